@@ -1,0 +1,217 @@
+//! Mesh input: OBJ (tobj), PLY ascii and binary (ply-rs-bw), STL ascii and binary (stl_io),
+//! each optionally gzip-compressed (`NAME.ply.gz`). Every reader yields a [`TriMesh`] whose
+//! triangle `i` is the i-th triangle of the file's faces fan-triangulated in file order
+//! (polygon v0..vk → (v0,v1,v2), (v0,v2,v3), …): that index is the `prim` id everywhere.
+//!
+//! Bad input never panics and never allocates in proportion to a size a header merely claims:
+//! every error names the file and the problem ([`MeshError`]).
+
+mod ply;
+mod stl;
+
+use std::io::{BufReader, Cursor, Read};
+use std::path::{Path, PathBuf};
+
+pub use raystream_math::{Aabb, Vec3};
+
+/// A triangle mesh: shared vertex positions and triangles as vertex-index triples.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TriMesh {
+    pub positions: Vec<Vec3>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// What went wrong reading a mesh, always with the file it came from.
+#[derive(Debug, thiserror::Error)]
+pub enum MeshError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {problem}")]
+    Invalid { path: PathBuf, problem: String },
+}
+
+impl MeshError {
+    pub fn invalid(path: &Path, problem: impl Into<String>) -> Self {
+        MeshError::Invalid {
+            path: path.to_path_buf(),
+            problem: problem.into(),
+        }
+    }
+}
+
+/// The mesh formats raystream reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MeshFormat {
+    Obj,
+    Ply,
+    Stl,
+}
+
+impl MeshFormat {
+    /// The format named by a file's extension (a trailing `.gz` is looked through).
+    pub fn from_path(path: &Path) -> Option<Self> {
+        let name = path.file_name()?.to_str()?.to_ascii_lowercase();
+        let name = name.strip_suffix(".gz").unwrap_or(&name);
+        match name.rsplit_once('.')?.1 {
+            "obj" => Some(Self::Obj),
+            "ply" => Some(Self::Ply),
+            "stl" => Some(Self::Stl),
+            _ => None,
+        }
+    }
+}
+
+/// Whether `path` names a mesh file raystream can read (by extension).
+pub fn is_mesh_path(path: &Path) -> bool {
+    MeshFormat::from_path(path).is_some()
+}
+
+/// Reads a mesh file, choosing the reader by extension.
+pub fn load_mesh(path: &Path) -> Result<TriMesh, MeshError> {
+    let format = MeshFormat::from_path(path).ok_or_else(|| {
+        MeshError::invalid(
+            path,
+            "unsupported mesh format (expected .obj, .ply or .stl, optionally .gz)",
+        )
+    })?;
+    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_mesh(&bytes, format, path)
+}
+
+/// Parses mesh bytes of a known format; `path` is only used in error messages and to notice
+/// gzip compression (a `.gz` name or the gzip magic number).
+pub fn parse_mesh(bytes: &[u8], format: MeshFormat, path: &Path) -> Result<TriMesh, MeshError> {
+    let unzipped;
+    let bytes = if bytes.starts_with(&[0x1f, 0x8b]) {
+        let mut out = Vec::new();
+        flate2::read::MultiGzDecoder::new(bytes)
+            .read_to_end(&mut out)
+            .map_err(|e| MeshError::invalid(path, format!("not a valid gzip stream ({e})")))?;
+        unzipped = out;
+        &unzipped[..]
+    } else {
+        bytes
+    };
+    let mesh = match format {
+        MeshFormat::Obj => parse_obj(bytes, path)?,
+        MeshFormat::Ply => ply::parse(bytes, path)?,
+        MeshFormat::Stl => stl::parse(bytes, path)?,
+    };
+    mesh.check(path)?;
+    Ok(mesh)
+}
+
+fn parse_obj(bytes: &[u8], path: &Path) -> Result<TriMesh, MeshError> {
+    let options = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    // Materials are not part of the geometry: a missing .mtl must not stop the mesh loading.
+    let (models, _) = tobj::load_obj_buf(&mut BufReader::new(Cursor::new(bytes)), &options, |_| {
+        Ok(Default::default())
+    })
+    .map_err(|e| MeshError::invalid(path, format!("cannot read OBJ: {e}")))?;
+    let mut mesh = TriMesh::default();
+    for model in models {
+        let m = model.mesh;
+        if m.positions.len() % 3 != 0 || m.indices.len() % 3 != 0 {
+            return Err(MeshError::invalid(path, "OBJ data is not in triples"));
+        }
+        let base = mesh.positions.len() as u32;
+        mesh.positions.extend(
+            m.positions
+                .chunks_exact(3)
+                .map(|p| Vec3::new(p[0], p[1], p[2])),
+        );
+        mesh.triangles.extend(
+            m.indices
+                .chunks_exact(3)
+                .map(|t| [base + t[0], base + t[1], base + t[2]]),
+        );
+    }
+    Ok(mesh)
+}
+
+impl TriMesh {
+    pub fn len(&self) -> usize {
+        self.triangles.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// The three corners of triangle `i`.
+    pub fn corners(&self, i: usize) -> [Vec3; 3] {
+        let [a, b, c] = self.triangles[i];
+        [
+            self.positions[a as usize],
+            self.positions[b as usize],
+            self.positions[c as usize],
+        ]
+    }
+
+    /// Bounds of the vertices that triangles use (stray unused points do not count).
+    pub fn bounds(&self) -> Aabb {
+        self.triangles
+            .iter()
+            .flatten()
+            .fold(Aabb::EMPTY, |b, &i| b.grow(self.positions[i as usize]))
+    }
+
+    /// The checks every loaded mesh passes: at least one triangle, indices in range, finite
+    /// coordinates, and not all triangles collapsed into one point.
+    pub fn check(&self, path: &Path) -> Result<(), MeshError> {
+        if self.triangles.is_empty() {
+            return Err(MeshError::invalid(path, "mesh has no triangles"));
+        }
+        let n = self.positions.len();
+        if let Some((i, t)) = self
+            .triangles
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.iter().any(|&v| v as usize >= n))
+        {
+            return Err(MeshError::invalid(
+                path,
+                format!("triangle {i} refers to vertex {t:?}, but the mesh has {n} vertices"),
+            ));
+        }
+        if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
+            return Err(MeshError::invalid(
+                path,
+                format!(
+                    "vertex {i} has a coordinate that is NaN or infinite ({:?})",
+                    self.positions[i]
+                ),
+            ));
+        }
+        if self.bounds().extent() == Vec3::ZERO {
+            return Err(MeshError::invalid(
+                path,
+                "all triangles collapse into one point",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Appends another mesh, with its vertices moved by `transform`.
+    pub fn append(&mut self, other: &TriMesh, transform: impl Fn(Vec3) -> Vec3) {
+        let base = self.positions.len() as u32;
+        self.positions
+            .extend(other.positions.iter().map(|&p| transform(p)));
+        self.triangles
+            .extend(other.triangles.iter().map(|t| t.map(|v| v + base)));
+    }
+}
+
+#[cfg(test)]
+mod tests;

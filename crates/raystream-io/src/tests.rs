@@ -1,0 +1,179 @@
+use std::path::{Path, PathBuf};
+
+use super::*;
+
+fn shared_mesh(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes").join(name)
+}
+
+fn parse_str(text: &str, format: MeshFormat) -> Result<TriMesh, MeshError> {
+    parse_mesh(text.as_bytes(), format, Path::new("test-input"))
+}
+
+fn problem(r: Result<TriMesh, MeshError>) -> String {
+    let e = r.expect_err("bad input must be an error");
+    let msg = e.to_string();
+    assert!(msg.starts_with("test-input: "), "error must name the file: {msg}");
+    msg
+}
+
+#[test]
+fn real_meshes_have_their_documented_sizes() {
+    // Counts from ../shared/data/README.md (checked there with trimesh).
+    for (name, triangles) in [
+        ("spot.obj", 5_856),
+        ("utah_teapot.obj", 6_320),
+        ("goblet_vase.stl", 10_910),
+        ("stanford_bunny.ply", 69_451),
+        ("stanford_lucy_100k.ply", 99_970),
+        ("turbine_blade.ply", 199_034),
+    ] {
+        let mesh = load_mesh(&shared_mesh(name)).unwrap();
+        assert_eq!(mesh.len(), triangles, "{name}");
+        let b = mesh.bounds();
+        assert!(!b.is_empty() && b.radius() > 0.0, "{name}");
+    }
+}
+
+#[test]
+fn polygons_are_fans_in_file_order() {
+    let obj = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 2 0\n\
+               f 1 2 3\nf 1 2 3 4 5\nf 2/1 3/1 4/1\n";
+    let m = parse_str(obj, MeshFormat::Obj).unwrap();
+    assert_eq!(
+        m.triangles,
+        vec![[0, 1, 2], [0, 1, 2], [0, 2, 3], [0, 3, 4], [1, 2, 3]]
+    );
+    let ply = "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n\
+               property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n\
+               0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 2 0\n5 0 1 2 3 4\n3 4 3 1\n";
+    let m = parse_str(ply, MeshFormat::Ply).unwrap();
+    assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3], [0, 3, 4], [4, 3, 1]]);
+}
+
+#[test]
+fn degenerate_triangles_keep_their_number() {
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 1 1\nf 1 2 3\n";
+    let m = parse_str(obj, MeshFormat::Obj).unwrap();
+    assert_eq!(m.triangles, vec![[0, 0, 0], [0, 1, 2]]);
+}
+
+#[test]
+fn stl_ascii_and_binary_agree() {
+    let ascii = "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n\
+                 endloop\nendfacet\nfacet normal 0 0 1\nouter loop\nvertex 1 0 0\nvertex 1 1 0\n\
+                 vertex 0 1 0\nendloop\nendfacet\nendsolid t\n";
+    let a = parse_str(ascii, MeshFormat::Stl).unwrap();
+    let mut bin = vec![0u8; 80];
+    bin.extend(2u32.to_le_bytes());
+    for tri in [[[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]]] {
+        bin.extend([0.0f32, 0.0, 1.0].iter().flat_map(|f| f.to_le_bytes()));
+        bin.extend(tri.iter().flatten().flat_map(|f| f.to_le_bytes()));
+        bin.extend([0u8, 0]);
+    }
+    let b = parse_mesh(&bin, MeshFormat::Stl, Path::new("test-input")).unwrap();
+    assert_eq!(a.len(), 2);
+    for i in 0..2 {
+        assert_eq!(a.corners(i), b.corners(i));
+    }
+}
+
+#[test]
+fn gzip_is_looked_through() {
+    use std::io::Write;
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    gz.write_all(obj.as_bytes()).unwrap();
+    let m = parse_mesh(&gz.finish().unwrap(), MeshFormat::Obj, Path::new("x.obj.gz")).unwrap();
+    assert_eq!(m.len(), 1);
+    assert_eq!(MeshFormat::from_path(Path::new("a/B.PLY.gz")), Some(MeshFormat::Ply));
+    assert_eq!(MeshFormat::from_path(Path::new("a/b.vtk")), None);
+}
+
+#[test]
+fn nan_and_inf_coordinates_are_errors() {
+    let msg = problem(parse_str("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", MeshFormat::Obj));
+    assert!(msg.contains("vertex 1") && msg.contains("NaN"), "{msg}");
+    let ply = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+               property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\
+               0 0 0\n1 0 1e39\n0 1 0\n3 0 1 2\n";
+    assert!(problem(parse_str(ply, MeshFormat::Ply)).contains("NaN or infinite"));
+}
+
+#[test]
+fn out_of_range_indices_are_errors() {
+    problem(parse_str("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", MeshFormat::Obj));
+    let ply = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+               property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\
+               0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n";
+    let msg = problem(parse_str(ply, MeshFormat::Ply));
+    assert!(msg.contains("3 vertices"), "{msg}");
+    let neg = ply.replace("3 0 1 3", "3 0 1 -1");
+    assert!(problem(parse_str(&neg, MeshFormat::Ply)).contains("-1"));
+}
+
+#[test]
+fn empty_meshes_are_errors() {
+    assert!(problem(parse_str("v 0 0 0\nv 1 0 0\n", MeshFormat::Obj)).contains("no triangles"));
+    assert!(problem(parse_str("", MeshFormat::Obj)).contains("no triangles"));
+    let ply = "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n\
+               property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n";
+    assert!(problem(parse_str(ply, MeshFormat::Ply)).contains("no triangles"));
+    // all corners in one point
+    problem(parse_str("v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n", MeshFormat::Obj));
+}
+
+#[test]
+fn truncated_files_are_errors() {
+    for name in ["stanford_lucy_100k.ply", "goblet_vase.stl", "stanford_bunny.ply"] {
+        let bytes = std::fs::read(shared_mesh(name)).unwrap();
+        let format = MeshFormat::from_path(Path::new(name)).unwrap();
+        for keep in [10, bytes.len() / 2, bytes.len() - 7] {
+            let r = parse_mesh(&bytes[..keep], format, Path::new("test-input"));
+            let msg = problem(r);
+            assert!(!msg.is_empty(), "{name} cut at {keep}");
+        }
+    }
+}
+
+#[test]
+fn lying_headers_do_not_allocate() {
+    // A binary STL claiming 4 billion triangles in 84 + 50 bytes.
+    let mut bin = vec![0u8; 80];
+    bin.extend(u32::MAX.to_le_bytes());
+    bin.extend([0u8; 50]);
+    let msg = problem(parse_mesh(&bin, MeshFormat::Stl, Path::new("test-input")));
+    assert!(msg.contains("truncated"), "{msg}");
+    // A binary PLY claiming 10^9 vertices.
+    let mut ply = b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\nproperty float x\n\
+                    property float y\nproperty float z\nend_header\n"
+        .to_vec();
+    ply.extend([0u8; 24]);
+    problem(parse_mesh(&ply, MeshFormat::Ply, Path::new("test-input")));
+}
+
+#[test]
+fn unsupported_extension_and_missing_file() {
+    let e = load_mesh(Path::new("scene.vtk")).unwrap_err().to_string();
+    assert!(e.contains("scene.vtk") && e.contains("unsupported"), "{e}");
+    let e = load_mesh(Path::new("does/not/exist.obj")).unwrap_err().to_string();
+    assert!(e.contains("does/not/exist.obj"), "{e}");
+}
+
+#[test]
+fn garbage_is_an_error_not_a_panic() {
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    for len in [0usize, 1, 5, 84, 200, 1000] {
+        let bytes: Vec<u8> = (0..len)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                state as u8
+            })
+            .collect();
+        for format in [MeshFormat::Obj, MeshFormat::Ply, MeshFormat::Stl] {
+            assert!(parse_mesh(&bytes, format, Path::new("g")).is_err());
+        }
+    }
+}
