@@ -7,6 +7,7 @@
 //! every error names the file and the problem ([`MeshError`]).
 
 mod ply;
+mod shapes;
 mod stl;
 
 use std::io::{BufReader, Cursor, Read};

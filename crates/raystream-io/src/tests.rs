@@ -3,7 +3,9 @@ use std::path::{Path, PathBuf};
 use super::*;
 
 fn shared_mesh(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/meshes")
+        .join(name)
 }
 
 fn parse_str(text: &str, format: MeshFormat) -> Result<TriMesh, MeshError> {
@@ -13,7 +15,10 @@ fn parse_str(text: &str, format: MeshFormat) -> Result<TriMesh, MeshError> {
 fn problem(r: Result<TriMesh, MeshError>) -> String {
     let e = r.expect_err("bad input must be an error");
     let msg = e.to_string();
-    assert!(msg.starts_with("test-input: "), "error must name the file: {msg}");
+    assert!(
+        msg.starts_with("test-input: "),
+        "error must name the file: {msg}"
+    );
     msg
 }
 
@@ -48,7 +53,10 @@ fn polygons_are_fans_in_file_order() {
                property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n\
                0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 2 0\n5 0 1 2 3 4\n3 4 3 1\n";
     let m = parse_str(ply, MeshFormat::Ply).unwrap();
-    assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3], [0, 3, 4], [4, 3, 1]]);
+    assert_eq!(
+        m.triangles,
+        vec![[0, 1, 2], [0, 2, 3], [0, 3, 4], [4, 3, 1]]
+    );
 }
 
 #[test]
@@ -66,7 +74,10 @@ fn stl_ascii_and_binary_agree() {
     let a = parse_str(ascii, MeshFormat::Stl).unwrap();
     let mut bin = vec![0u8; 80];
     bin.extend(2u32.to_le_bytes());
-    for tri in [[[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]]] {
+    for tri in [
+        [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+    ] {
         bin.extend([0.0f32, 0.0, 1.0].iter().flat_map(|f| f.to_le_bytes()));
         bin.extend(tri.iter().flatten().flat_map(|f| f.to_le_bytes()));
         bin.extend([0u8, 0]);
@@ -84,15 +95,26 @@ fn gzip_is_looked_through() {
     let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
     let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
     gz.write_all(obj.as_bytes()).unwrap();
-    let m = parse_mesh(&gz.finish().unwrap(), MeshFormat::Obj, Path::new("x.obj.gz")).unwrap();
+    let m = parse_mesh(
+        &gz.finish().unwrap(),
+        MeshFormat::Obj,
+        Path::new("x.obj.gz"),
+    )
+    .unwrap();
     assert_eq!(m.len(), 1);
-    assert_eq!(MeshFormat::from_path(Path::new("a/B.PLY.gz")), Some(MeshFormat::Ply));
+    assert_eq!(
+        MeshFormat::from_path(Path::new("a/B.PLY.gz")),
+        Some(MeshFormat::Ply)
+    );
     assert_eq!(MeshFormat::from_path(Path::new("a/b.vtk")), None);
 }
 
 #[test]
 fn nan_and_inf_coordinates_are_errors() {
-    let msg = problem(parse_str("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", MeshFormat::Obj));
+    let msg = problem(parse_str(
+        "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n",
+        MeshFormat::Obj,
+    ));
     assert!(msg.contains("vertex 1") && msg.contains("NaN"), "{msg}");
     let ply = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
                property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\
@@ -102,7 +124,10 @@ fn nan_and_inf_coordinates_are_errors() {
 
 #[test]
 fn out_of_range_indices_are_errors() {
-    problem(parse_str("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", MeshFormat::Obj));
+    problem(parse_str(
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n",
+        MeshFormat::Obj,
+    ));
     let ply = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
                property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\
                0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n";
@@ -120,12 +145,19 @@ fn empty_meshes_are_errors() {
                property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n";
     assert!(problem(parse_str(ply, MeshFormat::Ply)).contains("no triangles"));
     // all corners in one point
-    problem(parse_str("v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n", MeshFormat::Obj));
+    problem(parse_str(
+        "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n",
+        MeshFormat::Obj,
+    ));
 }
 
 #[test]
 fn truncated_files_are_errors() {
-    for name in ["stanford_lucy_100k.ply", "goblet_vase.stl", "stanford_bunny.ply"] {
+    for name in [
+        "stanford_lucy_100k.ply",
+        "goblet_vase.stl",
+        "stanford_bunny.ply",
+    ] {
         let bytes = std::fs::read(shared_mesh(name)).unwrap();
         let format = MeshFormat::from_path(Path::new(name)).unwrap();
         for keep in [10, bytes.len() / 2, bytes.len() - 7] {
@@ -145,9 +177,10 @@ fn lying_headers_do_not_allocate() {
     let msg = problem(parse_mesh(&bin, MeshFormat::Stl, Path::new("test-input")));
     assert!(msg.contains("truncated"), "{msg}");
     // A binary PLY claiming 10^9 vertices.
-    let mut ply = b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\nproperty float x\n\
+    let mut ply =
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\nproperty float x\n\
                     property float y\nproperty float z\nend_header\n"
-        .to_vec();
+            .to_vec();
     ply.extend([0u8; 24]);
     problem(parse_mesh(&ply, MeshFormat::Ply, Path::new("test-input")));
 }
@@ -156,7 +189,9 @@ fn lying_headers_do_not_allocate() {
 fn unsupported_extension_and_missing_file() {
     let e = load_mesh(Path::new("scene.vtk")).unwrap_err().to_string();
     assert!(e.contains("scene.vtk") && e.contains("unsupported"), "{e}");
-    let e = load_mesh(Path::new("does/not/exist.obj")).unwrap_err().to_string();
+    let e = load_mesh(Path::new("does/not/exist.obj"))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("does/not/exist.obj"), "{e}");
 }
 

@@ -174,10 +174,35 @@ mod tests {
     fn invalid_rays() {
         let ok = Ray::new(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY);
         assert!(ok.is_valid());
-        assert!(!Ray { dir: Vec3::ZERO, ..ok }.is_valid());
-        assert!(!Ray { t_max: f32::NAN, ..ok }.is_valid());
-        assert!(!Ray { t_min: 2.0, t_max: 1.0, ..ok }.is_valid());
-        assert!(!Ray { origin: Vec3::new(f32::NAN, 0.0, 0.0), ..ok }.is_valid());
+        assert!(
+            !Ray {
+                dir: Vec3::ZERO,
+                ..ok
+            }
+            .is_valid()
+        );
+        assert!(
+            !Ray {
+                t_max: f32::NAN,
+                ..ok
+            }
+            .is_valid()
+        );
+        assert!(
+            !Ray {
+                t_min: 2.0,
+                t_max: 1.0,
+                ..ok
+            }
+            .is_valid()
+        );
+        assert!(
+            !Ray {
+                origin: Vec3::new(f32::NAN, 0.0, 0.0),
+                ..ok
+            }
+            .is_valid()
+        );
     }
 
     #[test]

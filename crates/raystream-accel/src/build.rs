@@ -1,0 +1,316 @@
+//! kd-tree construction on the CPU: the two builders produce a [`KdBuildNode`] tree over
+//! triangle references with exact clipped bounds; `flat.rs` turns it into the flat layout.
+//!
+//! - `median`: the paper's builder — split axis cycles x→y→z with depth, split at the spatial
+//!   median of the node, until few triangles are left or the depth limit is reached.
+//! - `sah`: surface-area heuristic with perfect splits (Wald & Havran 2006, "On building fast
+//!   kd-trees for ray tracing, and on doing that in O(N log N)"). Large nodes are binned (32 bins
+//!   per axis, O(n) per node), small nodes sweep exact sorted events (planar triangles included);
+//!   the empty-space bonus favours cutting off empty space; the two subtrees of large nodes are
+//!   built in parallel with rayon.
+
+use raystream_math::{Aabb, Vec3};
+
+use crate::clip::clipped_bounds;
+use crate::layout::MAX_DEPTH;
+
+/// Which kd-tree builder to use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Builder {
+    #[default]
+    Sah,
+    Median,
+}
+
+impl Builder {
+    pub fn name(self) -> &'static str {
+        match self {
+            Builder::Sah => "sah",
+            Builder::Median => "median",
+        }
+    }
+}
+
+impl std::str::FromStr for Builder {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "sah" => Ok(Builder::Sah),
+            "median" => Ok(Builder::Median),
+            _ => Err(format!(
+                "unknown kd-tree builder '{s}' (expected sah or median)"
+            )),
+        }
+    }
+}
+
+/// SAH constants: cost of one traversal step and of one triangle test, in the same units.
+pub const COST_TRAVERSAL: f32 = 1.0;
+pub const COST_INTERSECT: f32 = 1.5;
+/// Factor on the cost of a split that cuts off empty space (Wald & Havran's λ).
+const EMPTY_BONUS: f32 = 0.8;
+const BINS: usize = 32;
+/// Nodes with at most this many references sweep exact events instead of bins.
+const EXACT_MAX: usize = 384;
+/// Nodes with more references than this build their two subtrees in parallel.
+const PARALLEL_MIN: usize = 2048;
+/// The median builder stops at this many references.
+const MEDIAN_LEAF: usize = 8;
+
+/// A node of the tree under construction (builder only).
+pub(crate) enum KdBuildNode {
+    Leaf(Vec<u32>),
+    Inner {
+        axis: usize,
+        split: f32,
+        children: Box<[KdBuildNode; 2]>,
+    },
+}
+
+#[derive(Clone, Copy)]
+struct Ref {
+    prim: u32,
+    bounds: Aabb,
+}
+
+struct Ctx<'a> {
+    corners: &'a [[Vec3; 3]],
+    builder: Builder,
+    max_depth: usize,
+}
+
+/// The depth limit for `n` triangles: 8 + 1.3·log2(n) (as pbrt), at most [`MAX_DEPTH`].
+pub fn depth_limit(n: usize) -> usize {
+    ((8.0 + 1.3 * (n.max(1) as f64).log2()).round() as usize).min(MAX_DEPTH)
+}
+
+/// Builds over the given triangles (`corners[prim]`), skipping `prims` not listed.
+pub(crate) fn build(
+    corners: &[[Vec3; 3]],
+    prims: &[u32],
+    bounds: Aabb,
+    builder: Builder,
+) -> KdBuildNode {
+    let ctx = Ctx {
+        corners,
+        builder,
+        max_depth: depth_limit(prims.len()),
+    };
+    let refs: Vec<Ref> = prims
+        .iter()
+        .map(|&prim| Ref {
+            prim,
+            bounds: Aabb::from_points(&corners[prim as usize]),
+        })
+        .collect();
+    ctx.node(refs, bounds, 0)
+}
+
+/// A split candidate: plane and cost.
+#[derive(Clone, Copy)]
+struct Split {
+    axis: usize,
+    pos: f32,
+    cost: f32,
+}
+
+fn split_box(b: &Aabb, axis: usize, pos: f32) -> (Aabb, Aabb) {
+    let (mut l, mut r) = (*b, *b);
+    l.max[axis] = pos;
+    r.min[axis] = pos;
+    (l, r)
+}
+
+impl Ctx<'_> {
+    fn node(&self, refs: Vec<Ref>, bounds: Aabb, depth: usize) -> KdBuildNode {
+        let split = if depth >= self.max_depth || refs.len() <= 1 {
+            None
+        } else {
+            match self.builder {
+                Builder::Sah => self.sah_split(&refs, &bounds),
+                Builder::Median => self.median_split(&refs, &bounds, depth),
+            }
+        };
+        let Some(s) = split else {
+            return KdBuildNode::Leaf(refs.iter().map(|r| r.prim).collect());
+        };
+        let n = refs.len();
+        let (lb, rb) = split_box(&bounds, s.axis, s.pos);
+        let (left, right) = self.partition(refs, &lb, &rb, s);
+        if self.builder == Builder::Median && left.len() == n && right.len() == n {
+            // No triangle was separated: splitting again would only duplicate references.
+            let mut prims: Vec<u32> = left.iter().map(|r| r.prim).collect();
+            prims.sort_unstable();
+            return KdBuildNode::Leaf(prims);
+        }
+        let (l, r) = if n >= PARALLEL_MIN {
+            rayon::join(
+                || self.node(left, lb, depth + 1),
+                || self.node(right, rb, depth + 1),
+            )
+        } else {
+            (
+                self.node(left, lb, depth + 1),
+                self.node(right, rb, depth + 1),
+            )
+        };
+        KdBuildNode::Inner {
+            axis: s.axis,
+            split: s.pos,
+            children: Box::new([l, r]),
+        }
+    }
+
+    fn median_split(&self, refs: &[Ref], b: &Aabb, depth: usize) -> Option<Split> {
+        if refs.len() <= MEDIAN_LEAF {
+            return None;
+        }
+        let axis = depth % 3;
+        let pos = 0.5 * (b.min[axis] + b.max[axis]);
+        (pos > b.min[axis] && pos < b.max[axis]).then_some(Split {
+            axis,
+            pos,
+            cost: 0.0,
+        })
+    }
+
+    fn sah_split(&self, refs: &[Ref], b: &Aabb) -> Option<Split> {
+        let area = b.area();
+        if area.is_nan() || area <= 0.0 {
+            return None;
+        }
+        let leaf_cost = COST_INTERSECT * refs.len() as f32;
+        let best = if refs.len() <= EXACT_MAX {
+            (0..3)
+                .filter_map(|a| exact_sweep(refs, b, a))
+                .min_by(|x, y| x.cost.total_cmp(&y.cost))
+        } else {
+            (0..3)
+                .filter_map(|a| binned(refs, b, a))
+                .min_by(|x, y| x.cost.total_cmp(&y.cost))
+        }?;
+        (best.cost < leaf_cost).then_some(best)
+    }
+
+    fn partition(&self, refs: Vec<Ref>, lb: &Aabb, rb: &Aabb, s: Split) -> (Vec<Ref>, Vec<Ref>) {
+        let a = s.axis;
+        let mut left = Vec::with_capacity(refs.len());
+        let mut right = Vec::with_capacity(refs.len());
+        for r in refs {
+            let (lo, hi) = (r.bounds.min[a], r.bounds.max[a]);
+            if hi < s.pos {
+                left.push(r);
+            } else if lo > s.pos {
+                right.push(r);
+            } else if lo == hi {
+                // In the plane: on both sides, for rays that start on it or run inside it.
+                left.push(r);
+                right.push(r);
+            } else {
+                // Straddles or touches the plane. Children are closed boxes: a triangle that
+                // touches a child's face is in it, so a ray starting on (or running in) a split
+                // plane finds it from either side.
+                let tri = &self.corners[r.prim as usize];
+                for (side, child) in [(&mut left, lb), (&mut right, rb)] {
+                    if let Some(bounds) = clipped_bounds(tri, &r.bounds.intersection(*child)) {
+                        side.push(Ref {
+                            prim: r.prim,
+                            bounds,
+                        });
+                    }
+                }
+            }
+        }
+        (left, right)
+    }
+}
+
+/// Cost of splitting `b` at `pos` with `nl`, `nr` references on each side.
+fn sah_cost(b: &Aabb, inv_area: f32, axis: usize, pos: f32, nl: usize, nr: usize) -> f32 {
+    let (lb, rb) = split_box(b, axis, pos);
+    let c = COST_TRAVERSAL
+        + COST_INTERSECT * inv_area * (lb.area() * nl as f32 + rb.area() * nr as f32);
+    if nl == 0 || nr == 0 {
+        c * EMPTY_BONUS
+    } else {
+        c
+    }
+}
+
+fn binned(refs: &[Ref], b: &Aabb, axis: usize) -> Option<Split> {
+    let lo = b.min[axis];
+    let ext = b.max[axis] - lo;
+    if !(ext > 0.0) {
+        return None;
+    }
+    let scale = BINS as f32 / ext;
+    let bin = |x: f32| (((x - lo) * scale) as usize).min(BINS - 1);
+    let mut starts = [0usize; BINS];
+    let mut ends = [0usize; BINS];
+    for r in refs {
+        starts[bin(r.bounds.min[axis])] += 1;
+        ends[bin(r.bounds.max[axis])] += 1;
+    }
+    let inv_area = 1.0 / b.area();
+    let mut best: Option<Split> = None;
+    let (mut nl, mut nr) = (0usize, refs.len());
+    for i in 1..BINS {
+        nl += starts[i - 1];
+        nr -= ends[i - 1];
+        let pos = lo + ext * (i as f32 / BINS as f32);
+        if !(pos > b.min[axis] && pos < b.max[axis]) {
+            continue;
+        }
+        let cost = sah_cost(b, inv_area, axis, pos, nl, nr);
+        if best.is_none_or(|s| cost < s.cost) {
+            best = Some(Split { axis, pos, cost });
+        }
+    }
+    best
+}
+
+/// Wald & Havran's sweep over sorted events, with planar triangles sent to the cheaper side.
+fn exact_sweep(refs: &[Ref], b: &Aabb, axis: usize) -> Option<Split> {
+    const END: u8 = 0;
+    const PLANAR: u8 = 1;
+    const START: u8 = 2;
+    let mut events: Vec<(f32, u8)> = Vec::with_capacity(2 * refs.len());
+    for r in refs {
+        let (lo, hi) = (r.bounds.min[axis], r.bounds.max[axis]);
+        if lo == hi {
+            events.push((lo, PLANAR));
+        } else {
+            events.push((lo, START));
+            events.push((hi, END));
+        }
+    }
+    events.sort_unstable_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+    let inv_area = 1.0 / b.area();
+    let (mut nl, mut nr) = (0usize, refs.len());
+    let mut best: Option<Split> = None;
+    let mut i = 0;
+    while i < events.len() {
+        let pos = events[i].0;
+        let count = |i: &mut usize, kind: u8| {
+            let mut c = 0;
+            while *i < events.len() && events[*i].0 == pos && events[*i].1 == kind {
+                c += 1;
+                *i += 1;
+            }
+            c
+        };
+        let ends = count(&mut i, END);
+        let planar = count(&mut i, PLANAR);
+        let starts = count(&mut i, START);
+        // Closed children: everything touching the plane counts on both sides.
+        if pos > b.min[axis] && pos < b.max[axis] {
+            let cost = sah_cost(b, inv_area, axis, pos, nl + planar + starts, nr);
+            if best.is_none_or(|s| cost < s.cost) {
+                best = Some(Split { axis, pos, cost });
+            }
+        }
+        nr -= planar + ends;
+        nl += starts + planar;
+    }
+    best
+}

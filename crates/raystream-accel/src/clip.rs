@@ -1,0 +1,123 @@
+//! Exact triangle–box geometry for the builder ("perfect splits": a triangle's bounds in a node
+//! are the bounds of the triangle clipped to that node, Wald & Havran 2006) and for `validate()`.
+
+use raystream_math::{Aabb, DVec3, Vec3};
+
+/// Bounds of the part of triangle `tri` inside `bx`, or `None` if the triangle misses the box.
+/// Clipping runs in f64 and the result is rounded outwards to f32, then limited to `bx`, so it
+/// never claims less than the true overlap nor more than the box.
+pub fn clipped_bounds(tri: &[Vec3; 3], bx: &Aabb) -> Option<Aabb> {
+    let mut poly: Vec<DVec3> = tri.iter().map(|v| v.as_dvec3()).collect();
+    let mut next = Vec::with_capacity(9);
+    for axis in 0..3 {
+        for (plane, keep_above) in [(bx.min[axis] as f64, true), (bx.max[axis] as f64, false)] {
+            next.clear();
+            let inside = |p: &DVec3| {
+                if keep_above {
+                    p[axis] >= plane
+                } else {
+                    p[axis] <= plane
+                }
+            };
+            for i in 0..poly.len() {
+                let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+                let (ia, ib) = (inside(&a), inside(&b));
+                if ia {
+                    next.push(a);
+                }
+                if ia != ib {
+                    let s = (plane - a[axis]) / (b[axis] - a[axis]);
+                    let mut p = a + (b - a) * s;
+                    p[axis] = plane;
+                    next.push(p);
+                }
+            }
+            std::mem::swap(&mut poly, &mut next);
+            if poly.is_empty() {
+                return None;
+            }
+        }
+    }
+    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    for p in &poly {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
+    let down = |x: f64| {
+        let f = x as f32;
+        if f as f64 > x { f.next_down() } else { f }
+    };
+    let up = |x: f64| {
+        let f = x as f32;
+        if (f as f64) < x { f.next_up() } else { f }
+    };
+    let b = Aabb::new(
+        Vec3::new(down(lo.x), down(lo.y), down(lo.z)),
+        Vec3::new(up(hi.x), up(hi.y), up(hi.z)),
+    )
+    .intersection(*bx);
+    (!b.is_empty()).then_some(b)
+}
+
+/// Whether the triangle meets the box's interior shrunk by `margin` on every side (separating
+/// axis test in f64). Used by `validate()`: a triangle that only grazes a leaf's boundary need
+/// not be listed in that leaf.
+pub fn overlaps_interior(tri: &[Vec3; 3], bx: &Aabb, margin: f64) -> bool {
+    let lo = bx.min.as_dvec3() + margin;
+    let hi = bx.max.as_dvec3() - margin;
+    if lo.cmpge(hi).any() {
+        return false;
+    }
+    let c = (lo + hi) * 0.5;
+    let h = (hi - lo) * 0.5;
+    let v = tri.map(|p| p.as_dvec3() - c);
+    let e = [v[1] - v[0], v[2] - v[1], v[0] - v[2]];
+    let sep = |axis: DVec3| {
+        if axis.length_squared() == 0.0 {
+            return false;
+        }
+        let p = v.map(|x| x.dot(axis));
+        let r = h.x * axis.x.abs() + h.y * axis.y.abs() + h.z * axis.z.abs();
+        p.iter().cloned().fold(f64::INFINITY, f64::min) >= r
+            || p.iter().cloned().fold(f64::NEG_INFINITY, f64::max) <= -r
+    };
+    for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
+        if sep(axis) {
+            return false;
+        }
+        for edge in e {
+            if sep(axis.cross(edge)) {
+                return false;
+            }
+        }
+    }
+    !sep(e[0].cross(e[1]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clipping_a_triangle_to_half_a_box() {
+        let tri = [
+            Vec3::ZERO,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(0.0, 2.0, 0.0),
+        ];
+        let b = Aabb::new(Vec3::new(1.0, -1.0, -1.0), Vec3::splat(3.0));
+        let c = clipped_bounds(&tri, &b).unwrap();
+        assert_eq!(
+            c,
+            Aabb::new(Vec3::new(1.0, 0.0, 0.0), Vec3::new(2.0, 1.0, 0.0))
+        );
+        let far = Aabb::new(Vec3::new(1.5, 1.5, -1.0), Vec3::splat(3.0));
+        assert_eq!(
+            clipped_bounds(&tri, &far),
+            None,
+            "box beyond the hypotenuse"
+        );
+        assert!(!overlaps_interior(&tri, &far, 0.0));
+        assert!(overlaps_interior(&tri, &b, 0.0));
+    }
+}

@@ -1,0 +1,158 @@
+//! kd-tree acceleration for triangle meshes: two builders (the paper's round-robin spatial
+//! median and SAH with perfect splits), ropes for stackless traversal, the flat `#[repr(C)]`
+//! layout shared with the GPU, and CPU queries over it (closest-hit and any-hit, with ropes or
+//! a stack). `validate()` checks a built tree; `brute` is the oracle every query is tested
+//! against.
+
+pub mod brute;
+mod build;
+pub mod clip;
+mod flat;
+pub mod intersect;
+pub mod layout;
+mod traverse;
+mod validate;
+
+use std::time::Instant;
+
+pub use build::{Builder, depth_limit};
+use raystream_io::TriMesh;
+use raystream_math::{Aabb, DVec3, Ray, Vec3};
+pub use traverse::{Counters, Traversal};
+
+use layout::{KdInner, KdLeaf, KdTri};
+
+/// A ray–triangle hit: distance in units of the ray direction's length, the triangle's prim id,
+/// and the barycentric weights of its v1 (`u`) and v2 (`v`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub prim: u32,
+    pub u: f32,
+    pub v: f32,
+}
+
+/// Statistics of a built tree, as `raystream info` reports them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TreeStats {
+    pub builder: &'static str,
+    pub nodes: usize,
+    pub leaves: usize,
+    pub empty_leaves: usize,
+    pub max_depth: usize,
+    /// Expected cost of a random ray by the surface-area heuristic (traversal = 1, test = 1.5).
+    pub sah_cost: f64,
+    /// Mean triangle references per non-empty leaf.
+    pub mean_tris_per_leaf: f64,
+    /// Triangle references in all leaves (a triangle may sit in several).
+    pub references: usize,
+    /// Triangles in the tree (degenerate ones are left out: they can never be hit).
+    pub triangles: usize,
+    pub build_ms: f64,
+}
+
+/// A kd-tree over one mesh, in the flat layout.
+#[derive(Clone, Debug)]
+pub struct KdTree {
+    /// The scene box: the root node's box.
+    pub bounds: Aabb,
+    /// The root's node reference.
+    pub root: u32,
+    pub inners: Vec<KdInner>,
+    pub leaves: Vec<KdLeaf>,
+    pub tris: Vec<KdTri>,
+    pub stats: TreeStats,
+}
+
+/// Whether a triangle has an area (computed in f64); degenerate triangles never get hit.
+pub fn is_degenerate(c: &[Vec3; 3]) -> bool {
+    let (a, b, d) = (c[0].as_dvec3(), c[1].as_dvec3(), c[2].as_dvec3());
+    (b - a).cross(d - a) == DVec3::ZERO
+}
+
+impl KdTree {
+    /// Builds a tree over a mesh's triangles with the chosen builder.
+    pub fn build(mesh: &TriMesh, builder: Builder) -> KdTree {
+        let corners: Vec<[Vec3; 3]> = (0..mesh.len()).map(|i| mesh.corners(i)).collect();
+        Self::build_from_corners(&corners, builder)
+    }
+
+    /// Builds over triangles given by their corners; triangle `i` gets prim id `i`.
+    pub fn build_from_corners(corners: &[[Vec3; 3]], builder: Builder) -> KdTree {
+        let start = Instant::now();
+        let prims: Vec<u32> = (0..corners.len() as u32)
+            .filter(|&i| !is_degenerate(&corners[i as usize]))
+            .collect();
+        let bounds = prims.iter().fold(Aabb::EMPTY, |b, &i| {
+            corners[i as usize].iter().fold(b, |b, &p| b.grow(p))
+        });
+        let root_node = build::build(corners, &prims, bounds, builder);
+        let (flat, root) = flat::flatten(&root_node, bounds, corners);
+        let build_ms = start.elapsed().as_secs_f64() * 1e3;
+        let empty_leaves = flat.leaves.iter().filter(|l| l.count == 0).count();
+        let full = flat.leaves.len() - empty_leaves;
+        let stats = TreeStats {
+            builder: builder.name(),
+            nodes: flat.inners.len() + flat.leaves.len(),
+            leaves: flat.leaves.len(),
+            empty_leaves,
+            max_depth: flat.max_depth,
+            sah_cost: flat.sah_cost,
+            mean_tris_per_leaf: flat.tris.len() as f64 / full.max(1) as f64,
+            references: flat.tris.len(),
+            triangles: prims.len(),
+            build_ms,
+        };
+        KdTree {
+            bounds,
+            root,
+            inners: flat.inners,
+            leaves: flat.leaves,
+            tris: flat.tris,
+            stats,
+        }
+    }
+
+    /// The closest hit in `[t_min, t_max]`.
+    pub fn intersect(&self, ray: &Ray, traversal: Traversal) -> Option<Hit> {
+        let mut c = Counters::default();
+        match traversal {
+            Traversal::Ropes => self.ropes::<false, false>(ray, &mut c),
+            Traversal::Stack => self.stack::<false, false>(ray, &mut c),
+        }
+    }
+
+    /// Some hit in `[t_min, t_max]` (occlusion); its `prim`, `u`, `v` are those of that hit.
+    pub fn intersect_any(&self, ray: &Ray, traversal: Traversal) -> Option<Hit> {
+        let mut c = Counters::default();
+        match traversal {
+            Traversal::Ropes => self.ropes::<true, false>(ray, &mut c),
+            Traversal::Stack => self.stack::<true, false>(ray, &mut c),
+        }
+    }
+
+    /// As [`Self::intersect`] / [`Self::intersect_any`], adding the work done to `counters`.
+    pub fn intersect_counted(
+        &self,
+        ray: &Ray,
+        traversal: Traversal,
+        any: bool,
+        counters: &mut Counters,
+    ) -> Option<Hit> {
+        match (traversal, any) {
+            (Traversal::Ropes, false) => self.ropes::<false, true>(ray, counters),
+            (Traversal::Ropes, true) => self.ropes::<true, true>(ray, counters),
+            (Traversal::Stack, false) => self.stack::<false, true>(ray, counters),
+            (Traversal::Stack, true) => self.stack::<true, true>(ray, counters),
+        }
+    }
+
+    /// The box of a leaf.
+    pub fn leaf_bounds(&self, leaf: usize) -> Aabb {
+        let l = &self.leaves[leaf];
+        Aabb::new(Vec3::from(l.min), Vec3::from(l.max))
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,361 @@
+use std::path::Path;
+
+use proptest::prelude::*;
+use raystream_io::{TriMesh, load_mesh};
+use raystream_math::{Ray, Vec3};
+
+use crate::layout::KdTri;
+use crate::{Builder, KdTree, Traversal, brute};
+
+const BUILDERS: [Builder; 2] = [Builder::Sah, Builder::Median];
+const TRAVERSALS: [Traversal; 2] = [Traversal::Ropes, Traversal::Stack];
+
+fn corners(mesh: &TriMesh) -> Vec<[Vec3; 3]> {
+    (0..mesh.len()).map(|i| mesh.corners(i)).collect()
+}
+
+fn shared_mesh(name: &str) -> TriMesh {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/meshes")
+        .join(name);
+    load_mesh(&p).unwrap()
+}
+
+/// xorshift: deterministic, dependency-free numbers for ray sets.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+    }
+    fn unit(&mut self) -> Vec3 {
+        loop {
+            let v = Vec3::new(self.next(), self.next(), self.next()) * 2.0 - 1.0;
+            if v.length_squared() > 1e-4 && v.length_squared() <= 1.0 {
+                return v.normalize();
+            }
+        }
+    }
+}
+
+/// Compares a tree query with the brute-force oracle over the same watertight test: the same
+/// distance exactly (it is the same arithmetic), the same prim unless two triangles tie.
+fn check_ray(tree: &KdTree, c: &[[Vec3; 3]], ray: &Ray, what: &str) {
+    let want = brute::closest(c, ray);
+    for trav in TRAVERSALS {
+        let got = tree.intersect(ray, trav);
+        match (got, want) {
+            (None, None) => {}
+            (Some(g), Some(w)) => {
+                assert_eq!(g.t, w.t, "{what} {trav:?}: t differs for {ray:?}");
+                if g.prim != w.prim {
+                    let tie = brute::closest(&[c[g.prim as usize]], &Ray { t_max: w.t, ..*ray });
+                    assert!(
+                        tie.is_some(),
+                        "{what} {trav:?}: prim {} instead of {} for {ray:?}",
+                        g.prim,
+                        w.prim
+                    );
+                }
+            }
+            _ => panic!("{what} {trav:?}: tree {got:?}, brute force {want:?} for {ray:?}"),
+        }
+        let any = tree.intersect_any(ray, trav);
+        assert_eq!(
+            any.is_some(),
+            want.is_some(),
+            "{what} {trav:?}: any-hit for {ray:?}"
+        );
+        if let Some(h) = any {
+            assert!(h.t >= ray.t_min && h.t <= ray.t_max);
+        }
+    }
+}
+
+fn rays_through(mesh: &TriMesh, n: usize, seed: u64) -> Vec<Ray> {
+    let b = mesh.bounds();
+    let mut rng = Rng(seed);
+    (0..n)
+        .map(|i| {
+            let target = b.min + (b.max - b.min) * Vec3::new(rng.next(), rng.next(), rng.next());
+            let origin = if i % 3 == 0 {
+                // from inside the box: secondary-ray-like
+                b.min + (b.max - b.min) * Vec3::new(rng.next(), rng.next(), rng.next())
+            } else {
+                b.center() + rng.unit() * 2.0 * b.radius()
+            };
+            let mut d = target - origin;
+            if i % 7 == 0 {
+                d[i % 3] = 0.0; // axis-parallel components
+            }
+            Ray::new(origin, d, 0.0, f32::INFINITY)
+        })
+        .collect()
+}
+
+#[test]
+fn real_meshes_agree_with_brute_force_and_validate() {
+    for name in ["spot.obj", "utah_teapot.obj", "goblet_vase.stl"] {
+        let mesh = shared_mesh(name);
+        let c = corners(&mesh);
+        for builder in BUILDERS {
+            let tree = KdTree::build(&mesh, builder);
+            tree.validate(&c)
+                .unwrap_or_else(|e| panic!("{name} {builder:?}: {e}"));
+            for ray in rays_through(&mesh, 1500, 7) {
+                check_ray(&tree, &c, &ray, name);
+            }
+        }
+    }
+}
+
+#[test]
+fn large_meshes_validate() {
+    for name in ["stanford_bunny.ply", "turbine_blade.ply"] {
+        let mesh = shared_mesh(name);
+        let c = corners(&mesh);
+        let tree = KdTree::build(&mesh, Builder::Sah);
+        tree.validate(&c).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(
+            tree.stats.triangles,
+            mesh.len() - c.iter().filter(|t| crate::is_degenerate(t)).count()
+        );
+        for ray in rays_through(&mesh, 300, 11) {
+            check_ray(&tree, &c, &ray, name);
+        }
+    }
+}
+
+#[test]
+fn sah_beats_median() {
+    let mesh = shared_mesh("stanford_bunny.ply");
+    let sah = KdTree::build(&mesh, Builder::Sah);
+    let median = KdTree::build(&mesh, Builder::Median);
+    assert!(
+        sah.stats.sah_cost < 0.8 * median.stats.sah_cost,
+        "SAH cost {} vs median {}",
+        sah.stats.sah_cost,
+        median.stats.sah_cost
+    );
+}
+
+#[test]
+fn empty_and_degenerate_scenes() {
+    let flat = [[Vec3::ZERO, Vec3::X, Vec3::X * 2.0], [Vec3::ONE; 3]];
+    let tree = KdTree::build_from_corners(&flat, Builder::Sah);
+    tree.validate(&flat).unwrap();
+    let ray = Ray::new(Vec3::new(0.5, 0.0, -1.0), Vec3::Z, 0.0, f32::INFINITY);
+    assert_eq!(tree.intersect(&ray, Traversal::Ropes), None);
+    let tree = KdTree::build_from_corners(&[], Builder::Median);
+    assert_eq!(tree.intersect(&ray, Traversal::Stack), None);
+}
+
+#[test]
+fn one_triangle_and_its_contract() {
+    let tri = [[Vec3::ZERO, Vec3::X, Vec3::Y]];
+    for builder in BUILDERS {
+        let tree = KdTree::build_from_corners(&tri, builder);
+        tree.validate(&tri).unwrap();
+        for trav in TRAVERSALS {
+            let ray = Ray::new(
+                Vec3::new(0.25, 0.5, 2.0),
+                Vec3::new(0.0, 0.0, -2.0),
+                0.0,
+                f32::INFINITY,
+            );
+            let h = tree.intersect(&ray, trav).unwrap();
+            assert_eq!((h.t, h.prim, h.u, h.v), (1.0, 0, 0.25, 0.5));
+            // t-range is inclusive on both ends, and exclusive beyond
+            assert!(tree.intersect(&Ray { t_max: 1.0, ..ray }, trav).is_some());
+            assert!(tree.intersect(&Ray { t_min: 1.0, ..ray }, trav).is_some());
+            assert!(
+                tree.intersect(
+                    &Ray {
+                        t_max: 0.999,
+                        ..ray
+                    },
+                    trav
+                )
+                .is_none()
+            );
+            assert!(
+                tree.intersect(
+                    &Ray {
+                        t_min: 1.001,
+                        ..ray
+                    },
+                    trav
+                )
+                .is_none()
+            );
+            // invalid rays miss
+            for bad in [
+                Ray {
+                    dir: Vec3::ZERO,
+                    ..ray
+                },
+                Ray {
+                    origin: Vec3::new(f32::NAN, 0.5, 2.0),
+                    ..ray
+                },
+                Ray {
+                    dir: Vec3::new(0.0, f32::NAN, -1.0),
+                    ..ray
+                },
+                Ray {
+                    t_max: f32::NAN,
+                    ..ray
+                },
+                Ray {
+                    t_min: f32::NEG_INFINITY,
+                    ..ray
+                },
+                Ray {
+                    origin: Vec3::new(f32::INFINITY, 0.5, 2.0),
+                    ..ray
+                },
+            ] {
+                assert_eq!(tree.intersect(&bad, trav), None, "{bad:?}");
+                assert_eq!(tree.intersect_any(&bad, trav), None, "{bad:?}");
+            }
+            // edges and vertices count as inside
+            let edge = Ray::new(Vec3::new(0.5, 0.0, 1.0), -Vec3::Z, 0.0, f32::INFINITY);
+            assert!(tree.intersect(&edge, trav).is_some());
+            // a ray in the triangle's plane misses
+            let planar = Ray::new(Vec3::new(-1.0, 0.25, 0.0), Vec3::X, 0.0, f32::INFINITY);
+            assert!(tree.intersect(&planar, trav).is_none());
+        }
+    }
+}
+
+#[test]
+fn rays_along_split_planes() {
+    // A grid of unit quads: the SAH builder splits on the integer planes the rays run along.
+    let mut c = Vec::new();
+    for i in 0..8 {
+        for j in 0..8 {
+            let (x, y) = (i as f32, j as f32);
+            let p = |dx: f32, dy: f32| Vec3::new(x + dx, y + dy, (i + j) as f32 * 0.1);
+            c.push([p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0)]);
+            c.push([p(0.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)]);
+        }
+    }
+    for builder in BUILDERS {
+        let tree = KdTree::build_from_corners(&c, builder);
+        tree.validate(&c).unwrap();
+        for i in 0..=8 {
+            for j in 0..=8 {
+                let o = Vec3::new(i as f32, j as f32, 5.0);
+                check_ray(
+                    &tree,
+                    &c,
+                    &Ray::new(o, -Vec3::Z, 0.0, f32::INFINITY),
+                    "grid vertical",
+                );
+                let o = Vec3::new(-1.0, j as f32, 0.05 * i as f32);
+                check_ray(
+                    &tree,
+                    &c,
+                    &Ray::new(o, Vec3::new(1.0, 0.0, 0.1), 0.0, f32::INFINITY),
+                    "grid slanted",
+                );
+                let o = Vec3::new(i as f32, -1.0, 0.5);
+                check_ray(
+                    &tree,
+                    &c,
+                    &Ray::new(o, Vec3::Y, 0.0, f32::INFINITY),
+                    "grid axis-parallel",
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn watertight_far_from_origin() {
+    // Rays from inside a closed sphere never escape, also 1e5 units from the origin where a
+    // float's spacing is ~0.008 and a non-watertight test leaks through edges.
+    let sphere = TriMesh::icosphere(4);
+    for offset in [Vec3::ZERO, Vec3::new(1e5, -3e4, 7e4)] {
+        let mut m = TriMesh::default();
+        m.append(&sphere, |p| p * 10.0 + offset);
+        let tree = KdTree::build(&m, Builder::Sah);
+        tree.validate(&corners(&m)).unwrap();
+        let mut rng = Rng(99);
+        let mut escaped = 0;
+        for i in 0..20_000 {
+            let origin = offset + rng.unit() * rng.next() * 5.0;
+            let mut d = rng.unit();
+            if i % 5 == 0 {
+                // aim at vertices: the hardest case for cracks
+                d = m.positions[i % m.positions.len()] - origin;
+            }
+            let ray = Ray::new(origin, d, 0.0, f32::INFINITY);
+            for trav in TRAVERSALS {
+                if tree.intersect(&ray, trav).is_none() {
+                    escaped += 1;
+                }
+            }
+        }
+        assert_eq!(escaped, 0, "rays escaped the sphere at offset {offset}");
+    }
+}
+
+#[test]
+fn flat_layout_bytes_round_trip() {
+    let mesh = shared_mesh("spot.obj");
+    let tree = KdTree::build(&mesh, Builder::Sah);
+    let bytes: &[u8] = bytemuck::cast_slice(&tree.tris);
+    let back: &[KdTri] = bytemuck::cast_slice(bytes);
+    assert_eq!(back[0].prim(), tree.tris[0].prim());
+    assert!(tree.stats.nodes == tree.inners.len() + tree.leaves.len());
+    assert!(tree.stats.max_depth <= crate::depth_limit(mesh.len()));
+}
+
+fn arb_vec(r: f32) -> impl Strategy<Value = Vec3> {
+    (-r..r, -r..r, -r..r).prop_map(|(x, y, z)| Vec3::new(x, y, z))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_soups_agree_with_brute_force(
+        tris in prop::collection::vec((arb_vec(10.0), arb_vec(3.0), arb_vec(3.0)), 1..120),
+        rays in prop::collection::vec((arb_vec(15.0), arb_vec(1.0), 0u8..8, 0.0f32..2.0), 64),
+    ) {
+        let c: Vec<[Vec3; 3]> = tris.iter().map(|&(p, a, b)| [p, p + a, p + b]).collect();
+        for builder in BUILDERS {
+            let tree = KdTree::build_from_corners(&c, builder);
+            prop_assert!(tree.validate(&c).is_ok(), "{:?}", tree.validate(&c));
+            for &(o, mut d, zero, t_min) in &rays {
+                // zero some direction components: axis-parallel rays
+                for a in 0..3 {
+                    if zero & (1 << a) != 0 && zero != 7 {
+                        d[a] = 0.0;
+                    }
+                }
+                // start some rays exactly on a triangle's vertex
+                let o = if zero == 7 { c[0][1] } else { o };
+                let ray = Ray::new(o, d, if zero == 5 { t_min } else { 0.0 }, f32::INFINITY);
+                check_ray(&tree, &c, &ray, "soup");
+            }
+        }
+    }
+
+    #[test]
+    fn watertight_test_agrees_with_f64(
+        tri in (arb_vec(5.0), arb_vec(5.0), arb_vec(5.0)),
+        o in arb_vec(10.0), d in arb_vec(1.0),
+    ) {
+        let c = [[tri.0, tri.1, tri.2]];
+        let ray = Ray::new(o, d, 0.0, f32::INFINITY);
+        if let (Some(h), Some((t, _))) = (brute::closest(&c, &ray), brute::closest_f64(&c, &ray)) {
+            prop_assert!(((h.t as f64) - t).abs() <= 1e-3 * t.abs().max(1.0), "{} vs {}", h.t, t);
+            let p = c[0][0] * (1.0 - h.u - h.v) + c[0][1] * h.u + c[0][2] * h.v;
+            prop_assert!((p - ray.at(h.t)).length() <= 1e-3 * (1.0 + p.length()));
+        }
+    }
+}

@@ -1,0 +1,231 @@
+//! CPU traversal of the flat kd-tree: stackless with ropes (the default, the algorithm the GPU
+//! kernels run) and the classic front-to-back stack traversal, each for closest-hit and any-hit.
+//!
+//! Contract of every query: invalid rays (see `Ray::is_valid`, NaN included) miss; a hit needs
+//! `t_min ≤ t ≤ t_max`; closest-hit returns the smallest such t (ties: the first triangle found);
+//! any-hit returns some hit in the range.
+
+use raystream_math::{Ray, Vec3};
+
+use crate::intersect::WatertightRay;
+use crate::layout::{KdLeaf, LEAF_BIT, MAX_DEPTH, NO_ROPE, is_leaf};
+use crate::{Hit, KdTree};
+
+/// Which traversal to run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Traversal {
+    #[default]
+    Ropes,
+    Stack,
+}
+
+impl Traversal {
+    pub fn name(self) -> &'static str {
+        match self {
+            Traversal::Ropes => "ropes",
+            Traversal::Stack => "stack",
+        }
+    }
+}
+
+impl std::str::FromStr for Traversal {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "ropes" => Ok(Traversal::Ropes),
+            "stack" => Ok(Traversal::Stack),
+            _ => Err(format!("unknown traversal '{s}' (expected ropes or stack)")),
+        }
+    }
+}
+
+/// Work done by queries, summed: inner nodes and leaves visited, triangles tested.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Counters {
+    pub inner: u64,
+    pub leaves: u64,
+    pub triangles: u64,
+}
+
+impl std::ops::AddAssign for Counters {
+    fn add_assign(&mut self, o: Counters) {
+        self.inner += o.inner;
+        self.leaves += o.leaves;
+        self.triangles += o.triangles;
+    }
+}
+
+/// Per-ray data of a traversal: the ray, its reciprocal direction with zero components made
+/// +0 (so that +inf, never −inf, stands for "parallel") and the watertight-test constants.
+struct RayCtx {
+    o: Vec3,
+    inv: Vec3,
+    neg: [bool; 3],
+    t_min: f32,
+    wt: WatertightRay,
+}
+
+impl RayCtx {
+    fn new(ray: &Ray) -> Self {
+        let d = ray.dir.map(|x| if x == 0.0 { 0.0 } else { x });
+        Self {
+            o: ray.origin,
+            inv: d.recip(),
+            neg: [
+                d.x.is_sign_negative(),
+                d.y.is_sign_negative(),
+                d.z.is_sign_negative(),
+            ],
+            t_min: ray.t_min,
+            wt: WatertightRay::new(ray),
+        }
+    }
+}
+
+impl KdTree {
+    #[inline(always)]
+    fn test_leaf<const ANY: bool, const COUNT: bool>(
+        &self,
+        leaf: &KdLeaf,
+        r: &RayCtx,
+        best: &mut Option<Hit>,
+        t_best: &mut f32,
+        c: &mut Counters,
+    ) -> bool {
+        let tris = &self.tris[leaf.first as usize..(leaf.first + leaf.count) as usize];
+        if COUNT {
+            c.leaves += 1;
+            c.triangles += tris.len() as u64;
+        }
+        for tri in tris {
+            if let Some((t, u, v)) = r.wt.intersect_tri(tri, r.t_min, *t_best) {
+                if ANY || t < *t_best || best.is_none() {
+                    *t_best = t;
+                    *best = Some(Hit {
+                        t,
+                        prim: tri.prim(),
+                        u,
+                        v,
+                    });
+                    if ANY {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+
+    /// Stackless traversal with ropes.
+    pub(crate) fn ropes<const ANY: bool, const COUNT: bool>(
+        &self,
+        ray: &Ray,
+        c: &mut Counters,
+    ) -> Option<Hit> {
+        if !ray.is_valid() || self.tris.is_empty() {
+            return None;
+        }
+        let (mut t_entry, _) = self.bounds.clip_ray(ray)?;
+        let r = RayCtx::new(ray);
+        let mut best = None;
+        let mut t_best = ray.t_max;
+        let mut node = self.root;
+        // Every step moves to a leaf strictly further along some axis, so the walk ends; the
+        // bound only guards against a broken tree.
+        for _ in 0..self.leaves.len() + self.inners.len() + 1 {
+            while !is_leaf(node) {
+                let n = &self.inners[node as usize];
+                let a = n.axis as usize;
+                let t_split = (n.split - r.o[a]) * r.inv[a];
+                // The plane was crossed at or before the entry point: the point is on the far side.
+                let far = t_split <= t_entry;
+                node = if far != r.neg[a] { n.right } else { n.left };
+                if COUNT {
+                    c.inner += 1;
+                }
+            }
+            let leaf = &self.leaves[(node & !LEAF_BIT) as usize];
+            if self.test_leaf::<ANY, COUNT>(leaf, &r, &mut best, &mut t_best, c) {
+                return best;
+            }
+            // Exit face of the leaf.
+            let mut t_exit = f32::INFINITY;
+            let mut face = 0usize;
+            for a in 0..3 {
+                let bound = if r.neg[a] { leaf.min[a] } else { leaf.max[a] };
+                let t = (bound - r.o[a]) * r.inv[a];
+                if t < t_exit {
+                    t_exit = t;
+                    face = 2 * a + (!r.neg[a]) as usize;
+                }
+            }
+            if t_best <= t_exit {
+                return best;
+            }
+            node = leaf.ropes[face];
+            if node == NO_ROPE {
+                return best;
+            }
+            t_entry = t_entry.max(t_exit);
+        }
+        best
+    }
+
+    /// Classic kd-tree traversal with a stack of far children.
+    pub(crate) fn stack<const ANY: bool, const COUNT: bool>(
+        &self,
+        ray: &Ray,
+        c: &mut Counters,
+    ) -> Option<Hit> {
+        if !ray.is_valid() || self.tris.is_empty() {
+            return None;
+        }
+        let (mut t0, mut t1) = self.bounds.clip_ray(ray)?;
+        let r = RayCtx::new(ray);
+        let mut best = None;
+        let mut t_best = ray.t_max;
+        let mut stack = [(0u32, 0f32, 0f32); MAX_DEPTH + 1];
+        let mut sp = 0;
+        let mut node = self.root;
+        loop {
+            while !is_leaf(node) {
+                let n = &self.inners[node as usize];
+                let a = n.axis as usize;
+                let t_split = (n.split - r.o[a]) * r.inv[a];
+                let (near, far) = if r.neg[a] {
+                    (n.right, n.left)
+                } else {
+                    (n.left, n.right)
+                };
+                if COUNT {
+                    c.inner += 1;
+                }
+                // NaN (a ray lying in the plane) goes to the near side, as in the rope traversal.
+                if !(t_split <= t1) {
+                    node = near;
+                } else if t_split < t0 {
+                    node = far;
+                } else {
+                    stack[sp] = (far, t_split, t1);
+                    sp += 1;
+                    node = near;
+                    t1 = t_split;
+                }
+            }
+            let leaf = &self.leaves[(node & !LEAF_BIT) as usize];
+            if self.test_leaf::<ANY, COUNT>(leaf, &r, &mut best, &mut t_best, c) || t_best <= t1 {
+                return best;
+            }
+            loop {
+                if sp == 0 {
+                    return best;
+                }
+                sp -= 1;
+                (node, t0, t1) = stack[sp];
+                if t0 <= t_best {
+                    break;
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,174 @@
+//! `validate()`: the invariants of a built, flattened, roped tree, checked from scratch.
+
+use raystream_math::{Aabb, Vec3};
+
+use crate::clip::{clipped_bounds, overlaps_interior};
+use crate::layout::{Face, LEAF_BIT, MAX_DEPTH, NO_ROPE, is_leaf};
+use crate::{KdTree, is_degenerate};
+
+impl KdTree {
+    /// Checks the tree against the triangles it was built from:
+    /// - the structure is a tree (every node reached once), depth ≤ `MAX_DEPTH`, splits lie
+    ///   strictly inside their node, leaf boxes equal the boxes the splits define;
+    /// - every leaf entry is a real triangle (exact corners, prim id) that meets the leaf's box;
+    /// - every non-degenerate triangle meeting the interior of a leaf's box is listed in it;
+    /// - every rope leads to the deepest node whose box covers the leaf's face from the other
+    ///   side, and `NO_ROPE` only on faces on the scene boundary.
+    pub fn validate(&self, corners: &[[Vec3; 3]]) -> Result<(), String> {
+        let mut inner_boxes = vec![None; self.inners.len()];
+        let mut leaf_seen = vec![false; self.leaves.len()];
+        if self.tris.is_empty() && self.inners.is_empty() {
+            return Ok(());
+        }
+        let mut todo = vec![(self.root, self.bounds, 0usize)];
+        while let Some((node, b, depth)) = todo.pop() {
+            if depth > MAX_DEPTH {
+                return Err(format!("node {node:#x} at depth {depth} > {MAX_DEPTH}"));
+            }
+            if is_leaf(node) {
+                let i = (node & !LEAF_BIT) as usize;
+                let seen = leaf_seen
+                    .get_mut(i)
+                    .ok_or(format!("leaf {i} out of range"))?;
+                if std::mem::replace(seen, true) {
+                    return Err(format!("leaf {i} reached twice"));
+                }
+                if self.leaf_bounds(i) != b {
+                    return Err(format!(
+                        "leaf {i} stores box {:?}, its splits give {b:?}",
+                        self.leaf_bounds(i)
+                    ));
+                }
+                continue;
+            }
+            let n = *self
+                .inners
+                .get(node as usize)
+                .ok_or(format!("inner {node} out of range"))?;
+            if inner_boxes[node as usize].replace(b).is_some() {
+                return Err(format!("inner node {node} reached twice"));
+            }
+            let a = n.axis as usize;
+            if a > 2 || !(n.split > b.min[a] && n.split < b.max[a]) {
+                return Err(format!(
+                    "inner node {node}: split {} on axis {a} not inside {b:?}",
+                    n.split
+                ));
+            }
+            let (mut lb, mut rb) = (b, b);
+            lb.max[a] = n.split;
+            rb.min[a] = n.split;
+            todo.push((n.left, lb, depth + 1));
+            todo.push((n.right, rb, depth + 1));
+        }
+        if let Some(i) = leaf_seen.iter().position(|s| !s) {
+            return Err(format!("leaf {i} is not reachable"));
+        }
+        if let Some(i) = inner_boxes.iter().position(|s| s.is_none()) {
+            return Err(format!("inner node {i} is not reachable"));
+        }
+        let node_box = |r: u32| {
+            if is_leaf(r) {
+                self.leaf_bounds((r & !LEAF_BIT) as usize)
+            } else {
+                inner_boxes[r as usize].unwrap()
+            }
+        };
+
+        for (i, leaf) in self.leaves.iter().enumerate() {
+            let b = self.leaf_bounds(i);
+            let range = leaf.first as usize..(leaf.first + leaf.count) as usize;
+            let tris = self
+                .tris
+                .get(range)
+                .ok_or(format!("leaf {i}: triangle range out of bounds"))?;
+            for t in tris {
+                let c = corners
+                    .get(t.prim() as usize)
+                    .ok_or(format!("leaf {i}: prim {} out of range", t.prim()))?;
+                let stored = [t.v0, t.v1, t.v2].map(|v| Vec3::new(v[0], v[1], v[2]));
+                if stored != *c {
+                    return Err(format!(
+                        "leaf {i}: corners of prim {} differ from the mesh",
+                        t.prim()
+                    ));
+                }
+                if clipped_bounds(c, &b).is_none() {
+                    return Err(format!(
+                        "leaf {i}: prim {} does not meet the leaf's box",
+                        t.prim()
+                    ));
+                }
+            }
+            for f in Face::ALL {
+                let a = f.axis();
+                let face = if f.is_positive() { b.max[a] } else { b.min[a] };
+                let rope = leaf.ropes[f as usize];
+                if rope == NO_ROPE {
+                    let scene = if f.is_positive() {
+                        self.bounds.max[a]
+                    } else {
+                        self.bounds.min[a]
+                    };
+                    if face != scene {
+                        return Err(format!(
+                            "leaf {i}: no rope on {f:?}, which is inside the scene"
+                        ));
+                    }
+                    continue;
+                }
+                let t = node_box(rope);
+                let other = if f.is_positive() { t.min[a] } else { t.max[a] };
+                if other != face {
+                    return Err(format!(
+                        "leaf {i}: rope {f:?} leads to {rope:#x}, not adjacent"
+                    ));
+                }
+                for o in (0..3).filter(|&o| o != a) {
+                    if t.min[o] > b.min[o] || t.max[o] < b.max[o] {
+                        return Err(format!(
+                            "leaf {i}: rope {f:?} target does not cover the face"
+                        ));
+                    }
+                }
+                if !is_leaf(rope) {
+                    let n = &self.inners[rope as usize];
+                    let na = n.axis as usize;
+                    if na == a || !(n.split > b.min[na] && n.split < b.max[na]) {
+                        return Err(format!("leaf {i}: rope {f:?} could be pushed further down"));
+                    }
+                }
+            }
+        }
+
+        // Completeness: walk the tree once per triangle, pruning by overlap.
+        let margin = 1e-6 * self.bounds.extent().max_element().max(f32::MIN_POSITIVE) as f64;
+        for (prim, c) in corners.iter().enumerate() {
+            if is_degenerate(c) {
+                continue;
+            }
+            let mut todo = vec![self.root];
+            while let Some(node) = todo.pop() {
+                let b: Aabb = node_box(node);
+                if !overlaps_interior(c, &b, margin) {
+                    continue;
+                }
+                if is_leaf(node) {
+                    let l = &self.leaves[(node & !LEAF_BIT) as usize];
+                    let tris = &self.tris[l.first as usize..(l.first + l.count) as usize];
+                    if !tris.iter().any(|t| t.prim() == prim as u32) {
+                        return Err(format!(
+                            "prim {prim} meets leaf {:#x} but is not in it",
+                            node
+                        ));
+                    }
+                } else {
+                    let n = &self.inners[node as usize];
+                    todo.push(n.left);
+                    todo.push(n.right);
+                }
+            }
+        }
+        Ok(())
+    }
+}
