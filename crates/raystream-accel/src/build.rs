@@ -46,14 +46,17 @@ impl std::str::FromStr for Builder {
 
 /// SAH constants: cost of one traversal step and of one triangle test, in the same units.
 pub const COST_TRAVERSAL: f32 = 1.0;
-pub const COST_INTERSECT: f32 = 1.5;
+pub const COST_INTERSECT: f32 = 1.0;
 /// Factor on the cost of a split that cuts off empty space (Wald & Havran's λ).
 const EMPTY_BONUS: f32 = 0.8;
 const BINS: usize = 32;
 /// Nodes with at most this many references sweep exact events instead of bins.
-const EXACT_MAX: usize = 384;
+const EXACT_MAX: usize = 12;
 /// Nodes with more references than this build their two subtrees in parallel.
 const PARALLEL_MIN: usize = 2048;
+/// Straddling triangles are clipped exactly in nodes with at least this many references; in
+/// smaller nodes their bounds are only cut by the plane (cheaper, a little looser).
+const CLIP_MIN: usize = 0;
 /// The median builder stops at this many references.
 const MEDIAN_LEAF: usize = 8;
 
@@ -196,6 +199,7 @@ impl Ctx<'_> {
         let a = s.axis;
         let mut left = Vec::with_capacity(refs.len());
         let mut right = Vec::with_capacity(refs.len());
+        let clip = refs.len() >= CLIP_MIN;
         for r in refs {
             let (lo, hi) = (r.bounds.min[a], r.bounds.max[a]);
             if hi < s.pos {
@@ -210,14 +214,20 @@ impl Ctx<'_> {
                 // Straddles or touches the plane. Children are closed boxes: a triangle that
                 // touches a child's face is in it, so a ray starting on (or running in) a split
                 // plane finds it from either side.
+                // The triangle's part in the node is convex and reaches the plane, so it meets
+                // both closed children; clipping only tightens its bounds there.
                 let tri = &self.corners[r.prim as usize];
                 for (side, child) in [(&mut left, lb), (&mut right, rb)] {
-                    if let Some(bounds) = clipped_bounds(tri, &r.bounds.intersection(*child)) {
-                        side.push(Ref {
-                            prim: r.prim,
-                            bounds,
-                        });
-                    }
+                    let coarse = r.bounds.intersection(*child);
+                    let bounds = if clip {
+                        clipped_bounds(tri, &coarse).unwrap_or(coarse)
+                    } else {
+                        coarse
+                    };
+                    side.push(Ref {
+                        prim: r.prim,
+                        bounds,
+                    });
                 }
             }
         }
@@ -226,10 +236,16 @@ impl Ctx<'_> {
 }
 
 /// Cost of splitting `b` at `pos` with `nl`, `nr` references on each side.
+#[inline]
 fn sah_cost(b: &Aabb, inv_area: f32, axis: usize, pos: f32, nl: usize, nr: usize) -> f32 {
-    let (lb, rb) = split_box(b, axis, pos);
-    let c = COST_TRAVERSAL
-        + COST_INTERSECT * inv_area * (lb.area() * nl as f32 + rb.area() * nr as f32);
+    let e = b.extent();
+    let (e1, e2) = (e[(axis + 1) % 3], e[(axis + 2) % 3]);
+    // Area of a box with extent `len` along `axis`: 2(e1·e2 + len·(e1 + e2)).
+    let cap = e1 * e2;
+    let side = e1 + e2;
+    let al = cap + (pos - b.min[axis]) * side;
+    let ar = cap + (b.max[axis] - pos) * side;
+    let c = COST_TRAVERSAL + COST_INTERSECT * 2.0 * inv_area * (al * nl as f32 + ar * nr as f32);
     if nl == 0 || nr == 0 {
         c * EMPTY_BONUS
     } else {

@@ -7,11 +7,22 @@ use raystream_math::{Aabb, DVec3, Vec3};
 /// Clipping runs in f64 and the result is rounded outwards to f32, then limited to `bx`, so it
 /// never claims less than the true overlap nor more than the box.
 pub fn clipped_bounds(tri: &[Vec3; 3], bx: &Aabb) -> Option<Aabb> {
-    let mut poly: Vec<DVec3> = tri.iter().map(|v| v.as_dvec3()).collect();
-    let mut next = Vec::with_capacity(9);
+    // A triangle clipped by 6 planes has at most 9 corners; fixed arrays keep this allocation-free.
+    let mut poly = [DVec3::ZERO; 10];
+    let mut next = [DVec3::ZERO; 10];
+    for (k, v) in tri.iter().enumerate() {
+        poly[k] = v.as_dvec3();
+    }
+    let mut len = 3;
+    let own = Aabb::from_points(tri);
     for axis in 0..3 {
         for (plane, keep_above) in [(bx.min[axis] as f64, true), (bx.max[axis] as f64, false)] {
-            next.clear();
+            // A plane the whole triangle lies inside cannot cut its clipped part either.
+            if (keep_above && own.min[axis] as f64 >= plane)
+                || (!keep_above && own.max[axis] as f64 <= plane)
+            {
+                continue;
+            }
             let inside = |p: &DVec3| {
                 if keep_above {
                     p[axis] >= plane
@@ -19,27 +30,32 @@ pub fn clipped_bounds(tri: &[Vec3; 3], bx: &Aabb) -> Option<Aabb> {
                     p[axis] <= plane
                 }
             };
-            for i in 0..poly.len() {
-                let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+            let mut n = 0;
+            for i in 0..len {
+                let (a, b) = (poly[i], poly[(i + 1) % len]);
                 let (ia, ib) = (inside(&a), inside(&b));
                 if ia {
-                    next.push(a);
+                    next[n] = a;
+                    n += 1;
                 }
                 if ia != ib {
                     let s = (plane - a[axis]) / (b[axis] - a[axis]);
                     let mut p = a + (b - a) * s;
                     p[axis] = plane;
-                    next.push(p);
+                    next[n] = p;
+                    n += 1;
                 }
             }
             std::mem::swap(&mut poly, &mut next);
-            if poly.is_empty() {
+            len = n;
+            if len == 0 {
                 return None;
             }
         }
     }
+    let poly = &poly[..len];
     let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-    for p in &poly {
+    for p in poly {
         lo = lo.min(*p);
         hi = hi.max(*p);
     }

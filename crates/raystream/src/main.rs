@@ -1,1 +1,30 @@
-fn main() {}
+//! `raystream`: render, trace, bench and info over the library crates.
+
+mod bench;
+mod cli;
+mod common;
+mod info;
+mod render;
+mod trace;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let args = cli::Cli::parse();
+    let result = match args.command {
+        cli::Command::Render(a) => render::run(&a),
+        cli::Command::Trace(a) => trace::run(&a),
+        cli::Command::Info(a) => info::run(&a),
+        cli::Command::Bench(a) => bench::run(&a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("raystream: error: {e:#}");
+            // Bad input and failed runs both exit 2, as clap does for bad arguments.
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,398 @@
+//! The CPU renderer: the stream stages of the research design, run as explicit queues depth by
+//! depth (no recursion), each stage a data-parallel pass over work items on rayon:
+//!
+//! `generate_camera_rays` → for each depth: `intersect_closest` → `handle_misses` →
+//! `shade_hits` (local Phong term, shadow work items, reflection/refraction rays for the next
+//! depth) → `intersect_any` on the shadow queue → `accumulate`.
+//!
+//! Compositing follows the paper, C(n) = Σ_j M_j (Π_{i<j} r_i)(1 − r_j): every work item
+//! carries the product of the coefficients along its path as `weight`; a hit adds its local
+//! colour M_j times `weight · (1 − r_j − τ_j)` and passes `weight · r_j` to its reflection ray
+//! and `weight · τ_j` to its refraction ray (with Fresnel, τ is split into reflected τF and
+//! transmitted τ(1 − F)). With no transparency this is exactly the paper's sum.
+//!
+//! The result is deterministic: queues keep their order and `accumulate` adds in queue order.
+
+mod image_out;
+
+use rayon::prelude::*;
+use raystream_accel::{Hit, KdTree, Traversal};
+use raystream_math::{Ray, Vec3};
+use raystream_scene::{Camera, Scene};
+
+pub use image_out::Image;
+
+#[derive(Clone, Copy, Debug)]
+pub struct RenderOptions {
+    pub width: u32,
+    pub height: u32,
+    /// Samples per pixel (stratified jitter; 1 = the pixel centre).
+    pub spp: u32,
+    /// Deepest reflection/refraction level; 0 = primary rays only.
+    pub max_depth: u32,
+    pub traversal: Traversal,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            width: 800,
+            height: 600,
+            spp: 4,
+            max_depth: 4,
+            traversal: Traversal::Ropes,
+        }
+    }
+}
+
+/// A ray waiting to be traced: the pixel it adds to and the weight of its path.
+#[derive(Clone, Copy, Debug)]
+pub struct RayWorkItem {
+    pub ray: Ray,
+    pub pixel: u32,
+    pub weight: Vec3,
+}
+
+/// A ray with its closest hit.
+#[derive(Clone, Copy, Debug)]
+pub struct HitWorkItem {
+    pub item: RayWorkItem,
+    pub hit: Hit,
+}
+
+/// A shadow ray toward a light, with the light's contribution if nothing blocks it.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadowWorkItem {
+    pub ray: Ray,
+    pub pixel: u32,
+    pub radiance: Vec3,
+}
+
+/// What one depth did, for progress reports and statistics.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DepthStats {
+    pub depth: u32,
+    pub rays: usize,
+    pub hits: usize,
+    pub shadow_rays: usize,
+}
+
+/// Everything the shading stage needs besides the hit.
+pub struct Shading<'a> {
+    pub scene: &'a Scene,
+    /// Offset of secondary ray origins off the surface (world units).
+    pub epsilon: f32,
+}
+
+/// Renders `scene` with the kd-tree built over `scene.mesh`; `progress` is told after each depth.
+pub fn render(
+    scene: &Scene,
+    tree: &KdTree,
+    opt: &RenderOptions,
+    mut progress: impl FnMut(DepthStats),
+) -> Image {
+    let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
+    let mut film = vec![Vec3::ZERO; (opt.width * opt.height) as usize];
+    let shading = Shading {
+        scene,
+        epsilon: 1e-4 * scene.object_box.radius().max(f32::MIN_POSITIVE),
+    };
+    let mut queue = generate_camera_rays(&cam, opt.width, opt.height, opt.spp);
+    for depth in 0..=opt.max_depth {
+        if queue.is_empty() {
+            break;
+        }
+        let (hits, misses) = intersect_closest(tree, &queue, opt.traversal);
+        handle_misses(&misses, scene.background, &mut film);
+        let spawn = depth < opt.max_depth;
+        let (local, shadows, next) = shade_hits(&shading, &hits, spawn);
+        let lit = intersect_any(tree, &shadows, opt.traversal);
+        accumulate(&mut film, &local);
+        accumulate(&mut film, &lit);
+        progress(DepthStats {
+            depth,
+            rays: queue.len(),
+            hits: hits.len(),
+            shadow_rays: shadows.len(),
+        });
+        queue = next;
+    }
+    let scale = 1.0 / opt.spp as f32;
+    Image {
+        width: opt.width,
+        height: opt.height,
+        pixels: film.into_iter().map(|c| c * scale).collect(),
+    }
+}
+
+/// A deterministic hash → [0, 1): the jitter of sample `s` of pixel `p`.
+fn jitter(p: u32, s: u32, k: u32) -> f32 {
+    let mut x =
+        p.wrapping_mul(0x9E37_79B9) ^ s.wrapping_mul(0x85EB_CA6B) ^ k.wrapping_mul(0xC2B2_AE35);
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7FEB_352D);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846C_A68B);
+    x ^= x >> 16;
+    (x >> 8) as f32 / (1u32 << 24) as f32
+}
+
+/// Stage 1: one ray per pixel sample, pixel-major. Sample `s` of `spp` lies in stratum `s` of an
+/// `n×n` grid (n = ⌈√spp⌉), jittered; with one sample it is the pixel centre.
+pub fn generate_camera_rays(cam: &Camera, width: u32, height: u32, spp: u32) -> Vec<RayWorkItem> {
+    let n = (spp as f32).sqrt().ceil() as u32;
+    let weight = Vec3::ONE;
+    (0..width * height)
+        .into_par_iter()
+        .flat_map_iter(|pixel| {
+            let (x, y) = ((pixel % width) as f32, (pixel / width) as f32);
+            (0..spp).map(move |s| {
+                let (jx, jy) = if spp == 1 {
+                    (0.5, 0.5)
+                } else {
+                    (
+                        ((s % n) as f32 + jitter(pixel, s, 0)) / n as f32,
+                        ((s / n) as f32 + jitter(pixel, s, 1)) / n as f32,
+                    )
+                };
+                RayWorkItem {
+                    ray: cam.ray(x + jx, y + jy, width, height),
+                    pixel,
+                    weight,
+                }
+            })
+        })
+        .collect()
+}
+
+/// Stage 2: closest hits; the queue is split into hits and misses (order kept).
+pub fn intersect_closest(
+    tree: &KdTree,
+    queue: &[RayWorkItem],
+    traversal: Traversal,
+) -> (Vec<HitWorkItem>, Vec<RayWorkItem>) {
+    let hits: Vec<Option<Hit>> = queue
+        .par_iter()
+        .with_min_len(256)
+        .map(|w| tree.intersect(&w.ray, traversal))
+        .collect();
+    let mut hit_items = Vec::with_capacity(hits.len());
+    let mut misses = Vec::new();
+    for (item, hit) in queue.iter().zip(hits) {
+        match hit {
+            Some(hit) => hit_items.push(HitWorkItem { item: *item, hit }),
+            None => misses.push(*item),
+        }
+    }
+    (hit_items, misses)
+}
+
+/// Stage 3: rays that leave the scene add the background.
+pub fn handle_misses(misses: &[RayWorkItem], background: Vec3, film: &mut [Vec3]) {
+    for m in misses {
+        film[m.pixel as usize] += m.weight * background;
+    }
+}
+
+/// Schlick's approximation of the Fresnel reflectance for a ray from index `n1` into `n2`.
+fn schlick(cos_i: f32, n1: f32, n2: f32) -> f32 {
+    let r0 = ((n1 - n2) / (n1 + n2)).powi(2);
+    r0 + (1.0 - r0) * (1.0 - cos_i).powi(5)
+}
+
+fn reflect(d: Vec3, n: Vec3) -> Vec3 {
+    d - 2.0 * d.dot(n) * n
+}
+
+/// Refraction of unit `d` through unit `n` (facing against `d`) with `eta = n1/n2`; `None` on
+/// total internal reflection.
+fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = -d.dot(n);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    (k >= 0.0).then(|| eta * d + (eta * cos_i - k.sqrt()) * n)
+}
+
+/// The surface at a hit, seen from the ray's side.
+struct Surface {
+    p: Vec3,
+    /// Geometric normal, facing the ray.
+    ng: Vec3,
+    /// Interpolated shading normal, facing the ray.
+    ns: Vec3,
+    /// Whether the ray arrived on the outside (against the triangle's winding normal).
+    outside: bool,
+    dir: Vec3,
+}
+
+fn surface(scene: &Scene, h: &HitWorkItem) -> Surface {
+    let prim = h.hit.prim as usize;
+    let [a, b, c] = scene.mesh.corners(prim);
+    let [ia, ib, ic] = scene.mesh.triangles[prim];
+    let dir = h.item.ray.dir.normalize();
+    let mut ng = (b - a).cross(c - a).normalize();
+    let (u, v) = (h.hit.u, h.hit.v);
+    let n = &scene.normals;
+    let mut ns = (n[ia as usize] * (1.0 - u - v) + n[ib as usize] * u + n[ic as usize] * v)
+        .normalize_or_zero();
+    if ns == Vec3::ZERO {
+        ns = ng;
+    }
+    let outside = ng.dot(dir) < 0.0;
+    if !outside {
+        ng = -ng;
+        ns = -ns;
+    }
+    if ns.dot(dir) >= 0.0 {
+        ns = ng;
+    }
+    Surface {
+        p: h.item.ray.at(h.hit.t),
+        ng,
+        ns,
+        outside,
+        dir,
+    }
+}
+
+/// The split of a hit's light: local (1 − r − τ), reflected, transmitted.
+fn coefficients(m: &raystream_scene::Material, s: &Surface) -> (f32, f32, f32, Option<Vec3>) {
+    let local = 1.0 - m.reflectivity - m.transparency;
+    if m.transparency <= 0.0 {
+        return (local, m.reflectivity, 0.0, None);
+    }
+    let (n1, n2) = if s.outside {
+        (1.0, m.ior)
+    } else {
+        (m.ior, 1.0)
+    };
+    match refract(s.dir, s.ns, n1 / n2) {
+        None => (local, m.reflectivity + m.transparency, 0.0, None),
+        Some(t) => {
+            let f = if m.fresnel {
+                schlick(-s.dir.dot(s.ns), n1, n2)
+            } else {
+                0.0
+            };
+            (
+                local,
+                m.reflectivity + m.transparency * f,
+                m.transparency * (1.0 - f),
+                Some(t),
+            )
+        }
+    }
+}
+
+type Contribution = (u32, Vec3);
+
+/// Stage 4: local Phong terms (ambient now, diffuse and specular behind shadow rays), and the
+/// next depth's reflection and refraction rays when `spawn`.
+pub fn shade_hits(
+    sh: &Shading,
+    hits: &[HitWorkItem],
+    spawn: bool,
+) -> (Vec<Contribution>, Vec<ShadowWorkItem>, Vec<RayWorkItem>) {
+    let scene = sh.scene;
+    let mat = |h: &HitWorkItem| &scene.materials[scene.material_of[h.hit.prim as usize] as usize];
+    let local: Vec<Contribution> = hits
+        .par_iter()
+        .with_min_len(256)
+        .map(|h| {
+            let s = surface(scene, h);
+            let m = mat(h);
+            let (k, ..) = coefficients(m, &s);
+            (
+                h.item.pixel,
+                h.item.weight * k * m.ambient * scene.ambient_light,
+            )
+        })
+        .collect();
+    let shadows: Vec<ShadowWorkItem> = hits
+        .par_iter()
+        .with_min_len(256)
+        .flat_map_iter(|h| {
+            let s = surface(scene, h);
+            let m = mat(h);
+            let (k, ..) = coefficients(m, &s);
+            let origin = s.p + s.ng * sh.epsilon;
+            let w = h.item.weight * k;
+            scene.lights.iter().filter_map(move |light| {
+                let to_light = light.position - origin;
+                let l = to_light.normalize();
+                let cos = s.ns.dot(l);
+                if cos <= 0.0 || s.ng.dot(to_light) <= 0.0 || k <= 0.0 {
+                    return None;
+                }
+                let spec = reflect(-l, s.ns).dot(-s.dir).max(0.0).powf(m.shininess);
+                let radiance = w * (m.diffuse * cos + m.specular * spec) * light.color;
+                Some(ShadowWorkItem {
+                    ray: Ray::new(origin, to_light, 0.0, 1.0 - 1e-4),
+                    pixel: h.item.pixel,
+                    radiance,
+                })
+            })
+        })
+        .collect();
+    let next: Vec<RayWorkItem> = if !spawn {
+        Vec::new()
+    } else {
+        hits.par_iter()
+            .with_min_len(256)
+            .flat_map_iter(|h| {
+                let s = surface(scene, h);
+                let (_, r, t, refr) = coefficients(mat(h), &s);
+                let w = h.item.weight;
+                let mut out = [None, None];
+                if r * w.max_element() > 1e-3 {
+                    let mut d = reflect(s.dir, s.ns);
+                    if d.dot(s.ng) <= 0.0 {
+                        d = reflect(s.dir, s.ng);
+                    }
+                    out[0] = Some(RayWorkItem {
+                        ray: Ray::new(s.p + s.ng * sh.epsilon, d, 0.0, f32::INFINITY),
+                        pixel: h.item.pixel,
+                        weight: w * r,
+                    });
+                }
+                if let Some(d) = refr.filter(|_| t * w.max_element() > 1e-3) {
+                    out[1] = Some(RayWorkItem {
+                        ray: Ray::new(s.p - s.ng * sh.epsilon, d, 0.0, f32::INFINITY),
+                        pixel: h.item.pixel,
+                        weight: w * t,
+                    });
+                }
+                out.into_iter().flatten()
+            })
+            .collect()
+    };
+    (local, shadows, next)
+}
+
+/// Stage 5: shadow rays; those that reach their light keep their contribution.
+pub fn intersect_any(
+    tree: &KdTree,
+    shadows: &[ShadowWorkItem],
+    traversal: Traversal,
+) -> Vec<Contribution> {
+    let blocked: Vec<bool> = shadows
+        .par_iter()
+        .with_min_len(256)
+        .map(|s| tree.intersect_any(&s.ray, traversal).is_some())
+        .collect();
+    shadows
+        .iter()
+        .zip(blocked)
+        .filter(|(_, b)| !b)
+        .map(|(s, _)| (s.pixel, s.radiance))
+        .collect()
+}
+
+/// Stage 6: adds contributions to the film in queue order (deterministic).
+pub fn accumulate(film: &mut [Vec3], contributions: &[Contribution]) {
+    for &(pixel, c) in contributions {
+        film[pixel as usize] += c;
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,90 @@
+//! Pinhole camera. Its framing rule is the one `../shared/tools/rays.py` uses for the standard
+//! ray sets (60° vertical field of view, looking at the bounding-box centre from direction
+//! (0.35, 0.25, 1), backed off until the projected points fit with a 5 % margin), so that
+//! `raystream bench` and `rays.py gen` trace the same primary rays.
+
+use raystream_math::{Aabb, Ray, Vec3};
+
+pub const FRAME_FOV_DEG: f32 = 60.0;
+pub const FRAME_VIEW_DIR: Vec3 = Vec3::new(0.35, 0.25, 1.0);
+const FRAME_MARGIN: f32 = 1.05;
+const FRAME_SAMPLES: usize = 200_000;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    pub fwd: Vec3,
+    pub right: Vec3,
+    pub up: Vec3,
+    /// tan of half the vertical field of view.
+    pub tan_y: f32,
+}
+
+impl Camera {
+    pub fn look_at(eye: Vec3, target: Vec3, up: Vec3, fov_y_deg: f32) -> Camera {
+        let fwd = (target - eye).normalize();
+        let right = fwd.cross(up).normalize();
+        Camera {
+            eye,
+            fwd,
+            right,
+            up: right.cross(fwd),
+            tan_y: (fov_y_deg.to_radians() * 0.5).tan(),
+        }
+    }
+
+    /// A camera looking at the points' bounding-box centre from `FRAME_VIEW_DIR`, backed off
+    /// until every point projects inside the frame with a 5 % margin.
+    pub fn frame(points: &[Vec3], aspect: f32) -> Camera {
+        let b = Aabb::from_points(points);
+        let center = b.center();
+        let back = FRAME_VIEW_DIR.normalize();
+        let mut cam = Camera::look_at(center + back, center, Vec3::Y, FRAME_FOV_DEG);
+        let tan_x = cam.tan_y * aspect;
+        let step = (points.len() / FRAME_SAMPLES).max(1);
+        let need = points
+            .iter()
+            .step_by(step)
+            .map(|&p| {
+                let q = p - center;
+                (q.dot(cam.right).abs() / tan_x).max(q.dot(cam.up).abs() / cam.tan_y) * FRAME_MARGIN
+                    + q.dot(back)
+            })
+            .fold(f32::NEG_INFINITY, f32::max);
+        cam.eye = center + back * need.max(1e-6 * b.radius());
+        cam
+    }
+
+    /// The ray through the image point (`x`, `y`) in pixels from the top-left corner of a
+    /// `width`×`height` image (pixel centres at +0.5), unit direction, t from 0 to infinity.
+    pub fn ray(&self, x: f32, y: f32, width: u32, height: u32) -> Ray {
+        let (w, h) = (width as f32, height as f32);
+        let px = (x / w * 2.0 - 1.0) * self.tan_y * (w / h);
+        let py = (1.0 - y / h * 2.0) * self.tan_y;
+        let d = (self.fwd + px * self.right + py * self.up).normalize();
+        Ray::new(self.eye, d, 0.0, f32::INFINITY)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn framed_points_project_inside_the_image() {
+        let pts: Vec<Vec3> = (0..100)
+            .map(|i| Vec3::new(i as f32, (i * 7 % 13) as f32, -(i as f32) * 0.5))
+            .collect();
+        let cam = Camera::frame(&pts, 16.0 / 9.0);
+        for p in &pts {
+            let q = *p - cam.eye;
+            let z = q.dot(cam.fwd);
+            assert!(z > 0.0);
+            assert!((q.dot(cam.right) / z).abs() <= cam.tan_y * 16.0 / 9.0 * 1.0001);
+            assert!((q.dot(cam.up) / z).abs() <= cam.tan_y * 1.0001);
+        }
+        // The centre pixel looks at the box centre.
+        let r = cam.ray(8.0, 4.5, 16, 9);
+        assert!((r.dir - cam.fwd).length() < 1e-6);
+    }
+}

@@ -1,0 +1,149 @@
+//! The scene file's plain data (serde), as a user writes it in TOML.
+
+use std::collections::HashMap;
+
+use raystream_math::{Mat3, Vec3};
+use serde::Deserialize;
+
+use crate::Material;
+
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneDesc {
+    pub camera: Option<CameraDesc>,
+    #[serde(default)]
+    pub lights: Vec<LightDesc>,
+    #[serde(default)]
+    pub materials: HashMap<String, MaterialDesc>,
+    #[serde(default)]
+    pub objects: Vec<ObjectDesc>,
+    pub ground: Option<GroundDesc>,
+    pub background: Option<[f32; 3]>,
+    pub ambient: Option<[f32; 3]>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraDesc {
+    pub eye: [f32; 3],
+    pub target: [f32; 3],
+    pub up: Option<[f32; 3]>,
+    /// Vertical field of view in degrees.
+    pub fov: Option<f32>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightDesc {
+    pub position: [f32; 3],
+    pub color: Option<[f32; 3]>,
+}
+
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialDesc {
+    pub ambient: Option<[f32; 3]>,
+    pub diffuse: Option<[f32; 3]>,
+    pub specular: Option<[f32; 3]>,
+    pub shininess: Option<f32>,
+    pub reflectivity: Option<f32>,
+    pub transparency: Option<f32>,
+    pub ior: Option<f32>,
+    pub fresnel: Option<bool>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum Scale {
+    Uniform(f32),
+    Axes([f32; 3]),
+}
+
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObjectDesc {
+    /// Mesh file, relative to the scene file.
+    pub mesh: Option<String>,
+    /// Built-in shape: "sphere" (unit radius) or "spot".
+    pub shape: Option<String>,
+    pub material: Option<String>,
+    pub translate: Option<[f32; 3]>,
+    /// Rotation in degrees about x, then y, then z.
+    pub rotate: Option<[f32; 3]>,
+    pub scale: Option<Scale>,
+}
+
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GroundDesc {
+    pub material: Option<String>,
+    /// Height (y) of the plane; default just under the objects.
+    pub height: Option<f32>,
+    /// Side length in scene radii (default 40).
+    pub size: Option<f32>,
+    /// A second material: the plane becomes a checkerboard of the two.
+    pub checker: Option<String>,
+    /// Checkerboard tiles per side (default 40).
+    pub tiles: Option<u32>,
+}
+
+impl MaterialDesc {
+    pub fn to_material(&self) -> Result<Material, String> {
+        let d = Material::default();
+        let m = Material {
+            ambient: self.ambient.map(Vec3::from).unwrap_or(d.ambient),
+            diffuse: self.diffuse.map(Vec3::from).unwrap_or(d.diffuse),
+            specular: self.specular.map(Vec3::from).unwrap_or(d.specular),
+            shininess: self.shininess.unwrap_or(d.shininess),
+            reflectivity: self.reflectivity.unwrap_or(d.reflectivity),
+            transparency: self.transparency.unwrap_or(d.transparency),
+            ior: self.ior.unwrap_or(d.ior),
+            fresnel: self.fresnel.unwrap_or(d.fresnel),
+        };
+        let unit = |x: f32| (0.0..=1.0).contains(&x);
+        if !unit(m.reflectivity) || !unit(m.transparency) || m.reflectivity + m.transparency > 1.0 {
+            return Err(
+                "reflectivity and transparency must lie in [0, 1] and add up to at most 1".into(),
+            );
+        }
+        if !(m.ior >= 1.0 && m.ior.is_finite()) || !(m.shininess >= 0.0 && m.shininess.is_finite())
+        {
+            return Err("ior must be ≥ 1 and shininess ≥ 0".into());
+        }
+        if ![m.ambient, m.diffuse, m.specular]
+            .iter()
+            .all(|c| c.is_finite() && c.min_element() >= 0.0)
+        {
+            return Err("colours must be finite and non-negative".into());
+        }
+        Ok(m)
+    }
+}
+
+impl ObjectDesc {
+    /// The linear part of the object's transform (rotation then scale applied to the mesh).
+    pub fn matrix(&self) -> Result<Mat3, String> {
+        let s = match self.scale {
+            None => Vec3::ONE,
+            Some(Scale::Uniform(s)) => Vec3::splat(s),
+            Some(Scale::Axes(a)) => Vec3::from(a),
+        };
+        if !s.is_finite() || s.abs().min_element() == 0.0 {
+            return Err(format!("scale {s} must be finite and non-zero"));
+        }
+        let r = self.rotate.map(Vec3::from).unwrap_or(Vec3::ZERO);
+        if !r.is_finite()
+            || !self
+                .translate
+                .map(Vec3::from)
+                .unwrap_or(Vec3::ZERO)
+                .is_finite()
+        {
+            return Err("rotate and translate must be finite".into());
+        }
+        let rot = Mat3::from_rotation_z(r.z.to_radians())
+            * Mat3::from_rotation_y(r.y.to_radians())
+            * Mat3::from_rotation_x(r.x.to_radians());
+        Ok(rot * Mat3::from_diagonal(s))
+    }
+}

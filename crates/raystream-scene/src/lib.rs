@@ -1,0 +1,352 @@
+//! Scenes: a plain-data description ([`SceneDesc`], parsed from TOML) of camera, lights,
+//! materials and objects, compiled into a [`Scene`]: one world-space mesh whose triangle `i`
+//! has material `material_of[i]`, with smooth vertex normals, ready for the kd-tree.
+//!
+//! ```toml
+//! [camera]            # optional: without it the camera frames the objects
+//! eye = [0, 1, 4]
+//! target = [0, 0.5, 0]
+//! fov = 40            # vertical, degrees
+//!
+//! [[lights]]
+//! position = [3, 5, 4]
+//! color = [1, 1, 1]
+//!
+//! [materials.glass]
+//! diffuse = [0.1, 0.1, 0.1]
+//! transparency = 0.9
+//! ior = 1.5
+//!
+//! [[objects]]
+//! mesh = "bunny.ply"        # relative to this file; or shape = "sphere" / "spot"
+//! material = "glass"
+//! translate = [0, 0, 0]
+//! rotate = [0, 30, 0]       # degrees about x, y, z (applied in that order)
+//! scale = 1.0               # or [sx, sy, sz]
+//!
+//! [ground]                  # optional plane under the objects
+//! material = "floor"
+//! ```
+
+mod camera;
+mod desc;
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+pub use camera::Camera;
+pub use desc::{CameraDesc, GroundDesc, LightDesc, MaterialDesc, ObjectDesc, Scale, SceneDesc};
+use raystream_io::{MeshError, TriMesh};
+use raystream_math::{Aabb, Vec3};
+
+/// What went wrong building a scene, naming the file.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    #[error("{path}: {problem}")]
+    Invalid { path: PathBuf, problem: String },
+}
+
+/// A point light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Light {
+    pub position: Vec3,
+    pub color: Vec3,
+}
+
+/// Phong material with Whitted-style reflection and refraction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Material {
+    pub ambient: Vec3,
+    pub diffuse: Vec3,
+    pub specular: Vec3,
+    pub shininess: f32,
+    /// Fraction of light reflected as a mirror (r_j in the paper's compositing).
+    pub reflectivity: f32,
+    /// Fraction of light transmitted (refracted).
+    pub transparency: f32,
+    /// Index of refraction of the inside.
+    pub ior: f32,
+    /// Whether transmitted light is split by Schlick's Fresnel term into reflection and
+    /// refraction (otherwise the fixed coefficients apply).
+    pub fresnel: bool,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Self {
+            ambient: Vec3::splat(0.08),
+            diffuse: Vec3::splat(0.7),
+            specular: Vec3::splat(0.3),
+            shininess: 32.0,
+            reflectivity: 0.0,
+            transparency: 0.0,
+            ior: 1.5,
+            fresnel: true,
+        }
+    }
+}
+
+/// A scene ready to render.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub mesh: TriMesh,
+    /// Unit vertex normals of `mesh` (for smooth shading).
+    pub normals: Vec<Vec3>,
+    pub material_of: Vec<u32>,
+    pub materials: Vec<Material>,
+    pub lights: Vec<Light>,
+    /// The camera, or `None` to frame the scene's objects.
+    pub camera: Option<Camera>,
+    pub background: Vec3,
+    /// Ambient light colour.
+    pub ambient_light: Vec3,
+    /// Bounds of the objects, without the ground plane.
+    pub object_box: Aabb,
+}
+
+/// The embedded Spot mesh (CC0, see `assets/README.md`).
+pub fn spot_mesh() -> TriMesh {
+    raystream_io::parse_mesh(
+        include_bytes!("../assets/spot.obj.gz"),
+        raystream_io::MeshFormat::Obj,
+        Path::new("<built-in spot.obj>"),
+    )
+    .expect("the embedded mesh is valid")
+}
+
+impl Scene {
+    /// Compiles a description; mesh paths are relative to `base_dir`, errors name `origin`.
+    pub fn from_desc(
+        desc: &SceneDesc,
+        base_dir: &Path,
+        origin: &Path,
+    ) -> Result<Scene, SceneError> {
+        Self::compile(desc, origin, |i, o| match (&o.mesh, &o.shape) {
+            (Some(p), None) => Ok(raystream_io::load_mesh(&base_dir.join(p))?),
+            (None, Some(s)) => builtin_shape(s)
+                .ok_or_else(|| format!("object {i}: unknown shape '{s}' (sphere, spot)").into()),
+            _ => Err(format!("object {i}: give exactly one of 'mesh' and 'shape'").into()),
+        })
+    }
+
+    fn compile(
+        desc: &SceneDesc,
+        origin: &Path,
+        mut load: impl FnMut(usize, &ObjectDesc) -> Result<TriMesh, SceneError>,
+    ) -> Result<Scene, SceneError> {
+        let invalid = |problem: String| SceneError::Invalid {
+            path: origin.to_path_buf(),
+            problem,
+        };
+        let mut names: HashMap<&str, u32> = HashMap::new();
+        let mut materials = Vec::new();
+        let mut sorted: Vec<_> = desc.materials.iter().collect();
+        sorted.sort_by_key(|(k, _)| k.as_str());
+        for (name, m) in sorted {
+            names.insert(name, materials.len() as u32);
+            materials.push(
+                m.to_material()
+                    .map_err(|e| invalid(format!("material '{name}': {e}")))?,
+            );
+        }
+        let default_material = materials.len() as u32;
+        materials.push(Material::default());
+        let lookup = |name: &Option<String>| -> Result<u32, SceneError> {
+            match name {
+                None => Ok(default_material),
+                Some(n) => names
+                    .get(n.as_str())
+                    .copied()
+                    .ok_or_else(|| invalid(format!("unknown material '{n}'"))),
+            }
+        };
+        if desc.objects.is_empty() {
+            return Err(invalid("the scene has no objects".into()));
+        }
+        let mut mesh = TriMesh::default();
+        let mut normals = Vec::new();
+        let mut material_of = Vec::new();
+        for (i, o) in desc.objects.iter().enumerate() {
+            let source = load(i, o).map_err(|e| match e {
+                SceneError::Invalid { problem, .. } => invalid(problem),
+                e => e,
+            })?;
+            let m = o
+                .matrix()
+                .map_err(|e| invalid(format!("object {i}: {e}")))?;
+            let t = o.translate.map(Vec3::from).unwrap_or(Vec3::ZERO);
+            let normal_m = m.inverse().transpose();
+            normals.extend(
+                source
+                    .vertex_normals()
+                    .iter()
+                    .map(|&n| (normal_m * n).normalize_or_zero()),
+            );
+            mesh.append(&source, |p| m * p + t);
+            material_of.extend(std::iter::repeat_n(lookup(&o.material)?, source.len()));
+        }
+        let object_box = mesh.bounds();
+        if let Some(g) = &desc.ground {
+            let r = object_box.radius();
+            let y = g.height.unwrap_or(object_box.min.y - 1e-3 * r);
+            let c = object_box.center();
+            let size = g.size.unwrap_or(40.0) * r;
+            let first = lookup(&g.material)?;
+            let (tiles, second) = match &g.checker {
+                Some(name) => (
+                    g.tiles.unwrap_or(40).clamp(1, 1000),
+                    lookup(&Some(name.clone()))?,
+                ),
+                None => (1, first),
+            };
+            let tile = size / tiles as f32;
+            let quad = TriMesh::ground_quad(tile);
+            for i in 0..tiles {
+                for j in 0..tiles {
+                    let offset = Vec3::new(
+                        c.x - 0.5 * size + (i as f32 + 0.5) * tile,
+                        y,
+                        c.z - 0.5 * size + (j as f32 + 0.5) * tile,
+                    );
+                    normals.extend(std::iter::repeat_n(Vec3::Y, quad.positions.len()));
+                    mesh.append(&quad, |p| p + offset);
+                    let m = if (i + j) % 2 == 0 { first } else { second };
+                    material_of.extend(std::iter::repeat_n(m, quad.len()));
+                }
+            }
+        }
+        let lights = desc
+            .lights
+            .iter()
+            .map(|l| Light {
+                position: Vec3::from(l.position),
+                color: l.color.map(Vec3::from).unwrap_or(Vec3::ONE),
+            })
+            .collect();
+        let camera = desc.camera.as_ref().map(|c| {
+            Camera::look_at(
+                Vec3::from(c.eye),
+                Vec3::from(c.target),
+                c.up.map(Vec3::from).unwrap_or(Vec3::Y),
+                c.fov.unwrap_or(45.0),
+            )
+        });
+        Ok(Scene {
+            mesh,
+            normals,
+            material_of,
+            materials,
+            lights,
+            camera,
+            background: desc
+                .background
+                .map(Vec3::from)
+                .unwrap_or(Vec3::new(0.05, 0.06, 0.08)),
+            ambient_light: desc.ambient.map(Vec3::from).unwrap_or(Vec3::splat(0.6)),
+            object_box,
+        })
+    }
+
+    /// Reads a TOML scene file.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let invalid = |problem: String| SceneError::Invalid {
+            path: path.to_path_buf(),
+            problem,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| invalid(e.to_string()))?;
+        let desc: SceneDesc =
+            toml::from_str(&text).map_err(|e| invalid(format!("not a valid scene: {e}")))?;
+        Self::from_desc(&desc, path.parent().unwrap_or(Path::new(".")), path)
+    }
+
+    /// A mesh alone: a key and a fill light, a slightly reflective ground plane under it, the
+    /// camera framing it.
+    pub fn for_mesh(mesh: TriMesh, name: &Path) -> Scene {
+        let b = mesh.bounds();
+        let (c, r) = (b.center(), b.radius());
+        let mut desc = SceneDesc::default();
+        desc.materials.insert(
+            "floor".into(),
+            MaterialDesc {
+                diffuse: Some([0.55, 0.55, 0.58]),
+                reflectivity: Some(0.15),
+                specular: Some([0.1, 0.1, 0.1]),
+                ..Default::default()
+            },
+        );
+        desc.ground = Some(GroundDesc {
+            material: Some("floor".into()),
+            ..Default::default()
+        });
+        desc.lights = vec![
+            LightDesc {
+                position: (c + r * Vec3::new(2.0, 3.0, 2.5)).into(),
+                color: Some([0.85, 0.85, 0.8]),
+            },
+            LightDesc {
+                position: (c + r * Vec3::new(-3.0, 1.5, 1.0)).into(),
+                color: Some([0.3, 0.32, 0.38]),
+            },
+        ];
+        desc.objects.push(ObjectDesc::default());
+        let mut mesh = Some(mesh);
+        Self::compile(&desc, name, |_, _| Ok(mesh.take().expect("one object")))
+            .expect("a checked mesh makes a valid scene")
+    }
+
+    /// The built-in default scene: Spot the cow between a glass sphere and a mirror sphere on a
+    /// reflective floor, with shadows from two lights.
+    pub fn builtin_default() -> Scene {
+        let desc: SceneDesc = toml::from_str(DEFAULT_SCENE).expect("built-in scene parses");
+        Scene::from_desc(&desc, Path::new("."), Path::new("<built-in default scene>"))
+            .expect("built-in scene is valid")
+    }
+
+    /// The camera to render with: the scene's, or one framing the objects (see [`Camera::frame`]).
+    pub fn camera_for(&self, aspect: f32) -> Camera {
+        self.camera
+            .unwrap_or_else(|| Camera::frame(&self.mesh_points_for_framing(), aspect))
+    }
+
+    fn mesh_points_for_framing(&self) -> Vec<Vec3> {
+        let b = self.object_box;
+        let mut used = vec![false; self.mesh.positions.len()];
+        for t in &self.mesh.triangles {
+            for &v in t {
+                used[v as usize] = true;
+            }
+        }
+        self.mesh
+            .positions
+            .iter()
+            .zip(used)
+            .filter(|&(p, u)| u && b.contains(*p))
+            .map(|(p, _)| *p)
+            .collect()
+    }
+}
+
+const SPHERE_SUBDIVISIONS: u32 = 4;
+
+fn builtin_shape(name: &str) -> Option<TriMesh> {
+    match name {
+        "sphere" => Some(TriMesh::icosphere(SPHERE_SUBDIVISIONS)),
+        "spot" => Some(spot_mesh()),
+        _ => None,
+    }
+}
+
+/// The default scene, in the same TOML a user writes.
+pub const DEFAULT_SCENE: &str = include_str!("default_scene.toml");
+
+impl From<String> for SceneError {
+    /// A problem whose file the caller fills in.
+    fn from(problem: String) -> Self {
+        SceneError::Invalid {
+            path: PathBuf::new(),
+            problem,
+        }
+    }
+}

@@ -1,0 +1,227 @@
+//! `raystream bench`: build time, and throughput on the standard primary, shadow and diffuse
+//! ray sets (the conventions of `../shared/tools/rays.py gen`), traversal and intersection
+//! only, build time apart as the paper measures. Hits are validated against brute force on a
+//! sample before any figure is printed.
+
+use std::f32::consts::PI;
+use std::time::Instant;
+
+use anyhow::{Result, bail};
+use raystream_accel::{Counters, KdTree, Traversal, brute};
+use raystream_io::TriMesh;
+use raystream_math::{Ray, Vec3};
+use raystream_scene::Camera;
+use serde_json::json;
+
+use crate::cli::BenchArgs;
+use crate::common::{cpu_model, file_name, load_mesh, median, ms, resolve_device, round3, spinner};
+use crate::info::tree_json;
+use crate::trace::{NO_PRIM, trace_all};
+
+const OFFSET: f32 = 1e-4;
+const LIGHT_RADIUS: f32 = 0.05;
+const MAX_PER_HIT: usize = 8;
+const VALIDATE_RAYS: usize = 256;
+
+/// xorshift64*: seeded, reproducible ray sets.
+struct Rng(u64);
+impl Rng {
+    fn f(&mut self) -> f32 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// The standard ray sets of one mesh: primary rays through pixel centres, and per primary hit
+/// K shadow rays (to a spherical light, t_max = 1) and K cosine-weighted diffuse rays, with K
+/// chosen for about one secondary ray per pixel (at most 8).
+pub fn ray_sets(
+    mesh: &TriMesh,
+    tree: &KdTree,
+    width: u32,
+    height: u32,
+) -> Vec<(&'static str, Vec<Ray>)> {
+    let used: Vec<Vec3> = mesh
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&i| mesh.positions[i as usize])
+        .collect();
+    let cam = Camera::frame(&used, width as f32 / height as f32);
+    let primary: Vec<Ray> = (0..width * height)
+        .map(|p| {
+            cam.ray(
+                (p % width) as f32 + 0.5,
+                (p / width) as f32 + 0.5,
+                width,
+                height,
+            )
+        })
+        .collect();
+    let hits = trace_all(tree, &primary, false, Traversal::Ropes);
+    let b = mesh.bounds();
+    let (center, radius) = (b.center(), b.radius());
+    let surf: Vec<(Vec3, Vec3)> = primary
+        .iter()
+        .zip(&hits)
+        .filter(|(_, h)| h.prim != NO_PRIM)
+        .map(|(r, h)| {
+            let [a, b, c] = mesh.corners(h.prim as usize);
+            let mut n = (b - a).cross(c - a).normalize_or_zero();
+            if n == Vec3::ZERO {
+                n = -r.dir.normalize();
+            }
+            if n.dot(r.dir) > 0.0 {
+                n = -n;
+            }
+            (r.at(h.t) + n * (OFFSET * radius), n)
+        })
+        .collect();
+    let k =
+        ((primary.len() as f64 / surf.len().max(1) as f64).round() as usize).clamp(1, MAX_PER_HIT);
+    let light = center + radius * (1.2 * cam.up + 0.6 * cam.right - 0.8 * cam.fwd);
+    let mut rng = Rng(1);
+    let mut shadow = Vec::with_capacity(surf.len() * k);
+    let mut diffuse = Vec::with_capacity(surf.len() * k);
+    for &(p, n) in &surf {
+        let (t1, t2) = n.any_orthonormal_pair();
+        for _ in 0..k {
+            let j = loop {
+                let v = Vec3::new(rng.f(), rng.f(), rng.f()) * 2.0 - 1.0;
+                if v.length_squared() <= 1.0 && v.length_squared() > 1e-6 {
+                    break v.normalize();
+                }
+            };
+            shadow.push(Ray::new(
+                p,
+                light + j * (LIGHT_RADIUS * radius) - p,
+                0.0,
+                1.0,
+            ));
+            let (u1, u2) = (rng.f(), rng.f());
+            let (r, phi) = (u1.sqrt(), 2.0 * PI * u2);
+            let d = t1 * (r * phi.cos()) + t2 * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt();
+            diffuse.push(Ray::new(p, d.normalize(), 0.0, f32::INFINITY));
+        }
+    }
+    vec![
+        ("primary", primary),
+        ("shadow", shadow),
+        ("diffuse", diffuse),
+    ]
+}
+
+fn git_commit() -> String {
+    std::process::Command::new("git")
+        .args(["rev-parse", "--short", "HEAD"])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+        .unwrap_or_else(|| "unknown".into())
+}
+
+pub fn run(a: &BenchArgs) -> Result<()> {
+    let quiet = a.quiet || a.json;
+    let mesh = load_mesh(&a.input)?;
+    let corners: Vec<[Vec3; 3]> = (0..mesh.len()).map(|i| mesh.corners(i)).collect();
+    let traversal: Traversal = a.traversal.into();
+    let builder = a.builder.into();
+    let commit = git_commit();
+    for &dev in &a.device {
+        let device = resolve_device(dev, quiet)?;
+        // Build time: median of 3 builds (the first also warms the thread pool).
+        let mut builds = Vec::new();
+        let mut tree = KdTree::build(&mesh, builder);
+        for _ in 0..3 {
+            let t0 = Instant::now();
+            tree = KdTree::build(&mesh, builder);
+            builds.push(ms(t0.elapsed()));
+        }
+        let build_ms = median(&mut builds);
+        let pb = spinner(quiet, "generating ray sets");
+        let sets = ray_sets(&mesh, &tree, a.size.0, a.size.1);
+        pb.finish_and_clear();
+        for (kind, rays) in &sets {
+            let any = *kind == "shadow";
+            // Validate a spread-out sample against brute force before timing anything.
+            let step = (rays.len() / VALIDATE_RAYS).max(1);
+            for r in rays.iter().step_by(step) {
+                let got = if any {
+                    tree.intersect_any(r, traversal)
+                } else {
+                    tree.intersect(r, traversal)
+                };
+                let want = brute::closest(&corners, r);
+                if got.is_some() != want.is_some()
+                    || (!any && got.map(|h| h.t) != want.map(|h| h.t))
+                {
+                    bail!(
+                        "{}: {kind} ray {r:?}: kd-tree {got:?}, brute force {want:?}",
+                        a.input.display()
+                    );
+                }
+            }
+            let pb = spinner(quiet, &format!("{kind}: {} rays", rays.len()));
+            let mut hits = trace_all(&tree, rays, any, traversal);
+            let mut times = Vec::new();
+            for _ in 0..a.repeat {
+                let t0 = Instant::now();
+                hits = trace_all(&tree, rays, any, traversal);
+                times.push(ms(t0.elapsed()));
+            }
+            pb.finish_and_clear();
+            let mut c = Counters::default();
+            for r in rays {
+                tree.intersect_counted(r, traversal, any, &mut c);
+            }
+            let n = rays.len().max(1) as f64;
+            let trace_ms_min = times.iter().cloned().fold(f64::INFINITY, f64::min);
+            let trace_ms = median(&mut times);
+            let line = json!({
+                "bench": "trace",
+                "device": device,
+                "adapter": cpu_model(),
+                "commit": commit,
+                "mesh": file_name(&a.input),
+                "triangles": mesh.len(),
+                "kind": kind,
+                "query": if any { "any" } else { "closest" },
+                "rays": rays.len(),
+                "size": format!("{}x{}", a.size.0, a.size.1),
+                "builder": tree.stats.builder,
+                "traversal": traversal.name(),
+                "build_ms": round3(build_ms),
+                "kdtree": tree_json(&tree.stats),
+                "trace_ms": round3(trace_ms),
+                "trace_ms_min": round3(trace_ms_min),
+                "mrays_per_s": round3(n / (trace_ms * 1e-3) / 1e6),
+                "inner_per_ray": round3(c.inner as f64 / n),
+                "leaves_per_ray": round3(c.leaves as f64 / n),
+                "tris_per_ray": round3(c.triangles as f64 / n),
+                "hits": hits.iter().filter(|h| h.t.is_finite()).count(),
+            });
+            if a.json {
+                println!("{line}");
+            } else {
+                println!(
+                    "{:<8} {:>9} rays  {:>8.2} Mrays/s  ({:.1} ms)  {:.1} inner, {:.2} leaves, {:.1} triangles per ray  [build {:.0} ms, SAH cost {:.1}, {} on {}]",
+                    kind,
+                    rays.len(),
+                    line["mrays_per_s"].as_f64().unwrap(),
+                    trace_ms,
+                    line["inner_per_ray"].as_f64().unwrap(),
+                    line["leaves_per_ray"].as_f64().unwrap(),
+                    line["tris_per_ray"].as_f64().unwrap(),
+                    build_ms,
+                    tree.stats.sah_cost,
+                    tree.stats.builder,
+                    device
+                );
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,179 @@
+//! Command-line arguments.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use raystream_accel::{Builder, Traversal};
+
+#[derive(Parser)]
+#[command(
+    name = "raystream",
+    version,
+    about = "Stream ray tracing of triangle meshes (and, soon, CT volumes) on the GPU and the CPU"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Render a mesh, a scene file (TOML) or, without INPUT, the built-in default scene to PNG.
+    Render(RenderArgs),
+    /// Trace a stream of rays (RAYS.bin) against a mesh and write the hits (HITS.bin).
+    Trace(TraceArgs),
+    /// Describe a mesh and its kd-tree.
+    Info(InfoArgs),
+    /// Measure build time and traversal throughput on standard ray sets.
+    Bench(BenchArgs),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Device {
+    Cpu,
+    Gpu,
+    Auto,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BuilderArg {
+    Sah,
+    Median,
+}
+
+impl From<BuilderArg> for Builder {
+    fn from(b: BuilderArg) -> Self {
+        match b {
+            BuilderArg::Sah => Builder::Sah,
+            BuilderArg::Median => Builder::Median,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TraversalArg {
+    Ropes,
+    Stack,
+}
+
+impl From<TraversalArg> for Traversal {
+    fn from(t: TraversalArg) -> Self {
+        match t {
+            TraversalArg::Ropes => Traversal::Ropes,
+            TraversalArg::Stack => Traversal::Stack,
+        }
+    }
+}
+
+#[derive(Args, Clone)]
+pub struct Accel {
+    /// kd-tree builder.
+    #[arg(long, value_enum, default_value = "sah")]
+    pub builder: BuilderArg,
+    /// kd-tree traversal.
+    #[arg(long, value_enum, default_value = "ropes")]
+    pub traversal: TraversalArg,
+    /// Where to run: the CPU, a GPU, or a GPU when there is one.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub device: Device,
+}
+
+#[derive(Args)]
+pub struct RenderArgs {
+    /// Mesh (.obj, .ply, .stl, optionally .gz) or scene (.toml); none: the built-in scene.
+    pub input: Option<PathBuf>,
+    /// Output PNG.
+    #[arg(short, long, default_value = "render.png")]
+    pub output: PathBuf,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "800x600", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Samples per pixel.
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub spp: u32,
+    /// Deepest reflection/refraction level (0: primary rays only).
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(0..=64))]
+    pub max_depth: u32,
+    #[command(flatten)]
+    pub accel: Accel,
+    /// No progress output.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+#[derive(Args)]
+pub struct TraceArgs {
+    /// Mesh file.
+    pub mesh: PathBuf,
+    /// Rays: per ray 8 little-endian f32, ox oy oz t_min dx dy dz t_max.
+    #[arg(long)]
+    pub rays: PathBuf,
+    /// Hits: per ray t (f32, +inf on miss), prim (u32, 0xFFFFFFFF on miss), u, v (f32).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Occlusion queries: any hit in [t_min, t_max].
+    #[arg(long)]
+    pub any: bool,
+    #[command(flatten)]
+    pub accel: Accel,
+    /// Timed runs after one warm-up; the median is reported.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub repeat: u32,
+    /// Print one JSON line of timings.
+    #[arg(long)]
+    pub json: bool,
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+#[derive(Args)]
+pub struct InfoArgs {
+    /// Mesh file.
+    pub input: PathBuf,
+    #[arg(long, value_enum, default_value = "sah")]
+    pub builder: BuilderArg,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Args)]
+pub struct BenchArgs {
+    /// Mesh file.
+    pub input: PathBuf,
+    /// Devices to measure, comma-separated (cpu, gpu, auto).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
+    pub device: Vec<Device>,
+    #[arg(long, value_enum, default_value = "sah")]
+    pub builder: BuilderArg,
+    #[arg(long, value_enum, default_value = "ropes")]
+    pub traversal: TraversalArg,
+    /// Image size of the ray sets.
+    #[arg(long, default_value = "1920x1080", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Timed runs per ray set after one warm-up.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub repeat: u32,
+    /// JSON lines only.
+    #[arg(long)]
+    pub json: bool,
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("'{s}' is not WIDTHxHEIGHT"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad width in '{s}'"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad height in '{s}'"))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("size '{s}' must be between 1x1 and 16384x16384"));
+    }
+    Ok((w, h))
+}

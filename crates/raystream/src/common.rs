@@ -1,0 +1,81 @@
+//! Pieces the commands share: device choice, inputs, progress, timing, machine description.
+
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::{Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use raystream_io::TriMesh;
+
+use crate::cli::Device;
+
+/// The device a command runs on. This build has the CPU back-end only: `gpu` fails with a clear
+/// message, `auto` falls back to the CPU and says so.
+pub fn resolve_device(d: Device, quiet: bool) -> Result<&'static str> {
+    match d {
+        Device::Cpu => Ok("cpu"),
+        Device::Gpu => bail!(
+            "--device gpu: this build of raystream has no GPU back-end yet; use --device cpu (or auto)"
+        ),
+        Device::Auto => {
+            if !quiet {
+                eprintln!("raystream: device: cpu (no GPU back-end in this build)");
+            }
+            Ok("cpu")
+        }
+    }
+}
+
+pub fn load_mesh(path: &Path) -> Result<TriMesh> {
+    Ok(raystream_io::load_mesh(path)?)
+}
+
+pub fn file_name(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| path.display().to_string())
+}
+
+/// A spinner with a message, hidden with `--quiet`.
+pub fn spinner(quiet: bool, msg: &str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new_spinner();
+    pb.set_style(ProgressStyle::with_template("{spinner} {msg} [{elapsed}]").unwrap());
+    pb.set_message(msg.to_string());
+    pb.enable_steady_tick(Duration::from_millis(120));
+    pb
+}
+
+/// The CPU's model name and thread count.
+pub fn cpu_model() -> String {
+    let name = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split_once(':'))
+                .map(|(_, v)| v.trim().to_string())
+        })
+        .unwrap_or_else(|| std::env::consts::ARCH.to_string());
+    format!("{name} ({} threads)", rayon::current_num_threads())
+}
+
+pub fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+pub fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+pub fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}

@@ -1,0 +1,85 @@
+//! `raystream render`: a mesh, a scene file or the built-in scene to PNG.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Result;
+use indicatif::{ProgressBar, ProgressStyle};
+use raystream_accel::KdTree;
+use raystream_cpu::{RenderOptions, render};
+use raystream_scene::Scene;
+
+use crate::cli::RenderArgs;
+use crate::common::{load_mesh, ms, resolve_device, spinner};
+
+/// The scene named by INPUT: none → built-in default, `.toml` → scene file, else a mesh.
+pub fn load_scene(input: Option<&Path>) -> Result<Scene> {
+    Ok(match input {
+        None => Scene::builtin_default(),
+        Some(p)
+            if p.extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("toml")) =>
+        {
+            Scene::load(p)?
+        }
+        Some(p) => Scene::for_mesh(load_mesh(p)?, p),
+    })
+}
+
+pub fn run(a: &RenderArgs) -> Result<()> {
+    let device = resolve_device(a.accel.device, a.quiet)?;
+    let t0 = Instant::now();
+    let scene = load_scene(a.input.as_deref())?;
+    let load_ms = ms(t0.elapsed());
+    let pb = spinner(
+        a.quiet,
+        &format!("building kd-tree over {} triangles", scene.mesh.len()),
+    );
+    let tree = KdTree::build(&scene.mesh, a.accel.builder.into());
+    pb.finish_and_clear();
+    let opt = RenderOptions {
+        width: a.size.0,
+        height: a.size.1,
+        spp: a.spp,
+        max_depth: a.max_depth,
+        traversal: a.accel.traversal.into(),
+    };
+    let bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(opt.max_depth as u64 + 1)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} depth {pos}/{len} {msg} [{elapsed}]").unwrap(),
+    );
+    let t1 = Instant::now();
+    let mut total_rays = 0usize;
+    let image = render(&scene, &tree, &opt, |s| {
+        total_rays += s.rays + s.shadow_rays;
+        bar.set_message(format!(
+            "{} rays, {} hits, {} shadow rays",
+            s.rays, s.hits, s.shadow_rays
+        ));
+        bar.inc(1);
+    });
+    let render_ms = ms(t1.elapsed());
+    bar.finish_and_clear();
+    image.save_png(&a.output).map_err(anyhow::Error::msg)?;
+    if !a.quiet {
+        eprintln!(
+            "raystream: wrote {} ({}x{}, {} spp, depth {}) on {device}: load {:.0} ms, kd-tree {:.0} ms ({} triangles), render {:.0} ms ({:.2} Mrays/s over {} rays)",
+            a.output.display(),
+            opt.width,
+            opt.height,
+            opt.spp,
+            opt.max_depth,
+            load_ms,
+            tree.stats.build_ms,
+            scene.mesh.len(),
+            render_ms,
+            total_rays as f64 / render_ms / 1e3,
+            total_rays
+        );
+    }
+    Ok(())
+}
