@@ -9,12 +9,13 @@ use raystream_math::{Ray, Vec3};
 
 use crate::layout::KdTri;
 
-/// Per-ray constants of the watertight test: the axis permutation and the shear.
+/// Per-ray constants of the watertight test: the axis permutation and the shear. Arrays of 4
+/// indexed with `k & 3` keep bounds checks out of the hot loop.
 #[derive(Clone, Copy, Debug)]
 pub struct WatertightRay {
-    pub origin: Vec3,
+    origin: [f32; 4],
     k: [usize; 3],
-    shear: Vec3,
+    shear: [f32; 3],
 }
 
 impl WatertightRay {
@@ -33,10 +34,11 @@ impl WatertightRay {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
+        let o = ray.origin;
         Self {
-            origin: ray.origin,
+            origin: [o.x, o.y, o.z, 0.0],
             k: [kx, ky, kz],
-            shear: Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]),
+            shear: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
         }
     }
 
@@ -50,17 +52,39 @@ impl WatertightRay {
         t_min: f32,
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
-        let [kx, ky, kz] = self.k;
-        let s = self.shear;
-        let a = v0 - self.origin;
-        let b = v1 - self.origin;
-        let c = v2 - self.origin;
-        let ax = a[kx] - s.x * a[kz];
-        let ay = a[ky] - s.y * a[kz];
-        let bx = b[kx] - s.x * b[kz];
-        let by = b[ky] - s.y * b[kz];
-        let cx = c[kx] - s.x * c[kz];
-        let cy = c[ky] - s.y * c[kz];
+        self.intersect4(
+            &v0.extend(0.0).to_array(),
+            &v1.extend(0.0).to_array(),
+            &v2.extend(0.0).to_array(),
+            t_min,
+            t_max,
+        )
+    }
+
+    #[inline(always)]
+    pub fn intersect_tri(&self, tri: &KdTri, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
+        self.intersect4(&tri.v0, &tri.v1, &tri.v2, t_min, t_max)
+    }
+
+    #[inline(always)]
+    fn intersect4(
+        &self,
+        v0: &[f32; 4],
+        v1: &[f32; 4],
+        v2: &[f32; 4],
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<(f32, f32, f32)> {
+        let (kx, ky, kz) = (self.k[0] & 3, self.k[1] & 3, self.k[2] & 3);
+        let [sx, sy, sz] = self.shear;
+        let o = &self.origin;
+        let (az, bz, cz) = (v0[kz] - o[kz], v1[kz] - o[kz], v2[kz] - o[kz]);
+        let ax = (v0[kx] - o[kx]) - sx * az;
+        let ay = (v0[ky] - o[ky]) - sy * az;
+        let bx = (v1[kx] - o[kx]) - sx * bz;
+        let by = (v1[ky] - o[ky]) - sy * bz;
+        let cx = (v2[kx] - o[kx]) - sx * cz;
+        let cy = (v2[ky] - o[ky]) - sy * cz;
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
@@ -80,18 +104,12 @@ impl WatertightRay {
         if det == 0.0 {
             return None;
         }
-        let t_scaled = s.z * (u * a[kz] + v * b[kz] + w * c[kz]);
+        let t_scaled = sz * (u * az + v * bz + w * cz);
         let inv = 1.0 / det;
         let t = t_scaled * inv;
         if !(t >= t_min && t <= t_max) {
             return None;
         }
         Some((t, v * inv, w * inv))
-    }
-
-    #[inline(always)]
-    pub fn intersect_tri(&self, tri: &KdTri, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
-        let p = |v: &[f32; 4]| Vec3::new(v[0], v[1], v[2]);
-        self.intersect(p(&tri.v0), p(&tri.v1), p(&tri.v2), t_min, t_max)
     }
 }

@@ -40,7 +40,7 @@ pub struct TreeStats {
     pub leaves: usize,
     pub empty_leaves: usize,
     pub max_depth: usize,
-    /// Expected cost of a random ray by the surface-area heuristic (traversal = 1, test = 1.5).
+    /// Expected cost of a random ray by the surface-area heuristic (traversal step = 1, triangle test = 1).
     pub sah_cost: f64,
     /// Mean triangle references per non-empty leaf.
     pub mean_tris_per_leaf: f64,

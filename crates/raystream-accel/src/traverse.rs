@@ -5,7 +5,7 @@
 //! `t_min ≤ t ≤ t_max`; closest-hit returns the smallest such t (ties: the first triangle found);
 //! any-hit returns some hit in the range.
 
-use raystream_math::{Ray, Vec3};
+use raystream_math::Ray;
 
 use crate::intersect::WatertightRay;
 use crate::layout::{KdLeaf, LEAF_BIT, MAX_DEPTH, NO_ROPE, is_leaf};
@@ -58,9 +58,9 @@ impl std::ops::AddAssign for Counters {
 /// Per-ray data of a traversal: the ray, its reciprocal direction with zero components made
 /// +0 (so that +inf, never −inf, stands for "parallel") and the watertight-test constants.
 struct RayCtx {
-    o: Vec3,
-    inv: Vec3,
-    neg: [bool; 3],
+    o: [f32; 4],
+    inv: [f32; 4],
+    neg: [bool; 4],
     t_min: f32,
     wt: WatertightRay,
 }
@@ -69,12 +69,13 @@ impl RayCtx {
     fn new(ray: &Ray) -> Self {
         let d = ray.dir.map(|x| if x == 0.0 { 0.0 } else { x });
         Self {
-            o: ray.origin,
-            inv: d.recip(),
+            o: ray.origin.extend(0.0).to_array(),
+            inv: d.recip().extend(0.0).to_array(),
             neg: [
                 d.x.is_sign_negative(),
                 d.y.is_sign_negative(),
                 d.z.is_sign_negative(),
+                false,
             ],
             t_min: ray.t_min,
             wt: WatertightRay::new(ray),
@@ -135,7 +136,7 @@ impl KdTree {
         for _ in 0..self.leaves.len() + self.inners.len() + 1 {
             while !is_leaf(node) {
                 let n = &self.inners[node as usize];
-                let a = n.axis as usize;
+                let a = (n.axis & 3) as usize;
                 let t_split = (n.split - r.o[a]) * r.inv[a];
                 // The plane was crossed at or before the entry point: the point is on the far side.
                 let far = t_split <= t_entry;
@@ -190,7 +191,7 @@ impl KdTree {
         loop {
             while !is_leaf(node) {
                 let n = &self.inners[node as usize];
-                let a = n.axis as usize;
+                let a = (n.axis & 3) as usize;
                 let t_split = (n.split - r.o[a]) * r.inv[a];
                 let (near, far) = if r.neg[a] {
                     (n.right, n.left)

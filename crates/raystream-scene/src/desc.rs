@@ -64,7 +64,7 @@ pub enum Scale {
 pub struct ObjectDesc {
     /// Mesh file, relative to the scene file.
     pub mesh: Option<String>,
-    /// Built-in shape: "sphere" (unit radius) or "spot".
+    /// Built-in shape: "sphere" (unit radius), "quad" (unit square in y = 0 facing +y) or "spot".
     pub shape: Option<String>,
     pub material: Option<String>,
     pub translate: Option<[f32; 3]>,

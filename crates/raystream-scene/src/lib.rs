@@ -18,7 +18,7 @@
 //! ior = 1.5
 //!
 //! [[objects]]
-//! mesh = "bunny.ply"        # relative to this file; or shape = "sphere" / "spot"
+//! mesh = "bunny.ply"        # relative to this file; or shape = "sphere" / "quad" / "spot"
 //! material = "glass"
 //! translate = [0, 0, 0]
 //! rotate = [0, 30, 0]       # degrees about x, y, z (applied in that order)
@@ -125,8 +125,9 @@ impl Scene {
     ) -> Result<Scene, SceneError> {
         Self::compile(desc, origin, |i, o| match (&o.mesh, &o.shape) {
             (Some(p), None) => Ok(raystream_io::load_mesh(&base_dir.join(p))?),
-            (None, Some(s)) => builtin_shape(s)
-                .ok_or_else(|| format!("object {i}: unknown shape '{s}' (sphere, spot)").into()),
+            (None, Some(s)) => builtin_shape(s).ok_or_else(|| {
+                format!("object {i}: unknown shape '{s}' (sphere, quad, spot)").into()
+            }),
             _ => Err(format!("object {i}: give exactly one of 'mesh' and 'shape'").into()),
         })
     }
@@ -334,6 +335,7 @@ fn builtin_shape(name: &str) -> Option<TriMesh> {
     match name {
         "sphere" => Some(TriMesh::icosphere(SPHERE_SUBDIVISIONS)),
         "spot" => Some(spot_mesh()),
+        "quad" => Some(TriMesh::ground_quad(1.0)),
         _ => None,
     }
 }

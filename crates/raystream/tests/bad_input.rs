@@ -1,0 +1,106 @@
+//! Bad input: a clear error naming the file and the problem, exit code 2, no panic.
+
+mod common;
+use common::*;
+
+fn write(name: &str, bytes: &[u8]) -> String {
+    let p = tmp(name);
+    std::fs::write(&p, bytes).unwrap();
+    p.to_string_lossy().into_owned()
+}
+
+fn assert_input_error(args: &[&str], file: &str, problem: &str) {
+    let o = run(args);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+    assert!(
+        err.contains(file),
+        "{args:?}: error must name {file}: {err}"
+    );
+    assert!(
+        err.contains(problem),
+        "{args:?}: error must say '{problem}': {err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn nan_coordinates() {
+    let f = write("nan.obj", b"v 0 0 0\nv nan 1 0\nv 0 1 0\nf 1 2 3\n");
+    for cmd in ["info", "render"] {
+        assert_input_error(&[cmd, &f], "nan.obj", "NaN");
+    }
+}
+
+#[test]
+fn out_of_range_index() {
+    let f = write("range.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
+    assert_input_error(&["info", &f], "range.obj", "vertex");
+}
+
+#[test]
+fn truncated_files() {
+    let lucy = std::fs::read(mesh("stanford_lucy_100k.ply")).unwrap();
+    let f = write("cut.ply", &lucy[..lucy.len() / 3]);
+    assert_input_error(&["info", &f], "cut.ply", "PLY");
+    let vase = std::fs::read(mesh("goblet_vase.stl")).unwrap();
+    let f = write("cut.stl", &vase[..vase.len() - 100]);
+    assert_input_error(&["info", &f], "cut.stl", "truncated");
+}
+
+#[test]
+fn empty_mesh() {
+    let f = write("empty.obj", b"# nothing here\nv 0 0 0\n");
+    assert_input_error(&["info", &f], "empty.obj", "no triangles");
+}
+
+#[test]
+fn missing_and_unsupported_files() {
+    assert_input_error(
+        &["info", "no/such/mesh.ply"],
+        "no/such/mesh.ply",
+        "No such file",
+    );
+    let f = write("mesh.xyz", b"1 2 3\n");
+    assert_input_error(&["info", &f], "mesh.xyz", "unsupported");
+}
+
+#[test]
+fn rays_file_of_wrong_size() {
+    let rays = write("odd.rays", &[0u8; 33]);
+    let out = tmp("odd.hits").to_string_lossy().into_owned();
+    assert_input_error(
+        &["trace", &mesh("spot.obj"), "--rays", &rays, "-o", &out],
+        "odd.rays",
+        "multiple of 32",
+    );
+}
+
+#[test]
+fn bad_scene_file() {
+    let f = write("bad.toml", b"[[objects]]\nshape = \"dodecahedron\"\n");
+    assert_input_error(
+        &["render", &f, "-o", &tmp("x.png").to_string_lossy()],
+        "bad.toml",
+        "unknown shape",
+    );
+    let f = write("syntax.toml", b"[[objects]\n");
+    assert_input_error(&["render", &f], "syntax.toml", "not a valid scene");
+    let f = write("mat.toml", b"[materials.m]\nreflectivity = 0.8\ntransparency = 0.5\n[[objects]]\nshape = \"sphere\"\nmaterial = \"m\"\n");
+    assert_input_error(&["render", &f], "mat.toml", "reflectivity");
+}
+
+#[test]
+fn gpu_device_is_refused_clearly() {
+    let o = run(&["info", &mesh("spot.obj")]);
+    assert!(o.status.success());
+    let o = run(&[
+        "render",
+        "--device",
+        "gpu",
+        "-o",
+        &tmp("g.png").to_string_lossy(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("GPU"), "{}", stderr(&o));
+}

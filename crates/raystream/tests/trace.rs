@@ -1,0 +1,172 @@
+//! `raystream trace`: the file formats, the JSON line, and agreement with Intel Embree on the
+//! standard ray sets (../shared/tools/rays.py).
+
+mod common;
+use common::*;
+
+fn f32s(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+#[test]
+fn formats_contract_and_json() {
+    // One triangle in the z = 0 plane, and rays: a hit, a miss, a NaN ray, a hit beyond t_max,
+    // an unnormalized direction.
+    let m = tmp("tri.obj");
+    std::fs::write(&m, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let rays = [
+        [0.25, 0.5, 1.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY],
+        [2.0, 2.0, 1.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY],
+        [f32::NAN, 0.5, 1.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY],
+        [0.25, 0.5, 1.0, 0.0, 0.0, 0.0, -1.0, 0.5],
+        [0.25, 0.25, 1.0, 0.0, 0.0, 0.0, -4.0, 1.0],
+    ];
+    let r = tmp("contract.rays");
+    std::fs::write(&r, f32s(&rays.concat())).unwrap();
+    let h = tmp("contract.hits");
+    for any in [false, true] {
+        let mut args = vec![
+            "trace",
+            m.to_str().unwrap(),
+            "--rays",
+            r.to_str().unwrap(),
+            "-o",
+            h.to_str().unwrap(),
+            "--json",
+            "--device",
+            "cpu",
+        ];
+        if any {
+            args.push("--any");
+        }
+        let o = run(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let j: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        for key in [
+            "device",
+            "adapter",
+            "mesh",
+            "triangles",
+            "rays",
+            "builder",
+            "traversal",
+            "build_ms",
+            "upload_ms",
+            "trace_ms",
+            "trace_ms_min",
+            "mrays_per_s",
+            "hits",
+        ] {
+            assert!(j.get(key).is_some(), "missing {key} in {j}");
+        }
+        assert_eq!(j["rays"], 5);
+        assert_eq!(j["hits"], 2);
+        let bytes = std::fs::read(&h).unwrap();
+        assert_eq!(bytes.len(), 5 * 16);
+        let rec = |i: usize| {
+            let f = |k: usize| {
+                f32::from_le_bytes(
+                    bytes[16 * i + 4 * k..16 * i + 4 * k + 4]
+                        .try_into()
+                        .unwrap(),
+                )
+            };
+            (
+                f(0),
+                u32::from_le_bytes(bytes[16 * i + 4..16 * i + 8].try_into().unwrap()),
+                f(2),
+                f(3),
+            )
+        };
+        assert_eq!(rec(0).0, 1.0);
+        assert_eq!(rec(4).0, 0.25, "t is in units of the direction's length");
+        for miss in [1, 2, 3] {
+            assert_eq!(rec(miss).0, f32::INFINITY);
+            if !any {
+                assert_eq!(rec(miss).1, u32::MAX);
+            }
+        }
+        if !any {
+            assert_eq!(rec(0), (1.0, 0, 0.25, 0.5));
+        }
+    }
+}
+
+/// Generates each standard ray set with rays.py, traces it, and lets rays.py check the hits
+/// against Embree. Small sizes keep the test fast; `--t-floor` as rays.py advises for them.
+fn check_against_embree(mesh_name: &str, builder: &str, traversal: &str) {
+    let Some(py) = python() else { return };
+    let m = mesh(mesh_name);
+    for kind in ["primary", "shadow", "diffuse", "random"] {
+        let stem = format!("{mesh_name}-{kind}-{builder}-{traversal}");
+        let rays = tmp(&format!("{stem}.rays"));
+        let hits = tmp(&format!("{stem}.hits"));
+        let g = rays_py(
+            &py,
+            &[
+                "gen",
+                &m,
+                "--kind",
+                kind,
+                "--size",
+                "160x120",
+                "-o",
+                rays.to_str().unwrap(),
+            ],
+        );
+        assert!(g.status.success(), "rays.py gen: {}", stderr(&g));
+        let any = kind == "shadow";
+        let mut args = vec![
+            "trace",
+            &m,
+            "--rays",
+            rays.to_str().unwrap(),
+            "-o",
+            hits.to_str().unwrap(),
+            "--builder",
+            builder,
+            "--traversal",
+            traversal,
+            "-q",
+        ];
+        if any {
+            args.push("--any");
+        }
+        let o = run(&args);
+        assert!(o.status.success(), "trace: {}", stderr(&o));
+        let mut check = vec![
+            "check",
+            &m,
+            rays.to_str().unwrap(),
+            hits.to_str().unwrap(),
+            "--t-floor",
+            "1e-4",
+        ];
+        if any {
+            check.push("--any");
+        }
+        let c = rays_py(&py, &check);
+        let out = stdout(&c);
+        assert!(
+            c.status.success() && out.lines().last().is_some_and(|l| l.starts_with("PASS")),
+            "{stem}: {out}{}",
+            stderr(&c)
+        );
+    }
+}
+
+#[test]
+fn agrees_with_embree_lucy_sah_ropes() {
+    check_against_embree("stanford_lucy_100k.ply", "sah", "ropes");
+}
+
+#[test]
+fn agrees_with_embree_bunny_median_stack() {
+    check_against_embree("stanford_bunny.ply", "median", "stack");
+}
+
+#[test]
+fn agrees_with_embree_vase_and_spot() {
+    check_against_embree("goblet_vase.stl", "sah", "stack");
+    check_against_embree("spot.obj", "median", "ropes");
+}
