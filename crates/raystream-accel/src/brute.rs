@@ -16,15 +16,10 @@ pub fn closest(corners: &[[Vec3; 3]], ray: &Ray) -> Option<Hit> {
     let mut best: Option<Hit> = None;
     for (i, c) in corners.iter().enumerate() {
         let t_max = best.map_or(ray.t_max, |h| h.t);
-        if let Some((t, u, v)) = wt.intersect(c[0], c[1], c[2], ray.t_min, t_max) {
-            if best.is_none_or(|h| t < h.t) {
-                best = Some(Hit {
-                    t,
-                    prim: i as u32,
-                    u,
-                    v,
-                });
-            }
+        if let Some((t, u, v)) = wt.intersect(c[0], c[1], c[2], ray.t_min, t_max)
+            && best.is_none_or(|h| t < h.t)
+        {
+            best = Some(Hit { t, prim: i as u32, u, v });
         }
     }
     best

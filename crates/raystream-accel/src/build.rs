@@ -54,9 +54,6 @@ const BINS: usize = 32;
 const EXACT_MAX: usize = 12;
 /// Nodes with more references than this build their two subtrees in parallel.
 const PARALLEL_MIN: usize = 2048;
-/// Straddling triangles are clipped exactly in nodes with at least this many references; in
-/// smaller nodes their bounds are only cut by the plane (cheaper, a little looser).
-const CLIP_MIN: usize = 0;
 /// The median builder stops at this many references.
 const MEDIAN_LEAF: usize = 8;
 
@@ -199,7 +196,6 @@ impl Ctx<'_> {
         let a = s.axis;
         let mut left = Vec::with_capacity(refs.len());
         let mut right = Vec::with_capacity(refs.len());
-        let clip = refs.len() >= CLIP_MIN;
         for r in refs {
             let (lo, hi) = (r.bounds.min[a], r.bounds.max[a]);
             if hi < s.pos {
@@ -219,11 +215,7 @@ impl Ctx<'_> {
                 let tri = &self.corners[r.prim as usize];
                 for (side, child) in [(&mut left, lb), (&mut right, rb)] {
                     let coarse = r.bounds.intersection(*child);
-                    let bounds = if clip {
-                        clipped_bounds(tri, &coarse).unwrap_or(coarse)
-                    } else {
-                        coarse
-                    };
+                    let bounds = clipped_bounds(tri, &coarse).unwrap_or(coarse);
                     side.push(Ref {
                         prim: r.prim,
                         bounds,

@@ -99,18 +99,13 @@ impl KdTree {
             c.triangles += tris.len() as u64;
         }
         for tri in tris {
-            if let Some((t, u, v)) = r.wt.intersect_tri(tri, r.t_min, *t_best) {
-                if ANY || t < *t_best || best.is_none() {
-                    *t_best = t;
-                    *best = Some(Hit {
-                        t,
-                        prim: tri.prim(),
-                        u,
-                        v,
-                    });
-                    if ANY {
-                        return true;
-                    }
+            if let Some((t, u, v)) = r.wt.intersect_tri(tri, r.t_min, *t_best)
+                && (ANY || t < *t_best || best.is_none())
+            {
+                *t_best = t;
+                *best = Some(Hit { t, prim: tri.prim(), u, v });
+                if ANY {
+                    return true;
                 }
             }
         }
