@@ -19,7 +19,12 @@ pub fn closest(corners: &[[Vec3; 3]], ray: &Ray) -> Option<Hit> {
         if let Some((t, u, v)) = wt.intersect(c[0], c[1], c[2], ray.t_min, t_max)
             && best.is_none_or(|h| t < h.t)
         {
-            best = Some(Hit { t, prim: i as u32, u, v });
+            best = Some(Hit {
+                t,
+                prim: i as u32,
+                u,
+                v,
+            });
         }
     }
     best

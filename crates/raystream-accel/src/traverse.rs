@@ -103,7 +103,12 @@ impl KdTree {
                 && (ANY || t < *t_best || best.is_none())
             {
                 *t_best = t;
-                *best = Some(Hit { t, prim: tri.prim(), u, v });
+                *best = Some(Hit {
+                    t,
+                    prim: tri.prim(),
+                    u,
+                    v,
+                });
                 if ANY {
                     return true;
                 }

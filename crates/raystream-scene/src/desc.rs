@@ -106,8 +106,7 @@ impl MaterialDesc {
                 "reflectivity and transparency must lie in [0, 1] and add up to at most 1".into(),
             );
         }
-        if !(m.ior >= 1.0 && m.ior.is_finite() && m.shininess >= 0.0 && m.shininess.is_finite())
-        {
+        if !(m.ior >= 1.0 && m.ior.is_finite() && m.shininess >= 0.0 && m.shininess.is_finite()) {
             return Err("ior must be ≥ 1 and shininess ≥ 0".into());
         }
         if ![m.ambient, m.diffuse, m.specular]
