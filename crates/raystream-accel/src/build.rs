@@ -210,16 +210,16 @@ impl Ctx<'_> {
                 // Straddles or touches the plane. Children are closed boxes: a triangle that
                 // touches a child's face is in it, so a ray starting on (or running in) a split
                 // plane finds it from either side.
-                // The triangle's part in the node is convex and reaches the plane, so it meets
-                // both closed children; clipping only tightens its bounds there.
+                // Clipping tightens the bounds in each child, and drops the triangle from a
+                // child it only seemed to reach through its (outward-rounded) bounds.
                 let tri = &self.corners[r.prim as usize];
                 for (side, child) in [(&mut left, lb), (&mut right, rb)] {
-                    let coarse = r.bounds.intersection(*child);
-                    let bounds = clipped_bounds(tri, &coarse).unwrap_or(coarse);
-                    side.push(Ref {
-                        prim: r.prim,
-                        bounds,
-                    });
+                    if let Some(bounds) = clipped_bounds(tri, &r.bounds.intersection(*child)) {
+                        side.push(Ref {
+                            prim: r.prim,
+                            bounds,
+                        });
+                    }
                 }
             }
         }
