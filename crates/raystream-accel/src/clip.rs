@@ -7,57 +7,60 @@ use raystream_math::{Aabb, DVec3, Vec3};
 /// Clipping runs in f64 and the result is rounded outwards to f32, then limited to `bx`, so it
 /// never claims less than the true overlap nor more than the box.
 pub fn clipped_bounds(tri: &[Vec3; 3], bx: &Aabb) -> Option<Aabb> {
-    // A triangle clipped by 6 planes has at most 9 corners; fixed arrays keep this allocation-free.
-    let mut poly = [DVec3::ZERO; 10];
-    let mut next = [DVec3::ZERO; 10];
-    for (k, v) in tri.iter().enumerate() {
-        poly[k] = v.as_dvec3();
-    }
-    let mut len = 3;
     let own = Aabb::from_points(tri);
+    // Planes the whole triangle lies inside cannot cut it: usually none or one plane is left.
+    let mut cuts = [(0usize, 0f64, false); 6];
+    let mut n_cuts = 0;
     for axis in 0..3 {
-        for (plane, keep_above) in [(bx.min[axis] as f64, true), (bx.max[axis] as f64, false)] {
-            // A plane the whole triangle lies inside cannot cut its clipped part either.
-            if (keep_above && own.min[axis] as f64 >= plane)
-                || (!keep_above && own.max[axis] as f64 <= plane)
-            {
-                continue;
-            }
-            let inside = |p: &DVec3| {
-                if keep_above {
-                    p[axis] >= plane
-                } else {
-                    p[axis] <= plane
-                }
-            };
-            let mut n = 0;
-            for i in 0..len {
-                let (a, b) = (poly[i], poly[(i + 1) % len]);
-                let (ia, ib) = (inside(&a), inside(&b));
-                if ia {
-                    next[n] = a;
-                    n += 1;
-                }
-                if ia != ib {
-                    let s = (plane - a[axis]) / (b[axis] - a[axis]);
-                    let mut p = a + (b - a) * s;
-                    p[axis] = plane;
-                    next[n] = p;
-                    n += 1;
-                }
-            }
-            std::mem::swap(&mut poly, &mut next);
-            len = n;
-            if len == 0 {
-                return None;
-            }
+        if own.min[axis] < bx.min[axis] {
+            cuts[n_cuts] = (axis, bx.min[axis] as f64, true);
+            n_cuts += 1;
+        }
+        if own.max[axis] > bx.max[axis] {
+            cuts[n_cuts] = (axis, bx.max[axis] as f64, false);
+            n_cuts += 1;
         }
     }
-    let poly = &poly[..len];
-    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-    for p in poly {
-        lo = lo.min(*p);
-        hi = hi.max(*p);
+    if n_cuts == 0 {
+        return Some(own.intersection(*bx)).filter(|b| !b.is_empty());
+    }
+    // A triangle clipped by 6 planes has at most 9 corners; fixed arrays keep this allocation-free.
+    let mut poly = [[0f64; 3]; 10];
+    let mut next = [[0f64; 3]; 10];
+    for (k, v) in tri.iter().enumerate() {
+        poly[k] = [v.x as f64, v.y as f64, v.z as f64];
+    }
+    let mut len = 3;
+    for &(axis, plane, keep_above) in &cuts[..n_cuts] {
+        let inside = |p: &[f64; 3]| if keep_above { p[axis] >= plane } else { p[axis] <= plane };
+        let mut n = 0;
+        for i in 0..len {
+            let (a, b) = (poly[i], poly[if i + 1 == len { 0 } else { i + 1 }]);
+            let (ia, ib) = (inside(&a), inside(&b));
+            if ia {
+                next[n] = a;
+                n += 1;
+            }
+            if ia != ib {
+                let s = (plane - a[axis]) / (b[axis] - a[axis]);
+                let mut p = [a[0] + (b[0] - a[0]) * s, a[1] + (b[1] - a[1]) * s, a[2] + (b[2] - a[2]) * s];
+                p[axis] = plane;
+                next[n] = p;
+                n += 1;
+            }
+        }
+        std::mem::swap(&mut poly, &mut next);
+        len = n;
+        if len == 0 {
+            return None;
+        }
+    }
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in &poly[..len] {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
     }
     let down = |x: f64| {
         let f = x as f32;
@@ -68,8 +71,8 @@ pub fn clipped_bounds(tri: &[Vec3; 3], bx: &Aabb) -> Option<Aabb> {
         if (f as f64) < x { f.next_up() } else { f }
     };
     let b = Aabb::new(
-        Vec3::new(down(lo.x), down(lo.y), down(lo.z)),
-        Vec3::new(up(hi.x), up(hi.y), up(hi.z)),
+        Vec3::new(down(lo[0]), down(lo[1]), down(lo[2])),
+        Vec3::new(up(hi[0]), up(hi[1]), up(hi[2])),
     )
     .intersection(*bx);
     (!b.is_empty()).then_some(b)
