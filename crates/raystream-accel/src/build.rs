@@ -48,7 +48,7 @@ impl std::str::FromStr for Builder {
 pub const COST_TRAVERSAL: f32 = 1.0;
 pub const COST_INTERSECT: f32 = 1.0;
 /// Factor on the cost of a split that cuts off empty space (Wald & Havran's λ).
-const EMPTY_BONUS: f32 = 0.8;
+const EMPTY_BONUS: f32 = 0.9;
 const BINS: usize = 32;
 /// Nodes with at most this many references sweep exact events instead of bins.
 const EXACT_MAX: usize = 12;
