@@ -1,0 +1,250 @@
+// Ray queries on the kd-tree: stackless traversal with ropes and the watertight triangle test,
+// the same algorithm as raystream-accel's CPU `ropes` traversal (traverse.rs, intersect.rs).
+// Reads: the flat kd-tree (inners, leaves, tris, uploaded unchanged) and a ray queue.
+// Writes: one hit record per ray. The struct layouts mirror raystream-accel's layout.rs and
+// this crate's layout.rs; a naga-based test checks every offset and size.
+
+// LEAF_BIT, NO_ROPE, NO_PRIM and WORKGROUP_SIZE come from the prelude that lib.rs generates
+// from the Rust constants.
+
+struct KdInner {
+    split: f32,
+    axis: u32,
+    left: u32,
+    right: u32,
+}
+
+struct KdLeaf {
+    bmin: vec3<f32>,
+    first: u32,
+    bmax: vec3<f32>,
+    count: u32,
+    ropes: array<u32, 6>,
+    pad: array<u32, 2>,
+}
+
+struct KdTri {
+    v0: vec4<f32>,
+    v1: vec4<f32>,
+    v2: vec4<f32>,
+}
+
+struct RayIn {
+    origin: vec3<f32>,
+    t_min: f32,
+    dir: vec3<f32>,
+    t_max: f32,
+}
+
+struct HitOut {
+    t: f32,
+    prim: u32,
+    u: f32,
+    v: f32,
+}
+
+struct Params {
+    ray_count: u32,
+    root: u32,
+    max_steps: u32,
+    tri_count: u32,
+    scene_min: vec4<f32>,
+    scene_max: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> inners: array<KdInner>;
+@group(0) @binding(2) var<storage, read> leaves: array<KdLeaf>;
+@group(0) @binding(3) var<storage, read> tris: array<KdTri>;
+@group(0) @binding(4) var<storage, read> rays: array<RayIn>;
+@group(0) @binding(5) var<storage, read_write> hits: array<HitOut>;
+
+// NaN and infinity by their bits: shader compilers may assume float arithmetic is finite.
+fn not_finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7f800000u) == 0x7f800000u;
+}
+
+fn is_nan(x: f32) -> bool {
+    return not_finite(x) && (bitcast<u32>(x) & 0x007fffffu) != 0u;
+}
+
+fn ray_is_valid(r: RayIn) -> bool {
+    let o = r.origin;
+    let d = r.dir;
+    if not_finite(o.x) || not_finite(o.y) || not_finite(o.z) || not_finite(d.x) || not_finite(d.y)
+        || not_finite(d.z) || not_finite(r.t_min) || is_nan(r.t_max) {
+        return false;
+    }
+    if d.x == 0.0 && d.y == 0.0 && d.z == 0.0 {
+        return false;
+    }
+    return r.t_min <= r.t_max;
+}
+
+struct Watertight {
+    o: vec3<f32>,
+    k: vec3<u32>,
+    shear: vec3<f32>,
+}
+
+fn watertight_ray(r: RayIn) -> Watertight {
+    let a = abs(r.dir);
+    var kz = 2u;
+    if a.x >= a.y && a.x >= a.z {
+        kz = 0u;
+    } else if a.y >= a.z {
+        kz = 1u;
+    }
+    var kx = (kz + 1u) % 3u;
+    var ky = (kx + 1u) % 3u;
+    if r.dir[kz] < 0.0 {
+        let t = kx;
+        kx = ky;
+        ky = t;
+    }
+    let d = r.dir;
+    return Watertight(r.origin, vec3<u32>(kx, ky, kz), vec3<f32>(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]));
+}
+
+// (t, u, v, 1) of a hit with t_min <= t <= t_max, or w = 0 on a miss (Woop, Benthin & Wald 2013).
+fn intersect_triangle(w: Watertight, tri: KdTri, t_min: f32, t_max: f32) -> vec4<f32> {
+    let kx = w.k.x;
+    let ky = w.k.y;
+    let kz = w.k.z;
+    let a = tri.v0.xyz - w.o;
+    let b = tri.v1.xyz - w.o;
+    let c = tri.v2.xyz - w.o;
+    let ax = a[kx] - w.shear.x * a[kz];
+    let ay = a[ky] - w.shear.y * a[kz];
+    let bx = b[kx] - w.shear.x * b[kz];
+    let by = b[ky] - w.shear.y * b[kz];
+    let cx = c[kx] - w.shear.x * c[kz];
+    let cy = c[ky] - w.shear.y * c[kz];
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let ww = bx * ay - by * ax;
+    if (u < 0.0 || v < 0.0 || ww < 0.0) && (u > 0.0 || v > 0.0 || ww > 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let det = u + v + ww;
+    if det == 0.0 {
+        return vec4<f32>(0.0);
+    }
+    let t = w.shear.z * (u * a[kz] + v * b[kz] + ww * c[kz]) / det;
+    if !(t >= t_min && t <= t_max) {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(t, v / det, ww / det, 1.0);
+}
+
+fn trace(r: RayIn, any_hit: bool) -> HitOut {
+    var miss = HitOut(bitcast<f32>(0x7f800000u), NO_PRIM, 0.0, 0.0);
+    if !ray_is_valid(r) || params.tri_count == 0u {
+        return miss;
+    }
+    // Normalize -0 to +0 so that "negative" means strictly negative, as on the CPU.
+    let d = select(r.dir, vec3<f32>(0.0), r.dir == vec3<f32>(0.0));
+    let o = r.origin;
+    let inv = 1.0 / d;
+    // Clip to the scene box.
+    var t0 = r.t_min;
+    var t1 = r.t_max;
+    for (var a = 0u; a < 3u; a++) {
+        if d[a] == 0.0 {
+            if o[a] < params.scene_min[a] || o[a] > params.scene_max[a] {
+                return miss;
+            }
+            continue;
+        }
+        var near = (params.scene_min[a] - o[a]) * inv[a];
+        var far = (params.scene_max[a] - o[a]) * inv[a];
+        if near > far {
+            let t = near;
+            near = far;
+            far = t;
+        }
+        t0 = max(t0, near);
+        t1 = min(t1, far);
+    }
+    if !(t0 <= t1) {
+        return miss;
+    }
+    let wt = watertight_ray(r);
+    var best = miss;
+    var t_best = r.t_max;
+    var t_entry = t0;
+    var node = params.root;
+    for (var step = 0u; step < params.max_steps; step++) {
+        while (node & LEAF_BIT) == 0u {
+            let n = inners[node];
+            let a = n.axis;
+            var far: bool;
+            if d[a] == 0.0 {
+                far = o[a] > n.split;
+            } else {
+                far = (n.split - o[a]) * inv[a] <= t_entry;
+            }
+            // far side = right for a positive direction, left for a negative one
+            if far != (d[a] < 0.0) {
+                node = n.right;
+            } else {
+                node = n.left;
+            }
+        }
+        let leaf = leaves[node & ~LEAF_BIT];
+        for (var i = leaf.first; i < leaf.first + leaf.count; i++) {
+            let tri = tris[i];
+            let h = intersect_triangle(wt, tri, r.t_min, t_best);
+            if h.w != 0.0 && (any_hit || h.x < t_best || best.prim == NO_PRIM) {
+                t_best = h.x;
+                best = HitOut(h.x, bitcast<u32>(tri.v0.w), h.y, h.z);
+                if any_hit {
+                    return best;
+                }
+            }
+        }
+        var t_exit = bitcast<f32>(0x7f800000u);
+        var face = 0u;
+        for (var a = 0u; a < 3u; a++) {
+            if d[a] == 0.0 {
+                continue;
+            }
+            let neg = d[a] < 0.0;
+            let bound = select(leaf.bmax[a], leaf.bmin[a], neg);
+            let t = (bound - o[a]) * inv[a];
+            if t < t_exit {
+                t_exit = t;
+                face = 2u * a + select(1u, 0u, neg);
+            }
+        }
+        if t_best <= t_exit {
+            return best;
+        }
+        node = leaf.ropes[face];
+        if node == NO_ROPE {
+            return best;
+        }
+        t_entry = max(t_entry, t_exit);
+    }
+    return best;
+}
+
+fn ray_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
+    return gid.x + gid.y * groups.x * WORKGROUP_SIZE;
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn intersect_closest(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = ray_index(gid, groups);
+    if i < params.ray_count {
+        hits[i] = trace(rays[i], false);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn intersect_any(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = ray_index(gid, groups);
+    if i < params.ray_count {
+        hits[i] = trace(rays[i], true);
+    }
+}

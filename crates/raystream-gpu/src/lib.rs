@@ -1,0 +1,307 @@
+//! The GPU back-end on wgpu (Vulkan, Metal, DX12): a [`GpuContext`] (adapter choice, full
+//! adapter limits, clear errors) and a [`GpuTracer`] that uploads the CPU-built kd-tree's flat
+//! layout unchanged and runs the `intersect_closest` / `intersect_any` kernels over ray queues.
+//!
+//! Every struct the kernels read has one home in Rust (`raystream-accel::layout` for the tree,
+//! [`layout`] here for rays, hits and parameters); the constants the kernels use are emitted from
+//! Rust into a WGSL prelude, and a naga-based test checks WGSL offsets and sizes.
+
+pub mod layout;
+
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use layout::{GpuHit, GpuRay, Params};
+use raystream_accel::KdTree;
+use raystream_accel::layout::{LEAF_BIT, NO_ROPE};
+use raystream_math::Ray;
+use wgpu::util::DeviceExt;
+
+/// Threads per workgroup of every kernel.
+pub const WORKGROUP_SIZE: u32 = 64;
+/// `prim` of a miss.
+pub const NO_PRIM: u32 = u32::MAX;
+/// How long a submission may run before it is reported as hung.
+const GPU_TIMEOUT: Duration = Duration::from_secs(120);
+
+const INTERSECT_WGSL: &str = include_str!("kernels/intersect.wgsl");
+
+/// The WGSL source of the intersection kernels: the constants prelude, then the kernels.
+pub fn intersect_wgsl() -> String {
+    format!(
+        "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\n{INTERSECT_WGSL}"
+    )
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter found{0}")]
+    NoAdapter(String),
+    #[error("GPU adapter '{adapter}': cannot open a device: {source}")]
+    Device {
+        adapter: String,
+        source: wgpu::RequestDeviceError,
+    },
+    #[error("GPU '{adapter}': {what} needs {need} bytes in one buffer, the device allows {limit}")]
+    TooLarge {
+        adapter: String,
+        what: &'static str,
+        need: u64,
+        limit: u64,
+    },
+    #[error("GPU '{adapter}': {0}", adapter = .1)]
+    Wgpu(String, String),
+    #[error("GPU '{0}': the device was lost ({1})")]
+    Lost(String, String),
+}
+
+/// An open GPU device.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    pub limits: wgpu::Limits,
+    lost: Arc<Mutex<Option<String>>>,
+}
+
+impl GpuContext {
+    /// Opens the first adapter whose name contains `adapter` (case-insensitive), preferring a
+    /// discrete GPU, then an integrated one, then anything else (such as lavapipe).
+    pub fn new(adapter: Option<&str>) -> Result<GpuContext, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::PRIMARY,
+            ..wgpu::InstanceDescriptor::new_without_display_handle()
+        });
+        let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::PRIMARY));
+        let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+        if let Some(want) = adapter {
+            let want = want.to_lowercase();
+            adapters.retain(|a| a.get_info().name.to_lowercase().contains(&want));
+        }
+        adapters.sort_by_key(|a| match a.get_info().device_type {
+            wgpu::DeviceType::DiscreteGpu => 0,
+            wgpu::DeviceType::IntegratedGpu => 1,
+            wgpu::DeviceType::VirtualGpu => 2,
+            wgpu::DeviceType::Cpu => 3,
+            wgpu::DeviceType::Other => 4,
+        });
+        let Some(chosen) = adapters.into_iter().next() else {
+            let why = match (adapter, names.is_empty()) {
+                (_, true) => " (no Vulkan, Metal or DX12 driver answered)".to_string(),
+                (Some(w), false) => format!(" matching '{w}' (available: {})", names.join(", ")),
+                (None, false) => String::new(),
+            };
+            return Err(GpuError::NoAdapter(why));
+        };
+        let info = chosen.get_info();
+        let limits = chosen.limits();
+        let (device, queue) = pollster::block_on(chosen.request_device(&wgpu::DeviceDescriptor {
+            label: Some("raystream"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|source| GpuError::Device { adapter: info.name.clone(), source })?;
+        let lost = Arc::new(Mutex::new(None));
+        let lost_cb = lost.clone();
+        device.set_device_lost_callback(move |reason, msg| {
+            *lost_cb.lock().unwrap() = Some(format!("{reason:?}: {msg}"));
+        });
+        Ok(GpuContext { device, queue, info, limits, lost })
+    }
+
+    /// "NAME (BACKEND, DRIVER)".
+    pub fn describe(&self) -> String {
+        format!("{} ({:?}, {} {})", self.info.name, self.info.backend, self.info.driver, self.info.driver_info).trim().to_string()
+    }
+
+    fn err(&self, e: impl std::fmt::Display) -> GpuError {
+        if let Some(l) = self.lost.lock().unwrap().clone() {
+            return GpuError::Lost(self.info.name.clone(), l);
+        }
+        GpuError::Wgpu(e.to_string(), self.info.name.clone())
+    }
+
+    /// Waits for all submitted work, failing instead of hanging past `GPU_TIMEOUT`.
+    fn wait(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::Wait { submission_index: None, timeout: Some(GPU_TIMEOUT) })
+            .map_err(|e| self.err(format!("waiting for the GPU: {e}")))?;
+        Ok(())
+    }
+
+    fn storage(&self, what: &'static str, bytes: &[u8], usage: wgpu::BufferUsages) -> Result<wgpu::Buffer, GpuError> {
+        let need = bytes.len().max(64) as u64;
+        let limit = (self.limits.max_storage_buffer_binding_size as u64).min(self.limits.max_buffer_size);
+        if need > limit {
+            return Err(GpuError::TooLarge { adapter: self.info.name.clone(), what, need, limit });
+        }
+        let contents: Vec<u8>;
+        let bytes = if bytes.is_empty() {
+            // Bindings may not be empty: one zeroed element of the largest struct stands in.
+            contents = vec![0u8; 64];
+            &contents[..]
+        } else {
+            bytes
+        };
+        Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(what),
+            contents: bytes,
+            usage: wgpu::BufferUsages::STORAGE | usage,
+        }))
+    }
+}
+
+/// The kd-tree on the GPU, with the intersection pipelines.
+pub struct GpuTracer<'a> {
+    ctx: &'a GpuContext,
+    inners: wgpu::Buffer,
+    leaves: wgpu::Buffer,
+    tris: wgpu::Buffer,
+    params: Params,
+    closest: wgpu::ComputePipeline,
+    any: wgpu::ComputePipeline,
+    /// Milliseconds spent uploading the tree.
+    pub upload_ms: f64,
+}
+
+/// Timings of one [`GpuTracer::trace`] call, milliseconds.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TraceTimes {
+    pub upload_ms: f64,
+    pub kernel_ms: f64,
+    pub readback_ms: f64,
+}
+
+impl<'a> GpuTracer<'a> {
+    pub fn new(ctx: &'a GpuContext, tree: &KdTree) -> Result<GpuTracer<'a>, GpuError> {
+        let t0 = Instant::now();
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let inners = ctx.storage("kd inner nodes", bytemuck::cast_slice(&tree.inners), wgpu::BufferUsages::empty())?;
+        let leaves = ctx.storage("kd leaves", bytemuck::cast_slice(&tree.leaves), wgpu::BufferUsages::empty())?;
+        let tris = ctx.storage("kd triangles", bytemuck::cast_slice(&tree.tris), wgpu::BufferUsages::empty())?;
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("intersect.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(intersect_wgsl().into()),
+        });
+        let pipeline = |entry: &str| {
+            ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let closest = pipeline("intersect_closest");
+        let any = pipeline("intersect_any");
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(ctx.err(e));
+        }
+        ctx.wait()?;
+        let b = tree.bounds;
+        let params = Params {
+            ray_count: 0,
+            root: tree.root,
+            max_steps: (tree.leaves.len() + tree.inners.len() + 1).min(u32::MAX as usize) as u32,
+            tri_count: tree.tris.len() as u32,
+            scene_min: b.min.extend(0.0).to_array(),
+            scene_max: b.max.extend(0.0).to_array(),
+        };
+        Ok(GpuTracer { ctx, inners, leaves, tris, params, closest, any, upload_ms: t0.elapsed().as_secs_f64() * 1e3 })
+    }
+
+    /// Traces every ray (closest hit, or any hit with `any`), returning one record per ray.
+    pub fn trace(&self, rays: &[Ray], any: bool) -> Result<(Vec<GpuHit>, TraceTimes), GpuError> {
+        let ctx = self.ctx;
+        let n = rays.len();
+        if n == 0 {
+            return Ok((Vec::new(), TraceTimes::default()));
+        }
+        let t0 = Instant::now();
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let gpu_rays: Vec<GpuRay> = rays.iter().map(GpuRay::from).collect();
+        let ray_buf = ctx.storage("rays", bytemuck::cast_slice(&gpu_rays), wgpu::BufferUsages::empty())?;
+        let hit_bytes = (n * std::mem::size_of::<GpuHit>()) as u64;
+        let limit = (ctx.limits.max_storage_buffer_binding_size as u64).min(ctx.limits.max_buffer_size);
+        if hit_bytes > limit {
+            return Err(GpuError::TooLarge { adapter: ctx.info.name.clone(), what: "hits", need: hit_bytes, limit });
+        }
+        let hit_buf = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("hits"),
+            size: hit_bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("hits readback"),
+            size: hit_bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let params = Params { ray_count: n as u32, ..self.params };
+        let param_buf = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let pipeline = if any { &self.any } else { &self.closest };
+        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("intersect"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: param_buf.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: self.inners.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: self.leaves.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: self.tris.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: ray_buf.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: hit_buf.as_entire_binding() },
+            ],
+        });
+        ctx.wait()?;
+        let upload_ms = t0.elapsed().as_secs_f64() * 1e3;
+
+        let t1 = Instant::now();
+        let groups = (n as u32).div_ceil(WORKGROUP_SIZE);
+        let max = ctx.limits.max_compute_workgroups_per_dimension.max(1);
+        let (gx, gy) = if groups <= max { (groups, 1) } else { (max, groups.div_ceil(max)) };
+        let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(if any { "intersect_any" } else { "intersect_closest" }),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        let kernel_ms = t1.elapsed().as_secs_f64() * 1e3;
+
+        let t2 = Instant::now();
+        let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+        enc.copy_buffer_to_buffer(&hit_buf, 0, &readback, 0, hit_bytes);
+        ctx.queue.submit([enc.finish()]);
+        let slice = readback.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        ctx.wait()?;
+        rx.recv().map_err(|e| ctx.err(e))?.map_err(|e| ctx.err(e))?;
+        let view = slice.get_mapped_range().map_err(|e| ctx.err(e))?;
+        let hits: Vec<GpuHit> = bytemuck::cast_slice(&view[..]).to_vec();
+        drop(view);
+        readback.unmap();
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(ctx.err(e));
+        }
+        let readback_ms = t2.elapsed().as_secs_f64() * 1e3;
+        Ok((hits, TraceTimes { upload_ms, kernel_ms, readback_ms }))
+    }
+}
+
+#[cfg(test)]
+mod tests;
