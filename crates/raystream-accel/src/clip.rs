@@ -32,7 +32,13 @@ pub fn clipped_bounds(tri: &[Vec3; 3], bx: &Aabb) -> Option<Aabb> {
     }
     let mut len = 3;
     for &(axis, plane, keep_above) in &cuts[..n_cuts] {
-        let inside = |p: &[f64; 3]| if keep_above { p[axis] >= plane } else { p[axis] <= plane };
+        let inside = |p: &[f64; 3]| {
+            if keep_above {
+                p[axis] >= plane
+            } else {
+                p[axis] <= plane
+            }
+        };
         let mut n = 0;
         for i in 0..len {
             let (a, b) = (poly[i], poly[if i + 1 == len { 0 } else { i + 1 }]);
@@ -43,7 +49,11 @@ pub fn clipped_bounds(tri: &[Vec3; 3], bx: &Aabb) -> Option<Aabb> {
             }
             if ia != ib {
                 let s = (plane - a[axis]) / (b[axis] - a[axis]);
-                let mut p = [a[0] + (b[0] - a[0]) * s, a[1] + (b[1] - a[1]) * s, a[2] + (b[2] - a[2]) * s];
+                let mut p = [
+                    a[0] + (b[0] - a[0]) * s,
+                    a[1] + (b[1] - a[1]) * s,
+                    a[2] + (b[2] - a[2]) * s,
+                ];
                 p[axis] = plane;
                 next[n] = p;
                 n += 1;

@@ -20,7 +20,12 @@ pub struct GpuRay {
 
 impl From<&Ray> for GpuRay {
     fn from(r: &Ray) -> Self {
-        GpuRay { origin: r.origin.to_array(), t_min: r.t_min, dir: r.dir.to_array(), t_max: r.t_max }
+        GpuRay {
+            origin: r.origin.to_array(),
+            t_min: r.t_min,
+            dir: r.dir.to_array(),
+            t_max: r.t_max,
+        }
     }
 }
 

@@ -101,18 +101,37 @@ impl GpuContext {
             required_limits: limits.clone(),
             ..Default::default()
         }))
-        .map_err(|source| GpuError::Device { adapter: info.name.clone(), source })?;
+        .map_err(|source| GpuError::Device {
+            adapter: info.name.clone(),
+            source,
+        })?;
         let lost = Arc::new(Mutex::new(None));
         let lost_cb = lost.clone();
         device.set_device_lost_callback(move |reason, msg| {
             *lost_cb.lock().unwrap() = Some(format!("{reason:?}: {msg}"));
         });
-        Ok(GpuContext { device, queue, info, limits, lost })
+        Ok(GpuContext {
+            device,
+            queue,
+            info,
+            limits,
+            lost,
+        })
+    }
+
+    /// Whether the adapter is a software rasterizer (lavapipe, WARP, SwiftShader).
+    pub fn is_software(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
     }
 
     /// "NAME (BACKEND, DRIVER)".
     pub fn describe(&self) -> String {
-        format!("{} ({:?}, {} {})", self.info.name, self.info.backend, self.info.driver, self.info.driver_info).trim().to_string()
+        format!(
+            "{} ({:?}, {} {})",
+            self.info.name, self.info.backend, self.info.driver, self.info.driver_info
+        )
+        .trim()
+        .to_string()
     }
 
     fn err(&self, e: impl std::fmt::Display) -> GpuError {
@@ -125,16 +144,29 @@ impl GpuContext {
     /// Waits for all submitted work, failing instead of hanging past `GPU_TIMEOUT`.
     fn wait(&self) -> Result<(), GpuError> {
         self.device
-            .poll(wgpu::PollType::Wait { submission_index: None, timeout: Some(GPU_TIMEOUT) })
+            .poll(wgpu::PollType::Wait {
+                submission_index: None,
+                timeout: Some(GPU_TIMEOUT),
+            })
             .map_err(|e| self.err(format!("waiting for the GPU: {e}")))?;
         Ok(())
     }
 
-    fn storage(&self, what: &'static str, bytes: &[u8], usage: wgpu::BufferUsages) -> Result<wgpu::Buffer, GpuError> {
+    fn storage(
+        &self,
+        what: &'static str,
+        bytes: &[u8],
+        usage: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer, GpuError> {
         let need = bytes.len().max(64) as u64;
-        let limit = (self.limits.max_storage_buffer_binding_size as u64).min(self.limits.max_buffer_size);
+        let limit = self.max_binding();
         if need > limit {
-            return Err(GpuError::TooLarge { adapter: self.info.name.clone(), what, need, limit });
+            return Err(GpuError::TooLarge {
+                adapter: self.info.name.clone(),
+                what,
+                need,
+                limit,
+            });
         }
         let contents: Vec<u8>;
         let bytes = if bytes.is_empty() {
@@ -144,11 +176,13 @@ impl GpuContext {
         } else {
             bytes
         };
-        Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(what),
-            contents: bytes,
-            usage: wgpu::BufferUsages::STORAGE | usage,
-        }))
+        Ok(self
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(what),
+                contents: bytes,
+                usage: wgpu::BufferUsages::STORAGE | usage,
+            }))
     }
 }
 
@@ -177,22 +211,37 @@ impl<'a> GpuTracer<'a> {
     pub fn new(ctx: &'a GpuContext, tree: &KdTree) -> Result<GpuTracer<'a>, GpuError> {
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let inners = ctx.storage("kd inner nodes", bytemuck::cast_slice(&tree.inners), wgpu::BufferUsages::empty())?;
-        let leaves = ctx.storage("kd leaves", bytemuck::cast_slice(&tree.leaves), wgpu::BufferUsages::empty())?;
-        let tris = ctx.storage("kd triangles", bytemuck::cast_slice(&tree.tris), wgpu::BufferUsages::empty())?;
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("intersect.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(intersect_wgsl().into()),
-        });
+        let inners = ctx.storage(
+            "kd inner nodes",
+            bytemuck::cast_slice(&tree.inners),
+            wgpu::BufferUsages::empty(),
+        )?;
+        let leaves = ctx.storage(
+            "kd leaves",
+            bytemuck::cast_slice(&tree.leaves),
+            wgpu::BufferUsages::empty(),
+        )?;
+        let tris = ctx.storage(
+            "kd triangles",
+            bytemuck::cast_slice(&tree.tris),
+            wgpu::BufferUsages::empty(),
+        )?;
+        let module = ctx
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("intersect.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(intersect_wgsl().into()),
+            });
         let pipeline = |entry: &str| {
-            ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: None,
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
+            ctx.device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: None,
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
         };
         let closest = pipeline("intersect_closest");
         let any = pipeline("intersect_any");
@@ -209,7 +258,16 @@ impl<'a> GpuTracer<'a> {
             scene_min: b.min.extend(0.0).to_array(),
             scene_max: b.max.extend(0.0).to_array(),
         };
-        Ok(GpuTracer { ctx, inners, leaves, tris, params, closest, any, upload_ms: t0.elapsed().as_secs_f64() * 1e3 })
+        Ok(GpuTracer {
+            ctx,
+            inners,
+            leaves,
+            tris,
+            params,
+            closest,
+            any,
+            upload_ms: t0.elapsed().as_secs_f64() * 1e3,
+        })
     }
 
     /// Traces every ray (closest hit, or any hit with `any`), returning one record per ray.
@@ -222,11 +280,20 @@ impl<'a> GpuTracer<'a> {
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let gpu_rays: Vec<GpuRay> = rays.iter().map(GpuRay::from).collect();
-        let ray_buf = ctx.storage("rays", bytemuck::cast_slice(&gpu_rays), wgpu::BufferUsages::empty())?;
+        let ray_buf = ctx.storage(
+            "rays",
+            bytemuck::cast_slice(&gpu_rays),
+            wgpu::BufferUsages::empty(),
+        )?;
         let hit_bytes = (n * std::mem::size_of::<GpuHit>()) as u64;
-        let limit = (ctx.limits.max_storage_buffer_binding_size as u64).min(ctx.limits.max_buffer_size);
+        let limit = ctx.max_binding();
         if hit_bytes > limit {
-            return Err(GpuError::TooLarge { adapter: ctx.info.name.clone(), what: "hits", need: hit_bytes, limit });
+            return Err(GpuError::TooLarge {
+                adapter: ctx.info.name.clone(),
+                what: "hits",
+                need: hit_bytes,
+                limit,
+            });
         }
         let hit_buf = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("hits"),
@@ -240,23 +307,46 @@ impl<'a> GpuTracer<'a> {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let params = Params { ray_count: n as u32, ..self.params };
-        let param_buf = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let params = Params {
+            ray_count: n as u32,
+            ..self.params
+        };
+        let param_buf = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("params"),
+                contents: bytemuck::bytes_of(&params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
         let pipeline = if any { &self.any } else { &self.closest };
         let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("intersect"),
             layout: &pipeline.get_bind_group_layout(0),
             entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: param_buf.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: self.inners.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: self.leaves.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: self.tris.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: ray_buf.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 5, resource: hit_buf.as_entire_binding() },
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: param_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: self.inners.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: self.leaves.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: self.tris.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: ray_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: hit_buf.as_entire_binding(),
+                },
             ],
         });
         ctx.wait()?;
@@ -265,11 +355,23 @@ impl<'a> GpuTracer<'a> {
         let t1 = Instant::now();
         let groups = (n as u32).div_ceil(WORKGROUP_SIZE);
         let max = ctx.limits.max_compute_workgroups_per_dimension.max(1);
-        let (gx, gy) = if groups <= max { (groups, 1) } else { (max, groups.div_ceil(max)) };
-        let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
+        let (gx, gy) = if groups <= max {
+            (groups, 1)
+        } else {
+            (max, groups.div_ceil(max))
+        };
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("trace"),
+            });
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(if any { "intersect_any" } else { "intersect_closest" }),
+                label: Some(if any {
+                    "intersect_any"
+                } else {
+                    "intersect_closest"
+                }),
                 timestamp_writes: None,
             });
             pass.set_pipeline(pipeline);
@@ -281,7 +383,11 @@ impl<'a> GpuTracer<'a> {
         let kernel_ms = t1.elapsed().as_secs_f64() * 1e3;
 
         let t2 = Instant::now();
-        let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("readback"),
+            });
         enc.copy_buffer_to_buffer(&hit_buf, 0, &readback, 0, hit_bytes);
         ctx.queue.submit([enc.finish()]);
         let slice = readback.slice(..);
@@ -299,7 +405,14 @@ impl<'a> GpuTracer<'a> {
             return Err(ctx.err(e));
         }
         let readback_ms = t2.elapsed().as_secs_f64() * 1e3;
-        Ok((hits, TraceTimes { upload_ms, kernel_ms, readback_ms }))
+        Ok((
+            hits,
+            TraceTimes {
+                upload_ms,
+                kernel_ms,
+                readback_ms,
+            },
+        ))
     }
 }
 

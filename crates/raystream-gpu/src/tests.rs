@@ -11,8 +11,13 @@ use super::*;
 #[test]
 fn wgsl_structs_match_rust() {
     let module = naga::front::wgsl::parse_str(&intersect_wgsl()).expect("intersect.wgsl parses");
-    let mut validator = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all());
-    validator.validate(&module).expect("intersect.wgsl validates");
+    let mut validator = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    );
+    validator
+        .validate(&module)
+        .expect("intersect.wgsl validates");
     let check = |name: &str, size: usize, offsets: &[(&str, usize)]| {
         let ty = module
             .types
@@ -20,7 +25,9 @@ fn wgsl_structs_match_rust() {
             .find(|(_, t)| t.name.as_deref() == Some(name))
             .unwrap_or_else(|| panic!("WGSL struct {name} missing"))
             .1;
-        let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is not a struct") };
+        let naga::TypeInner::Struct { members, span } = &ty.inner else {
+            panic!("{name} is not a struct")
+        };
         assert_eq!(*span as usize, size, "size of {name}");
         assert_eq!(members.len(), offsets.len(), "member count of {name}");
         for (m, (field, off)) in members.iter().zip(offsets) {
@@ -29,48 +36,78 @@ fn wgsl_structs_match_rust() {
         }
     };
     use std::mem::{offset_of, size_of};
-    check("KdInner", size_of::<KdInner>(), &[
-        ("split", offset_of!(KdInner, split)),
-        ("axis", offset_of!(KdInner, axis)),
-        ("left", offset_of!(KdInner, left)),
-        ("right", offset_of!(KdInner, right)),
-    ]);
-    check("KdLeaf", size_of::<KdLeaf>(), &[
-        ("bmin", offset_of!(KdLeaf, min)),
-        ("first", offset_of!(KdLeaf, first)),
-        ("bmax", offset_of!(KdLeaf, max)),
-        ("count", offset_of!(KdLeaf, count)),
-        ("ropes", offset_of!(KdLeaf, ropes)),
-        ("pad", offset_of!(KdLeaf, pad)),
-    ]);
-    check("KdTri", size_of::<KdTri>(), &[("v0", offset_of!(KdTri, v0)), ("v1", offset_of!(KdTri, v1)), ("v2", offset_of!(KdTri, v2))]);
-    check("RayIn", size_of::<GpuRay>(), &[
-        ("origin", offset_of!(GpuRay, origin)),
-        ("t_min", offset_of!(GpuRay, t_min)),
-        ("dir", offset_of!(GpuRay, dir)),
-        ("t_max", offset_of!(GpuRay, t_max)),
-    ]);
-    check("HitOut", size_of::<GpuHit>(), &[
-        ("t", offset_of!(GpuHit, t)),
-        ("prim", offset_of!(GpuHit, prim)),
-        ("u", offset_of!(GpuHit, u)),
-        ("v", offset_of!(GpuHit, v)),
-    ]);
-    check("Params", size_of::<Params>(), &[
-        ("ray_count", offset_of!(Params, ray_count)),
-        ("root", offset_of!(Params, root)),
-        ("max_steps", offset_of!(Params, max_steps)),
-        ("tri_count", offset_of!(Params, tri_count)),
-        ("scene_min", offset_of!(Params, scene_min)),
-        ("scene_max", offset_of!(Params, scene_max)),
-    ]);
+    check(
+        "KdInner",
+        size_of::<KdInner>(),
+        &[
+            ("split", offset_of!(KdInner, split)),
+            ("axis", offset_of!(KdInner, axis)),
+            ("left", offset_of!(KdInner, left)),
+            ("right", offset_of!(KdInner, right)),
+        ],
+    );
+    check(
+        "KdLeaf",
+        size_of::<KdLeaf>(),
+        &[
+            ("bmin", offset_of!(KdLeaf, min)),
+            ("first", offset_of!(KdLeaf, first)),
+            ("bmax", offset_of!(KdLeaf, max)),
+            ("count", offset_of!(KdLeaf, count)),
+            ("ropes", offset_of!(KdLeaf, ropes)),
+            ("pad", offset_of!(KdLeaf, pad)),
+        ],
+    );
+    check(
+        "KdTri",
+        size_of::<KdTri>(),
+        &[
+            ("v0", offset_of!(KdTri, v0)),
+            ("v1", offset_of!(KdTri, v1)),
+            ("v2", offset_of!(KdTri, v2)),
+        ],
+    );
+    check(
+        "RayIn",
+        size_of::<GpuRay>(),
+        &[
+            ("origin", offset_of!(GpuRay, origin)),
+            ("t_min", offset_of!(GpuRay, t_min)),
+            ("dir", offset_of!(GpuRay, dir)),
+            ("t_max", offset_of!(GpuRay, t_max)),
+        ],
+    );
+    check(
+        "HitOut",
+        size_of::<GpuHit>(),
+        &[
+            ("t", offset_of!(GpuHit, t)),
+            ("prim", offset_of!(GpuHit, prim)),
+            ("u", offset_of!(GpuHit, u)),
+            ("v", offset_of!(GpuHit, v)),
+        ],
+    );
+    check(
+        "Params",
+        size_of::<Params>(),
+        &[
+            ("ray_count", offset_of!(Params, ray_count)),
+            ("root", offset_of!(Params, root)),
+            ("max_steps", offset_of!(Params, max_steps)),
+            ("tri_count", offset_of!(Params, tri_count)),
+            ("scene_min", offset_of!(Params, scene_min)),
+            ("scene_max", offset_of!(Params, scene_max)),
+        ],
+    );
 }
 
 /// The GPU, or `None` (skip) where there is none — except under CI, where GPU tests must run.
 fn gpu() -> Option<GpuContext> {
     match GpuContext::new(None) {
         Ok(ctx) => Some(ctx),
-        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => panic!("CI=true but no GPU adapter: {e} (install lavapipe: ../shared/tools/install-lavapipe.sh)"),
+        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => panic!(
+            "CI=true but no GPU adapter: {e} (install lavapipe: ../shared/tools/install-lavapipe.sh)"
+        ),
         Err(e) => {
             eprintln!("skipping GPU test: {e}");
             None
@@ -118,23 +155,46 @@ fn test_rays(mesh: &TriMesh, n: usize) -> Vec<Ray> {
 fn compare(tree: &KdTree, rays: &[Ray], gpu: &[GpuHit], any: bool, what: &str) {
     let mut ties = 0;
     for (r, g) in rays.iter().zip(gpu) {
-        let cpu = if any { tree.intersect_any(r, Traversal::Ropes) } else { tree.intersect(r, Traversal::Ropes) };
+        let cpu = if any {
+            tree.intersect_any(r, Traversal::Ropes)
+        } else {
+            tree.intersect(r, Traversal::Ropes)
+        };
         match cpu {
-            None => assert!(g.t == f32::INFINITY && g.prim == NO_PRIM, "{what}: GPU hit {g:?}, CPU miss, ray {r:?}"),
+            None => assert!(
+                g.t == f32::INFINITY && g.prim == NO_PRIM,
+                "{what}: GPU hit {g:?}, CPU miss, ray {r:?}"
+            ),
             Some(c) => {
-                assert!(g.t.is_finite() && g.prim != NO_PRIM, "{what}: GPU miss, CPU {c:?}, ray {r:?}");
+                assert!(
+                    g.t.is_finite() && g.prim != NO_PRIM,
+                    "{what}: GPU miss, CPU {c:?}, ray {r:?}"
+                );
                 if any {
-                    assert!(g.t >= r.t_min && g.t <= r.t_max, "{what}: any-hit t {} outside the ray's range", g.t);
+                    assert!(
+                        g.t >= r.t_min && g.t <= r.t_max,
+                        "{what}: any-hit t {} outside the ray's range",
+                        g.t
+                    );
                     continue;
                 }
-                assert!((g.t - c.t).abs() <= 1e-5 * c.t.abs().max(1e-6), "{what}: t {} vs CPU {} for {r:?}", g.t, c.t);
+                assert!(
+                    (g.t - c.t).abs() <= 1e-5 * c.t.abs().max(1e-6),
+                    "{what}: t {} vs CPU {} for {r:?}",
+                    g.t,
+                    c.t
+                );
                 if g.prim != c.prim {
                     ties += 1;
                 }
             }
         }
     }
-    assert!(ties * 1000 <= rays.len(), "{what}: {ties} prim differences of {} rays", rays.len());
+    assert!(
+        ties * 1000 <= rays.len(),
+        "{what}: {ties} prim differences of {} rays",
+        rays.len()
+    );
 }
 
 #[test]
@@ -142,7 +202,14 @@ fn gpu_hits_equal_cpu_hits_on_every_mesh() {
     let Some(ctx) = gpu() else { return };
     eprintln!("adapter: {}", ctx.describe());
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
-    for name in ["spot.obj", "utah_teapot.obj", "goblet_vase.stl", "stanford_bunny.ply", "stanford_lucy_100k.ply", "turbine_blade.ply"] {
+    for name in [
+        "spot.obj",
+        "utah_teapot.obj",
+        "goblet_vase.stl",
+        "stanford_bunny.ply",
+        "stanford_lucy_100k.ply",
+        "turbine_blade.ply",
+    ] {
         let mesh = raystream_io::load_mesh(&dir.join(name)).unwrap();
         for builder in [Builder::Sah, Builder::Median] {
             let tree = KdTree::build(&mesh, builder);
@@ -150,7 +217,13 @@ fn gpu_hits_equal_cpu_hits_on_every_mesh() {
             let rays = test_rays(&mesh, 4096);
             for any in [false, true] {
                 let (hits, _) = tracer.trace(&rays, any).unwrap();
-                compare(&tree, &rays, &hits, any, &format!("{name} {builder:?} any={any}"));
+                compare(
+                    &tree,
+                    &rays,
+                    &hits,
+                    any,
+                    &format!("{name} {builder:?} any={any}"),
+                );
             }
         }
     }
@@ -162,15 +235,35 @@ fn gpu_contract_edge_cases() {
     let tri = [[Vec3::ZERO, Vec3::X, Vec3::Y]];
     let tree = KdTree::build_from_corners(&tri, Builder::Sah);
     let tracer = GpuTracer::new(&ctx, &tree).unwrap();
-    let hit = Ray::new(Vec3::new(0.25, 0.5, 2.0), Vec3::new(0.0, 0.0, -2.0), 0.0, f32::INFINITY);
+    let hit = Ray::new(
+        Vec3::new(0.25, 0.5, 2.0),
+        Vec3::new(0.0, 0.0, -2.0),
+        0.0,
+        f32::INFINITY,
+    );
     let rays = [
         hit,
-        Ray { t_max: 0.999, ..hit },
+        Ray {
+            t_max: 0.999,
+            ..hit
+        },
         Ray { t_min: 1.0, ..hit },
-        Ray { dir: Vec3::ZERO, ..hit },
-        Ray { origin: Vec3::new(f32::NAN, 0.5, 2.0), ..hit },
-        Ray { t_max: f32::NAN, ..hit },
-        Ray { origin: Vec3::new(f32::INFINITY, 0.5, 2.0), ..hit },
+        Ray {
+            dir: Vec3::ZERO,
+            ..hit
+        },
+        Ray {
+            origin: Vec3::new(f32::NAN, 0.5, 2.0),
+            ..hit
+        },
+        Ray {
+            t_max: f32::NAN,
+            ..hit
+        },
+        Ray {
+            origin: Vec3::new(f32::INFINITY, 0.5, 2.0),
+            ..hit
+        },
     ];
     let (h, _) = tracer.trace(&rays, false).unwrap();
     assert_eq!((h[0].t, h[0].prim, h[0].u, h[0].v), (1.0, 0, 0.25, 0.5));
@@ -181,14 +274,20 @@ fn gpu_contract_edge_cases() {
     }
     // An empty scene misses everything.
     let empty = KdTree::build_from_corners(&[], Builder::Sah);
-    let (h, _) = GpuTracer::new(&ctx, &empty).unwrap().trace(&[hit], false).unwrap();
+    let (h, _) = GpuTracer::new(&ctx, &empty)
+        .unwrap()
+        .trace(&[hit], false)
+        .unwrap();
     assert_eq!(h[0].prim, NO_PRIM);
 }
 
 #[test]
 fn adapter_filter_reports_what_exists() {
     match GpuContext::new(Some("no-such-adapter-xyz")) {
-        Err(GpuError::NoAdapter(msg)) => assert!(msg.contains("no-such-adapter-xyz") || msg.contains("driver"), "{msg}"),
+        Err(GpuError::NoAdapter(msg)) => assert!(
+            msg.contains("no-such-adapter-xyz") || msg.contains("driver"),
+            "{msg}"
+        ),
         Err(e) => panic!("unexpected error {e}"),
         Ok(_) => panic!("an adapter matched a made-up name"),
     }

@@ -73,9 +73,13 @@ pub struct Accel {
     /// kd-tree traversal.
     #[arg(long, value_enum, default_value = "ropes")]
     pub traversal: TraversalArg,
-    /// Where to run: the CPU, a GPU, or a GPU when there is one.
+    /// Where to run: the CPU, a GPU, or a GPU when there is one (a hardware GPU; software
+    /// adapters such as lavapipe only with `--device gpu`).
     #[arg(long, value_enum, default_value = "auto")]
     pub device: Device,
+    /// Use the first GPU adapter whose name contains this (case-insensitive).
+    #[arg(long)]
+    pub adapter: Option<String>,
 }
 
 #[derive(Args)]
@@ -143,6 +147,9 @@ pub struct BenchArgs {
     /// Devices to measure, comma-separated (cpu, gpu, auto).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
     pub device: Vec<Device>,
+    /// Use the first GPU adapter whose name contains this (case-insensitive).
+    #[arg(long)]
+    pub adapter: Option<String>,
     #[arg(long, value_enum, default_value = "sah")]
     pub builder: BuilderArg,
     #[arg(long, value_enum, default_value = "ropes")]

@@ -3,25 +3,72 @@
 use std::path::Path;
 use std::time::Duration;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
+use raystream_gpu::GpuContext;
 use raystream_io::TriMesh;
 
 use crate::cli::Device;
 
-/// The device a command runs on. This build has the CPU back-end only: `gpu` fails with a clear
-/// message, `auto` falls back to the CPU and says so.
-pub fn resolve_device(d: Device, quiet: bool) -> Result<&'static str> {
+/// Where a command runs.
+pub enum Backend {
+    Cpu,
+    Gpu(GpuContext),
+}
+
+impl Backend {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Backend::Cpu => "cpu",
+            Backend::Gpu(_) => "gpu",
+        }
+    }
+
+    /// The adapter's or the CPU's description.
+    pub fn adapter(&self) -> String {
+        match self {
+            Backend::Cpu => cpu_model(),
+            Backend::Gpu(ctx) => ctx.describe(),
+        }
+    }
+}
+
+/// Opens the device: `gpu` fails clearly when no adapter opens; `auto` takes a hardware GPU
+/// when there is one and otherwise the CPU path (a software adapter such as lavapipe is far
+/// slower than the CPU path), and says which it used.
+pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Backend> {
     match d {
-        Device::Cpu => Ok("cpu"),
-        Device::Gpu => bail!(
-            "--device gpu: this build of raystream has no GPU back-end yet; use --device cpu (or auto)"
-        ),
+        Device::Cpu => Ok(Backend::Cpu),
+        Device::Gpu => Ok(Backend::Gpu(
+            GpuContext::new(adapter).context("--device gpu")?,
+        )),
         Device::Auto => {
+            let backend = match GpuContext::new(adapter) {
+                Ok(ctx) if !ctx.is_software() => Backend::Gpu(ctx),
+                Ok(ctx) => {
+                    if !quiet {
+                        eprintln!(
+                            "raystream: '{}' is a software adapter; using the CPU path (--device gpu forces it)",
+                            ctx.info.name
+                        );
+                    }
+                    Backend::Cpu
+                }
+                Err(e) => {
+                    if !quiet {
+                        eprintln!("raystream: {e}; using the CPU path");
+                    }
+                    Backend::Cpu
+                }
+            };
             if !quiet {
-                eprintln!("raystream: device: cpu (no GPU back-end in this build)");
+                eprintln!(
+                    "raystream: device: {} ({})",
+                    backend.name(),
+                    backend.adapter()
+                );
             }
-            Ok("cpu")
+            Ok(backend)
         }
     }
 }

@@ -3,14 +3,15 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use raystream_accel::KdTree;
 use raystream_cpu::{RenderOptions, render};
 use raystream_scene::Scene;
 
+use crate::cli::Device;
 use crate::cli::RenderArgs;
-use crate::common::{load_mesh, ms, resolve_device, spinner};
+use crate::common::{load_mesh, ms, spinner};
 
 /// The scene named by INPUT: none → built-in default, `.toml` → scene file, else a mesh.
 pub fn load_scene(input: Option<&Path>) -> Result<Scene> {
@@ -27,7 +28,13 @@ pub fn load_scene(input: Option<&Path>) -> Result<Scene> {
 }
 
 pub fn run(a: &RenderArgs) -> Result<()> {
-    let device = resolve_device(a.accel.device, a.quiet)?;
+    // The GPU stream renderer is not built yet: rendering runs on the CPU path.
+    let device = match a.accel.device {
+        Device::Gpu => bail!(
+            "render --device gpu: the GPU stream renderer is not implemented yet (GPU ray queries are: raystream trace --device gpu); use --device cpu or auto"
+        ),
+        _ => "cpu",
+    };
     let t0 = Instant::now();
     let scene = load_scene(a.input.as_deref())?;
     let load_ms = ms(t0.elapsed());

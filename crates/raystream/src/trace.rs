@@ -10,7 +10,9 @@ use raystream_math::Ray;
 use serde_json::json;
 
 use crate::cli::TraceArgs;
-use crate::common::{cpu_model, file_name, load_mesh, median, ms, resolve_device, round3, spinner};
+use raystream_gpu::GpuTracer;
+
+use crate::common::{Backend, file_name, load_mesh, median, ms, open_device, round3, spinner};
 
 pub const RAY_BYTES: usize = 32;
 pub const NO_PRIM: u32 = u32::MAX;
@@ -81,65 +83,121 @@ pub fn trace_all(tree: &KdTree, rays: &[Ray], any: bool, traversal: Traversal) -
         .collect()
 }
 
+/// Hits and timings of one traced ray set on either back-end.
+pub struct Traced {
+    pub hits: Vec<HitRecord>,
+    pub build_ms: f64,
+    pub upload_ms: f64,
+    /// Median and minimum over the timed repeats (traversal and intersection only).
+    pub trace_ms: f64,
+    pub trace_ms_min: f64,
+}
+
+/// Traces `rays` once to warm up and `repeat` times timed, on the CPU or the GPU.
+pub fn trace_timed(
+    backend: &Backend,
+    tree: &KdTree,
+    rays: &[Ray],
+    any: bool,
+    traversal: Traversal,
+    repeat: u32,
+) -> Result<Traced> {
+    let mut times = Vec::new();
+    let (hits, upload_ms) = match backend {
+        Backend::Cpu => {
+            let mut hits = trace_all(tree, rays, any, traversal);
+            for _ in 0..repeat {
+                let t0 = Instant::now();
+                hits = trace_all(tree, rays, any, traversal);
+                times.push(ms(t0.elapsed()));
+            }
+            (hits, 0.0)
+        }
+        Backend::Gpu(ctx) => {
+            if traversal != Traversal::Ropes {
+                bail!("--device gpu runs the rope traversal only (--traversal ropes)");
+            }
+            let tracer = GpuTracer::new(ctx, tree)?;
+            let (mut hits, first) = tracer.trace(rays, any)?;
+            for _ in 0..repeat {
+                let (h, t) = tracer.trace(rays, any)?;
+                hits = h;
+                times.push(t.kernel_ms);
+            }
+            let records = hits
+                .iter()
+                .map(|h| HitRecord {
+                    t: h.t,
+                    prim: h.prim,
+                    u: h.u,
+                    v: h.v,
+                })
+                .collect();
+            (records, tracer.upload_ms + first.upload_ms)
+        }
+    };
+    let trace_ms_min = times.iter().cloned().fold(f64::INFINITY, f64::min);
+    Ok(Traced {
+        hits,
+        build_ms: tree.stats.build_ms,
+        upload_ms,
+        trace_ms: median(&mut times),
+        trace_ms_min,
+    })
+}
+
 pub fn run(a: &TraceArgs) -> Result<()> {
-    let device = resolve_device(a.accel.device, a.quiet || a.json)?;
+    let quiet = a.quiet || a.json;
+    let backend = open_device(a.accel.device, a.accel.adapter.as_deref(), quiet)?;
     let mesh = load_mesh(&a.mesh)?;
     let rays = read_rays(&a.rays)?;
     let pb = spinner(
-        a.quiet || a.json,
+        quiet,
         &format!("building kd-tree over {} triangles", mesh.len()),
     );
     let tree = KdTree::build(&mesh, a.accel.builder.into());
-    pb.set_message(format!("tracing {} rays", rays.len()));
+    pb.set_message(format!("tracing {} rays on {}", rays.len(), backend.name()));
     let traversal: Traversal = a.accel.traversal.into();
-    let mut hits = trace_all(&tree, &rays, a.any, traversal); // warm-up
-    let mut times = Vec::new();
-    for _ in 0..a.repeat {
-        let t0 = Instant::now();
-        hits = trace_all(&tree, &rays, a.any, traversal);
-        times.push(ms(t0.elapsed()));
-    }
+    let t = trace_timed(&backend, &tree, &rays, a.any, traversal, a.repeat)?;
     pb.finish_and_clear();
-    let bytes: &[u8] = bytemuck::cast_slice(&hits);
+    let bytes: &[u8] = bytemuck::cast_slice(&t.hits);
     // HITS.bin is little-endian; so is every target raystream builds for.
     const _: () = assert!(cfg!(target_endian = "little"));
     std::fs::write(&a.output, bytes)
         .with_context(|| format!("{}: cannot write hits", a.output.display()))?;
-    let trace_ms_min = times.iter().cloned().fold(f64::INFINITY, f64::min);
-    let trace_ms = median(&mut times);
-    let n_hits = hits
-        .iter()
-        .filter(|h| h.prim != NO_PRIM || (a.any && h.t.is_finite()))
-        .count();
-    let mrays = rays.len() as f64 / (trace_ms * 1e-3) / 1e6;
+    let n_hits = t.hits.iter().filter(|h| h.t.is_finite()).count();
+    let mrays = rays.len() as f64 / (t.trace_ms * 1e-3) / 1e6;
     if a.json {
         println!(
             "{}",
             json!({
-                "device": device,
-                "adapter": cpu_model(),
+                "device": backend.name(),
+                "adapter": backend.adapter(),
                 "mesh": file_name(&a.mesh),
                 "triangles": mesh.len(),
                 "rays": rays.len(),
                 "query": if a.any { "any" } else { "closest" },
                 "builder": tree.stats.builder,
                 "traversal": traversal.name(),
-                "build_ms": round3(tree.stats.build_ms),
-                "upload_ms": 0.0,
-                "trace_ms": round3(trace_ms),
-                "trace_ms_min": round3(trace_ms_min),
+                "build_ms": round3(t.build_ms),
+                "upload_ms": round3(t.upload_ms),
+                "trace_ms": round3(t.trace_ms),
+                "trace_ms_min": round3(t.trace_ms_min),
                 "mrays_per_s": round3(mrays),
                 "hits": n_hits,
             })
         );
     } else if !a.quiet {
         eprintln!(
-            "raystream: {} rays, {} hits, build {:.1} ms, trace {:.1} ms ({:.2} Mrays/s) on {device}",
+            "raystream: {} rays, {} hits, build {:.1} ms, upload {:.1} ms, trace {:.1} ms ({:.2} Mrays/s) on {} ({})",
             rays.len(),
             n_hits,
-            tree.stats.build_ms,
-            trace_ms,
-            mrays
+            t.build_ms,
+            t.upload_ms,
+            t.trace_ms,
+            mrays,
+            backend.name(),
+            backend.adapter()
         );
     }
     Ok(())

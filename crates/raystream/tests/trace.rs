@@ -170,3 +170,161 @@ fn agrees_with_embree_vase_and_spot() {
     check_against_embree("goblet_vase.stl", "sah", "stack");
     check_against_embree("spot.obj", "median", "ropes");
 }
+
+/// Whether `--device gpu` can open an adapter here; under CI it must (lavapipe at least).
+fn gpu_available() -> bool {
+    let probe = tmp("probe.rays");
+    std::fs::write(
+        &probe,
+        f32s(&[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY]),
+    )
+    .unwrap();
+    let o = run(&[
+        "trace",
+        &mesh("spot.obj"),
+        "--rays",
+        probe.to_str().unwrap(),
+        "-o",
+        tmp("probe.hits").to_str().unwrap(),
+        "--device",
+        "gpu",
+        "-q",
+    ]);
+    if o.status.success() {
+        return true;
+    }
+    if std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!("CI=true but --device gpu fails: {}", stderr(&o));
+    }
+    eprintln!("skipping GPU test: {}", stderr(&o));
+    false
+}
+
+fn read_hits(path: &std::path::Path) -> Vec<(f32, u32)> {
+    std::fs::read(path)
+        .unwrap()
+        .chunks_exact(16)
+        .map(|c| {
+            (
+                f32::from_le_bytes(c[0..4].try_into().unwrap()),
+                u32::from_le_bytes(c[4..8].try_into().unwrap()),
+            )
+        })
+        .collect()
+}
+
+/// GPU `trace` on the standard ray sets: passes rays.py's Embree check, and equals the CPU's
+/// hits (prim, and t within 1e-5 relative; only ties at shared edges may differ).
+#[test]
+fn gpu_trace_agrees_with_cpu_and_embree() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(py) = python() else { return };
+    for name in ["spot.obj", "stanford_lucy_100k.ply", "turbine_blade.ply"] {
+        let m = mesh(name);
+        for kind in ["primary", "shadow", "diffuse", "random"] {
+            let stem = format!("gpu-{name}-{kind}");
+            let rays = tmp(&format!("{stem}.rays"));
+            let g = rays_py(
+                &py,
+                &[
+                    "gen",
+                    &m,
+                    "--kind",
+                    kind,
+                    "--size",
+                    "96x72",
+                    "-o",
+                    rays.to_str().unwrap(),
+                ],
+            );
+            assert!(g.status.success(), "{}", stderr(&g));
+            let any = kind == "shadow";
+            let mut outs = Vec::new();
+            for device in ["gpu", "cpu"] {
+                let hits = tmp(&format!("{stem}-{device}.hits"));
+                let mut args = vec![
+                    "trace",
+                    &m,
+                    "--rays",
+                    rays.to_str().unwrap(),
+                    "-o",
+                    hits.to_str().unwrap(),
+                    "--device",
+                    device,
+                    "-q",
+                ];
+                if any {
+                    args.push("--any");
+                }
+                let o = run(&args);
+                assert!(o.status.success(), "{stem} {device}: {}", stderr(&o));
+                outs.push(hits);
+            }
+            let mut check = vec![
+                "check",
+                &m,
+                rays.to_str().unwrap(),
+                outs[0].to_str().unwrap(),
+                "--t-floor",
+                "1e-4",
+            ];
+            if any {
+                check.push("--any");
+            }
+            let c = rays_py(&py, &check);
+            assert!(c.status.success(), "{stem}: {}", stdout(&c));
+            let (gpu, cpu) = (read_hits(&outs[0]), read_hits(&outs[1]));
+            let mut prim_diff = 0;
+            for (i, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
+                assert_eq!(
+                    g.0.is_finite(),
+                    c.0.is_finite(),
+                    "{stem}: ray {i} hit/miss differs"
+                );
+                if !any && c.0.is_finite() {
+                    assert!(
+                        (g.0 - c.0).abs() <= 1e-5 * c.0.abs().max(1e-6),
+                        "{stem}: ray {i} t {} vs {}",
+                        g.0,
+                        c.0
+                    );
+                    prim_diff += (g.1 != c.1) as usize;
+                }
+            }
+            assert!(
+                prim_diff * 1000 <= gpu.len(),
+                "{stem}: {prim_diff} prim differences"
+            );
+        }
+    }
+}
+
+#[test]
+fn unknown_adapter_is_a_clear_error() {
+    let probe = tmp("adapter.rays");
+    std::fs::write(
+        &probe,
+        f32s(&[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY]),
+    )
+    .unwrap();
+    let o = run(&[
+        "trace",
+        &mesh("spot.obj"),
+        "--rays",
+        probe.to_str().unwrap(),
+        "-o",
+        tmp("adapter.hits").to_str().unwrap(),
+        "--device",
+        "gpu",
+        "--adapter",
+        "no-such-gpu-xyz",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = stderr(&o);
+    assert!(
+        err.contains("no GPU adapter") && !err.contains("panicked"),
+        "{err}"
+    );
+}
