@@ -152,6 +152,13 @@ impl GpuContext {
         Ok(())
     }
 
+    /// The largest buffer a kernel can bind.
+    fn max_binding(&self) -> u64 {
+        self.limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size)
+    }
+
     fn storage(
         &self,
         what: &'static str,

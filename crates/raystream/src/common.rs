@@ -13,7 +13,7 @@ use crate::cli::Device;
 /// Where a command runs.
 pub enum Backend {
     Cpu,
-    Gpu(GpuContext),
+    Gpu(Box<GpuContext>),
 }
 
 impl Backend {
@@ -39,12 +39,12 @@ impl Backend {
 pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Backend> {
     match d {
         Device::Cpu => Ok(Backend::Cpu),
-        Device::Gpu => Ok(Backend::Gpu(
+        Device::Gpu => Ok(Backend::Gpu(Box::new(
             GpuContext::new(adapter).context("--device gpu")?,
-        )),
+        ))),
         Device::Auto => {
             let backend = match GpuContext::new(adapter) {
-                Ok(ctx) if !ctx.is_software() => Backend::Gpu(ctx),
+                Ok(ctx) if !ctx.is_software() => Backend::Gpu(Box::new(ctx)),
                 Ok(ctx) => {
                     if !quiet {
                         eprintln!(
