@@ -117,17 +117,23 @@ impl KdTree {
         false
     }
 
+    /// The ray's interval inside the scene box and its traversal constants; `None` for a ray
+    /// that cannot hit anything (invalid, empty scene, or missing the box).
+    fn start(&self, ray: &Ray) -> Option<(f32, f32, RayCtx)> {
+        if !ray.is_valid() || self.tris.is_empty() {
+            return None;
+        }
+        let (t0, t1) = self.bounds.clip_ray(ray)?;
+        Some((t0, t1, RayCtx::new(ray)))
+    }
+
     /// Stackless traversal with ropes.
     pub(crate) fn ropes<const ANY: bool, const COUNT: bool>(
         &self,
         ray: &Ray,
         c: &mut Counters,
     ) -> Option<Hit> {
-        if !ray.is_valid() || self.tris.is_empty() {
-            return None;
-        }
-        let (mut t_entry, _) = self.bounds.clip_ray(ray)?;
-        let r = RayCtx::new(ray);
+        let (mut t_entry, _, r) = self.start(ray)?;
         let mut best = None;
         let mut t_best = ray.t_max;
         let mut node = self.root;
@@ -178,11 +184,7 @@ impl KdTree {
         ray: &Ray,
         c: &mut Counters,
     ) -> Option<Hit> {
-        if !ray.is_valid() || self.tris.is_empty() {
-            return None;
-        }
-        let (mut t0, mut t1) = self.bounds.clip_ray(ray)?;
-        let r = RayCtx::new(ray);
+        let (mut t0, mut t1, r) = self.start(ray)?;
         let mut best = None;
         let mut t_best = ray.t_max;
         let mut stack = [(0u32, 0f32, 0f32); MAX_DEPTH + 1];

@@ -101,57 +101,16 @@ fn check_against_embree(mesh_name: &str, builder: &str, traversal: &str) {
         let stem = format!("{mesh_name}-{kind}-{builder}-{traversal}");
         let rays = tmp(&format!("{stem}.rays"));
         let hits = tmp(&format!("{stem}.hits"));
-        let g = rays_py(
-            &py,
-            &[
-                "gen",
-                &m,
-                "--kind",
-                kind,
-                "--size",
-                "160x120",
-                "-o",
-                rays.to_str().unwrap(),
-            ],
-        );
-        assert!(g.status.success(), "rays.py gen: {}", stderr(&g));
+        gen_rays(&py, &m, kind, "160x120", &rays);
         let any = kind == "shadow";
-        let mut args = vec![
-            "trace",
+        trace_to(
             &m,
-            "--rays",
-            rays.to_str().unwrap(),
-            "-o",
-            hits.to_str().unwrap(),
-            "--builder",
-            builder,
-            "--traversal",
-            traversal,
-            "-q",
-        ];
-        if any {
-            args.push("--any");
-        }
-        let o = run(&args);
-        assert!(o.status.success(), "trace: {}", stderr(&o));
-        let mut check = vec![
-            "check",
-            &m,
-            rays.to_str().unwrap(),
-            hits.to_str().unwrap(),
-            "--t-floor",
-            "1e-4",
-        ];
-        if any {
-            check.push("--any");
-        }
-        let c = rays_py(&py, &check);
-        let out = stdout(&c);
-        assert!(
-            c.status.success() && out.lines().last().is_some_and(|l| l.starts_with("PASS")),
-            "{stem}: {out}{}",
-            stderr(&c)
+            &rays,
+            &hits,
+            any,
+            &["--builder", builder, "--traversal", traversal],
         );
+        embree_check(&py, &m, &rays, &hits, any, &stem);
     }
 }
 
@@ -226,55 +185,17 @@ fn gpu_trace_agrees_with_cpu_and_embree() {
         for kind in ["primary", "shadow", "diffuse", "random"] {
             let stem = format!("gpu-{name}-{kind}");
             let rays = tmp(&format!("{stem}.rays"));
-            let g = rays_py(
-                &py,
-                &[
-                    "gen",
-                    &m,
-                    "--kind",
-                    kind,
-                    "--size",
-                    "96x72",
-                    "-o",
-                    rays.to_str().unwrap(),
-                ],
-            );
-            assert!(g.status.success(), "{}", stderr(&g));
+            gen_rays(&py, &m, kind, "96x72", &rays);
             let any = kind == "shadow";
-            let mut outs = Vec::new();
-            for device in ["gpu", "cpu"] {
-                let hits = tmp(&format!("{stem}-{device}.hits"));
-                let mut args = vec![
-                    "trace",
-                    &m,
-                    "--rays",
-                    rays.to_str().unwrap(),
-                    "-o",
-                    hits.to_str().unwrap(),
-                    "--device",
-                    device,
-                    "-q",
-                ];
-                if any {
-                    args.push("--any");
-                }
-                let o = run(&args);
-                assert!(o.status.success(), "{stem} {device}: {}", stderr(&o));
-                outs.push(hits);
-            }
-            let mut check = vec![
-                "check",
-                &m,
-                rays.to_str().unwrap(),
-                outs[0].to_str().unwrap(),
-                "--t-floor",
-                "1e-4",
-            ];
-            if any {
-                check.push("--any");
-            }
-            let c = rays_py(&py, &check);
-            assert!(c.status.success(), "{stem}: {}", stdout(&c));
+            let outs: Vec<_> = ["gpu", "cpu"]
+                .iter()
+                .map(|device| {
+                    let hits = tmp(&format!("{stem}-{device}.hits"));
+                    trace_to(&m, &rays, &hits, any, &["--device", device]);
+                    hits
+                })
+                .collect();
+            embree_check(&py, &m, &rays, &outs[0], any, &stem);
             let (gpu, cpu) = (read_hits(&outs[0]), read_hits(&outs[1]));
             let mut prim_diff = 0;
             for (i, (g, c)) in gpu.iter().zip(&cpu).enumerate() {

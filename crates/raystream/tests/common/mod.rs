@@ -76,3 +76,67 @@ pub fn rays_py(python: &Path, args: &[&str]) -> Output {
         .output()
         .expect("rays.py runs")
 }
+
+/// `rays.py gen MESH --kind KIND --size SIZE -o RAYS`.
+pub fn gen_rays(python: &Path, mesh: &str, kind: &str, size: &str, rays: &Path) {
+    let g = rays_py(
+        python,
+        &[
+            "gen",
+            mesh,
+            "--kind",
+            kind,
+            "--size",
+            size,
+            "-o",
+            rays.to_str().unwrap(),
+        ],
+    );
+    assert!(
+        g.status.success(),
+        "rays.py gen {mesh} {kind}: {}",
+        stderr(&g)
+    );
+}
+
+/// `raystream trace MESH --rays RAYS -o HITS [--any] EXTRA… -q`, which must succeed.
+pub fn trace_to(mesh: &str, rays: &Path, hits: &Path, any: bool, extra: &[&str]) {
+    let mut args = vec![
+        "trace",
+        mesh,
+        "--rays",
+        rays.to_str().unwrap(),
+        "-o",
+        hits.to_str().unwrap(),
+        "-q",
+    ];
+    if any {
+        args.push("--any");
+    }
+    args.extend_from_slice(extra);
+    let o = run(&args);
+    assert!(o.status.success(), "trace {mesh} {extra:?}: {}", stderr(&o));
+}
+
+/// `rays.py check` of HITS against Embree (with the t floor rays.py advises for small sets);
+/// panics with its report unless it ends in PASS.
+pub fn embree_check(python: &Path, mesh: &str, rays: &Path, hits: &Path, any: bool, what: &str) {
+    let mut check = vec![
+        "check",
+        mesh,
+        rays.to_str().unwrap(),
+        hits.to_str().unwrap(),
+        "--t-floor",
+        "1e-4",
+    ];
+    if any {
+        check.push("--any");
+    }
+    let c = rays_py(python, &check);
+    let out = stdout(&c);
+    assert!(
+        c.status.success() && out.lines().last().is_some_and(|l| l.starts_with("PASS")),
+        "{what}: {out}{}",
+        stderr(&c)
+    );
+}
