@@ -95,9 +95,11 @@ impl GpuContext {
         };
         let info = chosen.get_info();
         let limits = chosen.limits();
+        // Per-kernel times come from timestamp queries where the adapter has them.
+        let features = chosen.features() & wgpu::Features::TIMESTAMP_QUERY;
         let (device, queue) = pollster::block_on(chosen.request_device(&wgpu::DeviceDescriptor {
             label: Some("raystream"),
-            required_features: wgpu::Features::empty(),
+            required_features: features,
             required_limits: limits.clone(),
             ..Default::default()
         }))
@@ -212,6 +214,9 @@ pub struct TraceTimes {
     pub upload_ms: f64,
     pub kernel_ms: f64,
     pub readback_ms: f64,
+    /// The kernel's own time between its pass's timestamps, where the adapter has timestamp
+    /// queries: the figure to compare kernels by.
+    pub kernel_gpu_ms: Option<f64>,
 }
 
 impl<'a> GpuTracer<'a> {
@@ -359,6 +364,30 @@ impl<'a> GpuTracer<'a> {
         ctx.wait()?;
         let upload_ms = t0.elapsed().as_secs_f64() * 1e3;
 
+        let timer = ctx
+            .device
+            .features()
+            .contains(wgpu::Features::TIMESTAMP_QUERY)
+            .then(|| {
+                let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("kernel timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: 2,
+                });
+                let resolve = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("timestamps"),
+                    size: 16,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                });
+                let read = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("timestamps readback"),
+                    size: 16,
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+                (set, resolve, read)
+            });
         let t1 = Instant::now();
         let groups = (n as u32).div_ceil(WORKGROUP_SIZE);
         let max = ctx.limits.max_compute_workgroups_per_dimension.max(1);
@@ -385,9 +414,17 @@ impl<'a> GpuTracer<'a> {
             pass.set_bind_group(0, &bind, &[]);
             pass.dispatch_workgroups(gx, gy, 1);
         }
+        if let Some((set, resolve, read)) = &timer {
+            enc.resolve_query_set(set, 0..2, resolve, 0);
+            enc.copy_buffer_to_buffer(resolve, 0, read, 0, 16);
+        }
         ctx.queue.submit([enc.finish()]);
         ctx.wait()?;
         let kernel_ms = t1.elapsed().as_secs_f64() * 1e3;
+        let kernel_gpu_ms = match &timer {
+            Some((_, _, read)) => self.read_timestamps(read)?,
+            None => None,
+        };
 
         let t2 = Instant::now();
         let mut enc = ctx
@@ -418,8 +455,29 @@ impl<'a> GpuTracer<'a> {
                 upload_ms,
                 kernel_ms,
                 readback_ms,
+                kernel_gpu_ms,
             },
         ))
+    }
+
+    /// Milliseconds between the two timestamps in `read` (already copied there); `None` where
+    /// the adapter wrote equal stamps (lavapipe does): no measurement rather than a false 0.
+    fn read_timestamps(&self, read: &wgpu::Buffer) -> Result<Option<f64>, GpuError> {
+        let ctx = self.ctx;
+        let slice = read.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        ctx.wait()?;
+        rx.recv().map_err(|e| ctx.err(e))?.map_err(|e| ctx.err(e))?;
+        let view = slice.get_mapped_range().map_err(|e| ctx.err(e))?;
+        let t: &[u64] = bytemuck::cast_slice(&view[..]);
+        let ticks = t[1].wrapping_sub(t[0]);
+        drop(view);
+        read.unmap();
+        let ms = ticks as f64 * ctx.queue.get_timestamp_period() as f64 * 1e-6;
+        Ok((ms > 0.0).then_some(ms))
     }
 }
 

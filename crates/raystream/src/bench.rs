@@ -16,7 +16,7 @@ use raystream_scene::Camera;
 use serde_json::json;
 
 use crate::cli::BenchArgs;
-use crate::common::{file_name, load_mesh, median, ms, open_device, round3, spinner};
+use crate::common::{file_name, load_mesh, median, ms, open_device, print_line, round3, spinner};
 use crate::info::tree_json;
 use crate::trace::{NO_PRIM, trace_all, trace_timed};
 
@@ -196,6 +196,8 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                 "kdtree": tree_json(&tree.stats),
                 "trace_ms": round3(t.trace_ms),
                 "trace_ms_min": round3(t.trace_ms_min),
+                // Per-kernel GPU time from timestamp queries, by stage name.
+                "gpu_kernel_ms": t.kernel_gpu_ms.map(|k| json!({ if any { "intersect_any" } else { "intersect_closest" }: round3(k) })),
                 "mrays_per_s": round3(n / (t.trace_ms * 1e-3) / 1e6),
                 "inner_per_ray": round3(c.inner as f64 / n),
                 "leaves_per_ray": round3(c.leaves as f64 / n),
@@ -203,7 +205,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                 "hits": t.hits.iter().filter(|h| h.t.is_finite()).count(),
             });
             if a.json {
-                println!("{line}");
+                print_line(line);
             } else {
                 println!(
                     "{:<4} {:<8} {:>9} rays  {:>8.2} Mrays/s  ({:.1} ms)  {:.1} inner, {:.2} leaves, {:.1} triangles per ray  [build {:.0} ms, SAH cost {:.1}, {}; {}]",

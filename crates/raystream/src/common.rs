@@ -126,3 +126,15 @@ pub fn ms(d: Duration) -> f64 {
 pub fn round3(x: f64) -> f64 {
     (x * 1000.0).round() / 1000.0
 }
+
+/// Prints one line to stdout; a closed pipe (`raystream … --json | head`) ends quietly instead
+/// of panicking as `println!` would.
+pub fn print_line(line: impl std::fmt::Display) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = writeln!(out, "{line}")
+        && e.kind() != std::io::ErrorKind::BrokenPipe
+    {
+        eprintln!("raystream: cannot write to stdout: {e}");
+    }
+}

@@ -5,7 +5,7 @@ use raystream_accel::{KdTree, TreeStats};
 use serde_json::json;
 
 use crate::cli::InfoArgs;
-use crate::common::{file_name, load_mesh, round3};
+use crate::common::{file_name, load_mesh, print_line, round3};
 
 pub fn tree_json(s: &TreeStats) -> serde_json::Value {
     json!({
@@ -36,7 +36,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             "bounds": [b.min.to_array(), b.max.to_array()],
             "kdtree": tree_json(s),
         });
-        println!("{v}");
+        print_line(v);
     } else {
         println!("{}: triangle mesh", a.input.display());
         println!("  vertices   {}", mesh.positions.len());

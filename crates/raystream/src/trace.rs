@@ -12,7 +12,9 @@ use serde_json::json;
 use crate::cli::TraceArgs;
 use raystream_gpu::GpuTracer;
 
-use crate::common::{Backend, file_name, load_mesh, median, ms, open_device, round3, spinner};
+use crate::common::{
+    Backend, file_name, load_mesh, median, ms, open_device, print_line, round3, spinner,
+};
 
 pub const RAY_BYTES: usize = 32;
 pub const NO_PRIM: u32 = u32::MAX;
@@ -91,6 +93,9 @@ pub struct Traced {
     /// Median and minimum over the timed repeats (traversal and intersection only).
     pub trace_ms: f64,
     pub trace_ms_min: f64,
+    /// GPU only, where the adapter has timestamp queries: median kernel time between the
+    /// compute pass's timestamps.
+    pub kernel_gpu_ms: Option<f64>,
 }
 
 /// Traces `rays` once to warm up and `repeat` times timed, on the CPU or the GPU.
@@ -103,6 +108,7 @@ pub fn trace_timed(
     repeat: u32,
 ) -> Result<Traced> {
     let mut times = Vec::new();
+    let mut gpu_times = Vec::new();
     let (hits, upload_ms) = match backend {
         Backend::Cpu => {
             let mut hits = trace_all(tree, rays, any, traversal);
@@ -123,6 +129,7 @@ pub fn trace_timed(
                 let (h, t) = tracer.trace(rays, any)?;
                 hits = h;
                 times.push(t.kernel_ms);
+                gpu_times.extend(t.kernel_gpu_ms);
             }
             let records = hits
                 .iter()
@@ -137,12 +144,14 @@ pub fn trace_timed(
         }
     };
     let trace_ms_min = times.iter().cloned().fold(f64::INFINITY, f64::min);
+    let kernel_gpu_ms = (!gpu_times.is_empty()).then(|| median(&mut gpu_times));
     Ok(Traced {
         hits,
         build_ms: tree.stats.build_ms,
         upload_ms,
         trace_ms: median(&mut times),
         trace_ms_min,
+        kernel_gpu_ms,
     })
 }
 
@@ -168,25 +177,23 @@ pub fn run(a: &TraceArgs) -> Result<()> {
     let n_hits = t.hits.iter().filter(|h| h.t.is_finite()).count();
     let mrays = rays.len() as f64 / (t.trace_ms * 1e-3) / 1e6;
     if a.json {
-        println!(
-            "{}",
-            json!({
-                "device": backend.name(),
-                "adapter": backend.adapter(),
-                "mesh": file_name(&a.mesh),
-                "triangles": mesh.len(),
-                "rays": rays.len(),
-                "query": if a.any { "any" } else { "closest" },
-                "builder": tree.stats.builder,
-                "traversal": traversal.name(),
-                "build_ms": round3(t.build_ms),
-                "upload_ms": round3(t.upload_ms),
-                "trace_ms": round3(t.trace_ms),
-                "trace_ms_min": round3(t.trace_ms_min),
-                "mrays_per_s": round3(mrays),
-                "hits": n_hits,
-            })
-        );
+        print_line(json!({
+            "device": backend.name(),
+            "adapter": backend.adapter(),
+            "mesh": file_name(&a.mesh),
+            "triangles": mesh.len(),
+            "rays": rays.len(),
+            "query": if a.any { "any" } else { "closest" },
+            "builder": tree.stats.builder,
+            "traversal": traversal.name(),
+            "build_ms": round3(t.build_ms),
+            "upload_ms": round3(t.upload_ms),
+            "trace_ms": round3(t.trace_ms),
+            "trace_ms_min": round3(t.trace_ms_min),
+            "gpu_kernel_ms": t.kernel_gpu_ms.map(round3),
+            "mrays_per_s": round3(mrays),
+            "hits": n_hits,
+        }));
     } else if !a.quiet {
         eprintln!(
             "raystream: {} rays, {} hits, build {:.1} ms, upload {:.1} ms, trace {:.1} ms ({:.2} Mrays/s) on {} ({})",
