@@ -9,11 +9,16 @@
 mod ply;
 mod shapes;
 mod stl;
+pub mod volume;
 
 use std::io::{BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};
 
 pub use raystream_math::{Aabb, Vec3};
+pub use volume::{
+    DicomSeriesInfo, MAX_VOXELS, ValueUnit, Volume, VolumeError, VolumeFormat, is_volume_path,
+    list_dicom_series, load_volume,
+};
 
 /// A triangle mesh: shared vertex positions and triangles as vertex-index triples.
 #[derive(Clone, Debug, Default, PartialEq)]

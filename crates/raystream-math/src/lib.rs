@@ -1,7 +1,7 @@
 //! Geometry shared by every raystream crate: glam's vectors, a [`Ray`] with its valid t-range,
 //! and an axis-aligned box [`Aabb`]. No I/O and no GPU here.
 
-pub use glam::{DMat3, DVec3, Mat3, Mat4, Quat, UVec3, Vec2, Vec3, Vec3A, Vec4};
+pub use glam::{DAffine3, DMat3, DVec3, Mat3, Mat4, Quat, UVec3, Vec2, Vec3, Vec3A, Vec4};
 
 /// A ray `o + t·d` with the interval of t that counts, `t_min ≤ t ≤ t_max`. The direction need not
 /// be unit length: t is measured in units of `|d|`.

@@ -22,7 +22,7 @@ pub enum Command {
     Render(RenderArgs),
     /// Trace a stream of rays (RAYS.bin) against a mesh and write the hits (HITS.bin).
     Trace(TraceArgs),
-    /// Describe a mesh and its kd-tree.
+    /// Describe a mesh and its kd-tree, or a CT volume's geometry and values.
     Info(InfoArgs),
     /// Measure build time and traversal throughput on standard ray sets.
     Bench(BenchArgs),
@@ -132,8 +132,11 @@ pub struct TraceArgs {
 
 #[derive(Args)]
 pub struct InfoArgs {
-    /// Mesh file.
+    /// Mesh file, or CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd).
     pub input: PathBuf,
+    /// DICOM: the SeriesInstanceUID to read (default: the series with the most slices).
+    #[arg(long)]
+    pub series: Option<String>,
     #[arg(long, value_enum, default_value = "sah")]
     pub builder: BuilderArg,
     #[arg(long)]

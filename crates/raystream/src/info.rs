@@ -1,4 +1,5 @@
-//! `raystream info`: a mesh's size and bounds and its kd-tree statistics.
+//! `raystream info`: a mesh's size and bounds and its kd-tree statistics, or a volume's geometry
+//! (dims, spacing in mm, LPS origin and direction), value range and, for DICOM, its series.
 
 use anyhow::Result;
 use raystream_accel::{KdTree, TreeStats};
@@ -22,6 +23,9 @@ pub fn tree_json(s: &TreeStats) -> serde_json::Value {
 }
 
 pub fn run(a: &InfoArgs) -> Result<()> {
+    if raystream_io::is_volume_path(&a.input) {
+        return volume_info(a);
+    }
     let mesh = load_mesh(&a.input)?;
     let tree = KdTree::build(&mesh, a.builder.into());
     let b = mesh.bounds();
@@ -62,6 +66,80 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             s.references,
             s.build_ms
         );
+    }
+    Ok(())
+}
+
+fn volume_info(a: &InfoArgs) -> Result<()> {
+    let v = raystream_io::load_volume(&a.input, a.series.as_deref())?;
+    let range = v.value_range();
+    let unit = match v.unit {
+        raystream_io::ValueUnit::Hounsfield => "HU",
+        raystream_io::ValueUnit::Unknown => "unknown",
+    };
+    let series = v.series.as_ref().map(|s| {
+        json!({
+            "uid": s.uid,
+            "description": s.description,
+            "modality": s.modality,
+            "count": s.count,
+            "transfer_syntax": s.transfer_syntax,
+            "transfer_syntax_name": s.transfer_syntax_name,
+            "all": s.all.iter().map(|(u, n, d)| json!({"uid": u, "count": n, "description": d})).collect::<Vec<_>>(),
+        })
+    });
+    if a.json {
+        let mut out = json!({
+            "kind": "volume",
+            "file": file_name(&a.input),
+            "format": v.format.name(),
+            "dims": v.dims,
+            "spacing": v.spacing,
+            "origin": v.origin,
+            "direction": v.direction.concat().iter().map(|d| d + 0.0).collect::<Vec<f64>>(),
+            "unit": unit,
+            "warnings": v.warnings,
+        });
+        out["hu_range"] = match (v.unit, range) {
+            (raystream_io::ValueUnit::Hounsfield, Some((lo, hi))) => json!([lo, hi]),
+            _ => serde_json::Value::Null,
+        };
+        out["value_range"] = match range {
+            Some((lo, hi)) => json!([lo, hi]),
+            None => serde_json::Value::Null,
+        };
+        if let Some(s) = series {
+            out["series"] = s;
+        }
+        print_line(out);
+    } else {
+        println!("{}: {} volume", a.input.display(), v.format.name());
+        println!(
+            "  dims       {} x {} x {} voxels",
+            v.dims[0], v.dims[1], v.dims[2]
+        );
+        println!("  spacing    {:?} mm", v.spacing);
+        println!("  origin     {:?} mm (LPS)", v.origin);
+        println!(
+            "  direction  {:?} (columns: i, j, k axes in LPS)",
+            v.direction
+        );
+        match range {
+            Some((lo, hi)) => println!("  values     {lo} .. {hi} ({unit})"),
+            None => println!("  values     all NaN"),
+        }
+        if let Some(s) = &v.series {
+            println!(
+                "  series     {} ({} slices, {}, {} {})",
+                s.uid, s.count, s.modality, s.transfer_syntax, s.transfer_syntax_name
+            );
+            for (u, n, d) in s.all.iter().filter(|(u, _, _)| *u != s.uid) {
+                println!("  also       {u} ({n} slices) {d}");
+            }
+        }
+        for w in &v.warnings {
+            println!("  warning    {w}");
+        }
     }
     Ok(())
 }

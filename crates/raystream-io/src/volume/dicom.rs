@@ -1,0 +1,625 @@
+//! DICOM CT series: a folder of single-frame slices (or one `.dcm` file) → one [`Volume`].
+//!
+//! Parsing and pixel decoding are dicom-rs (`dicom-object`, `dicom-pixeldata`: uncompressed,
+//! deflate, RLE, JPEG via jpeg-decoder, JPEG 2000 via the pure-Rust `openjp2`). JPEG-LS would need
+//! the C++ CharLS library and is reported as unsupported rather than built.
+//!
+//! The file meta group (group 0002) is read here rather than by dicom-rs's `open_file`, which
+//! rejects meta elements whose value is longer than their VR allows (e.g. a 18-character
+//! SourceApplicationEntityTitle, as 13 of the 15 transfer-syntax samples have): only the transfer
+//! syntax UID is taken from it, and the data set is parsed with that syntax.
+//!
+//! Series assembly follows the standard's geometry, never file names or InstanceNumber: slices
+//! are grouped by SeriesInstanceUID, sorted by ImagePositionPatient projected on the slice normal
+//! (row × column of ImageOrientationPatient), and the slice spacing comes from those positions.
+//! A gantry-tilted series (positions not stacked along the normal) or one with uneven spacing is
+//! refused with a message saying so, never loaded with a silently wrong geometry.
+
+use std::path::{Path, PathBuf};
+
+use dicom_dictionary_std::tags;
+use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
+use dicom_pixeldata::PixelDecoder;
+use dicom_transfer_syntax_registry::{TransferSyntaxIndex, TransferSyntaxRegistry};
+use rayon::prelude::*;
+
+use super::{ValueUnit, Volume, VolumeError, VolumeFormat, check_geometry, voxel_count};
+
+/// The series a DICOM volume was read from, and the other series in its folder.
+#[derive(Clone, Debug, Default)]
+pub struct DicomSeriesInfo {
+    pub uid: String,
+    pub description: String,
+    pub modality: String,
+    /// Slices (files) in the series.
+    pub count: usize,
+    /// Transfer syntax UID and name of the series' files (the first file's, if they differ).
+    pub transfer_syntax: String,
+    pub transfer_syntax_name: String,
+    /// Every series found in the folder: (UID, slice count, description).
+    pub all: Vec<(String, usize, String)>,
+}
+
+/// One parsed slice: its header fields and the object to decode pixels from.
+pub(crate) struct Slice {
+    file: PathBuf,
+    series_uid: String,
+    description: String,
+    modality: String,
+    ts_uid: String,
+    pub(crate) rows: u32,
+    pub(crate) cols: u32,
+    frames: u32,
+    position: [f64; 3],
+    orientation: [f64; 6],
+    pixel_spacing: [f64; 2],
+    between_slices: Option<f64>,
+    thickness: Option<f64>,
+    obj: Option<InMemDicomObject>,
+}
+
+/// Lists the series in a DICOM folder: (UID, slice count, description), largest first.
+pub fn list_dicom_series(path: &Path) -> Result<Vec<(String, usize, String)>, VolumeError> {
+    let (slices, _) = read_folder(path)?;
+    Ok(group(&slices))
+}
+
+pub(crate) fn load(path: &Path, series: Option<&str>) -> Result<Volume, VolumeError> {
+    let (slices, mut warnings) = read_folder(path)?;
+    let all = group(&slices);
+    let uid = match series {
+        Some(s) => all
+            .iter()
+            .find(|(u, _, _)| u == s)
+            .map(|(u, _, _)| u.clone())
+            .ok_or_else(|| {
+                VolumeError::invalid(
+                    path,
+                    format!(
+                        "no series with UID {s}; the folder holds: {}",
+                        all.iter()
+                            .map(|(u, n, d)| format!("{u} ({n} slices{})", describe(d)))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })?,
+        None => {
+            if all.len() > 1 {
+                warnings.push(format!(
+                    "{} series in the folder; reading the largest ({} slices); pick another with --series UID",
+                    all.len(),
+                    all[0].1
+                ));
+            }
+            all[0].0.clone()
+        }
+    };
+    let mut chosen: Vec<Slice> = slices.into_iter().filter(|s| s.series_uid == uid).collect();
+    assemble(path, &mut chosen, all, warnings)
+}
+
+fn describe(d: &str) -> String {
+    if d.is_empty() {
+        String::new()
+    } else {
+        format!(", {d:?}")
+    }
+}
+
+/// Series UIDs with their slice counts, largest first (ties by UID, for a stable choice).
+fn group(slices: &[Slice]) -> Vec<(String, usize, String)> {
+    let mut map: std::collections::BTreeMap<&str, (usize, &str)> = Default::default();
+    for s in slices {
+        map.entry(&s.series_uid).or_insert((0, &s.description)).0 += 1;
+    }
+    let mut v: Vec<_> = map
+        .into_iter()
+        .map(|(u, (n, d))| (u.to_string(), n, d.to_string()))
+        .collect();
+    v.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+    v
+}
+
+/// Parses every DICOM file of a folder (or the one file given); files that are not DICOM are
+/// skipped with a warning, a folder without any DICOM image is an error.
+fn read_folder(path: &Path) -> Result<(Vec<Slice>, Vec<String>), VolumeError> {
+    let files: Vec<PathBuf> = if path.is_dir() {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(path)
+            .map_err(|e| VolumeError::io(path, e))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                p.is_file()
+                    && !p
+                        .file_name()
+                        .and_then(|n| n.to_str())
+                        .is_some_and(|n| n.starts_with('.') || n.eq_ignore_ascii_case("DICOMDIR"))
+            })
+            .collect();
+        v.sort();
+        v
+    } else {
+        vec![path.to_path_buf()]
+    };
+    let parsed: Vec<Result<Slice, VolumeError>> = files.par_iter().map(|f| read_slice(f)).collect();
+    let mut slices = Vec::new();
+    let mut warnings = Vec::new();
+    let mut first_error = None;
+    for r in parsed {
+        match r {
+            Ok(s) => slices.push(s),
+            Err(e) => {
+                if path.is_dir() {
+                    warnings.push(format!("skipped {e}"));
+                }
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    if slices.is_empty() {
+        return Err(match first_error {
+            Some(e) if !path.is_dir() => e,
+            Some(e) => VolumeError::invalid(
+                path,
+                format!("no readable DICOM image in the folder (first problem: {e})"),
+            ),
+            None => VolumeError::invalid(path, "the folder is empty"),
+        });
+    }
+    Ok((slices, warnings))
+}
+
+/// Reads the file meta group by hand (see the module docs) and returns the transfer syntax UID
+/// and the offset of the data set.
+fn read_meta(bytes: &[u8], file: &Path) -> Result<(String, usize), VolumeError> {
+    let mut pos = if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
+        132
+    } else if bytes.starts_with(&[0x02, 0x00]) {
+        0
+    } else {
+        return Err(VolumeError::invalid(
+            file,
+            "not a DICOM file (no DICM marker at byte 128 and no file meta group)",
+        ));
+    };
+    let mut ts = None;
+    while pos + 8 <= bytes.len() && bytes[pos] == 0x02 && bytes[pos + 1] == 0x00 {
+        let elem = u16::from_le_bytes([bytes[pos + 2], bytes[pos + 3]]);
+        let vr = &bytes[pos + 4..pos + 6];
+        let long = matches!(
+            vr,
+            b"OB"
+                | b"OW"
+                | b"OF"
+                | b"OD"
+                | b"OL"
+                | b"OV"
+                | b"SQ"
+                | b"UT"
+                | b"UN"
+                | b"UC"
+                | b"UR"
+                | b"SV"
+                | b"UV"
+        );
+        let (len, head) = if long {
+            if pos + 12 > bytes.len() {
+                break;
+            }
+            let l = u32::from_le_bytes(bytes[pos + 8..pos + 12].try_into().unwrap()) as usize;
+            (l, 12)
+        } else {
+            (
+                u16::from_le_bytes([bytes[pos + 6], bytes[pos + 7]]) as usize,
+                8,
+            )
+        };
+        let start = pos + head;
+        let end = start
+            .checked_add(len)
+            .filter(|&e| e <= bytes.len())
+            .ok_or_else(|| VolumeError::invalid(file, "the DICOM file meta group is truncated"))?;
+        if elem == 0x0010 {
+            let s = String::from_utf8_lossy(&bytes[start..end]);
+            ts = Some(s.trim_end_matches(['\0', ' ']).trim().to_string());
+        }
+        pos = end;
+    }
+    let ts = ts.ok_or_else(|| {
+        VolumeError::invalid(
+            file,
+            "the DICOM file meta group has no transfer syntax (0002,0010)",
+        )
+    })?;
+    Ok((ts, pos))
+}
+
+fn read_slice(file: &Path) -> Result<Slice, VolumeError> {
+    parse_slice(
+        &std::fs::read(file).map_err(|e| VolumeError::io(file, e))?,
+        file,
+    )
+}
+
+pub(crate) fn parse_slice(bytes: &[u8], file: &Path) -> Result<Slice, VolumeError> {
+    let (ts_uid, start) = read_meta(bytes, file)?;
+    let ts = TransferSyntaxRegistry.get(&ts_uid).ok_or_else(|| {
+        VolumeError::invalid(
+            file,
+            format!(
+                "DICOM transfer syntax {ts_uid} is not supported{}",
+                if matches!(
+                    ts_uid.as_str(),
+                    "1.2.840.10008.1.2.4.52"
+                        | "1.2.840.10008.1.2.4.53"
+                        | "1.2.840.10008.1.2.4.54"
+                        | "1.2.840.10008.1.2.4.55"
+                        | "1.2.840.10008.1.2.4.56"
+                        | "1.2.840.10008.1.2.4.58"
+                        | "1.2.840.10008.1.2.4.59"
+                        | "1.2.840.10008.1.2.4.60"
+                        | "1.2.840.10008.1.2.4.61"
+                        | "1.2.840.10008.1.2.4.62"
+                        | "1.2.840.10008.1.2.4.63"
+                        | "1.2.840.10008.1.2.4.64"
+                        | "1.2.840.10008.1.2.4.65"
+                        | "1.2.840.10008.1.2.4.66"
+                ) {
+                    " (a retired JPEG process; convert the series, e.g. with dcmdjpeg or gdcmconv)"
+                } else {
+                    ""
+                }
+            ),
+        )
+    })?;
+    check_lengths(&bytes[start..], &ts_uid).map_err(|p| VolumeError::invalid(file, p))?;
+    let obj = InMemDicomObject::read_dataset_with_ts(&bytes[start..], ts)
+        .map_err(|e| VolumeError::invalid(file, format!("cannot parse the DICOM data set: {e}")))?;
+    let text = |tag| {
+        obj.get(tag)
+            .and_then(|e| e.to_str().ok())
+            .map(|s| s.trim().to_string())
+    };
+    let floats = |tag| obj.get(tag).and_then(|e| e.to_multi_float64().ok());
+    let int = |tag| obj.get(tag).and_then(|e| e.to_int::<u32>().ok());
+    let missing = |what: &str| VolumeError::invalid(file, format!("DICOM image without {what}"));
+    if obj.get(tags::PIXEL_DATA).is_none() {
+        return Err(missing("pixel data (7FE0,0010)"));
+    }
+    let rows = int(tags::ROWS).ok_or_else(|| missing("Rows"))?;
+    let cols = int(tags::COLUMNS).ok_or_else(|| missing("Columns"))?;
+    let frames = int(tags::NUMBER_OF_FRAMES).unwrap_or(1);
+    let position = floats(tags::IMAGE_POSITION_PATIENT)
+        .and_then(|v| <[f64; 3]>::try_from(v).ok())
+        .ok_or_else(|| missing("a valid ImagePositionPatient (0020,0032)"))?;
+    let orientation = floats(tags::IMAGE_ORIENTATION_PATIENT)
+        .and_then(|v| <[f64; 6]>::try_from(v).ok())
+        .ok_or_else(|| missing("a valid ImageOrientationPatient (0020,0037)"))?;
+    let pixel_spacing = floats(tags::PIXEL_SPACING)
+        .and_then(|v| <[f64; 2]>::try_from(v).ok())
+        .ok_or_else(|| missing("a valid PixelSpacing (0028,0030)"))?;
+    Ok(Slice {
+        file: file.to_path_buf(),
+        series_uid: text(tags::SERIES_INSTANCE_UID).unwrap_or_default(),
+        description: text(tags::SERIES_DESCRIPTION).unwrap_or_default(),
+        modality: text(tags::MODALITY).unwrap_or_default(),
+        ts_uid,
+        rows,
+        cols,
+        frames,
+        position,
+        orientation,
+        pixel_spacing,
+        between_slices: floats(tags::SPACING_BETWEEN_SLICES).and_then(|v| v.first().copied()),
+        thickness: floats(tags::SLICE_THICKNESS).and_then(|v| v.first().copied()),
+        obj: Some(obj),
+    })
+}
+
+/// Walks the top-level data elements and refuses a defined length that runs past the end of
+/// the file, before dicom-rs would allocate a buffer of that claimed size (a bit flip in a
+/// length field otherwise costs gigabytes and seconds). Stops at the first undefined length
+/// (sequences, encapsulated pixel data) and for deflated data sets, which dicom-rs bounds itself.
+fn check_lengths(data: &[u8], ts_uid: &str) -> Result<(), String> {
+    if ts_uid == "1.2.840.10008.1.2.1.99" {
+        return Ok(());
+    }
+    let implicit = ts_uid == "1.2.840.10008.1.2";
+    let big = ts_uid == "1.2.840.10008.1.2.2";
+    let u16_at = |o: usize| {
+        let b = [data[o], data[o + 1]];
+        if big {
+            u16::from_be_bytes(b)
+        } else {
+            u16::from_le_bytes(b)
+        }
+    };
+    let u32_at = |o: usize| {
+        let b = data[o..o + 4].try_into().unwrap();
+        if big {
+            u32::from_be_bytes(b)
+        } else {
+            u32::from_le_bytes(b)
+        }
+    };
+    let mut pos = 0;
+    while pos + 8 <= data.len() {
+        let (group, elem) = (u16_at(pos), u16_at(pos + 2));
+        let (len, head) = if implicit {
+            (u32_at(pos + 4), 8)
+        } else {
+            let vr = &data[pos + 4..pos + 6];
+            const SHORT: [&[u8; 2]; 21] = [
+                b"AE", b"AS", b"AT", b"CS", b"DA", b"DS", b"DT", b"FL", b"FD", b"IS", b"LO", b"LT",
+                b"PN", b"SH", b"SL", b"SS", b"ST", b"TM", b"UI", b"UL", b"US",
+            ];
+            let long = matches!(
+                vr,
+                b"OB"
+                    | b"OW"
+                    | b"OF"
+                    | b"OD"
+                    | b"OL"
+                    | b"OV"
+                    | b"SQ"
+                    | b"UT"
+                    | b"UN"
+                    | b"UC"
+                    | b"UR"
+                    | b"SV"
+                    | b"UV"
+            );
+            if !long && !SHORT.iter().any(|v| &v[..] == vr) {
+                return Err(format!(
+                    "data element ({group:04X},{elem:04X}) has an invalid VR {:?} (corrupt file)",
+                    String::from_utf8_lossy(vr)
+                ));
+            }
+            if long {
+                if pos + 12 > data.len() {
+                    break;
+                }
+                (u32_at(pos + 8), 12)
+            } else {
+                (u16_at(pos + 6) as u32, 8)
+            }
+        };
+        if len == u32::MAX {
+            return Ok(());
+        }
+        let end = pos + head + len as usize;
+        if end > data.len() {
+            return Err(format!(
+                "data element ({group:04X},{elem:04X}) claims {len} bytes but only {} remain (truncated or corrupt file)",
+                data.len() - pos - head
+            ));
+        }
+        pos = end;
+    }
+    Ok(())
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn assemble(
+    path: &Path,
+    slices: &mut [Slice],
+    all: Vec<(String, usize, String)>,
+    warnings: Vec<String>,
+) -> Result<Volume, VolumeError> {
+    if let Some(s) = slices.iter().find(|s| s.frames != 1) {
+        return Err(VolumeError::invalid(
+            &s.file,
+            format!("multi-frame DICOM ({} frames) is not supported", s.frames),
+        ));
+    }
+    let first = &slices[0];
+    for s in slices.iter() {
+        let same_grid = s.rows == first.rows
+            && s.cols == first.cols
+            && (0..6).all(|i| (s.orientation[i] - first.orientation[i]).abs() < 1e-4)
+            && (0..2).all(|i| (s.pixel_spacing[i] - first.pixel_spacing[i]).abs() < 1e-4);
+        if !same_grid {
+            return Err(VolumeError::invalid(
+                &s.file,
+                format!(
+                    "slice geometry differs within the series (rows/columns/orientation/pixel spacing vs {})",
+                    first.file.display()
+                ),
+            ));
+        }
+    }
+    let (o, first_file, pixel_spacing, rows, cols) = (
+        first.orientation,
+        first.file.clone(),
+        first.pixel_spacing,
+        first.rows,
+        first.cols,
+    );
+    let row_dir = [o[0], o[1], o[2]];
+    let col_dir = [o[3], o[4], o[5]];
+    let normal = cross(row_dir, col_dir);
+    let nlen = dot(normal, normal).sqrt();
+    if !(0.99..=1.01).contains(&nlen) || dot(row_dir, col_dir).abs() > 1e-3 {
+        return Err(VolumeError::invalid(
+            &first_file,
+            format!("ImageOrientationPatient {o:?} is not two orthogonal unit vectors"),
+        ));
+    }
+    let normal = normal.map(|v| v / nlen);
+    slices.sort_by(|a, b| dot(a.position, normal).total_cmp(&dot(b.position, normal)));
+
+    let dims = [cols as usize, rows as usize, slices.len()];
+    voxel_count(path, dims)?;
+    let mut spacing_k = slices[0]
+        .between_slices
+        .or(slices[0].thickness)
+        .filter(|s| *s > 0.0)
+        .unwrap_or(1.0);
+    if slices.len() > 1 {
+        let gaps: Vec<f64> = slices
+            .windows(2)
+            .map(|w| dot(sub(w[1].position, w[0].position), normal))
+            .collect();
+        if let Some(i) = gaps.iter().position(|g| *g < 1e-3) {
+            return Err(VolumeError::invalid(
+                path,
+                format!(
+                    "two slices at the same position ({} and {}): duplicate or mixed acquisitions; pick one series",
+                    slices[i].file.display(),
+                    slices[i + 1].file.display()
+                ),
+            ));
+        }
+        // Gantry tilt: consecutive positions move in-plane as well as along the normal.
+        let tilt = slices
+            .windows(2)
+            .map(|w| {
+                let d = sub(w[1].position, w[0].position);
+                let along = dot(d, normal);
+                let inplane = (dot(d, d) - along * along).max(0.0).sqrt();
+                inplane.atan2(along).to_degrees()
+            })
+            .fold(0.0f64, f64::max);
+        if tilt > 0.05 {
+            return Err(VolumeError::invalid(
+                path,
+                format!(
+                    "gantry tilt of {tilt:.1}° (slice positions are not stacked along the slice normal); \
+                     raystream does not resample tilted series — resample it first (e.g. dcm2niix, or SimpleITK's ResampleImageFilter)"
+                ),
+            ));
+        }
+        let (lo, hi) = gaps.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &g| {
+            (lo.min(g), hi.max(g))
+        });
+        if hi - lo > 1e-3 + 1e-3 * hi {
+            return Err(VolumeError::invalid(
+                path,
+                format!(
+                    "uneven slice spacing ({lo:.3} to {hi:.3} mm; missing slices?); raystream does not resample such series"
+                ),
+            ));
+        }
+        spacing_k = dot(
+            sub(slices[slices.len() - 1].position, slices[0].position),
+            normal,
+        ) / (slices.len() - 1) as f64;
+    }
+    let spacing = [pixel_spacing[1], pixel_spacing[0], spacing_k];
+    let direction = std::array::from_fn(|r| [row_dir[r], col_dir[r], normal[r]]);
+    let origin = slices[0].position;
+    check_geometry(path, dims, spacing, origin, &direction)?;
+
+    let per_slice = dims[0] * dims[1];
+    let decoded: Vec<Result<Vec<f32>, VolumeError>> = slices
+        .par_iter_mut()
+        .map(|s| decode_slice(s, per_slice))
+        .collect();
+    let mut data = Vec::with_capacity(per_slice * slices.len());
+    for d in decoded {
+        data.extend_from_slice(&d?);
+    }
+    let ts_name = TransferSyntaxRegistry
+        .get(&first_ts(slices))
+        .map(|t| t.name().to_string())
+        .unwrap_or_default();
+    let first = &slices[0];
+    let unit = if first.modality == "CT" {
+        ValueUnit::Hounsfield
+    } else {
+        ValueUnit::Unknown
+    };
+    Ok(Volume {
+        dims,
+        spacing,
+        origin,
+        direction,
+        data,
+        unit,
+        format: VolumeFormat::Dicom,
+        series: Some(DicomSeriesInfo {
+            uid: first.series_uid.clone(),
+            description: first.description.clone(),
+            modality: first.modality.clone(),
+            count: slices.len(),
+            transfer_syntax: first.ts_uid.clone(),
+            transfer_syntax_name: ts_name,
+            all,
+        }),
+        warnings,
+    })
+}
+
+fn first_ts(slices: &[Slice]) -> String {
+    slices[0].ts_uid.clone()
+}
+
+/// Decodes one slice to modality values (RescaleSlope/Intercept applied: HU for CT).
+pub(crate) fn decode_slice(s: &mut Slice, per_slice: usize) -> Result<Vec<f32>, VolumeError> {
+    let ts = TransferSyntaxRegistry.get(&s.ts_uid).ok_or_else(|| {
+        VolumeError::invalid(&s.file, format!("unknown transfer syntax {}", s.ts_uid))
+    })?;
+    if !ts.can_decode_all() {
+        return Err(VolumeError::invalid(
+            &s.file,
+            format!(
+                "pixel data in transfer syntax {} ({}) cannot be decoded by this build{}",
+                s.ts_uid,
+                ts.name(),
+                if s.ts_uid.starts_with("1.2.840.10008.1.2.4.8") {
+                    " (JPEG-LS needs the CharLS C++ library)"
+                } else {
+                    ""
+                }
+            ),
+        ));
+    }
+    let obj = s
+        .obj
+        .take()
+        .expect("each slice is decoded once")
+        .with_meta(FileMetaTableBuilder::new().transfer_syntax(s.ts_uid.as_str()))
+        .map_err(|e| {
+            VolumeError::invalid(&s.file, format!("cannot build the file meta table: {e}"))
+        })?;
+    let pixels = obj.decode_pixel_data().map_err(|e| {
+        VolumeError::invalid(
+            &s.file,
+            format!(
+                "cannot decode the pixel data ({}{}): {e}",
+                ts.name(),
+                if s.ts_uid == "1.2.840.10008.1.2.4.51" {
+                    "; 12-bit lossy JPEG is not supported by the pure-Rust decoder"
+                } else {
+                    ""
+                }
+            ),
+        )
+    })?;
+    let values: Vec<f32> = pixels.to_vec().map_err(|e| {
+        VolumeError::invalid(&s.file, format!("cannot convert the pixel data: {e}"))
+    })?;
+    if values.len() != per_slice {
+        return Err(VolumeError::invalid(
+            &s.file,
+            format!(
+                "{} pixel values decoded, {per_slice} expected",
+                values.len()
+            ),
+        ));
+    }
+    Ok(values)
+}

@@ -1,0 +1,312 @@
+//! CT volumes: the [`Volume`] model (voxel values, spacing in mm, origin and orientation in the
+//! DICOM patient system LPS) and its readers — DICOM series, NIfTI-1/2, NRRD and MetaImage.
+//!
+//! World coordinates are **LPS millimetres**, as ITK/SimpleITK report them: `x` grows to the
+//! patient's left, `y` to posterior, `z` to superior (head). A voxel index `(i, j, k)` (x fastest
+//! in memory) maps to `p_world = origin + direction · (spacing ⊙ (i, j, k))`; `origin` is the centre
+//! of voxel (0, 0, 0) and the columns of `direction` are the unit directions of the i, j, k axes.
+//!
+//! Every reader checks a header's claims (dimensions, spacing, direction) before allocating, caps
+//! the voxel count at [`MAX_VOXELS`], reads at most the bytes the header implies, and names the
+//! file in every error ([`VolumeError`]).
+
+mod dicom;
+mod mha;
+mod nifti;
+mod nrrd;
+mod raw;
+
+use std::path::{Path, PathBuf};
+
+use raystream_math::DVec3;
+
+pub use dicom::{DicomSeriesInfo, list_dicom_series};
+
+/// The largest volume raystream loads: 2³⁰ voxels (4 GiB of `f32`), e.g. 1024³ or 2048×2048×256.
+pub const MAX_VOXELS: u64 = 1 << 30;
+
+/// What the voxel values mean.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ValueUnit {
+    /// CT attenuation in Hounsfield units (DICOM CT after RescaleSlope/Intercept, CT NIfTI).
+    Hounsfield,
+    /// Values whose unit the file does not state (e.g. 8-bit scientific-visualisation scans).
+    Unknown,
+}
+
+/// The file format a volume came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VolumeFormat {
+    Dicom,
+    Nifti,
+    Nrrd,
+    MetaImage,
+}
+
+impl VolumeFormat {
+    /// The format named by a path: a directory is a DICOM series; files go by extension
+    /// (`.nii`, `.nii.gz`, `.nrrd`, `.nhdr`, `.mha`, `.mhd`, `.dcm`).
+    pub fn from_path(path: &Path) -> Option<Self> {
+        if path.is_dir() {
+            return Some(Self::Dicom);
+        }
+        let name = path.file_name()?.to_str()?.to_ascii_lowercase();
+        if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+            Some(Self::Nifti)
+        } else if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
+            Some(Self::Nrrd)
+        } else if name.ends_with(".mha") || name.ends_with(".mhd") {
+            Some(Self::MetaImage)
+        } else if name.ends_with(".dcm") {
+            Some(Self::Dicom)
+        } else {
+            None
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Dicom => "dicom",
+            Self::Nifti => "nifti",
+            Self::Nrrd => "nrrd",
+            Self::MetaImage => "metaimage",
+        }
+    }
+}
+
+/// Whether `path` names something [`load_volume`] reads (a directory, or a volume extension).
+pub fn is_volume_path(path: &Path) -> bool {
+    VolumeFormat::from_path(path).is_some()
+}
+
+/// What went wrong reading a volume, always with the file (or folder) it came from.
+#[derive(Debug, thiserror::Error)]
+pub enum VolumeError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {problem}")]
+    Invalid { path: PathBuf, problem: String },
+}
+
+impl VolumeError {
+    pub fn invalid(path: &Path, problem: impl Into<String>) -> Self {
+        VolumeError::Invalid {
+            path: path.to_path_buf(),
+            problem: problem.into(),
+        }
+    }
+    pub fn io(path: &Path, source: std::io::Error) -> Self {
+        VolumeError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}
+
+/// A scalar volume on a regular grid in LPS millimetres.
+#[derive(Clone, Debug)]
+pub struct Volume {
+    /// Voxels along i, j, k.
+    pub dims: [usize; 3],
+    /// Voxel spacing along i, j, k in millimetres (all > 0).
+    pub spacing: [f64; 3],
+    /// Centre of voxel (0, 0, 0) in LPS millimetres.
+    pub origin: [f64; 3],
+    /// Row-major 3×3; column c is the unit LPS direction of index axis c (as SimpleITK's
+    /// `GetDirection`).
+    pub direction: [[f64; 3]; 3],
+    /// `dims[0]·dims[1]·dims[2]` values, i fastest, then j, then k.
+    pub data: Vec<f32>,
+    pub unit: ValueUnit,
+    pub format: VolumeFormat,
+    /// For DICOM: the series read, and the others found in the folder.
+    pub series: Option<DicomSeriesInfo>,
+    /// Things a user should know (e.g. "sform and qform disagree; used sform").
+    pub warnings: Vec<String>,
+}
+
+impl Volume {
+    pub fn voxel_count(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+
+    /// The value at voxel `(i, j, k)`; indices must be in range.
+    #[inline]
+    pub fn at(&self, i: usize, j: usize, k: usize) -> f32 {
+        self.data[i + self.dims[0] * (j + self.dims[1] * k)]
+    }
+
+    /// Index space (voxel centres at integers) → LPS millimetres.
+    pub fn index_to_world(&self, p_voxel: DVec3) -> DVec3 {
+        let s = p_voxel * DVec3::from(self.spacing);
+        let d = &self.direction;
+        DVec3::new(
+            self.origin[0] + d[0][0] * s.x + d[0][1] * s.y + d[0][2] * s.z,
+            self.origin[1] + d[1][0] * s.x + d[1][1] * s.y + d[1][2] * s.z,
+            self.origin[2] + d[2][0] * s.x + d[2][1] * s.y + d[2][2] * s.z,
+        )
+    }
+
+    /// LPS millimetres → index space; the inverse of [`Volume::index_to_world`] (the direction
+    /// matrix is inverted in general, so sheared grids work too).
+    pub fn world_to_index(&self, p_world: DVec3) -> DVec3 {
+        let m = raystream_math::DMat3::from_cols_array_2d(&self.direction).transpose();
+        let s = m.inverse() * (p_world - DVec3::from(self.origin));
+        s / DVec3::from(self.spacing)
+    }
+
+    /// The 4×4 index → LPS affine, column-major (glam), for callers that transform many points.
+    pub fn index_to_world_affine(&self) -> raystream_math::DAffine3 {
+        let m = raystream_math::DMat3::from_cols_array_2d(&self.direction).transpose()
+            * raystream_math::DMat3::from_diagonal(DVec3::from(self.spacing));
+        raystream_math::DAffine3::from_mat3_translation(m, DVec3::from(self.origin))
+    }
+
+    /// Smallest and largest value (NaN voxels ignored); `None` for an all-NaN volume.
+    pub fn value_range(&self) -> Option<(f32, f32)> {
+        use rayon::prelude::*;
+        self.data
+            .par_chunks(1 << 16)
+            .map(|c| {
+                c.iter()
+                    .filter(|v| !v.is_nan())
+                    .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                        (lo.min(v), hi.max(v))
+                    })
+            })
+            .reduce(
+                || (f32::INFINITY, f32::NEG_INFINITY),
+                |a, b| (a.0.min(b.0), a.1.max(b.1)),
+            )
+            .into_finite()
+    }
+
+    /// Checks the invariants every reader guarantees; readers call it last.
+    pub(crate) fn check(&self, path: &Path) -> Result<(), VolumeError> {
+        check_geometry(path, self.dims, self.spacing, self.origin, &self.direction)?;
+        if self.data.len() != self.voxel_count() {
+            return Err(VolumeError::invalid(
+                path,
+                format!(
+                    "{} voxel values for dimensions {:?}",
+                    self.data.len(),
+                    self.dims
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+trait IntoFinite {
+    fn into_finite(self) -> Option<(f32, f32)>;
+}
+impl IntoFinite for (f32, f32) {
+    fn into_finite(self) -> Option<(f32, f32)> {
+        (self.0 <= self.1).then_some(self)
+    }
+}
+
+/// Dimensions within [`MAX_VOXELS`], spacing finite and positive, origin finite, direction
+/// finite with unit, linearly independent columns. Called on header values before any
+/// allocation, and again on the finished volume.
+pub(crate) fn check_geometry(
+    path: &Path,
+    dims: [usize; 3],
+    spacing: [f64; 3],
+    origin: [f64; 3],
+    direction: &[[f64; 3]; 3],
+) -> Result<(), VolumeError> {
+    voxel_count(path, dims)?;
+    if spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
+        return Err(VolumeError::invalid(
+            path,
+            format!("voxel spacing {spacing:?} mm is not finite and positive"),
+        ));
+    }
+    if origin.iter().any(|o| !o.is_finite()) {
+        return Err(VolumeError::invalid(
+            path,
+            format!("origin {origin:?} is not finite"),
+        ));
+    }
+    let m = raystream_math::DMat3::from_cols_array_2d(direction).transpose();
+    let det = m.determinant();
+    if !det.is_finite() || det.abs() < 1e-6 {
+        return Err(VolumeError::invalid(
+            path,
+            format!("direction matrix {direction:?} is not finite or is singular"),
+        ));
+    }
+    Ok(())
+}
+
+/// `dims` product, refused if zero or over [`MAX_VOXELS`].
+pub(crate) fn voxel_count(path: &Path, dims: [usize; 3]) -> Result<usize, VolumeError> {
+    let n = dims
+        .iter()
+        .try_fold(1u64, |acc, &d| acc.checked_mul(d as u64));
+    match n {
+        Some(n) if n > 0 && n <= MAX_VOXELS => Ok(n as usize),
+        _ => Err(VolumeError::invalid(
+            path,
+            format!(
+                "dimensions {dims:?} are empty or exceed the {MAX_VOXELS}-voxel limit (a corrupt header?)"
+            ),
+        )),
+    }
+}
+
+/// Reads a volume: a folder is a DICOM series (the largest, or the one with UID `series`),
+/// files go by extension.
+pub fn load_volume(path: &Path, series: Option<&str>) -> Result<Volume, VolumeError> {
+    let format = VolumeFormat::from_path(path).ok_or_else(|| {
+        VolumeError::invalid(
+            path,
+            "unsupported volume format (expected a DICOM folder, .dcm, .nii, .nii.gz, .nrrd, .nhdr, .mha or .mhd)",
+        )
+    })?;
+    if !path.exists() {
+        return Err(VolumeError::io(
+            path,
+            std::io::Error::from(std::io::ErrorKind::NotFound),
+        ));
+    }
+    let volume = match format {
+        VolumeFormat::Dicom => dicom::load(path, series)?,
+        VolumeFormat::Nifti => nifti::load(path)?,
+        VolumeFormat::Nrrd => nrrd::load(path)?,
+        VolumeFormat::MetaImage => mha::load(path)?,
+    };
+    volume.check(path)?;
+    Ok(volume)
+}
+
+/// Direction-matrix helpers shared by the readers.
+pub(crate) fn unit_columns(m: [[f64; 3]; 3]) -> ([[f64; 3]; 3], [f64; 3]) {
+    let mut dir = m;
+    let mut len = [0.0; 3];
+    for c in 0..3 {
+        len[c] = (m[0][c] * m[0][c] + m[1][c] * m[1][c] + m[2][c] * m[2][c]).sqrt();
+        for row in dir.iter_mut() {
+            row[c] /= len[c];
+        }
+    }
+    (dir, len)
+}
+
+/// Whether the direction columns are orthonormal to `tol` (a sheared grid is not).
+pub(crate) fn is_orthonormal(d: &[[f64; 3]; 3], tol: f64) -> bool {
+    (0..3).all(|a| {
+        (0..3).all(|b| {
+            let dot: f64 = (0..3).map(|r| d[r][a] * d[r][b]).sum();
+            (dot - if a == b { 1.0 } else { 0.0 }).abs() < tol
+        })
+    })
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,299 @@
+//! NIfTI-1 and NIfTI-2 single-file volumes (`.nii`, `.nii.gz`).
+//!
+//! NIfTI-1 headers are parsed by the `nifti` crate. It does not know NIfTI-2 (540-byte header,
+//! 64-bit fields), so that header is decoded here from the fixed offsets of the standard; the
+//! voxel payload is read here for both, so that only the bytes actually present get allocated.
+//! Orientation: the sform if `sform_code > 0`, else the qform if `qform_code > 0`, else pixdim
+//! spacing on the identity (with a warning); NIfTI's RAS+ world is turned into LPS by negating x, y.
+
+use std::io::Read;
+use std::path::Path;
+
+use super::raw::{Scalar, decode, open_payload, read_exact_n, read_file, skip_n};
+use super::{
+    ValueUnit, Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal, unit_columns,
+    voxel_count,
+};
+
+/// The header fields raystream uses, widened to the NIfTI-2 types.
+struct Header {
+    dim: [i64; 8],
+    datatype: i16,
+    pixdim: [f64; 8],
+    vox_offset: f64,
+    scl_slope: f64,
+    scl_inter: f64,
+    qform_code: i32,
+    sform_code: i32,
+    quatern: [f64; 3],
+    qoffset: [f64; 3],
+    srow: [[f64; 4]; 3],
+    big_endian: bool,
+}
+
+pub(crate) fn load(path: &Path) -> Result<Volume, VolumeError> {
+    parse(&read_file(path)?, path)
+}
+
+/// Parses a `.nii` / `.nii.gz` file's bytes; `path` names it in errors.
+pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
+    let gzip = bytes.starts_with(&[0x1f, 0x8b]);
+    let mut r = open_payload(bytes, 0, gzip, path)?;
+    let first = read_exact_n(&mut r, 4, path, "the NIfTI header")?;
+    let size_le = i32::from_le_bytes(first[..4].try_into().unwrap());
+    let size_be = i32::from_be_bytes(first[..4].try_into().unwrap());
+    let (hdr_len, big_endian) = match (size_le, size_be) {
+        (348, _) => (348, false),
+        (_, 348) => (348, true),
+        (540, _) => (540, false),
+        (_, 540) => (540, true),
+        _ => {
+            return Err(VolumeError::invalid(
+                path,
+                format!("not a NIfTI file (header size field {size_le}, expected 348 or 540)"),
+            ));
+        }
+    };
+    let rest = read_exact_n(&mut r, hdr_len - 4, path, "the NIfTI header")?;
+    let mut raw = first;
+    raw.extend_from_slice(&rest);
+    let h = if hdr_len == 348 {
+        parse_nifti1(&raw, path)?
+    } else {
+        parse_nifti2(&raw, big_endian, path)?
+    };
+    build(path, h, &mut r, hdr_len)
+}
+
+fn parse_nifti1(raw: &[u8], path: &Path) -> Result<Header, VolumeError> {
+    let h = nifti::NiftiHeader::from_reader(raw)
+        .map_err(|e| VolumeError::invalid(path, format!("invalid NIfTI-1 header: {e}")))?;
+    if &h.magic[..3] != b"n+1" {
+        return Err(VolumeError::invalid(
+            path,
+            format!(
+                "NIfTI-1 magic is {:?}, expected \"n+1\" (a .hdr/.img pair is not supported)",
+                String::from_utf8_lossy(&h.magic[..3])
+            ),
+        ));
+    }
+    Ok(Header {
+        dim: h.dim.map(|d| d as i16 as i64),
+        datatype: h.datatype,
+        pixdim: h.pixdim.map(f64::from),
+        vox_offset: h.vox_offset as f64,
+        scl_slope: h.scl_slope as f64,
+        scl_inter: h.scl_inter as f64,
+        qform_code: h.qform_code as i32,
+        sform_code: h.sform_code as i32,
+        quatern: [h.quatern_b, h.quatern_c, h.quatern_d].map(f64::from),
+        qoffset: [h.quatern_x, h.quatern_y, h.quatern_z].map(f64::from),
+        srow: [h.srow_x, h.srow_y, h.srow_z].map(|r| r.map(f64::from)),
+        big_endian: h.endianness == nifti::Endianness::Big,
+    })
+}
+
+/// NIfTI-2: offsets from the standard's `nifti2.h` (540 bytes, no padding).
+fn parse_nifti2(raw: &[u8], big_endian: bool, path: &Path) -> Result<Header, VolumeError> {
+    if &raw[4..7] != b"n+2" {
+        return Err(VolumeError::invalid(
+            path,
+            "NIfTI-2 magic is not \"n+2\" (a .hdr/.img pair is not supported)",
+        ));
+    }
+    let f64_at = |o: usize| {
+        let b = raw[o..o + 8].try_into().unwrap();
+        if big_endian {
+            f64::from_be_bytes(b)
+        } else {
+            f64::from_le_bytes(b)
+        }
+    };
+    let i64_at = |o: usize| {
+        let b = raw[o..o + 8].try_into().unwrap();
+        if big_endian {
+            i64::from_be_bytes(b)
+        } else {
+            i64::from_le_bytes(b)
+        }
+    };
+    let i32_at = |o: usize| {
+        let b = raw[o..o + 4].try_into().unwrap();
+        if big_endian {
+            i32::from_be_bytes(b)
+        } else {
+            i32::from_le_bytes(b)
+        }
+    };
+    let i16_at = |o: usize| {
+        let b = raw[o..o + 2].try_into().unwrap();
+        if big_endian {
+            i16::from_be_bytes(b)
+        } else {
+            i16::from_le_bytes(b)
+        }
+    };
+    Ok(Header {
+        datatype: i16_at(12),
+        dim: std::array::from_fn(|i| i64_at(16 + 8 * i)),
+        pixdim: std::array::from_fn(|i| f64_at(104 + 8 * i)),
+        vox_offset: i64_at(168) as f64,
+        scl_slope: f64_at(176),
+        scl_inter: f64_at(184),
+        qform_code: i32_at(344),
+        sform_code: i32_at(348),
+        quatern: std::array::from_fn(|i| f64_at(352 + 8 * i)),
+        qoffset: std::array::from_fn(|i| f64_at(376 + 8 * i)),
+        srow: std::array::from_fn(|r| std::array::from_fn(|c| f64_at(400 + 32 * r + 8 * c))),
+        big_endian,
+    })
+}
+
+fn scalar_of(datatype: i16) -> Option<Scalar> {
+    Some(match datatype {
+        2 => Scalar::U8,
+        4 => Scalar::I16,
+        8 => Scalar::I32,
+        16 => Scalar::F32,
+        64 => Scalar::F64,
+        256 => Scalar::I8,
+        512 => Scalar::U16,
+        768 => Scalar::U32,
+        1024 => Scalar::I64,
+        1280 => Scalar::U64,
+        _ => return None,
+    })
+}
+
+fn build(path: &Path, h: Header, r: &mut dyn Read, hdr_len: usize) -> Result<Volume, VolumeError> {
+    let mut warnings = Vec::new();
+    let ndim = h.dim[0];
+    if !(1..=7).contains(&ndim) {
+        return Err(VolumeError::invalid(
+            path,
+            format!("dim[0] = {ndim}, expected 1..7"),
+        ));
+    }
+    let d = |i: usize| if (i as i64) <= ndim { h.dim[i] } else { 1 };
+    if (1..=3).any(|i| d(i) < 1) {
+        return Err(VolumeError::invalid(
+            path,
+            format!("dimensions {:?} are not positive", &h.dim[1..=3]),
+        ));
+    }
+    let dims = [d(1), d(2), d(3)].map(|v| v as usize);
+    if (4..=7).any(|i| d(i) > 1) {
+        warnings.push(format!(
+            "{}-D image ({:?}): using the first 3-D volume",
+            ndim,
+            &h.dim[1..=ndim as usize]
+        ));
+    }
+    let n = voxel_count(path, dims)?;
+    let scalar = scalar_of(h.datatype).ok_or_else(|| {
+        VolumeError::invalid(
+            path,
+            format!(
+                "NIfTI datatype {} is not a scalar raystream reads (RGB, complex, bit data are not CT)",
+                h.datatype
+            ),
+        )
+    })?;
+
+    // Orientation, in RAS, as a 3×3 (columns = axis vectors incl. spacing) and a translation.
+    let (axes_ras, offset_ras): ([[f64; 3]; 3], [f64; 3]) = if h.sform_code > 0 {
+        let m: [[f64; 3]; 3] = std::array::from_fn(|r| std::array::from_fn(|c| h.srow[r][c]));
+        (m, [h.srow[0][3], h.srow[1][3], h.srow[2][3]])
+    } else if h.qform_code > 0 {
+        let [b, c, dd] = h.quatern;
+        let a = (1.0 - (b * b + c * c + dd * dd)).max(0.0).sqrt();
+        let rot = [
+            [
+                a * a + b * b - c * c - dd * dd,
+                2.0 * (b * c - a * dd),
+                2.0 * (b * dd + a * c),
+            ],
+            [
+                2.0 * (b * c + a * dd),
+                a * a + c * c - b * b - dd * dd,
+                2.0 * (c * dd - a * b),
+            ],
+            [
+                2.0 * (b * dd - a * c),
+                2.0 * (c * dd + a * b),
+                a * a + dd * dd - c * c - b * b,
+            ],
+        ];
+        let qfac = if h.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
+        let sp = [
+            h.pixdim[1].abs(),
+            h.pixdim[2].abs(),
+            h.pixdim[3].abs() * qfac,
+        ];
+        let m = std::array::from_fn(|r| std::array::from_fn(|c| rot[r][c] * sp[c]));
+        (m, h.qoffset)
+    } else {
+        warnings.push("no sform or qform: orientation unknown, assuming RAS axes".into());
+        let sp = [h.pixdim[1].abs(), h.pixdim[2].abs(), h.pixdim[3].abs()];
+        let m = std::array::from_fn(|r| std::array::from_fn(|c| if r == c { sp[c] } else { 0.0 }));
+        (m, [0.0; 3])
+    };
+    // RAS → LPS: negate the first two rows.
+    let lps = |r: usize| if r < 2 { -1.0 } else { 1.0 };
+    let axes: [[f64; 3]; 3] =
+        std::array::from_fn(|r| std::array::from_fn(|c| axes_ras[r][c] * lps(r)));
+    let origin = std::array::from_fn(|r| offset_ras[r] * lps(r));
+    let (direction, spacing) = unit_columns(axes);
+    check_geometry(path, dims, spacing, origin, &direction)?;
+    if !is_orthonormal(&direction, 1e-4) {
+        warnings.push("the voxel axes are not orthogonal (sheared sform)".into());
+    }
+
+    let offset = h.vox_offset.max(hdr_len as f64);
+    if !offset.is_finite() || offset > u32::MAX as f64 {
+        return Err(VolumeError::invalid(
+            path,
+            format!("vox_offset {} is invalid", h.vox_offset),
+        ));
+    }
+    skip_n(r, offset as u64 - hdr_len as u64, path)?;
+    let bytes = read_exact_n(r, n * scalar.size(), path, "the NIfTI voxel data")?;
+    // scl_slope 0 or NaN means "no scaling" (NIfTI-1 standard).
+    let (slope, inter) = if h.scl_slope == 0.0 || !h.scl_slope.is_finite() {
+        (1.0, 0.0)
+    } else {
+        (
+            h.scl_slope,
+            if h.scl_inter.is_finite() {
+                h.scl_inter
+            } else {
+                0.0
+            },
+        )
+    };
+    let data = decode(&bytes, scalar, h.big_endian, slope, inter);
+    let unit = guess_unit(&data, scalar);
+    Ok(Volume {
+        dims,
+        spacing,
+        origin,
+        direction,
+        data,
+        unit,
+        format: VolumeFormat::Nifti,
+        series: None,
+        warnings,
+    })
+}
+
+/// NIfTI, NRRD and MetaImage do not state a unit. A signed volume that reaches air (≤ −900)
+/// is taken to be CT in Hounsfield units; anything else is reported as unknown.
+pub(crate) fn guess_unit(data: &[f32], scalar: Scalar) -> ValueUnit {
+    let signed = !matches!(scalar, Scalar::U8 | Scalar::U16 | Scalar::U32 | Scalar::U64);
+    let min = data.iter().copied().fold(f32::INFINITY, f32::min);
+    if signed && (-4096.0..=-900.0).contains(&min) {
+        ValueUnit::Hounsfield
+    } else {
+        ValueUnit::Unknown
+    }
+}

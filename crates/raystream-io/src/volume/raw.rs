@@ -1,0 +1,146 @@
+//! Raw voxel payloads shared by the NIfTI, NRRD and MetaImage readers: scalar types, byte order,
+//! gzip, and reading exactly the bytes a header implies — never more, and never allocating for
+//! bytes that are not there.
+
+use std::io::Read;
+use std::path::Path;
+
+use super::VolumeError;
+
+/// A voxel's stored type.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Scalar {
+    U8,
+    I8,
+    U16,
+    I16,
+    U32,
+    I32,
+    U64,
+    I64,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    pub fn size(self) -> usize {
+        match self {
+            Scalar::U8 | Scalar::I8 => 1,
+            Scalar::U16 | Scalar::I16 => 2,
+            Scalar::U32 | Scalar::I32 | Scalar::F32 => 4,
+            Scalar::U64 | Scalar::I64 | Scalar::F64 => 8,
+        }
+    }
+}
+
+/// Reads `n` bytes from `r` (a file or a gzip stream). Errors if fewer are there; allocates as
+/// the bytes arrive, so a header that lies about the size costs no memory.
+pub(crate) fn read_exact_n(
+    r: &mut dyn Read,
+    n: usize,
+    path: &Path,
+    what: &str,
+) -> Result<Vec<u8>, VolumeError> {
+    let mut out = Vec::with_capacity(n.min(64 << 20));
+    r.take(n as u64)
+        .read_to_end(&mut out)
+        .map_err(|e| VolumeError::invalid(path, format!("reading {what}: {e}")))?;
+    if out.len() < n {
+        return Err(VolumeError::invalid(
+            path,
+            format!(
+                "{what} is truncated: the header implies {n} bytes, the file holds {}",
+                out.len()
+            ),
+        ));
+    }
+    Ok(out)
+}
+
+/// Skips `n` bytes of `r`, erroring if the stream ends first.
+pub(crate) fn skip_n(r: &mut dyn Read, n: u64, path: &Path) -> Result<(), VolumeError> {
+    let skipped = std::io::copy(&mut r.take(n), &mut std::io::sink())
+        .map_err(|e| VolumeError::invalid(path, format!("skipping to the voxel data: {e}")))?;
+    if skipped < n {
+        return Err(VolumeError::invalid(
+            path,
+            format!("file ends before the voxel data (offset {n})"),
+        ));
+    }
+    Ok(())
+}
+
+/// Decodes `bytes` (exactly `count` values of `scalar`) to `value·slope + intercept` as f32.
+pub(crate) fn decode(
+    bytes: &[u8],
+    scalar: Scalar,
+    big_endian: bool,
+    slope: f64,
+    intercept: f64,
+) -> Vec<f32> {
+    use rayon::prelude::*;
+    let size = scalar.size();
+    let convert = |c: &[u8]| -> f64 {
+        macro_rules! get {
+            ($t:ty) => {{
+                let a = c.try_into().unwrap();
+                if big_endian {
+                    <$t>::from_be_bytes(a) as f64
+                } else {
+                    <$t>::from_le_bytes(a) as f64
+                }
+            }};
+        }
+        match scalar {
+            Scalar::U8 => c[0] as f64,
+            Scalar::I8 => c[0] as i8 as f64,
+            Scalar::U16 => get!(u16),
+            Scalar::I16 => get!(i16),
+            Scalar::U32 => get!(u32),
+            Scalar::I32 => get!(i32),
+            Scalar::U64 => get!(u64),
+            Scalar::I64 => get!(i64),
+            Scalar::F32 => get!(f32),
+            Scalar::F64 => get!(f64),
+        }
+    };
+    if slope == 1.0 && intercept == 0.0 {
+        bytes
+            .par_chunks_exact(size)
+            .map(|c| convert(c) as f32)
+            .collect()
+    } else {
+        bytes
+            .par_chunks_exact(size)
+            .map(|c| (convert(c) * slope + intercept) as f32)
+            .collect()
+    }
+}
+
+/// A reader over a file's bytes from `offset`, gunzipped when `gzip`.
+pub(crate) fn open_payload<'a>(
+    bytes: &'a [u8],
+    offset: usize,
+    gzip: bool,
+    path: &Path,
+) -> Result<Box<dyn Read + 'a>, VolumeError> {
+    let rest = bytes.get(offset..).ok_or_else(|| {
+        VolumeError::invalid(
+            path,
+            format!(
+                "voxel data offset {offset} is past the end of the file ({} bytes)",
+                bytes.len()
+            ),
+        )
+    })?;
+    Ok(if gzip {
+        Box::new(flate2::read::MultiGzDecoder::new(rest))
+    } else {
+        Box::new(rest)
+    })
+}
+
+/// Reads a whole file, naming it in the error.
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, VolumeError> {
+    std::fs::read(path).map_err(|e| VolumeError::io(path, e))
+}

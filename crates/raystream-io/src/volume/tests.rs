@@ -1,0 +1,487 @@
+//! Volume readers on the real CT data in ../shared/data/volumes (expected geometry from
+//! SimpleITK 2.5 reading the same files: `scripts/sitk-geometry.py`), on small synthetic files
+//! for the formats the data set lacks, and under truncation and bit flips.
+
+use std::path::{Path, PathBuf};
+
+use super::*;
+
+fn shared(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/volumes")
+        .join(rel)
+}
+
+struct Expected {
+    path: &'static str,
+    dims: [usize; 3],
+    spacing: [f64; 3],
+    origin: [f64; 3],
+    direction: [f64; 9],
+    range: (f32, f32),
+}
+
+const TS_DIR: &str = "dicom/ct_slice_transfer_syntaxes";
+const LE_EXPLICIT: &str =
+    "dicom/ct_slice_transfer_syntaxes/ct_1.2.840.10008.1.2.1_LittleEndianExplicit.dcm";
+
+/// SimpleITK 2.5.7 `ReadImage` / `ImageSeriesReader` on the same files.
+const EXPECTED: &[Expected] = &[
+    Expected {
+        path: "nifti/abdomen_pelvis_ct_totalseg.nii.gz",
+        dims: [122, 101, 112],
+        spacing: [3.0, 3.0, 3.0],
+        origin: [177.95632934570312, -11.319000244140625, 94.3017578125],
+        direction: [-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0],
+        range: (-1207.0, 3382.0),
+    },
+    Expected {
+        path: "nifti/chest_ct_stents_totalseg.nii.gz",
+        dims: [120, 126, 164],
+        spacing: [1.5, 1.5, 1.5],
+        origin: [-71.658203125, -255.658203125, 540.2000122070312],
+        direction: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        range: (-1078.0, 3343.0),
+    },
+    Expected {
+        path: "nifti/scivis_bonsai.nii.gz",
+        dims: [256, 256, 256],
+        spacing: [1.0, 1.0, 1.0],
+        origin: [127.0, 127.0, -128.0],
+        direction: [-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0],
+        range: (0.0, 255.0),
+    },
+    Expected {
+        path: "nifti/scivis_engine.nii.gz",
+        dims: [256, 256, 128],
+        spacing: [1.0, 1.0, 1.0],
+        origin: [127.0, 127.0, -64.0],
+        direction: [-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0],
+        range: (0.0, 255.0),
+    },
+    Expected {
+        path: "dicom/abdomen_ct_j2k_totalseg",
+        dims: [512, 512, 20],
+        spacing: [0.9765625, 0.9765625, 2.0],
+        origin: [-249.51171875, -437.51171875, -804.5],
+        direction: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        range: (-1024.0, 1839.0),
+    },
+    Expected {
+        path: LE_EXPLICIT,
+        dims: [512, 512, 1],
+        spacing: [0.675781, 0.675781, 6.5],
+        origin: [-161.399994, -148.800003, 4.7],
+        direction: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        range: (-3024.0, 1378.0),
+    },
+];
+
+fn assert_geometry(v: &Volume, e: &Expected) {
+    assert_eq!(v.dims, e.dims, "{}", e.path);
+    for a in 0..3 {
+        assert!(
+            (v.spacing[a] - e.spacing[a]).abs() < 1e-3,
+            "{} spacing {:?}",
+            e.path,
+            v.spacing
+        );
+        assert!(
+            (v.origin[a] - e.origin[a]).abs() < 1e-3,
+            "{} origin {:?}",
+            e.path,
+            v.origin
+        );
+    }
+    let d = v.direction.concat();
+    for i in 0..9 {
+        assert!(
+            (d[i] - e.direction[i]).abs() < 1e-6,
+            "{} direction {d:?}",
+            e.path
+        );
+    }
+}
+
+#[test]
+fn geometry_and_values_match_simpleitk() {
+    for e in EXPECTED {
+        let v = load_volume(&shared(e.path), None).unwrap_or_else(|err| panic!("{err}"));
+        assert_geometry(&v, e);
+        assert_eq!(v.value_range(), Some(e.range), "{}", e.path);
+    }
+}
+
+#[test]
+fn units_follow_the_data() {
+    let ct = load_volume(&shared(EXPECTED[0].path), None).unwrap();
+    assert_eq!(ct.unit, ValueUnit::Hounsfield);
+    let engine = load_volume(&shared("nifti/scivis_engine.nii.gz"), None).unwrap();
+    assert_eq!(engine.unit, ValueUnit::Unknown);
+    let series = load_volume(&shared("dicom/abdomen_ct_j2k_totalseg"), None).unwrap();
+    assert_eq!(series.unit, ValueUnit::Hounsfield);
+    let info = series.series.unwrap();
+    assert_eq!(info.count, 20);
+    assert_eq!(info.transfer_syntax, "1.2.840.10008.1.2.4.90");
+}
+
+#[test]
+fn index_and_world_transforms_invert_each_other() {
+    let v = load_volume(&shared("nifti/abdomen_pelvis_ct_totalseg.nii.gz"), None).unwrap();
+    let p = DVec3::new(10.0, 20.5, 30.25);
+    let w = v.index_to_world(p);
+    // RAS-stored file: i runs to the patient's right (−x in LPS), j to anterior (−y).
+    assert!(
+        (w - DVec3::new(
+            177.95632934570312 - 30.0,
+            -11.319000244140625 - 61.5,
+            94.3017578125 + 90.75
+        ))
+        .length()
+            < 1e-9
+    );
+    assert!((v.world_to_index(w) - p).length() < 1e-9);
+    assert!((v.index_to_world_affine().transform_point3(p) - w).length() < 1e-9);
+}
+
+#[test]
+fn every_decodable_transfer_syntax_gives_the_uncompressed_hu() {
+    let reference = load_volume(&shared(LE_EXPLICIT), None).unwrap();
+    let max_diff = |v: &Volume| {
+        v.data
+            .iter()
+            .zip(&reference.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max)
+    };
+    // Lossless: identical values.
+    for ts in [
+        "1.2", "1.2.1.99", "1.2.2", "1.2.5", "1.2.4.57", "1.2.4.70", "1.2.4.90",
+    ] {
+        let v = load_ts(ts).unwrap_or_else(|e| panic!("{ts}: {e}"));
+        assert_geometry(&v, &EXPECTED[5]);
+        assert_eq!(max_diff(&v), 0.0, "transfer syntax 1.2.840.10008.{ts}");
+    }
+    // Lossy JPEG 2000: within 5 HU (pydicom + pylibjpeg give the same bound).
+    let v = load_ts("1.2.4.91").unwrap();
+    assert!(max_diff(&v) <= 5.0, "{}", max_diff(&v));
+    // Lossy 8-bit baseline JPEG with its own rescale: close on average only.
+    let v = load_ts("1.2.4.50").unwrap();
+    let mean: f64 = v
+        .data
+        .iter()
+        .zip(&reference.data)
+        .map(|(a, b)| (a - b).abs() as f64)
+        .sum::<f64>()
+        / v.data.len() as f64;
+    assert!(mean < 20.0, "mean |ΔHU| {mean}");
+}
+
+#[test]
+fn undecodable_transfer_syntaxes_are_clear_errors() {
+    for (ts, says) in [
+        ("1.2.4.53", "retired JPEG"),
+        ("1.2.4.55", "retired JPEG"),
+        ("1.2.4.80", "JPEG-LS"),
+        ("1.2.4.81", "JPEG-LS"),
+        ("1.2.4.51", "12-bit lossy JPEG"),
+    ] {
+        let e = load_ts(ts).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!("1.2.840.10008.{ts}")) && e.contains(says),
+            "{e}"
+        );
+    }
+}
+
+fn load_ts(ts: &str) -> Result<Volume, VolumeError> {
+    let dir = shared(TS_DIR);
+    let prefix = format!("ct_1.2.840.10008.{ts}_");
+    let file = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| {
+            p.file_name()
+                .unwrap()
+                .to_str()
+                .unwrap()
+                .starts_with(&prefix)
+        })
+        .unwrap();
+    load_volume(&file, None)
+}
+
+#[test]
+fn gantry_tilt_is_refused_with_its_angle() {
+    let e = load_volume(&shared("dicom/head_ct_gantry_tilt_ge"), None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("head_ct_gantry_tilt_ge") && e.contains("gantry tilt of 18.5°"),
+        "{e}"
+    );
+}
+
+#[test]
+fn unknown_series_lists_the_ones_there() {
+    let e = load_volume(&shared("dicom/abdomen_ct_j2k_totalseg"), Some("1.2.3"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no series with UID 1.2.3") && e.contains("20 slices"),
+        "{e}"
+    );
+}
+
+/// A 4×3×2 int16 volume with values `i + 10 j + 100 k − 1000`.
+fn ramp_i16() -> Vec<u8> {
+    let mut out = Vec::new();
+    for k in 0..2i16 {
+        for j in 0..3i16 {
+            for i in 0..4i16 {
+                out.extend_from_slice(&(i + 10 * j + 100 * k - 1000).to_le_bytes());
+            }
+        }
+    }
+    out
+}
+
+fn check_ramp(v: &Volume) {
+    assert_eq!(v.dims, [4, 3, 2]);
+    assert_eq!(v.at(3, 2, 1), 3.0 + 20.0 + 100.0 - 1000.0);
+    assert_eq!(v.at(0, 0, 0), -1000.0);
+}
+
+#[test]
+fn nrrd_attached_raw_in_ras_is_turned_into_lps() {
+    let mut bytes = b"NRRD0004\n# a comment\ntype: short\ndimension: 3\nspace: right-anterior-superior\nsizes: 4 3 2\nspace directions: (0.5,0,0) (0,0.7,0) (0,0,2.5)\nkinds: domain domain domain\nendian: little\nencoding: raw\nspace origin: (10,20,30)\n\n".to_vec();
+    bytes.extend(ramp_i16());
+    let v = nrrd::parse(&bytes, Path::new("t.nrrd")).unwrap();
+    check_ramp(&v);
+    assert_eq!(v.spacing, [0.5, 0.7, 2.5]);
+    assert_eq!(v.origin, [-10.0, -20.0, 30.0]);
+    assert_eq!(
+        v.direction,
+        [[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]]
+    );
+}
+
+#[test]
+fn nrrd_gzip_and_detached_data() {
+    use std::io::Write;
+    let dir = std::env::temp_dir().join(format!("raystream-nrrd-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    gz.write_all(&ramp_i16()).unwrap();
+    std::fs::write(dir.join("ramp.raw.gz"), gz.finish().unwrap()).unwrap();
+    let header = "NRRD0005\ntype: int16\ndimension: 3\nspace: LPS\nsizes: 4 3 2\nspace directions: (0,1,0) (1,0,0) (0,0,1)\nencoding: gzip\ndata file: ramp.raw.gz\n\n";
+    std::fs::write(dir.join("ramp.nhdr"), header).unwrap();
+    let v = load_volume(&dir.join("ramp.nhdr"), None).unwrap();
+    check_ramp(&v);
+    assert_eq!(
+        v.direction,
+        [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn metaimage_local_and_compressed() {
+    use std::io::Write;
+    let header = |compressed: bool| {
+        format!(
+            "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\nCompressedData = {}\nTransformMatrix = 0 1 0 -1 0 0 0 0 1\nOffset = 1 2 3\nElementSpacing = 0.5 0.25 2\nDimSize = 4 3 2\nElementType = MET_SHORT\nElementDataFile = LOCAL\n",
+            if compressed { "True" } else { "False" }
+        )
+    };
+    let mut raw = header(false).into_bytes();
+    raw.extend(ramp_i16());
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+    z.write_all(&ramp_i16()).unwrap();
+    let mut packed = header(true).into_bytes();
+    packed.extend(z.finish().unwrap());
+    for bytes in [raw, packed] {
+        let v = mha::parse(&bytes, Path::new("t.mha")).unwrap();
+        check_ramp(&v);
+        assert_eq!(v.spacing, [0.5, 0.25, 2.0]);
+        assert_eq!(v.origin, [1.0, 2.0, 3.0]);
+        // Axis i is the first triple (0, 1, 0), axis j the second (−1, 0, 0).
+        assert_eq!(
+            v.direction,
+            [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+        );
+    }
+}
+
+/// A NIfTI-2 file, little- or big-endian, with an sform (RAS) and a 90° qform that must lose.
+fn nifti2(big: bool) -> Vec<u8> {
+    let mut h = vec![0u8; 544];
+    let put = |h: &mut Vec<u8>, o: usize, b: &[u8]| h[o..o + b.len()].copy_from_slice(b);
+    macro_rules! num {
+        ($v:expr) => {
+            if big {
+                $v.to_be_bytes().to_vec()
+            } else {
+                $v.to_le_bytes().to_vec()
+            }
+        };
+    }
+    put(&mut h, 0, &num!(540i32));
+    put(&mut h, 4, b"n+2\0\r\n\x1a\n");
+    put(&mut h, 12, &num!(4i16)); // int16
+    put(&mut h, 14, &num!(16i16));
+    for (i, d) in [3i64, 4, 3, 2, 1, 1, 1, 1].iter().enumerate() {
+        put(&mut h, 16 + 8 * i, &num!(*d));
+    }
+    for (i, d) in [1.0f64, 0.5, 0.7, 2.5, 0.0, 0.0, 0.0, 0.0]
+        .iter()
+        .enumerate()
+    {
+        put(&mut h, 104 + 8 * i, &num!(*d));
+    }
+    put(&mut h, 168, &num!(544i64));
+    put(&mut h, 176, &num!(f64::NAN)); // scl_slope NaN: no scaling
+    put(&mut h, 344, &num!(1i32)); // qform_code
+    put(&mut h, 348, &num!(1i32)); // sform_code
+    put(&mut h, 352 + 16, &num!(1.0f64)); // quatern_d = 1: 180° about z
+    let srow = [
+        [0.5f64, 0.0, 0.0, 10.0],
+        [0.0, 0.7, 0.0, 20.0],
+        [0.0, 0.0, 2.5, 30.0],
+    ];
+    for (r, row) in srow.iter().enumerate() {
+        for (c, x) in row.iter().enumerate() {
+            put(&mut h, 400 + 32 * r + 8 * c, &num!(*x));
+        }
+    }
+    for chunk in ramp_i16().chunks(2) {
+        let v = i16::from_le_bytes([chunk[0], chunk[1]]);
+        h.extend(num!(v));
+    }
+    h
+}
+
+#[test]
+fn nifti2_both_byte_orders_sform_wins() {
+    for big in [false, true] {
+        let v = nifti::parse(&nifti2(big), Path::new("t.nii")).unwrap();
+        check_ramp(&v);
+        assert_eq!(v.spacing, [0.5, 0.7, 2.5]);
+        assert_eq!(v.origin, [-10.0, -20.0, 30.0]);
+        assert_eq!(
+            v.direction,
+            [[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]]
+        );
+    }
+}
+
+#[test]
+fn absurd_headers_are_refused_before_allocating() {
+    let mut bytes = b"NRRD0004\ntype: short\ndimension: 3\nspace: LPS\nsizes: 512 512 1000000\nspace directions: (1,0,0) (0,1,0) (0,0,1)\nencoding: raw\n\n".to_vec();
+    bytes.extend(ramp_i16());
+    let e = nrrd::parse(&bytes, Path::new("huge.nrrd"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("huge.nrrd") && e.contains("limit"), "{e}");
+    for (dirs, says) in [
+        ("(0,0,0) (0,1,0) (0,0,1)", "spacing"),
+        ("(nan,0,0) (0,1,0) (0,0,1)", "spacing"),
+        ("(1,0,0) (1,0,0) (0,0,1)", "singular"),
+    ] {
+        let text = format!(
+            "NRRD0004\ntype: short\ndimension: 3\nspace: LPS\nsizes: 4 3 2\nspace directions: {dirs}\nencoding: raw\n\n"
+        );
+        let mut bytes = text.into_bytes();
+        bytes.extend(ramp_i16());
+        let e = nrrd::parse(&bytes, Path::new("bad.nrrd"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(says), "{dirs}: {e}");
+    }
+    // A NIfTI claiming 10⁶ slices in a 500-byte file: refused by the size limit or as truncated.
+    let mut n2 = nifti2(false);
+    n2[16 + 24..16 + 32].copy_from_slice(&1_000_000i64.to_le_bytes());
+    let e = nifti::parse(&n2, Path::new("t.nii"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("truncated") || e.contains("limit"), "{e}");
+}
+
+/// The real explicit-VR slice cut down to its first 8×8 pixels (Rows, Columns and the pixel data
+/// length rewritten in place), so that thousands of corrupted copies parse quickly.
+fn tiny_dicom(full: &[u8]) -> Vec<u8> {
+    let find = |pat: &[u8]| full.windows(pat.len()).position(|w| w == pat).unwrap();
+    let mut b = full.to_vec();
+    for tag in [[0x28u8, 0, 0x10, 0], [0x28, 0, 0x11, 0]] {
+        let at = find(&[&tag[..], b"US\x02\x00"].concat()) + 8;
+        b[at..at + 2].copy_from_slice(&8u16.to_le_bytes());
+    }
+    let at = find(&[0xe0, 0x7f, 0x10, 0x00, b'O', b'W', 0, 0]) + 8;
+    b[at..at + 4].copy_from_slice(&128u32.to_le_bytes());
+    b.truncate(at + 4 + 128);
+    b
+}
+
+/// Truncations and bit flips of every format's header give errors (or a valid volume), never a
+/// panic.
+#[test]
+fn truncated_and_bit_flipped_headers_never_panic() {
+    let mut nrrd_bytes = b"NRRD0004\ntype: short\ndimension: 3\nspace: LPS\nsizes: 4 3 2\nspace directions: (1,0,0) (0,1,0) (0,0,1)\nencoding: raw\nspace origin: (1,2,3)\n\n".to_vec();
+    nrrd_bytes.extend(ramp_i16());
+    let mut mha_bytes = b"ObjectType = Image\nNDims = 3\nBinaryData = True\nCompressedData = False\nTransformMatrix = 1 0 0 0 1 0 0 0 1\nOffset = 1 2 3\nElementSpacing = 1 1 1\nDimSize = 4 3 2\nElementType = MET_SHORT\nElementDataFile = LOCAL\n".to_vec();
+    mha_bytes.extend(ramp_i16());
+    let dicom_bytes = std::fs::read(shared(LE_EXPLICIT)).unwrap();
+    let nifti_gz = std::fs::read(shared("nifti/abdomen_pelvis_ct_totalseg.nii.gz")).unwrap();
+    type Parse = fn(&[u8], &Path) -> Result<(), VolumeError>;
+    let cases: [(&str, Vec<u8>, usize, Parse); 5] = [
+        ("t.nii", nifti2(false), 544, |b, p| {
+            nifti::parse(b, p).map(drop)
+        }),
+        ("t.nii", nifti2(true), 544, |b, p| {
+            nifti::parse(b, p).map(drop)
+        }),
+        ("t.nrrd", nrrd_bytes, 160, |b, p| {
+            nrrd::parse(b, p).map(drop)
+        }),
+        ("t.mha", mha_bytes, 220, |b, p| mha::parse(b, p).map(drop)),
+        ("t.dcm", tiny_dicom(&dicom_bytes), 1400, |b, p| {
+            let mut s = dicom::parse_slice(b, p)?;
+            let n = (s.rows * s.cols) as usize;
+            dicom::decode_slice(&mut s, n).map(drop)
+        }),
+    ];
+    for (name, bytes, header, parse) in cases {
+        let path = Path::new(name);
+        assert!(parse(&bytes, path).is_ok(), "{name} must parse intact");
+        for cut in (0..bytes.len()).step_by((bytes.len() / 97).max(1)) {
+            let r = parse(&bytes[..cut], path);
+            if let Err(e) = r {
+                assert!(e.to_string().starts_with(name), "{e}");
+            }
+        }
+        for at in 0..header.min(bytes.len()) {
+            for bit in [0x01u8, 0x10, 0x80] {
+                let mut b = bytes.clone();
+                b[at] ^= bit;
+                let _ = parse(&b, path);
+            }
+        }
+    }
+    // Cut pixel data of the full slice.
+    for cut in [
+        dicom_bytes.len() - 1,
+        dicom_bytes.len() - 1000,
+        dicom_bytes.len() / 2,
+    ] {
+        let e = dicom::parse_slice(&dicom_bytes[..cut], Path::new("cut.dcm")).and_then(|mut s| {
+            let n = (s.rows * s.cols) as usize;
+            dicom::decode_slice(&mut s, n)
+        });
+        assert!(e.unwrap_err().to_string().starts_with("cut.dcm"));
+    }
+    // A truncated gzip stream of the real CT.
+    for cut in [10, 100, 1000, nifti_gz.len() / 2, nifti_gz.len() - 2000] {
+        let e = nifti::parse(&nifti_gz[..cut], Path::new("cut.nii.gz")).unwrap_err();
+        assert!(e.to_string().starts_with("cut.nii.gz"), "{e}");
+    }
+}
