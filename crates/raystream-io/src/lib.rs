@@ -10,6 +10,8 @@ mod ply;
 mod shapes;
 mod stl;
 pub mod volume;
+mod write;
+pub use write::write_mesh;
 
 use std::io::{BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};

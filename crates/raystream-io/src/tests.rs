@@ -212,3 +212,25 @@ fn garbage_is_an_error_not_a_panic() {
         }
     }
 }
+
+#[test]
+fn written_meshes_read_back_identically() {
+    let mesh = TriMesh::icosphere(2);
+    let normals = mesh.vertex_normals();
+    let dir = std::env::temp_dir().join(format!("raystream-write-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for name in ["m.ply", "m.obj", "m.stl"] {
+        let path = dir.join(name);
+        write_mesh(&path, &mesh, Some(&normals)).unwrap();
+        let back = load_mesh(&path).unwrap();
+        assert_eq!(back.len(), mesh.len(), "{name}");
+        for i in 0..mesh.len() {
+            assert_eq!(back.corners(i), mesh.corners(i), "{name} triangle {i}");
+        }
+    }
+    let e = write_mesh(&dir.join("m.vtk"), &mesh, None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("m.vtk"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

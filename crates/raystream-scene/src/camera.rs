@@ -36,9 +36,14 @@ impl Camera {
     /// A camera looking at the points' bounding-box centre from `FRAME_VIEW_DIR`, backed off
     /// until every point projects inside the frame with a 5 % margin.
     pub fn frame(points: &[Vec3], aspect: f32) -> Camera {
+        Self::frame_from(points, aspect, FRAME_VIEW_DIR)
+    }
+
+    /// As [`Camera::frame`], looking from direction `view_dir` (towards the eye, y up).
+    pub fn frame_from(points: &[Vec3], aspect: f32, view_dir: Vec3) -> Camera {
         let b = Aabb::from_points(points);
         let center = b.center();
-        let back = FRAME_VIEW_DIR.normalize();
+        let back = view_dir.normalize();
         let mut cam = Camera::look_at(center + back, center, Vec3::Y, FRAME_FOV_DEG);
         let tan_x = cam.tan_y * aspect;
         let step = (points.len() / FRAME_SAMPLES).max(1);

@@ -104,6 +104,8 @@ pub struct Scene {
     pub ambient_light: Vec3,
     /// Bounds of the objects, without the ground plane.
     pub object_box: Aabb,
+    /// Where a framing camera looks from (towards the eye), when `camera` is `None`.
+    pub frame_dir: Vec3,
 }
 
 /// The embedded Spot mesh (CC0, see `assets/README.md`).
@@ -247,6 +249,7 @@ impl Scene {
                 .unwrap_or(Vec3::new(0.05, 0.06, 0.08)),
             ambient_light: desc.ambient.map(Vec3::from).unwrap_or(Vec3::splat(0.6)),
             object_box,
+            frame_dir: camera::FRAME_VIEW_DIR,
         })
     }
 
@@ -297,6 +300,71 @@ impl Scene {
             .expect("a checked mesh makes a valid scene")
     }
 
+    /// A bone isosurface from CT: `mesh` and its `normals` in LPS millimetres are turned so that
+    /// the patient stands upright facing the camera (scene x = patient's left, y = superior,
+    /// z = anterior: the anterior view, patient's right on the image's left), in an ivory bone
+    /// material on a dark, slightly reflective floor, with a key light above-front and a fill.
+    pub fn for_bones(mut mesh: TriMesh, normals: &[Vec3], name: &Path) -> Scene {
+        let lps_to_scene = |p: Vec3| Vec3::new(p.x, p.z, -p.y);
+        for p in &mut mesh.positions {
+            *p = lps_to_scene(*p);
+        }
+        let b = mesh.bounds();
+        let (c, r) = (b.center(), b.radius());
+        let mut desc = SceneDesc::default();
+        desc.materials.insert(
+            "bone".into(),
+            MaterialDesc {
+                diffuse: Some([0.88, 0.84, 0.74]),
+                specular: Some([0.25, 0.25, 0.22]),
+                shininess: Some(24.0),
+                reflectivity: Some(0.04),
+                ..Default::default()
+            },
+        );
+        desc.materials.insert(
+            "floor".into(),
+            MaterialDesc {
+                diffuse: Some([0.22, 0.24, 0.28]),
+                reflectivity: Some(0.25),
+                specular: Some([0.1, 0.1, 0.1]),
+                ..Default::default()
+            },
+        );
+        desc.ground = Some(GroundDesc {
+            material: Some("floor".into()),
+            ..Default::default()
+        });
+        desc.lights = vec![
+            LightDesc {
+                position: (c + r * Vec3::new(1.2, 2.5, 3.0)).into(),
+                color: Some([0.85, 0.83, 0.8]),
+            },
+            LightDesc {
+                position: (c + r * Vec3::new(-2.5, 0.5, 2.0)).into(),
+                color: Some([0.25, 0.27, 0.32]),
+            },
+        ];
+        desc.ambient = Some([0.35, 0.35, 0.38]);
+        desc.background = Some([0.02, 0.025, 0.035]);
+        desc.objects.push(ObjectDesc {
+            material: Some("bone".into()),
+            ..Default::default()
+        });
+        let n = mesh.positions.len();
+        let mut mesh = Some(mesh);
+        let mut scene = Self::compile(&desc, name, |_, _| Ok(mesh.take().expect("one object")))
+            .expect("a checked mesh makes a valid scene");
+        // The volume's gradient normals shade an isosurface better than face-averaged ones.
+        if normals.len() == n {
+            for (dst, &src) in scene.normals[..n].iter_mut().zip(normals) {
+                *dst = lps_to_scene(src);
+            }
+        }
+        scene.frame_dir = Vec3::new(0.0, 0.12, 1.0);
+        scene
+    }
+
     /// The built-in default scene: Spot the cow between a glass sphere and a mirror sphere on a
     /// reflective floor, with shadows from two lights.
     pub fn builtin_default() -> Scene {
@@ -307,8 +375,9 @@ impl Scene {
 
     /// The camera to render with: the scene's, or one framing the objects (see [`Camera::frame`]).
     pub fn camera_for(&self, aspect: f32) -> Camera {
-        self.camera
-            .unwrap_or_else(|| Camera::frame(&self.mesh_points_for_framing(), aspect))
+        self.camera.unwrap_or_else(|| {
+            Camera::frame_from(&self.mesh_points_for_framing(), aspect, self.frame_dir)
+        })
     }
 
     fn mesh_points_for_framing(&self) -> Vec<Vec3> {

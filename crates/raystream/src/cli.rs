@@ -18,10 +18,13 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 pub enum Command {
-    /// Render a mesh, a scene file (TOML) or, without INPUT, the built-in default scene to PNG.
+    /// Render a mesh, a scene file (TOML), a CT volume's bones or, without INPUT, the built-in
+    /// default (the bones of an abdomen/pelvis CT) to PNG.
     Render(RenderArgs),
     /// Trace a stream of rays (RAYS.bin) against a mesh and write the hits (HITS.bin).
     Trace(TraceArgs),
+    /// Extract a bone isosurface from a CT volume and write it as a mesh (PLY, OBJ or STL).
+    Iso(IsoArgs),
     /// Describe a mesh and its kd-tree, or a CT volume's geometry and values.
     Info(InfoArgs),
     /// Measure build time and traversal throughput on standard ray sets.
@@ -84,8 +87,18 @@ pub struct Accel {
 
 #[derive(Args)]
 pub struct RenderArgs {
-    /// Mesh (.obj, .ply, .stl, optionally .gz) or scene (.toml); none: the built-in scene.
+    /// Mesh (.obj, .ply, .stl, optionally .gz), scene (.toml) or CT volume (DICOM folder,
+    /// .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd); none: the built-in abdomen CT.
     pub input: Option<PathBuf>,
+    #[command(flatten)]
+    pub threshold: Threshold,
+    /// DICOM: the SeriesInstanceUID to read (default: the series with the most slices).
+    #[arg(long)]
+    pub series: Option<String>,
+    /// Volumes: Taubin smoothing iterations of the bone surface (0: raw marching cubes with
+    /// gradient normals).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=100))]
+    pub smooth: u32,
     /// Output PNG.
     #[arg(short, long, default_value = "render.png")]
     pub output: PathBuf,
@@ -101,6 +114,60 @@ pub struct RenderArgs {
     #[command(flatten)]
     pub accel: Accel,
     /// No progress output.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+/// The isosurface threshold: `--iso HU` or a `--preset` (default: bone, 300 HU).
+#[derive(Args, Clone, Copy)]
+pub struct Threshold {
+    /// Isosurface threshold in Hounsfield units (volume value units for non-CT volumes).
+    #[arg(long, alias = "hu", conflicts_with = "preset")]
+    pub iso: Option<f32>,
+    /// Threshold preset: bone (300 HU), thin-bone (226 HU), contrast (400 HU).
+    #[arg(long, value_enum)]
+    pub preset: Option<PresetArg>,
+}
+
+impl Threshold {
+    pub fn hu(&self) -> f32 {
+        self.iso
+            .unwrap_or_else(|| self.preset.unwrap_or(PresetArg::Bone).preset().hu())
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PresetArg {
+    Bone,
+    ThinBone,
+    Contrast,
+}
+
+impl PresetArg {
+    pub fn preset(self) -> raystream_volume::Preset {
+        match self {
+            PresetArg::Bone => raystream_volume::Preset::Bone,
+            PresetArg::ThinBone => raystream_volume::Preset::ThinBone,
+            PresetArg::Contrast => raystream_volume::Preset::Contrast,
+        }
+    }
+}
+
+#[derive(Args)]
+pub struct IsoArgs {
+    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd).
+    pub input: PathBuf,
+    /// Output mesh in LPS millimetres: .ply (with normals), .obj (with normals) or .stl.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub threshold: Threshold,
+    /// DICOM: the SeriesInstanceUID to read (default: the series with the most slices).
+    #[arg(long)]
+    pub series: Option<String>,
+    /// Taubin smoothing iterations (0: the raw marching-cubes surface, gradient normals).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=100))]
+    pub smooth: u32,
     #[arg(short, long)]
     pub quiet: bool,
 }

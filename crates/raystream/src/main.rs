@@ -4,6 +4,7 @@ mod bench;
 mod cli;
 mod common;
 mod info;
+mod iso;
 mod render;
 mod trace;
 
@@ -16,6 +17,7 @@ fn main() -> ExitCode {
     let result = match args.command {
         cli::Command::Render(a) => render::run(&a),
         cli::Command::Trace(a) => trace::run(&a),
+        cli::Command::Iso(a) => iso::run(&a),
         cli::Command::Info(a) => info::run(&a),
         cli::Command::Bench(a) => bench::run(&a),
     };

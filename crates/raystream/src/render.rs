@@ -12,19 +12,34 @@ use raystream_scene::Scene;
 use crate::cli::Device;
 use crate::cli::RenderArgs;
 use crate::common::{load_mesh, ms, spinner};
+use crate::iso::{Bones, bones};
 
-/// The scene named by INPUT: none → built-in default, `.toml` → scene file, else a mesh.
-pub fn load_scene(input: Option<&Path>) -> Result<Scene> {
-    Ok(match input {
-        None => Scene::builtin_default(),
+/// The built-in default: the abdomen/pelvis CT of TotalSegmentator's tests (see
+/// `assets/README.md` for source and license), whose bones `render` shows without an input.
+const DEFAULT_CT: &[u8] = include_bytes!("../assets/abdomen_pelvis_ct_totalseg.nii.gz");
+const DEFAULT_CT_NAME: &str = "<built-in abdomen_pelvis_ct_totalseg.nii.gz>";
+
+/// The scene named by INPUT: none → the built-in CT's bones, `.toml` → scene file, a volume →
+/// its bones, else a mesh. Also says how the volume steps went, for volumes.
+fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
+    let hu = a.threshold.hu();
+    let volume_scene = |path: &Path, embedded: Option<&[u8]>| -> Result<(Scene, Option<Bones>)> {
+        let mut b = bones(path, a.series.as_deref(), hu, a.smooth, a.quiet, embedded)?;
+        let mesh = std::mem::take(&mut b.surface.mesh);
+        let scene = Scene::for_bones(mesh, &b.surface.normals, path);
+        Ok((scene, Some(b)))
+    };
+    match a.input.as_deref() {
+        None => volume_scene(Path::new(DEFAULT_CT_NAME), Some(DEFAULT_CT)),
         Some(p)
             if p.extension()
                 .is_some_and(|e| e.eq_ignore_ascii_case("toml")) =>
         {
-            Scene::load(p)?
+            Ok((Scene::load(p)?, None))
         }
-        Some(p) => Scene::for_mesh(load_mesh(p)?, p),
-    })
+        Some(p) if raystream_io::is_volume_path(p) => volume_scene(p, None),
+        Some(p) => Ok((Scene::for_mesh(load_mesh(p)?, p), None)),
+    }
 }
 
 pub fn run(a: &RenderArgs) -> Result<()> {
@@ -36,7 +51,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         _ => "cpu",
     };
     let t0 = Instant::now();
-    let scene = load_scene(a.input.as_deref())?;
+    let (scene, bones) = load_scene(a)?;
     let load_ms = ms(t0.elapsed());
     let pb = spinner(
         a.quiet,
@@ -87,6 +102,19 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             total_rays as f64 / render_ms / 1e3,
             total_rays
         );
+        if let Some(b) = bones {
+            eprintln!(
+                "raystream: of the load: volume {:.0} ms, isosurface {:.0} ms ({} voxels at {} HU)",
+                b.load_ms,
+                b.iso_ms,
+                b.voxels,
+                hu_of(a)
+            );
+        }
     }
     Ok(())
+}
+
+fn hu_of(a: &RenderArgs) -> f32 {
+    a.threshold.hu()
 }

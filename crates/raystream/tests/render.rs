@@ -74,9 +74,35 @@ fn golden(name: &str, args: &[&str]) {
 
 #[test]
 fn golden_default_scene() {
+    // The built-in abdomen CT's bones.
     golden(
         "default",
         &["--size", "96x64", "--spp", "2", "--max-depth", "4"],
+    );
+}
+
+fn spot_scene() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/scenes/spot.toml")
+        .to_str()
+        .unwrap()
+        .to_string()
+}
+
+#[test]
+fn golden_spot_scene() {
+    // Spot between a glass and a mirror sphere: refraction, reflection, shadows.
+    golden(
+        "spot",
+        &[
+            &spot_scene(),
+            "--size",
+            "96x64",
+            "--spp",
+            "2",
+            "--max-depth",
+            "4",
+        ],
     );
 }
 
@@ -115,10 +141,11 @@ fn golden_scene_file() {
 
 #[test]
 fn golden_median_builder_and_stack_traversal_match_default() {
-    // Same image as golden_default_scene through the other builder and traversal.
+    // Same image as golden_spot_scene through the other builder and traversal.
     golden(
-        "default",
+        "spot",
         &[
+            &spot_scene(),
             "--size",
             "96x64",
             "--spp",

@@ -285,6 +285,13 @@ pub fn load_volume(path: &Path, series: Option<&str>) -> Result<Volume, VolumeEr
     Ok(volume)
 }
 
+/// Parses NIfTI bytes held in memory (an embedded volume); `path` names it in errors.
+pub fn parse_nifti(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
+    let v = nifti::parse(bytes, path)?;
+    v.check(path)?;
+    Ok(v)
+}
+
 /// Direction-matrix helpers shared by the readers.
 pub(crate) fn unit_columns(m: [[f64; 3]; 3]) -> ([[f64; 3]; 3], [f64; 3]) {
     let mut dir = m;

@@ -28,8 +28,8 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
         ));
     }
     // The header ends at the first empty line.
-    let (header_end, data_start) = find_blank_line(bytes)
-        .ok_or_else(|| VolumeError::invalid(path, "NRRD header has no end (no blank line)"))?;
+    // A detached header (.nhdr) may simply end with the file.
+    let (header_end, data_start) = find_blank_line(bytes).unwrap_or((bytes.len(), bytes.len()));
     let text = std::str::from_utf8(&bytes[..header_end])
         .map_err(|_| VolumeError::invalid(path, "NRRD header is not text"))?;
     let mut fields = HashMap::new();

@@ -1,0 +1,37 @@
+//! CT volume processing: isosurface extraction ([`extract_isosurface`]) and the HU presets
+//! ([`Preset`]) that `raystream iso` and `raystream render VOLUME` use.
+
+mod cases;
+mod marching;
+
+pub use marching::{IsoSurface, extract_isosurface, smooth};
+
+/// Bone thresholds in Hounsfield units.
+///
+/// - `Bone` 300 HU: cortical and most trabecular bone while excluding contrast-free soft
+///   tissue (≤ ~100 HU); the usual bone threshold in CT volume rendering (e.g. 3D Slicer's
+///   "CT-Bone" volume-rendering preset ramps up from ~150–300 HU; Hounsfield-unit tables list
+///   cancellous bone at +300…+400 and cortical bone at +500…+1900).
+/// - `ThinBone` 226 HU: the lower bone threshold of 3D Slicer's Segment Editor "Threshold"
+///   bone default (226 HU), keeping thin structures (skull base, ribs, osteoporotic vertebrae).
+/// - `Contrast` 400 HU: contrast-enhanced scans, where iodinated vessels reach 200–400 HU and
+///   would otherwise merge with bone.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preset {
+    Bone,
+    ThinBone,
+    Contrast,
+}
+
+impl Preset {
+    pub fn hu(self) -> f32 {
+        match self {
+            Preset::Bone => 300.0,
+            Preset::ThinBone => 226.0,
+            Preset::Contrast => 400.0,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

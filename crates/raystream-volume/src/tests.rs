@@ -1,0 +1,214 @@
+//! Isosurfaces against analytic volumes: closed, consistently oriented, on the true surface.
+
+use std::collections::HashMap;
+
+use raystream_io::{ValueUnit, Volume, VolumeFormat};
+use raystream_math::Vec3;
+
+use super::*;
+
+/// A volume of `f(p_world)` on a grid with the given spacing, origin and (orthonormal) direction.
+fn analytic(
+    dims: [usize; 3],
+    spacing: [f64; 3],
+    origin: [f64; 3],
+    direction: [[f64; 3]; 3],
+    f: impl Fn(raystream_math::DVec3) -> f32,
+) -> Volume {
+    let mut v = Volume {
+        dims,
+        spacing,
+        origin,
+        direction,
+        data: Vec::new(),
+        unit: ValueUnit::Hounsfield,
+        format: VolumeFormat::Nifti,
+        series: None,
+        warnings: Vec::new(),
+    };
+    let mut data = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let p = v.index_to_world(raystream_math::DVec3::new(i as f64, j as f64, k as f64));
+                data.push(f(p));
+            }
+        }
+    }
+    v.data = data;
+    v
+}
+
+/// Every undirected edge is used by exactly two triangles, once in each direction: a closed,
+/// consistently oriented 2-manifold.
+fn assert_closed_and_oriented(mesh: &raystream_io::TriMesh) {
+    let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
+    for t in &mesh.triangles {
+        for i in 0..3 {
+            *directed.entry((t[i], t[(i + 1) % 3])).or_default() += 1;
+        }
+    }
+    for (&(a, b), &n) in &directed {
+        assert_eq!(n, 1, "directed edge {a}->{b} used {n} times");
+        assert_eq!(
+            directed.get(&(b, a)),
+            Some(&1),
+            "edge {a}-{b} has no opposite: a crack or a flipped triangle"
+        );
+    }
+}
+
+fn rotation() -> [[f64; 3]; 3] {
+    // 30° about z then 20° about x: an oblique grid, as a tilted acquisition gives.
+    let m = raystream_math::DMat3::from_rotation_x(20f64.to_radians())
+        * raystream_math::DMat3::from_rotation_z(30f64.to_radians());
+    let c = m.to_cols_array_2d();
+    std::array::from_fn(|r| std::array::from_fn(|col| c[col][r]))
+}
+
+#[test]
+fn sphere_is_closed_oriented_and_within_half_a_voxel() {
+    let centre = raystream_math::DVec3::new(3.0, -2.0, 5.0);
+    let radius = 20.0;
+    for (spacing, direction) in [
+        (
+            [1.0, 1.0, 1.0],
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        ),
+        ([0.8, 1.1, 1.7], rotation()),
+    ] {
+        let dims = [64, 64, 48];
+        let half =
+            raystream_math::DVec3::new(32.0 * spacing[0], 32.0 * spacing[1], 24.0 * spacing[2]);
+        let m = raystream_math::DMat3::from_cols_array_2d(&direction).transpose();
+        let origin = (centre - m * half).to_array();
+        // HU-like: 1000 at the centre, falling through 300 at the radius.
+        let vol = analytic(dims, spacing, origin, direction, |p| {
+            (300.0 + 40.0 * (radius - (p - centre).length())) as f32
+        });
+        let iso = extract_isosurface(&vol, 300.0);
+        assert!(iso.mesh.len() > 1000);
+        assert_closed_and_oriented(&iso.mesh);
+        let max_spacing = spacing.iter().cloned().fold(0.0, f64::max);
+        for (p, n) in iso.mesh.positions.iter().zip(&iso.normals) {
+            let r = (p.as_dvec3() - centre).length();
+            assert!(
+                (r - radius).abs() < 0.5 * max_spacing,
+                "vertex at radius {r}"
+            );
+            let outward = (p.as_dvec3() - centre).normalize().as_vec3();
+            assert!(n.dot(outward) > 0.99, "normal {n} vs {outward}");
+        }
+        // Triangle windings point outward too.
+        for t in &iso.mesh.triangles {
+            let [a, b, c] = t.map(|i| iso.mesh.positions[i as usize]);
+            let g = (b - a).cross(c - a);
+            let out = (a + b + c) / 3.0 - centre.as_vec3();
+            assert!(g.dot(out) >= 0.0, "triangle winds inward");
+        }
+    }
+}
+
+#[test]
+fn surfaces_cut_by_the_border_are_capped() {
+    // A slab filling the whole volume in x and y: without caps it would be two open sheets.
+    let vol = analytic(
+        [8, 9, 10],
+        [1.0; 3],
+        [0.0; 3],
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        |p| {
+            if (2.5..6.5).contains(&p.z) {
+                1000.0
+            } else {
+                -1000.0
+            }
+        },
+    );
+    let iso = extract_isosurface(&vol, 300.0);
+    assert_closed_and_oriented(&iso.mesh);
+    let b = iso.mesh.bounds();
+    assert_eq!(b.min.x, 0.0);
+    assert_eq!(b.max.y, 8.0);
+}
+
+#[test]
+fn every_case_is_closed_on_its_own() {
+    // One cell per case, surrounded by outside: each case's surface plus the caps is closed.
+    for case in 0..256usize {
+        let vol = analytic(
+            [2, 2, 2],
+            [1.0; 3],
+            [0.0; 3],
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            |p| {
+                let c = p.x as usize | (p.y as usize) << 1 | (p.z as usize) << 2;
+                if case >> c & 1 == 1 { 1000.0 } else { -1000.0 }
+            },
+        );
+        let iso = extract_isosurface(&vol, 0.0);
+        assert_closed_and_oriented(&iso.mesh);
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+    /// Random noise volumes (every ambiguous configuration appears): always closed and oriented.
+    #[test]
+    fn random_volumes_give_closed_surfaces(seed in 0u64..u64::MAX, dims in (2usize..9, 2usize..9, 2usize..9)) {
+        let mut s = seed | 1;
+        let mut rnd = move || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s % 2000) as f32 - 1000.0 };
+        let mut vol = analytic([dims.0, dims.1, dims.2], [1.0; 3], [0.0; 3],
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], |_| 0.0);
+        for v in vol.data.iter_mut() { *v = rnd(); }
+        let iso = extract_isosurface(&vol, 0.5);
+        assert_closed_and_oriented(&iso.mesh);
+        for n in &iso.normals { proptest::prop_assert!(n.is_finite()); }
+        let _ = Vec3::ZERO;
+    }
+}
+
+#[test]
+fn smoothing_keeps_the_sphere_closed_and_its_radius() {
+    let centre = raystream_math::DVec3::new(32.0, 32.0, 32.0);
+    let vol = analytic(
+        [64, 64, 64],
+        [1.0; 3],
+        [0.0; 3],
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        |p| {
+            if (p - centre).length() < 20.0 {
+                1000.0
+            } else {
+                -1000.0
+            }
+        },
+    );
+    let mut iso = extract_isosurface(&vol, 0.0);
+    let spread = |s: &IsoSurface| {
+        let r: Vec<f64> = s
+            .mesh
+            .positions
+            .iter()
+            .map(|p| (p.as_dvec3() - centre).length())
+            .collect();
+        let mean = r.iter().sum::<f64>() / r.len() as f64;
+        (
+            mean,
+            r.iter().map(|x| (x - mean).abs()).sum::<f64>() / r.len() as f64,
+        )
+    };
+    let (mean0, dev0) = spread(&iso);
+    smooth(&mut iso, 5);
+    let (mean1, dev1) = spread(&iso);
+    assert_closed_and_oriented(&iso.mesh);
+    // A binary sphere's stair-steps flatten out; Taubin's inflating step keeps the size.
+    assert!(dev1 < 0.7 * dev0, "mean deviation {dev0} -> {dev1}");
+    assert!(
+        (mean1 - mean0).abs() < 0.2,
+        "mean radius {mean0} -> {mean1}"
+    );
+    for (p, n) in iso.mesh.positions.iter().zip(&iso.normals) {
+        assert!(n.dot((p.as_dvec3() - centre).normalize().as_vec3()) > 0.8);
+    }
+}

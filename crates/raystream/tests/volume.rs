@@ -1,0 +1,168 @@
+//! CT volumes end to end: `info --json` against SimpleITK on every format, `iso`, and `render`
+//! from a DICOM folder.
+
+mod common;
+
+use common::*;
+use serde_json::Value;
+
+fn info(path: &str) -> Value {
+    let o = run(&["info", "--json", path]);
+    assert!(o.status.success(), "{path}: {}", stderr(&o));
+    serde_json::from_str(stdout(&o).trim()).unwrap()
+}
+
+fn volume(rel: &str) -> String {
+    shared()
+        .join("data/volumes")
+        .join(rel)
+        .to_string_lossy()
+        .into_owned()
+}
+
+fn close(a: &Value, b: &Value, tol: f64, what: &str) {
+    let (a, b) = (a.as_array().unwrap(), b.as_array().unwrap());
+    assert_eq!(a.len(), b.len(), "{what}");
+    for (x, y) in a.iter().zip(b) {
+        let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+        assert!((x - y).abs() <= tol, "{what}: {a:?} vs {b:?}");
+    }
+}
+
+#[test]
+fn info_json_describes_a_dicom_series() {
+    let v = info(&volume("dicom/abdomen_ct_j2k_totalseg"));
+    assert_eq!(v["kind"], "volume");
+    assert_eq!(v["dims"], serde_json::json!([512, 512, 20]));
+    close(
+        &v["spacing"],
+        &serde_json::json!([0.9765625, 0.9765625, 2.0]),
+        1e-6,
+        "spacing",
+    );
+    close(
+        &v["origin"],
+        &serde_json::json!([-249.51171875, -437.51171875, -804.5]),
+        1e-6,
+        "origin",
+    );
+    close(
+        &v["direction"],
+        &serde_json::json!([1, 0, 0, 0, 1, 0, 0, 0, 1]),
+        1e-9,
+        "direction",
+    );
+    assert_eq!(v["hu_range"], serde_json::json!([-1024.0, 1839.0]));
+    assert_eq!(v["series"]["count"], 20);
+    assert_eq!(v["series"]["transfer_syntax"], "1.2.840.10008.1.2.4.90");
+}
+
+#[test]
+fn every_format_matches_simpleitk_on_an_oblique_grid() {
+    let Some(py) = python() else { return };
+    let has_sitk = std::process::Command::new(&py)
+        .args(["-c", "import SimpleITK"])
+        .status()
+        .unwrap()
+        .success();
+    if !has_sitk {
+        if std::env::var("CI").is_ok_and(|v| v == "true") {
+            panic!("CI=true but SimpleITK is not installed in {}", py.display());
+        }
+        eprintln!("skipping: SimpleITK is not installed in {}", py.display());
+        return;
+    }
+    let dir = tmp("sitk-formats");
+    let o = std::process::Command::new(&py)
+        .arg(repo().join("crates/raystream/tests/sitk_convert.py"))
+        .arg(volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz"))
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let lines = stdout(&o);
+    assert_eq!(lines.lines().count(), 6);
+    for line in lines.lines() {
+        let e: Value = serde_json::from_str(line).unwrap();
+        let file = e["file"].as_str().unwrap();
+        let v = info(dir.join(file).to_str().unwrap());
+        assert_eq!(v["dims"], e["dims"], "{file}");
+        close(&v["spacing"], &e["spacing"], 1e-3, file);
+        close(&v["origin"], &e["origin"], 1e-3, file);
+        close(&v["direction"], &e["direction"], 1e-4, file);
+        close(&v["value_range"], &e["range"], 0.0, file);
+    }
+}
+
+#[test]
+fn iso_writes_a_closed_bone_surface() {
+    let out = tmp("abdomen-bones.ply");
+    let o = run(&[
+        "iso",
+        &volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz"),
+        "--hu",
+        "300",
+        "-o",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mesh = raystream_io::load_mesh(&out).unwrap();
+    assert!(mesh.len() > 50_000, "{} triangles", mesh.len());
+    // Closed: every edge is shared by exactly two triangles.
+    let mut edges = std::collections::HashMap::<(u32, u32), u32>::new();
+    for t in &mesh.triangles {
+        for i in 0..3 {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    assert!(edges.values().all(|&n| n == 2));
+    // In LPS millimetres, inside the volume's extent (x: 177.96 − 3·121 … 177.96).
+    let b = mesh.bounds();
+    assert!(
+        b.min.x >= 177.95 - 363.0 - 1e-3 && b.max.x <= 177.96,
+        "{b:?}"
+    );
+    assert!(b.min.z >= 94.30 - 1e-3 && b.max.z <= 94.31 + 333.0, "{b:?}");
+}
+
+#[test]
+fn render_a_dicom_folder_and_refuse_a_tilted_one() {
+    let out = tmp("j2k-bones.png");
+    let o = run(&[
+        "render",
+        &volume("dicom/abdomen_ct_j2k_totalseg"),
+        "--size",
+        "64x48",
+        "--spp",
+        "1",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("isosurface"), "{}", stderr(&o));
+    let img = image::open(&out).unwrap().to_rgb8();
+    // Bone is bright ivory: some pixels must be far brighter than the dark background.
+    let bright = img.pixels().filter(|p| p[0] > 150 && p[1] > 140).count();
+    assert!(bright > 50, "{bright} bright pixels");
+
+    let o = run(&[
+        "render",
+        &volume("dicom/head_ct_gantry_tilt_ge"),
+        "-o",
+        "/dev/null",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("gantry tilt"), "{}", stderr(&o));
+    let o = run(&[
+        "iso",
+        &volume("nifti/scivis_engine.nii.gz"),
+        "--hu",
+        "1000",
+        "-o",
+        tmp("none.ply").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("no surface at 1000"), "{}", stderr(&o));
+}
