@@ -126,6 +126,9 @@ fn git_commit() -> String {
 }
 
 pub fn run(a: &BenchArgs) -> Result<()> {
+    if raystream_io::is_volume_path(&a.input) {
+        return bench_iso(a);
+    }
     let quiet = a.quiet || a.json;
     let mesh = load_mesh(&a.input)?;
     let corners: Vec<[Vec3; 3]> = (0..mesh.len()).map(|i| mesh.corners(i)).collect();
@@ -224,6 +227,72 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                 );
             }
         }
+    }
+    Ok(())
+}
+
+/// A volume: marching-cubes throughput at `--iso` HU (default 300), the median of `--repeat`
+/// runs after a warm-up, validated first (a closed surface: every edge in two triangles).
+fn bench_iso(a: &BenchArgs) -> Result<()> {
+    let quiet = a.quiet || a.json;
+    let hu = a.iso.unwrap_or(raystream_volume::Preset::Bone.hu());
+    let t0 = Instant::now();
+    let pb = spinner(quiet, &format!("reading {}", a.input.display()));
+    let volume = raystream_io::load_volume(&a.input, None)?;
+    pb.finish_and_clear();
+    let load_ms = ms(t0.elapsed());
+    let pb = spinner(quiet, "marching cubes");
+    let surface = raystream_volume::extract_isosurface(&volume, hu);
+    let mut edges = std::collections::HashMap::<(u32, u32), u32>::new();
+    for t in &surface.mesh.triangles {
+        for i in 0..3 {
+            let (p, q) = (t[i], t[(i + 1) % 3]);
+            *edges.entry((p.min(q), p.max(q))).or_default() += 1;
+        }
+    }
+    if edges.values().any(|&n| n != 2) {
+        bail!(
+            "{}: the isosurface is not closed (a bug)",
+            a.input.display()
+        );
+    }
+    let mut times = Vec::new();
+    for _ in 0..a.repeat {
+        let t = Instant::now();
+        let s = raystream_volume::extract_isosurface(&volume, hu);
+        times.push(ms(t.elapsed()));
+        drop(s);
+    }
+    pb.finish_and_clear();
+    let iso_ms = median(&mut times);
+    let voxels = volume.voxel_count();
+    let v = json!({
+        "file": file_name(&a.input),
+        "kind": "isosurface",
+        "commit": git_commit(),
+        "threads": rayon::current_num_threads(),
+        "dims": volume.dims,
+        "iso_hu": hu,
+        "load_ms": round3(load_ms),
+        "iso_ms": round3(iso_ms),
+        "mvoxels_per_s": round3(voxels as f64 / iso_ms / 1e3),
+        "vertices": surface.mesh.positions.len(),
+        "triangles": surface.mesh.len(),
+    });
+    if a.json {
+        print_line(v);
+    } else {
+        println!(
+            "{}: {}x{}x{} voxels at {hu} HU: {:.1} ms ({:.0} M voxels/s), {} triangles; load {:.0} ms",
+            file_name(&a.input),
+            volume.dims[0],
+            volume.dims[1],
+            volume.dims[2],
+            iso_ms,
+            voxels as f64 / iso_ms / 1e3,
+            surface.mesh.len(),
+            load_ms
+        );
     }
     Ok(())
 }

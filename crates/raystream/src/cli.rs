@@ -212,8 +212,11 @@ pub struct InfoArgs {
 
 #[derive(Args)]
 pub struct BenchArgs {
-    /// Mesh file.
+    /// Mesh file, or a CT volume (measures isosurface extraction).
     pub input: PathBuf,
+    /// Volumes: the isosurface threshold in HU (default 300, bone).
+    #[arg(long)]
+    pub iso: Option<f32>,
     /// Devices to measure, comma-separated (cpu, gpu, auto).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
     pub device: Vec<Device>,
