@@ -54,6 +54,13 @@ pub fn extract_isosurface(vol: &Volume, iso: f32) -> IsoSurface {
                 }
             }
         });
+    // Per padded row (J, K): whether any corner in it is inside. Most CT rows hold no bone, and
+    // a cell or edge row can be skipped when the rows it touches are all empty.
+    let row_any: Vec<bool> = mask
+        .par_chunks(px)
+        .map(|row| row.iter().any(|&m| m != 0))
+        .collect();
+    let row = |j: usize, k: usize| j < py && k < pz && row_any[j + py * k];
     let affine = vol.index_to_world_affine();
     let dir = raystream_math::DMat3::from_cols_array_2d(&vol.direction).transpose();
     let inv_spacing = DVec3::from(vol.spacing).recip();
@@ -91,6 +98,9 @@ pub fn extract_isosurface(vol: &Volume, iso: f32) -> IsoSurface {
             };
             let m = |i: usize, j: usize, k: usize| mask[i + px * (j + py * k)];
             for jj in 0..py {
+                if !row(jj, kk) && !row(jj + 1, kk) && !row(jj, kk + 1) {
+                    continue;
+                }
                 for ii in 0..px {
                     let here = m(ii, jj, kk);
                     for a in 0..3 {
@@ -165,6 +175,9 @@ pub fn extract_isosurface(vol: &Volume, iso: f32) -> IsoSurface {
             let mut out = Vec::new();
             let m = |i: usize, j: usize, k: usize| mask[i + px * (j + py * k)];
             for jj in 0..py - 1 {
+                if !row(jj, kk) && !row(jj + 1, kk) && !row(jj, kk + 1) && !row(jj + 1, kk + 1) {
+                    continue;
+                }
                 for ii in 0..px - 1 {
                     let mut case = 0usize;
                     for c in 0..8 {
