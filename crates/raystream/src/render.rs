@@ -108,13 +108,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
                 b.load_ms,
                 b.iso_ms,
                 b.voxels,
-                hu_of(a)
+                a.threshold.hu()
             );
         }
     }
     Ok(())
-}
-
-fn hu_of(a: &RenderArgs) -> f32 {
-    a.threshold.hu()
 }

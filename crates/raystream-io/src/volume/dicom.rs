@@ -186,22 +186,7 @@ fn read_meta(bytes: &[u8], file: &Path) -> Result<(String, usize), VolumeError> 
     while pos + 8 <= bytes.len() && bytes[pos] == 0x02 && bytes[pos + 1] == 0x00 {
         let elem = u16::from_le_bytes([bytes[pos + 2], bytes[pos + 3]]);
         let vr = &bytes[pos + 4..pos + 6];
-        let long = matches!(
-            vr,
-            b"OB"
-                | b"OW"
-                | b"OF"
-                | b"OD"
-                | b"OL"
-                | b"OV"
-                | b"SQ"
-                | b"UT"
-                | b"UN"
-                | b"UC"
-                | b"UR"
-                | b"SV"
-                | b"UV"
-        );
+        let long = has_long_length(vr);
         let (len, head) = if long {
             if pos + 12 > bytes.len() {
                 break;
@@ -326,22 +311,11 @@ fn check_lengths(data: &[u8], ts_uid: &str) -> Result<(), String> {
     }
     let implicit = ts_uid == "1.2.840.10008.1.2";
     let big = ts_uid == "1.2.840.10008.1.2.2";
-    let u16_at = |o: usize| {
-        let b = [data[o], data[o + 1]];
-        if big {
-            u16::from_be_bytes(b)
-        } else {
-            u16::from_le_bytes(b)
-        }
+    let b = super::raw::Bytes {
+        data,
+        big_endian: big,
     };
-    let u32_at = |o: usize| {
-        let b = data[o..o + 4].try_into().unwrap();
-        if big {
-            u32::from_be_bytes(b)
-        } else {
-            u32::from_le_bytes(b)
-        }
-    };
+    let (u16_at, u32_at) = (|o| b.u16(o), |o| b.u32(o));
     let mut pos = 0;
     while pos + 8 <= data.len() {
         let (group, elem) = (u16_at(pos), u16_at(pos + 2));
@@ -353,22 +327,7 @@ fn check_lengths(data: &[u8], ts_uid: &str) -> Result<(), String> {
                 b"AE", b"AS", b"AT", b"CS", b"DA", b"DS", b"DT", b"FL", b"FD", b"IS", b"LO", b"LT",
                 b"PN", b"SH", b"SL", b"SS", b"ST", b"TM", b"UI", b"UL", b"US",
             ];
-            let long = matches!(
-                vr,
-                b"OB"
-                    | b"OW"
-                    | b"OF"
-                    | b"OD"
-                    | b"OL"
-                    | b"OV"
-                    | b"SQ"
-                    | b"UT"
-                    | b"UN"
-                    | b"UC"
-                    | b"UR"
-                    | b"SV"
-                    | b"UV"
-            );
+            let long = has_long_length(vr);
             if !long && !SHORT.iter().any(|v| &v[..] == vr) {
                 return Err(format!(
                     "data element ({group:04X},{elem:04X}) has an invalid VR {:?} (corrupt file)",
@@ -397,6 +356,26 @@ fn check_lengths(data: &[u8], ts_uid: &str) -> Result<(), String> {
         pos = end;
     }
     Ok(())
+}
+
+/// Explicit-VR elements whose length field is 4 bytes (after 2 reserved bytes).
+fn has_long_length(vr: &[u8]) -> bool {
+    matches!(
+        vr,
+        b"OB"
+            | b"OW"
+            | b"OF"
+            | b"OD"
+            | b"OL"
+            | b"OV"
+            | b"SQ"
+            | b"UT"
+            | b"UN"
+            | b"UC"
+            | b"UR"
+            | b"SV"
+            | b"UV"
+    )
 }
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -533,7 +512,7 @@ fn assemble(
         data.extend_from_slice(&d?);
     }
     let ts_name = TransferSyntaxRegistry
-        .get(&first_ts(slices))
+        .get(&slices[0].ts_uid)
         .map(|t| t.name().to_string())
         .unwrap_or_default();
     let first = &slices[0];
@@ -561,10 +540,6 @@ fn assemble(
         }),
         warnings,
     })
-}
-
-fn first_ts(slices: &[Slice]) -> String {
-    slices[0].ts_uid.clone()
 }
 
 /// Decodes one slice to modality values (RescaleSlope/Intercept applied: HU for CT).

@@ -104,27 +104,13 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
         .any(|v| v.eq_ignore_ascii_case("true"));
     let compressed = get("CompressedData").is_some_and(|v| v.eq_ignore_ascii_case("true"));
     let spacing_v = nums("ElementSpacing", Some(vec![1.0; 3]))?;
-    let origin_v = match get("Offset").or(get("Origin")).or(get("Position")) {
-        Some(_) => nums(
-            ["Offset", "Origin", "Position"]
-                .into_iter()
-                .find(|k| get(k).is_some())
-                .unwrap(),
-            None,
-        )?,
+    let first_of = |keys: [&'static str; 3]| keys.into_iter().find(|k| get(k).is_some());
+    let origin_v = match first_of(["Offset", "Origin", "Position"]) {
+        Some(k) => nums(k, None)?,
         None => vec![0.0; 3],
     };
-    let tm = match get("TransformMatrix")
-        .or(get("Rotation"))
-        .or(get("Orientation"))
-    {
-        Some(_) => nums(
-            ["TransformMatrix", "Rotation", "Orientation"]
-                .into_iter()
-                .find(|k| get(k).is_some())
-                .unwrap(),
-            None,
-        )?,
+    let tm = match first_of(["TransformMatrix", "Rotation", "Orientation"]) {
+        Some(k) => nums(k, None)?,
         None => vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
     };
     if spacing_v.len() != 3 || origin_v.len() != 3 || tm.len() != 9 {

@@ -9,7 +9,7 @@
 use std::io::Read;
 use std::path::Path;
 
-use super::raw::{Scalar, decode, open_payload, read_exact_n, read_file, skip_n};
+use super::raw::{Bytes, Scalar, decode, open_payload, read_exact_n, read_file, skip_n};
 use super::{
     ValueUnit, Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal, unit_columns,
     voxel_count,
@@ -101,38 +101,11 @@ fn parse_nifti2(raw: &[u8], big_endian: bool, path: &Path) -> Result<Header, Vol
             "NIfTI-2 magic is not \"n+2\" (a .hdr/.img pair is not supported)",
         ));
     }
-    let f64_at = |o: usize| {
-        let b = raw[o..o + 8].try_into().unwrap();
-        if big_endian {
-            f64::from_be_bytes(b)
-        } else {
-            f64::from_le_bytes(b)
-        }
+    let b = Bytes {
+        data: raw,
+        big_endian,
     };
-    let i64_at = |o: usize| {
-        let b = raw[o..o + 8].try_into().unwrap();
-        if big_endian {
-            i64::from_be_bytes(b)
-        } else {
-            i64::from_le_bytes(b)
-        }
-    };
-    let i32_at = |o: usize| {
-        let b = raw[o..o + 4].try_into().unwrap();
-        if big_endian {
-            i32::from_be_bytes(b)
-        } else {
-            i32::from_le_bytes(b)
-        }
-    };
-    let i16_at = |o: usize| {
-        let b = raw[o..o + 2].try_into().unwrap();
-        if big_endian {
-            i16::from_be_bytes(b)
-        } else {
-            i16::from_le_bytes(b)
-        }
-    };
+    let (f64_at, i64_at, i32_at, i16_at) = (|o| b.f64(o), |o| b.i64(o), |o| b.i32(o), |o| b.i16(o));
     Ok(Header {
         datatype: i16_at(12),
         dim: std::array::from_fn(|i| i64_at(16 + 8 * i)),

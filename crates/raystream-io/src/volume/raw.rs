@@ -144,3 +144,31 @@ pub(crate) fn open_payload<'a>(
 pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, VolumeError> {
     std::fs::read(path).map_err(|e| VolumeError::io(path, e))
 }
+
+/// Fixed-offset numbers from a header of known byte order.
+pub(crate) struct Bytes<'a> {
+    pub data: &'a [u8],
+    pub big_endian: bool,
+}
+
+macro_rules! bytes_getter {
+    ($name:ident, $t:ty) => {
+        pub fn $name(&self, o: usize) -> $t {
+            let b = self.data[o..o + size_of::<$t>()].try_into().unwrap();
+            if self.big_endian {
+                <$t>::from_be_bytes(b)
+            } else {
+                <$t>::from_le_bytes(b)
+            }
+        }
+    };
+}
+
+impl Bytes<'_> {
+    bytes_getter!(u16, u16);
+    bytes_getter!(i16, i16);
+    bytes_getter!(u32, u32);
+    bytes_getter!(i32, i32);
+    bytes_getter!(i64, i64);
+    bytes_getter!(f64, f64);
+}
