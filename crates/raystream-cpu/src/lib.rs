@@ -95,7 +95,7 @@ pub fn render(
     let mut film = vec![Vec3::ZERO; (opt.width * opt.height) as usize];
     let shading = Shading {
         scene,
-        epsilon: 1e-4 * scene.object_box.radius().max(f32::MIN_POSITIVE),
+        epsilon: surface_epsilon(scene),
     };
     let mut queue = generate_camera_rays(&cam, opt.width, opt.height, opt.spp);
     for depth in 0..=opt.max_depth {
@@ -125,6 +125,16 @@ pub fn render(
     }
 }
 
+/// How far secondary rays start off the surface: 1e-4 of the objects' radius.
+pub fn surface_epsilon(scene: &Scene) -> f32 {
+    1e-4 * scene.object_box.radius().max(f32::MIN_POSITIVE)
+}
+
+/// Strata per side of the sample grid for `spp` samples: ⌈√spp⌉.
+pub fn strata(spp: u32) -> u32 {
+    (spp as f32).sqrt().ceil() as u32
+}
+
 /// A deterministic hash → [0, 1): the jitter of sample `s` of pixel `p`.
 fn jitter(p: u32, s: u32, k: u32) -> f32 {
     let mut x =
@@ -140,7 +150,7 @@ fn jitter(p: u32, s: u32, k: u32) -> f32 {
 /// Stage 1: one ray per pixel sample, pixel-major. Sample `s` of `spp` lies in stratum `s` of an
 /// `n×n` grid (n = ⌈√spp⌉), jittered; with one sample it is the pixel centre.
 pub fn generate_camera_rays(cam: &Camera, width: u32, height: u32, spp: u32) -> Vec<RayWorkItem> {
-    let n = (spp as f32).sqrt().ceil() as u32;
+    let n = strata(spp);
     let weight = Vec3::ONE;
     (0..width * height)
         .into_par_iter()

@@ -1,5 +1,5 @@
-//! Host↔kernel structs of the intersection kernels (the tree's own structs live in
-//! `raystream_accel::layout`). Each mirrors a WGSL struct in `kernels/intersect.wgsl`.
+//! Host↔kernel structs (the tree's own structs live in `raystream_accel::layout`). Each mirrors
+//! a WGSL struct of `kernels/kdtree.wgsl` or `kernels/render.wgsl`; a naga test checks them.
 
 use bytemuck::{Pod, Zeroable};
 use raystream_math::Ray;
@@ -61,6 +61,144 @@ pub struct Params {
     pub scene_max: [f32; 4],
 }
 
+/// `RayWork` in render.wgsl, 48 bytes: a ray of a render queue, the pixel it adds to and the
+/// product of the coefficients along its path.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RayWork {
+    pub ray: GpuRay,
+    /// Byte 32.
+    pub weight: [f32; 3],
+    /// Byte 44.
+    pub pixel: u32,
+}
+
+/// `ShadowWork` in render.wgsl, 48 bytes: a shadow ray and what its light adds if unblocked.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ShadowWork {
+    pub ray: GpuRay,
+    /// Byte 32.
+    pub radiance: [f32; 3],
+    /// Byte 44.
+    pub pixel: u32,
+}
+
+/// `Vertex` in render.wgsl, 32 bytes: position and unit shading normal (w unused).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Vertex {
+    pub position: [f32; 4],
+    /// Byte 16.
+    pub normal: [f32; 4],
+}
+
+/// `ShadeTri` in render.wgsl, 16 bytes: a triangle's vertex indices and material, by prim id.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ShadeTri {
+    pub v: [u32; 3],
+    /// Byte 12.
+    pub material: u32,
+}
+
+/// `Material` in render.wgsl, 64 bytes: raystream_scene::Material.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuMaterial {
+    pub ambient: [f32; 3],
+    /// Byte 12.
+    pub reflectivity: f32,
+    /// Byte 16.
+    pub diffuse: [f32; 3],
+    /// Byte 28.
+    pub transparency: f32,
+    /// Byte 32.
+    pub specular: [f32; 3],
+    /// Byte 44.
+    pub shininess: f32,
+    /// Byte 48.
+    pub ior: f32,
+    /// 1 = Schlick's Fresnel term splits transmitted light (byte 52).
+    pub fresnel: u32,
+    pub pad: [u32; 2],
+}
+
+/// `Light` in render.wgsl, 32 bytes (w unused).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuLight {
+    pub position: [f32; 4],
+    /// Byte 16.
+    pub color: [f32; 4],
+}
+
+/// `RenderParams` in render.wgsl (uniform), 128 bytes: camera, film, scene constants and the
+/// current wave and depth.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RenderParams {
+    pub eye: [f32; 3],
+    /// tan of half the vertical field of view (byte 12).
+    pub tan_y: f32,
+    /// Byte 16.
+    pub fwd: [f32; 3],
+    /// Byte 28.
+    pub width: u32,
+    /// Byte 32.
+    pub right: [f32; 3],
+    /// Byte 44.
+    pub height: u32,
+    /// Byte 48.
+    pub up: [f32; 3],
+    /// Samples per pixel (byte 60).
+    pub spp: u32,
+    /// Byte 64.
+    pub background: [f32; 3],
+    /// Strata per side, ⌈√spp⌉ (byte 76).
+    pub strata: u32,
+    /// Byte 80.
+    pub ambient_light: [f32; 3],
+    /// Offset of secondary ray origins (byte 92).
+    pub epsilon: f32,
+    /// First sample (pixel · spp + s) of this wave (byte 96).
+    pub sample_base: u32,
+    /// Samples in this wave (byte 100).
+    pub sample_count: u32,
+    /// 1 = `shade_hits` spawns reflection/refraction rays (byte 104).
+    pub spawn: u32,
+    /// Byte 108.
+    pub light_count: u32,
+    /// Largest workgroup count per dispatch dimension (byte 112).
+    pub max_groups: u32,
+    pub pad: [u32; 3],
+}
+
+/// Slots of the render kernels' counter buffer (`counters` in render.wgsl).
+pub mod counter {
+    /// Items in the queue being traced.
+    pub const QUEUE: u32 = 0;
+    /// Items appended to the next depth's queue.
+    pub const NEXT: u32 = 1;
+    /// Shadow rays appended this depth.
+    pub const SHADOWS: u32 = 2;
+    /// Rays of this depth that hit.
+    pub const HITS: u32 = 3;
+    /// The last finished depth's rays, hits and shadow rays (written by `advance`).
+    pub const STAT_RAYS: u32 = 4;
+    pub const STAT_HITS: u32 = 5;
+    pub const STAT_SHADOWS: u32 = 6;
+    /// Slots in all.
+    pub const SLOTS: u32 = 8;
+}
+
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
 const _: () = assert!(std::mem::size_of::<GpuHit>() == 16);
 const _: () = assert!(std::mem::size_of::<Params>() == 48);
+const _: () = assert!(std::mem::size_of::<RayWork>() == 48);
+const _: () = assert!(std::mem::size_of::<ShadowWork>() == 48);
+const _: () = assert!(std::mem::size_of::<Vertex>() == 32);
+const _: () = assert!(std::mem::size_of::<ShadeTri>() == 16);
+const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
+const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
+const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);

@@ -7,6 +7,7 @@
 //! Rust into a WGSL prelude, and a naga-based test checks WGSL offsets and sizes.
 
 pub mod layout;
+mod render;
 
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -17,6 +18,8 @@ use raystream_accel::layout::{LEAF_BIT, NO_ROPE};
 use raystream_math::Ray;
 use wgpu::util::DeviceExt;
 
+pub use render::{GpuRenderStats, GpuRenderer, MAX_WAVE, STAGES, render_wgsl};
+
 /// Threads per workgroup of every kernel.
 pub const WORKGROUP_SIZE: u32 = 64;
 /// `prim` of a miss.
@@ -24,13 +27,19 @@ pub const NO_PRIM: u32 = u32::MAX;
 /// How long a submission may run before it is reported as hung.
 const GPU_TIMEOUT: Duration = Duration::from_secs(120);
 
-const INTERSECT_WGSL: &str = include_str!("kernels/intersect.wgsl");
+const KDTREE_WGSL: &str = include_str!("kernels/kdtree.wgsl");
+const QUERIES_WGSL: &str = include_str!("kernels/queries.wgsl");
 
-/// The WGSL source of the intersection kernels: the constants prelude, then the kernels.
-pub fn intersect_wgsl() -> String {
+/// The constants every kernel shares, from their Rust definitions, then the kd-tree code.
+fn kdtree_wgsl() -> String {
     format!(
-        "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\n{INTERSECT_WGSL}"
+        "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\n{KDTREE_WGSL}"
     )
+}
+
+/// The WGSL source of the ray-query kernels (`intersect_closest`, `intersect_any`).
+pub fn queries_wgsl() -> String {
+    format!("{}\n{QUERIES_WGSL}", kdtree_wgsl())
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -241,8 +250,8 @@ impl<'a> GpuTracer<'a> {
         let module = ctx
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("intersect.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(intersect_wgsl().into()),
+                label: Some("queries.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(queries_wgsl().into()),
             });
         let pipeline = |entry: &str| {
             ctx.device
@@ -280,6 +289,33 @@ impl<'a> GpuTracer<'a> {
             any,
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
+    }
+
+    /// The tree as bind group 0 of the render kernels (`layout`: params, inners, leaves, tris).
+    fn bind_tree(&self, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
+        let params = self
+            .ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("kd-tree params"),
+                contents: bytemuck::bytes_of(&self.params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+        let entries = [&params, &self.inners, &self.leaves, &self.tris]
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect::<Vec<_>>();
+        self.ctx
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("kd-tree"),
+                layout,
+                entries: &entries,
+            })
     }
 
     /// Traces every ray (closest hit, or any hit with `any`), returning one record per ray.
@@ -408,7 +444,13 @@ impl<'a> GpuTracer<'a> {
                 } else {
                     "intersect_closest"
                 }),
-                timestamp_writes: None,
+                timestamp_writes: timer.as_ref().map(|(set, ..)| {
+                    wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: Some(1),
+                    }
+                }),
             });
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &bind, &[]);
@@ -461,7 +503,7 @@ impl<'a> GpuTracer<'a> {
     }
 
     /// Milliseconds between the two timestamps in `read` (already copied there); `None` where
-    /// the adapter wrote equal stamps (lavapipe does): no measurement rather than a false 0.
+    /// the adapter wrote equal stamps: no measurement rather than a false 0.
     fn read_timestamps(&self, read: &wgpu::Buffer) -> Result<Option<f64>, GpuError> {
         let ctx = self.ctx;
         let slice = read.slice(..);

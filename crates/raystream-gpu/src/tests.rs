@@ -7,33 +7,44 @@ use raystream_math::{Ray, Vec3};
 
 use super::*;
 
-/// Offsets and sizes of every WGSL struct shared with Rust, from naga's own layout.
-#[test]
-fn wgsl_structs_match_rust() {
-    let module = naga::front::wgsl::parse_str(&intersect_wgsl()).expect("intersect.wgsl parses");
+/// Parses and validates a WGSL source with naga.
+fn naga_module(src: &str, what: &str) -> naga::Module {
+    let module = naga::front::wgsl::parse_str(src).unwrap_or_else(|e| panic!("{what}: {e}"));
     let mut validator = naga::valid::Validator::new(
         naga::valid::ValidationFlags::all(),
         naga::valid::Capabilities::all(),
     );
     validator
         .validate(&module)
-        .expect("intersect.wgsl validates");
+        .unwrap_or_else(|e| panic!("{what} does not validate: {e:?}"));
+    module
+}
+
+/// Checks a WGSL struct's size and member offsets, from naga's own layout.
+fn check_struct(module: &naga::Module, name: &str, size: usize, offsets: &[(&str, usize)]) {
+    let ty = module
+        .types
+        .iter()
+        .find(|(_, t)| t.name.as_deref() == Some(name))
+        .unwrap_or_else(|| panic!("WGSL struct {name} missing"))
+        .1;
+    let naga::TypeInner::Struct { members, span } = &ty.inner else {
+        panic!("{name} is not a struct")
+    };
+    assert_eq!(*span as usize, size, "size of {name}");
+    assert_eq!(members.len(), offsets.len(), "member count of {name}");
+    for (m, (field, off)) in members.iter().zip(offsets) {
+        assert_eq!(m.name.as_deref(), Some(*field), "{name}: member order");
+        assert_eq!(m.offset as usize, *off, "{name}.{field} offset");
+    }
+}
+
+/// Offsets and sizes of every WGSL struct of the ray-query kernels shared with Rust.
+#[test]
+fn wgsl_structs_match_rust() {
+    let module = naga_module(&queries_wgsl(), "queries.wgsl");
     let check = |name: &str, size: usize, offsets: &[(&str, usize)]| {
-        let ty = module
-            .types
-            .iter()
-            .find(|(_, t)| t.name.as_deref() == Some(name))
-            .unwrap_or_else(|| panic!("WGSL struct {name} missing"))
-            .1;
-        let naga::TypeInner::Struct { members, span } = &ty.inner else {
-            panic!("{name} is not a struct")
-        };
-        assert_eq!(*span as usize, size, "size of {name}");
-        assert_eq!(members.len(), offsets.len(), "member count of {name}");
-        for (m, (field, off)) in members.iter().zip(offsets) {
-            assert_eq!(m.name.as_deref(), Some(*field), "{name}: member order");
-            assert_eq!(m.offset as usize, *off, "{name}.{field} offset");
-        }
+        check_struct(&module, name, size, offsets)
     };
     use std::mem::{offset_of, size_of};
     check(
@@ -97,6 +108,103 @@ fn wgsl_structs_match_rust() {
             ("tri_count", offset_of!(Params, tri_count)),
             ("scene_min", offset_of!(Params, scene_min)),
             ("scene_max", offset_of!(Params, scene_max)),
+        ],
+    );
+}
+
+/// Offsets and sizes of the render kernels' structs shared with Rust.
+#[test]
+fn render_wgsl_structs_match_rust() {
+    use layout::*;
+    use std::mem::{offset_of, size_of};
+    let module = naga_module(&render_wgsl(), "render.wgsl");
+    let check = |name: &str, size: usize, offsets: &[(&str, usize)]| {
+        check_struct(&module, name, size, offsets)
+    };
+    check(
+        "RayWork",
+        size_of::<RayWork>(),
+        &[
+            ("ray", offset_of!(RayWork, ray)),
+            ("weight", offset_of!(RayWork, weight)),
+            ("pixel", offset_of!(RayWork, pixel)),
+        ],
+    );
+    check(
+        "ShadowWork",
+        size_of::<ShadowWork>(),
+        &[
+            ("ray", offset_of!(ShadowWork, ray)),
+            ("radiance", offset_of!(ShadowWork, radiance)),
+            ("pixel", offset_of!(ShadowWork, pixel)),
+        ],
+    );
+    check(
+        "Vertex",
+        size_of::<Vertex>(),
+        &[
+            ("position", offset_of!(Vertex, position)),
+            ("normal", offset_of!(Vertex, normal)),
+        ],
+    );
+    check(
+        "ShadeTri",
+        size_of::<ShadeTri>(),
+        &[
+            ("v", offset_of!(ShadeTri, v)),
+            ("material", offset_of!(ShadeTri, material)),
+        ],
+    );
+    let pad = offset_of!(GpuMaterial, pad);
+    check(
+        "Material",
+        size_of::<GpuMaterial>(),
+        &[
+            ("ambient", offset_of!(GpuMaterial, ambient)),
+            ("reflectivity", offset_of!(GpuMaterial, reflectivity)),
+            ("diffuse", offset_of!(GpuMaterial, diffuse)),
+            ("transparency", offset_of!(GpuMaterial, transparency)),
+            ("specular", offset_of!(GpuMaterial, specular)),
+            ("shininess", offset_of!(GpuMaterial, shininess)),
+            ("ior", offset_of!(GpuMaterial, ior)),
+            ("fresnel", offset_of!(GpuMaterial, fresnel)),
+            ("pad0", pad),
+            ("pad1", pad + 4),
+        ],
+    );
+    check(
+        "Light",
+        size_of::<GpuLight>(),
+        &[
+            ("position", offset_of!(GpuLight, position)),
+            ("color", offset_of!(GpuLight, color)),
+        ],
+    );
+    let pad = offset_of!(RenderParams, pad);
+    check(
+        "RenderParams",
+        size_of::<RenderParams>(),
+        &[
+            ("eye", offset_of!(RenderParams, eye)),
+            ("tan_y", offset_of!(RenderParams, tan_y)),
+            ("fwd", offset_of!(RenderParams, fwd)),
+            ("width", offset_of!(RenderParams, width)),
+            ("right", offset_of!(RenderParams, right)),
+            ("height", offset_of!(RenderParams, height)),
+            ("up", offset_of!(RenderParams, up)),
+            ("spp", offset_of!(RenderParams, spp)),
+            ("background", offset_of!(RenderParams, background)),
+            ("strata", offset_of!(RenderParams, strata)),
+            ("ambient_light", offset_of!(RenderParams, ambient_light)),
+            ("epsilon", offset_of!(RenderParams, epsilon)),
+            ("sample_base", offset_of!(RenderParams, sample_base)),
+            ("sample_count", offset_of!(RenderParams, sample_count)),
+            ("spawn", offset_of!(RenderParams, spawn)),
+            ("light_count", offset_of!(RenderParams, light_count)),
+            ("max_groups", offset_of!(RenderParams, max_groups)),
+            ("pad0", pad),
+            ("pad1", pad + 4),
+            ("pad2", pad + 8),
         ],
     );
 }
@@ -295,4 +403,111 @@ fn adapter_filter_reports_what_exists() {
         Err(e) => panic!("unexpected error {e}"),
         Ok(_) => panic!("an adapter matched a made-up name"),
     }
+}
+
+/// The mean absolute difference (of 255) and the fraction of pixels whose largest channel
+/// difference exceeds 2/255, in 8-bit sRGB as `rays.py imgdiff` measures them.
+fn image_diff(a: &raystream_cpu::Image, b: &raystream_cpu::Image) -> (f64, f64) {
+    let (a, b) = (a.to_srgb8(), b.to_srgb8());
+    assert_eq!(a.len(), b.len());
+    let mean = a
+        .iter()
+        .zip(&b)
+        .map(|(&x, &y)| (x as f64 - y as f64).abs())
+        .sum::<f64>()
+        / a.len() as f64;
+    let over = a
+        .chunks(3)
+        .zip(b.chunks(3))
+        .filter(|(p, q)| p.iter().zip(*q).any(|(&x, &y)| x.abs_diff(y) > 2))
+        .count();
+    (mean, over as f64 / (a.len() / 3) as f64)
+}
+
+/// The GPU stream renderer against the CPU reference on the same scene: the bar (mean
+/// absolute difference < 0.5/255, ≥ 99.9 % of pixels within 2/255), the same ray, hit and shadow
+/// counts per depth (up to ties), and the same image on every run.
+fn gpu_render_matches_cpu(
+    ctx: &GpuContext,
+    scene: &raystream_scene::Scene,
+    opt: &raystream_cpu::RenderOptions,
+    what: &str,
+) {
+    let tree = KdTree::build(&scene.mesh, Builder::Sah);
+    let mut cpu_depths = Vec::new();
+    let cpu = raystream_cpu::render(scene, &tree, opt, |s| cpu_depths.push(s));
+    let tracer = GpuTracer::new(ctx, &tree).unwrap();
+    let renderer = GpuRenderer::new(&tracer, scene).unwrap();
+    let (gpu, stats) = renderer.render(opt, |_| {}).unwrap();
+    let (mean, over) = image_diff(&cpu, &gpu);
+    eprintln!(
+        "{what}: mean |diff| {mean:.4}/255, {:.4} % of pixels > 2/255",
+        over * 100.0
+    );
+    assert!(mean < 0.5, "{what}: mean absolute difference {mean}/255");
+    assert!(
+        over <= 0.001,
+        "{what}: {} % of pixels differ by more than 2/255",
+        over * 100.0
+    );
+    assert!(
+        cpu.pixels.iter().map(|p| p.length()).fold(0.0, f32::max) > 0.1,
+        "{what}: the image is black"
+    );
+    assert_eq!(stats.depths.len(), cpu_depths.len(), "{what}: depths run");
+    for (g, c) in stats.depths.iter().zip(&cpu_depths) {
+        let close = |x: usize, y: usize| x.abs_diff(y) * 1000 <= y.max(1);
+        assert!(
+            close(g.rays, c.rays) && close(g.hits, c.hits) && close(g.shadow_rays, c.shadow_rays),
+            "{what}: GPU {g:?} vs CPU {c:?}"
+        );
+    }
+    let (again, _) = renderer.render(opt, |_| {}).unwrap();
+    assert_eq!(gpu, again, "{what}: a second GPU render differs");
+    // Many small waves (each growing its queues depth by depth) give the very same film.
+    let small = GpuRenderer::new(&tracer, scene).unwrap().with_wave(999);
+    let (waves, stats) = small.render(opt, |_| {}).unwrap();
+    assert!(stats.waves > 1);
+    assert_eq!(
+        gpu, waves,
+        "{what}: rendering in waves of 999 samples differs"
+    );
+}
+
+#[test]
+fn gpu_render_matches_cpu_on_the_builtin_scene() {
+    let Some(ctx) = gpu() else { return };
+    let scene = raystream_scene::Scene::builtin_default();
+    // Glass (refraction with Fresnel) and a mirror: every depth spawns rays.
+    for (spp, max_depth) in [(1, 4), (4, 2)] {
+        let opt = raystream_cpu::RenderOptions {
+            width: 96,
+            height: 72,
+            spp,
+            max_depth,
+            traversal: Traversal::Ropes,
+        };
+        gpu_render_matches_cpu(
+            &ctx,
+            &scene,
+            &opt,
+            &format!("built-in scene, {spp} spp, depth {max_depth}"),
+        );
+    }
+}
+
+#[test]
+fn gpu_render_matches_cpu_on_a_scanned_mesh() {
+    let Some(ctx) = gpu() else { return };
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/meshes/stanford_bunny.ply");
+    let scene = raystream_scene::Scene::for_mesh(raystream_io::load_mesh(&path).unwrap(), &path);
+    let opt = raystream_cpu::RenderOptions {
+        width: 80,
+        height: 64,
+        spp: 2,
+        max_depth: 3,
+        traversal: Traversal::Ropes,
+    };
+    gpu_render_matches_cpu(&ctx, &scene, &opt, "bunny");
 }

@@ -113,6 +113,10 @@ pub struct RenderArgs {
     pub max_depth: u32,
     #[command(flatten)]
     pub accel: Accel,
+    /// Render the frame this many times and report the median frame time and frames per
+    /// second (scene loading, kd-tree build and upload apart).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub repeat: u32,
     /// No progress output.
     #[arg(short, long)]
     pub quiet: bool,

@@ -3,15 +3,15 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use raystream_accel::KdTree;
-use raystream_cpu::{RenderOptions, render};
+use raystream_accel::{KdTree, Traversal};
+use raystream_cpu::{DepthStats, RenderOptions, render};
+use raystream_gpu::{GpuRenderer, GpuTracer};
 use raystream_scene::Scene;
 
-use crate::cli::Device;
 use crate::cli::RenderArgs;
-use crate::common::{load_mesh, ms, spinner};
+use crate::common::{Backend, load_mesh, ms, open_device, spinner};
 use crate::iso::{Bones, bones};
 
 /// The built-in default: the abdomen/pelvis CT of TotalSegmentator's tests (see
@@ -43,13 +43,7 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
 }
 
 pub fn run(a: &RenderArgs) -> Result<()> {
-    // The GPU stream renderer is not built yet: rendering runs on the CPU path.
-    let device = match a.accel.device {
-        Device::Gpu => bail!(
-            "render --device gpu: the GPU stream renderer is not implemented yet (GPU ray queries are: raystream trace --device gpu); use --device cpu or auto"
-        ),
-        _ => "cpu",
-    };
+    let backend = open_device(a.accel.device, a.accel.adapter.as_deref(), a.quiet)?;
     let t0 = Instant::now();
     let (scene, bones) = load_scene(a)?;
     let load_ms = ms(t0.elapsed());
@@ -66,42 +60,113 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         max_depth: a.max_depth,
         traversal: a.accel.traversal.into(),
     };
+    let t_setup = Instant::now();
+    let gpu = match &backend {
+        Backend::Gpu(_) if opt.traversal != Traversal::Ropes => {
+            bail!("--device gpu runs the rope traversal only (--traversal ropes)")
+        }
+        Backend::Gpu(ctx) => {
+            let tracer = GpuTracer::new(ctx, &tree).with_context(|| ctx.describe())?;
+            Some(tracer)
+        }
+        Backend::Cpu => None,
+    };
+    let renderer = match &gpu {
+        Some(tracer) => Some(GpuRenderer::new(tracer, &scene)?),
+        None => None,
+    };
+    let setup_ms = ms(t_setup.elapsed());
+    // The progress bar counts depths (of every wave, on the GPU) over all repeats.
+    let waves = match &renderer {
+        Some(r) => r.waves(&opt),
+        None => 1,
+    };
     let bar = if a.quiet {
         ProgressBar::hidden()
     } else {
-        ProgressBar::new(opt.max_depth as u64 + 1)
+        ProgressBar::new((opt.max_depth as u64 + 1) * waves as u64 * a.repeat as u64)
     };
     bar.set_style(
         ProgressStyle::with_template("{bar:30} depth {pos}/{len} {msg} [{elapsed}]").unwrap(),
     );
-    let t1 = Instant::now();
+    let mut frame_ms = Vec::new();
+    let mut image = None;
     let mut total_rays = 0usize;
-    let image = render(&scene, &tree, &opt, |s| {
-        total_rays += s.rays + s.shadow_rays;
-        bar.set_message(format!(
-            "{} rays, {} hits, {} shadow rays",
-            s.rays, s.hits, s.shadow_rays
-        ));
-        bar.inc(1);
-    });
-    let render_ms = ms(t1.elapsed());
+    let mut kernel_ms = None;
+    for _ in 0..a.repeat {
+        total_rays = 0;
+        let mut on_depth = |s: DepthStats| {
+            total_rays += s.rays + s.shadow_rays;
+            bar.set_message(format!(
+                "{} rays, {} hits, {} shadow rays",
+                s.rays, s.hits, s.shadow_rays
+            ));
+            bar.inc(1);
+        };
+        let t1 = Instant::now();
+        let img = match &renderer {
+            Some(r) => {
+                let (img, stats) = r.render(&opt, &mut on_depth)?;
+                kernel_ms = stats.kernel_gpu_ms;
+                img
+            }
+            None => render(&scene, &tree, &opt, &mut on_depth),
+        };
+        frame_ms.push(ms(t1.elapsed()));
+        // Depths that ended early leave the bar short: count them as done.
+        bar.set_position(
+            bar.position()
+                .max((opt.max_depth as u64 + 1) * waves as u64 * frame_ms.len() as u64),
+        );
+        image = Some(img);
+    }
     bar.finish_and_clear();
+    let image = image.expect("at least one frame");
     image.save_png(&a.output).map_err(anyhow::Error::msg)?;
     if !a.quiet {
+        frame_ms.sort_by(f64::total_cmp);
+        let median = frame_ms[frame_ms.len() / 2];
         eprintln!(
-            "raystream: wrote {} ({}x{}, {} spp, depth {}) on {device}: load {:.0} ms, kd-tree {:.0} ms ({} triangles), render {:.0} ms ({:.2} Mrays/s over {} rays)",
+            "raystream: wrote {} ({}x{}, {} spp, depth {}) on {} ({}): load {:.0} ms, kd-tree {:.0} ms ({} triangles){}, render {:.1} ms{} ({:.2} Mrays/s over {} rays)",
             a.output.display(),
             opt.width,
             opt.height,
             opt.spp,
             opt.max_depth,
+            backend.name(),
+            backend.adapter(),
             load_ms,
             tree.stats.build_ms,
             scene.mesh.len(),
-            render_ms,
-            total_rays as f64 / render_ms / 1e3,
+            if gpu.is_some() {
+                format!(", GPU upload and pipelines {setup_ms:.0} ms")
+            } else {
+                String::new()
+            },
+            median,
+            if a.repeat > 1 {
+                format!(
+                    " median of {} = {:.2} frames/s (min {:.1} ms)",
+                    a.repeat,
+                    1e3 / median,
+                    frame_ms[0]
+                )
+            } else {
+                String::new()
+            },
+            total_rays as f64 / median / 1e3,
             total_rays
         );
+        if let Some(k) = kernel_ms {
+            let parts: Vec<String> = k
+                .iter()
+                .map(|(name, ms)| format!("{name} {ms:.2}"))
+                .collect();
+            eprintln!(
+                "raystream: GPU kernel time of the last frame (ms): {}",
+                parts.join(", ")
+            );
+        }
         if let Some(b) = bones {
             eprintln!(
                 "raystream: of the load: volume {:.0} ms, isosurface {:.0} ms ({} voxels at {} HU)",

@@ -232,3 +232,60 @@ fn default_render_writes_render_png() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(dir.join("render.png").exists());
 }
+
+/// `render --device gpu` against `render --device cpu` of the same scene, measured by
+/// `rays.py imgdiff`: mean absolute difference < 0.5/255 and ≥ 99.9 % of pixels within 2/255.
+fn gpu_matches_cpu(name: &str, args: &[&str]) {
+    if !gpu_available() {
+        return;
+    }
+    let Some(py) = python() else { return };
+    let path = |dev: &str| tmp(&format!("gpu-vs-cpu-{name}-{dev}.png"));
+    for dev in ["cpu", "gpu"] {
+        let out = path(dev);
+        let mut all = vec!["render"];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["-o", out.to_str().unwrap(), "--quiet", "--device", dev]);
+        let o = run(&all);
+        assert!(o.status.success(), "{name} on {dev}: {}", stderr(&o));
+    }
+    let d = rays_py(
+        &py,
+        &[
+            "imgdiff",
+            path("cpu").to_str().unwrap(),
+            path("gpu").to_str().unwrap(),
+            "--json",
+        ],
+    );
+    assert!(d.status.success(), "imgdiff: {}", stderr(&d));
+    let r: serde_json::Value = serde_json::from_str(&stdout(&d)).unwrap();
+    let mean = r["mean_abs_diff"].as_f64().unwrap();
+    let over = r["frac_gt_2"].as_f64().unwrap();
+    assert!(
+        mean < 0.5 && over <= 0.001,
+        "{name}: GPU vs CPU mean {mean}/255, {over} of pixels > 2/255"
+    );
+    assert!(r["std_a"].as_f64().unwrap() > 5.0, "{name}: a blank image");
+}
+
+#[test]
+fn gpu_render_matches_cpu_default_ct() {
+    gpu_matches_cpu("default", &["--size", "96x72", "--spp", "1"]);
+}
+
+#[test]
+fn gpu_render_matches_cpu_spot_scene() {
+    gpu_matches_cpu(
+        "spot",
+        &[
+            &spot_scene(),
+            "--size",
+            "96x72",
+            "--spp",
+            "2",
+            "--max-depth",
+            "5",
+        ],
+    );
+}

@@ -140,3 +140,37 @@ pub fn embree_check(python: &Path, mesh: &str, rays: &Path, hits: &Path, any: bo
         stderr(&c)
     );
 }
+
+/// Whether `--device gpu` can open an adapter here; under CI it must (lavapipe at least).
+pub fn gpu_available() -> bool {
+    let probe = tmp("probe.rays");
+    std::fs::write(
+        &probe,
+        f32s(&[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY]),
+    )
+    .unwrap();
+    let o = run(&[
+        "trace",
+        &mesh("spot.obj"),
+        "--rays",
+        probe.to_str().unwrap(),
+        "-o",
+        tmp("probe.hits").to_str().unwrap(),
+        "--device",
+        "gpu",
+        "-q",
+    ]);
+    if o.status.success() {
+        return true;
+    }
+    if std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!("CI=true but --device gpu fails: {}", stderr(&o));
+    }
+    eprintln!("skipping GPU test: {}", stderr(&o));
+    false
+}
+
+/// Little-endian bytes of `v`.
+pub fn f32s(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}

@@ -1,8 +1,9 @@
-// Ray queries on the kd-tree: stackless traversal with ropes and the watertight triangle test,
-// the same algorithm as raystream-accel's CPU `ropes` traversal (traverse.rs, intersect.rs).
-// Reads: the flat kd-tree (inners, leaves, tris, uploaded unchanged) and a ray queue.
-// Writes: one hit record per ray. The struct layouts mirror raystream-accel's layout.rs and
-// this crate's layout.rs; a naga-based test checks every offset and size.
+// The kd-tree on the GPU: its flat layout (uploaded unchanged) and `trace`, the stackless
+// traversal with ropes and the watertight triangle test, the same algorithm as raystream-accel's
+// CPU `ropes` traversal (traverse.rs, intersect.rs). Shared by the ray-query kernels
+// (queries.wgsl) and the stream renderer (render.wgsl), which bind the tree as group 0.
+// The struct layouts mirror raystream-accel's layout.rs and this crate's layout.rs; a
+// naga-based test checks every offset and size.
 
 // LEAF_BIT, NO_ROPE, NO_PRIM and WORKGROUP_SIZE come from the prelude that lib.rs generates
 // from the Rust constants.
@@ -56,8 +57,7 @@ struct Params {
 @group(0) @binding(1) var<storage, read> inners: array<KdInner>;
 @group(0) @binding(2) var<storage, read> leaves: array<KdLeaf>;
 @group(0) @binding(3) var<storage, read> tris: array<KdTri>;
-@group(0) @binding(4) var<storage, read> rays: array<RayIn>;
-@group(0) @binding(5) var<storage, read_write> hits: array<HitOut>;
+
 
 // NaN and infinity by their bits: shader compilers may assume float arithmetic is finite.
 fn not_finite(x: f32) -> bool {
@@ -229,22 +229,8 @@ fn trace(r: RayIn, any_hit: bool) -> HitOut {
     return best;
 }
 
+// The work item of invocation `gid` in a dispatch of `groups` (x-major; y when one dimension
+// cannot hold the queue).
 fn ray_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
     return gid.x + gid.y * groups.x * WORKGROUP_SIZE;
-}
-
-@compute @workgroup_size(WORKGROUP_SIZE)
-fn intersect_closest(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let i = ray_index(gid, groups);
-    if i < params.ray_count {
-        hits[i] = trace(rays[i], false);
-    }
-}
-
-@compute @workgroup_size(WORKGROUP_SIZE)
-fn intersect_any(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let i = ray_index(gid, groups);
-    if i < params.ray_count {
-        hits[i] = trace(rays[i], true);
-    }
 }

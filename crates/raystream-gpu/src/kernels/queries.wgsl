@@ -1,0 +1,21 @@
+// Ray queries: one hit record per ray of a queue (RAYS.bin in, HITS.bin out), closest or any.
+// Follows kdtree.wgsl, whose group 0 bindings 0-3 hold the tree.
+
+@group(0) @binding(4) var<storage, read> rays: array<RayIn>;
+@group(0) @binding(5) var<storage, read_write> hits: array<HitOut>;
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn intersect_closest(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = ray_index(gid, groups);
+    if i < params.ray_count {
+        hits[i] = trace(rays[i], false);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn intersect_any(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = ray_index(gid, groups);
+    if i < params.ray_count {
+        hits[i] = trace(rays[i], true);
+    }
+}

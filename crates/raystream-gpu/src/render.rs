@@ -1,0 +1,663 @@
+//! The GPU stream renderer: the CPU renderer's stages (`raystream-cpu`) as the compute kernels
+//! of `kernels/render.wgsl`, joined by ray queues that stay on the device.
+//!
+//! The host is the paper's "CPU control". It splits the frame into waves of at most
+//! [`MAX_WAVE`] samples; for each wave it generates the camera rays, then runs depth after
+//! depth: one submission per depth whose kernels are dispatched indirectly from counts the
+//! kernels wrote themselves. After each depth it reads back the counters (a few bytes) to stop
+//! when the queue is empty and to size the next depth's queues exactly (a depth's queue is at
+//! most twice the previous one: one reflection and one refraction per hit), so nothing can
+//! overflow. The film is 64-bit fixed point added with atomics: the same image every run.
+
+use std::time::Instant;
+
+use raystream_cpu::{DepthStats, Image, RenderOptions, strata, surface_epsilon};
+use raystream_math::Vec3;
+use raystream_scene::Scene;
+
+use crate::layout::{
+    GpuLight, GpuMaterial, RayWork, RenderParams, ShadeTri, ShadowWork, Vertex, counter,
+};
+use crate::{GpuContext, GpuError, GpuHit, GpuTracer, WORKGROUP_SIZE, kdtree_wgsl};
+
+const RENDER_WGSL: &str = include_str!("kernels/render.wgsl");
+
+/// Samples generated and traced together; bounds the queues' memory.
+pub const MAX_WAVE: u32 = 1 << 20;
+/// Fixed-point steps per unit of radiance in the film.
+pub const FILM_SCALE: f32 = (1u32 << 24) as f32;
+/// The largest single contribution the film takes (keeps one rounded step inside a u32).
+pub const MAX_CONTRIBUTION: f32 = 255.0;
+
+/// The WGSL source of the render kernels: the kd-tree code, the render constants, the kernels.
+pub fn render_wgsl() -> String {
+    use counter::*;
+    format!(
+        "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\n\n{RENDER_WGSL}",
+        kdtree_wgsl()
+    )
+}
+
+/// The kernels in the order one depth runs them, then `generate_camera_rays`, which runs once
+/// per wave before the first depth (last here so that the timestamps of a later depth, which
+/// does not run it, are one range from the start: resolve offsets must be 256-aligned).
+pub const STAGES: [&str; 8] = [
+    "intersect_closest",
+    "handle_misses",
+    "shade_hits",
+    "prepare_shadows",
+    "intersect_any",
+    "accumulate",
+    "advance",
+    "generate_camera_rays",
+];
+const GENERATE: usize = 7;
+/// Stages run by the first depth of a wave and by later ones.
+const FIRST_DEPTH: [usize; 8] = [GENERATE, 0, 1, 2, 3, 4, 5, 6];
+const LATER_DEPTH: [usize; 7] = [0, 1, 2, 3, 4, 5, 6];
+/// Byte offsets of the two dispatch argument triples in the args buffer.
+const QUEUE_ARGS: u64 = 0;
+const SHADOW_ARGS: u64 = 12;
+
+/// What a GPU render did and how long its parts took.
+#[derive(Clone, Debug, Default)]
+pub struct GpuRenderStats {
+    /// Per depth, summed over the waves.
+    pub depths: Vec<DepthStats>,
+    pub waves: u32,
+    /// Wall time of the frame (generation to film readback), milliseconds.
+    pub render_ms: f64,
+    /// Each kernel's own time summed over its passes, from timestamp queries; `None` where the
+    /// adapter has none or writes equal stamps.
+    pub kernel_gpu_ms: Option<Vec<(&'static str, f64)>>,
+}
+
+/// The scene's shading data on the GPU and the render pipelines, over a [`GpuTracer`]'s tree.
+pub struct GpuRenderer<'a> {
+    tracer: &'a GpuTracer<'a>,
+    scene: &'a Scene,
+    vertices: wgpu::Buffer,
+    shade_tris: wgpu::Buffer,
+    materials: wgpu::Buffer,
+    lights: wgpu::Buffer,
+    params: wgpu::Buffer,
+    layouts: [wgpu::BindGroupLayout; 4],
+    pipelines: Vec<wgpu::ComputePipeline>,
+    /// Samples per wave: at most [`MAX_WAVE`], less where the device's bindings need it.
+    wave: u32,
+}
+
+fn layout_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// A uniform at binding 0, then `n` storage buffers.
+fn group_layout(
+    ctx: &GpuContext,
+    label: &str,
+    uniform: bool,
+    n: u32,
+    read_only: bool,
+) -> wgpu::BindGroupLayout {
+    let storage = wgpu::BufferBindingType::Storage { read_only };
+    let entries: Vec<_> = (0..n)
+        .map(|i| {
+            if uniform && i == 0 {
+                layout_entry(0, wgpu::BufferBindingType::Uniform)
+            } else {
+                layout_entry(i, storage)
+            }
+        })
+        .collect();
+    ctx.device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries: &entries,
+        })
+}
+
+fn bind(
+    ctx: &GpuContext,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    buffers: &[&wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<_> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect();
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
+}
+
+fn v3(v: Vec3) -> [f32; 3] {
+    v.to_array()
+}
+
+/// The work buffers of one frame; queues grow as the depths need.
+struct Queues {
+    counters: wgpu::Buffer,
+    args: wgpu::Buffer,
+    /// The two ray queues: `rays[cur]` is traced, `rays[1 - cur]` receives the next depth.
+    rays: [wgpu::Buffer; 2],
+    hits: wgpu::Buffer,
+    shadows: wgpu::Buffer,
+    film: wgpu::Buffer,
+    /// Counters, then 2 timestamps per stage.
+    readback: wgpu::Buffer,
+    resolve: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+}
+
+const COUNTER_BYTES: u64 = counter::SLOTS as u64 * 4;
+const STAMP_BYTES: u64 = STAGES.len() as u64 * 16;
+
+impl<'a> GpuRenderer<'a> {
+    /// Uploads `scene`'s vertices, triangles, materials and lights, whose kd-tree `tracer`
+    /// holds, and builds the render pipelines.
+    pub fn new(tracer: &'a GpuTracer<'a>, scene: &'a Scene) -> Result<GpuRenderer<'a>, GpuError> {
+        let ctx = tracer.ctx;
+        let need = 3 + 4 + 6 + 1;
+        if ctx.limits.max_storage_buffers_per_shader_stage < need {
+            return Err(ctx.err(format!(
+                "the render kernels bind {need} storage buffers, the adapter allows {}",
+                ctx.limits.max_storage_buffers_per_shader_stage
+            )));
+        }
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let vertices: Vec<Vertex> = scene
+            .mesh
+            .positions
+            .iter()
+            .zip(&scene.normals)
+            .map(|(p, n)| Vertex {
+                position: p.extend(1.0).to_array(),
+                normal: n.extend(0.0).to_array(),
+            })
+            .collect();
+        let shade_tris: Vec<ShadeTri> = scene
+            .mesh
+            .triangles
+            .iter()
+            .zip(&scene.material_of)
+            .map(|(&v, &material)| ShadeTri { v, material })
+            .collect();
+        let materials: Vec<GpuMaterial> = scene
+            .materials
+            .iter()
+            .map(|m| GpuMaterial {
+                ambient: v3(m.ambient),
+                reflectivity: m.reflectivity,
+                diffuse: v3(m.diffuse),
+                transparency: m.transparency,
+                specular: v3(m.specular),
+                shininess: m.shininess,
+                ior: m.ior,
+                fresnel: m.fresnel as u32,
+                pad: [0; 2],
+            })
+            .collect();
+        let lights: Vec<GpuLight> = scene
+            .lights
+            .iter()
+            .map(|l| GpuLight {
+                position: l.position.extend(1.0).to_array(),
+                color: l.color.extend(0.0).to_array(),
+            })
+            .collect();
+        let none = wgpu::BufferUsages::empty();
+        let vertices = ctx.storage("vertices", bytemuck::cast_slice(&vertices), none)?;
+        let shade_tris =
+            ctx.storage("shading triangles", bytemuck::cast_slice(&shade_tris), none)?;
+        let materials = ctx.storage("materials", bytemuck::cast_slice(&materials), none)?;
+        let lights = ctx.storage("lights", bytemuck::cast_slice(&lights), none)?;
+        let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("render params"),
+            size: std::mem::size_of::<RenderParams>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let layouts = [
+            group_layout(ctx, "kd-tree", true, 4, true),
+            group_layout(ctx, "scene", true, 5, true),
+            group_layout(ctx, "queues", false, 6, false),
+            group_layout(ctx, "dispatch args", false, 1, false),
+        ];
+        let module = ctx
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("render.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(render_wgsl().into()),
+            });
+        // The kernels that write dispatch arguments see them as group 3; the others may not
+        // (a buffer cannot be storage and indirect-argument source in one dispatch).
+        let layout = |groups: usize| {
+            let l: Vec<_> = layouts[..groups].iter().map(Some).collect();
+            ctx.device
+                .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("render"),
+                    bind_group_layouts: &l,
+                    immediate_size: 0,
+                })
+        };
+        let (work, control) = (layout(3), layout(4));
+        let pipelines = STAGES
+            .iter()
+            .map(|&entry| {
+                let writes_args = matches!(entry, "prepare_shadows" | "advance");
+                ctx.device
+                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(entry),
+                        layout: Some(if writes_args { &control } else { &work }),
+                        module: &module,
+                        entry_point: Some(entry),
+                        compilation_options: Default::default(),
+                        cache: None,
+                    })
+            })
+            .collect();
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(ctx.err(e));
+        }
+        let per_sample = 48 * 2.max(scene.lights.len() as u64);
+        let fit = (ctx.max_binding() / per_sample).min(u32::MAX as u64) as u32;
+        Ok(GpuRenderer {
+            wave: MAX_WAVE.min(fit).max(1),
+            tracer,
+            scene,
+            vertices,
+            shade_tris,
+            materials,
+            lights,
+            params,
+            layouts,
+            pipelines,
+        })
+    }
+
+    fn buffer(
+        &self,
+        what: &'static str,
+        size: u64,
+        usage: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        let ctx = self.tracer.ctx;
+        let limit = ctx.max_binding();
+        if size > limit {
+            return Err(GpuError::TooLarge {
+                adapter: ctx.info.name.clone(),
+                what,
+                need: size,
+                limit,
+            });
+        }
+        Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(what),
+            size: size.max(64),
+            usage,
+            mapped_at_creation: false,
+        }))
+    }
+
+    fn work_buffer(&self, what: &'static str, size: u64) -> Result<wgpu::Buffer, GpuError> {
+        self.buffer(
+            what,
+            size,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        )
+    }
+
+    /// Grows `buf` to hold `n` items of `T` (its old contents are not kept).
+    fn ensure<T>(
+        &self,
+        buf: &mut wgpu::Buffer,
+        what: &'static str,
+        n: u64,
+    ) -> Result<(), GpuError> {
+        let need = n * std::mem::size_of::<T>() as u64;
+        if buf.size() < need {
+            // Grow with headroom so that a slowly growing queue is not reallocated every depth.
+            *buf = self.work_buffer(what, need + need / 2)?;
+        }
+        Ok(())
+    }
+
+    /// How many waves a frame of `opt` takes.
+    pub fn waves(&self, opt: &RenderOptions) -> u64 {
+        (opt.width as u64 * opt.height as u64 * opt.spp as u64).div_ceil(self.wave as u64)
+    }
+
+    /// Traces at most `samples` samples at a time (the default is the most that fits, up to
+    /// [`MAX_WAVE`]); the image does not depend on it.
+    pub fn with_wave(mut self, samples: u32) -> Self {
+        self.wave = self.wave.min(samples.max(1));
+        self
+    }
+
+    /// Renders the scene with `opt` (its `traversal` is the CPU's; the GPU always uses ropes);
+    /// `progress` is told after each depth of each wave.
+    pub fn render(
+        &self,
+        opt: &RenderOptions,
+        mut progress: impl FnMut(DepthStats),
+    ) -> Result<(Image, GpuRenderStats), GpuError> {
+        let ctx = self.tracer.ctx;
+        let scene = self.scene;
+        let t0 = Instant::now();
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pixels = opt.width as u64 * opt.height as u64;
+        let total = pixels * opt.spp as u64;
+        if total > u32::MAX as u64 {
+            return Err(ctx.err(format!(
+                "{}x{} pixels at {} samples is more than 2^32 samples",
+                opt.width, opt.height, opt.spp
+            )));
+        }
+        let wave = self.wave;
+        let lights = scene.lights.len() as u64;
+        let mut q = self.queues(pixels, wave as u64, lights)?;
+        let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
+        let mut params = RenderParams {
+            eye: v3(cam.eye),
+            tan_y: cam.tan_y,
+            fwd: v3(cam.fwd),
+            width: opt.width,
+            right: v3(cam.right),
+            height: opt.height,
+            up: v3(cam.up),
+            spp: opt.spp,
+            background: v3(scene.background),
+            strata: strata(opt.spp),
+            ambient_light: v3(scene.ambient_light),
+            epsilon: surface_epsilon(scene),
+            light_count: lights as u32,
+            max_groups: ctx.limits.max_compute_workgroups_per_dimension.max(1),
+            ..Default::default()
+        };
+        let mut stats = GpuRenderStats::default();
+        let mut stage_ms = [0f64; STAGES.len()];
+        let mut timed = q.resolve.is_some();
+        let tree_group = self.tracer.bind_tree(&self.layouts[0]);
+        let scene_group = bind(
+            ctx,
+            "scene",
+            &self.layouts[1],
+            &[
+                &self.params,
+                &self.vertices,
+                &self.shade_tris,
+                &self.materials,
+                &self.lights,
+            ],
+        );
+        let args_group = bind(ctx, "args", &self.layouts[3], &[&q.args]);
+        let mut base = 0u64;
+        while base < total {
+            let n = (total - base).min(wave as u64) as u32;
+            stats.waves += 1;
+            params.sample_base = base as u32;
+            params.sample_count = n;
+            let mut counters = [0u32; counter::SLOTS as usize];
+            counters[counter::QUEUE as usize] = n;
+            ctx.queue
+                .write_buffer(&q.counters, 0, bytemuck::cast_slice(&counters));
+            ctx.queue
+                .write_buffer(&q.args, QUEUE_ARGS, bytemuck::cast_slice(&self.dims(n)));
+            let mut cur = 0usize;
+            let mut count = n as u64;
+            for depth in 0..=opt.max_depth {
+                self.ensure::<RayWork>(&mut q.rays[1 - cur], "next ray queue", 2 * count)?;
+                self.ensure::<ShadowWork>(&mut q.shadows, "shadow queue", count * lights)?;
+                self.ensure::<GpuHit>(&mut q.hits, "hits", count.max(count * lights))?;
+                params.spawn = (depth < opt.max_depth) as u32;
+                ctx.queue
+                    .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+                let work_group = bind(
+                    ctx,
+                    "queues",
+                    &self.layouts[2],
+                    &[
+                        &q.counters,
+                        &q.rays[cur],
+                        &q.hits,
+                        &q.rays[1 - cur],
+                        &q.shadows,
+                        &q.film,
+                    ],
+                );
+                let mut enc = ctx
+                    .device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                        label: Some("depth"),
+                    });
+                let order = if depth == 0 {
+                    &FIRST_DEPTH[..]
+                } else {
+                    &LATER_DEPTH[..]
+                };
+                for &k in order {
+                    let stage = STAGES[k];
+                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                        label: Some(stage),
+                        timestamp_writes: q.resolve.as_ref().map(|(set, _)| {
+                            wgpu::ComputePassTimestampWrites {
+                                query_set: set,
+                                beginning_of_pass_write_index: Some(2 * k as u32),
+                                end_of_pass_write_index: Some(2 * k as u32 + 1),
+                            }
+                        }),
+                    });
+                    pass.set_pipeline(&self.pipelines[k]);
+                    pass.set_bind_group(0, &tree_group, &[]);
+                    pass.set_bind_group(1, &scene_group, &[]);
+                    pass.set_bind_group(2, &work_group, &[]);
+                    match stage {
+                        "generate_camera_rays" => {
+                            let [gx, gy, _] = self.dims(n);
+                            pass.dispatch_workgroups(gx, gy, 1);
+                        }
+                        "prepare_shadows" | "advance" => {
+                            pass.set_bind_group(3, &args_group, &[]);
+                            pass.dispatch_workgroups(1, 1, 1);
+                        }
+                        "intersect_any" | "accumulate" => {
+                            pass.dispatch_workgroups_indirect(&q.args, SHADOW_ARGS)
+                        }
+                        _ => pass.dispatch_workgroups_indirect(&q.args, QUEUE_ARGS),
+                    }
+                }
+                if let Some((set, resolve)) = &q.resolve {
+                    enc.resolve_query_set(set, 0..2 * order.len() as u32, resolve, 0);
+                    enc.copy_buffer_to_buffer(resolve, 0, &q.readback, COUNTER_BYTES, STAMP_BYTES);
+                }
+                enc.copy_buffer_to_buffer(&q.counters, 0, &q.readback, 0, COUNTER_BYTES);
+                ctx.queue.submit([enc.finish()]);
+                let words = read_u32s(ctx, &q.readback)?;
+                let s = DepthStats {
+                    depth,
+                    rays: words[counter::STAT_RAYS as usize] as usize,
+                    hits: words[counter::STAT_HITS as usize] as usize,
+                    shadow_rays: words[counter::STAT_SHADOWS as usize] as usize,
+                };
+                if timed {
+                    let stamps: &[u64] = bytemuck::cast_slice(&words[counter::SLOTS as usize..]);
+                    let period = ctx.queue.get_timestamp_period() as f64 * 1e-6;
+                    let mut any = false;
+                    for (k, ms) in stage_ms.iter_mut().enumerate() {
+                        if k == GENERATE && depth > 0 {
+                            continue;
+                        }
+                        let ticks = stamps[2 * k + 1].wrapping_sub(stamps[2 * k]);
+                        any |= ticks > 0;
+                        *ms += ticks as f64 * period;
+                    }
+                    timed = any;
+                }
+                if stats.depths.len() <= depth as usize {
+                    stats.depths.push(DepthStats {
+                        depth,
+                        ..Default::default()
+                    });
+                }
+                let d = &mut stats.depths[depth as usize];
+                d.rays += s.rays;
+                d.hits += s.hits;
+                d.shadow_rays += s.shadow_rays;
+                progress(s);
+                count = words[counter::QUEUE as usize] as u64;
+                if count == 0 {
+                    break;
+                }
+                cur = 1 - cur;
+            }
+            base += n as u64;
+        }
+        let mut film = read_u32s(ctx, &q.film)?;
+        film.truncate(pixels as usize * 6);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(ctx.err(e));
+        }
+        let scale = 1.0 / (FILM_SCALE as f64 * opt.spp as f64);
+        let pixels = film
+            .chunks_exact(6)
+            .map(|p| {
+                let ch = |c: usize| {
+                    let v = (p[2 * c + 1] as u64) << 32 | p[2 * c] as u64;
+                    (v as f64 * scale) as f32
+                };
+                Vec3::new(ch(0), ch(1), ch(2))
+            })
+            .collect();
+        stats.render_ms = t0.elapsed().as_secs_f64() * 1e3;
+        stats.kernel_gpu_ms = timed.then(|| {
+            STAGES
+                .iter()
+                .copied()
+                .zip(stage_ms.iter().copied())
+                .collect()
+        });
+        Ok((
+            Image {
+                width: opt.width,
+                height: opt.height,
+                pixels,
+            },
+            stats,
+        ))
+    }
+
+    /// Workgroups for `n` items, as the kernels' `write_args` computes them.
+    fn dims(&self, n: u32) -> [u32; 3] {
+        let groups = n.div_ceil(WORKGROUP_SIZE);
+        let gx = groups.min(
+            self.tracer
+                .ctx
+                .limits
+                .max_compute_workgroups_per_dimension
+                .max(1),
+        );
+        let gy = if gx == 0 { 0 } else { groups.div_ceil(gx) };
+        [gx, gy, 1]
+    }
+
+    fn queues(&self, pixels: u64, wave: u64, lights: u64) -> Result<Queues, GpuError> {
+        let ctx = self.tracer.ctx;
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let ray_bytes = std::mem::size_of::<RayWork>() as u64;
+        let resolve = ctx
+            .device
+            .features()
+            .contains(wgpu::Features::TIMESTAMP_QUERY)
+            .then(|| {
+                let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("render kernel timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: 2 * STAGES.len() as u32,
+                });
+                let buf = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("render timestamps"),
+                    size: STAMP_BYTES,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                });
+                (set, buf)
+            });
+        Ok(Queues {
+            counters: self.buffer(
+                "queue counters",
+                COUNTER_BYTES,
+                usage | wgpu::BufferUsages::COPY_SRC,
+            )?,
+            args: self.buffer(
+                "dispatch arguments",
+                24,
+                usage | wgpu::BufferUsages::INDIRECT,
+            )?,
+            rays: [
+                self.work_buffer("ray queue", wave * ray_bytes)?,
+                self.work_buffer("next ray queue", 2 * wave * ray_bytes)?,
+            ],
+            hits: self.work_buffer("hits", wave * lights.max(1) * 16)?,
+            shadows: self.work_buffer("shadow queue", wave * lights.max(1) * ray_bytes)?,
+            film: self.buffer("film", pixels * 24, usage | wgpu::BufferUsages::COPY_SRC)?,
+            readback: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("counters readback"),
+                size: COUNTER_BYTES + STAMP_BYTES,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            resolve,
+        })
+    }
+}
+
+/// Waits for the GPU and reads a whole buffer as u32 words (via a staging copy unless `buf` is
+/// mappable).
+fn read_u32s(ctx: &GpuContext, buf: &wgpu::Buffer) -> Result<Vec<u32>, GpuError> {
+    let staging;
+    let src = if buf.usage().contains(wgpu::BufferUsages::MAP_READ) {
+        buf
+    } else {
+        staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: buf.size(),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("readback"),
+            });
+        enc.copy_buffer_to_buffer(buf, 0, &staging, 0, buf.size());
+        ctx.queue.submit([enc.finish()]);
+        &staging
+    };
+    let slice = src.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    ctx.wait()?;
+    rx.recv().map_err(|e| ctx.err(e))?.map_err(|e| ctx.err(e))?;
+    let view = slice.get_mapped_range().map_err(|e| ctx.err(e))?;
+    let words = bytemuck::cast_slice(&view[..]).to_vec();
+    drop(view);
+    src.unmap();
+    Ok(words)
+}
