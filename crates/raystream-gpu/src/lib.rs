@@ -8,6 +8,7 @@
 
 pub mod layout;
 mod render;
+mod split;
 
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -19,6 +20,7 @@ use raystream_math::Ray;
 use wgpu::util::DeviceExt;
 
 pub use render::{GpuRenderStats, GpuRenderer, MAX_WAVE, STAGES, render_wgsl};
+pub use split::{ITERATIONS_PER_SUBMIT, split_wgsl};
 
 /// Threads per workgroup of every kernel.
 pub const WORKGROUP_SIZE: u32 = 64;
@@ -163,6 +165,65 @@ impl GpuContext {
         Ok(())
     }
 
+    /// A zeroed storage buffer of `size` bytes (copyable both ways, plus `extra` usages),
+    /// refused with a clear error beyond what a kernel can bind.
+    fn work_buffer(
+        &self,
+        what: &'static str,
+        size: u64,
+        extra: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        let limit = self.max_binding();
+        if size > limit {
+            return Err(GpuError::TooLarge {
+                adapter: self.info.name.clone(),
+                what,
+                need: size,
+                limit,
+            });
+        }
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(what),
+            size: size.max(64).next_multiple_of(4),
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_DST
+                | wgpu::BufferUsages::COPY_SRC
+                | extra,
+            mapped_at_creation: false,
+        }))
+    }
+
+    /// A timestamp query set of `count` entries and the buffer to resolve it into, where the
+    /// adapter has timestamp queries.
+    fn timer(&self, count: u32) -> Option<(wgpu::QuerySet, wgpu::Buffer)> {
+        self.device
+            .features()
+            .contains(wgpu::Features::TIMESTAMP_QUERY)
+            .then(|| {
+                let set = self.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("kernel timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count,
+                });
+                let buf = self.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("resolved timestamps"),
+                    size: count as u64 * 8,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                });
+                (set, buf)
+            })
+    }
+
+    /// Workgroups (x, y, 1) for `n` items of one thread each, as the kernels' dispatch-argument
+    /// writers compute them.
+    fn dims(&self, n: u32) -> [u32; 3] {
+        let groups = n.div_ceil(WORKGROUP_SIZE);
+        let gx = groups.min(self.limits.max_compute_workgroups_per_dimension.max(1));
+        let gy = if gx == 0 { 0 } else { groups.div_ceil(gx) };
+        [gx, gy, 1]
+    }
+
     /// The largest buffer a kernel can bind.
     fn max_binding(&self) -> u64 {
         self.limits
@@ -213,8 +274,20 @@ pub struct GpuTracer<'a> {
     params: Params,
     closest: wgpu::ComputePipeline,
     any: wgpu::ComputePipeline,
+    split: std::sync::OnceLock<split::SplitKernels>,
     /// Milliseconds spent uploading the tree.
     pub upload_ms: f64,
+}
+
+/// How a ray query runs on the GPU.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Kernels {
+    /// One kernel per query: descend, intersect, follow the rope, in one loop per ray.
+    #[default]
+    Fused,
+    /// The paper's layout: a traversal kernel writes (ray, leaf) work items, an intersection
+    /// kernel consumes them and sends unfinished rays back, one leaf step per dispatch pair.
+    Split,
 }
 
 /// Timings of one [`GpuTracer::trace`] call, milliseconds.
@@ -223,9 +296,11 @@ pub struct TraceTimes {
     pub upload_ms: f64,
     pub kernel_ms: f64,
     pub readback_ms: f64,
-    /// The kernel's own time between its pass's timestamps, where the adapter has timestamp
+    /// The kernels' own time between their passes' timestamps, where the adapter has timestamp
     /// queries: the figure to compare kernels by.
     pub kernel_gpu_ms: Option<f64>,
+    /// Split kernels: leaf steps (traverse/intersect dispatch pairs) run.
+    pub split_steps: Option<u32>,
 }
 
 impl<'a> GpuTracer<'a> {
@@ -287,6 +362,7 @@ impl<'a> GpuTracer<'a> {
             params,
             closest,
             any,
+            split: std::sync::OnceLock::new(),
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }
@@ -318,8 +394,24 @@ impl<'a> GpuTracer<'a> {
             })
     }
 
-    /// Traces every ray (closest hit, or any hit with `any`), returning one record per ray.
+    fn split_kernels(&self) -> &split::SplitKernels {
+        self.split
+            .get_or_init(|| split::SplitKernels::new(self.ctx))
+    }
+
+    /// Traces every ray (closest hit, or any hit with `any`) with the fused kernel, returning
+    /// one record per ray.
     pub fn trace(&self, rays: &[Ray], any: bool) -> Result<(Vec<GpuHit>, TraceTimes), GpuError> {
+        self.trace_with(rays, any, Kernels::Fused)
+    }
+
+    /// As [`GpuTracer::trace`], with the fused or the split kernels (same hits).
+    pub fn trace_with(
+        &self,
+        rays: &[Ray],
+        any: bool,
+        kernels: Kernels,
+    ) -> Result<(Vec<GpuHit>, TraceTimes), GpuError> {
         let ctx = self.ctx;
         let n = rays.len();
         if n == 0 {
@@ -400,73 +492,16 @@ impl<'a> GpuTracer<'a> {
         ctx.wait()?;
         let upload_ms = t0.elapsed().as_secs_f64() * 1e3;
 
-        let timer = ctx
-            .device
-            .features()
-            .contains(wgpu::Features::TIMESTAMP_QUERY)
-            .then(|| {
-                let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
-                    label: Some("kernel timestamps"),
-                    ty: wgpu::QueryType::Timestamp,
-                    count: 2,
-                });
-                let resolve = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("timestamps"),
-                    size: 16,
-                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                    mapped_at_creation: false,
-                });
-                let read = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("timestamps readback"),
-                    size: 16,
-                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                });
-                (set, resolve, read)
-            });
         let t1 = Instant::now();
-        let groups = (n as u32).div_ceil(WORKGROUP_SIZE);
-        let max = ctx.limits.max_compute_workgroups_per_dimension.max(1);
-        let (gx, gy) = if groups <= max {
-            (groups, 1)
-        } else {
-            (max, groups.div_ceil(max))
+        let (kernel_gpu_ms, split_steps) = match kernels {
+            Kernels::Fused => (self.run_fused(pipeline, &bind, n as u32)?, None),
+            Kernels::Split => {
+                let r = split::run(self, &param_buf, &ray_buf, &hit_buf, n as u32, any)?;
+                (r.kernel_gpu_ms, Some(r.steps))
+            }
         };
-        let mut enc = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("trace"),
-            });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(if any {
-                    "intersect_any"
-                } else {
-                    "intersect_closest"
-                }),
-                timestamp_writes: timer.as_ref().map(|(set, ..)| {
-                    wgpu::ComputePassTimestampWrites {
-                        query_set: set,
-                        beginning_of_pass_write_index: Some(0),
-                        end_of_pass_write_index: Some(1),
-                    }
-                }),
-            });
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(gx, gy, 1);
-        }
-        if let Some((set, resolve, read)) = &timer {
-            enc.resolve_query_set(set, 0..2, resolve, 0);
-            enc.copy_buffer_to_buffer(resolve, 0, read, 0, 16);
-        }
-        ctx.queue.submit([enc.finish()]);
         ctx.wait()?;
         let kernel_ms = t1.elapsed().as_secs_f64() * 1e3;
-        let kernel_gpu_ms = match &timer {
-            Some((_, _, read)) => self.read_timestamps(read)?,
-            None => None,
-        };
 
         let t2 = Instant::now();
         let mut enc = ctx
@@ -498,29 +533,99 @@ impl<'a> GpuTracer<'a> {
                 kernel_ms,
                 readback_ms,
                 kernel_gpu_ms,
+                split_steps,
             },
         ))
     }
 
-    /// Milliseconds between the two timestamps in `read` (already copied there); `None` where
-    /// the adapter wrote equal stamps: no measurement rather than a false 0.
-    fn read_timestamps(&self, read: &wgpu::Buffer) -> Result<Option<f64>, GpuError> {
+    /// One dispatch of the fused kernel over `n` rays; its own time where timestamps exist.
+    fn run_fused(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        bind: &wgpu::BindGroup,
+        n: u32,
+    ) -> Result<Option<f64>, GpuError> {
         let ctx = self.ctx;
-        let slice = read.slice(..);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        ctx.wait()?;
-        rx.recv().map_err(|e| ctx.err(e))?.map_err(|e| ctx.err(e))?;
-        let view = slice.get_mapped_range().map_err(|e| ctx.err(e))?;
-        let t: &[u64] = bytemuck::cast_slice(&view[..]);
-        let ticks = t[1].wrapping_sub(t[0]);
-        drop(view);
-        read.unmap();
+        let timer = ctx.timer(2);
+        let [gx, gy, _] = ctx.dims(n);
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("trace"),
+            });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: pipeline_label(pipeline, &self.any),
+                timestamp_writes: timer
+                    .as_ref()
+                    .map(|(set, _)| wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: Some(1),
+                    }),
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, bind, &[]);
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        if let Some((set, resolve)) = &timer {
+            enc.resolve_query_set(set, 0..2, resolve, 0);
+        }
+        ctx.queue.submit([enc.finish()]);
+        let Some((_, resolve)) = &timer else {
+            return Ok(None);
+        };
+        let w = read_words(ctx, resolve)?;
+        let ticks =
+            (w[2] as u64 | (w[3] as u64) << 32).wrapping_sub(w[0] as u64 | (w[1] as u64) << 32);
         let ms = ticks as f64 * ctx.queue.get_timestamp_period() as f64 * 1e-6;
+        // Equal stamps: no measurement rather than a false 0.
         Ok((ms > 0.0).then_some(ms))
     }
+}
+
+fn pipeline_label<'a>(p: &wgpu::ComputePipeline, any: &wgpu::ComputePipeline) -> Option<&'a str> {
+    Some(if p == any {
+        "intersect_any"
+    } else {
+        "intersect_closest"
+    })
+}
+
+/// Waits for the GPU and reads a whole buffer as u32 words (through a staging copy unless `buf`
+/// is mappable).
+fn read_words(ctx: &GpuContext, buf: &wgpu::Buffer) -> Result<Vec<u32>, GpuError> {
+    let staging;
+    let src = if buf.usage().contains(wgpu::BufferUsages::MAP_READ) {
+        buf
+    } else {
+        staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: buf.size(),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("readback"),
+            });
+        enc.copy_buffer_to_buffer(buf, 0, &staging, 0, buf.size());
+        ctx.queue.submit([enc.finish()]);
+        &staging
+    };
+    let slice = src.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    ctx.wait()?;
+    rx.recv().map_err(|e| ctx.err(e))?.map_err(|e| ctx.err(e))?;
+    let view = slice.get_mapped_range().map_err(|e| ctx.err(e))?;
+    let words = bytemuck::cast_slice(&view[..]).to_vec();
+    drop(view);
+    src.unmap();
+    Ok(words)
 }
 
 #[cfg(test)]

@@ -18,7 +18,7 @@ use raystream_scene::Scene;
 use crate::layout::{
     GpuLight, GpuMaterial, RayWork, RenderParams, ShadeTri, ShadowWork, Vertex, counter,
 };
-use crate::{GpuContext, GpuError, GpuHit, GpuTracer, WORKGROUP_SIZE, kdtree_wgsl};
+use crate::{GpuContext, GpuError, GpuHit, GpuTracer, kdtree_wgsl, read_words};
 
 const RENDER_WGSL: &str = include_str!("kernels/render.wgsl");
 
@@ -290,38 +290,6 @@ impl<'a> GpuRenderer<'a> {
         })
     }
 
-    fn buffer(
-        &self,
-        what: &'static str,
-        size: u64,
-        usage: wgpu::BufferUsages,
-    ) -> Result<wgpu::Buffer, GpuError> {
-        let ctx = self.tracer.ctx;
-        let limit = ctx.max_binding();
-        if size > limit {
-            return Err(GpuError::TooLarge {
-                adapter: ctx.info.name.clone(),
-                what,
-                need: size,
-                limit,
-            });
-        }
-        Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(what),
-            size: size.max(64),
-            usage,
-            mapped_at_creation: false,
-        }))
-    }
-
-    fn work_buffer(&self, what: &'static str, size: u64) -> Result<wgpu::Buffer, GpuError> {
-        self.buffer(
-            what,
-            size,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        )
-    }
-
     /// Grows `buf` to hold `n` items of `T` (its old contents are not kept).
     fn ensure<T>(
         &self,
@@ -332,7 +300,10 @@ impl<'a> GpuRenderer<'a> {
         let need = n * std::mem::size_of::<T>() as u64;
         if buf.size() < need {
             // Grow with headroom so that a slowly growing queue is not reallocated every depth.
-            *buf = self.work_buffer(what, need + need / 2)?;
+            *buf =
+                self.tracer
+                    .ctx
+                    .work_buffer(what, need + need / 2, wgpu::BufferUsages::empty())?;
         }
         Ok(())
     }
@@ -417,7 +388,7 @@ impl<'a> GpuRenderer<'a> {
             ctx.queue
                 .write_buffer(&q.counters, 0, bytemuck::cast_slice(&counters));
             ctx.queue
-                .write_buffer(&q.args, QUEUE_ARGS, bytemuck::cast_slice(&self.dims(n)));
+                .write_buffer(&q.args, QUEUE_ARGS, bytemuck::cast_slice(&ctx.dims(n)));
             let mut cur = 0usize;
             let mut count = n as u64;
             for depth in 0..=opt.max_depth {
@@ -468,7 +439,7 @@ impl<'a> GpuRenderer<'a> {
                     pass.set_bind_group(2, &work_group, &[]);
                     match stage {
                         "generate_camera_rays" => {
-                            let [gx, gy, _] = self.dims(n);
+                            let [gx, gy, _] = ctx.dims(n);
                             pass.dispatch_workgroups(gx, gy, 1);
                         }
                         "prepare_shadows" | "advance" => {
@@ -487,7 +458,7 @@ impl<'a> GpuRenderer<'a> {
                 }
                 enc.copy_buffer_to_buffer(&q.counters, 0, &q.readback, 0, COUNTER_BYTES);
                 ctx.queue.submit([enc.finish()]);
-                let words = read_u32s(ctx, &q.readback)?;
+                let words = read_words(ctx, &q.readback)?;
                 let s = DepthStats {
                     depth,
                     rays: words[counter::STAT_RAYS as usize] as usize,
@@ -527,7 +498,7 @@ impl<'a> GpuRenderer<'a> {
             }
             base += n as u64;
         }
-        let mut film = read_u32s(ctx, &q.film)?;
+        let mut film = read_words(ctx, &q.film)?;
         film.truncate(pixels as usize * 6);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
@@ -561,103 +532,27 @@ impl<'a> GpuRenderer<'a> {
         ))
     }
 
-    /// Workgroups for `n` items, as the kernels' `write_args` computes them.
-    fn dims(&self, n: u32) -> [u32; 3] {
-        let groups = n.div_ceil(WORKGROUP_SIZE);
-        let gx = groups.min(
-            self.tracer
-                .ctx
-                .limits
-                .max_compute_workgroups_per_dimension
-                .max(1),
-        );
-        let gy = if gx == 0 { 0 } else { groups.div_ceil(gx) };
-        [gx, gy, 1]
-    }
-
     fn queues(&self, pixels: u64, wave: u64, lights: u64) -> Result<Queues, GpuError> {
         let ctx = self.tracer.ctx;
-        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let ray_bytes = std::mem::size_of::<RayWork>() as u64;
-        let resolve = ctx
-            .device
-            .features()
-            .contains(wgpu::Features::TIMESTAMP_QUERY)
-            .then(|| {
-                let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
-                    label: Some("render kernel timestamps"),
-                    ty: wgpu::QueryType::Timestamp,
-                    count: 2 * STAGES.len() as u32,
-                });
-                let buf = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("render timestamps"),
-                    size: STAMP_BYTES,
-                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                    mapped_at_creation: false,
-                });
-                (set, buf)
-            });
+        let none = wgpu::BufferUsages::empty();
         Ok(Queues {
-            counters: self.buffer(
-                "queue counters",
-                COUNTER_BYTES,
-                usage | wgpu::BufferUsages::COPY_SRC,
-            )?,
-            args: self.buffer(
-                "dispatch arguments",
-                24,
-                usage | wgpu::BufferUsages::INDIRECT,
-            )?,
+            counters: ctx.work_buffer("queue counters", COUNTER_BYTES, none)?,
+            args: ctx.work_buffer("dispatch arguments", 24, wgpu::BufferUsages::INDIRECT)?,
             rays: [
-                self.work_buffer("ray queue", wave * ray_bytes)?,
-                self.work_buffer("next ray queue", 2 * wave * ray_bytes)?,
+                ctx.work_buffer("ray queue", wave * ray_bytes, none)?,
+                ctx.work_buffer("next ray queue", 2 * wave * ray_bytes, none)?,
             ],
-            hits: self.work_buffer("hits", wave * lights.max(1) * 16)?,
-            shadows: self.work_buffer("shadow queue", wave * lights.max(1) * ray_bytes)?,
-            film: self.buffer("film", pixels * 24, usage | wgpu::BufferUsages::COPY_SRC)?,
+            hits: ctx.work_buffer("hits", wave * lights.max(1) * 16, none)?,
+            shadows: ctx.work_buffer("shadow queue", wave * lights.max(1) * ray_bytes, none)?,
+            film: ctx.work_buffer("film", pixels * 24, none)?,
             readback: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("counters readback"),
                 size: COUNTER_BYTES + STAMP_BYTES,
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
-            resolve,
+            resolve: ctx.timer(2 * STAGES.len() as u32),
         })
     }
-}
-
-/// Waits for the GPU and reads a whole buffer as u32 words (via a staging copy unless `buf` is
-/// mappable).
-fn read_u32s(ctx: &GpuContext, buf: &wgpu::Buffer) -> Result<Vec<u32>, GpuError> {
-    let staging;
-    let src = if buf.usage().contains(wgpu::BufferUsages::MAP_READ) {
-        buf
-    } else {
-        staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size: buf.size(),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut enc = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("readback"),
-            });
-        enc.copy_buffer_to_buffer(buf, 0, &staging, 0, buf.size());
-        ctx.queue.submit([enc.finish()]);
-        &staging
-    };
-    let slice = src.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    ctx.wait()?;
-    rx.recv().map_err(|e| ctx.err(e))?.map_err(|e| ctx.err(e))?;
-    let view = slice.get_mapped_range().map_err(|e| ctx.err(e))?;
-    let words = bytemuck::cast_slice(&view[..]).to_vec();
-    drop(view);
-    src.unmap();
-    Ok(words)
 }

@@ -43,6 +43,7 @@ fn check_struct(module: &naga::Module, name: &str, size: usize, offsets: &[(&str
 #[test]
 fn wgsl_structs_match_rust() {
     let module = naga_module(&queries_wgsl(), "queries.wgsl");
+    naga_module(&split_wgsl(), "split.wgsl");
     let check = |name: &str, size: usize, offsets: &[(&str, usize)]| {
         check_struct(&module, name, size, offsets)
     };
@@ -325,13 +326,16 @@ fn gpu_hits_equal_cpu_hits_on_every_mesh() {
             let rays = test_rays(&mesh, 4096);
             for any in [false, true] {
                 let (hits, _) = tracer.trace(&rays, any).unwrap();
-                compare(
-                    &tree,
-                    &rays,
-                    &hits,
-                    any,
-                    &format!("{name} {builder:?} any={any}"),
-                );
+                let what = format!("{name} {builder:?} any={any}");
+                compare(&tree, &rays, &hits, any, &what);
+                // The split kernels walk the same leaves: the very same records.
+                let (split, times) = tracer.trace_with(&rays, any, Kernels::Split).unwrap();
+                assert!(times.split_steps.is_some_and(|s| s > 0));
+                if any {
+                    compare(&tree, &rays, &split, any, &format!("{what} split"));
+                } else {
+                    assert_eq!(hits, split, "{what}: split kernels differ from fused");
+                }
             }
         }
     }

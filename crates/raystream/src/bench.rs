@@ -16,9 +16,12 @@ use raystream_scene::Camera;
 use serde_json::json;
 
 use crate::cli::BenchArgs;
-use crate::common::{file_name, load_mesh, median, ms, open_device, print_line, round3, spinner};
+use crate::common::{
+    Backend, file_name, load_mesh, median, ms, open_device, print_line, round3, spinner,
+};
 use crate::info::tree_json;
-use crate::trace::{NO_PRIM, trace_all, trace_timed};
+use crate::trace::{NO_PRIM, kernels_name, trace_all, trace_timed};
+use raystream_gpu::Kernels;
 
 const OFFSET: f32 = 1e-4;
 const LIGHT_RADIUS: f32 = 0.05;
@@ -125,6 +128,15 @@ fn git_commit() -> String {
         .unwrap_or_else(|| "unknown".into())
 }
 
+/// The name under which a query's GPU kernel time is reported.
+fn kernel_label(kernels: Option<Kernels>, any: bool) -> &'static str {
+    match (kernels, any) {
+        (Some(Kernels::Split), _) => "split_traverse+split_intersect",
+        (_, true) => "intersect_any",
+        (_, false) => "intersect_closest",
+    }
+}
+
 pub fn run(a: &BenchArgs) -> Result<()> {
     if raystream_io::is_volume_path(&a.input) {
         return bench_iso(a);
@@ -149,82 +161,101 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         let pb = spinner(quiet, "generating ray sets");
         let sets = ray_sets(&mesh, &tree, a.size.0, a.size.1);
         pb.finish_and_clear();
-        for (kind, rays) in &sets {
-            let any = *kind == "shadow";
-            let pb = spinner(
-                quiet,
-                &format!("{kind}: {} rays on {}", rays.len(), backend.name()),
-            );
-            let t = trace_timed(&backend, &tree, rays, any, traversal, a.repeat)?;
-            pb.finish_and_clear();
-            // Validate a spread-out sample against brute force before printing any figure.
-            let step = (rays.len() / VALIDATE_RAYS).max(1);
-            for (r, h) in rays.iter().zip(&t.hits).step_by(step) {
-                let want = brute::closest(&corners, r);
-                let ok = match want {
-                    None => !h.t.is_finite(),
-                    Some(_) if any => h.t.is_finite() && h.t >= r.t_min && h.t <= r.t_max,
-                    Some(w) => (h.t - w.t).abs() <= 1e-5 * w.t.abs().max(1e-6),
-                };
-                if !ok {
-                    bail!(
-                        "{}: {kind} ray {r:?} on {}: kd-tree t {} prim {}, brute force {want:?}",
-                        a.input.display(),
-                        backend.name(),
-                        h.t,
-                        h.prim
+        // The CPU has one way to trace; a GPU is measured with each kernel layout asked for.
+        let layouts: Vec<Option<Kernels>> = match backend {
+            Backend::Cpu => vec![None],
+            Backend::Gpu(_) => a.kernels.iter().map(|&k| Some(k.into())).collect(),
+        };
+        for kernels in layouts {
+            for (kind, rays) in &sets {
+                let any = *kind == "shadow";
+                let pb = spinner(
+                    quiet,
+                    &format!("{kind}: {} rays on {}", rays.len(), backend.name()),
+                );
+                let t = trace_timed(
+                    &backend,
+                    &tree,
+                    rays,
+                    any,
+                    traversal,
+                    kernels.unwrap_or_default(),
+                    a.repeat,
+                )?;
+                pb.finish_and_clear();
+                // Validate a spread-out sample against brute force before printing any figure.
+                let step = (rays.len() / VALIDATE_RAYS).max(1);
+                for (r, h) in rays.iter().zip(&t.hits).step_by(step) {
+                    let want = brute::closest(&corners, r);
+                    let ok = match want {
+                        None => !h.t.is_finite(),
+                        Some(_) if any => h.t.is_finite() && h.t >= r.t_min && h.t <= r.t_max,
+                        Some(w) => (h.t - w.t).abs() <= 1e-5 * w.t.abs().max(1e-6),
+                    };
+                    if !ok {
+                        bail!(
+                            "{}: {kind} ray {r:?} on {}: kd-tree t {} prim {}, brute force {want:?}",
+                            a.input.display(),
+                            backend.name(),
+                            h.t,
+                            h.prim
+                        );
+                    }
+                }
+                let mut c = Counters::default();
+                for r in rays {
+                    tree.intersect_counted(r, traversal, any, &mut c);
+                }
+                let n = rays.len().max(1) as f64;
+                let line = json!({
+                    "bench": "trace",
+                    "device": backend.name(),
+                    "adapter": backend.adapter(),
+                    "commit": commit,
+                    "mesh": file_name(&a.input),
+                    "triangles": mesh.len(),
+                    "kind": kind,
+                    "query": if any { "any" } else { "closest" },
+                    "rays": rays.len(),
+                    "size": format!("{}x{}", a.size.0, a.size.1),
+                    "builder": tree.stats.builder,
+                    "traversal": traversal.name(),
+                    "kernels": kernels.map(kernels_name),
+                    "build_ms": round3(build_ms),
+                    "upload_ms": round3(t.upload_ms),
+                    "kdtree": tree_json(&tree.stats),
+                    "trace_ms": round3(t.trace_ms),
+                    "trace_ms_min": round3(t.trace_ms_min),
+                    // Per-kernel GPU time from timestamp queries, by stage name.
+                    "gpu_kernel_ms": t.kernel_gpu_ms.map(|k| json!({ kernel_label(kernels, any): round3(k) })),
+                    "mrays_per_s": round3(n / (t.trace_ms * 1e-3) / 1e6),
+                    "inner_per_ray": round3(c.inner as f64 / n),
+                    "leaves_per_ray": round3(c.leaves as f64 / n),
+                    "tris_per_ray": round3(c.triangles as f64 / n),
+                    "hits": t.hits.iter().filter(|h| h.t.is_finite()).count(),
+                });
+                if a.json {
+                    print_line(line);
+                } else {
+                    println!(
+                        "{:<9} {:<8} {:>9} rays  {:>8.2} Mrays/s  ({:.1} ms)  {:.1} inner, {:.2} leaves, {:.1} triangles per ray  [build {:.0} ms, SAH cost {:.1}, {}; {}]",
+                        match kernels {
+                            Some(k) => format!("gpu/{}", kernels_name(k)),
+                            None => backend.name().to_string(),
+                        },
+                        kind,
+                        rays.len(),
+                        line["mrays_per_s"].as_f64().unwrap(),
+                        t.trace_ms,
+                        line["inner_per_ray"].as_f64().unwrap(),
+                        line["leaves_per_ray"].as_f64().unwrap(),
+                        line["tris_per_ray"].as_f64().unwrap(),
+                        build_ms,
+                        tree.stats.sah_cost,
+                        tree.stats.builder,
+                        backend.adapter()
                     );
                 }
-            }
-            let mut c = Counters::default();
-            for r in rays {
-                tree.intersect_counted(r, traversal, any, &mut c);
-            }
-            let n = rays.len().max(1) as f64;
-            let line = json!({
-                "bench": "trace",
-                "device": backend.name(),
-                "adapter": backend.adapter(),
-                "commit": commit,
-                "mesh": file_name(&a.input),
-                "triangles": mesh.len(),
-                "kind": kind,
-                "query": if any { "any" } else { "closest" },
-                "rays": rays.len(),
-                "size": format!("{}x{}", a.size.0, a.size.1),
-                "builder": tree.stats.builder,
-                "traversal": traversal.name(),
-                "build_ms": round3(build_ms),
-                "upload_ms": round3(t.upload_ms),
-                "kdtree": tree_json(&tree.stats),
-                "trace_ms": round3(t.trace_ms),
-                "trace_ms_min": round3(t.trace_ms_min),
-                // Per-kernel GPU time from timestamp queries, by stage name.
-                "gpu_kernel_ms": t.kernel_gpu_ms.map(|k| json!({ if any { "intersect_any" } else { "intersect_closest" }: round3(k) })),
-                "mrays_per_s": round3(n / (t.trace_ms * 1e-3) / 1e6),
-                "inner_per_ray": round3(c.inner as f64 / n),
-                "leaves_per_ray": round3(c.leaves as f64 / n),
-                "tris_per_ray": round3(c.triangles as f64 / n),
-                "hits": t.hits.iter().filter(|h| h.t.is_finite()).count(),
-            });
-            if a.json {
-                print_line(line);
-            } else {
-                println!(
-                    "{:<4} {:<8} {:>9} rays  {:>8.2} Mrays/s  ({:.1} ms)  {:.1} inner, {:.2} leaves, {:.1} triangles per ray  [build {:.0} ms, SAH cost {:.1}, {}; {}]",
-                    backend.name(),
-                    kind,
-                    rays.len(),
-                    line["mrays_per_s"].as_f64().unwrap(),
-                    t.trace_ms,
-                    line["inner_per_ray"].as_f64().unwrap(),
-                    line["leaves_per_ray"].as_f64().unwrap(),
-                    line["tris_per_ray"].as_f64().unwrap(),
-                    build_ms,
-                    tree.stats.sah_cost,
-                    tree.stats.builder,
-                    backend.adapter()
-                );
             }
         }
     }

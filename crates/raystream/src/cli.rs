@@ -68,6 +68,22 @@ impl From<TraversalArg> for Traversal {
     }
 }
 
+/// GPU ray queries: one fused kernel, or traversal and intersection split (the paper's layout).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum KernelsArg {
+    Fused,
+    Split,
+}
+
+impl From<KernelsArg> for raystream_gpu::Kernels {
+    fn from(k: KernelsArg) -> Self {
+        match k {
+            KernelsArg::Fused => raystream_gpu::Kernels::Fused,
+            KernelsArg::Split => raystream_gpu::Kernels::Split,
+        }
+    }
+}
+
 #[derive(Args, Clone)]
 pub struct Accel {
     /// kd-tree builder.
@@ -191,6 +207,10 @@ pub struct TraceArgs {
     pub any: bool,
     #[command(flatten)]
     pub accel: Accel,
+    /// GPU: one fused query kernel, or traversal and intersection kernels split (the paper's
+    /// layout: (ray, leaf) work items between them).
+    #[arg(long, value_enum, default_value = "fused")]
+    pub kernels: KernelsArg,
     /// Timed runs after one warm-up; the median is reported.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub repeat: u32,
@@ -231,6 +251,9 @@ pub struct BenchArgs {
     pub builder: BuilderArg,
     #[arg(long, value_enum, default_value = "ropes")]
     pub traversal: TraversalArg,
+    /// GPU query kernels to measure, comma-separated (fused, split), side by side.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "fused")]
+    pub kernels: Vec<KernelsArg>,
     /// Image size of the ray sets.
     #[arg(long, default_value = "1920x1080", value_parser = parse_size)]
     pub size: (u32, u32),

@@ -10,7 +10,7 @@ use raystream_math::Ray;
 use serde_json::json;
 
 use crate::cli::TraceArgs;
-use raystream_gpu::GpuTracer;
+use raystream_gpu::{GpuTracer, Kernels};
 
 use crate::common::{
     Backend, file_name, load_mesh, median, ms, open_device, print_line, round3, spinner,
@@ -105,6 +105,7 @@ pub fn trace_timed(
     rays: &[Ray],
     any: bool,
     traversal: Traversal,
+    kernels: Kernels,
     repeat: u32,
 ) -> Result<Traced> {
     let mut times = Vec::new();
@@ -124,9 +125,9 @@ pub fn trace_timed(
                 bail!("--device gpu runs the rope traversal only (--traversal ropes)");
             }
             let tracer = GpuTracer::new(ctx, tree)?;
-            let (mut hits, first) = tracer.trace(rays, any)?;
+            let (mut hits, first) = tracer.trace_with(rays, any, kernels)?;
             for _ in 0..repeat {
-                let (h, t) = tracer.trace(rays, any)?;
+                let (h, t) = tracer.trace_with(rays, any, kernels)?;
                 hits = h;
                 times.push(t.kernel_ms);
                 gpu_times.extend(t.kernel_gpu_ms);
@@ -155,6 +156,13 @@ pub fn trace_timed(
     })
 }
 
+pub fn kernels_name(k: Kernels) -> &'static str {
+    match k {
+        Kernels::Fused => "fused",
+        Kernels::Split => "split",
+    }
+}
+
 pub fn run(a: &TraceArgs) -> Result<()> {
     let quiet = a.quiet || a.json;
     let backend = open_device(a.accel.device, a.accel.adapter.as_deref(), quiet)?;
@@ -167,7 +175,15 @@ pub fn run(a: &TraceArgs) -> Result<()> {
     let tree = KdTree::build(&mesh, a.accel.builder.into());
     pb.set_message(format!("tracing {} rays on {}", rays.len(), backend.name()));
     let traversal: Traversal = a.accel.traversal.into();
-    let t = trace_timed(&backend, &tree, &rays, a.any, traversal, a.repeat)?;
+    let t = trace_timed(
+        &backend,
+        &tree,
+        &rays,
+        a.any,
+        traversal,
+        a.kernels.into(),
+        a.repeat,
+    )?;
     pb.finish_and_clear();
     let bytes: &[u8] = bytemuck::cast_slice(&t.hits);
     // HITS.bin is little-endian; so is every target raystream builds for.
@@ -186,6 +202,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             "query": if a.any { "any" } else { "closest" },
             "builder": tree.stats.builder,
             "traversal": traversal.name(),
+            "kernels": matches!(backend, Backend::Gpu(_)).then(|| kernels_name(a.kernels.into())),
             "build_ms": round3(t.build_ms),
             "upload_ms": round3(t.upload_ms),
             "trace_ms": round3(t.trace_ms),

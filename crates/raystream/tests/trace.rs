@@ -185,6 +185,22 @@ fn gpu_trace_agrees_with_cpu_and_embree() {
                 prim_diff * 1000 <= gpu.len(),
                 "{stem}: {prim_diff} prim differences"
             );
+            // The split kernels (traversal and intersection apart) write the same file.
+            if !any {
+                let split = tmp(&format!("{stem}-split.hits"));
+                trace_to(
+                    &m,
+                    &rays,
+                    &split,
+                    any,
+                    &["--device", "gpu", "--kernels", "split"],
+                );
+                assert_eq!(
+                    std::fs::read(&split).unwrap(),
+                    std::fs::read(&outs[0]).unwrap(),
+                    "{stem}: --kernels split differs from fused"
+                );
+            }
         }
     }
 }

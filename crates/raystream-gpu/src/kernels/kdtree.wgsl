@@ -137,27 +137,41 @@ fn intersect_triangle(w: Watertight, tri: KdTri, t_min: f32, t_max: f32) -> vec4
     return vec4<f32>(t, v / det, ww / det, 1.0);
 }
 
-fn trace(r: RayIn, any_hit: bool) -> HitOut {
-    var miss = HitOut(bitcast<f32>(0x7f800000u), NO_PRIM, 0.0, 0.0);
-    if !ray_is_valid(r) || params.tri_count == 0u {
-        return miss;
-    }
-    // Normalize -0 to +0 so that "negative" means strictly negative, as on the CPU.
+fn miss_record() -> HitOut {
+    return HitOut(bitcast<f32>(0x7f800000u), NO_PRIM, 0.0, 0.0);
+}
+
+// A ray prepared for traversal: -0 direction components made +0 (so that "negative" means
+// strictly negative, as on the CPU), their inverses, and the watertight test's shear.
+struct Walk {
+    o: vec3<f32>,
+    d: vec3<f32>,
+    inv: vec3<f32>,
+    wt: Watertight,
+}
+
+fn walk_of(r: RayIn) -> Walk {
     let d = select(r.dir, vec3<f32>(0.0), r.dir == vec3<f32>(0.0));
-    let o = r.origin;
-    let inv = 1.0 / d;
-    // Clip to the scene box.
+    return Walk(r.origin, d, 1.0 / d, watertight_ray(r));
+}
+
+// The ray's [t0, t1] inside the scene box; t0 > t1 (or NaN) when it misses the box or is invalid.
+fn clip_to_scene(r: RayIn, w: Walk) -> vec2<f32> {
+    let none = vec2<f32>(1.0, 0.0);
+    if !ray_is_valid(r) || params.tri_count == 0u {
+        return none;
+    }
     var t0 = r.t_min;
     var t1 = r.t_max;
     for (var a = 0u; a < 3u; a++) {
-        if d[a] == 0.0 {
-            if o[a] < params.scene_min[a] || o[a] > params.scene_max[a] {
-                return miss;
+        if w.d[a] == 0.0 {
+            if w.o[a] < params.scene_min[a] || w.o[a] > params.scene_max[a] {
+                return none;
             }
             continue;
         }
-        var near = (params.scene_min[a] - o[a]) * inv[a];
-        var far = (params.scene_max[a] - o[a]) * inv[a];
+        var near = (params.scene_min[a] - w.o[a]) * w.inv[a];
+        var far = (params.scene_max[a] - w.o[a]) * w.inv[a];
         if near > far {
             let t = near;
             near = far;
@@ -166,65 +180,107 @@ fn trace(r: RayIn, any_hit: bool) -> HitOut {
         t0 = max(t0, near);
         t1 = min(t1, far);
     }
-    if !(t0 <= t1) {
-        return miss;
+    return vec2<f32>(t0, t1);
+}
+
+// From `start` down to the leaf that holds the ray's point at `t_entry`.
+fn descend(start: u32, w: Walk, t_entry: f32) -> u32 {
+    var node = start;
+    while (node & LEAF_BIT) == 0u {
+        let n = inners[node];
+        let a = n.axis;
+        var far: bool;
+        if w.d[a] == 0.0 {
+            far = w.o[a] > n.split;
+        } else {
+            far = (n.split - w.o[a]) * w.inv[a] <= t_entry;
+        }
+        // far side = right for a positive direction, left for a negative one
+        if far != (w.d[a] < 0.0) {
+            node = n.right;
+        } else {
+            node = n.left;
+        }
     }
-    let wt = watertight_ray(r);
-    var best = miss;
-    var t_best = r.t_max;
-    var t_entry = t0;
+    return node;
+}
+
+// Tests the leaf's triangles against `best` (whose t, or t_max before any hit, bounds them);
+// with `any_hit` stops at the first. Returns whether `best` changed.
+fn intersect_leaf(leaf: KdLeaf, r: RayIn, w: Walk, any_hit: bool, best: ptr<function, HitOut>) -> bool {
+    var changed = false;
+    for (var i = leaf.first; i < leaf.first + leaf.count; i++) {
+        let tri = tris[i];
+        var t_best = (*best).t;
+        if (*best).prim == NO_PRIM {
+            t_best = r.t_max;
+        }
+        let h = intersect_triangle(w.wt, tri, r.t_min, t_best);
+        if h.w != 0.0 && (any_hit || h.x < t_best || (*best).prim == NO_PRIM) {
+            *best = HitOut(h.x, bitcast<u32>(tri.v0.w), h.y, h.z);
+            changed = true;
+            if any_hit {
+                return true;
+            }
+        }
+    }
+    return changed;
+}
+
+// Where the ray leaves the leaf: (t_exit, the rope to follow), the rope NO_ROPE when the ray
+// is done: it left the scene, or its best hit lies inside the leaf.
+struct Exit {
+    t: f32,
+    next: u32,
+}
+
+fn leaf_exit(leaf: KdLeaf, w: Walk, best: HitOut, t_max: f32) -> Exit {
+    var t_exit = bitcast<f32>(0x7f800000u);
+    var face = 0u;
+    for (var a = 0u; a < 3u; a++) {
+        if w.d[a] == 0.0 {
+            continue;
+        }
+        let neg = w.d[a] < 0.0;
+        let bound = select(leaf.bmax[a], leaf.bmin[a], neg);
+        let t = (bound - w.o[a]) * w.inv[a];
+        if t < t_exit {
+            t_exit = t;
+            face = 2u * a + select(1u, 0u, neg);
+        }
+    }
+    var t_best = best.t;
+    if best.prim == NO_PRIM {
+        t_best = t_max;
+    }
+    if t_best <= t_exit {
+        return Exit(t_exit, NO_ROPE);
+    }
+    return Exit(t_exit, leaf.ropes[face]);
+}
+
+// The fused query: descend, intersect, follow the rope, in one loop per ray.
+fn trace(r: RayIn, any_hit: bool) -> HitOut {
+    var best = miss_record();
+    let w = walk_of(r);
+    let span = clip_to_scene(r, w);
+    if !(span.x <= span.y) {
+        return best;
+    }
+    var t_entry = span.x;
     var node = params.root;
     for (var step = 0u; step < params.max_steps; step++) {
-        while (node & LEAF_BIT) == 0u {
-            let n = inners[node];
-            let a = n.axis;
-            var far: bool;
-            if d[a] == 0.0 {
-                far = o[a] > n.split;
-            } else {
-                far = (n.split - o[a]) * inv[a] <= t_entry;
-            }
-            // far side = right for a positive direction, left for a negative one
-            if far != (d[a] < 0.0) {
-                node = n.right;
-            } else {
-                node = n.left;
-            }
-        }
+        node = descend(node, w, t_entry);
         let leaf = leaves[node & ~LEAF_BIT];
-        for (var i = leaf.first; i < leaf.first + leaf.count; i++) {
-            let tri = tris[i];
-            let h = intersect_triangle(wt, tri, r.t_min, t_best);
-            if h.w != 0.0 && (any_hit || h.x < t_best || best.prim == NO_PRIM) {
-                t_best = h.x;
-                best = HitOut(h.x, bitcast<u32>(tri.v0.w), h.y, h.z);
-                if any_hit {
-                    return best;
-                }
-            }
-        }
-        var t_exit = bitcast<f32>(0x7f800000u);
-        var face = 0u;
-        for (var a = 0u; a < 3u; a++) {
-            if d[a] == 0.0 {
-                continue;
-            }
-            let neg = d[a] < 0.0;
-            let bound = select(leaf.bmax[a], leaf.bmin[a], neg);
-            let t = (bound - o[a]) * inv[a];
-            if t < t_exit {
-                t_exit = t;
-                face = 2u * a + select(1u, 0u, neg);
-            }
-        }
-        if t_best <= t_exit {
+        if intersect_leaf(leaf, r, w, any_hit, &best) && any_hit {
             return best;
         }
-        node = leaf.ropes[face];
-        if node == NO_ROPE {
+        let exit = leaf_exit(leaf, w, best, r.t_max);
+        if exit.next == NO_ROPE {
             return best;
         }
-        t_entry = max(t_entry, t_exit);
+        node = exit.next;
+        t_entry = max(t_entry, exit.t);
     }
     return best;
 }
