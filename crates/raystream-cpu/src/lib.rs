@@ -13,6 +13,7 @@
 //!
 //! The result is deterministic: queues keep their order and `accumulate` adds in queue order.
 
+pub mod dvr;
 mod image_out;
 
 use rayon::prelude::*;

@@ -3,8 +3,10 @@
 
 mod cases;
 mod marching;
+mod tf;
 
 pub use marching::{IsoSurface, extract_isosurface, smooth};
+pub use tf::{Shading, TfPreset, TransferFunction};
 
 /// Bone thresholds in Hounsfield units.
 ///

@@ -44,6 +44,10 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
 
 pub fn run(a: &RenderArgs) -> Result<()> {
     let backend = open_device(a.accel.device, a.accel.adapter.as_deref(), a.quiet)?;
+    if matches!(backend, Backend::Gpu(_)) && Traversal::from(a.accel.traversal) != Traversal::Ropes
+    {
+        bail!("--device gpu runs the rope traversal only (--traversal ropes)");
+    }
     let t0 = Instant::now();
     let (scene, bones) = load_scene(a)?;
     let load_ms = ms(t0.elapsed());
@@ -62,9 +66,6 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     };
     let t_setup = Instant::now();
     let gpu = match &backend {
-        Backend::Gpu(_) if opt.traversal != Traversal::Ropes => {
-            bail!("--device gpu runs the rope traversal only (--traversal ropes)")
-        }
         Backend::Gpu(ctx) => {
             let tracer = GpuTracer::new(ctx, &tree).with_context(|| ctx.describe())?;
             Some(tracer)

@@ -90,17 +90,41 @@ fn bad_scene_file() {
     assert_input_error(&["render", &f], "mat.toml", "reflectivity");
 }
 
+/// `render --device gpu` errors are clear: no matching adapter (naming what exists), and the
+/// stack traversal, which only the CPU has.
 #[test]
-fn gpu_device_is_refused_clearly() {
-    let o = run(&["info", &mesh("spot.obj")]);
-    assert!(o.status.success());
+fn gpu_render_errors_are_clear() {
+    let out = tmp("g.png");
     let o = run(&[
         "render",
         "--device",
         "gpu",
+        "--adapter",
+        "no-such-adapter-xyz",
         "-o",
-        &tmp("g.png").to_string_lossy(),
+        &out.to_string_lossy(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("no GPU adapter") && stderr(&o).contains("no-such-adapter-xyz")
+            || stderr(&o).contains("driver"),
+        "{}",
+        stderr(&o)
+    );
+    if !gpu_available() {
+        return;
+    }
+    let o = run(&[
+        "render",
+        "--device",
+        "gpu",
+        "--traversal",
+        "stack",
+        "--size",
+        "16x16",
+        "-o",
+        &out.to_string_lossy(),
     ]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("GPU"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--traversal ropes"), "{}", stderr(&o));
 }
