@@ -212,3 +212,67 @@ fn smoothing_keeps_the_sphere_closed_and_its_radius() {
         assert!(n.dot((p.as_dvec3() - centre).normalize().as_vec3()) > 0.8);
     }
 }
+
+/// Transfer functions: piecewise-linear between control points, clamped outside; the brick
+/// test's range maximum; the presets are valid; files load or fail naming the file.
+#[test]
+fn transfer_functions() {
+    let tf = TransferFunction {
+        opacity: vec![(0.0, 0.0), (100.0, 0.5), (200.0, 0.1)],
+        color: vec![(0.0, [0.0, 0.0, 0.0]), (100.0, [1.0, 0.5, 0.0])],
+        shading: Shading::default(),
+    };
+    assert_eq!(tf.opacity_at(-50.0), 0.0);
+    assert_eq!(tf.opacity_at(50.0), 0.25);
+    assert_eq!(tf.opacity_at(150.0), 0.3);
+    assert_eq!(tf.opacity_at(1e6), 0.1);
+    assert_eq!(tf.color_at(50.0), [0.5, 0.25, 0.0]);
+    assert_eq!(tf.max_opacity_in(-10.0, -1.0), 0.0);
+    assert_eq!(tf.max_opacity_in(50.0, 150.0), 0.5);
+    assert_eq!(tf.max_opacity_in(150.0, 160.0), 0.3);
+    for p in TfPreset::ALL {
+        p.function()
+            .validate()
+            .unwrap_or_else(|e| panic!("{}: {e}", p.name()));
+        // Air is transparent in every CT preset.
+        assert_eq!(p.function().opacity_at(-1000.0), 0.0, "{}", p.name());
+    }
+    let dir = std::env::temp_dir().join(format!("raystream-tf-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let good = dir.join("good.toml");
+    std::fs::write(
+        &good,
+        "opacity = [[-1000, 0], [300, 0.5]]\ncolor = [[0, 1, 0.9, 0.8]]\nspecular = 0.4\n",
+    )
+    .unwrap();
+    let tf = TransferFunction::load(&good).unwrap();
+    assert_eq!(tf.opacity, vec![(-1000.0, 0.0), (300.0, 0.5)]);
+    assert_eq!(tf.shading.specular, 0.4);
+    for (name, text, problem) in [
+        (
+            "order.toml",
+            "opacity = [[300, 0], [0, 1]]\ncolor = [[0, 1, 1, 1]]\n",
+            "increasing",
+        ),
+        (
+            "range.toml",
+            "opacity = [[0, 2]]\ncolor = [[0, 1, 1, 1]]\n",
+            "[0, 1]",
+        ),
+        (
+            "empty.toml",
+            "opacity = []\ncolor = [[0, 1, 1, 1]]\n",
+            "at least one",
+        ),
+        (
+            "typo.toml",
+            "opacity = [[0, 1]]\ncolour = [[0, 1, 1, 1]]\n",
+            "not a transfer function",
+        ),
+    ] {
+        let f = dir.join(name);
+        std::fs::write(&f, text).unwrap();
+        let e = TransferFunction::load(&f).unwrap_err();
+        assert!(e.contains(name) && e.contains(problem), "{name}: {e}");
+    }
+}

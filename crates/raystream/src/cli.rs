@@ -129,6 +129,26 @@ pub struct RenderArgs {
     pub max_depth: u32,
     #[command(flatten)]
     pub accel: Accel,
+    /// Volumes: direct volume rendering instead of the bone mesh: dvr (transfer function,
+    /// --preset ct-bone… or --tf FILE), mip, minip, average (--window/--level), iso (the first
+    /// crossing of --iso HU).
+    #[arg(long, value_enum)]
+    pub mode: Option<ModeArg>,
+    /// Transfer function file (TOML: opacity = [[HU, a], …], color = [[HU, r, g, b], …]).
+    #[arg(long, conflicts_with = "preset")]
+    pub tf: Option<PathBuf>,
+    /// Ray-marching step in mm (default: half the smallest voxel spacing).
+    #[arg(long)]
+    pub step: Option<f32>,
+    /// Window width in HU for mip/minip/average.
+    #[arg(long, requires = "level")]
+    pub window: Option<f32>,
+    /// Window level (centre) in HU for mip/minip/average.
+    #[arg(long, requires = "window", allow_hyphen_values = true)]
+    pub level: Option<f32>,
+    /// Turn empty-space skipping off (to measure what it saves; the picture is the same).
+    #[arg(long)]
+    pub no_skip: bool,
     /// Render the frame this many times and report the median frame time and frames per
     /// second (scene loading, kd-tree build and upload apart).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
@@ -144,15 +164,27 @@ pub struct Threshold {
     /// Isosurface threshold in Hounsfield units (volume value units for non-CT volumes).
     #[arg(long, alias = "hu", conflicts_with = "preset")]
     pub iso: Option<f32>,
-    /// Threshold preset: bone (300 HU), thin-bone (226 HU), contrast (400 HU).
+    /// Threshold preset: bone (300 HU), thin-bone (226 HU), contrast (400 HU); with
+    /// `render --mode dvr`, a transfer function (3D Slicer's): ct-bone, ct-bones, ct-aaa,
+    /// ct-muscle, ct-lung, mip-bone.
     #[arg(long, value_enum)]
     pub preset: Option<PresetArg>,
 }
 
 impl Threshold {
-    pub fn hu(&self) -> f32 {
-        self.iso
-            .unwrap_or_else(|| self.preset.unwrap_or(PresetArg::Bone).preset().hu())
+    /// The threshold in HU (default: bone, 300 HU).
+    pub fn hu(&self) -> anyhow::Result<f32> {
+        if let Some(hu) = self.iso {
+            return Ok(hu);
+        }
+        let p = self.preset.unwrap_or(PresetArg::Bone);
+        match p.threshold() {
+            Some(t) => Ok(t.hu()),
+            None => anyhow::bail!(
+                "--preset {}: a transfer function for --mode dvr; thresholds are bone, thin-bone, contrast",
+                p.name()
+            ),
+        }
     }
 }
 
@@ -161,14 +193,64 @@ pub enum PresetArg {
     Bone,
     ThinBone,
     Contrast,
+    CtBone,
+    CtBones,
+    CtAaa,
+    CtMuscle,
+    CtLung,
+    MipBone,
 }
 
 impl PresetArg {
-    pub fn preset(self) -> raystream_volume::Preset {
+    pub fn threshold(self) -> Option<raystream_volume::Preset> {
+        use raystream_volume::Preset;
         match self {
-            PresetArg::Bone => raystream_volume::Preset::Bone,
-            PresetArg::ThinBone => raystream_volume::Preset::ThinBone,
-            PresetArg::Contrast => raystream_volume::Preset::Contrast,
+            PresetArg::Bone => Some(Preset::Bone),
+            PresetArg::ThinBone => Some(Preset::ThinBone),
+            PresetArg::Contrast => Some(Preset::Contrast),
+            _ => None,
+        }
+    }
+
+    pub fn transfer(self) -> Option<raystream_volume::TfPreset> {
+        use raystream_volume::TfPreset;
+        match self {
+            PresetArg::CtBone => Some(TfPreset::CtBone),
+            PresetArg::CtBones => Some(TfPreset::CtBones),
+            PresetArg::CtAaa => Some(TfPreset::CtAaa),
+            PresetArg::CtMuscle => Some(TfPreset::CtMuscle),
+            PresetArg::CtLung => Some(TfPreset::CtLung),
+            PresetArg::MipBone => Some(TfPreset::MipBone),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> String {
+        self.to_possible_value()
+            .map(|v| v.get_name().to_string())
+            .unwrap_or_default()
+    }
+}
+
+/// `render --mode`: direct volume rendering modes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ModeArg {
+    Dvr,
+    Mip,
+    Minip,
+    Average,
+    Iso,
+}
+
+impl From<ModeArg> for raystream_cpu::dvr::DvrMode {
+    fn from(m: ModeArg) -> Self {
+        use raystream_cpu::dvr::DvrMode;
+        match m {
+            ModeArg::Dvr => DvrMode::Dvr,
+            ModeArg::Mip => DvrMode::Mip,
+            ModeArg::Minip => DvrMode::MinIp,
+            ModeArg::Average => DvrMode::Average,
+            ModeArg::Iso => DvrMode::Iso,
         }
     }
 }

@@ -14,6 +14,8 @@ use crate::common::{ms, spinner};
 /// The bone surface of a volume, with the time each step took.
 pub struct Bones {
     pub surface: IsoSurface,
+    /// The threshold, HU.
+    pub hu: f32,
     pub voxels: usize,
     pub load_ms: f64,
     pub iso_ms: f64,
@@ -28,24 +30,12 @@ pub fn bones(
     quiet: bool,
     embedded: Option<&[u8]>,
 ) -> Result<Bones> {
-    let t0 = Instant::now();
-    let pb = spinner(quiet, &format!("reading {}", path.display()));
-    let volume: Volume = match embedded {
-        Some(bytes) => raystream_io::volume::parse_nifti(bytes, path)?,
-        None => raystream_io::load_volume(path, series)?,
-    };
-    pb.finish_and_clear();
-    let load_ms = ms(t0.elapsed());
-    if !quiet {
-        for w in &volume.warnings {
-            eprintln!("raystream: {}: {w}", path.display());
-        }
-        if volume.unit != ValueUnit::Hounsfield {
-            eprintln!(
-                "raystream: {}: values are not known to be Hounsfield units; the threshold {hu} applies to the raw values",
-                path.display()
-            );
-        }
+    let (volume, load_ms) = read_volume(path, series, quiet, embedded)?;
+    if !quiet && volume.unit != ValueUnit::Hounsfield {
+        eprintln!(
+            "raystream: {}: values are not known to be Hounsfield units; the threshold {hu} applies to the raw values",
+            path.display()
+        );
     }
     let t1 = Instant::now();
     let pb = spinner(
@@ -69,14 +59,38 @@ pub fn bones(
     }
     Ok(Bones {
         surface,
+        hu,
         voxels: volume.voxel_count(),
         load_ms,
         iso_ms: ms(t1.elapsed()),
     })
 }
 
+/// Loads `path` (or takes `embedded` bytes as NIfTI), printing its warnings; also the time it
+/// took, ms.
+pub fn read_volume(
+    path: &Path,
+    series: Option<&str>,
+    quiet: bool,
+    embedded: Option<&[u8]>,
+) -> Result<(Volume, f64)> {
+    let t0 = Instant::now();
+    let pb = spinner(quiet, &format!("reading {}", path.display()));
+    let volume: Volume = match embedded {
+        Some(bytes) => raystream_io::volume::parse_nifti(bytes, path)?,
+        None => raystream_io::load_volume(path, series)?,
+    };
+    pb.finish_and_clear();
+    if !quiet {
+        for w in &volume.warnings {
+            eprintln!("raystream: {}: {w}", path.display());
+        }
+    }
+    Ok((volume, ms(t0.elapsed())))
+}
+
 pub fn run(a: &IsoArgs) -> Result<()> {
-    let hu = a.threshold.hu();
+    let hu = a.threshold.hu()?;
     let b = bones(&a.input, a.series.as_deref(), hu, a.smooth, a.quiet, None)?;
     let t = Instant::now();
     raystream_io::write_mesh(&a.output, &b.surface.mesh, Some(&b.surface.normals))?;

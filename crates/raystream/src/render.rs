@@ -10,9 +10,12 @@ use raystream_cpu::{DepthStats, RenderOptions, render};
 use raystream_gpu::{GpuRenderer, GpuTracer};
 use raystream_scene::Scene;
 
-use crate::cli::RenderArgs;
-use crate::common::{Backend, load_mesh, ms, open_device, spinner};
-use crate::iso::{Bones, bones};
+use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera};
+use raystream_volume::{TfPreset, TransferFunction};
+
+use crate::cli::{Device, RenderArgs};
+use crate::common::{Backend, cpu_model, load_mesh, ms, open_device, spinner};
+use crate::iso::{Bones, bones, read_volume};
 
 /// The built-in default: the abdomen/pelvis CT of TotalSegmentator's tests (see
 /// `assets/README.md` for source and license), whose bones `render` shows without an input.
@@ -22,7 +25,7 @@ const DEFAULT_CT_NAME: &str = "<built-in abdomen_pelvis_ct_totalseg.nii.gz>";
 /// The scene named by INPUT: none → the built-in CT's bones, `.toml` → scene file, a volume →
 /// its bones, else a mesh. Also says how the volume steps went, for volumes.
 fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
-    let hu = a.threshold.hu();
+    let hu = a.threshold.hu()?;
     let volume_scene = |path: &Path, embedded: Option<&[u8]>| -> Result<(Scene, Option<Bones>)> {
         let mut b = bones(path, a.series.as_deref(), hu, a.smooth, a.quiet, embedded)?;
         let mesh = std::mem::take(&mut b.surface.mesh);
@@ -42,7 +45,124 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
     }
 }
 
+/// `render VOLUME --mode …`: direct volume rendering on the CPU (the reference path).
+fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
+    if a.accel.device == Device::Gpu {
+        bail!(
+            "--mode {}: direct volume rendering runs on the CPU so far (--device cpu or auto)",
+            mode.name()
+        );
+    }
+    let (path, embedded) = match a.input.as_deref() {
+        None => (Path::new(DEFAULT_CT_NAME), Some(DEFAULT_CT)),
+        Some(p) if raystream_io::is_volume_path(p) => (p, None),
+        Some(p) => bail!(
+            "{}: --mode {} renders CT volumes (DICOM, NIfTI, NRRD, MetaImage), not meshes or scenes",
+            p.display(),
+            mode.name()
+        ),
+    };
+    let (volume, load_ms) = read_volume(path, a.series.as_deref(), a.quiet, embedded)?;
+    let tf = match (&a.tf, a.threshold.preset) {
+        (Some(f), _) => TransferFunction::load(f).map_err(anyhow::Error::msg)?,
+        (None, Some(p)) => match p.transfer() {
+            Some(t) => t.function(),
+            None if mode == DvrMode::Iso => TfPreset::CtBone.function(),
+            None => bail!(
+                "--preset {}: a threshold; --mode {} takes a transfer function: ct-bone, ct-bones, ct-aaa, ct-muscle, ct-lung, mip-bone (or --tf FILE)",
+                p.name(),
+                mode.name()
+            ),
+        },
+        (None, None) => TfPreset::CtBone.function(),
+    };
+    if let Some(s) = a.step
+        && !(s.is_finite() && s > 0.0)
+    {
+        bail!("--step {s}: the step must be a positive number of mm");
+    }
+    if let Some(w) = a.window
+        && !(w.is_finite() && w > 0.0)
+    {
+        bail!("--window {w}: the window must be a positive number of HU");
+    }
+    let opt = DvrOptions {
+        width: a.size.0,
+        height: a.size.1,
+        mode,
+        step_mm: a.step,
+        window: a.window.zip(a.level),
+        iso_hu: if mode == DvrMode::Iso {
+            a.threshold
+                .iso
+                .unwrap_or(match a.threshold.preset.and_then(|p| p.threshold()) {
+                    Some(t) => t.hu(),
+                    None => raystream_volume::Preset::Bone.hu(),
+                })
+        } else {
+            0.0
+        },
+        skip_empty: !a.no_skip,
+        ..Default::default()
+    };
+    let cam = volume_camera(&volume, opt.width as f32 / opt.height as f32);
+    let pb = spinner(
+        a.quiet,
+        &format!(
+            "{} of {}x{}x{} voxels",
+            mode.name(),
+            volume.dims[0],
+            volume.dims[1],
+            volume.dims[2]
+        ),
+    );
+    let mut frame_ms = Vec::new();
+    let mut out = None;
+    for _ in 0..a.repeat {
+        let t = Instant::now();
+        out = Some(render_volume(&volume, &tf, &opt, &cam));
+        frame_ms.push(ms(t.elapsed()));
+    }
+    pb.finish_and_clear();
+    let (image, stats) = out.expect("at least one frame");
+    image.save_png(&a.output).map_err(anyhow::Error::msg)?;
+    if !a.quiet {
+        frame_ms.sort_by(f64::total_cmp);
+        let median = frame_ms[frame_ms.len() / 2];
+        eprintln!(
+            "raystream: wrote {} ({}x{}, --mode {}, step {:.3} mm) on cpu ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}), {:.1} M samples/s, {} samples, {} skipped as empty ({:.0} %)",
+            a.output.display(),
+            opt.width,
+            opt.height,
+            mode.name(),
+            stats.step_mm,
+            cpu_model(),
+            load_ms,
+            median,
+            1e3 / median,
+            if a.repeat > 1 {
+                format!(", median of {}", a.repeat)
+            } else {
+                String::new()
+            },
+            stats.samples as f64 / median / 1e3,
+            stats.samples,
+            stats.skipped,
+            100.0 * stats.skipped as f64 / (stats.samples + stats.skipped).max(1) as f64
+        );
+    }
+    Ok(())
+}
+
 pub fn run(a: &RenderArgs) -> Result<()> {
+    if let Some(mode) = a.mode {
+        return render_direct(a, mode.into());
+    }
+    if a.tf.is_some() || a.step.is_some() || a.window.is_some() || a.no_skip {
+        bail!(
+            "--tf, --step, --window/--level and --no-skip go with --mode (direct volume rendering)"
+        );
+    }
     let backend = open_device(a.accel.device, a.accel.adapter.as_deref(), a.quiet)?;
     if matches!(backend, Backend::Gpu(_)) && Traversal::from(a.accel.traversal) != Traversal::Ropes
     {
@@ -171,10 +291,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         if let Some(b) = bones {
             eprintln!(
                 "raystream: of the load: volume {:.0} ms, isosurface {:.0} ms ({} voxels at {} HU)",
-                b.load_ms,
-                b.iso_ms,
-                b.voxels,
-                a.threshold.hu()
+                b.load_ms, b.iso_ms, b.voxels, b.hu
             );
         }
     }

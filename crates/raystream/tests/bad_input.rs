@@ -128,3 +128,40 @@ fn gpu_render_errors_are_clear() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--traversal ropes"), "{}", stderr(&o));
 }
+
+/// `render --mode`: wrong preset kind, a missing or bad transfer function, a mesh, a bad step.
+#[test]
+fn direct_volume_rendering_errors_are_clear() {
+    let out = tmp("dvr.png");
+    let out = out.to_string_lossy();
+    let o = run(&["render", "--mode", "dvr", "--preset", "bone", "-o", &out]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("ct-bone"), "{}", stderr(&o));
+    let o = run(&[
+        "render",
+        "--mode",
+        "dvr",
+        "--tf",
+        "no-such-tf.toml",
+        "-o",
+        &out,
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("no-such-tf.toml"), "{}", stderr(&o));
+    let f = write(
+        "bad-tf.toml",
+        b"opacity = [[0, 5]]\ncolor = [[0, 1, 1, 1]]\n",
+    );
+    let o = run(&["render", "--mode", "dvr", "--tf", &f, "-o", &out]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("bad-tf.toml"), "{}", stderr(&o));
+    let o = run(&["render", &mesh("spot.obj"), "--mode", "mip", "-o", &out]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("spot.obj"), "{}", stderr(&o));
+    let o = run(&["render", "--mode", "dvr", "--step", "0", "-o", &out]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--step"), "{}", stderr(&o));
+    let o = run(&["render", "--step", "1", "-o", &out]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--mode"), "{}", stderr(&o));
+}

@@ -289,3 +289,17 @@ fn gpu_render_matches_cpu_spot_scene() {
         ],
     );
 }
+
+#[test]
+fn golden_direct_volume_rendering() {
+    golden(
+        "dvr_ct_bones",
+        &["--mode", "dvr", "--preset", "ct-bones", "--size", "96x72"],
+    );
+    golden(
+        "mip",
+        &[
+            "--mode", "mip", "--window", "1500", "--level", "300", "--size", "96x72",
+        ],
+    );
+}
