@@ -87,6 +87,16 @@ impl Default for DvrOptions {
     }
 }
 
+impl DvrOptions {
+    /// The step in mm: `step_mm`, or half the smallest voxel spacing (never below 1/1000 of it).
+    pub fn step_for(&self, vol: &Volume) -> f32 {
+        let min_spacing = vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min) as f32;
+        self.step_mm
+            .unwrap_or(0.5 * min_spacing)
+            .max(1e-3 * min_spacing)
+    }
+}
+
 /// What a render did.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct DvrStats {
@@ -99,7 +109,7 @@ pub struct DvrStats {
 
 /// Bricks of `BRICK`³ cells: a brick holds the HU range of the voxels its cells' trilinear
 /// samples read (one more layer on the far sides).
-const BRICK: usize = 8;
+pub const BRICK: usize = 8;
 
 /// The volume prepared for marching: index-space transforms in f32 and the brick table.
 pub struct Marcher<'a> {
@@ -157,6 +167,17 @@ impl<'a> Marcher<'a> {
             bricks,
             visible,
         }
+    }
+
+    /// World (LPS mm) → continuous index as rows of the linear part, and the world origin:
+    /// p_idx = (row_a · (p − origin))_a.
+    pub fn world_to_index(&self) -> ([Vec3; 3], Vec3) {
+        (self.to_index, self.origin)
+    }
+
+    /// Bricks per axis and, per brick (x fastest), whether it may be visible.
+    pub fn brick_table(&self) -> ([usize; 3], &[bool]) {
+        (self.bricks, &self.visible)
     }
 
     fn index_of(&self, p: Vec3) -> Vec3 {
@@ -286,7 +307,8 @@ pub fn lps_to_scene(p: Vec3) -> Vec3 {
     Vec3::new(p.x, p.z, -p.y)
 }
 
-fn scene_to_lps(p: Vec3) -> Vec3 {
+/// The scene frame of [`volume_camera`] → LPS.
+pub fn scene_to_lps(p: Vec3) -> Vec3 {
     Vec3::new(p.x, -p.z, p.y)
 }
 

@@ -192,6 +192,45 @@ pub mod counter {
     pub const SLOTS: u32 = 8;
 }
 
+/// `DvrParams` in dvr.wgsl (uniform), 192 bytes: camera in LPS, the world → index transform,
+/// the mode and its parameters.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct DvrParams {
+    pub eye: [f32; 3],
+    pub tan_y: f32,
+    pub fwd: [f32; 3],
+    pub width: u32,
+    pub right: [f32; 3],
+    pub height: u32,
+    pub up: [f32; 3],
+    /// 0 dvr, 1 mip, 2 minip, 3 average, 4 iso (byte 60).
+    pub mode: u32,
+    /// Rows of the world → index linear map (bytes 64, 80, 96).
+    pub to_index0: [f32; 3],
+    /// Step, mm (byte 76).
+    pub step: f32,
+    pub to_index1: [f32; 3],
+    /// Iso threshold, HU (byte 92).
+    pub iso: f32,
+    pub to_index2: [f32; 3],
+    pub window_width: f32,
+    /// World position of voxel (0, 0, 0) (byte 112).
+    pub origin: [f32; 3],
+    pub window_level: f32,
+    /// Byte 128.
+    pub dims: [u32; 3],
+    pub skip_empty: u32,
+    /// Byte 144.
+    pub bricks: [u32; 3],
+    pub opacity_count: u32,
+    /// Byte 160.
+    pub background: [f32; 3],
+    pub color_count: u32,
+    /// Ambient, diffuse, specular, specular power (byte 176).
+    pub shading: [f32; 4],
+}
+
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
 const _: () = assert!(std::mem::size_of::<GpuHit>() == 16);
 const _: () = assert!(std::mem::size_of::<Params>() == 48);
@@ -202,3 +241,4 @@ const _: () = assert!(std::mem::size_of::<ShadeTri>() == 16);
 const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
+const _: () = assert!(std::mem::size_of::<DvrParams>() == 192);

@@ -9,6 +9,7 @@
 pub mod layout;
 mod render;
 mod split;
+mod volume;
 
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -21,6 +22,7 @@ use wgpu::util::DeviceExt;
 
 pub use render::{GpuRenderStats, GpuRenderer, MAX_WAVE, STAGES, render_wgsl};
 pub use split::{ITERATIONS_PER_SUBMIT, split_wgsl};
+pub use volume::{GpuDvrTimes, GpuVolumeRenderer, dvr_wgsl};
 
 /// Threads per workgroup of every kernel.
 pub const WORKGROUP_SIZE: u32 = 64;
@@ -572,16 +574,20 @@ impl<'a> GpuTracer<'a> {
             enc.resolve_query_set(set, 0..2, resolve, 0);
         }
         ctx.queue.submit([enc.finish()]);
-        let Some((_, resolve)) = &timer else {
-            return Ok(None);
-        };
-        let w = read_words(ctx, resolve)?;
-        let ticks =
-            (w[2] as u64 | (w[3] as u64) << 32).wrapping_sub(w[0] as u64 | (w[1] as u64) << 32);
-        let ms = ticks as f64 * ctx.queue.get_timestamp_period() as f64 * 1e-6;
-        // Equal stamps: no measurement rather than a false 0.
-        Ok((ms > 0.0).then_some(ms))
+        match &timer {
+            Some((_, resolve)) => read_elapsed_ms(ctx, resolve),
+            None => Ok(None),
+        }
     }
+}
+
+/// Milliseconds between the two timestamps resolved into `resolve`; `None` where the adapter
+/// wrote equal stamps: no measurement rather than a false 0.
+fn read_elapsed_ms(ctx: &GpuContext, resolve: &wgpu::Buffer) -> Result<Option<f64>, GpuError> {
+    let w = read_words(ctx, resolve)?;
+    let ticks = (w[2] as u64 | (w[3] as u64) << 32).wrapping_sub(w[0] as u64 | (w[1] as u64) << 32);
+    let ms = ticks as f64 * ctx.queue.get_timestamp_period() as f64 * 1e-6;
+    Ok((ms > 0.0).then_some(ms))
 }
 
 fn pipeline_label<'a>(p: &wgpu::ComputePipeline, any: &wgpu::ComputePipeline) -> Option<&'a str> {

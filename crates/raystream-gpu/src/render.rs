@@ -21,6 +21,7 @@ use crate::layout::{
 use crate::{GpuContext, GpuError, GpuHit, GpuTracer, kdtree_wgsl, read_words};
 
 const RENDER_WGSL: &str = include_str!("kernels/render.wgsl");
+pub(crate) const COMMON_WGSL: &str = include_str!("kernels/common.wgsl");
 
 /// Samples generated and traced together; bounds the queues' memory.
 pub const MAX_WAVE: u32 = 1 << 20;
@@ -33,7 +34,7 @@ pub const MAX_CONTRIBUTION: f32 = 255.0;
 pub fn render_wgsl() -> String {
     use counter::*;
     format!(
-        "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\n\n{RENDER_WGSL}",
+        "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\n\n{COMMON_WGSL}\n{RENDER_WGSL}",
         kdtree_wgsl()
     )
 }

@@ -7,14 +7,14 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use raystream_accel::{KdTree, Traversal};
 use raystream_cpu::{DepthStats, RenderOptions, render};
-use raystream_gpu::{GpuRenderer, GpuTracer};
+use raystream_gpu::{GpuRenderer, GpuTracer, GpuVolumeRenderer};
 use raystream_scene::Scene;
 
-use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera};
+use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, render_volume, volume_camera};
 use raystream_volume::{TfPreset, TransferFunction};
 
-use crate::cli::{Device, RenderArgs};
-use crate::common::{Backend, cpu_model, load_mesh, ms, open_device, spinner};
+use crate::cli::RenderArgs;
+use crate::common::{Backend, load_mesh, median as median_of, ms, open_device, spinner};
 use crate::iso::{Bones, bones, read_volume};
 
 /// The built-in default: the abdomen/pelvis CT of TotalSegmentator's tests (see
@@ -47,12 +47,7 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
 
 /// `render VOLUME --mode …`: direct volume rendering on the CPU (the reference path).
 fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
-    if a.accel.device == Device::Gpu {
-        bail!(
-            "--mode {}: direct volume rendering runs on the CPU so far (--device cpu or auto)",
-            mode.name()
-        );
-    }
+    let backend = open_device(a.accel.device, a.accel.adapter.as_deref(), a.quiet)?;
     let (path, embedded) = match a.input.as_deref() {
         None => (Path::new(DEFAULT_CT_NAME), Some(DEFAULT_CT)),
         Some(p) if raystream_io::is_volume_path(p) => (p, None),
@@ -116,27 +111,58 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             volume.dims[2]
         ),
     );
+    let gpu = match &backend {
+        Backend::Gpu(ctx) => Some(GpuVolumeRenderer::new(ctx, &volume, &tf)?),
+        Backend::Cpu => None,
+    };
     let mut frame_ms = Vec::new();
+    let mut kernel_ms = Vec::new();
     let mut out = None;
     for _ in 0..a.repeat {
         let t = Instant::now();
-        out = Some(render_volume(&volume, &tf, &opt, &cam));
+        out = Some(match &gpu {
+            Some(g) => {
+                let (img, times) = g.render(&opt, &cam)?;
+                kernel_ms.extend(times.kernel_gpu_ms);
+                img
+            }
+            None => render_volume(&volume, &tf, &opt, &cam).0,
+        });
         frame_ms.push(ms(t.elapsed()));
     }
     pb.finish_and_clear();
-    let (image, stats) = out.expect("at least one frame");
+    let image = out.expect("at least one frame");
     image.save_png(&a.output).map_err(anyhow::Error::msg)?;
     if !a.quiet {
+        // The work a frame does, counted on the CPU path's marcher (the same lattice).
+        let stats = if gpu.is_some() {
+            let small = DvrOptions {
+                width: opt.width.min(256),
+                height: opt.height.min(256),
+                ..opt
+            };
+            let (_, s) = render_volume(&volume, &tf, &small, &cam);
+            let scale =
+                (opt.width as f64 * opt.height as f64) / (small.width as f64 * small.height as f64);
+            DvrStats {
+                samples: (s.samples as f64 * scale) as u64,
+                skipped: (s.skipped as f64 * scale) as u64,
+                ..s
+            }
+        } else {
+            render_volume(&volume, &tf, &opt, &cam).1
+        };
         frame_ms.sort_by(f64::total_cmp);
         let median = frame_ms[frame_ms.len() / 2];
         eprintln!(
-            "raystream: wrote {} ({}x{}, --mode {}, step {:.3} mm) on cpu ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}), {:.1} M samples/s, {} samples, {} skipped as empty ({:.0} %)",
+            "raystream: wrote {} ({}x{}, --mode {}, step {:.3} mm) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples{}, {} skipped as empty ({:.0} %), {:.1} M samples/s",
             a.output.display(),
             opt.width,
             opt.height,
             mode.name(),
             stats.step_mm,
-            cpu_model(),
+            backend.name(),
+            backend.adapter(),
             load_ms,
             median,
             1e3 / median,
@@ -145,10 +171,16 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             } else {
                 String::new()
             },
-            stats.samples as f64 / median / 1e3,
+            if kernel_ms.is_empty() {
+                String::new()
+            } else {
+                format!(", kernel {:.2} ms", median_of(&mut kernel_ms))
+            },
             stats.samples,
+            if gpu.is_some() { " (estimated)" } else { "" },
             stats.skipped,
-            100.0 * stats.skipped as f64 / (stats.samples + stats.skipped).max(1) as f64
+            100.0 * stats.skipped as f64 / (stats.samples + stats.skipped).max(1) as f64,
+            stats.samples as f64 / median / 1e3
         );
     }
     Ok(())

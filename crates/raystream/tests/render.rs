@@ -234,8 +234,10 @@ fn default_render_writes_render_png() {
 }
 
 /// `render --device gpu` against `render --device cpu` of the same scene, measured by
-/// `rays.py imgdiff`: mean absolute difference < 0.5/255 and ≥ 99.9 % of pixels within 2/255.
-fn gpu_matches_cpu(name: &str, args: &[&str]) {
+/// `rays.py imgdiff`: meshes, mean absolute difference < 0.5/255 and ≥ 99.9 % of pixels within
+/// 2/255; volumes (`volume`: hardware texture filtering has ~1/256 weight precision), mean
+/// < 1/255 and the 99th percentile within 8/255.
+fn gpu_matches_cpu(name: &str, args: &[&str], volume: bool) {
     if !gpu_available() {
         return;
     }
@@ -262,16 +264,22 @@ fn gpu_matches_cpu(name: &str, args: &[&str]) {
     let r: serde_json::Value = serde_json::from_str(&stdout(&d)).unwrap();
     let mean = r["mean_abs_diff"].as_f64().unwrap();
     let over = r["frac_gt_2"].as_f64().unwrap();
+    let p99 = r["p99_max_channel_diff"].as_f64().unwrap();
+    let ok = if volume {
+        mean < 1.0 && p99 <= 8.0
+    } else {
+        mean < 0.5 && over <= 0.001
+    };
     assert!(
-        mean < 0.5 && over <= 0.001,
-        "{name}: GPU vs CPU mean {mean}/255, {over} of pixels > 2/255"
+        ok,
+        "{name}: GPU vs CPU mean {mean}/255, p99 {p99}/255, {over} of pixels > 2/255"
     );
     assert!(r["std_a"].as_f64().unwrap() > 5.0, "{name}: a blank image");
 }
 
 #[test]
 fn gpu_render_matches_cpu_default_ct() {
-    gpu_matches_cpu("default", &["--size", "96x72", "--spp", "1"]);
+    gpu_matches_cpu("default", &["--size", "96x72", "--spp", "1"], false);
 }
 
 #[test]
@@ -302,4 +310,14 @@ fn golden_direct_volume_rendering() {
             "--mode", "mip", "--window", "1500", "--level", "300", "--size", "96x72",
         ],
     );
+}
+
+#[test]
+fn gpu_volume_rendering_matches_cpu_cli() {
+    gpu_matches_cpu(
+        "dvr",
+        &["--mode", "dvr", "--preset", "ct-aaa", "--size", "64x48"],
+        true,
+    );
+    gpu_matches_cpu("mip", &["--mode", "mip", "--size", "64x48"], true);
 }

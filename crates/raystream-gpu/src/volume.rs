@@ -1,0 +1,286 @@
+//! Direct volume rendering on the GPU (`kernels/dvr.wgsl`): the CT volume as an R16Float 3D
+//! texture of HU with hardware trilinear filtering, the transfer function's control points and
+//! the CPU's brick table in storage buffers, one thread per pixel. The CPU path
+//! (`raystream_cpu::dvr`) is the reference; the tests hold the two together.
+
+use std::time::Instant;
+
+use raystream_cpu::Image;
+use raystream_cpu::dvr::{BRICK, DvrMode, DvrOptions, Marcher, scene_to_lps};
+use raystream_io::Volume;
+use raystream_math::Vec3;
+use raystream_scene::Camera;
+use raystream_volume::TransferFunction;
+use wgpu::util::DeviceExt;
+
+use crate::layout::DvrParams;
+use crate::render::COMMON_WGSL;
+use crate::{GpuContext, GpuError, read_elapsed_ms, read_words};
+
+const DVR_WGSL: &str = include_str!("kernels/dvr.wgsl");
+
+/// The WGSL source of the volume kernel.
+pub fn dvr_wgsl() -> String {
+    format!("const BRICK_SIZE: u32 = {BRICK}u;\n\n{COMMON_WGSL}\n{DVR_WGSL}")
+}
+
+/// A volume and its transfer function on the GPU.
+pub struct GpuVolumeRenderer<'a> {
+    ctx: &'a GpuContext,
+    vol: &'a Volume,
+    tf: &'a TransferFunction,
+    view: wgpu::TextureView,
+    sampler: wgpu::Sampler,
+    opacity: wgpu::Buffer,
+    color: wgpu::Buffer,
+    bricks: wgpu::Buffer,
+    brick_dims: [u32; 3],
+    pipeline: wgpu::ComputePipeline,
+    /// Milliseconds spent uploading the volume and building the pipeline.
+    pub upload_ms: f64,
+}
+
+/// Timings of one GPU volume frame, milliseconds.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GpuDvrTimes {
+    /// Submission to readback, wall time.
+    pub frame_ms: f64,
+    /// The kernel's own time, from timestamp queries where the adapter has them.
+    pub kernel_gpu_ms: Option<f64>,
+}
+
+impl<'a> GpuVolumeRenderer<'a> {
+    pub fn new(
+        ctx: &'a GpuContext,
+        vol: &'a Volume,
+        tf: &'a TransferFunction,
+    ) -> Result<GpuVolumeRenderer<'a>, GpuError> {
+        let t0 = Instant::now();
+        let max = ctx.limits.max_texture_dimension_3d as usize;
+        if vol.dims.iter().any(|&n| n > max) {
+            return Err(ctx.err(format!(
+                "a {}x{}x{} volume exceeds the adapter's 3D texture limit of {max} per side",
+                vol.dims[0], vol.dims[1], vol.dims[2]
+            )));
+        }
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let size = wgpu::Extent3d {
+            width: vol.dims[0] as u32,
+            height: vol.dims[1] as u32,
+            depth_or_array_layers: vol.dims[2] as u32,
+        };
+        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("CT volume (HU, f16)"),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::R16Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        let halves: Vec<u16> = vol
+            .data
+            .iter()
+            .map(|&v| half::f16::from_f32(v).to_bits())
+            .collect();
+        ctx.queue.write_texture(
+            texture.as_image_copy(),
+            bytemuck::cast_slice(&halves),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(2 * size.width),
+                rows_per_image: Some(size.height),
+            },
+            size,
+        );
+        let view = texture.create_view(&Default::default());
+        let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("trilinear"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let opacity: Vec<[f32; 2]> = tf.opacity.iter().map(|p| [p.0, p.1]).collect();
+        let color: Vec<[f32; 4]> = tf
+            .color
+            .iter()
+            .map(|p| [p.0, p.1[0], p.1[1], p.1[2]])
+            .collect();
+        let none = wgpu::BufferUsages::empty();
+        let opacity = ctx.storage("opacity points", bytemuck::cast_slice(&opacity), none)?;
+        let color = ctx.storage("color points", bytemuck::cast_slice(&color), none)?;
+        let marcher = Marcher::new(vol, Some(tf));
+        let (brick_dims, visible) = marcher.brick_table();
+        let visible: Vec<u32> = visible.iter().map(|&v| v as u32).collect();
+        let bricks = ctx.storage("brick table", bytemuck::cast_slice(&visible), none)?;
+        let module = ctx
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("dvr.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(dvr_wgsl().into()),
+            });
+        let pipeline = ctx
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("render_volume"),
+                layout: None,
+                module: &module,
+                entry_point: Some("render_volume"),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(ctx.err(e));
+        }
+        ctx.wait()?;
+        Ok(GpuVolumeRenderer {
+            ctx,
+            vol,
+            tf,
+            view,
+            sampler,
+            opacity,
+            color,
+            bricks,
+            brick_dims: brick_dims.map(|b| b as u32),
+            pipeline,
+            upload_ms: t0.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+
+    /// Renders one frame with `cam` (the scene frame of `raystream_cpu::dvr::volume_camera`).
+    pub fn render(&self, opt: &DvrOptions, cam: &Camera) -> Result<(Image, GpuDvrTimes), GpuError> {
+        let ctx = self.ctx;
+        let t0 = Instant::now();
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let ([r0, r1, r2], origin) = Marcher::new(self.vol, None).world_to_index();
+        let (w, l) = opt.window.unwrap_or(opt.mode.default_window());
+        let s = self.tf.shading;
+        let v3 = |v: Vec3| v.to_array();
+        let params = DvrParams {
+            eye: v3(scene_to_lps(cam.eye)),
+            tan_y: cam.tan_y,
+            fwd: v3(scene_to_lps(cam.fwd)),
+            width: opt.width,
+            right: v3(scene_to_lps(cam.right)),
+            height: opt.height,
+            up: v3(scene_to_lps(cam.up)),
+            mode: match opt.mode {
+                DvrMode::Dvr => 0,
+                DvrMode::Mip => 1,
+                DvrMode::MinIp => 2,
+                DvrMode::Average => 3,
+                DvrMode::Iso => 4,
+            },
+            to_index0: v3(r0),
+            step: opt.step_for(self.vol),
+            to_index1: v3(r1),
+            iso: opt.iso_hu,
+            to_index2: v3(r2),
+            window_width: w,
+            origin: v3(origin),
+            window_level: l,
+            dims: self.vol.dims.map(|n| n as u32),
+            skip_empty: (opt.skip_empty && opt.mode == DvrMode::Dvr) as u32,
+            bricks: self.brick_dims,
+            opacity_count: self.tf.opacity.len() as u32,
+            background: v3(opt.background),
+            color_count: self.tf.color.len() as u32,
+            shading: [s.ambient, s.diffuse, s.specular, s.power],
+        };
+        let param_buf = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("dvr params"),
+                contents: bytemuck::bytes_of(&params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+        let n = opt.width as u64 * opt.height as u64;
+        let pixels = ctx.work_buffer("volume pixels", n * 16, wgpu::BufferUsages::empty())?;
+        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("dvr"),
+            layout: &self.pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: param_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&self.view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(&self.sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: self.opacity.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: self.color.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: self.bricks.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: pixels.as_entire_binding(),
+                },
+            ],
+        });
+        let timer = ctx.timer(2);
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("render_volume"),
+            });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("render_volume"),
+                timestamp_writes: timer
+                    .as_ref()
+                    .map(|(set, _)| wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: Some(1),
+                    }),
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
+        }
+        if let Some((set, resolve)) = &timer {
+            enc.resolve_query_set(set, 0..2, resolve, 0);
+        }
+        ctx.queue.submit([enc.finish()]);
+        let words = read_words(ctx, &pixels)?;
+        let kernel_gpu_ms = match &timer {
+            Some((_, resolve)) => read_elapsed_ms(ctx, resolve)?,
+            None => None,
+        };
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(ctx.err(e));
+        }
+        let floats: &[f32] = bytemuck::cast_slice(&words);
+        let pixels = floats
+            .chunks_exact(4)
+            .take(n as usize)
+            .map(|p| Vec3::new(p[0], p[1], p[2]))
+            .collect();
+        Ok((
+            Image {
+                width: opt.width,
+                height: opt.height,
+                pixels,
+            },
+            GpuDvrTimes {
+                frame_ms: t0.elapsed().as_secs_f64() * 1e3,
+                kernel_gpu_ms,
+            },
+        ))
+    }
+}
