@@ -136,6 +136,7 @@ fn golden_scene_file() {
             "--max-depth",
             "5",
         ],
+        false,
     );
 }
 
@@ -295,6 +296,7 @@ fn gpu_render_matches_cpu_spot_scene() {
             "--max-depth",
             "5",
         ],
+        false,
     );
 }
 
