@@ -136,7 +136,6 @@ fn golden_scene_file() {
             "--max-depth",
             "5",
         ],
-        false,
     );
 }
 
