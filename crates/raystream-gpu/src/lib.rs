@@ -226,6 +226,55 @@ impl GpuContext {
         [gx, gy, 1]
     }
 
+    /// A compute bind group layout of buffers, binding i of type `types[i]`.
+    fn buffer_layout(
+        &self,
+        label: &str,
+        types: &[wgpu::BufferBindingType],
+    ) -> wgpu::BindGroupLayout {
+        let entries: Vec<_> = types
+            .iter()
+            .enumerate()
+            .map(|(i, &ty)| wgpu::BindGroupLayoutEntry {
+                binding: i as u32,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            })
+            .collect();
+        self.device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries: &entries,
+            })
+    }
+
+    /// A bind group of whole buffers, binding i = `buffers[i]`.
+    fn bind_buffers(
+        &self,
+        label: &str,
+        layout: &wgpu::BindGroupLayout,
+        buffers: &[&wgpu::Buffer],
+    ) -> wgpu::BindGroup {
+        let entries: Vec<_> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout,
+            entries: &entries,
+        })
+    }
+
     /// The largest buffer a kernel can bind.
     fn max_binding(&self) -> u64 {
         self.limits
@@ -379,21 +428,11 @@ impl<'a> GpuTracer<'a> {
                 contents: bytemuck::bytes_of(&self.params),
                 usage: wgpu::BufferUsages::UNIFORM,
             });
-        let entries = [&params, &self.inners, &self.leaves, &self.tris]
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect::<Vec<_>>();
-        self.ctx
-            .device
-            .create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("kd-tree"),
-                layout,
-                entries: &entries,
-            })
+        self.ctx.bind_buffers(
+            "kd-tree",
+            layout,
+            &[&params, &self.inners, &self.leaves, &self.tris],
+        )
     }
 
     fn split_kernels(&self) -> &split::SplitKernels {

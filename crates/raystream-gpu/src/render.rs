@@ -18,7 +18,7 @@ use raystream_scene::Scene;
 use crate::layout::{
     GpuLight, GpuMaterial, RayWork, RenderParams, ShadeTri, ShadowWork, Vertex, counter,
 };
-use crate::{GpuContext, GpuError, GpuHit, GpuTracer, kdtree_wgsl, read_words};
+use crate::{GpuError, GpuHit, GpuTracer, kdtree_wgsl, read_words};
 
 const RENDER_WGSL: &str = include_str!("kernels/render.wgsl");
 pub(crate) const COMMON_WGSL: &str = include_str!("kernels/common.wgsl");
@@ -86,65 +86,6 @@ pub struct GpuRenderer<'a> {
     pipelines: Vec<wgpu::ComputePipeline>,
     /// Samples per wave: at most [`MAX_WAVE`], less where the device's bindings need it.
     wave: u32,
-}
-
-fn layout_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-/// A uniform at binding 0, then `n` storage buffers.
-fn group_layout(
-    ctx: &GpuContext,
-    label: &str,
-    uniform: bool,
-    n: u32,
-    read_only: bool,
-) -> wgpu::BindGroupLayout {
-    let storage = wgpu::BufferBindingType::Storage { read_only };
-    let entries: Vec<_> = (0..n)
-        .map(|i| {
-            if uniform && i == 0 {
-                layout_entry(0, wgpu::BufferBindingType::Uniform)
-            } else {
-                layout_entry(i, storage)
-            }
-        })
-        .collect();
-    ctx.device
-        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some(label),
-            entries: &entries,
-        })
-}
-
-fn bind(
-    ctx: &GpuContext,
-    label: &str,
-    layout: &wgpu::BindGroupLayout,
-    buffers: &[&wgpu::Buffer],
-) -> wgpu::BindGroup {
-    let entries: Vec<_> = buffers
-        .iter()
-        .enumerate()
-        .map(|(i, b)| wgpu::BindGroupEntry {
-            binding: i as u32,
-            resource: b.as_entire_binding(),
-        })
-        .collect();
-    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout,
-        entries: &entries,
-    })
 }
 
 fn v3(v: Vec3) -> [f32; 3] {
@@ -233,11 +174,14 @@ impl<'a> GpuRenderer<'a> {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let uniform = wgpu::BufferBindingType::Uniform;
+        let ro = wgpu::BufferBindingType::Storage { read_only: true };
+        let rw = wgpu::BufferBindingType::Storage { read_only: false };
         let layouts = [
-            group_layout(ctx, "kd-tree", true, 4, true),
-            group_layout(ctx, "scene", true, 5, true),
-            group_layout(ctx, "queues", false, 6, false),
-            group_layout(ctx, "dispatch args", false, 1, false),
+            ctx.buffer_layout("kd-tree", &[uniform, ro, ro, ro]),
+            ctx.buffer_layout("scene", &[uniform, ro, ro, ro, ro]),
+            ctx.buffer_layout("queues", &[rw; 6]),
+            ctx.buffer_layout("dispatch args", &[rw]),
         ];
         let module = ctx
             .device
@@ -365,8 +309,7 @@ impl<'a> GpuRenderer<'a> {
         let mut stage_ms = [0f64; STAGES.len()];
         let mut timed = q.resolve.is_some();
         let tree_group = self.tracer.bind_tree(&self.layouts[0]);
-        let scene_group = bind(
-            ctx,
+        let scene_group = ctx.bind_buffers(
             "scene",
             &self.layouts[1],
             &[
@@ -377,7 +320,7 @@ impl<'a> GpuRenderer<'a> {
                 &self.lights,
             ],
         );
-        let args_group = bind(ctx, "args", &self.layouts[3], &[&q.args]);
+        let args_group = ctx.bind_buffers("args", &self.layouts[3], &[&q.args]);
         let mut base = 0u64;
         while base < total {
             let n = (total - base).min(wave as u64) as u32;
@@ -399,8 +342,7 @@ impl<'a> GpuRenderer<'a> {
                 params.spawn = (depth < opt.max_depth) as u32;
                 ctx.queue
                     .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-                let work_group = bind(
-                    ctx,
+                let work_group = ctx.bind_buffers(
                     "queues",
                     &self.layouts[2],
                     &[

@@ -26,40 +26,15 @@ pub(crate) struct SplitKernels {
     advance: wgpu::ComputePipeline,
 }
 
-fn entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
 impl SplitKernels {
     pub(crate) fn new(ctx: &GpuContext) -> SplitKernels {
         use wgpu::BufferBindingType::{Storage, Uniform};
         let ro = Storage { read_only: true };
         let rw = Storage { read_only: false };
-        let layout = |label: &str, types: &[wgpu::BufferBindingType]| {
-            let entries: Vec<_> = types
-                .iter()
-                .enumerate()
-                .map(|(i, &t)| entry(i as u32, t))
-                .collect();
-            ctx.device
-                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some(label),
-                    entries: &entries,
-                })
-        };
         let layouts = [
-            layout("split tree and rays", &[Uniform, ro, ro, ro, ro, rw]),
-            layout("split lists", &[rw, rw, rw, rw, rw]),
-            layout("split args", &[rw]),
+            ctx.buffer_layout("split tree and rays", &[Uniform, ro, ro, ro, ro, rw]),
+            ctx.buffer_layout("split lists", &[rw; 5]),
+            ctx.buffer_layout("split args", &[rw]),
         ];
         let module = ctx
             .device
@@ -106,26 +81,6 @@ impl SplitKernels {
     }
 }
 
-fn bind(
-    ctx: &GpuContext,
-    layout: &wgpu::BindGroupLayout,
-    buffers: &[&wgpu::Buffer],
-) -> wgpu::BindGroup {
-    let entries: Vec<_> = buffers
-        .iter()
-        .enumerate()
-        .map(|(i, b)| wgpu::BindGroupEntry {
-            binding: i as u32,
-            resource: b.as_entire_binding(),
-        })
-        .collect();
-    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("split"),
-        layout,
-        entries: &entries,
-    })
-}
-
 /// What a split query did: leaf steps run, and the kernels' own time (timestamps), summed.
 pub(crate) struct SplitRun {
     pub steps: u32,
@@ -160,8 +115,8 @@ pub(crate) fn run(
         mapped_at_creation: false,
     });
     let timer = ctx.timer(2);
-    let group0 = bind(
-        ctx,
+    let group0 = ctx.bind_buffers(
+        "split",
         &k.layouts[0],
         &[
             params,
@@ -174,13 +129,13 @@ pub(crate) fn run(
     );
     // Lists: [active, next] and the swapped pair.
     let group1 = [0, 1].map(|a| {
-        bind(
-            ctx,
+        ctx.bind_buffers(
+            "split",
             &k.layouts[1],
             &[&state, &lists[a], &items, &lists[1 - a], &counts],
         )
     });
-    let group2 = bind(ctx, &k.layouts[2], &[&args]);
+    let group2 = ctx.bind_buffers("split args", &k.layouts[2], &[&args]);
     let stamp = |first: bool, last: bool| {
         let (set, _) = timer.as_ref().filter(|_| first || last)?;
         Some(wgpu::ComputePassTimestampWrites {
