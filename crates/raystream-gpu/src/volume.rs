@@ -35,6 +35,8 @@ pub struct GpuVolumeRenderer<'a> {
     color: wgpu::Buffer,
     bricks: wgpu::Buffer,
     brick_dims: [u32; 3],
+    /// World → continuous index (rows and origin), from the marcher.
+    to_index: ([Vec3; 3], Vec3),
     pipeline: wgpu::ComputePipeline,
     /// Milliseconds spent uploading the volume and building the pipeline.
     pub upload_ms: f64,
@@ -144,6 +146,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             color,
             bricks,
             brick_dims: brick_dims.map(|b| b as u32),
+            to_index: marcher.world_to_index(),
             pipeline,
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
@@ -154,7 +157,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         let ctx = self.ctx;
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let ([r0, r1, r2], origin) = Marcher::new(self.vol, None).world_to_index();
+        let ([r0, r1, r2], origin) = self.to_index;
         let (w, l) = opt.window.unwrap_or(opt.mode.default_window());
         let s = self.tf.shading;
         let v3 = |v: Vec3| v.to_array();

@@ -118,6 +118,8 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let mut frame_ms = Vec::new();
     let mut kernel_ms = Vec::new();
     let mut out = None;
+    // The CPU path counts its samples; the GPU's are estimated below.
+    let mut cpu_stats = None;
     for _ in 0..a.repeat {
         let t = Instant::now();
         out = Some(match &gpu {
@@ -126,7 +128,11 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
                 kernel_ms.extend(times.kernel_gpu_ms);
                 img
             }
-            None => render_volume(&volume, &tf, &opt, &cam).0,
+            None => {
+                let (img, stats) = render_volume(&volume, &tf, &opt, &cam);
+                cpu_stats = Some(stats);
+                img
+            }
         });
         frame_ms.push(ms(t.elapsed()));
     }
@@ -134,8 +140,9 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let image = out.expect("at least one frame");
     image.save_png(&a.output).map_err(anyhow::Error::msg)?;
     if !a.quiet {
-        // The work a frame does, counted on the CPU path's marcher (the same lattice).
-        let stats = if gpu.is_some() {
+        // The work a GPU frame does, estimated on the CPU path's marcher (the same lattice)
+        // at no more than 256×256.
+        let stats = cpu_stats.unwrap_or_else(|| {
             let small = DvrOptions {
                 width: opt.width.min(256),
                 height: opt.height.min(256),
@@ -149,11 +156,8 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
                 skipped: (s.skipped as f64 * scale) as u64,
                 ..s
             }
-        } else {
-            render_volume(&volume, &tf, &opt, &cam).1
-        };
-        frame_ms.sort_by(f64::total_cmp);
-        let median = frame_ms[frame_ms.len() / 2];
+        });
+        let median = median_of(&mut frame_ms);
         eprintln!(
             "raystream: wrote {} ({}x{}, --mode {}, step {:.3} mm) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples{}, {} skipped as empty ({:.0} %), {:.1} M samples/s",
             a.output.display(),
@@ -277,8 +281,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     let image = image.expect("at least one frame");
     image.save_png(&a.output).map_err(anyhow::Error::msg)?;
     if !a.quiet {
-        frame_ms.sort_by(f64::total_cmp);
-        let median = frame_ms[frame_ms.len() / 2];
+        let median = median_of(&mut frame_ms);
         eprintln!(
             "raystream: wrote {} ({}x{}, {} spp, depth {}) on {} ({}): load {:.0} ms, kd-tree {:.0} ms ({} triangles){}, render {:.1} ms{} ({:.2} Mrays/s over {} rays)",
             a.output.display(),
