@@ -70,6 +70,14 @@ pub struct DvrOptions {
     /// Skip bricks the transfer function makes transparent (dvr mode).
     pub skip_empty: bool,
     pub background: Vec3,
+    /// dvr mode: light from a key light above left of the camera ([`key_light`]) instead of a
+    /// headlight, and march a shadow ray from every visible sample toward it through the same
+    /// transfer function.
+    pub shadows: bool,
+    /// Keep only the part of the volume inside this axis-aligned box, LPS mm (min, max).
+    pub crop: Option<[Vec3; 2]>,
+    /// Keep only points p with n · p ≥ c (n, c in LPS mm): up to two clip planes.
+    pub clip_planes: [Option<(Vec3, f32)>; 2],
 }
 
 impl Default for DvrOptions {
@@ -83,6 +91,9 @@ impl Default for DvrOptions {
             iso_hu: 300.0,
             skip_empty: true,
             background: Vec3::new(0.02, 0.025, 0.035),
+            shadows: false,
+            crop: None,
+            clip_planes: [None; 2],
         }
     }
 }
@@ -104,6 +115,8 @@ pub struct DvrStats {
     pub samples: u64,
     /// Samples not taken because their brick was transparent.
     pub skipped: u64,
+    /// Samples taken by shadow rays (`--shadows`).
+    pub shadow_samples: u64,
     pub step_mm: f32,
 }
 
@@ -263,6 +276,65 @@ impl<'a> Marcher<'a> {
         (t0 <= t1).then_some((t0, t1))
     }
 
+    /// Transmittance from index point `p` toward the light (`l_idx`: index units per mm along
+    /// the unit light direction), through the transfer function's opacity on the lattice of
+    /// the primary ray's step (from one step out, so that a sample does not shadow itself),
+    /// skipping transparent bricks; and the samples taken.
+    fn transmittance(
+        &self,
+        tf: &TransferFunction,
+        p: Vec3,
+        l_idx: Vec3,
+        step: f32,
+        jitter: f32,
+    ) -> (f32, u64) {
+        let Some((_, t1)) = self.clip(p, l_idx) else {
+            return (1.0, 0);
+        };
+        let (mut transmit, mut taken, mut k) = (1.0f32, 0u64, 1u64);
+        loop {
+            let start = k as f32 * step;
+            if start >= t1 {
+                break;
+            }
+            let t = ((k as f32 + jitter) * step).min(t1);
+            let q = p + l_idx * t;
+            if let Some(next) = self.skip_brick(q, t, 0.0, l_idx, step, jitter, k) {
+                k = next;
+                continue;
+            }
+            let seg = step.min(t1 - start);
+            taken += 1;
+            k += 1;
+            let a = tf.opacity_at(self.sample(q));
+            if a > 0.0 {
+                transmit *= (1.0 - a.min(1.0)).powf(seg);
+                if transmit < 0.01 {
+                    break;
+                }
+            }
+        }
+        (transmit, taken)
+    }
+
+    /// Where index point `q` (ray parameter `t`) lies in a transparent brick: the index of the
+    /// first sample of the lattice t0 + (k + jitter)·step past that brick (at least k + 1).
+    #[allow(clippy::too_many_arguments)]
+    fn skip_brick(
+        &self,
+        q: Vec3,
+        t: f32,
+        t0: f32,
+        d_idx: Vec3,
+        step: f32,
+        jitter: f32,
+        k: u64,
+    ) -> Option<u64> {
+        let (b, t_exit) = self.brick_exit(q, t, d_idx);
+        (!self.visible[b])
+            .then(|| (((t_exit - t0) / step - jitter).ceil().max(0.0) as u64).max(k + 1))
+    }
+
     /// The brick holding index `p`, and the ray parameter where the ray leaves it.
     fn brick_exit(&self, p: Vec3, t: f32, d_idx: Vec3) -> (usize, f32) {
         let b = [0, 1, 2].map(|a| ((p[a].max(0.0) as usize) / BRICK).min(self.bricks[a] - 1));
@@ -288,6 +360,12 @@ impl<'a> Marcher<'a> {
 /// The camera that shows a volume from the front (anterior view, head up, the patient's right
 /// on the image's left), framing its box, in the scene frame x = L, y = S, z = A.
 pub fn volume_camera(vol: &Volume, aspect: f32) -> Camera {
+    orbit_camera(vol, aspect, 0.0)
+}
+
+/// [`volume_camera`] turned `degrees` about the patient's superior axis (a turntable: 90° looks
+/// from the patient's left), framing the whole volume at every angle.
+pub fn orbit_camera(vol: &Volume, aspect: f32, degrees: f32) -> Camera {
     let [nx, ny, nz] = vol.dims;
     let corners: Vec<Vec3> = (0..8)
         .map(|c| {
@@ -299,7 +377,47 @@ pub fn volume_camera(vol: &Volume, aspect: f32) -> Camera {
             lps_to_scene(vol.index_to_world(idx).as_vec3())
         })
         .collect();
-    Camera::frame_from(&corners, aspect, Vec3::new(0.0, 0.12, 1.0))
+    let (s, c) = degrees.to_radians().sin_cos();
+    Camera::frame_from(&corners, aspect, Vec3::new(s, 0.12, c))
+}
+
+/// The direction toward the key light of `--shadows` (LPS, unit): above the camera, to its
+/// left and in front of the volume, so that shadows fall down and to the right.
+pub fn key_light(cam: &Camera) -> Vec3 {
+    scene_to_lps((cam.up * 0.6 - cam.right * 0.45 - cam.fwd * 0.66).normalize())
+}
+
+/// The part [t0, t1] of the ray o + t·d (LPS, unit d) that the crop box and the clip planes
+/// keep.
+pub fn clip_interval(opt: &DvrOptions, o: Vec3, d: Vec3, t0: f32, t1: f32) -> Option<(f32, f32)> {
+    let (mut t0, mut t1) = (t0, t1);
+    if let Some([lo, hi]) = opt.crop {
+        for a in 0..3 {
+            if d[a] == 0.0 {
+                if o[a] < lo[a] || o[a] > hi[a] {
+                    return None;
+                }
+                continue;
+            }
+            let (n, f) = ((lo[a] - o[a]) / d[a], (hi[a] - o[a]) / d[a]);
+            t0 = t0.max(n.min(f));
+            t1 = t1.min(n.max(f));
+        }
+    }
+    for (n, c) in opt.clip_planes.iter().flatten() {
+        // n · (o + t d) ≥ c
+        let (no, nd) = (n.dot(o), n.dot(d));
+        if nd == 0.0 {
+            if no < *c {
+                return None;
+            }
+        } else if nd > 0.0 {
+            t0 = t0.max((c - no) / nd);
+        } else {
+            t1 = t1.min((c - no) / nd);
+        }
+    }
+    (t0 <= t1).then_some((t0, t1))
 }
 
 /// LPS → the scene frame of [`volume_camera`] (and of `Scene::for_bones`).
@@ -338,7 +456,8 @@ pub fn render_volume(
         .unwrap_or(0.5 * min_spacing)
         .max(1e-3 * min_spacing);
     let win = opt.window.unwrap_or(opt.mode.default_window());
-    let counts: Vec<(Vec3, u64, u64)> = (0..opt.width * opt.height)
+    let light = (opt.shadows && opt.mode == DvrMode::Dvr).then(|| key_light(cam));
+    let rays: Vec<Marched> = (0..opt.width * opt.height)
         .into_par_iter()
         .with_min_len(64)
         .map(|pixel| {
@@ -348,29 +467,56 @@ pub fn render_volume(
             );
             let r = cam.ray(x, y, opt.width, opt.height);
             let (o, d) = (scene_to_lps(r.origin), scene_to_lps(r.dir));
-            march(&marcher, tf, opt, win, step, o, d, start_jitter(pixel))
+            let ray = Ray3 {
+                o,
+                d,
+                jitter: start_jitter(pixel),
+            };
+            march(&marcher, tf, opt, win, step, light, ray)
         })
         .collect();
     let stats = DvrStats {
-        samples: counts.iter().map(|c| c.1).sum(),
-        skipped: counts.iter().map(|c| c.2).sum(),
+        samples: rays.iter().map(|c| c.taken).sum(),
+        skipped: rays.iter().map(|c| c.skipped).sum(),
+        shadow_samples: rays.iter().map(|c| c.shadow).sum(),
         step_mm: step,
     };
     (
         Image {
             width: opt.width,
             height: opt.height,
-            pixels: counts.into_iter().map(|c| c.0).collect(),
+            pixels: rays.into_iter().map(|c| c.color).collect(),
         },
         stats,
     )
 }
 
-/// Phong with a headlight: the light comes from the eye, so `-d` is both L and V.
-fn phong(tf: &TransferFunction, n: Vec3, d: Vec3) -> (f32, f32) {
+/// A primary ray in LPS (unit `d`) and its start offset in steps.
+#[derive(Clone, Copy)]
+struct Ray3 {
+    o: Vec3,
+    d: Vec3,
+    jitter: f32,
+}
+
+/// What one ray gave: its colour and the samples it took, skipped and took for shadows.
+#[derive(Clone, Copy, Default)]
+struct Marched {
+    color: Vec3,
+    taken: u64,
+    skipped: u64,
+    shadow: u64,
+}
+
+/// Two-sided Blinn–Phong toward light `l` seen along `d`: (ambient + diffuse, specular). With
+/// a headlight (l = −d) the half vector is −d.
+fn phong(tf: &TransferFunction, n: Vec3, d: Vec3, l: Vec3) -> (f32, f32) {
     let s = tf.shading;
-    let cos = n.dot(-d).abs();
-    (s.ambient + s.diffuse * cos, s.specular * cos.powf(s.power))
+    let h = (l - d).normalize_or(-d);
+    (
+        s.ambient + s.diffuse * n.dot(l).abs(),
+        s.specular * n.dot(h).abs().powf(s.power),
+    )
 }
 
 /// Gradient magnitude (HU/mm) at which shading is fully on.
@@ -384,18 +530,25 @@ fn march(
     opt: &DvrOptions,
     win: (f32, f32),
     step: f32,
-    o: Vec3,
-    d: Vec3,
-    jitter: f32,
-) -> (Vec3, u64, u64) {
+    light: Option<Vec3>,
+    Ray3 { o, d, jitter }: Ray3,
+) -> Marched {
+    let background = Marched {
+        color: opt.background,
+        ..Default::default()
+    };
     let (o_idx, d_idx) = (m.index_of(o), m.index_dir(d));
-    let Some((t0, t1)) = m.clip(o_idx, d_idx) else {
-        return (opt.background, 0, 0);
+    let Some((t0, t1)) = m
+        .clip(o_idx, d_idx)
+        .and_then(|(t0, t1)| clip_interval(opt, o, d, t0, t1))
+    else {
+        return background;
     };
     let mut k = 0u64;
     let at = |k: u64| t0 + (k as f32 + jitter) * step;
     let mut taken = 0u64;
     let mut skipped = 0u64;
+    let mut shadow = 0u64;
     match opt.mode {
         DvrMode::Dvr => {
             let mut c = Vec3::ZERO;
@@ -410,16 +563,12 @@ fn march(
                 let t = at(k).min(t1);
                 let seg = step.min(t1 - start);
                 let p = o_idx + d_idx * t;
-                if opt.skip_empty {
-                    let (b, t_exit) = m.brick_exit(p, t, d_idx);
-                    if !m.visible[b] {
-                        // The first lattice sample past the brick.
-                        let next =
-                            (((t_exit - t0) / step - jitter).ceil().max(0.0) as u64).max(k + 1);
-                        skipped += next - k;
-                        k = next;
-                        continue;
-                    }
+                if opt.skip_empty
+                    && let Some(next) = m.skip_brick(p, t, t0, d_idx, step, jitter, k)
+                {
+                    skipped += next - k;
+                    k = next;
+                    continue;
                 }
                 taken += 1;
                 k += 1;
@@ -430,22 +579,42 @@ fn march(
                 }
                 let a = 1.0 - (1.0 - a.min(1.0)).powf(seg);
                 let base = Vec3::from(tf.color_at(v));
+                let l = light.unwrap_or(-d);
+                // Light reaching the sample: 1, or the shadow ray's transmittance.
+                let lit = match light {
+                    Some(l) => {
+                        let (tr, n) = m.transmittance(tf, p, m.index_dir(l), step, jitter);
+                        shadow += n;
+                        tr
+                    }
+                    None => 1.0,
+                };
                 let g = m.gradient(p);
                 let gm = g.length();
-                let shaded = if gm > 0.0 {
-                    let (diff, spec) = phong(tf, -g / gm, d);
-                    let w = (gm / FULL_SHADING_GRADIENT).min(1.0);
-                    base * (1.0 - w + w * diff) + Vec3::splat(w * spec)
+                let amb = tf.shading.ambient;
+                // Weight of surface shading: gradient magnitude; the rest lit without a normal.
+                let w = (gm / FULL_SHADING_GRADIENT).min(1.0);
+                let (diff, spec) = if gm > 0.0 {
+                    phong(tf, -g / gm, d, l)
                 } else {
-                    base
+                    (amb, 0.0)
                 };
+                let unshaded = amb + (1.0 - amb) * lit;
+                let surface = amb + (diff - amb) * lit;
+                let shaded =
+                    base * ((1.0 - w) * unshaded + w * surface) + Vec3::splat(w * spec * lit);
                 c += transmit * a * shaded;
                 transmit *= 1.0 - a;
                 if transmit < 0.01 {
                     break;
                 }
             }
-            (c + transmit * opt.background, taken, skipped)
+            Marched {
+                color: c + transmit * opt.background,
+                taken,
+                skipped,
+                shadow,
+            }
         }
         DvrMode::Mip | DvrMode::MinIp | DvrMode::Average => {
             let (mut best, mut sum) = (
@@ -471,14 +640,18 @@ fn march(
                 k += 1;
             }
             if taken == 0 {
-                return (opt.background, 0, 0);
+                return background;
             }
             let v = if opt.mode == DvrMode::Average {
                 (sum / taken as f64) as f32
             } else {
                 best
             };
-            (Vec3::splat(window(v, win)), taken, 0)
+            Marched {
+                color: Vec3::splat(window(v, win)),
+                taken,
+                ..background
+            }
         }
         DvrMode::Iso => {
             let iso = opt.iso_hu;
@@ -486,7 +659,10 @@ fn march(
             loop {
                 let t = at(k);
                 if t > t1 {
-                    return (opt.background, taken, 0);
+                    return Marched {
+                        taken,
+                        ..background
+                    };
                 }
                 let v = m.sample(o_idx + d_idx * t);
                 taken += 1;
@@ -507,9 +683,13 @@ fn march(
                     }
                     let g = m.gradient(o_idx + d_idx * hi);
                     let n = if g.length() > 0.0 { -g.normalize() } else { -d };
-                    let (diff, spec) = phong(tf, n, d);
+                    let (diff, spec) = phong(tf, n, d, -d);
                     let bone = Vec3::new(0.88, 0.84, 0.74);
-                    return (bone * diff + Vec3::splat(spec), taken, 0);
+                    return Marched {
+                        color: bone * diff + Vec3::splat(spec),
+                        taken,
+                        ..background
+                    };
                 }
                 prev = Some((t, v));
             }
@@ -599,6 +779,124 @@ mod tests {
             .iter()
             .fold((f32::MAX, f32::MIN), |(a, b), &t| (a.min(t), b.max(t)));
         assert!(hi / lo - 1.0 < 0.02, "{got:?}");
+    }
+
+    /// Crop box and clip planes shorten the path through a homogeneous slab exactly: the
+    /// transmittance becomes exp(−σL) of the kept length, and a crop box beside the ray leaves
+    /// the background.
+    #[test]
+    fn crop_and_clip_planes_keep_exactly_their_part() {
+        let vol = volume([24, 81, 24], [1.0, 0.8, 1.0], |_, _, _| 40.0);
+        let alpha = 0.02f32;
+        let cam = axis_camera(Vec3::new(11.5, 32.0, 11.5));
+        let t_of = |opt: DvrOptions| {
+            let (img, _) = render_volume(&vol, &grey(alpha), &opt, &cam);
+            img.pixels[4].x
+        };
+        let base = DvrOptions {
+            width: 3,
+            height: 3,
+            step_mm: Some(0.4),
+            background: Vec3::ONE,
+            ..Default::default()
+        };
+        let want = |len: f32| (1.0 - alpha).powf(len);
+        // The slab spans y ∈ [0, 64] mm; keep y ∈ [10, 30] (20 mm).
+        let crop = t_of(DvrOptions {
+            crop: Some([
+                Vec3::new(-100.0, 10.0, -100.0),
+                Vec3::new(100.0, 30.0, 100.0),
+            ]),
+            ..base
+        });
+        assert!(
+            (crop - want(20.0)).abs() <= 0.01 * want(20.0),
+            "crop: {crop}"
+        );
+        // Planes y ≥ 5 and −y ≥ −45: 40 mm.
+        let planes = t_of(DvrOptions {
+            clip_planes: [Some((Vec3::Y, 5.0)), Some((-Vec3::Y, -45.0))],
+            ..base
+        });
+        assert!(
+            (planes - want(40.0)).abs() <= 0.01 * want(40.0),
+            "planes: {planes}"
+        );
+        let beside = t_of(DvrOptions {
+            crop: Some([Vec3::new(50.0, 0.0, 0.0), Vec3::new(60.0, 64.0, 24.0)]),
+            ..base
+        });
+        assert_eq!(
+            beside, 1.0,
+            "a crop box beside the ray leaves the background"
+        );
+    }
+
+    /// A shadow ray through a homogeneous slab transmits exp(−σL) of the length between the
+    /// sample and where the light direction leaves the grid, within 1 %, for several steps.
+    #[test]
+    fn shadow_rays_transmit_exp_minus_sigma_l() {
+        let vol = volume([40, 40, 40], [1.0, 1.0, 1.0], |_, _, _| 40.0);
+        let alpha = 0.03f32;
+        let m = Marcher::new(&vol, Some(&grey(alpha)));
+        let p = Vec3::new(10.0, 20.0, 5.0);
+        let l = Vec3::new(0.6, 0.0, 0.8);
+        // Leaves through x = 39 (t = 29/0.6 = 48.3) or z = 39 (t = 34/0.8 = 42.5).
+        let len = 42.5f32;
+        let want = (1.0 - alpha).powf(len);
+        for step in [0.3f32, 0.5, 1.1] {
+            let (t, n) = m.transmittance(&grey(alpha), p, m.index_dir(l), step, 0.37);
+            // The first step is left out (no self-shadowing): up to one step less absorption.
+            let lo = want;
+            let hi = (1.0 - alpha).powf(len - step);
+            assert!(
+                t >= lo * 0.99 && t <= hi * 1.01,
+                "step {step}: {t} outside [{lo}, {hi}]"
+            );
+            assert!(n as f32 >= len / step - 2.0, "step {step}: {n} samples");
+        }
+        // An opaque slab between the sample and the light: nothing arrives.
+        let wall = volume([40, 40, 40], [1.0; 3], |i, _, _| {
+            if i == 20 { 1000.0 } else { -1000.0 }
+        });
+        let tf = TransferFunction {
+            opacity: vec![(0.0, 0.0), (500.0, 1.0)],
+            color: vec![(0.0, [1.0; 3])],
+            shading: Default::default(),
+        };
+        let m = Marcher::new(&wall, Some(&tf));
+        let (t, _) = m.transmittance(&tf, Vec3::new(5.0, 20.0, 20.0), Vec3::X, 0.5, 0.5);
+        assert!(t < 0.02, "behind the wall: {t}");
+        let (t, _) = m.transmittance(&tf, Vec3::new(25.0, 20.0, 20.0), Vec3::X, 0.5, 0.5);
+        assert_eq!(t, 1.0, "in front of the wall");
+    }
+
+    /// With --shadows the abdomen CT darkens (its shadow rays take samples, more than the
+    /// primary rays, and take light away).
+    #[test]
+    fn shadows_darken_the_abdomen() {
+        let vol = abdomen();
+        let tf = TfPreset::CtBone.function();
+        let opt = DvrOptions {
+            width: 48,
+            height: 36,
+            ..Default::default()
+        };
+        let cam = volume_camera(&vol, 48.0 / 36.0);
+        let (plain, _) = render_volume(&vol, &tf, &opt, &cam);
+        let shadowed = DvrOptions {
+            shadows: true,
+            ..opt
+        };
+        let (shadow, stats) = render_volume(&vol, &tf, &shadowed, &cam);
+        assert!(stats.shadow_samples > stats.samples, "{stats:?}");
+        let sum = |i: &Image| i.pixels.iter().map(|p| p.x + p.y + p.z).sum::<f32>();
+        assert!(
+            sum(&shadow) < 0.95 * sum(&plain),
+            "{} vs {}",
+            sum(&shadow),
+            sum(&plain)
+        );
     }
 
     /// MIP of a volume with one hot voxel shows it where the camera projects its centre.

@@ -24,7 +24,13 @@ impl From<&Ray> for GpuRay {
             origin: r.origin.to_array(),
             t_min: r.t_min,
             dir: r.dir.to_array(),
-            t_max: r.t_max,
+            // +inf as the largest finite f32: the same hits (every hit's t is finite), and
+            // shader compilers may assume arithmetic is finite (WGSL lets them).
+            t_max: if r.t_max == f32::INFINITY {
+                f32::MAX
+            } else {
+                r.t_max
+            },
         }
     }
 }
@@ -192,8 +198,8 @@ pub mod counter {
     pub const SLOTS: u32 = 8;
 }
 
-/// `DvrParams` in dvr.wgsl (uniform), 192 bytes: camera in LPS, the world → index transform,
-/// the mode and its parameters.
+/// `DvrParams` in dvr.wgsl (uniform), 272 bytes: camera in LPS, the world → index transform,
+/// the mode and its parameters, the shadow light, crop box and clip planes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct DvrParams {
@@ -229,6 +235,16 @@ pub struct DvrParams {
     pub color_count: u32,
     /// Ambient, diffuse, specular, specular power (byte 176).
     pub shading: [f32; 4],
+    /// Toward the key light (LPS, unit; byte 192), used when `shadows` is 1.
+    pub light: [f32; 3],
+    pub shadows: u32,
+    /// Crop box, LPS mm (bytes 208, 224), used when `crop` is 1.
+    pub crop_min: [f32; 3],
+    pub crop: u32,
+    pub crop_max: [f32; 3],
+    pub plane_count: u32,
+    /// Clip planes (n, c): keep n · p ≥ c (byte 240).
+    pub planes: [[f32; 4]; 2],
 }
 
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
@@ -241,4 +257,4 @@ const _: () = assert!(std::mem::size_of::<ShadeTri>() == 16);
 const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
-const _: () = assert!(std::mem::size_of::<DvrParams>() == 192);
+const _: () = assert!(std::mem::size_of::<DvrParams>() == 272);

@@ -195,9 +195,9 @@ impl GpuContext {
         }))
     }
 
-    /// A timestamp query set of `count` entries and the buffer to resolve it into, where the
-    /// adapter has timestamp queries.
-    fn timer(&self, count: u32) -> Option<(wgpu::QuerySet, wgpu::Buffer)> {
+    /// A timestamp query set of `count` entries, the buffer to resolve it into and a mappable
+    /// copy, where the adapter has timestamp queries.
+    fn timer(&self, count: u32) -> Option<Timer> {
         self.device
             .features()
             .contains(wgpu::Features::TIMESTAMP_QUERY)
@@ -207,13 +207,26 @@ impl GpuContext {
                     ty: wgpu::QueryType::Timestamp,
                     count,
                 });
-                let buf = self.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("resolved timestamps"),
-                    size: count as u64 * 8,
-                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                    mapped_at_creation: false,
-                });
-                (set, buf)
+                let buffer = |label, usage| {
+                    self.device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some(label),
+                        size: count as u64 * 8,
+                        usage,
+                        mapped_at_creation: false,
+                    })
+                };
+                Timer {
+                    resolve: buffer(
+                        "resolved timestamps",
+                        wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    ),
+                    readback: buffer(
+                        "timestamps readback",
+                        wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    ),
+                    set,
+                    count,
+                }
             })
     }
 
@@ -530,12 +543,17 @@ impl<'a> GpuTracer<'a> {
                 },
             ],
         });
+        let timer = ctx.timer(2);
         ctx.wait()?;
         let upload_ms = t0.elapsed().as_secs_f64() * 1e3;
 
+        // Submission to completion: one round trip (the timestamps travel back with it).
         let t1 = Instant::now();
         let (kernel_gpu_ms, split_steps) = match kernels {
-            Kernels::Fused => (self.run_fused(pipeline, &bind, n as u32)?, None),
+            Kernels::Fused => (
+                self.run_fused(pipeline, &bind, n as u32, timer.as_ref())?,
+                None,
+            ),
             Kernels::Split => {
                 let r = split::run(self, &param_buf, &ray_buf, &hit_buf, n as u32, any)?;
                 (r.kernel_gpu_ms, Some(r.steps))
@@ -585,9 +603,9 @@ impl<'a> GpuTracer<'a> {
         pipeline: &wgpu::ComputePipeline,
         bind: &wgpu::BindGroup,
         n: u32,
+        timer: Option<&Timer>,
     ) -> Result<Option<f64>, GpuError> {
         let ctx = self.ctx;
-        let timer = ctx.timer(2);
         let [gx, gy, _] = ctx.dims(n);
         let mut enc = ctx
             .device
@@ -597,33 +615,52 @@ impl<'a> GpuTracer<'a> {
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: pipeline_label(pipeline, &self.any),
-                timestamp_writes: timer
-                    .as_ref()
-                    .map(|(set, _)| wgpu::ComputePassTimestampWrites {
-                        query_set: set,
-                        beginning_of_pass_write_index: Some(0),
-                        end_of_pass_write_index: Some(1),
-                    }),
+                timestamp_writes: timer.map(|t| t.writes(Some(0), Some(1))),
             });
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, bind, &[]);
             pass.dispatch_workgroups(gx, gy, 1);
         }
-        if let Some((set, resolve)) = &timer {
-            enc.resolve_query_set(set, 0..2, resolve, 0);
+        if let Some(t) = timer {
+            t.resolve(&mut enc);
         }
         ctx.queue.submit([enc.finish()]);
-        match &timer {
-            Some((_, resolve)) => read_elapsed_ms(ctx, resolve),
-            None => Ok(None),
+        match timer {
+            Some(t) => read_elapsed_ms(ctx, t),
+            None => ctx.wait().map(|_| None),
         }
     }
 }
 
-/// Milliseconds between the two timestamps resolved into `resolve`; `None` where the adapter
-/// wrote equal stamps: no measurement rather than a false 0.
-fn read_elapsed_ms(ctx: &GpuContext, resolve: &wgpu::Buffer) -> Result<Option<f64>, GpuError> {
-    let w = read_words(ctx, resolve)?;
+/// Timestamp queries of kernel passes. `resolve` resolves them and copies them to `readback` in
+/// the encoder of the work they time, so reading them back costs no second round trip.
+struct Timer {
+    set: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    count: u32,
+}
+
+impl Timer {
+    /// Timestamps `begin` and `end` around one pass.
+    fn writes(&self, begin: Option<u32>, end: Option<u32>) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
+            query_set: &self.set,
+            beginning_of_pass_write_index: begin,
+            end_of_pass_write_index: end,
+        }
+    }
+
+    fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
+        enc.resolve_query_set(&self.set, 0..self.count, &self.resolve, 0);
+        enc.copy_buffer_to_buffer(&self.resolve, 0, &self.readback, 0, self.count as u64 * 8);
+    }
+}
+
+/// Milliseconds between the first two timestamps of `timer`, once its submission is done;
+/// `None` where the adapter wrote equal stamps: no measurement rather than a false 0.
+fn read_elapsed_ms(ctx: &GpuContext, timer: &Timer) -> Result<Option<f64>, GpuError> {
+    let w = read_words(ctx, &timer.readback)?;
     let ticks = (w[2] as u64 | (w[3] as u64) << 32).wrapping_sub(w[0] as u64 | (w[1] as u64) << 32);
     let ms = ticks as f64 * ctx.queue.get_timestamp_period() as f64 * 1e-6;
     Ok((ms > 0.0).then_some(ms))

@@ -18,12 +18,14 @@ use raystream_scene::Scene;
 use crate::layout::{
     GpuLight, GpuMaterial, RayWork, RenderParams, ShadeTri, ShadowWork, Vertex, counter,
 };
-use crate::{GpuError, GpuHit, GpuTracer, kdtree_wgsl, read_words};
+use crate::{GpuError, GpuHit, GpuTracer, Timer, kdtree_wgsl, read_words};
 
 const RENDER_WGSL: &str = include_str!("kernels/render.wgsl");
 pub(crate) const COMMON_WGSL: &str = include_str!("kernels/common.wgsl");
 
-/// Samples generated and traced together; bounds the queues' memory.
+/// Samples generated and traced together; bounds the queues' memory (about 300 bytes a sample
+/// with two lights). Measured on an H100 (BENCHMARKS.md): 2^22 (a 1920x1080 frame at 4 spp in
+/// two waves instead of eight) made the frame slower, 146 ms against 106 ms, so 2^20 stays.
 pub const MAX_WAVE: u32 = 1 << 20;
 /// Fixed-point steps per unit of radiance in the film.
 pub const FILM_SCALE: f32 = (1u32 << 24) as f32;
@@ -68,6 +70,10 @@ pub struct GpuRenderStats {
     pub waves: u32,
     /// Wall time of the frame (generation to film readback), milliseconds.
     pub render_ms: f64,
+    /// Of `render_ms`: waiting for each depth's submission to finish (the GPU's work and the
+    /// round trip), and reading the film back and converting it.
+    pub wait_ms: f64,
+    pub film_ms: f64,
     /// Each kernel's own time summed over its passes, from timestamp queries; `None` where the
     /// adapter has none or writes equal stamps.
     pub kernel_gpu_ms: Option<Vec<(&'static str, f64)>>,
@@ -86,11 +92,17 @@ pub struct GpuRenderer<'a> {
     pipelines: Vec<wgpu::ComputePipeline>,
     /// Samples per wave: at most [`MAX_WAVE`], less where the device's bindings need it.
     wave: u32,
+    /// The last frame's work buffers and their (pixels, wave, lights), kept for the next frame:
+    /// allocating them per frame cost most of a 1920x1080 frame on an H100.
+    frame: std::sync::Mutex<Option<(FrameKey, Queues)>>,
 }
 
 fn v3(v: Vec3) -> [f32; 3] {
     v.to_array()
 }
+
+/// What a frame's work buffers were made for: pixels, samples per wave, lights.
+type FrameKey = (u64, u64, u64);
 
 /// The work buffers of one frame; queues grow as the depths need.
 struct Queues {
@@ -103,7 +115,7 @@ struct Queues {
     film: wgpu::Buffer,
     /// Counters, then 2 timestamps per stage.
     readback: wgpu::Buffer,
-    resolve: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+    resolve: Option<Timer>,
 }
 
 const COUNTER_BYTES: u64 = counter::SLOTS as u64 * 4;
@@ -232,6 +244,7 @@ impl<'a> GpuRenderer<'a> {
             params,
             layouts,
             pipelines,
+            frame: std::sync::Mutex::new(None),
         })
     }
 
@@ -284,9 +297,23 @@ impl<'a> GpuRenderer<'a> {
                 opt.width, opt.height, opt.spp
             )));
         }
-        let wave = self.wave;
+        let wave = (self.wave as u64).min(total) as u32;
         let lights = scene.lights.len() as u64;
-        let mut q = self.queues(pixels, wave as u64, lights)?;
+        let key = (pixels, wave as u64, lights);
+        let kept = self.frame.lock().unwrap().take();
+        let mut q = match kept {
+            Some((k, q)) if k == key => {
+                let mut enc = ctx
+                    .device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                        label: Some("clear film"),
+                    });
+                enc.clear_buffer(&q.film, 0, None);
+                ctx.queue.submit([enc.finish()]);
+                q
+            }
+            _ => self.queues(pixels, wave as u64, lights)?,
+        };
         let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
         let mut params = RenderParams {
             eye: v3(cam.eye),
@@ -368,13 +395,10 @@ impl<'a> GpuRenderer<'a> {
                     let stage = STAGES[k];
                     let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                         label: Some(stage),
-                        timestamp_writes: q.resolve.as_ref().map(|(set, _)| {
-                            wgpu::ComputePassTimestampWrites {
-                                query_set: set,
-                                beginning_of_pass_write_index: Some(2 * k as u32),
-                                end_of_pass_write_index: Some(2 * k as u32 + 1),
-                            }
-                        }),
+                        timestamp_writes: q
+                            .resolve
+                            .as_ref()
+                            .map(|t| t.writes(Some(2 * k as u32), Some(2 * k as u32 + 1))),
                     });
                     pass.set_pipeline(&self.pipelines[k]);
                     pass.set_bind_group(0, &tree_group, &[]);
@@ -395,13 +419,21 @@ impl<'a> GpuRenderer<'a> {
                         _ => pass.dispatch_workgroups_indirect(&q.args, QUEUE_ARGS),
                     }
                 }
-                if let Some((set, resolve)) = &q.resolve {
-                    enc.resolve_query_set(set, 0..2 * order.len() as u32, resolve, 0);
-                    enc.copy_buffer_to_buffer(resolve, 0, &q.readback, COUNTER_BYTES, STAMP_BYTES);
+                if let Some(t) = &q.resolve {
+                    enc.resolve_query_set(&t.set, 0..2 * order.len() as u32, &t.resolve, 0);
+                    enc.copy_buffer_to_buffer(
+                        &t.resolve,
+                        0,
+                        &q.readback,
+                        COUNTER_BYTES,
+                        STAMP_BYTES,
+                    );
                 }
                 enc.copy_buffer_to_buffer(&q.counters, 0, &q.readback, 0, COUNTER_BYTES);
                 ctx.queue.submit([enc.finish()]);
+                let waited = Instant::now();
                 let words = read_words(ctx, &q.readback)?;
+                stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
                 let s = DepthStats {
                     depth,
                     rays: words[counter::STAT_RAYS as usize] as usize,
@@ -441,8 +473,10 @@ impl<'a> GpuRenderer<'a> {
             }
             base += n as u64;
         }
+        let film_t = Instant::now();
         let mut film = read_words(ctx, &q.film)?;
         film.truncate(pixels as usize * 6);
+        *self.frame.lock().unwrap() = Some((key, q));
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
@@ -457,6 +491,7 @@ impl<'a> GpuRenderer<'a> {
                 Vec3::new(ch(0), ch(1), ch(2))
             })
             .collect();
+        stats.film_ms = film_t.elapsed().as_secs_f64() * 1e3;
         stats.render_ms = t0.elapsed().as_secs_f64() * 1e3;
         stats.kernel_gpu_ms = timed.then(|| {
             STAGES

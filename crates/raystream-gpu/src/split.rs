@@ -137,12 +137,8 @@ pub(crate) fn run(
     });
     let group2 = ctx.bind_buffers("split args", &k.layouts[2], &[&args]);
     let stamp = |first: bool, last: bool| {
-        let (set, _) = timer.as_ref().filter(|_| first || last)?;
-        Some(wgpu::ComputePassTimestampWrites {
-            query_set: set,
-            beginning_of_pass_write_index: first.then_some(0),
-            end_of_pass_write_index: last.then_some(1),
-        })
+        let t = timer.as_ref().filter(|_| first || last)?;
+        Some(t.writes(first.then_some(0), last.then_some(1)))
     };
     let mut steps = 0u32;
     let mut gpu_ms = 0.0;
@@ -211,9 +207,9 @@ pub(crate) fn run(
         }
         steps += batch;
         enc.copy_buffer_to_buffer(&counts, 0, &counts_read, 0, 8);
-        if let Some((set, resolve)) = &timer {
-            enc.resolve_query_set(set, 0..2, resolve, 0);
-            enc.copy_buffer_to_buffer(resolve, 0, &counts_read, 8, 16);
+        if let Some(t) = &timer {
+            enc.resolve_query_set(&t.set, 0..2, &t.resolve, 0);
+            enc.copy_buffer_to_buffer(&t.resolve, 0, &counts_read, 8, 16);
         }
         ctx.queue.submit([enc.finish()]);
         let words = read_words(ctx, &counts_read)?;

@@ -3,10 +3,11 @@
 //! the CPU's brick table in storage buffers, one thread per pixel. The CPU path
 //! (`raystream_cpu::dvr`) is the reference; the tests hold the two together.
 
+use std::sync::Mutex;
 use std::time::Instant;
 
 use raystream_cpu::Image;
-use raystream_cpu::dvr::{BRICK, DvrMode, DvrOptions, Marcher, scene_to_lps};
+use raystream_cpu::dvr::{BRICK, DvrMode, DvrOptions, Marcher, key_light, scene_to_lps};
 use raystream_io::Volume;
 use raystream_math::Vec3;
 use raystream_scene::Camera;
@@ -15,7 +16,7 @@ use wgpu::util::DeviceExt;
 
 use crate::layout::DvrParams;
 use crate::render::COMMON_WGSL;
-use crate::{GpuContext, GpuError, read_elapsed_ms, read_words};
+use crate::{GpuContext, GpuError, Timer, read_elapsed_ms, read_words};
 
 const DVR_WGSL: &str = include_str!("kernels/dvr.wgsl");
 
@@ -38,8 +39,16 @@ pub struct GpuVolumeRenderer<'a> {
     /// World → continuous index (rows and origin), from the marcher.
     to_index: ([Vec3; 3], Vec3),
     pipeline: wgpu::ComputePipeline,
+    /// The last frame's output buffers, kept for the next frame of the same size or smaller.
+    frame: Mutex<Option<FrameBuffers>>,
     /// Milliseconds spent uploading the volume and building the pipeline.
     pub upload_ms: f64,
+}
+
+struct FrameBuffers {
+    pixels: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    timer: Option<Timer>,
 }
 
 /// Timings of one GPU volume frame, milliseconds.
@@ -49,6 +58,9 @@ pub struct GpuDvrTimes {
     pub frame_ms: f64,
     /// The kernel's own time, from timestamp queries where the adapter has them.
     pub kernel_gpu_ms: Option<f64>,
+    /// Samples the rays took (counted per pixel on the GPU, as the CPU counts them; shadow
+    /// rays' samples not included).
+    pub samples: u64,
 }
 
 impl<'a> GpuVolumeRenderer<'a> {
@@ -148,6 +160,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             brick_dims: brick_dims.map(|b| b as u32),
             to_index: marcher.world_to_index(),
             pipeline,
+            frame: Mutex::new(None),
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }
@@ -161,6 +174,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         let (w, l) = opt.window.unwrap_or(opt.mode.default_window());
         let s = self.tf.shading;
         let v3 = |v: Vec3| v.to_array();
+        let planes: Vec<(Vec3, f32)> = opt.clip_planes.iter().flatten().copied().collect();
         let params = DvrParams {
             eye: v3(scene_to_lps(cam.eye)),
             tan_y: cam.tan_y,
@@ -191,6 +205,13 @@ impl<'a> GpuVolumeRenderer<'a> {
             background: v3(opt.background),
             color_count: self.tf.color.len() as u32,
             shading: [s.ambient, s.diffuse, s.specular, s.power],
+            light: v3(key_light(cam)),
+            shadows: (opt.shadows && opt.mode == DvrMode::Dvr) as u32,
+            crop_min: v3(opt.crop.map_or(Vec3::ZERO, |c| c[0])),
+            crop: opt.crop.is_some() as u32,
+            crop_max: v3(opt.crop.map_or(Vec3::ZERO, |c| c[1])),
+            plane_count: planes.len() as u32,
+            planes: [0, 1].map(|i| planes.get(i).map_or([0.0; 4], |(n, c)| [n.x, n.y, n.z, *c])),
         };
         let param_buf = ctx
             .device
@@ -200,7 +221,24 @@ impl<'a> GpuVolumeRenderer<'a> {
                 usage: wgpu::BufferUsages::UNIFORM,
             });
         let n = opt.width as u64 * opt.height as u64;
-        let pixels = ctx.work_buffer("volume pixels", n * 16, wgpu::BufferUsages::empty())?;
+        let mut frame = self.frame.lock().unwrap();
+        if frame.as_ref().is_none_or(|f| f.pixels.size() < n * 16) {
+            *frame = Some(FrameBuffers {
+                pixels: ctx.work_buffer("volume pixels", n * 16, wgpu::BufferUsages::empty())?,
+                readback: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("volume pixels readback"),
+                    size: (n * 16).max(64),
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                }),
+                timer: ctx.timer(2),
+            });
+        }
+        let FrameBuffers {
+            pixels,
+            readback,
+            timer,
+        } = frame.as_ref().unwrap();
         let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("dvr"),
             layout: &self.pipeline.get_bind_group_layout(0),
@@ -235,7 +273,6 @@ impl<'a> GpuVolumeRenderer<'a> {
                 },
             ],
         });
-        let timer = ctx.timer(2);
         let mut enc = ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -244,34 +281,31 @@ impl<'a> GpuVolumeRenderer<'a> {
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("render_volume"),
-                timestamp_writes: timer
-                    .as_ref()
-                    .map(|(set, _)| wgpu::ComputePassTimestampWrites {
-                        query_set: set,
-                        beginning_of_pass_write_index: Some(0),
-                        end_of_pass_write_index: Some(1),
-                    }),
+                timestamp_writes: timer.as_ref().map(|t| t.writes(Some(0), Some(1))),
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind, &[]);
             pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
         }
-        if let Some((set, resolve)) = &timer {
-            enc.resolve_query_set(set, 0..2, resolve, 0);
+        // One submission: the kernel, its timestamps and the copy of the pixels to read.
+        if let Some(t) = timer {
+            t.resolve(&mut enc);
         }
+        enc.copy_buffer_to_buffer(pixels, 0, readback, 0, n * 16);
         ctx.queue.submit([enc.finish()]);
-        let words = read_words(ctx, &pixels)?;
-        let kernel_gpu_ms = match &timer {
-            Some((_, resolve)) => read_elapsed_ms(ctx, resolve)?,
+        let words = read_words(ctx, readback)?;
+        let kernel_gpu_ms = match timer {
+            Some(t) => read_elapsed_ms(ctx, t)?,
             None => None,
         };
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
         let floats: &[f32] = bytemuck::cast_slice(&words);
-        let pixels = floats
+        let px = &floats[..4 * n as usize];
+        let samples = px.chunks_exact(4).map(|p| p[3] as u64).sum();
+        let pixels = px
             .chunks_exact(4)
-            .take(n as usize)
             .map(|p| Vec3::new(p[0], p[1], p[2]))
             .collect();
         Ok((
@@ -283,6 +317,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             GpuDvrTimes {
                 frame_ms: t0.elapsed().as_secs_f64() * 1e3,
                 kernel_gpu_ms,
+                samples,
             },
         ))
     }

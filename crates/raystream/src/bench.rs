@@ -9,7 +9,9 @@ use std::f32::consts::PI;
 use std::time::Instant;
 
 use anyhow::{Result, bail};
+use indicatif::ProgressBar;
 use raystream_accel::{Counters, KdTree, Traversal, brute};
+use raystream_cpu::dvr::{DvrMode, DvrOptions, orbit_camera, render_volume};
 use raystream_io::TriMesh;
 use raystream_math::{Ray, Vec3};
 use raystream_scene::Camera;
@@ -139,7 +141,16 @@ fn kernel_label(kernels: Option<Kernels>, any: bool) -> &'static str {
 
 pub fn run(a: &BenchArgs) -> Result<()> {
     if raystream_io::is_volume_path(&a.input) {
-        return bench_iso(a);
+        return match a.mode {
+            Some(mode) => bench_dvr(a, mode.into()),
+            None => bench_iso(a),
+        };
+    }
+    if a.mode.is_some() || a.resample.is_some() {
+        bail!(
+            "{}: --mode and --resample measure volume rendering; this is a mesh",
+            a.input.display()
+        );
     }
     let quiet = a.quiet || a.json;
     let mesh = load_mesh(&a.input)?;
@@ -266,7 +277,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
 /// runs after a warm-up, validated first (a closed surface: every edge in two triangles).
 fn bench_iso(a: &BenchArgs) -> Result<()> {
     let quiet = a.quiet || a.json;
-    let hu = a.iso.unwrap_or(raystream_volume::Preset::Bone.hu());
+    let hu = a.threshold.hu()?;
     let t0 = Instant::now();
     let pb = spinner(quiet, &format!("reading {}", a.input.display()));
     let volume = raystream_io::load_volume(&a.input, None)?;
@@ -324,6 +335,161 @@ fn bench_iso(a: &BenchArgs) -> Result<()> {
             surface.mesh.len(),
             load_ms
         );
+    }
+    Ok(())
+}
+
+/// A volume with `--mode`: frames of an orbit (`--frames`, one every 360/N degrees, after one
+/// warm-up frame) on each device, dvr without and with shadows side by side. Before any GPU
+/// figure, the GPU's first frame at 128×128 must match the CPU's (mean < 1/255).
+fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
+    let quiet = a.quiet || a.json;
+    let t0 = Instant::now();
+    let pb = spinner(quiet, &format!("reading {}", a.input.display()));
+    let mut volume = raystream_io::load_volume(&a.input, None)?;
+    pb.finish_and_clear();
+    let load_ms = ms(t0.elapsed());
+    let source_dims = volume.dims;
+    let mut resample_ms = None;
+    if let Some(n) = a.resample {
+        let n = n as usize;
+        let t = Instant::now();
+        let pb = spinner(quiet, &format!("resampling to {n}³"));
+        volume = volume.resample([n; 3]);
+        pb.finish_and_clear();
+        resample_ms = Some(ms(t.elapsed()));
+    }
+    let (tf, base) = crate::dvr::options(&a.look, &a.threshold, mode, a.size)?;
+    let shadow_cases: &[bool] = if mode == DvrMode::Dvr {
+        &[false, true]
+    } else {
+        &[false]
+    };
+    let commit = git_commit();
+    let aspect = base.width as f32 / base.height as f32;
+    for &dev in &a.device {
+        let backend = open_device(dev, a.adapter.as_deref(), quiet)?;
+        let t = Instant::now();
+        let renderer = crate::dvr::Renderer::new(&backend, &volume, &tf)?;
+        let upload_ms = ms(t.elapsed());
+        for &shadows in shadow_cases {
+            let opt = DvrOptions { shadows, ..base };
+            let cam0 = orbit_camera(&volume, aspect, 0.0);
+            if matches!(backend, Backend::Gpu(_)) {
+                let small = DvrOptions {
+                    width: 128,
+                    height: 128,
+                    ..opt
+                };
+                let cam = orbit_camera(&volume, 1.0, 0.0);
+                let gpu = renderer.frame(&small, &cam)?.image.to_srgb8();
+                let (cpu, _) = render_volume(&volume, &tf, &small, &cam);
+                let cpu = cpu.to_srgb8();
+                let mean = gpu
+                    .iter()
+                    .zip(&cpu)
+                    .map(|(&x, &y)| x.abs_diff(y) as f64)
+                    .sum::<f64>()
+                    / gpu.len() as f64;
+                if mean >= 1.0 {
+                    bail!(
+                        "{}: the GPU's frame differs from the CPU's by {mean:.2}/255 on average (a bug); no figures",
+                        backend.adapter()
+                    );
+                }
+            }
+            let pb = if quiet {
+                ProgressBar::hidden()
+            } else {
+                ProgressBar::new(a.frames as u64 + 1)
+            };
+            pb.set_message(format!("{} {}", backend.name(), mode.name()));
+            renderer.frame(&opt, &cam0)?;
+            pb.inc(1);
+            let (mut frame_ms, mut kernel_ms, mut samples) = (Vec::new(), Vec::new(), 0u64);
+            let mut stats = None;
+            for i in 0..a.frames {
+                let cam = orbit_camera(&volume, aspect, 360.0 * i as f32 / a.frames as f32);
+                let f = renderer.frame(&opt, &cam)?;
+                frame_ms.push(f.frame_ms);
+                kernel_ms.extend(f.kernel_ms);
+                samples += f.samples;
+                stats = stats.or(f.stats);
+                pb.inc(1);
+            }
+            pb.finish_and_clear();
+            let estimated = stats.is_none();
+            let stats =
+                stats.unwrap_or_else(|| crate::dvr::estimate_stats(&volume, &tf, &opt, &cam0));
+            let frame_min = frame_ms.iter().cloned().fold(f64::INFINITY, f64::min);
+            let frame = median(&mut frame_ms);
+            let kernel = (!kernel_ms.is_empty()).then(|| median(&mut kernel_ms));
+            let per_frame = samples as f64 / a.frames as f64;
+            let v = json!({
+                "file": file_name(&a.input),
+                "kind": "volume",
+                "mode": mode.name(),
+                "shadows": shadows,
+                "transfer_function": a.look.tf.as_ref().map(|p| p.display().to_string())
+                    .unwrap_or_else(|| a.threshold.preset.map_or("ct-bone".into(), |p| p.name())),
+                "commit": commit,
+                "device": backend.name(),
+                "adapter": backend.adapter(),
+                "source_dims": source_dims,
+                "dims": volume.dims,
+                "size": format!("{}x{}", opt.width, opt.height),
+                "step_mm": round3(stats.step_mm as f64),
+                "skip_empty": opt.skip_empty,
+                "frames": a.frames,
+                "load_ms": round3(load_ms),
+                "resample_ms": resample_ms.map(round3),
+                "upload_ms": round3(upload_ms),
+                "frame_ms": round3(frame),
+                "frame_ms_min": round3(frame_min),
+                "frames_per_s": round3(1e3 / frame),
+                "kernel_ms": kernel.map(round3),
+                "kernel_frames_per_s": kernel.map(|k| round3(1e3 / k)),
+                "samples_per_frame": per_frame.round(),
+                "msamples_per_s": round3(per_frame / frame / 1e3),
+                "msamples_per_s_kernel": kernel.map(|k| round3(per_frame / k / 1e3)),
+                "skipped_fraction": round3(stats.skipped as f64 / (stats.samples + stats.skipped).max(1) as f64),
+                "shadow_samples_per_frame": stats.shadow_samples,
+                "counts_estimated_on_cpu": estimated,
+            });
+            if a.json {
+                print_line(v);
+            } else {
+                println!(
+                    "{} {}{} on {} ({}), {}x{}x{} voxels, {}x{}, {} frames: {:.2} ms/frame = {:.1} frames/s{}; {:.0} M samples/s ({:.1} M samples/frame){}",
+                    file_name(&a.input),
+                    mode.name(),
+                    if shadows { " --shadows" } else { "" },
+                    backend.name(),
+                    backend.adapter(),
+                    volume.dims[0],
+                    volume.dims[1],
+                    volume.dims[2],
+                    opt.width,
+                    opt.height,
+                    a.frames,
+                    frame,
+                    1e3 / frame,
+                    kernel
+                        .map(|k| format!(" (kernel {k:.2} ms = {:.1} frames/s)", 1e3 / k))
+                        .unwrap_or_default(),
+                    per_frame / frame / 1e3,
+                    per_frame / 1e6,
+                    if shadows {
+                        format!(
+                            ", {:.1} M shadow samples/frame",
+                            stats.shadow_samples as f64 / 1e6
+                        )
+                    } else {
+                        String::new()
+                    }
+                );
+            }
+        }
     }
     Ok(())
 }

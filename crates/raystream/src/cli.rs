@@ -134,6 +134,24 @@ pub struct RenderArgs {
     /// crossing of --iso HU).
     #[arg(long, value_enum)]
     pub mode: Option<ModeArg>,
+    #[command(flatten)]
+    pub look: VolumeLook,
+    /// With --mode: a turntable of N frames, one every 360/N degrees about the patient's
+    /// superior axis, written as OUTPUT/frame_000.png … (-o names the folder).
+    #[arg(long, requires = "mode", value_parser = clap::value_parser!(u32).range(1..=3600))]
+    pub turntable: Option<u32>,
+    /// Render the frame this many times and report the median frame time and frames per
+    /// second (scene loading, kd-tree build and upload apart).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub repeat: u32,
+    /// No progress output.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+/// How `--mode` renders a volume: transfer function, sampling, lighting and clipping.
+#[derive(Args, Clone)]
+pub struct VolumeLook {
     /// Transfer function file (TOML: opacity = [[HU, a], …], color = [[HU, r, g, b], …]).
     #[arg(long, conflicts_with = "preset")]
     pub tf: Option<PathBuf>,
@@ -149,13 +167,46 @@ pub struct RenderArgs {
     /// Turn empty-space skipping off (to measure what it saves; the picture is the same).
     #[arg(long)]
     pub no_skip: bool,
-    /// Render the frame this many times and report the median frame time and frames per
-    /// second (scene loading, kd-tree build and upload apart).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
-    pub repeat: u32,
-    /// No progress output.
-    #[arg(short, long)]
-    pub quiet: bool,
+    /// dvr: light from a key light above left of the camera and trace a shadow ray from every
+    /// visible sample toward it through the transfer function.
+    #[arg(long)]
+    pub shadows: bool,
+    /// Keep only the box XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX (LPS mm, as `info` reports positions).
+    #[arg(long, value_parser = parse_crop, allow_hyphen_values = true)]
+    pub crop: Option<[f32; 6]>,
+    /// Keep only points p with n·p ≥ c, given as NX,NY,NZ,C (LPS, mm); at most twice.
+    #[arg(long = "clip-plane", value_parser = parse_plane, allow_hyphen_values = true)]
+    pub clip_planes: Vec<[f32; 4]>,
+}
+
+fn parse_floats<const N: usize>(s: &str, what: &str) -> Result<[f32; N], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("'{s}': {e}; {what}"))?;
+    if v.len() != N || v.iter().any(|x| !x.is_finite()) {
+        return Err(format!("'{s}': {what}"));
+    }
+    Ok(std::array::from_fn(|i| v[i]))
+}
+
+pub fn parse_crop(s: &str) -> Result<[f32; 6], String> {
+    let what = "expected six finite numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX (LPS mm)";
+    let c = parse_floats::<6>(s, what)?;
+    if (0..3).any(|a| c[a] >= c[a + 3]) {
+        return Err(format!("'{s}': each minimum must be below its maximum"));
+    }
+    Ok(c)
+}
+
+pub fn parse_plane(s: &str) -> Result<[f32; 4], String> {
+    let p = parse_floats::<4>(s, "expected four finite numbers NX,NY,NZ,C (keeps n·p ≥ C)")?;
+    let n = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+    if n == 0.0 {
+        return Err(format!("'{s}': the normal (NX, NY, NZ) is zero"));
+    }
+    Ok(p.map(|x| x / n))
 }
 
 /// The isosurface threshold: `--iso HU` or a `--preset` (default: bone, 300 HU).
@@ -318,11 +369,25 @@ pub struct InfoArgs {
 
 #[derive(Args)]
 pub struct BenchArgs {
-    /// Mesh file, or a CT volume (measures isosurface extraction).
+    /// Mesh file, or a CT volume (measures isosurface extraction, or with --mode direct
+    /// volume rendering).
     pub input: PathBuf,
-    /// Volumes: the isosurface threshold in HU (default 300, bone).
-    #[arg(long)]
-    pub iso: Option<f32>,
+    /// Volumes: the isosurface threshold (--iso HU, default 300) or, with --mode dvr, the
+    /// transfer function (--preset, default ct-bone).
+    #[command(flatten)]
+    pub threshold: Threshold,
+    /// Volumes: measure direct volume rendering in this mode over an orbit of --frames
+    /// frames (dvr: without and with --shadows, side by side).
+    #[arg(long, value_enum)]
+    pub mode: Option<ModeArg>,
+    #[command(flatten)]
+    pub look: VolumeLook,
+    /// Volumes with --mode: frames of the orbit (one every 360/N degrees), after one warm-up.
+    #[arg(long, default_value_t = 36, value_parser = clap::value_parser!(u32).range(1..=3600))]
+    pub frames: u32,
+    /// Volumes with --mode: resample the volume to N×N×N voxels first (the benchmark's 512).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(2..=2048))]
+    pub resample: Option<u32>,
     /// Devices to measure, comma-separated (cpu, gpu, auto).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
     pub device: Vec<Device>,

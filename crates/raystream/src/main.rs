@@ -3,6 +3,7 @@
 mod bench;
 mod cli;
 mod common;
+mod dvr;
 mod info;
 mod iso;
 mod render;

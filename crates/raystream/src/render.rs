@@ -7,14 +7,14 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use raystream_accel::{KdTree, Traversal};
 use raystream_cpu::{DepthStats, RenderOptions, render};
-use raystream_gpu::{GpuRenderer, GpuTracer, GpuVolumeRenderer};
+use raystream_gpu::{GpuRenderer, GpuTracer};
 use raystream_scene::Scene;
 
-use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, render_volume, volume_camera};
-use raystream_volume::{TfPreset, TransferFunction};
+use raystream_cpu::dvr::{DvrMode, DvrOptions, orbit_camera, volume_camera};
 
 use crate::cli::RenderArgs;
 use crate::common::{Backend, load_mesh, median as median_of, ms, open_device, spinner};
+use crate::dvr;
 use crate::iso::{Bones, bones, read_volume};
 
 /// The built-in default: the abdomen/pelvis CT of TotalSegmentator's tests (see
@@ -58,49 +58,13 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         ),
     };
     let (volume, load_ms) = read_volume(path, a.series.as_deref(), a.quiet, embedded)?;
-    let tf = match (&a.tf, a.threshold.preset) {
-        (Some(f), _) => TransferFunction::load(f).map_err(anyhow::Error::msg)?,
-        (None, Some(p)) => match p.transfer() {
-            Some(t) => t.function(),
-            None if mode == DvrMode::Iso => TfPreset::CtBone.function(),
-            None => bail!(
-                "--preset {}: a threshold; --mode {} takes a transfer function: ct-bone, ct-bones, ct-aaa, ct-muscle, ct-lung, mip-bone (or --tf FILE)",
-                p.name(),
-                mode.name()
-            ),
-        },
-        (None, None) => TfPreset::CtBone.function(),
-    };
-    if let Some(s) = a.step
-        && !(s.is_finite() && s > 0.0)
-    {
-        bail!("--step {s}: the step must be a positive number of mm");
+    let (tf, opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
+    let aspect = opt.width as f32 / opt.height as f32;
+    let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
+    if let Some(n) = a.turntable {
+        return turntable(a, &renderer, &volume, &opt, n);
     }
-    if let Some(w) = a.window
-        && !(w.is_finite() && w > 0.0)
-    {
-        bail!("--window {w}: the window must be a positive number of HU");
-    }
-    let opt = DvrOptions {
-        width: a.size.0,
-        height: a.size.1,
-        mode,
-        step_mm: a.step,
-        window: a.window.zip(a.level),
-        iso_hu: if mode == DvrMode::Iso {
-            a.threshold
-                .iso
-                .unwrap_or(match a.threshold.preset.and_then(|p| p.threshold()) {
-                    Some(t) => t.hu(),
-                    None => raystream_volume::Preset::Bone.hu(),
-                })
-        } else {
-            0.0
-        },
-        skip_empty: !a.no_skip,
-        ..Default::default()
-    };
-    let cam = volume_camera(&volume, opt.width as f32 / opt.height as f32);
+    let cam = volume_camera(&volume, aspect);
     let pb = spinner(
         a.quiet,
         &format!(
@@ -111,59 +75,34 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             volume.dims[2]
         ),
     );
-    let gpu = match &backend {
-        Backend::Gpu(ctx) => Some(GpuVolumeRenderer::new(ctx, &volume, &tf)?),
-        Backend::Cpu => None,
-    };
     let mut frame_ms = Vec::new();
     let mut kernel_ms = Vec::new();
-    let mut out = None;
-    // The CPU path counts its samples; the GPU's are estimated below.
-    let mut cpu_stats = None;
+    let mut last = None;
     for _ in 0..a.repeat {
-        let t = Instant::now();
-        out = Some(match &gpu {
-            Some(g) => {
-                let (img, times) = g.render(&opt, &cam)?;
-                kernel_ms.extend(times.kernel_gpu_ms);
-                img
-            }
-            None => {
-                let (img, stats) = render_volume(&volume, &tf, &opt, &cam);
-                cpu_stats = Some(stats);
-                img
-            }
-        });
-        frame_ms.push(ms(t.elapsed()));
+        let f = renderer.frame(&opt, &cam)?;
+        frame_ms.push(f.frame_ms);
+        kernel_ms.extend(f.kernel_ms);
+        last = Some(f);
     }
     pb.finish_and_clear();
-    let image = out.expect("at least one frame");
-    image.save_png(&a.output).map_err(anyhow::Error::msg)?;
+    let frame = last.expect("at least one frame");
+    frame
+        .image
+        .save_png(&a.output)
+        .map_err(anyhow::Error::msg)?;
     if !a.quiet {
-        // The work a GPU frame does, estimated on the CPU path's marcher (the same lattice)
-        // at no more than 256×256.
-        let stats = cpu_stats.unwrap_or_else(|| {
-            let small = DvrOptions {
-                width: opt.width.min(256),
-                height: opt.height.min(256),
-                ..opt
-            };
-            let (_, s) = render_volume(&volume, &tf, &small, &cam);
-            let scale =
-                (opt.width as f64 * opt.height as f64) / (small.width as f64 * small.height as f64);
-            DvrStats {
-                samples: (s.samples as f64 * scale) as u64,
-                skipped: (s.skipped as f64 * scale) as u64,
-                ..s
-            }
-        });
+        let gpu = frame.stats.is_none();
+        let stats = frame
+            .stats
+            .unwrap_or_else(|| dvr::estimate_stats(&volume, &tf, &opt, &cam));
         let median = median_of(&mut frame_ms);
         eprintln!(
-            "raystream: wrote {} ({}x{}, --mode {}, step {:.3} mm) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples{}, {} skipped as empty ({:.0} %), {:.1} M samples/s",
+            "raystream: wrote {} ({}x{}, --mode {}{}, step {:.3} mm) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples, {} skipped as empty ({:.0} %{}){}, {:.1} M samples/s",
             a.output.display(),
             opt.width,
             opt.height,
             mode.name(),
+            if opt.shadows { " --shadows" } else { "" },
             stats.step_mm,
             backend.name(),
             backend.adapter(),
@@ -180,11 +119,77 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             } else {
                 format!(", kernel {:.2} ms", median_of(&mut kernel_ms))
             },
-            stats.samples,
-            if gpu.is_some() { " (estimated)" } else { "" },
+            frame.samples,
             stats.skipped,
             100.0 * stats.skipped as f64 / (stats.samples + stats.skipped).max(1) as f64,
-            stats.samples as f64 / median / 1e3
+            if gpu { ", estimated on the CPU" } else { "" },
+            if opt.shadows {
+                format!(
+                    ", {} shadow-ray samples{}",
+                    stats.shadow_samples,
+                    if gpu { " (estimated on the CPU)" } else { "" }
+                )
+            } else {
+                String::new()
+            },
+            frame.samples as f64 / median / 1e3
+        );
+    }
+    Ok(())
+}
+
+/// `render --mode … --turntable N -o DIR`: N frames about the patient's superior axis.
+fn turntable(
+    a: &RenderArgs,
+    renderer: &dvr::Renderer,
+    volume: &raystream_io::Volume,
+    opt: &DvrOptions,
+    n: u32,
+) -> Result<()> {
+    let dir = &a.output;
+    if dir
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        bail!(
+            "{}: --turntable writes frame_000.png … into a folder; name the folder with -o",
+            dir.display()
+        );
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let pb = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(n as u64).with_style(
+            ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} frames")
+                .expect("valid template"),
+        )
+    };
+    pb.set_message("turntable");
+    let digits = (n - 1).max(1).ilog10() as usize + 1;
+    let mut frame_ms = Vec::new();
+    for i in 0..n {
+        let cam = orbit_camera(
+            volume,
+            opt.width as f32 / opt.height as f32,
+            360.0 * i as f32 / n as f32,
+        );
+        let f = renderer.frame(opt, &cam)?;
+        frame_ms.push(f.frame_ms);
+        let path = dir.join(format!("frame_{i:0digits$}.png", digits = digits.max(3)));
+        f.image.save_png(&path).map_err(anyhow::Error::msg)?;
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    if !a.quiet {
+        let median = median_of(&mut frame_ms);
+        eprintln!(
+            "raystream: wrote {n} frames to {} ({}x{}, --mode {}): median render {median:.1} ms ({:.2} frames/s, PNG writing apart)",
+            dir.display(),
+            opt.width,
+            opt.height,
+            opt.mode.name(),
+            1e3 / median
         );
     }
     Ok(())
@@ -194,9 +199,17 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     if let Some(mode) = a.mode {
         return render_direct(a, mode.into());
     }
-    if a.tf.is_some() || a.step.is_some() || a.window.is_some() || a.no_skip {
+    let l = &a.look;
+    if l.tf.is_some()
+        || l.step.is_some()
+        || l.window.is_some()
+        || l.no_skip
+        || l.shadows
+        || l.crop.is_some()
+        || !l.clip_planes.is_empty()
+    {
         bail!(
-            "--tf, --step, --window/--level and --no-skip go with --mode (direct volume rendering)"
+            "--tf, --step, --window/--level, --no-skip, --shadows, --crop and --clip-plane go with --mode (direct volume rendering)"
         );
     }
     let backend = open_device(a.accel.device, a.accel.adapter.as_deref(), a.quiet)?;
@@ -250,6 +263,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     let mut image = None;
     let mut total_rays = 0usize;
     let mut kernel_ms = None;
+    let mut split = None;
     for _ in 0..a.repeat {
         total_rays = 0;
         let mut on_depth = |s: DepthStats| {
@@ -265,6 +279,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             Some(r) => {
                 let (img, stats) = r.render(&opt, &mut on_depth)?;
                 kernel_ms = stats.kernel_gpu_ms;
+                split = Some((stats.render_ms, stats.wait_ms, stats.film_ms));
                 img
             }
             None => render(&scene, &tree, &opt, &mut on_depth),
@@ -321,6 +336,12 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             eprintln!(
                 "raystream: GPU kernel time of the last frame (ms): {}",
                 parts.join(", ")
+            );
+        }
+        if let Some((all, wait, film)) = split {
+            eprintln!(
+                "raystream: the last frame's {all:.1} ms: {wait:.1} waiting on depth submissions (kernels and round trips), {film:.1} reading the film back, {:.1} on the host",
+                all - wait - film
             );
         }
         if let Some(b) = bones {

@@ -194,6 +194,15 @@ fn info_json() {
     assert!(m["kdtree"]["sah_cost"].as_f64().unwrap() > j["kdtree"]["sah_cost"].as_f64().unwrap());
 }
 
+/// A successful run's stdout as JSON lines.
+fn json_lines(o: &std::process::Output) -> Vec<serde_json::Value> {
+    assert!(o.status.success(), "{}", stderr(o));
+    stdout(o)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
 #[test]
 fn bench_json_lines() {
     let o = run(&[
@@ -205,11 +214,7 @@ fn bench_json_lines() {
         "1",
         "--json",
     ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let lines: Vec<serde_json::Value> = stdout(&o)
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let lines = json_lines(&o);
     let kinds: Vec<&str> = lines.iter().map(|l| l["kind"].as_str().unwrap()).collect();
     assert_eq!(kinds, ["primary", "shadow", "diffuse"]);
     for l in &lines {
@@ -321,4 +326,170 @@ fn gpu_volume_rendering_matches_cpu_cli() {
         true,
     );
     gpu_matches_cpu("mip", &["--mode", "mip", "--size", "64x48"], true);
+}
+
+#[test]
+fn golden_volume_shadows() {
+    golden(
+        "dvr_shadows",
+        &[
+            "--mode",
+            "dvr",
+            "--preset",
+            "ct-bones",
+            "--shadows",
+            "--size",
+            "96x72",
+        ],
+    );
+}
+
+#[test]
+fn gpu_volume_shadows_and_clipping_match_cpu_cli() {
+    gpu_matches_cpu(
+        "dvr-shadows-clipped",
+        &[
+            "--mode",
+            "dvr",
+            "--shadows",
+            "--crop=-250,-400,-400,60,400,400",
+            "--clip-plane=0,1,0.2,-60",
+            "--size",
+            "64x48",
+        ],
+        true,
+    );
+}
+
+/// Cropping and clipping change the picture; a crop box outside the volume leaves only the
+/// background; malformed boxes and planes, and options without --mode, are clear errors.
+#[test]
+fn crop_and_clip_planes_from_the_command_line() {
+    let render = |name: &str, extra: &[&str]| {
+        let out = tmp(&format!("clip-{name}.png"));
+        let mut all = vec!["render", "--mode", "mip", "--size", "48x36", "--quiet"];
+        all.extend_from_slice(extra);
+        all.extend_from_slice(&["-o", out.to_str().unwrap()]);
+        let o = run(&all);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        image::open(&out).unwrap().to_rgb8()
+    };
+    let full = render("full", &[]);
+    let cropped = render("crop", &["--crop=-250,-400,-400,60,400,400"]);
+    let planed = render("plane", &["--clip-plane=1,0,0,60"]);
+    assert_ne!(full, cropped, "--crop changed nothing");
+    assert_ne!(full, planed, "--clip-plane changed nothing");
+    let outside = render("outside", &["--crop=5000,5000,5000,5001,5001,5001"]);
+    let first = *outside.get_pixel(0, 0);
+    assert!(
+        outside.pixels().all(|p| *p == first),
+        "a crop box outside the volume shows something"
+    );
+    for (args, want) in [
+        (vec!["--crop=1,2,3"], "six finite numbers"),
+        (vec!["--crop=0,0,0,-1,5,5"], "below its maximum"),
+        (vec!["--clip-plane=0,0,0,1"], "normal"),
+        (
+            vec![
+                "--clip-plane=1,0,0,0",
+                "--clip-plane=0,1,0,0",
+                "--clip-plane=0,0,1,0",
+            ],
+            "at most two",
+        ),
+        (vec!["--shadows"], "--mode dvr"),
+    ] {
+        let bad = tmp("clip-bad.png");
+        let mut all = vec!["render", "--mode", "mip", "--size", "8x8", "--quiet"];
+        all.extend_from_slice(&args);
+        all.extend_from_slice(&["-o", bad.to_str().unwrap()]);
+        let o = run(&all);
+        assert_eq!(o.status.code(), Some(2), "{args:?} should fail");
+        assert!(stderr(&o).contains(want), "{args:?}: {}", stderr(&o));
+    }
+    let o = run(&["render", "--shadows", "--size", "8x8", "--quiet"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("go with --mode"), "{}", stderr(&o));
+}
+
+/// A turntable writes N frames; frame 0 is the plain front view, and the frames differ.
+#[test]
+fn turntable_writes_frames() {
+    let dir = tmp("turntable");
+    let _ = std::fs::remove_dir_all(&dir);
+    let args = ["render", "--mode", "mip", "--size", "40x30", "--quiet"];
+    let mut all = args.to_vec();
+    all.extend_from_slice(&["--turntable", "4", "-o", dir.to_str().unwrap()]);
+    let o = run(&all);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "frame_000.png",
+            "frame_001.png",
+            "frame_002.png",
+            "frame_003.png"
+        ]
+    );
+    let front = tmp("turntable-front.png");
+    let mut all = args.to_vec();
+    all.extend_from_slice(&["-o", front.to_str().unwrap()]);
+    assert!(run(&all).status.success());
+    let frame = |n: &str| image::open(dir.join(n)).unwrap().to_rgb8();
+    assert_eq!(
+        frame("frame_000.png"),
+        image::open(&front).unwrap().to_rgb8()
+    );
+    assert_ne!(frame("frame_000.png"), frame("frame_001.png"));
+    let png = tmp("x.png");
+    let o = run(&[
+        "render",
+        "--mode",
+        "mip",
+        "--turntable",
+        "2",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("folder"), "{}", stderr(&o));
+}
+
+/// `bench CT --mode dvr`: an orbit without and with shadows, one JSON line each, on the
+/// resampled grid, with samples counted.
+#[test]
+fn bench_volume_rendering() {
+    let ct = repo().join("crates/raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
+    let o = run(&[
+        "bench",
+        ct.to_str().unwrap(),
+        "--mode",
+        "dvr",
+        "--size",
+        "32x24",
+        "--frames",
+        "3",
+        "--resample",
+        "64",
+        "--json",
+    ]);
+    let lines = json_lines(&o);
+    assert_eq!(lines.len(), 2, "{}", stdout(&o));
+    for (l, shadows) in lines.iter().zip([false, true]) {
+        assert_eq!(l["shadows"], shadows);
+        assert_eq!(l["dims"], serde_json::json!([64, 64, 64]));
+        assert_eq!(l["frames"], 3);
+        assert!(l["samples_per_frame"].as_f64().unwrap() > 1000.0, "{l}");
+        assert!(l["frames_per_s"].as_f64().unwrap() > 0.0, "{l}");
+        assert_eq!(
+            l["shadow_samples_per_frame"].as_u64().unwrap() > 0,
+            shadows,
+            "{l}"
+        );
+    }
 }

@@ -1,7 +1,8 @@
 // Direct volume rendering: one thread per pixel marches its ray through the CT volume, the same
 // algorithm as raystream-cpu's dvr.rs (the reference) — world space (LPS mm), opacity per mm
 // corrected for the step, the last segment clipped, jittered start, early termination, bricks
-// of empty space skipped on the same sample lattice, gradient Phong with a headlight. The
+// of empty space skipped on the same sample lattice, gradient Blinn-Phong with a headlight or,
+// with shadows, a key light and a shadow ray per visible sample; crop box and clip planes. The
 // volume is an R16Float 3D texture of HU sampled with hardware trilinear filtering.
 
 struct DvrParams {
@@ -30,6 +31,15 @@ struct DvrParams {
     color_count: u32,
     // ambient, diffuse, specular, specular power
     shading: vec4<f32>,
+    // Toward the key light (LPS, unit).
+    light: vec3<f32>,
+    shadows: u32,
+    crop_min: vec3<f32>,
+    crop: u32,
+    crop_max: vec3<f32>,
+    plane_count: u32,
+    // Keep n . p >= c: (n, c).
+    planes: array<vec4<f32>, 2>,
 }
 
 // (HU, opacity per mm) and (HU, r, g, b) control points.
@@ -97,32 +107,30 @@ fn to_index(v: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(dot(dp.to_index0, v), dot(dp.to_index1, v), dot(dp.to_index2, v));
 }
 
-// (diffuse factor, specular) of Phong with a headlight.
-fn phong(n: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
-    let c = abs(dot(n, -d));
+// (ambient + diffuse, specular) of two-sided Blinn-Phong toward light `l` seen along `d`.
+fn phong(n: vec3<f32>, d: vec3<f32>, l: vec3<f32>) -> vec2<f32> {
+    var h = -d;
+    let hl = length(l - d);
+    if hl > 0.0 {
+        h = (l - d) / hl;
+    }
+    let c = abs(dot(n, h));
     var spec = 0.0;
     if c > 0.0 {
         spec = dp.shading.z * pow(c, dp.shading.w);
     }
-    return vec2<f32>(dp.shading.x + dp.shading.y * c, spec);
+    return vec2<f32>(dp.shading.x + dp.shading.y * abs(dot(n, l)), spec);
 }
 
-fn window(v: f32) -> f32 {
-    return clamp((v - (dp.window_level - 0.5 * dp.window_width)) / max(dp.window_width, 1e-6), 0.0, 1.0);
-}
-
-const FULL_SHADING_GRADIENT: f32 = 100.0;
-const BRICK: u32 = BRICK_SIZE;
-
-fn march(o_idx: vec3<f32>, d_idx: vec3<f32>, d: vec3<f32>, jit: f32) -> vec3<f32> {
-    // Clip to the grid of voxel centres.
+// [t0, t1] of the ray o_idx + t d_idx inside the grid of voxel centres; empty when t0 > t1.
+fn clip_grid(o_idx: vec3<f32>, d_idx: vec3<f32>) -> vec2<f32> {
     var t0 = 0.0;
     var t1 = bitcast<f32>(0x7f800000u);
     for (var a = 0u; a < 3u; a++) {
         let hi = f32(dp.dims[a] - 1u);
         if d_idx[a] == 0.0 {
             if o_idx[a] < 0.0 || o_idx[a] > hi {
-                return dp.background;
+                return vec2<f32>(1.0, 0.0);
             }
             continue;
         }
@@ -136,14 +144,128 @@ fn march(o_idx: vec3<f32>, d_idx: vec3<f32>, d: vec3<f32>, jit: f32) -> vec3<f32
         t0 = max(t0, n);
         t1 = min(t1, f);
     }
-    if !(t0 <= t1) {
-        return dp.background;
+    return vec2<f32>(t0, t1);
+}
+
+// The crop box and clip planes applied to [t.x, t.y] of the world ray o + t d, as the CPU's
+// clip_interval.
+fn clip_world(o: vec3<f32>, d: vec3<f32>, t_in: vec2<f32>) -> vec2<f32> {
+    var t = t_in;
+    let empty = vec2<f32>(1.0, 0.0);
+    if dp.crop != 0u {
+        for (var a = 0u; a < 3u; a++) {
+            if d[a] == 0.0 {
+                if o[a] < dp.crop_min[a] || o[a] > dp.crop_max[a] {
+                    return empty;
+                }
+                continue;
+            }
+            let n = (dp.crop_min[a] - o[a]) / d[a];
+            let f = (dp.crop_max[a] - o[a]) / d[a];
+            t.x = max(t.x, min(n, f));
+            t.y = min(t.y, max(n, f));
+        }
     }
+    for (var i = 0u; i < dp.plane_count; i++) {
+        let pl = dp.planes[i];
+        let no = dot(pl.xyz, o);
+        let nd = dot(pl.xyz, d);
+        if nd == 0.0 {
+            if no < pl.w {
+                return empty;
+            }
+        } else if nd > 0.0 {
+            t.x = max(t.x, (pl.w - no) / nd);
+        } else {
+            t.y = min(t.y, (pl.w - no) / nd);
+        }
+    }
+    return t;
+}
+
+// Where index point `p` (ray parameter t, lattice t0 + (k + jit) step) lies in a transparent
+// brick: the first lattice index past it (at least k + 1); else k.
+fn skip_brick(p: vec3<f32>, t: f32, t0: f32, d_idx: vec3<f32>, jit: f32, k: u32) -> u32 {
+    let b = min(vec3<u32>(max(p, vec3<f32>(0.0))) / BRICK, dp.bricks - 1u);
+    if brick_visible[b.x + dp.bricks.x * (b.y + dp.bricks.y * b.z)] != 0u {
+        return k;
+    }
+    var t_exit = bitcast<f32>(0x7f800000u);
+    for (var a = 0u; a < 3u; a++) {
+        if d_idx[a] == 0.0 {
+            continue;
+        }
+        var bound = f32(b[a] * BRICK);
+        if d_idx[a] > 0.0 {
+            bound = f32((b[a] + 1u) * BRICK);
+        }
+        t_exit = min(t_exit, t + (bound - p[a]) / d_idx[a]);
+    }
+    return max(u32(max(ceil((t_exit - t0) / dp.step - jit), 0.0)), k + 1u);
+}
+
+// Transmittance from index point `p` toward the light, as the CPU's Marcher::transmittance.
+fn transmittance(p: vec3<f32>, l_idx: vec3<f32>, jit: f32) -> f32 {
+    let t1 = clip_grid(p, l_idx).y;
+    let step = dp.step;
+    var tr = 1.0;
+    var k = 1u;
+    loop {
+        let start = f32(k) * step;
+        if start >= t1 {
+            break;
+        }
+        let t = min((f32(k) + jit) * step, t1);
+        let q = p + l_idx * t;
+        if dp.skip_empty != 0u {
+            let next = skip_brick(q, t, 0.0, l_idx, jit, k);
+            if next != k {
+                k = next;
+                continue;
+            }
+        }
+        let seg = min(step, t1 - start);
+        k += 1u;
+        let a = opacity_at(sample_at(q));
+        if a > 0.0 {
+            tr *= pow(1.0 - min(a, 1.0), seg);
+            if tr < 0.01 {
+                break;
+            }
+        }
+    }
+    return tr;
+}
+
+fn window(v: f32) -> f32 {
+    return clamp((v - (dp.window_level - 0.5 * dp.window_width)) / max(dp.window_width, 1e-6), 0.0, 1.0);
+}
+
+const FULL_SHADING_GRADIENT: f32 = 100.0;
+const BRICK: u32 = BRICK_SIZE;
+
+// Colour and the samples taken (primary, as the CPU counts them).
+fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
+    let o_idx = to_index(o - dp.origin);
+    let d_idx = to_index(d);
+    let tt = clip_world(o, d, clip_grid(o_idx, d_idx));
+    if !(tt.x <= tt.y) {
+        return vec4<f32>(dp.background, 0.0);
+    }
+    let t0 = tt.x;
+    let t1 = tt.y;
     let step = dp.step;
     var k = 0u;
     if dp.mode == MODE_DVR {
         var c = vec3<f32>(0.0);
         var transmit = 1.0;
+        var l = -d;
+        if dp.shadows != 0u {
+            l = dp.light;
+        }
+        let l_idx = to_index(l);
+        let amb = dp.shading.x;
+        var taken = 0u;
         loop {
             let start = t0 + f32(k) * step;
             if start >= t1 {
@@ -153,24 +275,14 @@ fn march(o_idx: vec3<f32>, d_idx: vec3<f32>, d: vec3<f32>, jit: f32) -> vec3<f32
             let seg = min(step, t1 - start);
             let p = o_idx + d_idx * t;
             if dp.skip_empty != 0u {
-                let b = min(vec3<u32>(max(p, vec3<f32>(0.0))) / BRICK, dp.bricks - 1u);
-                if brick_visible[b.x + dp.bricks.x * (b.y + dp.bricks.y * b.z)] == 0u {
-                    var t_exit = bitcast<f32>(0x7f800000u);
-                    for (var a = 0u; a < 3u; a++) {
-                        if d_idx[a] == 0.0 {
-                            continue;
-                        }
-                        var bound = f32(b[a] * BRICK);
-                        if d_idx[a] > 0.0 {
-                            bound = f32((b[a] + 1u) * BRICK);
-                        }
-                        t_exit = min(t_exit, t + (bound - p[a]) / d_idx[a]);
-                    }
-                    k = max(u32(max(ceil((t_exit - t0) / step - jit), 0.0)), k + 1u);
+                let next = skip_brick(p, t, t0, d_idx, jit, k);
+                if next != k {
+                    k = next;
                     continue;
                 }
             }
             k += 1u;
+            taken += 1u;
             let v = sample_at(p);
             var a = opacity_at(v);
             if a <= 0.0 {
@@ -178,21 +290,27 @@ fn march(o_idx: vec3<f32>, d_idx: vec3<f32>, d: vec3<f32>, jit: f32) -> vec3<f32
             }
             a = 1.0 - pow(1.0 - min(a, 1.0), seg);
             let base = color_at(v);
+            var lit = 1.0;
+            if dp.shadows != 0u {
+                lit = transmittance(p, l_idx, jit);
+            }
             let g = gradient_at(p);
             let gm = length(g);
-            var shaded = base;
+            let w = min(gm / FULL_SHADING_GRADIENT, 1.0);
+            var ph = vec2<f32>(amb, 0.0);
             if gm > 0.0 {
-                let ph = phong(-g / gm, d);
-                let w = min(gm / FULL_SHADING_GRADIENT, 1.0);
-                shaded = base * (1.0 - w + w * ph.x) + vec3<f32>(w * ph.y);
+                ph = phong(-g / gm, d, l);
             }
+            let unshaded = amb + (1.0 - amb) * lit;
+            let surface = amb + (ph.x - amb) * lit;
+            let shaded = base * ((1.0 - w) * unshaded + w * surface) + vec3<f32>(w * ph.y * lit);
             c += transmit * a * shaded;
             transmit *= 1.0 - a;
             if transmit < 0.01 {
                 break;
             }
         }
-        return c + transmit * dp.background;
+        return vec4<f32>(c + transmit * dp.background, f32(taken));
     }
     if dp.mode == MODE_ISO {
         var t_prev = 0.0;
@@ -200,7 +318,7 @@ fn march(o_idx: vec3<f32>, d_idx: vec3<f32>, d: vec3<f32>, jit: f32) -> vec3<f32
         loop {
             let t = t0 + (f32(k) + jit) * step;
             if t > t1 {
-                return dp.background;
+                return vec4<f32>(dp.background, f32(k));
             }
             k += 1u;
             if sample_at(o_idx + d_idx * t) >= dp.iso {
@@ -222,8 +340,8 @@ fn march(o_idx: vec3<f32>, d_idx: vec3<f32>, d: vec3<f32>, jit: f32) -> vec3<f32
                 if length(g) > 0.0 {
                     n = -normalize(g);
                 }
-                let ph = phong(n, d);
-                return vec3<f32>(0.88, 0.84, 0.74) * ph.x + vec3<f32>(ph.y);
+                let ph = phong(n, d, -d);
+                return vec4<f32>(vec3<f32>(0.88, 0.84, 0.74) * ph.x + vec3<f32>(ph.y), f32(k));
             }
             t_prev = t;
             has_prev = true;
@@ -253,12 +371,12 @@ fn march(o_idx: vec3<f32>, d_idx: vec3<f32>, d: vec3<f32>, jit: f32) -> vec3<f32
         k += 1u;
     }
     if taken == 0u {
-        return dp.background;
+        return vec4<f32>(dp.background, 0.0);
     }
     if dp.mode == MODE_AVERAGE {
         best = sum / f32(taken);
     }
-    return vec3<f32>(window(best));
+    return vec4<f32>(vec3<f32>(window(best)), f32(taken));
 }
 
 @compute @workgroup_size(8, 8)
@@ -272,6 +390,5 @@ fn render_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
     let px = ((f32(gid.x) + 0.5) / w * 2.0 - 1.0) * dp.tan_y * (w / h);
     let py = (1.0 - (f32(gid.y) + 0.5) / h * 2.0) * dp.tan_y;
     let d = normalize(dp.fwd + px * dp.right + py * dp.up);
-    let c = march(to_index(dp.eye - dp.origin), to_index(d), d, jitter(pixel, 0u, 7u));
-    pixels[pixel] = vec4<f32>(c, 1.0);
+    pixels[pixel] = march(dp.eye, d, jitter(pixel, 0u, 7u));
 }

@@ -13,6 +13,10 @@
 // rounded to 64-bit fixed point (FILM_SCALE steps per unit) and integer addition does not depend
 // on order. FILM_SCALE, MAX_CONTRIBUTION and the counter slots come from the Rust prelude.
 
+// The far end of camera and secondary rays: the largest finite f32 rather than +inf, which
+// shader compilers may assume never occurs (the CPU's +inf gives the same hits).
+const T_FAR: f32 = 3.40282347e38;
+
 struct RayWork {
     ray: RayIn,
     weight: vec3<f32>,
@@ -142,7 +146,7 @@ fn generate_camera_rays(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(
     let px = (x / w * 2.0 - 1.0) * rp.tan_y * (w / h);
     let py = (1.0 - y / h * 2.0) * rp.tan_y;
     let d = normalize(rp.fwd + px * rp.right + py * rp.up);
-    queue_in[i] = RayWork(RayIn(rp.eye, 0.0, d, bitcast<f32>(0x7f800000u)), vec3<f32>(1.0), pixel);
+    queue_in[i] = RayWork(RayIn(rp.eye, 0.0, d, T_FAR), vec3<f32>(1.0), pixel);
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
@@ -298,11 +302,11 @@ fn shade_hits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
             d = reflect_about(s.dir, s.ng);
         }
         let at = atomicAdd(&counters[NEXT], 1u);
-        queue_out[at] = RayWork(RayIn(s.p + s.ng * rp.epsilon, 0.0, d, bitcast<f32>(0x7f800000u)), w.weight * split.r, w.pixel);
+        queue_out[at] = RayWork(RayIn(s.p + s.ng * rp.epsilon, 0.0, d, T_FAR), w.weight * split.r, w.pixel);
     }
     if split.refr.w != 0.0 && split.t * max_element(w.weight) > 1e-3 {
         let at = atomicAdd(&counters[NEXT], 1u);
-        queue_out[at] = RayWork(RayIn(s.p - s.ng * rp.epsilon, 0.0, split.refr.xyz, bitcast<f32>(0x7f800000u)), w.weight * split.t, w.pixel);
+        queue_out[at] = RayWork(RayIn(s.p - s.ng * rp.epsilon, 0.0, split.refr.xyz, T_FAR), w.weight * split.t, w.pixel);
     }
 }
 

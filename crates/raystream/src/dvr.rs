@@ -1,0 +1,176 @@
+//! Direct volume rendering for `render --mode` and `bench --mode`: the options from the command
+//! line, and one frame on the CPU (the reference) or the GPU behind one call.
+
+use std::time::Instant;
+
+use anyhow::{Result, bail};
+use raystream_cpu::Image;
+use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, render_volume};
+use raystream_gpu::GpuVolumeRenderer;
+use raystream_io::Volume;
+use raystream_math::Vec3;
+use raystream_scene::Camera;
+use raystream_volume::{TfPreset, TransferFunction};
+
+use crate::cli::{Threshold, VolumeLook};
+use crate::common::{Backend, ms};
+
+/// The transfer function and options `--mode MODE` asks for, checked.
+pub fn options(
+    look: &VolumeLook,
+    threshold: &Threshold,
+    mode: DvrMode,
+    (width, height): (u32, u32),
+) -> Result<(TransferFunction, DvrOptions)> {
+    let tf = match (&look.tf, threshold.preset) {
+        (Some(f), _) => TransferFunction::load(f).map_err(anyhow::Error::msg)?,
+        (None, Some(p)) => match p.transfer() {
+            Some(t) => t.function(),
+            None if mode == DvrMode::Iso => TfPreset::CtBone.function(),
+            None => bail!(
+                "--preset {}: a threshold; --mode {} takes a transfer function: ct-bone, ct-bones, ct-aaa, ct-muscle, ct-lung, mip-bone (or --tf FILE)",
+                p.name(),
+                mode.name()
+            ),
+        },
+        (None, None) => TfPreset::CtBone.function(),
+    };
+    if let Some(s) = look.step
+        && !(s.is_finite() && s > 0.0)
+    {
+        bail!("--step {s}: the step must be a positive number of mm");
+    }
+    if let Some(w) = look.window
+        && !(w.is_finite() && w > 0.0)
+    {
+        bail!("--window {w}: the window must be a positive number of HU");
+    }
+    if look.shadows && mode != DvrMode::Dvr {
+        bail!(
+            "--shadows goes with --mode dvr (--mode {} has no lighting to shadow)",
+            mode.name()
+        );
+    }
+    if look.clip_planes.len() > 2 {
+        bail!(
+            "--clip-plane given {} times: at most two clip planes",
+            look.clip_planes.len()
+        );
+    }
+    let plane = |i: usize| {
+        look.clip_planes
+            .get(i)
+            .map(|p| (Vec3::new(p[0], p[1], p[2]), p[3]))
+    };
+    let opt = DvrOptions {
+        width,
+        height,
+        mode,
+        step_mm: look.step,
+        window: look.window.zip(look.level),
+        iso_hu: if mode == DvrMode::Iso {
+            threshold
+                .iso
+                .unwrap_or(match threshold.preset.and_then(|p| p.threshold()) {
+                    Some(t) => t.hu(),
+                    None => raystream_volume::Preset::Bone.hu(),
+                })
+        } else {
+            0.0
+        },
+        skip_empty: !look.no_skip,
+        shadows: look.shadows,
+        crop: look
+            .crop
+            .map(|c| [Vec3::new(c[0], c[1], c[2]), Vec3::new(c[3], c[4], c[5])]),
+        clip_planes: [plane(0), plane(1)],
+        ..Default::default()
+    };
+    Ok((tf, opt))
+}
+
+/// Renders frames of one volume on the CPU or the GPU.
+pub enum Renderer<'a> {
+    Cpu {
+        volume: &'a Volume,
+        tf: &'a TransferFunction,
+    },
+    Gpu(Box<GpuVolumeRenderer<'a>>),
+}
+
+/// One frame and what it cost.
+pub struct Frame {
+    pub image: Image,
+    /// Wall time, milliseconds: the whole render on the CPU; submission to pixels on the host
+    /// on the GPU.
+    pub frame_ms: f64,
+    /// The GPU kernel's own time (timestamp queries).
+    pub kernel_ms: Option<f64>,
+    /// Samples taken by the primary rays (counted by the renderer that ran).
+    pub samples: u64,
+    /// The CPU path's full statistics (skipped and shadow samples too).
+    pub stats: Option<DvrStats>,
+}
+
+impl<'a> Renderer<'a> {
+    pub fn new(
+        backend: &'a Backend,
+        volume: &'a Volume,
+        tf: &'a TransferFunction,
+    ) -> Result<Renderer<'a>> {
+        Ok(match backend {
+            Backend::Gpu(ctx) => Renderer::Gpu(Box::new(GpuVolumeRenderer::new(ctx, volume, tf)?)),
+            Backend::Cpu => Renderer::Cpu { volume, tf },
+        })
+    }
+
+    pub fn frame(&self, opt: &DvrOptions, cam: &Camera) -> Result<Frame> {
+        let t = Instant::now();
+        Ok(match self {
+            Renderer::Gpu(g) => {
+                let (image, times) = g.render(opt, cam)?;
+                Frame {
+                    image,
+                    frame_ms: ms(t.elapsed()),
+                    kernel_ms: times.kernel_gpu_ms,
+                    samples: times.samples,
+                    stats: None,
+                }
+            }
+            Renderer::Cpu { volume, tf } => {
+                let (image, stats) = render_volume(volume, tf, opt, cam);
+                Frame {
+                    image,
+                    frame_ms: ms(t.elapsed()),
+                    kernel_ms: None,
+                    samples: stats.samples,
+                    stats: Some(stats),
+                }
+            }
+        })
+    }
+}
+
+/// The skipped and shadow samples of a frame the GPU rendered (it counts only the samples it
+/// takes), estimated on the CPU path's marcher (the same lattice) at no more than 256×256.
+pub fn estimate_stats(
+    volume: &Volume,
+    tf: &TransferFunction,
+    opt: &DvrOptions,
+    cam: &Camera,
+) -> DvrStats {
+    let small = DvrOptions {
+        width: opt.width.min(256),
+        height: opt.height.min(256),
+        ..*opt
+    };
+    let (_, s) = render_volume(volume, tf, &small, cam);
+    let scale = (opt.width as f64 * opt.height as f64) / (small.width as f64 * small.height as f64);
+    let up = |n: u64| (n as f64 * scale) as u64;
+    DvrStats {
+        samples: up(s.samples),
+        skipped: up(s.skipped),
+        shadow_samples: up(s.shadow_samples),
+        step_mm: s.step_mm,
+    }
+}

@@ -1,0 +1,98 @@
+#!/usr/bin/env bash
+# Every GPU figure of BENCHMARKS.md in one run, on a machine that has no Rust (the lent GPU; see
+# DEVELOPERS.md): a release binary, the meshes, the abdomen CT, rays.py and its wheels travel in
+# a data folder made by `scripts/device-bench.sh --pack DIR`. Then, there:
+#   scripts/device-bench.sh DIR OUTDIR [SIZE] [DVR_SIZE]
+# For each mesh and ray kind: rays.py gen writes the standard set; raystream trace on the GPU
+# (fused and split kernels) and on the CPU, and Embree (rays.py embree), trace the same file on
+# the same machine; rays.py check must pass on the GPU's hits. Then bench (per-kernel times,
+# nodes and triangles per ray), the default scene's frame rate, and the volume modes' frame rates.
+# Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
+# ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
+# PARTS (default "trace render volume") picks the parts; TRACERS (default "gpu split cpu
+# embree") the tracers of the trace part.
+# Results: OUTDIR/results.jsonl (one JSON object per line, each tagged), images in OUTDIR.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+
+if [ "${1:-}" = --pack ]; then
+  d=${2:?--pack DIR}
+  mkdir -p "$d/meshes" "$d/ct"
+  cargo build --release --quiet
+  strip -o "$d/raystream" target/release/raystream
+  cp ../shared/data/meshes/{stanford_bunny.ply,stanford_lucy_100k.ply,turbine_blade.ply} "$d/meshes/"
+  cp ../shared/data/volumes/nifti/abdomen_pelvis_ct_totalseg.nii.gz "$d/ct/"
+  cp ../shared/tools/rays.py "$d/"
+  du -sh "$d"
+  exit 0
+fi
+
+d=${1:?data folder}; out=${2:?output folder}; size=${3:-1920x1080}; dvr_size=${4:-1024x1024}
+py=${RAYSTREAM_PYTHON:-python3}
+bin=$d/raystream
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+mkdir -p "$out"
+res=$out/results.jsonl
+# One JSON line, tagged with what produced it.
+tag() { $py -c 'import json,sys
+t=json.loads(sys.argv[1])
+for l in sys.stdin:
+    l=l.strip()
+    if l.startswith("{"):
+        o=json.loads(l); o.update(t); print(json.dumps(o), flush=True)' "$1" | tee -a "$res"; }
+
+echo "{\"machine\": \"$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"date\": \"$(date -u +%FT%TZ)\"}" | tee -a "$res"
+parts=${PARTS:-trace render volume}
+tracers=${TRACERS:-gpu split cpu embree}
+has() { [[ " $1 " == *" $2 "* ]]; }
+has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
+  mesh=$d/meshes/$m.ply
+  for kind in primary diffuse shadow random; do
+    rays=$tmp/$m-$kind.rays
+    $py "$d/rays.py" gen "$mesh" --kind $kind --size "$size" -o "$rays" > /dev/null || { echo "gen failed: $m $kind"; continue; }
+    any=(); [ $kind = shadow ] && any=(--any)
+    t="{\"mesh\": \"$m\", \"kind\": \"$kind\""
+    for k in fused split; do
+      [ $k = split ] && ! has "$tracers" split && continue
+      $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-$k.hits" "${any[@]}" --device gpu --kernels $k --repeat 10 --json --quiet \
+        | tag "$t, \"tracer\": \"raystream-gpu-$k\"}"
+    done
+    $py "$d/rays.py" check "$mesh" "$rays" "$tmp/gpu-fused.hits" "${any[@]}" --json | tag "$t, \"check\": \"gpu-fused\"}"
+    has "$tracers" split && { cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-split.hits" && echo "$m $kind: split hits == fused hits byte for byte" \
+      || echo "$m $kind: SPLIT HITS DIFFER from fused"; }
+    has "$tracers" cpu && { $bin trace "$mesh" --rays "$rays" -o "$tmp/cpu.hits" "${any[@]}" --device cpu --repeat 5 --json --quiet \
+      | tag "$t, \"tracer\": \"raystream-cpu\"}"
+    cmp -s "$tmp/cpu.hits" "$tmp/gpu-fused.hits" && echo "$m $kind: GPU hits == CPU hits byte for byte" \
+      || echo "$m $kind: GPU hits differ from CPU hits in $(cmp -l "$tmp/cpu.hits" "$tmp/gpu-fused.hits" | wc -l) bytes"; }
+    has "$tracers" embree && $py "$d/rays.py" embree "$mesh" "$rays" "${any[@]}" --repeat 5 --json | tag "$t, \"tracer\": \"embree\"}"
+    rm -f "$rays" "$tmp"/*.hits
+  done
+  has "$tracers" cpu && $bin bench "$mesh" --device gpu,cpu --kernels fused,split --size "$size" --repeat 5 --json --quiet \
+    | tag "{\"mesh\": \"$m\", \"bench\": true}"
+done
+
+ct=$d/ct/abdomen_pelvis_ct_totalseg.nii.gz
+# The default scene (the abdomen CT's bones) at depth 4; the CPU on all cores for the ratio.
+has "$parts" render && {
+$bin render --device gpu --size "$size" --max-depth 4 --repeat 20 -o "$out/default-gpu.png" 2>&1 | tee -a "$out/render.log"
+$bin render --device cpu --size "$size" --max-depth 4 --repeat 3 -o "$out/default-cpu.png" 2>&1 | tee -a "$out/render.log"
+# Volume modes straight from the CT.
+for mode in dvr mip iso; do
+  $bin render "$ct" --mode $mode --device gpu --size "$dvr_size" --repeat 20 -o "$out/$mode-gpu.png" 2>&1 | tee -a "$out/render.log"
+  $bin render "$ct" --mode $mode --device cpu --size "$dvr_size" --repeat 3 -o "$out/$mode-cpu.png" 2>&1 | tee -a "$out/render.log"
+done
+$bin render "$ct" --mode dvr --no-skip --device gpu --size "$dvr_size" --repeat 20 -o "$tmp/noskip.png" 2>&1 | tee -a "$out/render.log"
+$bin render "$ct" --mode dvr --shadows --device gpu --size "$dvr_size" --repeat 20 -o "$out/dvr-shadows-gpu.png" 2>&1 | tee -a "$out/render.log"
+}
+has "$parts" volume && {
+v=(bench "$ct" --mode dvr --resample 512 --size "$dvr_size" --json --quiet)
+$bin "${v[@]}" --device gpu --frames 36 | tag '{"volume": "ct-bone"}'
+$bin "${v[@]}" --device gpu --frames 36 --no-skip | tag '{"volume": "ct-bone no-skip"}'
+$bin "${v[@]}" --device gpu --frames 36 --preset ct-bones | tag '{"volume": "ct-bones"}'
+$bin "${v[@]}" --device cpu --frames 2 | tag '{"volume": "ct-bone"}'
+$bin bench "$ct" --mode mip --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 36 | tag '{"volume": "mip"}'
+$bin render "$ct" --mode dvr --shadows --preset ct-bones --device gpu --size "$dvr_size" -o "$out/dvr-bones-shadows-gpu.png" 2>&1 | tee -a "$out/render.log"
+}
+(cd "$out" && tar cf images.tar ./*.png && rm -f ./*.png) 2>/dev/null
+echo done
