@@ -7,7 +7,8 @@
 //! kernels wrote themselves. After each depth it reads back the counters (a few bytes) to stop
 //! when the queue is empty and to size the next depth's queues exactly (a depth's queue is at
 //! most twice the previous one: one reflection and one refraction per hit), so nothing can
-//! overflow. The film is 64-bit fixed point added with atomics: the same image every run.
+//! overflow. The film is 64-bit fixed point added with atomics: the same image every run;
+//! `kernels/film.wgsl` resolves it to one f32 per channel on the GPU before the readback.
 
 use std::time::Instant;
 
@@ -18,9 +19,15 @@ use raystream_scene::Scene;
 use crate::layout::{
     GpuLight, GpuMaterial, RayWork, RenderParams, ShadeTri, ShadowWork, Vertex, counter,
 };
-use crate::{GpuError, GpuHit, GpuTracer, Timer, kdtree_wgsl, read_words};
+use crate::{GpuError, GpuHit, GpuTracer, Timer, WORKGROUP_SIZE, kdtree_wgsl, read_words};
 
 const RENDER_WGSL: &str = include_str!("kernels/render.wgsl");
+const FILM_WGSL: &str = include_str!("kernels/film.wgsl");
+
+/// The WGSL source of the film-resolving kernel.
+pub fn film_wgsl() -> String {
+    format!("const WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\n{FILM_WGSL}")
+}
 pub(crate) const COMMON_WGSL: &str = include_str!("kernels/common.wgsl");
 
 /// Samples generated and traced together; bounds the queues' memory (about 300 bytes a sample
@@ -90,6 +97,8 @@ pub struct GpuRenderer<'a> {
     params: wgpu::Buffer,
     layouts: [wgpu::BindGroupLayout; 4],
     pipelines: Vec<wgpu::ComputePipeline>,
+    film_layout: wgpu::BindGroupLayout,
+    film_pipeline: wgpu::ComputePipeline,
     /// Samples per wave: at most [`MAX_WAVE`], less where the device's bindings need it.
     wave: u32,
     /// The last frame's work buffers and their (pixels, wave, lights), kept for the next frame:
@@ -113,6 +122,9 @@ struct Queues {
     hits: wgpu::Buffer,
     shadows: wgpu::Buffer,
     film: wgpu::Buffer,
+    /// The film resolved to f32 per channel (`film.wgsl`), and its mappable copy.
+    image: wgpu::Buffer,
+    image_read: wgpu::Buffer,
     /// Counters, then 2 timestamps per stage.
     readback: wgpu::Buffer,
     resolve: Option<Timer>,
@@ -228,6 +240,29 @@ impl<'a> GpuRenderer<'a> {
                     })
             })
             .collect();
+        let film_layout = ctx.buffer_layout("film", &[ro, rw]);
+        let film_module = ctx
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("film.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(film_wgsl().into()),
+            });
+        let film_pipeline =
+            ctx.device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some("resolve_film"),
+                    layout: Some(&ctx.device.create_pipeline_layout(
+                        &wgpu::PipelineLayoutDescriptor {
+                            label: Some("film"),
+                            bind_group_layouts: &[Some(&film_layout)],
+                            immediate_size: 0,
+                        },
+                    )),
+                    module: &film_module,
+                    entry_point: Some("resolve_film"),
+                    compilation_options: Default::default(),
+                    cache: None,
+                });
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
@@ -244,6 +279,8 @@ impl<'a> GpuRenderer<'a> {
             params,
             layouts,
             pipelines,
+            film_layout,
+            film_pipeline,
             frame: std::sync::Mutex::new(None),
         })
     }
@@ -474,23 +511,38 @@ impl<'a> GpuRenderer<'a> {
             base += n as u64;
         }
         let film_t = Instant::now();
-        let mut film = read_words(ctx, &q.film)?;
-        film.truncate(pixels as usize * 6);
-        *self.frame.lock().unwrap() = Some((key, q));
+        let film_group = ctx.bind_buffers("film", &self.film_layout, &[&q.film, &q.image]);
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("resolve film"),
+            });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("resolve_film"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.film_pipeline);
+            pass.set_bind_group(0, &film_group, &[]);
+            let [gx, gy, _] = ctx.dims(pixels as u32);
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        enc.copy_buffer_to_buffer(&q.image, 0, &q.image_read, 0, pixels * 12);
+        ctx.queue.submit([enc.finish()]);
+        let words = read_words(ctx, &q.image_read)?;
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
         let scale = 1.0 / (FILM_SCALE as f64 * opt.spp as f64);
-        let pixels = film
-            .chunks_exact(6)
+        let sums: &[f32] = bytemuck::cast_slice(&words);
+        let pixels = sums[..3 * pixels as usize]
+            .chunks_exact(3)
             .map(|p| {
-                let ch = |c: usize| {
-                    let v = (p[2 * c + 1] as u64) << 32 | p[2 * c] as u64;
-                    (v as f64 * scale) as f32
-                };
+                let ch = |c: usize| (p[c] as f64 * scale) as f32;
                 Vec3::new(ch(0), ch(1), ch(2))
             })
             .collect();
+        *self.frame.lock().unwrap() = Some((key, q));
         stats.film_ms = film_t.elapsed().as_secs_f64() * 1e3;
         stats.render_ms = t0.elapsed().as_secs_f64() * 1e3;
         stats.kernel_gpu_ms = timed.then(|| {
@@ -524,6 +576,13 @@ impl<'a> GpuRenderer<'a> {
             hits: ctx.work_buffer("hits", wave * lights.max(1) * 16, none)?,
             shadows: ctx.work_buffer("shadow queue", wave * lights.max(1) * ray_bytes, none)?,
             film: ctx.work_buffer("film", pixels * 24, none)?,
+            image: ctx.work_buffer("resolved film", pixels * 12, none)?,
+            image_read: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("resolved film readback"),
+                size: (pixels * 12).max(64),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
             readback: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("counters readback"),
                 size: COUNTER_BYTES + STAMP_BYTES,

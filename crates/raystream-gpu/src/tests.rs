@@ -20,6 +20,11 @@ fn naga_module(src: &str, what: &str) -> naga::Module {
     module
 }
 
+#[test]
+fn film_wgsl_validates() {
+    naga_module(&render::film_wgsl(), "film.wgsl");
+}
+
 /// Checks a WGSL struct's size and member offsets, from naga's own layout.
 fn check_struct(module: &naga::Module, name: &str, size: usize, offsets: &[(&str, usize)]) {
     let ty = module
