@@ -385,8 +385,9 @@ pub struct BenchArgs {
     /// Volumes with --mode: frames of the orbit (one every 360/N degrees), after one warm-up.
     #[arg(long, default_value_t = 36, value_parser = clap::value_parser!(u32).range(1..=3600))]
     pub frames: u32,
-    /// Volumes with --mode: resample the volume to N×N×N voxels first (the benchmark's 512).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(2..=2048))]
+    /// Volumes with --mode: resample the volume to N×N×N voxels first (the benchmark's 512;
+    /// at most 1024: 4 GiB of f32 on the host).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(2..=1024))]
     pub resample: Option<u32>,
     /// Devices to measure, comma-separated (cpu, gpu, auto).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
