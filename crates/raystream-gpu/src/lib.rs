@@ -339,6 +339,8 @@ pub struct GpuTracer<'a> {
     closest: wgpu::ComputePipeline,
     any: wgpu::ComputePipeline,
     split: std::sync::OnceLock<split::SplitKernels>,
+    /// The persistent-thread kernels (closest, any), built on first use.
+    persistent: std::sync::OnceLock<[wgpu::ComputePipeline; 2]>,
     /// Milliseconds spent uploading the tree.
     pub upload_ms: f64,
 }
@@ -352,7 +354,14 @@ pub enum Kernels {
     /// The paper's layout: a traversal kernel writes (ray, leaf) work items, an intersection
     /// kernel consumes them and sends unfinished rays back, one leaf step per dispatch pair.
     Split,
+    /// The fused loop in persistent threads (Aila & Laine 2009): a fixed grid of
+    /// [`PERSISTENT_GROUPS`] workgroups whose threads fetch rays from a global counter.
+    Persistent,
 }
+
+/// Workgroups of the persistent kernels: 4096 × 64 threads, about what an H100's 132 SMs hold
+/// at once (2048 threads each); fewer when there are fewer rays.
+pub const PERSISTENT_GROUPS: u32 = 4096;
 
 /// Timings of one [`GpuTracer::trace`] call, milliseconds.
 #[derive(Clone, Copy, Debug, Default)]
@@ -427,6 +436,7 @@ impl<'a> GpuTracer<'a> {
             closest,
             any,
             split: std::sync::OnceLock::new(),
+            persistent: std::sync::OnceLock::new(),
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }
@@ -446,6 +456,30 @@ impl<'a> GpuTracer<'a> {
             layout,
             &[&params, &self.inners, &self.leaves, &self.tris],
         )
+    }
+
+    fn persistent_kernels(&self) -> &[wgpu::ComputePipeline; 2] {
+        self.persistent.get_or_init(|| {
+            let module = self
+                .ctx
+                .device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("queries.wgsl"),
+                    source: wgpu::ShaderSource::Wgsl(queries_wgsl().into()),
+                });
+            ["intersect_closest_persistent", "intersect_any_persistent"].map(|entry| {
+                self.ctx
+                    .device
+                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(entry),
+                        layout: None,
+                        module: &module,
+                        entry_point: Some(entry),
+                        compilation_options: Default::default(),
+                        cache: None,
+                    })
+            })
+        })
     }
 
     fn split_kernels(&self) -> &split::SplitKernels {
@@ -512,36 +546,52 @@ impl<'a> GpuTracer<'a> {
                 contents: bytemuck::bytes_of(&params),
                 usage: wgpu::BufferUsages::UNIFORM,
             });
-        let pipeline = if any { &self.any } else { &self.closest };
+        let (pipeline, label) = match (kernels, any) {
+            (Kernels::Persistent, _) => (
+                &self.persistent_kernels()[any as usize],
+                ["intersect_closest_persistent", "intersect_any_persistent"][any as usize],
+            ),
+            (_, true) => (&self.any, "intersect_any"),
+            (_, false) => (&self.closest, "intersect_closest"),
+        };
+        // The persistent kernels' ray counter, from 0.
+        let next_ray = ctx.storage("next ray", &[0u8; 4], wgpu::BufferUsages::empty())?;
+        let mut entries = vec![
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: param_buf.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: self.inners.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: self.leaves.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: self.tris.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 4,
+                resource: ray_buf.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 5,
+                resource: hit_buf.as_entire_binding(),
+            },
+        ];
+        if kernels == Kernels::Persistent {
+            entries.push(wgpu::BindGroupEntry {
+                binding: 6,
+                resource: next_ray.as_entire_binding(),
+            });
+        }
         let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("intersect"),
             layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: param_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: self.inners.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: self.leaves.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: self.tris.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: ray_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: hit_buf.as_entire_binding(),
-                },
-            ],
+            entries: &entries,
         });
         let timer = ctx.timer(2);
         ctx.wait()?;
@@ -551,9 +601,15 @@ impl<'a> GpuTracer<'a> {
         let t1 = Instant::now();
         let (kernel_gpu_ms, split_steps) = match kernels {
             Kernels::Fused => (
-                self.run_fused(pipeline, &bind, n as u32, timer.as_ref())?,
+                self.run_fused(pipeline, label, &bind, ctx.dims(n as u32), timer.as_ref())?,
                 None,
             ),
+            Kernels::Persistent => {
+                let groups = (n as u32).div_ceil(WORKGROUP_SIZE).min(PERSISTENT_GROUPS);
+                let dims = [groups, 1, 1];
+                let ms = self.run_fused(pipeline, label, &bind, dims, timer.as_ref())?;
+                (ms, None)
+            }
             Kernels::Split => {
                 let r = split::run(self, &param_buf, &ray_buf, &hit_buf, n as u32, any)?;
                 (r.kernel_gpu_ms, Some(r.steps))
@@ -597,16 +653,17 @@ impl<'a> GpuTracer<'a> {
         ))
     }
 
-    /// One dispatch of the fused kernel over `n` rays; its own time where timestamps exist.
+    /// One dispatch of a fused (or persistent) query kernel of `dims` workgroups; its own time
+    /// where timestamps exist.
     fn run_fused(
         &self,
         pipeline: &wgpu::ComputePipeline,
+        label: &str,
         bind: &wgpu::BindGroup,
-        n: u32,
+        [gx, gy, _]: [u32; 3],
         timer: Option<&Timer>,
     ) -> Result<Option<f64>, GpuError> {
         let ctx = self.ctx;
-        let [gx, gy, _] = ctx.dims(n);
         let mut enc = ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -614,7 +671,7 @@ impl<'a> GpuTracer<'a> {
             });
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: pipeline_label(pipeline, &self.any),
+                label: Some(label),
                 timestamp_writes: timer.map(|t| t.writes(Some(0), Some(1))),
             });
             pass.set_pipeline(pipeline);
@@ -664,14 +721,6 @@ fn read_elapsed_ms(ctx: &GpuContext, timer: &Timer) -> Result<Option<f64>, GpuEr
     let ticks = (w[2] as u64 | (w[3] as u64) << 32).wrapping_sub(w[0] as u64 | (w[1] as u64) << 32);
     let ms = ticks as f64 * ctx.queue.get_timestamp_period() as f64 * 1e-6;
     Ok((ms > 0.0).then_some(ms))
-}
-
-fn pipeline_label<'a>(p: &wgpu::ComputePipeline, any: &wgpu::ComputePipeline) -> Option<&'a str> {
-    Some(if p == any {
-        "intersect_any"
-    } else {
-        "intersect_closest"
-    })
 }
 
 /// Waits for the GPU and reads a whole buffer as u32 words (through a staging copy unless `buf`

@@ -341,6 +341,19 @@ fn gpu_hits_equal_cpu_hits_on_every_mesh() {
                 } else {
                     assert_eq!(hits, split, "{what}: split kernels differ from fused");
                 }
+                // Persistent threads trace each ray with the same loop: the same records.
+                let (persistent, _) = tracer.trace_with(&rays, any, Kernels::Persistent).unwrap();
+                if any {
+                    compare(
+                        &tree,
+                        &rays,
+                        &persistent,
+                        any,
+                        &format!("{what} persistent"),
+                    );
+                } else {
+                    assert_eq!(hits, persistent, "{what}: persistent kernels differ");
+                }
             }
         }
     }

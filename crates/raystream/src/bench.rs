@@ -134,6 +134,8 @@ fn git_commit() -> String {
 fn kernel_label(kernels: Option<Kernels>, any: bool) -> &'static str {
     match (kernels, any) {
         (Some(Kernels::Split), _) => "split_traverse+split_intersect",
+        (Some(Kernels::Persistent), true) => "intersect_any_persistent",
+        (Some(Kernels::Persistent), false) => "intersect_closest_persistent",
         (_, true) => "intersect_any",
         (_, false) => "intersect_closest",
     }

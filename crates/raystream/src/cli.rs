@@ -73,6 +73,7 @@ impl From<TraversalArg> for Traversal {
 pub enum KernelsArg {
     Fused,
     Split,
+    Persistent,
 }
 
 impl From<KernelsArg> for raystream_gpu::Kernels {
@@ -80,6 +81,7 @@ impl From<KernelsArg> for raystream_gpu::Kernels {
         match k {
             KernelsArg::Fused => raystream_gpu::Kernels::Fused,
             KernelsArg::Split => raystream_gpu::Kernels::Split,
+            KernelsArg::Persistent => raystream_gpu::Kernels::Persistent,
         }
     }
 }
@@ -340,8 +342,9 @@ pub struct TraceArgs {
     pub any: bool,
     #[command(flatten)]
     pub accel: Accel,
-    /// GPU: one fused query kernel, or traversal and intersection kernels split (the paper's
-    /// layout: (ray, leaf) work items between them).
+    /// GPU: one fused query kernel, traversal and intersection kernels split (the paper's
+    /// layout: (ray, leaf) work items between them), or the fused loop in persistent threads
+    /// fetching rays from a global counter (Aila & Laine 2009).
     #[arg(long, value_enum, default_value = "fused")]
     pub kernels: KernelsArg,
     /// Timed runs after one warm-up; the median is reported.
@@ -399,7 +402,7 @@ pub struct BenchArgs {
     pub builder: BuilderArg,
     #[arg(long, value_enum, default_value = "ropes")]
     pub traversal: TraversalArg,
-    /// GPU query kernels to measure, comma-separated (fused, split), side by side.
+    /// GPU query kernels to measure, comma-separated (fused, split, persistent), side by side.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "fused")]
     pub kernels: Vec<KernelsArg>,
     /// Image size of the ray sets.

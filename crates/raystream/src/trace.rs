@@ -160,6 +160,7 @@ pub fn kernels_name(k: Kernels) -> &'static str {
     match k {
         Kernels::Fused => "fused",
         Kernels::Split => "split",
+        Kernels::Persistent => "persistent",
     }
 }
 

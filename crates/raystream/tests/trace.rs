@@ -185,20 +185,24 @@ fn gpu_trace_agrees_with_cpu_and_embree() {
                 prim_diff * 1000 <= gpu.len(),
                 "{stem}: {prim_diff} prim differences"
             );
-            // The split kernels (traversal and intersection apart) write the same file.
-            if !any {
-                let split = tmp(&format!("{stem}-split.hits"));
+            // The split kernels (traversal and intersection apart) and the persistent threads
+            // write the same file.
+            for kernels in ["split", "persistent"] {
+                if any && kernels == "split" {
+                    continue;
+                }
+                let other = tmp(&format!("{stem}-{kernels}.hits"));
                 trace_to(
                     &m,
                     &rays,
-                    &split,
+                    &other,
                     any,
-                    &["--device", "gpu", "--kernels", "split"],
+                    &["--device", "gpu", "--kernels", kernels],
                 );
                 assert_eq!(
-                    std::fs::read(&split).unwrap(),
+                    std::fs::read(&other).unwrap(),
                     std::fs::read(&outs[0]).unwrap(),
-                    "{stem}: --kernels split differs from fused"
+                    "{stem}: --kernels {kernels} differs from fused"
                 );
             }
         }

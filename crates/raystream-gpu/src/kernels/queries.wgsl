@@ -19,3 +19,28 @@ fn intersect_any(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wor
         hits[i] = trace(rays[i], true);
     }
 }
+
+// Persistent threads (Aila & Laine 2009): a fixed grid, sized to fill the GPU rather than one
+// thread per ray, whose threads fetch the next ray from a global counter whenever they finish
+// one, so that no thread idles behind a long ray of its workgroup while rays remain.
+@group(0) @binding(6) var<storage, read_write> next_ray: atomic<u32>;
+
+fn fetch_and_trace(any_hit: bool) {
+    loop {
+        let i = atomicAdd(&next_ray, 1u);
+        if i >= params.ray_count {
+            break;
+        }
+        hits[i] = trace(rays[i], any_hit);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn intersect_closest_persistent() {
+    fetch_and_trace(false);
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn intersect_any_persistent() {
+    fetch_and_trace(true);
+}
