@@ -71,8 +71,7 @@ pub struct DvrOptions {
     pub skip_empty: bool,
     pub background: Vec3,
     /// dvr mode: light from a key light above left of the camera ([`key_light`]) instead of a
-    /// headlight, and march a shadow ray from every visible sample toward it through the same
-    /// transfer function.
+    /// headlight, attenuated by shadow rays through the same transfer function ([`LightGrid`]).
     pub shadows: bool,
     /// Keep only the part of the volume inside this axis-aligned box, LPS mm (min, max).
     pub crop: Option<[Vec3; 2]>,
@@ -381,6 +380,108 @@ pub fn orbit_camera(vol: &Volume, aspect: f32, degrees: f32) -> Camera {
     Camera::frame_from(&corners, aspect, Vec3::new(s, 0.12, c))
 }
 
+/// Light grid points per axis at most: 128³ shadow rays a frame.
+pub const LIGHT_GRID_MAX: usize = 128;
+
+/// `--shadows`: the transmittance toward the light on a grid of about every other voxel (at
+/// most [`LIGHT_GRID_MAX`] per axis) spanning the voxel-centre box, one shadow ray from each
+/// grid point ([`Marcher`]'s `transmittance`), read back at every visible sample by trilinear
+/// interpolation: a shadow ray per grid point instead of one per sample (166 per primary
+/// sample on the 512³ benchmark with ct-bone). The GPU computes the same grid the same way.
+pub struct LightGrid {
+    pub dims: [usize; 3],
+    /// Volume index → grid coordinate, per axis.
+    scale: Vec3,
+    pub values: Vec<f32>,
+    /// Samples the grid's shadow rays took.
+    pub samples: u64,
+}
+
+impl LightGrid {
+    /// Grid points per axis for a volume of `dims` voxels.
+    pub fn dims_for(dims: [usize; 3]) -> [usize; 3] {
+        dims.map(|n| {
+            if n <= 1 {
+                1
+            } else {
+                n.div_ceil(2).clamp(2, LIGHT_GRID_MAX.min(n))
+            }
+        })
+    }
+
+    /// Index position of grid point `j` along an axis of `n` voxels and `g` grid points.
+    fn position(j: usize, n: usize, g: usize) -> f32 {
+        if g > 1 {
+            j as f32 * ((n - 1) as f32 / (g - 1) as f32)
+        } else {
+            0.0
+        }
+    }
+
+    pub fn new(m: &Marcher, tf: &TransferFunction, light: Vec3, step: f32) -> LightGrid {
+        let n = m.vol.dims;
+        let dims = Self::dims_for(n);
+        let l_idx = m.index_dir(light);
+        let rays: Vec<(f32, u64)> = (0..dims[0] * dims[1] * dims[2])
+            .into_par_iter()
+            .map(|i| {
+                let j = [i % dims[0], i / dims[0] % dims[1], i / (dims[0] * dims[1])];
+                let p = Vec3::new(
+                    Self::position(j[0], n[0], dims[0]),
+                    Self::position(j[1], n[1], dims[1]),
+                    Self::position(j[2], n[2], dims[2]),
+                );
+                m.transmittance(tf, p, l_idx, step, 0.5)
+            })
+            .collect();
+        let scale = Vec3::from(std::array::from_fn::<f32, 3, _>(|a| {
+            if n[a] > 1 && dims[a] > 1 {
+                (dims[a] - 1) as f32 / (n[a] - 1) as f32
+            } else {
+                0.0
+            }
+        }));
+        LightGrid {
+            dims,
+            scale,
+            samples: rays.iter().map(|r| r.1).sum(),
+            values: rays.into_iter().map(|r| r.0).collect(),
+        }
+    }
+
+    /// The light reaching volume index `p` (trilinear between grid points).
+    pub fn at(&self, p: Vec3) -> f32 {
+        let [gx, gy, gz] = self.dims;
+        let q = p * self.scale;
+        let c = |x: f32, g: usize| x.clamp(0.0, (g - 1) as f32);
+        let (x, y, z) = (c(q.x, gx), c(q.y, gy), c(q.z, gz));
+        let (i, j, k) = (
+            (x as usize).min(gx.saturating_sub(2)),
+            (y as usize).min(gy.saturating_sub(2)),
+            (z as usize).min(gz.saturating_sub(2)),
+        );
+        let (fx, fy, fz) = (x - i as f32, y - j as f32, z - k as f32);
+        let at = |di: usize, dj: usize, dk: usize| {
+            self.values
+                [(i + di).min(gx - 1) + gx * ((j + dj).min(gy - 1) + gy * (k + dk).min(gz - 1))]
+        };
+        let l = |a: f32, b: f32, w: f32| a + (b - a) * w;
+        l(
+            l(
+                l(at(0, 0, 0), at(1, 0, 0), fx),
+                l(at(0, 1, 0), at(1, 1, 0), fx),
+                fy,
+            ),
+            l(
+                l(at(0, 0, 1), at(1, 0, 1), fx),
+                l(at(0, 1, 1), at(1, 1, 1), fx),
+                fy,
+            ),
+            fz,
+        )
+    }
+}
+
 /// The direction toward the key light of `--shadows` (LPS, unit): above the camera, to its
 /// left and in front of the volume, so that shadows fall down and to the right.
 pub fn key_light(cam: &Camera) -> Vec3 {
@@ -457,6 +558,7 @@ pub fn render_volume(
         .max(1e-3 * min_spacing);
     let win = opt.window.unwrap_or(opt.mode.default_window());
     let light = (opt.shadows && opt.mode == DvrMode::Dvr).then(|| key_light(cam));
+    let grid = light.map(|l| LightGrid::new(&marcher, tf, l, step));
     let rays: Vec<Marched> = (0..opt.width * opt.height)
         .into_par_iter()
         .with_min_len(64)
@@ -472,13 +574,13 @@ pub fn render_volume(
                 d,
                 jitter: start_jitter(pixel),
             };
-            march(&marcher, tf, opt, win, step, light, ray)
+            march(&marcher, tf, opt, win, step, light.zip(grid.as_ref()), ray)
         })
         .collect();
     let stats = DvrStats {
         samples: rays.iter().map(|c| c.taken).sum(),
         skipped: rays.iter().map(|c| c.skipped).sum(),
-        shadow_samples: rays.iter().map(|c| c.shadow).sum(),
+        shadow_samples: grid.as_ref().map_or(0, |g| g.samples),
         step_mm: step,
     };
     (
@@ -499,13 +601,12 @@ struct Ray3 {
     jitter: f32,
 }
 
-/// What one ray gave: its colour and the samples it took, skipped and took for shadows.
+/// What one ray gave: its colour and the samples it took and skipped.
 #[derive(Clone, Copy, Default)]
 struct Marched {
     color: Vec3,
     taken: u64,
     skipped: u64,
-    shadow: u64,
 }
 
 /// Two-sided Blinn–Phong toward light `l` seen along `d`: (ambient + diffuse, specular). With
@@ -530,7 +631,7 @@ fn march(
     opt: &DvrOptions,
     win: (f32, f32),
     step: f32,
-    light: Option<Vec3>,
+    light: Option<(Vec3, &LightGrid)>,
     Ray3 { o, d, jitter }: Ray3,
 ) -> Marched {
     let background = Marched {
@@ -548,7 +649,6 @@ fn march(
     let at = |k: u64| t0 + (k as f32 + jitter) * step;
     let mut taken = 0u64;
     let mut skipped = 0u64;
-    let mut shadow = 0u64;
     match opt.mode {
         DvrMode::Dvr => {
             let mut c = Vec3::ZERO;
@@ -579,16 +679,9 @@ fn march(
                 }
                 let a = 1.0 - (1.0 - a.min(1.0)).powf(seg);
                 let base = Vec3::from(tf.color_at(v));
-                let l = light.unwrap_or(-d);
-                // Light reaching the sample: 1, or the shadow ray's transmittance.
-                let lit = match light {
-                    Some(l) => {
-                        let (tr, n) = m.transmittance(tf, p, m.index_dir(l), step, jitter);
-                        shadow += n;
-                        tr
-                    }
-                    None => 1.0,
-                };
+                let l = light.map_or(-d, |(l, _)| l);
+                // Light reaching the sample: 1, or the light grid's transmittance.
+                let lit = light.map_or(1.0, |(_, grid)| grid.at(p));
                 let g = m.gradient(p);
                 let gm = g.length();
                 let amb = tf.shading.ambient;
@@ -613,7 +706,6 @@ fn march(
                 color: c + transmit * opt.background,
                 taken,
                 skipped,
-                shadow,
             }
         }
         DvrMode::Mip | DvrMode::MinIp | DvrMode::Average => {
@@ -871,8 +963,45 @@ mod tests {
         assert_eq!(t, 1.0, "in front of the wall");
     }
 
-    /// With --shadows the abdomen CT darkens (its shadow rays take samples, more than the
-    /// primary rays, and take light away).
+    /// The light grid holds each grid point's shadow ray exactly, and between grid points
+    /// interpolates the transmittance field within 4 %: the field is smooth but for steps of
+    /// one lattice sample's absorption (here ≈ 1 %) where a ray's sample count changes.
+    #[test]
+    fn light_grid_interpolates_shadow_rays() {
+        let vol = volume([41, 33, 25], [1.0, 1.2, 2.0], |_, _, _| 40.0);
+        let tf = grey(0.02);
+        let m = Marcher::new(&vol, Some(&tf));
+        let light = Vec3::new(0.6, -0.3, 0.74).normalize();
+        let step = 0.5;
+        let grid = LightGrid::new(&m, &tf, light, step);
+        assert_eq!(grid.dims, [21, 17, 13]);
+        let l_idx = m.index_dir(light);
+        // Grid point (3, 5, 7) sits at index (6, 10, 14).
+        let exact = m
+            .transmittance(&tf, Vec3::new(6.0, 10.0, 14.0), l_idx, step, 0.5)
+            .0;
+        assert_eq!(grid.at(Vec3::new(6.0, 10.0, 14.0)), exact);
+        let mut rng = 0x2545_f491u64;
+        for _ in 0..200 {
+            let mut r = || {
+                rng ^= rng << 13;
+                rng ^= rng >> 7;
+                rng ^= rng << 17;
+                (rng >> 40) as f32 / (1u64 << 24) as f32
+            };
+            let p = Vec3::new(r() * 40.0, r() * 32.0, r() * 24.0);
+            let want = m.transmittance(&tf, p, l_idx, step, 0.5).0;
+            let got = grid.at(p);
+            assert!(
+                (got - want).abs() <= 0.04 * want.max(0.05),
+                "{p}: grid {got}, shadow ray {want}"
+            );
+        }
+        assert!(grid.samples > 0);
+    }
+
+    /// With --shadows the abdomen CT darkens (its light grid's shadow rays take samples and
+    /// take light away).
     #[test]
     fn shadows_darken_the_abdomen() {
         let vol = abdomen();
@@ -889,7 +1018,7 @@ mod tests {
             ..opt
         };
         let (shadow, stats) = render_volume(&vol, &tf, &shadowed, &cam);
-        assert!(stats.shadow_samples > stats.samples, "{stats:?}");
+        assert!(stats.shadow_samples > 0, "{stats:?}");
         let sum = |i: &Image| i.pixels.iter().map(|p| p.x + p.y + p.z).sum::<f32>();
         assert!(
             sum(&shadow) < 0.95 * sum(&plain),

@@ -198,7 +198,7 @@ pub mod counter {
     pub const SLOTS: u32 = 8;
 }
 
-/// `DvrParams` in dvr.wgsl (uniform), 272 bytes: camera in LPS, the world → index transform,
+/// `DvrParams` in dvr.wgsl (uniform), 288 bytes: camera in LPS, the world → index transform,
 /// the mode and its parameters, the shadow light, crop box and clip planes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -245,6 +245,9 @@ pub struct DvrParams {
     pub plane_count: u32,
     /// Clip planes (n, c): keep n · p ≥ c (byte 240).
     pub planes: [[f32; 4]; 2],
+    /// Light grid points per axis (byte 272), as `raystream_cpu::dvr::LightGrid`.
+    pub light_dims: [u32; 3],
+    pub _pad: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
@@ -257,4 +260,4 @@ const _: () = assert!(std::mem::size_of::<ShadeTri>() == 16);
 const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
-const _: () = assert!(std::mem::size_of::<DvrParams>() == 272);
+const _: () = assert!(std::mem::size_of::<DvrParams>() == 288);

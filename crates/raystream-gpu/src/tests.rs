@@ -570,6 +570,8 @@ fn dvr_wgsl_params_match_rust() {
         ("crop_max", offset_of!(DvrParams, crop_max)),
         ("plane_count", offset_of!(DvrParams, plane_count)),
         ("planes", offset_of!(DvrParams, planes)),
+        ("light_dims", offset_of!(DvrParams, light_dims)),
+        ("pad0", offset_of!(DvrParams, _pad)),
     ];
     check_struct(&module, "DvrParams", size_of::<DvrParams>(), &names);
 }

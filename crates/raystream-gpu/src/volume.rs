@@ -7,7 +7,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use raystream_cpu::Image;
-use raystream_cpu::dvr::{BRICK, DvrMode, DvrOptions, Marcher, key_light, scene_to_lps};
+use raystream_cpu::dvr::{BRICK, DvrMode, DvrOptions, LightGrid, Marcher, key_light, scene_to_lps};
 use raystream_io::Volume;
 use raystream_math::Vec3;
 use raystream_scene::Camera;
@@ -39,6 +39,10 @@ pub struct GpuVolumeRenderer<'a> {
     /// World → continuous index (rows and origin), from the marcher.
     to_index: ([Vec3; 3], Vec3),
     pipeline: wgpu::ComputePipeline,
+    /// `--shadows`: the light grid's kernel and values.
+    light_pipeline: wgpu::ComputePipeline,
+    light_values: wgpu::Buffer,
+    light_dims: [u32; 3],
     /// The last frame's output buffers, kept for the next frame of the same size or smaller.
     frame: Mutex<Option<FrameBuffers>>,
     /// Milliseconds spent uploading the volume and building the pipeline.
@@ -144,6 +148,22 @@ impl<'a> GpuVolumeRenderer<'a> {
                 compilation_options: Default::default(),
                 cache: None,
             });
+        let light_pipeline = ctx
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("light_grid"),
+                layout: None,
+                module: &module,
+                entry_point: Some("light_grid"),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+        let light_dims = LightGrid::dims_for(vol.dims);
+        let light_values = ctx.work_buffer(
+            "light grid",
+            4 * light_dims.iter().product::<usize>() as u64,
+            wgpu::BufferUsages::empty(),
+        )?;
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
@@ -160,6 +180,9 @@ impl<'a> GpuVolumeRenderer<'a> {
             brick_dims: brick_dims.map(|b| b as u32),
             to_index: marcher.world_to_index(),
             pipeline,
+            light_pipeline,
+            light_values,
+            light_dims: light_dims.map(|n| n as u32),
             frame: Mutex::new(None),
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
@@ -212,6 +235,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             crop_max: v3(opt.crop.map_or(Vec3::ZERO, |c| c[1])),
             plane_count: planes.len() as u32,
             planes: [0, 1].map(|i| planes.get(i).map_or([0.0; 4], |(n, c)| [n.x, n.y, n.z, *c])),
+            light_dims: self.light_dims,
+            _pad: 0,
         };
         let param_buf = ctx
             .device
@@ -271,17 +296,72 @@ impl<'a> GpuVolumeRenderer<'a> {
                     binding: 6,
                     resource: pixels.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: self.light_values.as_entire_binding(),
+                },
             ],
+        });
+        let shadows = params.shadows != 0;
+        // The light grid's kernel reads the volume, the opacity and the bricks, and writes the
+        // grid (its own layout: no colour, no pixels).
+        let light_bind = shadows.then(|| {
+            ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("light grid"),
+                layout: &self.light_pipeline.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: param_buf.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&self.view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::Sampler(&self.sampler),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: self.opacity.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: self.bricks.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 7,
+                        resource: self.light_values.as_entire_binding(),
+                    },
+                ],
+            })
         });
         let mut enc = ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("render_volume"),
             });
+        if let Some(light_bind) = &light_bind {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("light_grid"),
+                timestamp_writes: timer.as_ref().map(|t| t.writes(Some(0), None)),
+            });
+            pass.set_pipeline(&self.light_pipeline);
+            pass.set_bind_group(0, light_bind, &[]);
+            let n = self.light_dims.iter().product::<u32>();
+            let groups = n.div_ceil(64);
+            let gx = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
+            pass.dispatch_workgroups(gx, groups.div_ceil(gx), 1);
+        }
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("render_volume"),
-                timestamp_writes: timer.as_ref().map(|t| t.writes(Some(0), Some(1))),
+                // With shadows the light grid's pass wrote the first stamp: the kernel time
+                // covers both.
+                timestamp_writes: timer
+                    .as_ref()
+                    .map(|t| t.writes((!shadows).then_some(0), Some(1))),
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind, &[]);

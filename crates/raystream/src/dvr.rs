@@ -152,7 +152,8 @@ impl<'a> Renderer<'a> {
 }
 
 /// The skipped and shadow samples of a frame the GPU rendered (it counts only the samples it
-/// takes), estimated on the CPU path's marcher (the same lattice) at no more than 256×256.
+/// takes), estimated on the CPU path's marcher (the same lattice) at no more than 256×256; the
+/// light grid's shadow samples are the same at any image size.
 pub fn estimate_stats(
     volume: &Volume,
     tf: &TransferFunction,
@@ -170,7 +171,8 @@ pub fn estimate_stats(
     DvrStats {
         samples: up(s.samples),
         skipped: up(s.skipped),
-        shadow_samples: up(s.shadow_samples),
+        // The light grid does not depend on the image size.
+        shadow_samples: s.shadow_samples,
         step_mm: s.step_mm,
     }
 }

@@ -40,6 +40,9 @@ struct DvrParams {
     plane_count: u32,
     // Keep n . p >= c: (n, c).
     planes: array<vec4<f32>, 2>,
+    // Light grid points per axis (raystream_cpu::dvr::LightGrid).
+    light_dims: vec3<u32>,
+    pad0: u32,
 }
 
 // (HU, opacity per mm) and (HU, r, g, b) control points.
@@ -50,6 +53,8 @@ struct DvrParams {
 @group(0) @binding(4) var<storage, read> color_points: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read> brick_visible: array<u32>;
 @group(0) @binding(6) var<storage, read_write> pixels: array<vec4<f32>>;
+// Transmittance toward the light at the light grid's points (x fastest).
+@group(0) @binding(7) var<storage, read_write> light_values: array<f32>;
 
 const MODE_DVR: u32 = 0u;
 const MODE_MIP: u32 = 1u;
@@ -244,6 +249,54 @@ fn window(v: f32) -> f32 {
 const FULL_SHADING_GRADIENT: f32 = 100.0;
 const BRICK: u32 = BRICK_SIZE;
 
+// Index position of light grid point j along an axis of n voxels and g points.
+fn grid_position(j: u32, n: u32, g: u32) -> f32 {
+    if g > 1u {
+        return f32(j) * (f32(n - 1u) / f32(g - 1u));
+    }
+    return 0.0;
+}
+
+// One shadow ray per light grid point, as the CPU's LightGrid::new.
+@compute @workgroup_size(64)
+fn light_grid(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let g = dp.light_dims;
+    let i = gid.x + gid.y * groups.x * 64u;
+    if i >= g.x * g.y * g.z {
+        return;
+    }
+    let j = vec3<u32>(i % g.x, i / g.x % g.y, i / (g.x * g.y));
+    let p = vec3<f32>(
+        grid_position(j.x, dp.dims.x, g.x),
+        grid_position(j.y, dp.dims.y, g.y),
+        grid_position(j.z, dp.dims.z, g.z));
+    light_values[i] = transmittance(p, to_index(dp.light), 0.5);
+}
+
+fn light_value(i: u32, j: u32, k: u32) -> f32 {
+    let g = dp.light_dims;
+    return light_values[min(i, g.x - 1u) + g.x * (min(j, g.y - 1u) + g.y * min(k, g.z - 1u))];
+}
+
+// The light reaching index `p`: trilinear between grid points, as LightGrid::at.
+fn light_at(p: vec3<f32>) -> f32 {
+    let g = dp.light_dims;
+    var scale = vec3<f32>(0.0);
+    for (var a = 0u; a < 3u; a++) {
+        if dp.dims[a] > 1u && g[a] > 1u {
+            scale[a] = f32(g[a] - 1u) / f32(dp.dims[a] - 1u);
+        }
+    }
+    let q = clamp(p * scale, vec3<f32>(0.0), vec3<f32>(g - 1u));
+    let lo = min(vec3<u32>(q), max(g, vec3<u32>(2u)) - 2u);
+    let f = q - vec3<f32>(lo);
+    let x0 = mix(light_value(lo.x, lo.y, lo.z), light_value(lo.x + 1u, lo.y, lo.z), f.x);
+    let x1 = mix(light_value(lo.x, lo.y + 1u, lo.z), light_value(lo.x + 1u, lo.y + 1u, lo.z), f.x);
+    let x2 = mix(light_value(lo.x, lo.y, lo.z + 1u), light_value(lo.x + 1u, lo.y, lo.z + 1u), f.x);
+    let x3 = mix(light_value(lo.x, lo.y + 1u, lo.z + 1u), light_value(lo.x + 1u, lo.y + 1u, lo.z + 1u), f.x);
+    return mix(mix(x0, x1, f.y), mix(x2, x3, f.y), f.z);
+}
+
 // Colour and the samples taken (primary, as the CPU counts them).
 fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
     let o_idx = to_index(o - dp.origin);
@@ -263,7 +316,6 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
         if dp.shadows != 0u {
             l = dp.light;
         }
-        let l_idx = to_index(l);
         let amb = dp.shading.x;
         var taken = 0u;
         loop {
@@ -292,7 +344,7 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
             let base = color_at(v);
             var lit = 1.0;
             if dp.shadows != 0u {
-                lit = transmittance(p, l_idx, jit);
+                lit = light_at(p);
             }
             let g = gradient_at(p);
             let gm = length(g);
