@@ -211,36 +211,7 @@ impl<'a> Marcher<'a> {
 
     /// Trilinear value at continuous index `p` (clamped to the grid).
     pub fn sample(&self, p: Vec3) -> f32 {
-        let [nx, ny, nz] = self.vol.dims;
-        let c = |x: f32, n: usize| x.clamp(0.0, (n - 1) as f32);
-        let (x, y, z) = (c(p.x, nx), c(p.y, ny), c(p.z, nz));
-        let (i, j, k) = (
-            (x as usize).min(nx.saturating_sub(2)),
-            (y as usize).min(ny.saturating_sub(2)),
-            (z as usize).min(nz.saturating_sub(2)),
-        );
-        let (fx, fy, fz) = (x - i as f32, y - j as f32, z - k as f32);
-        let at = |di: usize, dj: usize, dk: usize| {
-            self.vol.at(
-                (i + di).min(nx - 1),
-                (j + dj).min(ny - 1),
-                (k + dk).min(nz - 1),
-            )
-        };
-        let l = |a: f32, b: f32, w: f32| a + (b - a) * w;
-        l(
-            l(
-                l(at(0, 0, 0), at(1, 0, 0), fx),
-                l(at(0, 1, 0), at(1, 1, 0), fx),
-                fy,
-            ),
-            l(
-                l(at(0, 0, 1), at(1, 0, 1), fx),
-                l(at(0, 1, 1), at(1, 1, 1), fx),
-                fy,
-            ),
-            fz,
-        )
+        trilinear(self.vol.dims, p, |i, j, k| self.vol.at(i, j, k))
     }
 
     /// The HU gradient per mm in world space at index `p` (central differences of samples).
@@ -451,35 +422,46 @@ impl LightGrid {
 
     /// The light reaching volume index `p` (trilinear between grid points).
     pub fn at(&self, p: Vec3) -> f32 {
-        let [gx, gy, gz] = self.dims;
-        let q = p * self.scale;
-        let c = |x: f32, g: usize| x.clamp(0.0, (g - 1) as f32);
-        let (x, y, z) = (c(q.x, gx), c(q.y, gy), c(q.z, gz));
-        let (i, j, k) = (
-            (x as usize).min(gx.saturating_sub(2)),
-            (y as usize).min(gy.saturating_sub(2)),
-            (z as usize).min(gz.saturating_sub(2)),
-        );
-        let (fx, fy, fz) = (x - i as f32, y - j as f32, z - k as f32);
-        let at = |di: usize, dj: usize, dk: usize| {
-            self.values
-                [(i + di).min(gx - 1) + gx * ((j + dj).min(gy - 1) + gy * (k + dk).min(gz - 1))]
-        };
-        let l = |a: f32, b: f32, w: f32| a + (b - a) * w;
-        l(
-            l(
-                l(at(0, 0, 0), at(1, 0, 0), fx),
-                l(at(0, 1, 0), at(1, 1, 0), fx),
-                fy,
-            ),
-            l(
-                l(at(0, 0, 1), at(1, 0, 1), fx),
-                l(at(0, 1, 1), at(1, 1, 1), fx),
-                fy,
-            ),
-            fz,
-        )
+        let [gx, gy, _] = self.dims;
+        trilinear(self.dims, p * self.scale, |i, j, k| {
+            self.values[i + gx * (j + gy * k)]
+        })
     }
+}
+
+/// Trilinear interpolation at continuous index `p` of a grid of `dims` values read by `at`,
+/// clamped to the grid (the GPU's `sample_at` and `light_at` compute the same).
+fn trilinear(dims: [usize; 3], p: Vec3, at: impl Fn(usize, usize, usize) -> f32) -> f32 {
+    let [nx, ny, nz] = dims;
+    let c = |x: f32, n: usize| x.clamp(0.0, (n - 1) as f32);
+    let (x, y, z) = (c(p.x, nx), c(p.y, ny), c(p.z, nz));
+    let (i, j, k) = (
+        (x as usize).min(nx.saturating_sub(2)),
+        (y as usize).min(ny.saturating_sub(2)),
+        (z as usize).min(nz.saturating_sub(2)),
+    );
+    let (fx, fy, fz) = (x - i as f32, y - j as f32, z - k as f32);
+    let v = |di: usize, dj: usize, dk: usize| {
+        at(
+            (i + di).min(nx - 1),
+            (j + dj).min(ny - 1),
+            (k + dk).min(nz - 1),
+        )
+    };
+    let l = |a: f32, b: f32, w: f32| a + (b - a) * w;
+    l(
+        l(
+            l(v(0, 0, 0), v(1, 0, 0), fx),
+            l(v(0, 1, 0), v(1, 1, 0), fx),
+            fy,
+        ),
+        l(
+            l(v(0, 0, 1), v(1, 0, 1), fx),
+            l(v(0, 1, 1), v(1, 1, 1), fx),
+            fy,
+        ),
+        fz,
+    )
 }
 
 /// The direction toward the key light of `--shadows` (LPS, unit): above the camera, to its

@@ -264,79 +264,36 @@ impl<'a> GpuVolumeRenderer<'a> {
             readback,
             timer,
         } = frame.as_ref().unwrap();
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("dvr"),
-            layout: &self.pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: param_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&self.view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(&self.sampler),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: self.opacity.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: self.color.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: self.bricks.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: pixels.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: self.light_values.as_entire_binding(),
-                },
-            ],
-        });
         let shadows = params.shadows != 0;
-        // The light grid's kernel reads the volume, the opacity and the bricks, and writes the
-        // grid (its own layout: no colour, no pixels).
-        let light_bind = shadows.then(|| {
+        // Bindings by number; the light grid's kernel uses no colour points (4) and no pixels
+        // (6), and each pipeline's layout holds exactly the bindings its entry point uses.
+        let resource = |b: u32| match b {
+            0 => param_buf.as_entire_binding(),
+            1 => wgpu::BindingResource::TextureView(&self.view),
+            2 => wgpu::BindingResource::Sampler(&self.sampler),
+            3 => self.opacity.as_entire_binding(),
+            4 => self.color.as_entire_binding(),
+            5 => self.bricks.as_entire_binding(),
+            6 => pixels.as_entire_binding(),
+            _ => self.light_values.as_entire_binding(),
+        };
+        let group = |label, pipeline: &wgpu::ComputePipeline, bindings: &[u32]| {
+            let entries: Vec<_> = bindings
+                .iter()
+                .map(|&binding| wgpu::BindGroupEntry {
+                    binding,
+                    resource: resource(binding),
+                })
+                .collect();
             ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("light grid"),
-                layout: &self.light_pipeline.get_bind_group_layout(0),
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: param_buf.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: wgpu::BindingResource::TextureView(&self.view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: wgpu::BindingResource::Sampler(&self.sampler),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: self.opacity.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 5,
-                        resource: self.bricks.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 7,
-                        resource: self.light_values.as_entire_binding(),
-                    },
-                ],
+                label: Some(label),
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &entries,
             })
-        });
+        };
+        let bind = group("dvr", &self.pipeline, &[0, 1, 2, 3, 4, 5, 6, 7]);
+        let light_bind =
+            shadows.then(|| group("light grid", &self.light_pipeline, &[0, 1, 2, 3, 5, 7]));
         let mut enc = ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
