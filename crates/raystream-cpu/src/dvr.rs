@@ -533,11 +533,7 @@ pub fn render_volume(
         vol,
         (opt.skip_empty && opt.mode == DvrMode::Dvr).then_some(tf),
     );
-    let min_spacing = vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min) as f32;
-    let step = opt
-        .step_mm
-        .unwrap_or(0.5 * min_spacing)
-        .max(1e-3 * min_spacing);
+    let step = opt.step_for(vol);
     let win = opt.window.unwrap_or(opt.mode.default_window());
     let light = (opt.shadows && opt.mode == DvrMode::Dvr).then(|| key_light(cam));
     let grid = light.map(|l| LightGrid::new(&marcher, tf, l, step));

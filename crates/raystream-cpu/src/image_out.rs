@@ -31,6 +31,31 @@ impl Image {
             .collect()
     }
 
+    /// How far `other` is from this image in 8-bit sRGB, as `rays.py imgdiff` measures: the
+    /// mean absolute channel difference (of 255), and per pixel the largest channel difference.
+    pub fn srgb8_diff(&self, other: &Image) -> (f64, Vec<u8>) {
+        let (a, b) = (self.to_srgb8(), other.to_srgb8());
+        assert_eq!(a.len(), b.len(), "images of different sizes");
+        let mean = a
+            .iter()
+            .zip(&b)
+            .map(|(&x, &y)| x.abs_diff(y) as f64)
+            .sum::<f64>()
+            / a.len().max(1) as f64;
+        let worst = a
+            .chunks(3)
+            .zip(b.chunks(3))
+            .map(|(p, q)| {
+                p.iter()
+                    .zip(q)
+                    .map(|(&x, &y)| x.abs_diff(y))
+                    .max()
+                    .unwrap_or(0)
+            })
+            .collect();
+        (mean, worst)
+    }
+
     pub fn save_png(&self, path: &Path) -> Result<(), String> {
         image::save_buffer(
             path,

@@ -230,6 +230,20 @@ impl GpuContext {
             })
     }
 
+    /// The compute pipeline of `entry` in `module`, its bind group layouts derived from what the
+    /// entry point uses.
+    fn auto_pipeline(&self, module: &wgpu::ShaderModule, entry: &str) -> wgpu::ComputePipeline {
+        self.device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+    }
+
     /// Workgroups (x, y, 1) for `n` items of one thread each, as the kernels' dispatch-argument
     /// writers compute them.
     fn dims(&self, n: u32) -> [u32; 3] {
@@ -341,6 +355,8 @@ pub struct GpuTracer<'a> {
     split: std::sync::OnceLock<split::SplitKernels>,
     /// The persistent-thread kernels (closest, any), built on first use.
     persistent: std::sync::OnceLock<[wgpu::ComputePipeline; 2]>,
+    /// `queries.wgsl`, for the pipelines built on first use.
+    module: wgpu::ShaderModule,
     /// Milliseconds spent uploading the tree.
     pub upload_ms: f64,
 }
@@ -401,19 +417,8 @@ impl<'a> GpuTracer<'a> {
                 label: Some("queries.wgsl"),
                 source: wgpu::ShaderSource::Wgsl(queries_wgsl().into()),
             });
-        let pipeline = |entry: &str| {
-            ctx.device
-                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(entry),
-                    layout: None,
-                    module: &module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    cache: None,
-                })
-        };
-        let closest = pipeline("intersect_closest");
-        let any = pipeline("intersect_any");
+        let closest = ctx.auto_pipeline(&module, "intersect_closest");
+        let any = ctx.auto_pipeline(&module, "intersect_any");
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
@@ -437,6 +442,7 @@ impl<'a> GpuTracer<'a> {
             any,
             split: std::sync::OnceLock::new(),
             persistent: std::sync::OnceLock::new(),
+            module,
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }
@@ -460,25 +466,8 @@ impl<'a> GpuTracer<'a> {
 
     fn persistent_kernels(&self) -> &[wgpu::ComputePipeline; 2] {
         self.persistent.get_or_init(|| {
-            let module = self
-                .ctx
-                .device
-                .create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some("queries.wgsl"),
-                    source: wgpu::ShaderSource::Wgsl(queries_wgsl().into()),
-                });
-            ["intersect_closest_persistent", "intersect_any_persistent"].map(|entry| {
-                self.ctx
-                    .device
-                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                        label: Some(entry),
-                        layout: None,
-                        module: &module,
-                        entry_point: Some(entry),
-                        compilation_options: Default::default(),
-                        cache: None,
-                    })
-            })
+            ["intersect_closest_persistent", "intersect_any_persistent"]
+                .map(|entry| self.ctx.auto_pipeline(&self.module, entry))
         })
     }
 

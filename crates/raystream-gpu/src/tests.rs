@@ -430,20 +430,9 @@ fn adapter_filter_reports_what_exists() {
 /// The mean absolute difference (of 255) and the fraction of pixels whose largest channel
 /// difference exceeds 2/255, in 8-bit sRGB as `rays.py imgdiff` measures them.
 fn image_diff(a: &raystream_cpu::Image, b: &raystream_cpu::Image) -> (f64, f64) {
-    let (a, b) = (a.to_srgb8(), b.to_srgb8());
-    assert_eq!(a.len(), b.len());
-    let mean = a
-        .iter()
-        .zip(&b)
-        .map(|(&x, &y)| (x as f64 - y as f64).abs())
-        .sum::<f64>()
-        / a.len() as f64;
-    let over = a
-        .chunks(3)
-        .zip(b.chunks(3))
-        .filter(|(p, q)| p.iter().zip(*q).any(|(&x, &y)| x.abs_diff(y) > 2))
-        .count();
-    (mean, over as f64 / (a.len() / 3) as f64)
+    let (mean, worst) = a.srgb8_diff(b);
+    let over = worst.iter().filter(|&&d| d > 2).count();
+    (mean, over as f64 / worst.len() as f64)
 }
 
 /// The GPU stream renderer against the CPU reference on the same scene: the bar (mean
@@ -635,18 +624,7 @@ fn gpu_volume_rendering_matches_cpu() {
             mode.name(),
             preset.name()
         );
-        let (a, b) = (cpu.to_srgb8(), img.to_srgb8());
-        let mean = a
-            .iter()
-            .zip(&b)
-            .map(|(&x, &y)| x.abs_diff(y) as f64)
-            .sum::<f64>()
-            / a.len() as f64;
-        let mut worst: Vec<u8> = a
-            .chunks(3)
-            .zip(b.chunks(3))
-            .map(|(p, q)| p.iter().zip(q).map(|(&x, &y)| x.abs_diff(y)).max().unwrap())
-            .collect();
+        let (mean, mut worst) = cpu.srgb8_diff(&img);
         worst.sort_unstable();
         let p99 = worst[worst.len() * 99 / 100];
         let what = format!("{} {}{what}", mode.name(), preset.name());

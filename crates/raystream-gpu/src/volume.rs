@@ -138,26 +138,8 @@ impl<'a> GpuVolumeRenderer<'a> {
                 label: Some("dvr.wgsl"),
                 source: wgpu::ShaderSource::Wgsl(dvr_wgsl().into()),
             });
-        let pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("render_volume"),
-                layout: None,
-                module: &module,
-                entry_point: Some("render_volume"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
-        let light_pipeline = ctx
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("light_grid"),
-                layout: None,
-                module: &module,
-                entry_point: Some("light_grid"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
+        let pipeline = ctx.auto_pipeline(&module, "render_volume");
+        let light_pipeline = ctx.auto_pipeline(&module, "light_grid");
         let light_dims = LightGrid::dims_for(vol.dims);
         let light_values = ctx.work_buffer(
             "light grid",

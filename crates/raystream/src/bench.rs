@@ -384,15 +384,9 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                     ..opt
                 };
                 let cam = orbit_camera(&volume, 1.0, 0.0);
-                let gpu = renderer.frame(&small, &cam)?.image.to_srgb8();
+                let gpu = renderer.frame(&small, &cam)?.image;
                 let (cpu, _) = render_volume(&volume, &tf, &small, &cam);
-                let cpu = cpu.to_srgb8();
-                let mean = gpu
-                    .iter()
-                    .zip(&cpu)
-                    .map(|(&x, &y)| x.abs_diff(y) as f64)
-                    .sum::<f64>()
-                    / gpu.len() as f64;
+                let (mean, _) = cpu.srgb8_diff(&gpu);
                 if mean >= 1.0 {
                     bail!(
                         "{}: the GPU's frame differs from the CPU's by {mean:.2}/255 on average (a bug); no figures",
