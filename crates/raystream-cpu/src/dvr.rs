@@ -192,6 +192,21 @@ impl<'a> Marcher<'a> {
         (self.bricks, &self.visible)
     }
 
+    /// A ray (LPS, unit `d`) in index space: origin, and index units per mm along it.
+    pub fn index_ray(&self, o: Vec3, d: Vec3) -> (Vec3, Vec3) {
+        (self.index_of(o), self.index_dir(d))
+    }
+
+    /// The part [t0, t1] (mm, t0 ≥ 0) of an index-space ray inside the grid of voxel centres.
+    pub fn clip_ray(&self, o_idx: Vec3, d_idx: Vec3) -> Option<(f32, f32)> {
+        self.clip(o_idx, d_idx)
+    }
+
+    /// Continuous index → world (LPS mm).
+    fn world_of(&self, p: Vec3) -> Vec3 {
+        self.vol.index_to_world(p.as_dvec3()).as_vec3()
+    }
+
     fn index_of(&self, p: Vec3) -> Vec3 {
         let q = p - self.origin;
         Vec3::new(
@@ -261,15 +276,30 @@ impl<'a> Marcher<'a> {
         let Some((_, t1)) = self.clip(p, l_idx) else {
             return (1.0, 0);
         };
-        let (mut transmit, mut taken, mut k) = (1.0f32, 0u64, 1u64);
+        self.absorb(tf, p, l_idx, [step, t1], step, jitter)
+    }
+
+    /// Transmittance over `[t0, t1]` (mm) of the ray `o_idx + t·d_idx` through the transfer
+    /// function's opacity on the lattice t0 + (k + jitter)·step, skipping transparent bricks;
+    /// and the samples taken. Stops below 1 % (nothing visible gets through).
+    pub fn absorb(
+        &self,
+        tf: &TransferFunction,
+        o_idx: Vec3,
+        d_idx: Vec3,
+        [t0, t1]: [f32; 2],
+        step: f32,
+        jitter: f32,
+    ) -> (f32, u64) {
+        let (mut transmit, mut taken, mut k) = (1.0f32, 0u64, 0u64);
         loop {
-            let start = k as f32 * step;
+            let start = t0 + k as f32 * step;
             if start >= t1 {
                 break;
             }
-            let t = ((k as f32 + jitter) * step).min(t1);
-            let q = p + l_idx * t;
-            if let Some(next) = self.skip_brick(q, t, 0.0, l_idx, step, jitter, k) {
+            let t = (t0 + (k as f32 + jitter) * step).min(t1);
+            let q = o_idx + d_idx * t;
+            if let Some(next) = self.skip_brick(q, t, t0, d_idx, step, jitter, k) {
                 k = next;
                 continue;
             }
@@ -285,6 +315,60 @@ impl<'a> Marcher<'a> {
             }
         }
         (transmit, taken)
+    }
+
+    /// Front-to-back emission–absorption over `[t0, t1]` (mm) of `ray` (LPS, unit direction;
+    /// `o_idx`, `d_idx` its index form) on the lattice t0 + (k + jitter)·step, each sample lit
+    /// by `lights` ([`shade_sample`]); early termination below 1 % transmittance, transparent
+    /// bricks skipped when `skip`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn composite(
+        &self,
+        tf: &TransferFunction,
+        ray: Ray3,
+        (o_idx, d_idx): (Vec3, Vec3),
+        [t0, t1]: [f32; 2],
+        step: f32,
+        skip: bool,
+        lights: &[SampleLight],
+    ) -> Composited {
+        let mut out = Composited {
+            transmit: 1.0,
+            ..Default::default()
+        };
+        let mut k = 0u64;
+        // Sample k stands for the segment [t0 + kΔs, t0 + (k + 1)Δs) clipped to [t0, t1]
+        // (the last one is shorter), so that the segments add up to the ray's length.
+        loop {
+            let start = t0 + k as f32 * step;
+            if start >= t1 {
+                break;
+            }
+            let t = (t0 + (k as f32 + ray.jitter) * step).min(t1);
+            let seg = step.min(t1 - start);
+            let p = o_idx + d_idx * t;
+            if skip && let Some(next) = self.skip_brick(p, t, t0, d_idx, step, ray.jitter, k) {
+                out.skipped += next - k;
+                k = next;
+                continue;
+            }
+            out.taken += 1;
+            k += 1;
+            let v = self.sample(p);
+            let a = tf.opacity_at(v);
+            if a <= 0.0 {
+                continue;
+            }
+            let a = 1.0 - (1.0 - a.min(1.0)).powf(seg);
+            let base = Vec3::from(tf.color_at(v));
+            let shaded = shade_sample(self, tf, base, p, ray.o + ray.d * t, ray.d, lights);
+            out.color += out.transmit * a * shaded;
+            out.transmit *= 1.0 - a;
+            if out.transmit < 0.01 {
+                break;
+            }
+        }
+        out
     }
 
     /// Where index point `q` (ray parameter `t`) lies in a transparent brick: the index of the
@@ -389,20 +473,50 @@ impl LightGrid {
         }
     }
 
+    /// The grid of a directional light (`light`: unit LPS direction toward it).
     pub fn new(m: &Marcher, tf: &TransferFunction, light: Vec3, step: f32) -> LightGrid {
+        let l_idx = m.index_dir(light);
+        Self::from_rays(m, |p| m.transmittance(tf, p, l_idx, step, 0.5))
+    }
+
+    /// The grid of a point light at LPS `light` (mm): shadow rays end at the light, and
+    /// `blocked(p, light)` (LPS points) says whether something else (a mesh) stops them.
+    pub fn toward_point(
+        m: &Marcher,
+        tf: &TransferFunction,
+        light: Vec3,
+        step: f32,
+        blocked: impl Fn(Vec3, Vec3) -> bool + Sync,
+    ) -> LightGrid {
+        Self::from_rays(m, |p| {
+            let world = m.world_of(p);
+            let to_light = light - world;
+            let dist = to_light.length();
+            if dist == 0.0 || blocked(world, light) {
+                return (if dist == 0.0 { 1.0 } else { 0.0 }, 0);
+            }
+            let l_idx = m.index_dir(to_light / dist);
+            match m.clip(p, l_idx) {
+                Some((_, t1)) => m.absorb(tf, p, l_idx, [step, t1.min(dist)], step, 0.5),
+                None => (1.0, 0),
+            }
+        })
+    }
+
+    /// The grid whose point at volume index `p` holds `shadow_ray(p)` = (transmittance,
+    /// samples taken).
+    fn from_rays(m: &Marcher, shadow_ray: impl Fn(Vec3) -> (f32, u64) + Sync) -> LightGrid {
         let n = m.vol.dims;
         let dims = Self::dims_for(n);
-        let l_idx = m.index_dir(light);
         let rays: Vec<(f32, u64)> = (0..dims[0] * dims[1] * dims[2])
             .into_par_iter()
             .map(|i| {
                 let j = [i % dims[0], i / dims[0] % dims[1], i / (dims[0] * dims[1])];
-                let p = Vec3::new(
+                shadow_ray(Vec3::new(
                     Self::position(j[0], n[0], dims[0]),
                     Self::position(j[1], n[1], dims[1]),
                     Self::position(j[2], n[2], dims[2]),
-                );
-                m.transmittance(tf, p, l_idx, step, 0.5)
+                ))
             })
             .collect();
         let scale = Vec3::from(std::array::from_fn::<f32, 3, _>(|a| {
@@ -571,12 +685,78 @@ pub fn render_volume(
     )
 }
 
-/// A primary ray in LPS (unit `d`) and its start offset in steps.
+/// A ray in LPS (unit `d`, mm) and its start offset in steps.
 #[derive(Clone, Copy)]
-struct Ray3 {
-    o: Vec3,
+pub struct Ray3 {
+    pub o: Vec3,
+    pub d: Vec3,
+    pub jitter: f32,
+}
+
+/// What compositing a stretch of a ray gave: emitted colour, transmittance, samples taken and
+/// skipped.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Composited {
+    pub color: Vec3,
+    pub transmit: f32,
+    pub taken: u64,
+    pub skipped: u64,
+}
+
+/// Where a light lies from a volume sample.
+#[derive(Clone, Copy, Debug)]
+pub enum Toward {
+    /// A unit LPS direction (a headlight, the key light).
+    Direction(Vec3),
+    /// An LPS point (mm): a scene's point light.
+    Point(Vec3),
+}
+
+/// A light that shades volume samples: where it is, its colour, and the light grid of its
+/// shadow rays (`None`: unshadowed).
+#[derive(Clone, Copy)]
+pub struct SampleLight<'a> {
+    pub toward: Toward,
+    pub color: Vec3,
+    pub grid: Option<&'a LightGrid>,
+}
+
+/// The light a sample of colour `base` at index `p` (world `at`, seen along unit `d`) sends
+/// back: per light, two-sided Blinn–Phong on the gradient normal, weighted by gradient
+/// magnitude so that homogeneous regions stay unshaded (lit without a normal), times the
+/// light's colour and what its light grid lets through. With one white unshadowed light this
+/// is the classic headlight shading.
+fn shade_sample(
+    m: &Marcher,
+    tf: &TransferFunction,
+    base: Vec3,
+    p: Vec3,
+    at: Vec3,
     d: Vec3,
-    jitter: f32,
+    lights: &[SampleLight],
+) -> Vec3 {
+    let g = m.gradient(p);
+    let gm = g.length();
+    let amb = tf.shading.ambient;
+    // Weight of surface shading: gradient magnitude; the rest lit without a normal.
+    let w = (gm / FULL_SHADING_GRADIENT).min(1.0);
+    let (mut unshaded, mut surface, mut spec) = (Vec3::splat(amb), Vec3::splat(amb), Vec3::ZERO);
+    for light in lights {
+        let l = match light.toward {
+            Toward::Direction(l) => l,
+            Toward::Point(q) => (q - at).normalize_or(-d),
+        };
+        let lit = light.color * light.grid.map_or(1.0, |grid| grid.at(p));
+        let (diff, sp) = if gm > 0.0 {
+            phong(tf, -g / gm, d, l)
+        } else {
+            (amb, 0.0)
+        };
+        unshaded += (1.0 - amb) * lit;
+        surface += (diff - amb) * lit;
+        spec += sp * lit;
+    }
+    base * ((1.0 - w) * unshaded + w * surface) + w * spec
 }
 
 /// What one ray gave: its colour and the samples it took and skipped.
@@ -626,64 +806,28 @@ fn march(
     let mut k = 0u64;
     let at = |k: u64| t0 + (k as f32 + jitter) * step;
     let mut taken = 0u64;
-    let mut skipped = 0u64;
     match opt.mode {
         DvrMode::Dvr => {
-            let mut c = Vec3::ZERO;
-            let mut transmit = 1.0f32;
-            // Sample k stands for the segment [t0 + kΔs, t0 + (k + 1)Δs) clipped to [t0, t1]
-            // (the last one is shorter), so that the segments add up to the ray's length.
-            loop {
-                let start = t0 + k as f32 * step;
-                if start >= t1 {
-                    break;
-                }
-                let t = at(k).min(t1);
-                let seg = step.min(t1 - start);
-                let p = o_idx + d_idx * t;
-                if opt.skip_empty
-                    && let Some(next) = m.skip_brick(p, t, t0, d_idx, step, jitter, k)
-                {
-                    skipped += next - k;
-                    k = next;
-                    continue;
-                }
-                taken += 1;
-                k += 1;
-                let v = m.sample(p);
-                let a = tf.opacity_at(v);
-                if a <= 0.0 {
-                    continue;
-                }
-                let a = 1.0 - (1.0 - a.min(1.0)).powf(seg);
-                let base = Vec3::from(tf.color_at(v));
-                let l = light.map_or(-d, |(l, _)| l);
-                // Light reaching the sample: 1, or the light grid's transmittance.
-                let lit = light.map_or(1.0, |(_, grid)| grid.at(p));
-                let g = m.gradient(p);
-                let gm = g.length();
-                let amb = tf.shading.ambient;
-                // Weight of surface shading: gradient magnitude; the rest lit without a normal.
-                let w = (gm / FULL_SHADING_GRADIENT).min(1.0);
-                let (diff, spec) = if gm > 0.0 {
-                    phong(tf, -g / gm, d, l)
-                } else {
-                    (amb, 0.0)
-                };
-                let unshaded = amb + (1.0 - amb) * lit;
-                let surface = amb + (diff - amb) * lit;
-                let shaded =
-                    base * ((1.0 - w) * unshaded + w * surface) + Vec3::splat(w * spec * lit);
-                c += transmit * a * shaded;
-                transmit *= 1.0 - a;
-                if transmit < 0.01 {
-                    break;
-                }
-            }
+            let ray = Ray3 { o, d, jitter };
+            // A headlight, or the key light through its light grid.
+            let lights = [SampleLight {
+                toward: Toward::Direction(light.map_or(-d, |(l, _)| l)),
+                color: Vec3::ONE,
+                grid: light.map(|(_, g)| g),
+            }];
+            let c = m.composite(
+                tf,
+                ray,
+                (o_idx, d_idx),
+                [t0, t1],
+                step,
+                opt.skip_empty,
+                &lights,
+            );
             Marched {
-                color: c + transmit * opt.background,
-                taken,
-                skipped,
+                color: c.color + c.transmit * opt.background,
+                taken: c.taken,
+                skipped: c.skipped,
             }
         }
         DvrMode::Mip | DvrMode::MinIp | DvrMode::Average => {

@@ -1,9 +1,10 @@
 //! The CPU renderer: the stream stages of the research design, run as explicit queues depth by
 //! depth (no recursion), each stage a data-parallel pass over work items on rayon:
 //!
-//! `generate_camera_rays` → for each depth: `intersect_closest` → `handle_misses` →
-//! `shade_hits` (local Phong term, shadow work items, reflection/refraction rays for the next
-//! depth) → `intersect_any` on the shadow queue → `accumulate`.
+//! `generate_camera_rays` → for each depth: `intersect_closest` → (`march_volume` in scenes
+//! with a volume, see [`medium`]) → `handle_misses` → `shade_hits` (local Phong term, shadow
+//! work items, reflection/refraction rays for the next depth) → `intersect_any` on the shadow
+//! queue → `accumulate`.
 //!
 //! Compositing follows the paper, C(n) = Σ_j M_j (Π_{i<j} r_i)(1 − r_j): every work item
 //! carries the product of the coefficients along its path as `weight`; a hit adds its local
@@ -15,6 +16,7 @@
 
 pub mod dvr;
 mod image_out;
+pub mod medium;
 
 use rayon::prelude::*;
 use raystream_accel::{Hit, KdTree, Traversal};
@@ -22,6 +24,7 @@ use raystream_math::{Ray, Vec3};
 use raystream_scene::{Camera, Scene};
 
 pub use image_out::Image;
+use medium::Medium;
 
 #[derive(Clone, Copy, Debug)]
 pub struct RenderOptions {
@@ -76,6 +79,8 @@ pub struct DepthStats {
     pub rays: usize,
     pub hits: usize,
     pub shadow_rays: usize,
+    /// Volume samples taken by this depth's rays (scenes with a volume).
+    pub volume_samples: u64,
 }
 
 /// Everything the shading stage needs besides the hit.
@@ -86,6 +91,7 @@ pub struct Shading<'a> {
 }
 
 /// Renders `scene` with the kd-tree built over `scene.mesh`; `progress` is told after each depth.
+/// A scene's volume is prepared here (light grids included) and marched by every ray.
 pub fn render(
     scene: &Scene,
     tree: &KdTree,
@@ -98,16 +104,24 @@ pub fn render(
         scene,
         epsilon: surface_epsilon(scene),
     };
+    let medium = scene
+        .volume
+        .as_ref()
+        .map(|v| Medium::new(v, scene, tree, opt.traversal));
     let mut queue = generate_camera_rays(&cam, opt.width, opt.height, opt.spp);
     for depth in 0..=opt.max_depth {
         if queue.is_empty() {
             break;
         }
-        let (hits, misses) = intersect_closest(tree, &queue, opt.traversal);
+        let (mut hits, mut misses) = intersect_closest(tree, &queue, opt.traversal);
+        let volume_samples = match &medium {
+            Some(m) => march_volume(m, &mut hits, &mut misses, &mut film),
+            None => 0,
+        };
         handle_misses(&misses, scene.background, &mut film);
         let spawn = depth < opt.max_depth;
         let (local, shadows, next) = shade_hits(&shading, &hits, spawn);
-        let lit = intersect_any(tree, &shadows, opt.traversal);
+        let lit = intersect_any(tree, &shadows, opt.traversal, medium.as_ref());
         accumulate(&mut film, &local);
         accumulate(&mut film, &lit);
         progress(DepthStats {
@@ -115,6 +129,7 @@ pub fn render(
             rays: queue.len(),
             hits: hits.len(),
             shadow_rays: shadows.len(),
+            volume_samples,
         });
         queue = next;
     }
@@ -196,6 +211,39 @@ pub fn intersect_closest(
         }
     }
     (hit_items, misses)
+}
+
+/// Stage 2½, in scenes with a volume: each ray's segment up to its hit (or out of the scene)
+/// adds the volume's emission, weighted by the ray's path, to its pixel, and the segment's
+/// transmittance scales the weight that its hit or the background gets. Returns the samples
+/// taken.
+pub fn march_volume(
+    medium: &Medium,
+    hits: &mut [HitWorkItem],
+    misses: &mut [RayWorkItem],
+    film: &mut [Vec3],
+) -> u64 {
+    let through = |item: &mut RayWorkItem, t_end: f32| {
+        let seg = medium.segment(&item.ray, t_end);
+        let emitted = (item.pixel, item.weight * seg.color);
+        item.weight *= seg.transmit;
+        (emitted, seg.taken)
+    };
+    let mut emitted: Vec<(Contribution, u64)> = hits
+        .par_iter_mut()
+        .with_min_len(64)
+        .map(|h| through(&mut h.item, h.hit.t))
+        .collect();
+    emitted.par_extend(
+        misses
+            .par_iter_mut()
+            .with_min_len(64)
+            .map(|m| through(m, m.ray.t_max)),
+    );
+    let samples = emitted.iter().map(|e| e.1).sum();
+    let contributions: Vec<Contribution> = emitted.into_iter().map(|e| e.0).collect();
+    accumulate(film, &contributions);
+    samples
 }
 
 /// Stage 3: rays that leave the scene add the background.
@@ -379,22 +427,31 @@ pub fn shade_hits(
     (local, shadows, next)
 }
 
-/// Stage 5: shadow rays; those that reach their light keep their contribution.
+/// Stage 5: shadow rays; those that reach their light keep their contribution, times the
+/// transmittance of the scene's volume (`medium`) along them.
 pub fn intersect_any(
     tree: &KdTree,
     shadows: &[ShadowWorkItem],
     traversal: Traversal,
+    medium: Option<&Medium>,
 ) -> Vec<Contribution> {
-    let blocked: Vec<bool> = shadows
+    let reaching: Vec<Option<Vec3>> = shadows
         .par_iter()
         .with_min_len(256)
-        .map(|s| tree.intersect_any(&s.ray, traversal).is_some())
+        .map(|s| {
+            if tree.intersect_any(&s.ray, traversal).is_some() {
+                return None;
+            }
+            Some(match medium {
+                Some(m) => s.radiance * m.transmittance(&s.ray),
+                None => s.radiance,
+            })
+        })
         .collect();
     shadows
         .iter()
-        .zip(blocked)
-        .filter(|(_, b)| !b)
-        .map(|(s, _)| (s.pixel, s.radiance))
+        .zip(reaching)
+        .filter_map(|(s, r)| r.map(|r| (s.pixel, r)))
         .collect()
 }
 

@@ -138,6 +138,11 @@ impl<'a> GpuRenderer<'a> {
     /// holds, and builds the render pipelines.
     pub fn new(tracer: &'a GpuTracer<'a>, scene: &'a Scene) -> Result<GpuRenderer<'a>, GpuError> {
         let ctx = tracer.ctx;
+        if scene.volume.is_some() {
+            return Err(ctx.err(
+                "scenes with a volume (meshes and CT together) render on the CPU only so far: use --device cpu",
+            ));
+        }
         let need = 3 + 4 + 6 + 1;
         if ctx.limits.max_storage_buffers_per_shader_stage < need {
             return Err(ctx.err(format!(
@@ -476,6 +481,7 @@ impl<'a> GpuRenderer<'a> {
                     rays: words[counter::STAT_RAYS as usize] as usize,
                     hits: words[counter::STAT_HITS as usize] as usize,
                     shadow_rays: words[counter::STAT_SHADOWS as usize] as usize,
+                    volume_samples: 0,
                 };
                 if timed {
                     let stamps: &[u64] = bytemuck::cast_slice(&words[counter::SLOTS as usize..]);

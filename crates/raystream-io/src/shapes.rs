@@ -87,6 +87,36 @@ impl TriMesh {
         }
     }
 
+    /// A closed cylinder of radius 1 around the y axis from y = −1 to 1, `segments` around,
+    /// outward-facing; the caps have their own vertices so that smooth normals keep the rims
+    /// sharp (a rod, a screw shaft, a nail).
+    pub fn cylinder(segments: u32) -> TriMesh {
+        let n = segments.max(3);
+        let ring = |y: f32| {
+            (0..n).map(move |i| {
+                let a = std::f32::consts::TAU * i as f32 / n as f32;
+                Vec3::new(a.cos(), y, -a.sin())
+            })
+        };
+        // Side rings (0..n bottom, n..2n top), cap rings (2n.. bottom, 3n.. top), centres.
+        let mut positions: Vec<Vec3> = ring(-1.0).chain(ring(1.0)).collect();
+        positions.extend(ring(-1.0).chain(ring(1.0)));
+        positions.extend([Vec3::new(0.0, -1.0, 0.0), Vec3::new(0.0, 1.0, 0.0)]);
+        let (bottom, top) = (4 * n, 4 * n + 1);
+        let mut triangles = Vec::with_capacity(4 * n as usize);
+        for i in 0..n {
+            let j = (i + 1) % n;
+            triangles.push([i, j, n + j]);
+            triangles.push([i, n + j, n + i]);
+            triangles.push([bottom, 2 * n + j, 2 * n + i]);
+            triangles.push([top, 3 * n + i, 3 * n + j]);
+        }
+        TriMesh {
+            positions,
+            triangles,
+        }
+    }
+
     /// Area-weighted vertex normals (unit length; zero for vertices of degenerate triangles only).
     pub fn vertex_normals(&self) -> Vec<Vec3> {
         let mut n = vec![Vec3::ZERO; self.positions.len()];
@@ -109,6 +139,38 @@ mod tests {
     fn icosphere_is_closed_and_outward() {
         let s = TriMesh::icosphere(2);
         assert_eq!(s.len(), 320);
+        assert_closed_and_outward(&s);
+    }
+
+    /// The cylinder's faces point away from its axis (sides) or along it (caps); its side
+    /// and cap rings are separate vertices, so it is closed by position, not by index.
+    #[test]
+    fn cylinder_is_closed_and_outward() {
+        let c = TriMesh::cylinder(12);
+        assert_eq!(c.len(), 48);
+        let mut area = 0.0;
+        for i in 0..c.len() {
+            let [a, b, d] = c.corners(i);
+            let face = (b - a).cross(d - a);
+            let centre = (a + b + d) / 3.0;
+            let outward = if face.y.abs() > 1e-4 {
+                Vec3::new(0.0, centre.y, 0.0)
+            } else {
+                Vec3::new(centre.x, 0.0, centre.z)
+            };
+            assert!(face.dot(outward) > 0.0, "triangle {i} faces inward");
+            area += 0.5 * face.length();
+        }
+        // 12 side rectangles of height 2 and one chord wide, and two caps of 12 triangles.
+        let chord = 2.0 * (std::f32::consts::PI / 12.0).sin();
+        let cap = 12.0 * 0.5 * (std::f32::consts::TAU / 12.0).sin();
+        assert!(
+            (area - (12.0 * 2.0 * chord + 2.0 * cap)).abs() < 1e-3,
+            "{area}"
+        );
+    }
+
+    fn assert_closed_and_outward(s: &TriMesh) {
         let mut edges: HashMap<(u32, u32), i32> = HashMap::new();
         for (i, t) in s.triangles.iter().enumerate() {
             for k in 0..3 {

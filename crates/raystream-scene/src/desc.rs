@@ -20,6 +20,29 @@ pub struct SceneDesc {
     pub ground: Option<GroundDesc>,
     pub background: Option<[f32; 3]>,
     pub ambient: Option<[f32; 3]>,
+    /// One CT volume rendered directly among the meshes.
+    pub volume: Option<VolumeDesc>,
+}
+
+/// A CT volume in a scene: direct volume rendering through a transfer function, in the scene
+/// frame of `render VOLUME` (x = patient's left, y = superior, z = anterior, mm).
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VolumeDesc {
+    /// A DICOM folder or a NIfTI, NRRD or MetaImage file, relative to the scene file.
+    pub path: String,
+    /// DICOM series UID (default: the largest series).
+    pub series: Option<String>,
+    /// Transfer-function preset: ct-bone (default), ct-bones, ct-aaa, ct-muscle, ct-lung,
+    /// mip-bone.
+    pub preset: Option<String>,
+    /// A transfer-function TOML file, relative to the scene file (instead of `preset`).
+    pub tf: Option<String>,
+    /// Step in mm (default: half the smallest voxel spacing).
+    pub step: Option<f32>,
+    /// Whether the volume is lit through shadow rays (its own and the meshes' shadows; default
+    /// true). Meshes always see the volume in their shadow rays.
+    pub shadows: Option<bool>,
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -71,6 +94,10 @@ pub struct ObjectDesc {
     /// Rotation in degrees about x, then y, then z.
     pub rotate: Option<[f32; 3]>,
     pub scale: Option<Scale>,
+    /// The frame the mesh (after its transform) is given in: "scene" (default), or "lps" /
+    /// "ras", patient millimetres as DICOM / NIfTI and 3D Slicer use them, converted to the
+    /// scene frame so that the mesh sits where it belongs in the scene's CT volume.
+    pub frame: Option<String>,
 }
 
 #[derive(Clone, Debug, Default, Deserialize)]
@@ -119,7 +146,35 @@ impl MaterialDesc {
     }
 }
 
+/// Patient coordinate frames a mesh may be given in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Frame {
+    Scene,
+    Lps,
+    Ras,
+}
+
+impl Frame {
+    /// The frame's point in the scene frame (x = L, y = S, z = A): a rotation.
+    pub fn to_scene(self, p: Vec3) -> Vec3 {
+        match self {
+            Frame::Scene => p,
+            Frame::Lps => Vec3::new(p.x, p.z, -p.y),
+            Frame::Ras => Vec3::new(-p.x, p.z, p.y),
+        }
+    }
+}
+
 impl ObjectDesc {
+    pub fn frame(&self) -> Result<Frame, String> {
+        match self.frame.as_deref() {
+            None | Some("scene") => Ok(Frame::Scene),
+            Some("lps") => Ok(Frame::Lps),
+            Some("ras") => Ok(Frame::Ras),
+            Some(f) => Err(format!("unknown frame '{f}' (scene, lps, ras)")),
+        }
+    }
+
     /// The linear part of the object's transform (rotation then scale applied to the mesh).
     pub fn matrix(&self) -> Result<Mat3, String> {
         let s = match self.scale {

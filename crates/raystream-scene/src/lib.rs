@@ -35,15 +35,21 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 pub use camera::Camera;
-pub use desc::{CameraDesc, GroundDesc, LightDesc, MaterialDesc, ObjectDesc, Scale, SceneDesc};
-use raystream_io::{MeshError, TriMesh};
-use raystream_math::{Aabb, Vec3};
+pub use desc::{
+    CameraDesc, Frame, GroundDesc, LightDesc, MaterialDesc, ObjectDesc, Scale, SceneDesc,
+    VolumeDesc,
+};
+use raystream_io::{MeshError, TriMesh, Volume, VolumeError};
+use raystream_math::{Aabb, DVec3, Vec3};
+use raystream_volume::{TfPreset, TransferFunction};
 
 /// What went wrong building a scene, naming the file.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     #[error(transparent)]
     Mesh(#[from] MeshError),
+    #[error(transparent)]
+    Volume(#[from] VolumeError),
     #[error("{path}: {problem}")]
     Invalid { path: PathBuf, problem: String },
 }
@@ -106,6 +112,70 @@ pub struct Scene {
     pub object_box: Aabb,
     /// Where a framing camera looks from (towards the eye), when `camera` is `None`.
     pub frame_dir: Vec3,
+    /// A CT volume rendered directly among the meshes.
+    pub volume: Option<SceneVolume>,
+}
+
+/// The CT volume of a scene, ready to render: values in HU on its LPS grid, which the scene
+/// frame holds turned by `Frame::Lps` (x = L, y = S, z = A).
+#[derive(Clone, Debug)]
+pub struct SceneVolume {
+    pub volume: Volume,
+    pub tf: TransferFunction,
+    /// Step in mm; `None`: half the smallest voxel spacing.
+    pub step_mm: Option<f32>,
+    /// Whether volume samples are lit through shadow rays (light grids).
+    pub shadows: bool,
+}
+
+impl SceneVolume {
+    /// Loads `d`'s volume and transfer function, paths relative to `base_dir`.
+    pub fn load(d: &VolumeDesc, base_dir: &Path) -> Result<SceneVolume, SceneError> {
+        let tf = match (&d.tf, &d.preset) {
+            (Some(_), Some(_)) => {
+                return Err("volume: give 'tf' or 'preset', not both".to_string().into());
+            }
+            (Some(f), None) => {
+                TransferFunction::load(&base_dir.join(f)).map_err(|e| format!("volume: {e}"))?
+            }
+            (None, p) => {
+                let name = p.as_deref().unwrap_or("ct-bone");
+                TfPreset::ALL
+                    .into_iter()
+                    .find(|t| t.name() == name)
+                    .ok_or_else(|| {
+                        let names: Vec<&str> = TfPreset::ALL.iter().map(|t| t.name()).collect();
+                        format!("volume: unknown preset '{name}' ({})", names.join(", "))
+                    })?
+                    .function()
+            }
+        };
+        if let Some(s) = d.step
+            && !(s.is_finite() && s > 0.0)
+        {
+            return Err(format!("volume: step {s} must be a positive number of mm").into());
+        }
+        let volume = raystream_io::load_volume(&base_dir.join(&d.path), d.series.as_deref())?;
+        Ok(SceneVolume {
+            volume,
+            tf,
+            step_mm: d.step,
+            shadows: d.shadows.unwrap_or(true),
+        })
+    }
+
+    /// The corners of the grid of voxel centres in the scene frame.
+    pub fn corners(&self) -> [Vec3; 8] {
+        let [nx, ny, nz] = self.volume.dims.map(|n| n.saturating_sub(1) as f64);
+        std::array::from_fn(|c| {
+            let idx = DVec3::new(
+                if c & 1 != 0 { nx } else { 0.0 },
+                if c & 2 != 0 { ny } else { 0.0 },
+                if c & 4 != 0 { nz } else { 0.0 },
+            );
+            Frame::Lps.to_scene(self.volume.index_to_world(idx).as_vec3())
+        })
+    }
 }
 
 /// The embedded Spot mesh (CC0, see `assets/README.md`).
@@ -125,18 +195,31 @@ impl Scene {
         base_dir: &Path,
         origin: &Path,
     ) -> Result<Scene, SceneError> {
-        Self::compile(desc, origin, |i, o| match (&o.mesh, &o.shape) {
+        let volume = match &desc.volume {
+            Some(v) => Some(SceneVolume::load(v, base_dir).map_err(|e| match e {
+                SceneError::Invalid { problem, .. } => SceneError::Invalid {
+                    path: origin.to_path_buf(),
+                    problem,
+                },
+                e => e,
+            })?),
+            None => None,
+        };
+        Self::compile(desc, origin, volume, |i, o| match (&o.mesh, &o.shape) {
             (Some(p), None) => Ok(raystream_io::load_mesh(&base_dir.join(p))?),
             (None, Some(s)) => builtin_shape(s).ok_or_else(|| {
-                format!("object {i}: unknown shape '{s}' (sphere, quad, spot)").into()
+                format!("object {i}: unknown shape '{s}' (sphere, cylinder, quad, spot)").into()
             }),
             _ => Err(format!("object {i}: give exactly one of 'mesh' and 'shape'").into()),
         })
     }
 
+    /// Builds the scene; a `volume` counts among the objects for the ground and the framing
+    /// camera, which then looks at it from the patient's front as `render VOLUME` does.
     fn compile(
         desc: &SceneDesc,
         origin: &Path,
+        volume: Option<SceneVolume>,
         mut load: impl FnMut(usize, &ObjectDesc) -> Result<TriMesh, SceneError>,
     ) -> Result<Scene, SceneError> {
         let invalid = |problem: String| SceneError::Invalid {
@@ -180,17 +263,21 @@ impl Scene {
                 .matrix()
                 .map_err(|e| invalid(format!("object {i}: {e}")))?;
             let t = o.translate.map(Vec3::from).unwrap_or(Vec3::ZERO);
+            let frame = o.frame().map_err(|e| invalid(format!("object {i}: {e}")))?;
             let normal_m = m.inverse().transpose();
             normals.extend(
                 source
                     .vertex_normals()
                     .iter()
-                    .map(|&n| (normal_m * n).normalize_or_zero()),
+                    .map(|&n| frame.to_scene(normal_m * n).normalize_or_zero()),
             );
-            mesh.append(&source, |p| m * p + t);
+            mesh.append(&source, |p| frame.to_scene(m * p + t));
             material_of.extend(std::iter::repeat_n(lookup(&o.material)?, source.len()));
         }
-        let object_box = mesh.bounds();
+        let mut object_box = mesh.bounds();
+        for c in volume.iter().flat_map(|v| v.corners()) {
+            object_box = object_box.grow(c);
+        }
         if let Some(g) = &desc.ground {
             let r = object_box.radius();
             let y = g.height.unwrap_or(object_box.min.y - 1e-3 * r);
@@ -249,7 +336,12 @@ impl Scene {
                 .unwrap_or(Vec3::new(0.05, 0.06, 0.08)),
             ambient_light: desc.ambient.map(Vec3::from).unwrap_or(Vec3::splat(0.6)),
             object_box,
-            frame_dir: camera::FRAME_VIEW_DIR,
+            frame_dir: if volume.is_some() {
+                VOLUME_VIEW_DIR
+            } else {
+                camera::FRAME_VIEW_DIR
+            },
+            volume,
         })
     }
 
@@ -296,8 +388,10 @@ impl Scene {
         ];
         desc.objects.push(ObjectDesc::default());
         let mut mesh = Some(mesh);
-        Self::compile(&desc, name, |_, _| Ok(mesh.take().expect("one object")))
-            .expect("a checked mesh makes a valid scene")
+        Self::compile(&desc, name, None, |_, _| {
+            Ok(mesh.take().expect("one object"))
+        })
+        .expect("a checked mesh makes a valid scene")
     }
 
     /// A bone isosurface from CT: `mesh` and its `normals` in LPS millimetres are turned so that
@@ -353,15 +447,17 @@ impl Scene {
         });
         let n = mesh.positions.len();
         let mut mesh = Some(mesh);
-        let mut scene = Self::compile(&desc, name, |_, _| Ok(mesh.take().expect("one object")))
-            .expect("a checked mesh makes a valid scene");
+        let mut scene = Self::compile(&desc, name, None, |_, _| {
+            Ok(mesh.take().expect("one object"))
+        })
+        .expect("a checked mesh makes a valid scene");
         // The volume's gradient normals shade an isosurface better than face-averaged ones.
         if normals.len() == n {
             for (dst, &src) in scene.normals[..n].iter_mut().zip(normals) {
                 *dst = lps_to_scene(src);
             }
         }
-        scene.frame_dir = Vec3::new(0.0, 0.12, 1.0);
+        scene.frame_dir = VOLUME_VIEW_DIR;
         scene
     }
 
@@ -394,15 +490,21 @@ impl Scene {
             .zip(used)
             .filter(|&(p, u)| u && b.contains(*p))
             .map(|(p, _)| *p)
+            .chain(self.volume.iter().flat_map(|v| v.corners()))
             .collect()
     }
 }
 
+/// Where a camera framing CT looks from: the patient's front, a little from above.
+const VOLUME_VIEW_DIR: Vec3 = Vec3::new(0.0, 0.12, 1.0);
+
 const SPHERE_SUBDIVISIONS: u32 = 4;
+const CYLINDER_SEGMENTS: u32 = 64;
 
 fn builtin_shape(name: &str) -> Option<TriMesh> {
     match name {
         "sphere" => Some(TriMesh::icosphere(SPHERE_SUBDIVISIONS)),
+        "cylinder" => Some(TriMesh::cylinder(CYLINDER_SEGMENTS)),
         "spot" => Some(spot_mesh()),
         "quad" => Some(TriMesh::ground_quad(1.0)),
         _ => None,
@@ -419,5 +521,104 @@ impl From<String> for SceneError {
             path: PathBuf::new(),
             problem,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn compile(text: &str) -> Result<Scene, SceneError> {
+        let desc: SceneDesc = toml::from_str(text).map_err(|e| e.to_string())?;
+        let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../raystream/assets");
+        Scene::from_desc(&desc, &assets, Path::new("test.toml"))
+    }
+
+    const CT: &str = r#"
+        [volume]
+        path = "abdomen_pelvis_ct_totalseg.nii.gz"
+    "#;
+
+    /// A mesh given in LPS or RAS lands where the same patient point lies in the scene frame
+    /// (x = L, y = S, z = A), and its normals turn with it.
+    #[test]
+    fn patient_frames_turn_into_the_scene_frame() {
+        for (frame, at, want) in [
+            ("scene", [1.0, 2.0, 3.0], Vec3::new(1.0, 2.0, 3.0)),
+            ("lps", [10.0, -20.0, 30.0], Vec3::new(10.0, 30.0, 20.0)),
+            ("ras", [-10.0, 20.0, 30.0], Vec3::new(10.0, 30.0, 20.0)),
+        ] {
+            let s = compile(&format!(
+                "[[objects]]\nshape = \"quad\"\nframe = \"{frame}\"\ntranslate = {at:?}\nscale = 0.001"
+            ))
+            .unwrap();
+            let c = s.mesh.bounds().center();
+            assert!((c - want).length() < 1e-3, "{frame}: {c} vs {want}");
+        }
+        // The quad faces +y (posterior in LPS): anterior in the scene frame is +z, so −z.
+        let s = compile("[[objects]]\nshape = \"quad\"\nframe = \"lps\"").unwrap();
+        assert!((s.normals[0] - Vec3::new(0.0, 0.0, -1.0)).length() < 1e-6);
+        let e = compile("[[objects]]\nshape = \"quad\"\nframe = \"xyz\"").unwrap_err();
+        assert!(e.to_string().contains("unknown frame 'xyz'"), "{e}");
+    }
+
+    /// A scene's volume loads with its preset; the ground goes under it and a framing camera
+    /// sees all of it from the patient's front.
+    #[test]
+    fn a_volume_joins_the_scene() {
+        let s = compile(&format!(
+            "{CT}\npreset = \"ct-bones\"\n[[objects]]\nshape = \"sphere\"\nscale = 10\ntranslate = [0, 250, 160]\n[ground]\nsize = 2"
+        ))
+        .unwrap();
+        let v = s.volume.as_ref().expect("a volume");
+        assert_eq!(v.volume.dims, [122, 101, 112]);
+        assert_eq!(v.tf, TfPreset::CtBones.function());
+        assert!(v.shadows);
+        let lowest = v.corners().iter().map(|c| c.y).fold(f32::MAX, f32::min);
+        let ground = s.mesh.positions[s.mesh.positions.len() - 1].y;
+        assert!(
+            ground < lowest && ground > lowest - 1.0,
+            "{ground} vs {lowest}"
+        );
+        let cam = s.camera_for(1.0);
+        assert!(
+            cam.fwd.z < -0.9,
+            "looks at the patient's front: {}",
+            cam.fwd
+        );
+        for c in v.corners() {
+            let q = c - cam.eye;
+            let z = q.dot(cam.fwd);
+            assert!(
+                z > 0.0 && q.dot(cam.up).abs() <= z * cam.tan_y * 1.001,
+                "{c} out of view"
+            );
+        }
+    }
+
+    /// Volume mistakes name the scene file and the problem.
+    #[test]
+    fn volume_mistakes_are_named() {
+        let obj = "[[objects]]\nshape = \"sphere\"";
+        for (extra, want) in [
+            ("preset = \"ct-nothing\"", "unknown preset 'ct-nothing'"),
+            (
+                "preset = \"ct-bone\"\ntf = \"a.toml\"",
+                "'tf' or 'preset', not both",
+            ),
+            ("step = -1", "step -1 must be a positive number"),
+        ] {
+            let e = compile(&format!("{CT}{extra}\n{obj}"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.starts_with("test.toml: volume: ") && e.contains(want),
+                "{e}"
+            );
+        }
+        let e = compile(&format!("[volume]\npath = \"missing.nii\"\n{obj}"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("missing.nii"), "{e}");
     }
 }

@@ -220,6 +220,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     let t0 = Instant::now();
     let (scene, bones) = load_scene(a)?;
     let load_ms = ms(t0.elapsed());
+    let mut volume_samples = 0u64;
     let pb = spinner(
         a.quiet,
         &format!("building kd-tree over {} triangles", scene.mesh.len()),
@@ -266,8 +267,10 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     let mut split = None;
     for _ in 0..a.repeat {
         total_rays = 0;
+        volume_samples = 0;
         let mut on_depth = |s: DepthStats| {
             total_rays += s.rays + s.shadow_rays;
+            volume_samples += s.volume_samples;
             bar.set_message(format!(
                 "{} rays, {} hits, {} shadow rays",
                 s.rays, s.hits, s.shadow_rays
@@ -342,6 +345,20 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             eprintln!(
                 "raystream: the last frame's {all:.1} ms: {wait:.1} waiting on depth submissions (kernels and round trips), {film:.1} reading the film back, {:.1} on the host",
                 all - wait - film
+            );
+        }
+        if let Some(v) = &scene.volume {
+            eprintln!(
+                "raystream: the scene's volume ({}x{}x{} voxels{}): {} samples along the rays",
+                v.volume.dims[0],
+                v.volume.dims[1],
+                v.volume.dims[2],
+                if v.shadows {
+                    ", lit through a light grid per light"
+                } else {
+                    ""
+                },
+                volume_samples
             );
         }
         if let Some(b) = bones {

@@ -318,6 +318,24 @@ fn golden_direct_volume_rendering() {
     );
 }
 
+/// The README's example of meshes and a CT volume in one scene (examples/spine_rods.toml):
+/// two rods in the abdomen CT, ray-marched through ct-bones, with shadows and a mirror floor.
+fn spine_rods() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/spine_rods.toml")
+        .to_str()
+        .unwrap()
+        .to_string()
+}
+
+#[test]
+fn golden_meshes_and_volume_in_one_scene() {
+    golden(
+        "spine_rods",
+        &[&spine_rods(), "--size", "96x72", "--spp", "1"],
+    );
+}
+
 #[test]
 fn gpu_volume_rendering_matches_cpu_cli() {
     gpu_matches_cpu(
