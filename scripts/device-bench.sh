@@ -9,7 +9,7 @@
 # nodes and triangles per ray), the default scene's frame rate, and the volume modes' frame rates.
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
-# PARTS (default "trace render volume") picks the parts; TRACERS (default "gpu split cpu
+# PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene) picks the parts; TRACERS (default "gpu split cpu
 # embree") the tracers of the trace part.
 # Results: OUTDIR/results.jsonl (one JSON object per line, each tagged), images in OUTDIR.
 set -uo pipefail
@@ -84,6 +84,14 @@ for mode in dvr mip iso; do
 done
 $bin render "$ct" --mode dvr --no-skip --device gpu --size "$dvr_size" --repeat 20 -o "$tmp/noskip.png" 2>&1 | tee -a "$out/render.log"
 $bin render "$ct" --mode dvr --shadows --device gpu --size "$dvr_size" --repeat 20 -o "$out/dvr-shadows-gpu.png" 2>&1 | tee -a "$out/render.log"
+}
+# Meshes and the CT in one scene (examples/spine_rods.toml, from the checkout), GPU and CPU.
+has "$parts" scene && {
+for dev in gpu cpu; do
+  n=10; [ $dev = cpu ] && n=2
+  $bin render examples/spine_rods.toml --device $dev --size "$size" --spp 4 --max-depth 4 --repeat $n -o "$out/spine-rods-$dev.png" 2>&1 | tee -a "$out/render.log"
+done
+$py "$d/rays.py" imgdiff "$out/spine-rods-cpu.png" "$out/spine-rods-gpu.png" --json | tag '{"imgdiff": "spine_rods"}'
 }
 has "$parts" volume && {
 v=(bench "$ct" --mode dvr --resample 512 --size "$dvr_size" --json --quiet)

@@ -627,8 +627,8 @@ pub fn scene_to_lps(p: Vec3) -> Vec3 {
     Vec3::new(p.x, -p.z, p.y)
 }
 
-/// The per-pixel start offset in [0, 1) steps.
-fn start_jitter(pixel: u32) -> f32 {
+/// The per-pixel start offset in [0, 1) steps of a sample lattice.
+pub fn start_jitter(pixel: u32) -> f32 {
     crate::jitter(pixel, 0, 7)
 }
 

@@ -215,8 +215,9 @@ pub fn intersect_closest(
 
 /// Stage 2½, in scenes with a volume: each ray's segment up to its hit (or out of the scene)
 /// adds the volume's emission, weighted by the ray's path, to its pixel, and the segment's
-/// transmittance scales the weight that its hit or the background gets. Returns the samples
-/// taken.
+/// transmittance scales the weight that its hit or the background gets. Every segment of a
+/// pixel starts its sample lattice at the pixel's offset, as `--mode dvr` does (and the GPU).
+/// Returns the samples taken.
 pub fn march_volume(
     medium: &Medium,
     hits: &mut [HitWorkItem],
@@ -224,7 +225,7 @@ pub fn march_volume(
     film: &mut [Vec3],
 ) -> u64 {
     let through = |item: &mut RayWorkItem, t_end: f32| {
-        let seg = medium.segment(&item.ray, t_end);
+        let seg = medium.segment(&item.ray, t_end, dvr::start_jitter(item.pixel));
         let emitted = (item.pixel, item.weight * seg.color);
         item.weight *= seg.transmit;
         (emitted, seg.taken)
@@ -443,7 +444,7 @@ pub fn intersect_any(
                 return None;
             }
             Some(match medium {
-                Some(m) => s.radiance * m.transmittance(&s.ray),
+                Some(m) => s.radiance * m.transmittance(&s.ray, dvr::start_jitter(s.pixel)),
                 None => s.radiance,
             })
         })

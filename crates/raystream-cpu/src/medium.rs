@@ -84,6 +84,11 @@ impl<'a> Medium<'a> {
         }
     }
 
+    /// The volume prepared for marching (brick table, index transforms).
+    pub fn marcher(&self) -> &Marcher<'a> {
+        &self.marcher
+    }
+
     /// The light grids (one per scene light) when the volume is shadowed.
     pub fn light_grids(&self) -> &[LightGrid] {
         &self.grids
@@ -94,10 +99,10 @@ impl<'a> Medium<'a> {
         self.grids.iter().map(|g| g.samples).sum()
     }
 
-    /// The volume along `ray` (scene frame) from `ray.t_min` to `t_end`: emitted colour and
-    /// transmittance, with the samples taken.
-    pub fn segment(&self, ray: &Ray, t_end: f32) -> Composited {
-        let Some((r, o_idx, d_idx, t0, t1)) = self.enter(ray, t_end) else {
+    /// The volume along `ray` (scene frame) from `ray.t_min` to `t_end`, its sample lattice
+    /// offset by `jitter` steps: emitted colour and transmittance, with the samples taken.
+    pub fn segment(&self, ray: &Ray, t_end: f32, jitter: f32) -> Composited {
+        let Some((r, o_idx, d_idx, t0, t1)) = self.enter(ray, t_end, jitter) else {
             return Composited {
                 transmit: 1.0,
                 ..Default::default()
@@ -125,9 +130,9 @@ impl<'a> Medium<'a> {
     }
 
     /// The volume's transmittance along the shadow ray `ray` (scene frame), from `t_min` to
-    /// `t_max`.
-    pub fn transmittance(&self, ray: &Ray) -> f32 {
-        match self.enter(ray, ray.t_max) {
+    /// `t_max`, its sample lattice offset by `jitter` steps.
+    pub fn transmittance(&self, ray: &Ray, jitter: f32) -> f32 {
+        match self.enter(ray, ray.t_max, jitter) {
             Some((r, o_idx, d_idx, t0, t1)) => {
                 self.marcher
                     .absorb(self.tf, o_idx, d_idx, [t0, t1], self.step, r.jitter)
@@ -139,7 +144,7 @@ impl<'a> Medium<'a> {
 
     /// `ray` in LPS with its jitter, its index form, and the part [t0, t1] (mm) of
     /// [t_min, t_end] inside the grid of voxel centres; `None` when it misses the volume.
-    fn enter(&self, ray: &Ray, t_end: f32) -> Option<(Ray3, Vec3, Vec3, f32, f32)> {
+    fn enter(&self, ray: &Ray, t_end: f32, jitter: f32) -> Option<(Ray3, Vec3, Vec3, f32, f32)> {
         let len = ray.dir.length();
         if len.is_nan() || len <= 0.0 {
             return None;
@@ -147,7 +152,7 @@ impl<'a> Medium<'a> {
         let r = Ray3 {
             o: scene_to_lps(ray.origin),
             d: scene_to_lps(ray.dir) / len,
-            jitter: ray_jitter(ray),
+            jitter,
         };
         let (o_idx, d_idx) = self.marcher.index_ray(r.o, r.d);
         let (g0, g1) = self.marcher.clip_ray(o_idx, d_idx)?;
@@ -155,18 +160,6 @@ impl<'a> Medium<'a> {
         let t1 = g1.min(t_end * len);
         (t0 < t1).then_some((r, o_idx, d_idx, t0, t1))
     }
-}
-
-/// The start offset in steps of a ray's lattice: a hash of its origin and direction bits, so
-/// that the samples of a pixel and the depths of a path sample differently (the GPU hashes the
-/// same bits).
-pub fn ray_jitter(ray: &Ray) -> f32 {
-    let b = |x: f32| x.to_bits();
-    crate::jitter(
-        b(ray.dir.x) ^ b(ray.dir.z).rotate_left(16) ^ b(ray.origin.y).rotate_left(8),
-        b(ray.dir.y) ^ b(ray.origin.x) ^ b(ray.origin.z).rotate_left(16),
-        7,
-    )
 }
 
 #[cfg(test)]

@@ -198,6 +198,34 @@ pub mod counter {
     pub const SLOTS: u32 = 8;
 }
 
+/// `MediumParams` in medium.wgsl (uniform), 128 bytes: a scene's volume for the render
+/// kernels' volume stages — the world → index transform, the transfer function's sizes and
+/// shading, the brick table's and light grids' sizes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct MediumParams {
+    pub to_index0: [f32; 3],
+    /// Step, mm (byte 12).
+    pub step: f32,
+    pub to_index1: [f32; 3],
+    pub light_count: u32,
+    pub to_index2: [f32; 3],
+    pub skip_empty: u32,
+    /// World position of voxel (0, 0, 0) (byte 48).
+    pub origin: [f32; 3],
+    pub opacity_count: u32,
+    pub dims: [u32; 3],
+    pub color_count: u32,
+    pub bricks: [u32; 3],
+    /// 1: volume samples lit through the light grids.
+    pub shadows: u32,
+    /// Ambient, diffuse, specular, specular power (byte 96).
+    pub shading: [f32; 4],
+    pub light_dims: [u32; 3],
+    /// Values per light grid (byte 124).
+    pub grid_points: u32,
+}
+
 /// `DvrParams` in dvr.wgsl (uniform), 288 bytes: camera in LPS, the world → index transform,
 /// the mode and its parameters, the shadow light, crop box and clip planes.
 #[repr(C)]
@@ -261,3 +289,4 @@ const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
 const _: () = assert!(std::mem::size_of::<DvrParams>() == 288);
+const _: () = assert!(std::mem::size_of::<MediumParams>() == 128);

@@ -12,16 +12,21 @@
 
 use std::time::Instant;
 
+use raystream_accel::{KdTree, Traversal};
+use raystream_cpu::medium::Medium;
 use raystream_cpu::{DepthStats, Image, RenderOptions, strata, surface_epsilon};
 use raystream_math::Vec3;
 use raystream_scene::Scene;
 
 use crate::layout::{
-    GpuLight, GpuMaterial, RayWork, RenderParams, ShadeTri, ShadowWork, Vertex, counter,
+    GpuLight, GpuMaterial, MediumParams, RayWork, RenderParams, ShadeTri, ShadowWork, Vertex,
+    counter,
 };
+use crate::volume::{GpuVolume, volume_core_wgsl};
 use crate::{GpuError, GpuHit, GpuTracer, Timer, WORKGROUP_SIZE, kdtree_wgsl, read_words};
 
 const RENDER_WGSL: &str = include_str!("kernels/render.wgsl");
+const MEDIUM_WGSL: &str = include_str!("kernels/medium.wgsl");
 const FILM_WGSL: &str = include_str!("kernels/film.wgsl");
 
 /// The WGSL source of the film-resolving kernel.
@@ -39,32 +44,33 @@ pub const FILM_SCALE: f32 = (1u32 << 24) as f32;
 /// The largest single contribution the film takes (keeps one rounded step inside a u32).
 pub const MAX_CONTRIBUTION: f32 = 255.0;
 
-/// The WGSL source of the render kernels: the kd-tree code, the render constants, the kernels.
+/// The WGSL source of the render kernels: the kd-tree code, the render constants, the kernels,
+/// and the volume stages (the volume core and `kernels/medium.wgsl`).
 pub fn render_wgsl() -> String {
     use counter::*;
     format!(
-        "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\n\n{COMMON_WGSL}\n{RENDER_WGSL}",
-        kdtree_wgsl()
+        "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\n\n{COMMON_WGSL}\n{RENDER_WGSL}\n{}\n{MEDIUM_WGSL}",
+        kdtree_wgsl(),
+        volume_core_wgsl()
     )
 }
 
-/// The kernels in the order one depth runs them, then `generate_camera_rays`, which runs once
-/// per wave before the first depth (last here so that the timestamps of a later depth, which
-/// does not run it, are one range from the start: resolve offsets must be 256-aligned).
-pub const STAGES: [&str; 8] = [
+/// The kernels: a wave's first depth runs `generate_camera_rays` and then what every depth
+/// runs, in this order; `march_volume` and `attenuate_shadows` only in scenes with a volume.
+pub const STAGES: [&str; 10] = [
+    "generate_camera_rays",
     "intersect_closest",
+    "march_volume",
     "handle_misses",
     "shade_hits",
     "prepare_shadows",
     "intersect_any",
+    "attenuate_shadows",
     "accumulate",
     "advance",
-    "generate_camera_rays",
 ];
-const GENERATE: usize = 7;
-/// Stages run by the first depth of a wave and by later ones.
-const FIRST_DEPTH: [usize; 8] = [GENERATE, 0, 1, 2, 3, 4, 5, 6];
-const LATER_DEPTH: [usize; 7] = [0, 1, 2, 3, 4, 5, 6];
+const GENERATE: usize = 0;
+const VOLUME_STAGES: [usize; 2] = [2, 7];
 /// Byte offsets of the two dispatch argument triples in the args buffer.
 const QUEUE_ARGS: u64 = 0;
 const SHADOW_ARGS: u64 = 12;
@@ -96,7 +102,10 @@ pub struct GpuRenderer<'a> {
     lights: wgpu::Buffer,
     params: wgpu::Buffer,
     layouts: [wgpu::BindGroupLayout; 4],
-    pipelines: Vec<wgpu::ComputePipeline>,
+    /// Per stage of [`STAGES`]; the volume stages only for scenes with a volume.
+    pipelines: Vec<Option<wgpu::ComputePipeline>>,
+    /// The scene's volume and its bind group (group 3 of the volume stages).
+    medium: Option<(GpuVolume, wgpu::BindGroup)>,
     film_layout: wgpu::BindGroupLayout,
     film_pipeline: wgpu::ComputePipeline,
     /// Samples per wave: at most [`MAX_WAVE`], less where the device's bindings need it.
@@ -134,16 +143,16 @@ const COUNTER_BYTES: u64 = counter::SLOTS as u64 * 4;
 const STAMP_BYTES: u64 = STAGES.len() as u64 * 16;
 
 impl<'a> GpuRenderer<'a> {
-    /// Uploads `scene`'s vertices, triangles, materials and lights, whose kd-tree `tracer`
-    /// holds, and builds the render pipelines.
-    pub fn new(tracer: &'a GpuTracer<'a>, scene: &'a Scene) -> Result<GpuRenderer<'a>, GpuError> {
+    /// Uploads `scene`'s vertices, triangles, materials and lights, whose kd-tree `tree` is
+    /// `tracer`'s, and builds the render pipelines. A scene's volume goes up as a texture
+    /// with the light grids that the CPU computes from `tree` (as `raystream_cpu::render`).
+    pub fn new(
+        tracer: &'a GpuTracer<'a>,
+        scene: &'a Scene,
+        tree: &KdTree,
+    ) -> Result<GpuRenderer<'a>, GpuError> {
         let ctx = tracer.ctx;
-        if scene.volume.is_some() {
-            return Err(ctx.err(
-                "scenes with a volume (meshes and CT together) render on the CPU only so far: use --device cpu",
-            ));
-        }
-        let need = 3 + 4 + 6 + 1;
+        let need = 3 + 4 + 6 + if scene.volume.is_some() { 4 } else { 1 };
         if ctx.limits.max_storage_buffers_per_shader_stage < need {
             return Err(ctx.err(format!(
                 "the render kernels bind {need} storage buffers, the adapter allows {}",
@@ -212,6 +221,7 @@ impl<'a> GpuRenderer<'a> {
             ctx.buffer_layout("queues", &[rw; 6]),
             ctx.buffer_layout("dispatch args", &[rw]),
         ];
+        let medium_layout = scene.volume.as_ref().map(|_| medium_layout(ctx));
         let module = ctx
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -230,21 +240,51 @@ impl<'a> GpuRenderer<'a> {
                 })
         };
         let (work, control) = (layout(3), layout(4));
+        // The volume stages see the volume as group 3.
+        let volume = medium_layout.as_ref().map(|m| {
+            ctx.device
+                .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("render volume stages"),
+                    bind_group_layouts: &[
+                        Some(&layouts[0]),
+                        Some(&layouts[1]),
+                        Some(&layouts[2]),
+                        Some(m),
+                    ],
+                    immediate_size: 0,
+                })
+        });
         let pipelines = STAGES
             .iter()
-            .map(|&entry| {
-                let writes_args = matches!(entry, "prepare_shadows" | "advance");
-                ctx.device
-                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                        label: Some(entry),
-                        layout: Some(if writes_args { &control } else { &work }),
-                        module: &module,
-                        entry_point: Some(entry),
-                        compilation_options: Default::default(),
-                        cache: None,
-                    })
+            .enumerate()
+            .map(|(k, &entry)| {
+                let layout = match entry {
+                    "prepare_shadows" | "advance" => &control,
+                    _ if VOLUME_STAGES.contains(&k) => volume.as_ref()?,
+                    _ => &work,
+                };
+                Some(
+                    ctx.device
+                        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                            label: Some(entry),
+                            layout: Some(layout),
+                            module: &module,
+                            entry_point: Some(entry),
+                            compilation_options: Default::default(),
+                            cache: None,
+                        }),
+                )
             })
             .collect();
+        let medium = match (&scene.volume, &medium_layout) {
+            (Some(v), Some(layout)) => {
+                let m = Medium::new(v, scene, tree, Traversal::Ropes);
+                let gpu = GpuVolume::new(ctx, &v.volume, &v.tf, m.marcher())?;
+                let group = medium_group(ctx, layout, &gpu, &m, v, scene.lights.len())?;
+                Some((gpu, group))
+            }
+            _ => None,
+        };
         let film_layout = ctx.buffer_layout("film", &[ro, rw]);
         let film_module = ctx
             .device
@@ -284,6 +324,7 @@ impl<'a> GpuRenderer<'a> {
             params,
             layouts,
             pipelines,
+            medium,
             film_layout,
             film_pipeline,
             frame: std::sync::Mutex::new(None),
@@ -428,24 +469,29 @@ impl<'a> GpuRenderer<'a> {
                     .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                         label: Some("depth"),
                     });
-                let order = if depth == 0 {
-                    &FIRST_DEPTH[..]
-                } else {
-                    &LATER_DEPTH[..]
-                };
-                for &k in order {
+                let order: Vec<usize> = (0..STAGES.len())
+                    .filter(|&k| k != GENERATE || depth == 0)
+                    .filter(|k| self.medium.is_some() || !VOLUME_STAGES.contains(k))
+                    .collect();
+                // Pass j writes timestamps 2j and 2j + 1.
+                for (j, &k) in order.iter().enumerate() {
                     let stage = STAGES[k];
                     let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                         label: Some(stage),
                         timestamp_writes: q
                             .resolve
                             .as_ref()
-                            .map(|t| t.writes(Some(2 * k as u32), Some(2 * k as u32 + 1))),
+                            .map(|t| t.writes(Some(2 * j as u32), Some(2 * j as u32 + 1))),
                     });
-                    pass.set_pipeline(&self.pipelines[k]);
+                    pass.set_pipeline(self.pipelines[k].as_ref().expect("a stage this scene runs"));
                     pass.set_bind_group(0, &tree_group, &[]);
                     pass.set_bind_group(1, &scene_group, &[]);
                     pass.set_bind_group(2, &work_group, &[]);
+                    if let Some((_, group)) = &self.medium
+                        && VOLUME_STAGES.contains(&k)
+                    {
+                        pass.set_bind_group(3, group, &[]);
+                    }
                     match stage {
                         "generate_camera_rays" => {
                             let [gx, gy, _] = ctx.dims(n);
@@ -455,7 +501,7 @@ impl<'a> GpuRenderer<'a> {
                             pass.set_bind_group(3, &args_group, &[]);
                             pass.dispatch_workgroups(1, 1, 1);
                         }
-                        "intersect_any" | "accumulate" => {
+                        "intersect_any" | "attenuate_shadows" | "accumulate" => {
                             pass.dispatch_workgroups_indirect(&q.args, SHADOW_ARGS)
                         }
                         _ => pass.dispatch_workgroups_indirect(&q.args, QUEUE_ARGS),
@@ -487,13 +533,10 @@ impl<'a> GpuRenderer<'a> {
                     let stamps: &[u64] = bytemuck::cast_slice(&words[counter::SLOTS as usize..]);
                     let period = ctx.queue.get_timestamp_period() as f64 * 1e-6;
                     let mut any = false;
-                    for (k, ms) in stage_ms.iter_mut().enumerate() {
-                        if k == GENERATE && depth > 0 {
-                            continue;
-                        }
-                        let ticks = stamps[2 * k + 1].wrapping_sub(stamps[2 * k]);
+                    for (j, &k) in order.iter().enumerate() {
+                        let ticks = stamps[2 * j + 1].wrapping_sub(stamps[2 * j]);
                         any |= ticks > 0;
-                        *ms += ticks as f64 * period;
+                        stage_ms[k] += ticks as f64 * period;
                     }
                     timed = any;
                 }
@@ -554,8 +597,9 @@ impl<'a> GpuRenderer<'a> {
         stats.kernel_gpu_ms = timed.then(|| {
             STAGES
                 .iter()
-                .copied()
-                .zip(stage_ms.iter().copied())
+                .enumerate()
+                .filter(|(k, _)| self.pipelines[*k].is_some())
+                .map(|(k, &name)| (name, stage_ms[k]))
                 .collect()
         });
         Ok((
@@ -598,4 +642,110 @@ impl<'a> GpuRenderer<'a> {
             resolve: ctx.timer(2 * STAGES.len() as u32),
         })
     }
+}
+
+/// Group 3 of the volume stages (medium.wgsl): binding 0 is left to the dispatch arguments of
+/// the control kernels.
+fn medium_layout(ctx: &crate::GpuContext) -> wgpu::BindGroupLayout {
+    let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty,
+        count: None,
+    };
+    let buffer = |ty| wgpu::BindingType::Buffer {
+        ty,
+        has_dynamic_offset: false,
+        min_binding_size: None,
+    };
+    let ro = wgpu::BufferBindingType::Storage { read_only: true };
+    ctx.device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("scene volume"),
+            entries: &[
+                entry(1, buffer(wgpu::BufferBindingType::Uniform)),
+                entry(
+                    2,
+                    wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D3,
+                        multisampled: false,
+                    },
+                ),
+                entry(
+                    3,
+                    wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                ),
+                entry(4, buffer(ro)),
+                entry(5, buffer(ro)),
+                entry(6, buffer(ro)),
+                entry(7, buffer(ro)),
+            ],
+        })
+}
+
+/// The volume stages' bind group: `m`'s parameters and light grids (one per light, back to
+/// back) with `gpu`'s texture, transfer function and bricks.
+fn medium_group(
+    ctx: &crate::GpuContext,
+    layout: &wgpu::BindGroupLayout,
+    gpu: &GpuVolume,
+    m: &Medium,
+    v: &raystream_scene::SceneVolume,
+    lights: usize,
+) -> Result<wgpu::BindGroup, GpuError> {
+    let ([r0, r1, r2], origin) = gpu.to_index;
+    let grid_dims = raystream_cpu::dvr::LightGrid::dims_for(v.volume.dims);
+    let grids: Vec<f32> = m
+        .light_grids()
+        .iter()
+        .flat_map(|g| g.values.iter().copied())
+        .collect();
+    let sh = v.tf.shading;
+    let params = MediumParams {
+        to_index0: r0.to_array(),
+        step: m.step,
+        to_index1: r1.to_array(),
+        light_count: lights as u32,
+        to_index2: r2.to_array(),
+        skip_empty: 1,
+        origin: origin.to_array(),
+        opacity_count: v.tf.opacity.len() as u32,
+        dims: v.volume.dims.map(|n| n as u32),
+        color_count: v.tf.color.len() as u32,
+        bricks: gpu.brick_dims,
+        shadows: v.shadows as u32,
+        shading: [sh.ambient, sh.diffuse, sh.specular, sh.power],
+        light_dims: grid_dims.map(|n| n as u32),
+        grid_points: grid_dims.iter().product::<usize>() as u32,
+    };
+    let none = wgpu::BufferUsages::empty();
+    // A binding may not be empty: one value stands in when the volume is unshadowed.
+    let grids = ctx.storage(
+        "light grids",
+        bytemuck::cast_slice(if grids.is_empty() { &[1.0f32] } else { &grids }),
+        none,
+    )?;
+    let params = wgpu::util::DeviceExt::create_buffer_init(
+        &ctx.device,
+        &wgpu::util::BufferInitDescriptor {
+            label: Some("scene volume params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        },
+    );
+    let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
+    Ok(ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("scene volume"),
+        layout,
+        entries: &[
+            entry(1, params.as_entire_binding()),
+            entry(2, wgpu::BindingResource::TextureView(&gpu.view)),
+            entry(3, wgpu::BindingResource::Sampler(&gpu.sampler)),
+            entry(4, gpu.opacity.as_entire_binding()),
+            entry(5, gpu.color.as_entire_binding()),
+            entry(6, gpu.bricks.as_entire_binding()),
+            entry(7, grids.as_entire_binding()),
+        ],
+    }))
 }

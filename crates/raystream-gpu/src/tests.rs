@@ -186,6 +186,27 @@ fn render_wgsl_structs_match_rust() {
             ("color", offset_of!(GpuLight, color)),
         ],
     );
+    check(
+        "MediumParams",
+        size_of::<MediumParams>(),
+        &[
+            ("to_index0", offset_of!(MediumParams, to_index0)),
+            ("step", offset_of!(MediumParams, step)),
+            ("to_index1", offset_of!(MediumParams, to_index1)),
+            ("light_count", offset_of!(MediumParams, light_count)),
+            ("to_index2", offset_of!(MediumParams, to_index2)),
+            ("skip_empty", offset_of!(MediumParams, skip_empty)),
+            ("origin", offset_of!(MediumParams, origin)),
+            ("opacity_count", offset_of!(MediumParams, opacity_count)),
+            ("dims", offset_of!(MediumParams, dims)),
+            ("color_count", offset_of!(MediumParams, color_count)),
+            ("bricks", offset_of!(MediumParams, bricks)),
+            ("shadows", offset_of!(MediumParams, shadows)),
+            ("shading", offset_of!(MediumParams, shading)),
+            ("light_dims", offset_of!(MediumParams, light_dims)),
+            ("grid_points", offset_of!(MediumParams, grid_points)),
+        ],
+    );
     let pad = offset_of!(RenderParams, pad);
     check(
         "RenderParams",
@@ -444,23 +465,35 @@ fn gpu_render_matches_cpu(
     opt: &raystream_cpu::RenderOptions,
     what: &str,
 ) {
+    let volume = scene.volume.is_some();
     let tree = KdTree::build(&scene.mesh, Builder::Sah);
     let mut cpu_depths = Vec::new();
     let cpu = raystream_cpu::render(scene, &tree, opt, |s| cpu_depths.push(s));
     let tracer = GpuTracer::new(ctx, &tree).unwrap();
-    let renderer = GpuRenderer::new(&tracer, scene).unwrap();
+    let renderer = GpuRenderer::new(&tracer, scene, &tree).unwrap();
     let (gpu, stats) = renderer.render(opt, |_| {}).unwrap();
     let (mean, over) = image_diff(&cpu, &gpu);
     eprintln!(
         "{what}: mean |diff| {mean:.4}/255, {:.4} % of pixels > 2/255",
         over * 100.0
     );
-    assert!(mean < 0.5, "{what}: mean absolute difference {mean}/255");
-    assert!(
-        over <= 0.001,
-        "{what}: {} % of pixels differ by more than 2/255",
-        over * 100.0
-    );
+    if volume {
+        // The volume's tolerance (#5): the GPU's hardware filtering of an f16 texture.
+        let (mean, mut worst) = cpu.srgb8_diff(&gpu);
+        worst.sort_unstable();
+        let p99 = worst[worst.len() * 99 / 100];
+        assert!(
+            mean < 1.0 && p99 <= 8,
+            "{what}: GPU vs CPU mean {mean}/255, p99 {p99}/255"
+        );
+    } else {
+        assert!(mean < 0.5, "{what}: mean absolute difference {mean}/255");
+        assert!(
+            over <= 0.001,
+            "{what}: {} % of pixels differ by more than 2/255",
+            over * 100.0
+        );
+    }
     assert!(
         cpu.pixels.iter().map(|p| p.length()).fold(0.0, f32::max) > 0.1,
         "{what}: the image is black"
@@ -476,7 +509,9 @@ fn gpu_render_matches_cpu(
     let (again, _) = renderer.render(opt, |_| {}).unwrap();
     assert_eq!(gpu, again, "{what}: a second GPU render differs");
     // Many small waves (each growing its queues depth by depth) give the very same film.
-    let small = GpuRenderer::new(&tracer, scene).unwrap().with_wave(999);
+    let small = GpuRenderer::new(&tracer, scene, &tree)
+        .unwrap()
+        .with_wave(999);
     let (waves, stats) = small.render(opt, |_| {}).unwrap();
     assert!(stats.waves > 1);
     assert_eq!(
@@ -505,6 +540,24 @@ fn gpu_render_matches_cpu_on_the_builtin_scene() {
             &format!("built-in scene, {spp} spp, depth {max_depth}"),
         );
     }
+}
+
+/// Meshes and a CT volume in one scene (examples/spine_rods.toml: rods in the abdomen CT, a
+/// mirror floor, two lights with light grids): the render kernels' volume stages against the
+/// CPU's.
+#[test]
+fn gpu_render_matches_cpu_with_a_volume_in_the_scene() {
+    let Some(ctx) = gpu() else { return };
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/spine_rods.toml");
+    let scene = raystream_scene::Scene::load(&path).unwrap();
+    let opt = raystream_cpu::RenderOptions {
+        width: 64,
+        height: 48,
+        spp: 1,
+        max_depth: 2,
+        traversal: Traversal::Ropes,
+    };
+    gpu_render_matches_cpu(&ctx, &scene, &opt, "spine rods");
 }
 
 #[test]

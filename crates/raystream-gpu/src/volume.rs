@@ -19,25 +19,111 @@ use crate::render::COMMON_WGSL;
 use crate::{GpuContext, GpuError, Timer, read_elapsed_ms, read_words};
 
 const DVR_WGSL: &str = include_str!("kernels/dvr.wgsl");
+const VOLUME_WGSL: &str = include_str!("kernels/volume.wgsl");
+
+/// The volume core (`kernels/volume.wgsl`) that the volume kernels and the render kernels'
+/// volume stages share, with its constants.
+pub(crate) fn volume_core_wgsl() -> String {
+    format!("const BRICK_SIZE: u32 = {BRICK}u;\n\n{VOLUME_WGSL}")
+}
 
 /// The WGSL source of the volume kernel.
 pub fn dvr_wgsl() -> String {
-    format!("const BRICK_SIZE: u32 = {BRICK}u;\n\n{COMMON_WGSL}\n{DVR_WGSL}")
+    format!("{}\n{COMMON_WGSL}\n{DVR_WGSL}", volume_core_wgsl())
 }
 
-/// A volume and its transfer function on the GPU.
+/// A volume and its transfer function on the GPU: the HU texture with its trilinear sampler,
+/// the transfer function's control points and the marcher's brick table. Direct volume
+/// rendering and the render kernels' volume stages bind the same.
+pub(crate) struct GpuVolume {
+    pub view: wgpu::TextureView,
+    pub sampler: wgpu::Sampler,
+    pub opacity: wgpu::Buffer,
+    pub color: wgpu::Buffer,
+    pub bricks: wgpu::Buffer,
+    pub brick_dims: [u32; 3],
+    /// World → continuous index (rows and origin), from the marcher.
+    pub to_index: ([Vec3; 3], Vec3),
+}
+
+impl GpuVolume {
+    /// Uploads `vol` (as R16Float), `tf`'s control points and `marcher`'s brick table.
+    pub(crate) fn new(
+        ctx: &GpuContext,
+        vol: &Volume,
+        tf: &TransferFunction,
+        marcher: &Marcher,
+    ) -> Result<GpuVolume, GpuError> {
+        let max = ctx.limits.max_texture_dimension_3d as usize;
+        if vol.dims.iter().any(|&n| n > max) {
+            return Err(ctx.err(format!(
+                "a {}x{}x{} volume exceeds the adapter's 3D texture limit of {max} per side",
+                vol.dims[0], vol.dims[1], vol.dims[2]
+            )));
+        }
+        let size = wgpu::Extent3d {
+            width: vol.dims[0] as u32,
+            height: vol.dims[1] as u32,
+            depth_or_array_layers: vol.dims[2] as u32,
+        };
+        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("CT volume (HU, f16)"),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::R16Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        let halves: Vec<u16> = vol
+            .data
+            .iter()
+            .map(|&v| half::f16::from_f32(v).to_bits())
+            .collect();
+        ctx.queue.write_texture(
+            texture.as_image_copy(),
+            bytemuck::cast_slice(&halves),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(2 * size.width),
+                rows_per_image: Some(size.height),
+            },
+            size,
+        );
+        let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("trilinear"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let opacity: Vec<[f32; 2]> = tf.opacity.iter().map(|p| [p.0, p.1]).collect();
+        let color: Vec<[f32; 4]> = tf
+            .color
+            .iter()
+            .map(|p| [p.0, p.1[0], p.1[1], p.1[2]])
+            .collect();
+        let none = wgpu::BufferUsages::empty();
+        let (brick_dims, visible) = marcher.brick_table();
+        let visible: Vec<u32> = visible.iter().map(|&v| v as u32).collect();
+        Ok(GpuVolume {
+            view: texture.create_view(&Default::default()),
+            sampler,
+            opacity: ctx.storage("opacity points", bytemuck::cast_slice(&opacity), none)?,
+            color: ctx.storage("color points", bytemuck::cast_slice(&color), none)?,
+            bricks: ctx.storage("brick table", bytemuck::cast_slice(&visible), none)?,
+            brick_dims: brick_dims.map(|b| b as u32),
+            to_index: marcher.world_to_index(),
+        })
+    }
+}
+
+/// A volume and its transfer function on the GPU, ready for direct volume rendering.
 pub struct GpuVolumeRenderer<'a> {
     ctx: &'a GpuContext,
     vol: &'a Volume,
     tf: &'a TransferFunction,
-    view: wgpu::TextureView,
-    sampler: wgpu::Sampler,
-    opacity: wgpu::Buffer,
-    color: wgpu::Buffer,
-    bricks: wgpu::Buffer,
-    brick_dims: [u32; 3],
-    /// World → continuous index (rows and origin), from the marcher.
-    to_index: ([Vec3; 3], Vec3),
+    gpu: GpuVolume,
     pipeline: wgpu::ComputePipeline,
     /// `--shadows`: the light grid's kernel and values.
     light_pipeline: wgpu::ComputePipeline,
@@ -74,64 +160,8 @@ impl<'a> GpuVolumeRenderer<'a> {
         tf: &'a TransferFunction,
     ) -> Result<GpuVolumeRenderer<'a>, GpuError> {
         let t0 = Instant::now();
-        let max = ctx.limits.max_texture_dimension_3d as usize;
-        if vol.dims.iter().any(|&n| n > max) {
-            return Err(ctx.err(format!(
-                "a {}x{}x{} volume exceeds the adapter's 3D texture limit of {max} per side",
-                vol.dims[0], vol.dims[1], vol.dims[2]
-            )));
-        }
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let size = wgpu::Extent3d {
-            width: vol.dims[0] as u32,
-            height: vol.dims[1] as u32,
-            depth_or_array_layers: vol.dims[2] as u32,
-        };
-        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("CT volume (HU, f16)"),
-            size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D3,
-            format: wgpu::TextureFormat::R16Float,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
-        let halves: Vec<u16> = vol
-            .data
-            .iter()
-            .map(|&v| half::f16::from_f32(v).to_bits())
-            .collect();
-        ctx.queue.write_texture(
-            texture.as_image_copy(),
-            bytemuck::cast_slice(&halves),
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(2 * size.width),
-                rows_per_image: Some(size.height),
-            },
-            size,
-        );
-        let view = texture.create_view(&Default::default());
-        let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("trilinear"),
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        });
-        let opacity: Vec<[f32; 2]> = tf.opacity.iter().map(|p| [p.0, p.1]).collect();
-        let color: Vec<[f32; 4]> = tf
-            .color
-            .iter()
-            .map(|p| [p.0, p.1[0], p.1[1], p.1[2]])
-            .collect();
-        let none = wgpu::BufferUsages::empty();
-        let opacity = ctx.storage("opacity points", bytemuck::cast_slice(&opacity), none)?;
-        let color = ctx.storage("color points", bytemuck::cast_slice(&color), none)?;
-        let marcher = Marcher::new(vol, Some(tf));
-        let (brick_dims, visible) = marcher.brick_table();
-        let visible: Vec<u32> = visible.iter().map(|&v| v as u32).collect();
-        let bricks = ctx.storage("brick table", bytemuck::cast_slice(&visible), none)?;
+        let gpu = GpuVolume::new(ctx, vol, tf, &Marcher::new(vol, Some(tf)))?;
         let module = ctx
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -154,13 +184,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             ctx,
             vol,
             tf,
-            view,
-            sampler,
-            opacity,
-            color,
-            bricks,
-            brick_dims: brick_dims.map(|b| b as u32),
-            to_index: marcher.world_to_index(),
+            gpu,
             pipeline,
             light_pipeline,
             light_values,
@@ -175,7 +199,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         let ctx = self.ctx;
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let ([r0, r1, r2], origin) = self.to_index;
+        let ([r0, r1, r2], origin) = self.gpu.to_index;
         let (w, l) = opt.window.unwrap_or(opt.mode.default_window());
         let s = self.tf.shading;
         let v3 = |v: Vec3| v.to_array();
@@ -205,7 +229,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             window_level: l,
             dims: self.vol.dims.map(|n| n as u32),
             skip_empty: (opt.skip_empty && opt.mode == DvrMode::Dvr) as u32,
-            bricks: self.brick_dims,
+            bricks: self.gpu.brick_dims,
             opacity_count: self.tf.opacity.len() as u32,
             background: v3(opt.background),
             color_count: self.tf.color.len() as u32,
@@ -251,11 +275,11 @@ impl<'a> GpuVolumeRenderer<'a> {
         // (6), and each pipeline's layout holds exactly the bindings its entry point uses.
         let resource = |b: u32| match b {
             0 => param_buf.as_entire_binding(),
-            1 => wgpu::BindingResource::TextureView(&self.view),
-            2 => wgpu::BindingResource::Sampler(&self.sampler),
-            3 => self.opacity.as_entire_binding(),
-            4 => self.color.as_entire_binding(),
-            5 => self.bricks.as_entire_binding(),
+            1 => wgpu::BindingResource::TextureView(&self.gpu.view),
+            2 => wgpu::BindingResource::Sampler(&self.gpu.sampler),
+            3 => self.gpu.opacity.as_entire_binding(),
+            4 => self.gpu.color.as_entire_binding(),
+            5 => self.gpu.bricks.as_entire_binding(),
             6 => pixels.as_entire_binding(),
             _ => self.light_values.as_entire_binding(),
         };

@@ -26,7 +26,14 @@
 //!
 //! [ground]                  # optional plane under the objects
 //! material = "floor"
+//!
+//! [volume]                  # optional CT volume among the meshes (see `SceneVolume`)
+//! path = "ct.nii.gz"        # relative to this file
+//! preset = "ct-bones"       # or tf = "tf.toml"
 //! ```
+//!
+//! With a volume, the scene frame is millimetres with x = the patient's left, y = superior,
+//! z = anterior; objects with `frame = "lps"` or `"ras"` are given in patient coordinates.
 
 mod camera;
 mod desc;

@@ -243,7 +243,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         Backend::Cpu => None,
     };
     let renderer = match &gpu {
-        Some(tracer) => Some(GpuRenderer::new(tracer, &scene)?),
+        Some(tracer) => Some(GpuRenderer::new(tracer, &scene, &tree)?),
         None => None,
     };
     let setup_ms = ms(t_setup.elapsed());
@@ -349,7 +349,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
         if let Some(v) = &scene.volume {
             eprintln!(
-                "raystream: the scene's volume ({}x{}x{} voxels{}): {} samples along the rays",
+                "raystream: the scene's volume ({}x{}x{} voxels{}){}",
                 v.volume.dims[0],
                 v.volume.dims[1],
                 v.volume.dims[2],
@@ -358,7 +358,11 @@ pub fn run(a: &RenderArgs) -> Result<()> {
                 } else {
                     ""
                 },
-                volume_samples
+                if gpu.is_some() {
+                    String::new()
+                } else {
+                    format!(": {volume_samples} samples along the rays")
+                }
             );
         }
         if let Some(b) = bones {

@@ -337,6 +337,23 @@ fn golden_meshes_and_volume_in_one_scene() {
 }
 
 #[test]
+fn gpu_matches_cpu_with_meshes_and_volume_in_one_scene() {
+    gpu_matches_cpu(
+        "spine_rods",
+        &[
+            &spine_rods(),
+            "--size",
+            "64x48",
+            "--spp",
+            "1",
+            "--max-depth",
+            "2",
+        ],
+        true,
+    );
+}
+
+#[test]
 fn gpu_volume_rendering_matches_cpu_cli() {
     gpu_matches_cpu(
         "dvr",

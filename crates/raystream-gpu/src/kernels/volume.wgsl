@@ -1,0 +1,262 @@
+// The volume core that direct volume rendering (dvr.wgsl) and volumes in mesh scenes
+// (medium.wgsl) share: raystream-cpu's dvr.rs Marcher, LightGrid and shading, on an R16Float 3D
+// texture of HU with hardware trilinear filtering.
+//
+// The including module declares the uniform `dp` with the fields used here (dims, bricks,
+// to_index0..2, origin, step, skip_empty, opacity_count, color_count, shading, light_dims),
+// the resources `volume`, `trilinear`, `opacity_points`, `color_points`, `brick_visible`,
+// `light_values`, and the lights of a sample: `sample_light_count()` and
+// `sample_light(i, p, at, d)`.
+
+const FULL_SHADING_GRADIENT: f32 = 100.0;
+const BRICK: u32 = BRICK_SIZE;
+
+// A light as a volume sample sees it: the unit direction toward it and the light arriving.
+struct SampleLight {
+    dir: vec3<f32>,
+    lit: vec3<f32>,
+}
+
+fn opacity_at(hu: f32) -> f32 {
+    let n = dp.opacity_count;
+    if hu < opacity_points[0].x {
+        return opacity_points[0].y;
+    }
+    for (var i = 1u; i < n; i++) {
+        let b = opacity_points[i];
+        if hu < b.x {
+            let a = opacity_points[i - 1u];
+            return a.y + (b.y - a.y) * (hu - a.x) / (b.x - a.x);
+        }
+    }
+    return opacity_points[n - 1u].y;
+}
+
+fn color_at(hu: f32) -> vec3<f32> {
+    let n = dp.color_count;
+    if hu < color_points[0].x {
+        return color_points[0].yzw;
+    }
+    for (var i = 1u; i < n; i++) {
+        let b = color_points[i];
+        if hu < b.x {
+            let a = color_points[i - 1u];
+            return a.yzw + (b.yzw - a.yzw) * (hu - a.x) / (b.x - a.x);
+        }
+    }
+    return color_points[n - 1u].yzw;
+}
+
+// HU at continuous index `p`, clamped to the grid of voxel centres.
+fn sample_at(p: vec3<f32>) -> f32 {
+    let d = vec3<f32>(dp.dims);
+    let q = clamp(p, vec3<f32>(0.0), d - 1.0);
+    return textureSampleLevel(volume, trilinear, (q + 0.5) / d, 0.0).r;
+}
+
+// The world gradient (HU per mm) at index `p`, as the CPU's Marcher::gradient.
+fn gradient_at(p: vec3<f32>) -> vec3<f32> {
+    let g = vec3<f32>(
+        sample_at(p + vec3<f32>(1.0, 0.0, 0.0)) - sample_at(p - vec3<f32>(1.0, 0.0, 0.0)),
+        sample_at(p + vec3<f32>(0.0, 1.0, 0.0)) - sample_at(p - vec3<f32>(0.0, 1.0, 0.0)),
+        sample_at(p + vec3<f32>(0.0, 0.0, 1.0)) - sample_at(p - vec3<f32>(0.0, 0.0, 1.0))) * 0.5;
+    return dp.to_index0 * g.x + dp.to_index1 * g.y + dp.to_index2 * g.z;
+}
+
+fn to_index(v: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(dot(dp.to_index0, v), dot(dp.to_index1, v), dot(dp.to_index2, v));
+}
+
+// (ambient + diffuse, specular) of two-sided Blinn-Phong toward light `l` seen along `d`.
+fn phong(n: vec3<f32>, d: vec3<f32>, l: vec3<f32>) -> vec2<f32> {
+    var h = -d;
+    let hl = length(l - d);
+    if hl > 0.0 {
+        h = (l - d) / hl;
+    }
+    let c = abs(dot(n, h));
+    var spec = 0.0;
+    if c > 0.0 {
+        spec = dp.shading.z * pow(c, dp.shading.w);
+    }
+    return vec2<f32>(dp.shading.x + dp.shading.y * abs(dot(n, l)), spec);
+}
+
+// [t0, t1] of the ray o_idx + t d_idx inside the grid of voxel centres; empty when t0 > t1.
+fn clip_grid(o_idx: vec3<f32>, d_idx: vec3<f32>) -> vec2<f32> {
+    var t0 = 0.0;
+    var t1 = bitcast<f32>(0x7f800000u);
+    for (var a = 0u; a < 3u; a++) {
+        let hi = f32(dp.dims[a] - 1u);
+        if d_idx[a] == 0.0 {
+            if o_idx[a] < 0.0 || o_idx[a] > hi {
+                return vec2<f32>(1.0, 0.0);
+            }
+            continue;
+        }
+        var n = (0.0 - o_idx[a]) / d_idx[a];
+        var f = (hi - o_idx[a]) / d_idx[a];
+        if n > f {
+            let t = n;
+            n = f;
+            f = t;
+        }
+        t0 = max(t0, n);
+        t1 = min(t1, f);
+    }
+    return vec2<f32>(t0, t1);
+}
+
+// Where index point `p` (ray parameter t, lattice t0 + (k + jit) step) lies in a transparent
+// brick: the first lattice index past it (at least k + 1); else k.
+fn skip_brick(p: vec3<f32>, t: f32, t0: f32, d_idx: vec3<f32>, jit: f32, k: u32) -> u32 {
+    let b = min(vec3<u32>(max(p, vec3<f32>(0.0))) / BRICK, dp.bricks - 1u);
+    if brick_visible[b.x + dp.bricks.x * (b.y + dp.bricks.y * b.z)] != 0u {
+        return k;
+    }
+    var t_exit = bitcast<f32>(0x7f800000u);
+    for (var a = 0u; a < 3u; a++) {
+        if d_idx[a] == 0.0 {
+            continue;
+        }
+        var bound = f32(b[a] * BRICK);
+        if d_idx[a] > 0.0 {
+            bound = f32((b[a] + 1u) * BRICK);
+        }
+        t_exit = min(t_exit, t + (bound - p[a]) / d_idx[a]);
+    }
+    return max(u32(max(ceil((t_exit - t0) / dp.step - jit), 0.0)), k + 1u);
+}
+
+// Transmittance over [t0, t1] (mm) of the ray o_idx + t d_idx on the lattice
+// t0 + (k + jit) step, skipping transparent bricks, as the CPU's Marcher::absorb.
+fn absorb(o_idx: vec3<f32>, d_idx: vec3<f32>, t0: f32, t1: f32, jit: f32) -> f32 {
+    let step = dp.step;
+    var tr = 1.0;
+    var k = 0u;
+    loop {
+        let start = t0 + f32(k) * step;
+        if start >= t1 {
+            break;
+        }
+        let t = min(t0 + (f32(k) + jit) * step, t1);
+        let q = o_idx + d_idx * t;
+        if dp.skip_empty != 0u {
+            let next = skip_brick(q, t, t0, d_idx, jit, k);
+            if next != k {
+                k = next;
+                continue;
+            }
+        }
+        let seg = min(step, t1 - start);
+        k += 1u;
+        let a = opacity_at(sample_at(q));
+        if a > 0.0 {
+            tr *= pow(1.0 - min(a, 1.0), seg);
+            if tr < 0.01 {
+                break;
+            }
+        }
+    }
+    return tr;
+}
+
+
+fn light_value(base: u32, i: u32, j: u32, k: u32) -> f32 {
+    let g = dp.light_dims;
+    return light_values[base + min(i, g.x - 1u) + g.x * (min(j, g.y - 1u) + g.y * min(k, g.z - 1u))];
+}
+
+// The light reaching index `p` through the grid whose values start at `base`: trilinear
+// between grid points, as LightGrid::at.
+fn light_at(p: vec3<f32>, base: u32) -> f32 {
+    let g = dp.light_dims;
+    var scale = vec3<f32>(0.0);
+    for (var a = 0u; a < 3u; a++) {
+        if dp.dims[a] > 1u && g[a] > 1u {
+            scale[a] = f32(g[a] - 1u) / f32(dp.dims[a] - 1u);
+        }
+    }
+    let q = clamp(p * scale, vec3<f32>(0.0), vec3<f32>(g - 1u));
+    let lo = min(vec3<u32>(q), max(g, vec3<u32>(2u)) - 2u);
+    let f = q - vec3<f32>(lo);
+    let x0 = mix(light_value(base, lo.x, lo.y, lo.z), light_value(base, lo.x + 1u, lo.y, lo.z), f.x);
+    let x1 = mix(light_value(base, lo.x, lo.y + 1u, lo.z), light_value(base, lo.x + 1u, lo.y + 1u, lo.z), f.x);
+    let x2 = mix(light_value(base, lo.x, lo.y, lo.z + 1u), light_value(base, lo.x + 1u, lo.y, lo.z + 1u), f.x);
+    let x3 = mix(light_value(base, lo.x, lo.y + 1u, lo.z + 1u), light_value(base, lo.x + 1u, lo.y + 1u, lo.z + 1u), f.x);
+    return mix(mix(x0, x1, f.y), mix(x2, x3, f.y), f.z);
+}
+
+// The light a sample of colour `base` at index `p` (world `at`, seen along unit `d`) sends
+// back, as the CPU's shade_sample: per light, two-sided Blinn-Phong on the gradient normal,
+// weighted by gradient magnitude, times the light arriving.
+fn shade_sample(base: vec3<f32>, p: vec3<f32>, at: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
+    let g = gradient_at(p);
+    let gm = length(g);
+    let amb = dp.shading.x;
+    let w = min(gm / FULL_SHADING_GRADIENT, 1.0);
+    var unshaded = vec3<f32>(amb);
+    var surface = vec3<f32>(amb);
+    var spec = vec3<f32>(0.0);
+    let n = sample_light_count();
+    for (var i = 0u; i < n; i++) {
+        let l = sample_light(i, p, at, d);
+        var ph = vec2<f32>(amb, 0.0);
+        if gm > 0.0 {
+            ph = phong(-g / gm, d, l.dir);
+        }
+        unshaded += (1.0 - amb) * l.lit;
+        surface += (ph.x - amb) * l.lit;
+        spec += ph.y * l.lit;
+    }
+    return base * ((1.0 - w) * unshaded + w * surface) + w * spec;
+}
+
+// What compositing a stretch of a ray gave: colour, transmittance, samples taken.
+struct Composited {
+    color: vec3<f32>,
+    transmit: f32,
+    taken: u32,
+}
+
+// Front-to-back emission-absorption over [t0, t1] (mm) of the world ray o + t d (unit d;
+// o_idx, d_idx its index form) on the lattice t0 + (k + jit) step, as the CPU's
+// Marcher::composite: opacity per mm corrected for the step, the last segment clipped,
+// transparent bricks skipped, early termination below 1 % transmittance.
+fn composite(o: vec3<f32>, d: vec3<f32>, o_idx: vec3<f32>, d_idx: vec3<f32>, t0: f32, t1: f32, jit: f32) -> Composited {
+    let step = dp.step;
+    var c = vec3<f32>(0.0);
+    var transmit = 1.0;
+    var taken = 0u;
+    var k = 0u;
+    loop {
+        let start = t0 + f32(k) * step;
+        if start >= t1 {
+            break;
+        }
+        let t = min(t0 + (f32(k) + jit) * step, t1);
+        let seg = min(step, t1 - start);
+        let p = o_idx + d_idx * t;
+        if dp.skip_empty != 0u {
+            let next = skip_brick(p, t, t0, d_idx, jit, k);
+            if next != k {
+                k = next;
+                continue;
+            }
+        }
+        k += 1u;
+        taken += 1u;
+        let v = sample_at(p);
+        var a = opacity_at(v);
+        if a <= 0.0 {
+            continue;
+        }
+        a = 1.0 - pow(1.0 - min(a, 1.0), seg);
+        c += transmit * a * shade_sample(color_at(v), p, o + d * t, d);
+        transmit *= 1.0 - a;
+        if transmit < 0.01 {
+            break;
+        }
+    }
+    return Composited(c, transmit, taken);
+}
