@@ -120,14 +120,9 @@ pub fn ray_sets(
     ]
 }
 
+/// The commit the binary was built from (see build.rs).
 fn git_commit() -> String {
-    std::process::Command::new("git")
-        .args(["rev-parse", "--short", "HEAD"])
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-        .unwrap_or_else(|| "unknown".into())
+    env!("RAYSTREAM_COMMIT").to_string()
 }
 
 /// The name under which a query's GPU kernel time is reported.

@@ -45,8 +45,10 @@ fn scene_to_lps(p: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(p.x, -p.z, p.y);
 }
 
-fn sample_light_count() -> u32 {
-    return dp.light_count;
+// A light as a volume sample sees it: the unit direction toward it and the light arriving.
+struct SampleLight {
+    dir: vec3<f32>,
+    lit: vec3<f32>,
 }
 
 // The scene's light i seen from a sample: toward its position, through its light grid.
@@ -63,6 +65,31 @@ fn sample_light(i: u32, p: vec3<f32>, at: vec3<f32>, d: vec3<f32>) -> SampleLigh
         lit *= light_at(p, i * dp.grid_points);
     }
     return SampleLight(l, lit);
+}
+
+// The light a sample of colour `base` at index `p` (world `at`, seen along unit `d`) sends
+// back, as the CPU's shade_sample: per light, two-sided Blinn-Phong on the gradient normal,
+// weighted by gradient magnitude, times the light arriving.
+fn shade_sample(base: vec3<f32>, p: vec3<f32>, at: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
+    let g = gradient_at(p);
+    let gm = length(g);
+    let amb = dp.shading.x;
+    let w = min(gm / FULL_SHADING_GRADIENT, 1.0);
+    var unshaded = vec3<f32>(amb);
+    var surface = vec3<f32>(amb);
+    var spec = vec3<f32>(0.0);
+    let n = dp.light_count;
+    for (var i = 0u; i < n; i++) {
+        let l = sample_light(i, p, at, d);
+        var ph = vec2<f32>(amb, 0.0);
+        if gm > 0.0 {
+            ph = phong(-g / gm, d, l.dir);
+        }
+        unshaded += (1.0 - amb) * l.lit;
+        surface += (ph.x - amb) * l.lit;
+        spec += ph.y * l.lit;
+    }
+    return base * ((1.0 - w) * unshaded + w * surface) + w * spec;
 }
 
 // A scene-frame ray in LPS (unit d, mm) and its part [t0, t1] inside the volume; empty when

@@ -5,17 +5,12 @@
 // The including module declares the uniform `dp` with the fields used here (dims, bricks,
 // to_index0..2, origin, step, skip_empty, opacity_count, color_count, shading, light_dims),
 // the resources `volume`, `trilinear`, `opacity_points`, `color_points`, `brick_visible`,
-// `light_values`, and the lights of a sample: `sample_light_count()` and
-// `sample_light(i, p, at, d)`.
+// `light_values`, and the shading of a sample, `shade_sample(base, p, at, d)`: the light a
+// sample of colour `base` at index `p` (world `at`, seen along unit `d`) sends back, as the
+// CPU's shade_sample for the module's lights.
 
 const FULL_SHADING_GRADIENT: f32 = 100.0;
 const BRICK: u32 = BRICK_SIZE;
-
-// A light as a volume sample sees it: the unit direction toward it and the light arriving.
-struct SampleLight {
-    dir: vec3<f32>,
-    lit: vec3<f32>,
-}
 
 fn opacity_at(hu: f32) -> f32 {
     let n = dp.opacity_count;
@@ -185,31 +180,6 @@ fn light_at(p: vec3<f32>, base: u32) -> f32 {
     let x2 = mix(light_value(base, lo.x, lo.y, lo.z + 1u), light_value(base, lo.x + 1u, lo.y, lo.z + 1u), f.x);
     let x3 = mix(light_value(base, lo.x, lo.y + 1u, lo.z + 1u), light_value(base, lo.x + 1u, lo.y + 1u, lo.z + 1u), f.x);
     return mix(mix(x0, x1, f.y), mix(x2, x3, f.y), f.z);
-}
-
-// The light a sample of colour `base` at index `p` (world `at`, seen along unit `d`) sends
-// back, as the CPU's shade_sample: per light, two-sided Blinn-Phong on the gradient normal,
-// weighted by gradient magnitude, times the light arriving.
-fn shade_sample(base: vec3<f32>, p: vec3<f32>, at: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
-    let g = gradient_at(p);
-    let gm = length(g);
-    let amb = dp.shading.x;
-    let w = min(gm / FULL_SHADING_GRADIENT, 1.0);
-    var unshaded = vec3<f32>(amb);
-    var surface = vec3<f32>(amb);
-    var spec = vec3<f32>(0.0);
-    let n = sample_light_count();
-    for (var i = 0u; i < n; i++) {
-        let l = sample_light(i, p, at, d);
-        var ph = vec2<f32>(amb, 0.0);
-        if gm > 0.0 {
-            ph = phong(-g / gm, d, l.dir);
-        }
-        unshaded += (1.0 - amb) * l.lit;
-        surface += (ph.x - amb) * l.lit;
-        spec += ph.y * l.lit;
-    }
-    return base * ((1.0 - w) * unshaded + w * surface) + w * spec;
 }
 
 // What compositing a stretch of a ray gave: colour, transmittance, samples taken.
