@@ -23,7 +23,7 @@ use raystream_accel::{Hit, KdTree, Traversal};
 use raystream_math::{Ray, Vec3};
 use raystream_scene::{Camera, Scene};
 
-pub use image_out::Image;
+pub use image_out::{Image, save_srgb8_png, srgb8_diff};
 use medium::Medium;
 
 #[derive(Clone, Copy, Debug)]

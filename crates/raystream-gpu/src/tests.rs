@@ -677,6 +677,20 @@ fn gpu_volume_rendering_matches_cpu() {
             mode.name(),
             preset.name()
         );
+        // The frame as a viewer gets it (sRGB converted on the GPU): the float frame's bytes,
+        // up to 1/255 where the GPU's pow rounds differently, and the same sample count.
+        let (rgb, packed) = gpu.render_srgb8(&opt, &cam).unwrap();
+        let want = img.to_srgb8();
+        assert_eq!(rgb.len(), want.len());
+        let off = rgb.iter().zip(&want).filter(|(a, b)| a != b).count();
+        assert!(
+            rgb.iter().zip(&want).all(|(a, b)| a.abs_diff(*b) <= 1) && off * 100 <= want.len(),
+            "{} {}{what}: the GPU's sRGB bytes differ from its float pixels' in {off} of {}",
+            mode.name(),
+            preset.name(),
+            want.len()
+        );
+        assert_eq!(packed.samples, times.samples, "{}{what}", mode.name());
         let (mean, mut worst) = cpu.srgb8_diff(&img);
         worst.sort_unstable();
         let p99 = worst[worst.len() * 99 / 100];
@@ -686,5 +700,36 @@ fn gpu_volume_rendering_matches_cpu() {
             mean < 1.0 && p99 <= 8,
             "{what}: GPU vs CPU mean {mean}/255, p99 {p99}/255"
         );
+    }
+}
+
+/// The GPU's sRGB frame packs 4 pixels in 3 words: an image whose pixel count is not a
+/// multiple of 4 keeps its last pixels, and matches the float frame's bytes.
+#[test]
+fn gpu_srgb8_frames_of_any_size() {
+    use raystream_cpu::dvr::{DvrOptions, volume_camera};
+    use raystream_volume::TfPreset;
+    let Some(ctx) = gpu() else { return };
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
+    let vol = raystream_io::load_volume(&path, None).unwrap();
+    let tf = TfPreset::CtBones.function();
+    let gpu = GpuVolumeRenderer::new(&ctx, &vol, &tf).unwrap();
+    for (w, h) in [(13, 7), (31, 9), (2, 1)] {
+        let opt = DvrOptions {
+            width: w,
+            height: h,
+            ..Default::default()
+        };
+        let cam = volume_camera(&vol, w as f32 / h as f32);
+        let (img, t) = gpu.render(&opt, &cam).unwrap();
+        let (rgb, t8) = gpu.render_srgb8(&opt, &cam).unwrap();
+        let want = img.to_srgb8();
+        assert_eq!(rgb.len(), want.len(), "{w}x{h}");
+        assert!(
+            rgb.iter().zip(&want).all(|(a, b)| a.abs_diff(*b) <= 1),
+            "{w}x{h}: {rgb:?} vs {want:?}"
+        );
+        assert_eq!(t8.samples, t.samples, "{w}x{h}");
     }
 }

@@ -127,6 +127,8 @@ pub struct GpuVolumeRenderer<'a> {
     pipeline: wgpu::ComputePipeline,
     /// `--shadows`: the light grid's kernel and values.
     light_pipeline: wgpu::ComputePipeline,
+    /// Float pixels → 8-bit sRGB and the summed sample count, for [`Self::render_srgb8`].
+    pack_pipeline: wgpu::ComputePipeline,
     light_values: wgpu::Buffer,
     light_dims: [u32; 3],
     /// The last frame's output buffers, kept for the next frame of the same size or smaller.
@@ -138,6 +140,10 @@ pub struct GpuVolumeRenderer<'a> {
 struct FrameBuffers {
     pixels: wgpu::Buffer,
     readback: wgpu::Buffer,
+    /// 8-bit sRGB (3 bytes a pixel, in words), then the sample count, and their mappable copy.
+    packed: wgpu::Buffer,
+    sum: wgpu::Buffer,
+    packed_read: wgpu::Buffer,
     timer: Option<Timer>,
 }
 
@@ -170,6 +176,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             });
         let pipeline = ctx.auto_pipeline(&module, "render_volume");
         let light_pipeline = ctx.auto_pipeline(&module, "light_grid");
+        let pack_pipeline = ctx.auto_pipeline(&module, "pack_srgb8");
         let light_dims = LightGrid::dims_for(vol.dims);
         let light_values = ctx.work_buffer(
             "light grid",
@@ -187,6 +194,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             gpu,
             pipeline,
             light_pipeline,
+            pack_pipeline,
             light_values,
             light_dims: light_dims.map(|n| n as u32),
             frame: Mutex::new(None),
@@ -196,6 +204,31 @@ impl<'a> GpuVolumeRenderer<'a> {
 
     /// Renders one frame with `cam` (the scene frame of `raystream_cpu::dvr::volume_camera`).
     pub fn render(&self, opt: &DvrOptions, cam: &Camera) -> Result<(Image, GpuDvrTimes), GpuError> {
+        match self.run(opt, cam, false)? {
+            (Pixels::Linear(image), times) => Ok((image, times)),
+            (Pixels::Srgb8(_), _) => unreachable!("asked for linear pixels"),
+        }
+    }
+
+    /// Renders one frame as a viewer shows it: 8-bit sRGB, 3 bytes a pixel (as
+    /// [`Image::to_srgb8`]), converted on the GPU so that a fifth of the bytes come back.
+    pub fn render_srgb8(
+        &self,
+        opt: &DvrOptions,
+        cam: &Camera,
+    ) -> Result<(Vec<u8>, GpuDvrTimes), GpuError> {
+        match self.run(opt, cam, true)? {
+            (Pixels::Srgb8(rgb), times) => Ok((rgb, times)),
+            (Pixels::Linear(_), _) => unreachable!("asked for sRGB pixels"),
+        }
+    }
+
+    fn run(
+        &self,
+        opt: &DvrOptions,
+        cam: &Camera,
+        srgb8: bool,
+    ) -> Result<(Pixels, GpuDvrTimes), GpuError> {
         let ctx = self.ctx;
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -252,6 +285,8 @@ impl<'a> GpuVolumeRenderer<'a> {
                 usage: wgpu::BufferUsages::UNIFORM,
             });
         let n = opt.width as u64 * opt.height as u64;
+        // 4 pixels in 3 words.
+        let packed_bytes = n.div_ceil(4) * 12;
         let mut frame = self.frame.lock().unwrap();
         if frame.as_ref().is_none_or(|f| f.pixels.size() < n * 16) {
             *frame = Some(FrameBuffers {
@@ -262,12 +297,27 @@ impl<'a> GpuVolumeRenderer<'a> {
                     usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 }),
+                packed: ctx.work_buffer(
+                    "sRGB pixels",
+                    packed_bytes,
+                    wgpu::BufferUsages::empty(),
+                )?,
+                sum: ctx.work_buffer("sample count", 8, wgpu::BufferUsages::empty())?,
+                packed_read: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("sRGB pixels readback"),
+                    size: packed_bytes + 8,
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                }),
                 timer: ctx.timer(2),
             });
         }
         let FrameBuffers {
             pixels,
             readback,
+            packed,
+            sum,
+            packed_read,
             timer,
         } = frame.as_ref().unwrap();
         let shadows = params.shadows != 0;
@@ -281,7 +331,9 @@ impl<'a> GpuVolumeRenderer<'a> {
             4 => self.gpu.color.as_entire_binding(),
             5 => self.gpu.bricks.as_entire_binding(),
             6 => pixels.as_entire_binding(),
-            _ => self.light_values.as_entire_binding(),
+            7 => self.light_values.as_entire_binding(),
+            8 => packed.as_entire_binding(),
+            _ => sum.as_entire_binding(),
         };
         let group = |label, pipeline: &wgpu::ComputePipeline, bindings: &[u32]| {
             let entries: Vec<_> = bindings
@@ -330,13 +382,31 @@ impl<'a> GpuVolumeRenderer<'a> {
             pass.set_bind_group(0, &bind, &[]);
             pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
         }
-        // One submission: the kernel, its timestamps and the copy of the pixels to read.
+        if srgb8 {
+            enc.clear_buffer(sum, 0, None);
+            let pack = group("pack sRGB", &self.pack_pipeline, &[0, 6, 8, 9]);
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("pack_srgb8"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pack_pipeline);
+            pass.set_bind_group(0, &pack, &[]);
+            let groups = (n as u32).div_ceil(4 * 64);
+            let gx = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
+            pass.dispatch_workgroups(gx, groups.div_ceil(gx), 1);
+        }
+        // One submission: the kernels, their timestamps and the copy of the pixels to read.
         if let Some(t) = timer {
             t.resolve(&mut enc);
         }
-        enc.copy_buffer_to_buffer(pixels, 0, readback, 0, n * 16);
+        if srgb8 {
+            enc.copy_buffer_to_buffer(packed, 0, packed_read, 0, packed_bytes);
+            enc.copy_buffer_to_buffer(sum, 0, packed_read, packed_bytes, 8);
+        } else {
+            enc.copy_buffer_to_buffer(pixels, 0, readback, 0, n * 16);
+        }
         ctx.queue.submit([enc.finish()]);
-        let words = read_words(ctx, readback)?;
+        let words = read_words(ctx, if srgb8 { packed_read } else { readback })?;
         let kernel_gpu_ms = match timer {
             Some(t) => read_elapsed_ms(ctx, t)?,
             None => None,
@@ -344,19 +414,30 @@ impl<'a> GpuVolumeRenderer<'a> {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
-        let floats: &[f32] = bytemuck::cast_slice(&words);
-        let px = &floats[..4 * n as usize];
-        let samples = px.chunks_exact(4).map(|p| p[3] as u64).sum();
-        let pixels = px
-            .chunks_exact(4)
-            .map(|p| Vec3::new(p[0], p[1], p[2]))
-            .collect();
+        let (out, samples) = if srgb8 {
+            let at = (packed_bytes / 4) as usize;
+            let samples = words[at] as u64 | (words[at + 1] as u64) << 32;
+            let bytes: &[u8] = bytemuck::cast_slice(&words);
+            (Pixels::Srgb8(bytes[..3 * n as usize].to_vec()), samples)
+        } else {
+            let floats: &[f32] = bytemuck::cast_slice(&words);
+            let px = &floats[..4 * n as usize];
+            let samples = px.chunks_exact(4).map(|p| p[3] as u64).sum();
+            let pixels = px
+                .chunks_exact(4)
+                .map(|p| Vec3::new(p[0], p[1], p[2]))
+                .collect();
+            (
+                Pixels::Linear(Image {
+                    width: opt.width,
+                    height: opt.height,
+                    pixels,
+                }),
+                samples,
+            )
+        };
         Ok((
-            Image {
-                width: opt.width,
-                height: opt.height,
-                pixels,
-            },
+            out,
             GpuDvrTimes {
                 frame_ms: t0.elapsed().as_secs_f64() * 1e3,
                 kernel_gpu_ms,
@@ -364,4 +445,11 @@ impl<'a> GpuVolumeRenderer<'a> {
             },
         ))
     }
+}
+
+/// A frame's pixels as they come back.
+enum Pixels {
+    Linear(Image),
+    /// 8-bit sRGB, 3 bytes a pixel.
+    Srgb8(Vec<u8>),
 }

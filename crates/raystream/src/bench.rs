@@ -379,9 +379,9 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                     ..opt
                 };
                 let cam = orbit_camera(&volume, 1.0, 0.0);
-                let gpu = renderer.frame(&small, &cam)?.image;
+                let gpu = renderer.frame(&small, &cam)?.rgb;
                 let (cpu, _) = render_volume(&volume, &tf, &small, &cam);
-                let (mean, _) = cpu.srgb8_diff(&gpu);
+                let (mean, _) = raystream_cpu::srgb8_diff(&cpu.to_srgb8(), &gpu);
                 if mean >= 1.0 {
                     bail!(
                         "{}: the GPU's frame differs from the CPU's by {mean:.2}/255 on average (a bug); no figures",

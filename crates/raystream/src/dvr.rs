@@ -4,7 +4,6 @@
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use raystream_cpu::Image;
 use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, render_volume};
 use raystream_gpu::GpuVolumeRenderer;
 use raystream_io::Volume;
@@ -98,11 +97,15 @@ pub enum Renderer<'a> {
     Gpu(Box<GpuVolumeRenderer<'a>>),
 }
 
-/// One frame and what it cost.
+/// One frame, as a viewer shows it, and what it cost.
 pub struct Frame {
-    pub image: Image,
-    /// Wall time, milliseconds: the whole render on the CPU; submission to pixels on the host
-    /// on the GPU.
+    /// 8-bit sRGB, 3 bytes a pixel (converted on the GPU there: a fifth of the float pixels'
+    /// bytes to read back).
+    pub rgb: Vec<u8>,
+    pub width: u32,
+    pub height: u32,
+    /// Wall time, milliseconds: the whole render on the CPU; submission to 8-bit pixels on the
+    /// host on the GPU.
     pub frame_ms: f64,
     /// The GPU kernel's own time (timestamp queries).
     pub kernel_ms: Option<f64>,
@@ -128,9 +131,11 @@ impl<'a> Renderer<'a> {
         let t = Instant::now();
         Ok(match self {
             Renderer::Gpu(g) => {
-                let (image, times) = g.render(opt, cam)?;
+                let (rgb, times) = g.render_srgb8(opt, cam)?;
                 Frame {
-                    image,
+                    rgb,
+                    width: opt.width,
+                    height: opt.height,
                     frame_ms: ms(t.elapsed()),
                     kernel_ms: times.kernel_gpu_ms,
                     samples: times.samples,
@@ -140,7 +145,9 @@ impl<'a> Renderer<'a> {
             Renderer::Cpu { volume, tf } => {
                 let (image, stats) = render_volume(volume, tf, opt, cam);
                 Frame {
-                    image,
+                    rgb: image.to_srgb8(),
+                    width: opt.width,
+                    height: opt.height,
                     frame_ms: ms(t.elapsed()),
                     kernel_ms: None,
                     samples: stats.samples,
@@ -148,6 +155,13 @@ impl<'a> Renderer<'a> {
                 }
             }
         })
+    }
+}
+
+impl Frame {
+    pub fn save_png(&self, path: &std::path::Path) -> Result<()> {
+        raystream_cpu::save_srgb8_png(path, &self.rgb, self.width, self.height)
+            .map_err(anyhow::Error::msg)
     }
 }
 

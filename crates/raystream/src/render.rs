@@ -86,10 +86,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     }
     pb.finish_and_clear();
     let frame = last.expect("at least one frame");
-    frame
-        .image
-        .save_png(&a.output)
-        .map_err(anyhow::Error::msg)?;
+    frame.save_png(&a.output)?;
     if !a.quiet {
         let gpu = frame.stats.is_none();
         let stats = frame
@@ -177,7 +174,7 @@ fn turntable(
         let f = renderer.frame(opt, &cam)?;
         frame_ms.push(f.frame_ms);
         let path = dir.join(format!("frame_{i:0digits$}.png", digits = digits.max(3)));
-        f.image.save_png(&path).map_err(anyhow::Error::msg)?;
+        f.save_png(&path)?;
         pb.inc(1);
     }
     pb.finish_and_clear();
