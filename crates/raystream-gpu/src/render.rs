@@ -31,7 +31,7 @@ const FILM_WGSL: &str = include_str!("kernels/film.wgsl");
 
 /// The WGSL source of the film-resolving kernel.
 pub fn film_wgsl() -> String {
-    format!("const WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\n{FILM_WGSL}")
+    format!("const WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\n{COMMON_WGSL}\n{FILM_WGSL}")
 }
 pub(crate) const COMMON_WGSL: &str = include_str!("kernels/common.wgsl");
 
@@ -108,6 +108,8 @@ pub struct GpuRenderer<'a> {
     medium: Option<(GpuVolume, wgpu::BindGroup)>,
     film_layout: wgpu::BindGroupLayout,
     film_pipeline: wgpu::ComputePipeline,
+    /// The film straight to 8-bit sRGB, for [`GpuRenderer::render_srgb8`].
+    srgb8_pipeline: wgpu::ComputePipeline,
     /// Samples per wave: at most [`MAX_WAVE`], less where the device's bindings need it.
     wave: u32,
     /// The last frame's work buffers and their (pixels, wave, lights), kept for the next frame:
@@ -134,6 +136,9 @@ struct Queues {
     /// The film resolved to f32 per channel (`film.wgsl`), and its mappable copy.
     image: wgpu::Buffer,
     image_read: wgpu::Buffer,
+    /// The film as 8-bit sRGB (3 bytes a pixel, in words), and its mappable copy.
+    packed: wgpu::Buffer,
+    packed_read: wgpu::Buffer,
     /// Counters, then 2 timestamps per stage.
     readback: wgpu::Buffer,
     resolve: Option<Timer>,
@@ -308,6 +313,7 @@ impl<'a> GpuRenderer<'a> {
                     compilation_options: Default::default(),
                     cache: None,
                 });
+        let srgb8_pipeline = ctx.auto_pipeline(&film_module, "resolve_film_srgb8");
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
@@ -327,6 +333,7 @@ impl<'a> GpuRenderer<'a> {
             medium,
             film_layout,
             film_pipeline,
+            srgb8_pipeline,
             frame: std::sync::Mutex::new(None),
         })
     }
@@ -368,6 +375,32 @@ impl<'a> GpuRenderer<'a> {
         opt: &RenderOptions,
         mut progress: impl FnMut(DepthStats),
     ) -> Result<(Image, GpuRenderStats), GpuError> {
+        match self.run(opt, &mut progress, false)? {
+            (Film::Linear(image), stats) => Ok((image, stats)),
+            (Film::Srgb8(_), _) => unreachable!("asked for linear pixels"),
+        }
+    }
+
+    /// Renders as [`Self::render`] and delivers the frame as a viewer shows it: 8-bit sRGB,
+    /// 3 bytes a pixel (as [`Image::to_srgb8`]), converted from the film on the GPU so that a
+    /// quarter of the resolved film's bytes come back.
+    pub fn render_srgb8(
+        &self,
+        opt: &RenderOptions,
+        mut progress: impl FnMut(DepthStats),
+    ) -> Result<(Vec<u8>, GpuRenderStats), GpuError> {
+        match self.run(opt, &mut progress, true)? {
+            (Film::Srgb8(rgb), stats) => Ok((rgb, stats)),
+            (Film::Linear(_), _) => unreachable!("asked for sRGB pixels"),
+        }
+    }
+
+    fn run(
+        &self,
+        opt: &RenderOptions,
+        progress: &mut dyn FnMut(DepthStats),
+        srgb8: bool,
+    ) -> Result<(Film, GpuRenderStats), GpuError> {
         let ctx = self.tracer.ctx;
         let scene = self.scene;
         let t0 = Instant::now();
@@ -560,7 +593,7 @@ impl<'a> GpuRenderer<'a> {
             base += n as u64;
         }
         let film_t = Instant::now();
-        let film_group = ctx.bind_buffers("film", &self.film_layout, &[&q.film, &q.image]);
+        let scale = 1.0 / (FILM_SCALE as f64 * opt.spp as f64);
         let mut enc = ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -571,26 +604,78 @@ impl<'a> GpuRenderer<'a> {
                 label: Some("resolve_film"),
                 timestamp_writes: None,
             });
-            pass.set_pipeline(&self.film_pipeline);
-            pass.set_bind_group(0, &film_group, &[]);
-            let [gx, gy, _] = ctx.dims(pixels as u32);
-            pass.dispatch_workgroups(gx, gy, 1);
+            if srgb8 {
+                let pack = wgpu::util::DeviceExt::create_buffer_init(
+                    &ctx.device,
+                    &wgpu::util::BufferInitDescriptor {
+                        label: Some("pack params"),
+                        contents: bytemuck::cast_slice(&[
+                            (scale as f32).to_bits(),
+                            pixels as u32,
+                            0,
+                            0,
+                        ]),
+                        usage: wgpu::BufferUsages::UNIFORM,
+                    },
+                );
+                let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("film to sRGB"),
+                    layout: &self.srgb8_pipeline.get_bind_group_layout(0),
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: q.film.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: q.packed.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 3,
+                            resource: pack.as_entire_binding(),
+                        },
+                    ],
+                });
+                pass.set_pipeline(&self.srgb8_pipeline);
+                pass.set_bind_group(0, &group, &[]);
+                let [gx, gy, _] = ctx.dims(pixels.div_ceil(4) as u32);
+                pass.dispatch_workgroups(gx, gy, 1);
+            } else {
+                let group = ctx.bind_buffers("film", &self.film_layout, &[&q.film, &q.image]);
+                pass.set_pipeline(&self.film_pipeline);
+                pass.set_bind_group(0, &group, &[]);
+                let [gx, gy, _] = ctx.dims(pixels as u32);
+                pass.dispatch_workgroups(gx, gy, 1);
+            }
         }
-        enc.copy_buffer_to_buffer(&q.image, 0, &q.image_read, 0, pixels * 12);
+        let packed_bytes = pixels.div_ceil(4) * 12;
+        if srgb8 {
+            enc.copy_buffer_to_buffer(&q.packed, 0, &q.packed_read, 0, packed_bytes);
+        } else {
+            enc.copy_buffer_to_buffer(&q.image, 0, &q.image_read, 0, pixels * 12);
+        }
         ctx.queue.submit([enc.finish()]);
-        let words = read_words(ctx, &q.image_read)?;
+        let words = read_words(ctx, if srgb8 { &q.packed_read } else { &q.image_read })?;
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
-        let scale = 1.0 / (FILM_SCALE as f64 * opt.spp as f64);
-        let sums: &[f32] = bytemuck::cast_slice(&words);
-        let pixels = sums[..3 * pixels as usize]
-            .chunks_exact(3)
-            .map(|p| {
-                let ch = |c: usize| (p[c] as f64 * scale) as f32;
-                Vec3::new(ch(0), ch(1), ch(2))
+        let film = if srgb8 {
+            let bytes: &[u8] = bytemuck::cast_slice(&words);
+            Film::Srgb8(bytes[..3 * pixels as usize].to_vec())
+        } else {
+            let sums: &[f32] = bytemuck::cast_slice(&words);
+            Film::Linear(Image {
+                width: opt.width,
+                height: opt.height,
+                pixels: sums[..3 * pixels as usize]
+                    .chunks_exact(3)
+                    .map(|p| {
+                        let ch = |c: usize| (p[c] as f64 * scale) as f32;
+                        Vec3::new(ch(0), ch(1), ch(2))
+                    })
+                    .collect(),
             })
-            .collect();
+        };
         *self.frame.lock().unwrap() = Some((key, q));
         stats.film_ms = film_t.elapsed().as_secs_f64() * 1e3;
         stats.render_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -602,14 +687,7 @@ impl<'a> GpuRenderer<'a> {
                 .map(|(k, &name)| (name, stage_ms[k]))
                 .collect()
         });
-        Ok((
-            Image {
-                width: opt.width,
-                height: opt.height,
-                pixels,
-            },
-            stats,
-        ))
+        Ok((film, stats))
     }
 
     fn queues(&self, pixels: u64, wave: u64, lights: u64) -> Result<Queues, GpuError> {
@@ -627,6 +705,13 @@ impl<'a> GpuRenderer<'a> {
             shadows: ctx.work_buffer("shadow queue", wave * lights.max(1) * ray_bytes, none)?,
             film: ctx.work_buffer("film", pixels * 24, none)?,
             image: ctx.work_buffer("resolved film", pixels * 12, none)?,
+            packed: ctx.work_buffer("sRGB film", pixels.div_ceil(4) * 12, none)?,
+            packed_read: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("sRGB film readback"),
+                size: (pixels.div_ceil(4) * 12).max(64),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
             image_read: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("resolved film readback"),
                 size: (pixels * 12).max(64),
@@ -748,4 +833,11 @@ fn medium_group(
             entry(7, grids.as_entire_binding()),
         ],
     }))
+}
+
+/// A frame's pixels as they come back.
+enum Film {
+    Linear(Image),
+    /// 8-bit sRGB, 3 bytes a pixel.
+    Srgb8(Vec<u8>),
 }

@@ -508,6 +508,17 @@ fn gpu_render_matches_cpu(
     }
     let (again, _) = renderer.render(opt, |_| {}).unwrap();
     assert_eq!(gpu, again, "{what}: a second GPU render differs");
+    // The frame as a viewer gets it (the film to sRGB on the GPU): the float frame's bytes, up
+    // to 1/255 where f32 scaling and the GPU's pow round differently.
+    let (rgb, _) = renderer.render_srgb8(opt, |_| {}).unwrap();
+    let want = gpu.to_srgb8();
+    assert_eq!(rgb.len(), want.len(), "{what}");
+    let off = rgb.iter().zip(&want).filter(|(a, b)| a != b).count();
+    assert!(
+        rgb.iter().zip(&want).all(|(a, b)| a.abs_diff(*b) <= 1) && off * 100 <= want.len(),
+        "{what}: the GPU's sRGB film differs from its float film in {off} of {} bytes",
+        want.len()
+    );
     // Many small waves (each growing its queues depth by depth) give the very same film.
     let small = GpuRenderer::new(&tracer, scene, &tree)
         .unwrap()

@@ -275,14 +275,16 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             bar.inc(1);
         };
         let t1 = Instant::now();
+        // A frame is 8-bit sRGB pixels on the host, as a viewer shows them (the GPU converts
+        // its film itself).
         let img = match &renderer {
             Some(r) => {
-                let (img, stats) = r.render(&opt, &mut on_depth)?;
+                let (rgb, stats) = r.render_srgb8(&opt, &mut on_depth)?;
                 kernel_ms = stats.kernel_gpu_ms;
                 split = Some((stats.render_ms, stats.wait_ms, stats.film_ms));
-                img
+                rgb
             }
-            None => render(&scene, &tree, &opt, &mut on_depth),
+            None => render(&scene, &tree, &opt, &mut on_depth).to_srgb8(),
         };
         frame_ms.push(ms(t1.elapsed()));
         // Depths that ended early leave the bar short: count them as done.
@@ -294,7 +296,8 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     let image = image.expect("at least one frame");
-    image.save_png(&a.output).map_err(anyhow::Error::msg)?;
+    raystream_cpu::save_srgb8_png(&a.output, &image, opt.width, opt.height)
+        .map_err(anyhow::Error::msg)?;
     if !a.quiet {
         let median = median_of(&mut frame_ms);
         eprintln!(
@@ -340,7 +343,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
         if let Some((all, wait, film)) = split {
             eprintln!(
-                "raystream: the last frame's {all:.1} ms: {wait:.1} waiting on depth submissions (kernels and round trips), {film:.1} reading the film back, {:.1} on the host",
+                "raystream: the last frame's {all:.1} ms: {wait:.1} waiting on depth submissions (kernels and round trips), {film:.1} turning the film into 8-bit sRGB and reading it back, {:.1} on the host",
                 all - wait - film
             );
         }

@@ -10,3 +10,13 @@ fn jitter(p: u32, s: u32, k: u32) -> f32 {
     x ^= x >> 16u;
     return f32(x >> 8u) / 16777216.0;
 }
+
+// Linear [0, 1] → 8-bit sRGB, as raystream-cpu's Image::to_srgb8.
+fn srgb8(x: f32) -> u32 {
+    let c = clamp(x, 0.0, 1.0);
+    var s = 12.92 * c;
+    if c > 0.0031308 {
+        s = 1.055 * pow(c, 1.0 / 2.4) - 0.055;
+    }
+    return u32(s * 255.0 + 0.5);
+}

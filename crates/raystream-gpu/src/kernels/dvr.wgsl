@@ -255,15 +255,6 @@ fn render_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
 @group(0) @binding(9) var<storage, read_write> sample_sum: array<atomic<u32>, 2>;
 var<workgroup> group_samples: atomic<u32>;
 
-fn srgb8(x: f32) -> u32 {
-    let c = clamp(x, 0.0, 1.0);
-    var s = 12.92 * c;
-    if c > 0.0031308 {
-        s = 1.055 * pow(c, 1.0 / 2.4) - 0.055;
-    }
-    return u32(s * 255.0 + 0.5);
-}
-
 // One thread per 4 pixels: their 12 bytes are 3 words.
 @compute @workgroup_size(64)
 fn pack_srgb8(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) li: u32, @builtin(num_workgroups) groups: vec3<u32>) {
