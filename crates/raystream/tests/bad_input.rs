@@ -90,6 +90,32 @@ fn bad_scene_file() {
     assert_input_error(&["render", &f], "mat.toml", "reflectivity");
 }
 
+/// A scene's volume: a truncated CT names the CT file; an unknown preset names the scene.
+#[test]
+fn bad_volume_in_a_scene() {
+    let ct = std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("assets/abdomen_pelvis_ct_totalseg.nii.gz"),
+    )
+    .unwrap();
+    write("cut_ct.nii.gz", &ct[..ct.len() / 2]);
+    let f = write(
+        "cut_ct.toml",
+        b"[volume]\npath = \"cut_ct.nii.gz\"\n[[objects]]\nshape = \"sphere\"\n",
+    );
+    let out = tmp("x.png");
+    assert_input_error(
+        &["render", &f, "-o", &out.to_string_lossy()],
+        "cut_ct.nii.gz",
+        "NIfTI",
+    );
+    let f = write(
+        "preset.toml",
+        b"[volume]\npath = \"cut_ct.nii.gz\"\npreset = \"ct-teeth\"\n[[objects]]\nshape = \"sphere\"\n",
+    );
+    assert_input_error(&["render", &f], "preset.toml", "unknown preset 'ct-teeth'");
+}
+
 /// `render --device gpu` errors are clear: no matching adapter (naming what exists), and the
 /// stack traversal, which only the CPU has.
 #[test]
