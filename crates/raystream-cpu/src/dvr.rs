@@ -100,11 +100,33 @@ impl Default for DvrOptions {
 impl DvrOptions {
     /// The step in mm: `step_mm`, or half the smallest voxel spacing (never below 1/1000 of it).
     pub fn step_for(&self, vol: &Volume) -> f32 {
-        let min_spacing = vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min) as f32;
-        self.step_mm
-            .unwrap_or(0.5 * min_spacing)
-            .max(1e-3 * min_spacing)
+        step_for(self.step_mm, vol)
     }
+
+    /// The step of the light grid's shadow rays ([`shadow_step_for`]).
+    pub fn shadow_step_for(&self, vol: &Volume) -> f32 {
+        shadow_step_for(self.step_mm, vol)
+    }
+}
+
+/// The smallest voxel spacing, mm.
+fn min_spacing(vol: &Volume) -> f32 {
+    vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min) as f32
+}
+
+/// The march's step in mm: `step_mm`, or half the smallest voxel spacing (never below 1/1000
+/// of it).
+pub fn step_for(step_mm: Option<f32>, vol: &Volume) -> f32 {
+    let s = min_spacing(vol);
+    step_mm.unwrap_or(0.5 * s).max(1e-3 * s)
+}
+
+/// The step of the light grids' shadow rays: the march's step, but at least one voxel (the
+/// smallest spacing). The grid points lie two or more voxels apart, so the light field they
+/// sample is already smoother than the data, and opacity correction keeps the transmittance
+/// independent of the step: on an H100 this halved the shadow samples of the 512³ benchmark.
+pub fn shadow_step_for(step_mm: Option<f32>, vol: &Volume) -> f32 {
+    step_for(step_mm, vol).max(min_spacing(vol))
 }
 
 /// What a render did.
@@ -650,7 +672,7 @@ pub fn render_volume(
     let step = opt.step_for(vol);
     let win = opt.window.unwrap_or(opt.mode.default_window());
     let light = (opt.shadows && opt.mode == DvrMode::Dvr).then(|| key_light(cam));
-    let grid = light.map(|l| LightGrid::new(&marcher, tf, l, step));
+    let grid = light.map(|l| LightGrid::new(&marcher, tf, l, opt.shadow_step_for(vol)));
     let rays: Vec<Marched> = (0..opt.width * opt.height)
         .into_par_iter()
         .with_min_len(64)
@@ -1083,6 +1105,16 @@ mod tests {
         assert!(t < 0.02, "behind the wall: {t}");
         let (t, _) = m.transmittance(&tf, Vec3::new(25.0, 20.0, 20.0), Vec3::X, 0.5, 0.5);
         assert_eq!(t, 1.0, "in front of the wall");
+    }
+
+    /// Shadow rays of the light grid step at least one voxel; the march keeps its own step.
+    #[test]
+    fn shadow_step_is_at_least_a_voxel() {
+        let vol = volume([4, 4, 4], [0.6, 0.8, 3.0], |_, _, _| 0.0);
+        assert_eq!(step_for(None, &vol), 0.3);
+        assert_eq!(shadow_step_for(None, &vol), 0.6);
+        assert_eq!(shadow_step_for(Some(0.2), &vol), 0.6);
+        assert_eq!(shadow_step_for(Some(1.5), &vol), 1.5);
     }
 
     /// The light grid holds each grid point's shadow ray exactly, and between grid points

@@ -46,16 +46,8 @@ impl<'a> Medium<'a> {
         traversal: Traversal,
     ) -> Medium<'a> {
         let marcher = Marcher::new(&v.volume, Some(&v.tf));
-        let min_spacing = v
-            .volume
-            .spacing
-            .iter()
-            .cloned()
-            .fold(f64::INFINITY, f64::min) as f32;
-        let step = v
-            .step_mm
-            .unwrap_or(0.5 * min_spacing)
-            .max(1e-3 * min_spacing);
+        let step = crate::dvr::step_for(v.step_mm, &v.volume);
+        let shadow_step = crate::dvr::shadow_step_for(v.step_mm, &v.volume);
         let lights: Vec<(Vec3, Vec3)> = scene
             .lights
             .iter()
@@ -65,7 +57,7 @@ impl<'a> Medium<'a> {
             lights
                 .iter()
                 .map(|&(at, _)| {
-                    LightGrid::toward_point(&marcher, &v.tf, at, step, |p, light| {
+                    LightGrid::toward_point(&marcher, &v.tf, at, shadow_step, |p, light| {
                         let ray =
                             Ray::new(lps_to_scene(p), lps_to_scene(light - p), 0.0, 1.0 - 1e-4);
                         tree.intersect_any(&ray, traversal).is_some()

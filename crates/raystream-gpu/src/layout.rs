@@ -275,7 +275,8 @@ pub struct DvrParams {
     pub planes: [[f32; 4]; 2],
     /// Light grid points per axis (byte 272), as `raystream_cpu::dvr::LightGrid`.
     pub light_dims: [u32; 3],
-    pub _pad: u32,
+    /// Step of the light grid's shadow rays, mm (byte 284).
+    pub shadow_step: f32,
 }
 
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);

@@ -624,7 +624,7 @@ fn dvr_wgsl_params_match_rust() {
         ("plane_count", offset_of!(DvrParams, plane_count)),
         ("planes", offset_of!(DvrParams, planes)),
         ("light_dims", offset_of!(DvrParams, light_dims)),
-        ("pad0", offset_of!(DvrParams, _pad)),
+        ("shadow_step", offset_of!(DvrParams, shadow_step)),
     ];
     check_struct(&module, "DvrParams", size_of::<DvrParams>(), &names);
 }

@@ -275,7 +275,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             plane_count: planes.len() as u32,
             planes: [0, 1].map(|i| planes.get(i).map_or([0.0; 4], |(n, c)| [n.x, n.y, n.z, *c])),
             light_dims: self.light_dims,
-            _pad: 0,
+            shadow_step: opt.shadow_step_for(self.vol),
         };
         let param_buf = ctx
             .device

@@ -42,7 +42,8 @@ struct DvrParams {
     planes: array<vec4<f32>, 2>,
     // Light grid points per axis (raystream_cpu::dvr::LightGrid).
     light_dims: vec3<u32>,
-    pad0: u32,
+    // Step of the light grid's shadow rays, mm (DvrOptions::shadow_step_for).
+    shadow_step: f32,
 }
 
 // (HU, opacity per mm) and (HU, r, g, b) control points.
@@ -124,7 +125,8 @@ fn light_grid(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
         grid_position(j.y, dp.dims.y, g.y),
         grid_position(j.z, dp.dims.z, g.z));
     let l_idx = to_index(dp.light);
-    light_values[i] = absorb(p, l_idx, dp.step, clip_grid(p, l_idx).y, 0.5);
+    let s = dp.shadow_step;
+    light_values[i] = absorb(p, l_idx, s, clip_grid(p, l_idx).y, s, 0.5);
 }
 
 // dvr mode's shading (the CPU's shade_sample with one white light): the key light through

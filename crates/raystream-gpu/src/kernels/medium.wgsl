@@ -149,5 +149,5 @@ fn attenuate_shadows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num
     if !(e.t0 < e.t1) {
         return;
     }
-    shadows[i].radiance = s.radiance * absorb(e.o_idx, e.d_idx, e.t0, e.t1, jitter(s.pixel, 0u, 7u));
+    shadows[i].radiance = s.radiance * absorb(e.o_idx, e.d_idx, e.t0, e.t1, dp.step, jitter(s.pixel, 0u, 7u));
 }

@@ -104,7 +104,7 @@ fn clip_grid(o_idx: vec3<f32>, d_idx: vec3<f32>) -> vec2<f32> {
 
 // Where index point `p` (ray parameter t, lattice t0 + (k + jit) step) lies in a transparent
 // brick: the first lattice index past it (at least k + 1); else k.
-fn skip_brick(p: vec3<f32>, t: f32, t0: f32, d_idx: vec3<f32>, jit: f32, k: u32) -> u32 {
+fn skip_brick(p: vec3<f32>, t: f32, t0: f32, d_idx: vec3<f32>, step: f32, jit: f32, k: u32) -> u32 {
     let b = min(vec3<u32>(max(p, vec3<f32>(0.0))) / BRICK, dp.bricks - 1u);
     if brick_visible[b.x + dp.bricks.x * (b.y + dp.bricks.y * b.z)] != 0u {
         return k;
@@ -120,13 +120,12 @@ fn skip_brick(p: vec3<f32>, t: f32, t0: f32, d_idx: vec3<f32>, jit: f32, k: u32)
         }
         t_exit = min(t_exit, t + (bound - p[a]) / d_idx[a]);
     }
-    return max(u32(max(ceil((t_exit - t0) / dp.step - jit), 0.0)), k + 1u);
+    return max(u32(max(ceil((t_exit - t0) / step - jit), 0.0)), k + 1u);
 }
 
 // Transmittance over [t0, t1] (mm) of the ray o_idx + t d_idx on the lattice
 // t0 + (k + jit) step, skipping transparent bricks, as the CPU's Marcher::absorb.
-fn absorb(o_idx: vec3<f32>, d_idx: vec3<f32>, t0: f32, t1: f32, jit: f32) -> f32 {
-    let step = dp.step;
+fn absorb(o_idx: vec3<f32>, d_idx: vec3<f32>, t0: f32, t1: f32, step: f32, jit: f32) -> f32 {
     var tr = 1.0;
     var k = 0u;
     loop {
@@ -137,7 +136,7 @@ fn absorb(o_idx: vec3<f32>, d_idx: vec3<f32>, t0: f32, t1: f32, jit: f32) -> f32
         let t = min(t0 + (f32(k) + jit) * step, t1);
         let q = o_idx + d_idx * t;
         if dp.skip_empty != 0u {
-            let next = skip_brick(q, t, t0, d_idx, jit, k);
+            let next = skip_brick(q, t, t0, d_idx, step, jit, k);
             if next != k {
                 k = next;
                 continue;
@@ -208,7 +207,7 @@ fn composite(o: vec3<f32>, d: vec3<f32>, o_idx: vec3<f32>, d_idx: vec3<f32>, t0:
         let seg = min(step, t1 - start);
         let p = o_idx + d_idx * t;
         if dp.skip_empty != 0u {
-            let next = skip_brick(p, t, t0, d_idx, jit, k);
+            let next = skip_brick(p, t, t0, d_idx, step, jit, k);
             if next != k {
                 k = next;
                 continue;
