@@ -214,22 +214,13 @@ impl<'a> Marcher<'a> {
         (self.bricks, &self.visible)
     }
 
-    /// A ray (LPS, unit `d`) in index space: origin, and index units per mm along it.
-    pub fn index_ray(&self, o: Vec3, d: Vec3) -> (Vec3, Vec3) {
-        (self.index_of(o), self.index_dir(d))
-    }
-
-    /// The part [t0, t1] (mm, t0 ≥ 0) of an index-space ray inside the grid of voxel centres.
-    pub fn clip_ray(&self, o_idx: Vec3, d_idx: Vec3) -> Option<(f32, f32)> {
-        self.clip(o_idx, d_idx)
-    }
-
     /// Continuous index → world (LPS mm).
     fn world_of(&self, p: Vec3) -> Vec3 {
         self.vol.index_to_world(p.as_dvec3()).as_vec3()
     }
 
-    fn index_of(&self, p: Vec3) -> Vec3 {
+    /// World (LPS mm) → continuous index.
+    pub(crate) fn index_of(&self, p: Vec3) -> Vec3 {
         let q = p - self.origin;
         Vec3::new(
             self.to_index[0].dot(q),
@@ -238,7 +229,8 @@ impl<'a> Marcher<'a> {
         )
     }
 
-    fn index_dir(&self, d: Vec3) -> Vec3 {
+    /// A world direction → index units per world unit along it.
+    pub(crate) fn index_dir(&self, d: Vec3) -> Vec3 {
         Vec3::new(
             self.to_index[0].dot(d),
             self.to_index[1].dot(d),
@@ -263,7 +255,7 @@ impl<'a> Marcher<'a> {
     }
 
     /// The ray's [t0, t1] (mm along unit `d`) inside the grid of voxel centres.
-    fn clip(&self, o_idx: Vec3, d_idx: Vec3) -> Option<(f32, f32)> {
+    pub(crate) fn clip(&self, o_idx: Vec3, d_idx: Vec3) -> Option<(f32, f32)> {
         let (mut t0, mut t1) = (0.0f32, f32::INFINITY);
         for a in 0..3 {
             let hi = (self.vol.dims[a] - 1) as f32;

@@ -24,7 +24,7 @@ use raystream_math::{Ray, Vec3};
 use raystream_scene::{Camera, Scene};
 
 pub use image_out::{Image, save_srgb8_png, srgb8_diff};
-use medium::Medium;
+pub use medium::Medium;
 
 #[derive(Clone, Copy, Debug)]
 pub struct RenderOptions {
@@ -91,10 +91,35 @@ pub struct Shading<'a> {
 }
 
 /// Renders `scene` with the kd-tree built over `scene.mesh`; `progress` is told after each depth.
-/// A scene's volume is prepared here (light grids included) and marched by every ray.
+/// A scene's volume is prepared here ([`prepare_volume`]) and marched by every ray.
 pub fn render(
     scene: &Scene,
     tree: &KdTree,
+    opt: &RenderOptions,
+    progress: impl FnMut(DepthStats),
+) -> Image {
+    let medium = prepare_volume(scene, tree, opt.traversal);
+    render_prepared(scene, tree, medium.as_ref(), opt, progress)
+}
+
+/// A scene's volume prepared for its rays (brick table and light grids: they depend on the
+/// scene, not on the camera, so frames of one scene share them); `None` without a volume.
+pub fn prepare_volume<'a>(
+    scene: &'a Scene,
+    tree: &KdTree,
+    traversal: Traversal,
+) -> Option<Medium<'a>> {
+    scene
+        .volume
+        .as_ref()
+        .map(|v| Medium::new(v, scene, tree, traversal))
+}
+
+/// [`render`] with the scene's volume already prepared (`medium`, from [`prepare_volume`]).
+pub fn render_prepared(
+    scene: &Scene,
+    tree: &KdTree,
+    medium: Option<&Medium>,
     opt: &RenderOptions,
     mut progress: impl FnMut(DepthStats),
 ) -> Image {
@@ -104,24 +129,20 @@ pub fn render(
         scene,
         epsilon: surface_epsilon(scene),
     };
-    let medium = scene
-        .volume
-        .as_ref()
-        .map(|v| Medium::new(v, scene, tree, opt.traversal));
     let mut queue = generate_camera_rays(&cam, opt.width, opt.height, opt.spp);
     for depth in 0..=opt.max_depth {
         if queue.is_empty() {
             break;
         }
         let (mut hits, mut misses) = intersect_closest(tree, &queue, opt.traversal);
-        let volume_samples = match &medium {
+        let volume_samples = match medium {
             Some(m) => march_volume(m, &mut hits, &mut misses, &mut film),
             None => 0,
         };
         handle_misses(&misses, scene.background, &mut film);
         let spawn = depth < opt.max_depth;
         let (local, shadows, next) = shade_hits(&shading, &hits, spawn);
-        let lit = intersect_any(tree, &shadows, opt.traversal, medium.as_ref());
+        let lit = intersect_any(tree, &shadows, opt.traversal, medium);
         accumulate(&mut film, &local);
         accumulate(&mut film, &lit);
         progress(DepthStats {
@@ -224,8 +245,9 @@ pub fn march_volume(
     misses: &mut [RayWorkItem],
     film: &mut [Vec3],
 ) -> u64 {
+    let lights = medium.sample_lights();
     let through = |item: &mut RayWorkItem, t_end: f32| {
-        let seg = medium.segment(&item.ray, t_end, dvr::start_jitter(item.pixel));
+        let seg = medium.segment(&item.ray, t_end, dvr::start_jitter(item.pixel), &lights);
         let emitted = (item.pixel, item.weight * seg.color);
         item.weight *= seg.transmit;
         (emitted, seg.taken)

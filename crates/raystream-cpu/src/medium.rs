@@ -86,22 +86,10 @@ impl<'a> Medium<'a> {
         &self.grids
     }
 
-    /// Samples the light grids' shadow rays took.
-    pub fn grid_samples(&self) -> u64 {
-        self.grids.iter().map(|g| g.samples).sum()
-    }
-
-    /// The volume along `ray` (scene frame) from `ray.t_min` to `t_end`, its sample lattice
-    /// offset by `jitter` steps: emitted colour and transmittance, with the samples taken.
-    pub fn segment(&self, ray: &Ray, t_end: f32, jitter: f32) -> Composited {
-        let Some((r, o_idx, d_idx, t0, t1)) = self.enter(ray, t_end, jitter) else {
-            return Composited {
-                transmit: 1.0,
-                ..Default::default()
-            };
-        };
-        let lights: Vec<SampleLight> = self
-            .lights
+    /// The scene's lights as volume samples see them, for [`Medium::segment`]: built once per
+    /// stage, not per ray.
+    pub fn sample_lights(&self) -> Vec<SampleLight<'_>> {
+        self.lights
             .iter()
             .enumerate()
             .map(|(i, &(at, color))| SampleLight {
@@ -109,34 +97,47 @@ impl<'a> Medium<'a> {
                 color,
                 grid: self.grids.get(i),
             })
-            .collect();
-        self.marcher.composite(
-            self.tf,
-            r,
-            (o_idx, d_idx),
-            [t0, t1],
-            self.step,
-            true,
-            &lights,
-        )
+            .collect()
+    }
+
+    /// The volume along `ray` (scene frame) from `ray.t_min` to `t_end`, its sample lattice
+    /// offset by `jitter` steps, lit by `lights` ([`Medium::sample_lights`]): emitted colour and
+    /// transmittance, with the samples taken.
+    pub fn segment(
+        &self,
+        ray: &Ray,
+        t_end: f32,
+        jitter: f32,
+        lights: &[SampleLight],
+    ) -> Composited {
+        match self.enter(ray, t_end, jitter) {
+            Some((r, idx, span)) => self
+                .marcher
+                .composite(self.tf, r, idx, span, self.step, true, lights),
+            None => Composited {
+                transmit: 1.0,
+                ..Default::default()
+            },
+        }
     }
 
     /// The volume's transmittance along the shadow ray `ray` (scene frame), from `t_min` to
     /// `t_max`, its sample lattice offset by `jitter` steps.
     pub fn transmittance(&self, ray: &Ray, jitter: f32) -> f32 {
         match self.enter(ray, ray.t_max, jitter) {
-            Some((r, o_idx, d_idx, t0, t1)) => {
+            Some((_, (o_idx, d_idx), span)) => {
                 self.marcher
-                    .absorb(self.tf, o_idx, d_idx, [t0, t1], self.step, r.jitter)
+                    .absorb(self.tf, o_idx, d_idx, span, self.step, jitter)
                     .0
             }
             None => 1.0,
         }
     }
 
-    /// `ray` in LPS with its jitter, its index form, and the part [t0, t1] (mm) of
-    /// [t_min, t_end] inside the grid of voxel centres; `None` when it misses the volume.
-    fn enter(&self, ray: &Ray, t_end: f32, jitter: f32) -> Option<(Ray3, Vec3, Vec3, f32, f32)> {
+    /// `ray` in LPS with its jitter, its index form (origin, direction), and the part
+    /// [t0, t1] (mm) of [t_min, t_end] inside the grid of voxel centres; `None` when it misses
+    /// the volume.
+    fn enter(&self, ray: &Ray, t_end: f32, jitter: f32) -> Option<(Ray3, (Vec3, Vec3), [f32; 2])> {
         let len = ray.dir.length();
         if len.is_nan() || len <= 0.0 {
             return None;
@@ -146,11 +147,11 @@ impl<'a> Medium<'a> {
             d: scene_to_lps(ray.dir) / len,
             jitter,
         };
-        let (o_idx, d_idx) = self.marcher.index_ray(r.o, r.d);
-        let (g0, g1) = self.marcher.clip_ray(o_idx, d_idx)?;
+        let (o_idx, d_idx) = (self.marcher.index_of(r.o), self.marcher.index_dir(r.d));
+        let (g0, g1) = self.marcher.clip(o_idx, d_idx)?;
         let t0 = g0.max(ray.t_min * len);
         let t1 = g1.min(t_end * len);
-        (t0 < t1).then_some((r, o_idx, d_idx, t0, t1))
+        (t0 < t1).then_some((r, (o_idx, d_idx), [t0, t1]))
     }
 }
 

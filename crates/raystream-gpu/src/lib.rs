@@ -678,6 +678,29 @@ impl<'a> GpuTracer<'a> {
     }
 }
 
+/// A frame's pixels as the renderers read them back: linear floats (the reference's form) or
+/// 8-bit sRGB, 3 bytes a pixel (converted on the GPU).
+enum Pixels {
+    Linear(raystream_cpu::Image),
+    Srgb8(Vec<u8>),
+}
+
+impl Pixels {
+    fn into_linear(self) -> raystream_cpu::Image {
+        match self {
+            Pixels::Linear(image) => image,
+            Pixels::Srgb8(_) => unreachable!("asked for linear pixels"),
+        }
+    }
+
+    fn into_srgb8(self) -> Vec<u8> {
+        match self {
+            Pixels::Srgb8(rgb) => rgb,
+            Pixels::Linear(_) => unreachable!("asked for sRGB pixels"),
+        }
+    }
+}
+
 /// Timestamp queries of kernel passes. `resolve` resolves them and copies them to `readback` in
 /// the encoder of the work they time, so reading them back costs no second round trip.
 struct Timer {

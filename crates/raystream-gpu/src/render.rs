@@ -23,7 +23,7 @@ use crate::layout::{
     counter,
 };
 use crate::volume::{GpuVolume, volume_core_wgsl};
-use crate::{GpuError, GpuHit, GpuTracer, Timer, WORKGROUP_SIZE, kdtree_wgsl, read_words};
+use crate::{GpuError, GpuHit, GpuTracer, Pixels, Timer, WORKGROUP_SIZE, kdtree_wgsl, read_words};
 
 const RENDER_WGSL: &str = include_str!("kernels/render.wgsl");
 const MEDIUM_WGSL: &str = include_str!("kernels/medium.wgsl");
@@ -375,10 +375,8 @@ impl<'a> GpuRenderer<'a> {
         opt: &RenderOptions,
         mut progress: impl FnMut(DepthStats),
     ) -> Result<(Image, GpuRenderStats), GpuError> {
-        match self.run(opt, &mut progress, false)? {
-            (Film::Linear(image), stats) => Ok((image, stats)),
-            (Film::Srgb8(_), _) => unreachable!("asked for linear pixels"),
-        }
+        let (film, stats) = self.run(opt, &mut progress, false)?;
+        Ok((film.into_linear(), stats))
     }
 
     /// Renders as [`Self::render`] and delivers the frame as a viewer shows it: 8-bit sRGB,
@@ -389,10 +387,8 @@ impl<'a> GpuRenderer<'a> {
         opt: &RenderOptions,
         mut progress: impl FnMut(DepthStats),
     ) -> Result<(Vec<u8>, GpuRenderStats), GpuError> {
-        match self.run(opt, &mut progress, true)? {
-            (Film::Srgb8(rgb), stats) => Ok((rgb, stats)),
-            (Film::Linear(_), _) => unreachable!("asked for sRGB pixels"),
-        }
+        let (film, stats) = self.run(opt, &mut progress, true)?;
+        Ok((film.into_srgb8(), stats))
     }
 
     fn run(
@@ -400,7 +396,7 @@ impl<'a> GpuRenderer<'a> {
         opt: &RenderOptions,
         progress: &mut dyn FnMut(DepthStats),
         srgb8: bool,
-    ) -> Result<(Film, GpuRenderStats), GpuError> {
+    ) -> Result<(Pixels, GpuRenderStats), GpuError> {
         let ctx = self.tracer.ctx;
         let scene = self.scene;
         let t0 = Instant::now();
@@ -661,10 +657,10 @@ impl<'a> GpuRenderer<'a> {
         }
         let film = if srgb8 {
             let bytes: &[u8] = bytemuck::cast_slice(&words);
-            Film::Srgb8(bytes[..3 * pixels as usize].to_vec())
+            Pixels::Srgb8(bytes[..3 * pixels as usize].to_vec())
         } else {
             let sums: &[f32] = bytemuck::cast_slice(&words);
-            Film::Linear(Image {
+            Pixels::Linear(Image {
                 width: opt.width,
                 height: opt.height,
                 pixels: sums[..3 * pixels as usize]
@@ -833,11 +829,4 @@ fn medium_group(
             entry(7, grids.as_entire_binding()),
         ],
     }))
-}
-
-/// A frame's pixels as they come back.
-enum Film {
-    Linear(Image),
-    /// 8-bit sRGB, 3 bytes a pixel.
-    Srgb8(Vec<u8>),
 }

@@ -512,10 +512,9 @@ fn gpu_render_matches_cpu(
     // to 1/255 where f32 scaling and the GPU's pow round differently.
     let (rgb, _) = renderer.render_srgb8(opt, |_| {}).unwrap();
     let want = gpu.to_srgb8();
-    assert_eq!(rgb.len(), want.len(), "{what}");
-    let off = rgb.iter().zip(&want).filter(|(a, b)| a != b).count();
+    let off = srgb8_within_one(&rgb, &want, what);
     assert!(
-        rgb.iter().zip(&want).all(|(a, b)| a.abs_diff(*b) <= 1) && off * 100 <= want.len(),
+        off * 100 <= want.len(),
         "{what}: the GPU's sRGB film differs from its float film in {off} of {} bytes",
         want.len()
     );
@@ -692,10 +691,10 @@ fn gpu_volume_rendering_matches_cpu() {
         // up to 1/255 where the GPU's pow rounds differently, and the same sample count.
         let (rgb, packed) = gpu.render_srgb8(&opt, &cam).unwrap();
         let want = img.to_srgb8();
-        assert_eq!(rgb.len(), want.len());
-        let off = rgb.iter().zip(&want).filter(|(a, b)| a != b).count();
+        let name = format!("{} {}{what}", mode.name(), preset.name());
+        let off = srgb8_within_one(&rgb, &want, &name);
         assert!(
-            rgb.iter().zip(&want).all(|(a, b)| a.abs_diff(*b) <= 1) && off * 100 <= want.len(),
+            off * 100 <= want.len(),
             "{} {}{what}: the GPU's sRGB bytes differ from its float pixels' in {off} of {}",
             mode.name(),
             preset.name(),
@@ -735,12 +734,18 @@ fn gpu_srgb8_frames_of_any_size() {
         let cam = volume_camera(&vol, w as f32 / h as f32);
         let (img, t) = gpu.render(&opt, &cam).unwrap();
         let (rgb, t8) = gpu.render_srgb8(&opt, &cam).unwrap();
-        let want = img.to_srgb8();
-        assert_eq!(rgb.len(), want.len(), "{w}x{h}");
-        assert!(
-            rgb.iter().zip(&want).all(|(a, b)| a.abs_diff(*b) <= 1),
-            "{w}x{h}: {rgb:?} vs {want:?}"
-        );
+        srgb8_within_one(&rgb, &img.to_srgb8(), &format!("{w}x{h}"));
         assert_eq!(t8.samples, t.samples, "{w}x{h}");
     }
+}
+
+/// Bytes the GPU converted to sRGB against its float frame's: the same length, each within
+/// 1/255 (f32 scaling and the GPU's pow round differently). Returns how many differ.
+fn srgb8_within_one(got: &[u8], want: &[u8], what: &str) -> usize {
+    assert_eq!(got.len(), want.len(), "{what}");
+    assert!(
+        got.iter().zip(want).all(|(a, b)| a.abs_diff(*b) <= 1),
+        "{what}: sRGB bytes differ from the float frame's by more than 1/255"
+    );
+    got.iter().zip(want).filter(|(a, b)| a != b).count()
 }

@@ -16,7 +16,7 @@ use wgpu::util::DeviceExt;
 
 use crate::layout::DvrParams;
 use crate::render::COMMON_WGSL;
-use crate::{GpuContext, GpuError, Timer, read_elapsed_ms, read_words};
+use crate::{GpuContext, GpuError, Pixels, Timer, read_elapsed_ms, read_words};
 
 const DVR_WGSL: &str = include_str!("kernels/dvr.wgsl");
 const VOLUME_WGSL: &str = include_str!("kernels/volume.wgsl");
@@ -204,10 +204,8 @@ impl<'a> GpuVolumeRenderer<'a> {
 
     /// Renders one frame with `cam` (the scene frame of `raystream_cpu::dvr::volume_camera`).
     pub fn render(&self, opt: &DvrOptions, cam: &Camera) -> Result<(Image, GpuDvrTimes), GpuError> {
-        match self.run(opt, cam, false)? {
-            (Pixels::Linear(image), times) => Ok((image, times)),
-            (Pixels::Srgb8(_), _) => unreachable!("asked for linear pixels"),
-        }
+        let (pixels, times) = self.run(opt, cam, false)?;
+        Ok((pixels.into_linear(), times))
     }
 
     /// Renders one frame as a viewer shows it: 8-bit sRGB, 3 bytes a pixel (as
@@ -217,10 +215,8 @@ impl<'a> GpuVolumeRenderer<'a> {
         opt: &DvrOptions,
         cam: &Camera,
     ) -> Result<(Vec<u8>, GpuDvrTimes), GpuError> {
-        match self.run(opt, cam, true)? {
-            (Pixels::Srgb8(rgb), times) => Ok((rgb, times)),
-            (Pixels::Linear(_), _) => unreachable!("asked for sRGB pixels"),
-        }
+        let (pixels, times) = self.run(opt, cam, true)?;
+        Ok((pixels.into_srgb8(), times))
     }
 
     fn run(
@@ -445,11 +441,4 @@ impl<'a> GpuVolumeRenderer<'a> {
             },
         ))
     }
-}
-
-/// A frame's pixels as they come back.
-enum Pixels {
-    Linear(Image),
-    /// 8-bit sRGB, 3 bytes a pixel.
-    Srgb8(Vec<u8>),
 }
