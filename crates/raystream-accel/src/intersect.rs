@@ -88,7 +88,9 @@ impl WatertightRay {
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
-        if u == 0.0 || v == 0.0 || w == 0.0 {
+        // Non-short-circuit `|` and `&` below: these signs are unpredictable, so flags
+        // combined without branches are faster than early exits.
+        if (u == 0.0) | (v == 0.0) | (w == 0.0) {
             // On an edge in single precision: decide it in double, as the paper prescribes.
             let (ax, ay, bx, by, cx, cy) = (
                 ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
@@ -97,7 +99,7 @@ impl WatertightRay {
             v = (ax * cy - ay * cx) as f32;
             w = (bx * ay - by * ax) as f32;
         }
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        if ((u < 0.0) | (v < 0.0) | (w < 0.0)) & ((u > 0.0) | (v > 0.0) | (w > 0.0)) {
             return None;
         }
         let det = u + v + w;

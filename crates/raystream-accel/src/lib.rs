@@ -19,6 +19,8 @@ mod validate;
 
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 pub use build::{Builder, depth_limit};
 use raystream_io::TriMesh;
 use raystream_math::{Aabb, DVec3, Ray, Vec3};
@@ -133,6 +135,43 @@ impl KdTree {
             Traversal::Ropes => self.ropes::<true, false>(ray, &mut c),
             Traversal::Stack => self.stack::<true, false>(ray, &mut c),
         }
+    }
+
+    /// [`Self::intersect`] (or [`Self::intersect_any`] with `any`) of every ray, into `out`:
+    /// the same answers, faster on many rays (rope walks interleaved; stack traversal ray by
+    /// ray).
+    pub fn intersect_many(
+        &self,
+        rays: &[Ray],
+        traversal: Traversal,
+        any: bool,
+        out: &mut [Option<Hit>],
+    ) {
+        match (traversal, any) {
+            (Traversal::Ropes, false) => self.ropes_stream::<false>(rays, out),
+            (Traversal::Ropes, true) => self.ropes_stream::<true>(rays, out),
+            (Traversal::Stack, _) => {
+                assert_eq!(rays.len(), out.len(), "one result per ray");
+                for (ray, o) in rays.iter().zip(out) {
+                    let mut c = Counters::default();
+                    *o = if any {
+                        self.stack::<true, false>(ray, &mut c)
+                    } else {
+                        self.stack::<false, false>(ray, &mut c)
+                    };
+                }
+            }
+        }
+    }
+
+    /// [`Self::intersect_many`] over all rays in parallel (rayon, in chunks of 1024 rays).
+    pub fn intersect_all(&self, rays: &[Ray], traversal: Traversal, any: bool) -> Vec<Option<Hit>> {
+        const CHUNK: usize = 1024;
+        let mut hits = vec![None; rays.len()];
+        rays.par_chunks(CHUNK)
+            .zip(hits.par_chunks_mut(CHUNK))
+            .for_each(|(r, h)| self.intersect_many(r, traversal, any, h));
+        hits
     }
 
     /// As [`Self::intersect`] / [`Self::intersect_any`], adding the work done to `counters`.

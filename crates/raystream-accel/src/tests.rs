@@ -111,6 +111,65 @@ fn real_meshes_agree_with_brute_force_and_validate() {
     }
 }
 
+/// The batched queries (interleaved rope walks) answer every ray exactly as one-ray queries
+/// do, closest and any hit, with both traversals.
+fn check_batched(tree: &KdTree, rays: &[Ray], what: &str) {
+    for trav in TRAVERSALS {
+        for any in [false, true] {
+            let mut got = vec![None; rays.len()];
+            tree.intersect_many(rays, trav, any, &mut got);
+            assert_eq!(got, tree.intersect_all(rays, trav, any), "{what}");
+            for (ray, g) in rays.iter().zip(&got) {
+                let want = if any {
+                    tree.intersect_any(ray, trav)
+                } else {
+                    tree.intersect(ray, trav)
+                };
+                assert_eq!(*g, want, "{what} {trav:?} any={any}: {ray:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn batched_queries_equal_one_ray_queries() {
+    for name in ["stanford_bunny.ply", "utah_teapot.obj"] {
+        let mesh = shared_mesh(name);
+        let tree = KdTree::build(&mesh, Builder::Sah);
+        let mut rays = rays_through(&mesh, 5003, 3);
+        // Rays that cannot hit, mixed in: invalid, NaN, pointing away, empty interval.
+        let b = mesh.bounds();
+        let away = Ray::new(b.max + 1.0, Vec3::ONE, 0.0, f32::INFINITY);
+        for (k, bad) in [
+            Ray::new(Vec3::ZERO, Vec3::ZERO, 0.0, f32::INFINITY),
+            Ray::new(Vec3::NAN, Vec3::X, 0.0, f32::INFINITY),
+            away,
+            Ray {
+                t_max: -1.0,
+                ..rays[0]
+            },
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            rays.insert(k * 97, bad);
+        }
+        // Every length around the lane count, down to no rays at all.
+        for n in [0, 1, 7, 8, 9, 100] {
+            check_batched(&tree, &rays[..n], name);
+        }
+        check_batched(&tree, &rays, name);
+        assert!(
+            tree.intersect_all(&rays, Traversal::Ropes, false)
+                .iter()
+                .filter(|h| h.is_some())
+                .count()
+                > rays.len() / 4,
+            "{name}: the rays should hit the mesh often"
+        );
+    }
+}
+
 #[test]
 fn large_meshes_validate() {
     for name in ["stanford_bunny.ply", "turbine_blade.ply"] {
@@ -330,6 +389,7 @@ proptest! {
         for builder in BUILDERS {
             let tree = KdTree::build_from_corners(&c, builder);
             prop_assert!(tree.validate(&c).is_ok(), "{:?}", tree.validate(&c));
+            let mut soup_rays = Vec::new();
             for &(o, mut d, zero, t_min) in &rays {
                 // zero some direction components: axis-parallel rays
                 for a in 0..3 {
@@ -341,7 +401,9 @@ proptest! {
                 let o = if zero == 7 { c[0][1] } else { o };
                 let ray = Ray::new(o, d, if zero == 5 { t_min } else { 0.0 }, f32::INFINITY);
                 check_ray(&tree, &c, &ray, "soup");
+                soup_rays.push(ray);
             }
+            check_batched(&tree, &soup_rays, "soup");
         }
     }
 

@@ -218,11 +218,8 @@ pub fn intersect_closest(
     queue: &[RayWorkItem],
     traversal: Traversal,
 ) -> (Vec<HitWorkItem>, Vec<RayWorkItem>) {
-    let hits: Vec<Option<Hit>> = queue
-        .par_iter()
-        .with_min_len(256)
-        .map(|w| tree.intersect(&w.ray, traversal))
-        .collect();
+    let rays: Vec<Ray> = queue.iter().map(|w| w.ray).collect();
+    let hits = tree.intersect_all(&rays, traversal, false);
     let mut hit_items = Vec::with_capacity(hits.len());
     let mut misses = Vec::new();
     for (item, hit) in queue.iter().zip(hits) {
@@ -458,11 +455,14 @@ pub fn intersect_any(
     traversal: Traversal,
     medium: Option<&Medium>,
 ) -> Vec<Contribution> {
+    let rays: Vec<Ray> = shadows.iter().map(|s| s.ray).collect();
+    let blocked = tree.intersect_all(&rays, traversal, true);
     let reaching: Vec<Option<Vec3>> = shadows
         .par_iter()
+        .zip(blocked)
         .with_min_len(256)
-        .map(|s| {
-            if tree.intersect_any(&s.ray, traversal).is_some() {
+        .map(|(s, blocked)| {
+            if blocked.is_some() {
                 return None;
             }
             Some(match medium {

@@ -4,7 +4,6 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use rayon::prelude::*;
 use raystream_accel::{Hit, KdTree, Traversal};
 use raystream_math::Ray;
 use serde_json::json;
@@ -72,16 +71,9 @@ pub fn read_rays(path: &Path) -> Result<Vec<Ray>> {
 
 /// Traces all rays in parallel.
 pub fn trace_all(tree: &KdTree, rays: &[Ray], any: bool, traversal: Traversal) -> Vec<HitRecord> {
-    rays.par_iter()
-        .with_min_len(1024)
-        .map(|r| {
-            if any {
-                tree.intersect_any(r, traversal)
-            } else {
-                tree.intersect(r, traversal)
-            }
-            .into()
-        })
+    tree.intersect_all(rays, traversal, any)
+        .into_iter()
+        .map(HitRecord::from)
         .collect()
 }
 
