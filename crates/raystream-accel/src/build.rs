@@ -11,7 +11,7 @@
 
 use raystream_math::{Aabb, Vec3};
 
-use crate::clip::clipped_bounds;
+use crate::clip::split_clipped_bounds;
 use crate::layout::MAX_DEPTH;
 
 /// Which kd-tree builder to use.
@@ -64,7 +64,60 @@ pub(crate) enum KdBuildNode {
         axis: usize,
         split: f32,
         children: Box<[KdBuildNode; 2]>,
+        /// What the subtree takes in the flat arrays, this node included.
+        sizes: Sizes,
     },
+}
+
+/// Entries a subtree takes in each of the flat arrays (inner nodes, leaves, triangle
+/// references); with them the subtrees can be written into disjoint slices in parallel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Sizes {
+    pub inners: usize,
+    pub leaves: usize,
+    pub tris: usize,
+}
+
+impl std::ops::Add for Sizes {
+    type Output = Sizes;
+    fn add(self, o: Sizes) -> Sizes {
+        Sizes {
+            inners: self.inners + o.inners,
+            leaves: self.leaves + o.leaves,
+            tris: self.tris + o.tris,
+        }
+    }
+}
+
+impl KdBuildNode {
+    pub fn sizes(&self) -> Sizes {
+        match self {
+            KdBuildNode::Leaf(prims) => Sizes {
+                inners: 0,
+                leaves: 1,
+                tris: prims.len(),
+            },
+            KdBuildNode::Inner { sizes, .. } => *sizes,
+        }
+    }
+
+    /// Whether the subtree is big enough to be worth a parallel task.
+    pub fn is_big(&self) -> bool {
+        self.sizes().tris >= PARALLEL_MIN
+    }
+
+    /// Frees the tree, large subtrees in parallel (the recursive drop of half a million
+    /// boxed nodes is otherwise a serial tail of the build).
+    pub fn free(self) {
+        if let KdBuildNode::Inner { children, .. } = self {
+            let [l, r] = *children;
+            if l.is_big() || r.is_big() {
+                rayon::join(|| l.free(), || r.free());
+            } else {
+                drop((l, r));
+            }
+        }
+    }
 }
 
 #[derive(Clone, Copy)]
@@ -136,7 +189,7 @@ impl Ctx<'_> {
         };
         let n = refs.len();
         let (lb, rb) = split_box(&bounds, s.axis, s.pos);
-        let (left, right) = self.partition(refs, &lb, &rb, s);
+        let (left, right) = self.partition(refs, s);
         if self.builder == Builder::Median && left.len() == n && right.len() == n {
             // No triangle was separated: splitting again would only duplicate references.
             let mut prims: Vec<u32> = left.iter().map(|r| r.prim).collect();
@@ -157,6 +210,12 @@ impl Ctx<'_> {
         KdBuildNode::Inner {
             axis: s.axis,
             split: s.pos,
+            sizes: Sizes {
+                inners: 1,
+                leaves: 0,
+                tris: 0,
+            } + l.sizes()
+                + r.sizes(),
             children: Box::new([l, r]),
         }
     }
@@ -185,14 +244,12 @@ impl Ctx<'_> {
                 .filter_map(|a| exact_sweep(refs, b, a))
                 .min_by(|x, y| x.cost.total_cmp(&y.cost))
         } else {
-            (0..3)
-                .filter_map(|a| binned(refs, b, a))
-                .min_by(|x, y| x.cost.total_cmp(&y.cost))
+            binned(refs, b)
         }?;
         (best.cost < leaf_cost).then_some(best)
     }
 
-    fn partition(&self, refs: Vec<Ref>, lb: &Aabb, rb: &Aabb, s: Split) -> (Vec<Ref>, Vec<Ref>) {
+    fn partition(&self, refs: Vec<Ref>, s: Split) -> (Vec<Ref>, Vec<Ref>) {
         let a = s.axis;
         let mut left = Vec::with_capacity(refs.len());
         let mut right = Vec::with_capacity(refs.len());
@@ -212,9 +269,11 @@ impl Ctx<'_> {
                 // plane finds it from either side.
                 // Clipping tightens the bounds in each child, and drops the triangle from a
                 // child it only seemed to reach through its (outward-rounded) bounds.
+                // The triangle is clipped to its bounds in this node once, then split.
                 let tri = &self.corners[r.prim as usize];
-                for (side, child) in [(&mut left, lb), (&mut right, rb)] {
-                    if let Some(bounds) = clipped_bounds(tri, &r.bounds.intersection(*child)) {
+                let [below, above] = split_clipped_bounds(tri, &r.bounds, a, s.pos);
+                for (side, bounds) in [(&mut left, below), (&mut right, above)] {
+                    if let Some(bounds) = bounds {
                         side.push(Ref {
                             prim: r.prim,
                             bounds,
@@ -245,33 +304,39 @@ fn sah_cost(b: &Aabb, inv_area: f32, axis: usize, pos: f32, nl: usize, nr: usize
     }
 }
 
-fn binned(refs: &[Ref], b: &Aabb, axis: usize) -> Option<Split> {
-    let lo = b.min[axis];
-    let ext = b.max[axis] - lo;
-    if !(ext > 0.0) {
-        return None;
-    }
-    let scale = BINS as f32 / ext;
-    let bin = |x: f32| (((x - lo) * scale) as usize).min(BINS - 1);
-    let mut starts = [0usize; BINS];
-    let mut ends = [0usize; BINS];
+/// The cheapest of the `BINS − 1` planes per axis, counting the references in one pass over
+/// them for all three axes.
+fn binned(refs: &[Ref], b: &Aabb) -> Option<Split> {
+    let ext = b.extent();
+    let scale: [f32; 3] = std::array::from_fn(|a| BINS as f32 / ext[a]);
+    let bin = |x: f32, a: usize| (((x - b.min[a]) * scale[a]) as usize).min(BINS - 1);
+    let mut starts = [[0u32; BINS]; 3];
+    let mut ends = [[0u32; BINS]; 3];
     for r in refs {
-        starts[bin(r.bounds.min[axis])] += 1;
-        ends[bin(r.bounds.max[axis])] += 1;
+        for a in 0..3 {
+            starts[a][bin(r.bounds.min[a], a)] += 1;
+            ends[a][bin(r.bounds.max[a], a)] += 1;
+        }
     }
     let inv_area = 1.0 / b.area();
     let mut best: Option<Split> = None;
-    let (mut nl, mut nr) = (0usize, refs.len());
-    for i in 1..BINS {
-        nl += starts[i - 1];
-        nr -= ends[i - 1];
-        let pos = lo + ext * (i as f32 / BINS as f32);
-        if !(pos > b.min[axis] && pos < b.max[axis]) {
+    for axis in 0..3 {
+        let lo = b.min[axis];
+        if !(ext[axis] > 0.0) {
             continue;
         }
-        let cost = sah_cost(b, inv_area, axis, pos, nl, nr);
-        if best.is_none_or(|s| cost < s.cost) {
-            best = Some(Split { axis, pos, cost });
+        let (mut nl, mut nr) = (0usize, refs.len());
+        for i in 1..BINS {
+            nl += starts[axis][i - 1] as usize;
+            nr -= ends[axis][i - 1] as usize;
+            let pos = lo + ext[axis] * (i as f32 / BINS as f32);
+            if !(pos > b.min[axis] && pos < b.max[axis]) {
+                continue;
+            }
+            let cost = sah_cost(b, inv_area, axis, pos, nl, nr);
+            if best.is_none_or(|s| cost < s.cost) {
+                best = Some(Split { axis, pos, cost });
+            }
         }
     }
     best

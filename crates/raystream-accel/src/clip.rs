@@ -3,35 +3,25 @@
 
 use raystream_math::{Aabb, DVec3, Vec3};
 
-/// Bounds of the part of triangle `tri` inside `bx`, or `None` if the triangle misses the box.
-/// Clipping runs in f64 and the result is rounded outwards to f32, then limited to `bx`, so it
-/// never claims less than the true overlap nor more than the box.
-pub fn clipped_bounds(tri: &[Vec3; 3], bx: &Aabb) -> Option<Aabb> {
-    let own = Aabb::from_points(tri);
-    // Planes the whole triangle lies inside cannot cut it: usually none or one plane is left.
-    let mut cuts = [(0usize, 0f64, false); 6];
-    let mut n_cuts = 0;
-    for axis in 0..3 {
-        if own.min[axis] < bx.min[axis] {
-            cuts[n_cuts] = (axis, bx.min[axis] as f64, true);
-            n_cuts += 1;
+/// A convex polygon in f64: a triangle clipped by up to 7 planes has at most 10 corners. Fixed
+/// arrays keep clipping allocation-free.
+#[derive(Clone, Copy)]
+struct Polygon {
+    corners: [[f64; 3]; 10],
+    len: usize,
+}
+
+impl Polygon {
+    fn triangle(tri: &[Vec3; 3]) -> Self {
+        let mut corners = [[0f64; 3]; 10];
+        for (k, v) in tri.iter().enumerate() {
+            corners[k] = [v.x as f64, v.y as f64, v.z as f64];
         }
-        if own.max[axis] > bx.max[axis] {
-            cuts[n_cuts] = (axis, bx.max[axis] as f64, false);
-            n_cuts += 1;
-        }
+        Self { corners, len: 3 }
     }
-    if n_cuts == 0 {
-        return Some(own.intersection(*bx)).filter(|b| !b.is_empty());
-    }
-    // A triangle clipped by 6 planes has at most 9 corners; fixed arrays keep this allocation-free.
-    let mut poly = [[0f64; 3]; 10];
-    let mut next = [[0f64; 3]; 10];
-    for (k, v) in tri.iter().enumerate() {
-        poly[k] = [v.x as f64, v.y as f64, v.z as f64];
-    }
-    let mut len = 3;
-    for &(axis, plane, keep_above) in &cuts[..n_cuts] {
+
+    /// Keeps the part with `p[axis] >= plane` (`keep_above`) or `<= plane` (Sutherland–Hodgman).
+    fn clip(&mut self, axis: usize, plane: f64, keep_above: bool) {
         let inside = |p: &[f64; 3]| {
             if keep_above {
                 p[axis] >= plane
@@ -39,9 +29,14 @@ pub fn clipped_bounds(tri: &[Vec3; 3], bx: &Aabb) -> Option<Aabb> {
                 p[axis] <= plane
             }
         };
+        let mut next = [[0f64; 3]; 10];
         let mut n = 0;
+        let len = self.len;
         for i in 0..len {
-            let (a, b) = (poly[i], poly[if i + 1 == len { 0 } else { i + 1 }]);
+            let (a, b) = (
+                self.corners[i],
+                self.corners[if i + 1 == len { 0 } else { i + 1 }],
+            );
             let (ia, ib) = (inside(&a), inside(&b));
             if ia {
                 next[n] = a;
@@ -59,33 +54,90 @@ pub fn clipped_bounds(tri: &[Vec3; 3], bx: &Aabb) -> Option<Aabb> {
                 n += 1;
             }
         }
-        std::mem::swap(&mut poly, &mut next);
-        len = n;
-        if len == 0 {
+        self.corners = next;
+        self.len = n;
+    }
+
+    /// The polygon's bounds rounded outwards to f32 and limited to `bx`; `None` when empty.
+    fn bounds_in(&self, bx: &Aabb) -> Option<Aabb> {
+        if self.len == 0 {
             return None;
         }
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for p in &self.corners[..self.len] {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let down = |x: f64| {
+            let f = x as f32;
+            if f as f64 > x { f.next_down() } else { f }
+        };
+        let up = |x: f64| {
+            let f = x as f32;
+            if (f as f64) < x { f.next_up() } else { f }
+        };
+        let b = Aabb::new(
+            Vec3::new(down(lo[0]), down(lo[1]), down(lo[2])),
+            Vec3::new(up(hi[0]), up(hi[1]), up(hi[2])),
+        )
+        .intersection(*bx);
+        (!b.is_empty()).then_some(b)
     }
-    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for p in &poly[..len] {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
+}
+
+/// The triangle clipped to `bx`: `Err(bounds)` when no face of the box cuts it (the bounds of
+/// the triangle within the box, `None` if empty), else `Ok(polygon)`.
+fn clip_to_box(tri: &[Vec3; 3], bx: &Aabb) -> Result<Polygon, Option<Aabb>> {
+    let own = Aabb::from_points(tri);
+    // Planes the whole triangle lies inside cannot cut it: usually none or one plane is left.
+    let mut poly: Option<Polygon> = None;
+    for axis in 0..3 {
+        for (cut, plane, keep_above) in [
+            (own.min[axis] < bx.min[axis], bx.min[axis], true),
+            (own.max[axis] > bx.max[axis], bx.max[axis], false),
+        ] {
+            if cut {
+                let p = poly.get_or_insert_with(|| Polygon::triangle(tri));
+                p.clip(axis, plane as f64, keep_above);
+            }
         }
     }
-    let down = |x: f64| {
-        let f = x as f32;
-        if f as f64 > x { f.next_down() } else { f }
+    poly.ok_or_else(|| Some(own.intersection(*bx)).filter(|b| !b.is_empty()))
+}
+
+/// Bounds of the part of triangle `tri` inside `bx`, or `None` if the triangle misses the box.
+/// Clipping runs in f64 and the result is rounded outwards to f32, then limited to `bx`, so it
+/// never claims less than the true overlap nor more than the box.
+pub fn clipped_bounds(tri: &[Vec3; 3], bx: &Aabb) -> Option<Aabb> {
+    match clip_to_box(tri, bx) {
+        Ok(poly) => poly.bounds_in(bx),
+        Err(bounds) => bounds,
+    }
+}
+
+/// [`clipped_bounds`] in the two halves of `bx` split at `pos` along `axis` (below, above),
+/// clipping the triangle to `bx` once for both.
+pub fn split_clipped_bounds(
+    tri: &[Vec3; 3],
+    bx: &Aabb,
+    axis: usize,
+    pos: f32,
+) -> [Option<Aabb>; 2] {
+    let (mut below, mut above) = (*bx, *bx);
+    below.max[axis] = pos;
+    above.min[axis] = pos;
+    let poly = match clip_to_box(tri, bx) {
+        Ok(poly) => poly,
+        Err(None) => return [None, None],
+        Err(Some(_)) => Polygon::triangle(tri),
     };
-    let up = |x: f64| {
-        let f = x as f32;
-        if (f as f64) < x { f.next_up() } else { f }
-    };
-    let b = Aabb::new(
-        Vec3::new(down(lo[0]), down(lo[1]), down(lo[2])),
-        Vec3::new(up(hi[0]), up(hi[1]), up(hi[2])),
-    )
-    .intersection(*bx);
-    (!b.is_empty()).then_some(b)
+    [(below, false), (above, true)].map(|(half, keep_above)| {
+        let mut p = poly;
+        p.clip(axis, pos as f64, keep_above);
+        p.bounds_in(&half)
+    })
 }
 
 /// Whether the triangle meets the box's interior shrunk by `margin` on every side (separating
@@ -148,5 +200,52 @@ mod tests {
         );
         assert!(!overlaps_interior(&tri, &far, 0.0));
         assert!(overlaps_interior(&tri, &b, 0.0));
+    }
+
+    #[test]
+    fn split_clipping_equals_clipping_each_half() {
+        // Triangles of all sizes and slants against boxes that cut them on 0 to 6 faces, split
+        // on every axis: clipping once and splitting gives each half's clipped bounds, up to
+        // the f32 rounding of the last corner (the planes are applied in another order).
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 4.0 - 2.0
+        };
+        let mut cut = 0;
+        for _ in 0..20_000 {
+            let tri = [(); 3].map(|_| Vec3::new(next(), next(), next()));
+            let (p, q) = (
+                Vec3::new(next(), next(), next()),
+                Vec3::new(next(), next(), next()),
+            );
+            let bx = Aabb::new(p.min(q), p.max(q));
+            let axis = (next().abs() * 1.5) as usize % 3;
+            let pos = bx.min[axis] + (bx.max[axis] - bx.min[axis]) * (next() + 2.0) / 4.0;
+            let (mut below, mut above) = (bx, bx);
+            below.max[axis] = pos;
+            above.min[axis] = pos;
+            let got = split_clipped_bounds(&tri, &bx, axis, pos);
+            for (g, half) in got.into_iter().zip([below, above]) {
+                let want = clipped_bounds(&tri, &half);
+                assert_eq!(
+                    g.is_some(),
+                    want.is_some(),
+                    "{tri:?} in {half:?}: {g:?} vs {want:?}"
+                );
+                if let (Some(g), Some(w)) = (g, want) {
+                    let ulp = (w.max - w.min).max_element().max(1.0) * 4.0 * f32::EPSILON;
+                    assert!(
+                        (g.min - w.min).abs().max_element() <= ulp
+                            && (g.max - w.max).abs().max_element() <= ulp,
+                        "{tri:?} in {half:?}: {g:?} vs {w:?}"
+                    );
+                    cut += 1;
+                }
+            }
+        }
+        assert!(cut > 5_000, "too few triangles met the boxes: {cut}");
     }
 }

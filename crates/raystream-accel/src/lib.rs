@@ -94,6 +94,7 @@ impl KdTree {
         });
         let root_node = build::build(corners, &prims, bounds, builder);
         let (flat, root) = flat::flatten(&root_node, bounds, corners);
+        root_node.free();
         let build_ms = start.elapsed().as_secs_f64() * 1e3;
         let empty_leaves = flat.leaves.iter().filter(|l| l.count == 0).count();
         let full = flat.leaves.len() - empty_leaves;

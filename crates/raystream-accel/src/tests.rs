@@ -373,6 +373,38 @@ fn flat_layout_bytes_round_trip() {
     assert!(tree.stats.max_depth <= crate::depth_limit(mesh.len()));
 }
 
+#[test]
+fn validate_rejects_a_layout_out_of_depth_first_order() {
+    let mesh = shared_mesh("spot.obj");
+    let c = corners(&mesh);
+    let tree = KdTree::build(&mesh, Builder::Sah);
+    assert!(tree.validate(&c).is_ok());
+    // Renumber two leaves (the first and the last): the same tree, boxes and ropes, but its
+    // leaves are no longer stored in depth-first order.
+    let mut swapped = tree.clone();
+    let (a, b) = (
+        crate::layout::leaf_ref(0),
+        crate::layout::leaf_ref(tree.leaves.len() as u32 - 1),
+    );
+    let relabel = |r: &mut u32| {
+        if *r == a {
+            *r = b
+        } else if *r == b {
+            *r = a
+        }
+    };
+    swapped.leaves.swap(0, tree.leaves.len() - 1);
+    for n in &mut swapped.inners {
+        relabel(&mut n.left);
+        relabel(&mut n.right);
+    }
+    for l in &mut swapped.leaves {
+        l.ropes.iter_mut().for_each(relabel);
+    }
+    let err = swapped.validate(&c).unwrap_err();
+    assert!(err.contains("depth-first order"), "{err}");
+}
+
 fn arb_vec(r: f32) -> impl Strategy<Value = Vec3> {
     (-r..r, -r..r, -r..r).prop_map(|(x, y, z)| Vec3::new(x, y, z))
 }

@@ -10,6 +10,7 @@ impl KdTree {
     /// Checks the tree against the triangles it was built from:
     /// - the structure is a tree (every node reached once), depth ≤ `MAX_DEPTH`, splits lie
     ///   strictly inside their node, leaf boxes equal the boxes the splits define;
+    /// - the arrays are laid out depth first, left subtrees before right ones;
     /// - every leaf entry is a real triangle (exact corners, prim id) that meets the leaf's box;
     /// - every non-degenerate triangle meeting the interior of a leaf's box is listed in it;
     /// - every rope leads to the deepest node whose box covers the leaf's face from the other
@@ -66,6 +67,41 @@ impl KdTree {
         }
         if let Some(i) = inner_boxes.iter().position(|s| s.is_none()) {
             return Err(format!("inner node {i} is not reachable"));
+        }
+        // Depth-first layout in every array: a node, then its left subtree, then its right
+        // one; the leaves' triangle ranges follow one another and cover `tris`.
+        let (mut next_inner, mut next_leaf, mut next_tri) = (0u32, 0u32, 0u32);
+        let mut stack = vec![self.root];
+        while let Some(node) = stack.pop() {
+            if is_leaf(node) {
+                let i = node & !LEAF_BIT;
+                let leaf = &self.leaves[i as usize];
+                if i != next_leaf || leaf.first != next_tri {
+                    return Err(format!(
+                        "leaf {i} (triangles from {}) out of depth-first order: expected leaf \
+                         {next_leaf} from {next_tri}",
+                        leaf.first
+                    ));
+                }
+                next_leaf += 1;
+                next_tri += leaf.count;
+            } else {
+                if node != next_inner {
+                    return Err(format!(
+                        "inner node {node} out of depth-first order: expected {next_inner}"
+                    ));
+                }
+                next_inner += 1;
+                let n = &self.inners[node as usize];
+                stack.push(n.right);
+                stack.push(n.left);
+            }
+        }
+        if next_tri as usize != self.tris.len() {
+            return Err(format!(
+                "the leaves list {next_tri} triangle entries, `tris` holds {}",
+                self.tris.len()
+            ));
         }
         let node_box = |r: u32| {
             if is_leaf(r) {
