@@ -343,30 +343,55 @@ fn binned(refs: &[Ref], b: &Aabb) -> Option<Split> {
 }
 
 /// Wald & Havran's sweep over sorted events, with planar triangles sent to the cheaper side.
+/// Only small nodes (at most [`EXACT_MAX`] references) sweep, so the events fit on the stack.
 fn exact_sweep(refs: &[Ref], b: &Aabb, axis: usize) -> Option<Split> {
     const END: u8 = 0;
     const PLANAR: u8 = 1;
     const START: u8 = 2;
-    let mut events: Vec<(f32, u8)> = Vec::with_capacity(2 * refs.len());
+    assert!(refs.len() <= EXACT_MAX, "exact sweeps are for small nodes");
+    // An event is one u64 whose order is (position, kind): the position's bits mapped so that
+    // unsigned order is `f32::total_cmp` order, above the kind. Integer keys sort fastest.
+    let key = |x: f32, kind: u8| {
+        let bits = x.to_bits();
+        let ordered = if bits & 0x8000_0000 != 0 {
+            !bits
+        } else {
+            bits | 0x8000_0000
+        };
+        (ordered as u64) << 8 | kind as u64
+    };
+    let pos_of = |k: u64| {
+        let ordered = (k >> 8) as u32;
+        f32::from_bits(if ordered & 0x8000_0000 != 0 {
+            ordered & 0x7fff_ffff
+        } else {
+            !ordered
+        })
+    };
+    let mut buf = [0u64; 2 * EXACT_MAX];
+    let mut n = 0;
     for r in refs {
         let (lo, hi) = (r.bounds.min[axis], r.bounds.max[axis]);
         if lo == hi {
-            events.push((lo, PLANAR));
+            buf[n] = key(lo, PLANAR);
+            n += 1;
         } else {
-            events.push((lo, START));
-            events.push((hi, END));
+            buf[n] = key(lo, START);
+            buf[n + 1] = key(hi, END);
+            n += 2;
         }
     }
-    events.sort_unstable_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+    let events = &mut buf[..n];
+    events.sort_unstable();
     let inv_area = 1.0 / b.area();
     let (mut nl, mut nr) = (0usize, refs.len());
     let mut best: Option<Split> = None;
     let mut i = 0;
     while i < events.len() {
-        let pos = events[i].0;
+        let pos = pos_of(events[i]);
         let count = |i: &mut usize, kind: u8| {
             let mut c = 0;
-            while *i < events.len() && events[*i].0 == pos && events[*i].1 == kind {
+            while *i < events.len() && pos_of(events[*i]) == pos && events[*i] as u8 == kind {
                 c += 1;
                 *i += 1;
             }

@@ -60,15 +60,38 @@ impl Polygon {
 
     /// The polygon's bounds rounded outwards to f32 and limited to `bx`; `None` when empty.
     fn bounds_in(&self, bx: &Aabb) -> Option<Aabb> {
-        if self.len == 0 {
-            return None;
-        }
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        let mut b = Bounds64::EMPTY;
         for p in &self.corners[..self.len] {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
+            b.grow(p);
+        }
+        b.to_f32_in(bx)
+    }
+}
+
+/// A box in f64 being grown around points.
+#[derive(Clone, Copy)]
+struct Bounds64 {
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
+impl Bounds64 {
+    const EMPTY: Bounds64 = Bounds64 {
+        lo: [f64::INFINITY; 3],
+        hi: [f64::NEG_INFINITY; 3],
+    };
+
+    fn grow(&mut self, p: &[f64; 3]) {
+        for k in 0..3 {
+            self.lo[k] = self.lo[k].min(p[k]);
+            self.hi[k] = self.hi[k].max(p[k]);
+        }
+    }
+
+    /// Rounded outwards to f32 and limited to `bx`; `None` when empty.
+    fn to_f32_in(&self, bx: &Aabb) -> Option<Aabb> {
+        if !(self.lo[0] <= self.hi[0]) {
+            return None;
         }
         let down = |x: f64| {
             let f = x as f32;
@@ -78,6 +101,7 @@ impl Polygon {
             let f = x as f32;
             if (f as f64) < x { f.next_up() } else { f }
         };
+        let (lo, hi) = (self.lo, self.hi);
         let b = Aabb::new(
             Vec3::new(down(lo[0]), down(lo[1]), down(lo[2])),
             Vec3::new(up(hi[0]), up(hi[1]), up(hi[2])),
@@ -133,11 +157,36 @@ pub fn split_clipped_bounds(
         Err(None) => return [None, None],
         Err(Some(_)) => Polygon::triangle(tri),
     };
-    [(below, false), (above, true)].map(|(half, keep_above)| {
-        let mut p = poly;
-        p.clip(axis, pos as f64, keep_above);
-        p.bounds_in(&half)
-    })
+    // The two halves' corners are the polygon's corners on each side (those on the plane on
+    // both) and the points where its edges cross the plane, computed as `Polygon::clip` does:
+    // their bounds need no clipped polygons.
+    let plane = pos as f64;
+    let (mut lo, mut hi) = (Bounds64::EMPTY, Bounds64::EMPTY);
+    let n = poly.len;
+    for i in 0..n {
+        let (a, b) = (
+            poly.corners[i],
+            poly.corners[if i + 1 == n { 0 } else { i + 1 }],
+        );
+        if a[axis] <= plane {
+            lo.grow(&a);
+        }
+        if a[axis] >= plane {
+            hi.grow(&a);
+        }
+        if (a[axis] < plane && b[axis] > plane) || (a[axis] > plane && b[axis] < plane) {
+            let s = (plane - a[axis]) / (b[axis] - a[axis]);
+            let mut p = [
+                a[0] + (b[0] - a[0]) * s,
+                a[1] + (b[1] - a[1]) * s,
+                a[2] + (b[2] - a[2]) * s,
+            ];
+            p[axis] = plane;
+            lo.grow(&p);
+            hi.grow(&p);
+        }
+    }
+    [lo.to_f32_in(&below), hi.to_f32_in(&above)]
 }
 
 /// Whether the triangle meets the box's interior shrunk by `margin` on every side (separating
