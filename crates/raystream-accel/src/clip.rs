@@ -82,14 +82,14 @@ impl Bounds64 {
     };
 
     fn grow(&mut self, p: &[f64; 3]) {
-        for k in 0..3 {
-            self.lo[k] = self.lo[k].min(p[k]);
-            self.hi[k] = self.hi[k].max(p[k]);
+        for ((lo, hi), x) in self.lo.iter_mut().zip(&mut self.hi).zip(p) {
+            *lo = lo.min(*x);
+            *hi = hi.max(*x);
         }
     }
 
     /// Rounded outwards to f32 and limited to `bx`; `None` when empty.
-    fn to_f32_in(&self, bx: &Aabb) -> Option<Aabb> {
+    fn to_f32_in(self, bx: &Aabb) -> Option<Aabb> {
         if !(self.lo[0] <= self.hi[0]) {
             return None;
         }
