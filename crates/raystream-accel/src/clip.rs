@@ -43,14 +43,7 @@ impl Polygon {
                 n += 1;
             }
             if ia != ib {
-                let s = (plane - a[axis]) / (b[axis] - a[axis]);
-                let mut p = [
-                    a[0] + (b[0] - a[0]) * s,
-                    a[1] + (b[1] - a[1]) * s,
-                    a[2] + (b[2] - a[2]) * s,
-                ];
-                p[axis] = plane;
-                next[n] = p;
+                next[n] = crossing(&a, &b, axis, plane);
                 n += 1;
             }
         }
@@ -66,6 +59,19 @@ impl Polygon {
         }
         b.to_f32_in(bx)
     }
+}
+
+/// Where the edge from `a` to `b` meets the plane `p[axis] = plane` (exactly on it).
+#[inline]
+fn crossing(a: &[f64; 3], b: &[f64; 3], axis: usize, plane: f64) -> [f64; 3] {
+    let s = (plane - a[axis]) / (b[axis] - a[axis]);
+    let mut p = [
+        a[0] + (b[0] - a[0]) * s,
+        a[1] + (b[1] - a[1]) * s,
+        a[2] + (b[2] - a[2]) * s,
+    ];
+    p[axis] = plane;
+    p
 }
 
 /// A box in f64 being grown around points.
@@ -175,13 +181,7 @@ pub fn split_clipped_bounds(
             hi.grow(&a);
         }
         if (a[axis] < plane && b[axis] > plane) || (a[axis] > plane && b[axis] < plane) {
-            let s = (plane - a[axis]) / (b[axis] - a[axis]);
-            let mut p = [
-                a[0] + (b[0] - a[0]) * s,
-                a[1] + (b[1] - a[1]) * s,
-                a[2] + (b[2] - a[2]) * s,
-            ];
-            p[axis] = plane;
+            let p = crossing(&a, &b, axis, plane);
             lo.grow(&p);
             hi.grow(&p);
         }
