@@ -8,7 +8,7 @@
 use std::f32::consts::PI;
 use std::time::Instant;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 use raystream_accel::{Counters, KdTree, Traversal, brute};
 use raystream_cpu::dvr::{DvrMode, DvrOptions, orbit_camera, render_volume};
@@ -22,7 +22,7 @@ use crate::common::{
     Backend, file_name, load_mesh, median, ms, open_device, print_line, round3, spinner,
 };
 use crate::info::tree_json;
-use crate::trace::{NO_PRIM, kernels_name, trace_all, trace_timed};
+use crate::trace::{NO_PRIM, kernels_name, trace_all, trace_timed, write_rays};
 use raystream_gpu::Kernels;
 
 const OFFSET: f32 = 1e-4;
@@ -138,6 +138,12 @@ fn kernel_label(kernels: Option<Kernels>, any: bool) -> &'static str {
 
 pub fn run(a: &BenchArgs) -> Result<()> {
     if raystream_io::is_volume_path(&a.input) {
+        if a.save_rays.is_some() {
+            bail!(
+                "{}: --save-rays writes a mesh's ray sets; this is a volume",
+                a.input.display()
+            );
+        }
         return match a.mode {
             Some(mode) => bench_dvr(a, mode.into()),
             None => bench_iso(a),
@@ -169,6 +175,13 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         let pb = spinner(quiet, "generating ray sets");
         let sets = ray_sets(&mesh, &tree, a.size.0, a.size.1);
         pb.finish_and_clear();
+        if let Some(dir) = &a.save_rays {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("{}: cannot create the folder", dir.display()))?;
+            for (kind, rays) in &sets {
+                write_rays(&dir.join(format!("{kind}.rays")), rays)?;
+            }
+        }
         // The CPU has one way to trace; a GPU is measured with each kernel layout asked for.
         let layouts: Vec<Option<Kernels>> = match backend {
             Backend::Cpu => vec![None],

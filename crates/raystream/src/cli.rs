@@ -411,6 +411,10 @@ pub struct BenchArgs {
     /// Timed runs per ray set after one warm-up.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub repeat: u32,
+    /// Meshes: also write the ray sets to this folder as primary.rays, shadow.rays and
+    /// diffuse.rays (RAYS.bin format), for `trace` and `rays.py`.
+    #[arg(long, value_name = "DIR")]
+    pub save_rays: Option<PathBuf>,
     /// JSON lines only.
     #[arg(long)]
     pub json: bool,

@@ -69,6 +69,16 @@ pub fn read_rays(path: &Path) -> Result<Vec<Ray>> {
         .collect())
 }
 
+/// Writes rays in the RAYS.bin layout (8 little-endian f32 per ray).
+pub fn write_rays(path: &Path, rays: &[Ray]) -> Result<()> {
+    let bytes: Vec<u8> = rays
+        .iter()
+        .flat_map(|r| r.to_array())
+        .flat_map(f32::to_le_bytes)
+        .collect();
+    std::fs::write(path, bytes).with_context(|| format!("{}: cannot write rays", path.display()))
+}
+
 /// Traces all rays in parallel.
 pub fn trace_all(tree: &KdTree, rays: &[Ray], any: bool, traversal: Traversal) -> Vec<HitRecord> {
     tree.intersect_all(rays, traversal, any)
@@ -90,7 +100,13 @@ pub struct Traced {
     pub kernel_gpu_ms: Option<f64>,
 }
 
-/// Traces `rays` once to warm up and `repeat` times timed, on the CPU or the GPU.
+/// Untimed GPU runs before the timed ones: until this much time has passed…
+const GPU_WARM_UP: std::time::Duration = std::time::Duration::from_millis(200);
+/// …or this many runs (the first included).
+const GPU_WARM_UP_RUNS: u32 = 50;
+
+/// Traces `rays` to warm up (once on the CPU; on a GPU for [`GPU_WARM_UP`], at most
+/// [`GPU_WARM_UP_RUNS`] runs) and `repeat` times timed, on the CPU or the GPU.
 pub fn trace_timed(
     backend: &Backend,
     tree: &KdTree,
@@ -117,7 +133,16 @@ pub fn trace_timed(
                 bail!("--device gpu runs the rope traversal only (--traversal ropes)");
             }
             let tracer = GpuTracer::new(ctx, tree)?;
+            let warm_up = Instant::now();
             let (mut hits, first) = tracer.trace_with(rays, any, kernels)?;
+            // A GPU left idle (while the CPU built the tree or generated rays) runs at low
+            // clocks; keep it busy for a while before timing, as GPU benchmarks do.
+            for _ in 1..GPU_WARM_UP_RUNS {
+                if warm_up.elapsed() >= GPU_WARM_UP {
+                    break;
+                }
+                tracer.trace_with(rays, any, kernels)?;
+            }
             for _ in 0..repeat {
                 let (h, t) = tracer.trace_with(rays, any, kernels)?;
                 hits = h;

@@ -205,24 +205,51 @@ fn json_lines(o: &std::process::Output) -> Vec<serde_json::Value> {
 
 #[test]
 fn bench_json_lines() {
+    let dir = tmp("bench-rays");
+    let _ = std::fs::remove_dir_all(&dir);
+    let spot = mesh("spot.obj");
     let o = run(&[
         "bench",
-        &mesh("spot.obj"),
+        &spot,
         "--size",
         "64x48",
         "--repeat",
         "1",
         "--json",
+        "--save-rays",
+        dir.to_str().unwrap(),
     ]);
     let lines = json_lines(&o);
     let kinds: Vec<&str> = lines.iter().map(|l| l["kind"].as_str().unwrap()).collect();
     assert_eq!(kinds, ["primary", "shadow", "diffuse"]);
     for l in &lines {
-        assert!(l["rays"].as_u64().unwrap() > 1000);
+        let rays = l["rays"].as_u64().unwrap();
+        assert!(rays > 1000);
         assert!(l["mrays_per_s"].as_f64().unwrap() > 0.0);
         assert!(l["inner_per_ray"].as_f64().unwrap() > 0.0);
         assert!(l["hits"].as_u64().unwrap() > 0);
+        // The saved set is the one measured: as many rays, and `trace` finds the same hits.
+        let kind = l["kind"].as_str().unwrap();
+        let saved = dir.join(format!("{kind}.rays"));
+        assert_eq!(std::fs::metadata(&saved).unwrap().len(), 32 * rays);
+        let hits = dir.join(format!("{kind}.hits"));
+        trace_to(&spot, &saved, &hits, kind == "shadow", &[]);
+        let found = std::fs::read(&hits)
+            .unwrap()
+            .chunks_exact(16)
+            .filter(|h| f32::from_le_bytes(h[..4].try_into().unwrap()).is_finite())
+            .count();
+        assert_eq!(found as u64, l["hits"].as_u64().unwrap(), "{kind}");
     }
+    let ct = repo().join("crates/raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
+    let o = run(&[
+        "bench",
+        ct.to_str().unwrap(),
+        "--save-rays",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--save-rays"), "{}", stderr(&o));
 }
 
 #[test]
