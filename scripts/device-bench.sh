@@ -9,8 +9,8 @@
 # nodes and triangles per ray), the default scene's frame rate, and the volume modes' frame rates.
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
-# PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene) picks the parts; TRACERS (default "gpu split cpu
-# embree") the tracers of the trace part.
+# PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene) picks the parts; TRACERS (default "gpu spin
+# split cpu embree"; spin = the fused kernel with RAYSTREAM_GPU_WAIT=spin) the tracers of the trace part.
 # Results: OUTDIR/results.jsonl (one JSON object per line, each tagged), images in OUTDIR.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -44,7 +44,7 @@ for l in sys.stdin:
 
 echo "{\"machine\": \"$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"date\": \"$(date -u +%FT%TZ)\"}" | tee -a "$res"
 parts=${PARTS:-trace render volume}
-tracers=${TRACERS:-gpu split cpu embree}
+tracers=${TRACERS:-gpu spin split cpu embree}
 has() { [[ " $1 " == *" $2 "* ]]; }
 has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
   mesh=$d/meshes/$m.ply
@@ -58,6 +58,9 @@ has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; 
       $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-$k.hits" "${any[@]}" --device gpu --kernels $k --repeat 10 --json --quiet \
         | tag "$t, \"tracer\": \"raystream-gpu-$k\"}"
     done
+    # The fused kernel again with spinning waits (RAYSTREAM_GPU_WAIT=spin), for the A/B.
+    has "$tracers" spin && RAYSTREAM_GPU_WAIT=spin $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-spin.hits" "${any[@]}" --device gpu \
+      --repeat 10 --json --quiet | tag "$t, \"tracer\": \"raystream-gpu-fused-spin\"}"
     $py "$d/rays.py" check "$mesh" "$rays" "$tmp/gpu-fused.hits" "${any[@]}" --json | tag "$t, \"check\": \"gpu-fused\"}"
     has "$tracers" split && { cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-split.hits" && echo "$m $kind: split hits == fused hits byte for byte" \
       || echo "$m $kind: SPLIT HITS DIFFER from fused"; }
@@ -69,7 +72,14 @@ has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; 
     rm -f "$rays" "$tmp"/*.hits
   done
   has "$tracers" cpu && $bin bench "$mesh" --device gpu,cpu --kernels fused,split --size "$size" --repeat 5 --json --quiet \
-    | tag "{\"mesh\": \"$m\", \"bench\": true}"
+    --save-rays "$tmp/bench-$m" | tag "{\"mesh\": \"$m\", \"bench\": true}"
+  # bench's own sets traced by `trace`: are they slow on the GPU by themselves, or only inside bench?
+  has "$tracers" cpu && for kind in diffuse shadow; do
+    any=(); [ $kind = shadow ] && any=(--any)
+    $bin trace "$mesh" --rays "$tmp/bench-$m/$kind.rays" -o "$tmp/bench.hits" "${any[@]}" --device gpu --repeat 10 --json --quiet \
+      | tag "{\"mesh\": \"$m\", \"kind\": \"$kind\", \"tracer\": \"raystream-gpu-fused\", \"rays_from\": \"bench\"}"
+  done
+  rm -rf "$tmp/bench-$m" "$tmp/bench.hits"
 done
 
 ct=$d/ct/abdomen_pelvis_ct_totalseg.nii.gz

@@ -75,7 +75,13 @@ pub struct GpuContext {
     pub info: wgpu::AdapterInfo,
     pub limits: wgpu::Limits,
     lost: Arc<Mutex<Option<String>>>,
+    /// Waits poll the fence in a loop for up to [`SPIN_WAIT`] before blocking (see
+    /// [`GpuContext::wait`]).
+    spin_wait: bool,
 }
+
+/// How long a spinning wait polls before it blocks.
+const SPIN_WAIT: Duration = Duration::from_millis(5);
 
 impl GpuContext {
     /// Opens the first adapter whose name contains `adapter` (case-insensitive), preferring a
@@ -131,7 +137,14 @@ impl GpuContext {
             info,
             limits,
             lost,
+            spin_wait: false,
         })
+    }
+
+    /// Makes waits for the GPU spin (poll the fence) for up to 5 ms before they block; the
+    /// CLI turns it on with `RAYSTREAM_GPU_WAIT=spin`. See [`GpuContext::wait`].
+    pub fn set_spin_wait(&mut self, on: bool) {
+        self.spin_wait = on;
     }
 
     /// Whether the adapter is a software rasterizer (lavapipe, WARP, SwiftShader).
@@ -157,7 +170,25 @@ impl GpuContext {
     }
 
     /// Waits for all submitted work, failing instead of hanging past `GPU_TIMEOUT`.
+    ///
+    /// With spinning waits ([`GpuContext::set_spin_wait`]) it first polls the fence (without blocking) for up to
+    /// [`SPIN_WAIT`]: under a sandbox such as gVisor a blocking fence wait costs ≈ 0.5 ms of
+    /// wake-up latency (BENCHMARKS.md), which dominates short queries. An experiment to be
+    /// measured on a hardware GPU; blocking stays the default until it is.
     fn wait(&self) -> Result<(), GpuError> {
+        if self.spin_wait {
+            let start = Instant::now();
+            while start.elapsed() < SPIN_WAIT {
+                let status = self
+                    .device
+                    .poll(wgpu::PollType::Poll)
+                    .map_err(|e| self.err(format!("polling the GPU: {e}")))?;
+                if status.is_queue_empty() {
+                    return Ok(());
+                }
+                std::hint::spin_loop();
+            }
+        }
         self.device
             .poll(wgpu::PollType::Wait {
                 submission_index: None,

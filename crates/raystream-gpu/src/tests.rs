@@ -381,6 +381,33 @@ fn gpu_hits_equal_cpu_hits_on_every_mesh() {
 }
 
 #[test]
+fn spinning_waits_give_the_same_results() {
+    let Some(mut ctx) = gpu() else { return };
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
+    let mesh = raystream_io::load_mesh(&dir.join("spot.obj")).unwrap();
+    let tree = KdTree::build(&mesh, Builder::Sah);
+    let rays = test_rays(&mesh, 4096);
+    let blocking: Vec<_> = [false, true]
+        .map(|any| {
+            GpuTracer::new(&ctx, &tree)
+                .unwrap()
+                .trace(&rays, any)
+                .unwrap()
+                .0
+        })
+        .into();
+    ctx.set_spin_wait(true);
+    for (any, want) in [false, true].into_iter().zip(&blocking) {
+        // Twice: the second run reuses the tracer's buffers after a spinning readback.
+        let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+        for _ in 0..2 {
+            let (hits, _) = tracer.trace(&rays, any).unwrap();
+            assert_eq!(&hits, want, "any={any}: spinning waits changed the hits");
+        }
+    }
+}
+
+#[test]
 fn gpu_contract_edge_cases() {
     let Some(ctx) = gpu() else { return };
     let tri = [[Vec3::ZERO, Vec3::X, Vec3::Y]];

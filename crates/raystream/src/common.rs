@@ -37,13 +37,21 @@ impl Backend {
 /// when there is one and otherwise the CPU path (a software adapter such as lavapipe is far
 /// slower than the CPU path), and says which it used.
 pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Backend> {
+    // `RAYSTREAM_GPU_WAIT=spin`: waits for the GPU poll before they block (an experiment for
+    // sandboxed machines, where a blocking wait costs ≈ 0.5 ms; see BENCHMARKS.md).
+    let open = |adapter| {
+        GpuContext::new(adapter).map(|mut ctx| {
+            ctx.set_spin_wait(std::env::var("RAYSTREAM_GPU_WAIT").is_ok_and(|v| v == "spin"));
+            ctx
+        })
+    };
     match d {
         Device::Cpu => Ok(Backend::Cpu),
         Device::Gpu => Ok(Backend::Gpu(Box::new(
-            GpuContext::new(adapter).context("--device gpu")?,
+            open(adapter).context("--device gpu")?,
         ))),
         Device::Auto => {
-            let backend = match GpuContext::new(adapter) {
+            let backend = match open(adapter) {
                 Ok(ctx) if !ctx.is_software() => Backend::Gpu(Box::new(ctx)),
                 Ok(ctx) => {
                     if !quiet {
