@@ -9,6 +9,7 @@ use std::f32::consts::PI;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use rayon::prelude::*;
 use indicatif::ProgressBar;
 use raystream_accel::{Counters, KdTree, Traversal, brute};
 use raystream_cpu::dvr::{DvrMode, DvrOptions, orbit_camera, render_volume};
@@ -223,10 +224,19 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                         );
                     }
                 }
-                let mut c = Counters::default();
-                for r in rays {
-                    tree.intersect_counted(r, traversal, any, &mut c);
-                }
+                let c = rays
+                    .par_chunks(4096)
+                    .map(|chunk| {
+                        let mut c = Counters::default();
+                        for r in chunk {
+                            tree.intersect_counted(r, traversal, any, &mut c);
+                        }
+                        c
+                    })
+                    .reduce(Counters::default, |mut a, b| {
+                        a += b;
+                        a
+                    });
                 let n = rays.len().max(1) as f64;
                 let line = json!({
                     "bench": "trace",
