@@ -33,12 +33,27 @@ const GPU_TIMEOUT: Duration = Duration::from_secs(120);
 
 const KDTREE_WGSL: &str = include_str!("kernels/kdtree.wgsl");
 const QUERIES_WGSL: &str = include_str!("kernels/queries.wgsl");
+const STATS_WGSL: &str = include_str!("kernels/stats.wgsl");
 
-/// The constants every kernel shares, from their Rust definitions, then the kd-tree code.
-fn kdtree_wgsl() -> String {
+/// The constants every kernel shares, from their Rust definitions, then the kd-tree code
+/// (without its work counters).
+fn kdtree_core_wgsl() -> String {
     format!(
         "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\n{KDTREE_WGSL}"
     )
+}
+
+/// The kd-tree code for every kernel but the statistics query: work counters that count nothing.
+fn kdtree_wgsl() -> String {
+    format!(
+        "{}\nfn stat(k: u32) {{}}\nfn stat_listed(n: u32) {{}}\n",
+        kdtree_core_wgsl()
+    )
+}
+
+/// The WGSL source of the statistics query (`stats_closest`, `stats_any`); needs subgroups.
+pub fn stats_wgsl() -> String {
+    format!("{}\n{STATS_WGSL}", kdtree_core_wgsl())
 }
 
 /// The WGSL source of the ray-query kernels (`intersect_closest`, `intersect_any`).
@@ -115,7 +130,9 @@ impl GpuContext {
         let info = chosen.get_info();
         let limits = chosen.limits();
         // Per-kernel times come from timestamp queries where the adapter has them.
-        let features = chosen.features() & wgpu::Features::TIMESTAMP_QUERY;
+        // Subgroups, where there are, for the statistics query's SIMD efficiency.
+        let features =
+            chosen.features() & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::SUBGROUP);
         let (device, queue) = pollster::block_on(chosen.request_device(&wgpu::DeviceDescriptor {
             label: Some("raystream"),
             required_features: features,
@@ -386,6 +403,8 @@ pub struct GpuTracer<'a> {
     split: std::sync::OnceLock<split::SplitKernels>,
     /// The persistent-thread kernels (closest, any), built on first use.
     persistent: std::sync::OnceLock<[wgpu::ComputePipeline; 2]>,
+    /// The statistics query's kernels (closest, any), built on first use.
+    stats: std::sync::OnceLock<[wgpu::ComputePipeline; 2]>,
     /// `queries.wgsl`, for the pipelines built on first use.
     module: wgpu::ShaderModule,
     /// Milliseconds spent uploading the tree.
@@ -405,6 +424,41 @@ pub enum Kernels {
     /// [`PERSISTENT_GROUPS`] workgroups whose threads fetch rays from a global counter.
     Persistent,
 }
+
+/// The work of a fused query, counted on the GPU by the statistics kernels (`stats.wgsl`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct QueryStats {
+    pub rays: u64,
+    /// Inner-node steps, leaf visits and triangle tests, summed over the rays.
+    pub steps: [u64; 3],
+    /// Triangles listed in the visited leaves (the CPU's `Counters::triangles`; `steps[2]`
+    /// is smaller where any-hit queries stop inside a leaf).
+    pub listed: u64,
+    /// Per kind of step: the lanes that took part, summed over every step a subgroup took…
+    pub active_lanes: [u64; 3],
+    /// …and the lanes those steps could have used (the subgroup size, summed likewise).
+    pub lane_slots: [u64; 3],
+}
+
+impl QueryStats {
+    /// Inner steps, leaf steps and triangle tests: SIMD efficiency, the share of a subgroup's
+    /// lanes busy in its steps of that kind (1 = no divergence).
+    pub const KINDS: [&'static str; 3] = ["traversal", "leaf", "triangle"];
+
+    /// The SIMD efficiency of steps of kind `k` (see [`QueryStats::KINDS`]).
+    pub fn simd_efficiency(&self, k: usize) -> f64 {
+        self.active_lanes[k] as f64 / self.lane_slots[k].max(1) as f64
+    }
+
+    /// Mean steps of kind `k` per ray.
+    pub fn per_ray(&self, k: usize) -> f64 {
+        self.steps[k] as f64 / self.rays.max(1) as f64
+    }
+}
+
+/// Rays per statistics dispatch: few enough that no u32 counter of `stats.wgsl` can overflow
+/// (≤ 2^18 rays × the steps of one ray; 16,000 steps a ray would be needed).
+const STATS_BATCH: usize = 1 << 18;
 
 /// Workgroups of the persistent kernels: 4096 × 64 threads, about what an H100's 132 SMs hold
 /// at once (2048 threads each); fewer when there are fewer rays.
@@ -473,6 +527,7 @@ impl<'a> GpuTracer<'a> {
             any,
             split: std::sync::OnceLock::new(),
             persistent: std::sync::OnceLock::new(),
+            stats: std::sync::OnceLock::new(),
             module,
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
@@ -500,6 +555,86 @@ impl<'a> GpuTracer<'a> {
             ["intersect_closest_persistent", "intersect_any_persistent"]
                 .map(|entry| self.ctx.auto_pipeline(&self.module, entry))
         })
+    }
+
+    /// The fused query's work and SIMD efficiency on these rays, counted on the GPU (the hits
+    /// are the fused kernel's); `None` where the device has no subgroup operations.
+    pub fn query_stats(&self, rays: &[Ray], any: bool) -> Result<Option<QueryStats>, GpuError> {
+        let ctx = self.ctx;
+        if !ctx.device.features().contains(wgpu::Features::SUBGROUP) {
+            return Ok(None);
+        }
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipeline = &self.stats.get_or_init(|| {
+            let module = ctx
+                .device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("stats.wgsl"),
+                    source: wgpu::ShaderSource::Wgsl(stats_wgsl().into()),
+                });
+            ["stats_closest", "stats_any"].map(|entry| ctx.auto_pipeline(&module, entry))
+        })[any as usize];
+        let mut total = QueryStats {
+            rays: rays.len() as u64,
+            ..QueryStats::default()
+        };
+        for batch in rays.chunks(STATS_BATCH) {
+            let n = batch.len();
+            let gpu_rays: Vec<GpuRay> = batch.iter().map(GpuRay::from).collect();
+            let ray_buf = ctx.storage(
+                "rays",
+                bytemuck::cast_slice(&gpu_rays),
+                wgpu::BufferUsages::empty(),
+            )?;
+            let hit_buf = ctx.work_buffer(
+                "hits",
+                (n * std::mem::size_of::<GpuHit>()) as u64,
+                wgpu::BufferUsages::empty(),
+            )?;
+            let stats_buf = ctx.work_buffer("query statistics", 40, wgpu::BufferUsages::empty())?;
+            let params = Params {
+                ray_count: n as u32,
+                ..self.params
+            };
+            let param_buf = ctx
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("params"),
+                    contents: bytemuck::bytes_of(&params),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
+            let bind = ctx.bind_buffers(
+                "query statistics",
+                &pipeline.get_bind_group_layout(0),
+                &[
+                    &param_buf,
+                    &self.inners,
+                    &self.leaves,
+                    &self.tris,
+                    &ray_buf,
+                    &hit_buf,
+                    &stats_buf,
+                ],
+            );
+            self.run_fused(
+                pipeline,
+                "query statistics",
+                &bind,
+                ctx.dims(n as u32),
+                None,
+            )?;
+            let w = read_words(ctx, &stats_buf)?;
+            for k in 0..3 {
+                total.steps[k] += w[k] as u64;
+                total.active_lanes[k] += w[4 + k] as u64;
+                total.lane_slots[k] += w[7 + k] as u64;
+            }
+            total.listed += w[3] as u64;
+        }
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(ctx.err(e));
+        }
+        Ok(Some(total))
     }
 
     fn split_kernels(&self) -> &split::SplitKernels {

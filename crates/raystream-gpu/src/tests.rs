@@ -21,6 +21,12 @@ fn naga_module(src: &str, what: &str) -> naga::Module {
 }
 
 #[test]
+fn stats_wgsl_validates() {
+    naga_module(&stats_wgsl(), "stats.wgsl");
+    naga_module(&queries_wgsl(), "queries.wgsl");
+}
+
+#[test]
 fn film_wgsl_validates() {
     naga_module(&render::film_wgsl(), "film.wgsl");
 }
@@ -378,6 +384,72 @@ fn gpu_hits_equal_cpu_hits_on_every_mesh() {
             }
         }
     }
+}
+
+/// The statistics query walks the same nodes as the CPU's rope traversal, step for step: the
+/// same inner nodes, leaves and listed triangles summed over the rays; SIMD efficiencies are
+/// shares of lanes, and coherent rays keep more lanes busy than incoherent ones.
+#[test]
+fn query_statistics_count_the_cpu_walk() {
+    let Some(ctx) = gpu() else { return };
+    let has_subgroups = ctx.device.features().contains(wgpu::Features::SUBGROUP);
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
+    let mesh = raystream_io::load_mesh(&dir.join("stanford_bunny.ply")).unwrap();
+    let tree = KdTree::build(&mesh, Builder::Sah);
+    let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+    let rays = test_rays(&mesh, 20_000);
+    for any in [false, true] {
+        let Some(stats) = tracer.query_stats(&rays, any).unwrap() else {
+            assert!(!has_subgroups);
+            eprintln!("skipping: '{}' has no subgroup operations", ctx.info.name);
+            return;
+        };
+        let mut c = raystream_accel::Counters::default();
+        for r in &rays {
+            tree.intersect_counted(r, Traversal::Ropes, any, &mut c);
+        }
+        assert_eq!(stats.rays, rays.len() as u64);
+        assert_eq!(
+            (stats.steps[0], stats.steps[1], stats.listed),
+            (c.inner, c.leaves, c.triangles),
+            "any={any}: GPU (inner, leaves, triangles) vs the CPU's"
+        );
+        assert!(stats.steps[2] <= stats.listed && stats.steps[2] > 0);
+        for k in 0..3 {
+            let e = stats.simd_efficiency(k);
+            assert!(
+                e > 0.0 && e <= 1.0,
+                "any={any} {}: {e}",
+                QueryStats::KINDS[k]
+            );
+        }
+    }
+    // Camera rays through neighbouring pixels (coherent) against rays in random directions
+    // from random points (incoherent): divergence shows in the traversal's efficiency.
+    let b = mesh.bounds();
+    let eye = b.center() + Vec3::new(0.2, 0.3, 1.0).normalize() * 2.5 * b.radius();
+    let coherent: Vec<Ray> = (0..128 * 128)
+        .map(|p| {
+            let (x, y) = ((p % 128) as f32 / 127.0, (p / 128) as f32 / 127.0);
+            let target = b.min + (b.max - b.min) * Vec3::new(x, y, 0.5);
+            Ray::new(eye, target - eye, 0.0, f32::INFINITY)
+        })
+        .collect();
+    let mut rng = Rng(7);
+    let incoherent: Vec<Ray> = (0..128 * 128)
+        .map(|_| {
+            let o = b.min + (b.max - b.min) * Vec3::new(rng.f(), rng.f(), rng.f());
+            let d = Vec3::new(rng.f(), rng.f(), rng.f()) * 2.0 - 1.0;
+            Ray::new(o, d, 0.0, f32::INFINITY)
+        })
+        .collect();
+    let eff = |rays: &[Ray]| {
+        let s = tracer.query_stats(rays, false).unwrap().unwrap();
+        s.simd_efficiency(0)
+    };
+    let (c, i) = (eff(&coherent), eff(&incoherent));
+    eprintln!("SIMD efficiency of traversal steps: coherent {c:.3}, incoherent {i:.3}");
+    assert!(c > i, "coherent {c} vs incoherent {i}");
 }
 
 #[test]

@@ -9,8 +9,8 @@ use std::f32::consts::PI;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use rayon::prelude::*;
 use indicatif::ProgressBar;
+use rayon::prelude::*;
 use raystream_accel::{Counters, KdTree, Traversal, brute};
 use raystream_cpu::dvr::{DvrMode, DvrOptions, orbit_camera, render_volume};
 use raystream_io::TriMesh;
@@ -24,7 +24,7 @@ use crate::common::{
 };
 use crate::info::tree_json;
 use crate::trace::{NO_PRIM, kernels_name, trace_all, trace_timed, write_rays};
-use raystream_gpu::Kernels;
+use raystream_gpu::{GpuTracer, Kernels, QueryStats};
 
 const OFFSET: f32 = 1e-4;
 const LIGHT_RADIUS: f32 = 0.05;
@@ -237,6 +237,38 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                         a += b;
                         a
                     });
+                // The fused kernel's own count of its work, and its SIMD efficiency, where the
+                // GPU has subgroup operations.
+                let simd = match (&backend, kernels) {
+                    (Backend::Gpu(ctx), Some(Kernels::Fused)) => GpuTracer::new(ctx, &tree)
+                        .and_then(|tracer| tracer.query_stats(rays, any))
+                        .map_err(anyhow::Error::from)?
+                        .map(|s| {
+                            if (s.steps[0], s.steps[1], s.listed) != (c.inner, c.leaves, c.triangles) {
+                                eprintln!(
+                                    "raystream: {kind}: the GPU counted {:?} inner/leaf steps and {} listed triangles, the CPU {} / {} / {}",
+                                    &s.steps[..2],
+                                    s.listed,
+                                    c.inner,
+                                    c.leaves,
+                                    c.triangles
+                                );
+                            }
+                            let per_kind = |f: &dyn Fn(usize) -> f64| -> serde_json::Value {
+                                QueryStats::KINDS
+                                    .iter()
+                                    .enumerate()
+                                    .map(|(k, name)| (name.to_string(), json!(round3(f(k)))))
+                                    .collect::<serde_json::Map<_, _>>()
+                                    .into()
+                            };
+                            json!({
+                                "steps_per_ray": per_kind(&|k| s.per_ray(k)),
+                                "simd_efficiency": per_kind(&|k| s.simd_efficiency(k)),
+                            })
+                        }),
+                    _ => None,
+                };
                 let n = rays.len().max(1) as f64;
                 let line = json!({
                     "bench": "trace",
@@ -264,6 +296,9 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                     "leaves_per_ray": round3(c.leaves as f64 / n),
                     "tris_per_ray": round3(c.triangles as f64 / n),
                     "hits": t.hits.iter().filter(|h| h.t.is_finite()).count(),
+                    // GPU, fused kernel, subgroups: steps per ray as the kernel counted them,
+                    // and the share of each subgroup's lanes busy in its steps.
+                    "gpu_stats": simd,
                 });
                 if a.json {
                     print_line(line);
@@ -286,6 +321,12 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                         tree.stats.builder,
                         backend.adapter()
                     );
+                    if let Some(s) = &line["gpu_stats"].as_object() {
+                        println!(
+                            "          SIMD efficiency (share of subgroup lanes busy): {}",
+                            s["simd_efficiency"]
+                        );
+                    }
                 }
             }
         }

@@ -252,6 +252,43 @@ fn bench_json_lines() {
     assert!(stderr(&o).contains("--save-rays"), "{}", stderr(&o));
 }
 
+/// `bench --device gpu,cpu`: both devices' lines, the GPU's with the fused kernel's own count
+/// of its work (the CPU's walk, step for step) and its SIMD efficiency.
+#[test]
+fn bench_gpu_and_cpu_side_by_side() {
+    if !gpu_available() {
+        return;
+    }
+    let o = run(&[
+        "bench",
+        &mesh("spot.obj"),
+        "--device",
+        "gpu,cpu",
+        "--size",
+        "48x36",
+        "--repeat",
+        "1",
+        "--json",
+    ]);
+    let lines = json_lines(&o);
+    let devices: Vec<&str> = lines.iter().map(|l| l["device"].as_str().unwrap()).collect();
+    assert_eq!(devices, ["gpu", "gpu", "gpu", "cpu", "cpu", "cpu"]);
+    for (g, c) in lines[..3].iter().zip(&lines[3..]) {
+        assert_eq!(g["kind"], c["kind"]);
+        assert!(c["gpu_stats"].is_null());
+        let Some(stats) = g["gpu_stats"].as_object() else {
+            eprintln!("no subgroup operations on this adapter: no GPU statistics");
+            continue;
+        };
+        assert_eq!(stats["steps_per_ray"]["traversal"], c["inner_per_ray"]);
+        assert_eq!(stats["steps_per_ray"]["leaf"], c["leaves_per_ray"]);
+        for (kind, e) in stats["simd_efficiency"].as_object().unwrap() {
+            let e = e.as_f64().unwrap();
+            assert!(e > 0.0 && e <= 1.0, "{kind}: {e}");
+        }
+    }
+}
+
 #[test]
 fn default_render_writes_render_png() {
     let dir = tmp("default-cwd");

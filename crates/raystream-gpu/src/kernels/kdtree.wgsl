@@ -187,6 +187,7 @@ fn clip_to_scene(r: RayIn, w: Walk) -> vec2<f32> {
 fn descend(start: u32, w: Walk, t_entry: f32) -> u32 {
     var node = start;
     while (node & LEAF_BIT) == 0u {
+        stat(STAT_INNER);
         let n = inners[node];
         let a = n.axis;
         var far: bool;
@@ -210,6 +211,7 @@ fn descend(start: u32, w: Walk, t_entry: f32) -> u32 {
 fn intersect_leaf(leaf: KdLeaf, r: RayIn, w: Walk, any_hit: bool, best: ptr<function, HitOut>) -> bool {
     var changed = false;
     for (var i = leaf.first; i < leaf.first + leaf.count; i++) {
+        stat(STAT_TRIANGLE);
         let tri = tris[i];
         var t_best = (*best).t;
         if (*best).prim == NO_PRIM {
@@ -272,6 +274,8 @@ fn trace(r: RayIn, any_hit: bool) -> HitOut {
     for (var step = 0u; step < params.max_steps; step++) {
         node = descend(node, w, t_entry);
         let leaf = leaves[node & ~LEAF_BIT];
+        stat(STAT_LEAF);
+        stat_listed(leaf.count);
         if intersect_leaf(leaf, r, w, any_hit, &best) && any_hit {
             return best;
         }
@@ -290,3 +294,10 @@ fn trace(r: RayIn, any_hit: bool) -> HitOut {
 fn ray_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
     return gid.x + gid.y * groups.x * WORKGROUP_SIZE;
 }
+
+// Work counters of `trace` (`stat(k)` at each inner step, leaf visit and triangle test;
+// `stat_listed(n)` with each visited leaf's triangle count). Every module but the statistics
+// query (stats.wgsl) defines them as nothing.
+const STAT_INNER: u32 = 0u;
+const STAT_LEAF: u32 = 1u;
+const STAT_TRIANGLE: u32 = 2u;

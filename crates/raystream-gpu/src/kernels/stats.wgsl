@@ -1,0 +1,60 @@
+// The statistics query: `trace` as the fused kernel runs it, counting its work per ray and, with
+// subgroup operations, how many lanes of each subgroup take part in each step (SIMD efficiency,
+// Aila & Laine 2009). Follows kdtree.wgsl. naga takes the subgroup built-ins without `enable
+// subgroups;` (it does not know that directive yet); the device needs wgpu's SUBGROUP feature.
+
+@group(0) @binding(4) var<storage, read> rays: array<RayIn>;
+@group(0) @binding(5) var<storage, read_write> hits: array<HitOut>;
+// 0-2: steps of each kind (inner, leaf, triangle) summed over lanes; 3: triangles listed in
+// the visited leaves; 4-6: active lanes summed over the subgroups' steps of each kind; 7-9:
+// the subgroup size summed over the same steps (the lanes those steps could have used).
+@group(0) @binding(6) var<storage, read_write> stats: array<atomic<u32>, 10>;
+
+var<private> subgroup_lanes: u32;
+var<private> lane_steps: array<u32, 4>;
+var<private> active_lanes: array<u32, 3>;
+var<private> lane_slots: array<u32, 3>;
+
+fn stat(k: u32) {
+    lane_steps[k] += 1u;
+    // The lanes of this subgroup taking this step; the first of them (the only one before
+    // which no lane counts) books the step.
+    let taking = subgroupAdd(1u);
+    if subgroupExclusiveAdd(1u) == 0u {
+        active_lanes[k] += taking;
+        lane_slots[k] += subgroup_lanes;
+    }
+}
+
+fn stat_listed(n: u32) {
+    lane_steps[3] += n;
+}
+
+fn stats_query(gid: vec3<u32>, groups: vec3<u32>, lanes: u32, any_hit: bool) {
+    subgroup_lanes = lanes;
+    let i = ray_index(gid, groups);
+    if i < params.ray_count {
+        hits[i] = trace(rays[i], any_hit);
+    }
+    for (var k = 0u; k < 4u; k++) {
+        if lane_steps[k] != 0u {
+            atomicAdd(&stats[k], lane_steps[k]);
+        }
+    }
+    for (var k = 0u; k < 3u; k++) {
+        if lane_slots[k] != 0u {
+            atomicAdd(&stats[4u + k], active_lanes[k]);
+            atomicAdd(&stats[7u + k], lane_slots[k]);
+        }
+    }
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn stats_closest(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(subgroup_size) lanes: u32) {
+    stats_query(gid, groups, lanes, false);
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn stats_any(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(subgroup_size) lanes: u32) {
+    stats_query(gid, groups, lanes, true);
+}
