@@ -403,8 +403,11 @@ pub struct GpuTracer<'a> {
     split: std::sync::OnceLock<split::SplitKernels>,
     /// The persistent-thread kernels (closest, any), built on first use.
     persistent: std::sync::OnceLock<[wgpu::ComputePipeline; 2]>,
-    /// The statistics query's kernels (closest, any), built on first use.
-    stats: std::sync::OnceLock<[wgpu::ComputePipeline; 2]>,
+    /// The "if-if" kernels (closest, any), built on first use.
+    ifif: std::sync::OnceLock<[wgpu::ComputePipeline; 2]>,
+    /// The statistics query's kernels (closest, any; then the same as "if-if"), built on
+    /// first use.
+    stats: std::sync::OnceLock<[wgpu::ComputePipeline; 4]>,
     /// `queries.wgsl`, for the pipelines built on first use.
     module: wgpu::ShaderModule,
     /// Milliseconds spent uploading the tree.
@@ -423,6 +426,10 @@ pub enum Kernels {
     /// The fused loop in persistent threads (Aila & Laine 2009): a fixed grid of
     /// [`PERSISTENT_GROUPS`] workgroups whose threads fetch rays from a global counter.
     Persistent,
+    /// The fused query as Aila & Laine's "if-if" loop: each iteration a thread takes at most
+    /// one traversal step and one triangle step, so threads in different phases share
+    /// iterations (the fused kernel runs "while-while": all inner steps, then all triangles).
+    IfIf,
 }
 
 /// The work of a fused query, counted on the GPU by the statistics kernels (`stats.wgsl`).
@@ -527,6 +534,7 @@ impl<'a> GpuTracer<'a> {
             any,
             split: std::sync::OnceLock::new(),
             persistent: std::sync::OnceLock::new(),
+            ifif: std::sync::OnceLock::new(),
             stats: std::sync::OnceLock::new(),
             module,
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
@@ -550,6 +558,13 @@ impl<'a> GpuTracer<'a> {
         )
     }
 
+    fn ifif_kernels(&self) -> &[wgpu::ComputePipeline; 2] {
+        self.ifif.get_or_init(|| {
+            ["intersect_closest_ifif", "intersect_any_ifif"]
+                .map(|entry| self.ctx.auto_pipeline(&self.module, entry))
+        })
+    }
+
     fn persistent_kernels(&self) -> &[wgpu::ComputePipeline; 2] {
         self.persistent.get_or_init(|| {
             ["intersect_closest_persistent", "intersect_any_persistent"]
@@ -560,7 +575,23 @@ impl<'a> GpuTracer<'a> {
     /// The fused query's work and SIMD efficiency on these rays, counted on the GPU (the hits
     /// are the fused kernel's); `None` where the device has no subgroup operations.
     pub fn query_stats(&self, rays: &[Ray], any: bool) -> Result<Option<QueryStats>, GpuError> {
+        self.query_stats_with(rays, any, Kernels::Fused)
+    }
+
+    /// As [`GpuTracer::query_stats`] for the fused or the "if-if" loop; `None` for the other
+    /// layouts too.
+    pub fn query_stats_with(
+        &self,
+        rays: &[Ray],
+        any: bool,
+        kernels: Kernels,
+    ) -> Result<Option<QueryStats>, GpuError> {
         let ctx = self.ctx;
+        let ifif = match kernels {
+            Kernels::Fused => false,
+            Kernels::IfIf => true,
+            Kernels::Split | Kernels::Persistent => return Ok(None),
+        };
         if !ctx.device.features().contains(wgpu::Features::SUBGROUP) {
             return Ok(None);
         }
@@ -572,8 +603,14 @@ impl<'a> GpuTracer<'a> {
                     label: Some("stats.wgsl"),
                     source: wgpu::ShaderSource::Wgsl(stats_wgsl().into()),
                 });
-            ["stats_closest", "stats_any"].map(|entry| ctx.auto_pipeline(&module, entry))
-        })[any as usize];
+            [
+                "stats_closest",
+                "stats_any",
+                "stats_closest_ifif",
+                "stats_any_ifif",
+            ]
+            .map(|entry| ctx.auto_pipeline(&module, entry))
+        })[2 * ifif as usize + any as usize];
         let mut total = QueryStats {
             rays: rays.len() as u64,
             ..QueryStats::default()
@@ -706,6 +743,10 @@ impl<'a> GpuTracer<'a> {
                 &self.persistent_kernels()[any as usize],
                 ["intersect_closest_persistent", "intersect_any_persistent"][any as usize],
             ),
+            (Kernels::IfIf, _) => (
+                &self.ifif_kernels()[any as usize],
+                ["intersect_closest_ifif", "intersect_any_ifif"][any as usize],
+            ),
             (_, true) => (&self.any, "intersect_any"),
             (_, false) => (&self.closest, "intersect_closest"),
         };
@@ -755,7 +796,7 @@ impl<'a> GpuTracer<'a> {
         // Submission to completion: one round trip (the timestamps travel back with it).
         let t1 = Instant::now();
         let (kernel_gpu_ms, split_steps) = match kernels {
-            Kernels::Fused => (
+            Kernels::Fused | Kernels::IfIf => (
                 self.run_fused(pipeline, label, &bind, ctx.dims(n as u32), timer.as_ref())?,
                 None,
             ),

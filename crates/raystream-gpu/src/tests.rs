@@ -381,6 +381,13 @@ fn gpu_hits_equal_cpu_hits_on_every_mesh() {
                 } else {
                     assert_eq!(hits, persistent, "{what}: persistent kernels differ");
                 }
+                // The "if-if" loop takes the same steps in the same order: the same records.
+                let (ifif, _) = tracer.trace_with(&rays, any, Kernels::IfIf).unwrap();
+                if any {
+                    compare(&tree, &rays, &ifif, any, &format!("{what} ifif"));
+                } else {
+                    assert_eq!(hits, ifif, "{what}: if-if kernels differ");
+                }
             }
         }
     }
@@ -398,8 +405,11 @@ fn query_statistics_count_the_cpu_walk() {
     let tree = KdTree::build(&mesh, Builder::Sah);
     let tracer = GpuTracer::new(&ctx, &tree).unwrap();
     let rays = test_rays(&mesh, 20_000);
-    for any in [false, true] {
-        let Some(stats) = tracer.query_stats(&rays, any).unwrap() else {
+    for (any, kernels) in [false, true]
+        .into_iter()
+        .flat_map(|any| [(any, Kernels::Fused), (any, Kernels::IfIf)])
+    {
+        let Some(stats) = tracer.query_stats_with(&rays, any, kernels).unwrap() else {
             assert!(!has_subgroups);
             eprintln!("skipping: '{}' has no subgroup operations", ctx.info.name);
             return;
@@ -412,7 +422,7 @@ fn query_statistics_count_the_cpu_walk() {
         assert_eq!(
             (stats.steps[0], stats.steps[1], stats.listed),
             (c.inner, c.leaves, c.triangles),
-            "any={any}: GPU (inner, leaves, triangles) vs the CPU's"
+            "any={any} {kernels:?}: GPU (inner, leaves, triangles) vs the CPU's"
         );
         assert!(stats.steps[2] <= stats.listed && stats.steps[2] > 0);
         for k in 0..3 {

@@ -132,6 +132,8 @@ fn kernel_label(kernels: Option<Kernels>, any: bool) -> &'static str {
         (Some(Kernels::Split), _) => "split_traverse+split_intersect",
         (Some(Kernels::Persistent), true) => "intersect_any_persistent",
         (Some(Kernels::Persistent), false) => "intersect_closest_persistent",
+        (Some(Kernels::IfIf), true) => "intersect_any_ifif",
+        (Some(Kernels::IfIf), false) => "intersect_closest_ifif",
         (_, true) => "intersect_any",
         (_, false) => "intersect_closest",
     }
@@ -240,8 +242,8 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                 // The fused kernel's own count of its work, and its SIMD efficiency, where the
                 // GPU has subgroup operations.
                 let simd = match (&backend, kernels) {
-                    (Backend::Gpu(ctx), Some(Kernels::Fused)) => GpuTracer::new(ctx, &tree)
-                        .and_then(|tracer| tracer.query_stats(rays, any))
+                    (Backend::Gpu(ctx), Some(k)) => GpuTracer::new(ctx, &tree)
+                        .and_then(|tracer| tracer.query_stats_with(rays, any, k))
                         .map_err(anyhow::Error::from)?
                         .map(|s| {
                             if (s.steps[0], s.steps[1], s.listed) != (c.inner, c.leaves, c.triangles) {

@@ -74,6 +74,7 @@ pub enum KernelsArg {
     Fused,
     Split,
     Persistent,
+    Ifif,
 }
 
 impl From<KernelsArg> for raystream_gpu::Kernels {
@@ -82,6 +83,7 @@ impl From<KernelsArg> for raystream_gpu::Kernels {
             KernelsArg::Fused => raystream_gpu::Kernels::Fused,
             KernelsArg::Split => raystream_gpu::Kernels::Split,
             KernelsArg::Persistent => raystream_gpu::Kernels::Persistent,
+            KernelsArg::Ifif => raystream_gpu::Kernels::IfIf,
         }
     }
 }
@@ -343,8 +345,9 @@ pub struct TraceArgs {
     #[command(flatten)]
     pub accel: Accel,
     /// GPU: one fused query kernel, traversal and intersection kernels split (the paper's
-    /// layout: (ray, leaf) work items between them), or the fused loop in persistent threads
-    /// fetching rays from a global counter (Aila & Laine 2009).
+    /// layout: (ray, leaf) work items between them), the fused loop in persistent threads
+    /// fetching rays from a global counter (Aila & Laine 2009), or the fused loop in their
+    /// "if-if" form (one traversal step and one triangle step per iteration).
     #[arg(long, value_enum, default_value = "fused")]
     pub kernels: KernelsArg,
     /// Timed runs after one warm-up; the median is reported.
@@ -402,7 +405,7 @@ pub struct BenchArgs {
     pub builder: BuilderArg,
     #[arg(long, value_enum, default_value = "ropes")]
     pub traversal: TraversalArg,
-    /// GPU query kernels to measure, comma-separated (fused, split, persistent), side by side.
+    /// GPU query kernels to measure, comma-separated (fused, split, persistent, ifif), side by side.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "fused")]
     pub kernels: Vec<KernelsArg>,
     /// Image size of the ray sets.

@@ -178,6 +178,7 @@ pub fn kernels_name(k: Kernels) -> &'static str {
         Kernels::Fused => "fused",
         Kernels::Split => "split",
         Kernels::Persistent => "persistent",
+        Kernels::IfIf => "ifif",
     }
 }
 

@@ -271,7 +271,10 @@ fn bench_gpu_and_cpu_side_by_side() {
         "--json",
     ]);
     let lines = json_lines(&o);
-    let devices: Vec<&str> = lines.iter().map(|l| l["device"].as_str().unwrap()).collect();
+    let devices: Vec<&str> = lines
+        .iter()
+        .map(|l| l["device"].as_str().unwrap())
+        .collect();
     assert_eq!(devices, ["gpu", "gpu", "gpu", "cpu", "cpu", "cpu"]);
     for (g, c) in lines[..3].iter().zip(&lines[3..]) {
         assert_eq!(g["kind"], c["kind"]);

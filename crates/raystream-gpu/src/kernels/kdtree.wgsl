@@ -183,43 +183,56 @@ fn clip_to_scene(r: RayIn, w: Walk) -> vec2<f32> {
     return vec2<f32>(t0, t1);
 }
 
+// One step from the inner node `node` toward the leaf that holds the ray's point at `t_entry`.
+fn descend_step(node: u32, w: Walk, t_entry: f32) -> u32 {
+    stat(STAT_INNER);
+    let n = inners[node];
+    let a = n.axis;
+    var far: bool;
+    if w.d[a] == 0.0 {
+        far = w.o[a] > n.split;
+    } else {
+        far = (n.split - w.o[a]) * w.inv[a] <= t_entry;
+    }
+    // far side = right for a positive direction, left for a negative one
+    if far != (w.d[a] < 0.0) {
+        return n.right;
+    }
+    return n.left;
+}
+
 // From `start` down to the leaf that holds the ray's point at `t_entry`.
 fn descend(start: u32, w: Walk, t_entry: f32) -> u32 {
     var node = start;
     while (node & LEAF_BIT) == 0u {
-        stat(STAT_INNER);
-        let n = inners[node];
-        let a = n.axis;
-        var far: bool;
-        if w.d[a] == 0.0 {
-            far = w.o[a] > n.split;
-        } else {
-            far = (n.split - w.o[a]) * w.inv[a] <= t_entry;
-        }
-        // far side = right for a positive direction, left for a negative one
-        if far != (w.d[a] < 0.0) {
-            node = n.right;
-        } else {
-            node = n.left;
-        }
+        node = descend_step(node, w, t_entry);
     }
     return node;
 }
 
-// Tests the leaf's triangles against `best` (whose t, or t_max before any hit, bounds them);
-// with `any_hit` stops at the first. Returns whether `best` changed.
+// Tests triangle entry `i` against `best` (whose t, or t_max before any hit, bounds it);
+// returns whether `best` changed (with `any_hit`, any hit in range changes it).
+fn test_triangle(i: u32, r: RayIn, w: Walk, any_hit: bool, best: ptr<function, HitOut>) -> bool {
+    stat(STAT_TRIANGLE);
+    let tri = tris[i];
+    var t_best = (*best).t;
+    if (*best).prim == NO_PRIM {
+        t_best = r.t_max;
+    }
+    let h = intersect_triangle(w.wt, tri, r.t_min, t_best);
+    if h.w != 0.0 && (any_hit || h.x < t_best || (*best).prim == NO_PRIM) {
+        *best = HitOut(h.x, bitcast<u32>(tri.v0.w), h.y, h.z);
+        return true;
+    }
+    return false;
+}
+
+// Tests the leaf's triangles against `best`; with `any_hit` stops at the first hit. Returns
+// whether `best` changed.
 fn intersect_leaf(leaf: KdLeaf, r: RayIn, w: Walk, any_hit: bool, best: ptr<function, HitOut>) -> bool {
     var changed = false;
     for (var i = leaf.first; i < leaf.first + leaf.count; i++) {
-        stat(STAT_TRIANGLE);
-        let tri = tris[i];
-        var t_best = (*best).t;
-        if (*best).prim == NO_PRIM {
-            t_best = r.t_max;
-        }
-        let h = intersect_triangle(w.wt, tri, r.t_min, t_best);
-        if h.w != 0.0 && (any_hit || h.x < t_best || (*best).prim == NO_PRIM) {
-            *best = HitOut(h.x, bitcast<u32>(tri.v0.w), h.y, h.z);
+        if test_triangle(i, r, w, any_hit, best) {
             changed = true;
             if any_hit {
                 return true;
@@ -285,6 +298,57 @@ fn trace(r: RayIn, any_hit: bool) -> HitOut {
         }
         node = exit.next;
         t_entry = max(t_entry, exit.t);
+    }
+    return best;
+}
+
+// The same query as `trace` in Aila & Laine's "if-if" form: each iteration a lane takes at
+// most one traversal step (an inner node, or entering the leaf reached) and at most one
+// triangle step (a test, or leaving the leaf by its rope), so lanes in different phases share
+// iterations instead of waiting for each other's inner loops ("while-while", `trace`).
+// The same steps in the same order: the same hits.
+fn trace_ifif(r: RayIn, any_hit: bool) -> HitOut {
+    var best = miss_record();
+    let w = walk_of(r);
+    let span = clip_to_scene(r, w);
+    if !(span.x <= span.y) {
+        return best;
+    }
+    var t_entry = span.x;
+    var node = params.root;
+    var leaf: KdLeaf;
+    var next_tri = 0u;
+    var in_leaf = false;
+    var leaves_left = params.max_steps;
+    loop {
+        if !in_leaf {
+            if (node & LEAF_BIT) == 0u {
+                node = descend_step(node, w, t_entry);
+            } else {
+                leaf = leaves[node & ~LEAF_BIT];
+                stat(STAT_LEAF);
+                stat_listed(leaf.count);
+                next_tri = leaf.first;
+                in_leaf = true;
+            }
+        }
+        if in_leaf {
+            if next_tri < leaf.first + leaf.count {
+                if test_triangle(next_tri, r, w, any_hit, &best) && any_hit {
+                    return best;
+                }
+                next_tri++;
+            } else {
+                let exit = leaf_exit(leaf, w, best, r.t_max);
+                leaves_left--;
+                if exit.next == NO_ROPE || leaves_left == 0u {
+                    return best;
+                }
+                node = exit.next;
+                t_entry = max(t_entry, exit.t);
+                in_leaf = false;
+            }
+        }
     }
     return best;
 }

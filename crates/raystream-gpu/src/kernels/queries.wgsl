@@ -20,6 +20,23 @@ fn intersect_any(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wor
     }
 }
 
+// The "if-if" loop (kdtree.wgsl's `trace_ifif`), one thread per ray.
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn intersect_closest_ifif(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = ray_index(gid, groups);
+    if i < params.ray_count {
+        hits[i] = trace_ifif(rays[i], false);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn intersect_any_ifif(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = ray_index(gid, groups);
+    if i < params.ray_count {
+        hits[i] = trace_ifif(rays[i], true);
+    }
+}
+
 // Persistent threads (Aila & Laine 2009): a fixed grid, sized to fill the GPU rather than one
 // thread per ray, whose threads fetch the next ray from a global counter whenever they finish
 // one, so that no thread idles behind a long ray of its workgroup while rays remain.

@@ -30,11 +30,15 @@ fn stat_listed(n: u32) {
     lane_steps[3] += n;
 }
 
-fn stats_query(gid: vec3<u32>, groups: vec3<u32>, lanes: u32, any_hit: bool) {
+fn stats_query(gid: vec3<u32>, groups: vec3<u32>, lanes: u32, any_hit: bool, ifif: bool) {
     subgroup_lanes = lanes;
     let i = ray_index(gid, groups);
     if i < params.ray_count {
-        hits[i] = trace(rays[i], any_hit);
+        if ifif {
+            hits[i] = trace_ifif(rays[i], any_hit);
+        } else {
+            hits[i] = trace(rays[i], any_hit);
+        }
     }
     for (var k = 0u; k < 4u; k++) {
         if lane_steps[k] != 0u {
@@ -51,10 +55,20 @@ fn stats_query(gid: vec3<u32>, groups: vec3<u32>, lanes: u32, any_hit: bool) {
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn stats_closest(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(subgroup_size) lanes: u32) {
-    stats_query(gid, groups, lanes, false);
+    stats_query(gid, groups, lanes, false, false);
 }
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn stats_any(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(subgroup_size) lanes: u32) {
-    stats_query(gid, groups, lanes, true);
+    stats_query(gid, groups, lanes, true, false);
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn stats_closest_ifif(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(subgroup_size) lanes: u32) {
+    stats_query(gid, groups, lanes, false, true);
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn stats_any_ifif(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(subgroup_size) lanes: u32) {
+    stats_query(gid, groups, lanes, true, true);
 }
