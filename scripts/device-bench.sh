@@ -10,7 +10,8 @@
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
 # PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene) picks the parts; TRACERS (default "gpu spin
-# split cpu embree"; spin = the fused kernel with RAYSTREAM_GPU_WAIT=spin) the tracers of the trace part.
+# ifif split cpu embree"; spin = the fused kernel with RAYSTREAM_GPU_WAIT=spin) the tracers of the trace part. bench's lines
+# carry the fused and if-if kernels' SIMD efficiency (gpu_stats).
 # Results: OUTDIR/results.jsonl (one JSON object per line, each tagged), images in OUTDIR.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -44,7 +45,7 @@ for l in sys.stdin:
 
 echo "{\"machine\": \"$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"date\": \"$(date -u +%FT%TZ)\"}" | tee -a "$res"
 parts=${PARTS:-trace render volume}
-tracers=${TRACERS:-gpu spin split cpu embree}
+tracers=${TRACERS:-gpu spin ifif split cpu embree}
 has() { [[ " $1 " == *" $2 "* ]]; }
 has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
   mesh=$d/meshes/$m.ply
@@ -53,8 +54,8 @@ has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; 
     $py "$d/rays.py" gen "$mesh" --kind $kind --size "$size" -o "$rays" > /dev/null || { echo "gen failed: $m $kind"; continue; }
     any=(); [ $kind = shadow ] && any=(--any)
     t="{\"mesh\": \"$m\", \"kind\": \"$kind\""
-    for k in fused split; do
-      [ $k = split ] && ! has "$tracers" split && continue
+    for k in fused split ifif; do
+      [ $k != fused ] && ! has "$tracers" $k && continue
       $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-$k.hits" "${any[@]}" --device gpu --kernels $k --repeat 10 --json --quiet \
         | tag "$t, \"tracer\": \"raystream-gpu-$k\"}"
     done
@@ -64,6 +65,8 @@ has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; 
     $py "$d/rays.py" check "$mesh" "$rays" "$tmp/gpu-fused.hits" "${any[@]}" --json | tag "$t, \"check\": \"gpu-fused\"}"
     has "$tracers" split && { cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-split.hits" && echo "$m $kind: split hits == fused hits byte for byte" \
       || echo "$m $kind: SPLIT HITS DIFFER from fused"; }
+    has "$tracers" ifif && { cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-ifif.hits" && echo "$m $kind: ifif hits == fused hits byte for byte" \
+      || echo "$m $kind: IFIF HITS DIFFER from fused"; }
     has "$tracers" cpu && { $bin trace "$mesh" --rays "$rays" -o "$tmp/cpu.hits" "${any[@]}" --device cpu --repeat 5 --json --quiet \
       | tag "$t, \"tracer\": \"raystream-cpu\"}"
     cmp -s "$tmp/cpu.hits" "$tmp/gpu-fused.hits" && echo "$m $kind: GPU hits == CPU hits byte for byte" \
@@ -71,7 +74,7 @@ has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; 
     has "$tracers" embree && $py "$d/rays.py" embree "$mesh" "$rays" "${any[@]}" --repeat 5 --json | tag "$t, \"tracer\": \"embree\"}"
     rm -f "$rays" "$tmp"/*.hits
   done
-  has "$tracers" cpu && $bin bench "$mesh" --device gpu,cpu --kernels fused,split --size "$size" --repeat 5 --json --quiet \
+  has "$tracers" cpu && $bin bench "$mesh" --device gpu,cpu --kernels fused,ifif,split --size "$size" --repeat 5 --json --quiet \
     --save-rays "$tmp/bench-$m" | tag "{\"mesh\": \"$m\", \"bench\": true}"
   # bench's own sets traced by `trace`: are they slow on the GPU by themselves, or only inside bench?
   has "$tracers" cpu && for kind in diffuse shadow; do
