@@ -558,6 +558,21 @@ impl<'a> GpuTracer<'a> {
         )
     }
 
+    /// The query kernels' uniform parameters for a queue of `ray_count` rays.
+    fn params_buffer(&self, ray_count: u32) -> wgpu::Buffer {
+        let params = Params {
+            ray_count,
+            ..self.params
+        };
+        self.ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("params"),
+                contents: bytemuck::bytes_of(&params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+    }
+
     fn ifif_kernels(&self) -> &[wgpu::ComputePipeline; 2] {
         self.ifif.get_or_init(|| {
             ["intersect_closest_ifif", "intersect_any_ifif"]
@@ -629,17 +644,7 @@ impl<'a> GpuTracer<'a> {
                 wgpu::BufferUsages::empty(),
             )?;
             let stats_buf = ctx.work_buffer("query statistics", 40, wgpu::BufferUsages::empty())?;
-            let params = Params {
-                ray_count: n as u32,
-                ..self.params
-            };
-            let param_buf = ctx
-                .device
-                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("params"),
-                    contents: bytemuck::bytes_of(&params),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                });
+            let param_buf = self.params_buffer(n as u32);
             let bind = ctx.bind_buffers(
                 "query statistics",
                 &pipeline.get_bind_group_layout(0),
@@ -727,17 +732,7 @@ impl<'a> GpuTracer<'a> {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let params = Params {
-            ray_count: n as u32,
-            ..self.params
-        };
-        let param_buf = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("params"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            });
+        let param_buf = self.params_buffer(n as u32);
         let (pipeline, label) = match (kernels, any) {
             (Kernels::Persistent, _) => (
                 &self.persistent_kernels()[any as usize],
