@@ -23,8 +23,8 @@ use crate::common::{
     Backend, file_name, load_mesh, median, ms, open_device, print_line, round3, spinner,
 };
 use crate::info::tree_json;
-use crate::trace::{NO_PRIM, kernels_name, trace_all, trace_timed, write_rays};
-use raystream_gpu::{GpuTracer, Kernels, QueryStats};
+use crate::trace::{NO_PRIM, gpu_stats_json, kernels_name, trace_all, trace_timed, write_rays};
+use raystream_gpu::{GpuTracer, Kernels};
 
 const OFFSET: f32 = 1e-4;
 const LIGHT_RADIUS: f32 = 0.05;
@@ -256,18 +256,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                                     c.triangles
                                 );
                             }
-                            let per_kind = |f: &dyn Fn(usize) -> f64| -> serde_json::Value {
-                                QueryStats::KINDS
-                                    .iter()
-                                    .enumerate()
-                                    .map(|(k, name)| (name.to_string(), json!(round3(f(k)))))
-                                    .collect::<serde_json::Map<_, _>>()
-                                    .into()
-                            };
-                            json!({
-                                "steps_per_ray": per_kind(&|k| s.per_ray(k)),
-                                "simd_efficiency": per_kind(&|k| s.simd_efficiency(k)),
-                            })
+                            gpu_stats_json(&s)
                         }),
                     _ => None,
                 };

@@ -353,6 +353,10 @@ pub struct TraceArgs {
     /// Timed runs after one warm-up; the median is reported.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub repeat: u32,
+    /// GPU, fused or ifif kernels: also count the kernel's steps per ray and its SIMD
+    /// efficiency (the share of subgroup lanes busy), where the adapter has subgroups.
+    #[arg(long)]
+    pub stats: bool,
     /// Print one JSON line of timings.
     #[arg(long)]
     pub json: bool,

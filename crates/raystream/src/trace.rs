@@ -9,7 +9,7 @@ use raystream_math::Ray;
 use serde_json::json;
 
 use crate::cli::TraceArgs;
-use raystream_gpu::{GpuTracer, Kernels};
+use raystream_gpu::{GpuTracer, Kernels, QueryStats};
 
 use crate::common::{
     Backend, file_name, load_mesh, median, ms, open_device, print_line, round3, spinner,
@@ -173,6 +173,22 @@ pub fn trace_timed(
     })
 }
 
+/// A GPU query's own count of its work: steps per ray and SIMD efficiency, by kind of step.
+pub fn gpu_stats_json(s: &QueryStats) -> serde_json::Value {
+    let per_kind = |f: &dyn Fn(usize) -> f64| -> serde_json::Value {
+        QueryStats::KINDS
+            .iter()
+            .enumerate()
+            .map(|(k, name)| (name.to_string(), json!(round3(f(k)))))
+            .collect::<serde_json::Map<_, _>>()
+            .into()
+    };
+    json!({
+        "steps_per_ray": per_kind(&|k| s.per_ray(k)),
+        "simd_efficiency": per_kind(&|k| s.simd_efficiency(k)),
+    })
+}
+
 pub fn kernels_name(k: Kernels) -> &'static str {
     match k {
         Kernels::Fused => "fused",
@@ -203,6 +219,21 @@ pub fn run(a: &TraceArgs) -> Result<()> {
         a.kernels.into(),
         a.repeat,
     )?;
+    let stats = match (&backend, a.stats) {
+        (_, false) => None,
+        (Backend::Cpu, true) => bail!("--stats counts a GPU kernel's work: add --device gpu"),
+        (Backend::Gpu(ctx), true) => {
+            let tracer = GpuTracer::new(ctx, &tree)?;
+            let Some(s) = tracer.query_stats_with(&rays, a.any, a.kernels.into())? else {
+                bail!(
+                    "--stats: '{}' has no subgroup operations, or --kernels {} has no statistics (fused and ifif have)",
+                    backend.adapter(),
+                    kernels_name(a.kernels.into())
+                );
+            };
+            Some(s)
+        }
+    };
     pb.finish_and_clear();
     let bytes: &[u8] = bytemuck::cast_slice(&t.hits);
     // HITS.bin is little-endian; so is every target raystream builds for.
@@ -229,6 +260,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             "gpu_kernel_ms": t.kernel_gpu_ms.map(round3),
             "mrays_per_s": round3(mrays),
             "hits": n_hits,
+            "gpu_stats": stats.as_ref().map(gpu_stats_json),
         }));
     } else if !a.quiet {
         eprintln!(
@@ -242,6 +274,12 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             backend.name(),
             backend.adapter()
         );
+        if let Some(s) = &stats {
+            eprintln!(
+                "raystream: GPU work and SIMD efficiency: {}",
+                gpu_stats_json(s)
+            );
+        }
     }
     Ok(())
 }

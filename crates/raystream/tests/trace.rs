@@ -187,7 +187,7 @@ fn gpu_trace_agrees_with_cpu_and_embree() {
             );
             // The split kernels (traversal and intersection apart) and the persistent threads
             // write the same file.
-            for kernels in ["split", "persistent"] {
+            for kernels in ["split", "persistent", "ifif"] {
                 if any && kernels == "split" {
                     continue;
                 }
@@ -206,6 +206,60 @@ fn gpu_trace_agrees_with_cpu_and_embree() {
                 );
             }
         }
+    }
+}
+
+/// `trace --stats`: the GPU kernel's steps per ray and SIMD efficiency in the JSON line (where
+/// the adapter has subgroups); on the CPU a clear error.
+#[test]
+fn trace_stats() {
+    let m = mesh("spot.obj");
+    let rays = tmp("stats.rays");
+    let mut floats = Vec::new();
+    for i in 0..4096 {
+        let (x, y) = ((i % 64) as f32 / 63.0 - 0.5, (i / 64) as f32 / 63.0 - 0.5);
+        floats.extend([0.0, 0.5, 3.0, 0.0, x, y - 0.3, -1.0, f32::INFINITY]);
+    }
+    std::fs::write(&rays, f32s(&floats)).unwrap();
+    let hits = tmp("stats.hits");
+    let args = |device: &'static str| {
+        vec![
+            "trace".to_string(),
+            m.clone(),
+            "--rays".into(),
+            rays.to_str().unwrap().into(),
+            "-o".into(),
+            hits.to_str().unwrap().into(),
+            "--stats".into(),
+            "--json".into(),
+            "--device".into(),
+            device.into(),
+        ]
+    };
+    let cpu = args("cpu");
+    let o = run(&cpu.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--stats"), "{}", stderr(&o));
+    if !gpu_available() {
+        return;
+    }
+    let gpu = args("gpu");
+    let o = run(&gpu.iter().map(String::as_str).collect::<Vec<_>>());
+    if !o.status.success() {
+        // Only an adapter without subgroups may refuse, and it must say so.
+        assert!(stderr(&o).contains("subgroup"), "{}", stderr(&o));
+        return;
+    }
+    let line: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let s = &line["gpu_stats"];
+    assert!(line["hits"].as_u64().unwrap() > 100, "{line}");
+    assert!(
+        s["steps_per_ray"]["traversal"].as_f64().unwrap() > 1.0,
+        "{line}"
+    );
+    for kind in ["traversal", "leaf", "triangle"] {
+        let e = s["simd_efficiency"][kind].as_f64().unwrap();
+        assert!(e > 0.0 && e <= 1.0, "{kind}: {e}");
     }
 }
 
