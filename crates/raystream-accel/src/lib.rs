@@ -24,6 +24,7 @@ use rayon::prelude::*;
 pub use build::{Builder, depth_limit};
 use raystream_io::TriMesh;
 use raystream_math::{Aabb, DVec3, Ray, Vec3};
+use traverse::RopeWalk;
 pub use traverse::{Counters, Traversal};
 
 use layout::{KdInner, KdLeaf, KdTri};
@@ -139,8 +140,8 @@ impl KdTree {
     }
 
     /// [`Self::intersect`] (or [`Self::intersect_any`] with `any`) of every ray, into `out`:
-    /// the same answers, faster on many rays (rope walks interleaved; stack traversal ray by
-    /// ray).
+    /// the same answers, faster on many rays (eight rope walks interleaved; stack traversal
+    /// ray by ray).
     pub fn intersect_many(
         &self,
         rays: &[Ray],
@@ -149,12 +150,14 @@ impl KdTree {
         out: &mut [Option<Hit>],
     ) {
         match (traversal, any) {
-            (Traversal::Ropes, false) => self.ropes_stream::<false>(rays, out),
-            (Traversal::Ropes, true) => self.ropes_stream::<true>(rays, out),
+            (Traversal::Ropes, false) => self.walk_many::<RopeWalk, false>(rays, out),
+            (Traversal::Ropes, true) => self.walk_many::<RopeWalk, true>(rays, out),
+            // Interleaved, stack walks ran at half the speed of one at a time (each lane
+            // carries its 780-byte stack; BENCHMARKS.md): they run ray by ray.
             (Traversal::Stack, _) => {
                 assert_eq!(rays.len(), out.len(), "one result per ray");
+                let mut c = Counters::default();
                 for (ray, o) in rays.iter().zip(out) {
-                    let mut c = Counters::default();
                     *o = if any {
                         self.stack::<true, false>(ray, &mut c)
                     } else {

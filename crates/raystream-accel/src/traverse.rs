@@ -55,12 +55,12 @@ impl std::ops::AddAssign for Counters {
     }
 }
 
-/// Rope walks interleaved by [`KdTree::ropes_stream`].
+/// Walks interleaved by [`KdTree::walk_many`].
 pub const STREAM_LANES: usize = 8;
 
 /// One ray's rope walk in progress: where it is and what it has found.
 #[derive(Clone, Copy)]
-struct RopeWalk {
+pub(crate) struct RopeWalk {
     r: RayCtx,
     node: u32,
     t_entry: f32,
@@ -73,7 +73,7 @@ struct RopeWalk {
 /// Per-ray data of a traversal: the ray, its reciprocal direction with zero components made
 /// +0 (so that +inf, never −inf, stands for "parallel") and the watertight-test constants.
 #[derive(Clone, Copy)]
-struct RayCtx {
+pub(crate) struct RayCtx {
     o: [f32; 4],
     inv: [f32; 4],
     neg: [bool; 4],
@@ -149,59 +149,157 @@ impl KdTree {
         ray: &Ray,
         c: &mut Counters,
     ) -> Option<Hit> {
-        let mut w = self.walk(ray)?;
+        self.walk_one::<RopeWalk, ANY, COUNT>(ray, c)
+    }
+
+    /// Classic kd-tree traversal with a stack of far children.
+    pub(crate) fn stack<const ANY: bool, const COUNT: bool>(
+        &self,
+        ray: &Ray,
+        c: &mut Counters,
+    ) -> Option<Hit> {
+        self.walk_one::<StackWalk, ANY, COUNT>(ray, c)
+    }
+
+    /// One ray's walk, from start to answer.
+    #[inline(always)]
+    fn walk_one<W: Walker, const ANY: bool, const COUNT: bool>(
+        &self,
+        ray: &Ray,
+        c: &mut Counters,
+    ) -> Option<Hit> {
+        let mut w = W::start(self, ray)?;
         loop {
-            while !is_leaf(w.node) {
-                self.descend_once::<COUNT>(&mut w, c);
+            while !is_leaf(w.node()) {
+                w.descend_once::<COUNT>(self, c);
             }
-            if self.leaf_step::<ANY, COUNT>(&mut w, c) {
-                return w.best;
+            if w.leaf_step::<ANY, COUNT>(self, c) {
+                return w.best();
             }
         }
     }
 
-    /// The start of one ray's rope walk; `None` for a ray that hits nothing.
+    /// Many rays' walks, [`STREAM_LANES`] of them interleaved a step at a time. The hits are
+    /// those of [`Self::walk_one`], ray for ray: each walk runs the same steps. What it gains
+    /// is memory-level parallelism: a single walk is a chain of dependent node loads that
+    /// mostly miss the caches, and the interleaved walks' loads overlap.
+    pub(crate) fn walk_many<W: Walker, const ANY: bool>(
+        &self,
+        rays: &[Ray],
+        out: &mut [Option<Hit>],
+    ) {
+        assert_eq!(rays.len(), out.len(), "one result per ray");
+        let mut c = Counters::default();
+        let mut next = 0;
+        // Starts the next ray that can hit something in `lane` (answering the others), or
+        // leaves the lane empty when the rays are used up.
+        let mut refill = |lane: &mut Option<(usize, W)>, out: &mut [Option<Hit>]| {
+            *lane = None;
+            while next < rays.len() {
+                let i = next;
+                next += 1;
+                match W::start(self, &rays[i]) {
+                    Some(w) => {
+                        *lane = Some((i, w));
+                        return;
+                    }
+                    None => out[i] = None,
+                }
+            }
+        };
+        let mut lanes: [Option<(usize, W)>; STREAM_LANES] = std::array::from_fn(|_| None);
+        for lane in &mut lanes {
+            refill(lane, out);
+        }
+        loop {
+            let mut active = false;
+            for lane in &mut lanes {
+                let Some((i, w)) = lane else { continue };
+                active = true;
+                if !is_leaf(w.node()) {
+                    w.descend_once::<false>(self, &mut c);
+                } else if w.leaf_step::<ANY, false>(self, &mut c) {
+                    out[*i] = w.best();
+                    refill(lane, out);
+                }
+            }
+            if !active {
+                return;
+            }
+        }
+    }
+}
+
+/// A traversal advanced a step at a time: one inner node down, or one leaf's triangles and
+/// the way out of it. One-ray queries run the steps in a loop; [`KdTree::walk_many`]
+/// interleaves several rays' walks.
+pub(crate) trait Walker: Sized {
+    /// The walk of `ray`; `None` for a ray that hits nothing.
+    fn start(tree: &KdTree, ray: &Ray) -> Option<Self>;
+    /// The node the next step works on.
+    fn node(&self) -> u32;
+    /// One step down from the inner node [`Walker::node`].
+    fn descend_once<const COUNT: bool>(&mut self, tree: &KdTree, c: &mut Counters);
+    /// Tests the leaf [`Walker::node`] and finds the next node; true when the walk is over.
+    fn leaf_step<const ANY: bool, const COUNT: bool>(
+        &mut self,
+        tree: &KdTree,
+        c: &mut Counters,
+    ) -> bool;
+    /// The answer so far (the answer once the walk is over).
+    fn best(&self) -> Option<Hit>;
+}
+
+impl Walker for RopeWalk {
     #[inline(always)]
-    fn walk(&self, ray: &Ray) -> Option<RopeWalk> {
-        let (t_entry, _, r) = self.start(ray)?;
+    fn start(tree: &KdTree, ray: &Ray) -> Option<Self> {
+        let (t_entry, _, r) = tree.start(ray)?;
         Some(RopeWalk {
             t_best: ray.t_max,
             r,
-            node: self.root,
+            node: tree.root,
             t_entry,
             best: None,
-            leaf_budget: self.leaves.len() + self.inners.len() + 1,
+            leaf_budget: tree.leaves.len() + tree.inners.len() + 1,
         })
     }
 
-    /// One step down from the inner node `w.node` toward the leaf holding the entry point.
     #[inline(always)]
-    fn descend_once<const COUNT: bool>(&self, w: &mut RopeWalk, c: &mut Counters) {
-        let n = &self.inners[w.node as usize];
+    fn node(&self) -> u32 {
+        self.node
+    }
+
+    /// Toward the leaf holding the entry point.
+    #[inline(always)]
+    fn descend_once<const COUNT: bool>(&mut self, tree: &KdTree, c: &mut Counters) {
+        let n = &tree.inners[self.node as usize];
         let a = (n.axis & 3) as usize;
-        let t_split = (n.split - w.r.o[a]) * w.r.inv[a];
+        let t_split = (n.split - self.r.o[a]) * self.r.inv[a];
         // The plane was crossed at or before the entry point: the point is on the far side.
-        let far = t_split <= w.t_entry;
-        w.node = if far != w.r.neg[a] { n.right } else { n.left };
+        let far = t_split <= self.t_entry;
+        self.node = if far != self.r.neg[a] {
+            n.right
+        } else {
+            n.left
+        };
         if COUNT {
             c.inner += 1;
         }
     }
 
-    /// Tests the leaf `w.node` and follows the rope out of it; true when the walk is over
-    /// (`w.best` is then the answer).
+    /// Tests the leaf and follows the rope out of it.
     #[inline(always)]
     fn leaf_step<const ANY: bool, const COUNT: bool>(
-        &self,
-        w: &mut RopeWalk,
+        &mut self,
+        tree: &KdTree,
         c: &mut Counters,
     ) -> bool {
-        let leaf = &self.leaves[(w.node & !LEAF_BIT) as usize];
-        if self.test_leaf::<ANY, COUNT>(leaf, &w.r, &mut w.best, &mut w.t_best, c) {
+        let leaf = &tree.leaves[(self.node & !LEAF_BIT) as usize];
+        if tree.test_leaf::<ANY, COUNT>(leaf, &self.r, &mut self.best, &mut self.t_best, c) {
             return true;
         }
         // Exit face of the leaf.
-        let r = &w.r;
+        let r = &self.r;
         let mut t_exit = f32::INFINITY;
         let mut face = 0usize;
         for a in 0..3 {
@@ -214,115 +312,114 @@ impl KdTree {
         }
         // Every step moves to a leaf strictly further along some axis, so the walk ends; the
         // budget only guards against a broken tree.
-        w.leaf_budget -= 1;
-        if w.t_best <= t_exit || w.leaf_budget == 0 {
+        self.leaf_budget -= 1;
+        if self.t_best <= t_exit || self.leaf_budget == 0 {
             return true;
         }
-        w.node = leaf.ropes[face];
-        if w.node == NO_ROPE {
+        self.node = leaf.ropes[face];
+        if self.node == NO_ROPE {
             return true;
         }
-        w.t_entry = w.t_entry.max(t_exit);
+        self.t_entry = self.t_entry.max(t_exit);
         false
     }
 
-    /// The rope traversal of many rays at once, [`STREAM_LANES`] walks interleaved a step at
-    /// a time. The hits are those of [`Self::ropes`], ray for ray: each walk runs the same
-    /// steps. What it gains is memory-level parallelism: a single walk is a chain of dependent
-    /// node loads that mostly miss the caches, and the interleaved walks' loads overlap.
-    pub(crate) fn ropes_stream<const ANY: bool>(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
-        assert_eq!(rays.len(), out.len(), "one result per ray");
-        let mut c = Counters::default();
-        let mut next = 0;
-        // Starts the next ray that can hit something in `lane` (answering the others), or
-        // leaves the lane empty when the rays are used up.
-        let mut refill = |lane: &mut Option<(usize, RopeWalk)>, out: &mut [Option<Hit>]| {
-            *lane = None;
-            while next < rays.len() {
-                let i = next;
-                next += 1;
-                match self.walk(&rays[i]) {
-                    Some(w) => {
-                        *lane = Some((i, w));
-                        return;
-                    }
-                    None => out[i] = None,
-                }
-            }
+    #[inline(always)]
+    fn best(&self) -> Option<Hit> {
+        self.best
+    }
+}
+
+/// One ray's stack traversal in progress: the node and its ray interval, and the far children
+/// still to visit with theirs.
+#[derive(Clone, Copy)]
+pub(crate) struct StackWalk {
+    r: RayCtx,
+    node: u32,
+    t0: f32,
+    t1: f32,
+    t_best: f32,
+    best: Option<Hit>,
+    stack: [(u32, f32, f32); MAX_DEPTH + 1],
+    sp: usize,
+}
+
+impl Walker for StackWalk {
+    #[inline(always)]
+    fn start(tree: &KdTree, ray: &Ray) -> Option<Self> {
+        let (t0, t1, r) = tree.start(ray)?;
+        Some(StackWalk {
+            r,
+            node: tree.root,
+            t0,
+            t1,
+            t_best: ray.t_max,
+            best: None,
+            stack: [(0, 0.0, 0.0); MAX_DEPTH + 1],
+            sp: 0,
+        })
+    }
+
+    #[inline(always)]
+    fn node(&self) -> u32 {
+        self.node
+    }
+
+    /// To the near child, keeping the far one for later when the interval reaches it.
+    #[inline(always)]
+    fn descend_once<const COUNT: bool>(&mut self, tree: &KdTree, c: &mut Counters) {
+        let r = &self.r;
+        let n = &tree.inners[self.node as usize];
+        let a = (n.axis & 3) as usize;
+        let t_split = (n.split - r.o[a]) * r.inv[a];
+        let (near, far) = if r.neg[a] {
+            (n.right, n.left)
+        } else {
+            (n.left, n.right)
         };
-        let mut lanes: [Option<(usize, RopeWalk)>; STREAM_LANES] = Default::default();
-        for lane in &mut lanes {
-            refill(lane, out);
+        if COUNT {
+            c.inner += 1;
+        }
+        // NaN (a ray lying in the plane) goes to the near side, as in the rope traversal.
+        if !(t_split <= self.t1) {
+            self.node = near;
+        } else if t_split < self.t0 {
+            self.node = far;
+        } else {
+            self.stack[self.sp] = (far, t_split, self.t1);
+            self.sp += 1;
+            self.node = near;
+            self.t1 = t_split;
+        }
+    }
+
+    /// Tests the leaf, then takes the nearest far child the best hit does not rule out.
+    #[inline(always)]
+    fn leaf_step<const ANY: bool, const COUNT: bool>(
+        &mut self,
+        tree: &KdTree,
+        c: &mut Counters,
+    ) -> bool {
+        let leaf = &tree.leaves[(self.node & !LEAF_BIT) as usize];
+        if tree.test_leaf::<ANY, COUNT>(leaf, &self.r, &mut self.best, &mut self.t_best, c)
+            || self.t_best <= self.t1
+        {
+            return true;
         }
         loop {
-            let mut active = false;
-            for lane in &mut lanes {
-                let Some((i, w)) = lane else { continue };
-                active = true;
-                if !is_leaf(w.node) {
-                    self.descend_once::<false>(w, &mut c);
-                } else if self.leaf_step::<ANY, false>(w, &mut c) {
-                    out[*i] = w.best;
-                    refill(lane, out);
-                }
+            if self.sp == 0 {
+                return true;
             }
-            if !active {
-                return;
+            self.sp -= 1;
+            (self.node, self.t0, self.t1) = self.stack[self.sp];
+            if self.t0 <= self.t_best {
+                return false;
             }
         }
     }
 
-    /// Classic kd-tree traversal with a stack of far children.
-    pub(crate) fn stack<const ANY: bool, const COUNT: bool>(
-        &self,
-        ray: &Ray,
-        c: &mut Counters,
-    ) -> Option<Hit> {
-        let (mut t0, mut t1, r) = self.start(ray)?;
-        let mut best = None;
-        let mut t_best = ray.t_max;
-        let mut stack = [(0u32, 0f32, 0f32); MAX_DEPTH + 1];
-        let mut sp = 0;
-        let mut node = self.root;
-        loop {
-            while !is_leaf(node) {
-                let n = &self.inners[node as usize];
-                let a = (n.axis & 3) as usize;
-                let t_split = (n.split - r.o[a]) * r.inv[a];
-                let (near, far) = if r.neg[a] {
-                    (n.right, n.left)
-                } else {
-                    (n.left, n.right)
-                };
-                if COUNT {
-                    c.inner += 1;
-                }
-                // NaN (a ray lying in the plane) goes to the near side, as in the rope traversal.
-                if !(t_split <= t1) {
-                    node = near;
-                } else if t_split < t0 {
-                    node = far;
-                } else {
-                    stack[sp] = (far, t_split, t1);
-                    sp += 1;
-                    node = near;
-                    t1 = t_split;
-                }
-            }
-            let leaf = &self.leaves[(node & !LEAF_BIT) as usize];
-            if self.test_leaf::<ANY, COUNT>(leaf, &r, &mut best, &mut t_best, c) || t_best <= t1 {
-                return best;
-            }
-            loop {
-                if sp == 0 {
-                    return best;
-                }
-                sp -= 1;
-                (node, t0, t1) = stack[sp];
-                if t0 <= t_best {
-                    break;
-                }
-            }
-        }
+    #[inline(always)]
+    fn best(&self) -> Option<Hit> {
+        self.best
     }
 }
