@@ -78,6 +78,15 @@ pub(crate) struct Sizes {
     pub tris: usize,
 }
 
+impl Sizes {
+    /// One inner node.
+    pub const INNER: Sizes = Sizes {
+        inners: 1,
+        leaves: 0,
+        tris: 0,
+    };
+}
+
 impl std::ops::Add for Sizes {
     type Output = Sizes;
     fn add(self, o: Sizes) -> Sizes {
@@ -210,12 +219,7 @@ impl Ctx<'_> {
         KdBuildNode::Inner {
             axis: s.axis,
             split: s.pos,
-            sizes: Sizes {
-                inners: 1,
-                leaves: 0,
-                tris: 0,
-            } + l.sizes()
-                + r.sizes(),
+            sizes: Sizes::INNER + l.sizes() + r.sizes(),
             children: Box::new([l, r]),
         }
     }

@@ -3,9 +3,8 @@
 
 use raystream_math::{Aabb, DVec3, Vec3};
 
-/// A convex polygon in f64: a triangle clipped by up to 7 planes has at most 10 corners. Fixed
-/// arrays keep clipping allocation-free.
-#[derive(Clone, Copy)]
+/// A convex polygon in f64: a triangle clipped by a box's 6 planes has at most 9 corners, and
+/// a clip may hold one more for a moment. Fixed arrays keep clipping allocation-free.
 struct Polygon {
     corners: [[f64; 3]; 10],
     len: usize,

@@ -115,11 +115,7 @@ fn emit(
             ..
         } => {
             let index = out.base.inners;
-            let (this, rest) = out.split(Sizes {
-                inners: 1,
-                leaves: 0,
-                tris: 0,
-            });
+            let (this, rest) = out.split(Sizes::INNER);
             let (lo, hi) = rest.split(children[0].sizes());
             let (mut lb, mut rb) = (b, b);
             lb.max[*axis] = *split;

@@ -156,12 +156,11 @@ impl KdTree {
             // carries its 780-byte stack; BENCHMARKS.md): they run ray by ray.
             (Traversal::Stack, _) => {
                 assert_eq!(rays.len(), out.len(), "one result per ray");
-                let mut c = Counters::default();
                 for (ray, o) in rays.iter().zip(out) {
                     *o = if any {
-                        self.stack::<true, false>(ray, &mut c)
+                        self.intersect_any(ray, traversal)
                     } else {
-                        self.stack::<false, false>(ray, &mut c)
+                        self.intersect(ray, traversal)
                     };
                 }
             }

@@ -56,7 +56,7 @@ impl std::ops::AddAssign for Counters {
 }
 
 /// Walks interleaved by [`KdTree::walk_many`].
-pub const STREAM_LANES: usize = 8;
+const STREAM_LANES: usize = 8;
 
 /// One ray's rope walk in progress: where it is and what it has found.
 #[derive(Clone, Copy)]

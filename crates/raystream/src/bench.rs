@@ -185,6 +185,12 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                 write_rays(&dir.join(format!("{kind}.rays")), rays)?;
             }
         }
+        // The kernels' own count of their work (statistics query), where a GPU has subgroup
+        // operations: one tracer, uploaded once, for every set and layout.
+        let stats_tracer = match &backend {
+            Backend::Gpu(ctx) => Some(GpuTracer::new(ctx, &tree)?),
+            Backend::Cpu => None,
+        };
         // The CPU has one way to trace; a GPU is measured with each kernel layout asked for.
         let layouts: Vec<Option<Kernels>> = match backend {
             Backend::Cpu => vec![None],
@@ -239,12 +245,10 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                         a += b;
                         a
                     });
-                // The fused kernel's own count of its work, and its SIMD efficiency, where the
-                // GPU has subgroup operations.
-                let simd = match (&backend, kernels) {
-                    (Backend::Gpu(ctx), Some(k)) => GpuTracer::new(ctx, &tree)
-                        .and_then(|tracer| tracer.query_stats_with(rays, any, k))
-                        .map_err(anyhow::Error::from)?
+                // The kernel's own count of its work, and its SIMD efficiency.
+                let simd = match (&stats_tracer, kernels) {
+                    (Some(tracer), Some(k)) => tracer
+                        .query_stats_with(rays, any, k)?
                         .map(|s| {
                             if (s.steps[0], s.steps[1], s.listed) != (c.inner, c.leaves, c.triangles) {
                                 eprintln!(
