@@ -10,8 +10,10 @@
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
 # PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene) picks the parts; TRACERS (default "gpu spin
-# ifif split cpu embree"; spin = the fused kernel with RAYSTREAM_GPU_WAIT=spin) the tracers of the trace part. bench's lines
-# carry the fused and if-if kernels' SIMD efficiency (gpu_stats).
+# ifif split sorted cpu embree"; spin = the fused kernel with RAYSTREAM_GPU_WAIT=spin; sorted = the diffuse and random sets
+# reordered by sort-rays.py) the tracers of the trace part. The fused and if-if trace lines and bench's lines carry the
+# kernels' SIMD efficiency and residency peak (gpu_stats); every GPU trace line but split's also carries stream_ms (the
+# wall time per query of 10 queries queued in one submission).
 # Results: OUTDIR/results.jsonl (one JSON object per line, each tagged), images in OUTDIR.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -23,7 +25,7 @@ if [ "${1:-}" = --pack ]; then
   strip -o "$d/raystream" target/release/raystream
   cp ../shared/data/meshes/{stanford_bunny.ply,stanford_lucy_100k.ply,turbine_blade.ply} "$d/meshes/"
   cp ../shared/data/volumes/nifti/abdomen_pelvis_ct_totalseg.nii.gz "$d/ct/"
-  cp ../shared/tools/rays.py "$d/"
+  cp ../shared/tools/rays.py scripts/sort-rays.py "$d/"
   du -sh "$d"
   exit 0
 fi
@@ -45,7 +47,7 @@ for l in sys.stdin:
 
 echo "{\"machine\": \"$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"date\": \"$(date -u +%FT%TZ)\"}" | tee -a "$res"
 parts=${PARTS:-trace render volume}
-tracers=${TRACERS:-gpu spin ifif split cpu embree}
+tracers=${TRACERS:-gpu spin ifif split sorted cpu embree}
 has() { [[ " $1 " == *" $2 "* ]]; }
 has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
   mesh=$d/meshes/$m.ply
@@ -56,9 +58,16 @@ has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; 
     t="{\"mesh\": \"$m\", \"kind\": \"$kind\""
     for k in fused split ifif; do
       [ $k != fused ] && ! has "$tracers" $k && continue
+      stats=(--stats); [ $k = split ] && stats=()
       $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-$k.hits" "${any[@]}" --device gpu --kernels $k --repeat 10 --json --quiet \
-        | tag "$t, \"tracer\": \"raystream-gpu-$k\"}"
+        "${stats[@]}" | tag "$t, \"tracer\": \"raystream-gpu-$k\"}"
     done
+    # Incoherent sets reordered (direction octant, then origin Morton code): SIMD efficiency and speed.
+    has "$tracers" sorted && [[ $kind == diffuse || $kind == random ]] && $py "$d/sort-rays.py" "$rays" "$tmp/sorted.rays" && {
+      $bin trace "$mesh" --rays "$tmp/sorted.rays" -o "$tmp/sorted.hits" --device gpu --repeat 10 --json --quiet --stats \
+        | tag "$t, \"tracer\": \"raystream-gpu-fused\", \"order\": \"octant-morton\"}"
+      $py "$d/rays.py" check "$mesh" "$tmp/sorted.rays" "$tmp/sorted.hits" --json | tag "$t, \"check\": \"gpu-fused-sorted\"}"
+      rm -f "$tmp/sorted.rays"; }
     # The fused kernel again with spinning waits (RAYSTREAM_GPU_WAIT=spin), for the A/B.
     has "$tracers" spin && RAYSTREAM_GPU_WAIT=spin $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-spin.hits" "${any[@]}" --device gpu \
       --repeat 10 --json --quiet | tag "$t, \"tracer\": \"raystream-gpu-fused-spin\"}"

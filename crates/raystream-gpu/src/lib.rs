@@ -445,6 +445,12 @@ pub struct QueryStats {
     pub active_lanes: [u64; 3],
     /// …and the lanes those steps could have used (the subgroup size, summed likewise).
     pub lane_slots: [u64; 3],
+    /// The most invocations the GPU ran at once, between their entry into the kernel and
+    /// their exit: the peak of achieved occupancy, in threads (divide by the GPU's thread
+    /// slots, e.g. an H100's 132 SMs × 2048, for the fraction).
+    pub peak_resident: u64,
+    /// The subgroup (warp, wave) size the kernel ran with.
+    pub subgroup_size: u32,
 }
 
 impl QueryStats {
@@ -461,15 +467,38 @@ impl QueryStats {
     pub fn per_ray(&self, k: usize) -> f64 {
         self.steps[k] as f64 / self.rays.max(1) as f64
     }
+
+    /// [`QueryStats::peak_resident`] in subgroups (warps).
+    pub fn peak_resident_subgroups(&self) -> f64 {
+        self.peak_resident as f64 / self.subgroup_size.max(1) as f64
+    }
 }
 
-/// Rays per statistics dispatch: few enough that no u32 counter of `stats.wgsl` can overflow
-/// (≤ 2^18 rays × the steps of one ray; 16,000 steps a ray would be needed).
-const STATS_BATCH: usize = 1 << 18;
+/// Rays per statistics dispatch: a whole 1920×1080 set in one (the counters of `stats.wgsl`
+/// are 64-bit), so that the residency peak is that of a GPU filled as the timed kernel fills
+/// it; larger sets run in batches.
+const STATS_BATCH: usize = 1 << 22;
+
+/// Words of `stats.wgsl`'s counter buffer: ten 64-bit counters, then LIVE, PEAK and LANES.
+const STATS_WORDS: usize = 23;
 
 /// Workgroups of the persistent kernels: 4096 × 64 threads, about what an H100's 132 SMs hold
 /// at once (2048 threads each); fewer when there are fewer rays.
 pub const PERSISTENT_GROUPS: u32 = 4096;
+
+/// One query's buffers, bind group and grid, ready to dispatch.
+struct Query<'p> {
+    ray_buf: wgpu::Buffer,
+    hit_buf: wgpu::Buffer,
+    hit_bytes: u64,
+    param_buf: wgpu::Buffer,
+    /// The persistent kernels' ray counter, from 0.
+    next_ray: wgpu::Buffer,
+    bind: wgpu::BindGroup,
+    pipeline: &'p wgpu::ComputePipeline,
+    label: &'static str,
+    dims: [u32; 3],
+}
 
 /// Timings of one [`GpuTracer::trace`] call, milliseconds.
 #[derive(Clone, Copy, Debug, Default)]
@@ -643,7 +672,11 @@ impl<'a> GpuTracer<'a> {
                 (n * std::mem::size_of::<GpuHit>()) as u64,
                 wgpu::BufferUsages::empty(),
             )?;
-            let stats_buf = ctx.work_buffer("query statistics", 40, wgpu::BufferUsages::empty())?;
+            let stats_buf = ctx.work_buffer(
+                "query statistics",
+                4 * STATS_WORDS as u64,
+                wgpu::BufferUsages::empty(),
+            )?;
             let param_buf = self.params_buffer(n as u32);
             let bind = ctx.bind_buffers(
                 "query statistics",
@@ -666,12 +699,22 @@ impl<'a> GpuTracer<'a> {
                 None,
             )?;
             let w = read_words(ctx, &stats_buf)?;
+            let counter = |k: usize| w[2 * k] as u64 | (w[2 * k + 1] as u64) << 32;
             for k in 0..3 {
-                total.steps[k] += w[k] as u64;
-                total.active_lanes[k] += w[4 + k] as u64;
-                total.lane_slots[k] += w[7 + k] as u64;
+                total.steps[k] += counter(k);
+                total.active_lanes[k] += counter(4 + k);
+                total.lane_slots[k] += counter(7 + k);
             }
-            total.listed += w[3] as u64;
+            total.listed += counter(3);
+            // Every invocation that entered has left: the residency count balances.
+            if w[20] != 0 {
+                return Err(ctx.err(format!(
+                    "the statistics query's residency count ended at {} instead of 0",
+                    w[20] as i32
+                )));
+            }
+            total.peak_resident = total.peak_resident.max(w[21] as u64);
+            total.subgroup_size = total.subgroup_size.max(w[22]);
         }
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
@@ -690,20 +733,10 @@ impl<'a> GpuTracer<'a> {
         self.trace_with(rays, any, Kernels::Fused)
     }
 
-    /// As [`GpuTracer::trace`], with the fused or the split kernels (same hits).
-    pub fn trace_with(
-        &self,
-        rays: &[Ray],
-        any: bool,
-        kernels: Kernels,
-    ) -> Result<(Vec<GpuHit>, TraceTimes), GpuError> {
+    /// The buffers, bind group and grid of one query of `rays` with `kernels`.
+    fn query(&self, rays: &[Ray], any: bool, kernels: Kernels) -> Result<Query<'_>, GpuError> {
         let ctx = self.ctx;
         let n = rays.len();
-        if n == 0 {
-            return Ok((Vec::new(), TraceTimes::default()));
-        }
-        let t0 = Instant::now();
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let gpu_rays: Vec<GpuRay> = rays.iter().map(GpuRay::from).collect();
         let ray_buf = ctx.storage(
             "rays",
@@ -723,13 +756,9 @@ impl<'a> GpuTracer<'a> {
         let hit_buf = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("hits"),
             size: hit_bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("hits readback"),
-            size: hit_bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let param_buf = self.params_buffer(n as u32);
@@ -745,8 +774,8 @@ impl<'a> GpuTracer<'a> {
             (_, true) => (&self.any, "intersect_any"),
             (_, false) => (&self.closest, "intersect_closest"),
         };
-        // The persistent kernels' ray counter, from 0.
-        let next_ray = ctx.storage("next ray", &[0u8; 4], wgpu::BufferUsages::empty())?;
+        // The persistent kernels' ray counter, from 0 (cleared between streamed queries).
+        let next_ray = ctx.storage("next ray", &[0u8; 4], wgpu::BufferUsages::COPY_DST)?;
         let mut entries = vec![
             wgpu::BindGroupEntry {
                 binding: 0,
@@ -784,6 +813,109 @@ impl<'a> GpuTracer<'a> {
             layout: &pipeline.get_bind_group_layout(0),
             entries: &entries,
         });
+        let dims = match kernels {
+            Kernels::Persistent => [
+                (n as u32).div_ceil(WORKGROUP_SIZE).min(PERSISTENT_GROUPS),
+                1,
+                1,
+            ],
+            _ => ctx.dims(n as u32),
+        };
+        Ok(Query {
+            ray_buf,
+            hit_buf,
+            hit_bytes,
+            param_buf,
+            next_ray,
+            bind,
+            pipeline,
+            label,
+            dims,
+        })
+    }
+
+    /// Milliseconds of wall time per query when `runs` queries of these rays are queued in
+    /// one submission and waited for once: the throughput of a stream of queries, with no host
+    /// round trip between them (each still waits for the one before), and the last query's
+    /// hits (the hit buffer is cleared before it, within the stream, so that they are its
+    /// own). `None` for the split kernels, which the host drives step by step.
+    pub fn trace_streamed(
+        &self,
+        rays: &[Ray],
+        any: bool,
+        kernels: Kernels,
+        runs: u32,
+    ) -> Result<Option<(Vec<GpuHit>, f64)>, GpuError> {
+        let ctx = self.ctx;
+        if kernels == Kernels::Split || rays.is_empty() || runs == 0 {
+            return Ok(None);
+        }
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let q = self.query(rays, any, kernels)?;
+        ctx.wait()?;
+        let t0 = Instant::now();
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("streamed queries"),
+            });
+        for run in 0..runs {
+            if kernels == Kernels::Persistent {
+                enc.clear_buffer(&q.next_ray, 0, None);
+            }
+            if run + 1 == runs {
+                enc.clear_buffer(&q.hit_buf, 0, None);
+            }
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(q.label),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(q.pipeline);
+            pass.set_bind_group(0, &q.bind, &[]);
+            pass.dispatch_workgroups(q.dims[0], q.dims[1], 1);
+        }
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait()?;
+        let ms = t0.elapsed().as_secs_f64() * 1e3 / runs as f64;
+        let hits = bytemuck::cast_slice(&read_words(ctx, &q.hit_buf)?).to_vec();
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(ctx.err(e));
+        }
+        Ok(Some((hits, ms)))
+    }
+
+    /// As [`GpuTracer::trace`], with the fused or the split kernels (same hits).
+    pub fn trace_with(
+        &self,
+        rays: &[Ray],
+        any: bool,
+        kernels: Kernels,
+    ) -> Result<(Vec<GpuHit>, TraceTimes), GpuError> {
+        let ctx = self.ctx;
+        let n = rays.len();
+        if n == 0 {
+            return Ok((Vec::new(), TraceTimes::default()));
+        }
+        let t0 = Instant::now();
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let q = self.query(rays, any, kernels)?;
+        let Query {
+            ref ray_buf,
+            ref hit_buf,
+            hit_bytes,
+            ref param_buf,
+            ref bind,
+            pipeline,
+            label,
+            dims,
+            ..
+        } = q;
+        let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("hits readback"),
+            size: hit_bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let timer = ctx.timer(2);
         ctx.wait()?;
         let upload_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -791,18 +923,12 @@ impl<'a> GpuTracer<'a> {
         // Submission to completion: one round trip (the timestamps travel back with it).
         let t1 = Instant::now();
         let (kernel_gpu_ms, split_steps) = match kernels {
-            Kernels::Fused | Kernels::IfIf => (
-                self.run_fused(pipeline, label, &bind, ctx.dims(n as u32), timer.as_ref())?,
+            Kernels::Fused | Kernels::IfIf | Kernels::Persistent => (
+                self.run_fused(pipeline, label, bind, dims, timer.as_ref())?,
                 None,
             ),
-            Kernels::Persistent => {
-                let groups = (n as u32).div_ceil(WORKGROUP_SIZE).min(PERSISTENT_GROUPS);
-                let dims = [groups, 1, 1];
-                let ms = self.run_fused(pipeline, label, &bind, dims, timer.as_ref())?;
-                (ms, None)
-            }
             Kernels::Split => {
-                let r = split::run(self, &param_buf, &ray_buf, &hit_buf, n as u32, any)?;
+                let r = split::run(self, param_buf, ray_buf, hit_buf, n as u32, any)?;
                 (r.kernel_gpu_ms, Some(r.steps))
             }
         };
@@ -815,7 +941,7 @@ impl<'a> GpuTracer<'a> {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("readback"),
             });
-        enc.copy_buffer_to_buffer(&hit_buf, 0, &readback, 0, hit_bytes);
+        enc.copy_buffer_to_buffer(hit_buf, 0, &readback, 0, hit_bytes);
         ctx.queue.submit([enc.finish()]);
         let slice = readback.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();

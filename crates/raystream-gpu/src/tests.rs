@@ -425,6 +425,18 @@ fn query_statistics_count_the_cpu_walk() {
             "any={any} {kernels:?}: GPU (inner, leaves, triangles) vs the CPU's"
         );
         assert!(stats.steps[2] <= stats.listed && stats.steps[2] > 0);
+        // Residency: at least one subgroup ran, and never more invocations than dispatched
+        // (rays rounded up to whole workgroups). The kernel also checked that every
+        // invocation booked in was booked out.
+        let lanes = stats.subgroup_size;
+        assert!(lanes.is_power_of_two(), "subgroup size {lanes}");
+        let [gx, gy, _] = ctx.dims(rays.len() as u32);
+        let dispatched = (gx * gy * crate::WORKGROUP_SIZE) as u64;
+        assert!(
+            (lanes as u64..=dispatched).contains(&stats.peak_resident),
+            "peak resident invocations {} (subgroup {lanes}, dispatched {dispatched})",
+            stats.peak_resident
+        );
         for k in 0..3 {
             let e = stats.simd_efficiency(k);
             assert!(
@@ -462,6 +474,44 @@ fn query_statistics_count_the_cpu_walk() {
     assert!(c > i, "coherent {c} vs incoherent {i}");
 }
 
+/// `stats.wgsl`'s 64-bit counters carry into their high word: 256 invocations, in many
+/// subgroups at once, each add 2^28 to one counter (2^36 in all: the low word wraps 16 times)
+/// and 2^28 − 1 to another (wrapping at uneven points).
+#[test]
+fn statistics_counters_carry_past_32_bits() {
+    let Some(ctx) = gpu() else { return };
+    let source = stats_wgsl();
+    let add64 = &source[source.find("fn add64").unwrap()..];
+    let add64 = &add64[..add64.find("\n}\n").unwrap() + 3];
+    let module = format!(
+        "@group(0) @binding(0) var<storage, read_write> stats: array<atomic<u32>, 4>;\n{add64}\n\
+         @compute @workgroup_size(64) fn main() {{ add64(0u, 1u << 28u); add64(1u, (1u << 28u) - 1u); }}"
+    );
+    let module = ctx
+        .device
+        .create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("add64 check"),
+            source: wgpu::ShaderSource::Wgsl(module.into()),
+        });
+    let pipeline = ctx.auto_pipeline(&module, "main");
+    let buf = ctx
+        .work_buffer("counters", 16, wgpu::BufferUsages::empty())
+        .unwrap();
+    let bind = ctx.bind_buffers("counters", &pipeline.get_bind_group_layout(0), &[&buf]);
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(4, 1, 1);
+    }
+    ctx.queue.submit([enc.finish()]);
+    let w = read_words(&ctx, &buf).unwrap();
+    let counter = |k: usize| w[2 * k] as u64 | (w[2 * k + 1] as u64) << 32;
+    assert_eq!(counter(0), 256 << 28);
+    assert_eq!(counter(1), 256 * ((1 << 28) - 1));
+}
+
 #[test]
 fn spinning_waits_give_the_same_results() {
     let Some(mut ctx) = gpu() else { return };
@@ -486,6 +536,36 @@ fn spinning_waits_give_the_same_results() {
             let (hits, _) = tracer.trace(&rays, any).unwrap();
             assert_eq!(&hits, want, "any={any}: spinning waits changed the hits");
         }
+    }
+}
+
+/// Queries queued back to back in one submission each trace every ray: the last one's hits
+/// (its hit buffer cleared just before it) equal a lone query's, for every kernel layout the
+/// host does not drive step by step; persistent threads restart their ray counter each time.
+#[test]
+fn streamed_queries_each_trace_every_ray() {
+    let Some(ctx) = gpu() else { return };
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
+    let mesh = raystream_io::load_mesh(&dir.join("stanford_bunny.ply")).unwrap();
+    let tree = KdTree::build(&mesh, Builder::Sah);
+    let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+    let rays = test_rays(&mesh, 4096);
+    for any in [false, true] {
+        for kernels in [Kernels::Fused, Kernels::IfIf, Kernels::Persistent] {
+            let (want, _) = tracer.trace_with(&rays, any, kernels).unwrap();
+            let (hits, ms) = tracer
+                .trace_streamed(&rays, any, kernels, 3)
+                .unwrap()
+                .unwrap();
+            assert!(ms > 0.0);
+            assert_eq!(hits, want, "any={any} {kernels:?}: streamed hits differ");
+        }
+        assert!(
+            tracer
+                .trace_streamed(&rays, any, Kernels::Split, 3)
+                .unwrap()
+                .is_none()
+        );
     }
 }
 

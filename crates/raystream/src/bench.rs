@@ -286,6 +286,8 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                     "trace_ms_min": round3(t.trace_ms_min),
                     // Per-kernel GPU time from timestamp queries, by stage name.
                     "gpu_kernel_ms": t.kernel_gpu_ms.map(|k| json!({ kernel_label(kernels, any): round3(k) })),
+                    // Wall time per query of --repeat queries queued in one submission.
+                    "stream_ms": t.stream_ms.map(round3),
                     "mrays_per_s": round3(n / (t.trace_ms * 1e-3) / 1e6),
                     "inner_per_ray": round3(c.inner as f64 / n),
                     "leaves_per_ray": round3(c.leaves as f64 / n),
@@ -316,10 +318,19 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                         tree.stats.builder,
                         backend.adapter()
                     );
+                    if let Some(ms) = t.stream_ms {
+                        println!(
+                            "          streamed: {:.2} Mrays/s ({ms:.2} ms a query, {} queued in one submission)",
+                            n / (ms * 1e-3) / 1e6,
+                            a.repeat
+                        );
+                    }
                     if let Some(s) = &line["gpu_stats"].as_object() {
                         println!(
-                            "          SIMD efficiency (share of subgroup lanes busy): {}",
-                            s["simd_efficiency"]
+                            "          SIMD efficiency (share of subgroup lanes busy): {}; at most {} invocations ({} subgroups) resident at once",
+                            s["simd_efficiency"],
+                            s["peak_resident_invocations"],
+                            s["peak_resident_subgroups"]
                         );
                     }
                 }

@@ -98,6 +98,9 @@ pub struct Traced {
     /// GPU only, where the adapter has timestamp queries: median kernel time between the
     /// compute pass's timestamps.
     pub kernel_gpu_ms: Option<f64>,
+    /// GPU only, not for split kernels: wall time per query of `repeat` queries queued in one
+    /// submission and waited for once (a stream of queries: no host round trip between them).
+    pub stream_ms: Option<f64>,
 }
 
 /// Untimed GPU runs before the timed ones: until this much time has passed…
@@ -118,6 +121,7 @@ pub fn trace_timed(
 ) -> Result<Traced> {
     let mut times = Vec::new();
     let mut gpu_times = Vec::new();
+    let mut stream_ms = None;
     let (hits, upload_ms) = match backend {
         Backend::Cpu => {
             let mut hits = trace_all(tree, rays, any, traversal);
@@ -149,6 +153,15 @@ pub fn trace_timed(
                 times.push(t.kernel_ms);
                 gpu_times.extend(t.kernel_gpu_ms);
             }
+            if let Some((h, ms)) = tracer.trace_streamed(rays, any, kernels, repeat)? {
+                if h != hits {
+                    bail!(
+                        "{} rays: the streamed queries' hits differ from a lone query's",
+                        rays.len()
+                    );
+                }
+                stream_ms = Some(ms);
+            }
             let records = hits
                 .iter()
                 .map(|h| HitRecord {
@@ -170,10 +183,12 @@ pub fn trace_timed(
         trace_ms: median(&mut times),
         trace_ms_min,
         kernel_gpu_ms,
+        stream_ms,
     })
 }
 
-/// A GPU query's own count of its work: steps per ray and SIMD efficiency, by kind of step.
+/// A GPU query's own count of its work: steps per ray and SIMD efficiency, by kind of step, and
+/// the most invocations (and subgroups) the GPU held at once.
 pub fn gpu_stats_json(s: &QueryStats) -> serde_json::Value {
     let per_kind = |f: &dyn Fn(usize) -> f64| -> serde_json::Value {
         QueryStats::KINDS
@@ -186,6 +201,9 @@ pub fn gpu_stats_json(s: &QueryStats) -> serde_json::Value {
     json!({
         "steps_per_ray": per_kind(&|k| s.per_ray(k)),
         "simd_efficiency": per_kind(&|k| s.simd_efficiency(k)),
+        "subgroup_size": s.subgroup_size,
+        "peak_resident_invocations": s.peak_resident,
+        "peak_resident_subgroups": round3(s.peak_resident_subgroups()),
     })
 }
 
@@ -258,6 +276,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             "trace_ms": round3(t.trace_ms),
             "trace_ms_min": round3(t.trace_ms_min),
             "gpu_kernel_ms": t.kernel_gpu_ms.map(round3),
+            "stream_ms": t.stream_ms.map(round3),
             "mrays_per_s": round3(mrays),
             "hits": n_hits,
             "gpu_stats": stats.as_ref().map(gpu_stats_json),
@@ -274,6 +293,13 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             backend.name(),
             backend.adapter()
         );
+        if let Some(ms) = t.stream_ms {
+            eprintln!(
+                "raystream: streamed: {ms:.2} ms a query ({:.2} Mrays/s), {} queued in one submission",
+                rays.len() as f64 / (ms * 1e-3) / 1e6,
+                a.repeat
+            );
+        }
         if let Some(s) = &stats {
             eprintln!(
                 "raystream: GPU work and SIMD efficiency: {}",

@@ -261,6 +261,15 @@ fn trace_stats() {
         let e = s["simd_efficiency"][kind].as_f64().unwrap();
         assert!(e > 0.0 && e <= 1.0, "{kind}: {e}");
     }
+    // The residency peak: at least one subgroup, in subgroups and invocations alike.
+    let lanes = s["subgroup_size"].as_u64().unwrap();
+    let peak = s["peak_resident_invocations"].as_u64().unwrap();
+    assert!(lanes >= 1 && peak >= lanes, "{line}");
+    let subgroups = s["peak_resident_subgroups"].as_f64().unwrap();
+    assert!(
+        (subgroups - peak as f64 / lanes as f64).abs() < 1e-3,
+        "{line}"
+    );
 }
 
 #[test]

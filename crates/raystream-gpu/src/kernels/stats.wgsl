@@ -5,10 +5,17 @@
 
 @group(0) @binding(4) var<storage, read> rays: array<RayIn>;
 @group(0) @binding(5) var<storage, read_write> hits: array<HitOut>;
-// 0-2: steps of each kind (inner, leaf, triangle) summed over lanes; 3: triangles listed in
-// the visited leaves; 4-6: active lanes summed over the subgroups' steps of each kind; 7-9:
-// the subgroup size summed over the same steps (the lanes those steps could have used).
-@group(0) @binding(6) var<storage, read_write> stats: array<atomic<u32>, 10>;
+// Every counter is 64 bits, a (low, high) pair of words carried by `add64`, so that one dispatch
+// can count a whole 1080p ray set. Counters 0-2: steps of each kind (inner, leaf, triangle)
+// summed over lanes; 3: triangles listed in the visited leaves; 4-6: active lanes summed over
+// the subgroups' steps of each kind; 7-9: the subgroup size summed over the same steps (the
+// lanes those steps could have used). Then single words: LIVE, the invocations between their
+// entry and their exit now; PEAK, the most LIVE ever reached (the invocations the GPU held at
+// once: achieved occupancy's peak); LANES, the subgroup size.
+const LIVE: u32 = 20u;
+const PEAK: u32 = 21u;
+const LANES: u32 = 22u;
+@group(0) @binding(6) var<storage, read_write> stats: array<atomic<u32>, 23>;
 
 var<private> subgroup_lanes: u32;
 var<private> lane_steps: array<u32, 4>;
@@ -30,8 +37,26 @@ fn stat_listed(n: u32) {
     lane_steps[3] += n;
 }
 
+// Adds `v` to 64-bit counter `k`: the high word takes the carry when the low one wraps.
+fn add64(k: u32, v: u32) {
+    if v != 0u {
+        let old = atomicAdd(&stats[2u * k], v);
+        if old > 0xffffffffu - v {
+            atomicAdd(&stats[2u * k + 1u], 1u);
+        }
+    }
+}
+
 fn stats_query(gid: vec3<u32>, groups: vec3<u32>, lanes: u32, any_hit: bool, ifif: bool) {
     subgroup_lanes = lanes;
+    // Residency: the lanes that arrive together are booked by the first of them, and booked
+    // out likewise when they leave. Lanes that arrive or leave apart (independent thread
+    // scheduling) are booked apart, so the count stays exact.
+    let arriving = subgroupAdd(1u);
+    if subgroupExclusiveAdd(1u) == 0u {
+        atomicMax(&stats[PEAK], atomicAdd(&stats[LIVE], arriving) + arriving);
+        atomicMax(&stats[LANES], lanes);
+    }
     let i = ray_index(gid, groups);
     if i < params.ray_count {
         if ifif {
@@ -41,15 +66,15 @@ fn stats_query(gid: vec3<u32>, groups: vec3<u32>, lanes: u32, any_hit: bool, ifi
         }
     }
     for (var k = 0u; k < 4u; k++) {
-        if lane_steps[k] != 0u {
-            atomicAdd(&stats[k], lane_steps[k]);
-        }
+        add64(k, lane_steps[k]);
     }
     for (var k = 0u; k < 3u; k++) {
-        if lane_slots[k] != 0u {
-            atomicAdd(&stats[4u + k], active_lanes[k]);
-            atomicAdd(&stats[7u + k], lane_slots[k]);
-        }
+        add64(4u + k, active_lanes[k]);
+        add64(7u + k, lane_slots[k]);
+    }
+    let leaving = subgroupAdd(1u);
+    if subgroupExclusiveAdd(1u) == 0u {
+        atomicSub(&stats[LIVE], leaving);
     }
 }
 
