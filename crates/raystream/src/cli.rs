@@ -350,11 +350,13 @@ pub struct TraceArgs {
     /// "if-if" form (one traversal step and one triangle step per iteration).
     #[arg(long, value_enum, default_value = "fused")]
     pub kernels: KernelsArg,
-    /// Timed runs after one warm-up; the median is reported.
+    /// Timed runs after warming up; the median is reported. On a GPU the same number of
+    /// queries is then queued in one submission and timed together (`stream_ms`).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub repeat: u32,
-    /// GPU, fused or ifif kernels: also count the kernel's steps per ray and its SIMD
-    /// efficiency (the share of subgroup lanes busy), where the adapter has subgroups.
+    /// GPU, fused or ifif kernels: also count the kernel's steps per ray, its SIMD efficiency
+    /// (the share of subgroup lanes busy) and the most invocations resident at once, where
+    /// the adapter has subgroups.
     #[arg(long)]
     pub stats: bool,
     /// Print one JSON line of timings.

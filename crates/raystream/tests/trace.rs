@@ -209,8 +209,9 @@ fn gpu_trace_agrees_with_cpu_and_embree() {
     }
 }
 
-/// `trace --stats`: the GPU kernel's steps per ray and SIMD efficiency in the JSON line (where
-/// the adapter has subgroups); on the CPU a clear error.
+/// `trace --stats`: the GPU kernel's steps per ray, SIMD efficiency and residency peak in the
+/// JSON line (where the adapter has subgroups), with the streamed queries' time; on the CPU a
+/// clear error.
 #[test]
 fn trace_stats() {
     let m = mesh("spot.obj");
@@ -253,6 +254,8 @@ fn trace_stats() {
     let line: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
     let s = &line["gpu_stats"];
     assert!(line["hits"].as_u64().unwrap() > 100, "{line}");
+    // The queued queries' wall time per query (their hits were checked against a lone one's).
+    assert!(line["stream_ms"].as_f64().unwrap() > 0.0, "{line}");
     assert!(
         s["steps_per_ray"]["traversal"].as_f64().unwrap() > 1.0,
         "{line}"
