@@ -877,7 +877,7 @@ impl<'a> GpuTracer<'a> {
         ctx.queue.submit([enc.finish()]);
         ctx.wait()?;
         let ms = t0.elapsed().as_secs_f64() * 1e3 / runs as f64;
-        let hits = bytemuck::cast_slice(&read_words(ctx, &q.hit_buf)?).to_vec();
+        let hits = read_back(ctx, &q.hit_buf)?;
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
@@ -943,17 +943,7 @@ impl<'a> GpuTracer<'a> {
             });
         enc.copy_buffer_to_buffer(hit_buf, 0, &readback, 0, hit_bytes);
         ctx.queue.submit([enc.finish()]);
-        let slice = readback.slice(..);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        ctx.wait()?;
-        rx.recv().map_err(|e| ctx.err(e))?.map_err(|e| ctx.err(e))?;
-        let view = slice.get_mapped_range().map_err(|e| ctx.err(e))?;
-        let hits: Vec<GpuHit> = bytemuck::cast_slice(&view[..]).to_vec();
-        drop(view);
-        readback.unmap();
+        let hits: Vec<GpuHit> = read_back(ctx, &readback)?;
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
@@ -1066,6 +1056,12 @@ fn read_elapsed_ms(ctx: &GpuContext, timer: &Timer) -> Result<Option<f64>, GpuEr
 /// Waits for the GPU and reads a whole buffer as u32 words (through a staging copy unless `buf`
 /// is mappable).
 fn read_words(ctx: &GpuContext, buf: &wgpu::Buffer) -> Result<Vec<u32>, GpuError> {
+    read_back(ctx, buf)
+}
+
+/// Waits for the GPU and reads a whole buffer as `T`s (through a staging copy unless `buf` is
+/// mappable).
+fn read_back<T: bytemuck::Pod>(ctx: &GpuContext, buf: &wgpu::Buffer) -> Result<Vec<T>, GpuError> {
     let staging;
     let src = if buf.usage().contains(wgpu::BufferUsages::MAP_READ) {
         buf
