@@ -7,7 +7,9 @@
 //!   kd-trees for ray tracing, and on doing that in O(N log N)"). Large nodes are binned (32 bins
 //!   per axis, O(n) per node), small nodes sweep exact sorted events (planar triangles included);
 //!   the empty-space bonus favours cutting off empty space; the two subtrees of large nodes are
-//!   built in parallel with rayon.
+//!   built in parallel with rayon. A traversal step costs [`DEFAULT_TRAVERSAL_COST`] triangle
+//!   tests unless the caller prices it otherwise (`KdTree::build_with`): dearer steps make
+//!   shallower trees with fuller leaves.
 
 use raystream_math::{Aabb, Vec3};
 
@@ -44,9 +46,15 @@ impl std::str::FromStr for Builder {
     }
 }
 
-/// SAH constants: cost of one traversal step and of one triangle test, in the same units.
+/// The yardstick of `TreeStats::sah_cost`: cost of one traversal step and of one triangle test,
+/// in the same units, whatever the build priced them at (so that trees compare).
 pub const COST_TRAVERSAL: f32 = 1.0;
 pub const COST_INTERSECT: f32 = 1.0;
+/// What the SAH builder prices a traversal step at, in triangle tests, by default: the ratio
+/// that traces fastest on the CPU (1 against 0.5, 2 and 4: BENCHMARKS.md).
+pub const DEFAULT_TRAVERSAL_COST: f32 = 1.0;
+/// The range of traversal costs the SAH builder accepts.
+pub const TRAVERSAL_COST_RANGE: std::ops::RangeInclusive<f32> = 0.01..=1000.0;
 /// Factor on the cost of a split that cuts off empty space (Wald & Havran's λ).
 const EMPTY_BONUS: f32 = 0.9;
 const BINS: usize = 32;
@@ -139,6 +147,8 @@ struct Ctx<'a> {
     corners: &'a [[Vec3; 3]],
     builder: Builder,
     max_depth: usize,
+    /// A traversal step's cost in triangle tests (SAH).
+    traversal_cost: f32,
 }
 
 /// The depth limit for `n` triangles: 8 + 1.3·log2(n) (as pbrt), at most [`MAX_DEPTH`].
@@ -146,17 +156,20 @@ pub fn depth_limit(n: usize) -> usize {
     ((8.0 + 1.3 * (n.max(1) as f64).log2()).round() as usize).min(MAX_DEPTH)
 }
 
-/// Builds over the given triangles (`corners[prim]`), skipping `prims` not listed.
+/// Builds over the given triangles (`corners[prim]`), skipping `prims` not listed; the SAH
+/// builder prices a traversal step at `traversal_cost` triangle tests.
 pub(crate) fn build(
     corners: &[[Vec3; 3]],
     prims: &[u32],
     bounds: Aabb,
     builder: Builder,
+    traversal_cost: f32,
 ) -> KdBuildNode {
     let ctx = Ctx {
         corners,
         builder,
         max_depth: depth_limit(prims.len()),
+        traversal_cost,
     };
     let refs: Vec<Ref> = prims
         .iter()
@@ -242,13 +255,15 @@ impl Ctx<'_> {
         if area.is_nan() || area <= 0.0 {
             return None;
         }
-        let leaf_cost = COST_INTERSECT * refs.len() as f32;
+        // In triangle tests: a leaf costs one per reference.
+        let leaf_cost = refs.len() as f32;
+        let kt = self.traversal_cost;
         let best = if refs.len() <= EXACT_MAX {
             (0..3)
-                .filter_map(|a| exact_sweep(refs, b, a))
+                .filter_map(|a| exact_sweep(refs, b, a, kt))
                 .min_by(|x, y| x.cost.total_cmp(&y.cost))
         } else {
-            binned(refs, b)
+            binned(refs, b, kt)
         }?;
         (best.cost < leaf_cost).then_some(best)
     }
@@ -290,9 +305,10 @@ impl Ctx<'_> {
     }
 }
 
-/// Cost of splitting `b` at `pos` with `nl`, `nr` references on each side.
+/// Cost of splitting `b` at `pos` with `nl`, `nr` references on each side, in triangle tests
+/// (a traversal step costs `kt`).
 #[inline]
-fn sah_cost(b: &Aabb, inv_area: f32, axis: usize, pos: f32, nl: usize, nr: usize) -> f32 {
+fn sah_cost(b: &Aabb, inv_area: f32, axis: usize, pos: f32, nl: usize, nr: usize, kt: f32) -> f32 {
     let e = b.extent();
     let (e1, e2) = (e[(axis + 1) % 3], e[(axis + 2) % 3]);
     // Area of a box with extent `len` along `axis`: 2(e1·e2 + len·(e1 + e2)).
@@ -300,7 +316,7 @@ fn sah_cost(b: &Aabb, inv_area: f32, axis: usize, pos: f32, nl: usize, nr: usize
     let side = e1 + e2;
     let al = cap + (pos - b.min[axis]) * side;
     let ar = cap + (b.max[axis] - pos) * side;
-    let c = COST_TRAVERSAL + COST_INTERSECT * 2.0 * inv_area * (al * nl as f32 + ar * nr as f32);
+    let c = kt + 2.0 * inv_area * (al * nl as f32 + ar * nr as f32);
     if nl == 0 || nr == 0 {
         c * EMPTY_BONUS
     } else {
@@ -310,7 +326,7 @@ fn sah_cost(b: &Aabb, inv_area: f32, axis: usize, pos: f32, nl: usize, nr: usize
 
 /// The cheapest of the `BINS − 1` planes per axis, counting the references in one pass over
 /// them for all three axes.
-fn binned(refs: &[Ref], b: &Aabb) -> Option<Split> {
+fn binned(refs: &[Ref], b: &Aabb, kt: f32) -> Option<Split> {
     let ext = b.extent();
     let scale: [f32; 3] = std::array::from_fn(|a| BINS as f32 / ext[a]);
     let bin = |x: f32, a: usize| (((x - b.min[a]) * scale[a]) as usize).min(BINS - 1);
@@ -337,7 +353,7 @@ fn binned(refs: &[Ref], b: &Aabb) -> Option<Split> {
             if !(pos > b.min[axis] && pos < b.max[axis]) {
                 continue;
             }
-            let cost = sah_cost(b, inv_area, axis, pos, nl, nr);
+            let cost = sah_cost(b, inv_area, axis, pos, nl, nr, kt);
             if best.is_none_or(|s| cost < s.cost) {
                 best = Some(Split { axis, pos, cost });
             }
@@ -348,7 +364,7 @@ fn binned(refs: &[Ref], b: &Aabb) -> Option<Split> {
 
 /// Wald & Havran's sweep over sorted events, with planar triangles sent to the cheaper side.
 /// Only small nodes (at most [`EXACT_MAX`] references) sweep, so the events fit on the stack.
-fn exact_sweep(refs: &[Ref], b: &Aabb, axis: usize) -> Option<Split> {
+fn exact_sweep(refs: &[Ref], b: &Aabb, axis: usize, kt: f32) -> Option<Split> {
     const END: u8 = 0;
     const PLANAR: u8 = 1;
     const START: u8 = 2;
@@ -406,7 +422,7 @@ fn exact_sweep(refs: &[Ref], b: &Aabb, axis: usize) -> Option<Split> {
         let starts = count(&mut i, START);
         // Closed children: everything touching the plane counts on both sides.
         if pos > b.min[axis] && pos < b.max[axis] {
-            let cost = sah_cost(b, inv_area, axis, pos, nl + planar + starts, nr);
+            let cost = sah_cost(b, inv_area, axis, pos, nl + planar + starts, nr, kt);
             if best.is_none_or(|s| cost < s.cost) {
                 best = Some(Split { axis, pos, cost });
             }

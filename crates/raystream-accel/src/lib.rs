@@ -21,7 +21,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-pub use build::{Builder, depth_limit};
+pub use build::{Builder, DEFAULT_TRAVERSAL_COST, TRAVERSAL_COST_RANGE, depth_limit};
 use raystream_io::TriMesh;
 use raystream_math::{Aabb, DVec3, Ray, Vec3};
 use traverse::RopeWalk;
@@ -47,8 +47,11 @@ pub struct TreeStats {
     pub leaves: usize,
     pub empty_leaves: usize,
     pub max_depth: usize,
-    /// Expected cost of a random ray by the surface-area heuristic (traversal step = 1, triangle test = 1).
+    /// Expected cost of a random ray by the surface-area heuristic (traversal step = 1, triangle
+    /// test = 1, whatever the build priced a step at).
     pub sah_cost: f64,
+    /// SAH builds: what the builder priced a traversal step at, in triangle tests.
+    pub traversal_cost: Option<f32>,
     /// Mean triangle references per non-empty leaf.
     pub mean_tris_per_leaf: f64,
     /// Triangle references in all leaves (a triangle may sit in several).
@@ -80,12 +83,33 @@ pub fn is_degenerate(c: &[Vec3; 3]) -> bool {
 impl KdTree {
     /// Builds a tree over a mesh's triangles with the chosen builder.
     pub fn build(mesh: &TriMesh, builder: Builder) -> KdTree {
+        Self::build_with(mesh, builder, DEFAULT_TRAVERSAL_COST)
+    }
+
+    /// As [`KdTree::build`], the SAH builder pricing a traversal step at `traversal_cost`
+    /// triangle tests (the median builder ignores it). Panics outside
+    /// [`TRAVERSAL_COST_RANGE`] (callers check user input against it).
+    pub fn build_with(mesh: &TriMesh, builder: Builder, traversal_cost: f32) -> KdTree {
         let corners: Vec<[Vec3; 3]> = (0..mesh.len()).map(|i| mesh.corners(i)).collect();
-        Self::build_from_corners(&corners, builder)
+        Self::build_from_corners_with(&corners, builder, traversal_cost)
     }
 
     /// Builds over triangles given by their corners; triangle `i` gets prim id `i`.
     pub fn build_from_corners(corners: &[[Vec3; 3]], builder: Builder) -> KdTree {
+        Self::build_from_corners_with(corners, builder, DEFAULT_TRAVERSAL_COST)
+    }
+
+    /// As [`KdTree::build_from_corners`], with the SAH's traversal cost (see
+    /// [`KdTree::build_with`]).
+    pub fn build_from_corners_with(
+        corners: &[[Vec3; 3]],
+        builder: Builder,
+        traversal_cost: f32,
+    ) -> KdTree {
+        assert!(
+            TRAVERSAL_COST_RANGE.contains(&traversal_cost),
+            "SAH traversal cost {traversal_cost} outside {TRAVERSAL_COST_RANGE:?}"
+        );
         let start = Instant::now();
         let prims: Vec<u32> = (0..corners.len() as u32)
             .filter(|&i| !is_degenerate(&corners[i as usize]))
@@ -93,7 +117,7 @@ impl KdTree {
         let bounds = prims.iter().fold(Aabb::EMPTY, |b, &i| {
             corners[i as usize].iter().fold(b, |b, &p| b.grow(p))
         });
-        let root_node = build::build(corners, &prims, bounds, builder);
+        let root_node = build::build(corners, &prims, bounds, builder, traversal_cost);
         let (flat, root) = flat::flatten(&root_node, bounds, corners);
         root_node.free();
         let build_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -106,6 +130,7 @@ impl KdTree {
             empty_leaves,
             max_depth: flat.max_depth,
             sah_cost: flat.sah_cost,
+            traversal_cost: (builder == Builder::Sah).then_some(traversal_cost),
             mean_tris_per_leaf: flat.tris.len() as f64 / full.max(1) as f64,
             references: flat.tris.len(),
             triangles: prims.len(),

@@ -5,7 +5,7 @@ use raystream_io::{TriMesh, load_mesh};
 use raystream_math::{Ray, Vec3};
 
 use crate::layout::KdTri;
-use crate::{Builder, KdTree, Traversal, brute};
+use crate::{Builder, DEFAULT_TRAVERSAL_COST, KdTree, Traversal, brute};
 
 const BUILDERS: [Builder; 2] = [Builder::Sah, Builder::Median];
 const TRAVERSALS: [Traversal; 2] = [Traversal::Ropes, Traversal::Stack];
@@ -403,6 +403,55 @@ fn validate_rejects_a_layout_out_of_depth_first_order() {
     }
     let err = swapped.validate(&c).unwrap_err();
     assert!(err.contains("depth-first order"), "{err}");
+}
+
+/// The SAH builder's traversal cost shapes the tree (dearer steps: fewer, fuller leaves and
+/// a shallower tree) but never the answers: every tree validates and agrees with brute force
+/// ray for ray. (Not asserted: that the default tree has the lowest yardstick SAH cost. The
+/// greedy builder stops early, and the tree built with steps at 0.5 scores 2 % lower.)
+#[test]
+fn traversal_cost_shapes_the_tree_not_the_hits() {
+    let mesh = shared_mesh("stanford_bunny.ply");
+    let c = corners(&mesh);
+    let rays = rays_through(&mesh, 1500, 11);
+    let trees: Vec<KdTree> = [0.5, DEFAULT_TRAVERSAL_COST, 4.0, 16.0]
+        .into_iter()
+        .map(|kt| KdTree::build_with(&mesh, Builder::Sah, kt))
+        .collect();
+    for t in &trees {
+        let what = format!("traversal cost {:?}", t.stats.traversal_cost);
+        t.validate(&c).unwrap_or_else(|e| panic!("{what}: {e}"));
+        for ray in &rays {
+            check_ray(t, &c, ray, &what);
+        }
+        check_batched(t, &rays[..300], &what);
+    }
+    for w in trees.windows(2) {
+        let (a, b) = (&w[0].stats, &w[1].stats);
+        assert!(
+            b.leaves < a.leaves && b.mean_tris_per_leaf > a.mean_tris_per_leaf,
+            "{:?} → {:?}: leaves {} → {}, triangles per leaf {} → {}",
+            a.traversal_cost,
+            b.traversal_cost,
+            a.leaves,
+            b.leaves,
+            a.mean_tris_per_leaf,
+            b.mean_tris_per_leaf
+        );
+        assert!(b.max_depth <= a.max_depth);
+    }
+    assert_eq!(
+        KdTree::build_with(&mesh, Builder::Median, 4.0)
+            .stats
+            .traversal_cost,
+        None
+    );
+}
+
+#[test]
+#[should_panic(expected = "SAH traversal cost")]
+fn traversal_cost_out_of_range_is_refused() {
+    KdTree::build_from_corners_with(&[[Vec3::ZERO, Vec3::X, Vec3::Y]], Builder::Sah, 0.0);
 }
 
 fn arb_vec(r: f32) -> impl Strategy<Value = Vec3> {

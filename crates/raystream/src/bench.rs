@@ -162,16 +162,15 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     let mesh = load_mesh(&a.input)?;
     let corners: Vec<[Vec3; 3]> = (0..mesh.len()).map(|i| mesh.corners(i)).collect();
     let traversal: Traversal = a.traversal.into();
-    let builder = a.builder.into();
     let commit = git_commit();
     for &dev in &a.device {
         let backend = open_device(dev, a.adapter.as_deref(), quiet)?;
         // Build time: median of 3 builds (the first also warms the thread pool).
         let mut builds = Vec::new();
-        let mut tree = KdTree::build(&mesh, builder);
+        let mut tree = a.tree.build(&mesh);
         for _ in 0..3 {
             let t0 = Instant::now();
-            tree = KdTree::build(&mesh, builder);
+            tree = a.tree.build(&mesh);
             builds.push(ms(t0.elapsed()));
         }
         let build_ms = median(&mut builds);

@@ -90,9 +90,8 @@ impl From<KernelsArg> for raystream_gpu::Kernels {
 
 #[derive(Args, Clone)]
 pub struct Accel {
-    /// kd-tree builder.
-    #[arg(long, value_enum, default_value = "sah")]
-    pub builder: BuilderArg,
+    #[command(flatten)]
+    pub tree: TreeArgs,
     /// kd-tree traversal.
     #[arg(long, value_enum, default_value = "ropes")]
     pub traversal: TraversalArg,
@@ -103,6 +102,36 @@ pub struct Accel {
     /// Use the first GPU adapter whose name contains this (case-insensitive).
     #[arg(long)]
     pub adapter: Option<String>,
+}
+
+/// How the kd-tree is built.
+#[derive(Args, Clone, Copy)]
+pub struct TreeArgs {
+    /// kd-tree builder.
+    #[arg(long, value_enum, default_value = "sah")]
+    pub builder: BuilderArg,
+    /// SAH builder: what a traversal step costs, in triangle tests. Dearer steps build
+    /// shallower trees with fuller leaves.
+    #[arg(long, default_value_t = raystream_accel::DEFAULT_TRAVERSAL_COST, value_parser = parse_traversal_cost, allow_negative_numbers = true)]
+    pub sah_traversal_cost: f32,
+}
+
+impl TreeArgs {
+    pub fn build(&self, mesh: &raystream_io::TriMesh) -> raystream_accel::KdTree {
+        raystream_accel::KdTree::build_with(mesh, self.builder.into(), self.sah_traversal_cost)
+    }
+}
+
+fn parse_traversal_cost(s: &str) -> Result<f32, String> {
+    let range = raystream_accel::TRAVERSAL_COST_RANGE;
+    match s.parse::<f32>() {
+        Ok(c) if range.contains(&c) => Ok(c),
+        _ => Err(format!(
+            "'{s}': a traversal step's cost in triangle tests, from {} to {}",
+            range.start(),
+            range.end()
+        )),
+    }
 }
 
 #[derive(Args)]
@@ -373,8 +402,8 @@ pub struct InfoArgs {
     /// DICOM: the SeriesInstanceUID to read (default: the series with the most slices).
     #[arg(long)]
     pub series: Option<String>,
-    #[arg(long, value_enum, default_value = "sah")]
-    pub builder: BuilderArg,
+    #[command(flatten)]
+    pub tree: TreeArgs,
     #[arg(long)]
     pub json: bool,
 }
@@ -407,8 +436,8 @@ pub struct BenchArgs {
     /// Use the first GPU adapter whose name contains this (case-insensitive).
     #[arg(long)]
     pub adapter: Option<String>,
-    #[arg(long, value_enum, default_value = "sah")]
-    pub builder: BuilderArg,
+    #[command(flatten)]
+    pub tree: TreeArgs,
     #[arg(long, value_enum, default_value = "ropes")]
     pub traversal: TraversalArg,
     /// GPU query kernels to measure, comma-separated (fused, split, persistent, ifif), side by side.

@@ -2,7 +2,7 @@
 //! (dims, spacing in mm, LPS origin and direction), value range and, for DICOM, its series.
 
 use anyhow::Result;
-use raystream_accel::{KdTree, TreeStats};
+use raystream_accel::TreeStats;
 use serde_json::json;
 
 use crate::cli::InfoArgs;
@@ -16,6 +16,7 @@ pub fn tree_json(s: &TreeStats) -> serde_json::Value {
         "empty_leaves": s.empty_leaves,
         "max_depth": s.max_depth,
         "sah_cost": round3(s.sah_cost),
+        "sah_traversal_cost": s.traversal_cost,
         "mean_tris_per_leaf": round3(s.mean_tris_per_leaf),
         "references": s.references,
         "build_ms": round3(s.build_ms),
@@ -27,7 +28,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         return volume_info(a);
     }
     let mesh = load_mesh(&a.input)?;
-    let tree = KdTree::build(&mesh, a.builder.into());
+    let tree = a.tree.build(&mesh);
     let b = mesh.bounds();
     let s = &tree.stats;
     if a.json {

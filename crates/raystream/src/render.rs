@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use raystream_accel::{KdTree, Traversal};
+use raystream_accel::Traversal;
 use raystream_cpu::{DepthStats, RenderOptions, prepare_volume, render_prepared};
 use raystream_gpu::{GpuRenderer, GpuTracer};
 use raystream_scene::Scene;
@@ -222,7 +222,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         a.quiet,
         &format!("building kd-tree over {} triangles", scene.mesh.len()),
     );
-    let tree = KdTree::build(&scene.mesh, a.accel.builder.into());
+    let tree = a.accel.tree.build(&scene.mesh);
     pb.finish_and_clear();
     let opt = RenderOptions {
         width: a.size.0,

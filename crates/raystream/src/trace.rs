@@ -225,7 +225,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
         quiet,
         &format!("building kd-tree over {} triangles", mesh.len()),
     );
-    let tree = KdTree::build(&mesh, a.accel.builder.into());
+    let tree = a.accel.tree.build(&mesh);
     pb.set_message(format!("tracing {} rays on {}", rays.len(), backend.name()));
     let traversal: Traversal = a.accel.traversal.into();
     let t = trace_timed(

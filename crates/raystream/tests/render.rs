@@ -192,6 +192,36 @@ fn info_json() {
     ]);
     let m: serde_json::Value = serde_json::from_str(stdout(&med).trim()).unwrap();
     assert!(m["kdtree"]["sah_cost"].as_f64().unwrap() > j["kdtree"]["sah_cost"].as_f64().unwrap());
+    assert!(m["kdtree"]["sah_traversal_cost"].is_null(), "{m}");
+    // A dearer traversal step: a tree of fewer, fuller leaves.
+    assert_eq!(j["kdtree"]["sah_traversal_cost"], 1.0);
+    let dear = run(&[
+        "info",
+        &mesh("utah_teapot.obj"),
+        "--json",
+        "--sah-traversal-cost",
+        "4",
+    ]);
+    let d: serde_json::Value = serde_json::from_str(stdout(&dear).trim()).unwrap();
+    assert_eq!(d["kdtree"]["sah_traversal_cost"], 4.0);
+    assert!(
+        d["kdtree"]["leaves"].as_u64() < j["kdtree"]["leaves"].as_u64(),
+        "{d} vs {j}"
+    );
+    for bad in ["0", "-1", "nan", "1e9", "cheap"] {
+        let o = run(&[
+            "info",
+            &mesh("utah_teapot.obj"),
+            "--sah-traversal-cost",
+            bad,
+        ]);
+        assert_eq!(o.status.code(), Some(2), "{bad}");
+        assert!(
+            stderr(&o).contains("--sah-traversal-cost") && stderr(&o).contains("triangle tests"),
+            "{bad}: {}",
+            stderr(&o)
+        );
+    }
 }
 
 /// A successful run's stdout as JSON lines.
