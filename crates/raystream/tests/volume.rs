@@ -66,7 +66,7 @@ fn every_format_matches_simpleitk_on_an_oblique_grid() {
         .unwrap()
         .success();
     if !has_sitk {
-        if std::env::var("CI").is_ok_and(|v| v == "true") {
+        if in_ci() {
             panic!("CI=true but SimpleITK is not installed in {}", py.display());
         }
         eprintln!("skipping: SimpleITK is not installed in {}", py.display());

@@ -56,7 +56,7 @@ pub fn python() -> Option<PathBuf> {
     if p.exists() {
         return Some(p);
     }
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
+    if in_ci() {
         panic!(
             "CI=true but no Python with rays.py's requirements at {} (set RAYSTREAM_PYTHON)",
             p.display()
@@ -163,11 +163,17 @@ pub fn gpu_available() -> bool {
     if o.status.success() {
         return true;
     }
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
+    if in_ci() {
         panic!("CI=true but --device gpu fails: {}", stderr(&o));
     }
     eprintln!("skipping GPU test: {}", stderr(&o));
     false
+}
+
+/// Under CI (`CI=true`): the GPU is lavapipe, which has subgroups, and Python with rays.py's
+/// requirements is installed; nothing that needs them may skip.
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
 }
 
 /// Little-endian bytes of `v`.
