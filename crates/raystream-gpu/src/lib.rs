@@ -98,27 +98,68 @@ pub struct GpuContext {
 /// How long a spinning wait polls before it blocks.
 const SPIN_WAIT: Duration = Duration::from_millis(5);
 
+/// Every adapter wgpu finds (Vulkan, Metal, DX12), in the order `--device gpu` prefers them: a
+/// discrete GPU, then an integrated one, then anything else (such as lavapipe).
+fn adapters_by_preference() -> Vec<wgpu::Adapter> {
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+        backends: wgpu::Backends::PRIMARY,
+        ..wgpu::InstanceDescriptor::new_without_display_handle()
+    });
+    let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::PRIMARY));
+    // Stable: adapters of one type keep the driver's order.
+    adapters.sort_by_key(|a| match a.get_info().device_type {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Cpu => 3,
+        wgpu::DeviceType::Other => 4,
+    });
+    adapters
+}
+
+/// What an adapter offers raystream (`raystream info --gpu`).
+#[derive(Clone, Debug)]
+pub struct AdapterSummary {
+    pub info: wgpu::AdapterInfo,
+    /// Timestamp queries: per-kernel times.
+    pub timestamps: bool,
+    /// Subgroup operations: the statistics query (SIMD efficiency, residency).
+    pub subgroups: bool,
+    /// The largest storage buffer a kernel can bind, and the largest buffer, bytes.
+    pub max_storage_binding: u64,
+    pub max_buffer: u64,
+    pub max_workgroups_per_dimension: u32,
+}
+
+/// Every adapter, in the order `--device gpu` (without `--adapter`) prefers them: it opens the
+/// first.
+pub fn list_adapters() -> Vec<AdapterSummary> {
+    adapters_by_preference()
+        .iter()
+        .map(|a| {
+            let (features, limits) = (a.features(), a.limits());
+            AdapterSummary {
+                info: a.get_info(),
+                timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
+                subgroups: features.contains(wgpu::Features::SUBGROUP),
+                max_storage_binding: limits.max_storage_buffer_binding_size,
+                max_buffer: limits.max_buffer_size,
+                max_workgroups_per_dimension: limits.max_compute_workgroups_per_dimension,
+            }
+        })
+        .collect()
+}
+
 impl GpuContext {
     /// Opens the first adapter whose name contains `adapter` (case-insensitive), preferring a
     /// discrete GPU, then an integrated one, then anything else (such as lavapipe).
     pub fn new(adapter: Option<&str>) -> Result<GpuContext, GpuError> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
-            backends: wgpu::Backends::PRIMARY,
-            ..wgpu::InstanceDescriptor::new_without_display_handle()
-        });
-        let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::PRIMARY));
+        let mut adapters = adapters_by_preference();
         let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
         if let Some(want) = adapter {
             let want = want.to_lowercase();
             adapters.retain(|a| a.get_info().name.to_lowercase().contains(&want));
         }
-        adapters.sort_by_key(|a| match a.get_info().device_type {
-            wgpu::DeviceType::DiscreteGpu => 0,
-            wgpu::DeviceType::IntegratedGpu => 1,
-            wgpu::DeviceType::VirtualGpu => 2,
-            wgpu::DeviceType::Cpu => 3,
-            wgpu::DeviceType::Other => 4,
-        });
         let Some(chosen) = adapters.into_iter().next() else {
             let why = match (adapter, names.is_empty()) {
                 (_, true) => " (no Vulkan, Metal or DX12 driver answered)".to_string(),

@@ -398,7 +398,12 @@ pub struct TraceArgs {
 #[derive(Args)]
 pub struct InfoArgs {
     /// Mesh file, or CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd).
-    pub input: PathBuf,
+    #[arg(required_unless_present = "gpu")]
+    pub input: Option<PathBuf>,
+    /// Instead of a file: the GPU adapters (Vulkan, Metal, DX12) found here, in the order
+    /// `--device gpu` prefers them, with what each offers raystream.
+    #[arg(long, conflicts_with = "input")]
+    pub gpu: bool,
     /// DICOM: the SeriesInstanceUID to read (default: the series with the most slices).
     #[arg(long)]
     pub series: Option<String>,

@@ -24,17 +24,21 @@ pub fn tree_json(s: &TreeStats) -> serde_json::Value {
 }
 
 pub fn run(a: &InfoArgs) -> Result<()> {
-    if raystream_io::is_volume_path(&a.input) {
-        return volume_info(a);
+    let Some(input) = &a.input else {
+        gpu_info(a.json);
+        return Ok(());
+    };
+    if raystream_io::is_volume_path(input) {
+        return volume_info(a, input);
     }
-    let mesh = load_mesh(&a.input)?;
+    let mesh = load_mesh(input)?;
     let tree = a.tree.build(&mesh);
     let b = mesh.bounds();
     let s = &tree.stats;
     if a.json {
         let v = json!({
             "kind": "mesh",
-            "file": file_name(&a.input),
+            "file": file_name(input),
             "vertices": mesh.positions.len(),
             "triangles": mesh.len(),
             "degenerate_triangles": mesh.len() - s.triangles,
@@ -43,7 +47,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         });
         print_line(v);
     } else {
-        println!("{}: triangle mesh", a.input.display());
+        println!("{}: triangle mesh", input.display());
         println!("  vertices   {}", mesh.positions.len());
         println!(
             "  triangles  {} ({} degenerate, never hit)",
@@ -71,8 +75,8 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     Ok(())
 }
 
-fn volume_info(a: &InfoArgs) -> Result<()> {
-    let v = raystream_io::load_volume(&a.input, a.series.as_deref())?;
+fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
+    let v = raystream_io::load_volume(input, a.series.as_deref())?;
     let range = v.value_range();
     let unit = match v.unit {
         raystream_io::ValueUnit::Hounsfield => "HU",
@@ -92,7 +96,7 @@ fn volume_info(a: &InfoArgs) -> Result<()> {
     if a.json {
         let mut out = json!({
             "kind": "volume",
-            "file": file_name(&a.input),
+            "file": file_name(input),
             "format": v.format.name(),
             "dims": v.dims,
             "spacing": v.spacing,
@@ -114,7 +118,7 @@ fn volume_info(a: &InfoArgs) -> Result<()> {
         }
         print_line(out);
     } else {
-        println!("{}: {} volume", a.input.display(), v.format.name());
+        println!("{}: {} volume", input.display(), v.format.name());
         println!(
             "  dims       {} x {} x {} voxels",
             v.dims[0], v.dims[1], v.dims[2]
@@ -143,4 +147,58 @@ fn volume_info(a: &InfoArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `info --gpu`: the adapters, in the order `--device gpu` prefers them (it opens the first).
+fn gpu_info(json: bool) {
+    let adapters = raystream_gpu::list_adapters();
+    if json {
+        let list: Vec<serde_json::Value> = adapters
+            .iter()
+            .map(|a| {
+                json!({
+                    "name": a.info.name,
+                    "backend": format!("{:?}", a.info.backend),
+                    "device_type": format!("{:?}", a.info.device_type),
+                    "driver": a.info.driver,
+                    "driver_info": a.info.driver_info,
+                    "timestamps": a.timestamps,
+                    "subgroups": a.subgroups,
+                    "subgroup_sizes": [a.info.subgroup_min_size, a.info.subgroup_max_size],
+                    "max_storage_binding": a.max_storage_binding,
+                    "max_buffer": a.max_buffer,
+                    "max_workgroups_per_dimension": a.max_workgroups_per_dimension,
+                })
+            })
+            .collect();
+        print_line(json!({ "kind": "gpu", "adapters": list }));
+        return;
+    }
+    if adapters.is_empty() {
+        println!(
+            "no GPU adapter: no Vulkan, Metal or DX12 driver answered (without a GPU, Mesa's lavapipe gives a software one)"
+        );
+        return;
+    }
+    for (k, a) in adapters.iter().enumerate() {
+        println!(
+            "{}{} ({:?}, {:?}, {} {})",
+            if k == 0 { "* " } else { "  " },
+            a.info.name,
+            a.info.backend,
+            a.info.device_type,
+            a.info.driver,
+            a.info.driver_info
+        );
+        println!(
+            "    timestamps {}, subgroups {} ({}–{} lanes), storage binding up to {} MiB, buffers up to {} MiB",
+            if a.timestamps { "yes" } else { "no" },
+            if a.subgroups { "yes" } else { "no" },
+            a.info.subgroup_min_size,
+            a.info.subgroup_max_size,
+            a.max_storage_binding >> 20,
+            a.max_buffer >> 20
+        );
+    }
+    println!("(* the adapter --device gpu opens; --adapter SUBSTRING picks another)");
 }

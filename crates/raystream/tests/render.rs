@@ -224,6 +224,66 @@ fn info_json() {
     }
 }
 
+/// `info --gpu`: the adapters, the first being the one `--device gpu` opens; under CI at least
+/// lavapipe, with subgroups and timestamps. `info` wants a file or `--gpu`, not both.
+#[test]
+fn info_lists_gpu_adapters() {
+    let o = run(&["info", "--gpu", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(j["kind"], "gpu");
+    let adapters = j["adapters"].as_array().unwrap();
+    if in_ci() {
+        assert!(
+            adapters
+                .iter()
+                .any(|a| a["name"].as_str().unwrap().contains("llvmpipe")
+                    && a["subgroups"] == true
+                    && a["timestamps"] == true),
+            "{j}"
+        );
+    }
+    if let Some(first) = adapters.first() {
+        for k in [
+            "backend",
+            "device_type",
+            "driver",
+            "max_storage_binding",
+            "subgroup_sizes",
+        ] {
+            assert!(first.get(k).is_some(), "{k} missing: {first}");
+        }
+        let probe = tmp("info-gpu.rays");
+        std::fs::write(
+            &probe,
+            f32s(&[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY]),
+        )
+        .unwrap();
+        let t = run(&[
+            "trace",
+            &mesh("spot.obj"),
+            "--rays",
+            probe.to_str().unwrap(),
+            "-o",
+            tmp("info-gpu.hits").to_str().unwrap(),
+            "--device",
+            "gpu",
+            "--json",
+        ]);
+        let line: serde_json::Value = serde_json::from_str(stdout(&t).trim()).unwrap();
+        let name = first["name"].as_str().unwrap();
+        assert!(
+            line["adapter"].as_str().unwrap().contains(name),
+            "--device gpu opened {} but info --gpu lists {name} first",
+            line["adapter"]
+        );
+    }
+    assert_eq!(run(&["info"]).status.code(), Some(2));
+    let both = run(&["info", &mesh("spot.obj"), "--gpu"]);
+    assert_eq!(both.status.code(), Some(2));
+    assert!(stderr(&both).contains("--gpu"), "{}", stderr(&both));
+}
+
 /// A successful run's stdout as JSON lines.
 fn json_lines(o: &std::process::Output) -> Vec<serde_json::Value> {
     assert!(o.status.success(), "{}", stderr(o));
