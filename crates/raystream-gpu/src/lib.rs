@@ -451,6 +451,9 @@ pub struct GpuTracer<'a> {
     stats: std::sync::OnceLock<[wgpu::ComputePipeline; 4]>,
     /// `queries.wgsl`, for the pipelines built on first use.
     module: wgpu::ShaderModule,
+    /// The most rays one query binds: its rays (32 bytes each, its largest buffer) must fit in
+    /// a storage binding (128 MiB on lavapipe, 2 GiB on an H100); more are traced in chunks.
+    max_rays: usize,
     /// Milliseconds spent uploading the tree.
     pub upload_ms: f64,
 }
@@ -607,6 +610,7 @@ impl<'a> GpuTracer<'a> {
             ifif: std::sync::OnceLock::new(),
             stats: std::sync::OnceLock::new(),
             module,
+            max_rays: (ctx.max_binding() / std::mem::size_of::<GpuRay>() as u64).max(1) as usize,
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }
@@ -875,11 +879,47 @@ impl<'a> GpuTracer<'a> {
         })
     }
 
+    /// Traces more rays than one query can bind, `chunk` at a time: the hits of all, the times
+    /// summed.
+    fn trace_chunked(
+        &self,
+        rays: &[Ray],
+        any: bool,
+        kernels: Kernels,
+        chunk: usize,
+    ) -> Result<(Vec<GpuHit>, TraceTimes), GpuError> {
+        let mut hits = Vec::with_capacity(rays.len());
+        let mut total = TraceTimes::default();
+        // A sum of optional figures: known only where every chunk knows it.
+        fn add<T: std::ops::Add<Output = T>>(
+            first: bool,
+            sum: Option<T>,
+            x: Option<T>,
+        ) -> Option<T> {
+            if first {
+                x
+            } else {
+                sum.zip(x).map(|(a, b)| a + b)
+            }
+        }
+        for (k, part) in rays.chunks(chunk).enumerate() {
+            let (h, t) = self.trace_with(part, any, kernels)?;
+            hits.extend(h);
+            total.upload_ms += t.upload_ms;
+            total.kernel_ms += t.kernel_ms;
+            total.readback_ms += t.readback_ms;
+            total.kernel_gpu_ms = add(k == 0, total.kernel_gpu_ms, t.kernel_gpu_ms);
+            total.split_steps = add(k == 0, total.split_steps, t.split_steps);
+        }
+        Ok((hits, total))
+    }
+
     /// Milliseconds of wall time per query when `runs` queries of these rays are queued in
     /// one submission and waited for once: the throughput of a stream of queries, with no host
     /// round trip between them (each still waits for the one before), and the last query's
     /// hits (the hit buffer is cleared before it, within the stream, so that they are its
-    /// own). `None` for the split kernels, which the host drives step by step.
+    /// own). `None` for the split kernels, which the host drives step by step, and for more
+    /// rays than one query binds.
     pub fn trace_streamed(
         &self,
         rays: &[Ray],
@@ -888,7 +928,7 @@ impl<'a> GpuTracer<'a> {
         runs: u32,
     ) -> Result<Option<(Vec<GpuHit>, f64)>, GpuError> {
         let ctx = self.ctx;
-        if kernels == Kernels::Split || rays.is_empty() || runs == 0 {
+        if kernels == Kernels::Split || rays.is_empty() || runs == 0 || rays.len() > self.max_rays {
             return Ok(None);
         }
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -936,6 +976,10 @@ impl<'a> GpuTracer<'a> {
         let n = rays.len();
         if n == 0 {
             return Ok((Vec::new(), TraceTimes::default()));
+        }
+        let chunk = self.max_rays;
+        if n > chunk {
+            return self.trace_chunked(rays, any, kernels, chunk);
         }
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);

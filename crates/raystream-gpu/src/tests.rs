@@ -569,6 +569,45 @@ fn streamed_queries_each_trace_every_ray() {
     }
 }
 
+/// More rays than one query can bind are traced in chunks: the same hits as one query, for
+/// every kernel layout, the chunks' times summed; a stream of such queries is not measured.
+#[test]
+fn oversized_queries_are_traced_in_chunks() {
+    let Some(ctx) = gpu() else { return };
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
+    let mesh = raystream_io::load_mesh(&dir.join("stanford_bunny.ply")).unwrap();
+    let tree = KdTree::build(&mesh, Builder::Sah);
+    let whole = GpuTracer::new(&ctx, &tree).unwrap();
+    let mut chunked = GpuTracer::new(&ctx, &tree).unwrap();
+    // As if the device bound 1000 rays at most (4096 rays: four chunks, the last short).
+    chunked.max_rays = 1000;
+    let rays = test_rays(&mesh, 4096);
+    let has_timestamps = ctx
+        .device
+        .features()
+        .contains(wgpu::Features::TIMESTAMP_QUERY);
+    for any in [false, true] {
+        for kernels in [
+            Kernels::Fused,
+            Kernels::Split,
+            Kernels::Persistent,
+            Kernels::IfIf,
+        ] {
+            let (want, _) = whole.trace_with(&rays, any, kernels).unwrap();
+            let (got, times) = chunked.trace_with(&rays, any, kernels).unwrap();
+            assert_eq!(got, want, "any={any} {kernels:?}: chunked hits differ");
+            assert_eq!(times.kernel_gpu_ms.is_some(), has_timestamps);
+            assert_eq!(times.split_steps.is_some(), kernels == Kernels::Split);
+            assert!(
+                chunked
+                    .trace_streamed(&rays, any, kernels, 2)
+                    .unwrap()
+                    .is_none()
+            );
+        }
+    }
+}
+
 #[test]
 fn gpu_contract_edge_cases() {
     let Some(ctx) = gpu() else { return };
