@@ -520,7 +520,7 @@ impl QueryStats {
 
 /// Rays per statistics dispatch: a whole 1920×1080 set in one (the counters of `stats.wgsl`
 /// are 64-bit), so that the residency peak is that of a GPU filled as the timed kernel fills
-/// it; larger sets run in batches.
+/// it; larger sets (or more than a query binds) run in batches.
 const STATS_BATCH: usize = 1 << 22;
 
 /// Words of `stats.wgsl`'s counter buffer: ten 64-bit counters, then LIVE, PEAK and LANES.
@@ -704,7 +704,7 @@ impl<'a> GpuTracer<'a> {
             rays: rays.len() as u64,
             ..QueryStats::default()
         };
-        for batch in rays.chunks(STATS_BATCH) {
+        for batch in rays.chunks(STATS_BATCH.min(self.max_rays)) {
             let n = batch.len();
             let gpu_rays: Vec<GpuRay> = batch.iter().map(GpuRay::from).collect();
             let ray_buf = ctx.storage(

@@ -605,6 +605,13 @@ fn oversized_queries_are_traced_in_chunks() {
                     .is_none()
             );
         }
+        // The statistics query batches likewise: the same steps, summed over the batches.
+        if let (Some(a), Some(b)) = (
+            whole.query_stats(&rays, any).unwrap(),
+            chunked.query_stats(&rays, any).unwrap(),
+        ) {
+            assert_eq!((a.steps, a.listed), (b.steps, b.listed), "any={any}");
+        }
     }
 }
 
