@@ -227,11 +227,17 @@ fn test_triangle(i: u32, r: RayIn, w: Walk, any_hit: bool, best: ptr<function, H
     return false;
 }
 
-// Tests the leaf's triangles against `best`; with `any_hit` stops at the first hit. Returns
-// whether `best` changed.
-fn intersect_leaf(leaf: KdLeaf, r: RayIn, w: Walk, any_hit: bool, best: ptr<function, HitOut>) -> bool {
+// A leaf is read field by field where each is needed (its triangle range, then its box, then
+// one rope), never as the whole 64-byte struct: loading the struct at once cost lavapipe 2-10 %
+// (BENCHMARKS.md), its compiler fetching all 64 bytes.
+
+// Tests the triangles of leaf `li` against `best`; with `any_hit` stops at the first hit.
+// Returns whether `best` changed.
+fn intersect_leaf(li: u32, r: RayIn, w: Walk, any_hit: bool, best: ptr<function, HitOut>) -> bool {
     var changed = false;
-    for (var i = leaf.first; i < leaf.first + leaf.count; i++) {
+    let first = leaves[li].first;
+    let end = first + leaves[li].count;
+    for (var i = first; i < end; i++) {
         if test_triangle(i, r, w, any_hit, best) {
             changed = true;
             if any_hit {
@@ -249,7 +255,9 @@ struct Exit {
     next: u32,
 }
 
-fn leaf_exit(leaf: KdLeaf, w: Walk, best: HitOut, t_max: f32) -> Exit {
+fn leaf_exit(li: u32, w: Walk, best: HitOut, t_max: f32) -> Exit {
+    let bmin = leaves[li].bmin;
+    let bmax = leaves[li].bmax;
     var t_exit = bitcast<f32>(0x7f800000u);
     var face = 0u;
     for (var a = 0u; a < 3u; a++) {
@@ -257,7 +265,7 @@ fn leaf_exit(leaf: KdLeaf, w: Walk, best: HitOut, t_max: f32) -> Exit {
             continue;
         }
         let neg = w.d[a] < 0.0;
-        let bound = select(leaf.bmax[a], leaf.bmin[a], neg);
+        let bound = select(bmax[a], bmin[a], neg);
         let t = (bound - w.o[a]) * w.inv[a];
         if t < t_exit {
             t_exit = t;
@@ -271,7 +279,7 @@ fn leaf_exit(leaf: KdLeaf, w: Walk, best: HitOut, t_max: f32) -> Exit {
     if t_best <= t_exit {
         return Exit(t_exit, NO_ROPE);
     }
-    return Exit(t_exit, leaf.ropes[face]);
+    return Exit(t_exit, leaves[li].ropes[face]);
 }
 
 // The fused query: descend, intersect, follow the rope, in one loop per ray.
@@ -286,13 +294,13 @@ fn trace(r: RayIn, any_hit: bool) -> HitOut {
     var node = params.root;
     for (var step = 0u; step < params.max_steps; step++) {
         node = descend(node, w, t_entry);
-        let leaf = leaves[node & ~LEAF_BIT];
+        let li = node & ~LEAF_BIT;
         stat(STAT_LEAF);
-        stat_listed(leaf.count);
-        if intersect_leaf(leaf, r, w, any_hit, &best) && any_hit {
+        stat_listed(leaves[li].count);
+        if intersect_leaf(li, r, w, any_hit, &best) && any_hit {
             return best;
         }
-        let exit = leaf_exit(leaf, w, best, r.t_max);
+        let exit = leaf_exit(li, w, best, r.t_max);
         if exit.next == NO_ROPE {
             return best;
         }
@@ -316,8 +324,9 @@ fn trace_ifif(r: RayIn, any_hit: bool) -> HitOut {
     }
     var t_entry = span.x;
     var node = params.root;
-    var leaf: KdLeaf;
+    var li = 0u;
     var next_tri = 0u;
+    var end_tri = 0u;
     var in_leaf = false;
     var leaves_left = params.max_steps;
     loop {
@@ -325,21 +334,22 @@ fn trace_ifif(r: RayIn, any_hit: bool) -> HitOut {
             if (node & LEAF_BIT) == 0u {
                 node = descend_step(node, w, t_entry);
             } else {
-                leaf = leaves[node & ~LEAF_BIT];
+                li = node & ~LEAF_BIT;
+                next_tri = leaves[li].first;
+                end_tri = next_tri + leaves[li].count;
                 stat(STAT_LEAF);
-                stat_listed(leaf.count);
-                next_tri = leaf.first;
+                stat_listed(end_tri - next_tri);
                 in_leaf = true;
             }
         }
         if in_leaf {
-            if next_tri < leaf.first + leaf.count {
+            if next_tri < end_tri {
                 if test_triangle(next_tri, r, w, any_hit, &best) && any_hit {
                     return best;
                 }
                 next_tri++;
             } else {
-                let exit = leaf_exit(leaf, w, best, r.t_max);
+                let exit = leaf_exit(li, w, best, r.t_max);
                 leaves_left--;
                 if exit.next == NO_ROPE || leaves_left == 0u {
                     return best;

@@ -73,16 +73,16 @@ fn split_intersect(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_w
     let i = item.ray;
     let r = rays[i];
     let w = walk_of(r);
-    let leaf = leaves[item.leaf & ~LEAF_BIT];
+    let li = item.leaf & ~LEAF_BIT;
     var best = hits[i];
     let any_hit = ANY_HIT != 0u;
-    if intersect_leaf(leaf, r, w, any_hit, &best) {
+    if intersect_leaf(li, r, w, any_hit, &best) {
         hits[i] = best;
         if any_hit {
             return;
         }
     }
-    let exit = leaf_exit(leaf, w, best, r.t_max);
+    let exit = leaf_exit(li, w, best, r.t_max);
     if exit.next == NO_ROPE {
         return;
     }
