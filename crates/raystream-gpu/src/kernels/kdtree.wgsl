@@ -228,7 +228,7 @@ fn test_triangle(i: u32, r: RayIn, w: Walk, any_hit: bool, best: ptr<function, H
 }
 
 // A leaf is read field by field where each is needed (its triangle range, then its box, then
-// one rope), never as the whole 64-byte struct: loading the struct at once cost lavapipe 2-10 %
+// one rope), never as the whole 64-byte struct: loading the struct at once cost lavapipe 5-13 %
 // (BENCHMARKS.md), its compiler fetching all 64 bytes.
 
 // Tests the triangles of leaf `li` against `best`; with `any_hit` stops at the first hit.
