@@ -269,6 +269,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             "rays": rays.len(),
             "query": if a.any { "any" } else { "closest" },
             "builder": tree.stats.builder,
+            "sah_traversal_cost": tree.stats.traversal_cost,
             "traversal": traversal.name(),
             "kernels": matches!(backend, Backend::Gpu(_)).then(|| kernels_name(a.kernels.into())),
             "build_ms": round3(t.build_ms),

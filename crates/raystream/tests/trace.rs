@@ -57,6 +57,7 @@ fn formats_contract_and_json() {
         }
         assert_eq!(j["rays"], 5);
         assert_eq!(j["hits"], 2);
+        assert_eq!(j["sah_traversal_cost"], 1.0);
         let bytes = std::fs::read(&h).unwrap();
         assert_eq!(bytes.len(), 5 * 16);
         let rec = |i: usize| {
