@@ -53,7 +53,10 @@ fn kdtree_wgsl() -> String {
 
 /// The WGSL source of the statistics query (`stats_closest`, `stats_any`); needs subgroups.
 pub fn stats_wgsl() -> String {
-    format!("{}\n{STATS_WGSL}", kdtree_core_wgsl())
+    format!(
+        "{}\nconst STATS_WORDS: u32 = {STATS_WORDS}u;\nconst LIVE: u32 = {STATS_LIVE}u;\nconst PEAK: u32 = {STATS_PEAK}u;\nconst LANES: u32 = {STATS_LANES}u;\n{STATS_WGSL}",
+        kdtree_core_wgsl()
+    )
 }
 
 /// The WGSL source of the ray-query kernels (`intersect_closest`, `intersect_any`).
@@ -523,8 +526,13 @@ impl QueryStats {
 /// it; larger sets (or more than a query binds) run in batches.
 const STATS_BATCH: usize = 1 << 22;
 
-/// Words of `stats.wgsl`'s counter buffer: ten 64-bit counters, then LIVE, PEAK and LANES.
+/// Words of `stats.wgsl`'s counter buffer: ten 64-bit counters (a low and a high word each),
+/// then LIVE (invocations inside the kernel now), PEAK (the most LIVE reached) and LANES (the
+/// subgroup size), at these indices (the kernel gets them from its prelude).
 const STATS_WORDS: usize = 23;
+const STATS_LIVE: usize = 20;
+const STATS_PEAK: usize = 21;
+const STATS_LANES: usize = 22;
 
 /// Workgroups of the persistent kernels: 4096 × 64 threads, about what an H100's 132 SMs hold
 /// at once (2048 threads each); fewer when there are fewer rays.
@@ -536,8 +544,9 @@ struct Query<'p> {
     hit_buf: wgpu::Buffer,
     hit_bytes: u64,
     param_buf: wgpu::Buffer,
-    /// The persistent kernels' ray counter, from 0.
-    next_ray: wgpu::Buffer,
+    /// Binding 6, where the kernel has one: the persistent kernels' ray counter, the
+    /// statistics query's counters.
+    slot6: Option<wgpu::Buffer>,
     bind: wgpu::BindGroup,
     pipeline: &'p wgpu::ComputePipeline,
     label: &'static str,
@@ -705,45 +714,16 @@ impl<'a> GpuTracer<'a> {
             ..QueryStats::default()
         };
         for batch in rays.chunks(STATS_BATCH.min(self.max_rays)) {
-            let n = batch.len();
-            let gpu_rays: Vec<GpuRay> = batch.iter().map(GpuRay::from).collect();
-            let ray_buf = ctx.storage(
-                "rays",
-                bytemuck::cast_slice(&gpu_rays),
-                wgpu::BufferUsages::empty(),
-            )?;
-            let hit_buf = ctx.work_buffer(
-                "hits",
-                (n * std::mem::size_of::<GpuHit>()) as u64,
-                wgpu::BufferUsages::empty(),
-            )?;
             let stats_buf = ctx.work_buffer(
                 "query statistics",
                 4 * STATS_WORDS as u64,
                 wgpu::BufferUsages::empty(),
             )?;
-            let param_buf = self.params_buffer(n as u32);
-            let bind = ctx.bind_buffers(
-                "query statistics",
-                &pipeline.get_bind_group_layout(0),
-                &[
-                    &param_buf,
-                    &self.inners,
-                    &self.leaves,
-                    &self.tris,
-                    &ray_buf,
-                    &hit_buf,
-                    &stats_buf,
-                ],
-            );
-            self.run_fused(
-                pipeline,
-                "query statistics",
-                &bind,
-                ctx.dims(n as u32),
-                None,
-            )?;
-            let w = read_words(ctx, &stats_buf)?;
+            let dims = ctx.dims(batch.len() as u32);
+            let q = self.bind_query(batch, pipeline, "query statistics", dims, Some(stats_buf))?;
+            self.run_fused(&q, None)?;
+            let stats_buf = q.slot6.as_ref().expect("bound above");
+            let w = read_words(ctx, stats_buf)?;
             let counter = |k: usize| w[2 * k] as u64 | (w[2 * k + 1] as u64) << 32;
             for k in 0..3 {
                 total.steps[k] += counter(k);
@@ -752,14 +732,14 @@ impl<'a> GpuTracer<'a> {
             }
             total.listed += counter(3);
             // Every invocation that entered has left: the residency count balances.
-            if w[20] != 0 {
+            if w[STATS_LIVE] != 0 {
                 return Err(ctx.err(format!(
                     "the statistics query's residency count ended at {} instead of 0",
-                    w[20] as i32
+                    w[STATS_LIVE] as i32
                 )));
             }
-            total.peak_resident = total.peak_resident.max(w[21] as u64);
-            total.subgroup_size = total.subgroup_size.max(w[22]);
+            total.peak_resident = total.peak_resident.max(w[STATS_PEAK] as u64);
+            total.subgroup_size = total.subgroup_size.max(w[STATS_LANES]);
         }
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
@@ -781,6 +761,41 @@ impl<'a> GpuTracer<'a> {
     /// The buffers, bind group and grid of one query of `rays` with `kernels`.
     fn query(&self, rays: &[Ray], any: bool, kernels: Kernels) -> Result<Query<'_>, GpuError> {
         let ctx = self.ctx;
+        let (pipeline, label) = match (kernels, any) {
+            (Kernels::Persistent, _) => (
+                &self.persistent_kernels()[any as usize],
+                ["intersect_closest_persistent", "intersect_any_persistent"][any as usize],
+            ),
+            (Kernels::IfIf, _) => (
+                &self.ifif_kernels()[any as usize],
+                ["intersect_closest_ifif", "intersect_any_ifif"][any as usize],
+            ),
+            (_, true) => (&self.any, "intersect_any"),
+            (_, false) => (&self.closest, "intersect_closest"),
+        };
+        let n = rays.len() as u32;
+        if kernels == Kernels::Persistent {
+            // The persistent kernels' ray counter, from 0 (cleared between streamed queries).
+            let next_ray = ctx.storage("next ray", &[0u8; 4], wgpu::BufferUsages::COPY_DST)?;
+            let dims = [n.div_ceil(WORKGROUP_SIZE).min(PERSISTENT_GROUPS), 1, 1];
+            self.bind_query(rays, pipeline, label, dims, Some(next_ray))
+        } else {
+            self.bind_query(rays, pipeline, label, ctx.dims(n), None)
+        }
+    }
+
+    /// The rays and hit buffers of a query of `rays` by `pipeline` over `dims` workgroups,
+    /// bound with the tree (bindings 0-5) and `slot6` at binding 6 where the kernel has one
+    /// (the persistent kernels' ray counter, the statistics query's counters).
+    fn bind_query<'p>(
+        &self,
+        rays: &[Ray],
+        pipeline: &'p wgpu::ComputePipeline,
+        label: &'static str,
+        dims: [u32; 3],
+        slot6: Option<wgpu::Buffer>,
+    ) -> Result<Query<'p>, GpuError> {
+        let ctx = self.ctx;
         let n = rays.len();
         let gpu_rays: Vec<GpuRay> = rays.iter().map(GpuRay::from).collect();
         let ray_buf = ctx.storage(
@@ -798,6 +813,7 @@ impl<'a> GpuTracer<'a> {
                 limit,
             });
         }
+        // Exactly one record a ray (readbacks take the whole buffer).
         let hit_buf = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("hits"),
             size: hit_bytes,
@@ -807,71 +823,22 @@ impl<'a> GpuTracer<'a> {
             mapped_at_creation: false,
         });
         let param_buf = self.params_buffer(n as u32);
-        let (pipeline, label) = match (kernels, any) {
-            (Kernels::Persistent, _) => (
-                &self.persistent_kernels()[any as usize],
-                ["intersect_closest_persistent", "intersect_any_persistent"][any as usize],
-            ),
-            (Kernels::IfIf, _) => (
-                &self.ifif_kernels()[any as usize],
-                ["intersect_closest_ifif", "intersect_any_ifif"][any as usize],
-            ),
-            (_, true) => (&self.any, "intersect_any"),
-            (_, false) => (&self.closest, "intersect_closest"),
-        };
-        // The persistent kernels' ray counter, from 0 (cleared between streamed queries).
-        let next_ray = ctx.storage("next ray", &[0u8; 4], wgpu::BufferUsages::COPY_DST)?;
-        let mut entries = vec![
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: param_buf.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: self.inners.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: self.leaves.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 3,
-                resource: self.tris.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 4,
-                resource: ray_buf.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 5,
-                resource: hit_buf.as_entire_binding(),
-            },
+        let mut buffers = vec![
+            &param_buf,
+            &self.inners,
+            &self.leaves,
+            &self.tris,
+            &ray_buf,
+            &hit_buf,
         ];
-        if kernels == Kernels::Persistent {
-            entries.push(wgpu::BindGroupEntry {
-                binding: 6,
-                resource: next_ray.as_entire_binding(),
-            });
-        }
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("intersect"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
-        let dims = match kernels {
-            Kernels::Persistent => [
-                (n as u32).div_ceil(WORKGROUP_SIZE).min(PERSISTENT_GROUPS),
-                1,
-                1,
-            ],
-            _ => ctx.dims(n as u32),
-        };
+        buffers.extend(&slot6);
+        let bind = ctx.bind_buffers(label, &pipeline.get_bind_group_layout(0), &buffers);
         Ok(Query {
             ray_buf,
             hit_buf,
             hit_bytes,
             param_buf,
-            next_ray,
+            slot6,
             bind,
             pipeline,
             label,
@@ -941,19 +908,14 @@ impl<'a> GpuTracer<'a> {
                 label: Some("streamed queries"),
             });
         for run in 0..runs {
-            if kernels == Kernels::Persistent {
-                enc.clear_buffer(&q.next_ray, 0, None);
+            // The persistent kernels' ray counter restarts for each query.
+            if let Some(next_ray) = &q.slot6 {
+                enc.clear_buffer(next_ray, 0, None);
             }
             if run + 1 == runs {
                 enc.clear_buffer(&q.hit_buf, 0, None);
             }
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(q.label),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(q.pipeline);
-            pass.set_bind_group(0, &q.bind, &[]);
-            pass.dispatch_workgroups(q.dims[0], q.dims[1], 1);
+            record_pass(&mut enc, &q, None);
         }
         ctx.queue.submit([enc.finish()]);
         ctx.wait()?;
@@ -989,10 +951,6 @@ impl<'a> GpuTracer<'a> {
             ref hit_buf,
             hit_bytes,
             ref param_buf,
-            ref bind,
-            pipeline,
-            label,
-            dims,
             ..
         } = q;
         let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -1008,10 +966,9 @@ impl<'a> GpuTracer<'a> {
         // Submission to completion: one round trip (the timestamps travel back with it).
         let t1 = Instant::now();
         let (kernel_gpu_ms, split_steps) = match kernels {
-            Kernels::Fused | Kernels::IfIf | Kernels::Persistent => (
-                self.run_fused(pipeline, label, bind, dims, timer.as_ref())?,
-                None,
-            ),
+            Kernels::Fused | Kernels::IfIf | Kernels::Persistent => {
+                (self.run_fused(&q, timer.as_ref())?, None)
+            }
             Kernels::Split => {
                 let r = split::run(self, param_buf, ray_buf, hit_buf, n as u32, any)?;
                 (r.kernel_gpu_ms, Some(r.steps))
@@ -1045,31 +1002,15 @@ impl<'a> GpuTracer<'a> {
         ))
     }
 
-    /// One dispatch of a fused (or persistent) query kernel of `dims` workgroups; its own time
-    /// where timestamps exist.
-    fn run_fused(
-        &self,
-        pipeline: &wgpu::ComputePipeline,
-        label: &str,
-        bind: &wgpu::BindGroup,
-        [gx, gy, _]: [u32; 3],
-        timer: Option<&Timer>,
-    ) -> Result<Option<f64>, GpuError> {
+    /// One dispatch of a query's kernel; its own time where timestamps exist.
+    fn run_fused(&self, q: &Query, timer: Option<&Timer>) -> Result<Option<f64>, GpuError> {
         let ctx = self.ctx;
         let mut enc = ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("trace"),
             });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(label),
-                timestamp_writes: timer.map(|t| t.writes(Some(0), Some(1))),
-            });
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, bind, &[]);
-            pass.dispatch_workgroups(gx, gy, 1);
-        }
+        record_pass(&mut enc, q, timer);
         if let Some(t) = timer {
             t.resolve(&mut enc);
         }
@@ -1079,6 +1020,18 @@ impl<'a> GpuTracer<'a> {
             None => ctx.wait().map(|_| None),
         }
     }
+}
+
+/// Records a query's dispatch as one compute pass, between `timer`'s two stamps where given.
+fn record_pass(enc: &mut wgpu::CommandEncoder, q: &Query, timer: Option<&Timer>) {
+    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(q.label),
+        timestamp_writes: timer.map(|t| t.writes(Some(0), Some(1))),
+    });
+    pass.set_pipeline(q.pipeline);
+    pass.set_bind_group(0, &q.bind, &[]);
+    let [gx, gy, gz] = q.dims;
+    pass.dispatch_workgroups(gx, gy, gz);
 }
 
 /// A frame's pixels as the renderers read them back: linear floats (the reference's form) or

@@ -23,8 +23,10 @@ use crate::common::{
     Backend, file_name, load_mesh, median, ms, open_device, print_line, round3, spinner,
 };
 use crate::info::tree_json;
-use crate::trace::{NO_PRIM, gpu_stats_json, kernels_name, trace_all, trace_timed, write_rays};
-use raystream_gpu::{GpuTracer, Kernels};
+use crate::trace::{
+    NO_PRIM, gpu_stats_json, gpu_tracer, kernels_name, trace_all, trace_timed, write_rays,
+};
+use raystream_gpu::Kernels;
 
 const OFFSET: f32 = 1e-4;
 const LIGHT_RADIUS: f32 = 0.05;
@@ -184,12 +186,9 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                 write_rays(&dir.join(format!("{kind}.rays")), rays)?;
             }
         }
-        // The kernels' own count of their work (statistics query), where a GPU has subgroup
-        // operations: one tracer, uploaded once, for every set and layout.
-        let stats_tracer = match &backend {
-            Backend::Gpu(ctx) => Some(GpuTracer::new(ctx, &tree)?),
-            Backend::Cpu => None,
-        };
+        // On a GPU one tracer, the tree uploaded once, for every set and layout (and the
+        // kernels' own count of their work, the statistics query).
+        let gpu = gpu_tracer(&backend, &tree)?;
         // The CPU has one way to trace; a GPU is measured with each kernel layout asked for.
         let layouts: Vec<Option<Kernels>> = match backend {
             Backend::Cpu => vec![None],
@@ -203,7 +202,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                     &format!("{kind}: {} rays on {}", rays.len(), backend.name()),
                 );
                 let t = trace_timed(
-                    &backend,
+                    gpu.as_ref(),
                     &tree,
                     rays,
                     any,
@@ -245,7 +244,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                         a
                     });
                 // The kernel's own count of its work, and its SIMD efficiency.
-                let simd = match (&stats_tracer, kernels) {
+                let simd = match (&gpu, kernels) {
                     (Some(tracer), Some(k)) => tracer
                         .query_stats_with(rays, any, k)?
                         .map(|s| {

@@ -108,10 +108,20 @@ const GPU_WARM_UP: std::time::Duration = std::time::Duration::from_millis(200);
 /// …or this many runs (the first included).
 const GPU_WARM_UP_RUNS: u32 = 50;
 
+/// The GPU tracer of `tree` (the tree uploaded once, for every query on it), or `None` on the
+/// CPU.
+pub fn gpu_tracer<'a>(backend: &'a Backend, tree: &KdTree) -> Result<Option<GpuTracer<'a>>> {
+    Ok(match backend {
+        Backend::Gpu(ctx) => Some(GpuTracer::new(ctx, tree)?),
+        Backend::Cpu => None,
+    })
+}
+
 /// Traces `rays` to warm up (once on the CPU; on a GPU for [`GPU_WARM_UP`], at most
-/// [`GPU_WARM_UP_RUNS`] runs) and `repeat` times timed, on the CPU or the GPU.
+/// [`GPU_WARM_UP_RUNS`] runs) and `repeat` times timed, on the CPU or, with `gpu` (the tracer
+/// of `tree`), on the GPU.
 pub fn trace_timed(
-    backend: &Backend,
+    gpu: Option<&GpuTracer>,
     tree: &KdTree,
     rays: &[Ray],
     any: bool,
@@ -122,8 +132,8 @@ pub fn trace_timed(
     let mut times = Vec::new();
     let mut gpu_times = Vec::new();
     let mut stream_ms = None;
-    let (hits, upload_ms) = match backend {
-        Backend::Cpu => {
+    let (hits, upload_ms) = match gpu {
+        None => {
             let mut hits = trace_all(tree, rays, any, traversal);
             for _ in 0..repeat {
                 let t0 = Instant::now();
@@ -132,11 +142,10 @@ pub fn trace_timed(
             }
             (hits, 0.0)
         }
-        Backend::Gpu(ctx) => {
+        Some(tracer) => {
             if traversal != Traversal::Ropes {
                 bail!("--device gpu runs the rope traversal only (--traversal ropes)");
             }
-            let tracer = GpuTracer::new(ctx, tree)?;
             let warm_up = Instant::now();
             let (mut hits, first) = tracer.trace_with(rays, any, kernels)?;
             // A GPU left idle (while the CPU built the tree or generated rays) runs at low
@@ -228,8 +237,9 @@ pub fn run(a: &TraceArgs) -> Result<()> {
     let tree = a.accel.tree.build(&mesh);
     pb.set_message(format!("tracing {} rays on {}", rays.len(), backend.name()));
     let traversal: Traversal = a.accel.traversal.into();
+    let gpu = gpu_tracer(&backend, &tree)?;
     let t = trace_timed(
-        &backend,
+        gpu.as_ref(),
         &tree,
         &rays,
         a.any,
@@ -237,11 +247,10 @@ pub fn run(a: &TraceArgs) -> Result<()> {
         a.kernels.into(),
         a.repeat,
     )?;
-    let stats = match (&backend, a.stats) {
+    let stats = match (&gpu, a.stats) {
         (_, false) => None,
-        (Backend::Cpu, true) => bail!("--stats counts a GPU kernel's work: add --device gpu"),
-        (Backend::Gpu(ctx), true) => {
-            let tracer = GpuTracer::new(ctx, &tree)?;
+        (None, true) => bail!("--stats counts a GPU kernel's work: add --device gpu"),
+        (Some(tracer), true) => {
             let Some(s) = tracer.query_stats_with(&rays, a.any, a.kernels.into())? else {
                 bail!(
                     "--stats: '{}' has no subgroup operations, or --kernels {} has no statistics (fused and ifif have)",

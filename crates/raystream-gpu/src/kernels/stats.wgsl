@@ -9,13 +9,11 @@
 // can count a whole 1080p ray set. Counters 0-2: steps of each kind (inner, leaf, triangle)
 // summed over lanes; 3: triangles listed in the visited leaves; 4-6: active lanes summed over
 // the subgroups' steps of each kind; 7-9: the subgroup size summed over the same steps (the
-// lanes those steps could have used). Then single words: LIVE, the invocations between their
-// entry and their exit now; PEAK, the most LIVE ever reached (the invocations the GPU held at
-// once: achieved occupancy's peak); LANES, the subgroup size.
-const LIVE: u32 = 20u;
-const PEAK: u32 = 21u;
-const LANES: u32 = 22u;
-@group(0) @binding(6) var<storage, read_write> stats: array<atomic<u32>, 23>;
+// lanes those steps could have used). Then single words at indices from the prelude (lib.rs):
+// LIVE, the invocations between their entry and their exit now; PEAK, the most LIVE ever
+// reached (the invocations the GPU held at once: achieved occupancy's peak); LANES, the
+// subgroup size.
+@group(0) @binding(6) var<storage, read_write> stats: array<atomic<u32>, STATS_WORDS>;
 
 var<private> subgroup_lanes: u32;
 var<private> lane_steps: array<u32, 4>;
