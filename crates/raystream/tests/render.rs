@@ -253,23 +253,7 @@ fn info_lists_gpu_adapters() {
         ] {
             assert!(first.get(k).is_some(), "{k} missing: {first}");
         }
-        let probe = tmp("info-gpu.rays");
-        std::fs::write(
-            &probe,
-            f32s(&[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY]),
-        )
-        .unwrap();
-        let t = run(&[
-            "trace",
-            &mesh("spot.obj"),
-            "--rays",
-            probe.to_str().unwrap(),
-            "-o",
-            tmp("info-gpu.hits").to_str().unwrap(),
-            "--device",
-            "gpu",
-            "--json",
-        ]);
+        let t = gpu_probe("info-gpu", &["--json"]);
         let line: serde_json::Value = serde_json::from_str(stdout(&t).trim()).unwrap();
         let name = first["name"].as_str().unwrap();
         assert!(

@@ -280,24 +280,7 @@ fn trace_stats() {
 
 #[test]
 fn unknown_adapter_is_a_clear_error() {
-    let probe = tmp("adapter.rays");
-    std::fs::write(
-        &probe,
-        f32s(&[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY]),
-    )
-    .unwrap();
-    let o = run(&[
-        "trace",
-        &mesh("spot.obj"),
-        "--rays",
-        probe.to_str().unwrap(),
-        "-o",
-        tmp("adapter.hits").to_str().unwrap(),
-        "--device",
-        "gpu",
-        "--adapter",
-        "no-such-gpu-xyz",
-    ]);
+    let o = gpu_probe("adapter", &["--adapter", "no-such-gpu-xyz"]);
     assert_eq!(o.status.code(), Some(2));
     let err = stderr(&o);
     assert!(

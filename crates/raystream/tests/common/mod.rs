@@ -141,25 +141,34 @@ pub fn embree_check(python: &Path, mesh: &str, rays: &Path, hits: &Path, any: bo
     );
 }
 
-/// Whether `--device gpu` can open an adapter here; under CI it must (lavapipe at least).
-pub fn gpu_available() -> bool {
-    let probe = tmp("probe.rays");
+/// `raystream trace --device gpu` of one ray at spot.obj (files `NAME.rays`, `NAME.hits`), with
+/// `extra` arguments: a probe of the GPU path.
+pub fn gpu_probe(name: &str, extra: &[&str]) -> Output {
+    let probe = tmp(&format!("{name}.rays"));
     std::fs::write(
         &probe,
         f32s(&[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY]),
     )
     .unwrap();
-    let o = run(&[
+    let hits = tmp(&format!("{name}.hits"));
+    let mesh = mesh("spot.obj");
+    let mut args = vec![
         "trace",
-        &mesh("spot.obj"),
+        &mesh,
         "--rays",
         probe.to_str().unwrap(),
         "-o",
-        tmp("probe.hits").to_str().unwrap(),
+        hits.to_str().unwrap(),
         "--device",
         "gpu",
-        "-q",
-    ]);
+    ];
+    args.extend(extra);
+    run(&args)
+}
+
+/// Whether `--device gpu` can open an adapter here; under CI it must (lavapipe at least).
+pub fn gpu_available() -> bool {
+    let o = gpu_probe("probe", &["-q"]);
     if o.status.success() {
         return true;
     }
