@@ -256,6 +256,12 @@ fn gpu() -> Option<GpuContext> {
     }
 }
 
+/// A mesh of `../shared/data/meshes`.
+fn shared_mesh(name: &str) -> TriMesh {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
+    raystream_io::load_mesh(&dir.join(name)).unwrap()
+}
+
 struct Rng(u64);
 impl Rng {
     fn f(&mut self) -> f32 {
@@ -342,7 +348,6 @@ fn compare(tree: &KdTree, rays: &[Ray], gpu: &[GpuHit], any: bool, what: &str) {
 fn gpu_hits_equal_cpu_hits_on_every_mesh() {
     let Some(ctx) = gpu() else { return };
     eprintln!("adapter: {}", ctx.describe());
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
     for name in [
         "spot.obj",
         "utah_teapot.obj",
@@ -351,7 +356,7 @@ fn gpu_hits_equal_cpu_hits_on_every_mesh() {
         "stanford_lucy_100k.ply",
         "turbine_blade.ply",
     ] {
-        let mesh = raystream_io::load_mesh(&dir.join(name)).unwrap();
+        let mesh = shared_mesh(name);
         for builder in [Builder::Sah, Builder::Median] {
             let tree = KdTree::build(&mesh, builder);
             let tracer = GpuTracer::new(&ctx, &tree).unwrap();
@@ -400,8 +405,7 @@ fn gpu_hits_equal_cpu_hits_on_every_mesh() {
 fn query_statistics_count_the_cpu_walk() {
     let Some(ctx) = gpu() else { return };
     let has_subgroups = ctx.device.features().contains(wgpu::Features::SUBGROUP);
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
-    let mesh = raystream_io::load_mesh(&dir.join("stanford_bunny.ply")).unwrap();
+    let mesh = shared_mesh("stanford_bunny.ply");
     let tree = KdTree::build(&mesh, Builder::Sah);
     let tracer = GpuTracer::new(&ctx, &tree).unwrap();
     let rays = test_rays(&mesh, 20_000);
@@ -515,8 +519,7 @@ fn statistics_counters_carry_past_32_bits() {
 #[test]
 fn spinning_waits_give_the_same_results() {
     let Some(mut ctx) = gpu() else { return };
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
-    let mesh = raystream_io::load_mesh(&dir.join("spot.obj")).unwrap();
+    let mesh = shared_mesh("spot.obj");
     let tree = KdTree::build(&mesh, Builder::Sah);
     let rays = test_rays(&mesh, 4096);
     let blocking: Vec<_> = [false, true]
@@ -545,8 +548,7 @@ fn spinning_waits_give_the_same_results() {
 #[test]
 fn streamed_queries_each_trace_every_ray() {
     let Some(ctx) = gpu() else { return };
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
-    let mesh = raystream_io::load_mesh(&dir.join("stanford_bunny.ply")).unwrap();
+    let mesh = shared_mesh("stanford_bunny.ply");
     let tree = KdTree::build(&mesh, Builder::Sah);
     let tracer = GpuTracer::new(&ctx, &tree).unwrap();
     let rays = test_rays(&mesh, 4096);
@@ -574,8 +576,7 @@ fn streamed_queries_each_trace_every_ray() {
 #[test]
 fn oversized_queries_are_traced_in_chunks() {
     let Some(ctx) = gpu() else { return };
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
-    let mesh = raystream_io::load_mesh(&dir.join("stanford_bunny.ply")).unwrap();
+    let mesh = shared_mesh("stanford_bunny.ply");
     let tree = KdTree::build(&mesh, Builder::Sah);
     let whole = GpuTracer::new(&ctx, &tree).unwrap();
     let mut chunked = GpuTracer::new(&ctx, &tree).unwrap();
