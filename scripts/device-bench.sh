@@ -105,6 +105,14 @@ ct=$d/ct/abdomen_pelvis_ct_totalseg.nii.gz
 has "$parts" render && {
 $bin render --device gpu --size "$size" --max-depth 4 --repeat 20 -o "$out/default-gpu.png" 2>&1 | tee -a "$out/render.log"
 $bin render --device cpu --size "$size" --max-depth 4 --repeat 3 -o "$out/default-cpu.png" 2>&1 | tee -a "$out/render.log"
+# The host's submissions: a wave's depths in one submission (--submit wave, the default) against
+# one per depth with the counts read back after each, alternated twice, at 4 spp and 1 spp.
+for spp in 4 1; do for round in 1 2; do for submit in depth wave; do
+  $bin render --device gpu --size "$size" --spp $spp --max-depth 4 --repeat 20 --submit $submit \
+    -o "$tmp/submit-$submit.png" 2>&1 | sed "s/^/[submit $submit, $spp spp] /" | tee -a "$out/render.log"
+done; done
+cmp "$tmp/submit-depth.png" "$tmp/submit-wave.png" && echo "[submit] $spp spp: the same PNG" | tee -a "$out/render.log"
+done
 # Volume modes straight from the CT.
 for mode in dvr mip iso; do
   $bin render "$ct" --mode $mode --device gpu --size "$dvr_size" --repeat 20 -o "$out/$mode-gpu.png" 2>&1 | tee -a "$out/render.log"
@@ -119,6 +127,8 @@ for dev in gpu cpu; do
   n=10; [ $dev = cpu ] && n=2
   $bin render examples/spine_rods.toml --device $dev --size "$size" --spp 4 --max-depth 4 --repeat $n -o "$out/spine-rods-$dev.png" 2>&1 | tee -a "$out/render.log"
 done
+$bin render examples/spine_rods.toml --device gpu --size "$size" --spp 4 --max-depth 4 --repeat 10 --submit depth \
+  -o "$tmp/spine-depth.png" 2>&1 | sed "s/^/[submit depth] /" | tee -a "$out/render.log"
 $py "$d/rays.py" imgdiff "$out/spine-rods-cpu.png" "$out/spine-rods-gpu.png" --json | tag '{"imgdiff": "spine_rods"}'
 }
 has "$parts" volume && {

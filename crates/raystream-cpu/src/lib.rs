@@ -73,7 +73,7 @@ pub struct ShadowWorkItem {
 }
 
 /// What one depth did, for progress reports and statistics.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct DepthStats {
     pub depth: u32,
     pub rays: usize,

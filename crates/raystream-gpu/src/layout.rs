@@ -171,8 +171,9 @@ pub struct RenderParams {
     pub sample_base: u32,
     /// Samples in this wave (byte 100).
     pub sample_count: u32,
-    /// 1 = `shade_hits` spawns reflection/refraction rays (byte 104).
-    pub spawn: u32,
+    /// The last depth at which `shade_hits` spawns reflection/refraction rays is
+    /// `max_depth - 1`: the current depth is the `counter::DEPTH` slot (byte 104).
+    pub max_depth: u32,
     /// Byte 108.
     pub light_count: u32,
     /// Largest workgroup count per dispatch dimension (byte 112).
@@ -194,6 +195,8 @@ pub mod counter {
     pub const STAT_RAYS: u32 = 4;
     pub const STAT_HITS: u32 = 5;
     pub const STAT_SHADOWS: u32 = 6;
+    /// The depth being traced: 0 at a wave's start, advanced by `advance`.
+    pub const DEPTH: u32 = 7;
     /// Slots in all.
     pub const SLOTS: u32 = 8;
 }

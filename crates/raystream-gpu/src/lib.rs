@@ -20,7 +20,9 @@ use raystream_accel::layout::{LEAF_BIT, NO_ROPE};
 use raystream_math::Ray;
 use wgpu::util::DeviceExt;
 
-pub use render::{GpuRenderStats, GpuRenderer, MAX_WAVE, STAGES, render_wgsl};
+pub use render::{
+    GpuRenderStats, GpuRenderer, MAX_WAVE, MAX_WAVE_DEPTHS, STAGES, Submit, render_wgsl,
+};
 pub use split::{ITERATIONS_PER_SUBMIT, split_wgsl};
 pub use volume::{GpuDvrTimes, GpuVolumeRenderer, dvr_wgsl};
 
@@ -237,7 +239,13 @@ impl GpuContext {
     /// wake-up latency (BENCHMARKS.md), which dominates short queries. An experiment to be
     /// measured on a hardware GPU; blocking stays the default until it is.
     fn wait(&self) -> Result<(), GpuError> {
-        if self.spin_wait {
+        self.wait_for(None)
+    }
+
+    /// Waits for submission `index` (and those before it), or with `None` for all submitted
+    /// work, as [`GpuContext::wait`]; spinning waits only for all work.
+    fn wait_for(&self, index: Option<wgpu::SubmissionIndex>) -> Result<(), GpuError> {
+        if self.spin_wait && index.is_none() {
             let start = Instant::now();
             while start.elapsed() < SPIN_WAIT {
                 let status = self
@@ -252,7 +260,7 @@ impl GpuContext {
         }
         self.device
             .poll(wgpu::PollType::Wait {
-                submission_index: None,
+                submission_index: index,
                 timeout: Some(GPU_TIMEOUT),
             })
             .map_err(|e| self.err(format!("waiting for the GPU: {e}")))?;
@@ -1100,6 +1108,17 @@ fn read_words(ctx: &GpuContext, buf: &wgpu::Buffer) -> Result<Vec<u32>, GpuError
 /// Waits for the GPU and reads a whole buffer as `T`s (through a staging copy unless `buf` is
 /// mappable).
 fn read_back<T: bytemuck::Pod>(ctx: &GpuContext, buf: &wgpu::Buffer) -> Result<Vec<T>, GpuError> {
+    read_back_after(ctx, buf, None)
+}
+
+/// Reads a whole buffer as `T`s once submission `index` is done (`None`: all submitted work),
+/// through a staging copy unless `buf` is mappable; work submitted after `index` may still run.
+fn read_back_after<T: bytemuck::Pod>(
+    ctx: &GpuContext,
+    buf: &wgpu::Buffer,
+    index: Option<wgpu::SubmissionIndex>,
+) -> Result<Vec<T>, GpuError> {
+    let mut index = index;
     let staging;
     let src = if buf.usage().contains(wgpu::BufferUsages::MAP_READ) {
         buf
@@ -1116,7 +1135,7 @@ fn read_back<T: bytemuck::Pod>(ctx: &GpuContext, buf: &wgpu::Buffer) -> Result<V
                 label: Some("readback"),
             });
         enc.copy_buffer_to_buffer(buf, 0, &staging, 0, buf.size());
-        ctx.queue.submit([enc.finish()]);
+        index = Some(ctx.queue.submit([enc.finish()]));
         &staging
     };
     let slice = src.slice(..);
@@ -1124,8 +1143,17 @@ fn read_back<T: bytemuck::Pod>(ctx: &GpuContext, buf: &wgpu::Buffer) -> Result<V
     slice.map_async(wgpu::MapMode::Read, move |r| {
         let _ = tx.send(r);
     });
-    ctx.wait()?;
-    rx.recv().map_err(|e| ctx.err(e))?.map_err(|e| ctx.err(e))?;
+    ctx.wait_for(index)?;
+    let mapped = match rx.try_recv() {
+        Ok(r) => r,
+        // Not mapped yet (`buf` was in a later submission than `index`): wait for everything
+        // rather than for a callback that might not come.
+        Err(_) => {
+            ctx.wait()?;
+            rx.recv().map_err(|e| ctx.err(e))?
+        }
+    };
+    mapped.map_err(|e| ctx.err(e))?;
     let view = slice.get_mapped_range().map_err(|e| ctx.err(e))?;
     let words = bytemuck::cast_slice(&view[..]).to_vec();
     drop(view);

@@ -2,13 +2,21 @@
 //! of `kernels/render.wgsl`, joined by ray queues that stay on the device.
 //!
 //! The host is the paper's "CPU control". It splits the frame into waves of at most
-//! [`MAX_WAVE`] samples; for each wave it generates the camera rays, then runs depth after
-//! depth: one submission per depth whose kernels are dispatched indirectly from counts the
-//! kernels wrote themselves. After each depth it reads back the counters (a few bytes) to stop
-//! when the queue is empty and to size the next depth's queues exactly (a depth's queue is at
-//! most twice the previous one: one reflection and one refraction per hit), so nothing can
-//! overflow. The film is 64-bit fixed point added with atomics: the same image every run;
-//! `kernels/film.wgsl` resolves it to one f32 per channel on the GPU before the readback.
+//! [`MAX_WAVE`] samples; for each wave it generates the camera rays, then records depth after
+//! depth, swapping the two ray queues, each depth's kernels dispatched indirectly from counts
+//! the kernels wrote themselves ([`Submit`]):
+//! - [`Submit::Wave`] (where no hit can spawn two rays): all of a wave's depths go in one
+//!   submission, and the next wave is queued before the host reads the last one's counters
+//!   (copied aside after each depth), so the GPU never waits for the host inside a frame. A
+//!   queue that empties makes the later depths dispatch no workgroups. No queue can outgrow
+//!   the wave, so all are sized for it up front.
+//! - [`Submit::Depth`]: one submission per depth; the host reads the counters back after each,
+//!   stops when the queue is empty and sizes the next depth's queues exactly (a depth's queue
+//!   is at most twice the previous one: one reflection and one refraction per hit), so nothing
+//!   can overflow.
+//!
+//! The film is 64-bit fixed point added with atomics: the same image every run, either way;
+//! `kernels/film.wgsl` resolves it on the GPU before the readback.
 
 use std::time::Instant;
 
@@ -23,7 +31,10 @@ use crate::layout::{
     counter,
 };
 use crate::volume::{GpuVolume, volume_core_wgsl};
-use crate::{GpuError, GpuHit, GpuTracer, Pixels, Timer, WORKGROUP_SIZE, kdtree_wgsl, read_words};
+use crate::{
+    GpuContext, GpuError, GpuHit, GpuTracer, Pixels, Timer, WORKGROUP_SIZE, kdtree_wgsl,
+    read_back_after, read_words,
+};
 
 const RENDER_WGSL: &str = include_str!("kernels/render.wgsl");
 const MEDIUM_WGSL: &str = include_str!("kernels/medium.wgsl");
@@ -49,7 +60,7 @@ pub const MAX_CONTRIBUTION: f32 = 255.0;
 pub fn render_wgsl() -> String {
     use counter::*;
     format!(
-        "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\n\n{COMMON_WGSL}\n{RENDER_WGSL}\n{}\n{MEDIUM_WGSL}",
+        "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\nconst DEPTH: u32 = {DEPTH}u;\n\n{COMMON_WGSL}\n{RENDER_WGSL}\n{}\n{MEDIUM_WGSL}",
         kdtree_wgsl(),
         volume_core_wgsl()
     )
@@ -75,16 +86,41 @@ const VOLUME_STAGES: [usize; 2] = [2, 7];
 const QUEUE_ARGS: u64 = 0;
 const SHADOW_ARGS: u64 = 12;
 
+/// How the host (the paper's "CPU control") submits a wave's depths.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Submit {
+    /// One submission per depth. After each the host reads the counters back, stops at an
+    /// empty queue and sizes the next depth's queues from the count: needed where a hit can
+    /// spawn two rays (a transparent material), since the queue may then double every depth.
+    #[default]
+    Depth,
+    /// One submission per wave holding all of its depths, and the next wave submitted before
+    /// the host reads this one's counters, so that the GPU never waits for the host inside a
+    /// frame (each round trip costs ≈ 0.5 ms under a sandbox such as gVisor: BENCHMARKS.md).
+    /// A queue that empties makes the later depths dispatch no workgroups, and each depth's
+    /// counters are copied aside for the statistics. Only where no hit spawns two rays: no
+    /// queue then outgrows the wave, and every queue is sized for it up front.
+    Wave,
+}
+
+/// The deepest frame run as [`Submit::Wave`] (max depth + 1): beyond it a wave's passes
+/// outgrow one timestamp query set, and queues empty long before.
+pub const MAX_WAVE_DEPTHS: u32 = 64;
+
 /// What a GPU render did and how long its parts took.
 #[derive(Clone, Debug, Default)]
 pub struct GpuRenderStats {
     /// Per depth, summed over the waves.
     pub depths: Vec<DepthStats>,
     pub waves: u32,
+    /// How the depths were submitted, and how many submissions the frame's rays took.
+    pub submit: Submit,
+    pub submissions: u32,
     /// Wall time of the frame (generation to film readback), milliseconds.
     pub render_ms: f64,
-    /// Of `render_ms`: waiting for each depth's submission to finish (the GPU's work and the
-    /// round trip), and reading the film back and converting it.
+    /// Of `render_ms`: submitting the depths and waiting for them to finish (the GPU's work and
+    /// the round trips; some drivers, lavapipe's, run the work inside the submission), and
+    /// reading the film back and converting it.
     pub wait_ms: f64,
     pub film_ms: f64,
     /// Each kernel's own time summed over its passes, from timestamp queries; `None` where the
@@ -112,17 +148,37 @@ pub struct GpuRenderer<'a> {
     srgb8_pipeline: wgpu::ComputePipeline,
     /// Samples per wave: at most [`MAX_WAVE`], less where the device's bindings need it.
     wave: u32,
+    /// The submission asked for ([`Submit::Wave`] unless told), and whether a hit can spawn
+    /// two rays (some material both reflects and refracts), which rules it out.
+    submit: Submit,
+    branches: bool,
     /// The last frame's work buffers and their (pixels, wave, lights), kept for the next frame:
     /// allocating them per frame cost most of a 1920x1080 frame on an H100.
-    frame: std::sync::Mutex<Option<(FrameKey, Queues)>>,
+    frame: std::sync::Mutex<Option<(FrameShape, Queues)>>,
 }
 
 fn v3(v: Vec3) -> [f32; 3] {
     v.to_array()
 }
 
-/// What a frame's work buffers were made for: pixels, samples per wave, lights.
-type FrameKey = (u64, u64, u64);
+/// What a frame's work buffers were made for: pixels, samples per wave, lights, and the
+/// counter sets and timed passes one readback holds (one depth's, or a whole wave's).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct FrameShape {
+    pixels: u64,
+    wave: u64,
+    lights: u64,
+    counter_sets: u64,
+    passes: u64,
+}
+
+/// The bind groups of a frame's passes: `work[cur]` traces ray queue `cur`.
+struct Groups {
+    tree: wgpu::BindGroup,
+    scene: wgpu::BindGroup,
+    args: wgpu::BindGroup,
+    work: [wgpu::BindGroup; 2],
+}
 
 /// The work buffers of one frame; queues grow as the depths need.
 struct Queues {
@@ -139,13 +195,104 @@ struct Queues {
     /// The film as 8-bit sRGB (3 bytes a pixel, in words), and its mappable copy.
     packed: wgpu::Buffer,
     packed_read: wgpu::Buffer,
-    /// Counters, then 2 timestamps per stage.
-    readback: wgpu::Buffer,
+    /// Counters (a set per depth of a wave, or one), then 2 timestamps per pass; two, so that
+    /// the host reads one wave's while the GPU writes the next one's.
+    readback: [wgpu::Buffer; 2],
     resolve: Option<Timer>,
 }
 
+impl Queues {
+    /// Resolves the timestamps of the first `passes` passes into readback `slot` at `offset`.
+    fn copy_stamps(&self, enc: &mut wgpu::CommandEncoder, passes: u32, slot: usize, offset: u64) {
+        if let Some(t) = &self.resolve {
+            enc.resolve_query_set(&t.set, 0..2 * passes, &t.resolve, 0);
+            let bytes = passes as u64 * 16;
+            enc.copy_buffer_to_buffer(&t.resolve, 0, &self.readback[slot], offset, bytes);
+        }
+    }
+}
+
+/// Each stage's kernel time summed over a frame, and whether the stamps are real (some
+/// adapters write equal ones).
+struct Tally {
+    stage_ms: [f64; STAGES.len()],
+    timed: bool,
+}
+
+impl Tally {
+    /// Adds the timestamps `words` (two u64 a pass, as u32 pairs) of the passes `order`
+    /// (indices into [`STAGES`]).
+    fn stamps(&mut self, words: &[u32], order: &[usize], ctx: &GpuContext) {
+        if !self.timed {
+            return;
+        }
+        let stamp = |i: usize| words[2 * i] as u64 | (words[2 * i + 1] as u64) << 32;
+        let period = ctx.queue.get_timestamp_period() as f64 * 1e-6;
+        let mut any = false;
+        for (j, &k) in order.iter().enumerate() {
+            let ticks = stamp(2 * j + 1).wrapping_sub(stamp(2 * j));
+            any |= ticks > 0;
+            self.stage_ms[k] += ticks as f64 * period;
+        }
+        self.timed = any;
+    }
+
+    /// A finished depth's statistics from its counters `words`, added to `stats` and told to
+    /// `progress`; returns the next depth's queue length.
+    fn depth(
+        &mut self,
+        words: &[u32],
+        depth: u32,
+        stats: &mut GpuRenderStats,
+        progress: &mut dyn FnMut(DepthStats),
+    ) -> u64 {
+        let s = DepthStats {
+            depth,
+            rays: words[counter::STAT_RAYS as usize] as usize,
+            hits: words[counter::STAT_HITS as usize] as usize,
+            shadow_rays: words[counter::STAT_SHADOWS as usize] as usize,
+            volume_samples: 0,
+        };
+        if stats.depths.len() <= depth as usize {
+            stats.depths.push(DepthStats {
+                depth,
+                ..Default::default()
+            });
+        }
+        let d = &mut stats.depths[depth as usize];
+        d.rays += s.rays;
+        d.hits += s.hits;
+        d.shadow_rays += s.shadow_rays;
+        progress(s);
+        words[counter::QUEUE as usize] as u64
+    }
+
+    /// A finished [`Submit::Wave`] wave: its depths' statistics up to the first whose next
+    /// queue was empty (as [`Submit::Depth`] stops there), and its passes' timestamps.
+    fn wave(
+        &mut self,
+        words: &[u32],
+        shape: &FrameShape,
+        passes: &[usize],
+        stats: &mut GpuRenderStats,
+        progress: &mut dyn FnMut(DepthStats),
+        ctx: &GpuContext,
+    ) {
+        let slots = counter::SLOTS as usize;
+        for (d, set) in words
+            .chunks_exact(slots)
+            .take(shape.counter_sets as usize)
+            .enumerate()
+        {
+            if self.depth(set, d as u32, stats, progress) == 0 {
+                break;
+            }
+        }
+        self.stamps(&words[shape.counter_sets as usize * slots..], passes, ctx);
+    }
+}
+
 const COUNTER_BYTES: u64 = counter::SLOTS as u64 * 4;
-const STAMP_BYTES: u64 = STAGES.len() as u64 * 16;
 
 impl<'a> GpuRenderer<'a> {
     /// Uploads `scene`'s vertices, triangles, materials and lights, whose kd-tree `tree` is
@@ -319,8 +466,16 @@ impl<'a> GpuRenderer<'a> {
         }
         let per_sample = 48 * 2.max(scene.lights.len() as u64);
         let fit = (ctx.max_binding() / per_sample).min(u32::MAX as u64) as u32;
+        // A hit spawns two rays only off a material that refracts and also reflects (by its
+        // reflectivity or by Fresnel); scenes hold no NaN (desc.rs checks both lie in [0, 1]).
+        let branches = scene
+            .materials
+            .iter()
+            .any(|m| m.transparency > 0.0 && (m.reflectivity > 0.0 || m.fresnel));
         Ok(GpuRenderer {
             wave: MAX_WAVE.min(fit).max(1),
+            submit: Submit::Wave,
+            branches,
             tracer,
             scene,
             vertices,
@@ -347,13 +502,89 @@ impl<'a> GpuRenderer<'a> {
     ) -> Result<(), GpuError> {
         let need = n * std::mem::size_of::<T>() as u64;
         if buf.size() < need {
-            // Grow with headroom so that a slowly growing queue is not reallocated every depth.
-            *buf =
-                self.tracer
-                    .ctx
-                    .work_buffer(what, need + need / 2, wgpu::BufferUsages::empty())?;
+            let ctx = self.tracer.ctx;
+            let size = grown_size(need, ctx.max_binding());
+            *buf = ctx.work_buffer(what, size, wgpu::BufferUsages::empty())?;
         }
         Ok(())
+    }
+
+    /// Asks for `submit` ([`Submit::Wave`] by default); [`GpuRenderer::submit_for`] says what
+    /// a frame runs.
+    pub fn with_submit(mut self, submit: Submit) -> Self {
+        self.submit = submit;
+        self
+    }
+
+    /// How a frame of `opt` is submitted: as asked, except that a scene where a hit can spawn
+    /// two rays, or a max depth of [`MAX_WAVE_DEPTHS`] or more, runs [`Submit::Depth`].
+    pub fn submit_for(&self, opt: &RenderOptions) -> Submit {
+        if self.submit == Submit::Wave && !self.branches && opt.max_depth < MAX_WAVE_DEPTHS {
+            Submit::Wave
+        } else {
+            Submit::Depth
+        }
+    }
+
+    /// The stages that depth `depth` runs, in order: generation at depth 0 only, the volume
+    /// stages only in a scene with a volume.
+    fn passes(&self, depth: u32) -> Vec<usize> {
+        (0..STAGES.len())
+            .filter(|&k| (k != GENERATE || depth == 0) && self.pipelines[k].is_some())
+            .collect()
+    }
+
+    /// Records the passes of depth `depth` of a wave of `n` samples, tracing ray queue `cur`;
+    /// pass j writes timestamps 2(first + j) and 2(first + j) + 1. Returns `first` plus the
+    /// passes recorded.
+    #[allow(clippy::too_many_arguments)]
+    fn record_depth(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        depth: u32,
+        n: u32,
+        g: &Groups,
+        cur: usize,
+        q: &Queues,
+        first: u32,
+    ) -> u32 {
+        let ctx = self.tracer.ctx;
+        let order = self.passes(depth);
+        for (j, &k) in order.iter().enumerate() {
+            let stage = STAGES[k];
+            let stamp = 2 * (first + j as u32);
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(stage),
+                timestamp_writes: q
+                    .resolve
+                    .as_ref()
+                    .map(|t| t.writes(Some(stamp), Some(stamp + 1))),
+            });
+            pass.set_pipeline(self.pipelines[k].as_ref().expect("a stage this scene runs"));
+            pass.set_bind_group(0, &g.tree, &[]);
+            pass.set_bind_group(1, &g.scene, &[]);
+            pass.set_bind_group(2, &g.work[cur], &[]);
+            if let Some((_, group)) = &self.medium
+                && VOLUME_STAGES.contains(&k)
+            {
+                pass.set_bind_group(3, group, &[]);
+            }
+            match stage {
+                "generate_camera_rays" => {
+                    let [gx, gy, _] = ctx.dims(n);
+                    pass.dispatch_workgroups(gx, gy, 1);
+                }
+                "prepare_shadows" | "advance" => {
+                    pass.set_bind_group(3, &g.args, &[]);
+                    pass.dispatch_workgroups(1, 1, 1);
+                }
+                "intersect_any" | "attenuate_shadows" | "accumulate" => {
+                    pass.dispatch_workgroups_indirect(&q.args, SHADOW_ARGS)
+                }
+                _ => pass.dispatch_workgroups_indirect(&q.args, QUEUE_ARGS),
+            }
+        }
+        first + order.len() as u32
     }
 
     /// How many waves a frame of `opt` takes.
@@ -411,10 +642,25 @@ impl<'a> GpuRenderer<'a> {
         }
         let wave = (self.wave as u64).min(total) as u32;
         let lights = scene.lights.len() as u64;
-        let key = (pixels, wave as u64, lights);
+        let depths = opt.max_depth as u64 + 1;
+        let submit = self.submit_for(opt);
+        // The passes one readback's timestamps cover: a depth's, or a whole wave's.
+        let wave_passes: Vec<usize> = (0..opt.max_depth + 1)
+            .flat_map(|d| self.passes(d))
+            .collect();
+        let shape = FrameShape {
+            pixels,
+            wave: wave as u64,
+            lights,
+            counter_sets: if submit == Submit::Wave { depths } else { 1 },
+            passes: match submit {
+                Submit::Wave => wave_passes.len() as u64,
+                Submit::Depth => STAGES.len() as u64,
+            },
+        };
         let kept = self.frame.lock().unwrap().take();
         let mut q = match kept {
-            Some((k, q)) if k == key => {
+            Some((k, q)) if k == shape => {
                 let mut enc = ctx
                     .device
                     .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -424,7 +670,7 @@ impl<'a> GpuRenderer<'a> {
                 ctx.queue.submit([enc.finish()]);
                 q
             }
-            _ => self.queues(pixels, wave as u64, lights)?,
+            _ => self.queues(&shape)?,
         };
         let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
         let mut params = RenderParams {
@@ -440,13 +686,19 @@ impl<'a> GpuRenderer<'a> {
             strata: strata(opt.spp),
             ambient_light: v3(scene.ambient_light),
             epsilon: surface_epsilon(scene),
+            max_depth: opt.max_depth,
             light_count: lights as u32,
             max_groups: ctx.limits.max_compute_workgroups_per_dimension.max(1),
             ..Default::default()
         };
-        let mut stats = GpuRenderStats::default();
-        let mut stage_ms = [0f64; STAGES.len()];
-        let mut timed = q.resolve.is_some();
+        let mut stats = GpuRenderStats {
+            submit,
+            ..Default::default()
+        };
+        let mut tally = Tally {
+            stage_ms: [0.0; STAGES.len()],
+            timed: q.resolve.is_some(),
+        };
         let tree_group = self.tracer.bind_tree(&self.layouts[0]);
         let scene_group = ctx.bind_buffers(
             "scene",
@@ -460,127 +712,102 @@ impl<'a> GpuRenderer<'a> {
             ],
         );
         let args_group = ctx.bind_buffers("args", &self.layouts[3], &[&q.args]);
+        let work_group = |q: &Queues, cur: usize| {
+            ctx.bind_buffers(
+                "queues",
+                &self.layouts[2],
+                &[
+                    &q.counters,
+                    &q.rays[cur],
+                    &q.hits,
+                    &q.rays[1 - cur],
+                    &q.shadows,
+                    &q.film,
+                ],
+            )
+        };
+        let groups = |q: &Queues| Groups {
+            tree: tree_group.clone(),
+            scene: scene_group.clone(),
+            args: args_group.clone(),
+            work: [work_group(q, 0), work_group(q, 1)],
+        };
+        let stamp_offset = shape.counter_sets * COUNTER_BYTES;
+        // The wave submitted last, whose counters are still to be read: (readback slot,
+        // submission).
+        let mut in_flight: Option<(usize, wgpu::SubmissionIndex)> = None;
+        let mut slot = 0usize;
+        let wave_groups = (submit == Submit::Wave).then(|| groups(&q));
         let mut base = 0u64;
         while base < total {
             let n = (total - base).min(wave as u64) as u32;
             stats.waves += 1;
             params.sample_base = base as u32;
             params.sample_count = n;
+            ctx.queue
+                .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
             let mut counters = [0u32; counter::SLOTS as usize];
             counters[counter::QUEUE as usize] = n;
             ctx.queue
                 .write_buffer(&q.counters, 0, bytemuck::cast_slice(&counters));
             ctx.queue
                 .write_buffer(&q.args, QUEUE_ARGS, bytemuck::cast_slice(&ctx.dims(n)));
+            if let Some(g) = &wave_groups {
+                // Every depth in one submission; the counters after each depth go aside.
+                let mut enc = ctx
+                    .device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                        label: Some("wave"),
+                    });
+                let mut pass = 0u32;
+                for depth in 0..=opt.max_depth {
+                    pass = self.record_depth(&mut enc, depth, n, g, depth as usize % 2, &q, pass);
+                    let at = depth as u64 * COUNTER_BYTES;
+                    enc.copy_buffer_to_buffer(&q.counters, 0, &q.readback[slot], at, COUNTER_BYTES);
+                }
+                q.copy_stamps(&mut enc, pass, slot, stamp_offset);
+                let cmd = enc.finish();
+                let waited = Instant::now();
+                let index = ctx.queue.submit([cmd]);
+                stats.submissions += 1;
+                // The GPU has this wave queued while the host reads the last one's counters.
+                let last = in_flight.replace((slot, index));
+                let words = match last {
+                    Some((s, i)) => Some(read_back_after(ctx, &q.readback[s], Some(i))?),
+                    None => None,
+                };
+                stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
+                if let Some(words) = words {
+                    tally.wave(&words, &shape, &wave_passes, &mut stats, progress, ctx);
+                }
+                slot = 1 - slot;
+                base += n as u64;
+                continue;
+            }
             let mut cur = 0usize;
             let mut count = n as u64;
             for depth in 0..=opt.max_depth {
                 self.ensure::<RayWork>(&mut q.rays[1 - cur], "next ray queue", 2 * count)?;
                 self.ensure::<ShadowWork>(&mut q.shadows, "shadow queue", count * lights)?;
                 self.ensure::<GpuHit>(&mut q.hits, "hits", count.max(count * lights))?;
-                params.spawn = (depth < opt.max_depth) as u32;
-                ctx.queue
-                    .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-                let work_group = ctx.bind_buffers(
-                    "queues",
-                    &self.layouts[2],
-                    &[
-                        &q.counters,
-                        &q.rays[cur],
-                        &q.hits,
-                        &q.rays[1 - cur],
-                        &q.shadows,
-                        &q.film,
-                    ],
-                );
+                let g = groups(&q);
                 let mut enc = ctx
                     .device
                     .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                         label: Some("depth"),
                     });
-                let order: Vec<usize> = (0..STAGES.len())
-                    .filter(|&k| k != GENERATE || depth == 0)
-                    .filter(|k| self.medium.is_some() || !VOLUME_STAGES.contains(k))
-                    .collect();
-                // Pass j writes timestamps 2j and 2j + 1.
-                for (j, &k) in order.iter().enumerate() {
-                    let stage = STAGES[k];
-                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                        label: Some(stage),
-                        timestamp_writes: q
-                            .resolve
-                            .as_ref()
-                            .map(|t| t.writes(Some(2 * j as u32), Some(2 * j as u32 + 1))),
-                    });
-                    pass.set_pipeline(self.pipelines[k].as_ref().expect("a stage this scene runs"));
-                    pass.set_bind_group(0, &tree_group, &[]);
-                    pass.set_bind_group(1, &scene_group, &[]);
-                    pass.set_bind_group(2, &work_group, &[]);
-                    if let Some((_, group)) = &self.medium
-                        && VOLUME_STAGES.contains(&k)
-                    {
-                        pass.set_bind_group(3, group, &[]);
-                    }
-                    match stage {
-                        "generate_camera_rays" => {
-                            let [gx, gy, _] = ctx.dims(n);
-                            pass.dispatch_workgroups(gx, gy, 1);
-                        }
-                        "prepare_shadows" | "advance" => {
-                            pass.set_bind_group(3, &args_group, &[]);
-                            pass.dispatch_workgroups(1, 1, 1);
-                        }
-                        "intersect_any" | "attenuate_shadows" | "accumulate" => {
-                            pass.dispatch_workgroups_indirect(&q.args, SHADOW_ARGS)
-                        }
-                        _ => pass.dispatch_workgroups_indirect(&q.args, QUEUE_ARGS),
-                    }
-                }
-                if let Some(t) = &q.resolve {
-                    enc.resolve_query_set(&t.set, 0..2 * order.len() as u32, &t.resolve, 0);
-                    enc.copy_buffer_to_buffer(
-                        &t.resolve,
-                        0,
-                        &q.readback,
-                        COUNTER_BYTES,
-                        STAMP_BYTES,
-                    );
-                }
-                enc.copy_buffer_to_buffer(&q.counters, 0, &q.readback, 0, COUNTER_BYTES);
-                ctx.queue.submit([enc.finish()]);
+                let passes = self.record_depth(&mut enc, depth, n, &g, cur, &q, 0);
+                q.copy_stamps(&mut enc, passes, 0, stamp_offset);
+                enc.copy_buffer_to_buffer(&q.counters, 0, &q.readback[0], 0, COUNTER_BYTES);
+                let cmd = enc.finish();
                 let waited = Instant::now();
-                let words = read_words(ctx, &q.readback)?;
+                ctx.queue.submit([cmd]);
+                stats.submissions += 1;
+                let words = read_words(ctx, &q.readback[0])?;
                 stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
-                let s = DepthStats {
-                    depth,
-                    rays: words[counter::STAT_RAYS as usize] as usize,
-                    hits: words[counter::STAT_HITS as usize] as usize,
-                    shadow_rays: words[counter::STAT_SHADOWS as usize] as usize,
-                    volume_samples: 0,
-                };
-                if timed {
-                    let stamps: &[u64] = bytemuck::cast_slice(&words[counter::SLOTS as usize..]);
-                    let period = ctx.queue.get_timestamp_period() as f64 * 1e-6;
-                    let mut any = false;
-                    for (j, &k) in order.iter().enumerate() {
-                        let ticks = stamps[2 * j + 1].wrapping_sub(stamps[2 * j]);
-                        any |= ticks > 0;
-                        stage_ms[k] += ticks as f64 * period;
-                    }
-                    timed = any;
-                }
-                if stats.depths.len() <= depth as usize {
-                    stats.depths.push(DepthStats {
-                        depth,
-                        ..Default::default()
-                    });
-                }
-                let d = &mut stats.depths[depth as usize];
-                d.rays += s.rays;
-                d.hits += s.hits;
-                d.shadow_rays += s.shadow_rays;
-                progress(s);
-                count = words[counter::QUEUE as usize] as u64;
+                let stamps = &words[stamp_offset as usize / 4..];
+                tally.stamps(stamps, &self.passes(depth), ctx);
+                count = tally.depth(&words, depth, &mut stats, progress);
                 if count == 0 {
                     break;
                 }
@@ -588,6 +815,13 @@ impl<'a> GpuRenderer<'a> {
             }
             base += n as u64;
         }
+        if let Some((s, i)) = in_flight {
+            let waited = Instant::now();
+            let words = read_back_after(ctx, &q.readback[s], Some(i))?;
+            stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
+            tally.wave(&words, &shape, &wave_passes, &mut stats, progress, ctx);
+        }
+        let (stage_ms, timed) = (tally.stage_ms, tally.timed);
         let film_t = Instant::now();
         let scale = 1.0 / (FILM_SCALE as f64 * opt.spp as f64);
         let mut enc = ctx
@@ -672,7 +906,7 @@ impl<'a> GpuRenderer<'a> {
                     .collect(),
             })
         };
-        *self.frame.lock().unwrap() = Some((key, q));
+        *self.frame.lock().unwrap() = Some((shape, q));
         stats.film_ms = film_t.elapsed().as_secs_f64() * 1e3;
         stats.render_ms = t0.elapsed().as_secs_f64() * 1e3;
         stats.kernel_gpu_ms = timed.then(|| {
@@ -686,8 +920,22 @@ impl<'a> GpuRenderer<'a> {
         Ok((film, stats))
     }
 
-    fn queues(&self, pixels: u64, wave: u64, lights: u64) -> Result<Queues, GpuError> {
+    fn queues(&self, shape: &FrameShape) -> Result<Queues, GpuError> {
         let ctx = self.tracer.ctx;
+        let FrameShape {
+            pixels,
+            wave,
+            lights,
+            ..
+        } = *shape;
+        let readback = || {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("counters readback"),
+                size: shape.counter_sets * COUNTER_BYTES + shape.passes * 16,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
         let ray_bytes = std::mem::size_of::<RayWork>() as u64;
         let none = wgpu::BufferUsages::empty();
         Ok(Queues {
@@ -714,15 +962,17 @@ impl<'a> GpuRenderer<'a> {
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
-            readback: ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("counters readback"),
-                size: COUNTER_BYTES + STAMP_BYTES,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
-            resolve: ctx.timer(2 * STAGES.len() as u32),
+            readback: [readback(), readback()],
+            resolve: ctx.timer(2 * shape.passes as u32),
         })
     }
+}
+
+/// The size a queue buffer grows to for `need` bytes: with headroom, so that a slowly growing
+/// queue is not reallocated every depth, but never past what a binding holds (`limit`) when
+/// `need` itself fits (the headroom made 640x480 at 8 spp fail on lavapipe's 128 MiB bindings).
+fn grown_size(need: u64, limit: u64) -> u64 {
+    (need + need / 2).min(limit.max(need))
 }
 
 /// Group 3 of the volume stages (medium.wgsl): binding 0 is left to the dispatch arguments of
@@ -829,4 +1079,18 @@ fn medium_group(
             entry(7, grids.as_entire_binding()),
         ],
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn queues_grow_with_headroom_within_a_binding() {
+        use super::grown_size;
+        assert_eq!(grown_size(100, 1000), 150);
+        // 2 x 0.97 M rays of 48 bytes under lavapipe's 128 MiB: the binding, not 146 MB.
+        let (need, limit) = (2 * 970_000 * 48, 128 << 20);
+        assert_eq!(grown_size(need, limit), limit);
+        // Past the binding the need stands, and work_buffer refuses it by name.
+        assert_eq!(grown_size(limit + 8, limit), limit + 8);
+    }
 }

@@ -232,7 +232,7 @@ fn render_wgsl_structs_match_rust() {
             ("epsilon", offset_of!(RenderParams, epsilon)),
             ("sample_base", offset_of!(RenderParams, sample_base)),
             ("sample_count", offset_of!(RenderParams, sample_count)),
-            ("spawn", offset_of!(RenderParams, spawn)),
+            ("max_depth", offset_of!(RenderParams, max_depth)),
             ("light_count", offset_of!(RenderParams, light_count)),
             ("max_groups", offset_of!(RenderParams, max_groups)),
             ("pad0", pad),
@@ -694,11 +694,13 @@ fn image_diff(a: &raystream_cpu::Image, b: &raystream_cpu::Image) -> (f64, f64) 
 
 /// The GPU stream renderer against the CPU reference on the same scene: the bar (mean
 /// absolute difference < 0.5/255, ≥ 99.9 % of pixels within 2/255), the same ray, hit and shadow
-/// counts per depth (up to ties), and the same image on every run.
+/// counts per depth (up to ties), and the same image on every run, in any wave size, submitted
+/// wave by wave (`expect`: what the scene runs by default) or depth by depth.
 fn gpu_render_matches_cpu(
     ctx: &GpuContext,
     scene: &raystream_scene::Scene,
     opt: &raystream_cpu::RenderOptions,
+    expect: Submit,
     what: &str,
 ) {
     let volume = scene.volume.is_some();
@@ -707,7 +709,20 @@ fn gpu_render_matches_cpu(
     let cpu = raystream_cpu::render(scene, &tree, opt, |s| cpu_depths.push(s));
     let tracer = GpuTracer::new(ctx, &tree).unwrap();
     let renderer = GpuRenderer::new(&tracer, scene, &tree).unwrap();
-    let (gpu, stats) = renderer.render(opt, |_| {}).unwrap();
+    let mut told = Vec::new();
+    let (gpu, stats) = renderer.render(opt, |s| told.push(s)).unwrap();
+    assert_eq!(stats.submit, expect, "{what}: submission");
+    assert_eq!(renderer.submit_for(opt), expect, "{what}: submission");
+    // Progress hears of every depth of every wave: their sums are the frame's counts.
+    let mut summed = vec![raystream_cpu::DepthStats::default(); stats.depths.len()];
+    for t in &told {
+        let d = &mut summed[t.depth as usize];
+        d.depth = t.depth;
+        d.rays += t.rays;
+        d.hits += t.hits;
+        d.shadow_rays += t.shadow_rays;
+    }
+    assert_eq!(summed, stats.depths, "{what}: progress");
     let (mean, over) = image_diff(&cpu, &gpu);
     eprintln!(
         "{what}: mean |diff| {mean:.4}/255, {:.4} % of pixels > 2/255",
@@ -754,16 +769,45 @@ fn gpu_render_matches_cpu(
         "{what}: the GPU's sRGB film differs from its float film in {off} of {} bytes",
         want.len()
     );
-    // Many small waves (each growing its queues depth by depth) give the very same film.
-    let small = GpuRenderer::new(&tracer, scene, &tree)
-        .unwrap()
-        .with_wave(999);
-    let (waves, stats) = small.render(opt, |_| {}).unwrap();
-    assert!(stats.waves > 1);
-    assert_eq!(
-        gpu, waves,
-        "{what}: rendering in waves of 999 samples differs"
-    );
+    // Many small waves give the very same film and statistics, whether the host submits a
+    // wave at a time (the next queued while it reads the last one's counts) or a depth at a
+    // time (growing the queues depth by depth); so does one wave submitted depth by depth.
+    let mut depth_by_depth = None;
+    for (wave, submit) in [
+        (999, Submit::Wave),
+        (999, Submit::Depth),
+        (u32::MAX, Submit::Depth),
+    ] {
+        let other = GpuRenderer::new(&tracer, scene, &tree)
+            .unwrap()
+            .with_wave(wave)
+            .with_submit(submit);
+        let mut told_here = Vec::new();
+        let (image, s) = other.render(opt, |s| told_here.push(s)).unwrap();
+        let ran = if submit == Submit::Wave {
+            expect
+        } else {
+            submit
+        };
+        let how = format!("waves of {wave} samples submitted by {submit:?}");
+        assert_eq!(s.submit, ran, "{what}, {how}");
+        assert_eq!(gpu, image, "{what}: the film of {how} differs");
+        assert_eq!(stats.depths, s.depths, "{what}: the counts of {how} differ");
+        match ran {
+            Submit::Wave => assert_eq!(s.submissions, s.waves, "{what}, {how}"),
+            Submit::Depth => assert!(s.submissions >= s.waves, "{what}, {how}"),
+        }
+        if wave == 999 {
+            assert!(s.waves > 1, "{what}, {how}");
+            // The same depths of the same waves reported, in the same order.
+            match &depth_by_depth {
+                None => depth_by_depth = Some(told_here),
+                Some(t) => assert_eq!(t, &told_here, "{what}: progress of {how}"),
+            }
+        } else {
+            assert_eq!(told, told_here, "{what}: progress of {how}");
+        }
+    }
 }
 
 #[test]
@@ -783,6 +827,7 @@ fn gpu_render_matches_cpu_on_the_builtin_scene() {
             &ctx,
             &scene,
             &opt,
+            Submit::Depth,
             &format!("built-in scene, {spp} spp, depth {max_depth}"),
         );
     }
@@ -803,7 +848,7 @@ fn gpu_render_matches_cpu_with_a_volume_in_the_scene() {
         max_depth: 2,
         traversal: Traversal::Ropes,
     };
-    gpu_render_matches_cpu(&ctx, &scene, &opt, "spine rods");
+    gpu_render_matches_cpu(&ctx, &scene, &opt, Submit::Wave, "spine rods");
 }
 
 #[test]
@@ -819,7 +864,7 @@ fn gpu_render_matches_cpu_on_a_scanned_mesh() {
         max_depth: 3,
         traversal: Traversal::Ropes,
     };
-    gpu_render_matches_cpu(&ctx, &scene, &opt, "bunny");
+    gpu_render_matches_cpu(&ctx, &scene, &opt, Submit::Wave, "bunny");
 }
 
 #[test]

@@ -77,6 +77,25 @@ pub enum KernelsArg {
     Ifif,
 }
 
+/// GPU rendering: how the host submits the depths of a wave of samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SubmitArg {
+    /// One submission per wave with all its depths, the next wave queued before the host
+    /// reads this one's counts (scenes whose hits can spawn two rays run `depth`).
+    Wave,
+    /// One submission per depth, the queue counts read back after each.
+    Depth,
+}
+
+impl From<SubmitArg> for raystream_gpu::Submit {
+    fn from(s: SubmitArg) -> Self {
+        match s {
+            SubmitArg::Wave => raystream_gpu::Submit::Wave,
+            SubmitArg::Depth => raystream_gpu::Submit::Depth,
+        }
+    }
+}
+
 impl From<KernelsArg> for raystream_gpu::Kernels {
     fn from(k: KernelsArg) -> Self {
         match k {
@@ -177,6 +196,10 @@ pub struct RenderArgs {
     /// second (scene loading, kd-tree build and upload apart).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub repeat: u32,
+    /// GPU: submit each wave of samples with all its depths at once (wave), or depth by
+    /// depth, reading the queue counts back after each (depth). The same image either way.
+    #[arg(long, value_enum, default_value = "wave")]
+    pub submit: SubmitArg,
     /// No progress output.
     #[arg(short, long)]
     pub quiet: bool,

@@ -240,7 +240,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         Backend::Cpu => None,
     };
     let renderer = match &gpu {
-        Some(tracer) => Some(GpuRenderer::new(tracer, &scene, &tree)?),
+        Some(tracer) => Some(GpuRenderer::new(tracer, &scene, &tree)?.with_submit(a.submit.into())),
         None => None,
     };
     // The CPU prepares a scene's volume (its light grids) once for all repeats, as the GPU
@@ -287,7 +287,13 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             Some(r) => {
                 let (rgb, stats) = r.render_srgb8(&opt, &mut on_depth)?;
                 kernel_ms = stats.kernel_gpu_ms;
-                split = Some((stats.render_ms, stats.wait_ms, stats.film_ms));
+                split = Some((
+                    stats.render_ms,
+                    stats.wait_ms,
+                    stats.film_ms,
+                    stats.submissions,
+                    stats.submit,
+                ));
                 rgb
             }
             None => render_prepared(&scene, &tree, medium.as_ref(), &opt, &mut on_depth).to_srgb8(),
@@ -349,9 +355,13 @@ pub fn run(a: &RenderArgs) -> Result<()> {
                 parts.join(", ")
             );
         }
-        if let Some((all, wait, film)) = split {
+        if let Some((all, wait, film, submissions, submit)) = split {
+            let per = match submit {
+                raystream_gpu::Submit::Wave => "wave",
+                raystream_gpu::Submit::Depth => "depth",
+            };
             eprintln!(
-                "raystream: the last frame's {all:.1} ms: {wait:.1} waiting on depth submissions (kernels and round trips), {film:.1} turning the film into 8-bit sRGB and reading it back, {:.1} on the host",
+                "raystream: the last frame's {all:.1} ms: {wait:.1} submitting and waiting on {submissions} submissions, one per {per} (kernels and round trips), {film:.1} turning the film into 8-bit sRGB and reading it back, {:.1} on the host",
                 all - wait - film
             );
         }

@@ -432,6 +432,40 @@ fn gpu_render_matches_cpu_default_ct() {
     gpu_matches_cpu("default", &["--size", "96x72", "--spp", "1"], false);
 }
 
+/// `render --submit wave|depth`: the host submits a wave's depths at once or one by one; the
+/// same PNG, and the summary says which ran.
+#[test]
+fn gpu_render_submit_modes_give_the_same_image() {
+    if !gpu_available() {
+        return;
+    }
+    let mut pngs = Vec::new();
+    for submit in ["wave", "depth"] {
+        let out = tmp(&format!("submit-{submit}.png"));
+        let o = run(&[
+            "render",
+            "--size",
+            "96x72",
+            "--spp",
+            "2",
+            "--device",
+            "gpu",
+            "--submit",
+            submit,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{submit}: {}", stderr(&o));
+        assert!(
+            stderr(&o).contains(&format!("submissions, one per {submit}")),
+            "{submit}: {}",
+            stderr(&o)
+        );
+        pngs.push(std::fs::read(&out).unwrap());
+    }
+    assert!(pngs[0] == pngs[1], "--submit wave and depth differ");
+}
+
 #[test]
 fn gpu_render_matches_cpu_spot_scene() {
     gpu_matches_cpu(

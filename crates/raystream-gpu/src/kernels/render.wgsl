@@ -5,9 +5,10 @@
 //   → prepare_shadows → intersect_any → accumulate → advance
 //
 // Queue counters never leave the device: kernels append with atomics, `prepare_shadows` and
-// `advance` turn counts into indirect dispatch arguments, and the host only chooses which queue
-// is read and which written (the paper's "CPU control"), reading the counts back to stop early
-// and to size the next depth's queues.
+// `advance` turn counts into indirect dispatch arguments (and `advance` counts the depth), and
+// the host only chooses which queue is read and which written (the paper's "CPU control"),
+// either submitting a whole wave's depths at once (an emptied queue dispatches nothing) or
+// reading the counts back after each depth to stop early and size the next depth's queues.
 //
 // The film is deterministic whatever order the atomics give the queues: every contribution is
 // rounded to 64-bit fixed point (FILM_SCALE steps per unit) and integer addition does not depend
@@ -72,7 +73,7 @@ struct RenderParams {
     epsilon: f32,
     sample_base: u32,
     sample_count: u32,
-    spawn: u32,
+    max_depth: u32,
     light_count: u32,
     max_groups: u32,
     pad0: u32,
@@ -293,7 +294,7 @@ fn shade_hits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
         shadows[at] = ShadowWork(RayIn(origin, 0.0, to_light, 1.0 - 1e-4), radiance, w.pixel);
     }
 
-    if rp.spawn == 0u {
+    if atomicLoad(&counters[DEPTH]) >= rp.max_depth {
         return;
     }
     if split.r * max_element(w.weight) > 1e-3 {
@@ -343,5 +344,6 @@ fn advance() {
     atomicStore(&counters[NEXT], 0u);
     atomicStore(&counters[SHADOWS], 0u);
     atomicStore(&counters[HITS], 0u);
+    atomicAdd(&counters[DEPTH], 1u);
     write_args(0u, next);
 }
