@@ -744,6 +744,9 @@ impl<'a> GpuRenderer<'a> {
             stats.waves += 1;
             params.sample_base = base as u32;
             params.sample_count = n;
+            // With the last wave still queued: queue writes run at the start of the next
+            // submission, and a queue's submissions run one after another (wgpu-hal's `submit`
+            // contract), so the last wave reads its own parameters and counters.
             ctx.queue
                 .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
             let mut counters = [0u32; counter::SLOTS as usize];

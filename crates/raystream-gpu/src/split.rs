@@ -1,14 +1,21 @@
 //! `--kernels split`: ray queries with traversal and intersection in separate kernels
 //! (`kernels/split.wgsl`), the layout of the paper. Traversal writes one (ray, leaf) work item
 //! per active ray; the intersection kernel tests the leaf and sends unfinished rays back to the
-//! other active list. The host repeats the pair, [`ITERATIONS_PER_SUBMIT`] leaf steps per
-//! submission with indirect dispatch, until no ray is active (or the tree's step bound).
+//! other active list. The host repeats the pair with indirect dispatch,
+//! [`ITERATIONS_PER_SUBMIT`] leaf steps a submission, until no ray is active (or the tree's
+//! step bound). It keeps one submission queued ahead of the one whose active count it reads,
+//! so that the GPU does not wait for the host between them; steps recorded after the last ray
+//! finished dispatch nothing. (Submissions growing twice as long each time, to need fewer, were
+//! tried: they record up to 4x the steps needed, and the empty passes made queries 1.3-2.5x
+//! slower on lavapipe: BENCHMARKS.md.)
 
-use crate::{GpuContext, GpuError, GpuTracer, kdtree_wgsl, read_words};
+use std::collections::VecDeque;
+
+use crate::{GpuContext, GpuError, GpuTracer, kdtree_wgsl, read_back_after};
 
 const SPLIT_WGSL: &str = include_str!("kernels/split.wgsl");
 
-/// Leaf steps recorded per submission between reads of the active count.
+/// Leaf steps recorded per submission.
 pub const ITERATIONS_PER_SUBMIT: u32 = 16;
 
 /// The WGSL source of the split kernels.
@@ -81,7 +88,8 @@ impl SplitKernels {
     }
 }
 
-/// What a split query did: leaf steps run, and the kernels' own time (timestamps), summed.
+/// What a split query did: leaf steps run with rays in them (the most leaves any one ray
+/// visited), and the kernels' own time (timestamps), summed over the submissions.
 pub(crate) struct SplitRun {
     pub steps: u32,
     pub kernel_gpu_ms: Option<f64>,
@@ -106,13 +114,17 @@ pub(crate) fn run(
         list("active rays", n as u64 * 4)?,
     ];
     let items = list("work items", n as u64 * 8)?;
-    let counts = list("active counts", 8)?;
+    let counts = list("active counts", 12)?;
     let args = ctx.work_buffer("split dispatch arguments", 12, wgpu::BufferUsages::INDIRECT)?;
-    let counts_read = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("active count readback"),
-        size: 8 + 16,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
+    // The counts (12 bytes, padded to 16), then the two timestamps; two, so that the host reads
+    // one submission's while the GPU runs the next.
+    let counts_read = [0, 1].map(|_| {
+        ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("active count readback"),
+            size: 16 + 16,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
     });
     let timer = ctx.timer(2);
     let group0 = ctx.bind_buffers(
@@ -140,89 +152,106 @@ pub(crate) fn run(
         let t = timer.as_ref().filter(|_| first || last)?;
         Some(t.writes(first.then_some(0), last.then_some(1)))
     };
+    let max_steps = tracer.params.max_steps;
     let mut steps = 0u32;
     let mut gpu_ms = 0.0;
-    let mut timed = timer.is_some();
+    // Whether any submission's stamps differ: some adapters write equal ones (no measurement
+    // rather than a false 0), and a submission of finished steps may take no time.
+    let mut timed = false;
     let mut cur = 0usize;
     let mut submitted_init = false;
-    loop {
-        let mut enc = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("split"),
-            });
-        let mut first = true;
-        if !submitted_init {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("split_init"),
-                timestamp_writes: stamp(true, false),
-            });
-            pass.set_pipeline(&k.init);
-            pass.set_bind_group(0, &group0, &[]);
-            pass.set_bind_group(1, &group1[cur], &[]);
-            let [gx, gy, _] = ctx.dims(n);
-            pass.dispatch_workgroups(gx, gy, 1);
-            drop(pass);
-            first = false;
-            submitted_init = true;
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("split_advance"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&k.advance);
-            pass.set_bind_group(0, &group0, &[]);
-            pass.set_bind_group(1, &group1[cur], &[]);
-            pass.set_bind_group(2, &group2, &[]);
-            pass.dispatch_workgroups(1, 1, 1);
-            drop(pass);
-            cur = 1 - cur;
-        }
-        let batch = ITERATIONS_PER_SUBMIT.min(tracer.params.max_steps - steps);
-        for it in 0..batch {
-            for (p, name) in [
-                (&k.traverse, "split_traverse"),
-                (&k.intersect[any as usize], "split_intersect"),
-            ] {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some(name),
-                    timestamp_writes: stamp(first, false),
+    let mut recorded = 0u32;
+    // Submissions whose counts are not read yet, oldest first: (readback slot, submission).
+    let mut in_flight = VecDeque::new();
+    let mut slot = 0usize;
+    // Set once a readback shows no active ray, or every step the tree allows is recorded.
+    let mut done = false;
+    while !(done && in_flight.is_empty()) {
+        if !done {
+            let mut enc = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("split"),
                 });
-                first = false;
-                pass.set_pipeline(p);
+            let mut first = true;
+            if !submitted_init {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("split_init"),
+                    timestamp_writes: stamp(true, false),
+                });
+                pass.set_pipeline(&k.init);
                 pass.set_bind_group(0, &group0, &[]);
                 pass.set_bind_group(1, &group1[cur], &[]);
-                pass.dispatch_workgroups_indirect(&args, 0);
+                let [gx, gy, _] = ctx.dims(n);
+                pass.dispatch_workgroups(gx, gy, 1);
+                drop(pass);
+                first = false;
+                submitted_init = true;
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("split_advance"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&k.advance);
+                pass.set_bind_group(0, &group0, &[]);
+                pass.set_bind_group(1, &group1[cur], &[]);
+                pass.set_bind_group(2, &group2, &[]);
+                pass.dispatch_workgroups(1, 1, 1);
+                drop(pass);
+                cur = 1 - cur;
             }
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("split_advance"),
-                timestamp_writes: stamp(false, it + 1 == batch),
-            });
-            pass.set_pipeline(&k.advance);
-            pass.set_bind_group(0, &group0, &[]);
-            pass.set_bind_group(1, &group1[cur], &[]);
-            pass.set_bind_group(2, &group2, &[]);
-            pass.dispatch_workgroups(1, 1, 1);
-            drop(pass);
-            cur = 1 - cur;
+            let batch = ITERATIONS_PER_SUBMIT.min(max_steps - recorded);
+            for it in 0..batch {
+                for (p, name) in [
+                    (&k.traverse, "split_traverse"),
+                    (&k.intersect[any as usize], "split_intersect"),
+                ] {
+                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                        label: Some(name),
+                        timestamp_writes: stamp(first, false),
+                    });
+                    first = false;
+                    pass.set_pipeline(p);
+                    pass.set_bind_group(0, &group0, &[]);
+                    pass.set_bind_group(1, &group1[cur], &[]);
+                    pass.dispatch_workgroups_indirect(&args, 0);
+                }
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("split_advance"),
+                    timestamp_writes: stamp(false, it + 1 == batch),
+                });
+                pass.set_pipeline(&k.advance);
+                pass.set_bind_group(0, &group0, &[]);
+                pass.set_bind_group(1, &group1[cur], &[]);
+                pass.set_bind_group(2, &group2, &[]);
+                pass.dispatch_workgroups(1, 1, 1);
+                drop(pass);
+                cur = 1 - cur;
+            }
+            recorded += batch;
+            enc.copy_buffer_to_buffer(&counts, 0, &counts_read[slot], 0, 12);
+            if let Some(t) = &timer {
+                enc.resolve_query_set(&t.set, 0..2, &t.resolve, 0);
+                enc.copy_buffer_to_buffer(&t.resolve, 0, &counts_read[slot], 16, 16);
+            }
+            in_flight.push_back((slot, ctx.queue.submit([enc.finish()])));
+            slot = 1 - slot;
+            done = recorded >= max_steps;
+            // Keep one submission queued ahead of the one read.
+            if in_flight.len() < 2 && !done {
+                continue;
+            }
         }
-        steps += batch;
-        enc.copy_buffer_to_buffer(&counts, 0, &counts_read, 0, 8);
-        if let Some(t) = &timer {
-            enc.resolve_query_set(&t.set, 0..2, &t.resolve, 0);
-            enc.copy_buffer_to_buffer(&t.resolve, 0, &counts_read, 8, 16);
-        }
-        ctx.queue.submit([enc.finish()]);
-        let words = read_words(ctx, &counts_read)?;
-        if timed {
-            let t0 = words[2] as u64 | (words[3] as u64) << 32;
-            let t1 = words[4] as u64 | (words[5] as u64) << 32;
+        let (s, index) = in_flight.pop_front().expect("a submission in flight");
+        let words: Vec<u32> = read_back_after(ctx, &counts_read[s], Some(index))?;
+        if timer.is_some() {
+            let t0 = words[4] as u64 | (words[5] as u64) << 32;
+            let t1 = words[6] as u64 | (words[7] as u64) << 32;
             let ticks = t1.wrapping_sub(t0);
-            timed = ticks > 0;
+            timed |= ticks > 0;
             gpu_ms += ticks as f64 * ctx.queue.get_timestamp_period() as f64 * 1e-6;
         }
-        if words[0] == 0 || steps >= tracer.params.max_steps {
-            break;
-        }
+        steps = words[2];
+        done |= words[0] == 0;
     }
     Ok(SplitRun {
         steps,

@@ -101,6 +101,8 @@ pub struct Traced {
     /// GPU only, not for split kernels: wall time per query of `repeat` queries queued in one
     /// submission and waited for once (a stream of queries: no host round trip between them).
     pub stream_ms: Option<f64>,
+    /// GPU split kernels only: leaf steps with rays in them (the longest walk's leaves).
+    pub split_steps: Option<u32>,
 }
 
 /// Untimed GPU runs before the timed ones: until this much time has passed…
@@ -132,6 +134,7 @@ pub fn trace_timed(
     let mut times = Vec::new();
     let mut gpu_times = Vec::new();
     let mut stream_ms = None;
+    let mut split_steps = None;
     let (hits, upload_ms) = match gpu {
         None => {
             let mut hits = trace_all(tree, rays, any, traversal);
@@ -148,6 +151,7 @@ pub fn trace_timed(
             }
             let warm_up = Instant::now();
             let (mut hits, first) = tracer.trace_with(rays, any, kernels)?;
+            split_steps = first.split_steps;
             // A GPU left idle (while the CPU built the tree or generated rays) runs at low
             // clocks; keep it busy for a while before timing, as GPU benchmarks do.
             for _ in 1..GPU_WARM_UP_RUNS {
@@ -193,6 +197,7 @@ pub fn trace_timed(
         trace_ms_min,
         kernel_gpu_ms,
         stream_ms,
+        split_steps,
     })
 }
 
@@ -287,6 +292,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             "trace_ms_min": round3(t.trace_ms_min),
             "gpu_kernel_ms": t.kernel_gpu_ms.map(round3),
             "stream_ms": t.stream_ms.map(round3),
+            "split_steps": t.split_steps,
             "mrays_per_s": round3(mrays),
             "hits": n_hits,
             "gpu_stats": stats.as_ref().map(gpu_stats_json),

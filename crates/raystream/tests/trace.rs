@@ -257,6 +257,7 @@ fn trace_stats() {
     let line: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
     let s = &line["gpu_stats"];
     assert!(line["hits"].as_u64().unwrap() > 100, "{line}");
+    assert!(line["split_steps"].is_null(), "{line}");
     // The queued queries' wall time per query (their hits were checked against a lone one's).
     assert!(line["stream_ms"].as_f64().unwrap() > 0.0, "{line}");
     assert!(
@@ -276,6 +277,14 @@ fn trace_stats() {
         (subgroups - peak as f64 / lanes as f64).abs() < 1e-3,
         "{line}"
     );
+    // The split kernels report their leaf steps: these rays cross the spot mesh's leaves.
+    let mut split = gpu.clone();
+    split.retain(|a| a != "--stats");
+    split.extend(["--kernels".into(), "split".into()]);
+    let o = run(&split.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let line: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert!(line["split_steps"].as_u64().unwrap() > 1, "{line}");
 }
 
 #[test]

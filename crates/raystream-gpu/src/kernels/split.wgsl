@@ -8,7 +8,7 @@
 //   split_advance:   the other list becomes the active one; dispatch arguments for it
 //
 // The host repeats traverse → intersect → advance, swapping the two lists, until no ray is
-// active. Each active ray yields exactly one work item, so item k belongs to list entry k.
+// active (steps recorded after that dispatch nothing). Each active ray yields exactly one work item, so item k belongs to list entry k.
 
 struct RayState {
     t_entry: f32,
@@ -26,8 +26,8 @@ struct WorkItem {
 @group(1) @binding(1) var<storage, read_write> live: array<u32>;
 @group(1) @binding(2) var<storage, read_write> items: array<WorkItem>;
 @group(1) @binding(3) var<storage, read_write> next_live: array<u32>;
-// [0] active rays, [1] rays appended to next_live.
-@group(1) @binding(4) var<storage, read_write> counts: array<atomic<u32>, 2>;
+// [0] active rays, [1] rays appended to next_live, [2] leaf steps with rays in them.
+@group(1) @binding(4) var<storage, read_write> counts: array<atomic<u32>, 3>;
 // Only split_advance binds it: the other kernels are dispatched from it.
 @group(2) @binding(0) var<storage, read_write> args: array<u32, 3>;
 
@@ -95,6 +95,9 @@ fn split_advance() {
     let n = atomicLoad(&counts[1]);
     atomicStore(&counts[0], n);
     atomicStore(&counts[1], 0u);
+    if n > 0u {
+        atomicAdd(&counts[2], 1u);
+    }
     let g = (n + WORKGROUP_SIZE - 1u) / WORKGROUP_SIZE;
     let gx = min(g, MAX_GROUPS);
     var gy = 0u;
