@@ -152,6 +152,21 @@ pub(crate) fn run(
         let t = timer.as_ref().filter(|_| first || last)?;
         Some(t.writes(first.then_some(0), last.then_some(1)))
     };
+    // `split_advance`: the other list becomes the active one.
+    let advance = |enc: &mut wgpu::CommandEncoder,
+                   cur: &mut usize,
+                   timestamp_writes: Option<wgpu::ComputePassTimestampWrites>| {
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("split_advance"),
+            timestamp_writes,
+        });
+        pass.set_pipeline(&k.advance);
+        pass.set_bind_group(0, &group0, &[]);
+        pass.set_bind_group(1, &group1[*cur], &[]);
+        pass.set_bind_group(2, &group2, &[]);
+        pass.dispatch_workgroups(1, 1, 1);
+        *cur = 1 - *cur;
+    };
     let max_steps = tracer.params.max_steps;
     let mut steps = 0u32;
     let mut gpu_ms = 0.0;
@@ -187,17 +202,7 @@ pub(crate) fn run(
                 drop(pass);
                 first = false;
                 submitted_init = true;
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("split_advance"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&k.advance);
-                pass.set_bind_group(0, &group0, &[]);
-                pass.set_bind_group(1, &group1[cur], &[]);
-                pass.set_bind_group(2, &group2, &[]);
-                pass.dispatch_workgroups(1, 1, 1);
-                drop(pass);
-                cur = 1 - cur;
+                advance(&mut enc, &mut cur, None);
             }
             let batch = ITERATIONS_PER_SUBMIT.min(max_steps - recorded);
             for it in 0..batch {
@@ -215,17 +220,7 @@ pub(crate) fn run(
                     pass.set_bind_group(1, &group1[cur], &[]);
                     pass.dispatch_workgroups_indirect(&args, 0);
                 }
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("split_advance"),
-                    timestamp_writes: stamp(false, it + 1 == batch),
-                });
-                pass.set_pipeline(&k.advance);
-                pass.set_bind_group(0, &group0, &[]);
-                pass.set_bind_group(1, &group1[cur], &[]);
-                pass.set_bind_group(2, &group2, &[]);
-                pass.dispatch_workgroups(1, 1, 1);
-                drop(pass);
-                cur = 1 - cur;
+                advance(&mut enc, &mut cur, stamp(false, it + 1 == batch));
             }
             recorded += batch;
             enc.copy_buffer_to_buffer(&counts, 0, &counts_read[slot], 0, 12);
