@@ -361,7 +361,8 @@ pub fn run(a: &RenderArgs) -> Result<()> {
                 raystream_gpu::Submit::Depth => "depth",
             };
             eprintln!(
-                "raystream: the last frame's {all:.1} ms: {wait:.1} submitting and waiting on {submissions} submissions, one per {per} (kernels and round trips), {film:.1} turning the film into 8-bit sRGB and reading it back, {:.1} on the host",
+                "raystream: the last frame's {all:.1} ms: {wait:.1} submitting and waiting on {submissions} submission{}, one per {per} (kernels and round trips), {film:.1} turning the film into 8-bit sRGB and reading it back, {:.1} on the host",
+                if submissions == 1 { "" } else { "s" },
                 all - wait - film
             );
         }

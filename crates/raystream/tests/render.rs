@@ -457,7 +457,7 @@ fn gpu_render_submit_modes_give_the_same_image() {
         ]);
         assert!(o.status.success(), "{submit}: {}", stderr(&o));
         assert!(
-            stderr(&o).contains(&format!("submissions, one per {submit}")),
+            stderr(&o).contains(&format!(", one per {submit} (kernels")),
             "{submit}: {}",
             stderr(&o)
         );
