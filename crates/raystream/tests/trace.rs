@@ -297,3 +297,91 @@ fn unknown_adapter_is_a_clear_error() {
         "{err}"
     );
 }
+
+/// scripts/summarize-device-bench.py on the lines device-bench.sh writes: Grays/s from the
+/// times, the first bar judged by wall, streamed and kernel time against the issue's peers, a
+/// failed rays.py check named, and the render modes' frame times side by side.
+#[test]
+fn device_bench_summary() {
+    let Some(py) = python() else { return };
+    let results = tmp("summary-results.jsonl");
+    // lucy's primary rays as the H100 ran them: 2.25 Grays/s by wall time, 4.89 by kernel time
+    // (half the best peer, Warp's 5.24, is 2.62); streamed 2.8.
+    let n = 2_073_600.0;
+    let ms = |grays: f64| n / grays / 1e6;
+    let lines = [
+        r#"{"machine": "16 cores, Intel(R) Xeon(R) Processor", "date": "2026-11-23T10:00:00Z"}"#
+            .to_string(),
+        format!(
+            r#"{{"device": "gpu", "adapter": "NVIDIA H100 80GB HBM3", "mesh": "stanford_lucy_100k", "kind": "primary", "tracer": "raystream-gpu-fused", "rays": {n}, "trace_ms": {}, "gpu_kernel_ms": {}, "stream_ms": {}, "sah_traversal_cost": 1.0, "gpu_stats": {{"steps_per_ray": {{"traversal": 9.0, "leaf": 2.8, "triangle": 1.9}}, "simd_efficiency": {{"traversal": 0.5, "leaf": 0.7, "triangle": 0.25}}, "subgroup_size": 32, "peak_resident_invocations": 135168}}}}"#,
+            ms(2.25),
+            ms(4.89),
+            ms(2.8)
+        ),
+        format!(
+            r#"{{"device": "gpu", "mesh": "stanford_lucy_100k", "kind": "primary", "tracer": "raystream-gpu-fused", "sah_traversal_cost": 4, "rays": {n}, "trace_ms": {}, "gpu_kernel_ms": {}}}"#,
+            ms(2.5),
+            ms(5.5)
+        ),
+        format!(
+            r#"{{"device": "cpu", "mesh": "stanford_lucy_100k", "kind": "primary", "tracer": "raystream-cpu", "rays": {n}, "trace_ms": {}}}"#,
+            ms(0.05)
+        ),
+        r#"{"mesh": "stanford_lucy_100k", "kind": "primary", "check": "gpu-fused", "pass": false, "hit_agree": 0.99, "prim_agree": 0.98}"#.to_string(),
+    ];
+    std::fs::write(&results, lines.join("\n") + "\n").unwrap();
+    let log = tmp("summary-render.log");
+    let frame = |submit: &str, spp: u32, ms: f64| {
+        format!(
+            "[submit {submit}, {spp} spp] raystream: wrote /tmp/x.png (1920x1080, {spp} spp, depth 4) on gpu (H100): load 1 ms, render {ms} ms median of 20 = {:.2} frames/s (min {ms} ms)\n",
+            1e3 / ms
+        )
+    };
+    let text = [
+        frame("depth", 4, 36.0),
+        frame("wave", 4, 30.0),
+        frame("depth", 4, 38.0),
+        frame("wave", 4, 31.0),
+    ]
+    .concat();
+    std::fs::write(&log, text).unwrap();
+    let o = std::process::Command::new(&py)
+        .arg(repo().join("scripts/summarize-device-bench.py"))
+        .arg(&results)
+        .arg("--render")
+        .arg(&log)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(
+        out.contains(
+            "| stanford_lucy_100k | primary | 2,073,600 | 2.25 | 4.89 | 2.8 | 3.62 | 5.24 | 2.62 | **missed** | met | met | 0.05 | – | 45× |"
+        ),
+        "{out}"
+    );
+    assert!(
+        out.contains("First bar by wall time: met on 0 of 1 rows."),
+        "{out}"
+    );
+    assert!(
+        out.contains("First bar by kernel time: met on 1 of 1 rows."),
+        "{out}"
+    );
+    // The leaf-size variant beside the fused kernel: 5.5 / 4.89 of its kernel time.
+    assert!(
+        out.contains("| raystream-gpu-fused (K=4) | 2.5 | 5.5 | 2.25 | 4.89 | 1.11 | 1.12 | – |"),
+        "{out}"
+    );
+    // Occupancy: 135,168 resident invocations are half of 132 SMs x 2048.
+    assert!(out.contains("| 32 | 135168 | 0.50 |"), "{out}");
+    assert!(
+        out.contains("FAILED: stanford_lucy_100k primary gpu-fused"),
+        "{out}"
+    );
+    // Medians 30.5 and 37.0.
+    assert!(
+        out.contains("| 4 | 36.0, 38.0 | 30.0, 31.0 | 0.82 |"),
+        "{out}"
+    );
+}

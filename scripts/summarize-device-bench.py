@@ -1,0 +1,221 @@
+#!/usr/bin/env python3
+"""Turns what scripts/device-bench.sh wrote (results.jsonl, render.log) into BENCHMARKS.md's
+tables, so that a session with a device spends its minutes measuring, not tabulating.
+
+    scripts/summarize-device-bench.py OUT/results.jsonl [--render OUT/render.log] [--sms 132]
+
+Prints Markdown: the ray-query table against the issue's peers (Grays/s by single-query wall
+time, kernel time and streamed queries, with the first bar -- at least half the best GPU peer --
+judged by each), the variants (spinning waits, if-if, leaf size, split, sorted sets, bench's
+own sets), divergence and occupancy (peak resident invocations over SMs x 2048), failed
+rays.py checks, and the render frame rates of each `--submit` mode. Only the standard library.
+"""
+
+import argparse
+import json
+import re
+import statistics
+import sys
+from collections import defaultdict
+
+# The issue's peers on the H100 (Grays/s): OptiX via Mitsuba 3, NVIDIA Warp 1.5.
+PEERS = {
+    "stanford_bunny": {"primary": (3.26, 1.78), "diffuse": (1.10, 0.31), "shadow": (2.05, 0.34)},
+    "stanford_lucy_100k": {"primary": (3.62, 5.24), "diffuse": (0.86, 0.74), "shadow": (2.34, 1.29)},
+    "turbine_blade": {"primary": (4.12, 6.77), "diffuse": (1.31, 1.29), "shadow": (3.58, 3.48)},
+}
+KINDS = ["primary", "diffuse", "shadow", "random"]
+
+
+def grays(rays, ms):
+    """Grays/s of `rays` rays in `ms` milliseconds (None where either is missing)."""
+    if not rays or not ms:
+        return None
+    return rays / (ms * 1e-3) / 1e9
+
+
+def fmt(x):
+    """Three significant digits (2.25, 0.109), or a dash for no figure."""
+    return "–" if x is None else f"{x:.3g}"
+
+
+def load(path):
+    lines = []
+    with open(path) as f:
+        for n, line in enumerate(f, 1):
+            line = line.strip()
+            if not line:
+                continue
+            try:
+                lines.append(json.loads(line))
+            except json.JSONDecodeError as e:
+                sys.exit(f"{path}:{n}: not a JSON line: {e}")
+    return lines
+
+
+def index(lines):
+    """Trace lines by (mesh, kind, variant): variant names the tracer and its options."""
+    by = {}
+    for o in lines:
+        tracer = o.get("tracer")
+        if not tracer or "kind" not in o or "rays" not in o:
+            continue
+        variant = tracer
+        if o.get("rays_from") == "bench":
+            variant += " (bench's set)"
+        elif o.get("order"):
+            variant += f" ({o['order']})"
+        elif tracer == "raystream-gpu-fused" and o.get("sah_traversal_cost", 1) not in (1, 1.0):
+            variant += f" (K={o['sah_traversal_cost']:g})"
+        by[(o["mesh"], o["kind"], variant)] = o
+    return by
+
+
+def query_table(by, out):
+    meshes = sorted({m for m, _, _ in by})
+    out.append("| mesh | rays | count | GPU wall | GPU kernel | GPU streamed | OptiX | Warp | "
+               "½ best GPU peer | bar by wall | by streamed | by kernel | CPU | Embree | GPU wall / CPU |")
+    out.append("|" + "---|" * 15)
+    verdicts = defaultdict(list)
+    for m in meshes:
+        for k in KINDS:
+            g = by.get((m, k, "raystream-gpu-fused"))
+            if not g:
+                continue
+            n = g["rays"]
+            wall = grays(n, g.get("trace_ms"))
+            kern = grays(n, g.get("gpu_kernel_ms"))
+            stream = grays(n, g.get("stream_ms"))
+            cpu = by.get((m, k, "raystream-cpu"))
+            emb = by.get((m, k, "embree"))
+            cpu_g = grays(n, cpu and cpu.get("trace_ms"))
+            emb_g = grays(n, emb and emb.get("trace_ms"))
+            peers = PEERS.get(m, {}).get(k)
+            half = max(peers) / 2 if peers else None
+            cells = []
+            for name, x in [("wall", wall), ("streamed", stream), ("kernel", kern)]:
+                if half is None or x is None:
+                    cells.append("–")
+                    continue
+                ok = x >= half
+                verdicts[name].append(ok)
+                cells.append("met" if ok else "**missed**")
+            ratio = f"{wall / cpu_g:.2g}×" if wall and cpu_g else "–"
+            out.append(
+                f"| {m} | {k} | {n:,} | {fmt(wall)} | {fmt(kern)} | {fmt(stream)} | "
+                f"{fmt(peers and peers[0])} | {fmt(peers and peers[1])} | {fmt(half)} | "
+                f"{' | '.join(cells)} | {fmt(cpu_g)} | {fmt(emb_g)} | {ratio} |"
+            )
+    out.append("")
+    for name in ["wall", "streamed", "kernel"]:
+        v = verdicts[name]
+        if v:
+            out.append(f"- First bar by {name} time: met on {sum(v)} of {len(v)} rows.")
+    out.append("")
+
+
+def variants_table(by, out):
+    """Each variant's Grays/s (kernel time where stamped, else wall) beside the fused kernel's."""
+    base = {(m, k): o for (m, k, v), o in by.items() if v == "raystream-gpu-fused"}
+    rows = []
+    for (m, k, v), o in sorted(by.items()):
+        if v in ("raystream-gpu-fused", "raystream-cpu", "embree") or (m, k) not in base:
+            continue
+        b = base[(m, k)]
+        n = o["rays"]
+        row = (m, k, v, grays(n, o.get("trace_ms")), grays(n, o.get("gpu_kernel_ms")),
+               grays(b["rays"], b.get("trace_ms")), grays(b["rays"], b.get("gpu_kernel_ms")),
+               o.get("split_steps"))
+        rows.append(row)
+    if not rows:
+        return
+    out.append("| mesh | rays | variant | wall | kernel | fused wall | fused kernel | wall / fused | "
+               "kernel / fused | split steps |")
+    out.append("|" + "---|" * 10)
+    for m, k, v, w, kn, bw, bk, steps in rows:
+        ratio = lambda x, y: f"{x / y:.2f}" if x and y else "–"  # noqa: E731
+        out.append(f"| {m} | {k} | {v} | {fmt(w)} | {fmt(kn)} | {fmt(bw)} | {fmt(bk)} | "
+                   f"{ratio(w, bw)} | {ratio(kn, bk)} | {'–' if steps is None else steps} |")
+    out.append("")
+
+
+def stats_table(by, sms, threads_per_sm, out):
+    rows = [(m, k, v, o["gpu_stats"]) for (m, k, v), o in sorted(by.items()) if o.get("gpu_stats")]
+    if not rows:
+        return
+    out.append(f"| mesh | rays | tracer | traversal steps / ray | efficiency | leaf visits / ray | "
+               f"efficiency | triangle tests / ray | efficiency | subgroup | peak resident | "
+               f"occupancy (of {sms} × {threads_per_sm}) |")
+    out.append("|" + "---|" * 12)
+    for m, k, v, s in rows:
+        steps, eff = s["steps_per_ray"], s["simd_efficiency"]
+        peak = s.get("peak_resident_invocations")
+        occ = f"{peak / (sms * threads_per_sm):.2f}" if peak else "–"
+        out.append(f"| {m} | {k} | {v} | {steps['traversal']:.1f} | {eff['traversal']:.2f} | "
+                   f"{steps['leaf']:.2f} | {eff['leaf']:.2f} | {steps['triangle']:.2f} | "
+                   f"{eff['triangle']:.2f} | {s.get('subgroup_size', '–')} | {peak or '–'} | {occ} |")
+    out.append("")
+
+
+def checks(lines, out):
+    bad = [o for o in lines if "check" in o and not o.get("pass")]
+    n = sum(1 for o in lines if "check" in o)
+    if not n:
+        return
+    out.append(f"- rays.py check: {n - len(bad)} of {n} passed.")
+    for o in bad:
+        out.append(f"  - FAILED: {o.get('mesh')} {o.get('kind')} {o['check']}: hit agreement "
+                   f"{o.get('hit_agree')}, prim agreement {o.get('prim_agree')}")
+    out.append("")
+
+
+FRAME = re.compile(r"^\[submit (\w+), (\d+) spp\] raystream: wrote .*? render ([\d.]+) ms median of "
+                   r"\d+ = ([\d.]+) frames/s")
+
+
+def render_table(path, out):
+    runs = defaultdict(list)
+    with open(path) as f:
+        for line in f:
+            m = FRAME.match(line)
+            if m:
+                runs[(int(m.group(2)), m.group(1))].append(float(m.group(3)))
+    if not runs:
+        return
+    out.append("| spp | `--submit depth` frame ms | `--submit wave` frame ms | wave / depth (medians) |")
+    out.append("|---|---|---|---|")
+    for spp in sorted({s for s, _ in runs}, reverse=True):
+        d, w = runs.get((spp, "depth"), []), runs.get((spp, "wave"), [])
+        ratio = f"{statistics.median(w) / statistics.median(d):.2f}" if d and w else "–"
+        out.append(f"| {spp} | {', '.join(f'{x:.1f}' for x in d)} | {', '.join(f'{x:.1f}' for x in w)} | {ratio} |")
+    out.append("")
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("results", help="results.jsonl from scripts/device-bench.sh")
+    p.add_argument("--render", help="render.log from the same run")
+    p.add_argument("--sms", type=int, default=132, help="streaming multiprocessors (H100 SXM: 132)")
+    p.add_argument("--threads-per-sm", type=int, default=2048)
+    a = p.parse_args()
+    lines = load(a.results)
+    by = index(lines)
+    out = []
+    machine = next((o for o in lines if "machine" in o), None)
+    adapter = next((o["adapter"] for o in lines if o.get("device") == "gpu" and "adapter" in o), None)
+    commit = next((o["commit"] for o in lines if "commit" in o), None)
+    if machine:
+        out.append(f"Machine: {machine['machine']}, {machine.get('date', '')}; adapter: {adapter}; "
+                   f"commit: {commit or 'not recorded'}.")
+        out.append("")
+    query_table(by, out)
+    variants_table(by, out)
+    stats_table(by, a.sms, a.threads_per_sm, out)
+    checks(lines, out)
+    if a.render:
+        render_table(a.render, out)
+    print("\n".join(out))
+
+
+if __name__ == "__main__":
+    main()
