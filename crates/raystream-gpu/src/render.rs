@@ -13,7 +13,8 @@
 //! - [`Submit::Depth`]: one submission per depth; the host reads the counters back after each,
 //!   stops when the queue is empty and sizes the next depth's queues exactly (a depth's queue
 //!   is at most twice the previous one: one reflection and one refraction per hit), so nothing
-//!   can overflow.
+//!   can overflow; where a queue would outgrow a buffer binding, the frame starts again in
+//!   waves half as large.
 //!
 //! The film is 64-bit fixed point added with atomics: the same image every run, either way;
 //! `kernels/film.wgsl` resolves it on the GPU before the readback.
@@ -102,6 +103,9 @@ pub enum Submit {
     /// queue then outgrows the wave, and every queue is sized for it up front.
     Wave,
 }
+
+/// The queues that [`Submit::Depth`] grows depth by depth (their `ensure` names).
+const GROWING: [&str; 3] = ["next ray queue", "shadow queue", "hits"];
 
 /// The deepest frame run as [`Submit::Wave`] (max depth + 1): beyond it a wave's passes
 /// outgrow one timestamp query set, and queues empty long before.
@@ -622,11 +626,32 @@ impl<'a> GpuRenderer<'a> {
         Ok((film.into_srgb8(), stats))
     }
 
+    /// Renders in waves of at most `self.wave` samples. Where a hit can spawn two rays the
+    /// queues may double every depth; when one then needs more than a binding holds, the frame
+    /// starts again in waves half as large (the image does not depend on the wave size).
     fn run(
         &self,
         opt: &RenderOptions,
         progress: &mut dyn FnMut(DepthStats),
         srgb8: bool,
+    ) -> Result<(Pixels, GpuRenderStats), GpuError> {
+        let mut wave = self.wave;
+        loop {
+            match self.run_in_waves(opt, progress, srgb8, wave) {
+                Err(GpuError::TooLarge { what, .. }) if GROWING.contains(&what) && wave > 1 => {
+                    wave /= 2;
+                }
+                r => return r,
+            }
+        }
+    }
+
+    fn run_in_waves(
+        &self,
+        opt: &RenderOptions,
+        progress: &mut dyn FnMut(DepthStats),
+        srgb8: bool,
+        wave: u32,
     ) -> Result<(Pixels, GpuRenderStats), GpuError> {
         let ctx = self.tracer.ctx;
         let scene = self.scene;
@@ -640,7 +665,7 @@ impl<'a> GpuRenderer<'a> {
                 opt.width, opt.height, opt.spp
             )));
         }
-        let wave = (self.wave as u64).min(total) as u32;
+        let wave = (wave as u64).min(total) as u32;
         let lights = scene.lights.len() as u64;
         let depths = opt.max_depth as u64 + 1;
         let submit = self.submit_for(opt);

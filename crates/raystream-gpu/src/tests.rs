@@ -1045,3 +1045,45 @@ fn srgb8_within_one(got: &[u8], want: &[u8], what: &str) -> usize {
     );
     got.iter().zip(want).filter(|(a, b)| a != b).count()
 }
+
+/// A scene all of glass (a sphere on a glass floor): every hit spawns a reflection and a
+/// refraction, so the queues may double depth by depth. Where they outgrow a binding (lavapipe's
+/// 128 MiB, from a 2^20-sample wave at the third depth) the frame starts again in smaller
+/// waves, and the image is the one rendered in small waves from the start.
+#[test]
+fn queues_past_a_binding_render_again_in_smaller_waves() {
+    let Some(ctx) = gpu() else { return };
+    let mut scene = raystream_scene::Scene::for_mesh(TriMesh::icosphere(3), Path::new("glass.obj"));
+    for m in &mut scene.materials {
+        m.transparency = 0.9;
+        m.reflectivity = 0.05;
+        m.fresnel = true;
+    }
+    let opt = raystream_cpu::RenderOptions {
+        width: 1024,
+        height: 1024,
+        spp: 1,
+        max_depth: 2,
+        traversal: Traversal::Ropes,
+    };
+    let tree = KdTree::build(&scene.mesh, Builder::Sah);
+    let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+    let renderer = GpuRenderer::new(&tracer, &scene, &tree).unwrap();
+    assert_eq!(renderer.submit_for(&opt), Submit::Depth);
+    let (image, stats) = renderer.render(&opt, |_| {}).unwrap();
+    let rays = stats.depths[2].rays as u64;
+    let ray_bytes = std::mem::size_of::<crate::layout::RayWork>() as u64;
+    eprintln!(
+        "{} waves, depth 2: {rays} rays (the next queue needs {} MB at one wave)",
+        stats.waves,
+        (2 * rays * ray_bytes) >> 20
+    );
+    if 2 * rays * ray_bytes > ctx.max_binding() {
+        assert!(stats.waves > 1, "{} waves", stats.waves);
+    }
+    let small = GpuRenderer::new(&tracer, &scene, &tree)
+        .unwrap()
+        .with_wave(1 << 17);
+    let (want, _) = small.render(&opt, |_| {}).unwrap();
+    assert!(image == want, "the frame rendered again differs");
+}
