@@ -732,7 +732,7 @@ impl<'a> GpuTracer<'a> {
             self.run_fused(&q, None)?;
             let stats_buf = q.slot6.as_ref().expect("bound above");
             let w = read_words(ctx, stats_buf)?;
-            let counter = |k: usize| w[2 * k] as u64 | (w[2 * k + 1] as u64) << 32;
+            let counter = |k: usize| u64_at(&w, k);
             for k in 0..3 {
                 total.steps[k] += counter(k);
                 total.active_lanes[k] += counter(4 + k);
@@ -1090,11 +1090,17 @@ impl Timer {
     }
 }
 
+/// The 64-bit value `k` of `words`: words 2k (low) and 2k + 1 (high), as the kernels' 64-bit
+/// counters and resolved timestamps lie.
+pub(crate) fn u64_at(words: &[u32], k: usize) -> u64 {
+    words[2 * k] as u64 | (words[2 * k + 1] as u64) << 32
+}
+
 /// Milliseconds between the first two timestamps of `timer`, once its submission is done;
 /// `None` where the adapter wrote equal stamps: no measurement rather than a false 0.
 fn read_elapsed_ms(ctx: &GpuContext, timer: &Timer) -> Result<Option<f64>, GpuError> {
     let w = read_words(ctx, &timer.readback)?;
-    let ticks = (w[2] as u64 | (w[3] as u64) << 32).wrapping_sub(w[0] as u64 | (w[1] as u64) << 32);
+    let ticks = u64_at(&w, 1).wrapping_sub(u64_at(&w, 0));
     let ms = ticks as f64 * ctx.queue.get_timestamp_period() as f64 * 1e-6;
     Ok((ms > 0.0).then_some(ms))
 }
@@ -1135,7 +1141,10 @@ fn read_back_after<T: bytemuck::Pod>(
                 label: Some("readback"),
             });
         enc.copy_buffer_to_buffer(buf, 0, &staging, 0, buf.size());
-        index = Some(ctx.queue.submit([enc.finish()]));
+        let copied = ctx.queue.submit([enc.finish()]);
+        // Waiting for the copy waits for `index` too; `None` keeps waiting for all work (and
+        // spinning where asked).
+        index = index.map(|_| copied);
         &staging
     };
     let slice = src.slice(..);

@@ -34,7 +34,7 @@ use crate::layout::{
 use crate::volume::{GpuVolume, volume_core_wgsl};
 use crate::{
     GpuContext, GpuError, GpuHit, GpuTracer, Pixels, Timer, WORKGROUP_SIZE, kdtree_wgsl,
-    read_back_after, read_words,
+    read_back_after, read_words, u64_at,
 };
 
 const RENDER_WGSL: &str = include_str!("kernels/render.wgsl");
@@ -230,11 +230,10 @@ impl Tally {
         if !self.timed {
             return;
         }
-        let stamp = |i: usize| words[2 * i] as u64 | (words[2 * i + 1] as u64) << 32;
         let period = ctx.queue.get_timestamp_period() as f64 * 1e-6;
         let mut any = false;
         for (j, &k) in order.iter().enumerate() {
-            let ticks = stamp(2 * j + 1).wrapping_sub(stamp(2 * j));
+            let ticks = u64_at(words, 2 * j + 1).wrapping_sub(u64_at(words, 2 * j));
             any |= ticks > 0;
             self.stage_ms[k] += ticks as f64 * period;
         }
@@ -271,17 +270,24 @@ impl Tally {
         words[counter::QUEUE as usize] as u64
     }
 
-    /// A finished [`Submit::Wave`] wave: its depths' statistics up to the first whose next
-    /// queue was empty (as [`Submit::Depth`] stops there), and its passes' timestamps.
+    /// A finished [`Submit::Wave`] wave, once its submission `index` is done: reads its
+    /// readback `buf` (the wait counted in `stats.wait_ms`), then its depths' statistics up to
+    /// the first whose next queue was empty (as [`Submit::Depth`] stops there), and its passes'
+    /// timestamps.
+    #[allow(clippy::too_many_arguments)]
     fn wave(
         &mut self,
-        words: &[u32],
+        ctx: &GpuContext,
+        buf: &wgpu::Buffer,
+        index: wgpu::SubmissionIndex,
         shape: &FrameShape,
         passes: &[usize],
         stats: &mut GpuRenderStats,
         progress: &mut dyn FnMut(DepthStats),
-        ctx: &GpuContext,
-    ) {
+    ) -> Result<(), GpuError> {
+        let waited = Instant::now();
+        let words: Vec<u32> = read_back_after(ctx, buf, Some(index))?;
+        stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
         let slots = counter::SLOTS as usize;
         for (d, set) in words
             .chunks_exact(slots)
@@ -293,6 +299,7 @@ impl Tally {
             }
         }
         self.stamps(&words[shape.counter_sets as usize * slots..], passes, ctx);
+        Ok(())
     }
 }
 
@@ -497,20 +504,22 @@ impl<'a> GpuRenderer<'a> {
         })
     }
 
-    /// Grows `buf` to hold `n` items of `T` (its old contents are not kept).
+    /// Grows `buf` to hold `n` items of `T` (its old contents are not kept); returns whether it
+    /// grew (a new buffer, to be bound anew).
     fn ensure<T>(
         &self,
         buf: &mut wgpu::Buffer,
         what: &'static str,
         n: u64,
-    ) -> Result<(), GpuError> {
+    ) -> Result<bool, GpuError> {
         let need = n * std::mem::size_of::<T>() as u64;
-        if buf.size() < need {
-            let ctx = self.tracer.ctx;
-            let size = grown_size(need, ctx.max_binding());
-            *buf = ctx.work_buffer(what, size, wgpu::BufferUsages::empty())?;
+        if buf.size() >= need {
+            return Ok(false);
         }
-        Ok(())
+        let ctx = self.tracer.ctx;
+        let size = grown_size(need, ctx.max_binding());
+        *buf = ctx.work_buffer(what, size, wgpu::BufferUsages::empty())?;
+        Ok(true)
     }
 
     /// Asks for `submit` ([`Submit::Wave`] by default); [`GpuRenderer::submit_for`] says what
@@ -538,14 +547,14 @@ impl<'a> GpuRenderer<'a> {
             .collect()
     }
 
-    /// Records the passes of depth `depth` of a wave of `n` samples, tracing ray queue `cur`;
-    /// pass j writes timestamps 2(first + j) and 2(first + j) + 1. Returns `first` plus the
-    /// passes recorded.
+    /// Records the passes `order` (a depth's, [`GpuRenderer::passes`]) of a wave of `n`
+    /// samples, tracing ray queue `cur`; pass j writes timestamps 2(first + j) and
+    /// 2(first + j) + 1. Returns `first` plus the passes recorded.
     #[allow(clippy::too_many_arguments)]
     fn record_depth(
         &self,
         enc: &mut wgpu::CommandEncoder,
-        depth: u32,
+        order: &[usize],
         n: u32,
         g: &Groups,
         cur: usize,
@@ -553,7 +562,6 @@ impl<'a> GpuRenderer<'a> {
         first: u32,
     ) -> u32 {
         let ctx = self.tracer.ctx;
-        let order = self.passes(depth);
         for (j, &k) in order.iter().enumerate() {
             let stage = STAGES[k];
             let stamp = 2 * (first + j as u32);
@@ -669,10 +677,9 @@ impl<'a> GpuRenderer<'a> {
         let lights = scene.lights.len() as u64;
         let depths = opt.max_depth as u64 + 1;
         let submit = self.submit_for(opt);
-        // The passes one readback's timestamps cover: a depth's, or a whole wave's.
-        let wave_passes: Vec<usize> = (0..opt.max_depth + 1)
-            .flat_map(|d| self.passes(d))
-            .collect();
+        // Each depth's passes, and a whole wave's (what one readback's timestamps cover).
+        let depth_passes: Vec<Vec<usize>> = (0..=opt.max_depth).map(|d| self.passes(d)).collect();
+        let wave_passes = depth_passes.concat();
         let shape = FrameShape {
             pixels,
             wave: wave as u64,
@@ -762,7 +769,8 @@ impl<'a> GpuRenderer<'a> {
         // submission).
         let mut in_flight: Option<(usize, wgpu::SubmissionIndex)> = None;
         let mut slot = 0usize;
-        let wave_groups = (submit == Submit::Wave).then(|| groups(&q));
+        // Bound anew only where a depth grows a queue ([`Submit::Depth`]).
+        let mut g = groups(&q);
         let mut base = 0u64;
         while base < total {
             let n = (total - base).min(wave as u64) as u32;
@@ -780,7 +788,7 @@ impl<'a> GpuRenderer<'a> {
                 .write_buffer(&q.counters, 0, bytemuck::cast_slice(&counters));
             ctx.queue
                 .write_buffer(&q.args, QUEUE_ARGS, bytemuck::cast_slice(&ctx.dims(n)));
-            if let Some(g) = &wave_groups {
+            if submit == Submit::Wave {
                 // Every depth in one submission; the counters after each depth go aside.
                 let mut enc = ctx
                     .device
@@ -788,8 +796,8 @@ impl<'a> GpuRenderer<'a> {
                         label: Some("wave"),
                     });
                 let mut pass = 0u32;
-                for depth in 0..=opt.max_depth {
-                    pass = self.record_depth(&mut enc, depth, n, g, depth as usize % 2, &q, pass);
+                for (depth, order) in depth_passes.iter().enumerate() {
+                    pass = self.record_depth(&mut enc, order, n, &g, depth % 2, &q, pass);
                     let at = depth as u64 * COUNTER_BYTES;
                     enc.copy_buffer_to_buffer(&q.counters, 0, &q.readback[slot], at, COUNTER_BYTES);
                 }
@@ -798,15 +806,11 @@ impl<'a> GpuRenderer<'a> {
                 let waited = Instant::now();
                 let index = ctx.queue.submit([cmd]);
                 stats.submissions += 1;
-                // The GPU has this wave queued while the host reads the last one's counters.
-                let last = in_flight.replace((slot, index));
-                let words = match last {
-                    Some((s, i)) => Some(read_back_after(ctx, &q.readback[s], Some(i))?),
-                    None => None,
-                };
                 stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
-                if let Some(words) = words {
-                    tally.wave(&words, &shape, &wave_passes, &mut stats, progress, ctx);
+                // The GPU has this wave queued while the host reads the last one's counters.
+                if let Some((s, i)) = in_flight.replace((slot, index)) {
+                    let buf = &q.readback[s];
+                    tally.wave(ctx, buf, i, &shape, &wave_passes, &mut stats, progress)?;
                 }
                 slot = 1 - slot;
                 base += n as u64;
@@ -814,17 +818,21 @@ impl<'a> GpuRenderer<'a> {
             }
             let mut cur = 0usize;
             let mut count = n as u64;
-            for depth in 0..=opt.max_depth {
-                self.ensure::<RayWork>(&mut q.rays[1 - cur], "next ray queue", 2 * count)?;
-                self.ensure::<ShadowWork>(&mut q.shadows, "shadow queue", count * lights)?;
-                self.ensure::<GpuHit>(&mut q.hits, "hits", count.max(count * lights))?;
-                let g = groups(&q);
+            for (depth, order) in depth_passes.iter().enumerate() {
+                let grew = [
+                    self.ensure::<RayWork>(&mut q.rays[1 - cur], "next ray queue", 2 * count)?,
+                    self.ensure::<ShadowWork>(&mut q.shadows, "shadow queue", count * lights)?,
+                    self.ensure::<GpuHit>(&mut q.hits, "hits", count.max(count * lights))?,
+                ];
+                if grew.contains(&true) {
+                    g = groups(&q);
+                }
                 let mut enc = ctx
                     .device
                     .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                         label: Some("depth"),
                     });
-                let passes = self.record_depth(&mut enc, depth, n, &g, cur, &q, 0);
+                let passes = self.record_depth(&mut enc, order, n, &g, cur, &q, 0);
                 q.copy_stamps(&mut enc, passes, 0, stamp_offset);
                 enc.copy_buffer_to_buffer(&q.counters, 0, &q.readback[0], 0, COUNTER_BYTES);
                 let cmd = enc.finish();
@@ -834,8 +842,8 @@ impl<'a> GpuRenderer<'a> {
                 let words = read_words(ctx, &q.readback[0])?;
                 stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
                 let stamps = &words[stamp_offset as usize / 4..];
-                tally.stamps(stamps, &self.passes(depth), ctx);
-                count = tally.depth(&words, depth, &mut stats, progress);
+                tally.stamps(stamps, order, ctx);
+                count = tally.depth(&words, depth as u32, &mut stats, progress);
                 if count == 0 {
                     break;
                 }
@@ -844,10 +852,8 @@ impl<'a> GpuRenderer<'a> {
             base += n as u64;
         }
         if let Some((s, i)) = in_flight {
-            let waited = Instant::now();
-            let words = read_back_after(ctx, &q.readback[s], Some(i))?;
-            stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
-            tally.wave(&words, &shape, &wave_passes, &mut stats, progress, ctx);
+            let buf = &q.readback[s];
+            tally.wave(ctx, buf, i, &shape, &wave_passes, &mut stats, progress)?;
         }
         let (stage_ms, timed) = (tally.stage_ms, tally.timed);
         let film_t = Instant::now();

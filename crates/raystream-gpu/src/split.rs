@@ -11,7 +11,7 @@
 
 use std::collections::VecDeque;
 
-use crate::{GpuContext, GpuError, GpuTracer, kdtree_wgsl, read_back_after};
+use crate::{GpuContext, GpuError, GpuTracer, kdtree_wgsl, read_back_after, u64_at};
 
 const SPLIT_WGSL: &str = include_str!("kernels/split.wgsl");
 
@@ -174,7 +174,6 @@ pub(crate) fn run(
     // rather than a false 0), and a submission of finished steps may take no time.
     let mut timed = false;
     let mut cur = 0usize;
-    let mut submitted_init = false;
     let mut recorded = 0u32;
     // Submissions whose counts are not read yet, oldest first: (readback slot, submission).
     let mut in_flight = VecDeque::new();
@@ -189,7 +188,8 @@ pub(crate) fn run(
                     label: Some("split"),
                 });
             let mut first = true;
-            if !submitted_init {
+            // The first submission starts with `split_init`.
+            if recorded == 0 {
                 let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("split_init"),
                     timestamp_writes: stamp(true, false),
@@ -201,7 +201,6 @@ pub(crate) fn run(
                 pass.dispatch_workgroups(gx, gy, 1);
                 drop(pass);
                 first = false;
-                submitted_init = true;
                 advance(&mut enc, &mut cur, None);
             }
             let batch = ITERATIONS_PER_SUBMIT.min(max_steps - recorded);
@@ -239,9 +238,8 @@ pub(crate) fn run(
         let (s, index) = in_flight.pop_front().expect("a submission in flight");
         let words: Vec<u32> = read_back_after(ctx, &counts_read[s], Some(index))?;
         if timer.is_some() {
-            let t0 = words[4] as u64 | (words[5] as u64) << 32;
-            let t1 = words[6] as u64 | (words[7] as u64) << 32;
-            let ticks = t1.wrapping_sub(t0);
+            // The stamps after the 16 bytes of counts.
+            let ticks = u64_at(&words, 3).wrapping_sub(u64_at(&words, 2));
             timed |= ticks > 0;
             gpu_ms += ticks as f64 * ctx.queue.get_timestamp_period() as f64 * 1e-6;
         }

@@ -526,7 +526,7 @@ fn statistics_counters_carry_past_32_bits() {
     }
     ctx.queue.submit([enc.finish()]);
     let w = read_words(&ctx, &buf).unwrap();
-    let counter = |k: usize| w[2 * k] as u64 | (w[2 * k + 1] as u64) << 32;
+    let counter = |k: usize| u64_at(&w, k);
     assert_eq!(counter(0), 256 << 28);
     assert_eq!(counter(1), 256 * ((1 << 28) - 1));
 }

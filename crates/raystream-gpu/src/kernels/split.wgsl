@@ -8,7 +8,8 @@
 //   split_advance:   the other list becomes the active one; dispatch arguments for it
 //
 // The host repeats traverse → intersect → advance, swapping the two lists, until no ray is
-// active (steps recorded after that dispatch nothing). Each active ray yields exactly one work item, so item k belongs to list entry k.
+// active (steps recorded after that dispatch nothing). Each active ray yields exactly one work
+// item, so item k belongs to list entry k.
 
 struct RayState {
     t_entry: f32,
