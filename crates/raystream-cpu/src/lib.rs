@@ -14,6 +14,7 @@
 //!
 //! The result is deterministic: queues keep their order and `accumulate` adds in queue order.
 
+mod aov;
 pub mod dvr;
 mod image_out;
 pub mod medium;
@@ -23,6 +24,7 @@ use raystream_accel::{Hit, KdTree, Traversal};
 use raystream_math::{Ray, Vec3};
 use raystream_scene::{Camera, Scene};
 
+pub use aov::{Aov, AovImage, aov_image, aov_rays, prim_colour};
 pub use image_out::{Image, save_srgb8_png, srgb8_diff};
 pub use medium::Medium;
 

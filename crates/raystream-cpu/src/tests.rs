@@ -170,3 +170,101 @@ fn srgb_encoding() {
     };
     assert_eq!(img.to_srgb8(), vec![0, 0, 0, 188, 188, 188, 255, 255, 255]);
 }
+
+/// `--aov`: a square seen head-on (some pixels miss it). Every pixel against the brute-force
+/// closest hit of its ray: misses black; depth the distance's grey level (the nearest hit
+/// white, the farthest 1, within a level); the normal facing the eye (0, 0, 1) → (128, 128,
+/// 255); each triangle its own colour.
+#[test]
+fn aovs_follow_the_brute_force_hits() {
+    let s = scene(
+        r#"
+        [camera]
+        eye = [0, 0, 0]
+        target = [0, 0, -1]
+        fov = 90
+        [[objects]]
+        shape = "quad"
+        rotate = [90, 0, 0]
+        translate = [0.3, 0, -2]
+        "#,
+    );
+    let (w, h) = (24u32, 16u32);
+    let tree = KdTree::build(&s.mesh, Builder::Sah);
+    let corners: Vec<[Vec3; 3]> = (0..s.mesh.len()).map(|i| s.mesh.corners(i)).collect();
+    let rays = aov_rays(&s.camera_for(w as f32 / h as f32), w, h);
+    let hits = tree.intersect_all(&rays, Traversal::Ropes, false);
+    let want: Vec<Option<Hit>> = rays
+        .iter()
+        .map(|r| raystream_accel::brute::closest(&corners, r))
+        .collect();
+    let hit_count = want.iter().flatten().count();
+    assert!(
+        hit_count > 0 && hit_count < rays.len(),
+        "{hit_count} of {} pixels hit: the test needs both",
+        rays.len()
+    );
+    let prims: std::collections::BTreeSet<u32> = want.iter().flatten().map(|h| h.prim).collect();
+    assert_eq!(prims.len(), 2, "both triangles of the square in view");
+    let dist: Vec<Option<f32>> = rays
+        .iter()
+        .zip(&want)
+        .map(|(r, h)| h.map(|h| h.t * r.dir.length()))
+        .collect();
+    let near = dist.iter().flatten().fold(f32::INFINITY, |a, &b| a.min(b));
+    let far = dist.iter().flatten().fold(0.0f32, |a, &b| a.max(b));
+
+    let AovImage::Gray16 { pixels, range, .. } = aov_image(&s, &rays, &hits, w, h, Aov::Depth)
+    else {
+        panic!("depth is 16-bit grey")
+    };
+    let (n, f) = range.expect("hits");
+    assert!(
+        (n - near).abs() < 1e-5 && (f - far).abs() < 1e-5,
+        "range {n}..{f}"
+    );
+    for (i, d) in dist.iter().enumerate() {
+        let want_level = d.map_or(0.0, |d| 1.0 + 65534.0 * (far - d) / (far - near));
+        assert!(
+            (pixels[i] as f32 - want_level).abs() <= 1.0,
+            "depth pixel {i}: {} vs {want_level}",
+            pixels[i]
+        );
+    }
+    assert!(pixels.contains(&u16::MAX) && pixels.contains(&1));
+
+    for aov in [Aov::Normal, Aov::Prim] {
+        let AovImage::Rgb8 { pixels, .. } = aov_image(&s, &rays, &hits, w, h, aov) else {
+            panic!("{aov:?} is RGB")
+        };
+        for (i, hit) in want.iter().enumerate() {
+            let rgb = &pixels[3 * i..3 * i + 3];
+            let expect = match (hit, aov) {
+                (None, _) => [0, 0, 0],
+                (Some(_), Aov::Normal) => [128, 128, 255],
+                (Some(h), _) => prim_colour(h.prim),
+            };
+            assert_eq!(rgb, expect, "{aov:?} pixel {i}");
+        }
+    }
+    // Neighbouring triangles get different colours, never a miss's black.
+    let colours: Vec<[u8; 3]> = (0..1000).map(prim_colour).collect();
+    assert!(colours.windows(2).all(|c| c[0] != c[1]));
+    assert!(colours.iter().all(|c| c.iter().all(|&v| v >= 32)));
+}
+
+/// A 16-bit depth image survives the PNG round trip.
+#[test]
+fn depth_aov_png_round_trip() {
+    let img = AovImage::Gray16 {
+        width: 3,
+        height: 1,
+        pixels: vec![0, 1, 65535],
+        range: Some((1.0, 2.0)),
+    };
+    let path = std::env::temp_dir().join(format!("raystream-aov-{}.png", std::process::id()));
+    img.save_png(&path).unwrap();
+    let back = image::open(&path).unwrap().to_luma16();
+    std::fs::remove_file(&path).ok();
+    assert_eq!(back.into_raw(), vec![0, 1, 65535]);
+}

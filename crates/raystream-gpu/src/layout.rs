@@ -49,6 +49,18 @@ pub struct GpuHit {
     pub v: f32,
 }
 
+impl GpuHit {
+    /// The hit as the CPU traversal reports it; `None` for a miss.
+    pub fn hit(&self) -> Option<raystream_accel::Hit> {
+        (self.prim != crate::NO_PRIM).then_some(raystream_accel::Hit {
+            t: self.t,
+            prim: self.prim,
+            u: self.u,
+            v: self.v,
+        })
+    }
+}
+
 /// `Params` in WGSL (uniform), 48 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]

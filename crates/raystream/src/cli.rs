@@ -9,7 +9,7 @@ use raystream_accel::{Builder, Traversal};
 #[command(
     name = "raystream",
     version,
-    about = "Stream ray tracing of triangle meshes (and, soon, CT volumes) on the GPU and the CPU"
+    about = "Stream ray tracing of triangle meshes and CT volumes on the GPU and the CPU"
 )]
 pub struct Cli {
     #[command(subcommand)]
@@ -75,6 +75,24 @@ pub enum KernelsArg {
     Split,
     Persistent,
     Ifif,
+}
+
+/// `render --aov`: what the image of each pixel's closest hit shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum AovArg {
+    Depth,
+    Normal,
+    Prim,
+}
+
+impl From<AovArg> for raystream_cpu::Aov {
+    fn from(a: AovArg) -> Self {
+        match a {
+            AovArg::Depth => raystream_cpu::Aov::Depth,
+            AovArg::Normal => raystream_cpu::Aov::Normal,
+            AovArg::Prim => raystream_cpu::Aov::Prim,
+        }
+    }
 }
 
 /// GPU rendering: how the host submits the depths of a wave of samples.
@@ -188,6 +206,13 @@ pub struct RenderArgs {
     pub mode: Option<ModeArg>,
     #[command(flatten)]
     pub look: VolumeLook,
+    /// Instead of a shaded picture, one ray through each pixel's centre and an image of its
+    /// closest hit: depth (distance from the eye, 16-bit grey, nearest white), normal (the
+    /// shading normal facing the eye, RGB = 128 + 127 n) or prim (a colour per triangle);
+    /// misses black. The triangles of meshes, volumes' bones and scenes (a scene's volume is
+    /// left out).
+    #[arg(long, value_enum, conflicts_with_all = ["mode", "spp", "max_depth", "repeat", "submit"])]
+    pub aov: Option<AovArg>,
     /// With --mode: a turntable of N frames, one every 360/N degrees about the patient's
     /// superior axis, written as OUTPUT/frame_000.png … (-o names the folder).
     #[arg(long, requires = "mode", value_parser = clap::value_parser!(u32).range(1..=3600))]

@@ -5,8 +5,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
+use raystream_accel::Hit;
 use raystream_accel::Traversal;
-use raystream_cpu::{DepthStats, RenderOptions, prepare_volume, render_prepared};
+use raystream_cpu::{
+    Aov, AovImage, DepthStats, RenderOptions, aov_image, aov_rays, prepare_volume, render_prepared,
+};
 use raystream_gpu::{GpuRenderer, GpuTracer};
 use raystream_scene::Scene;
 
@@ -192,6 +195,68 @@ fn turntable(
     Ok(())
 }
 
+/// `render --aov …`: one ray through each pixel's centre, traced on the chosen device, and the
+/// image of its closest hit (made on the host from either device's hits).
+fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
+    let backend = open_device(a.accel.device, a.accel.adapter.as_deref(), a.quiet)?;
+    let traversal = Traversal::from(a.accel.traversal);
+    if matches!(backend, Backend::Gpu(_)) && traversal != Traversal::Ropes {
+        bail!("--device gpu runs the rope traversal only (--traversal ropes)");
+    }
+    let t0 = Instant::now();
+    let (scene, _) = load_scene(a)?;
+    let load_ms = ms(t0.elapsed());
+    let pb = spinner(
+        a.quiet,
+        &format!("building kd-tree over {} triangles", scene.mesh.len()),
+    );
+    let tree = a.accel.tree.build(&scene.mesh);
+    pb.finish_and_clear();
+    let (width, height) = a.size;
+    let rays = aov_rays(
+        &scene.camera_for(width as f32 / height as f32),
+        width,
+        height,
+    );
+    let pb = spinner(a.quiet, &format!("tracing {} rays", rays.len()));
+    let t1 = Instant::now();
+    let hits: Vec<Option<Hit>> = match &backend {
+        Backend::Gpu(ctx) => {
+            let tracer = GpuTracer::new(ctx, &tree).with_context(|| ctx.describe())?;
+            let (hits, _) = tracer.trace(&rays, false)?;
+            hits.iter().map(|h| h.hit()).collect()
+        }
+        Backend::Cpu => tree.intersect_all(&rays, traversal, false),
+    };
+    let trace_ms = ms(t1.elapsed());
+    pb.finish_and_clear();
+    let image = aov_image(&scene, &rays, &hits, width, height, aov);
+    image.save_png(&a.output).map_err(anyhow::Error::msg)?;
+    if !a.quiet {
+        let range = match &image {
+            AovImage::Gray16 {
+                range: Some((near, far)),
+                ..
+            } => format!(", white = {near:.4}, grey level 1 = {far:.4} scene units from the eye"),
+            _ => String::new(),
+        };
+        eprintln!(
+            "raystream: wrote {} (--aov {}, {width}x{height}, one ray a pixel) on {} ({}): {} of {} rays hit{range}; load {load_ms:.0} ms, kd-tree {:.0} ms, trace {trace_ms:.1} ms",
+            a.output.display(),
+            aov.name(),
+            backend.name(),
+            backend.adapter(),
+            hits.iter().flatten().count(),
+            rays.len(),
+            tree.stats.build_ms,
+        );
+        if scene.volume.is_some() {
+            eprintln!("raystream: the scene's volume is left out of --aov (its triangles only)");
+        }
+    }
+    Ok(())
+}
+
 pub fn run(a: &RenderArgs) -> Result<()> {
     if let Some(mode) = a.mode {
         return render_direct(a, mode.into());
@@ -208,6 +273,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         bail!(
             "--tf, --step, --window/--level, --no-skip, --shadows, --crop and --clip-plane go with --mode (direct volume rendering)"
         );
+    }
+    if let Some(aov) = a.aov {
+        return render_aov(a, aov.into());
     }
     let backend = open_device(a.accel.device, a.accel.adapter.as_deref(), a.quiet)?;
     if matches!(backend, Backend::Gpu(_)) && Traversal::from(a.accel.traversal) != Traversal::Ropes

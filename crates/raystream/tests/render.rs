@@ -707,3 +707,80 @@ fn bench_volume_rendering() {
         );
     }
 }
+
+/// `render --aov`: the GPU's ray queries give the CPU's images (the triangle and normal
+/// images equal but for ties at shared edges, ≤ 0.1 % of pixels; distances within one grey
+/// level); the summary names what was written; `--aov` refuses what a shaded frame needs.
+#[test]
+fn aovs_on_the_gpu_match_the_cpu() {
+    let bunny = mesh("stanford_bunny.ply");
+    let devices: &[&str] = if gpu_available() {
+        &["cpu", "gpu"]
+    } else {
+        &["cpu"]
+    };
+    for aov in ["prim", "normal", "depth"] {
+        let mut images = Vec::new();
+        for dev in devices {
+            let out = tmp(&format!("aov-{aov}-{dev}.png"));
+            let o = run(&[
+                "render",
+                &bunny,
+                "--aov",
+                aov,
+                "--size",
+                "96x72",
+                "--device",
+                dev,
+                "-o",
+                out.to_str().unwrap(),
+            ]);
+            assert!(o.status.success(), "{aov} on {dev}: {}", stderr(&o));
+            assert!(
+                stderr(&o).contains(&format!("(--aov {aov}, 96x72, one ray a pixel)")),
+                "{}",
+                stderr(&o)
+            );
+            images.push(image::open(&out).unwrap());
+        }
+        let cpu = &images[0];
+        let (w, h) = (cpu.width() as usize, cpu.height() as usize);
+        assert_eq!((w, h), (96, 72));
+        if aov == "depth" {
+            let c = cpu.to_luma16().into_raw();
+            let hits = c.iter().filter(|&&v| v > 0).count();
+            assert!(hits > w * h / 4, "{aov}: {hits} hits");
+            assert!(
+                c.contains(&u16::MAX) && c.contains(&1),
+                "{aov}: a full range"
+            );
+            if let Some(gpu) = images.get(1) {
+                let g = gpu.to_luma16().into_raw();
+                let off = c
+                    .iter()
+                    .zip(&g)
+                    .filter(|(a, b)| a.abs_diff(**b) > 1)
+                    .count();
+                assert!(
+                    off * 1000 <= w * h,
+                    "{aov}: {off} pixels differ by > 1 level"
+                );
+            }
+        } else {
+            let c = cpu.to_rgb8().into_raw();
+            let lit = c.chunks(3).filter(|p| p != &[0, 0, 0]).count();
+            assert!(lit > w * h / 4, "{aov}: {lit} pixels hit");
+            if let Some(gpu) = images.get(1) {
+                let g = gpu.to_rgb8().into_raw();
+                let off = c.chunks(3).zip(g.chunks(3)).filter(|(a, b)| a != b).count();
+                assert!(off * 1000 <= w * h, "{aov}: {off} pixels differ");
+            }
+        }
+    }
+    let o = run(&["render", &bunny, "--aov", "depth", "--spp", "4"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--spp"), "{}", stderr(&o));
+    let o = run(&["render", "--aov", "depth", "--mode", "mip"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--mode"), "{}", stderr(&o));
+}
