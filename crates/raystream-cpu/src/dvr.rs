@@ -333,7 +333,7 @@ impl<'a> Marcher<'a> {
 
     /// Front-to-back emission–absorption over `[t0, t1]` (mm) of `ray` (LPS, unit direction;
     /// `o_idx`, `d_idx` its index form) on the lattice t0 + (k + jitter)·step, each sample lit
-    /// by `lights` ([`shade_sample`]); early termination below 1 % transmittance, transparent
+    /// by `lights` (`shade_sample`); early termination below 1 % transmittance, transparent
     /// bricks skipped when `skip`.
     #[allow(clippy::too_many_arguments)]
     pub fn composite(
