@@ -50,7 +50,7 @@ pub(crate) struct Slice {
     pub(crate) rows: u32,
     pub(crate) cols: u32,
     frames: u32,
-    position: [f64; 3],
+    pub(crate) position: [f64; 3],
     orientation: [f64; 6],
     pixel_spacing: [f64; 2],
     between_slices: Option<f64>,
@@ -66,6 +66,9 @@ pub fn list_dicom_series(path: &Path) -> Result<Vec<(String, usize, String)>, Vo
 
 pub(crate) fn load(path: &Path, series: Option<&str>) -> Result<Volume, VolumeError> {
     let (slices, mut warnings) = read_folder(path)?;
+    // So far the warnings are the files skipped as unreadable; a problem with the series (a
+    // gap, above all) is often one of them, so its error names them.
+    let skipped = warnings.clone();
     let all = group(&slices);
     let uid = match series {
         Some(s) => all
@@ -96,7 +99,24 @@ pub(crate) fn load(path: &Path, series: Option<&str>) -> Result<Volume, VolumeEr
         }
     };
     let mut chosen: Vec<Slice> = slices.into_iter().filter(|s| s.series_uid == uid).collect();
-    assemble(path, &mut chosen, all, warnings)
+    assemble(path, &mut chosen, all, warnings).map_err(|e| mention_skipped(e, &skipped))
+}
+
+/// `e`, with the files of the folder that were skipped as unreadable (`skipped`: "skipped
+/// FILE: PROBLEM") added to its problem.
+fn mention_skipped(e: VolumeError, skipped: &[String]) -> VolumeError {
+    match (e, skipped) {
+        (VolumeError::Invalid { path, problem }, [first, rest @ ..]) => VolumeError::Invalid {
+            path,
+            problem: format!(
+                "{problem}; {} unreadable file{} in the folder: {first}{}",
+                skipped.len(),
+                if rest.is_empty() { " was" } else { "s were" },
+                if rest.is_empty() { "" } else { "; …" }
+            ),
+        },
+        (e, _) => e,
+    }
 }
 
 fn describe(d: &str) -> String {

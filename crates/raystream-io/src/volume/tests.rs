@@ -273,6 +273,44 @@ fn unknown_series_lists_the_ones_there() {
     );
 }
 
+/// A series with a slice that cannot be read: the gap it leaves is refused, and the error names
+/// the file that was skipped (the cause), not only the gap.
+#[test]
+fn a_gap_left_by_an_unreadable_slice_names_the_file() {
+    let src = shared("dicom/abdomen_ct_j2k_totalseg");
+    let dir = std::env::temp_dir().join(format!("raystream-gap-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut names: Vec<_> = std::fs::read_dir(&src)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    names.sort();
+    for n in &names {
+        std::fs::copy(src.join(n), dir.join(n)).unwrap();
+    }
+    // Cut the slice in the middle of the stack (by position, not by name) to 3000 bytes.
+    assert_eq!(load_volume(&dir, None).unwrap().dims[2], names.len());
+    let mut by_z: Vec<(f64, &std::ffi::OsString)> = names
+        .iter()
+        .map(|n| {
+            let s = dicom::parse_slice(&std::fs::read(dir.join(n)).unwrap(), Path::new("x"));
+            (s.unwrap().position[2], n)
+        })
+        .collect();
+    by_z.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let cut = by_z[by_z.len() / 2].1;
+    let bytes = std::fs::read(dir.join(cut)).unwrap();
+    std::fs::write(dir.join(cut), &bytes[..3000]).unwrap();
+    let e = load_volume(&dir, None).unwrap_err().to_string();
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(
+        e.contains("uneven slice spacing")
+            && e.contains("1 unreadable file was in the folder")
+            && e.contains(cut.to_str().unwrap()),
+        "{e}"
+    );
+}
+
 /// A 4×3×2 int16 volume with values `i + 10 j + 100 k − 1000`.
 fn ramp_i16() -> Vec<u8> {
     let mut out = Vec::new();
