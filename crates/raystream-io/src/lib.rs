@@ -176,7 +176,8 @@ impl TriMesh {
     }
 
     /// The checks every loaded mesh passes: at least one triangle, indices in range, finite
-    /// coordinates, and not all triangles collapsed into one point.
+    /// coordinates within ±[`raystream_math::MAX_COORDINATE`], and not all triangles collapsed
+    /// into one point.
     pub fn check(&self, path: &Path) -> Result<(), MeshError> {
         if self.triangles.is_empty() {
             return Err(MeshError::invalid(path, "mesh has no triangles"));
@@ -198,6 +199,20 @@ impl TriMesh {
                 path,
                 format!(
                     "vertex {i} has a coordinate that is NaN or infinite ({:?})",
+                    self.positions[i]
+                ),
+            ));
+        }
+        if let Some(i) = self
+            .positions
+            .iter()
+            .position(|p| p.abs().max_element() > raystream_math::MAX_COORDINATE)
+        {
+            return Err(MeshError::invalid(
+                path,
+                format!(
+                    "vertex {i} lies beyond ±{:e} ({:?}), too far from the origin for f32 triangle tests; scale or move the mesh",
+                    raystream_math::MAX_COORDINATE,
                     self.positions[i]
                 ),
             ));

@@ -3,6 +3,13 @@
 
 pub use glam::{DAffine3, DMat3, DVec3, Mat3, Mat4, Quat, UVec3, Vec2, Vec3, Vec3A, Vec4};
 
+/// The largest coordinate a mesh, scene or volume may hold, in scene units (millimetres for
+/// CT). The watertight triangle test (Woop et al. 2013) multiplies three coordinate differences
+/// in f32, which overflows from about 7·10¹² on, and the CPU and GPU then disagree; 10¹⁰
+/// leaves room for the ground and the camera placed around the objects (tens of times their
+/// size). Inputs beyond it are refused with an error, not rendered wrong.
+pub const MAX_COORDINATE: f32 = 1e10;
+
 /// A ray `o + t·d` with the interval of t that counts, `t_min ≤ t ≤ t_max`. The direction need not
 /// be unit length: t is measured in units of `|d|`.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -22,7 +22,11 @@ pub struct Camera {
 
 impl Camera {
     pub fn look_at(eye: Vec3, target: Vec3, up: Vec3, fov_y_deg: f32) -> Camera {
-        let fwd = (target - eye).normalize();
+        Self::looking_along(eye, (target - eye).normalize(), up, fov_y_deg)
+    }
+
+    /// A camera at `eye` looking along the unit vector `fwd`.
+    fn looking_along(eye: Vec3, fwd: Vec3, up: Vec3, fov_y_deg: f32) -> Camera {
         let right = fwd.cross(up).normalize();
         Camera {
             eye,
@@ -44,7 +48,9 @@ impl Camera {
         let b = Aabb::from_points(points);
         let center = b.center();
         let back = view_dir.normalize();
-        let mut cam = Camera::look_at(center + back, center, Vec3::Y, FRAME_FOV_DEG);
+        // The view direction straight from `back`, as rays.py takes it (not from an eye one
+        // unit from the centre, which rounds onto the centre far from the origin).
+        let mut cam = Camera::looking_along(center, -back, Vec3::Y, FRAME_FOV_DEG);
         let tan_x = cam.tan_y * aspect;
         let step = (points.len() / FRAME_SAMPLES).max(1);
         let need = points
@@ -91,5 +97,33 @@ mod tests {
         // The centre pixel looks at the box centre.
         let r = cam.ray(8.0, 4.5, 16, 9);
         assert!((r.dir - cam.fwd).length() < 1e-6);
+    }
+
+    /// Framing does not depend on where the points are or how large: the same view from 1e-3
+    /// to 1e12 units (an eye one unit from the centre used to round onto it far from the
+    /// origin, leaving a NaN view and an empty image).
+    #[test]
+    fn framing_holds_at_any_scale_and_place() {
+        let pts: Vec<Vec3> = (0..100)
+            .map(|i| Vec3::new(i as f32, (i * 7 % 13) as f32, -(i as f32) * 0.5))
+            .collect();
+        let unit = Camera::frame(&pts, 1.5);
+        for scale in [1e-3f32, 1.0, 1e6, 1e9, 1e12] {
+            for offset in [Vec3::ZERO, Vec3::new(3.0, -2.0, 1.0) * scale] {
+                let moved: Vec<Vec3> = pts.iter().map(|&p| p * scale + offset).collect();
+                let cam = Camera::frame(&moved, 1.5);
+                assert_eq!(
+                    (cam.fwd, cam.right, cam.up),
+                    (unit.fwd, unit.right, unit.up),
+                    "scale {scale}"
+                );
+                let want = unit.eye * scale + offset;
+                assert!(
+                    (cam.eye - want).length() <= 1e-5 * want.length().max(scale),
+                    "scale {scale}: eye {} vs {want}",
+                    cam.eye
+                );
+            }
+        }
     }
 }

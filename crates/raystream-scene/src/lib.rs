@@ -47,7 +47,7 @@ pub use desc::{
     VolumeDesc,
 };
 use raystream_io::{MeshError, TriMesh, Volume, VolumeError};
-use raystream_math::{Aabb, DVec3, Vec3};
+use raystream_math::{Aabb, DVec3, MAX_COORDINATE, Vec3};
 use raystream_volume::{TfPreset, TransferFunction};
 
 /// What went wrong building a scene, naming the file.
@@ -195,6 +195,46 @@ pub fn spot_mesh() -> TriMesh {
     .expect("the embedded mesh is valid")
 }
 
+/// `p`, if finite and within ±[`MAX_COORDINATE`].
+fn check_point(what: &str, p: Vec3) -> Result<Vec3, String> {
+    if p.is_finite() && p.abs().max_element() <= MAX_COORDINATE {
+        Ok(p)
+    } else {
+        Err(format!(
+            "{what} {p} must be finite and within ±{MAX_COORDINATE:e}"
+        ))
+    }
+}
+
+/// `c`, if finite and non-negative.
+fn check_colour(what: &str, c: Vec3) -> Result<Vec3, String> {
+    if c.is_finite() && c.min_element() >= 0.0 {
+        Ok(c)
+    } else {
+        Err(format!("{what} {c} must be finite and non-negative"))
+    }
+}
+
+/// The camera a description gives, if it defines one: finite points, an eye apart from the
+/// target, an up direction not along the view, a field of view between 0 and 180 degrees.
+fn camera_of(c: &CameraDesc) -> Result<Camera, String> {
+    let eye = check_point("eye", Vec3::from(c.eye))?;
+    let target = check_point("target", Vec3::from(c.target))?;
+    let up = c.up.map(Vec3::from).unwrap_or(Vec3::Y);
+    let fov = c.fov.unwrap_or(45.0);
+    if !(fov > 0.0 && fov < 180.0) {
+        return Err(format!("fov {fov} must be between 0 and 180 degrees"));
+    }
+    let view = target - eye;
+    if view.length() <= 1e-6 * eye.abs().max_element().max(target.abs().max_element()) {
+        return Err(format!("eye {eye} and target {target} must differ"));
+    }
+    if !up.is_finite() || view.normalize().cross(up).length() <= 1e-6 * up.length() {
+        return Err(format!("up {up} must be finite and not along the view"));
+    }
+    Ok(Camera::look_at(eye, target, up, fov))
+}
+
 impl Scene {
     /// Compiles a description; mesh paths are relative to `base_dir`, errors name `origin`.
     pub fn from_desc(
@@ -278,7 +318,16 @@ impl Scene {
                     .iter()
                     .map(|&n| frame.to_scene(normal_m * n).normalize_or_zero()),
             );
+            let first_new = mesh.positions.len();
             mesh.append(&source, |p| frame.to_scene(m * p + t));
+            if let Some(p) = mesh.positions[first_new..]
+                .iter()
+                .find(|p| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE)
+            {
+                return Err(invalid(format!(
+                    "object {i}: a vertex lands at {p} after scale, rotate and translate, beyond ±{MAX_COORDINATE:e} (f32 triangle tests overflow that far out)"
+                )));
+            }
             material_of.extend(std::iter::repeat_n(lookup(&o.material)?, source.len()));
         }
         let mut object_box = mesh.bounds();
@@ -286,6 +335,15 @@ impl Scene {
             object_box = object_box.grow(c);
         }
         if let Some(g) = &desc.ground {
+            if g.size.is_some_and(|s| !(s > 0.0 && s <= 1e4)) {
+                return Err(invalid(format!(
+                    "ground: size {} (in scene radii) must be in (0, 10000]",
+                    g.size.unwrap_or_default()
+                )));
+            }
+            if let Some(h) = g.height {
+                check_point("ground height", Vec3::new(0.0, h, 0.0)).map_err(invalid)?;
+            }
             let r = object_box.radius();
             let y = g.height.unwrap_or(object_box.min.y - 1e-3 * r);
             let c = object_box.center();
@@ -314,22 +372,34 @@ impl Scene {
                 }
             }
         }
-        let lights = desc
-            .lights
-            .iter()
-            .map(|l| Light {
-                position: Vec3::from(l.position),
-                color: l.color.map(Vec3::from).unwrap_or(Vec3::ONE),
-            })
-            .collect();
-        let camera = desc.camera.as_ref().map(|c| {
-            Camera::look_at(
-                Vec3::from(c.eye),
-                Vec3::from(c.target),
-                c.up.map(Vec3::from).unwrap_or(Vec3::Y),
-                c.fov.unwrap_or(45.0),
-            )
-        });
+        let mut lights = Vec::new();
+        for (i, l) in desc.lights.iter().enumerate() {
+            lights.push(Light {
+                position: check_point(&format!("light {i}: position"), Vec3::from(l.position))
+                    .map_err(invalid)?,
+                color: check_colour(
+                    &format!("light {i}: color"),
+                    l.color.map(Vec3::from).unwrap_or(Vec3::ONE),
+                )
+                .map_err(invalid)?,
+            });
+        }
+        let camera = match &desc.camera {
+            Some(c) => Some(camera_of(c).map_err(|e| invalid(format!("camera: {e}")))?),
+            None => None,
+        };
+        let background = check_colour(
+            "background",
+            desc.background
+                .map(Vec3::from)
+                .unwrap_or(Vec3::new(0.05, 0.06, 0.08)),
+        )
+        .map_err(invalid)?;
+        let ambient_light = check_colour(
+            "ambient",
+            desc.ambient.map(Vec3::from).unwrap_or(Vec3::splat(0.6)),
+        )
+        .map_err(invalid)?;
         Ok(Scene {
             mesh,
             normals,
@@ -337,11 +407,8 @@ impl Scene {
             materials,
             lights,
             camera,
-            background: desc
-                .background
-                .map(Vec3::from)
-                .unwrap_or(Vec3::new(0.05, 0.06, 0.08)),
-            ambient_light: desc.ambient.map(Vec3::from).unwrap_or(Vec3::splat(0.6)),
+            background,
+            ambient_light,
             object_box,
             frame_dir: if volume.is_some() {
                 VOLUME_VIEW_DIR

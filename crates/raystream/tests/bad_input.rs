@@ -90,6 +90,69 @@ fn bad_scene_file() {
     assert_input_error(&["render", &f], "mat.toml", "reflectivity");
 }
 
+/// Values a scene cannot be rendered with, each refused by name: light and background colours
+/// below zero or infinite, a camera with no view or a field of view of 180° or more, objects
+/// (or lights) pushed so far out that f32 triangle tests would overflow.
+#[test]
+fn scene_values_out_of_range() {
+    let sphere = "[[objects]]\nshape = \"sphere\"\n";
+    let cases: [(&str, &str, &str); 9] = [
+        (
+            "light-colour",
+            "[[lights]]\nposition = [1, 2, 3]\ncolor = [1, -1, 1]\n",
+            "light 0: color",
+        ),
+        (
+            "light-far",
+            "[[lights]]\nposition = [1, inf, 3]\n",
+            "light 0: position",
+        ),
+        ("background", "background = [0.1, 0.1, -1]\n", "background"),
+        ("ambient", "ambient = [nan, 0, 0]\n", "ambient"),
+        (
+            "eye-target",
+            "[camera]\neye = [1, 1, 1]\ntarget = [1, 1, 1]\n",
+            "must differ",
+        ),
+        (
+            "up",
+            "[camera]\neye = [0, 5, 0]\ntarget = [0, 0, 0]\n",
+            "not along the view",
+        ),
+        (
+            "fov",
+            "[camera]\neye = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 1e9\n",
+            "fov",
+        ),
+        (
+            "far-object",
+            "[[objects]]\nshape = \"spot\"\nscale = 1e12\n",
+            "beyond ±1e10",
+        ),
+        ("ground", "[ground]\nsize = -3\n", "ground: size"),
+    ];
+    for (name, text, problem) in cases {
+        let body = if name == "far-object" {
+            text.to_string()
+        } else {
+            format!("{text}{sphere}")
+        };
+        let f = write(&format!("range-{name}.toml"), body.as_bytes());
+        assert_input_error(
+            &["render", &f, "--size", "8x8"],
+            &format!("range-{name}.toml"),
+            problem,
+        );
+    }
+}
+
+/// Meshes and volumes so far from the origin that f32 triangle tests would overflow.
+#[test]
+fn coordinates_beyond_the_f32_range_of_the_tests() {
+    let f = write("far.obj", b"v 0 0 0\nv 2e10 1 0\nv 0 1 0\nf 1 2 3\n");
+    assert_input_error(&["info", &f], "far.obj", "beyond ±1e10");
+}
+
 /// A scene's volume: a truncated CT names the CT file; an unknown preset names the scene.
 #[test]
 fn bad_volume_in_a_scene() {

@@ -272,8 +272,9 @@ impl IntoFinite for (f32, f32) {
     }
 }
 
-/// Dimensions within [`MAX_VOXELS`], spacing finite and positive, origin finite, direction
-/// finite with unit, linearly independent columns. Called on header values before any
+/// Dimensions within [`MAX_VOXELS`], spacing finite and positive, origin finite, the grid
+/// within ±[`raystream_math::MAX_COORDINATE`] mm, direction finite with unit, linearly
+/// independent columns. Called on header values before any
 /// allocation, and again on the finished volume.
 pub(crate) fn check_geometry(
     path: &Path,
@@ -293,6 +294,18 @@ pub(crate) fn check_geometry(
         return Err(VolumeError::invalid(
             path,
             format!("origin {origin:?} is not finite"),
+        ));
+    }
+    // Unit direction columns: no point of the grid lies further from the origin than this.
+    let reach = origin.iter().fold(0.0f64, |a, o| a.max(o.abs()))
+        + (0..3).map(|i| spacing[i] * dims[i] as f64).sum::<f64>();
+    if reach > raystream_math::MAX_COORDINATE as f64 {
+        return Err(VolumeError::invalid(
+            path,
+            format!(
+                "the grid reaches {reach:.3e} mm from the origin, beyond ±{:e} mm (a corrupt header?)",
+                raystream_math::MAX_COORDINATE
+            ),
         ));
     }
     let m = raystream_math::DMat3::from_cols_array_2d(direction).transpose();

@@ -461,13 +461,15 @@ fn absurd_headers_are_refused_before_allocating() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("huge.nrrd") && e.contains("limit"), "{e}");
-    for (dirs, says) in [
-        ("(0,0,0) (0,1,0) (0,0,1)", "spacing"),
-        ("(nan,0,0) (0,1,0) (0,0,1)", "spacing"),
-        ("(1,0,0) (1,0,0) (0,0,1)", "singular"),
+    for (dirs, origin, says) in [
+        ("(0,0,0) (0,1,0) (0,0,1)", "(0,0,0)", "spacing"),
+        ("(nan,0,0) (0,1,0) (0,0,1)", "(0,0,0)", "spacing"),
+        ("(1,0,0) (1,0,0) (0,0,1)", "(0,0,0)", "singular"),
+        ("(1,0,0) (0,1,0) (0,0,1)", "(0,0,3e12)", "beyond ±1e10 mm"),
+        ("(1e10,0,0) (0,1,0) (0,0,1)", "(0,0,0)", "beyond ±1e10 mm"),
     ] {
         let text = format!(
-            "NRRD0004\ntype: short\ndimension: 3\nspace: LPS\nsizes: 4 3 2\nspace directions: {dirs}\nencoding: raw\n\n"
+            "NRRD0004\ntype: short\ndimension: 3\nspace: LPS\nsizes: 4 3 2\nspace directions: {dirs}\nspace origin: {origin}\nencoding: raw\n\n"
         );
         let mut bytes = text.into_bytes();
         bytes.extend(ramp_i16());
