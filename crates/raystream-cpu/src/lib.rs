@@ -164,9 +164,17 @@ pub fn render_prepared(
     }
 }
 
-/// How far secondary rays start off the surface: 1e-4 of the objects' radius.
+/// How far secondary rays start off the surface: 1e-4 of the objects' radius, and at least 32
+/// units in the last place of the objects' largest coordinate. The second term matters only for
+/// objects more than 26 radii from the origin (a CT with a far-off origin): there a hit point
+/// is only good to its f32 rounding, and an offset below it lets a shadow ray hit its own
+/// surface, differently on the CPU and the GPU.
 pub fn surface_epsilon(scene: &Scene) -> f32 {
-    1e-4 * scene.object_box.radius().max(f32::MIN_POSITIVE)
+    let b = scene.object_box;
+    let far = b.min.abs().max(b.max.abs()).max_element();
+    (1e-4 * b.radius())
+        .max(far * (32.0 * f32::EPSILON))
+        .max(f32::MIN_POSITIVE)
 }
 
 /// Strata per side of the sample grid for `spp` samples: ⌈√spp⌉.

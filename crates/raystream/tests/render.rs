@@ -466,6 +466,28 @@ fn gpu_render_submit_modes_give_the_same_image() {
     assert!(pngs[0] == pngs[1], "--submit wave and depth differ");
 }
 
+/// Objects a million units from the origin (a CT whose header puts it a kilometre off, say):
+/// hit points there are good only to their f32 rounding (1/16 unit), so secondary rays start
+/// at least 32 of those units off the surface, and the GPU still gives the CPU's picture
+/// (with 1e-4 radii, less than the rounding, each back-end's shadow rays hit their own
+/// surfaces in their own places).
+#[test]
+fn gpu_render_matches_cpu_far_from_the_origin() {
+    let scene = tmp("far-off.toml");
+    std::fs::write(
+        &scene,
+        "[[lights]]\nposition = [1000003, 4, 3]\n[[objects]]\nshape = \"spot\"\n\
+         translate = [1000000, 0, 0]\n[[objects]]\nshape = \"sphere\"\nscale = 0.4\n\
+         translate = [1000001.5, 0, 0]\n[ground]\n",
+    )
+    .unwrap();
+    gpu_matches_cpu(
+        "far-off",
+        &[scene.to_str().unwrap(), "--size", "96x72", "--spp", "1"],
+        false,
+    );
+}
+
 #[test]
 fn gpu_render_matches_cpu_spot_scene() {
     gpu_matches_cpu(

@@ -273,9 +273,14 @@ impl IntoFinite for (f32, f32) {
 }
 
 /// Dimensions within [`MAX_VOXELS`], spacing finite and positive, origin finite, the grid
-/// within ±[`raystream_math::MAX_COORDINATE`] mm, direction finite with unit, linearly
-/// independent columns. Called on header values before any
+/// within ±[`MAX_GRID_REACH_MM`], direction finite with unit, linearly independent columns. Called on header values before any
 /// allocation, and again on the finished volume.
+/// How far from the origin of patient coordinates a volume's grid may reach: a kilometre. No
+/// scanner's coordinates come near (a CT's lie within a few metres of its isocentre), so a
+/// header beyond it is corrupt; and there f32 positions are still good to 1/16 mm, while the
+/// renderings drift apart further out (the CPU and GPU differ at 10⁹ mm).
+pub const MAX_GRID_REACH_MM: f64 = 1e6;
+
 pub(crate) fn check_geometry(
     path: &Path,
     dims: [usize; 3],
@@ -299,12 +304,11 @@ pub(crate) fn check_geometry(
     // Unit direction columns: no point of the grid lies further from the origin than this.
     let reach = origin.iter().fold(0.0f64, |a, o| a.max(o.abs()))
         + (0..3).map(|i| spacing[i] * dims[i] as f64).sum::<f64>();
-    if reach > raystream_math::MAX_COORDINATE as f64 {
+    if reach > MAX_GRID_REACH_MM {
         return Err(VolumeError::invalid(
             path,
             format!(
-                "the grid reaches {reach:.3e} mm from the origin, beyond ±{:e} mm (a corrupt header?)",
-                raystream_math::MAX_COORDINATE
+                "the grid reaches {reach:.3e} mm from the origin, beyond ±{MAX_GRID_REACH_MM:e} mm (a corrupt header?)"
             ),
         ));
     }
