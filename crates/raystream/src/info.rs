@@ -134,12 +134,25 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             None => println!("  values     all NaN"),
         }
         if let Some(s) = &v.series {
+            // Some files carry no SeriesInstanceUID; their slices form one series with an
+            // empty one.
+            let uid = |u: &str| {
+                if u.is_empty() {
+                    "(no SeriesInstanceUID)".to_string()
+                } else {
+                    u.to_string()
+                }
+            };
             println!(
                 "  series     {} ({} slices, {}, {} {})",
-                s.uid, s.count, s.modality, s.transfer_syntax, s.transfer_syntax_name
+                uid(&s.uid),
+                s.count,
+                s.modality,
+                s.transfer_syntax,
+                s.transfer_syntax_name
             );
             for (u, n, d) in s.all.iter().filter(|(u, _, _)| *u != s.uid) {
-                println!("  also       {u} ({n} slices) {d}");
+                println!("  also       {} ({n} slices) {d}", uid(u));
             }
         }
         for w in &v.warnings {

@@ -81,7 +81,14 @@ pub(crate) fn load(path: &Path, series: Option<&str>) -> Result<Volume, VolumeEr
                     format!(
                         "no series with UID {s}; the folder holds: {}",
                         all.iter()
-                            .map(|(u, n, d)| format!("{u} ({n} slices{})", describe(d)))
+                            .map(|(u, n, d)| {
+                                let u = if u.is_empty() {
+                                    "(no SeriesInstanceUID)"
+                                } else {
+                                    u
+                                };
+                                format!("{u} ({n} slices{})", describe(d))
+                            })
                             .collect::<Vec<_>>()
                             .join(", ")
                     ),
