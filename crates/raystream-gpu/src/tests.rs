@@ -957,7 +957,8 @@ fn gpu_render_matches_cpu_on_a_scanned_mesh() {
     let Some(ctx) = gpu() else { return };
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/data/meshes/stanford_bunny.ply");
-    let scene = raystream_scene::Scene::for_mesh(raystream_io::load_mesh(&path).unwrap(), &path);
+    let scene =
+        raystream_scene::Scene::for_mesh(raystream_io::load_mesh(&path).unwrap(), &path).unwrap();
     let opt = raystream_cpu::RenderOptions {
         width: 80,
         height: 64,
@@ -1139,7 +1140,8 @@ fn srgb8_within_one(got: &[u8], want: &[u8], what: &str) -> usize {
 #[test]
 fn queues_past_a_binding_render_again_in_smaller_waves() {
     let Some(ctx) = gpu() else { return };
-    let mut scene = raystream_scene::Scene::for_mesh(TriMesh::icosphere(3), Path::new("glass.obj"));
+    let mut scene =
+        raystream_scene::Scene::for_mesh(TriMesh::icosphere(3), Path::new("glass.obj")).unwrap();
     for m in &mut scene.materials {
         m.transparency = 0.9;
         m.reflectivity = 0.05;

@@ -195,6 +195,20 @@ pub fn spot_mesh() -> TriMesh {
     .expect("the embedded mesh is valid")
 }
 
+/// A problem with the lights or the floor that a mesh or a CT's bones get: they lie a few
+/// times the object's size around it, so a mesh near the coordinate limit takes them past it.
+fn around_the_mesh(e: SceneError) -> SceneError {
+    match e {
+        SceneError::Invalid { path, problem } => SceneError::Invalid {
+            path,
+            problem: format!(
+                "{problem} (the lights and the floor are placed a few times the mesh's size around it)"
+            ),
+        },
+        e => e,
+    }
+}
+
 /// `p`, if finite and within ±[`MAX_COORDINATE`].
 fn check_point(what: &str, p: Vec3) -> Result<Vec3, String> {
     if p.is_finite() && p.abs().max_element() <= MAX_COORDINATE {
@@ -433,7 +447,7 @@ impl Scene {
 
     /// A mesh alone: a key and a fill light, a slightly reflective ground plane under it, the
     /// camera framing it.
-    pub fn for_mesh(mesh: TriMesh, name: &Path) -> Scene {
+    pub fn for_mesh(mesh: TriMesh, name: &Path) -> Result<Scene, SceneError> {
         let b = mesh.bounds();
         let (c, r) = (b.center(), b.radius());
         let mut desc = SceneDesc::default();
@@ -465,7 +479,7 @@ impl Scene {
         Self::compile(&desc, name, None, |_, _| {
             Ok(mesh.take().expect("one object"))
         })
-        .expect("a checked mesh makes a valid scene")
+        .map_err(around_the_mesh)
     }
 
     /// A bone isosurface from CT: `mesh` and its `normals` in LPS millimetres are turned so that
@@ -521,10 +535,11 @@ impl Scene {
         });
         let n = mesh.positions.len();
         let mut mesh = Some(mesh);
+        // A CT grid lies within ±1e6 mm, so its bones' lights and floor are far inside ±1e10.
         let mut scene = Self::compile(&desc, name, None, |_, _| {
             Ok(mesh.take().expect("one object"))
         })
-        .expect("a checked mesh makes a valid scene");
+        .expect("bones of a checked CT make a valid scene");
         // The volume's gradient normals shade an isosurface better than face-averaged ones.
         if normals.len() == n {
             for (dst, &src) in scene.normals[..n].iter_mut().zip(normals) {

@@ -44,7 +44,7 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
             Ok((Scene::load(p)?, None))
         }
         Some(p) if raystream_io::is_volume_path(p) => volume_scene(p, None),
-        Some(p) => Ok((Scene::for_mesh(load_mesh(p)?, p), None)),
+        Some(p) => Ok((Scene::for_mesh(load_mesh(p)?, p)?, None)),
     }
 }
 

@@ -151,6 +151,16 @@ fn scene_values_out_of_range() {
 fn coordinates_beyond_the_f32_range_of_the_tests() {
     let f = write("far.obj", b"v 0 0 0\nv 2e10 1 0\nv 0 1 0\nf 1 2 3\n");
     assert_input_error(&["info", &f], "far.obj", "beyond ±1e10");
+    // Inside the limit, but the lights and floor placed around it would not be.
+    let f = write(
+        "near-limit.obj",
+        b"v 9e9 0 0\nv 9.9e9 0 0\nv 9e9 5e9 0\nf 1 2 3\n",
+    );
+    assert_input_error(
+        &["render", &f, "--size", "8x8"],
+        "near-limit.obj",
+        "placed a few times",
+    );
 }
 
 /// A scene's volume: a truncated CT names the CT file; an unknown preset names the scene.
