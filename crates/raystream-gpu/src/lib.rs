@@ -75,7 +75,9 @@ pub enum GpuError {
         adapter: String,
         source: wgpu::RequestDeviceError,
     },
-    #[error("GPU '{adapter}': {what} needs {need} bytes in one buffer, the device allows {limit}")]
+    #[error(
+        "GPU '{adapter}': {what} needs {need} bytes in one buffer, the device allows {limit} (--device cpu has no such limit)"
+    )]
     TooLarge {
         adapter: String,
         what: &'static str,

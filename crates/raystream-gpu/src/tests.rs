@@ -348,6 +348,27 @@ fn shared_mesh(name: &str) -> TriMesh {
     raystream_io::load_mesh(&dir.join(name)).unwrap()
 }
 
+/// A tree larger than what one buffer binding of the device holds is refused before any
+/// upload, with the buffer, both sizes and the way out named (here a device whose bindings
+/// are cut to 1 MiB: the bunny's inner nodes, the first buffer, take 1.3 MB).
+#[test]
+fn a_tree_too_large_for_a_binding_is_a_clear_error() {
+    let Some(mut ctx) = gpu() else { return };
+    ctx.limits.max_storage_buffer_binding_size = 1 << 20;
+    let tree = KdTree::build(&shared_mesh("stanford_bunny.ply"), Builder::Sah);
+    let e = GpuTracer::new(&ctx, &tree)
+        .err()
+        .expect("too large")
+        .to_string();
+    let need = std::mem::size_of_val(tree.inners.as_slice());
+    assert!(
+        e.contains(&format!("kd inner nodes needs {need} bytes"))
+            && e.contains("allows 1048576")
+            && e.contains("--device cpu"),
+        "{e}"
+    );
+}
+
 struct Rng(u64);
 impl Rng {
     fn f(&mut self) -> f32 {

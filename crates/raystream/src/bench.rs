@@ -20,12 +20,10 @@ use serde_json::json;
 
 use crate::cli::BenchArgs;
 use crate::common::{
-    Backend, file_name, load_mesh, median, ms, open_device, print_line, round3, spinner,
+    Backend, file_name, gpu_tracer, load_mesh, median, ms, open_device, print_line, round3, spinner,
 };
 use crate::info::tree_json;
-use crate::trace::{
-    NO_PRIM, gpu_stats_json, gpu_tracer, kernels_name, trace_all, trace_timed, write_rays,
-};
+use crate::trace::{NO_PRIM, gpu_stats_json, kernels_name, trace_all, trace_timed, write_rays};
 use raystream_gpu::Kernels;
 
 const OFFSET: f32 = 1e-4;
@@ -188,7 +186,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         }
         // On a GPU one tracer, the tree uploaded once, for every set and layout (and the
         // kernels' own count of their work, the statistics query).
-        let gpu = gpu_tracer(&backend, &tree)?;
+        let gpu = gpu_tracer(&backend, &tree, &a.input)?;
         // The CPU has one way to trace; a GPU is measured with each kernel layout asked for.
         let layouts: Vec<Option<Kernels>> = match backend {
             Backend::Cpu => vec![None],

@@ -5,7 +5,8 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use raystream_gpu::GpuContext;
+use raystream_accel::KdTree;
+use raystream_gpu::{GpuContext, GpuTracer};
 use raystream_io::TriMesh;
 
 use crate::cli::Device;
@@ -79,6 +80,27 @@ pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Back
             Ok(backend)
         }
     }
+}
+
+/// The GPU tracer of `tree`, built from `input` (the tree uploaded once, for every query on
+/// it), or `None` on the CPU. A tree too large for the GPU's buffers is an error naming the
+/// input and the adapter.
+pub fn gpu_tracer<'a>(
+    backend: &'a Backend,
+    tree: &KdTree,
+    input: &Path,
+) -> Result<Option<GpuTracer<'a>>> {
+    Ok(match backend {
+        Backend::Gpu(ctx) => Some(GpuTracer::new(ctx, tree).with_context(|| {
+            format!(
+                "{}: its kd-tree ({} triangle references) on {}",
+                input.display(),
+                tree.tris.len(),
+                ctx.describe()
+            )
+        })?),
+        Backend::Cpu => None,
+    })
 }
 
 pub fn load_mesh(path: &Path) -> Result<TriMesh> {

@@ -10,13 +10,15 @@ use raystream_accel::Traversal;
 use raystream_cpu::{
     Aov, AovImage, DepthStats, RenderOptions, aov_image, aov_rays, prepare_volume, render_prepared,
 };
-use raystream_gpu::{GpuRenderer, GpuTracer};
+use raystream_gpu::GpuRenderer;
 use raystream_scene::Scene;
 
 use raystream_cpu::dvr::{DvrMode, DvrOptions, orbit_camera, volume_camera};
 
 use crate::cli::RenderArgs;
-use crate::common::{Backend, load_mesh, median as median_of, ms, open_device, spinner};
+use crate::common::{
+    Backend, gpu_tracer, load_mesh, median as median_of, ms, open_device, spinner,
+};
 use crate::dvr;
 use crate::iso::{Bones, bones, read_volume};
 
@@ -24,6 +26,13 @@ use crate::iso::{Bones, bones, read_volume};
 /// `assets/README.md` for source and license), whose bones `render` shows without an input.
 const DEFAULT_CT: &[u8] = include_bytes!("../assets/abdomen_pelvis_ct_totalseg.nii.gz");
 const DEFAULT_CT_NAME: &str = "<built-in abdomen_pelvis_ct_totalseg.nii.gz>";
+
+/// INPUT, or the built-in CT's name.
+fn input_name(a: &RenderArgs) -> std::path::PathBuf {
+    a.input
+        .clone()
+        .unwrap_or_else(|| Path::new(DEFAULT_CT_NAME).to_path_buf())
+}
 
 /// The scene named by INPUT: none → the built-in CT's bones, `.toml` → scene file, a volume →
 /// its bones, else a mesh. Also says how the volume steps went, for volumes.
@@ -220,13 +229,12 @@ fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
     );
     let pb = spinner(a.quiet, &format!("tracing {} rays", rays.len()));
     let t1 = Instant::now();
-    let hits: Vec<Option<Hit>> = match &backend {
-        Backend::Gpu(ctx) => {
-            let tracer = GpuTracer::new(ctx, &tree).with_context(|| ctx.describe())?;
+    let hits: Vec<Option<Hit>> = match gpu_tracer(&backend, &tree, &input_name(a))? {
+        Some(tracer) => {
             let (hits, _) = tracer.trace(&rays, false)?;
             hits.iter().map(|h| h.hit()).collect()
         }
-        Backend::Cpu => tree.intersect_all(&rays, traversal, false),
+        None => tree.intersect_all(&rays, traversal, false),
     };
     let trace_ms = ms(t1.elapsed());
     pb.finish_and_clear();
@@ -300,13 +308,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         traversal: a.accel.traversal.into(),
     };
     let t_setup = Instant::now();
-    let gpu = match &backend {
-        Backend::Gpu(ctx) => {
-            let tracer = GpuTracer::new(ctx, &tree).with_context(|| ctx.describe())?;
-            Some(tracer)
-        }
-        Backend::Cpu => None,
-    };
+    let gpu = gpu_tracer(&backend, &tree, &input_name(a))?;
     let renderer = match &gpu {
         Some(tracer) => Some(GpuRenderer::new(tracer, &scene, &tree)?.with_submit(a.submit.into())),
         None => None,

@@ -12,7 +12,7 @@ use crate::cli::TraceArgs;
 use raystream_gpu::{GpuTracer, Kernels, QueryStats};
 
 use crate::common::{
-    Backend, file_name, load_mesh, median, ms, open_device, print_line, round3, spinner,
+    Backend, file_name, gpu_tracer, load_mesh, median, ms, open_device, print_line, round3, spinner,
 };
 
 pub const RAY_BYTES: usize = 32;
@@ -109,15 +109,6 @@ pub struct Traced {
 const GPU_WARM_UP: std::time::Duration = std::time::Duration::from_millis(200);
 /// …or this many runs (the first included).
 const GPU_WARM_UP_RUNS: u32 = 50;
-
-/// The GPU tracer of `tree` (the tree uploaded once, for every query on it), or `None` on the
-/// CPU.
-pub fn gpu_tracer<'a>(backend: &'a Backend, tree: &KdTree) -> Result<Option<GpuTracer<'a>>> {
-    Ok(match backend {
-        Backend::Gpu(ctx) => Some(GpuTracer::new(ctx, tree)?),
-        Backend::Cpu => None,
-    })
-}
 
 /// Traces `rays` to warm up (once on the CPU; on a GPU for [`GPU_WARM_UP`], at most
 /// [`GPU_WARM_UP_RUNS`] runs) and `repeat` times timed, on the CPU or, with `gpu` (the tracer
@@ -242,7 +233,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
     let tree = a.accel.tree.build(&mesh);
     pb.set_message(format!("tracing {} rays on {}", rays.len(), backend.name()));
     let traversal: Traversal = a.accel.traversal.into();
-    let gpu = gpu_tracer(&backend, &tree)?;
+    let gpu = gpu_tracer(&backend, &tree, &a.mesh)?;
     let t = trace_timed(
         gpu.as_ref(),
         &tree,
