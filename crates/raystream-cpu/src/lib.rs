@@ -13,6 +13,9 @@
 //! transmitted τ(1 − F)). With no transparency this is exactly the paper's sum.
 //!
 //! The result is deterministic: queues keep their order and `accumulate` adds in queue order.
+//! Frames run in waves of whole pixels ([`WAVE_SAMPLES`]), each through all its depths; a
+//! pixel's contributions are added in the same order whatever the waves, so the image does not
+//! depend on them.
 
 mod aov;
 pub mod dvr;
@@ -117,36 +120,88 @@ pub fn prepare_volume<'a>(
         .map(|v| Medium::new(v, scene, tree, traversal))
 }
 
+/// At most this many samples are traced at once: the frame is rendered in waves of whole
+/// pixels, so that memory stays bounded at any size and sample count (a 1080p frame at 256 spp
+/// would otherwise queue 531 M rays, 25 GB, at once). A pixel's sums run in the same order
+/// whatever the wave, so the image is the same byte for byte.
+pub const WAVE_SAMPLES: u32 = 1 << 20;
+
+/// Pixels in one wave of `opt`'s frame.
+pub fn wave_pixels(opt: &RenderOptions) -> u32 {
+    (WAVE_SAMPLES / opt.spp.max(1)).max(1)
+}
+
+/// Waves the CPU renders `opt`'s frame in (each reports every depth it runs to the progress).
+pub fn waves(opt: &RenderOptions) -> u32 {
+    (opt.width * opt.height).div_ceil(wave_pixels(opt))
+}
+
 /// [`render`] with the scene's volume already prepared (`medium`, from [`prepare_volume`]).
 pub fn render_prepared(
     scene: &Scene,
     tree: &KdTree,
     medium: Option<&Medium>,
     opt: &RenderOptions,
+    progress: impl FnMut(DepthStats),
+) -> Image {
+    render_in_waves(scene, tree, medium, opt, wave_pixels(opt), progress)
+}
+
+/// [`render_prepared`] in waves of `wave_pixels` pixels (the same image for any wave size).
+pub fn render_in_waves(
+    scene: &Scene,
+    tree: &KdTree,
+    medium: Option<&Medium>,
+    opt: &RenderOptions,
+    wave_pixels: u32,
     mut progress: impl FnMut(DepthStats),
 ) -> Image {
     let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
     let mut film = vec![Vec3::ZERO; (opt.width * opt.height) as usize];
+    let pixels = opt.width * opt.height;
+    let wave_pixels = wave_pixels.max(1);
+    for first in (0..pixels).step_by(wave_pixels as usize) {
+        let wave = first..(first + wave_pixels).min(pixels);
+        let queue = camera_rays_of(&cam, opt.width, opt.height, opt.spp, wave);
+        trace_wave(scene, tree, medium, opt, queue, &mut film, &mut progress);
+    }
+    let scale = 1.0 / opt.spp as f32;
+    Image {
+        width: opt.width,
+        height: opt.height,
+        pixels: film.into_iter().map(|c| c * scale).collect(),
+    }
+}
+
+/// One wave's camera rays (`queue`) through every depth, into `film`.
+fn trace_wave(
+    scene: &Scene,
+    tree: &KdTree,
+    medium: Option<&Medium>,
+    opt: &RenderOptions,
+    mut queue: Vec<RayWorkItem>,
+    film: &mut [Vec3],
+    progress: &mut impl FnMut(DepthStats),
+) {
     let shading = Shading {
         scene,
         epsilon: surface_epsilon(scene),
     };
-    let mut queue = generate_camera_rays(&cam, opt.width, opt.height, opt.spp);
     for depth in 0..=opt.max_depth {
         if queue.is_empty() {
             break;
         }
         let (mut hits, mut misses) = intersect_closest(tree, &queue, opt.traversal);
         let volume_samples = match medium {
-            Some(m) => march_volume(m, &mut hits, &mut misses, &mut film),
+            Some(m) => march_volume(m, &mut hits, &mut misses, film),
             None => 0,
         };
-        handle_misses(&misses, scene.background, &mut film);
+        handle_misses(&misses, scene.background, film);
         let spawn = depth < opt.max_depth;
         let (local, shadows, next) = shade_hits(&shading, &hits, spawn);
         let lit = intersect_any(tree, &shadows, opt.traversal, medium);
-        accumulate(&mut film, &local);
-        accumulate(&mut film, &lit);
+        accumulate(film, &local);
+        accumulate(film, &lit);
         progress(DepthStats {
             depth,
             rays: queue.len(),
@@ -155,12 +210,6 @@ pub fn render_prepared(
             volume_samples,
         });
         queue = next;
-    }
-    let scale = 1.0 / opt.spp as f32;
-    Image {
-        width: opt.width,
-        height: opt.height,
-        pixels: film.into_iter().map(|c| c * scale).collect(),
     }
 }
 
@@ -197,9 +246,20 @@ fn jitter(p: u32, s: u32, k: u32) -> f32 {
 /// Stage 1: one ray per pixel sample, pixel-major. Sample `s` of `spp` lies in stratum `s` of an
 /// `n×n` grid (n = ⌈√spp⌉), jittered; with one sample it is the pixel centre.
 pub fn generate_camera_rays(cam: &Camera, width: u32, height: u32, spp: u32) -> Vec<RayWorkItem> {
+    camera_rays_of(cam, width, height, spp, 0..width * height)
+}
+
+/// [`generate_camera_rays`] of the pixels `pixels` only (a wave).
+fn camera_rays_of(
+    cam: &Camera,
+    width: u32,
+    height: u32,
+    spp: u32,
+    pixels: std::ops::Range<u32>,
+) -> Vec<RayWorkItem> {
     let n = strata(spp);
     let weight = Vec3::ONE;
-    (0..width * height)
+    pixels
         .into_par_iter()
         .flat_map_iter(|pixel| {
             let (x, y) = ((pixel % width) as f32, (pixel / width) as f32);

@@ -268,3 +268,83 @@ fn depth_aov_png_round_trip() {
     std::fs::remove_file(&path).ok();
     assert_eq!(back.into_raw(), vec![0, 1, 65535]);
 }
+
+/// Waves of any size give the same image byte for byte, and the same rays per depth: glass
+/// (reflection and refraction), a mirror, shadows, and the CT volume among meshes.
+#[test]
+fn waves_do_not_change_the_image() {
+    let ct = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
+    let glass = scene(
+        r#"
+        [[lights]]
+        position = [3, 5, 4]
+        [materials.glass]
+        transparency = 0.8
+        reflectivity = 0.1
+        [materials.mirror]
+        reflectivity = 0.6
+        [[objects]]
+        shape = "sphere"
+        material = "glass"
+        [[objects]]
+        shape = "spot"
+        material = "mirror"
+        translate = [1.5, 0, 0]
+        [ground]
+        "#,
+    );
+    let with_volume = scene(&format!(
+        r#"
+        [volume]
+        path = "{}"
+        preset = "ct-bones"
+        [materials.mirror]
+        reflectivity = 0.5
+        [[objects]]
+        shape = "cylinder"
+        material = "mirror"
+        scale = [4, 70, 4]
+        translate = [0, 235, 140]
+        [ground]
+        material = "mirror"
+        "#,
+        ct.display()
+    ));
+    for (what, s, spp) in [("glass", &glass, 3), ("volume", &with_volume, 2)] {
+        let tree = KdTree::build(&s.mesh, Builder::Sah);
+        let medium = prepare_volume(s, &tree, Traversal::Ropes);
+        let opt = RenderOptions {
+            width: 24,
+            height: 16,
+            spp,
+            max_depth: 3,
+            traversal: Traversal::Ropes,
+        };
+        let frame = |wave: u32| {
+            let mut rays = vec![0usize; 4];
+            let img = render_in_waves(s, &tree, medium.as_ref(), &opt, wave, |d| {
+                rays[d.depth as usize] += d.rays
+            });
+            (img.pixels, rays)
+        };
+        let whole = frame(24 * 16);
+        assert!(whole.1[1] > 0, "{what}: secondary rays");
+        for wave in [1, 7, 100] {
+            let waved = frame(wave);
+            assert!(
+                whole.0 == waved.0,
+                "{what}: waves of {wave} pixels change the image"
+            );
+            assert_eq!(whole.1, waved.1, "{what}: waves of {wave} pixels");
+        }
+    }
+    let big = RenderOptions {
+        width: 1920,
+        height: 1080,
+        spp: 256,
+        ..RenderOptions::default()
+    };
+    assert_eq!(wave_pixels(&big), 4096);
+    assert_eq!(waves(&big), 507);
+}

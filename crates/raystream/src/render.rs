@@ -323,7 +323,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     // The progress bar counts depths (of every wave, on the GPU) over all repeats.
     let waves = match &renderer {
         Some(r) => r.waves(&opt),
-        None => 1,
+        None => raystream_cpu::waves(&opt) as u64,
     };
     let bar = if a.quiet {
         ProgressBar::hidden()
