@@ -445,7 +445,8 @@ pub struct TraceArgs {
 
 #[derive(Args)]
 pub struct InfoArgs {
-    /// Mesh file, or CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd).
+    /// Mesh file, CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd) or
+    /// scene file (.toml).
     #[arg(required_unless_present = "gpu")]
     pub input: Option<PathBuf>,
     /// Instead of a file: the GPU adapters (Vulkan, Metal, DX12) found here, in the order

@@ -1,5 +1,6 @@
-//! `raystream info`: a mesh's size and bounds and its kd-tree statistics, or a volume's geometry
-//! (dims, spacing in mm, LPS origin and direction), value range and, for DICOM, its series.
+//! `raystream info`: a mesh's size and bounds and its kd-tree statistics, a volume's geometry
+//! (dims, spacing in mm, LPS origin and direction), value range and, for DICOM, its series, or
+//! a scene file as `render` would draw it.
 
 use anyhow::Result;
 use raystream_accel::TreeStats;
@@ -30,6 +31,12 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     };
     if raystream_io::is_volume_path(input) {
         return volume_info(a, input);
+    }
+    if input
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+    {
+        return scene_info(a, input);
     }
     let mesh = load_mesh(input)?;
     let tree = a.tree.build(&mesh);
@@ -72,6 +79,100 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             s.build_ms
         );
     }
+    Ok(())
+}
+
+/// The aspect ratio `info` frames a scene's camera for: `render`'s default 800x600.
+const INFO_ASPECT: f32 = 4.0 / 3.0;
+
+/// A scene file as `render` would draw it: its triangles (objects and ground), materials,
+/// lights, camera, the objects' bounds, its CT volume and the kd-tree over the triangles.
+fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
+    let scene = raystream_scene::Scene::load(input)?;
+    let tree = a.tree.build(&scene.mesh);
+    let b = scene.object_box;
+    let cam = scene.camera_for(INFO_ASPECT);
+    let fov = 2.0 * cam.tan_y.atan().to_degrees();
+    let lights: Vec<_> = scene
+        .lights
+        .iter()
+        .map(|l| json!({"position": l.position.to_array(), "color": l.color.to_array()}))
+        .collect();
+    let volume = scene.volume.as_ref().map(|v| {
+        json!({
+            "dims": v.volume.dims,
+            "spacing": v.volume.spacing,
+            "step_mm": v.step_mm,
+            "shadows": v.shadows,
+        })
+    });
+    if a.json {
+        print_line(json!({
+            "kind": "scene",
+            "file": file_name(input),
+            "triangles": scene.mesh.len(),
+            "materials": scene.materials.len(),
+            "lights": lights,
+            "camera": {
+                "eye": cam.eye.to_array(),
+                "forward": cam.fwd.to_array(),
+                "up": cam.up.to_array(),
+                "fov_y_deg": round3(fov as f64),
+                "framed": scene.camera.is_none(),
+            },
+            "bounds": [b.min.to_array(), b.max.to_array()],
+            "volume": volume,
+            "kdtree": tree_json(&tree.stats),
+        }));
+        return Ok(());
+    }
+    println!("{}: scene", input.display());
+    println!(
+        "  triangles  {} (objects and ground), {} materials",
+        scene.mesh.len(),
+        scene.materials.len()
+    );
+    for (i, l) in scene.lights.iter().enumerate() {
+        println!(
+            "  light {i}    at {:?}, colour {:?}",
+            l.position.to_array(),
+            l.color.to_array()
+        );
+    }
+    println!(
+        "  camera     eye {:?} looking along {:?}, {fov:.1}° vertical{}",
+        cam.eye.to_array(),
+        cam.fwd.to_array(),
+        if scene.camera.is_none() {
+            " (framing the objects at 4:3)"
+        } else {
+            ""
+        }
+    );
+    println!(
+        "  bounds     {:?} .. {:?} (the objects, the ground apart)",
+        b.min.to_array(),
+        b.max.to_array()
+    );
+    if let Some(v) = &scene.volume {
+        println!(
+            "  volume     {} x {} x {} voxels of {:?} mm{}",
+            v.volume.dims[0],
+            v.volume.dims[1],
+            v.volume.dims[2],
+            v.volume.spacing,
+            if v.shadows {
+                ", lit through shadow rays"
+            } else {
+                ""
+            }
+        );
+    }
+    let s = &tree.stats;
+    println!(
+        "  kd-tree    {}: {} nodes, {} leaves, SAH cost {:.2}, built in {:.1} ms",
+        s.builder, s.nodes, s.leaves, s.sah_cost, s.build_ms
+    );
     Ok(())
 }
 

@@ -226,6 +226,50 @@ fn info_json() {
 
 /// `info --gpu`: the adapters, the first being the one `--device gpu` opens; under CI at least
 /// lavapipe, with subgroups and timestamps. `info` wants a file or `--gpu`, not both.
+/// `info SCENE.toml`: what `render` would draw — triangles, materials, lights, the camera (the
+/// file's, or the framing one), the objects' box, the CT volume and the kd-tree.
+#[test]
+fn info_describes_a_scene() {
+    let rods = repo().join("examples/spine_rods.toml");
+    let o = run(&["info", rods.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(v["kind"], "scene");
+    // Two cylinders of 256 triangles and a ground of 2.
+    assert_eq!(v["triangles"], 514);
+    assert_eq!(v["lights"].as_array().unwrap().len(), 2);
+    assert_eq!(
+        v["lights"][0]["position"],
+        serde_json::json!([700.0, 1000.0, -400.0])
+    );
+    assert_eq!(v["camera"]["framed"], false);
+    assert_eq!(
+        v["camera"]["eye"],
+        serde_json::json!([520.0, 560.0, -620.0])
+    );
+    assert_eq!(v["camera"]["fov_y_deg"], 36.0);
+    assert_eq!(v["volume"]["dims"], serde_json::json!([122, 101, 112]));
+    assert!(v["kdtree"]["nodes"].as_u64().unwrap() > 1);
+
+    let scene = tmp("info-framed.toml");
+    std::fs::write(&scene, "[[objects]]\nshape = \"sphere\"\n").unwrap();
+    let o = run(&["info", scene.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert!(
+        text.contains("scene") && text.contains("(framing the objects at 4:3)"),
+        "{text}"
+    );
+    std::fs::write(&scene, "[[objects]]\nshape = \"cube\"\n").unwrap();
+    let o = run(&["info", scene.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("info-framed.toml") && stderr(&o).contains("unknown shape"),
+        "{}",
+        stderr(&o)
+    );
+}
+
 #[test]
 fn info_lists_gpu_adapters() {
     let o = run(&["info", "--gpu", "--json"]);
