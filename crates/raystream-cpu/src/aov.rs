@@ -7,6 +7,7 @@
 //! Reads: the scene, its camera and one hit (or miss) per pixel. Writes: a 16-bit grey image
 //! (distance) or an 8-bit RGB one (normal, triangle), PNG.
 
+use std::ops::Range;
 use std::path::Path;
 
 use raystream_accel::Hit;
@@ -95,10 +96,121 @@ impl AovImage {
 /// The rays of an AOV image: one through each pixel's centre, pixel-major from the top left
 /// (the camera rays of a 1-spp frame).
 pub fn aov_rays(cam: &Camera, width: u32, height: u32) -> Vec<Ray> {
-    crate::generate_camera_rays(cam, width, height, 1)
+    aov_rays_of(cam, width, height, 0..width * height)
+}
+
+/// [`aov_rays`] of the pixels `pixels` only.
+pub fn aov_rays_of(cam: &Camera, width: u32, height: u32, pixels: Range<u32>) -> Vec<Ray> {
+    crate::camera_rays_of(cam, width, height, 1, pixels)
         .into_iter()
         .map(|w| w.ray)
         .collect()
+}
+
+/// Pixels traced at once by [`AovBuilder`]'s callers: rays and hits stay bounded (tens of MB)
+/// whatever the image size; the image itself is 3 bytes a pixel (4 for distances, until the
+/// end).
+pub const AOV_CHUNK: u32 = 1 << 20;
+
+/// An AOV image made chunk by chunk: each run of pixels, its rays and their closest hits, is
+/// turned into pixel values as it comes, so only the image is held whole.
+pub struct AovBuilder<'a> {
+    scene: &'a Scene,
+    aov: Aov,
+    width: u32,
+    height: u32,
+    /// Depth: the distance of each pixel's hit so far, NaN for a miss.
+    dist: Vec<f32>,
+    /// Normal, triangle: RGB so far.
+    rgb: Vec<u8>,
+}
+
+impl<'a> AovBuilder<'a> {
+    pub fn new(scene: &'a Scene, aov: Aov, width: u32, height: u32) -> Self {
+        let n = (width * height) as usize;
+        Self {
+            scene,
+            aov,
+            width,
+            height,
+            dist: Vec::with_capacity(if aov == Aov::Depth { n } else { 0 }),
+            rgb: Vec::with_capacity(if aov == Aov::Depth { 0 } else { 3 * n }),
+        }
+    }
+
+    /// The next pixels, in order: their rays (from [`aov_rays_of`]) and closest hits.
+    pub fn add(&mut self, rays: &[Ray], hits: &[Option<Hit>]) {
+        assert_eq!(rays.len(), hits.len(), "one hit or miss per ray");
+        if self.aov == Aov::Depth {
+            self.dist.extend(
+                rays.iter()
+                    .zip(hits)
+                    .map(|(r, h)| h.map_or(f32::NAN, |h| h.t * r.dir.length())),
+            );
+            return;
+        }
+        let first = self.rgb.len() / 3;
+        for (i, (ray, hit)) in rays.iter().zip(hits).enumerate() {
+            let rgb = match hit {
+                None => [0; 3],
+                Some(h) if self.aov == Aov::Prim => prim_colour(h.prim),
+                Some(h) => {
+                    let item = HitWorkItem {
+                        item: RayWorkItem {
+                            ray: *ray,
+                            pixel: (first + i) as u32,
+                            weight: Vec3::ONE,
+                        },
+                        hit: *h,
+                    };
+                    let n = surface(self.scene, &item).ns;
+                    (n * 127.0 + Vec3::splat(128.0))
+                        .round()
+                        .clamp(Vec3::ZERO, Vec3::splat(255.0))
+                        .to_array()
+                        .map(|c| c as u8)
+                }
+            };
+            self.rgb.extend_from_slice(&rgb);
+        }
+    }
+
+    /// The image, once every pixel has been added.
+    pub fn finish(self) -> AovImage {
+        let (width, height) = (self.width, self.height);
+        let n = (width * height) as usize;
+        if self.aov != Aov::Depth {
+            assert_eq!(self.rgb.len(), 3 * n, "every pixel added");
+            return AovImage::Rgb8 {
+                width,
+                height,
+                pixels: self.rgb,
+            };
+        }
+        assert_eq!(self.dist.len(), n, "every pixel added");
+        let range = self
+            .dist
+            .iter()
+            .filter(|d| !d.is_nan())
+            .fold(None, |acc, &d| match acc {
+                None => Some((d, d)),
+                Some((near, far)) => Some((f32::min(near, d), f32::max(far, d))),
+            });
+        let pixels = self
+            .dist
+            .iter()
+            .map(|&d| match range {
+                Some((near, far)) if !d.is_nan() => depth_level(d, near, far),
+                _ => 0,
+            })
+            .collect();
+        AovImage::Gray16 {
+            width,
+            height,
+            pixels,
+            range,
+        }
+    }
 }
 
 /// The `aov` image of `scene` from the closest hits of [`aov_rays`] (`rays`, one per pixel).
@@ -111,64 +223,9 @@ pub fn aov_image(
     aov: Aov,
 ) -> AovImage {
     assert_eq!(rays.len(), (width * height) as usize, "one ray per pixel");
-    assert_eq!(rays.len(), hits.len(), "one hit or miss per ray");
-    match aov {
-        Aov::Depth => {
-            let dist: Vec<Option<f32>> = rays
-                .iter()
-                .zip(hits)
-                .map(|(r, h)| h.map(|h| h.t * r.dir.length()))
-                .collect();
-            let range = dist.iter().flatten().fold(None, |acc, &d| match acc {
-                None => Some((d, d)),
-                Some((near, far)) => Some((f32::min(near, d), f32::max(far, d))),
-            });
-            let pixels = dist
-                .iter()
-                .map(|d| match (d, range) {
-                    (Some(d), Some((near, far))) => depth_level(*d, near, far),
-                    _ => 0,
-                })
-                .collect();
-            AovImage::Gray16 {
-                width,
-                height,
-                pixels,
-                range,
-            }
-        }
-        Aov::Normal | Aov::Prim => {
-            let mut pixels = Vec::with_capacity(rays.len() * 3);
-            for (pixel, (ray, hit)) in rays.iter().zip(hits).enumerate() {
-                let rgb = match hit {
-                    None => [0; 3],
-                    Some(h) if aov == Aov::Prim => prim_colour(h.prim),
-                    Some(h) => {
-                        let item = HitWorkItem {
-                            item: RayWorkItem {
-                                ray: *ray,
-                                pixel: pixel as u32,
-                                weight: Vec3::ONE,
-                            },
-                            hit: *h,
-                        };
-                        let n = surface(scene, &item).ns;
-                        (n * 127.0 + Vec3::splat(128.0))
-                            .round()
-                            .clamp(Vec3::ZERO, Vec3::splat(255.0))
-                            .to_array()
-                            .map(|c| c as u8)
-                    }
-                };
-                pixels.extend_from_slice(&rgb);
-            }
-            AovImage::Rgb8 {
-                width,
-                height,
-                pixels,
-            }
-        }
-    }
+    let mut b = AovBuilder::new(scene, aov, width, height);
+    b.add(rays, hits);
+    b.finish()
 }
 
 /// Distance `d` in `[near, far]` as a grey level: `near` → 65535, `far` → 1 (0 is a miss).

@@ -27,7 +27,9 @@ use raystream_accel::{Hit, KdTree, Traversal};
 use raystream_math::{Ray, Vec3};
 use raystream_scene::{Camera, Scene};
 
-pub use aov::{Aov, AovImage, aov_image, aov_rays, prim_colour};
+pub use aov::{
+    AOV_CHUNK, Aov, AovBuilder, AovImage, aov_image, aov_rays, aov_rays_of, prim_colour,
+};
 pub use image_out::{Image, save_srgb8_png, srgb8_diff};
 pub use medium::Medium;
 

@@ -253,6 +253,27 @@ fn aovs_follow_the_brute_force_hits() {
     assert!(colours.iter().all(|c| c.iter().all(|&v| v >= 32)));
 }
 
+/// An AOV made chunk by chunk (as `render --aov` makes it) equals the one made at once.
+#[test]
+fn aovs_in_chunks_equal_aovs_at_once() {
+    let s = scene("[[objects]]\nshape = \"spot\"\n[ground]\n");
+    let (w, h) = (19u32, 13u32);
+    let tree = KdTree::build(&s.mesh, Builder::Sah);
+    let cam = s.camera_for(w as f32 / h as f32);
+    let rays = aov_rays(&cam, w, h);
+    let hits = tree.intersect_all(&rays, Traversal::Ropes, false);
+    for aov in [Aov::Depth, Aov::Normal, Aov::Prim] {
+        let whole = aov_image(&s, &rays, &hits, w, h, aov);
+        let mut b = AovBuilder::new(&s, aov, w, h);
+        for first in (0..w * h).step_by(7) {
+            let part = aov_rays_of(&cam, w, h, first..(first + 7).min(w * h));
+            let part_hits = tree.intersect_all(&part, Traversal::Ropes, false);
+            b.add(&part, &part_hits);
+        }
+        assert_eq!(b.finish(), whole, "{aov:?}");
+    }
+}
+
 /// A 16-bit depth image survives the PNG round trip.
 #[test]
 fn depth_aov_png_round_trip() {

@@ -8,7 +8,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use raystream_accel::Hit;
 use raystream_accel::Traversal;
 use raystream_cpu::{
-    Aov, AovImage, DepthStats, RenderOptions, aov_image, aov_rays, prepare_volume, render_prepared,
+    AOV_CHUNK, Aov, AovBuilder, AovImage, DepthStats, RenderOptions, aov_rays_of, prepare_volume,
+    render_prepared,
 };
 use raystream_gpu::GpuRenderer;
 use raystream_scene::Scene;
@@ -222,23 +223,29 @@ fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
     let tree = a.accel.tree.build(&scene.mesh);
     pb.finish_and_clear();
     let (width, height) = a.size;
-    let rays = aov_rays(
-        &scene.camera_for(width as f32 / height as f32),
-        width,
-        height,
-    );
-    let pb = spinner(a.quiet, &format!("tracing {} rays", rays.len()));
+    let cam = scene.camera_for(width as f32 / height as f32);
+    let pixels = width * height;
+    let pb = spinner(a.quiet, &format!("tracing {pixels} rays"));
     let t1 = Instant::now();
-    let hits: Vec<Option<Hit>> = match gpu_tracer(&backend, &tree, &input_name(a))? {
-        Some(tracer) => {
-            let (hits, _) = tracer.trace(&rays, false)?;
-            hits.iter().map(|h| h.hit()).collect()
-        }
-        None => tree.intersect_all(&rays, traversal, false),
-    };
+    let gpu = gpu_tracer(&backend, &tree, &input_name(a))?;
+    let mut image = AovBuilder::new(&scene, aov, width, height);
+    let mut hit_count = 0;
+    // In chunks, so that rays and hits stay small at any image size.
+    for first in (0..pixels).step_by(AOV_CHUNK as usize) {
+        let rays = aov_rays_of(&cam, width, height, first..(first + AOV_CHUNK).min(pixels));
+        let hits: Vec<Option<Hit>> = match &gpu {
+            Some(tracer) => {
+                let (hits, _) = tracer.trace(&rays, false)?;
+                hits.iter().map(|h| h.hit()).collect()
+            }
+            None => tree.intersect_all(&rays, traversal, false),
+        };
+        hit_count += hits.iter().flatten().count();
+        image.add(&rays, &hits);
+    }
     let trace_ms = ms(t1.elapsed());
     pb.finish_and_clear();
-    let image = aov_image(&scene, &rays, &hits, width, height, aov);
+    let image = image.finish();
     image.save_png(&a.output).map_err(anyhow::Error::msg)?;
     if !a.quiet {
         let range = match &image {
@@ -254,8 +261,8 @@ fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
             aov.name(),
             backend.name(),
             backend.adapter(),
-            hits.iter().flatten().count(),
-            rays.len(),
+            hit_count,
+            pixels,
             tree.stats.build_ms,
         );
         if scene.volume.is_some() {
