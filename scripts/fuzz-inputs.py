@@ -1,0 +1,233 @@
+#!/usr/bin/env python3
+"""Fuzzes raystream's inputs: mutated files and scenes through the release binary.
+
+  .venv/bin/python scripts/fuzz-inputs.py files [--runs N] [--seed S] [--device cpu|gpu]
+  .venv/bin/python scripts/fuzz-inputs.py scenes [--runs N] [--seed S]
+
+files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary), tiny volumes (NIfTI, NRRD and
+        MetaImage, attached and detached, via SimpleITK) and real DICOM slices from
+        ../shared, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
+        and `raystream render --aov prim`. Each run must exit 0 or 2, never panic, and an error
+        must name the file.
+scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
+        absurd ones (0, -1, ±inf, nan, 1e30 ...), rendered on the CPU and the GPU: either both
+        refuse it (exit 2, naming the file) or rays.py imgdiff finds them within the GPU tests'
+        bounds (mean < 0.5/255, at most 0.1 % of pixels over 2/255).
+
+Prints each failure with its input (kept under the work folder) and a count at the end; exits 1
+if any failed. Run from the repository root after `cargo build --release`. The 2026-11-23
+sessions found with it: the NaN framing camera beyond ~1e8 units, unchecked scene values, the
+far-off secondary-ray offset, the hidden cause of DICOM gaps (all fixed); see BENCHMARKS.md and
+README for the limits that stay.
+"""
+import argparse
+import json
+import os
+import random
+import re
+import shutil
+import struct
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BIN = os.path.join(ROOT, "target/release/raystream")
+SHARED = os.path.join(ROOT, "..", "shared")
+ABSURD = [b"4294967295", b"1000000", b"-1", b"0", b"nan", b"inf", b"1e39",
+          b"99999999999999999999", b"2147483648", b"-2147483649"]
+
+
+def seeds(d):
+    """Small valid inputs of every format, written into d."""
+    v = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)]
+    f = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+    w = lambda name, data: open(os.path.join(d, name), "wb").write(data)
+    w("t.obj", "".join(f"v {x} {y} {z}\n" for x, y, z in v).encode()
+      + "".join(f"f {a+1} {b+1} {c+1}\n" for a, b, c in f).encode())
+    hdr = lambda fmt: (f"ply\nformat {fmt} 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                       "property float z\nelement face 4\nproperty list uchar int vertex_indices\n"
+                       "end_header\n").encode()
+    w("t_ascii.ply", hdr("ascii") + "".join(f"{x} {y} {z}\n" for x, y, z in v).encode()
+      + "".join(f"3 {a} {b} {c}\n" for a, b, c in f).encode())
+    for name, e in [("le", "<"), ("be", ">")]:
+        b = hdr("binary_little_endian" if e == "<" else "binary_big_endian")
+        b += b"".join(struct.pack(e + "3f", *p) for p in v)
+        b += b"".join(struct.pack(e + "B3i", 3, *t) for t in f)
+        w(f"t_{name}.ply", b)
+    s = "solid t\n"
+    for t in f:
+        s += " facet normal 0 0 0\n  outer loop\n" + "".join(
+            "   vertex {} {} {}\n".format(*v[i]) for i in t) + "  endloop\n endfacet\n"
+    w("t_ascii.stl", (s + "endsolid t\n").encode())
+    b = b"\0" * 80 + struct.pack("<I", len(f))
+    for t in f:
+        b += struct.pack("<12fH", 0, 0, 0, *v[t[0]], *v[t[1]], *v[t[2]], 0)
+    w("t_bin.stl", b)
+    try:
+        import numpy as np
+        import SimpleITK as sitk
+        img = sitk.GetImageFromArray((np.arange(120).reshape(4, 5, 6) * 10 - 500).astype(np.int16))
+        img.SetSpacing((0.7, 0.8, 2.5))
+        img.SetOrigin((-10, 20, 30))
+        img.SetDirection((0, 1, 0, 1, 0, 0, 0, 0, -1))
+        for n in ["v.nii", "v.nii.gz", "v.nrrd", "v.mha", "v.mhd", "v.nhdr"]:
+            sitk.WriteImage(img, os.path.join(d, n))
+    except ImportError:
+        print("no SimpleITK: volumes other than DICOM left out", file=sys.stderr)
+    ts = os.path.join(SHARED, "data/volumes/dicom/ct_slice_transfer_syntaxes")
+    for n in sorted(os.listdir(ts))[:4]:
+        shutil.copy(os.path.join(ts, n), os.path.join(d, n))
+        os.chmod(os.path.join(d, n), 0o644)
+
+
+def mutate(b, text):
+    b = bytearray(b)
+    k = random.randrange(6)
+    if k == 0 and len(b) > 1:
+        return bytes(b[:random.randrange(len(b))])
+    if k == 1:
+        for _ in range(random.randint(1, 8)):
+            b[random.randrange(len(b))] = random.randrange(256)
+        return bytes(b)
+    if k == 2:
+        i = random.randrange(len(b) + 1)
+        return bytes(b[:i] + os.urandom(random.randint(1, 16)) + b[i:])
+    if k == 3 and text:
+        nums = list(re.finditer(rb"-?\d+(\.\d+)?", bytes(b)))
+        if nums:
+            m = random.choice(nums)
+            return bytes(b[:m.start()] + random.choice(ABSURD) + b[m.end():])
+    if k == 4 and len(b) >= 4:
+        i = random.randrange(min(len(b) - 3, 2048))
+        b[i:i + 4] = random.choice([b"\xff\xff\xff\xff", b"\xff\xff\xff\x7f", b"\0\0\0\x80"])
+        return bytes(b)
+    i = random.randrange(min(len(b), 4096))
+    b[i] ^= 1 << random.randrange(8)
+    return bytes(b)
+
+
+def run(args, name):
+    """None if the run behaved, else what went wrong."""
+    try:
+        r = subprocess.run(["bash", "-c", "ulimit -v 8000000; exec \"$@\"", "_", BIN] + args,
+                           capture_output=True, timeout=120)
+    except subprocess.TimeoutExpired:
+        return "timeout"
+    err = r.stderr.decode(errors="replace")
+    if r.returncode not in (0, 2) or "panicked" in err:
+        return f"exit {r.returncode}: {err[-400:]}"
+    if r.returncode == 2 and name not in err:
+        return f"error without the file's name: {err[-400:]}"
+    return None
+
+
+def fuzz_files(work, n, device):
+    sd = os.path.join(work, "seeds")
+    os.makedirs(sd)
+    seeds(sd)
+    names = [s for s in sorted(os.listdir(sd)) if s != "v.raw"]
+    bad = 0
+    for i in range(n):
+        s = random.choice(names)
+        d = os.path.join(work, f"case{i}")
+        os.makedirs(d)
+        p = os.path.join(d, s)
+        text = s.endswith((".obj", ".stl", ".ply", ".mha", ".mhd", ".nhdr", ".nrrd"))
+        open(p, "wb").write(mutate(open(os.path.join(sd, s), "rb").read(), text))
+        if s in ("v.mhd", "v.nhdr"):
+            shutil.copy(os.path.join(sd, "v.raw"), d)
+        why = run(["info", p, "--json"], s) or run(
+            ["render", p, "--aov", "prim", "--size", "8x8", "-q", "--device", device,
+             "-o", os.path.join(d, "o.png")], s)
+        if why:
+            bad += 1
+            print(f"FAIL {p}: {why}")
+        else:
+            shutil.rmtree(d)
+    return bad
+
+
+SCENE = """background = [0.1, 0.1, 0.1]
+ambient = [0.3, 0.3, 0.3]
+[camera]
+eye = [0, 1, 5]
+target = [0, 0, 0]
+fov = 40
+[[lights]]
+position = [3, 5, 4]
+color = [1, 1, 1]
+[materials.glass]
+diffuse = [0.1, 0.1, 0.1]
+transparency = 0.8
+reflectivity = 0.1
+ior = 1.5
+[materials.mirror]
+reflectivity = 0.7
+[[objects]]
+shape = "sphere"
+material = "glass"
+[[objects]]
+shape = "quad"
+material = "mirror"
+scale = [5, 1, 5]
+translate = [0, -1, 0]
+[[objects]]
+shape = "spot"
+translate = [1.5, 0, 0]
+scale = 0.5
+rotate = [0, 30, 0]
+"""
+
+
+def fuzz_scenes(work, n):
+    python = os.path.join(ROOT, ".venv/bin/python")
+    rays_py = os.path.join(SHARED, "tools/rays.py")
+    bad = 0
+    for i in range(n):
+        s = SCENE
+        for _ in range(random.randint(1, 3)):
+            m = random.choice(list(re.finditer(r"-?\d+(\.\d+)?", s)))
+            s = s[:m.start()] + random.choice(
+                ["0", "-1", "1e30", "-1e30", "nan", "inf", "-inf", "1e-30", "1e9", "-0.0"]) + s[m.end():]
+        name = f"scene{i}.toml"
+        p = os.path.join(work, name)
+        open(p, "w").write(s)
+        codes, why = [], None
+        for dev in ("cpu", "gpu"):
+            png = os.path.join(work, f"scene{i}-{dev}.png")
+            why = why or run(["render", p, "--size", "24x16", "--spp", "2", "--max-depth", "3",
+                              "-q", "--device", dev, "-o", png], name)
+            codes.append(os.path.exists(png))
+        if not why and codes == [True, True]:
+            r = subprocess.run([python, rays_py, "imgdiff",
+                                os.path.join(work, f"scene{i}-cpu.png"),
+                                os.path.join(work, f"scene{i}-gpu.png"), "--json"],
+                               capture_output=True)
+            j = json.loads(r.stdout)
+            if j["mean_abs_diff"] >= 0.5 or j["frac_gt_2"] > 0.001:
+                why = f"GPU vs CPU: mean {j['mean_abs_diff']:.3f}/255, {j['frac_gt_2']:.4f} > 2/255"
+        elif not why and codes != [False, False]:
+            why = "one device rendered it, the other refused it"
+        if why:
+            bad += 1
+            print(f"FAIL {p}: {why}")
+    return bad
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("what", choices=["files", "scenes"])
+    ap.add_argument("--runs", type=int, default=500)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--device", default="cpu", choices=["cpu", "gpu"])
+    a = ap.parse_args()
+    random.seed(a.seed)
+    work = tempfile.mkdtemp(prefix="raystream-fuzz-")
+    bad = fuzz_files(work, a.runs, a.device) if a.what == "files" else fuzz_scenes(work, a.runs)
+    print(f"{a.what}: {a.runs} runs, {bad} failed (inputs of failures kept in {work})")
+    sys.exit(1 if bad else 0)
+
+
+if __name__ == "__main__":
+    main()
