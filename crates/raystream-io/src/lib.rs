@@ -206,7 +206,7 @@ impl TriMesh {
         if let Some(i) = self
             .positions
             .iter()
-            .position(|p| p.abs().max_element() > raystream_math::MAX_COORDINATE)
+            .position(|&p| !raystream_math::in_coordinate_range(p))
         {
             return Err(MeshError::invalid(
                 path,

@@ -10,6 +10,11 @@ pub use glam::{DAffine3, DMat3, DVec3, Mat3, Mat4, Quat, UVec3, Vec2, Vec3, Vec3
 /// size). Inputs beyond it are refused with an error, not rendered wrong.
 pub const MAX_COORDINATE: f32 = 1e10;
 
+/// Whether `p` is finite and within ±[`MAX_COORDINATE`] on every axis.
+pub fn in_coordinate_range(p: Vec3) -> bool {
+    p.is_finite() && p.abs().max_element() <= MAX_COORDINATE
+}
+
 /// A ray `o + t·d` with the interval of t that counts, `t_min ≤ t ≤ t_max`. The direction need not
 /// be unit length: t is measured in units of `|d|`.
 #[derive(Clone, Copy, Debug, PartialEq)]

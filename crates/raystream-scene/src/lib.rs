@@ -47,7 +47,7 @@ pub use desc::{
     VolumeDesc,
 };
 use raystream_io::{MeshError, TriMesh, Volume, VolumeError};
-use raystream_math::{Aabb, DVec3, MAX_COORDINATE, Vec3};
+use raystream_math::{Aabb, DVec3, MAX_COORDINATE, Vec3, in_coordinate_range};
 use raystream_volume::{TfPreset, TransferFunction};
 
 /// What went wrong building a scene, naming the file.
@@ -211,7 +211,7 @@ fn around_the_mesh(e: SceneError) -> SceneError {
 
 /// `p`, if finite and within ±[`MAX_COORDINATE`].
 fn check_point(what: &str, p: Vec3) -> Result<Vec3, String> {
-    if p.is_finite() && p.abs().max_element() <= MAX_COORDINATE {
+    if in_coordinate_range(p) {
         Ok(p)
     } else {
         Err(format!(
@@ -336,7 +336,7 @@ impl Scene {
             mesh.append(&source, |p| frame.to_scene(m * p + t));
             if let Some(p) = mesh.positions[first_new..]
                 .iter()
-                .find(|p| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE)
+                .find(|&&p| !in_coordinate_range(p))
             {
                 return Err(invalid(format!(
                     "object {i}: a vertex lands at {p} after scale, rotate and translate, beyond ±{MAX_COORDINATE:e} (f32 triangle tests overflow that far out)"

@@ -93,20 +93,20 @@ fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     let b = scene.object_box;
     let cam = scene.camera_for(INFO_ASPECT);
     let fov = 2.0 * cam.tan_y.atan().to_degrees();
-    let lights: Vec<_> = scene
-        .lights
-        .iter()
-        .map(|l| json!({"position": l.position.to_array(), "color": l.color.to_array()}))
-        .collect();
-    let volume = scene.volume.as_ref().map(|v| {
-        json!({
-            "dims": v.volume.dims,
-            "spacing": v.volume.spacing,
-            "step_mm": v.step_mm,
-            "shadows": v.shadows,
-        })
-    });
     if a.json {
+        let lights: Vec<_> = scene
+            .lights
+            .iter()
+            .map(|l| json!({"position": l.position.to_array(), "color": l.color.to_array()}))
+            .collect();
+        let volume = scene.volume.as_ref().map(|v| {
+            json!({
+                "dims": v.volume.dims,
+                "spacing": v.volume.spacing,
+                "step_mm": v.step_mm,
+                "shadows": v.shadows,
+            })
+        });
         print_line(json!({
             "kind": "scene",
             "file": file_name(input),

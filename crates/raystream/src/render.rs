@@ -5,8 +5,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use raystream_accel::Hit;
 use raystream_accel::Traversal;
+use raystream_accel::{Hit, KdTree};
 use raystream_cpu::{
     AOV_CHUNK, Aov, AovBuilder, AovImage, DepthStats, RenderOptions, aov_rays_of, prepare_volume,
     render_prepared,
@@ -205,16 +205,25 @@ fn turntable(
     Ok(())
 }
 
-/// `render --aov …`: one ray through each pixel's centre, traced on the chosen device, and the
-/// image of its closest hit (made on the host from either device's hits).
-fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
+/// What a mesh or scene render starts from: the device, the scene and its kd-tree.
+struct Loaded {
+    backend: Backend,
+    scene: Scene,
+    bones: Option<Bones>,
+    load_ms: f64,
+    tree: KdTree,
+}
+
+/// Opens the device (refusing the stack traversal on a GPU), loads INPUT's scene and builds its
+/// kd-tree.
+fn load(a: &RenderArgs) -> Result<Loaded> {
     let backend = open_device(a.accel.device, a.accel.adapter.as_deref(), a.quiet)?;
-    let traversal = Traversal::from(a.accel.traversal);
-    if matches!(backend, Backend::Gpu(_)) && traversal != Traversal::Ropes {
+    if matches!(backend, Backend::Gpu(_)) && Traversal::from(a.accel.traversal) != Traversal::Ropes
+    {
         bail!("--device gpu runs the rope traversal only (--traversal ropes)");
     }
     let t0 = Instant::now();
-    let (scene, _) = load_scene(a)?;
+    let (scene, bones) = load_scene(a)?;
     let load_ms = ms(t0.elapsed());
     let pb = spinner(
         a.quiet,
@@ -222,6 +231,26 @@ fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
     );
     let tree = a.accel.tree.build(&scene.mesh);
     pb.finish_and_clear();
+    Ok(Loaded {
+        backend,
+        scene,
+        bones,
+        load_ms,
+        tree,
+    })
+}
+
+/// `render --aov …`: one ray through each pixel's centre, traced on the chosen device, and the
+/// image of its closest hit (made on the host from either device's hits).
+fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
+    let Loaded {
+        backend,
+        scene,
+        load_ms,
+        tree,
+        ..
+    } = load(a)?;
+    let traversal = Traversal::from(a.accel.traversal);
     let (width, height) = a.size;
     let cam = scene.camera_for(width as f32 / height as f32);
     let pixels = width * height;
@@ -292,21 +321,14 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     if let Some(aov) = a.aov {
         return render_aov(a, aov.into());
     }
-    let backend = open_device(a.accel.device, a.accel.adapter.as_deref(), a.quiet)?;
-    if matches!(backend, Backend::Gpu(_)) && Traversal::from(a.accel.traversal) != Traversal::Ropes
-    {
-        bail!("--device gpu runs the rope traversal only (--traversal ropes)");
-    }
-    let t0 = Instant::now();
-    let (scene, bones) = load_scene(a)?;
-    let load_ms = ms(t0.elapsed());
+    let Loaded {
+        backend,
+        scene,
+        bones,
+        load_ms,
+        tree,
+    } = load(a)?;
     let mut volume_samples = 0u64;
-    let pb = spinner(
-        a.quiet,
-        &format!("building kd-tree over {} triangles", scene.mesh.len()),
-    );
-    let tree = a.accel.tree.build(&scene.mesh);
-    pb.finish_and_clear();
     let opt = RenderOptions {
         width: a.size.0,
         height: a.size.1,

@@ -272,15 +272,15 @@ impl IntoFinite for (f32, f32) {
     }
 }
 
-/// Dimensions within [`MAX_VOXELS`], spacing finite and positive, origin finite, the grid
-/// within ±[`MAX_GRID_REACH_MM`], direction finite with unit, linearly independent columns. Called on header values before any
-/// allocation, and again on the finished volume.
 /// How far from the origin of patient coordinates a volume's grid may reach: a kilometre. No
 /// scanner's coordinates come near (a CT's lie within a few metres of its isocentre), so a
 /// header beyond it is corrupt; and there f32 positions are still good to 1/16 mm, while the
 /// renderings drift apart further out (the CPU and GPU differ at 10⁹ mm).
 pub const MAX_GRID_REACH_MM: f64 = 1e6;
 
+/// Dimensions within [`MAX_VOXELS`], spacing finite and positive, origin finite, the grid
+/// within ±[`MAX_GRID_REACH_MM`], direction finite with unit, linearly independent columns.
+/// Called on header values before any allocation, and again on the finished volume.
 pub(crate) fn check_geometry(
     path: &Path,
     dims: [usize; 3],
