@@ -90,13 +90,6 @@ pub struct DepthStats {
     pub volume_samples: u64,
 }
 
-/// Everything the shading stage needs besides the hit.
-pub struct Shading<'a> {
-    pub scene: &'a Scene,
-    /// Offset of secondary ray origins off the surface (world units).
-    pub epsilon: f32,
-}
-
 /// Renders `scene` with the kd-tree built over `scene.mesh`; `progress` is told after each depth.
 /// A scene's volume is prepared here ([`prepare_volume`]) and marched by every ray.
 pub fn render(
@@ -185,10 +178,6 @@ fn trace_wave(
     film: &mut [Vec3],
     progress: &mut impl FnMut(DepthStats),
 ) {
-    let shading = Shading {
-        scene,
-        epsilon: surface_epsilon(scene),
-    };
     for depth in 0..=opt.max_depth {
         if queue.is_empty() {
             break;
@@ -200,7 +189,7 @@ fn trace_wave(
         };
         handle_misses(&misses, scene.background, film);
         let spawn = depth < opt.max_depth;
-        let (local, shadows, next) = shade_hits(&shading, &hits, spawn);
+        let (local, shadows, next) = shade_hits(scene, &hits, spawn);
         let lit = intersect_any(tree, &shadows, opt.traversal, medium);
         accumulate(film, &local);
         accumulate(film, &lit);
@@ -213,19 +202,6 @@ fn trace_wave(
         });
         queue = next;
     }
-}
-
-/// How far secondary rays start off the surface: 1e-4 of the objects' radius, and at least 32
-/// units in the last place of the objects' largest coordinate. The second term matters only for
-/// objects more than 26 radii from the origin (a CT with a far-off origin): there a hit point
-/// is only good to its f32 rounding, and an offset below it lets a shadow ray hit its own
-/// surface, differently on the CPU and the GPU.
-pub fn surface_epsilon(scene: &Scene) -> f32 {
-    let b = scene.object_box;
-    let far = b.min.abs().max(b.max.abs()).max_element();
-    (1e-4 * b.radius())
-        .max(far * (32.0 * f32::EPSILON))
-        .max(f32::MIN_POSITIVE)
 }
 
 /// Strata per side of the sample grid for `spp` samples: ⌈√spp⌉.
@@ -365,7 +341,10 @@ fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
 
 /// The surface at a hit, seen from the ray's side.
 struct Surface {
+    /// The hit point, on the triangle's plane.
     p: Vec3,
+    /// How far secondary rays start off the surface (the object's ray offset).
+    offset: f32,
     /// Geometric normal, facing the ray.
     ng: Vec3,
     /// Interpolated shading normal, facing the ray.
@@ -397,12 +376,21 @@ fn surface(scene: &Scene, h: &HitWorkItem) -> Surface {
         ns = ng;
     }
     Surface {
-        p: h.item.ray.at(h.hit.t),
+        p: on_plane(h.item.ray.at(h.hit.t), a, ng),
+        offset: scene.ray_offsets[ia as usize],
         ng,
         ns,
         outside,
         dir,
     }
+}
+
+/// `p` moved along the unit normal `n` onto the plane through `a`. A hit point computed as
+/// origin + t·direction is only good to the rounding of the ray's origin and length, which a
+/// far camera makes larger than a small object's ray offset; its distance to the triangle's
+/// own plane is good to the rounding of the triangle's coordinates, which the offset covers.
+fn on_plane(p: Vec3, a: Vec3, n: Vec3) -> Vec3 {
+    p - n * (p - a).dot(n)
 }
 
 /// The split of a hit's light: local (1 − r − τ), reflected, transmitted.
@@ -439,11 +427,10 @@ type Contribution = (u32, Vec3);
 /// Stage 4: local Phong terms (ambient now, diffuse and specular behind shadow rays), and the
 /// next depth's reflection and refraction rays when `spawn`.
 pub fn shade_hits(
-    sh: &Shading,
+    scene: &Scene,
     hits: &[HitWorkItem],
     spawn: bool,
 ) -> (Vec<Contribution>, Vec<ShadowWorkItem>, Vec<RayWorkItem>) {
-    let scene = sh.scene;
     let mat = |h: &HitWorkItem| &scene.materials[scene.material_of[h.hit.prim as usize] as usize];
     let local: Vec<Contribution> = hits
         .par_iter()
@@ -465,7 +452,7 @@ pub fn shade_hits(
             let s = surface(scene, h);
             let m = mat(h);
             let (k, ..) = coefficients(m, &s);
-            let origin = s.p + s.ng * sh.epsilon;
+            let origin = s.p + s.ng * s.offset;
             let w = h.item.weight * k;
             scene.lights.iter().filter_map(move |light| {
                 let to_light = light.position - origin;
@@ -500,14 +487,14 @@ pub fn shade_hits(
                         d = reflect(s.dir, s.ng);
                     }
                     out[0] = Some(RayWorkItem {
-                        ray: Ray::new(s.p + s.ng * sh.epsilon, d, 0.0, f32::INFINITY),
+                        ray: Ray::new(s.p + s.ng * s.offset, d, 0.0, f32::INFINITY),
                         pixel: h.item.pixel,
                         weight: w * r,
                     });
                 }
                 if let Some(d) = refr.filter(|_| t * w.max_element() > 1e-3) {
                     out[1] = Some(RayWorkItem {
-                        ray: Ray::new(s.p - s.ng * sh.epsilon, d, 0.0, f32::INFINITY),
+                        ray: Ray::new(s.p - s.ng * s.offset, d, 0.0, f32::INFINITY),
                         pixel: h.item.pixel,
                         weight: w * t,
                     });

@@ -369,3 +369,104 @@ fn waves_do_not_change_the_image() {
     assert_eq!(wave_pixels(&big), 4096);
     assert_eq!(waves(&big), 507);
 }
+
+/// The cow and a small sphere, lit by two lights, with `extra` objects added.
+fn cow_scene(extra: &str) -> Scene {
+    scene(&format!(
+        r#"
+        background = [0, 0, 0]
+        [camera]
+        eye = [0.5, 1.2, 3.0]
+        target = [0, 0.4, 0]
+        fov = 35
+        [[lights]]
+        position = [3, 5, 4]
+        [[lights]]
+        position = [-4, 2, 1]
+        color = [0.3, 0.3, 0.4]
+        [materials.shiny]
+        diffuse = [0.7, 0.5, 0.4]
+        reflectivity = 0.3
+        [materials.black]
+        ambient = [0, 0, 0]
+        diffuse = [0, 0, 0]
+        specular = [0, 0, 0]
+        [[objects]]
+        shape = "spot"
+        material = "shiny"
+        [[objects]]
+        shape = "sphere"
+        scale = 0.3
+        translate = [0.9, 0.3, 0.2]
+        material = "shiny"
+        {extra}
+        "#
+    ))
+}
+
+/// Secondary rays leave each object by its own offset: a black quad 10⁹ units wide, far
+/// below the cow where it gives what the black background gives, leaves the cow's picture as
+/// it was. (With one offset for the whole scene, 10⁻⁴ of its radius, the cow's shadow and
+/// reflection rays started 10⁵ units off it: a mean difference of 27/255.)
+#[test]
+fn a_small_object_beside_a_huge_one_is_shaded_as_if_alone() {
+    let alone = cow_scene("");
+    let beside = cow_scene(
+        r#"
+        [[objects]]
+        shape = "quad"
+        scale = 1e9
+        translate = [0, -1e8, 0]
+        material = "black"
+        "#,
+    );
+    let n = alone.mesh.positions.len();
+    assert_eq!(alone.ray_offsets, beside.ray_offsets[..n]);
+    assert!(beside.ray_offsets[n] > 1e3 * alone.ray_offsets[0]);
+    let (a, b) = (
+        render_scene(&alone, 48, 36, 3),
+        render_scene(&beside, 48, 36, 3),
+    );
+    let lit = a.pixels.iter().filter(|p| p.max_element() > 0.05).count();
+    assert!(lit > 300, "{lit} lit pixels");
+    let off = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .filter(|(p, q)| (**p - **q).abs().max_element() > 1e-3)
+        .count();
+    assert!(off <= 2, "{off} pixels differ");
+}
+
+/// A camera 10⁵ radii from a sphere, with the light beside it: every lit point faces the light
+/// and the sphere is convex, so no shadow ray may hit the sphere. The hit point origin + t·dir
+/// is good only to 10⁵ ulps there, more than the sphere's offset; moved onto its triangle's
+/// plane it is good to the triangle's rounding.
+#[test]
+fn a_far_camera_does_not_let_a_surface_shadow_itself() {
+    let s = scene(
+        r#"
+        [camera]
+        eye = [0, 0, 1e5]
+        target = [0, 0, 0]
+        fov = 0.0015
+        [[lights]]
+        position = [0, 0, 1e5]
+        [[objects]]
+        shape = "sphere"
+        "#,
+    );
+    let tree = KdTree::build(&s.mesh, Builder::Sah);
+    let cam = s.camera_for(1.0);
+    let rays = generate_camera_rays(&cam, 64, 64, 1);
+    let (hits, _) = intersect_closest(&tree, &rays, Traversal::Ropes);
+    assert!(hits.len() > 1500, "{} hits", hits.len());
+    let (_, shadows, _) = shade_hits(&s, &hits, false);
+    assert!(shadows.len() > 1500, "{} shadow rays", shadows.len());
+    let lit = intersect_any(&tree, &shadows, Traversal::Ropes, None);
+    assert_eq!(
+        lit.len(),
+        shadows.len(),
+        "shadow rays hit the sphere itself"
+    );
+}

@@ -102,7 +102,8 @@ pub struct ShadowWork {
     pub pixel: u32,
 }
 
-/// `Vertex` in render.wgsl, 32 bytes: position and unit shading normal (w unused).
+/// `Vertex` in render.wgsl, 32 bytes: position (w unused) and unit shading normal, with its
+/// object's ray offset (`Scene::ray_offsets`) in the normal's w.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Vertex {
@@ -177,8 +178,8 @@ pub struct RenderParams {
     pub strata: u32,
     /// Byte 80.
     pub ambient_light: [f32; 3],
-    /// Offset of secondary ray origins (byte 92).
-    pub epsilon: f32,
+    /// Unused (byte 92): each vertex carries its object's ray offset.
+    pub pad_92: u32,
     /// First sample (pixel · spp + s) of this wave (byte 96).
     pub sample_base: u32,
     /// Samples in this wave (byte 100).

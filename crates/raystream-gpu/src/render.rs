@@ -23,7 +23,7 @@ use std::time::Instant;
 
 use raystream_accel::{KdTree, Traversal};
 use raystream_cpu::medium::Medium;
-use raystream_cpu::{DepthStats, Image, RenderOptions, strata, surface_epsilon};
+use raystream_cpu::{DepthStats, Image, RenderOptions, strata};
 use raystream_math::Vec3;
 use raystream_scene::Scene;
 
@@ -328,9 +328,10 @@ impl<'a> GpuRenderer<'a> {
             .positions
             .iter()
             .zip(&scene.normals)
-            .map(|(p, n)| Vertex {
+            .zip(&scene.ray_offsets)
+            .map(|((p, n), &offset)| Vertex {
                 position: p.extend(1.0).to_array(),
-                normal: n.extend(0.0).to_array(),
+                normal: n.extend(offset).to_array(),
             })
             .collect();
         let shade_tris: Vec<ShadeTri> = scene
@@ -717,7 +718,6 @@ impl<'a> GpuRenderer<'a> {
             background: v3(scene.background),
             strata: strata(opt.spp),
             ambient_light: v3(scene.ambient_light),
-            epsilon: surface_epsilon(scene),
             max_depth: opt.max_depth,
             light_count: lights as u32,
             max_groups: ctx.limits.max_compute_workgroups_per_dimension.max(1),

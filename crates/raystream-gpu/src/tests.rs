@@ -315,7 +315,7 @@ fn render_wgsl_structs_match_rust() {
             ("background", offset_of!(RenderParams, background)),
             ("strata", offset_of!(RenderParams, strata)),
             ("ambient_light", offset_of!(RenderParams, ambient_light)),
-            ("epsilon", offset_of!(RenderParams, epsilon)),
+            ("pad_92", offset_of!(RenderParams, pad_92)),
             ("sample_base", offset_of!(RenderParams, sample_base)),
             ("sample_count", offset_of!(RenderParams, sample_count)),
             ("max_depth", offset_of!(RenderParams, max_depth)),

@@ -107,6 +107,9 @@ pub struct Scene {
     pub mesh: TriMesh,
     /// Unit vertex normals of `mesh` (for smooth shading).
     pub normals: Vec<Vec3>,
+    /// Per vertex of `mesh`: how far secondary rays start off the surface of the triangles
+    /// through it, its object's [`ray_offset`] (the ground takes the objects' box's).
+    pub ray_offsets: Vec<f32>,
     pub material_of: Vec<u32>,
     pub materials: Vec<Material>,
     pub lights: Vec<Light>,
@@ -315,6 +318,7 @@ impl Scene {
         let mut mesh = TriMesh::default();
         let mut normals = Vec::new();
         let mut material_of = Vec::new();
+        let mut ray_offsets = Vec::new();
         for (i, o) in desc.objects.iter().enumerate() {
             let source = load(i, o).map_err(|e| match e {
                 SceneError::Invalid { problem, .. } => invalid(problem),
@@ -343,6 +347,9 @@ impl Scene {
                 )));
             }
             material_of.extend(std::iter::repeat_n(lookup(&o.material)?, source.len()));
+            let own = Aabb::from_points(&mesh.positions[first_new..]);
+            let offset = ray_offset(own.radius(), farthest(own));
+            ray_offsets.resize(mesh.positions.len(), offset);
         }
         let mut object_box = mesh.bounds();
         for c in volume.iter().flat_map(|v| v.corners()) {
@@ -385,6 +392,14 @@ impl Scene {
                     material_of.extend(std::iter::repeat_n(m, quad.len()));
                 }
             }
+            // The ground is sized and placed in the objects' radii: it leaves its surface by
+            // the objects' offset, or by its own rounding where that is larger.
+            let ground = Aabb::from_points(&mesh.positions[ray_offsets.len()..]);
+            let offset = ray_offset(
+                object_box.radius(),
+                farthest(object_box).max(farthest(ground)),
+            );
+            ray_offsets.resize(mesh.positions.len(), offset);
         }
         let mut lights = Vec::new();
         for (i, l) in desc.lights.iter().enumerate() {
@@ -417,6 +432,7 @@ impl Scene {
         Ok(Scene {
             mesh,
             normals,
+            ray_offsets,
             material_of,
             materials,
             lights,
@@ -587,6 +603,26 @@ impl Scene {
 /// Where a camera framing CT looks from: the patient's front, a little from above.
 const VOLUME_VIEW_DIR: Vec3 = Vec3::new(0.0, 0.12, 1.0);
 
+/// How far secondary rays start off the surface of an object of `radius` whose largest
+/// coordinate is `far`: 1e-4 of its radius, and at least 32 units in the last place of `far`. The second term
+/// matters only for objects more than 26 radii from the origin (a CT with a far-off origin):
+/// there a hit point is only good to its f32 rounding, and an offset below it lets a shadow ray
+/// hit its own surface, differently on the CPU and the GPU.
+///
+/// Each object has its own offset, so that a small object beside a huge one is shaded as if
+/// alone: one offset for the whole scene would start the small one's shadow and reflection
+/// rays far off its surface.
+pub fn ray_offset(radius: f32, far: f32) -> f32 {
+    (1e-4 * radius)
+        .max(far * (32.0 * f32::EPSILON))
+        .max(f32::MIN_POSITIVE)
+}
+
+/// The largest coordinate of `b`, in magnitude.
+fn farthest(b: Aabb) -> f32 {
+    b.min.abs().max(b.max.abs()).max_element()
+}
+
 const SPHERE_SUBDIVISIONS: u32 = 4;
 const CYLINDER_SEGMENTS: u32 = 64;
 
@@ -627,6 +663,39 @@ mod tests {
         [volume]
         path = "abdomen_pelvis_ct_totalseg.nii.gz"
     "#;
+
+    /// Each object's vertices carry its own ray offset, 10⁻⁴ of its radius (or 32 ulps of its
+    /// largest coordinate where that is more); the ground carries the objects' box's.
+    #[test]
+    fn every_vertex_carries_its_objects_ray_offset() {
+        let s = compile(
+            "[[objects]]\nshape = \"sphere\"\n[[objects]]\nshape = \"sphere\"\n\
+             scale = 100\ntranslate = [300, 0, 0]\n[[objects]]\nshape = \"quad\"\n\
+             translate = [3e6, 0, 0]\n[ground]\n",
+        )
+        .unwrap();
+        let n = TriMesh::icosphere(SPHERE_SUBDIVISIONS).positions.len();
+        assert_eq!(s.ray_offsets.len(), s.mesh.positions.len());
+        let unit = Aabb::from_points(&s.mesh.positions[..n]).radius();
+        assert!((unit - 3f32.sqrt()).abs() < 1e-3, "{unit}");
+        let offsets = |r: std::ops::Range<usize>| {
+            let mut v = s.ray_offsets[r].to_vec();
+            v.dedup();
+            v
+        };
+        assert_eq!(offsets(0..n), [1e-4 * unit]);
+        assert_eq!(offsets(n..2 * n).len(), 1);
+        assert!((s.ray_offsets[n] / (1e-2 * unit) - 1.0).abs() < 1e-5);
+        // The quad: 3·10⁶ out, its f32 rounding (32 ulps ≈ 11) outweighs 10⁻⁴ of its size.
+        let quad = 2 * n..2 * n + 4;
+        assert_eq!(offsets(quad.clone()), [3_000_000.5 * 32.0 * f32::EPSILON]);
+        let ground = Aabb::from_points(&s.mesh.positions[quad.end..]);
+        assert_eq!(
+            offsets(quad.end..s.ray_offsets.len()),
+            [ray_offset(s.object_box.radius(), farthest(ground))]
+        );
+        assert!(farthest(ground) > farthest(s.object_box));
+    }
 
     /// A mesh given in LPS or RAS lands where the same patient point lies in the scene frame
     /// (x = L, y = S, z = A), and its normals turn with it.

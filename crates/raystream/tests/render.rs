@@ -532,6 +532,97 @@ fn gpu_render_matches_cpu_far_from_the_origin() {
     );
 }
 
+/// The cow and a small sphere under two lights; `beside` adds a black quad 10⁹ units wide far
+/// below them, where it gives what the black background gives.
+fn cow_scene(beside: bool) -> String {
+    let mut s = String::from(
+        "background = [0, 0, 0]\n[camera]\neye = [0.5, 1.2, 3.0]\ntarget = [0, 0.4, 0]\n\
+         fov = 35\n[[lights]]\nposition = [3, 5, 4]\n[[lights]]\nposition = [-4, 2, 1]\n\
+         color = [0.3, 0.3, 0.4]\n[materials.shiny]\ndiffuse = [0.7, 0.5, 0.4]\n\
+         reflectivity = 0.3\n[[objects]]\nshape = \"spot\"\nmaterial = \"shiny\"\n\
+         [[objects]]\nshape = \"sphere\"\nscale = 0.3\ntranslate = [0.9, 0.3, 0.2]\n\
+         material = \"shiny\"\n",
+    );
+    if beside {
+        s.push_str(
+            "[materials.black]\nambient = [0, 0, 0]\ndiffuse = [0, 0, 0]\n\
+             specular = [0, 0, 0]\n[[objects]]\nshape = \"quad\"\nscale = 1e9\n\
+             translate = [0, -1e8, 0]\nmaterial = \"black\"\n",
+        );
+    }
+    let path = tmp(&format!("cow-beside-{beside}.toml"));
+    std::fs::write(&path, s).unwrap();
+    path.to_str().unwrap().to_string()
+}
+
+/// Each object's secondary rays leave it by its own offset, on both devices: the cow beside a
+/// huge far-off quad renders as the cow alone (a scene-wide offset, 10⁻⁴ of the scene's
+/// radius, started the cow's shadow and reflection rays 10⁵ units off it), and the GPU gives
+/// the CPU's picture of it.
+#[test]
+fn a_small_object_beside_a_huge_one_is_shaded_as_if_alone() {
+    let devices: &[&str] = if gpu_available() {
+        &["cpu", "gpu"]
+    } else {
+        &["cpu"]
+    };
+    for dev in devices {
+        let mut images = Vec::new();
+        for beside in [false, true] {
+            let out = tmp(&format!("cow-beside-{beside}-{dev}.png"));
+            let o = run(&[
+                "render",
+                &cow_scene(beside),
+                "--size",
+                "96x72",
+                "--spp",
+                "1",
+                "--device",
+                dev,
+                "--quiet",
+                "-o",
+                out.to_str().unwrap(),
+            ]);
+            assert!(o.status.success(), "{dev}: {}", stderr(&o));
+            images.push(image::open(&out).unwrap().to_rgb8());
+        }
+        let lit = images[0].pixels().filter(|p| p[0] > 12).count();
+        assert!(lit > 1000, "{dev}: {lit} lit pixels");
+        let off = images[0]
+            .pixels()
+            .zip(images[1].pixels())
+            .filter(|(a, b)| (0..3).any(|c| a[c].abs_diff(b[c]) > 1))
+            .count();
+        assert!(off <= 4, "{dev}: {off} pixels differ beside the huge quad");
+    }
+    gpu_matches_cpu(
+        "cow-beside",
+        &[&cow_scene(true), "--size", "96x72", "--spp", "1"],
+        false,
+    );
+}
+
+/// A camera and its light 10⁵ radii from a sphere: hit points along the camera rays are good
+/// only to 10⁵ ulps, more than the sphere's ray offset, so both devices move them onto their
+/// triangle's plane before the shadow rays leave; otherwise each back-end's shadow rays hit
+/// the sphere in their own places.
+#[test]
+fn gpu_render_matches_cpu_with_a_far_camera() {
+    let scene = tmp("far-camera.toml");
+    std::fs::write(
+        &scene,
+        "[camera]\neye = [0, 0, 1e5]\ntarget = [0, 0, 0]\nfov = 0.0015\n[[lights]]\n\
+         position = [0, 0, 1e5]\n[[lights]]\nposition = [1e5, 1e5, 1e5]\n\
+         color = [0.3, 0.3, 0.3]\n[[objects]]\nshape = \"sphere\"\n",
+    )
+    .unwrap();
+    gpu_matches_cpu(
+        "far-camera",
+        &[scene.to_str().unwrap(), "--size", "96x96", "--spp", "1"],
+        false,
+    );
+}
+
 #[test]
 fn gpu_render_matches_cpu_spot_scene() {
     gpu_matches_cpu(

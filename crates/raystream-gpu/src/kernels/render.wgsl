@@ -30,6 +30,7 @@ struct ShadowWork {
     pixel: u32,
 }
 
+// normal.w: the ray offset of the vertex's object.
 struct Vertex {
     position: vec4<f32>,
     normal: vec4<f32>,
@@ -70,7 +71,7 @@ struct RenderParams {
     background: vec3<f32>,
     strata: u32,
     ambient_light: vec3<f32>,
-    epsilon: f32,
+    pad_92: u32,
     sample_base: u32,
     sample_count: u32,
     max_depth: u32,
@@ -184,6 +185,7 @@ fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
 
 struct Surface {
     p: vec3<f32>,
+    offset: f32,
     ng: vec3<f32>,
     ns: vec3<f32>,
     outside: bool,
@@ -211,7 +213,10 @@ fn surface(w: RayWork, h: HitOut) -> Surface {
     if dot(ns, dir) >= 0.0 {
         ns = ng;
     }
-    return Surface(w.ray.origin + w.ray.dir * h.t, ng, ns, outside, dir);
+    // The hit point moved onto the triangle's plane, as raystream-cpu's `on_plane`.
+    let q = w.ray.origin + w.ray.dir * h.t;
+    let p = q - ng * dot(q - a.position.xyz, ng);
+    return Surface(p, a.normal.w, ng, ns, outside, dir);
 }
 
 // (local, reflected, transmitted) and the refracted direction (w = 1 when there is one).
@@ -274,7 +279,7 @@ fn shade_hits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     add_film(w.pixel, w.weight * k * m.ambient * rp.ambient_light);
 
     // Diffuse and specular, behind one shadow ray per light.
-    let origin = s.p + s.ng * rp.epsilon;
+    let origin = s.p + s.ng * s.offset;
     let wk = w.weight * k;
     for (var li = 0u; li < rp.light_count; li++) {
         let light = lights[li];
@@ -303,11 +308,11 @@ fn shade_hits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
             d = reflect_about(s.dir, s.ng);
         }
         let at = atomicAdd(&counters[NEXT], 1u);
-        queue_out[at] = RayWork(RayIn(s.p + s.ng * rp.epsilon, 0.0, d, T_FAR), w.weight * split.r, w.pixel);
+        queue_out[at] = RayWork(RayIn(s.p + s.ng * s.offset, 0.0, d, T_FAR), w.weight * split.r, w.pixel);
     }
     if split.refr.w != 0.0 && split.t * max_element(w.weight) > 1e-3 {
         let at = atomicAdd(&counters[NEXT], 1u);
-        queue_out[at] = RayWork(RayIn(s.p - s.ng * rp.epsilon, 0.0, split.refr.xyz, T_FAR), w.weight * split.t, w.pixel);
+        queue_out[at] = RayWork(RayIn(s.p - s.ng * s.offset, 0.0, split.refr.xyz, T_FAR), w.weight * split.t, w.pixel);
     }
 }
 
