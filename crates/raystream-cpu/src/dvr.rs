@@ -20,7 +20,7 @@
 use rayon::prelude::*;
 use raystream_io::Volume;
 use raystream_math::Vec3;
-use raystream_scene::Camera;
+use raystream_scene::{Camera, VOLUME_VIEW, View};
 use raystream_volume::TransferFunction;
 
 use crate::Image;
@@ -425,15 +425,16 @@ impl<'a> Marcher<'a> {
     }
 }
 
-/// The camera that shows a volume from the front (anterior view, head up, the patient's right
-/// on the image's left), framing its box, in the scene frame x = L, y = S, z = A.
+/// The camera that shows a volume from the front (anterior view, a little from above, head up,
+/// the patient's right on the image's left), framing its box, in the scene frame x = L,
+/// y = S, z = A.
 pub fn volume_camera(vol: &Volume, aspect: f32) -> Camera {
-    orbit_camera(vol, aspect, 0.0)
+    volume_camera_from(vol, aspect, VOLUME_VIEW)
 }
 
-/// [`volume_camera`] turned `degrees` about the patient's superior axis (a turntable: 90° looks
-/// from the patient's left), framing the whole volume at every angle.
-pub fn orbit_camera(vol: &Volume, aspect: f32, degrees: f32) -> Camera {
+/// A camera framing the whole volume from `view` (in the scene frame; a turntable turns
+/// [`VOLUME_VIEW`] about the patient's superior axis: 90° looks from the patient's left).
+pub fn volume_camera_from(vol: &Volume, aspect: f32, view: View) -> Camera {
     let [nx, ny, nz] = vol.dims;
     let corners: Vec<Vec3> = (0..8)
         .map(|c| {
@@ -445,8 +446,7 @@ pub fn orbit_camera(vol: &Volume, aspect: f32, degrees: f32) -> Camera {
             lps_to_scene(vol.index_to_world(idx).as_vec3())
         })
         .collect();
-    let (s, c) = degrees.to_radians().sin_cos();
-    Camera::frame_from(&corners, aspect, Vec3::new(s, 0.12, c))
+    Camera::frame_from(&corners, aspect, view)
 }
 
 /// Light grid points per axis at most: 128³ shadow rays a frame.
@@ -1208,6 +1208,67 @@ mod tests {
             "brightest pixel ({bx}, {by}), projection ({px}, {py})"
         );
         assert!(img.pixels[brightest].x > 0.9);
+    }
+
+    /// Each named view shows the patient the right way round: a hot block in the patient's
+    /// left-anterior-superior corner (LPS: high x, low y, high z) lands in the image quarter the
+    /// view's conventions put it in, by the brightest pixels' centre in a MIP.
+    #[test]
+    fn every_patient_view_shows_the_patient_the_right_way_round() {
+        use raystream_scene::PatientView as V;
+        let vol = volume([20, 24, 28], [1.0, 0.9, 1.2], |i, j, k| {
+            if i >= 14 && j < 6 && k >= 20 {
+                2000.0
+            } else {
+                0.0
+            }
+        });
+        let opt = DvrOptions {
+            width: 48,
+            height: 48,
+            mode: DvrMode::Mip,
+            window: Some((100.0, 1950.0)),
+            ..Default::default()
+        };
+        // (view, on the image's right, at the image's top)
+        let want = [
+            (V::Anterior, true, true),   // the patient's left on the image's right
+            (V::Posterior, false, true), // … on the image's left
+            (V::Left, false, true),      // anterior on the image's left
+            (V::Right, true, true),      // anterior on the image's right
+            (V::Superior, false, true),  // the patient's left on the image's left, anterior up
+            (V::Inferior, true, true),   // as axial slices: the left on the right, anterior up
+        ];
+        for (view, right, top) in want {
+            let cam = volume_camera_from(&vol, 1.0, view.view());
+            let (img, _) = render_volume(&vol, &grey(0.0), &opt, &cam);
+            let hot: Vec<(f32, f32)> = (0..img.pixels.len())
+                .filter(|&i| img.pixels[i].x > 0.5)
+                .map(|i| ((i % 48) as f32 + 0.5, (i / 48) as f32 + 0.5))
+                .collect();
+            assert!(hot.len() > 20, "{view:?}: {} hot pixels", hot.len());
+            let n = hot.len() as f32;
+            let x = hot.iter().map(|p| p.0).sum::<f32>() / n;
+            let y = hot.iter().map(|p| p.1).sum::<f32>() / n;
+            assert_eq!(
+                (x > 24.0, y < 24.0),
+                (right, top),
+                "{view:?}: hot block at ({x}, {y})"
+            );
+            assert!(
+                (x - 24.0).abs() > 6.0 && (y - 24.0).abs() > 6.0,
+                "{view:?}: ({x}, {y})"
+            );
+        }
+        // The front view turned a quarter about the superior axis is the view from the left.
+        let turned = volume_camera_from(&vol, 1.0, V::Anterior.view().orbit(90.0, 0.0));
+        let left = volume_camera_from(&vol, 1.0, V::Left.view());
+        assert!(
+            (turned.fwd - left.fwd).length() < 1e-6,
+            "{turned:?} vs {left:?}"
+        );
+        assert!((turned.right - left.right).length() < 1e-6);
+        assert!((turned.eye - left.eye).length() < 1e-3);
     }
 
     /// The abdomen CT that the CLI embeds as its default.

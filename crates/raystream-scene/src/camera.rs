@@ -3,12 +3,66 @@
 //! (0.35, 0.25, 1), backed off until the projected points fit with a 5 % margin), so that
 //! `raystream bench` and `rays.py gen` trace the same primary rays.
 
-use raystream_math::{Aabb, Ray, Vec3};
+use raystream_math::{Aabb, Mat3, Quat, Ray, Vec3};
 
 pub const FRAME_FOV_DEG: f32 = 60.0;
 pub const FRAME_VIEW_DIR: Vec3 = Vec3::new(0.35, 0.25, 1.0);
+/// The view of meshes and scenes: from [`FRAME_VIEW_DIR`], y up.
+pub const FRAME_VIEW: View = View::from(FRAME_VIEW_DIR);
 const FRAME_MARGIN: f32 = 1.05;
 const FRAME_SAMPLES: usize = 200_000;
+
+/// Where a framing camera looks from: `back` points from what it frames towards the eye, and
+/// `up` is the image's up (any vector not along `back`; the camera keeps its part across the
+/// view).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    pub back: Vec3,
+    pub up: Vec3,
+}
+
+impl View {
+    /// From `back`, with y up.
+    pub const fn from(back: Vec3) -> View {
+        View { back, up: Vec3::Y }
+    }
+
+    /// This view turned `azimuth` degrees about its up axis (right-handed: from the front, +90
+    /// looks from the image's right side), then raised `elevation` degrees towards its up
+    /// (90: looking straight down the up axis, the old view's far side now at the image's
+    /// top). Zero angles leave it exactly as it was.
+    #[must_use]
+    pub fn orbit(self, azimuth: f32, elevation: f32) -> View {
+        let mut v = self;
+        if azimuth != 0.0 {
+            v.back = Quat::from_axis_angle(v.up.normalize(), azimuth.to_radians()) * v.back;
+        }
+        if elevation != 0.0 {
+            let b = v.back.normalize();
+            let u = v.up.reject_from_normalized(b).normalize();
+            let (s, c) = elevation.to_radians().sin_cos();
+            v = View {
+                back: b * c + u * s,
+                up: u * c - b * s,
+            };
+        }
+        v
+    }
+
+    /// The view's frame as the columns of a rotation: the image's right, its up and `back`,
+    /// each of unit length.
+    pub fn basis(self) -> Mat3 {
+        let back = self.back.normalize();
+        let right = self.up.cross(back).normalize();
+        Mat3::from_cols(right, back.cross(right), back)
+    }
+
+    /// The rotation that takes `from`'s frame onto this view's: what turns with the camera
+    /// (lights that keep their place beside it) turns by it.
+    pub fn turn_from(self, from: View) -> Mat3 {
+        self.basis() * from.basis().transpose()
+    }
+}
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
@@ -40,17 +94,17 @@ impl Camera {
     /// A camera looking at the points' bounding-box centre from `FRAME_VIEW_DIR`, backed off
     /// until every point projects inside the frame with a 5 % margin.
     pub fn frame(points: &[Vec3], aspect: f32) -> Camera {
-        Self::frame_from(points, aspect, FRAME_VIEW_DIR)
+        Self::frame_from(points, aspect, FRAME_VIEW)
     }
 
-    /// As [`Camera::frame`], looking from direction `view_dir` (towards the eye, y up).
-    pub fn frame_from(points: &[Vec3], aspect: f32, view_dir: Vec3) -> Camera {
+    /// As [`Camera::frame`], with `view`.
+    pub fn frame_from(points: &[Vec3], aspect: f32, view: View) -> Camera {
         let b = Aabb::from_points(points);
         let center = b.center();
-        let back = view_dir.normalize();
+        let back = view.back.normalize();
         // The view direction straight from `back`, as rays.py takes it (not from an eye one
         // unit from the centre, which rounds onto the centre far from the origin).
-        let mut cam = Camera::looking_along(center, -back, Vec3::Y, FRAME_FOV_DEG);
+        let mut cam = Camera::looking_along(center, -back, view.up, FRAME_FOV_DEG);
         let tan_x = cam.tan_y * aspect;
         let step = (points.len() / FRAME_SAMPLES).max(1);
         let need = points
@@ -97,6 +151,86 @@ mod tests {
         // The centre pixel looks at the box centre.
         let r = cam.ray(8.0, 4.5, 16, 9);
         assert!((r.dir - cam.fwd).length() < 1e-6);
+    }
+
+    /// `View::orbit`: no turn is exactly no turn; a turn keeps the distance to the up axis and
+    /// the camera level; raising a level view by ±90° looks straight down (up) the up axis
+    /// with a finite camera; raising adds to the view's angle above the horizontal; a full
+    /// circle comes back.
+    #[test]
+    fn orbits_turn_about_the_up_axis_and_raise_towards_it() {
+        let v = View::from(FRAME_VIEW_DIR);
+        assert_eq!(v.orbit(0.0, 0.0), v);
+        let pts = [Vec3::new(-1.0, -2.0, -3.0), Vec3::new(2.0, 1.0, 0.5)];
+        for az in [-170.0f32, -90.0, 33.0, 90.0, 180.0] {
+            let t = v.orbit(az, 0.0);
+            assert!((t.back.y - v.back.y).abs() < 1e-6, "{az}: {t:?}");
+            assert!((t.back.length() - v.back.length()).abs() < 1e-5);
+            let (s, c) = az.to_radians().sin_cos();
+            let want = Vec3::new(
+                v.back.x * c + v.back.z * s,
+                v.back.y,
+                v.back.z * c - v.back.x * s,
+            );
+            assert!((t.back - want).length() < 1e-5, "{az}: {t:?} vs {want}");
+            let cam = Camera::frame_from(&pts, 1.0, t);
+            assert!(cam.right.y.abs() < 1e-6, "{az}: the horizon tilts: {cam:?}");
+        }
+        let back = v.orbit(200.0, 0.0).orbit(160.0, 0.0);
+        assert!((back.back - v.back).length() < 1e-5);
+        // From a level view, ±90° looks straight down (up) the axis.
+        let level = View::from(Vec3::Z);
+        for el in [-90.0f32, 90.0] {
+            let t = level.orbit(30.0, el);
+            assert!(
+                (t.back.normalize() - Vec3::Y * el.signum()).length() < 1e-6,
+                "{t:?}"
+            );
+            let cam = Camera::frame_from(&pts, 1.0, t);
+            assert!(cam.fwd.is_finite() && cam.right.is_finite() && cam.up.is_finite());
+            assert!((cam.fwd + Vec3::Y * el.signum()).length() < 1e-6, "{cam:?}");
+        }
+        // Raised 30°: the view's angle above the horizontal grows by 30°.
+        let rise = |b: Vec3| (b.y / b.length()).asin().to_degrees();
+        assert!((rise(v.orbit(0.0, 30.0).back) - rise(v.back) - 30.0).abs() < 1e-3);
+    }
+
+    /// `View::turn_from` takes one view's frame onto another's: a point keeps its place in the
+    /// camera's frame (right, up, back) when both turn, and the basis is orthonormal.
+    #[test]
+    fn what_turns_with_the_camera_keeps_its_place_beside_it() {
+        let a = View::from(FRAME_VIEW_DIR);
+        let p = Vec3::new(2.0, 3.0, 2.5);
+        for b in [
+            a.orbit(90.0, 0.0),
+            a.orbit(-140.0, 35.0),
+            a.orbit(10.0, -80.0),
+            View {
+                back: Vec3::NEG_Y,
+                up: Vec3::Z,
+            },
+        ] {
+            let m = b.basis();
+            assert!(
+                (m.transpose() * m - Mat3::IDENTITY)
+                    .abs()
+                    .to_cols_array()
+                    .iter()
+                    .all(|&e| e < 1e-6)
+            );
+            assert!((m.determinant() - 1.0).abs() < 1e-6);
+            let turned = b.turn_from(a) * p;
+            let (here, there) = (a.basis().transpose() * p, m.transpose() * turned);
+            assert!((here - there).length() < 1e-5, "{b:?}: {here} vs {there}");
+            assert!((turned.length() - p.length()).abs() < 1e-5);
+        }
+        assert!(
+            (a.turn_from(a) - Mat3::IDENTITY)
+                .abs()
+                .to_cols_array()
+                .iter()
+                .all(|&e| e < 1e-6)
+        );
     }
 
     /// Framing does not depend on where the points are or how large: the same view from 1e-3

@@ -41,7 +41,7 @@ mod desc;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-pub use camera::Camera;
+pub use camera::{Camera, FRAME_VIEW, View};
 pub use desc::{
     CameraDesc, Frame, GroundDesc, LightDesc, MaterialDesc, ObjectDesc, Scale, SceneDesc,
     VolumeDesc,
@@ -120,8 +120,11 @@ pub struct Scene {
     pub ambient_light: Vec3,
     /// Bounds of the objects, without the ground plane.
     pub object_box: Aabb,
-    /// Where a framing camera looks from (towards the eye), when `camera` is `None`.
-    pub frame_dir: Vec3,
+    /// The ground plane's triangles and vertices: the last ones of `mesh` (0 without one).
+    pub ground_triangles: usize,
+    pub ground_vertices: usize,
+    /// Where a framing camera looks from, when `camera` is `None`.
+    pub frame_view: View,
     /// A CT volume rendered directly among the meshes.
     pub volume: Option<SceneVolume>,
 }
@@ -355,6 +358,7 @@ impl Scene {
         for c in volume.iter().flat_map(|v| v.corners()) {
             object_box = object_box.grow(c);
         }
+        let (object_triangles, object_vertices) = (mesh.len(), mesh.positions.len());
         if let Some(g) = &desc.ground {
             if g.size.is_some_and(|s| !(s > 0.0 && s <= 1e4)) {
                 return Err(invalid(format!(
@@ -429,6 +433,8 @@ impl Scene {
             desc.ambient.map(Vec3::from).unwrap_or(Vec3::splat(0.6)),
         )
         .map_err(invalid)?;
+        let ground_triangles = mesh.len() - object_triangles;
+        let ground_vertices = mesh.positions.len() - object_vertices;
         Ok(Scene {
             mesh,
             normals,
@@ -440,10 +446,12 @@ impl Scene {
             background,
             ambient_light,
             object_box,
-            frame_dir: if volume.is_some() {
-                VOLUME_VIEW_DIR
+            ground_triangles,
+            ground_vertices,
+            frame_view: if volume.is_some() {
+                VOLUME_VIEW
             } else {
-                camera::FRAME_VIEW_DIR
+                FRAME_VIEW
             },
             volume,
         })
@@ -562,7 +570,7 @@ impl Scene {
                 *dst = lps_to_scene(src);
             }
         }
-        scene.frame_dir = VOLUME_VIEW_DIR;
+        scene.frame_view = VOLUME_VIEW;
         scene
     }
 
@@ -574,10 +582,22 @@ impl Scene {
             .expect("built-in scene is valid")
     }
 
+    /// Leaves the ground plane out (a view from below, where it would hide the objects).
+    pub fn leave_out_ground(&mut self) {
+        let (t, v) = (self.mesh.len(), self.mesh.positions.len());
+        self.mesh.triangles.truncate(t - self.ground_triangles);
+        self.material_of.truncate(t - self.ground_triangles);
+        for n in [&mut self.mesh.positions, &mut self.normals] {
+            n.truncate(v - self.ground_vertices);
+        }
+        self.ray_offsets.truncate(v - self.ground_vertices);
+        (self.ground_triangles, self.ground_vertices) = (0, 0);
+    }
+
     /// The camera to render with: the scene's, or one framing the objects (see [`Camera::frame`]).
     pub fn camera_for(&self, aspect: f32) -> Camera {
         self.camera.unwrap_or_else(|| {
-            Camera::frame_from(&self.mesh_points_for_framing(), aspect, self.frame_dir)
+            Camera::frame_from(&self.mesh_points_for_framing(), aspect, self.frame_view)
         })
     }
 
@@ -600,8 +620,42 @@ impl Scene {
     }
 }
 
-/// Where a camera framing CT looks from: the patient's front, a little from above.
-const VOLUME_VIEW_DIR: Vec3 = Vec3::new(0.0, 0.12, 1.0);
+/// Where a camera framing CT looks from: the patient's front, a little from above
+/// (atan 0.12 ≈ 6.8°), head up, in the scene frame x = the patient's left, y = superior,
+/// z = anterior.
+pub const VOLUME_VIEW: View = View::from(Vec3::new(0.0, 0.12, 1.0));
+
+/// The standard views of a patient, each from one side, straight on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PatientView {
+    /// From the front, head up: the patient's right on the image's left.
+    Anterior,
+    /// From the back, head up: the patient's right on the image's right.
+    Posterior,
+    /// From the patient's left side, head up: anterior on the image's left.
+    Left,
+    /// From the patient's right side, head up: anterior on the image's right.
+    Right,
+    /// From above the head, anterior up: the patient's right on the image's right.
+    Superior,
+    /// From below the feet, anterior up: the patient's right on the image's left (as axial
+    /// slices are shown).
+    Inferior,
+}
+
+impl PatientView {
+    pub fn view(self) -> View {
+        let from = |back: Vec3, up: Vec3| View { back, up };
+        match self {
+            PatientView::Anterior => from(Vec3::Z, Vec3::Y),
+            PatientView::Posterior => from(Vec3::NEG_Z, Vec3::Y),
+            PatientView::Left => from(Vec3::X, Vec3::Y),
+            PatientView::Right => from(Vec3::NEG_X, Vec3::Y),
+            PatientView::Superior => from(Vec3::Y, Vec3::Z),
+            PatientView::Inferior => from(Vec3::NEG_Y, Vec3::Z),
+        }
+    }
+}
 
 /// How far secondary rays start off the surface of an object of `radius` whose largest
 /// coordinate is `far`: 1e-4 of its radius, and at least 32 units in the last place of `far`. The second term
@@ -695,6 +749,33 @@ mod tests {
             [ray_offset(s.object_box.radius(), farthest(ground))]
         );
         assert!(farthest(ground) > farthest(s.object_box));
+    }
+
+    /// The ground's triangles and vertices come last and are counted; leaving it out keeps
+    /// the objects and every per-vertex and per-triangle array in step.
+    #[test]
+    fn the_ground_can_be_left_out() {
+        let mut s = compile(
+            "[[objects]]\nshape = \"sphere\"\n[ground]\nchecker = \"x\"\ntiles = 4\n\
+             [materials.x]\n",
+        )
+        .unwrap();
+        let sphere = TriMesh::icosphere(SPHERE_SUBDIVISIONS);
+        assert_eq!(s.ground_triangles, s.mesh.len() - sphere.len());
+        assert_eq!(
+            s.ground_vertices,
+            s.mesh.positions.len() - sphere.positions.len()
+        );
+        assert_eq!(s.ground_triangles, 4 * 4 * 2);
+        let before = s.mesh.positions[..sphere.positions.len()].to_vec();
+        s.leave_out_ground();
+        assert_eq!(s.mesh.len(), sphere.len());
+        assert_eq!(s.mesh.positions, before);
+        assert_eq!(s.normals.len(), s.mesh.positions.len());
+        assert_eq!(s.ray_offsets.len(), s.mesh.positions.len());
+        assert_eq!(s.material_of.len(), s.mesh.len());
+        assert_eq!((s.ground_triangles, s.ground_vertices), (0, 0));
+        s.mesh.check(Path::new("left-out.toml")).unwrap();
     }
 
     /// A mesh given in LPS or RAS lands where the same patient point lies in the scene frame

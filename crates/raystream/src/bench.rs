@@ -12,10 +12,10 @@ use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use raystream_accel::{Counters, KdTree, Traversal, brute};
-use raystream_cpu::dvr::{DvrMode, DvrOptions, orbit_camera, render_volume};
+use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera, volume_camera_from};
 use raystream_io::TriMesh;
 use raystream_math::{Ray, Vec3};
-use raystream_scene::Camera;
+use raystream_scene::{Camera, VOLUME_VIEW};
 use serde_json::json;
 
 use crate::cli::BenchArgs;
@@ -437,14 +437,14 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
         let upload_ms = ms(t.elapsed());
         for &shadows in shadow_cases {
             let opt = DvrOptions { shadows, ..base };
-            let cam0 = orbit_camera(&volume, aspect, 0.0);
+            let cam0 = volume_camera(&volume, aspect);
             if matches!(backend, Backend::Gpu(_)) {
                 let small = DvrOptions {
                     width: 128,
                     height: 128,
                     ..opt
                 };
-                let cam = orbit_camera(&volume, 1.0, 0.0);
+                let cam = volume_camera(&volume, 1.0);
                 let gpu = renderer.frame(&small, &cam)?.rgb;
                 let (cpu, _) = render_volume(&volume, &tf, &small, &cam);
                 let (mean, _) = raystream_cpu::srgb8_diff(&cpu.to_srgb8(), &gpu);
@@ -466,7 +466,8 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
             let (mut frame_ms, mut kernel_ms, mut samples) = (Vec::new(), Vec::new(), 0u64);
             let mut stats = None;
             for i in 0..a.frames {
-                let cam = orbit_camera(&volume, aspect, 360.0 * i as f32 / a.frames as f32);
+                let turn = VOLUME_VIEW.orbit(360.0 * i as f32 / a.frames as f32, 0.0);
+                let cam = volume_camera_from(&volume, aspect, turn);
                 let f = renderer.frame(&opt, &cam)?;
                 frame_ms.push(f.frame_ms);
                 kernel_ms.extend(f.kernel_ms);

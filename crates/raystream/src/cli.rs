@@ -213,8 +213,22 @@ pub struct RenderArgs {
     /// left out).
     #[arg(long, value_enum, conflicts_with_all = ["mode", "spp", "max_depth", "repeat", "submit"])]
     pub aov: Option<AovArg>,
-    /// With --mode: a turntable of N frames, one every 360/N degrees about the patient's
-    /// superior axis, written as OUTPUT/frame_000.png … (-o names the folder).
+    /// CT volumes (and scenes with one): look at the patient straight on from this side
+    /// (default: from the front, 7° from above). anterior and posterior: head up; left and
+    /// right: from the patient's left or right side, head up; superior: from above the head,
+    /// anterior up; inferior: from below the feet, anterior up, the patient's right on the
+    /// image's left as axial slices are shown.
+    #[arg(long, value_enum)]
+    pub view: Option<ViewArg>,
+    /// Turn the framing camera AZ degrees about the image's up axis (+90 looks from what was
+    /// the image's right side; for a volume's front view, from the patient's left), then raise
+    /// it EL degrees towards that axis (−90 to 90): AZ or AZ,EL. Meshes, volumes and scenes
+    /// without a camera of their own.
+    #[arg(long, value_parser = parse_orbit, allow_hyphen_values = true)]
+    pub orbit: Option<[f32; 2]>,
+    /// With --mode: a turntable of N frames, one every 360/N degrees about the image's up axis
+    /// (the patient's superior axis unless --view superior/inferior), starting from --view and
+    /// --orbit, written as OUTPUT/frame_000.png … (-o names the folder).
     #[arg(long, requires = "mode", value_parser = clap::value_parser!(u32).range(1..=3600))]
     pub turntable: Option<u32>,
     /// Render the frame this many times and report the median frame time and frames per
@@ -279,6 +293,18 @@ pub fn parse_crop(s: &str) -> Result<[f32; 6], String> {
         return Err(format!("'{s}': each minimum must be below its maximum"));
     }
     Ok(c)
+}
+
+pub fn parse_orbit(s: &str) -> Result<[f32; 2], String> {
+    let what = "expected AZ or AZ,EL in degrees (EL from -90 to 90)";
+    let [az, el] = match s.split(',').count() {
+        1 => [parse_floats::<1>(s, what)?[0], 0.0],
+        _ => parse_floats::<2>(s, what)?,
+    };
+    if el.abs() > 90.0 {
+        return Err(format!("'{s}': elevation {el} is past 90 degrees; {what}"));
+    }
+    Ok([az, el])
 }
 
 pub fn parse_plane(s: &str) -> Result<[f32; 4], String> {
@@ -361,6 +387,31 @@ impl PresetArg {
         self.to_possible_value()
             .map(|v| v.get_name().to_string())
             .unwrap_or_default()
+    }
+}
+
+/// `render --view`: a side of the patient.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ViewArg {
+    Anterior,
+    Posterior,
+    Left,
+    Right,
+    Superior,
+    Inferior,
+}
+
+impl From<ViewArg> for raystream_scene::PatientView {
+    fn from(v: ViewArg) -> Self {
+        use raystream_scene::PatientView;
+        match v {
+            ViewArg::Anterior => PatientView::Anterior,
+            ViewArg::Posterior => PatientView::Posterior,
+            ViewArg::Left => PatientView::Left,
+            ViewArg::Right => PatientView::Right,
+            ViewArg::Superior => PatientView::Superior,
+            ViewArg::Inferior => PatientView::Inferior,
+        }
     }
 }
 

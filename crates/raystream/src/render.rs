@@ -12,9 +12,9 @@ use raystream_cpu::{
     render_prepared,
 };
 use raystream_gpu::GpuRenderer;
-use raystream_scene::Scene;
+use raystream_scene::{PatientView, Scene, VOLUME_VIEW, View};
 
-use raystream_cpu::dvr::{DvrMode, DvrOptions, orbit_camera, volume_camera};
+use raystream_cpu::dvr::{DvrMode, DvrOptions, volume_camera_from};
 
 use crate::cli::RenderArgs;
 use crate::common::{
@@ -35,6 +35,14 @@ fn input_name(a: &RenderArgs) -> std::path::PathBuf {
         .unwrap_or_else(|| Path::new(DEFAULT_CT_NAME).to_path_buf())
 }
 
+/// Whether INPUT is a scene file (`.toml`).
+fn is_scene_file(a: &RenderArgs) -> bool {
+    a.input.as_deref().is_some_and(|p| {
+        p.extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+    })
+}
+
 /// The scene named by INPUT: none → the built-in CT's bones, `.toml` → scene file, a volume →
 /// its bones, else a mesh. Also says how the volume steps went, for volumes.
 fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
@@ -47,15 +55,28 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
     };
     match a.input.as_deref() {
         None => volume_scene(Path::new(DEFAULT_CT_NAME), Some(DEFAULT_CT)),
-        Some(p)
-            if p.extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("toml")) =>
-        {
-            Ok((Scene::load(p)?, None))
-        }
+        Some(p) if is_scene_file(a) => Ok((Scene::load(p)?, None)),
         Some(p) if raystream_io::is_volume_path(p) => volume_scene(p, None),
         Some(p) => Ok((Scene::for_mesh(load_mesh(p)?, p)?, None)),
     }
+}
+
+/// The view `--view` starts from (`default` without it), before `--orbit`; `patient`: the
+/// scene frame is the patient's (x = left, y = superior, z = anterior), so sides have names.
+fn base_view(a: &RenderArgs, default: View, patient: bool) -> Result<View> {
+    Ok(match a.view {
+        Some(_) if !patient => bail!(
+            "{}: --view names a side of the patient, for CT volumes and scenes with one; turn a mesh with --orbit AZ,EL",
+            input_name(a).display()
+        ),
+        Some(v) => PatientView::from(v).view(),
+        None => default,
+    })
+}
+
+/// `--orbit AZ,EL`, or no turn.
+fn orbit_angles(a: &RenderArgs) -> [f32; 2] {
+    a.orbit.unwrap_or([0.0; 2])
 }
 
 /// `render VOLUME --mode …`: direct volume rendering on the CPU (the reference path).
@@ -74,10 +95,12 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let (tf, opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     let aspect = opt.width as f32 / opt.height as f32;
     let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
+    let view = base_view(a, VOLUME_VIEW, true)?;
     if let Some(n) = a.turntable {
-        return turntable(a, &renderer, &volume, &opt, n);
+        return turntable(a, &renderer, &volume, &opt, view, n);
     }
-    let cam = volume_camera(&volume, aspect);
+    let [az, el] = orbit_angles(a);
+    let cam = volume_camera_from(&volume, aspect, view.orbit(az, el));
     let pb = spinner(
         a.quiet,
         &format!(
@@ -148,12 +171,14 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     Ok(())
 }
 
-/// `render --mode … --turntable N -o DIR`: N frames about the patient's superior axis.
+/// `render --mode … --turntable N -o DIR`: N frames about `view`'s up axis (the patient's
+/// superior axis unless the view is from above or below), from `--orbit`'s angles on.
 fn turntable(
     a: &RenderArgs,
     renderer: &dvr::Renderer,
     volume: &raystream_io::Volume,
     opt: &DvrOptions,
+    view: View,
     n: u32,
 ) -> Result<()> {
     let dir = &a.output;
@@ -178,11 +203,12 @@ fn turntable(
     pb.set_message("turntable");
     let digits = (n - 1).max(1).ilog10() as usize + 1;
     let mut frame_ms = Vec::new();
+    let [az, el] = orbit_angles(a);
     for i in 0..n {
-        let cam = orbit_camera(
+        let cam = volume_camera_from(
             volume,
             opt.width as f32 / opt.height as f32,
-            360.0 * i as f32 / n as f32,
+            view.orbit(az + 360.0 * i as f32 / n as f32, el),
         );
         let f = renderer.frame(opt, &cam)?;
         frame_ms.push(f.frame_ms);
@@ -223,7 +249,34 @@ fn load(a: &RenderArgs) -> Result<Loaded> {
         bail!("--device gpu runs the rope traversal only (--traversal ropes)");
     }
     let t0 = Instant::now();
-    let (scene, bones) = load_scene(a)?;
+    let (mut scene, bones) = load_scene(a)?;
+    if a.view.is_some() || a.orbit.is_some() {
+        if scene.camera.is_some() {
+            bail!(
+                "{}: the scene sets its camera; --view and --orbit turn the framing camera of scenes without one",
+                input_name(a).display()
+            );
+        }
+        let [az, el] = orbit_angles(a);
+        let patient = bones.is_some() || scene.volume.is_some();
+        let default = scene.frame_view;
+        scene.frame_view = base_view(a, default, patient)?.orbit(az, el);
+        if !is_scene_file(a) {
+            // A mesh's or the bones' lights are a studio's: they keep their place beside the
+            // camera. A scene file's lights stay where the file puts them.
+            let turn = scene.frame_view.turn_from(default);
+            let c = scene.object_box.center();
+            for l in &mut scene.lights {
+                l.position = c + turn * (l.position - c);
+            }
+        }
+        if scene.frame_view.back.y < 0.0 && scene.ground_triangles > 0 {
+            scene.leave_out_ground();
+            if !a.quiet {
+                eprintln!("raystream: a view from below: the ground is left out");
+            }
+        }
+    }
     let load_ms = ms(t0.elapsed());
     let pb = spinner(
         a.quiet,

@@ -831,6 +831,124 @@ fn turntable_writes_frames() {
     assert!(stderr(&o).contains("folder"), "{}", stderr(&o));
 }
 
+/// `--view` and `--orbit`: the CT from the patient's left is the front view turned a quarter
+/// (within rounding) and differs from the front; a turntable starts at its `--view`; a mesh
+/// turned by 0° is the mesh unturned, byte for byte, and by 180° is not; mistakes are named.
+#[test]
+fn views_and_orbits_turn_the_framing_camera() {
+    let render = |name: &str, args: &[&str]| {
+        let out = tmp(&format!("view-{name}.png"));
+        let mut all = vec!["render", "--size", "48x36", "--quiet", "--device", "cpu"];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["-o", out.to_str().unwrap()]);
+        let o = run(&all);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        image::open(&out).unwrap().to_rgb8()
+    };
+    let mip = ["--mode", "mip", "--window", "1500", "--level", "300"];
+    let with = |extra: &[&'static str]| [&mip[..], extra].concat();
+    let left = render("left", &with(&["--view", "left"]));
+    let turned = render("turned", &with(&["--view", "anterior", "--orbit", "90"]));
+    let front = render("front", &with(&[]));
+    let near = left
+        .pixels()
+        .zip(turned.pixels())
+        .filter(|(a, b)| (0..3).all(|c| a[c].abs_diff(b[c]) <= 2))
+        .count();
+    assert!(near >= 48 * 36 * 99 / 100, "{near} of 1728 pixels alike");
+    assert_ne!(left, front);
+
+    let dir = tmp("view-turntable");
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut all = vec!["render", "--size", "48x36", "--quiet", "--device", "cpu"];
+    all.extend_from_slice(&with(&["--view", "superior", "--turntable", "3"]));
+    all.extend_from_slice(&["-o", dir.to_str().unwrap()]);
+    let o = run(&all);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let superior = render("superior", &with(&["--view", "superior"]));
+    assert_eq!(
+        image::open(dir.join("frame_000.png")).unwrap().to_rgb8(),
+        superior
+    );
+    assert_ne!(superior, front);
+
+    let bunny = mesh("stanford_bunny.ply");
+    let plain = render("bunny", &[&bunny, "--spp", "1", "--max-depth", "1"]);
+    let zero = render(
+        "bunny-0",
+        &[&bunny, "--spp", "1", "--max-depth", "1", "--orbit", "0,0"],
+    );
+    let back = render(
+        "bunny-180",
+        &[&bunny, "--spp", "1", "--max-depth", "1", "--orbit=180,-10"],
+    );
+    assert_eq!(plain, zero);
+    assert_ne!(plain, back);
+    // From below, the ground is left out and the lights have come round with the camera: the
+    // bunny is as brightly lit as from the front (fixed lights would leave it in the dark).
+    let below = render(
+        "bunny-below",
+        &[&bunny, "--spp", "1", "--max-depth", "1", "--orbit=0,-60"],
+    );
+    // The median brightness of the pixels that are not the background (the commonest value).
+    let bright = |img: &image::RgbImage| {
+        let v: Vec<u8> = img.pixels().map(|p| p[0].max(p[1]).max(p[2])).collect();
+        let mut count = [0usize; 256];
+        v.iter().for_each(|&x| count[x as usize] += 1);
+        let bg = (0..256).max_by_key(|&i| count[i]).unwrap() as u8;
+        let mut object: Vec<u8> = v.into_iter().filter(|x| x.abs_diff(bg) > 3).collect();
+        object.sort_unstable();
+        assert!(object.len() > 300, "{} object pixels", object.len());
+        object[object.len() / 2]
+    };
+    let (front_b, below_b) = (bright(&plain), bright(&below));
+    assert!(
+        below_b as f32 >= 0.8 * front_b as f32,
+        "from below {below_b}, from the front {front_b}"
+    );
+
+    let scene = tmp("view-camera.toml");
+    std::fs::write(
+        &scene,
+        "[camera]\neye = [0, 0, 4]\ntarget = [0, 0, 0]\n[[objects]]\nshape = \"sphere\"\n",
+    )
+    .unwrap();
+    for (args, want) in [
+        (
+            vec![bunny.as_str(), "--view", "left"],
+            "names a side of the patient",
+        ),
+        (
+            vec![scene.to_str().unwrap(), "--orbit", "10"],
+            "sets its camera",
+        ),
+        (vec![bunny.as_str(), "--orbit", "0,91"], "past 90 degrees"),
+        (vec![bunny.as_str(), "--orbit", "x"], "AZ or AZ,EL"),
+        (vec!["--view", "sideways"], "possible values"),
+    ] {
+        let mut all = vec!["render", "--size", "8x8", "--quiet", "-o", "/dev/null"];
+        all.extend_from_slice(&args);
+        let o = run(&all);
+        assert_eq!(o.status.code(), Some(2), "{args:?} should fail");
+        let err = stderr(&o);
+        assert!(err.contains(want), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}
+
+/// A CT's bones seen from below the feet (the camera's up is then the patient's anterior),
+/// turned and raised: the GPU gives the CPU's picture.
+#[test]
+fn gpu_render_matches_cpu_from_below() {
+    gpu_matches_cpu(
+        "view-inferior",
+        &[
+            "--size", "64x48", "--spp", "1", "--view", "inferior", "--orbit", "30,20",
+        ],
+        false,
+    );
+}
+
 /// `bench CT --mode dvr`: an orbit without and with shadows, one JSON line each, on the
 /// resampled grid, with samples counted.
 #[test]
