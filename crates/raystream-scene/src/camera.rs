@@ -7,7 +7,7 @@ use raystream_math::{Aabb, Mat3, Quat, Ray, Vec3};
 
 pub const FRAME_FOV_DEG: f32 = 60.0;
 pub const FRAME_VIEW_DIR: Vec3 = Vec3::new(0.35, 0.25, 1.0);
-/// The view of meshes and scenes: from [`FRAME_VIEW_DIR`], y up.
+/// The view of meshes and scenes: from `FRAME_VIEW_DIR`, (0.35, 0.25, 1), y up.
 pub const FRAME_VIEW: View = View::from(FRAME_VIEW_DIR);
 const FRAME_MARGIN: f32 = 1.05;
 const FRAME_SAMPLES: usize = 200_000;
