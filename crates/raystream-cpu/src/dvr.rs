@@ -20,7 +20,7 @@
 use rayon::prelude::*;
 use raystream_io::Volume;
 use raystream_math::Vec3;
-use raystream_scene::{Camera, VOLUME_VIEW, View};
+use raystream_scene::{Camera, Projection, VOLUME_VIEW, View};
 use raystream_volume::TransferFunction;
 
 use crate::Image;
@@ -429,12 +429,12 @@ impl<'a> Marcher<'a> {
 /// the patient's right on the image's left), framing its box, in the scene frame x = L,
 /// y = S, z = A.
 pub fn volume_camera(vol: &Volume, aspect: f32) -> Camera {
-    volume_camera_from(vol, aspect, VOLUME_VIEW)
+    volume_camera_from(vol, aspect, VOLUME_VIEW, Projection::Perspective)
 }
 
 /// A camera framing the whole volume from `view` (in the scene frame; a turntable turns
 /// [`VOLUME_VIEW`] about the patient's superior axis: 90° looks from the patient's left).
-pub fn volume_camera_from(vol: &Volume, aspect: f32, view: View) -> Camera {
+pub fn volume_camera_from(vol: &Volume, aspect: f32, view: View, projection: Projection) -> Camera {
     let [nx, ny, nz] = vol.dims;
     let corners: Vec<Vec3> = (0..8)
         .map(|c| {
@@ -446,7 +446,7 @@ pub fn volume_camera_from(vol: &Volume, aspect: f32, view: View) -> Camera {
             lps_to_scene(vol.index_to_world(idx).as_vec3())
         })
         .collect();
-    Camera::frame_from(&corners, aspect, view)
+    Camera::framing(&corners, aspect, view, projection)
 }
 
 /// Light grid points per axis at most: 128³ shadow rays a frame.
@@ -1240,7 +1240,7 @@ mod tests {
             (V::Inferior, true, true),   // as axial slices: the left on the right, anterior up
         ];
         for (view, right, top) in want {
-            let cam = volume_camera_from(&vol, 1.0, view.view());
+            let cam = volume_camera_from(&vol, 1.0, view.view(), Projection::Perspective);
             let (img, _) = render_volume(&vol, &grey(0.0), &opt, &cam);
             let hot: Vec<(f32, f32)> = (0..img.pixels.len())
                 .filter(|&i| img.pixels[i].x > 0.5)
@@ -1261,14 +1261,65 @@ mod tests {
             );
         }
         // The front view turned a quarter about the superior axis is the view from the left.
-        let turned = volume_camera_from(&vol, 1.0, V::Anterior.view().orbit(90.0, 0.0));
-        let left = volume_camera_from(&vol, 1.0, V::Left.view());
+        let turned = volume_camera_from(
+            &vol,
+            1.0,
+            V::Anterior.view().orbit(90.0, 0.0),
+            Projection::Perspective,
+        );
+        let left = volume_camera_from(&vol, 1.0, V::Left.view(), Projection::Perspective);
         assert!(
             (turned.fwd - left.fwd).length() < 1e-6,
             "{turned:?} vs {left:?}"
         );
         assert!((turned.right - left.right).length() < 1e-6);
         assert!((turned.eye - left.eye).length() < 1e-3);
+    }
+
+    /// Two equal hot cubes, one near the front of the volume and one near the back, side by
+    /// side as seen from the front: a parallel projection draws them the same size, a
+    /// perspective one draws the nearer larger.
+    #[test]
+    fn a_parallel_projection_draws_every_depth_at_one_scale() {
+        // LPS: x to the patient's left, y to posterior; cube A anterior (low y), B posterior.
+        let vol = volume([40, 40, 40], [1.0; 3], |i, j, k| {
+            let a = (6..12).contains(&i) && (2..8).contains(&j);
+            let b = (28..34).contains(&i) && (32..38).contains(&j);
+            if (a || b) && (17..23).contains(&k) {
+                2000.0
+            } else {
+                0.0
+            }
+        });
+        let opt = DvrOptions {
+            width: 64,
+            height: 64,
+            mode: DvrMode::Mip,
+            window: Some((100.0, 1950.0)),
+            ..Default::default()
+        };
+        let front = raystream_scene::PatientView::Anterior.view();
+        let areas = |projection| {
+            let cam = volume_camera_from(&vol, 1.0, front, projection);
+            let (img, _) = render_volume(&vol, &grey(0.0), &opt, &cam);
+            // Cube A (the patient's right) on the image's left, B on its right.
+            let hot = |right: bool| {
+                (0..img.pixels.len())
+                    .filter(|&i| ((i % 64) >= 32) == right && img.pixels[i].x > 0.5)
+                    .count() as f32
+            };
+            (hot(false), hot(true))
+        };
+        let (a, b) = areas(Projection::Parallel);
+        assert!(
+            a > 20.0 && (a / b - 1.0).abs() < 0.2,
+            "parallel: {a} vs {b} pixels"
+        );
+        let (a, b) = areas(Projection::Perspective);
+        assert!(
+            b > 4.0 && a / b > 1.5,
+            "perspective: the nearer {a} vs the farther {b} pixels"
+        );
     }
 
     /// The abdomen CT that the CLI embeds as its default.

@@ -178,8 +178,9 @@ pub struct RenderParams {
     pub strata: u32,
     /// Byte 80.
     pub ambient_light: [f32; 3],
-    /// Unused (byte 92): each vertex carries its object's ray offset.
-    pub pad_92: u32,
+    /// `Camera::parallel`: half the view's height of a parallel projection, 0 for a
+    /// perspective one (byte 92).
+    pub parallel: f32,
     /// First sample (pixel · spp + s) of this wave (byte 96).
     pub sample_base: u32,
     /// Samples in this wave (byte 100).
@@ -242,7 +243,7 @@ pub struct MediumParams {
     pub grid_points: u32,
 }
 
-/// `DvrParams` in dvr.wgsl (uniform), 288 bytes: camera in LPS, the world → index transform,
+/// `DvrParams` in dvr.wgsl (uniform), 304 bytes: camera in LPS, the world → index transform,
 /// the mode and its parameters, the shadow light, crop box and clip planes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -293,6 +294,10 @@ pub struct DvrParams {
     pub light_dims: [u32; 3],
     /// Step of the light grid's shadow rays, mm (byte 284).
     pub shadow_step: f32,
+    /// `Camera::parallel`: half the view's height (mm) of a parallel projection, 0 for a
+    /// perspective one (byte 288).
+    pub parallel: f32,
+    pub pad: [u32; 3],
 }
 
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
@@ -305,5 +310,5 @@ const _: () = assert!(std::mem::size_of::<ShadeTri>() == 16);
 const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
-const _: () = assert!(std::mem::size_of::<DvrParams>() == 288);
+const _: () = assert!(std::mem::size_of::<DvrParams>() == 304);
 const _: () = assert!(std::mem::size_of::<MediumParams>() == 128);

@@ -709,6 +709,7 @@ impl<'a> GpuRenderer<'a> {
         let mut params = RenderParams {
             eye: v3(cam.eye),
             tan_y: cam.tan_y,
+            parallel: cam.parallel,
             fwd: v3(cam.fwd),
             width: opt.width,
             right: v3(cam.right),

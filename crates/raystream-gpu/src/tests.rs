@@ -315,7 +315,7 @@ fn render_wgsl_structs_match_rust() {
             ("background", offset_of!(RenderParams, background)),
             ("strata", offset_of!(RenderParams, strata)),
             ("ambient_light", offset_of!(RenderParams, ambient_light)),
-            ("pad_92", offset_of!(RenderParams, pad_92)),
+            ("parallel", offset_of!(RenderParams, parallel)),
             ("sample_base", offset_of!(RenderParams, sample_base)),
             ("sample_count", offset_of!(RenderParams, sample_count)),
             ("max_depth", offset_of!(RenderParams, max_depth)),
@@ -1028,6 +1028,10 @@ fn dvr_wgsl_params_match_rust() {
         ("planes", offset_of!(DvrParams, planes)),
         ("light_dims", offset_of!(DvrParams, light_dims)),
         ("shadow_step", offset_of!(DvrParams, shadow_step)),
+        ("parallel", offset_of!(DvrParams, parallel)),
+        ("pad0", offset_of!(DvrParams, pad)),
+        ("pad1", offset_of!(DvrParams, pad) + 4),
+        ("pad2", offset_of!(DvrParams, pad) + 8),
     ];
     check_struct(&module, "DvrParams", size_of::<DvrParams>(), &names);
 }

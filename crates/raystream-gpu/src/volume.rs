@@ -272,6 +272,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             planes: [0, 1].map(|i| planes.get(i).map_or([0.0; 4], |(n, c)| [n.x, n.y, n.z, *c])),
             light_dims: self.light_dims,
             shadow_step: opt.shadow_step_for(self.vol),
+            parallel: cam.parallel,
+            pad: [0; 3],
         };
         let param_buf = ctx
             .device

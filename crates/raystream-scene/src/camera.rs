@@ -72,6 +72,20 @@ pub struct Camera {
     pub up: Vec3,
     /// tan of half the vertical field of view.
     pub tan_y: f32,
+    /// Half the view's height in world units for a parallel (orthographic) projection: each
+    /// ray runs along `fwd` from its own point of the image plane through `eye`, so that sizes
+    /// do not change with depth. 0: a perspective projection from `eye` (`tan_y`).
+    pub parallel: f32,
+}
+
+/// How a framing camera projects.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Projection {
+    /// From the eye, 60° high: near things larger.
+    #[default]
+    Perspective,
+    /// Rays parallel to the view: every depth at one scale, as radiology shows projections.
+    Parallel,
 }
 
 impl Camera {
@@ -88,6 +102,7 @@ impl Camera {
             right,
             up: right.cross(fwd),
             tan_y: (fov_y_deg.to_radians() * 0.5).tan(),
+            parallel: 0.0,
         }
     }
 
@@ -120,10 +135,48 @@ impl Camera {
         cam
     }
 
+    /// As [`Camera::frame_from`] or [`Camera::frame_parallel`], by `projection`.
+    pub fn framing(points: &[Vec3], aspect: f32, view: View, projection: Projection) -> Camera {
+        match projection {
+            Projection::Perspective => Self::frame_from(points, aspect, view),
+            Projection::Parallel => Self::frame_parallel(points, aspect, view),
+        }
+    }
+
+    /// A parallel projection along `view` of the points' bounding-box centre, the view's
+    /// height the smallest that shows every point with a 5 % margin, the eye plane in front of
+    /// them all.
+    pub fn frame_parallel(points: &[Vec3], aspect: f32, view: View) -> Camera {
+        let b = Aabb::from_points(points);
+        let center = b.center();
+        let back = view.back.normalize();
+        let mut cam = Camera::looking_along(center, -back, view.up, FRAME_FOV_DEG);
+        let step = (points.len() / FRAME_SAMPLES).max(1);
+        let (half, front) =
+            points
+                .iter()
+                .step_by(step)
+                .fold((0.0f32, f32::NEG_INFINITY), |(half, front), &p| {
+                    let q = p - center;
+                    let h = (q.dot(cam.right).abs() / aspect).max(q.dot(cam.up).abs());
+                    (half.max(h), front.max(q.dot(back)))
+                });
+        let r = b.radius();
+        cam.parallel = (half * FRAME_MARGIN).max(1e-6 * r).max(f32::MIN_POSITIVE);
+        cam.eye = center + back * (front + 0.05 * r).max(1e-6 * r);
+        cam
+    }
+
     /// The ray through the image point (`x`, `y`) in pixels from the top-left corner of a
     /// `width`×`height` image (pixel centres at +0.5), unit direction, t from 0 to infinity.
     pub fn ray(&self, x: f32, y: f32, width: u32, height: u32) -> Ray {
         let (w, h) = (width as f32, height as f32);
+        if self.parallel > 0.0 {
+            let px = (x / w * 2.0 - 1.0) * (w / h);
+            let py = 1.0 - y / h * 2.0;
+            let origin = self.eye + (px * self.right + py * self.up) * self.parallel;
+            return Ray::new(origin, self.fwd, 0.0, f32::INFINITY);
+        }
         let px = (x / w * 2.0 - 1.0) * self.tan_y * (w / h);
         let py = (1.0 - y / h * 2.0) * self.tan_y;
         let d = (self.fwd + px * self.right + py * self.up).normalize();
@@ -193,6 +246,53 @@ mod tests {
         // Raised 30°: the view's angle above the horizontal grows by 30°.
         let rise = |b: Vec3| (b.y / b.length()).asin().to_degrees();
         assert!((rise(v.orbit(0.0, 30.0).back) - rise(v.back) - 30.0).abs() < 1e-3);
+    }
+
+    /// A parallel framing: every ray runs along `fwd`, every point lies in front of the eye
+    /// plane and inside the view (5 % margin), and the view is no larger than that needs.
+    #[test]
+    fn parallel_framing_shows_every_point_at_one_scale() {
+        let pts: Vec<Vec3> = (0..100)
+            .map(|i| Vec3::new(i as f32, (i * 7 % 13) as f32, -(i as f32) * 0.5))
+            .collect();
+        for view in [
+            FRAME_VIEW,
+            View::from(Vec3::X),
+            FRAME_VIEW.orbit(40.0, -30.0),
+        ] {
+            let aspect = 1.5;
+            let cam = Camera::frame_parallel(&pts, aspect, view);
+            assert!(cam.parallel > 0.0);
+            let mut widest = 0.0f32;
+            for p in &pts {
+                let q = *p - cam.eye;
+                assert!(q.dot(cam.fwd) > 0.0, "{p} behind the eye plane");
+                let (x, y) = (q.dot(cam.right) / aspect, q.dot(cam.up));
+                widest = widest.max(x.abs()).max(y.abs());
+            }
+            let b = Aabb::from_points(&pts);
+            let c = b.center() - cam.eye;
+            let (cx, cy) = (c.dot(cam.right) / aspect, c.dot(cam.up));
+            assert!(cx.abs() < 1e-3 && cy.abs() < 1e-3, "off centre: {cx} {cy}");
+            assert!(
+                widest <= cam.parallel && widest * 1.06 > cam.parallel,
+                "{widest} vs {}",
+                cam.parallel
+            );
+            let (w, h) = (30, 20);
+            for (x, y) in [(0.5, 0.5), (29.5, 0.5), (15.0, 10.0), (0.5, 19.5)] {
+                let r = cam.ray(x, y, w, h);
+                assert_eq!(r.dir, cam.fwd);
+                let o = r.origin - cam.eye;
+                assert!(
+                    o.dot(cam.fwd).abs() < 1e-3,
+                    "the ray starts off the eye plane"
+                );
+            }
+            let corner = cam.ray(0.0, 0.0, w, h).origin - cam.eye;
+            assert!((corner.dot(cam.up) - cam.parallel).abs() < 1e-3);
+            assert!((corner.dot(cam.right) + cam.parallel * aspect).abs() < 1e-3);
+        }
     }
 
     /// `View::turn_from` takes one view's frame onto another's: a point keeps its place in the

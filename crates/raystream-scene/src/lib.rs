@@ -41,7 +41,7 @@ mod desc;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-pub use camera::{Camera, FRAME_VIEW, View};
+pub use camera::{Camera, FRAME_VIEW, Projection, View};
 pub use desc::{
     CameraDesc, Frame, GroundDesc, LightDesc, MaterialDesc, ObjectDesc, Scale, SceneDesc,
     VolumeDesc,
@@ -123,8 +123,9 @@ pub struct Scene {
     /// The ground plane's triangles and vertices: the last ones of `mesh` (0 without one).
     pub ground_triangles: usize,
     pub ground_vertices: usize,
-    /// Where a framing camera looks from, when `camera` is `None`.
+    /// Where a framing camera looks from, and how it projects, when `camera` is `None`.
     pub frame_view: View,
+    pub frame_projection: Projection,
     /// A CT volume rendered directly among the meshes.
     pub volume: Option<SceneVolume>,
 }
@@ -448,6 +449,7 @@ impl Scene {
             object_box,
             ground_triangles,
             ground_vertices,
+            frame_projection: Projection::Perspective,
             frame_view: if volume.is_some() {
                 VOLUME_VIEW
             } else {
@@ -597,7 +599,12 @@ impl Scene {
     /// The camera to render with: the scene's, or one framing the objects (see [`Camera::frame`]).
     pub fn camera_for(&self, aspect: f32) -> Camera {
         self.camera.unwrap_or_else(|| {
-            Camera::frame_from(&self.mesh_points_for_framing(), aspect, self.frame_view)
+            Camera::framing(
+                &self.mesh_points_for_framing(),
+                aspect,
+                self.frame_view,
+                self.frame_projection,
+            )
         })
     }
 

@@ -15,7 +15,7 @@ use raystream_accel::{Counters, KdTree, Traversal, brute};
 use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera, volume_camera_from};
 use raystream_io::TriMesh;
 use raystream_math::{Ray, Vec3};
-use raystream_scene::{Camera, VOLUME_VIEW};
+use raystream_scene::{Camera, Projection, VOLUME_VIEW};
 use serde_json::json;
 
 use crate::cli::BenchArgs;
@@ -467,7 +467,7 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
             let mut stats = None;
             for i in 0..a.frames {
                 let turn = VOLUME_VIEW.orbit(360.0 * i as f32 / a.frames as f32, 0.0);
-                let cam = volume_camera_from(&volume, aspect, turn);
+                let cam = volume_camera_from(&volume, aspect, turn, Projection::Perspective);
                 let f = renderer.frame(&opt, &cam)?;
                 frame_ms.push(f.frame_ms);
                 kernel_ms.extend(f.kernel_ms);

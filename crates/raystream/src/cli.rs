@@ -226,6 +226,11 @@ pub struct RenderArgs {
     /// without a camera of their own.
     #[arg(long, value_parser = parse_orbit, allow_hyphen_values = true)]
     pub orbit: Option<[f32; 2]>,
+    /// A parallel (orthographic) projection instead of the perspective one: every depth at
+    /// one scale, as radiology shows MIPs and projections. Framed inputs (not a scene file's
+    /// own camera).
+    #[arg(long)]
+    pub parallel: bool,
     /// With --mode: a turntable of N frames, one every 360/N degrees about the image's up axis
     /// (the patient's superior axis unless --view superior/inferior), starting from --view and
     /// --orbit, written as OUTPUT/frame_000.png … (-o names the folder).

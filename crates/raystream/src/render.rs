@@ -12,7 +12,7 @@ use raystream_cpu::{
     render_prepared,
 };
 use raystream_gpu::GpuRenderer;
-use raystream_scene::{PatientView, Scene, VOLUME_VIEW, View};
+use raystream_scene::{PatientView, Projection, Scene, VOLUME_VIEW, View};
 
 use raystream_cpu::dvr::{DvrMode, DvrOptions, volume_camera_from};
 
@@ -74,6 +74,15 @@ fn base_view(a: &RenderArgs, default: View, patient: bool) -> Result<View> {
     })
 }
 
+/// `--parallel`: the framing camera's projection.
+fn projection(a: &RenderArgs) -> Projection {
+    if a.parallel {
+        Projection::Parallel
+    } else {
+        Projection::Perspective
+    }
+}
+
 /// `--orbit AZ,EL`, or no turn.
 fn orbit_angles(a: &RenderArgs) -> [f32; 2] {
     a.orbit.unwrap_or([0.0; 2])
@@ -100,7 +109,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         return turntable(a, &renderer, &volume, &opt, view, n);
     }
     let [az, el] = orbit_angles(a);
-    let cam = volume_camera_from(&volume, aspect, view.orbit(az, el));
+    let cam = volume_camera_from(&volume, aspect, view.orbit(az, el), projection(a));
     let pb = spinner(
         a.quiet,
         &format!(
@@ -209,6 +218,7 @@ fn turntable(
             volume,
             opt.width as f32 / opt.height as f32,
             view.orbit(az + 360.0 * i as f32 / n as f32, el),
+            projection(a),
         );
         let f = renderer.frame(opt, &cam)?;
         frame_ms.push(f.frame_ms);
@@ -250,13 +260,14 @@ fn load(a: &RenderArgs) -> Result<Loaded> {
     }
     let t0 = Instant::now();
     let (mut scene, bones) = load_scene(a)?;
-    if a.view.is_some() || a.orbit.is_some() {
+    if a.view.is_some() || a.orbit.is_some() || a.parallel {
         if scene.camera.is_some() {
             bail!(
-                "{}: the scene sets its camera; --view and --orbit turn the framing camera of scenes without one",
+                "{}: the scene sets its camera; --view, --orbit and --parallel set the framing camera of scenes without one",
                 input_name(a).display()
             );
         }
+        scene.frame_projection = projection(a);
         let [az, el] = orbit_angles(a);
         let patient = bones.is_some() || scene.volume.is_some();
         let default = scene.frame_view;

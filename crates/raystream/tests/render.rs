@@ -922,6 +922,10 @@ fn views_and_orbits_turn_the_framing_camera() {
             vec![scene.to_str().unwrap(), "--orbit", "10"],
             "sets its camera",
         ),
+        (
+            vec![scene.to_str().unwrap(), "--parallel"],
+            "sets its camera",
+        ),
         (vec![bunny.as_str(), "--orbit", "0,91"], "past 90 degrees"),
         (vec![bunny.as_str(), "--orbit", "x"], "AZ or AZ,EL"),
         (vec!["--view", "sideways"], "possible values"),
@@ -934,6 +938,43 @@ fn views_and_orbits_turn_the_framing_camera() {
         assert!(err.contains(want), "{args:?}: {err}");
         assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
+}
+
+/// `--parallel`: a MIP of the CT from the patient's left and the bunny, both in a parallel
+/// projection, on the GPU as on the CPU.
+#[test]
+fn gpu_render_matches_cpu_in_a_parallel_projection() {
+    gpu_matches_cpu(
+        "parallel-mip",
+        &[
+            "--mode",
+            "mip",
+            "--window",
+            "1500",
+            "--level",
+            "300",
+            "--view",
+            "left",
+            "--parallel",
+            "--size",
+            "64x48",
+        ],
+        true,
+    );
+    gpu_matches_cpu(
+        "parallel-bunny",
+        &[
+            &mesh("stanford_bunny.ply"),
+            "--parallel",
+            "--orbit",
+            "30,10",
+            "--size",
+            "64x48",
+            "--spp",
+            "1",
+        ],
+        false,
+    );
 }
 
 /// A CT's bones seen from below the feet (the camera's up is then the patient's anterior),

@@ -44,6 +44,11 @@ struct DvrParams {
     light_dims: vec3<u32>,
     // Step of the light grid's shadow rays, mm (DvrOptions::shadow_step_for).
     shadow_step: f32,
+    // Half the view's height (mm) of a parallel projection; 0: perspective (Camera::parallel).
+    parallel: f32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 // (HU, opacity per mm) and (HU, r, g, b) control points.
@@ -244,6 +249,14 @@ fn render_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
     let pixel = gid.x + gid.y * dp.width;
     let w = f32(dp.width);
     let h = f32(dp.height);
+    // As raystream_scene::Camera::ray.
+    if dp.parallel > 0.0 {
+        let sx = ((f32(gid.x) + 0.5) / w * 2.0 - 1.0) * (w / h);
+        let sy = 1.0 - (f32(gid.y) + 0.5) / h * 2.0;
+        let o = dp.eye + (sx * dp.right + sy * dp.up) * dp.parallel;
+        pixels[pixel] = march(o, dp.fwd, jitter(pixel, 0u, 7u));
+        return;
+    }
     let px = ((f32(gid.x) + 0.5) / w * 2.0 - 1.0) * dp.tan_y * (w / h);
     let py = (1.0 - (f32(gid.y) + 0.5) / h * 2.0) * dp.tan_y;
     let d = normalize(dp.fwd + px * dp.right + py * dp.up);

@@ -71,7 +71,8 @@ struct RenderParams {
     background: vec3<f32>,
     strata: u32,
     ambient_light: vec3<f32>,
-    pad_92: u32,
+    // Half the view's height of a parallel projection; 0: perspective (Camera::parallel).
+    parallel: f32,
     sample_base: u32,
     sample_count: u32,
     max_depth: u32,
@@ -145,6 +146,14 @@ fn generate_camera_rays(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(
     let h = f32(rp.height);
     let x = f32(pixel % rp.width) + j.x;
     let y = f32(pixel / rp.width) + j.y;
+    // As raystream_scene::Camera::ray.
+    if rp.parallel > 0.0 {
+        let sx = (x / w * 2.0 - 1.0) * (w / h);
+        let sy = 1.0 - y / h * 2.0;
+        let o = rp.eye + (sx * rp.right + sy * rp.up) * rp.parallel;
+        queue_in[i] = RayWork(RayIn(o, 0.0, rp.fwd, T_FAR), vec3<f32>(1.0), pixel);
+        return;
+    }
     let px = (x / w * 2.0 - 1.0) * rp.tan_y * (w / h);
     let py = (1.0 - y / h * 2.0) * rp.tan_y;
     let d = normalize(rp.fwd + px * rp.right + py * rp.up);
