@@ -12,7 +12,8 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary), tiny volumes (NIfT
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
         absurd ones (0, -1, ±inf, nan, 1e30 ...), rendered on the CPU and the GPU: either both
         refuse it (exit 2, naming the file) or rays.py imgdiff finds them within the GPU tests'
-        bounds (mean < 0.5/255, at most 0.1 % of pixels over 2/255).
+        bounds (mean < 0.5/255, at most 0.1 % of pixels over 2/255). Half of them drop the
+        file's camera for the framing one, turned by a random --orbit, some with --parallel.
 
 Prints each failure with its input (kept under the work folder) and a count at the end; exits 1
 if any failed. Run from the repository root after `cargo build --release`. The 2026-11-23
@@ -185,7 +186,12 @@ def fuzz_scenes(work, n):
     rays_py = os.path.join(SHARED, "tools/rays.py")
     bad = 0
     for i in range(n):
-        s = SCENE
+        s, framing = SCENE, []
+        if random.random() < 0.5:
+            # The framing camera instead of the file's, turned and projected at random.
+            s = re.sub(r"\[camera\]\n(.*\n){3}", "", s)
+            framing = [f"--orbit={random.uniform(-360, 360):.3f},{random.uniform(-90, 90):.3f}"]
+            framing += ["--parallel"] if random.random() < 0.5 else []
         for _ in range(random.randint(1, 3)):
             m = random.choice(list(re.finditer(r"-?\d+(\.\d+)?", s)))
             s = s[:m.start()] + random.choice(
@@ -197,7 +203,7 @@ def fuzz_scenes(work, n):
         for dev in ("cpu", "gpu"):
             png = os.path.join(work, f"scene{i}-{dev}.png")
             why = why or run(["render", p, "--size", "24x16", "--spp", "2", "--max-depth", "3",
-                              "-q", "--device", dev, "-o", png], name)
+                              "-q", "--device", dev, "-o", png] + framing, name)
             codes.append(os.path.exists(png))
         if not why and codes == [True, True]:
             r = subprocess.run([python, rays_py, "imgdiff",
@@ -211,7 +217,7 @@ def fuzz_scenes(work, n):
             why = "one device rendered it, the other refused it"
         if why:
             bad += 1
-            print(f"FAIL {p}: {why}")
+            print(f"FAIL {p} {' '.join(framing)}: {why}")
     return bad
 
 
