@@ -272,7 +272,7 @@ fn load(a: &RenderArgs) -> Result<Loaded> {
         let patient = bones.is_some() || scene.volume.is_some();
         let default = scene.frame_view;
         scene.frame_view = base_view(a, default, patient)?.orbit(az, el);
-        if !is_scene_file(a) {
+        if !is_scene_file(a) && scene.frame_view != default {
             // A mesh's or the bones' lights are a studio's: they keep their place beside the
             // camera. A scene file's lights stay where the file puts them.
             let turn = scene.frame_view.turn_from(default);
