@@ -977,6 +977,19 @@ fn gpu_render_matches_cpu_in_a_parallel_projection() {
     );
 }
 
+/// Direct volume rendering from above the head (the camera's up is the patient's anterior),
+/// turned: the GPU gives the CPU's picture.
+#[test]
+fn gpu_volume_rendering_matches_cpu_from_above() {
+    gpu_matches_cpu(
+        "superior-dvr",
+        &[
+            "--mode", "dvr", "--view", "superior", "--orbit", "-40,15", "--size", "64x48",
+        ],
+        true,
+    );
+}
+
 /// A CT's bones seen from below the feet (the camera's up is then the patient's anterior),
 /// turned and raised: the GPU gives the CPU's picture.
 #[test]
