@@ -51,8 +51,11 @@ pub struct CameraDesc {
     pub eye: [f32; 3],
     pub target: [f32; 3],
     pub up: Option<[f32; 3]>,
-    /// Vertical field of view in degrees.
+    /// Vertical field of view in degrees (perspective).
     pub fov: Option<f32>,
+    /// The height of the view in scene units: a parallel (orthographic) projection through
+    /// the eye's plane instead of a perspective one (give it or `fov`, not both).
+    pub parallel_height: Option<f32>,
 }
 
 #[derive(Clone, Debug, Deserialize)]

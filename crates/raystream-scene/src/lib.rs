@@ -6,7 +6,8 @@
 //! [camera]            # optional: without it the camera frames the objects
 //! eye = [0, 1, 4]
 //! target = [0, 0.5, 0]
-//! fov = 40            # vertical, degrees
+//! fov = 40            # vertical, degrees; or parallel_height = 3 (a parallel projection,
+//!                     # the view that high in scene units)
 //!
 //! [[lights]]
 //! position = [3, 5, 4]
@@ -242,6 +243,9 @@ fn camera_of(c: &CameraDesc) -> Result<Camera, String> {
     let eye = check_point("eye", Vec3::from(c.eye))?;
     let target = check_point("target", Vec3::from(c.target))?;
     let up = c.up.map(Vec3::from).unwrap_or(Vec3::Y);
+    if let (Some(_), Some(_)) = (c.fov, c.parallel_height) {
+        return Err("give fov (perspective) or parallel_height (parallel), not both".into());
+    }
     let fov = c.fov.unwrap_or(45.0);
     if !(fov > 0.0 && fov < 180.0) {
         return Err(format!("fov {fov} must be between 0 and 180 degrees"));
@@ -253,7 +257,17 @@ fn camera_of(c: &CameraDesc) -> Result<Camera, String> {
     if !up.is_finite() || view.normalize().cross(up).length() <= 1e-6 * up.length() {
         return Err(format!("up {up} must be finite and not along the view"));
     }
-    Ok(Camera::look_at(eye, target, up, fov))
+    let mut cam = Camera::look_at(eye, target, up, fov);
+    if let Some(h) = c.parallel_height {
+        if !(h > 0.0 && h <= 2.0 * MAX_COORDINATE) {
+            return Err(format!(
+                "parallel_height {h} must be a positive number of scene units up to {:e}",
+                2.0 * MAX_COORDINATE
+            ));
+        }
+        cam.parallel = 0.5 * h;
+    }
+    Ok(cam)
 }
 
 impl Scene {
@@ -756,6 +770,29 @@ mod tests {
             [ray_offset(s.object_box.radius(), farthest(ground))]
         );
         assert!(farthest(ground) > farthest(s.object_box));
+    }
+
+    /// `parallel_height` makes the scene's camera a parallel projection of that height; it
+    /// excludes `fov` and must be a positive size.
+    #[test]
+    fn a_scene_camera_may_project_in_parallel() {
+        let base =
+            "[[objects]]\nshape = \"sphere\"\n[camera]\neye = [0, 0, 5]\ntarget = [0, 0, 0]\n";
+        let s = compile(&format!("{base}parallel_height = 3\n")).unwrap();
+        let cam = s.camera_for(1.0);
+        assert_eq!(cam.parallel, 1.5);
+        let (a, b) = (cam.ray(0.5, 0.5, 10, 10), cam.ray(9.5, 9.5, 10, 10));
+        assert_eq!((a.dir, b.dir), (cam.fwd, cam.fwd));
+        assert!(((a.origin - b.origin).length() - 2.7 * 2f32.sqrt()).abs() < 1e-4);
+        assert_eq!(compile(base).unwrap().camera_for(1.0).parallel, 0.0);
+        for (extra, want) in [
+            ("parallel_height = 3\nfov = 30\n", "not both"),
+            ("parallel_height = -1\n", "positive"),
+            ("parallel_height = inf\n", "positive"),
+        ] {
+            let e = compile(&format!("{base}{extra}")).unwrap_err().to_string();
+            assert!(e.contains(want) && e.contains("test.toml"), "{extra}: {e}");
+        }
     }
 
     /// The ground's triangles and vertices come last and are counted; leaving it out keeps

@@ -117,7 +117,8 @@ fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 "eye": cam.eye.to_array(),
                 "forward": cam.fwd.to_array(),
                 "up": cam.up.to_array(),
-                "fov_y_deg": round3(fov as f64),
+                "fov_y_deg": (cam.parallel == 0.0).then(|| round3(fov as f64)),
+                "parallel_height": (cam.parallel > 0.0).then_some(2.0 * cam.parallel),
                 "framed": scene.camera.is_none(),
             },
             "bounds": [b.min.to_array(), b.max.to_array()],
@@ -140,9 +141,14 @@ fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
         );
     }
     println!(
-        "  camera     eye {:?} looking along {:?}, {fov:.1}° vertical{}",
+        "  camera     eye {:?} looking along {:?}, {}{}",
         cam.eye.to_array(),
         cam.fwd.to_array(),
+        if cam.parallel > 0.0 {
+            format!("parallel, {} high", 2.0 * cam.parallel)
+        } else {
+            format!("{fov:.1}° vertical")
+        },
         if scene.camera.is_none() {
             " (framing the objects at 4:3)"
         } else {

@@ -977,6 +977,32 @@ fn gpu_render_matches_cpu_in_a_parallel_projection() {
     );
 }
 
+/// A scene file's own parallel camera (`parallel_height`): the GPU gives the CPU's picture,
+/// and `info` reports the projection.
+#[test]
+fn gpu_render_matches_cpu_with_a_parallel_scene_camera() {
+    let scene = tmp("parallel-camera.toml");
+    std::fs::write(
+        &scene,
+        "[camera]\neye = [2, 1.5, 4]\ntarget = [0, 0.3, 0]\nparallel_height = 2.5\n\
+         [[lights]]\nposition = [3, 5, 4]\n[materials.mirror]\nreflectivity = 0.6\n\
+         [[objects]]\nshape = \"spot\"\n[[objects]]\nshape = \"sphere\"\nscale = 0.4\n\
+         translate = [-1, 0.4, 0]\nmaterial = \"mirror\"\n[ground]\n",
+    )
+    .unwrap();
+    let path = scene.to_str().unwrap();
+    let o = run(&["info", path, "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(j["camera"]["parallel_height"], 2.5, "{j}");
+    assert!(j["camera"]["fov_y_deg"].is_null(), "{j}");
+    gpu_matches_cpu(
+        "parallel-scene",
+        &[path, "--size", "64x48", "--spp", "1"],
+        false,
+    );
+}
+
 /// Direct volume rendering from above the head (the camera's up is the patient's anterior),
 /// turned: the GPU gives the CPU's picture.
 #[test]
