@@ -114,56 +114,50 @@ impl Camera {
 
     /// As [`Camera::frame`], with `view`.
     pub fn frame_from(points: &[Vec3], aspect: f32, view: View) -> Camera {
-        let b = Aabb::from_points(points);
-        let center = b.center();
-        let back = view.back.normalize();
-        // The view direction straight from `back`, as rays.py takes it (not from an eye one
-        // unit from the centre, which rounds onto the centre far from the origin).
-        let mut cam = Camera::looking_along(center, -back, view.up, FRAME_FOV_DEG);
-        let tan_x = cam.tan_y * aspect;
-        let step = (points.len() / FRAME_SAMPLES).max(1);
-        let need = points
-            .iter()
-            .step_by(step)
-            .map(|&p| {
-                let q = p - center;
-                (q.dot(cam.right).abs() / tan_x).max(q.dot(cam.up).abs() / cam.tan_y) * FRAME_MARGIN
-                    + q.dot(back)
-            })
-            .fold(f32::NEG_INFINITY, f32::max);
-        cam.eye = center + back * need.max(1e-6 * b.radius());
-        cam
-    }
-
-    /// As [`Camera::frame_from`] or [`Camera::frame_parallel`], by `projection`.
-    pub fn framing(points: &[Vec3], aspect: f32, view: View, projection: Projection) -> Camera {
-        match projection {
-            Projection::Perspective => Self::frame_from(points, aspect, view),
-            Projection::Parallel => Self::frame_parallel(points, aspect, view),
-        }
+        Self::framing(points, aspect, view, Projection::Perspective)
     }
 
     /// A parallel projection along `view` of the points' bounding-box centre, the view's
     /// height the smallest that shows every point with a 5 % margin, the eye plane in front of
     /// them all.
     pub fn frame_parallel(points: &[Vec3], aspect: f32, view: View) -> Camera {
+        Self::framing(points, aspect, view, Projection::Parallel)
+    }
+
+    /// A camera looking at the points' bounding-box centre along `view`: in perspective
+    /// ([`Camera::frame_from`]) or in parallel ([`Camera::frame_parallel`]).
+    pub fn framing(points: &[Vec3], aspect: f32, view: View, projection: Projection) -> Camera {
         let b = Aabb::from_points(points);
         let center = b.center();
         let back = view.back.normalize();
+        // The view direction straight from `back`, as rays.py takes it (not from an eye one
+        // unit from the centre, which rounds onto the centre far from the origin).
         let mut cam = Camera::looking_along(center, -back, view.up, FRAME_FOV_DEG);
         let step = (points.len() / FRAME_SAMPLES).max(1);
-        let (half, front) =
-            points
-                .iter()
-                .step_by(step)
-                .fold((0.0f32, f32::NEG_INFINITY), |(half, front), &p| {
-                    let q = p - center;
-                    let h = (q.dot(cam.right).abs() / aspect).max(q.dot(cam.up).abs());
-                    (half.max(h), front.max(q.dot(back)))
-                });
+        let sampled = points.iter().step_by(step).map(|&p| p - center);
         let r = b.radius();
-        cam.parallel = (half * FRAME_MARGIN).max(1e-6 * r).max(f32::MIN_POSITIVE);
-        cam.eye = center + back * (front + 0.05 * r).max(1e-6 * r);
+        match projection {
+            Projection::Perspective => {
+                let tan_x = cam.tan_y * aspect;
+                let need = sampled
+                    .map(|q| {
+                        (q.dot(cam.right).abs() / tan_x).max(q.dot(cam.up).abs() / cam.tan_y)
+                            * FRAME_MARGIN
+                            + q.dot(back)
+                    })
+                    .fold(f32::NEG_INFINITY, f32::max);
+                cam.eye = center + back * need.max(1e-6 * r);
+            }
+            Projection::Parallel => {
+                let (half, front) =
+                    sampled.fold((0.0f32, f32::NEG_INFINITY), |(half, front), q| {
+                        let h = (q.dot(cam.right).abs() / aspect).max(q.dot(cam.up).abs());
+                        (half.max(h), front.max(q.dot(back)))
+                    });
+                cam.parallel = (half * FRAME_MARGIN).max(1e-6 * r).max(f32::MIN_POSITIVE);
+                cam.eye = center + back * (front + 0.05 * r).max(1e-6 * r);
+            }
+        }
         cam
     }
 

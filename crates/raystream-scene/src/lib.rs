@@ -413,7 +413,7 @@ impl Scene {
             }
             // The ground is sized and placed in the objects' radii: it leaves its surface by
             // the objects' offset, or by its own rounding where that is larger.
-            let ground = Aabb::from_points(&mesh.positions[ray_offsets.len()..]);
+            let ground = Aabb::from_points(&mesh.positions[object_vertices..]);
             let offset = ray_offset(
                 object_box.radius(),
                 farthest(object_box).max(farthest(ground)),
@@ -679,10 +679,10 @@ impl PatientView {
 }
 
 /// How far secondary rays start off the surface of an object of `radius` whose largest
-/// coordinate is `far`: 1e-4 of its radius, and at least 32 units in the last place of `far`. The second term
-/// matters only for objects more than 26 radii from the origin (a CT with a far-off origin):
-/// there a hit point is only good to its f32 rounding, and an offset below it lets a shadow ray
-/// hit its own surface, differently on the CPU and the GPU.
+/// coordinate is `far`: 1e-4 of its radius, and at least 32 units in the last place of `far`.
+/// The second term matters only for objects more than 26 radii from the origin (a CT with a
+/// far-off origin): there a hit point is only good to its f32 rounding, and an offset below it
+/// lets a shadow ray hit its own surface, differently on the CPU and the GPU.
 ///
 /// Each object has its own offset, so that a small object beside a huge one is shaded as if
 /// alone: one offset for the whole scene would start the small one's shadow and reflection

@@ -212,13 +212,13 @@ fn turntable(
     pb.set_message("turntable");
     let digits = (n - 1).max(1).ilog10() as usize + 1;
     let mut frame_ms = Vec::new();
-    let [az, el] = orbit_angles(a);
+    let ([az, el], projection) = (orbit_angles(a), projection(a));
     for i in 0..n {
         let cam = volume_camera_from(
             volume,
             opt.width as f32 / opt.height as f32,
             view.orbit(az + 360.0 * i as f32 / n as f32, el),
-            projection(a),
+            projection,
         );
         let f = renderer.frame(opt, &cam)?;
         frame_ms.push(f.frame_ms);
