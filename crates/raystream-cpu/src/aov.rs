@@ -5,7 +5,7 @@
 //! traversal or from the GPU's ray queries, and the images are made here from either.
 //!
 //! Reads: the scene, its camera and one hit (or miss) per pixel. Writes: a 16-bit grey image
-//! (distance) or an 8-bit RGB one (normal, triangle), PNG.
+//! (distance) or an 8-bit RGB one (normal, triangle), PNG; or the values themselves, OpenEXR.
 
 use std::ops::Range;
 use std::path::Path;
@@ -40,56 +40,142 @@ impl Aov {
     }
 }
 
-/// An AOV image, row-major from the top-left pixel.
+/// What an AOV image holds, one value per pixel, row-major from the top-left pixel.
 #[derive(Clone, Debug, PartialEq)]
-pub enum AovImage {
-    /// Distances as 16-bit grey, with the distances that map to white (`near`) and to 1
-    /// (`far`); `None` when no ray hit.
-    Gray16 {
-        width: u32,
-        height: u32,
-        pixels: Vec<u16>,
-        range: Option<(f32, f32)>,
-    },
-    Rgb8 {
-        width: u32,
-        height: u32,
-        pixels: Vec<u8>,
-    },
+pub enum AovValues {
+    /// Distance from the eye to the closest hit, scene units; +∞ for a miss.
+    Depth(Vec<f32>),
+    /// The unit shading normal facing the eye; zero for a miss.
+    Normal(Vec<Vec3>),
+    /// The triangle hit; [`NO_PRIM`] for a miss.
+    Prim(Vec<u32>),
+}
+
+/// The triangle number of a miss in [`AovValues::Prim`].
+pub const NO_PRIM: u32 = u32::MAX;
+
+/// An AOV image: its values ([`AovValues`]), written as PNG (quantized as [`Aov`] says) or as
+/// OpenEXR (the values themselves).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AovImage {
+    pub width: u32,
+    pub height: u32,
+    pub values: AovValues,
 }
 
 impl AovImage {
+    /// Depth: the nearest and the farthest hit's distance (white and grey level 1 in the PNG);
+    /// `None` when no ray hit or for other AOVs.
+    pub fn depth_range(&self) -> Option<(f32, f32)> {
+        let AovValues::Depth(d) = &self.values else {
+            return None;
+        };
+        d.iter()
+            .filter(|d| d.is_finite())
+            .fold(None, |acc, &d| match acc {
+                None => Some((d, d)),
+                Some((near, far)) => Some((f32::min(near, d), f32::max(far, d))),
+            })
+    }
+
+    /// Depth as the PNG's 16-bit grey levels: the nearest hit 65535, the farthest 1, misses 0.
+    pub fn gray16(&self) -> Option<Vec<u16>> {
+        let AovValues::Depth(d) = &self.values else {
+            return None;
+        };
+        let range = self.depth_range();
+        Some(
+            d.iter()
+                .map(|&d| match range {
+                    Some((near, far)) if d.is_finite() => depth_level(d, near, far),
+                    _ => 0,
+                })
+                .collect(),
+        )
+    }
+
+    /// Normal and triangle as the PNG's 8-bit RGB (3 bytes a pixel): RGB = 128 + 127 n, or the
+    /// triangle's hashed colour ([`prim_colour`]); misses black.
+    pub fn rgb8(&self) -> Option<Vec<u8>> {
+        match &self.values {
+            AovValues::Depth(_) => None,
+            AovValues::Normal(n) => Some(
+                n.iter()
+                    .flat_map(|&n| {
+                        if n == Vec3::ZERO {
+                            return [0; 3];
+                        }
+                        (n * 127.0 + Vec3::splat(128.0))
+                            .round()
+                            .clamp(Vec3::ZERO, Vec3::splat(255.0))
+                            .to_array()
+                            .map(|c| c as u8)
+                    })
+                    .collect(),
+            ),
+            AovValues::Prim(p) => Some(
+                p.iter()
+                    .flat_map(|&p| if p == NO_PRIM { [0; 3] } else { prim_colour(p) })
+                    .collect(),
+            ),
+        }
+    }
+
     pub fn save_png(&self, path: &Path) -> Result<(), String> {
-        let result = match self {
-            AovImage::Gray16 {
-                width,
-                height,
-                pixels,
-                ..
-            } => image::save_buffer(
+        let (w, h) = (self.width, self.height);
+        let result = match (self.gray16(), self.rgb8()) {
+            (Some(grey), _) => image::save_buffer(
                 path,
                 // 16-bit samples go to the encoder in native byte order
-                &pixels
+                &grey
                     .iter()
                     .flat_map(|p| p.to_ne_bytes())
                     .collect::<Vec<u8>>(),
-                *width,
-                *height,
+                w,
+                h,
                 image::ExtendedColorType::L16,
             ),
-            AovImage::Rgb8 {
-                width,
-                height,
-                pixels,
-            } => image::save_buffer(
-                path,
-                pixels,
-                *width,
-                *height,
-                image::ExtendedColorType::Rgb8,
-            ),
+            (_, Some(rgb)) => image::save_buffer(path, &rgb, w, h, image::ExtendedColorType::Rgb8),
+            (None, None) => unreachable!("every AOV is grey or RGB"),
         };
         result.map_err(|e| format!("{}: cannot write PNG: {e}", path.display()))
+    }
+
+    /// The values themselves as OpenEXR: depth as channel Z (32-bit float, scene units, +∞
+    /// for a miss), the normal as N.X, N.Y, N.Z (float, zero for a miss), the triangle as
+    /// channel prim (32-bit unsigned, 4294967295 for a miss). `units` names the scene unit
+    /// (the file's comments say what the channels are).
+    pub fn save_exr(&self, path: &Path, units: &str) -> Result<(), String> {
+        use crate::ExrSamples::{F32, U32};
+        let (channels, what) = match &self.values {
+            AovValues::Depth(d) => (
+                vec![("Z", F32(d.clone()))],
+                format!("Z: distance from the eye to the closest hit, {units}; inf: no hit"),
+            ),
+            AovValues::Normal(n) => (
+                ["N.X", "N.Y", "N.Z"]
+                    .into_iter()
+                    .enumerate()
+                    .map(|(c, name)| (name, F32(n.iter().map(|v| v.to_array()[c]).collect())))
+                    .collect(),
+                "N: unit shading normal at the closest hit, world axes, facing the eye; 0: no hit"
+                    .to_string(),
+            ),
+            AovValues::Prim(p) => (
+                vec![("prim", U32(p.clone()))],
+                "prim: the triangle hit first (file order, polygons fanned); 4294967295: no hit"
+                    .to_string(),
+            ),
+        };
+        crate::save_exr(path, self.width, self.height, channels, &what)
+    }
+
+    /// Writes PNG or EXR as `format` says.
+    pub fn save(&self, path: &Path, format: crate::ImageFormat, units: &str) -> Result<(), String> {
+        match format {
+            crate::ImageFormat::Png => self.save_png(path),
+            crate::ImageFormat::Exr => self.save_exr(path, units),
+        }
     }
 }
 
@@ -108,21 +194,16 @@ pub fn aov_rays_of(cam: &Camera, width: u32, height: u32, pixels: Range<u32>) ->
 }
 
 /// Pixels traced at once by [`AovBuilder`]'s callers: rays and hits stay bounded (tens of MB)
-/// whatever the image size; the image itself is 3 bytes a pixel (4 for distances, until the
-/// end).
+/// whatever the image size; the image itself is 4 bytes a pixel (12 for normals).
 pub const AOV_CHUNK: u32 = 1 << 20;
 
 /// An AOV image made chunk by chunk: each run of pixels, its rays and their closest hits, is
 /// turned into pixel values as it comes, so only the image is held whole.
 pub struct AovBuilder<'a> {
     scene: &'a Scene,
-    aov: Aov,
     width: u32,
     height: u32,
-    /// Depth: the distance of each pixel's hit so far, NaN for a miss.
-    dist: Vec<f32>,
-    /// Normal, triangle: RGB so far.
-    rgb: Vec<u8>,
+    values: AovValues,
 }
 
 impl<'a> AovBuilder<'a> {
@@ -130,85 +211,61 @@ impl<'a> AovBuilder<'a> {
         let n = (width * height) as usize;
         Self {
             scene,
-            aov,
             width,
             height,
-            dist: Vec::with_capacity(if aov == Aov::Depth { n } else { 0 }),
-            rgb: Vec::with_capacity(if aov == Aov::Depth { 0 } else { 3 * n }),
+            values: match aov {
+                Aov::Depth => AovValues::Depth(Vec::with_capacity(n)),
+                Aov::Normal => AovValues::Normal(Vec::with_capacity(n)),
+                Aov::Prim => AovValues::Prim(Vec::with_capacity(n)),
+            },
         }
     }
 
     /// The next pixels, in order: their rays (from [`aov_rays_of`]) and closest hits.
     pub fn add(&mut self, rays: &[Ray], hits: &[Option<Hit>]) {
         assert_eq!(rays.len(), hits.len(), "one hit or miss per ray");
-        if self.aov == Aov::Depth {
-            self.dist.extend(
+        match &mut self.values {
+            AovValues::Depth(d) => d.extend(
                 rays.iter()
                     .zip(hits)
-                    .map(|(r, h)| h.map_or(f32::NAN, |h| h.t * r.dir.length())),
-            );
-            return;
-        }
-        let first = self.rgb.len() / 3;
-        for (i, (ray, hit)) in rays.iter().zip(hits).enumerate() {
-            let rgb = match hit {
-                None => [0; 3],
-                Some(h) if self.aov == Aov::Prim => prim_colour(h.prim),
-                Some(h) => {
-                    let item = HitWorkItem {
-                        item: RayWorkItem {
-                            ray: *ray,
-                            pixel: (first + i) as u32,
-                            weight: Vec3::ONE,
-                        },
-                        hit: *h,
-                    };
-                    let n = surface(self.scene, &item).ns;
-                    (n * 127.0 + Vec3::splat(128.0))
-                        .round()
-                        .clamp(Vec3::ZERO, Vec3::splat(255.0))
-                        .to_array()
-                        .map(|c| c as u8)
-                }
-            };
-            self.rgb.extend_from_slice(&rgb);
+                    .map(|(r, h)| h.map_or(f32::INFINITY, |h| h.t * r.dir.length())),
+            ),
+            AovValues::Prim(p) => p.extend(hits.iter().map(|h| h.map_or(NO_PRIM, |h| h.prim))),
+            AovValues::Normal(n) => {
+                let first = n.len();
+                n.extend(rays.iter().zip(hits).enumerate().map(|(i, (ray, hit))| {
+                    hit.map_or(Vec3::ZERO, |hit| {
+                        let item = HitWorkItem {
+                            item: RayWorkItem {
+                                ray: *ray,
+                                pixel: (first + i) as u32,
+                                weight: Vec3::ONE,
+                            },
+                            hit,
+                        };
+                        surface(self.scene, &item).ns
+                    })
+                }))
+            }
         }
     }
 
     /// The image, once every pixel has been added.
     pub fn finish(self) -> AovImage {
-        let (width, height) = (self.width, self.height);
-        let n = (width * height) as usize;
-        if self.aov != Aov::Depth {
-            assert_eq!(self.rgb.len(), 3 * n, "every pixel added");
-            return AovImage::Rgb8 {
-                width,
-                height,
-                pixels: self.rgb,
-            };
-        }
-        assert_eq!(self.dist.len(), n, "every pixel added");
-        let range = self
-            .dist
-            .iter()
-            .filter(|d| !d.is_nan())
-            .fold(None, |acc, &d| match acc {
-                None => Some((d, d)),
-                Some((near, far)) => Some((f32::min(near, d), f32::max(far, d))),
-            });
-        let pixels = self
-            .dist
-            .iter()
-            .map(|&d| match range {
-                Some((near, far)) if !d.is_nan() => depth_level(d, near, far),
-                _ => 0,
-            })
-            .collect();
-        AovImage::Gray16 {
-            width,
-            height,
-            pixels,
-            range,
+        let len = match &self.values {
+            AovValues::Depth(v) => v.len(),
+            AovValues::Normal(v) => v.len(),
+            AovValues::Prim(v) => v.len(),
+        };
+        assert_eq!(
+            len,
+            (self.width * self.height) as usize,
+            "every pixel added"
+        );
+        AovImage {
+            width: self.width,
+            height: self.height,
+            values: self.values,
         }
     }
 }

@@ -46,6 +46,11 @@ impl DvrMode {
         }
     }
 
+    /// Whether the mode projects the HU values (mip, minip, average) rather than shading.
+    pub fn is_projection(self) -> bool {
+        matches!(self, DvrMode::Mip | DvrMode::MinIp | DvrMode::Average)
+    }
+
     /// The usual window (width, level) in HU of the intensity projections.
     pub fn default_window(self) -> (f32, f32) {
         match self {
@@ -77,6 +82,9 @@ pub struct DvrOptions {
     pub crop: Option<[Vec3; 2]>,
     /// Keep only points p with n · p ≥ c (n, c in LPS mm): up to two clip planes.
     pub clip_planes: [Option<(Vec3, f32)>; 2],
+    /// mip, minip, average: every channel of a pixel holds the projection's value itself, in
+    /// HU (no window: the film for an EXR), and a ray that takes no sample holds NaN.
+    pub hu_values: bool,
 }
 
 impl Default for DvrOptions {
@@ -93,6 +101,7 @@ impl Default for DvrOptions {
             shadows: false,
             crop: None,
             clip_planes: [None; 2],
+            hu_values: false,
         }
     }
 }
@@ -807,7 +816,11 @@ fn march(
     Ray3 { o, d, jitter }: Ray3,
 ) -> Marched {
     let background = Marched {
-        color: opt.background,
+        color: if opt.hu_values && opt.mode.is_projection() {
+            Vec3::NAN
+        } else {
+            opt.background
+        },
         ..Default::default()
     };
     let (o_idx, d_idx) = (m.index_of(o), m.index_dir(d));
@@ -876,7 +889,7 @@ fn march(
                 best
             };
             Marched {
-                color: Vec3::splat(window(v, win)),
+                color: Vec3::splat(if opt.hu_values { v } else { window(v, win) }),
                 taken,
                 ..background
             }
@@ -1171,6 +1184,65 @@ mod tests {
             "{} vs {}",
             sum(&shadow),
             sum(&plain)
+        );
+    }
+
+    /// `hu_values`: on the abdomen CT the projections' films hold HU whose window is the
+    /// windowed film, pixel for pixel; per pixel MinIP ≤ average ≤ MIP (the same samples);
+    /// the rays that take no sample are NaN in all three and the background without it.
+    #[test]
+    fn projections_give_hounsfield_units_before_the_window() {
+        let vol = abdomen();
+        let base = DvrOptions {
+            width: 48,
+            height: 40,
+            ..Default::default()
+        };
+        let cam = volume_camera(&vol, 1.2);
+        let tf = grey(0.0);
+        let mut hu = Vec::new();
+        for mode in [DvrMode::MinIp, DvrMode::Average, DvrMode::Mip] {
+            let opt = DvrOptions { mode, ..base };
+            let (shown, _) = render_volume(&vol, &tf, &opt, &cam);
+            let values = DvrOptions {
+                hu_values: true,
+                ..opt
+            };
+            let (film, _) = render_volume(&vol, &tf, &values, &cam);
+            let win = mode.default_window();
+            for (v, s) in film.pixels.iter().zip(&shown.pixels) {
+                if v.x.is_nan() {
+                    assert!(v.is_nan() && *s == opt.background, "{}", mode.name());
+                } else {
+                    assert!(v.x == v.y && v.y == v.z, "one value a pixel");
+                    assert_eq!(Vec3::splat(window(v.x, win)), *s, "{}", mode.name());
+                }
+            }
+            hu.push(film.pixels.iter().map(|p| p.x).collect::<Vec<f32>>());
+        }
+        let sampled = hu[0].iter().filter(|v| !v.is_nan()).count();
+        assert!(sampled > 48 * 40 / 2, "{sampled} pixels sampled");
+        for ((&lo, &mean), &hi) in hu[0].iter().zip(&hu[1]).zip(&hu[2]) {
+            if lo.is_nan() {
+                assert!(mean.is_nan() && hi.is_nan());
+                continue;
+            }
+            assert!(lo <= mean + 1e-3 && mean <= hi + 1e-3, "{lo} {mean} {hi}");
+        }
+        // Bone and air both in view: the values span the CT's range, beyond any window.
+        let top = hu[2]
+            .iter()
+            .copied()
+            .filter(|v| !v.is_nan())
+            .fold(f32::MIN, f32::max);
+        let bottom = hu[0]
+            .iter()
+            .copied()
+            .filter(|v| !v.is_nan())
+            .fold(f32::MAX, f32::min);
+        assert!(
+            top > 1500.0 && bottom < -900.0,
+            "MIP up to {top}, MinIP down to {bottom}"
         );
     }
 

@@ -28,9 +28,12 @@ use raystream_math::{Ray, Vec3};
 use raystream_scene::{Camera, Scene};
 
 pub use aov::{
-    AOV_CHUNK, Aov, AovBuilder, AovImage, aov_image, aov_rays, aov_rays_of, prim_colour,
+    AOV_CHUNK, Aov, AovBuilder, AovImage, AovValues, NO_PRIM, aov_image, aov_rays, aov_rays_of,
+    prim_colour,
 };
-pub use image_out::{Image, save_srgb8_png, srgb8_diff};
+pub use image_out::{
+    ExrFile, ExrSamples, Image, ImageFormat, load_exr, save_exr, save_srgb8_png, srgb8_diff,
+};
 pub use medium::Medium;
 
 #[derive(Clone, Copy, Debug)]

@@ -214,15 +214,16 @@ fn aovs_follow_the_brute_force_hits() {
     let near = dist.iter().flatten().fold(f32::INFINITY, |a, &b| a.min(b));
     let far = dist.iter().flatten().fold(0.0f32, |a, &b| a.max(b));
 
-    let AovImage::Gray16 { pixels, range, .. } = aov_image(&s, &rays, &hits, w, h, Aov::Depth)
-    else {
-        panic!("depth is 16-bit grey")
-    };
-    let (n, f) = range.expect("hits");
+    let depth = aov_image(&s, &rays, &hits, w, h, Aov::Depth);
+    let (n, f) = depth.depth_range().expect("hits");
     assert!(
         (n - near).abs() < 1e-5 && (f - far).abs() < 1e-5,
         "range {n}..{f}"
     );
+    let AovValues::Depth(values) = &depth.values else {
+        panic!("a depth AOV holds distances")
+    };
+    let pixels = depth.gray16().expect("depth is 16-bit grey");
     for (i, d) in dist.iter().enumerate() {
         let want_level = d.map_or(0.0, |d| 1.0 + 65534.0 * (far - d) / (far - near));
         assert!(
@@ -230,13 +231,16 @@ fn aovs_follow_the_brute_force_hits() {
             "depth pixel {i}: {} vs {want_level}",
             pixels[i]
         );
+        match d {
+            Some(d) => assert!((values[i] - d).abs() <= 1e-5 * d, "distance {i}"),
+            None => assert_eq!(values[i], f32::INFINITY, "a miss's distance"),
+        }
     }
     assert!(pixels.contains(&u16::MAX) && pixels.contains(&1));
 
     for aov in [Aov::Normal, Aov::Prim] {
-        let AovImage::Rgb8 { pixels, .. } = aov_image(&s, &rays, &hits, w, h, aov) else {
-            panic!("{aov:?} is RGB")
-        };
+        let img = aov_image(&s, &rays, &hits, w, h, aov);
+        let pixels = img.rgb8().expect("RGB");
         for (i, hit) in want.iter().enumerate() {
             let rgb = &pixels[3 * i..3 * i + 3];
             let expect = match (hit, aov) {
@@ -245,6 +249,14 @@ fn aovs_follow_the_brute_force_hits() {
                 (Some(h), _) => prim_colour(h.prim),
             };
             assert_eq!(rgb, expect, "{aov:?} pixel {i}");
+            match (&img.values, hit) {
+                (AovValues::Normal(n), None) => assert_eq!(n[i], Vec3::ZERO),
+                (AovValues::Normal(n), Some(_)) => {
+                    assert!((n[i] - Vec3::Z).length() < 1e-6, "normal {i}: {}", n[i])
+                }
+                (AovValues::Prim(p), h) => assert_eq!(p[i], h.map_or(NO_PRIM, |h| h.prim)),
+                (v, _) => panic!("{aov:?} holds {v:?}"),
+            }
         }
     }
     // Neighbouring triangles get different colours, never a miss's black.
@@ -277,17 +289,107 @@ fn aovs_in_chunks_equal_aovs_at_once() {
 /// A 16-bit depth image survives the PNG round trip.
 #[test]
 fn depth_aov_png_round_trip() {
-    let img = AovImage::Gray16 {
-        width: 3,
+    let img = AovImage {
+        width: 4,
         height: 1,
-        pixels: vec![0, 1, 65535],
-        range: Some((1.0, 2.0)),
+        values: AovValues::Depth(vec![f32::INFINITY, 2.0, 1.0, 1.5]),
     };
     let path = std::env::temp_dir().join(format!("raystream-aov-{}.png", std::process::id()));
     img.save_png(&path).unwrap();
     let back = image::open(&path).unwrap().to_luma16();
     std::fs::remove_file(&path).ok();
-    assert_eq!(back.into_raw(), vec![0, 1, 65535]);
+    assert_eq!(back.into_raw(), vec![0, 1, 65535, 32768]);
+}
+
+/// Every channel of an EXR file: name → samples.
+fn read_exr(path: &Path) -> std::collections::BTreeMap<String, ExrSamples> {
+    load_exr(path).unwrap().channels
+}
+
+/// EXR keeps the values themselves: the film's linear RGB above 1 and below the 8-bit step,
+/// distances with +∞ for a miss, normals, triangle numbers as 32-bit integers.
+#[test]
+fn exr_round_trip_keeps_the_values() {
+    let dir = std::env::temp_dir().join(format!("raystream-exr-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let film = Image {
+        width: 3,
+        height: 2,
+        pixels: vec![
+            Vec3::new(0.0, 1e-4, 7.25),
+            Vec3::new(0.5, 0.25, 0.125),
+            Vec3::new(1.0, 2.0, 3.0),
+            Vec3::splat(-0.0),
+            Vec3::new(12345.678, 1e-30, 0.333),
+            Vec3::ONE,
+        ],
+    };
+    let path = dir.join("film.exr");
+    film.save(&path, ImageFormat::Exr, "test film").unwrap();
+    let ch = read_exr(&path);
+    assert_eq!(ch.keys().collect::<Vec<_>>(), ["B", "G", "R"]);
+    for (c, name) in ["R", "G", "B"].iter().enumerate() {
+        let want: Vec<f32> = film.pixels.iter().map(|p| p.to_array()[c]).collect();
+        assert_eq!(ch[*name], ExrSamples::F32(want), "{name}");
+    }
+
+    let depth = AovImage {
+        width: 2,
+        height: 2,
+        values: AovValues::Depth(vec![f32::INFINITY, 1.5, 1e7, 3.25e-3]),
+    };
+    let path = dir.join("depth.exr");
+    depth.save(&path, ImageFormat::Exr, "mm").unwrap();
+    let ch = read_exr(&path);
+    assert_eq!(ch.len(), 1);
+    assert_eq!(
+        ch["Z"],
+        ExrSamples::F32(vec![f32::INFINITY, 1.5, 1e7, 3.25e-3])
+    );
+
+    let normals = vec![Vec3::ZERO, Vec3::X, Vec3::new(0.6, -0.8, 0.0), -Vec3::Z];
+    let img = AovImage {
+        width: 4,
+        height: 1,
+        values: AovValues::Normal(normals.clone()),
+    };
+    img.save(&path, ImageFormat::Exr, "mm").unwrap();
+    let ch = read_exr(&path);
+    assert_eq!(ch.len(), 3);
+    for (c, name) in ["N.X", "N.Y", "N.Z"].iter().enumerate() {
+        let want: Vec<f32> = normals.iter().map(|p| p.to_array()[c]).collect();
+        assert_eq!(ch[*name], ExrSamples::F32(want), "{name}");
+    }
+
+    let prims = vec![NO_PRIM, 0, 16_777_217, 4_000_000_000];
+    let img = AovImage {
+        width: 2,
+        height: 2,
+        values: AovValues::Prim(prims.clone()),
+    };
+    img.save(&path, ImageFormat::Exr, "mm").unwrap();
+    let ch = read_exr(&path);
+    assert_eq!(ch.len(), 1);
+    assert_eq!(
+        ch["prim"],
+        ExrSamples::U32(prims),
+        "exact above 2^24, as no float is"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The format follows the output's extension; any other is refused by name.
+#[test]
+fn image_format_from_the_extension() {
+    assert_eq!(ImageFormat::of(Path::new("a/b.png")), Ok(ImageFormat::Png));
+    assert_eq!(ImageFormat::of(Path::new("b.EXR")), Ok(ImageFormat::Exr));
+    for bad in ["b.jpg", "b", "b.png.tmp", "dir/"] {
+        let e = ImageFormat::of(Path::new(bad)).unwrap_err();
+        assert!(
+            e.starts_with(bad.trim_end_matches('/')) && e.contains(".exr"),
+            "{e}"
+        );
+    }
 }
 
 /// Waves of any size give the same image byte for byte, and the same rays per depth: glass

@@ -297,7 +297,9 @@ pub struct DvrParams {
     /// `Camera::parallel`: half the view's height (mm) of a parallel projection, 0 for a
     /// perspective one (byte 288).
     pub parallel: f32,
-    pub pad: [u32; 3],
+    /// `DvrOptions::hu_values`: 1 for the projections' HU values unwindowed (byte 292).
+    pub hu_values: u32,
+    pub pad: [u32; 2],
 }
 
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);

@@ -273,7 +273,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             light_dims: self.light_dims,
             shadow_step: opt.shadow_step_for(self.vol),
             parallel: cam.parallel,
-            pad: [0; 3],
+            hu_values: (opt.hu_values && opt.mode.is_projection()) as u32,
+            pad: [0; 2],
         };
         let param_buf = ctx
             .device
@@ -421,9 +422,18 @@ impl<'a> GpuVolumeRenderer<'a> {
             let floats: &[f32] = bytemuck::cast_slice(&words);
             let px = &floats[..4 * n as usize];
             let samples = px.chunks_exact(4).map(|p| p[3] as u64).sum();
+            // A ray that took no sample has no HU value: NaN, as on the CPU (the kernel writes
+            // the background there).
+            let none = params.hu_values != 0;
             let pixels = px
                 .chunks_exact(4)
-                .map(|p| Vec3::new(p[0], p[1], p[2]))
+                .map(|p| {
+                    if none && p[3] == 0.0 {
+                        Vec3::NAN
+                    } else {
+                        Vec3::new(p[0], p[1], p[2])
+                    }
+                })
                 .collect();
             (
                 Pixels::Linear(Image {

@@ -12,6 +12,7 @@ use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use raystream_accel::{Counters, KdTree, Traversal, brute};
+use raystream_cpu::ImageFormat;
 use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera, volume_camera_from};
 use raystream_io::TriMesh;
 use raystream_math::{Ray, Vec3};
@@ -445,7 +446,10 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                     ..opt
                 };
                 let cam = volume_camera(&volume, 1.0);
-                let gpu = renderer.frame(&small, &cam)?.rgb;
+                let gpu = renderer
+                    .frame(&small, &cam, ImageFormat::Png)?
+                    .picture
+                    .into_srgb8();
                 let (cpu, _) = render_volume(&volume, &tf, &small, &cam);
                 let (mean, _) = raystream_cpu::srgb8_diff(&cpu.to_srgb8(), &gpu);
                 if mean >= 1.0 {
@@ -461,14 +465,14 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                 ProgressBar::new(a.frames as u64 + 1)
             };
             pb.set_message(format!("{} {}", backend.name(), mode.name()));
-            renderer.frame(&opt, &cam0)?;
+            renderer.frame(&opt, &cam0, ImageFormat::Png)?;
             pb.inc(1);
             let (mut frame_ms, mut kernel_ms, mut samples) = (Vec::new(), Vec::new(), 0u64);
             let mut stats = None;
             for i in 0..a.frames {
                 let turn = VOLUME_VIEW.orbit(360.0 * i as f32 / a.frames as f32, 0.0);
                 let cam = volume_camera_from(&volume, aspect, turn, Projection::Perspective);
-                let f = renderer.frame(&opt, &cam)?;
+                let f = renderer.frame(&opt, &cam, ImageFormat::Png)?;
                 frame_ms.push(f.frame_ms);
                 kernel_ms.extend(f.kernel_ms);
                 samples += f.samples;

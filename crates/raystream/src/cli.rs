@@ -185,7 +185,9 @@ pub struct RenderArgs {
     /// gradient normals).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=100))]
     pub smooth: u32,
-    /// Output PNG.
+    /// Output image: .png (8-bit sRGB as a viewer shows it; 16-bit grey for --aov depth) or
+    /// .exr (32-bit float: the linear film; --aov depth Z, normal N.X/N.Y/N.Z, prim as 32-bit
+    /// integers; --mode mip/minip/average the HU values themselves, no window).
     #[arg(short, long, default_value = "render.png")]
     pub output: PathBuf,
     /// Image size, WIDTHxHEIGHT.

@@ -6,6 +6,7 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use raystream_accel::KdTree;
+use raystream_cpu::{ExrSamples, Image, ImageFormat};
 use raystream_gpu::{GpuContext, GpuTracer};
 use raystream_io::TriMesh;
 
@@ -101,6 +102,68 @@ pub fn gpu_tracer<'a>(
         })?),
         Backend::Cpu => None,
     })
+}
+
+/// A frame as it is written: 8-bit sRGB (3 bytes a pixel) for a PNG, or for an EXR the
+/// linear float film (R, G, B) or, for the intensity projections, their HU values (Y).
+pub enum Picture {
+    Srgb8 {
+        rgb: Vec<u8>,
+        width: u32,
+        height: u32,
+    },
+    Film(Image),
+    /// One value a pixel (the film's first channel), written as channel Y.
+    Values(Image),
+}
+
+impl Picture {
+    /// `film` as `format` writes it: 8-bit sRGB for a PNG, the film itself for an EXR.
+    pub fn of_film(film: Image, format: ImageFormat) -> Picture {
+        match format {
+            ImageFormat::Png => Picture::Srgb8 {
+                rgb: film.to_srgb8(),
+                width: film.width,
+                height: film.height,
+            },
+            ImageFormat::Exr => Picture::Film(film),
+        }
+    }
+
+    /// Writes the picture to `path` (PNG for 8-bit sRGB, else EXR); `what` says what the
+    /// values are, in the EXR's comments.
+    pub fn save(&self, path: &Path, what: &str) -> Result<()> {
+        match self {
+            Picture::Srgb8 { rgb, width, height } => {
+                raystream_cpu::save_srgb8_png(path, rgb, *width, *height)
+            }
+            Picture::Film(film) => film.save_exr(path, what),
+            Picture::Values(film) => raystream_cpu::save_exr(
+                path,
+                film.width,
+                film.height,
+                vec![(
+                    "Y",
+                    ExrSamples::F32(film.pixels.iter().map(|p| p.x).collect()),
+                )],
+                what,
+            ),
+        }
+        .map_err(anyhow::Error::msg)
+    }
+
+    /// 8-bit sRGB pixels (3 bytes a pixel), as a viewer shows the frame.
+    pub fn into_srgb8(self) -> Vec<u8> {
+        match self {
+            Picture::Srgb8 { rgb, .. } => rgb,
+            Picture::Film(film) | Picture::Values(film) => film.to_srgb8(),
+        }
+    }
+}
+
+/// The image format `-o` names (`.png` or `.exr`), checked before any work.
+pub fn image_format(output: &Path) -> Result<ImageFormat> {
+    ImageFormat::of(output).map_err(anyhow::Error::msg)
 }
 
 pub fn load_mesh(path: &Path) -> Result<TriMesh> {

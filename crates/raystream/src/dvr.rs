@@ -4,6 +4,7 @@
 use std::time::Instant;
 
 use anyhow::{Result, bail};
+use raystream_cpu::ImageFormat;
 use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, render_volume};
 use raystream_gpu::GpuVolumeRenderer;
 use raystream_io::Volume;
@@ -12,7 +13,7 @@ use raystream_scene::Camera;
 use raystream_volume::{TfPreset, TransferFunction};
 
 use crate::cli::{Threshold, VolumeLook};
-use crate::common::{Backend, ms};
+use crate::common::{Backend, Picture, ms};
 
 /// The transfer function and options `--mode MODE` asks for, checked.
 pub fn options(
@@ -97,14 +98,12 @@ pub enum Renderer<'a> {
     Gpu(Box<GpuVolumeRenderer<'a>>),
 }
 
-/// One frame, as a viewer shows it, and what it cost.
+/// One frame, as it is written, and what it cost.
 pub struct Frame {
-    /// 8-bit sRGB, 3 bytes a pixel (converted on the GPU there: a fifth of the float pixels'
-    /// bytes to read back).
-    pub rgb: Vec<u8>,
-    pub width: u32,
-    pub height: u32,
-    /// Wall time, milliseconds: the whole render on the CPU; submission to 8-bit pixels on the
+    /// 8-bit sRGB for a PNG (converted on the GPU there: a fifth of the float pixels' bytes
+    /// to read back); for an EXR the film, or the projections' HU values.
+    pub picture: Picture,
+    /// Wall time, milliseconds: the whole render on the CPU; submission to the pixels on the
     /// host on the GPU.
     pub frame_ms: f64,
     /// The GPU kernel's own time (timestamp queries).
@@ -127,41 +126,47 @@ impl<'a> Renderer<'a> {
         })
     }
 
-    pub fn frame(&self, opt: &DvrOptions, cam: &Camera) -> Result<Frame> {
+    /// One frame with `cam`, as `format` writes it: for an EXR the film, or with
+    /// `opt.hu_values` (the projections) their HU values.
+    pub fn frame(&self, opt: &DvrOptions, cam: &Camera, format: ImageFormat) -> Result<Frame> {
         let t = Instant::now();
-        Ok(match self {
-            Renderer::Gpu(g) => {
+        let (film, kernel_ms, samples, stats) = match (self, format) {
+            (Renderer::Gpu(g), ImageFormat::Png) => {
                 let (rgb, times) = g.render_srgb8(opt, cam)?;
-                Frame {
+                let picture = Picture::Srgb8 {
                     rgb,
                     width: opt.width,
                     height: opt.height,
+                };
+                return Ok(Frame {
+                    picture,
                     frame_ms: ms(t.elapsed()),
                     kernel_ms: times.kernel_gpu_ms,
                     samples: times.samples,
                     stats: None,
-                }
+                });
             }
-            Renderer::Cpu { volume, tf } => {
-                let (image, stats) = render_volume(volume, tf, opt, cam);
-                Frame {
-                    rgb: image.to_srgb8(),
-                    width: opt.width,
-                    height: opt.height,
-                    frame_ms: ms(t.elapsed()),
-                    kernel_ms: None,
-                    samples: stats.samples,
-                    stats: Some(stats),
-                }
+            (Renderer::Gpu(g), ImageFormat::Exr) => {
+                let (film, times) = g.render(opt, cam)?;
+                (film, times.kernel_gpu_ms, times.samples, None)
             }
+            (Renderer::Cpu { volume, tf }, _) => {
+                let (film, stats) = render_volume(volume, tf, opt, cam);
+                (film, None, stats.samples, Some(stats))
+            }
+        };
+        let picture = if opt.hu_values && opt.mode.is_projection() {
+            Picture::Values(film)
+        } else {
+            Picture::of_film(film, format)
+        };
+        Ok(Frame {
+            picture,
+            frame_ms: ms(t.elapsed()),
+            kernel_ms,
+            samples,
+            stats,
         })
-    }
-}
-
-impl Frame {
-    pub fn save_png(&self, path: &std::path::Path) -> Result<()> {
-        raystream_cpu::save_srgb8_png(path, &self.rgb, self.width, self.height)
-            .map_err(anyhow::Error::msg)
     }
 }
 

@@ -8,17 +8,18 @@ use indicatif::{ProgressBar, ProgressStyle};
 use raystream_accel::Traversal;
 use raystream_accel::{Hit, KdTree};
 use raystream_cpu::{
-    AOV_CHUNK, Aov, AovBuilder, AovImage, DepthStats, RenderOptions, aov_rays_of, prepare_volume,
-    render_prepared,
+    AOV_CHUNK, Aov, AovBuilder, DepthStats, ImageFormat, RenderOptions, aov_rays_of,
+    prepare_volume, render_prepared,
 };
 use raystream_gpu::GpuRenderer;
-use raystream_scene::{PatientView, Projection, Scene, VOLUME_VIEW, View};
+use raystream_scene::{Camera, PatientView, Projection, Scene, VOLUME_VIEW, View};
 
 use raystream_cpu::dvr::{DvrMode, DvrOptions, volume_camera_from};
 
 use crate::cli::RenderArgs;
 use crate::common::{
-    Backend, gpu_tracer, load_mesh, median as median_of, ms, open_device, spinner,
+    Backend, Picture, gpu_tracer, image_format, load_mesh, median as median_of, ms, open_device,
+    spinner,
 };
 use crate::dvr;
 use crate::iso::{Bones, bones, read_volume};
@@ -83,6 +84,27 @@ fn projection(a: &RenderArgs) -> Projection {
     }
 }
 
+/// For an EXR's comments: a parallel projection's pixel size (`height` pixels high), in the
+/// scene's units (mm for CT); nothing for a perspective one, whose pixels have no one size.
+fn pixel_size(cam: &Camera, height: u32, units: &str) -> String {
+    if cam.parallel > 0.0 {
+        format!(
+            "; parallel projection, pixels {} {units} square",
+            2.0 * cam.parallel / height as f32
+        )
+    } else {
+        String::new()
+    }
+}
+
+/// The unit of the scene's coordinates: mm for a CT volume's bones.
+fn units(bones: &Option<Bones>) -> &'static str {
+    match bones {
+        Some(_) => "mm",
+        None => "scene units",
+    }
+}
+
 /// `--orbit AZ,EL`, or no turn.
 fn orbit_angles(a: &RenderArgs) -> [f32; 2] {
     a.orbit.unwrap_or([0.0; 2])
@@ -100,8 +122,15 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             mode.name()
         ),
     };
+    // A turntable's frames are PNGs in a folder.
+    let format = match a.turntable {
+        Some(_) => ImageFormat::Png,
+        None => image_format(&a.output)?,
+    };
     let (volume, load_ms) = read_volume(path, a.series.as_deref(), a.quiet, embedded)?;
-    let (tf, opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
+    let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
+    // An EXR keeps what the projections found, in HU; the window is for display.
+    opt.hu_values = format == ImageFormat::Exr;
     let aspect = opt.width as f32 / opt.height as f32;
     let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
     let view = base_view(a, VOLUME_VIEW, true)?;
@@ -124,14 +153,25 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let mut kernel_ms = Vec::new();
     let mut last = None;
     for _ in 0..a.repeat {
-        let f = renderer.frame(&opt, &cam)?;
+        let f = renderer.frame(&opt, &cam, format)?;
         frame_ms.push(f.frame_ms);
         kernel_ms.extend(f.kernel_ms);
         last = Some(f);
     }
     pb.finish_and_clear();
     let frame = last.expect("at least one frame");
-    frame.save_png(&a.output)?;
+    let what = if opt.hu_values && mode.is_projection() {
+        format!(
+            "Y: the {} of the HU values along each ray (no window); NaN: no sample",
+            mode.name()
+        )
+    } else {
+        format!("linear RGB, --mode {}", mode.name())
+    };
+    frame.picture.save(
+        &a.output,
+        &format!("{what}{}", pixel_size(&cam, opt.height, "mm")),
+    )?;
     if !a.quiet {
         let gpu = frame.stats.is_none();
         let stats = frame
@@ -139,12 +179,17 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             .unwrap_or_else(|| dvr::estimate_stats(&volume, &tf, &opt, &cam));
         let median = median_of(&mut frame_ms);
         eprintln!(
-            "raystream: wrote {} ({}x{}, --mode {}{}, step {:.3} mm) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples, {} skipped as empty ({:.0} %{}){}, {:.1} M samples/s",
+            "raystream: wrote {} ({}x{}, --mode {}{}{}, step {:.3} mm) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples, {} skipped as empty ({:.0} %{}){}, {:.1} M samples/s",
             a.output.display(),
             opt.width,
             opt.height,
             mode.name(),
             if opt.shadows { " --shadows" } else { "" },
+            match format {
+                ImageFormat::Exr if mode.is_projection() => ", HU values, no window",
+                ImageFormat::Exr => ", linear float RGB",
+                ImageFormat::Png => "",
+            },
             stats.step_mm,
             backend.name(),
             backend.adapter(),
@@ -191,10 +236,7 @@ fn turntable(
     n: u32,
 ) -> Result<()> {
     let dir = &a.output;
-    if dir
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
-    {
+    if ImageFormat::of(dir).is_ok() {
         bail!(
             "{}: --turntable writes frame_000.png … into a folder; name the folder with -o",
             dir.display()
@@ -220,10 +262,10 @@ fn turntable(
             view.orbit(az + 360.0 * i as f32 / n as f32, el),
             projection,
         );
-        let f = renderer.frame(opt, &cam)?;
+        let f = renderer.frame(opt, &cam, ImageFormat::Png)?;
         frame_ms.push(f.frame_ms);
         let path = dir.join(format!("frame_{i:0digits$}.png", digits = digits.max(3)));
-        f.save_png(&path)?;
+        f.picture.save(&path, "")?;
         pb.inc(1);
     }
     pb.finish_and_clear();
@@ -307,12 +349,13 @@ fn load(a: &RenderArgs) -> Result<Loaded> {
 /// `render --aov …`: one ray through each pixel's centre, traced on the chosen device, and the
 /// image of its closest hit (made on the host from either device's hits).
 fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
+    let format = image_format(&a.output)?;
     let Loaded {
         backend,
         scene,
+        bones,
         load_ms,
         tree,
-        ..
     } = load(a)?;
     let traversal = Traversal::from(a.accel.traversal);
     let (width, height) = a.size;
@@ -339,13 +382,18 @@ fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
     let trace_ms = ms(t1.elapsed());
     pb.finish_and_clear();
     let image = image.finish();
-    image.save_png(&a.output).map_err(anyhow::Error::msg)?;
+    let units = units(&bones);
+    image
+        .save(&a.output, format, units)
+        .map_err(anyhow::Error::msg)?;
     if !a.quiet {
-        let range = match &image {
-            AovImage::Gray16 {
-                range: Some((near, far)),
-                ..
-            } => format!(", white = {near:.4}, grey level 1 = {far:.4} scene units from the eye"),
+        let range = match (image.depth_range(), format) {
+            (Some((near, far)), ImageFormat::Png) => {
+                format!(", white = {near:.4}, grey level 1 = {far:.4} {units} from the eye")
+            }
+            (Some((near, far)), ImageFormat::Exr) => {
+                format!(", distances {near:.4} to {far:.4} {units} from the eye")
+            }
             _ => String::new(),
         };
         eprintln!(
@@ -385,6 +433,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     if let Some(aov) = a.aov {
         return render_aov(a, aov.into());
     }
+    let format = image_format(&a.output)?;
     let Loaded {
         backend,
         scene,
@@ -444,11 +493,21 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             bar.inc(1);
         };
         let t1 = Instant::now();
-        // A frame is 8-bit sRGB pixels on the host, as a viewer shows them (the GPU converts
-        // its film itself).
+        // For a PNG a frame is 8-bit sRGB pixels on the host, as a viewer shows them (the GPU
+        // converts its film itself); for an EXR the film.
         let img = match &renderer {
             Some(r) => {
-                let (rgb, stats) = r.render_srgb8(&opt, &mut on_depth)?;
+                let (picture, stats) = match format {
+                    ImageFormat::Png => {
+                        let (rgb, stats) = r.render_srgb8(&opt, &mut on_depth)?;
+                        let (width, height) = (opt.width, opt.height);
+                        (Picture::Srgb8 { rgb, width, height }, stats)
+                    }
+                    ImageFormat::Exr => {
+                        let (film, stats) = r.render(&opt, &mut on_depth)?;
+                        (Picture::Film(film), stats)
+                    }
+                };
                 kernel_ms = stats.kernel_gpu_ms;
                 split = Some((
                     stats.render_ms,
@@ -457,9 +516,12 @@ pub fn run(a: &RenderArgs) -> Result<()> {
                     stats.submissions,
                     stats.submit,
                 ));
-                rgb
+                picture
             }
-            None => render_prepared(&scene, &tree, medium.as_ref(), &opt, &mut on_depth).to_srgb8(),
+            None => Picture::of_film(
+                render_prepared(&scene, &tree, medium.as_ref(), &opt, &mut on_depth),
+                format,
+            ),
         };
         frame_ms.push(ms(t1.elapsed()));
         // Depths that ended early leave the bar short: count them as done.
@@ -471,8 +533,16 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     let image = image.expect("at least one frame");
-    raystream_cpu::save_srgb8_png(&a.output, &image, opt.width, opt.height)
-        .map_err(anyhow::Error::msg)?;
+    let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
+    image.save(
+        &a.output,
+        &format!(
+            "linear RGB, {} spp, depth {}{}",
+            opt.spp,
+            opt.max_depth,
+            pixel_size(&cam, opt.height, units(&bones))
+        ),
+    )?;
     if !a.quiet {
         let median = median_of(&mut frame_ms);
         eprintln!(
@@ -524,8 +594,12 @@ pub fn run(a: &RenderArgs) -> Result<()> {
                 raystream_gpu::Submit::Depth => "depth",
             };
             eprintln!(
-                "raystream: the last frame's {all:.1} ms: {wait:.1} submitting and waiting on {submissions} submission{}, one per {per} (kernels and round trips), {film:.1} turning the film into 8-bit sRGB and reading it back, {:.1} on the host",
+                "raystream: the last frame's {all:.1} ms: {wait:.1} submitting and waiting on {submissions} submission{}, one per {per} (kernels and round trips), {film:.1} {} reading it back, {:.1} on the host",
                 if submissions == 1 { "" } else { "s" },
+                match format {
+                    ImageFormat::Png => "turning the film into 8-bit sRGB and",
+                    ImageFormat::Exr => "resolving the float film and",
+                },
                 all - wait - film
             );
         }

@@ -817,18 +817,20 @@ fn turntable_writes_frames() {
         image::open(&front).unwrap().to_rgb8()
     );
     assert_ne!(frame("frame_000.png"), frame("frame_001.png"));
-    let png = tmp("x.png");
-    let o = run(&[
-        "render",
-        "--mode",
-        "mip",
-        "--turntable",
-        "2",
-        "-o",
-        png.to_str().unwrap(),
-    ]);
-    assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("folder"), "{}", stderr(&o));
+    // A folder named like an image (PNG or EXR) is refused.
+    for name in ["x.png", "x.exr"] {
+        let o = run(&[
+            "render",
+            "--mode",
+            "mip",
+            "--turntable",
+            "2",
+            "-o",
+            tmp(name).to_str().unwrap(),
+        ]);
+        assert_eq!(o.status.code(), Some(2));
+        assert!(stderr(&o).contains("folder"), "{}", stderr(&o));
+    }
 }
 
 /// `--view` and `--orbit`: the CT from the patient's left is the front view turned a quarter
@@ -930,7 +932,9 @@ fn views_and_orbits_turn_the_framing_camera() {
         (vec![bunny.as_str(), "--orbit", "x"], "AZ or AZ,EL"),
         (vec!["--view", "sideways"], "possible values"),
     ] {
-        let mut all = vec!["render", "--size", "8x8", "--quiet", "-o", "/dev/null"];
+        let refused = tmp("refused.png");
+        let mut all = vec!["render", "--size", "8x8", "--quiet", "-o"];
+        all.push(refused.to_str().unwrap());
         all.extend_from_slice(&args);
         let o = run(&all);
         assert_eq!(o.status.code(), Some(2), "{args:?} should fail");

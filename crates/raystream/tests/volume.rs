@@ -151,7 +151,7 @@ fn render_a_dicom_folder_and_refuse_a_tilted_one() {
         "render",
         &volume("dicom/head_ct_gantry_tilt_ge"),
         "-o",
-        "/dev/null",
+        tmp("tilted.png").to_str().unwrap(),
     ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("gantry tilt"), "{}", stderr(&o));

@@ -46,7 +46,8 @@ struct DvrParams {
     shadow_step: f32,
     // Half the view's height (mm) of a parallel projection; 0: perspective (Camera::parallel).
     parallel: f32,
-    pad0: u32,
+    // 1: mip, minip and average give the HU value itself, no window (DvrOptions::hu_values).
+    hu_values: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -237,6 +238,9 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
     }
     if dp.mode == MODE_AVERAGE {
         best = sum / f32(taken);
+    }
+    if dp.hu_values != 0u {
+        return vec4<f32>(vec3<f32>(best), f32(taken));
     }
     return vec4<f32>(vec3<f32>(window(best)), f32(taken));
 }

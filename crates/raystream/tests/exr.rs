@@ -1,0 +1,327 @@
+//! `render -o OUT.exr`: the float values behind a picture. The shaded film before its sRGB
+//! curve and 8-bit rounding, AOVs' distances, normals and triangle numbers, and the intensity
+//! projections' Hounsfield units before the window. Each is checked against the PNG of the
+//! same render (the PNG must follow from the EXR), against values known from the input, and
+//! the GPU's against the CPU's.
+
+mod common;
+use std::path::Path;
+
+use common::*;
+use raystream_cpu::{ExrFile, Image};
+use raystream_math::Vec3;
+
+/// An EXR file that `render` wrote.
+fn read_exr(path: &Path) -> ExrFile {
+    raystream_cpu::load_exr(path).unwrap()
+}
+
+/// A float channel's samples.
+fn floats<'a>(e: &'a ExrFile, name: &str) -> &'a [f32] {
+    e.channels[name].as_f32().expect("a float channel")
+}
+
+/// `render ARGS -o NAME` on `dev`, quiet; the output's path.
+fn render(name: &str, dev: &str, args: &[&str]) -> std::path::PathBuf {
+    let out = tmp(name);
+    let mut all = vec!["render", "--quiet", "--device", dev];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["-o", out.to_str().unwrap()]);
+    let o = run(&all);
+    assert!(o.status.success(), "{all:?}: {}", stderr(&o));
+    out
+}
+
+fn devices() -> &'static [&'static str] {
+    if gpu_available() {
+        &["cpu", "gpu"]
+    } else {
+        &["cpu"]
+    }
+}
+
+/// The film of an EXR's R, G, B channels.
+fn film(e: &ExrFile) -> Image {
+    let (r, g, b) = (floats(e, "R"), floats(e, "G"), floats(e, "B"));
+    Image {
+        width: e.width,
+        height: e.height,
+        pixels: (0..r.len()).map(|i| Vec3::new(r[i], g[i], b[i])).collect(),
+    }
+}
+
+/// A shaded frame's EXR is the film the PNG is made from: the PNG's bytes follow from it
+/// exactly, and it keeps a highlight above 1 that the PNG clamps. The GPU's film is the
+/// CPU's (mean difference < 0.5/255 once encoded, as the PNGs are checked).
+#[test]
+fn exr_holds_the_film_behind_the_png() {
+    let spot = repo().join("crates/raystream/tests/scenes/spot.toml");
+    let args = [spot.to_str().unwrap(), "--size", "64x48", "--spp", "2"];
+    let mut films = Vec::new();
+    for dev in devices() {
+        let png = render(&format!("exr-spot-{dev}.png"), dev, &args);
+        let exr = read_exr(&render(&format!("exr-spot-{dev}.exr"), dev, &args));
+        assert_eq!((exr.width, exr.height), (64, 48));
+        assert_eq!(exr.channels.len(), 3, "R, G, B");
+        assert!(
+            exr.comments.contains("linear RGB, 2 spp"),
+            "{}",
+            exr.comments
+        );
+        let f = film(&exr);
+        assert_eq!(
+            f.to_srgb8(),
+            image::open(&png).unwrap().to_rgb8().into_raw(),
+            "{dev}: the PNG is the EXR's film encoded"
+        );
+        let over = f.pixels.iter().filter(|p| p.max_element() > 1.0).count();
+        assert!(over > 0, "{dev}: a highlight above 1 kept");
+        assert!(
+            f.pixels
+                .iter()
+                .all(|p| p.is_finite() && p.min_element() >= 0.0)
+        );
+        films.push(f);
+    }
+    if let [cpu, gpu] = &films[..] {
+        let (mean, _) = cpu.srgb8_diff(gpu);
+        assert!(mean < 0.5, "GPU film differs by {mean:.3}/255");
+    }
+}
+
+/// AOVs as EXR hold the values the PNGs quantize: distances (+∞ where the PNG is 0), the unit
+/// normal, the triangle's number; the GPU's equal the CPU's but at ties on shared edges.
+#[test]
+fn exr_aovs_hold_distances_normals_and_triangles() {
+    let bunny = mesh("stanford_bunny.ply");
+    // The bunny's 69,451 and the ground's two.
+    let triangles = 69_453;
+    let size = ["--size", "96x72"];
+    let mut by_dev = Vec::new();
+    for dev in devices() {
+        let aov = |kind: &str, ext: &str| {
+            let args = [&bunny[..], "--aov", kind, size[0], size[1]];
+            render(&format!("exr-aov-{kind}-{dev}.{ext}"), dev, &args)
+        };
+        let depth = read_exr(&aov("depth", "exr"));
+        let z = floats(&depth, "Z").to_vec();
+        assert!(depth.comments.contains("distance from the eye"));
+        let grey = image::open(aov("depth", "png")).unwrap().to_luma16();
+        let hits: Vec<f32> = z.iter().copied().filter(|d| d.is_finite()).collect();
+        assert!(hits.len() > z.len() / 4, "{dev}: {} hits", hits.len());
+        let (near, far) = hits
+            .iter()
+            .fold((f32::MAX, 0.0f32), |(n, f), &d| (n.min(d), f.max(d)));
+        for (d, &g) in z.iter().zip(grey.as_raw()) {
+            if d.is_finite() {
+                assert!(*d > 0.0);
+                let level = 1.0 + 65534.0 * (far - d) / (far - near);
+                assert!((level - g as f32).abs() <= 1.0, "{dev}: {d} is grey {g}");
+            } else {
+                assert_eq!((*d, g), (f32::INFINITY, 0), "{dev}: a miss");
+            }
+        }
+
+        let normal = read_exr(&aov("normal", "exr"));
+        let n: Vec<Vec3> = {
+            let c = |name: &str| floats(&normal, name).to_vec();
+            let (x, y, zz) = (c("N.X"), c("N.Y"), c("N.Z"));
+            (0..x.len()).map(|i| Vec3::new(x[i], y[i], zz[i])).collect()
+        };
+        let rgb = image::open(aov("normal", "png")).unwrap().to_rgb8();
+        for (i, (v, p)) in n.iter().zip(rgb.pixels()).enumerate() {
+            if z[i].is_finite() {
+                assert!(
+                    (v.length() - 1.0).abs() < 1e-4,
+                    "{dev}: normal {v} not unit"
+                );
+                let want = (*v * 127.0 + Vec3::splat(128.0)).round();
+                assert_eq!(Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32), want);
+            } else {
+                assert_eq!((*v, p.0), (Vec3::ZERO, [0; 3]), "{dev}: a miss");
+            }
+        }
+
+        let prim = read_exr(&aov("prim", "exr"));
+        let prims = prim.channels["prim"]
+            .as_u32()
+            .expect("triangle numbers are 32-bit integers");
+        for (&p, d) in prims.iter().zip(&z) {
+            assert_eq!(p == u32::MAX, !d.is_finite(), "{dev}: a miss in both");
+            assert!(p == u32::MAX || p < triangles, "{dev}: triangle {p}");
+        }
+        let distinct: std::collections::BTreeSet<u32> = prims.iter().copied().collect();
+        assert!(
+            distinct.len() > 1000,
+            "{dev}: {} triangles seen",
+            distinct.len()
+        );
+        by_dev.push((z, n, prims.to_vec()));
+    }
+    if let [(zc, nc, pc), (zg, ng, pg)] = &by_dev[..] {
+        let off = (0..zc.len())
+            .filter(|&i| {
+                pc[i] != pg[i]
+                    || (zc[i] - zg[i]).abs() > 1e-5 * zc[i]
+                    || (nc[i] - ng[i]).length() > 1e-5
+            })
+            .count();
+        assert!(off * 1000 <= zc.len(), "{off} pixels differ, GPU to CPU");
+    }
+}
+
+/// A 40 mm cube of air (−1000 HU) holding a block of bone (1000 HU), 10 × 30 × 10 mm, as a
+/// MetaImage: voxels 1 mm, the block at x 10..20, y (posterior) 5..35, z 15..25.
+fn block_volume() -> std::path::PathBuf {
+    let n = 40usize;
+    let mut data = Vec::with_capacity(2 * n * n * n);
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let inside = (10..20).contains(&x) && (5..35).contains(&y) && (15..25).contains(&z);
+                let hu: i16 = if inside { 1000 } else { -1000 };
+                data.extend_from_slice(&hu.to_le_bytes());
+            }
+        }
+    }
+    let header = format!(
+        "ObjectType = Image\nNDims = 3\nDimSize = {n} {n} {n}\nElementSpacing = 1 1 1\nOffset = 0 0 0\nTransformMatrix = 1 0 0 0 1 0 0 0 1\nElementType = MET_SHORT\nElementByteOrderMSB = False\nElementDataFile = LOCAL\n"
+    );
+    let path = tmp("exr-block.mha");
+    let mut bytes = header.into_bytes();
+    bytes.extend_from_slice(&data);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+/// The projections as EXR hold Hounsfield units, before the window: seen from the front
+/// (along the block's 30 mm), the MIP is exactly 1000 HU over the block's 10 × 10 mm face and
+/// −1000 HU elsewhere, the MinIP −1000 HU everywhere, the average over the block (1000 × 30 −
+/// 1000 × 9) / 39 = 538 HU (the rays run between the outer voxels' centres, 39 mm); rays
+/// that miss the volume are NaN. The PNG is the window of
+/// these values. The GPU (a half-float texture) agrees within a few HU.
+#[test]
+fn exr_projections_hold_hounsfield_units() {
+    let vol = block_volume();
+    let vol = vol.to_str().unwrap();
+    let base = [vol, "--size", "64x64", "--parallel", "--view", "anterior"];
+    let mut mips = Vec::new();
+    for dev in devices() {
+        let project = |mode: &str, ext: &str, window: &[&str]| {
+            let args = [&base[..], &["--mode", mode], window].concat();
+            render(&format!("exr-block-{mode}-{dev}.{ext}"), dev, &args)
+        };
+        let mip = read_exr(&project("mip", "exr", &[]));
+        assert_eq!(mip.channels.len(), 1, "one channel, Y");
+        assert!(
+            mip.comments.contains("HU values") && mip.comments.contains("mm square"),
+            "{}",
+            mip.comments
+        );
+        // "pixels S mm square"
+        let pixel_mm: f32 = mip
+            .comments
+            .split("pixels ")
+            .nth(1)
+            .and_then(|s| s.split(' ').next())
+            .and_then(|s| s.parse().ok())
+            .expect("the pixel size");
+        let y = floats(&mip, "Y").to_vec();
+        let missed = y.iter().filter(|v| v.is_nan()).count();
+        assert!(missed > 0 && missed < y.len() / 2, "{dev}: {missed} missed");
+        assert!(
+            y.iter()
+                .filter(|v| !v.is_nan())
+                .all(|v| (-1000.5..=1000.5).contains(v)),
+            "{dev}: the values lie between air and bone"
+        );
+        let bone = y.iter().filter(|&&v| v >= 999.0).count();
+        let air = y.iter().filter(|&&v| v <= -999.0).count();
+        assert!(air > bone, "{dev}: air around the block");
+        // The block's face, 10 × 10 mm, in pixels (its edges blur by a voxel).
+        let face = 100.0 / (pixel_mm * pixel_mm);
+        let over_half = y.iter().filter(|&&v| v > 0.0).count() as f32;
+        assert!(
+            (over_half - face).abs() < 0.25 * face && bone as f32 > 0.5 * face,
+            "{dev}: {over_half} pixels over 0 HU, {bone} at 1000 HU; the face is {face:.0}"
+        );
+
+        let minip = read_exr(&project("minip", "exr", &[]));
+        let m = floats(&minip, "Y");
+        for (a, b) in m.iter().zip(&y) {
+            assert_eq!(a.is_nan(), b.is_nan(), "{dev}: the same rays miss");
+            assert!(a.is_nan() || (a + 1000.0).abs() < 0.5, "{dev}: MinIP {a}");
+        }
+        let avg = read_exr(&project("average", "exr", &[]));
+        let top = floats(&avg, "Y")
+            .iter()
+            .copied()
+            .filter(|v| !v.is_nan())
+            .fold(f32::MIN, f32::max);
+        assert!(
+            (top - 21_000.0 / 39.0).abs() < 2.0,
+            "{dev}: the average through the block is {top} HU"
+        );
+
+        // The PNG is the window (here 0 to 1000 HU) of the EXR's values; misses are the
+        // background.
+        let window = ["--window", "1000", "--level", "500"];
+        let png = image::open(project("mip", "png", &window))
+            .unwrap()
+            .to_rgb8();
+        let film = Image {
+            width: 64,
+            height: 64,
+            pixels: y
+                .iter()
+                .map(|&v| {
+                    if v.is_nan() {
+                        raystream_cpu::dvr::DvrOptions::default().background
+                    } else {
+                        Vec3::splat((v / 1000.0).clamp(0.0, 1.0))
+                    }
+                })
+                .collect(),
+        };
+        let (mean, worst) = raystream_cpu::srgb8_diff(&film.to_srgb8(), png.as_raw());
+        assert!(
+            mean < 0.05 && worst.iter().all(|&d| d <= 1),
+            "{dev}: the PNG is the window of the EXR (mean {mean})"
+        );
+        mips.push(y);
+    }
+    if let [cpu, gpu] = &mips[..] {
+        let mut diffs: Vec<f32> = Vec::new();
+        for (c, g) in cpu.iter().zip(gpu) {
+            assert_eq!(c.is_nan(), g.is_nan(), "the same rays miss on both");
+            if !c.is_nan() {
+                diffs.push((c - g).abs());
+            }
+        }
+        diffs.sort_by(f32::total_cmp);
+        let p99 = diffs[diffs.len() * 99 / 100];
+        let max = diffs[diffs.len() - 1];
+        // f16 holds ±1000 exactly; hardware filtering weighs neighbours to 1/256 at worst
+        // (2000 HU apart: 8 HU).
+        assert!(
+            p99 <= 1.0 && max <= 10.0,
+            "GPU MIP off by {p99} HU (p99), {max} (max)"
+        );
+    }
+}
+
+/// `-o` must name a PNG or an EXR, refused before any work.
+#[test]
+fn output_names_its_format() {
+    for bad in ["render.jpg", "render", "render.exr.tmp"] {
+        let out = tmp(bad);
+        let o = run(&["render", "--quiet", "-o", out.to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(2), "{bad}");
+        let e = stderr(&o);
+        assert!(
+            e.contains(bad) && e.contains(".png") && e.contains(".exr"),
+            "{e}"
+        );
+        assert!(!out.exists());
+    }
+}
