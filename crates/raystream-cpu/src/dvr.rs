@@ -33,6 +33,9 @@ pub enum DvrMode {
     MinIp,
     Average,
     Iso,
+    /// Multiplanar reformation: the volume's HU on one plane, through `slice_at`, facing the
+    /// camera (with a parallel camera, an axial, coronal, sagittal or oblique slice).
+    Slice,
 }
 
 impl DvrMode {
@@ -43,19 +46,26 @@ impl DvrMode {
             DvrMode::MinIp => "minip",
             DvrMode::Average => "average",
             DvrMode::Iso => "iso",
+            DvrMode::Slice => "slice",
         }
     }
 
-    /// Whether the mode projects the HU values (mip, minip, average) rather than shading.
-    pub fn is_projection(self) -> bool {
-        matches!(self, DvrMode::Mip | DvrMode::MinIp | DvrMode::Average)
+    /// Whether a pixel is one HU value seen through a window (mip, minip, average, slice)
+    /// rather than shaded.
+    pub fn is_windowed(self) -> bool {
+        matches!(
+            self,
+            DvrMode::Mip | DvrMode::MinIp | DvrMode::Average | DvrMode::Slice
+        )
     }
 
-    /// The usual window (width, level) in HU of the intensity projections.
+    /// The usual window (width, level) in HU of the windowed modes: bone for MIP, lung for
+    /// MinIP, soft tissue for slices.
     pub fn default_window(self) -> (f32, f32) {
         match self {
             DvrMode::MinIp => (1500.0, -600.0),
             DvrMode::Average => (1000.0, -300.0),
+            DvrMode::Slice => (400.0, 40.0),
             _ => (2000.0, 500.0),
         }
     }
@@ -82,9 +92,11 @@ pub struct DvrOptions {
     pub crop: Option<[Vec3; 2]>,
     /// Keep only points p with n · p ≥ c (n, c in LPS mm): up to two clip planes.
     pub clip_planes: [Option<(Vec3, f32)>; 2],
-    /// mip, minip, average: every channel of a pixel holds the projection's value itself, in
-    /// HU (no window: the film for an EXR), and a ray that takes no sample holds NaN.
+    /// mip, minip, average, slice: every channel of a pixel holds the HU value itself (no
+    /// window: the film for an EXR), and a ray that takes no sample holds NaN.
     pub hu_values: bool,
+    /// slice: a point of the plane, LPS mm; `None`: the volume's centre.
+    pub slice_at: Option<Vec3>,
 }
 
 impl Default for DvrOptions {
@@ -102,6 +114,7 @@ impl Default for DvrOptions {
             crop: None,
             clip_planes: [None; 2],
             hu_values: false,
+            slice_at: None,
         }
     }
 }
@@ -110,6 +123,16 @@ impl DvrOptions {
     /// The step in mm: `step_mm`, or half the smallest voxel spacing (never below 1/1000 of it).
     pub fn step_for(&self, vol: &Volume) -> f32 {
         step_for(self.step_mm, vol)
+    }
+
+    /// The plane of a slice passes through this point (LPS mm): `slice_at`, or the centre of
+    /// the volume's voxel-centre box.
+    pub fn slice_point(&self, vol: &Volume) -> Vec3 {
+        self.slice_at.unwrap_or_else(|| {
+            let centre = vol.dims.map(|n| (n.max(1) - 1) as f64 / 2.0);
+            vol.index_to_world(raystream_math::DVec3::from_array(centre))
+                .as_vec3()
+        })
     }
 
     /// The step of the light grid's shadow rays ([`shadow_step_for`]).
@@ -674,6 +697,11 @@ pub fn render_volume(
     let win = opt.window.unwrap_or(opt.mode.default_window());
     let light = (opt.shadows && opt.mode == DvrMode::Dvr).then(|| key_light(cam));
     let grid = light.map(|l| LightGrid::new(&marcher, tf, l, opt.shadow_step_for(vol)));
+    // A slice's plane: through its point, facing the camera.
+    let slice = Slice {
+        at: opt.slice_point(vol),
+        normal: scene_to_lps(cam.fwd),
+    };
     let rays: Vec<Marched> = (0..opt.width * opt.height)
         .into_par_iter()
         .with_min_len(64)
@@ -689,7 +717,8 @@ pub fn render_volume(
                 d,
                 jitter: start_jitter(pixel),
             };
-            march(&marcher, tf, opt, win, step, light.zip(grid.as_ref()), ray)
+            let light = light.zip(grid.as_ref());
+            march(&marcher, tf, opt, (win, step, slice), light, ray)
         })
         .collect();
     let stats = DvrStats {
@@ -804,19 +833,25 @@ fn phong(tf: &TransferFunction, n: Vec3, d: Vec3, l: Vec3) -> (f32, f32) {
 /// Gradient magnitude (HU/mm) at which shading is fully on.
 const FULL_SHADING_GRADIENT: f32 = 100.0;
 
-/// One ray: colour, samples taken, samples skipped.
-#[allow(clippy::too_many_arguments)]
+/// The plane of a slice: a point and its normal (LPS).
+#[derive(Clone, Copy)]
+struct Slice {
+    at: Vec3,
+    normal: Vec3,
+}
+
+/// One ray: colour, samples taken, samples skipped; `win`, `step` and `slice` resolved from
+/// `opt` once a frame.
 fn march(
     m: &Marcher,
     tf: &TransferFunction,
     opt: &DvrOptions,
-    win: (f32, f32),
-    step: f32,
+    (win, step, slice): ((f32, f32), f32, Slice),
     light: Option<(Vec3, &LightGrid)>,
     Ray3 { o, d, jitter }: Ray3,
 ) -> Marched {
     let background = Marched {
-        color: if opt.hu_values && opt.mode.is_projection() {
+        color: if opt.hu_values && opt.mode.is_windowed() {
             Vec3::NAN
         } else {
             opt.background
@@ -891,6 +926,19 @@ fn march(
             Marched {
                 color: Vec3::splat(if opt.hu_values { v } else { window(v, win) }),
                 taken,
+                ..background
+            }
+        }
+        DvrMode::Slice => {
+            // One sample, where the ray crosses the plane (rays parallel to it see nothing).
+            let t = (slice.at - o).dot(slice.normal) / d.dot(slice.normal);
+            if !(t0..=t1).contains(&t) {
+                return background;
+            }
+            let v = m.sample(o_idx + d_idx * t);
+            Marched {
+                color: Vec3::splat(if opt.hu_values { v } else { window(v, win) }),
+                taken: 1,
                 ..background
             }
         }
@@ -1244,6 +1292,89 @@ mod tests {
             top > 1500.0 && bottom < -900.0,
             "MIP up to {top}, MinIP down to {bottom}"
         );
+    }
+
+    /// `--mode slice` samples the plane through `slice_at` facing the camera, at the pixels'
+    /// positions. The grid is oblique and anisotropic and holds linear fields, which trilinear
+    /// interpolation reproduces exactly: the field n·p (n the view direction) is the plane's
+    /// offset at every pixel, and right·p and up·p are the pixel's position across the image
+    /// (one pixel's size a column and a row). Six patient views and an oblique orbit.
+    #[test]
+    fn slices_sample_their_plane_at_the_pixels() {
+        use raystream_scene::PatientView as V;
+        let mut vol = volume([30, 26, 22], [0.8, 1.1, 1.6], |_, _, _| 0.0);
+        let turn = raystream_math::DMat3::from_rotation_z(20f64.to_radians())
+            * raystream_math::DMat3::from_rotation_x(10f64.to_radians());
+        vol.direction = std::array::from_fn(|r| std::array::from_fn(|c| turn.col(c)[r]));
+        vol.origin = [-12.0, 5.0, 30.0];
+        let (w, h) = (40u32, 30u32);
+        let views = [
+            V::Anterior,
+            V::Posterior,
+            V::Left,
+            V::Right,
+            V::Superior,
+            V::Inferior,
+        ]
+        .map(|v| v.view());
+        for (i, view) in views
+            .into_iter()
+            .chain([VOLUME_VIEW.orbit(30.0, 20.0)])
+            .enumerate()
+        {
+            let cam = volume_camera_from(&vol, w as f32 / h as f32, view, Projection::Parallel);
+            let [n, right, up] = [cam.fwd, cam.right, cam.up].map(scene_to_lps);
+            let at = DvrOptions::default().slice_point(&vol) + 2.0 * n - 1.5 * right;
+            for (axis, what) in [(n, "depth"), (right, "across"), (up, "up")] {
+                let mut field = vol.clone();
+                for k in 0..vol.dims[2] {
+                    for j in 0..vol.dims[1] {
+                        for i in 0..vol.dims[0] {
+                            let p = vol.index_to_world(raystream_math::DVec3::new(
+                                i as f64, j as f64, k as f64,
+                            ));
+                            field.data[i + vol.dims[0] * (j + vol.dims[1] * k)] =
+                                axis.dot(p.as_vec3());
+                        }
+                    }
+                }
+                let opt = DvrOptions {
+                    width: w,
+                    height: h,
+                    mode: DvrMode::Slice,
+                    hu_values: true,
+                    slice_at: Some(at),
+                    ..Default::default()
+                };
+                let (img, stats) = render_volume(&field, &grey(0.0), &opt, &cam);
+                let eye = scene_to_lps(cam.eye);
+                let mut seen = 0;
+                for (pixel, v) in img.pixels.iter().enumerate() {
+                    if v.x.is_nan() {
+                        continue;
+                    }
+                    seen += 1;
+                    let (x, y) = ((pixel as u32 % w) as f32, (pixel as u32 / w) as f32);
+                    let sx = ((x + 0.5) / w as f32 * 2.0 - 1.0) * (w as f32 / h as f32);
+                    let sy = 1.0 - (y + 0.5) / h as f32 * 2.0;
+                    let want = match what {
+                        "depth" => n.dot(at),
+                        "across" => right.dot(eye) + sx * cam.parallel,
+                        _ => up.dot(eye) + sy * cam.parallel,
+                    };
+                    assert!(
+                        (v.x - want).abs() < 2e-3 * (1.0 + want.abs()),
+                        "view {i}, {what}, pixel ({x}, {y}): {} HU, want {want}",
+                        v.x
+                    );
+                }
+                assert_eq!(stats.samples, seen, "one sample a pixel on the plane");
+                assert!(
+                    seen > (w * h / 4) as u64,
+                    "view {i}: {seen} pixels on the plane"
+                );
+            }
+        }
     }
 
     /// MIP of a volume with one hot voxel shows it where the camera projects its centre.

@@ -243,7 +243,7 @@ pub struct MediumParams {
     pub grid_points: u32,
 }
 
-/// `DvrParams` in dvr.wgsl (uniform), 304 bytes: camera in LPS, the world → index transform,
+/// `DvrParams` in dvr.wgsl (uniform), 320 bytes: camera in LPS, the world → index transform,
 /// the mode and its parameters, the shadow light, crop box and clip planes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -255,7 +255,7 @@ pub struct DvrParams {
     pub right: [f32; 3],
     pub height: u32,
     pub up: [f32; 3],
-    /// 0 dvr, 1 mip, 2 minip, 3 average, 4 iso (byte 60).
+    /// 0 dvr, 1 mip, 2 minip, 3 average, 4 iso, 5 slice (byte 60).
     pub mode: u32,
     /// Rows of the world → index linear map (bytes 64, 80, 96).
     pub to_index0: [f32; 3],
@@ -297,9 +297,12 @@ pub struct DvrParams {
     /// `Camera::parallel`: half the view's height (mm) of a parallel projection, 0 for a
     /// perspective one (byte 288).
     pub parallel: f32,
-    /// `DvrOptions::hu_values`: 1 for the projections' HU values unwindowed (byte 292).
+    /// `DvrOptions::hu_values`: 1 for the windowed modes' HU values unwindowed (byte 292).
     pub hu_values: u32,
     pub pad: [u32; 2],
+    /// A point of a slice's plane, LPS mm (byte 304); the plane faces `fwd`.
+    pub slice_at: [f32; 3],
+    pub pad3: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
@@ -312,5 +315,5 @@ const _: () = assert!(std::mem::size_of::<ShadeTri>() == 16);
 const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
-const _: () = assert!(std::mem::size_of::<DvrParams>() == 304);
+const _: () = assert!(std::mem::size_of::<DvrParams>() == 320);
 const _: () = assert!(std::mem::size_of::<MediumParams>() == 128);

@@ -1032,6 +1032,8 @@ fn dvr_wgsl_params_match_rust() {
         ("hu_values", offset_of!(DvrParams, hu_values)),
         ("pad1", offset_of!(DvrParams, pad)),
         ("pad2", offset_of!(DvrParams, pad) + 4),
+        ("slice_at", offset_of!(DvrParams, slice_at)),
+        ("pad3", offset_of!(DvrParams, pad3)),
     ];
     check_struct(&module, "DvrParams", size_of::<DvrParams>(), &names);
 }
@@ -1068,6 +1070,7 @@ fn gpu_volume_rendering_matches_cpu() {
         (DvrMode::MinIp, TfPreset::MipBone, plain, ""),
         (DvrMode::Average, TfPreset::MipBone, plain, ""),
         (DvrMode::Iso, TfPreset::CtBone, plain, ""),
+        (DvrMode::Slice, TfPreset::CtBone, plain, ""),
         (
             DvrMode::Dvr,
             TfPreset::CtBone,
@@ -1121,8 +1124,8 @@ fn gpu_volume_rendering_matches_cpu() {
     }
 }
 
-/// The projections' HU values (`hu_values`, for EXR) on the GPU against the CPU's on the
-/// abdomen CT, whole and cropped: the same rays take no sample (NaN); the values within 4 HU
+/// The windowed modes' HU values (`hu_values`, for EXR: the projections and a slice) on the
+/// GPU against the CPU's on the abdomen CT, whole and cropped: the same rays take no sample (NaN); the values within 4 HU
 /// for 99 % of pixels and 16 HU for all (the GPU samples a half-float texture, exact to 1 HU
 /// below 2048 HU and 2 HU above, with hardware filter weights).
 #[test]
@@ -1150,7 +1153,12 @@ fn gpu_projections_give_the_cpus_hounsfield_units() {
         ..plain
     };
     for (base, what) in [(plain, ""), (cropped, " cropped")] {
-        for mode in [DvrMode::Mip, DvrMode::MinIp, DvrMode::Average] {
+        for mode in [
+            DvrMode::Mip,
+            DvrMode::MinIp,
+            DvrMode::Average,
+            DvrMode::Slice,
+        ] {
             let opt = DvrOptions { mode, ..base };
             let name = format!("{}{what}", mode.name());
             let (cpu, _) = render_volume(&vol, &tf, &opt, &cam);
@@ -1167,7 +1175,11 @@ fn gpu_projections_give_the_cpus_hounsfield_units() {
                     diffs.push((c.x - g.x).abs());
                 }
             }
-            assert!(diffs.len() > 64 * 48 / 3, "{name}: {} sampled", diffs.len());
+            assert!(
+                diffs.len() > 64 * 48 / 10,
+                "{name}: {} sampled",
+                diffs.len()
+            );
             diffs.sort_by(f32::total_cmp);
             let (p99, max) = (diffs[diffs.len() * 99 / 100], diffs[diffs.len() - 1]);
             eprintln!("{name}: GPU vs CPU p99 {p99} HU, max {max} HU");

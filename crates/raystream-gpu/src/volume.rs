@@ -247,6 +247,7 @@ impl<'a> GpuVolumeRenderer<'a> {
                 DvrMode::MinIp => 2,
                 DvrMode::Average => 3,
                 DvrMode::Iso => 4,
+                DvrMode::Slice => 5,
             },
             to_index0: v3(r0),
             step: opt.step_for(self.vol),
@@ -273,8 +274,10 @@ impl<'a> GpuVolumeRenderer<'a> {
             light_dims: self.light_dims,
             shadow_step: opt.shadow_step_for(self.vol),
             parallel: cam.parallel,
-            hu_values: (opt.hu_values && opt.mode.is_projection()) as u32,
+            hu_values: (opt.hu_values && opt.mode.is_windowed()) as u32,
             pad: [0; 2],
+            slice_at: v3(opt.slice_point(self.vol)),
+            pad3: 0,
         };
         let param_buf = ctx
             .device

@@ -203,7 +203,9 @@ pub struct RenderArgs {
     pub accel: Accel,
     /// Volumes: direct volume rendering instead of the bone mesh: dvr (transfer function,
     /// --preset ct-bone… or --tf FILE), mip, minip, average (--window/--level), iso (the first
-    /// crossing of --iso HU).
+    /// crossing of --iso HU), slice (the HU on the plane through --slice-at facing the camera,
+    /// in parallel projection: axial with --view superior/inferior, coronal with anterior,
+    /// sagittal with left/right, oblique with --orbit).
     #[arg(long, value_enum)]
     pub mode: Option<ModeArg>,
     #[command(flatten)]
@@ -260,10 +262,10 @@ pub struct VolumeLook {
     /// Ray-marching step in mm (default: half the smallest voxel spacing).
     #[arg(long)]
     pub step: Option<f32>,
-    /// Window width in HU for mip/minip/average.
+    /// Window width in HU for mip/minip/average/slice.
     #[arg(long, requires = "level")]
     pub window: Option<f32>,
-    /// Window level (centre) in HU for mip/minip/average.
+    /// Window level (centre) in HU for mip/minip/average/slice.
     #[arg(long, requires = "window", allow_hyphen_values = true)]
     pub level: Option<f32>,
     /// Turn empty-space skipping off (to measure what it saves; the picture is the same).
@@ -279,6 +281,10 @@ pub struct VolumeLook {
     /// Keep only points p with n·p ≥ c, given as NX,NY,NZ,C (LPS, mm); at most twice.
     #[arg(long = "clip-plane", value_parser = parse_plane, allow_hyphen_values = true)]
     pub clip_planes: Vec<[f32; 4]>,
+    /// --mode slice: a point X,Y,Z of the slice's plane (LPS mm, as `info` reports positions;
+    /// default: the volume's centre).
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub slice_at: Option<[f32; 3]>,
 }
 
 fn parse_floats<const N: usize>(s: &str, what: &str) -> Result<[f32; N], String> {
@@ -312,6 +318,10 @@ pub fn parse_orbit(s: &str) -> Result<[f32; 2], String> {
         return Err(format!("'{s}': elevation {el} is past 90 degrees; {what}"));
     }
     Ok([az, el])
+}
+
+pub fn parse_point(s: &str) -> Result<[f32; 3], String> {
+    parse_floats::<3>(s, "expected three finite numbers X,Y,Z (LPS mm)")
 }
 
 pub fn parse_plane(s: &str) -> Result<[f32; 4], String> {
@@ -430,6 +440,7 @@ pub enum ModeArg {
     Minip,
     Average,
     Iso,
+    Slice,
 }
 
 impl From<ModeArg> for raystream_cpu::dvr::DvrMode {
@@ -441,6 +452,7 @@ impl From<ModeArg> for raystream_cpu::dvr::DvrMode {
             ModeArg::Minip => DvrMode::MinIp,
             ModeArg::Average => DvrMode::Average,
             ModeArg::Iso => DvrMode::Iso,
+            ModeArg::Slice => DvrMode::Slice,
         }
     }
 }

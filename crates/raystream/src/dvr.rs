@@ -51,6 +51,12 @@ pub fn options(
             mode.name()
         );
     }
+    if look.slice_at.is_some() && mode != DvrMode::Slice {
+        bail!(
+            "--slice-at places the plane of --mode slice (not --mode {})",
+            mode.name()
+        );
+    }
     if look.clip_planes.len() > 2 {
         bail!(
             "--clip-plane given {} times: at most two clip planes",
@@ -84,6 +90,7 @@ pub fn options(
             .crop
             .map(|c| [Vec3::new(c[0], c[1], c[2]), Vec3::new(c[3], c[4], c[5])]),
         clip_planes: [plane(0), plane(1)],
+        slice_at: look.slice_at.map(Vec3::from_array),
         ..Default::default()
     };
     Ok((tf, opt))
@@ -155,7 +162,7 @@ impl<'a> Renderer<'a> {
                 (film, None, stats.samples, Some(stats))
             }
         };
-        let picture = if opt.hu_values && opt.mode.is_projection() {
+        let picture = if opt.hu_values && opt.mode.is_windowed() {
             Picture::Values(film)
         } else {
             Picture::of_film(film, format)

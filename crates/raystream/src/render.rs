@@ -75,9 +75,10 @@ fn base_view(a: &RenderArgs, default: View, patient: bool) -> Result<View> {
     })
 }
 
-/// `--parallel`: the framing camera's projection.
+/// `--parallel` (and always for `--mode slice`, whose pixels then have one size): the framing
+/// camera's projection.
 fn projection(a: &RenderArgs) -> Projection {
-    if a.parallel {
+    if a.parallel || a.mode == Some(crate::cli::ModeArg::Slice) {
         Projection::Parallel
     } else {
         Projection::Perspective
@@ -160,7 +161,13 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     }
     pb.finish_and_clear();
     let frame = last.expect("at least one frame");
-    let what = if opt.hu_values && mode.is_projection() {
+    let what = if opt.hu_values && mode == DvrMode::Slice {
+        let [x, y, z] = opt.slice_point(&volume).to_array();
+        let [nx, ny, nz] = raystream_cpu::dvr::scene_to_lps(cam.fwd).to_array();
+        format!(
+            "Y: HU on the plane through ({x:.3}, {y:.3}, {z:.3}) mm LPS, normal ({nx:.6}, {ny:.6}, {nz:.6}) (no window); NaN: outside the volume"
+        )
+    } else if opt.hu_values && mode.is_windowed() {
         format!(
             "Y: the {} of the HU values along each ray (no window); NaN: no sample",
             mode.name()
@@ -186,7 +193,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             mode.name(),
             if opt.shadows { " --shadows" } else { "" },
             match format {
-                ImageFormat::Exr if mode.is_projection() => ", HU values, no window",
+                ImageFormat::Exr if mode.is_windowed() => ", HU values, no window",
                 ImageFormat::Exr => ", linear float RGB",
                 ImageFormat::Png => "",
             },
@@ -425,9 +432,10 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         || l.shadows
         || l.crop.is_some()
         || !l.clip_planes.is_empty()
+        || l.slice_at.is_some()
     {
         bail!(
-            "--tf, --step, --window/--level, --no-skip, --shadows, --crop and --clip-plane go with --mode (direct volume rendering)"
+            "--tf, --step, --window/--level, --no-skip, --shadows, --crop, --clip-plane and --slice-at go with --mode (direct volume rendering)"
         );
     }
     if let Some(aov) = a.aov {

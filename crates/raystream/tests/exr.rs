@@ -170,28 +170,145 @@ fn exr_aovs_hold_distances_normals_and_triangles() {
     }
 }
 
-/// A 40 mm cube of air (−1000 HU) holding a block of bone (1000 HU), 10 × 30 × 10 mm, as a
-/// MetaImage: voxels 1 mm, the block at x 10..20, y (posterior) 5..35, z 15..25.
-fn block_volume() -> std::path::PathBuf {
-    let n = 40usize;
-    let mut data = Vec::with_capacity(2 * n * n * n);
-    for z in 0..n {
-        for y in 0..n {
-            for x in 0..n {
-                let inside = (10..20).contains(&x) && (5..35).contains(&y) && (15..25).contains(&z);
-                let hu: i16 = if inside { 1000 } else { -1000 };
-                data.extend_from_slice(&hu.to_le_bytes());
+/// A MetaImage of `dims` voxels of `spacing` mm from `origin` (LPS, axis-aligned), each
+/// voxel's value `f` of its centre's position (LPS mm), as 32-bit floats.
+fn metaimage(
+    name: &str,
+    dims: [usize; 3],
+    spacing: [f32; 3],
+    origin: [f32; 3],
+    f: impl Fn([f32; 3]) -> f32,
+) -> std::path::PathBuf {
+    let [nx, ny, nz] = dims;
+    let mut bytes = format!(
+        "ObjectType = Image\nNDims = 3\nDimSize = {nx} {ny} {nz}\nElementSpacing = {} {} {}\nOffset = {} {} {}\nTransformMatrix = 1 0 0 0 1 0 0 0 1\nElementType = MET_FLOAT\nElementByteOrderMSB = False\nElementDataFile = LOCAL\n",
+        spacing[0], spacing[1], spacing[2], origin[0], origin[1], origin[2]
+    )
+    .into_bytes();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let p = [i, j, k].map(|n| n as f32);
+                let at = std::array::from_fn(|a| origin[a] + p[a] * spacing[a]);
+                bytes.extend_from_slice(&f(at).to_le_bytes());
             }
         }
     }
-    let header = format!(
-        "ObjectType = Image\nNDims = 3\nDimSize = {n} {n} {n}\nElementSpacing = 1 1 1\nOffset = 0 0 0\nTransformMatrix = 1 0 0 0 1 0 0 0 1\nElementType = MET_SHORT\nElementByteOrderMSB = False\nElementDataFile = LOCAL\n"
-    );
-    let path = tmp("exr-block.mha");
-    let mut bytes = header.into_bytes();
-    bytes.extend_from_slice(&data);
+    let path = tmp(name);
     std::fs::write(&path, bytes).unwrap();
     path
+}
+
+/// A 40 mm cube of air (−1000 HU) holding a block of bone (1000 HU), 10 × 30 × 10 mm: voxels
+/// 1 mm, the block at x 10..20, y (posterior) 5..35, z 15..25.
+fn block_volume() -> std::path::PathBuf {
+    metaimage("exr-block.mha", [40; 3], [1.0; 3], [0.0; 3], |[x, y, z]| {
+        let inside =
+            (10.0..20.0).contains(&x) && (5.0..35.0).contains(&y) && (15.0..25.0).contains(&z);
+        if inside { 1000.0 } else { -1000.0 }
+    })
+}
+
+/// The pixel size ("pixels S mm square") an EXR's comments give.
+fn pixel_mm(e: &ExrFile) -> f32 {
+    e.comments
+        .split("pixels ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no pixel size in '{}'", e.comments))
+}
+
+/// `--mode slice` shows the plane through `--slice-at` as radiology shows slices, with the
+/// values themselves in the EXR. A grid whose voxels hold one coordinate of their position
+/// (LPS mm: x to the patient's left, y posterior, z superior) gives, pixel by pixel:
+/// - axial (`--view inferior`): z is the plane's height everywhere, and x grows left to right
+///   by one pixel's size a column (the patient's right on the image's left);
+/// - coronal (`--view anterior`): y is the plane's depth, z falls down the image;
+/// - sagittal (`--view left`): x is the plane's offset, y grows left to right (anterior on
+///   the left).
+///
+/// The GPU's values equal the CPU's (within a half-float's rounding).
+#[test]
+fn slices_show_the_plane_as_radiology_does() {
+    let (dims, spacing, origin) = ([36, 30, 24], [0.9, 1.1, 1.5], [-20.0, -10.0, 40.0]);
+    let grids = ["x", "y", "z"].map(|axis| {
+        let a = ["x", "y", "z"].iter().position(|&n| n == axis).unwrap();
+        metaimage(
+            &format!("exr-slice-{axis}.mha"),
+            dims,
+            spacing,
+            origin,
+            move |p| p[a],
+        )
+    });
+    let at = [-4.0f32, 3.5, 55.25];
+    let at_arg = format!("{},{},{}", at[0], at[1], at[2]);
+    // (view, constant axis, axis along the rows (+1: grows to the right), axis down the
+    // columns (+1: grows downwards))
+    let cases = [
+        ("inferior", 2, (0, 1.0), (1, 1.0)),
+        ("anterior", 1, (0, 1.0), (2, -1.0)),
+        ("left", 0, (1, 1.0), (2, -1.0)),
+    ];
+    for dev in devices() {
+        for (view, constant, (across, sign_x), (down, sign_y)) in cases {
+            let slice = |grid: usize| {
+                let vol = grids[grid].to_str().unwrap();
+                let name = format!("exr-slice-{view}-{grid}-{dev}.exr");
+                let args = [vol, "--mode", "slice", "--view", view, "--size", "48x40"];
+                let args = [&args[..], &["--slice-at", &at_arg]].concat();
+                read_exr(&render(&name, dev, &args))
+            };
+            let flat = slice(constant);
+            let px = pixel_mm(&flat);
+            let values = floats(&flat, "Y");
+            let on = values.iter().filter(|v| !v.is_nan()).count();
+            assert!(on > 48 * 40 / 4, "{dev} {view}: {on} pixels on the plane");
+            for v in values.iter().filter(|v| !v.is_nan()) {
+                assert!(
+                    (v - at[constant]).abs() < 0.02,
+                    "{dev} {view}: {v} off the plane"
+                );
+            }
+            for (axis, sign, step) in [(across, sign_x, 1), (down, sign_y, 48)] {
+                let e = slice(axis);
+                let v = floats(&e, "Y");
+                let mut steps = 0;
+                for i in 0..v.len() - step {
+                    if step == 1 && i % 48 == 47 {
+                        continue;
+                    }
+                    let (a, b) = (v[i], v[i + step]);
+                    if a.is_nan() || b.is_nan() {
+                        continue;
+                    }
+                    steps += 1;
+                    assert!(
+                        (b - a - sign * px).abs() < 0.02,
+                        "{dev} {view}: axis {axis} steps {} per pixel, want {}",
+                        b - a,
+                        sign * px
+                    );
+                }
+                assert!(steps > 100, "{dev} {view}: {steps} steps");
+            }
+        }
+    }
+    let vol = grids[0].to_str().unwrap();
+    for (args, want) in [
+        (
+            vec![vol, "--mode", "mip", "--slice-at", "0,0,0"],
+            "--mode slice",
+        ),
+        (vec![vol, "--slice-at", "0,0,0"], "go with --mode"),
+        (vec![vol, "--mode", "slice", "--slice-at", "0,0"], "X,Y,Z"),
+    ] {
+        let out = tmp("refused-slice.png");
+        let o = run(&[&["render"], &args[..], &["-o", out.to_str().unwrap()]].concat());
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        assert!(stderr(&o).contains(want), "{args:?}: {}", stderr(&o));
+    }
 }
 
 /// The projections as EXR hold Hounsfield units, before the window: seen from the front
@@ -218,14 +335,7 @@ fn exr_projections_hold_hounsfield_units() {
             "{}",
             mip.comments
         );
-        // "pixels S mm square"
-        let pixel_mm: f32 = mip
-            .comments
-            .split("pixels ")
-            .nth(1)
-            .and_then(|s| s.split(' ').next())
-            .and_then(|s| s.parse().ok())
-            .expect("the pixel size");
+        let pixel_mm = pixel_mm(&mip);
         let y = floats(&mip, "Y").to_vec();
         let missed = y.iter().filter(|v| v.is_nan()).count();
         assert!(missed > 0 && missed < y.len() / 2, "{dev}: {missed} missed");

@@ -46,10 +46,14 @@ struct DvrParams {
     shadow_step: f32,
     // Half the view's height (mm) of a parallel projection; 0: perspective (Camera::parallel).
     parallel: f32,
-    // 1: mip, minip and average give the HU value itself, no window (DvrOptions::hu_values).
+    // 1: mip, minip, average and slice give the HU value itself, no window
+    // (DvrOptions::hu_values).
     hu_values: u32,
     pad1: u32,
     pad2: u32,
+    // A point of a slice's plane (LPS mm); the plane faces fwd.
+    slice_at: vec3<f32>,
+    pad3: u32,
 }
 
 // (HU, opacity per mm) and (HU, r, g, b) control points.
@@ -68,6 +72,7 @@ const MODE_MIP: u32 = 1u;
 const MODE_MINIP: u32 = 2u;
 const MODE_AVERAGE: u32 = 3u;
 const MODE_ISO: u32 = 4u;
+const MODE_SLICE: u32 = 5u;
 
 // The crop box and clip planes applied to [t.x, t.y] of the world ray o + t d, as the CPU's
 // clip_interval.
@@ -174,6 +179,18 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
     if dp.mode == MODE_DVR {
         let c = composite(o, d, o_idx, d_idx, t0, t1, jit);
         return vec4<f32>(c.color + c.transmit * dp.background, f32(c.taken));
+    }
+    if dp.mode == MODE_SLICE {
+        // One sample, where the ray crosses the plane (as the CPU's march).
+        let t = dot(dp.slice_at - o, dp.fwd) / dot(d, dp.fwd);
+        if !(t >= t0 && t <= t1) {
+            return vec4<f32>(dp.background, 0.0);
+        }
+        let v = sample_at(o_idx + d_idx * t);
+        if dp.hu_values != 0u {
+            return vec4<f32>(vec3<f32>(v), 1.0);
+        }
+        return vec4<f32>(vec3<f32>(window(v)), 1.0);
     }
     if dp.mode == MODE_ISO {
         var t_prev = 0.0;
