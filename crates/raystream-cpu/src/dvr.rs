@@ -95,8 +95,12 @@ pub struct DvrOptions {
     /// mip, minip, average, slice: every channel of a pixel holds the HU value itself (no
     /// window: the film for an EXR), and a ray that takes no sample holds NaN.
     pub hu_values: bool,
-    /// slice: a point of the plane, LPS mm; `None`: the volume's centre.
+    /// slice: a point of the plane, LPS mm; `None`: the volume's centre. Also the middle of
+    /// `slab`.
     pub slice_at: Option<Vec3>,
+    /// Keep only a slab this many mm thick about the plane through `slice_at` facing the
+    /// camera (a slab MIP, say), in place of `clip_planes` ([`Self::planes_for`]).
+    pub slab: Option<f32>,
 }
 
 impl Default for DvrOptions {
@@ -115,6 +119,7 @@ impl Default for DvrOptions {
             clip_planes: [None; 2],
             hu_values: false,
             slice_at: None,
+            slab: None,
         }
     }
 }
@@ -133,6 +138,25 @@ impl DvrOptions {
             vol.index_to_world(raystream_math::DVec3::from_array(centre))
                 .as_vec3()
         })
+    }
+
+    /// The clip planes (n, c: keep n · p ≥ c, LPS) that rays seen by `cam` are cut to:
+    /// `clip_planes`, or with `slab` the two faces of the slab about the plane through
+    /// [`Self::slice_point`] facing the camera (then `clip_planes` must be empty).
+    pub fn planes_for(&self, vol: &Volume, cam: &Camera) -> [Option<(Vec3, f32)>; 2] {
+        let Some(thickness) = self.slab else {
+            return self.clip_planes;
+        };
+        assert!(
+            self.clip_planes.iter().all(Option::is_none),
+            "a slab takes both clip planes"
+        );
+        let n = scene_to_lps(cam.fwd).normalize();
+        let c = n.dot(self.slice_point(vol));
+        [
+            Some((n, c - 0.5 * thickness)),
+            Some((-n, -(c + 0.5 * thickness))),
+        ]
     }
 
     /// The step of the light grid's shadow rays ([`shadow_step_for`]).
@@ -689,6 +713,11 @@ pub fn render_volume(
     opt: &DvrOptions,
     cam: &Camera,
 ) -> (Image, DvrStats) {
+    let opt = &DvrOptions {
+        clip_planes: opt.planes_for(vol, cam),
+        slab: None,
+        ..*opt
+    };
     let marcher = Marcher::new(
         vol,
         (opt.skip_empty && opt.mode == DvrMode::Dvr).then_some(tf),
@@ -1375,6 +1404,49 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// A slab is the two clip planes about its middle facing the camera: the same picture as
+    /// those planes given by hand, and the planes are the slab's faces.
+    #[test]
+    fn a_slab_is_two_planes_facing_the_camera() {
+        let vol = abdomen();
+        let cam = volume_camera_from(
+            &vol,
+            1.0,
+            VOLUME_VIEW.orbit(25.0, 10.0),
+            Projection::Parallel,
+        );
+        let at = Vec3::new(0.0, 60.0, 150.0);
+        let slab = DvrOptions {
+            width: 40,
+            height: 40,
+            mode: DvrMode::Mip,
+            slice_at: Some(at),
+            slab: Some(12.0),
+            ..Default::default()
+        };
+        let n = scene_to_lps(cam.fwd).normalize();
+        let planes = slab.planes_for(&vol, &cam);
+        assert_eq!(
+            planes,
+            [Some((n, n.dot(at) - 6.0)), Some((-n, -n.dot(at) - 6.0))]
+        );
+        let by_hand = DvrOptions {
+            slab: None,
+            clip_planes: planes,
+            ..slab
+        };
+        let tf = grey(0.0);
+        let (a, sa) = render_volume(&vol, &tf, &slab, &cam);
+        let (b, sb) = render_volume(&vol, &tf, &by_hand, &cam);
+        assert_eq!(a, b);
+        assert_eq!(sa.samples, sb.samples);
+        let whole = render_volume(&vol, &tf, &DvrOptions { slab: None, ..slab }, &cam);
+        assert!(
+            sa.samples * 5 < whole.1.samples,
+            "a 12 mm slab takes a fraction of the samples"
+        );
     }
 
     /// MIP of a volume with one hot voxel shows it where the camera projects its centre.

@@ -232,7 +232,12 @@ impl<'a> GpuVolumeRenderer<'a> {
         let (w, l) = opt.window.unwrap_or(opt.mode.default_window());
         let s = self.tf.shading;
         let v3 = |v: Vec3| v.to_array();
-        let planes: Vec<(Vec3, f32)> = opt.clip_planes.iter().flatten().copied().collect();
+        let planes: Vec<(Vec3, f32)> = opt
+            .planes_for(self.vol, cam)
+            .iter()
+            .flatten()
+            .copied()
+            .collect();
         let params = DvrParams {
             eye: v3(scene_to_lps(cam.eye)),
             tan_y: cam.tan_y,

@@ -282,9 +282,13 @@ pub struct VolumeLook {
     #[arg(long = "clip-plane", value_parser = parse_plane, allow_hyphen_values = true)]
     pub clip_planes: Vec<[f32; 4]>,
     /// --mode slice: a point X,Y,Z of the slice's plane (LPS mm, as `info` reports positions;
-    /// default: the volume's centre).
+    /// default: the volume's centre); with --slab, the slab's middle.
     #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     pub slice_at: Option<[f32; 3]>,
+    /// Keep only a slab MM thick about the plane through --slice-at facing the camera: a slab
+    /// MIP, MinIP, average or rendering (not --mode slice, which is the plane itself).
+    #[arg(long, value_name = "MM", conflicts_with = "clip_planes")]
+    pub slab: Option<f32>,
 }
 
 fn parse_floats<const N: usize>(s: &str, what: &str) -> Result<[f32; N], String> {

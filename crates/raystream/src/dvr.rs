@@ -51,11 +51,21 @@ pub fn options(
             mode.name()
         );
     }
-    if look.slice_at.is_some() && mode != DvrMode::Slice {
+    if look.slice_at.is_some() && mode != DvrMode::Slice && look.slab.is_none() {
         bail!(
-            "--slice-at places the plane of --mode slice (not --mode {})",
+            "--slice-at places the plane of --mode slice or the middle of a --slab (not --mode {} alone)",
             mode.name()
         );
+    }
+    if let Some(t) = look.slab {
+        if !(t.is_finite() && t > 0.0) {
+            bail!("--slab {t}: the slab must be a positive number of mm thick");
+        }
+        if mode == DvrMode::Slice {
+            bail!(
+                "--slab thickens a plane for the other modes (a slab MIP, say); --mode slice is the plane itself"
+            );
+        }
     }
     if look.clip_planes.len() > 2 {
         bail!(
@@ -91,6 +101,7 @@ pub fn options(
             .map(|c| [Vec3::new(c[0], c[1], c[2]), Vec3::new(c[3], c[4], c[5])]),
         clip_planes: [plane(0), plane(1)],
         slice_at: look.slice_at.map(Vec3::from_array),
+        slab: look.slab,
         ..Default::default()
     };
     Ok((tf, opt))

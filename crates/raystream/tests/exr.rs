@@ -420,6 +420,73 @@ fn exr_projections_hold_hounsfield_units() {
     }
 }
 
+/// `--slab MM`: a slab MIP or average keeps only the slab about `--slice-at` facing the
+/// camera. Seen from the front, a 4 mm slab through the bone block's middle gives 1000 HU over
+/// its face (MIP and average alike: the slab lies wholly in bone there); one in front of the
+/// block (y 0 to 4 mm, the block starting at 5) gives air, −1000 HU, everywhere, where the
+/// whole-depth MIP shows the block. The GPU gives the same values.
+#[test]
+fn slabs_keep_only_their_thickness() {
+    let vol = block_volume();
+    let vol = vol.to_str().unwrap();
+    for dev in devices() {
+        let project = |name: &str, extra: &[&str]| {
+            let args = [vol, "--size", "48x48", "--view", "anterior", "--parallel"];
+            let args = [&args[..], extra].concat();
+            let e = read_exr(&render(&format!("exr-slab-{name}-{dev}.exr"), dev, &args));
+            floats(&e, "Y").to_vec()
+        };
+        let slab = ["--slab", "4"];
+        let mid = ["--slice-at", "15,20,20"];
+        let front = ["--slice-at", "15,2,20"];
+        let whole = project("whole", &["--mode", "mip"]);
+        let bone = whole.iter().filter(|&&v| v >= 999.0).count();
+        assert!(bone > 20, "{dev}: {bone} pixels see the block");
+        for mode in ["mip", "average"] {
+            let m = ["--mode", mode];
+            let inside = project(&format!("{mode}-mid"), &[&m[..], &slab, &mid].concat());
+            for (a, w) in inside.iter().zip(&whole) {
+                assert_eq!(a.is_nan(), w.is_nan(), "{dev} {mode}: the same rays miss");
+                if *w >= 999.0 {
+                    assert!(
+                        (a - 1000.0).abs() < 0.5,
+                        "{dev} {mode}: {a} in the block's slab"
+                    );
+                }
+            }
+            let before = project(&format!("{mode}-front"), &[&m[..], &slab, &front].concat());
+            let sampled = before.iter().filter(|v| !v.is_nan()).count();
+            assert!(
+                sampled > 48 * 48 / 4,
+                "{dev} {mode}: {sampled} pixels sampled"
+            );
+            for v in before.iter().filter(|v| !v.is_nan()) {
+                assert!(
+                    (v + 1000.0).abs() < 0.5,
+                    "{dev} {mode}: {v} in front of the block"
+                );
+            }
+        }
+    }
+    for (args, want) in [
+        (
+            vec!["--mode", "mip", "--slab", "0"],
+            "positive number of mm",
+        ),
+        (vec!["--mode", "slice", "--slab", "4"], "the plane itself"),
+        (
+            vec!["--mode", "mip", "--slab", "4", "--clip-plane", "0,1,0,3"],
+            "cannot be used with",
+        ),
+        (vec!["--slab", "4"], "go with --mode"),
+    ] {
+        let out = tmp("refused-slab.png");
+        let o = run(&[&["render", vol], &args[..], &["-o", out.to_str().unwrap()]].concat());
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        assert!(stderr(&o).contains(want), "{args:?}: {}", stderr(&o));
+    }
+}
+
 /// `-o` must name a PNG or an EXR, refused before any work.
 #[test]
 fn output_names_its_format() {
