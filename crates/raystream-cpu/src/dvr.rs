@@ -65,7 +65,7 @@ impl DvrMode {
         match self {
             DvrMode::MinIp => (1500.0, -600.0),
             DvrMode::Average => (1000.0, -300.0),
-            DvrMode::Slice => (400.0, 40.0),
+            DvrMode::Slice => (400.0, 50.0),
             _ => (2000.0, 500.0),
         }
     }

@@ -262,9 +262,11 @@ pub struct VolumeLook {
     /// Ray-marching step in mm (default: half the smallest voxel spacing).
     #[arg(long)]
     pub step: Option<f32>,
-    /// Window width in HU for mip/minip/average/slice.
-    #[arg(long, requires = "level")]
-    pub window: Option<f32>,
+    /// Window for mip/minip/average/slice: a width in HU (with --level), or a named one:
+    /// brain (80/40), lung (1500/−600), mediastinum (350/50), abdomen (400/50), liver
+    /// (150/30), bone (1800/400).
+    #[arg(long, value_parser = parse_window)]
+    pub window: Option<WindowArg>,
     /// Window level (centre) in HU for mip/minip/average/slice.
     #[arg(long, requires = "window", allow_hyphen_values = true)]
     pub level: Option<f32>,
@@ -322,6 +324,36 @@ pub fn parse_orbit(s: &str) -> Result<[f32; 2], String> {
         return Err(format!("'{s}': elevation {el} is past 90 degrees; {what}"));
     }
     Ok([az, el])
+}
+
+/// `--window`: a width in HU, or a named window (width and level).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum WindowArg {
+    Width(f32),
+    Named(&'static str, f32, f32),
+}
+
+/// Radiology's usual windows: name, width and level in HU (as Radiopaedia lists them).
+pub const WINDOWS: [(&str, f32, f32); 6] = [
+    ("brain", 80.0, 40.0),
+    ("lung", 1500.0, -600.0),
+    ("mediastinum", 350.0, 50.0),
+    ("abdomen", 400.0, 50.0),
+    ("liver", 150.0, 30.0),
+    ("bone", 1800.0, 400.0),
+];
+
+pub fn parse_window(s: &str) -> Result<WindowArg, String> {
+    if let Some(&(name, w, l)) = WINDOWS.iter().find(|(n, ..)| n.eq_ignore_ascii_case(s)) {
+        return Ok(WindowArg::Named(name, w, l));
+    }
+    let names: Vec<&str> = WINDOWS.iter().map(|w| w.0).collect();
+    s.trim().parse::<f32>().map(WindowArg::Width).map_err(|_| {
+        format!(
+            "'{s}': a width in HU (with --level) or one of {}",
+            names.join(", ")
+        )
+    })
 }
 
 pub fn parse_point(s: &str) -> Result<[f32; 3], String> {

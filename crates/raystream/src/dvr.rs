@@ -12,7 +12,7 @@ use raystream_math::Vec3;
 use raystream_scene::Camera;
 use raystream_volume::{TfPreset, TransferFunction};
 
-use crate::cli::{Threshold, VolumeLook};
+use crate::cli::{Threshold, VolumeLook, WindowArg};
 use crate::common::{Backend, Picture, ms};
 
 /// The transfer function and options `--mode MODE` asks for, checked.
@@ -40,11 +40,23 @@ pub fn options(
     {
         bail!("--step {s}: the step must be a positive number of mm");
     }
-    if let Some(w) = look.window
-        && !(w.is_finite() && w > 0.0)
-    {
-        bail!("--window {w}: the window must be a positive number of HU");
-    }
+    let window = match (look.window, look.level) {
+        (None, _) => None,
+        (Some(WindowArg::Named(name, ..)), Some(_)) => {
+            bail!("--window {name} sets the level too; give --window W --level L for another level")
+        }
+        (Some(WindowArg::Named(_, w, l)), None) => Some((w, l)),
+        (Some(WindowArg::Width(w)), None) => bail!(
+            "--window {w} needs --level L (or name a window: brain, lung, mediastinum, abdomen, liver, bone)"
+        ),
+        (Some(WindowArg::Width(w)), Some(_)) if !(w.is_finite() && w > 0.0) => {
+            bail!("--window {w}: the window must be a positive number of HU")
+        }
+        (Some(WindowArg::Width(_)), Some(l)) if !l.is_finite() => {
+            bail!("--level {l}: the level must be a finite number of HU")
+        }
+        (Some(WindowArg::Width(w)), Some(l)) => Some((w, l)),
+    };
     if look.shadows && mode != DvrMode::Dvr {
         bail!(
             "--shadows goes with --mode dvr (--mode {} has no lighting to shadow)",
@@ -83,7 +95,7 @@ pub fn options(
         height,
         mode,
         step_mm: look.step,
-        window: look.window.zip(look.level),
+        window,
         iso_hu: if mode == DvrMode::Iso {
             threshold
                 .iso

@@ -1207,3 +1207,51 @@ fn the_picture_does_not_depend_on_the_scale() {
         }
     }
 }
+
+/// `--window NAME`: radiology's named windows are their width and level, byte for byte; a
+/// width needs its level, a name takes none, an unknown name lists the known ones.
+#[test]
+fn named_windows_are_their_numbers() {
+    let render = |name: &str, window: &[&str]| -> std::result::Result<Vec<u8>, String> {
+        let out = tmp(&format!("window-{name}.png"));
+        let args = [
+            "render", "--mode", "slice", "--size", "32x24", "--device", "cpu",
+        ];
+        let args = [&args[..], window, &["-o", out.to_str().unwrap()]].concat();
+        let o = run(&args);
+        match o.status.code() {
+            Some(0) => Ok(image::open(&out).unwrap().to_rgb8().into_raw()),
+            Some(2) => Err(stderr(&o)),
+            c => panic!("{window:?}: exit {c:?}: {}", stderr(&o)),
+        }
+    };
+    for (name, w, l) in [
+        ("lung", "1500", "-600"),
+        ("brain", "80", "40"),
+        ("BONE", "1800", "400"),
+    ] {
+        let named = render(name, &["--window", name]).unwrap();
+        let numbers = render(&format!("{name}-n"), &["--window", w, "--level", l]).unwrap();
+        assert_eq!(named, numbers, "{name}");
+    }
+    let lung = render("lung", &["--window", "lung"]).unwrap();
+    let soft = render("default", &[]).unwrap();
+    assert_ne!(lung, soft, "the slice's default window is not the lung's");
+    assert_eq!(
+        soft,
+        render("abdomen", &["--window", "abdomen"]).unwrap(),
+        "the slice's default is the abdomen window"
+    );
+    for (args, want) in [
+        (vec!["--window", "400"], "needs --level"),
+        (
+            vec!["--window", "lung", "--level", "0"],
+            "sets the level too",
+        ),
+        (vec!["--window", "lungs"], "brain, lung, mediastinum"),
+        (vec!["--window=-5", "--level", "0"], "positive number"),
+    ] {
+        let e = render("refused", &args).unwrap_err();
+        assert!(e.contains(want), "{args:?}: {e}");
+    }
+}
