@@ -434,79 +434,84 @@ pub fn shade_hits(
     hits: &[HitWorkItem],
     spawn: bool,
 ) -> (Vec<Contribution>, Vec<ShadowWorkItem>, Vec<RayWorkItem>) {
-    let mat = |h: &HitWorkItem| &scene.materials[scene.material_of[h.hit.prim as usize] as usize];
-    let local: Vec<Contribution> = hits
+    // One pass: each hit's surface is found once, and its outputs go to the three queues of
+    // its run of hits; the runs are joined in order, so the queues come out in hit order
+    // whatever the split.
+    let runs = hits
         .par_iter()
         .with_min_len(256)
-        .map(|h| {
-            let s = surface(scene, h);
-            let m = mat(h);
-            let (k, ..) = coefficients(m, &s);
-            (
-                h.item.pixel,
-                h.item.weight * k * m.ambient * scene.ambient_light,
-            )
+        .fold(Shaded::default, |mut out, h| {
+            shade_hit(scene, h, spawn, &mut out);
+            out
         })
-        .collect();
-    let shadows: Vec<ShadowWorkItem> = hits
-        .par_iter()
-        .with_min_len(256)
-        .flat_map_iter(|h| {
-            let s = surface(scene, h);
-            let m = mat(h);
-            let (k, ..) = coefficients(m, &s);
-            let origin = s.p + s.ng * s.offset;
-            let w = h.item.weight * k;
-            scene.lights.iter().filter_map(move |light| {
-                let to_light = light.position - origin;
-                let l = to_light.normalize();
-                let cos = s.ns.dot(l);
-                if cos <= 0.0 || s.ng.dot(to_light) <= 0.0 || k <= 0.0 {
-                    return None;
-                }
-                let spec = reflect(-l, s.ns).dot(-s.dir).max(0.0).powf(m.shininess);
-                let radiance = w * (m.diffuse * cos + m.specular * spec) * light.color;
-                Some(ShadowWorkItem {
-                    ray: Ray::new(origin, to_light, 0.0, 1.0 - 1e-4),
-                    pixel: h.item.pixel,
-                    radiance,
-                })
-            })
-        })
-        .collect();
-    let next: Vec<RayWorkItem> = if !spawn {
-        Vec::new()
-    } else {
-        hits.par_iter()
-            .with_min_len(256)
-            .flat_map_iter(|h| {
-                let s = surface(scene, h);
-                let (_, r, t, refr) = coefficients(mat(h), &s);
-                let w = h.item.weight;
-                let mut out = [None, None];
-                if r * w.max_element() > 1e-3 {
-                    let mut d = reflect(s.dir, s.ns);
-                    if d.dot(s.ng) <= 0.0 {
-                        d = reflect(s.dir, s.ng);
-                    }
-                    out[0] = Some(RayWorkItem {
-                        ray: Ray::new(s.p + s.ng * s.offset, d, 0.0, f32::INFINITY),
-                        pixel: h.item.pixel,
-                        weight: w * r,
-                    });
-                }
-                if let Some(d) = refr.filter(|_| t * w.max_element() > 1e-3) {
-                    out[1] = Some(RayWorkItem {
-                        ray: Ray::new(s.p - s.ng * s.offset, d, 0.0, f32::INFINITY),
-                        pixel: h.item.pixel,
-                        weight: w * t,
-                    });
-                }
-                out.into_iter().flatten()
-            })
-            .collect()
+        .collect_vec_list();
+    let mut all = Shaded {
+        local: Vec::with_capacity(hits.len()),
+        ..Default::default()
     };
-    (local, shadows, next)
+    for run in runs.into_iter().flatten() {
+        all.local.extend(run.local);
+        all.shadows.extend(run.shadows);
+        all.next.extend(run.next);
+    }
+    (all.local, all.shadows, all.next)
+}
+
+/// What [`shade_hits`] makes of a run of hits: their local terms, shadow rays and next rays.
+#[derive(Default)]
+struct Shaded {
+    local: Vec<Contribution>,
+    shadows: Vec<ShadowWorkItem>,
+    next: Vec<RayWorkItem>,
+}
+
+/// One hit: its ambient term, a shadow ray toward each light that can reach it, and (with
+/// `spawn`) its reflection and refraction rays.
+fn shade_hit(scene: &Scene, h: &HitWorkItem, spawn: bool, out: &mut Shaded) {
+    let s = surface(scene, h);
+    let m = &scene.materials[scene.material_of[h.hit.prim as usize] as usize];
+    let (k, r, t, refr) = coefficients(m, &s);
+    let pixel = h.item.pixel;
+    out.local
+        .push((pixel, h.item.weight * k * m.ambient * scene.ambient_light));
+    let origin = s.p + s.ng * s.offset;
+    let w = h.item.weight * k;
+    for light in &scene.lights {
+        let to_light = light.position - origin;
+        let l = to_light.normalize();
+        let cos = s.ns.dot(l);
+        if cos <= 0.0 || s.ng.dot(to_light) <= 0.0 || k <= 0.0 {
+            continue;
+        }
+        let spec = reflect(-l, s.ns).dot(-s.dir).max(0.0).powf(m.shininess);
+        out.shadows.push(ShadowWorkItem {
+            ray: Ray::new(origin, to_light, 0.0, 1.0 - 1e-4),
+            pixel,
+            radiance: w * (m.diffuse * cos + m.specular * spec) * light.color,
+        });
+    }
+    if !spawn {
+        return;
+    }
+    let w = h.item.weight;
+    if r * w.max_element() > 1e-3 {
+        let mut d = reflect(s.dir, s.ns);
+        if d.dot(s.ng) <= 0.0 {
+            d = reflect(s.dir, s.ng);
+        }
+        out.next.push(RayWorkItem {
+            ray: Ray::new(s.p + s.ng * s.offset, d, 0.0, f32::INFINITY),
+            pixel,
+            weight: w * r,
+        });
+    }
+    if let Some(d) = refr.filter(|_| t * w.max_element() > 1e-3) {
+        out.next.push(RayWorkItem {
+            ray: Ray::new(s.p - s.ng * s.offset, d, 0.0, f32::INFINITY),
+            pixel,
+            weight: w * t,
+        });
+    }
 }
 
 /// Stage 5: shadow rays; those that reach their light keep their contribution, times the
