@@ -120,6 +120,13 @@ for mode in dvr mip iso; do
 done
 $bin render "$ct" --mode dvr --no-skip --device gpu --size "$dvr_size" --repeat 20 -o "$tmp/noskip.png" 2>&1 | tee -a "$out/render.log"
 $bin render "$ct" --mode dvr --shadows --device gpu --size "$dvr_size" --repeat 20 -o "$out/dvr-shadows-gpu.png" 2>&1 | tee -a "$out/render.log"
+# EXR: the default's float film read back instead of 8-bit sRGB (frames/s beside the PNG's);
+# a parallel MIP's and a slice's HU on both devices, for scripts/exr-diff.py at home (the
+# GPU's hardware filter weights against the CPU's f32 trilinear).
+$bin render --device gpu --size "$size" --max-depth 4 --repeat 20 -o "$out/default-gpu.exr" 2>&1 | tee -a "$out/render.log"
+for mode in mip slice; do for dev in gpu cpu; do
+  $bin render "$ct" --mode $mode --parallel --device $dev --size "$dvr_size" --repeat 3 -o "$out/$mode-hu-$dev.exr" 2>&1 | tee -a "$out/render.log"
+done; done
 }
 # Meshes and the CT in one scene (examples/spine_rods.toml, from the checkout), GPU and CPU.
 has "$parts" scene && {
@@ -140,5 +147,6 @@ $bin "${v[@]}" --device cpu --frames 2 | tag '{"volume": "ct-bone"}'
 $bin bench "$ct" --mode mip --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 36 | tag '{"volume": "mip"}'
 $bin render "$ct" --mode dvr --shadows --preset ct-bones --device gpu --size "$dvr_size" -o "$out/dvr-bones-shadows-gpu.png" 2>&1 | tee -a "$out/render.log"
 }
-(cd "$out" && tar cf images.tar ./*.png && rm -f ./*.png) 2>/dev/null
+(cd "$out" && shopt -s nullglob && f=(./*.png ./*.exr) && [ ${#f[@]} -gt 0 ] \
+  && tar cf images.tar "${f[@]}" && rm -f "${f[@]}")
 echo done

@@ -347,13 +347,17 @@ pub fn parse_window(s: &str) -> Result<WindowArg, String> {
     if let Some(&(name, w, l)) = WINDOWS.iter().find(|(n, ..)| n.eq_ignore_ascii_case(s)) {
         return Ok(WindowArg::Named(name, w, l));
     }
-    let names: Vec<&str> = WINDOWS.iter().map(|w| w.0).collect();
     s.trim().parse::<f32>().map(WindowArg::Width).map_err(|_| {
         format!(
             "'{s}': a width in HU (with --level) or one of {}",
-            names.join(", ")
+            window_names()
         )
     })
+}
+
+/// The named windows, comma-separated.
+pub fn window_names() -> String {
+    WINDOWS.map(|w| w.0).join(", ")
 }
 
 pub fn parse_point(s: &str) -> Result<[f32; 3], String> {

@@ -105,7 +105,8 @@ pub fn gpu_tracer<'a>(
 }
 
 /// A frame as it is written: 8-bit sRGB (3 bytes a pixel) for a PNG, or for an EXR the
-/// linear float film (R, G, B) or, for the intensity projections, their HU values (Y).
+/// linear float film (R, G, B) or, for the windowed modes (projections, slices), their HU
+/// values (Y).
 pub enum Picture {
     Srgb8 {
         rgb: Vec<u8>,

@@ -47,7 +47,8 @@ pub fn options(
         }
         (Some(WindowArg::Named(_, w, l)), None) => Some((w, l)),
         (Some(WindowArg::Width(w)), None) => bail!(
-            "--window {w} needs --level L (or name a window: brain, lung, mediastinum, abdomen, liver, bone)"
+            "--window {w} needs --level L (or name a window: {})",
+            crate::cli::window_names()
         ),
         (Some(WindowArg::Width(w)), Some(_)) if !(w.is_finite() && w > 0.0) => {
             bail!("--window {w}: the window must be a positive number of HU")

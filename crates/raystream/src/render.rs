@@ -98,6 +98,17 @@ fn pixel_size(cam: &Camera, height: u32, units: &str) -> String {
     }
 }
 
+/// `--slab`, in words for the summary and an EXR's comments: its thickness and middle.
+fn slab_words(opt: &DvrOptions, volume: &raystream_io::Volume) -> String {
+    match opt.slab {
+        Some(t) => {
+            let [x, y, z] = opt.slice_point(volume).to_array();
+            format!("; a slab {t} mm thick about ({x:.3}, {y:.3}, {z:.3}) mm LPS")
+        }
+        None => String::new(),
+    }
+}
+
 /// The unit of the scene's coordinates: mm for a CT volume's bones.
 fn units(bones: &Option<Bones>) -> &'static str {
     match bones {
@@ -165,7 +176,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         let [x, y, z] = opt.slice_point(&volume).to_array();
         let [nx, ny, nz] = raystream_cpu::dvr::scene_to_lps(cam.fwd).to_array();
         format!(
-            "Y: HU on the plane through ({x:.3}, {y:.3}, {z:.3}) mm LPS, normal ({nx:.6}, {ny:.6}, {nz:.6}) (no window); NaN: outside the volume"
+            "Y: HU on the plane through ({x:.3}, {y:.3}, {z:.3}) mm LPS, normal ({nx:.6}, {ny:.6}, {nz:.6}) (no window); NaN: outside the volume or its crop"
         )
     } else if opt.hu_values && mode.is_windowed() {
         format!(
@@ -175,9 +186,10 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     } else {
         format!("linear RGB, --mode {}", mode.name())
     };
+    let slab = slab_words(&opt, &volume);
     frame.picture.save(
         &a.output,
-        &format!("{what}{}", pixel_size(&cam, opt.height, "mm")),
+        &format!("{what}{slab}{}", pixel_size(&cam, opt.height, "mm")),
     )?;
     if !a.quiet {
         let gpu = frame.stats.is_none();
@@ -186,7 +198,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             .unwrap_or_else(|| dvr::estimate_stats(&volume, &tf, &opt, &cam));
         let median = median_of(&mut frame_ms);
         eprintln!(
-            "raystream: wrote {} ({}x{}, --mode {}{}{}, step {:.3} mm) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples, {} skipped as empty ({:.0} %{}){}, {:.1} M samples/s",
+            "raystream: wrote {} ({}x{}, --mode {}{}{}{slab}, step {:.3} mm) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples, {} skipped as empty ({:.0} %{}){}, {:.1} M samples/s",
             a.output.display(),
             opt.width,
             opt.height,
