@@ -114,6 +114,12 @@ pub enum Picture {
         height: u32,
     },
     Film(Image),
+    /// Premultiplied colour and opacity (R, G, B, A): what a volume sends toward the eye and
+    /// how much of what lies behind it hides.
+    Rgba {
+        film: Image,
+        alpha: Vec<f32>,
+    },
     /// One value a pixel (the film's first channel), written as channel Y.
     Values(Image),
 }
@@ -139,6 +145,23 @@ impl Picture {
                 raystream_cpu::save_srgb8_png(path, rgb, *width, *height)
             }
             Picture::Film(film) => film.save_exr(path, what),
+            Picture::Rgba { film, alpha } => {
+                let channel = |c: usize| {
+                    ExrSamples::F32(film.pixels.iter().map(|p| p.to_array()[c]).collect())
+                };
+                raystream_cpu::save_exr(
+                    path,
+                    film.width,
+                    film.height,
+                    vec![
+                        ("R", channel(0)),
+                        ("G", channel(1)),
+                        ("B", channel(2)),
+                        ("A", ExrSamples::F32(alpha.clone())),
+                    ],
+                    what,
+                )
+            }
             Picture::Values(film) => raystream_cpu::save_exr(
                 path,
                 film.width,
@@ -157,7 +180,9 @@ impl Picture {
     pub fn into_srgb8(self) -> Vec<u8> {
         match self {
             Picture::Srgb8 { rgb, .. } => rgb,
-            Picture::Film(film) | Picture::Values(film) => film.to_srgb8(),
+            Picture::Film(film) | Picture::Values(film) | Picture::Rgba { film, .. } => {
+                film.to_srgb8()
+            }
         }
     }
 }

@@ -4,8 +4,8 @@
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use raystream_cpu::ImageFormat;
 use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, render_volume};
+use raystream_cpu::{Image, ImageFormat};
 use raystream_gpu::GpuVolumeRenderer;
 use raystream_io::Volume;
 use raystream_math::Vec3;
@@ -132,7 +132,8 @@ pub enum Renderer<'a> {
 /// One frame, as it is written, and what it cost.
 pub struct Frame {
     /// 8-bit sRGB for a PNG (converted on the GPU there: a fifth of the float pixels' bytes
-    /// to read back); for an EXR the film, or the projections' HU values.
+    /// to read back); for an EXR the windowed modes' HU values, or dvr's and iso's
+    /// premultiplied RGBA.
     pub picture: Picture,
     /// Wall time, milliseconds: the whole render on the CPU; submission to the pixels on the
     /// host on the GPU.
@@ -157,36 +158,53 @@ impl<'a> Renderer<'a> {
         })
     }
 
-    /// One frame with `cam`, as `format` writes it: for an EXR the film, or with
-    /// `opt.hu_values` (the projections) their HU values.
+    /// One frame with `cam`, as `format` writes it: for an EXR, the windowed modes' film (their
+    /// HU values with `opt.hu_values`), or dvr's and iso's premultiplied RGBA (two frames, over
+    /// black and over white).
     pub fn frame(&self, opt: &DvrOptions, cam: &Camera, format: ImageFormat) -> Result<Frame> {
         let t = Instant::now();
-        let (film, kernel_ms, samples, stats) = match (self, format) {
-            (Renderer::Gpu(g), ImageFormat::Png) => {
-                let (rgb, times) = g.render_srgb8(opt, cam)?;
-                let picture = Picture::Srgb8 {
-                    rgb,
-                    width: opt.width,
-                    height: opt.height,
-                };
-                return Ok(Frame {
-                    picture,
-                    frame_ms: ms(t.elapsed()),
-                    kernel_ms: times.kernel_gpu_ms,
-                    samples: times.samples,
-                    stats: None,
-                });
-            }
-            (Renderer::Gpu(g), ImageFormat::Exr) => {
-                let (film, times) = g.render(opt, cam)?;
-                (film, times.kernel_gpu_ms, times.samples, None)
-            }
-            (Renderer::Cpu { volume, tf }, _) => {
-                let (film, stats) = render_volume(volume, tf, opt, cam);
-                (film, None, stats.samples, Some(stats))
-            }
-        };
-        let picture = if opt.hu_values && opt.mode.is_windowed() {
+        if let (Renderer::Gpu(g), ImageFormat::Png) = (self, format) {
+            let (rgb, times) = g.render_srgb8(opt, cam)?;
+            let picture = Picture::Srgb8 {
+                rgb,
+                width: opt.width,
+                height: opt.height,
+            };
+            return Ok(Frame {
+                picture,
+                frame_ms: ms(t.elapsed()),
+                kernel_ms: times.kernel_gpu_ms,
+                samples: times.samples,
+                stats: None,
+            });
+        }
+        if format == ImageFormat::Exr && !opt.mode.is_windowed() {
+            // dvr and iso to an EXR: premultiplied RGBA, for compositing. A pixel is C + T·bg
+            // (C what the volume sends, T what it lets through), so a frame over black gives
+            // C and a second over white gives T as the difference: the rays, their samples and
+            // where they stop do not depend on the background.
+            let on = |background| DvrOptions { background, ..*opt };
+            let (over_black, kernel_ms, samples, stats) = self.film(&on(Vec3::ZERO), cam)?;
+            let (over_white, k2, ..) = self.film(&on(Vec3::ONE), cam)?;
+            let alpha = over_white
+                .pixels
+                .iter()
+                .zip(&over_black.pixels)
+                .map(|(w, b)| (1.0 - (*w - *b).element_sum() / 3.0).clamp(0.0, 1.0))
+                .collect();
+            return Ok(Frame {
+                picture: Picture::Rgba {
+                    film: over_black,
+                    alpha,
+                },
+                frame_ms: ms(t.elapsed()),
+                kernel_ms: kernel_ms.zip(k2).map(|(a, b)| a + b),
+                samples,
+                stats,
+            });
+        }
+        let (film, kernel_ms, samples, stats) = self.film(opt, cam)?;
+        let picture = if opt.mode.is_windowed() && opt.hu_values {
             Picture::Values(film)
         } else {
             Picture::of_film(film, format)
@@ -197,6 +215,25 @@ impl<'a> Renderer<'a> {
             kernel_ms,
             samples,
             stats,
+        })
+    }
+
+    /// One frame's linear film, the kernel's time (GPU), the samples taken and the CPU's full
+    /// statistics.
+    fn film(
+        &self,
+        opt: &DvrOptions,
+        cam: &Camera,
+    ) -> Result<(Image, Option<f64>, u64, Option<DvrStats>)> {
+        Ok(match self {
+            Renderer::Gpu(g) => {
+                let (film, times) = g.render(opt, cam)?;
+                (film, times.kernel_gpu_ms, times.samples, None)
+            }
+            Renderer::Cpu { volume, tf } => {
+                let (film, stats) = render_volume(volume, tf, opt, cam);
+                (film, None, stats.samples, Some(stats))
+            }
         })
     }
 }

@@ -184,7 +184,10 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             mode.name()
         )
     } else {
-        format!("linear RGB, --mode {}", mode.name())
+        format!(
+            "premultiplied linear RGBA, --mode {}: the volume's light and opacity, no background",
+            mode.name()
+        )
     };
     let slab = slab_words(&opt, &volume);
     frame.picture.save(
@@ -206,7 +209,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             if opt.shadows { " --shadows" } else { "" },
             match format {
                 ImageFormat::Exr if mode.is_windowed() => ", HU values, no window",
-                ImageFormat::Exr => ", linear float RGB",
+                ImageFormat::Exr => ", premultiplied float RGBA",
                 ImageFormat::Png => "",
             },
             stats.step_mm,

@@ -487,6 +487,72 @@ fn slabs_keep_only_their_thickness() {
     }
 }
 
+/// `--mode dvr|iso` to an EXR: premultiplied RGBA. Composited over the default background it
+/// is the PNG (within 1/255); rays that miss are transparent black; iso's surface is opaque
+/// (A is 0 or 1), the rendering's bone nearly so and its soft parts in between. The GPU's
+/// RGBA is the CPU's.
+#[test]
+fn volume_renderings_are_premultiplied_rgba() {
+    let background = raystream_cpu::dvr::DvrOptions::default().background;
+    for mode in ["dvr", "iso"] {
+        let mut rgba = Vec::new();
+        for dev in devices() {
+            let args = ["--mode", mode, "--preset", "ct-bones", "--size", "64x48"];
+            let png = render(&format!("exr-rgba-{mode}-{dev}.png"), dev, &args);
+            let exr = read_exr(&render(&format!("exr-rgba-{mode}-{dev}.exr"), dev, &args));
+            assert_eq!(exr.channels.len(), 4, "R, G, B, A");
+            assert!(exr.comments.contains("premultiplied"), "{}", exr.comments);
+            let (f, a) = (film(&exr), floats(&exr, "A").to_vec());
+            assert!(
+                a.iter().all(|a| (0.0..=1.0).contains(a)),
+                "{dev} {mode}: A in 0..1"
+            );
+            let clear = a.iter().filter(|&&a| a == 0.0).count();
+            let opaque = a.iter().filter(|&&a| a > 0.98).count();
+            assert!(
+                clear > 64 && opaque > 64,
+                "{dev} {mode}: {clear} clear, {opaque} opaque"
+            );
+            for (p, a) in f.pixels.iter().zip(&a) {
+                if *a == 0.0 {
+                    assert_eq!(*p, Vec3::ZERO, "{dev} {mode}: a clear pixel is black");
+                }
+                if mode == "iso" {
+                    assert!(*a < 1e-5 || *a > 1.0 - 1e-5, "{dev} iso: A {a}");
+                }
+            }
+            if mode == "dvr" {
+                let between = a.iter().filter(|&&a| a > 0.05 && a < 0.95).count();
+                assert!(between > 16, "{dev} dvr: {between} translucent pixels");
+            }
+            let over = Image {
+                pixels: f
+                    .pixels
+                    .iter()
+                    .zip(&a)
+                    .map(|(p, a)| *p + (1.0 - a) * background)
+                    .collect(),
+                ..f.clone()
+            };
+            let shown = image::open(&png).unwrap().to_rgb8().into_raw();
+            let (mean, worst) = raystream_cpu::srgb8_diff(&over.to_srgb8(), &shown);
+            assert!(
+                mean < 0.1 && worst.iter().all(|&d| d <= 1),
+                "{dev} {mode}: over the background it is the PNG (mean {mean})"
+            );
+            rgba.push((f, a));
+        }
+        if let [(fc, ac), (fg, ag)] = &rgba[..] {
+            let (mean, _) = fc.srgb8_diff(fg);
+            let da = ac.iter().zip(ag).map(|(x, y)| (x - y).abs()).sum::<f32>() / ac.len() as f32;
+            assert!(
+                mean < 1.0 && da < 0.01,
+                "{mode}: GPU vs CPU {mean}/255, A {da}"
+            );
+        }
+    }
+}
+
 /// `-o` must name a PNG or an EXR, refused before any work.
 #[test]
 fn output_names_its_format() {
