@@ -702,8 +702,16 @@ pub fn start_jitter(pixel: u32) -> f32 {
     crate::jitter(pixel, 0, 7)
 }
 
+/// Where `v` falls in the window (width, level): 0 at its bottom, 1 at its top.
 fn window(v: f32, (w, l): (f32, f32)) -> f32 {
     ((v - (l - 0.5 * w)) / w.max(1e-6)).clamp(0.0, 1.0)
+}
+
+/// The film value of a windowed pixel: a window maps HU linearly to the grey levels shown (as
+/// a DICOM viewer's VOI LUT does), so the film holds the linear light whose 8-bit sRGB byte is
+/// 255 × (v − (l − w/2)) / w, clamped: fat in a soft-tissue window is dark grey, not mid-grey.
+pub fn windowed(v: f32, win: (f32, f32)) -> f32 {
+    crate::srgb_to_linear(window(v, win))
 }
 
 /// Renders `vol` (HU) with `tf` (dvr mode; `None` elsewhere is fine).
@@ -953,7 +961,7 @@ fn march(
                 best
             };
             Marched {
-                color: Vec3::splat(if opt.hu_values { v } else { window(v, win) }),
+                color: Vec3::splat(if opt.hu_values { v } else { windowed(v, win) }),
                 taken,
                 ..background
             }
@@ -966,7 +974,7 @@ fn march(
             }
             let v = m.sample(o_idx + d_idx * t);
             Marched {
-                color: Vec3::splat(if opt.hu_values { v } else { window(v, win) }),
+                color: Vec3::splat(if opt.hu_values { v } else { windowed(v, win) }),
                 taken: 1,
                 ..background
             }
@@ -1292,7 +1300,7 @@ mod tests {
                     assert!(v.is_nan() && *s == opt.background, "{}", mode.name());
                 } else {
                     assert!(v.x == v.y && v.y == v.z, "one value a pixel");
-                    assert_eq!(Vec3::splat(window(v.x, win)), *s, "{}", mode.name());
+                    assert_eq!(Vec3::splat(windowed(v.x, win)), *s, "{}", mode.name());
                 }
             }
             hu.push(film.pixels.iter().map(|p| p.x).collect::<Vec<f32>>());

@@ -24,6 +24,17 @@ fn srgb(x: f32) -> u8 {
     (s * 255.0 + 0.5) as u8
 }
 
+/// 8-bit sRGB's curve undone: the linear value that [`Image::to_srgb8`] encodes as `s`
+/// (0 to 1) of full scale.
+pub fn srgb_to_linear(s: f32) -> f32 {
+    let s = s.clamp(0.0, 1.0);
+    if s <= 0.040_45 {
+        s / 12.92
+    } else {
+        ((s + 0.055) / 1.055).powf(2.4)
+    }
+}
+
 impl Image {
     /// 8-bit sRGB, 3 bytes per pixel.
     pub fn to_srgb8(&self) -> Vec<u8> {

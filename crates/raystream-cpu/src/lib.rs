@@ -32,7 +32,8 @@ pub use aov::{
     prim_colour,
 };
 pub use image_out::{
-    ExrFile, ExrSamples, Image, ImageFormat, load_exr, save_exr, save_srgb8_png, srgb8_diff,
+    ExrFile, ExrSamples, Image, ImageFormat, load_exr, save_exr, save_srgb8_png, srgb_to_linear,
+    srgb8_diff,
 };
 pub use medium::Medium;
 

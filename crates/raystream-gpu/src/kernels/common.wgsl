@@ -11,6 +11,15 @@ fn jitter(p: u32, s: u32, k: u32) -> f32 {
     return f32(x >> 8u) / 16777216.0;
 }
 
+// 8-bit sRGB's curve undone, as raystream-cpu's srgb_to_linear.
+fn srgb_to_linear(s: f32) -> f32 {
+    let c = clamp(s, 0.0, 1.0);
+    if c <= 0.04045 {
+        return c / 12.92;
+    }
+    return pow((c + 0.055) / 1.055, 2.4);
+}
+
 // Linear [0, 1] → 8-bit sRGB, as raystream-cpu's Image::to_srgb8.
 fn srgb8(x: f32) -> u32 {
     let c = clamp(x, 0.0, 1.0);

@@ -110,8 +110,10 @@ fn clip_world(o: vec3<f32>, d: vec3<f32>, t_in: vec2<f32>) -> vec2<f32> {
     return t;
 }
 
-fn window(v: f32) -> f32 {
-    return clamp((v - (dp.window_level - 0.5 * dp.window_width)) / max(dp.window_width, 1e-6), 0.0, 1.0);
+// A windowed pixel's film value, as raystream_cpu::dvr::windowed: linear light whose sRGB
+// byte is 255 times where v falls in the window.
+fn windowed(v: f32) -> f32 {
+    return srgb_to_linear(clamp((v - (dp.window_level - 0.5 * dp.window_width)) / max(dp.window_width, 1e-6), 0.0, 1.0));
 }
 
 // Index position of light grid point j along an axis of n voxels and g points.
@@ -190,7 +192,7 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
         if dp.hu_values != 0u {
             return vec4<f32>(vec3<f32>(v), 1.0);
         }
-        return vec4<f32>(vec3<f32>(window(v)), 1.0);
+        return vec4<f32>(vec3<f32>(windowed(v)), 1.0);
     }
     if dp.mode == MODE_ISO {
         var t_prev = 0.0;
@@ -259,7 +261,7 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
     if dp.hu_values != 0u {
         return vec4<f32>(vec3<f32>(best), f32(taken));
     }
-    return vec4<f32>(vec3<f32>(window(best)), f32(taken));
+    return vec4<f32>(vec3<f32>(windowed(best)), f32(taken));
 }
 
 @compute @workgroup_size(8, 8)
