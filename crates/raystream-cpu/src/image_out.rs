@@ -58,15 +58,14 @@ impl Image {
     /// clamping: highlights above 1 keep their values). `what` says what the pixels are; it
     /// goes into the file's comments.
     pub fn save_exr(&self, path: &Path, what: &str) -> Result<(), String> {
+        save_exr(path, self.width, self.height, self.exr_channels(), what)
+    }
+
+    /// The film's R, G and B as EXR channels (for [`save_exr`], with more channels beside).
+    pub fn exr_channels(&self) -> Vec<(&'static str, ExrSamples)> {
         let channel =
             |c: usize| ExrSamples::F32(self.pixels.iter().map(|p| p.to_array()[c]).collect());
-        save_exr(
-            path,
-            self.width,
-            self.height,
-            vec![("R", channel(0)), ("G", channel(1)), ("B", channel(2))],
-            what,
-        )
+        vec![("R", channel(0)), ("G", channel(1)), ("B", channel(2))]
     }
 
     /// Writes PNG or EXR as `format` says ([`Self::save_png`], [`Self::save_exr`]).

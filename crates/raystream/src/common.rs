@@ -146,21 +146,9 @@ impl Picture {
             }
             Picture::Film(film) => film.save_exr(path, what),
             Picture::Rgba { film, alpha } => {
-                let channel = |c: usize| {
-                    ExrSamples::F32(film.pixels.iter().map(|p| p.to_array()[c]).collect())
-                };
-                raystream_cpu::save_exr(
-                    path,
-                    film.width,
-                    film.height,
-                    vec![
-                        ("R", channel(0)),
-                        ("G", channel(1)),
-                        ("B", channel(2)),
-                        ("A", ExrSamples::F32(alpha.clone())),
-                    ],
-                    what,
-                )
+                let mut channels = film.exr_channels();
+                channels.push(("A", ExrSamples::F32(alpha.clone())));
+                raystream_cpu::save_exr(path, film.width, film.height, channels, what)
             }
             Picture::Values(film) => raystream_cpu::save_exr(
                 path,
