@@ -10,7 +10,7 @@
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
 # PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene) picks the parts; TRACERS (default "gpu spin
-# ifif split sorted costs cpu embree"; spin = the fused kernel with RAYSTREAM_GPU_WAIT=spin; sorted = the diffuse and random
+# ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; spin = the fused kernel with RAYSTREAM_GPU_WAIT=spin; sorted = the diffuse and random
 # sets reordered by sort-rays.py; costs = the fused kernel on trees built with --sah-traversal-cost 2, 4, 8) the tracers of
 # the trace part. The fused and if-if trace lines and bench's lines carry the
 # kernels' SIMD efficiency and residency peak (gpu_stats); every GPU trace line but split's also carries stream_ms (the
@@ -48,7 +48,7 @@ for l in sys.stdin:
 
 echo "{\"machine\": \"$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"date\": \"$(date -u +%FT%TZ)\"}" | tee -a "$res"
 parts=${PARTS:-trace render volume}
-tracers=${TRACERS:-gpu spin ifif split sorted costs cpu embree}
+tracers=${TRACERS:-gpu spin ifif wg split sorted costs cpu embree}
 has() { [[ " $1 " == *" $2 "* ]]; }
 has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
   mesh=$d/meshes/$m.ply
@@ -67,6 +67,12 @@ has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; 
     has "$tracers" costs && for kt in 2 4 8; do
       $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-kt.hits" "${any[@]}" --device gpu --sah-traversal-cost $kt --repeat 10 --json \
         --quiet | tag "$t, \"tracer\": \"raystream-gpu-fused\", \"sah_traversal_cost\": $kt}"
+    done
+    # Threads per workgroup of the query kernel (64 is the fused line's): 32, 128 and 256.
+    has "$tracers" wg && for wg in 32 128 256; do
+      RAYSTREAM_GPU_WORKGROUP=$wg $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-wg.hits" "${any[@]}" --device gpu --repeat 10 \
+        --json --quiet | tag "$t, \"tracer\": \"raystream-gpu-fused\"}"
+      cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-wg.hits" || echo "$m $kind: WORKGROUP $wg HITS DIFFER from fused"
     done
     # Incoherent sets reordered (direction octant, then origin Morton code): SIMD efficiency and speed.
     has "$tracers" sorted && [[ $kind == diffuse || $kind == random ]] && $py "$d/sort-rays.py" "$rays" "$tmp/sorted.rays" && {

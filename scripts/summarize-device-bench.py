@@ -67,6 +67,8 @@ def index(lines):
             variant += f" ({o['order']})"
         elif tracer == "raystream-gpu-fused" and o.get("sah_traversal_cost", 1) not in (1, 1.0):
             variant += f" (K={o['sah_traversal_cost']:g})"
+        elif tracer == "raystream-gpu-fused" and o.get("query_workgroup", 64) != 64:
+            variant += f" ({o['query_workgroup']} threads a workgroup)"
         by[(o["mesh"], o["kind"], variant)] = o
     return by
 

@@ -40,16 +40,26 @@ const STATS_WGSL: &str = include_str!("kernels/stats.wgsl");
 /// The constants every kernel shares, from their Rust definitions, then the kd-tree code
 /// (without its work counters).
 fn kdtree_core_wgsl() -> String {
+    kdtree_core_wgsl_sized(WORKGROUP_SIZE)
+}
+
+/// [`kdtree_core_wgsl`] with `workgroup` threads per workgroup.
+fn kdtree_core_wgsl_sized(workgroup: u32) -> String {
     format!(
-        "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\n{KDTREE_WGSL}"
+        "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {workgroup}u;\n\n{KDTREE_WGSL}"
     )
 }
 
 /// The kd-tree code for every kernel but the statistics query: work counters that count nothing.
 fn kdtree_wgsl() -> String {
+    kdtree_wgsl_sized(WORKGROUP_SIZE)
+}
+
+/// [`kdtree_wgsl`] with `workgroup` threads per workgroup.
+fn kdtree_wgsl_sized(workgroup: u32) -> String {
     format!(
         "{}\nfn stat(k: u32) {{}}\nfn stat_listed(n: u32) {{}}\n",
-        kdtree_core_wgsl()
+        kdtree_core_wgsl_sized(workgroup)
     )
 }
 
@@ -63,7 +73,13 @@ pub fn stats_wgsl() -> String {
 
 /// The WGSL source of the ray-query kernels (`intersect_closest`, `intersect_any`).
 pub fn queries_wgsl() -> String {
-    format!("{}\n{QUERIES_WGSL}", kdtree_wgsl())
+    queries_wgsl_sized(WORKGROUP_SIZE)
+}
+
+/// [`queries_wgsl`] with `workgroup` threads per workgroup (see
+/// [`GpuContext::set_query_workgroup`]).
+pub fn queries_wgsl_sized(workgroup: u32) -> String {
+    format!("{}\n{QUERIES_WGSL}", kdtree_wgsl_sized(workgroup))
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -100,6 +116,8 @@ pub struct GpuContext {
     /// Waits poll the fence in a loop for up to [`SPIN_WAIT`] before blocking (see
     /// [`GpuContext::wait`]).
     spin_wait: bool,
+    /// Threads per workgroup of the ray-query kernels (fused, if-if, persistent).
+    query_workgroup: u32,
 }
 
 /// How long a spinning wait polls before it blocks.
@@ -203,6 +221,7 @@ impl GpuContext {
             limits,
             lost,
             spin_wait: false,
+            query_workgroup: WORKGROUP_SIZE,
         })
     }
 
@@ -210,6 +229,29 @@ impl GpuContext {
     /// CLI turns it on with `RAYSTREAM_GPU_WAIT=spin`; every wait for a submission obeys it.
     pub fn set_spin_wait(&mut self, on: bool) {
         self.spin_wait = on;
+    }
+
+    /// Sets the threads per workgroup of the ray-query kernels (fused, if-if, persistent) of
+    /// tracers made after it: a power of two from 32 to 1024 that the adapter allows. The CLI
+    /// sets it from `RAYSTREAM_GPU_WORKGROUP` (an experiment: BENCHMARKS.md); the default is
+    /// [`WORKGROUP_SIZE`]. The statistics query and the renderer keep [`WORKGROUP_SIZE`].
+    pub fn set_query_workgroup(&mut self, threads: u32) -> Result<(), GpuError> {
+        let most = self.limits.max_compute_invocations_per_workgroup.min(1024);
+        if !threads.is_power_of_two() || !(32..=most).contains(&threads) {
+            return Err(GpuError::Wgpu(
+                format!(
+                    "a query workgroup of {threads} threads: it must be a power of two from 32 to {most}"
+                ),
+                self.info.name.clone(),
+            ));
+        }
+        self.query_workgroup = threads;
+        Ok(())
+    }
+
+    /// Threads per workgroup of the ray-query kernels.
+    pub fn query_workgroup(&self) -> u32 {
+        self.query_workgroup
     }
 
     /// Whether the adapter is a software rasterizer (lavapipe, WARP, SwiftShader).
@@ -349,7 +391,12 @@ impl GpuContext {
     /// Workgroups (x, y, 1) for `n` items of one thread each, as the kernels' dispatch-argument
     /// writers compute them.
     fn dims(&self, n: u32) -> [u32; 3] {
-        let groups = n.div_ceil(WORKGROUP_SIZE);
+        self.dims_sized(n, WORKGROUP_SIZE)
+    }
+
+    /// [`GpuContext::dims`] for workgroups of `workgroup` threads.
+    fn dims_sized(&self, n: u32, workgroup: u32) -> [u32; 3] {
+        let groups = n.div_ceil(workgroup);
         let gx = groups.min(self.limits.max_compute_workgroups_per_dimension.max(1));
         let gy = if gx == 0 { 0 } else { groups.div_ceil(gx) };
         [gx, gy, 1]
@@ -599,7 +646,7 @@ impl<'a> GpuTracer<'a> {
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("queries.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(queries_wgsl().into()),
+                source: wgpu::ShaderSource::Wgsl(queries_wgsl_sized(ctx.query_workgroup).into()),
             });
         let closest = ctx.auto_pipeline(&module, "intersect_closest");
         let any = ctx.auto_pipeline(&module, "intersect_any");
@@ -787,10 +834,16 @@ impl<'a> GpuTracer<'a> {
         if kernels == Kernels::Persistent {
             // The persistent kernels' ray counter, from 0 (cleared between streamed queries).
             let next_ray = ctx.storage("next ray", &[0u8; 4], wgpu::BufferUsages::COPY_DST)?;
-            let dims = [n.div_ceil(WORKGROUP_SIZE).min(PERSISTENT_GROUPS), 1, 1];
+            let dims = [
+                n.div_ceil(ctx.query_workgroup)
+                    .min(PERSISTENT_GROUPS * WORKGROUP_SIZE / ctx.query_workgroup),
+                1,
+                1,
+            ];
             self.bind_query(rays, pipeline, label, dims, Some(next_ray))
         } else {
-            self.bind_query(rays, pipeline, label, ctx.dims(n), None)
+            let dims = ctx.dims_sized(n, ctx.query_workgroup);
+            self.bind_query(rays, pipeline, label, dims, None)
         }
     }
 

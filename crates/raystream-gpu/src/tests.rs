@@ -664,6 +664,45 @@ fn spinning_waits_give_the_same_results() {
     }
 }
 
+/// The ray-query kernels give the same records at every workgroup size
+/// (`RAYSTREAM_GPU_WORKGROUP`), on a ray count that leaves the last workgroup part-filled;
+/// sizes that are not a power of two from 32 to the adapter's limit are refused.
+#[test]
+fn query_workgroup_sizes_give_the_same_hits() {
+    let Some(mut ctx) = gpu() else { return };
+    let mesh = shared_mesh("stanford_bunny.ply");
+    let tree = KdTree::build(&mesh, Builder::Sah);
+    let rays = test_rays(&mesh, 5000);
+    let kernels = [Kernels::Fused, Kernels::IfIf, Kernels::Persistent];
+    let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+    let want: Vec<Vec<GpuHit>> = [false, true]
+        .iter()
+        .flat_map(|&any| kernels.map(|k| tracer.trace_with(&rays, any, k).unwrap().0))
+        .collect();
+    drop(tracer);
+    compare(&tree, &rays, &want[0], false, "default workgroup");
+    for bad in [0, 16, 48, 2048] {
+        assert!(
+            ctx.set_query_workgroup(bad).is_err(),
+            "{bad} threads accepted"
+        );
+    }
+    assert_eq!(ctx.query_workgroup(), crate::WORKGROUP_SIZE);
+    for threads in [32, 128, 256] {
+        ctx.set_query_workgroup(threads).unwrap();
+        let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+        let got = [false, true]
+            .iter()
+            .flat_map(|&any| kernels.map(|k| tracer.trace_with(&rays, any, k).unwrap().0));
+        for (i, hits) in got.enumerate() {
+            assert_eq!(
+                hits, want[i],
+                "{threads} threads, query {i}: the hits differ"
+            );
+        }
+    }
+}
+
 /// Queries queued back to back in one submission each trace every ray: the last one's hits
 /// (its hit buffer cleared just before it) equal a lone query's, for every kernel layout the
 /// host does not drive step by step; persistent threads restart their ray counter each time.

@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use raystream_accel::KdTree;
 use raystream_cpu::{ExrSamples, Image, ImageFormat};
-use raystream_gpu::{GpuContext, GpuTracer};
+use raystream_gpu::{GpuContext, GpuError, GpuTracer};
 use raystream_io::TriMesh;
 
 use crate::cli::Device;
@@ -41,10 +41,21 @@ impl Backend {
 pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Backend> {
     // `RAYSTREAM_GPU_WAIT=spin`: waits for the GPU poll before they block (an experiment for
     // sandboxed machines, where a blocking wait costs ≈ 0.5 ms; see BENCHMARKS.md).
+    // `RAYSTREAM_GPU_WORKGROUP=N`: the ray-query kernels' threads per workgroup (an experiment
+    // for `trace`; see BENCHMARKS.md).
     let open = |adapter| {
-        GpuContext::new(adapter).map(|mut ctx| {
+        GpuContext::new(adapter).and_then(|mut ctx| {
             ctx.set_spin_wait(std::env::var("RAYSTREAM_GPU_WAIT").is_ok_and(|v| v == "spin"));
-            ctx
+            if let Ok(v) = std::env::var("RAYSTREAM_GPU_WORKGROUP") {
+                let threads = v.trim().parse().map_err(|_| {
+                    GpuError::Wgpu(
+                        format!("RAYSTREAM_GPU_WORKGROUP={v:?} is not a number of threads"),
+                        ctx.info.name.clone(),
+                    )
+                })?;
+                ctx.set_query_workgroup(threads)?;
+            }
+            Ok(ctx)
         })
     };
     match d {

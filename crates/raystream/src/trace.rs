@@ -277,6 +277,10 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             "sah_traversal_cost": tree.stats.traversal_cost,
             "traversal": traversal.name(),
             "kernels": matches!(backend, Backend::Gpu(_)).then(|| kernels_name(a.kernels.into())),
+            "query_workgroup": match &backend {
+                Backend::Gpu(ctx) => Some(ctx.query_workgroup()),
+                Backend::Cpu => None,
+            },
             "build_ms": round3(t.build_ms),
             "upload_ms": round3(t.upload_ms),
             "trace_ms": round3(t.trace_ms),
