@@ -8,7 +8,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary), tiny volumes (NIfT
         MetaImage, attached and detached, via SimpleITK) and real DICOM slices from
         ../shared, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (volumes also `--mode` mip, minip, average, slice or
-        dvr, some with --slab, to an EXR). Each run must exit 0 or 2, never panic, and an error
+        dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
         must name the file.
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
         absurd ones (0, -1, ±inf, nan, 1e30 ...), rendered on the CPU and the GPU: either both
@@ -146,9 +146,11 @@ def fuzz_files(work, n, device):
             # A volume also goes straight through a windowed mode, its HU into an EXR.
             mode = random.choice(["mip", "minip", "average", "slice", "dvr"])
             extra = ["--slab", "3"] if mode != "slice" and random.random() < 0.5 else []
+            # Some as a turntable of EXR frames into a folder.
+            out = (["--turntable", "2", "--format", "exr", "-o", os.path.join(d, "frames")]
+                   if random.random() < 0.25 else ["-o", os.path.join(d, "o.exr")])
             why = run(["render", p, "--mode", mode, "--size", "8x8", "-q", "--device", device,
-                       "--view", random.choice(["inferior", "left", "anterior"])] + extra
-                      + ["-o", os.path.join(d, "o.exr")], s)
+                       "--view", random.choice(["inferior", "left", "anterior"])] + extra + out, s)
         if why:
             bad += 1
             print(f"FAIL {p}: {why}")

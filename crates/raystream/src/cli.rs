@@ -77,6 +77,15 @@ pub enum KernelsArg {
     Ifif,
 }
 
+/// `render --turntable --format`: the frames' file format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum FrameFormat {
+    /// 8-bit sRGB, as shown.
+    Png,
+    /// 32-bit float OpenEXR: what `-o OUT.exr` writes for the mode (HU, or premultiplied RGBA).
+    Exr,
+}
+
 /// `render --aov`: what the image of each pixel's closest hit shows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum AovArg {
@@ -238,9 +247,14 @@ pub struct RenderArgs {
     pub parallel: bool,
     /// With --mode: a turntable of N frames, one every 360/N degrees about the image's up axis
     /// (the patient's superior axis unless --view superior/inferior), starting from --view and
-    /// --orbit, written as OUTPUT/frame_000.png … (-o names the folder).
+    /// --orbit, written as OUTPUT/frame_000.png … (-o names the folder; --format exr for EXRs).
     #[arg(long, requires = "mode", value_parser = clap::value_parser!(u32).range(1..=3600))]
     pub turntable: Option<u32>,
+    /// With --turntable: the frames' format; `exr` writes frame_000.exr … holding what
+    /// `-o OUT.exr` holds for the mode (HU before the window for mip, minip, average and
+    /// slice; premultiplied float RGBA for dvr and iso).
+    #[arg(long, requires = "turntable", value_enum, default_value_t = FrameFormat::Png)]
+    pub format: FrameFormat,
     /// Render the frame this many times and report the median frame time and frames per
     /// second (scene loading, kd-tree build and upload apart).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]

@@ -16,7 +16,7 @@ use raystream_scene::{Camera, PatientView, Projection, Scene, VOLUME_VIEW, View}
 
 use raystream_cpu::dvr::{DvrMode, DvrOptions, volume_camera_from};
 
-use crate::cli::RenderArgs;
+use crate::cli::{FrameFormat, RenderArgs};
 use crate::common::{
     Backend, Picture, gpu_tracer, image_format, load_mesh, median as median_of, ms, open_device,
     spinner,
@@ -134,10 +134,11 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             mode.name()
         ),
     };
-    // A turntable's frames are PNGs in a folder.
-    let format = match a.turntable {
-        Some(_) => ImageFormat::Png,
-        None => image_format(&a.output)?,
+    // A turntable's frames are files in a folder, in --format.
+    let format = match (a.turntable, a.format) {
+        (Some(_), FrameFormat::Png) => ImageFormat::Png,
+        (Some(_), FrameFormat::Exr) => ImageFormat::Exr,
+        (None, _) => image_format(&a.output)?,
     };
     let (volume, load_ms) = read_volume(path, a.series.as_deref(), a.quiet, embedded)?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
@@ -147,7 +148,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
     let view = base_view(a, VOLUME_VIEW, true)?;
     if let Some(n) = a.turntable {
-        return turntable(a, &renderer, &volume, &opt, view, n);
+        return turntable(a, &renderer, &volume, &opt, view, n, format);
     }
     let [az, el] = orbit_angles(a);
     let cam = volume_camera_from(&volume, aspect, view.orbit(az, el), projection(a));
@@ -172,28 +173,10 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     }
     pb.finish_and_clear();
     let frame = last.expect("at least one frame");
-    let what = if opt.hu_values && mode == DvrMode::Slice {
-        let [x, y, z] = opt.slice_point(&volume).to_array();
-        let [nx, ny, nz] = raystream_cpu::dvr::scene_to_lps(cam.fwd).to_array();
-        format!(
-            "Y: HU on the plane through ({x:.3}, {y:.3}, {z:.3}) mm LPS, normal ({nx:.6}, {ny:.6}, {nz:.6}) (no window); NaN: outside the volume or its crop"
-        )
-    } else if opt.hu_values && mode.is_windowed() {
-        format!(
-            "Y: the {} of the HU values along each ray (no window); NaN: no sample",
-            mode.name()
-        )
-    } else {
-        format!(
-            "premultiplied linear RGBA, --mode {}: the volume's light and opacity, no background",
-            mode.name()
-        )
-    };
     let slab = slab_words(&opt, &volume);
-    frame.picture.save(
-        &a.output,
-        &format!("{what}{slab}{}", pixel_size(&cam, opt.height, "mm")),
-    )?;
+    frame
+        .picture
+        .save(&a.output, &exr_comment(&opt, &volume, &cam))?;
     if !a.quiet {
         let gpu = frame.stats.is_none();
         let stats = frame
@@ -247,6 +230,34 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     Ok(())
 }
 
+/// What an EXR of a direct rendering holds, for its comments: the channels, the slab and, in a
+/// parallel projection, the pixel size.
+fn exr_comment(opt: &DvrOptions, volume: &raystream_io::Volume, cam: &Camera) -> String {
+    let mode = opt.mode;
+    let what = if opt.hu_values && mode == DvrMode::Slice {
+        let [x, y, z] = opt.slice_point(volume).to_array();
+        let [nx, ny, nz] = raystream_cpu::dvr::scene_to_lps(cam.fwd).to_array();
+        format!(
+            "Y: HU on the plane through ({x:.3}, {y:.3}, {z:.3}) mm LPS, normal ({nx:.6}, {ny:.6}, {nz:.6}) (no window); NaN: outside the volume or its crop"
+        )
+    } else if opt.hu_values && mode.is_windowed() {
+        format!(
+            "Y: the {} of the HU values along each ray (no window); NaN: no sample",
+            mode.name()
+        )
+    } else {
+        format!(
+            "premultiplied linear RGBA, --mode {}: the volume's light and opacity, no background",
+            mode.name()
+        )
+    };
+    format!(
+        "{what}{}{}",
+        slab_words(opt, volume),
+        pixel_size(cam, opt.height, "mm")
+    )
+}
+
 /// `render --mode … --turntable N -o DIR`: N frames about `view`'s up axis (the patient's
 /// superior axis unless the view is from above or below), from `--orbit`'s angles on.
 fn turntable(
@@ -256,11 +267,16 @@ fn turntable(
     opt: &DvrOptions,
     view: View,
     n: u32,
+    format: ImageFormat,
 ) -> Result<()> {
     let dir = &a.output;
+    let ext = match format {
+        ImageFormat::Png => "png",
+        ImageFormat::Exr => "exr",
+    };
     if ImageFormat::of(dir).is_ok() {
         bail!(
-            "{}: --turntable writes frame_000.png … into a folder; name the folder with -o",
+            "{}: --turntable writes frame_000.{ext} … into a folder; name the folder with -o",
             dir.display()
         );
     }
@@ -284,17 +300,17 @@ fn turntable(
             view.orbit(az + 360.0 * i as f32 / n as f32, el),
             projection,
         );
-        let f = renderer.frame(opt, &cam, ImageFormat::Png)?;
+        let f = renderer.frame(opt, &cam, format)?;
         frame_ms.push(f.frame_ms);
-        let path = dir.join(format!("frame_{i:0digits$}.png", digits = digits.max(3)));
-        f.picture.save(&path, "")?;
+        let path = dir.join(format!("frame_{i:0digits$}.{ext}", digits = digits.max(3)));
+        f.picture.save(&path, &exr_comment(opt, volume, &cam))?;
         pb.inc(1);
     }
     pb.finish_and_clear();
     if !a.quiet {
         let median = median_of(&mut frame_ms);
         eprintln!(
-            "raystream: wrote {n} frames to {} ({}x{}, --mode {}): median render {median:.1} ms ({:.2} frames/s, PNG writing apart)",
+            "raystream: wrote {n} frames to {} ({}x{}, --mode {}, {ext}): median render {median:.1} ms ({:.2} frames/s, file writing apart)",
             dir.display(),
             opt.width,
             opt.height,

@@ -574,3 +574,61 @@ fn output_names_its_format() {
         assert!(!out.exists());
     }
 }
+
+/// `--turntable N --format exr` writes frame_000.exr …: frame i is exactly the single EXR of
+/// `--orbit 360·i/N,0` (the MIP's HU, a slice's HU on its turned plane with that plane named
+/// in the comments, the DVR's premultiplied RGBA), and `--format` needs a turntable.
+#[test]
+fn turntables_write_exr_frames() {
+    for dev in devices() {
+        for mode in ["mip", "slice", "dvr"] {
+            let dir = tmp(&format!("turntable-exr-{mode}-{dev}"));
+            let _ = std::fs::remove_dir_all(&dir);
+            let args = ["--mode", mode, "--size", "48x40", "--turntable", "3"];
+            let mut all = vec!["render", "--quiet", "--device", dev];
+            all.extend_from_slice(&args);
+            all.extend_from_slice(&["--format", "exr", "-o", dir.to_str().unwrap()]);
+            let o = run(&all);
+            assert!(o.status.success(), "{all:?}: {}", stderr(&o));
+            let mut names: Vec<_> = std::fs::read_dir(&dir)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().into_string().unwrap())
+                .collect();
+            names.sort();
+            assert_eq!(names, ["frame_000.exr", "frame_001.exr", "frame_002.exr"]);
+            let mut frames = Vec::new();
+            for (i, az) in ["0", "120", "240"].iter().enumerate() {
+                let frame = read_exr(&dir.join(&names[i]));
+                let orbit = format!("{az},0");
+                let one = read_exr(&render(
+                    &format!("turntable-exr-{mode}-{dev}-{i}.exr"),
+                    dev,
+                    &["--mode", mode, "--size", "48x40", "--orbit", &orbit],
+                ));
+                assert_eq!(frame.comments, one.comments, "{dev} {mode} frame {i}");
+                assert_eq!(frame.channels.len(), one.channels.len());
+                for (name, samples) in &one.channels {
+                    let (a, b) = (floats(&frame, name), samples.as_f32().unwrap());
+                    let same = a
+                        .iter()
+                        .zip(b)
+                        .all(|(x, y)| x == y || (x.is_nan() && y.is_nan()));
+                    assert!(same, "{dev} {mode} frame {i}: channel {name} differs");
+                }
+                frames.push(frame);
+            }
+            let first = if mode == "dvr" { "A" } else { "Y" };
+            assert_ne!(
+                floats(&frames[0], first),
+                floats(&frames[1], first),
+                "{dev} {mode}: the frames turn"
+            );
+            if mode == "slice" {
+                assert_ne!(frames[0].comments, frames[1].comments, "the plane turns");
+            }
+        }
+    }
+    let o = run(&["render", "--mode", "mip", "--format", "exr", "-o", "x.exr"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--turntable"), "{}", stderr(&o));
+}
