@@ -714,13 +714,56 @@ pub fn windowed(v: f32, win: (f32, f32)) -> f32 {
     crate::srgb_to_linear(window(v, win))
 }
 
-/// Renders `vol` (HU) with `tf` (dvr mode; `None` elsewhere is fine).
+/// Renders `vol` (HU) with `tf` (dvr mode; `None` elsewhere is fine) over `opt.background`
+/// (with `opt.hu_values`, a windowed mode's pixels without a sample are NaN).
 pub fn render_volume(
     vol: &Volume,
     tf: &TransferFunction,
     opt: &DvrOptions,
     cam: &Camera,
 ) -> (Image, DvrStats) {
+    let (rays, stats) = march_frame(vol, tf, opt, cam);
+    let background = if opt.hu_values && opt.mode.is_windowed() {
+        Vec3::NAN
+    } else {
+        opt.background
+    };
+    let pixels = rays.iter().map(|c| c.over(background)).collect();
+    (
+        Image {
+            width: opt.width,
+            height: opt.height,
+            pixels,
+        },
+        stats,
+    )
+}
+
+/// Renders `vol` with no background, in one pass: the premultiplied light each pixel sends
+/// (C) and its opacity α = 1 − T (T: the fraction of what lies behind that it lets through),
+/// so that over any background B the pixel is C + (1 − α)·B, exactly [`render_volume`]'s.
+pub fn render_volume_rgba(
+    vol: &Volume,
+    tf: &TransferFunction,
+    opt: &DvrOptions,
+    cam: &Camera,
+) -> (Image, Vec<f32>, DvrStats) {
+    let (rays, stats) = march_frame(vol, tf, opt, cam);
+    let film = Image {
+        width: opt.width,
+        height: opt.height,
+        pixels: rays.iter().map(|c| c.color).collect(),
+    };
+    (film, rays.iter().map(|c| 1.0 - c.transmit).collect(), stats)
+}
+
+/// Every pixel's ray, marched.
+fn march_frame(
+    vol: &Volume,
+    tf: &TransferFunction,
+    opt: &DvrOptions,
+    cam: &Camera,
+) -> (Vec<Marched>, DvrStats) {
     let opt = &DvrOptions {
         clip_planes: opt.planes_for(vol, cam),
         slab: None,
@@ -764,14 +807,7 @@ pub fn render_volume(
         shadow_samples: grid.as_ref().map_or(0, |g| g.samples),
         step_mm: step,
     };
-    (
-        Image {
-            width: opt.width,
-            height: opt.height,
-            pixels: rays.into_iter().map(|c| c.color).collect(),
-        },
-        stats,
-    )
+    (rays, stats)
 }
 
 /// A ray in LPS (unit `d`, mm) and its start offset in steps.
@@ -848,12 +884,44 @@ fn shade_sample(
     base * ((1.0 - w) * unshaded + w * surface) + w * spec
 }
 
-/// What one ray gave: its colour and the samples it took and skipped.
-#[derive(Clone, Copy, Default)]
+/// What one ray gave: the light it sends toward the eye (premultiplied, no background), the
+/// fraction of the background it lets through, and the samples it took and skipped.
+#[derive(Clone, Copy)]
 struct Marched {
     color: Vec3,
+    transmit: f32,
     taken: u64,
     skipped: u64,
+}
+
+impl Marched {
+    /// A ray that reached nothing: all background.
+    const MISS: Marched = Marched {
+        color: Vec3::ZERO,
+        transmit: 1.0,
+        taken: 0,
+        skipped: 0,
+    };
+
+    /// An opaque value (a projection's, a slice's, an isosurface's) after `taken` samples.
+    fn opaque(color: Vec3, taken: u64) -> Marched {
+        Marched {
+            color,
+            transmit: 0.0,
+            taken,
+            skipped: 0,
+        }
+    }
+
+    /// The pixel over `background` (which may be NaN, for "no value": opaque pixels keep
+    /// theirs).
+    fn over(&self, background: Vec3) -> Vec3 {
+        if self.transmit == 0.0 {
+            self.color
+        } else {
+            self.color + self.transmit * background
+        }
+    }
 }
 
 /// Two-sided Blinn–Phong toward light `l` seen along `d`: (ambient + diffuse, specular). With
@@ -887,20 +955,13 @@ fn march(
     light: Option<(Vec3, &LightGrid)>,
     Ray3 { o, d, jitter }: Ray3,
 ) -> Marched {
-    let background = Marched {
-        color: if opt.hu_values && opt.mode.is_windowed() {
-            Vec3::NAN
-        } else {
-            opt.background
-        },
-        ..Default::default()
-    };
+    let miss = Marched::MISS;
     let (o_idx, d_idx) = (m.index_of(o), m.index_dir(d));
     let Some((t0, t1)) = m
         .clip(o_idx, d_idx)
         .and_then(|(t0, t1)| clip_interval(opt, o, d, t0, t1))
     else {
-        return background;
+        return miss;
     };
     let mut k = 0u64;
     let at = |k: u64| t0 + (k as f32 + jitter) * step;
@@ -924,7 +985,8 @@ fn march(
                 &lights,
             );
             Marched {
-                color: c.color + c.transmit * opt.background,
+                color: c.color,
+                transmit: c.transmit,
                 taken: c.taken,
                 skipped: c.skipped,
             }
@@ -953,31 +1015,29 @@ fn march(
                 k += 1;
             }
             if taken == 0 {
-                return background;
+                return miss;
             }
             let v = if opt.mode == DvrMode::Average {
                 (sum / taken as f64) as f32
             } else {
                 best
             };
-            Marched {
-                color: Vec3::splat(if opt.hu_values { v } else { windowed(v, win) }),
+            Marched::opaque(
+                Vec3::splat(if opt.hu_values { v } else { windowed(v, win) }),
                 taken,
-                ..background
-            }
+            )
         }
         DvrMode::Slice => {
             // One sample, where the ray crosses the plane (rays parallel to it see nothing).
             let t = (slice.at - o).dot(slice.normal) / d.dot(slice.normal);
             if !(t0..=t1).contains(&t) {
-                return background;
+                return miss;
             }
             let v = m.sample(o_idx + d_idx * t);
-            Marched {
-                color: Vec3::splat(if opt.hu_values { v } else { windowed(v, win) }),
-                taken: 1,
-                ..background
-            }
+            Marched::opaque(
+                Vec3::splat(if opt.hu_values { v } else { windowed(v, win) }),
+                1,
+            )
         }
         DvrMode::Iso => {
             let iso = opt.iso_hu;
@@ -985,10 +1045,7 @@ fn march(
             loop {
                 let t = at(k);
                 if t > t1 {
-                    return Marched {
-                        taken,
-                        ..background
-                    };
+                    return Marched { taken, ..miss };
                 }
                 let v = m.sample(o_idx + d_idx * t);
                 taken += 1;
@@ -1011,11 +1068,7 @@ fn march(
                     let n = if g.length() > 0.0 { -g.normalize() } else { -d };
                     let (diff, spec) = phong(tf, n, d, -d);
                     let bone = Vec3::new(0.88, 0.84, 0.74);
-                    return Marched {
-                        color: bone * diff + Vec3::splat(spec),
-                        taken,
-                        ..background
-                    };
+                    return Marched::opaque(bone * diff + Vec3::splat(spec), taken);
                 }
                 prev = Some((t, v));
             }
@@ -1270,6 +1323,65 @@ mod tests {
             sum(&shadow),
             sum(&plain)
         );
+    }
+
+    /// Premultiplied RGBA in one pass: over any background B, C + (1 − α)·B is the frame
+    /// rendered over B, in every mode (translucent DVR with shadows and a crop, opaque
+    /// projections, slices and isosurfaces), and α is 0 exactly where a ray reaches nothing.
+    #[test]
+    fn one_pass_rgba_is_the_frame_over_any_background() {
+        let vol = abdomen();
+        let cam = volume_camera(&vol, 1.2);
+        let base = DvrOptions {
+            width: 40,
+            height: 32,
+            ..Default::default()
+        };
+        let crop = Some([Vec3::splat(-400.0), Vec3::new(40.0, 400.0, 400.0)]);
+        for (mode, preset, shadows) in [
+            (DvrMode::Dvr, TfPreset::CtBones, true),
+            (DvrMode::Dvr, TfPreset::CtMuscle, false),
+            (DvrMode::Mip, TfPreset::MipBone, false),
+            (DvrMode::Slice, TfPreset::CtBone, false),
+            (DvrMode::Iso, TfPreset::CtBone, false),
+        ] {
+            let tf = preset.function();
+            let opt = DvrOptions {
+                mode,
+                shadows,
+                crop,
+                ..base
+            };
+            let (film, alpha, stats) = render_volume_rgba(&vol, &tf, &opt, &cam);
+            assert_eq!(alpha.len(), film.pixels.len());
+            let clear = alpha.iter().filter(|&&a| a == 0.0).count();
+            assert!(
+                clear > 0 && clear < alpha.len(),
+                "{}: {clear} clear",
+                mode.name()
+            );
+            if mode == DvrMode::Dvr {
+                let between = alpha.iter().filter(|&&a| a > 0.05 && a < 0.95).count();
+                assert!(between > 0, "{}: translucent pixels", preset.name());
+            } else {
+                assert!(
+                    alpha.iter().all(|&a| a == 0.0 || a == 1.0),
+                    "{}",
+                    mode.name()
+                );
+            }
+            for background in [Vec3::ZERO, Vec3::ONE, Vec3::new(0.2, 0.5, 0.9)] {
+                let (want, s) = render_volume(&vol, &tf, &DvrOptions { background, ..opt }, &cam);
+                assert_eq!(s.samples, stats.samples);
+                for ((c, a), w) in film.pixels.iter().zip(&alpha).zip(&want.pixels) {
+                    let over = *c + (1.0 - a) * background;
+                    assert!((over - *w).abs().max_element() < 1e-6, "{over} vs {w}");
+                    if *a == 0.0 {
+                        assert_eq!(*w, background, "a clear pixel is the background");
+                    }
+                }
+            }
+        }
     }
 
     /// `hu_values`: on the abdomen CT the projections' films hold HU whose window is the

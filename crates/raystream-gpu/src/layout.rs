@@ -299,7 +299,10 @@ pub struct DvrParams {
     pub parallel: f32,
     /// `DvrOptions::hu_values`: 1 for the windowed modes' HU values unwindowed (byte 292).
     pub hu_values: u32,
-    pub pad: [u32; 2],
+    /// 1: premultiplied RGBA, no background: the pixels hold C and the second half of the
+    /// pixel buffer the opacity 1 − T (byte 296).
+    pub premultiplied: u32,
+    pub pad: u32,
     /// A point of a slice's plane, LPS mm (byte 304); the plane faces `fwd`.
     pub slice_at: [f32; 3],
     pub pad3: u32,

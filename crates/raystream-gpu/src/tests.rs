@@ -1069,8 +1069,8 @@ fn dvr_wgsl_params_match_rust() {
         ("shadow_step", offset_of!(DvrParams, shadow_step)),
         ("parallel", offset_of!(DvrParams, parallel)),
         ("hu_values", offset_of!(DvrParams, hu_values)),
-        ("pad1", offset_of!(DvrParams, pad)),
-        ("pad2", offset_of!(DvrParams, pad) + 4),
+        ("premultiplied", offset_of!(DvrParams, premultiplied)),
+        ("pad2", offset_of!(DvrParams, pad)),
         ("slice_at", offset_of!(DvrParams, slice_at)),
         ("pad3", offset_of!(DvrParams, pad3)),
     ];
@@ -1151,6 +1151,30 @@ fn gpu_volume_rendering_matches_cpu() {
             want.len()
         );
         assert_eq!(packed.samples, times.samples, "{}{what}", mode.name());
+        // Premultiplied RGBA in one pass (no background): over the background it is the
+        // frame above, and its opacity is the CPU's.
+        let (film, alpha, rgba_times) = gpu.render_rgba(&opt, &cam).unwrap();
+        assert_eq!(rgba_times.samples, times.samples, "{name}");
+        for ((c, a), want) in film.pixels.iter().zip(&alpha).zip(&img.pixels) {
+            let over = *c + (1.0 - a) * opt.background;
+            assert!(
+                (over - *want).abs().max_element() < 1e-5,
+                "{name}: {over} vs {want}"
+            );
+            if mode != DvrMode::Dvr {
+                assert!(*a == 0.0 || *a == 1.0, "{name}: opaque or clear, not {a}");
+            }
+        }
+        let (_, cpu_alpha, _) = raystream_cpu::dvr::render_volume_rgba(&vol, &tf, &opt, &cam);
+        let da = alpha
+            .iter()
+            .zip(&cpu_alpha)
+            .map(|(g, c)| (g - c).abs())
+            .sum::<f32>();
+        assert!(
+            da < 0.01 * alpha.len() as f32,
+            "{name}: opacity off by {da} in all"
+        );
         let (mean, mut worst) = cpu.srgb8_diff(&img);
         worst.sort_unstable();
         let p99 = worst[worst.len() * 99 / 100];

@@ -204,8 +204,20 @@ impl<'a> GpuVolumeRenderer<'a> {
 
     /// Renders one frame with `cam` (the scene frame of `raystream_cpu::dvr::volume_camera`).
     pub fn render(&self, opt: &DvrOptions, cam: &Camera) -> Result<(Image, GpuDvrTimes), GpuError> {
-        let (pixels, times) = self.run(opt, cam, false)?;
+        let (pixels, _, times) = self.run(opt, cam, false, false)?;
         Ok((pixels.into_linear(), times))
+    }
+
+    /// Renders one frame with no background, in one pass, as
+    /// `raystream_cpu::dvr::render_volume_rgba`: the premultiplied light of each pixel and its
+    /// opacity 1 − T.
+    pub fn render_rgba(
+        &self,
+        opt: &DvrOptions,
+        cam: &Camera,
+    ) -> Result<(Image, Vec<f32>, GpuDvrTimes), GpuError> {
+        let (pixels, alpha, times) = self.run(opt, cam, false, true)?;
+        Ok((pixels.into_linear(), alpha, times))
     }
 
     /// Renders one frame as a viewer shows it: 8-bit sRGB, 3 bytes a pixel (as
@@ -215,7 +227,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         opt: &DvrOptions,
         cam: &Camera,
     ) -> Result<(Vec<u8>, GpuDvrTimes), GpuError> {
-        let (pixels, times) = self.run(opt, cam, true)?;
+        let (pixels, _, times) = self.run(opt, cam, true, false)?;
         Ok((pixels.into_srgb8(), times))
     }
 
@@ -224,7 +236,8 @@ impl<'a> GpuVolumeRenderer<'a> {
         opt: &DvrOptions,
         cam: &Camera,
         srgb8: bool,
-    ) -> Result<(Pixels, GpuDvrTimes), GpuError> {
+        premultiplied: bool,
+    ) -> Result<(Pixels, Vec<f32>, GpuDvrTimes), GpuError> {
         let ctx = self.ctx;
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -280,7 +293,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             shadow_step: opt.shadow_step_for(self.vol),
             parallel: cam.parallel,
             hu_values: (opt.hu_values && opt.mode.is_windowed()) as u32,
-            pad: [0; 2],
+            premultiplied: premultiplied as u32,
+            pad: 0,
             slice_at: v3(opt.slice_point(self.vol)),
             pad3: 0,
         };
@@ -294,13 +308,22 @@ impl<'a> GpuVolumeRenderer<'a> {
         let n = opt.width as u64 * opt.height as u64;
         // 4 pixels in 3 words.
         let packed_bytes = n.div_ceil(4) * 12;
+        // 16 bytes a pixel; premultiplied, another 16 for its opacity.
+        let pixel_bytes = n * 16 * (1 + premultiplied as u64);
         let mut frame = self.frame.lock().unwrap();
-        if frame.as_ref().is_none_or(|f| f.pixels.size() < n * 16) {
+        if frame
+            .as_ref()
+            .is_none_or(|f| f.pixels.size() < pixel_bytes || f.packed.size() < packed_bytes)
+        {
             *frame = Some(FrameBuffers {
-                pixels: ctx.work_buffer("volume pixels", n * 16, wgpu::BufferUsages::empty())?,
+                pixels: ctx.work_buffer(
+                    "volume pixels",
+                    pixel_bytes,
+                    wgpu::BufferUsages::empty(),
+                )?,
                 readback: ctx.device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("volume pixels readback"),
-                    size: (n * 16).max(64),
+                    size: pixel_bytes.max(64),
                     usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 }),
@@ -410,7 +433,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             enc.copy_buffer_to_buffer(packed, 0, packed_read, 0, packed_bytes);
             enc.copy_buffer_to_buffer(sum, 0, packed_read, packed_bytes, 8);
         } else {
-            enc.copy_buffer_to_buffer(pixels, 0, readback, 0, n * 16);
+            enc.copy_buffer_to_buffer(pixels, 0, readback, 0, pixel_bytes);
         }
         ctx.queue.submit([enc.finish()]);
         let words = read_words(ctx, if srgb8 { packed_read } else { readback })?;
@@ -421,6 +444,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
+        let mut alpha = Vec::new();
         let (out, samples) = if srgb8 {
             let at = (packed_bytes / 4) as usize;
             let samples = words[at] as u64 | (words[at + 1] as u64) << 32;
@@ -429,6 +453,10 @@ impl<'a> GpuVolumeRenderer<'a> {
         } else {
             let floats: &[f32] = bytemuck::cast_slice(&words);
             let px = &floats[..4 * n as usize];
+            if premultiplied {
+                let a = &floats[4 * n as usize..8 * n as usize];
+                alpha = a.chunks_exact(4).map(|a| a[0]).collect();
+            }
             let samples = px.chunks_exact(4).map(|p| p[3] as u64).sum();
             // A ray that took no sample has no HU value: NaN, as on the CPU (the kernel writes
             // the background there).
@@ -454,6 +482,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         };
         Ok((
             out,
+            alpha,
             GpuDvrTimes {
                 frame_ms: t0.elapsed().as_secs_f64() * 1e3,
                 kernel_gpu_ms,

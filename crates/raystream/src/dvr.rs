@@ -4,7 +4,7 @@
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, render_volume};
+use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, render_volume, render_volume_rgba};
 use raystream_cpu::{Image, ImageFormat};
 use raystream_gpu::GpuVolumeRenderer;
 use raystream_io::Volume;
@@ -159,8 +159,7 @@ impl<'a> Renderer<'a> {
     }
 
     /// One frame with `cam`, as `format` writes it: for an EXR, the windowed modes' film (their
-    /// HU values with `opt.hu_values`), or dvr's and iso's premultiplied RGBA (two frames, over
-    /// black and over white).
+    /// HU values with `opt.hu_values`), or dvr's and iso's premultiplied RGBA (one pass).
     pub fn frame(&self, opt: &DvrOptions, cam: &Camera, format: ImageFormat) -> Result<Frame> {
         let t = Instant::now();
         if let (Renderer::Gpu(g), ImageFormat::Png) = (self, format) {
@@ -179,26 +178,22 @@ impl<'a> Renderer<'a> {
             });
         }
         if format == ImageFormat::Exr && !opt.mode.is_windowed() {
-            // dvr and iso to an EXR: premultiplied RGBA, for compositing. A pixel is C + T·bg
-            // (C what the volume sends, T what it lets through), so a frame over black gives
-            // C and a second over white gives T as the difference: the rays, their samples and
-            // where they stop do not depend on the background.
-            let on = |background| DvrOptions { background, ..*opt };
-            let (over_black, kernel_ms, samples, stats) = self.film(&on(Vec3::ZERO), cam)?;
-            let (over_white, k2, ..) = self.film(&on(Vec3::ONE), cam)?;
-            let alpha = over_white
-                .pixels
-                .iter()
-                .zip(&over_black.pixels)
-                .map(|(w, b)| (1.0 - (*w - *b).element_sum() / 3.0).clamp(0.0, 1.0))
-                .collect();
+            // dvr and iso to an EXR: premultiplied RGBA, for compositing, in one pass: each
+            // pixel's light C and opacity 1 − T, so that over a background B it is C + T·B.
+            let (film, alpha, kernel_ms, samples, stats) = match self {
+                Renderer::Gpu(g) => {
+                    let (film, alpha, times) = g.render_rgba(opt, cam)?;
+                    (film, alpha, times.kernel_gpu_ms, times.samples, None)
+                }
+                Renderer::Cpu { volume, tf } => {
+                    let (film, alpha, stats) = render_volume_rgba(volume, tf, opt, cam);
+                    (film, alpha, None, stats.samples, Some(stats))
+                }
+            };
             return Ok(Frame {
-                picture: Picture::Rgba {
-                    film: over_black,
-                    alpha,
-                },
+                picture: Picture::Rgba { film, alpha },
                 frame_ms: ms(t.elapsed()),
-                kernel_ms: kernel_ms.zip(k2).map(|(a, b)| a + b),
+                kernel_ms,
                 samples,
                 stats,
             });

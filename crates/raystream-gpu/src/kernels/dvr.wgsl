@@ -49,7 +49,8 @@ struct DvrParams {
     // 1: mip, minip, average and slice give the HU value itself, no window
     // (DvrOptions::hu_values).
     hu_values: u32,
-    pad1: u32,
+    // 1: premultiplied RGBA (no background): pixels[i] = (C, samples), pixels[n + i].x = 1 - T.
+    premultiplied: u32,
     pad2: u32,
     // A point of a slice's plane (LPS mm); the plane faces fwd.
     slice_at: vec3<f32>,
@@ -166,13 +167,25 @@ fn shade_sample(base: vec3<f32>, p: vec3<f32>, at: vec3<f32>, d: vec3<f32>) -> v
     return base * ((1.0 - w) * unshaded + w * surface) + vec3<f32>(w * ph.y * lit);
 }
 
-// Colour and the samples taken (primary, as the CPU counts them).
-fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
+// What one ray gave (raystream_cpu::dvr's Marched): the light it sends (premultiplied, no
+// background), the fraction of the background it lets through, the samples taken (primary,
+// as the CPU counts them).
+struct Marched {
+    color: vec3<f32>,
+    transmit: f32,
+    taken: f32,
+}
+
+fn missed(taken: f32) -> Marched {
+    return Marched(vec3<f32>(0.0), 1.0, taken);
+}
+
+fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> Marched {
     let o_idx = to_index(o - dp.origin);
     let d_idx = to_index(d);
     let tt = clip_world(o, d, clip_grid(o_idx, d_idx));
     if !(tt.x <= tt.y) {
-        return vec4<f32>(dp.background, 0.0);
+        return missed(0.0);
     }
     let t0 = tt.x;
     let t1 = tt.y;
@@ -180,19 +193,19 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
     var k = 0u;
     if dp.mode == MODE_DVR {
         let c = composite(o, d, o_idx, d_idx, t0, t1, jit);
-        return vec4<f32>(c.color + c.transmit * dp.background, f32(c.taken));
+        return Marched(c.color, c.transmit, f32(c.taken));
     }
     if dp.mode == MODE_SLICE {
         // One sample, where the ray crosses the plane (as the CPU's march).
         let t = dot(dp.slice_at - o, dp.fwd) / dot(d, dp.fwd);
         if !(t >= t0 && t <= t1) {
-            return vec4<f32>(dp.background, 0.0);
+            return missed(0.0);
         }
         let v = sample_at(o_idx + d_idx * t);
         if dp.hu_values != 0u {
-            return vec4<f32>(vec3<f32>(v), 1.0);
+            return Marched(vec3<f32>(v), 0.0, 1.0);
         }
-        return vec4<f32>(vec3<f32>(windowed(v)), 1.0);
+        return Marched(vec3<f32>(windowed(v)), 0.0, 1.0);
     }
     if dp.mode == MODE_ISO {
         var t_prev = 0.0;
@@ -200,7 +213,7 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
         loop {
             let t = t0 + (f32(k) + jit) * step;
             if t > t1 {
-                return vec4<f32>(dp.background, f32(k));
+                return missed(f32(k));
             }
             k += 1u;
             if sample_at(o_idx + d_idx * t) >= dp.iso {
@@ -223,7 +236,7 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
                     n = -normalize(g);
                 }
                 let ph = phong(n, d, -d);
-                return vec4<f32>(vec3<f32>(0.88, 0.84, 0.74) * ph.x + vec3<f32>(ph.y), f32(k));
+                return Marched(vec3<f32>(0.88, 0.84, 0.74) * ph.x + vec3<f32>(ph.y), 0.0, f32(k));
             }
             t_prev = t;
             has_prev = true;
@@ -253,15 +266,15 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> vec4<f32> {
         k += 1u;
     }
     if taken == 0u {
-        return vec4<f32>(dp.background, 0.0);
+        return missed(0.0);
     }
     if dp.mode == MODE_AVERAGE {
         best = sum / f32(taken);
     }
     if dp.hu_values != 0u {
-        return vec4<f32>(vec3<f32>(best), f32(taken));
+        return Marched(vec3<f32>(best), 0.0, f32(taken));
     }
-    return vec4<f32>(vec3<f32>(windowed(best)), f32(taken));
+    return Marched(vec3<f32>(windowed(best)), 0.0, f32(taken));
 }
 
 @compute @workgroup_size(8, 8)
@@ -277,13 +290,28 @@ fn render_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
         let sx = ((f32(gid.x) + 0.5) / w * 2.0 - 1.0) * (w / h);
         let sy = 1.0 - (f32(gid.y) + 0.5) / h * 2.0;
         let o = dp.eye + (sx * dp.right + sy * dp.up) * dp.parallel;
-        pixels[pixel] = march(o, dp.fwd, jitter(pixel, 0u, 7u));
+        store(pixel, march(o, dp.fwd, jitter(pixel, 0u, 7u)));
         return;
     }
     let px = ((f32(gid.x) + 0.5) / w * 2.0 - 1.0) * dp.tan_y * (w / h);
     let py = (1.0 - (f32(gid.y) + 0.5) / h * 2.0) * dp.tan_y;
     let d = normalize(dp.fwd + px * dp.right + py * dp.up);
-    pixels[pixel] = march(dp.eye, d, jitter(pixel, 0u, 7u));
+    store(pixel, march(dp.eye, d, jitter(pixel, 0u, 7u)));
+}
+
+// A pixel over the background (opaque pixels keep their value, as the CPU's Marched::over),
+// or premultiplied with its opacity in the buffer's second half.
+fn store(pixel: u32, m: Marched) {
+    if dp.premultiplied != 0u {
+        pixels[pixel] = vec4<f32>(m.color, m.taken);
+        pixels[dp.width * dp.height + pixel] = vec4<f32>(1.0 - m.transmit, 0.0, 0.0, 0.0);
+        return;
+    }
+    var c = m.color;
+    if m.transmit != 0.0 {
+        c += m.transmit * dp.background;
+    }
+    pixels[pixel] = vec4<f32>(c, m.taken);
 }
 
 // The frame as a viewer shows it: 8-bit sRGB, 3 bytes a pixel (as the CPU's Image::to_srgb8),
