@@ -118,6 +118,15 @@ impl GpuVolume {
     }
 }
 
+/// What a frame reads back: 8-bit sRGB packed on the GPU, the float frame over the
+/// background, or the float frame premultiplied (no background) with each pixel's opacity.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Output {
+    Srgb8,
+    Linear,
+    Premultiplied,
+}
+
 /// A volume and its transfer function on the GPU, ready for direct volume rendering.
 pub struct GpuVolumeRenderer<'a> {
     ctx: &'a GpuContext,
@@ -204,7 +213,7 @@ impl<'a> GpuVolumeRenderer<'a> {
 
     /// Renders one frame with `cam` (the scene frame of `raystream_cpu::dvr::volume_camera`).
     pub fn render(&self, opt: &DvrOptions, cam: &Camera) -> Result<(Image, GpuDvrTimes), GpuError> {
-        let (pixels, _, times) = self.run(opt, cam, false, false)?;
+        let (pixels, _, times) = self.run(opt, cam, Output::Linear)?;
         Ok((pixels.into_linear(), times))
     }
 
@@ -216,7 +225,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         opt: &DvrOptions,
         cam: &Camera,
     ) -> Result<(Image, Vec<f32>, GpuDvrTimes), GpuError> {
-        let (pixels, alpha, times) = self.run(opt, cam, false, true)?;
+        let (pixels, alpha, times) = self.run(opt, cam, Output::Premultiplied)?;
         Ok((pixels.into_linear(), alpha, times))
     }
 
@@ -227,7 +236,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         opt: &DvrOptions,
         cam: &Camera,
     ) -> Result<(Vec<u8>, GpuDvrTimes), GpuError> {
-        let (pixels, _, times) = self.run(opt, cam, true, false)?;
+        let (pixels, _, times) = self.run(opt, cam, Output::Srgb8)?;
         Ok((pixels.into_srgb8(), times))
     }
 
@@ -235,9 +244,10 @@ impl<'a> GpuVolumeRenderer<'a> {
         &self,
         opt: &DvrOptions,
         cam: &Camera,
-        srgb8: bool,
-        premultiplied: bool,
+        output: Output,
     ) -> Result<(Pixels, Vec<f32>, GpuDvrTimes), GpuError> {
+        let srgb8 = output == Output::Srgb8;
+        let premultiplied = output == Output::Premultiplied;
         let ctx = self.ctx;
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
