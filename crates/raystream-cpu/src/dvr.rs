@@ -1447,14 +1447,29 @@ mod tests {
     /// positions. The grid is oblique and anisotropic and holds linear fields, which trilinear
     /// interpolation reproduces exactly: the field n·p (n the view direction) is the plane's
     /// offset at every pixel, and right·p and up·p are the pixel's position across the image
-    /// (one pixel's size a column and a row). Six patient views and an oblique orbit.
+    /// (one pixel's size a column and a row). Six patient views and an oblique orbit, on an
+    /// oblique grid and on a sheared one (a gantry-tilted CT's).
     #[test]
     fn slices_sample_their_plane_at_the_pixels() {
-        use raystream_scene::PatientView as V;
-        let mut vol = volume([30, 26, 22], [0.8, 1.1, 1.6], |_, _, _| 0.0);
         let turn = raystream_math::DMat3::from_rotation_z(20f64.to_radians())
             * raystream_math::DMat3::from_rotation_x(10f64.to_radians());
-        vol.direction = std::array::from_fn(|r| std::array::from_fn(|c| turn.col(c)[r]));
+        // The third axis leans 18.5° towards the second.
+        let lean =
+            raystream_math::DVec3::new(0.0, 18.5f64.to_radians().sin(), 18.5f64.to_radians().cos());
+        let shear = raystream_math::DMat3::from_cols(
+            raystream_math::DVec3::X,
+            raystream_math::DVec3::Y,
+            lean,
+        );
+        for m in [turn, turn * shear] {
+            slices_sample_their_plane(m);
+        }
+    }
+
+    fn slices_sample_their_plane(m: raystream_math::DMat3) {
+        use raystream_scene::PatientView as V;
+        let mut vol = volume([30, 26, 22], [0.8, 1.1, 1.6], |_, _, _| 0.0);
+        vol.direction = std::array::from_fn(|r| std::array::from_fn(|c| m.col(c)[r]));
         vol.origin = [-12.0, 5.0, 30.0];
         let (w, h) = (40u32, 30u32);
         let views = [
@@ -1769,25 +1784,34 @@ mod tests {
         }
     }
 
-    /// The world gradient of a linear ramp on an oblique, anisotropic grid is the ramp's slope.
+    /// The world gradient of a linear ramp on an oblique, anisotropic grid is the ramp's slope;
+    /// on a sheared grid (a gantry-tilted CT's: columns tilted 18.5°, the third axis along the
+    /// table) too.
     #[test]
     fn gradient_is_per_mm_in_world_space() {
         let (c, s) = (0.6f64, 0.8f64);
-        let mut vol = volume([12, 12, 12], [0.7, 1.3, 2.1], |_, _, _| 0.0);
-        vol.direction = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
-        vol.origin = [5.0, -3.0, 2.0];
-        let slope = raystream_math::DVec3::new(3.0, -2.0, 5.0);
-        for k in 0..12 {
-            for j in 0..12 {
-                for i in 0..12 {
-                    let p = vol
-                        .index_to_world(raystream_math::DVec3::new(i as f64, j as f64, k as f64));
-                    vol.data[i + 12 * (j + 12 * k)] = slope.dot(p) as f32;
+        let (tc, ts) = (18.5f64.to_radians().cos(), 18.5f64.to_radians().sin());
+        for direction in [
+            [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
+            [[1.0, 0.0, 0.0], [0.0, tc, 0.0], [0.0, -ts, 1.0]],
+        ] {
+            let mut vol = volume([12, 12, 12], [0.7, 1.3, 2.1], |_, _, _| 0.0);
+            vol.direction = direction;
+            vol.origin = [5.0, -3.0, 2.0];
+            let slope = raystream_math::DVec3::new(3.0, -2.0, 5.0);
+            for k in 0..12 {
+                for j in 0..12 {
+                    for i in 0..12 {
+                        let p = vol.index_to_world(raystream_math::DVec3::new(
+                            i as f64, j as f64, k as f64,
+                        ));
+                        vol.data[i + 12 * (j + 12 * k)] = slope.dot(p) as f32;
+                    }
                 }
             }
+            let m = Marcher::new(&vol, None);
+            let g = m.gradient(Vec3::new(5.3, 6.1, 4.7));
+            assert!((g - slope.as_vec3()).length() < 1e-3, "{g} vs {slope}");
         }
-        let m = Marcher::new(&vol, None);
-        let g = m.gradient(Vec3::new(5.3, 6.1, 4.7));
-        assert!((g - slope.as_vec3()).length() < 1e-3, "{g} vs {slope}");
     }
 }

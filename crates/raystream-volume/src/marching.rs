@@ -4,8 +4,9 @@
 //! volume's border is closed by a flat cap there and every surface is closed. Vertices sit on
 //! cell edges at the linear interpolation of the iso crossing; each crossing edge gets exactly
 //! one vertex (keyed by the edge), so neighbouring cells share vertices and the mesh has no
-//! cracks. Normals are the negated value gradient (central differences, scaled by 1/spacing,
-//! rotated into LPS), interpolated along the edge: they point out of the inside region.
+//! cracks. Normals are the negated value gradient (central differences in index space, taken
+//! into LPS by the inverse transpose of the grid's matrix, so sheared grids too), interpolated
+//! along the edge: they point out of the inside region.
 //!
 //! Three passes, each parallel over z: (1) the inside mask; (2) per layer, the vertices of the
 //! edges leaving that layer's corners, in key order; (3) per layer of cells, the triangles, their
@@ -62,8 +63,9 @@ pub fn extract_isosurface(vol: &Volume, iso: f32) -> IsoSurface {
         .collect();
     let row = |j: usize, k: usize| j < py && k < pz && row_any[j + py * k];
     let affine = vol.index_to_world_affine();
-    let dir = raystream_math::DMat3::from_cols_array_2d(&vol.direction).transpose();
-    let inv_spacing = DVec3::from(vol.spacing).recip();
+    // ∂f/∂world = (M⁻¹)ᵀ ∂f/∂index for the index → world matrix M (direction · spacing): right
+    // for sheared grids too (a gantry-tilted CT), where rotating the per-mm differences is not.
+    let index_to_world_grad = affine.matrix3.inverse().transpose();
     let value = |i: usize, j: usize, k: usize| vol.data[i + nx * (j + ny * k)];
     // Gradient at a voxel in LPS (value units per mm), one-sided at the border.
     let gradient = |i: usize, j: usize, k: usize| -> DVec3 {
@@ -83,9 +85,10 @@ pub fn extract_isosurface(vol: &Volume, iso: f32) -> IsoSurface {
             value(i, j, (k + 1).min(nz - 1)),
             ((k + 1).min(nz - 1) - k.saturating_sub(1)).max(1) as f64,
         );
-        dir * (DVec3::new(gi, gj, gk) * inv_spacing)
+        index_to_world_grad * DVec3::new(gi, gj, gk)
     };
-    let axis_world = |a: usize| dir.col(a);
+    // The world normal of the grid's faces across index axis `a` (not unit length).
+    let axis_world = |a: usize| index_to_world_grad.col(a);
 
     // Pass 2: vertices of the edges leaving each corner layer.
     let layers: Vec<Layer> = (0..pz)

@@ -66,6 +66,11 @@ fn rotation() -> [[f64; 3]; 3] {
     std::array::from_fn(|r| std::array::from_fn(|col| c[col][r]))
 }
 
+fn tilted() -> [[f64; 3]; 3] {
+    let (c, s) = (18.5f64.to_radians().cos(), 18.5f64.to_radians().sin());
+    [[1.0, 0.0, 0.0], [0.0, c, 0.0], [0.0, -s, 1.0]]
+}
+
 #[test]
 fn sphere_is_closed_oriented_and_within_half_a_voxel() {
     let centre = raystream_math::DVec3::new(3.0, -2.0, 5.0);
@@ -76,6 +81,9 @@ fn sphere_is_closed_oriented_and_within_half_a_voxel() {
             [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
         ),
         ([0.8, 1.1, 1.7], rotation()),
+        // A gantry-tilted CT's sheared grid: rows along x, columns tilted 18.5° about x, the
+        // third axis along the table (z), as the GE head CT in ../shared reads.
+        ([0.9, 0.9, 1.4], tilted()),
     ] {
         let dims = [64, 64, 48];
         let half =

@@ -732,6 +732,28 @@ fn gpu_volume_shadows_and_clipping_match_cpu_cli() {
     );
 }
 
+/// A gantry-tilted head CT's sheared grid (18.5°, slices resampled to even spacing): the GPU
+/// marches it as the CPU does, seen from the side, where the shear shows.
+#[test]
+fn gpu_matches_cpu_on_a_sheared_grid() {
+    let head = shared().join("data/volumes/dicom/head_ct_gantry_tilt_ge");
+    for (name, mode) in [("tilted-dvr", "dvr"), ("tilted-mip", "mip")] {
+        gpu_matches_cpu(
+            name,
+            &[
+                head.to_str().unwrap(),
+                "--mode",
+                mode,
+                "--view",
+                "left",
+                "--size",
+                "64x48",
+            ],
+            true,
+        );
+    }
+}
+
 /// Cropping and clipping change the picture; a crop box outside the volume leaves only the
 /// background; malformed boxes and planes, and options without --mode, are clear errors.
 #[test]

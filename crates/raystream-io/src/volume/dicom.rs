@@ -12,8 +12,9 @@
 //! Series assembly follows the standard's geometry, never file names or InstanceNumber: slices
 //! are grouped by SeriesInstanceUID, sorted by ImagePositionPatient projected on the slice normal
 //! (row × column of ImageOrientationPatient), and the slice spacing comes from those positions.
-//! A gantry-tilted series (positions not stacked along the normal) or one with uneven spacing is
-//! refused with a message saying so, never loaded with a silently wrong geometry.
+//! A gantry-tilted series (positions stacked along the table, not the normal) becomes a sheared
+//! grid, and one with uneven spacing is interpolated onto a regular one ([`Stack`]); the volume's
+//! warnings say which, so that no geometry is silently wrong or silently invented.
 
 use std::path::{Path, PathBuf};
 
@@ -106,7 +107,8 @@ pub(crate) fn load(path: &Path, series: Option<&str>) -> Result<Volume, VolumeEr
         }
     };
     let mut chosen: Vec<Slice> = slices.into_iter().filter(|s| s.series_uid == uid).collect();
-    assemble(path, &mut chosen, all, warnings).map_err(|e| mention_skipped(e, &skipped))
+    assemble(path, &mut chosen, all, warnings, !skipped.is_empty())
+        .map_err(|e| mention_skipped(e, &skipped))
 }
 
 /// `e`, with the files of the folder that were skipped as unreadable (`skipped`: "skipped
@@ -423,7 +425,8 @@ fn assemble(
     path: &Path,
     slices: &mut [Slice],
     all: Vec<(String, usize, String)>,
-    warnings: Vec<String>,
+    mut warnings: Vec<String>,
+    files_skipped: bool,
 ) -> Result<Volume, VolumeError> {
     if let Some(s) = slices.iter().find(|s| s.frames != 1) {
         return Err(VolumeError::invalid(
@@ -467,77 +470,42 @@ fn assemble(
     let normal = normal.map(|v| v / nlen);
     slices.sort_by(|a, b| dot(a.position, normal).total_cmp(&dot(b.position, normal)));
 
-    let dims = [cols as usize, rows as usize, slices.len()];
-    voxel_count(path, dims)?;
-    let mut spacing_k = slices[0]
+    voxel_count(path, [cols as usize, rows as usize, slices.len()])?;
+    let positions: Vec<[f64; 3]> = slices.iter().map(|s| s.position).collect();
+    let header_spacing = slices[0]
         .between_slices
         .or(slices[0].thickness)
         .filter(|s| *s > 0.0)
         .unwrap_or(1.0);
-    if slices.len() > 1 {
-        let gaps: Vec<f64> = slices
-            .windows(2)
-            .map(|w| dot(sub(w[1].position, w[0].position), normal))
-            .collect();
-        if let Some(i) = gaps.iter().position(|g| *g < 1e-3) {
-            return Err(VolumeError::invalid(
-                path,
-                format!(
-                    "two slices at the same position ({} and {}): duplicate or mixed acquisitions; pick one series",
-                    slices[i].file.display(),
-                    slices[i + 1].file.display()
-                ),
-            ));
-        }
-        // Gantry tilt: consecutive positions move in-plane as well as along the normal.
-        let tilt = slices
-            .windows(2)
-            .map(|w| {
-                let d = sub(w[1].position, w[0].position);
-                let along = dot(d, normal);
-                let inplane = (dot(d, d) - along * along).max(0.0).sqrt();
-                inplane.atan2(along).to_degrees()
-            })
-            .fold(0.0f64, f64::max);
-        if tilt > 0.05 {
-            return Err(VolumeError::invalid(
-                path,
-                format!(
-                    "gantry tilt of {tilt:.1}° (slice positions are not stacked along the slice normal); \
-                     raystream does not resample tilted series — resample it first (e.g. dcm2niix, or SimpleITK's ResampleImageFilter)"
-                ),
-            ));
-        }
-        let (lo, hi) = gaps.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &g| {
-            (lo.min(g), hi.max(g))
-        });
-        if hi - lo > 1e-3 + 1e-3 * hi {
-            return Err(VolumeError::invalid(
-                path,
-                format!(
-                    "uneven slice spacing ({lo:.3} to {hi:.3} mm; missing slices?); raystream does not resample such series"
-                ),
-            ));
-        }
-        spacing_k = dot(
-            sub(slices[slices.len() - 1].position, slices[0].position),
-            normal,
-        ) / (slices.len() - 1) as f64;
-    }
-    let spacing = [pixel_spacing[1], pixel_spacing[0], spacing_k];
-    let direction = std::array::from_fn(|r| [row_dir[r], col_dir[r], normal[r]]);
+    let stack = Stack::new(
+        path,
+        &positions,
+        normal,
+        pixel_spacing[0].min(pixel_spacing[1]),
+        header_spacing,
+        files_skipped,
+        // The folder is the message's subject: its files by name.
+        |k| {
+            let f = &slices[k].file;
+            f.file_name()
+                .unwrap_or(f.as_os_str())
+                .to_string_lossy()
+                .into_owned()
+        },
+    )?;
+    warnings.extend(stack.warnings.iter().cloned());
+    let dims = [cols as usize, rows as usize, stack.count];
+    let spacing = [pixel_spacing[1], pixel_spacing[0], stack.spacing];
+    let direction = std::array::from_fn(|r| [row_dir[r], col_dir[r], stack.axis[r]]);
     let origin = slices[0].position;
     check_geometry(path, dims, spacing, origin, &direction)?;
 
     let per_slice = dims[0] * dims[1];
-    let decoded: Vec<Result<Vec<f32>, VolumeError>> = slices
+    let decoded: Vec<Vec<f32>> = slices
         .par_iter_mut()
         .map(|s| decode_slice(s, per_slice))
-        .collect();
-    let mut data = Vec::with_capacity(per_slice * slices.len());
-    for d in decoded {
-        data.extend_from_slice(&d?);
-    }
+        .collect::<Result<_, _>>()?;
+    let data = stack.regular(&decoded);
     let ts_name = TransferSyntaxRegistry
         .get(&slices[0].ts_uid)
         .map(|t| t.name().to_string())
@@ -567,6 +535,213 @@ fn assemble(
         }),
         warnings,
     })
+}
+
+/// Steeper than this, positions do not describe a tilted stack (CT gantries tilt by ±30° at most).
+const MAX_TILT_DEG: f64 = 45.0;
+/// Below this a stack's slant is rounding, not tilt: the stack is taken along its normal.
+const MIN_TILT_DEG: f64 = 0.05;
+
+/// Where a series' slices lie along the line they are stacked on, and the regular grid they
+/// become.
+///
+/// A CT's slices are usually stacked along their normal, evenly: the grid is the slices
+/// themselves. Two kinds of acquisition break that, and both are read rather than refused (as
+/// 3D Slicer and dcm2niix read them), saying so in the volume's warnings:
+/// - **Gantry tilt**: the table moves along the patient's axis while the image plane is tilted
+///   about its row axis, so the positions step along the table, not along the normal. The
+///   grid's third axis then follows the table: a sheared grid, exact with no resampling (each
+///   voxel where its pixel was imaged), which the renderers handle as any affine grid.
+/// - **Uneven spacing** (e.g. 4 mm slices through the posterior fossa, then 7 mm ones above):
+///   the grid slices are interpolated, each linearly between the two acquired slices about it,
+///   pixel by pixel along the stacking line (no in-plane interpolation), at the smallest gap but
+///   no finer than a quarter of the median gap (a stray close pair must not blow the grid up).
+///
+/// An uneven series with an unreadable file in its folder is refused: the gap is most likely
+/// that file. An isolated gap that is a whole multiple of the spacing about it is named in the
+/// warning as possibly missing slices.
+pub(crate) struct Stack {
+    /// Unit LPS direction of the stacking line: the grid's third axis.
+    pub(crate) axis: [f64; 3],
+    /// Each acquired slice's distance from the first along `axis`, mm, increasing.
+    pub(crate) at: Vec<f64>,
+    /// Slices of the regular grid, and their spacing along `axis`, mm.
+    pub(crate) count: usize,
+    pub(crate) spacing: f64,
+    /// Whether the grid's slices are interpolated (uneven spacing) rather than the acquired ones.
+    pub(crate) resampled: bool,
+    pub(crate) warnings: Vec<String>,
+}
+
+impl Stack {
+    /// `positions`: each slice's ImagePositionPatient, sorted along the unit `normal`; `pixel`:
+    /// the smaller pixel spacing (mm), the scale of how far off the line a slice may lie;
+    /// `single`: the spacing of a one-slice series (from its header); `name(k)`: the k-th
+    /// slice's file, for messages.
+    pub(crate) fn new(
+        path: &Path,
+        positions: &[[f64; 3]],
+        normal: [f64; 3],
+        pixel: f64,
+        single: f64,
+        files_skipped: bool,
+        name: impl Fn(usize) -> String,
+    ) -> Result<Stack, VolumeError> {
+        let n = positions.len();
+        let mut stack = Stack {
+            axis: normal,
+            at: vec![0.0],
+            count: 1,
+            spacing: single,
+            resampled: false,
+            warnings: Vec::new(),
+        };
+        if n < 2 {
+            return Ok(stack);
+        }
+        let from_first = |p: [f64; 3], axis: [f64; 3]| dot(sub(p, positions[0]), axis);
+        let along_normal: Vec<f64> = positions.iter().map(|p| from_first(*p, normal)).collect();
+        if let Some(i) = along_normal.windows(2).position(|w| w[1] - w[0] < 1e-3) {
+            return Err(VolumeError::invalid(
+                path,
+                format!(
+                    "two slices at the same position ({} and {}): duplicate or mixed acquisitions; pick one series",
+                    name(i),
+                    name(i + 1)
+                ),
+            ));
+        }
+        // The line from the first slice to the last: the table's path.
+        let span = sub(positions[n - 1], positions[0]);
+        let line = span.map(|v| v / dot(span, span).sqrt());
+        let tilt = dot(line, normal).clamp(-1.0, 1.0).acos().to_degrees();
+        if tilt > MAX_TILT_DEG {
+            return Err(VolumeError::invalid(
+                path,
+                format!(
+                    "the slice positions run at {tilt:.1}° to the slice normal: not a stack of slices (mixed acquisitions?)"
+                ),
+            ));
+        }
+        let (worst, off) = positions
+            .iter()
+            .map(|p| {
+                let d = sub(*p, positions[0]);
+                let a = dot(d, line);
+                (dot(d, d) - a * a).max(0.0).sqrt()
+            })
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .expect("two slices or more");
+        if off > (0.1 * pixel).max(1e-3) {
+            return Err(VolumeError::invalid(
+                path,
+                format!(
+                    "the slice positions do not lie on one line ({} is {off:.3} mm off the line from the first slice to the last): mixed acquisitions?",
+                    name(worst)
+                ),
+            ));
+        }
+        if tilt > MIN_TILT_DEG {
+            stack.axis = line;
+            stack.at = positions.iter().map(|p| from_first(*p, line)).collect();
+            stack.warnings.push(format!(
+                "gantry tilt of {tilt:.1}°: the slices were stacked along the table, not their normal; \
+                 the grid's third axis follows the table (a sheared grid: each voxel where its pixel was imaged)"
+            ));
+        } else {
+            stack.at = along_normal;
+        }
+        let at = &stack.at;
+        let gaps: Vec<f64> = at.windows(2).map(|w| w[1] - w[0]).collect();
+        let (lo, hi) = gaps.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &g| {
+            (lo.min(g), hi.max(g))
+        });
+        let last = at[n - 1];
+        if hi - lo <= 1e-3 + 1e-3 * hi {
+            stack.count = n;
+            stack.spacing = last / (n - 1) as f64;
+            return Ok(stack);
+        }
+        if files_skipped {
+            return Err(VolumeError::invalid(
+                path,
+                format!("uneven slice spacing ({lo:.3} to {hi:.3} mm): missing slices?"),
+            ));
+        }
+        let mut sorted = gaps.clone();
+        sorted.sort_by(f64::total_cmp);
+        let step = lo.max(sorted[sorted.len() / 2] / 4.0);
+        stack.count = (last / step - 1e-9).ceil() as usize + 1;
+        stack.spacing = last / (stack.count - 1) as f64;
+        stack.resampled = true;
+        // The first of the widest gaps (to rounding).
+        let widest = gaps
+            .iter()
+            .position(|&g| g >= hi - 1e-3)
+            .expect("one gap or more");
+        let missing = (0..gaps.len())
+            .find_map(|k| {
+                let around: Vec<f64> = [k.checked_sub(1), Some(k + 1)]
+                    .into_iter()
+                    .flatten()
+                    .filter_map(|i| gaps.get(i).copied())
+                    .collect();
+                let g = *around.first()?;
+                let m = gaps[k] / g;
+                let whole = m.round();
+                (around.iter().all(|a| (a - g).abs() <= 0.01 * g)
+                    && whole >= 2.0
+                    && (m - whole).abs() <= 0.02 * whole)
+                    .then(|| {
+                        format!(
+                            "; the gap between {} and {} is {whole}× the spacing about it: {} missing slice{}?",
+                            name(k),
+                            name(k + 1),
+                            whole - 1.0,
+                            if whole > 2.0 { "s" } else { "" }
+                        )
+                    })
+            })
+            .unwrap_or_default();
+        stack.warnings.push(format!(
+            "uneven slice spacing, {lo:.2} to {hi:.2} mm (the widest between {} and {}){missing}; \
+             resampled to {} slices {:.3} mm apart, each interpolated linearly between the two acquired slices about it",
+            name(widest),
+            name(widest + 1),
+            stack.count,
+            stack.spacing
+        ));
+        Ok(stack)
+    }
+
+    /// The grid's values from the acquired slices' (`slices[k]` at `at[k]`, all the same
+    /// length): the slices themselves, or interpolated onto the regular spacing.
+    pub(crate) fn regular(&self, slices: &[Vec<f32>]) -> Vec<f32> {
+        if !self.resampled {
+            return slices.concat();
+        }
+        let per = slices[0].len();
+        let n = slices.len();
+        let mut data = vec![0f32; per * self.count];
+        data.par_chunks_mut(per).enumerate().for_each(|(k, out)| {
+            let t = k as f64 * self.spacing;
+            let a = (self.at.partition_point(|&x| x <= t).max(1) - 1).min(n - 2);
+            let w = ((t - self.at[a]) / (self.at[a + 1] - self.at[a])).clamp(0.0, 1.0);
+            let (lo, hi) = (&slices[a], &slices[a + 1]);
+            if w <= 1e-9 {
+                out.copy_from_slice(lo);
+            } else if w >= 1.0 - 1e-9 {
+                out.copy_from_slice(hi);
+            } else {
+                let w = w as f32;
+                for ((o, &l), &h) in out.iter_mut().zip(lo).zip(hi) {
+                    *o = l + (h - l) * w;
+                }
+            }
+        });
+        data
+    }
 }
 
 /// Decodes one slice to modality values (RescaleSlope/Intercept applied: HU for CT).

@@ -251,15 +251,191 @@ fn load_ts(ts: &str) -> Result<Volume, VolumeError> {
     load_volume(&file, None)
 }
 
+/// The GE head CT (../shared: gantry tilted 18.5°, 4 mm slices through the posterior fossa
+/// then 7 mm ones, 28 files) against its own files read one by one: the grid's third axis is
+/// the table's (z), each acquired slice lies in the grid where its file puts it, every grid
+/// slice is the linear interpolation of the two acquired slices about it, and every voxel is
+/// where its pixel was imaged.
 #[test]
-fn gantry_tilt_is_refused_with_its_angle() {
-    let e = load_volume(&shared("dicom/head_ct_gantry_tilt_ge"), None)
-        .unwrap_err()
-        .to_string();
+fn a_tilted_unevenly_spaced_series_is_sheared_and_interpolated() {
+    let dir = shared("dicom/head_ct_gantry_tilt_ge");
+    let v = load_volume(&dir, None).unwrap();
+    let w = v.warnings.join("\n");
     assert!(
-        e.contains("head_ct_gantry_tilt_ge") && e.contains("gantry tilt of 18.5°"),
+        w.contains("gantry tilt of 18.5°")
+            && w.contains("uneven slice spacing, 1.14 to 7.38 mm")
+            && w.contains("resampled to"),
+        "{w}"
+    );
+    let mut files: Vec<Volume> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| load_volume(&e.unwrap().path(), None).unwrap())
+        .collect();
+    files.sort_by(|a, b| a.origin[2].total_cmp(&b.origin[2]));
+    assert_eq!(files.len(), 28);
+    let (c, s) = (18.5f64.to_radians().cos(), 18.5f64.to_radians().sin());
+    let col = |m: &[[f64; 3]; 3], a: usize| DVec3::new(m[0][a], m[1][a], m[2][a]);
+    // Rows along x, columns tilted (ImageOrientationPatient), the third axis along the table.
+    assert!((col(&v.direction, 0) - DVec3::X).length() < 1e-6);
+    assert!((col(&v.direction, 1) - col(&files[0].direction, 1)).length() < 1e-9);
+    assert!((col(&v.direction, 1) - DVec3::new(0.0, c, -s)).length() < 1e-3);
+    assert!((col(&v.direction, 2) - DVec3::Z).length() < 1e-9);
+    assert_eq!(v.origin, files[0].origin);
+    assert_eq!(&v.spacing[..2], &files[0].spacing[..2]);
+    assert_eq!(&v.dims[..2], &files[0].dims[..2]);
+    // Acquired slice k sits at height t[k] along the table; the grid spans first to last at
+    // a spacing no coarser than the smallest gap.
+    let t: Vec<f64> = files
+        .iter()
+        .map(|f| f.origin[2] - files[0].origin[2])
+        .collect();
+    let h = v.spacing[2];
+    assert!((h * (v.dims[2] - 1) as f64 - t[27]).abs() < 1e-6);
+    let smallest = t
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .fold(f64::INFINITY, f64::min);
+    assert!(h <= smallest && h > 0.9 * smallest, "{h} vs {smallest}");
+    for (f, tk) in files.iter().zip(&t) {
+        let idx = v.world_to_index(DVec3::from(f.origin));
+        assert!(
+            (idx - DVec3::new(0.0, 0.0, tk / h)).length() < 1e-6,
+            "{idx}"
+        );
+    }
+    let per = v.dims[0] * v.dims[1];
+    let last = v.dims[2] - 1;
+    for k in [0, 1, 7, 40, 55, 56, 90, last - 1, last] {
+        let at = k as f64 * h;
+        let a = t.iter().rposition(|&x| x <= at + 1e-9).unwrap().min(26);
+        let wgt = ((at - t[a]) / (t[a + 1] - t[a])).clamp(0.0, 1.0);
+        let (lo, hi) = (&files[a], &files[a + 1]);
+        let grid = &v.data[k * per..][..per];
+        for (p, g) in grid.iter().enumerate() {
+            let want = lo.data[p] as f64 + (hi.data[p] as f64 - lo.data[p] as f64) * wgt;
+            assert!(
+                (*g as f64 - want).abs() < 1e-3,
+                "slice {k}, pixel {p}: {g} vs {want}"
+            );
+        }
+        // Each voxel lies between its two pixels, on the line the table moved them along.
+        for (i, j) in [(0, 0), (511, 0), (0, 511), (511, 511), (200, 300)] {
+            let ij = |z: f64| DVec3::new(i as f64, j as f64, z);
+            let want = lo.index_to_world(ij(0.0))
+                + (hi.index_to_world(ij(0.0)) - lo.index_to_world(ij(0.0))) * wgt;
+            assert!(
+                (v.index_to_world(ij(k as f64)) - want).length() < 1e-6,
+                "slice {k}, ({i}, {j})"
+            );
+        }
+    }
+}
+
+/// A stack's geometry from synthetic positions: even stacks stay as they are, a tilted one
+/// follows its table, an uneven one is resampled (missing slices named), and positions that
+/// are no stack are refused.
+#[test]
+fn stacks_of_slices() {
+    let name = |k: usize| format!("s{k}.dcm");
+    let z = [0.0, 0.0, 1.0];
+    let at = |gaps: &[f64]| -> Vec<[f64; 3]> {
+        let mut p = vec![[10.0, -20.0, 30.0]];
+        for g in gaps {
+            let l = *p.last().unwrap();
+            p.push([l[0], l[1], l[2] + g]);
+        }
+        p
+    };
+    let stack = |p: &[[f64; 3]], normal: [f64; 3], skipped: bool| {
+        dicom::Stack::new(Path::new("ser"), p, normal, 0.5, 3.0, skipped, name)
+    };
+    // Even, along the normal: the slices themselves.
+    let s = stack(&at(&[2.5; 6]), z, false).unwrap();
+    assert_eq!((s.count, s.resampled, s.axis), (7, false, z));
+    assert!((s.spacing - 2.5).abs() < 1e-12 && s.warnings.is_empty());
+    // One slice: the header's spacing.
+    let s = stack(&at(&[]), z, false).unwrap();
+    assert_eq!((s.count, s.spacing), (1, 3.0));
+    // Tilted 18.5° about x, even steps of 4.22 mm along the table (z).
+    let (c, sn) = (18.5f64.to_radians().cos(), 18.5f64.to_radians().sin());
+    let tilted = [0.0, sn, c];
+    let s = stack(&at(&[4.22; 9]), tilted, false).unwrap();
+    assert_eq!((s.count, s.resampled), (10, false));
+    assert!((DVec3::from(s.axis) - DVec3::Z).length() < 1e-12);
+    assert!((s.spacing - 4.22).abs() < 1e-9);
+    assert!(
+        s.warnings[0].contains("gantry tilt of 18.5°"),
+        "{:?}",
+        s.warnings
+    );
+    // Uneven: resampled at the smallest gap; a field linear along the stack stays linear.
+    let p = at(&[2.0, 2.0, 2.0, 3.0, 5.0, 5.0]);
+    let s = stack(&p, z, false).unwrap();
+    assert!(s.resampled && s.count == 11 && (s.spacing - 1.9).abs() < 1e-12);
+    assert!(
+        s.warnings[0].contains("2.00 to 5.00 mm (the widest between s4.dcm and s5.dcm)")
+            && s.warnings[0].contains("resampled to 11 slices 1.900 mm apart")
+            && !s.warnings[0].contains("missing"),
+        "{:?}",
+        s.warnings
+    );
+    let slices: Vec<Vec<f32>> =
+        s.at.iter()
+            .map(|t| vec![*t as f32 * 3.0 - 7.0, 1.5])
+            .collect();
+    let grid = s.regular(&slices);
+    for k in 0..s.count {
+        let want = (k as f64 * s.spacing * 3.0 - 7.0) as f32;
+        assert!(
+            (grid[2 * k] - want).abs() < 1e-4 && grid[2 * k + 1] == 1.5,
+            "{k}"
+        );
+    }
+    // An isolated gap of twice the spacing about it: a missing slice, named.
+    let s = stack(&at(&[2.0, 2.0, 4.0, 2.0, 2.0]), z, false).unwrap();
+    assert!(
+        s.warnings[0].contains(
+            "the gap between s2.dcm and s3.dcm is 2× the spacing about it: 1 missing slice?"
+        ),
+        "{:?}",
+        s.warnings
+    );
+    // The same with an unreadable file in the folder: refused (the file is the gap).
+    let e = stack(&at(&[2.0, 2.0, 4.0, 2.0, 2.0]), z, true)
+        .err()
+        .unwrap();
+    assert!(
+        e.to_string()
+            .contains("uneven slice spacing (2.000 to 4.000 mm)"),
         "{e}"
     );
+    // A close pair among wide gaps does not blow the grid up: no finer than a quarter of the
+    // median gap.
+    let s = stack(&at(&[8.0, 8.0, 0.1, 8.0, 8.0]), z, false).unwrap();
+    assert!(
+        (s.spacing - 32.1 / 17.0).abs() < 1e-12 && s.count == 18,
+        "{} {}",
+        s.spacing,
+        s.count
+    );
+    // Not a stack: a slice off the line, two at one place, positions within the plane.
+    let mut p = at(&[2.0; 4]);
+    p[2][0] += 0.2;
+    let e = stack(&p, z, false).err().unwrap().to_string();
+    assert!(e.contains("s2.dcm is 0.200 mm off the line"), "{e}");
+    let e = stack(&at(&[2.0, 0.0, 2.0]), z, false)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("two slices at the same position (s1.dcm and s2.dcm)"),
+        "{e}"
+    );
+    let e = stack(&at(&[2.0; 3]), [0.0, 0.8, 0.6], false)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("53.1° to the slice normal"), "{e}");
 }
 
 #[test]
