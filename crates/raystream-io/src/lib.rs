@@ -79,6 +79,26 @@ pub fn is_mesh_path(path: &Path) -> bool {
 
 /// Reads a mesh file, choosing the reader by extension.
 pub fn load_mesh(path: &Path) -> Result<TriMesh, MeshError> {
+    let (format, bytes) = read_mesh_file(path)?;
+    parse_mesh(&bytes, format, path)
+}
+
+/// Reads a mesh file and, for an OBJ, the materials of the material libraries it names
+/// (`mtllib`, looked up beside the file) and which triangle has which (`usemtl`). Other
+/// formats carry no materials. A library that is missing or unreadable is a warning, not an
+/// error: the geometry is still the file's.
+pub fn load_mesh_with_materials(path: &Path) -> Result<(TriMesh, MeshMaterials), MeshError> {
+    let (format, bytes) = read_mesh_file(path)?;
+    let bytes = gunzip(&bytes, path)?;
+    let (mesh, materials) = match format {
+        MeshFormat::Obj => parse_obj(&bytes, path, path.parent())?,
+        _ => (parse_mesh(&bytes, format, path)?, MeshMaterials::default()),
+    };
+    mesh.check(path)?;
+    Ok((mesh, materials))
+}
+
+fn read_mesh_file(path: &Path) -> Result<(MeshFormat, Vec<u8>), MeshError> {
     let format = MeshFormat::from_path(path).ok_or_else(|| {
         MeshError::invalid(
             path,
@@ -89,33 +109,72 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh, MeshError> {
         path: path.to_path_buf(),
         source,
     })?;
-    parse_mesh(&bytes, format, path)
+    Ok((format, bytes))
+}
+
+/// A material of an OBJ's material library (`.mtl`): the statements raystream's Phong
+/// materials take from it, as the file gives them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MtlMaterial {
+    pub name: String,
+    /// `Kd`, `Ks`, `Ns`.
+    pub diffuse: Option<[f32; 3]>,
+    pub specular: Option<[f32; 3]>,
+    pub shininess: Option<f32>,
+    /// `d`, or 1 − `Tr`: 1 is opaque.
+    pub dissolve: Option<f32>,
+    /// `Ni`, the index of refraction.
+    pub ior: Option<f32>,
+    /// `illum`, the illumination model: 3, 5 and 8 reflect as mirrors, 4, 6, 7 and 9 are
+    /// transparent.
+    pub illum: Option<u8>,
+    /// `map_Kd`: a texture, which raystream does not apply (its `Kd` stands in).
+    pub texture: Option<String>,
+}
+
+/// The materials a mesh file gives its triangles (an OBJ's `mtllib` and `usemtl`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeshMaterials {
+    pub materials: Vec<MtlMaterial>,
+    /// Per triangle, its material's index in `materials`, `None` where the file names none (or
+    /// one its libraries lack); empty when the file uses no material.
+    pub material_of: Vec<Option<u32>>,
+    /// What a user should know: a library missing or unreadable, a texture not applied.
+    pub warnings: Vec<String>,
 }
 
 /// Parses mesh bytes of a known format; `path` is only used in error messages and to notice
-/// gzip compression (a `.gz` name or the gzip magic number).
+/// gzip compression (a `.gz` name or the gzip magic number). Materials are not read.
 pub fn parse_mesh(bytes: &[u8], format: MeshFormat, path: &Path) -> Result<TriMesh, MeshError> {
-    let unzipped;
-    let bytes = if bytes.starts_with(&[0x1f, 0x8b]) {
-        let mut out = Vec::new();
-        flate2::read::MultiGzDecoder::new(bytes)
-            .read_to_end(&mut out)
-            .map_err(|e| MeshError::invalid(path, format!("not a valid gzip stream ({e})")))?;
-        unzipped = out;
-        &unzipped[..]
-    } else {
-        bytes
-    };
+    let bytes = gunzip(bytes, path)?;
     let mesh = match format {
-        MeshFormat::Obj => parse_obj(bytes, path)?,
-        MeshFormat::Ply => ply::parse(bytes, path)?,
-        MeshFormat::Stl => stl::parse(bytes, path)?,
+        MeshFormat::Obj => parse_obj(&bytes, path, None)?.0,
+        MeshFormat::Ply => ply::parse(&bytes, path)?,
+        MeshFormat::Stl => stl::parse(&bytes, path)?,
     };
     mesh.check(path)?;
     Ok(mesh)
 }
 
-fn parse_obj(bytes: &[u8], path: &Path) -> Result<TriMesh, MeshError> {
+/// `bytes`, unzipped if they start with the gzip magic number.
+fn gunzip<'a>(bytes: &'a [u8], path: &Path) -> Result<std::borrow::Cow<'a, [u8]>, MeshError> {
+    if !bytes.starts_with(&[0x1f, 0x8b]) {
+        return Ok(std::borrow::Cow::Borrowed(bytes));
+    }
+    let mut out = Vec::new();
+    flate2::read::MultiGzDecoder::new(bytes)
+        .read_to_end(&mut out)
+        .map_err(|e| MeshError::invalid(path, format!("not a valid gzip stream ({e})")))?;
+    Ok(std::borrow::Cow::Owned(out))
+}
+
+/// An OBJ's triangles and, with `libraries` (the folder its material libraries are looked up
+/// in), its materials.
+fn parse_obj(
+    bytes: &[u8],
+    path: &Path,
+    libraries: Option<&Path>,
+) -> Result<(TriMesh, MeshMaterials), MeshError> {
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
@@ -123,12 +182,41 @@ fn parse_obj(bytes: &[u8], path: &Path) -> Result<TriMesh, MeshError> {
         ignore_lines: true,
     };
     // Materials are not part of the geometry: a missing .mtl must not stop the mesh loading.
-    let (models, _) = tobj::load_obj_buf(&mut BufReader::new(Cursor::new(bytes)), &options, |_| {
-        Ok(Default::default())
-    })
-    .map_err(|e| MeshError::invalid(path, format!("cannot read OBJ: {e}")))?;
+    let warnings = std::cell::RefCell::new(Vec::new());
+    let (models, libs) =
+        tobj::load_obj_buf(&mut BufReader::new(Cursor::new(bytes)), &options, |lib| {
+            let Some(dir) = libraries else {
+                return Ok(Default::default());
+            };
+            let file = dir.join(lib);
+            let read = std::fs::read(&file)
+                .map_err(|e| e.to_string())
+                .and_then(|b| {
+                    tobj::load_mtl_buf(&mut BufReader::new(Cursor::new(b)))
+                        .map_err(|e| e.to_string())
+                });
+            read.map_err(|e| {
+                warnings.borrow_mut().push(format!(
+                    "material library {}: {e}; its materials are left out",
+                    file.display()
+                ));
+                tobj::LoadError::OpenFileFailed
+            })
+        })
+        .map_err(|e| MeshError::invalid(path, format!("cannot read OBJ: {e}")))?;
+    let mut warnings = warnings.into_inner();
+    let libs = libs.unwrap_or_default();
     let mut mesh = TriMesh::default();
+    let mut material_of = Vec::new();
     for model in models {
+        material_of.extend(std::iter::repeat_n(
+            model
+                .mesh
+                .material_id
+                .filter(|&m| m < libs.len())
+                .map(|m| m as u32),
+            model.mesh.indices.len() / 3,
+        ));
         let m = model.mesh;
         if m.positions.len() % 3 != 0 || m.indices.len() % 3 != 0 {
             return Err(MeshError::invalid(path, "OBJ data is not in triples"));
@@ -145,7 +233,40 @@ fn parse_obj(bytes: &[u8], path: &Path) -> Result<TriMesh, MeshError> {
                 .map(|t| [base + t[0], base + t[1], base + t[2]]),
         );
     }
-    Ok(mesh)
+    let materials: Vec<MtlMaterial> = libs
+        .into_iter()
+        .map(|m| MtlMaterial {
+            dissolve: m.dissolve.or_else(|| {
+                let tr = m.unknown_param.get("Tr")?.trim().parse::<f32>().ok()?;
+                Some(1.0 - tr)
+            }),
+            name: m.name,
+            diffuse: m.diffuse,
+            specular: m.specular,
+            shininess: m.shininess,
+            ior: m.optical_density,
+            illum: m.illumination_model,
+            texture: m.diffuse_texture,
+        })
+        .collect();
+    for m in materials.iter().filter(|m| m.texture.is_some()) {
+        warnings.push(format!(
+            "material '{}': textures are not applied ({}); its diffuse colour stands in",
+            m.name,
+            m.texture.as_deref().unwrap_or_default()
+        ));
+    }
+    if material_of.iter().all(Option::is_none) {
+        material_of.clear();
+    }
+    Ok((
+        mesh,
+        MeshMaterials {
+            materials,
+            material_of,
+            warnings,
+        },
+    ))
 }
 
 impl TriMesh {

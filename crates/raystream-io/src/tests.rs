@@ -234,3 +234,104 @@ fn written_meshes_read_back_identically() {
     assert!(e.contains("m.vtk"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A folder of its own under the system's temporary one, emptied.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("raystream-io-{name}-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+const TWO_LIBRARIES_OBJ: &str = "mtllib paint.mtl
+mtllib glass.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 2 0 0
+v 2 1 0
+usemtl red
+f 1 2 3 4
+usemtl glass
+f 2 5 6
+usemtl nowhere
+f 2 6 3
+usemtl red
+f 1 2 4
+";
+
+/// An OBJ's materials from two libraries, in file order: a quad's two fan triangles share
+/// their polygon's material, a material used again keeps its number, a name no library has
+/// gives none; `Tr` stands for 1 − `d`; textures are named in a warning.
+#[test]
+fn obj_materials_follow_the_faces() {
+    let dir = scratch("mtl");
+    std::fs::write(dir.join("scene.obj"), TWO_LIBRARIES_OBJ).unwrap();
+    std::fs::write(
+        dir.join("paint.mtl"),
+        "newmtl red\nKd 0.8 0.1 0.1\nKs 0.2 0.2 0.2\nNs 40\nillum 2\nmap_Kd red.png\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("glass.mtl"),
+        "newmtl glass\nKd 0 0 0\nTr 0.9\nNi 1.5\nillum 7\n",
+    )
+    .unwrap();
+    let (mesh, m) = load_mesh_with_materials(&dir.join("scene.obj")).unwrap();
+    assert_eq!(mesh.len(), 5);
+    let names: Vec<&str> = m.materials.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["red", "glass"]);
+    assert_eq!(m.material_of, [Some(0), Some(0), Some(1), None, Some(0)]);
+    assert_eq!(
+        m.materials[0],
+        MtlMaterial {
+            name: "red".into(),
+            diffuse: Some([0.8, 0.1, 0.1]),
+            specular: Some([0.2, 0.2, 0.2]),
+            shininess: Some(40.0),
+            illum: Some(2),
+            texture: Some("red.png".into()),
+            ..Default::default()
+        }
+    );
+    let glass = &m.materials[1];
+    assert!((glass.dissolve.unwrap() - 0.1).abs() < 1e-6 && glass.ior == Some(1.5));
+    assert_eq!(m.warnings.len(), 1);
+    assert!(m.warnings[0].contains("'red': textures are not applied (red.png)"));
+    // The triangles are the same as without materials (each material's faces keep their own
+    // copies of the vertices, as tobj splits the file there).
+    let plain = load_mesh(&dir.join("scene.obj")).unwrap();
+    assert!((0..5).all(|i| mesh.corners(i) == plain.corners(i)));
+
+    // A library that is not there: a warning naming it; the faces have no material.
+    std::fs::remove_file(dir.join("glass.mtl")).unwrap();
+    let (_, m) = load_mesh_with_materials(&dir.join("scene.obj")).unwrap();
+    assert_eq!(m.material_of, [Some(0), Some(0), None, None, Some(0)]);
+    assert!(
+        m.warnings
+            .iter()
+            .any(|w| w.contains("glass.mtl") && w.contains("left out")),
+        "{:?}",
+        m.warnings
+    );
+    // A malformed library likewise, and a gzipped OBJ finds its libraries beside it.
+    std::fs::write(dir.join("glass.mtl"), "newmtl glass\nKd one two three\n").unwrap();
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut gz, TWO_LIBRARIES_OBJ.as_bytes()).unwrap();
+    std::fs::write(dir.join("scene.obj.gz"), gz.finish().unwrap()).unwrap();
+    let (mesh_gz, m) = load_mesh_with_materials(&dir.join("scene.obj.gz")).unwrap();
+    assert!((0..5).all(|i| mesh_gz.corners(i) == plain.corners(i)));
+    assert_eq!(m.material_of, [Some(0), Some(0), None, None, Some(0)]);
+    assert!(
+        m.warnings.iter().any(|w| w.contains("glass.mtl")),
+        "{:?}",
+        m.warnings
+    );
+    // Other formats, and an OBJ without materials, have none.
+    let (_, m) = load_mesh_with_materials(&shared_mesh("spot.obj")).unwrap();
+    assert_eq!(m, MeshMaterials::default());
+    let (_, m) = load_mesh_with_materials(&shared_mesh("goblet_vase.stl")).unwrap();
+    assert_eq!(m, MeshMaterials::default());
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -47,7 +47,7 @@ pub use desc::{
     CameraDesc, Frame, GroundDesc, LightDesc, MaterialDesc, ObjectDesc, Scale, SceneDesc,
     VolumeDesc,
 };
-use raystream_io::{MeshError, TriMesh, Volume, VolumeError};
+use raystream_io::{MeshError, MeshMaterials, MtlMaterial, TriMesh, Volume, VolumeError};
 use raystream_math::{Aabb, DVec3, MAX_COORDINATE, Vec3, in_coordinate_range};
 use raystream_volume::{TfPreset, TransferFunction};
 
@@ -129,6 +129,8 @@ pub struct Scene {
     pub frame_projection: Projection,
     /// A CT volume rendered directly among the meshes.
     pub volume: Option<SceneVolume>,
+    /// What a user should know (a material library not found, a texture not applied).
+    pub warnings: Vec<String>,
 }
 
 /// The CT volume of a scene, ready to render: values in HU on its LPS grid, which the scene
@@ -270,6 +272,45 @@ fn camera_of(c: &CameraDesc) -> Result<Camera, String> {
     Ok(cam)
 }
 
+/// An OBJ's material (MTL) as a Phong material:
+/// - `Kd` is the diffuse colour, and the ambient one follows it as the default material's does;
+/// - `Ks` and `Ns` make the highlight, which the models without one (`illum` 0, 1) lack;
+/// - the mirror models (`illum` 3, 5, 8) reflect the mean of `Ks`;
+/// - 1 − `d` is the transparency, refracting by `Ni` (1, see-through, where the file gives none
+///   or less), with Fresnel's split where it bends light; the mirror gives way where the two
+///   would add up to more than 1.
+///
+/// The result passes the checks a scene file's materials pass (finite, non-negative colours,
+/// fractions in [0, 1]).
+fn mtl_material(m: &MtlMaterial) -> Result<Material, String> {
+    let d = Material::default();
+    let illum = m.illum.unwrap_or(2);
+    let diffuse = m.diffuse.unwrap_or(d.diffuse.into());
+    let specular = if illum < 2 {
+        [0.0; 3]
+    } else {
+        m.specular.unwrap_or(d.specular.into())
+    };
+    let transparency = 1.0 - m.dissolve.unwrap_or(1.0);
+    let mirror = if matches!(illum, 3 | 5 | 8) {
+        (specular.iter().sum::<f32>() / 3.0).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let ior = m.ior.filter(|n| *n > 1.0).unwrap_or(1.0);
+    MaterialDesc {
+        ambient: Some(diffuse.map(|c| c * d.ambient.x / d.diffuse.x)),
+        diffuse: Some(diffuse),
+        specular: Some(specular),
+        shininess: Some(m.shininess.unwrap_or(d.shininess)),
+        reflectivity: Some(mirror.min((1.0 - transparency).max(0.0))),
+        transparency: Some(transparency),
+        ior: Some(ior),
+        fresnel: Some(ior > 1.0),
+    }
+    .to_material()
+}
+
 impl Scene {
     /// Compiles a description; mesh paths are relative to `base_dir`, errors name `origin`.
     pub fn from_desc(
@@ -288,10 +329,12 @@ impl Scene {
             None => None,
         };
         Self::compile(desc, origin, volume, |i, o| match (&o.mesh, &o.shape) {
-            (Some(p), None) => Ok(raystream_io::load_mesh(&base_dir.join(p))?),
-            (None, Some(s)) => builtin_shape(s).ok_or_else(|| {
-                format!("object {i}: unknown shape '{s}' (sphere, cylinder, quad, spot)").into()
-            }),
+            (Some(p), None) => Ok(raystream_io::load_mesh_with_materials(&base_dir.join(p))?),
+            (None, Some(s)) => builtin_shape(s)
+                .map(|m| (m, MeshMaterials::default()))
+                .ok_or_else(|| {
+                    format!("object {i}: unknown shape '{s}' (sphere, cylinder, quad, spot)").into()
+                }),
             _ => Err(format!("object {i}: give exactly one of 'mesh' and 'shape'").into()),
         })
     }
@@ -302,7 +345,7 @@ impl Scene {
         desc: &SceneDesc,
         origin: &Path,
         volume: Option<SceneVolume>,
-        mut load: impl FnMut(usize, &ObjectDesc) -> Result<TriMesh, SceneError>,
+        mut load: impl FnMut(usize, &ObjectDesc) -> Result<(TriMesh, MeshMaterials), SceneError>,
     ) -> Result<Scene, SceneError> {
         let invalid = |problem: String| SceneError::Invalid {
             path: origin.to_path_buf(),
@@ -337,8 +380,9 @@ impl Scene {
         let mut normals = Vec::new();
         let mut material_of = Vec::new();
         let mut ray_offsets = Vec::new();
+        let mut warnings = Vec::new();
         for (i, o) in desc.objects.iter().enumerate() {
-            let source = load(i, o).map_err(|e| match e {
+            let (source, own_materials) = load(i, o).map_err(|e| match e {
                 SceneError::Invalid { problem, .. } => invalid(problem),
                 e => e,
             })?;
@@ -364,7 +408,32 @@ impl Scene {
                     "object {i}: a vertex lands at {p} after scale, rotate and translate, beyond ±{MAX_COORDINATE:e} (f32 triangle tests overflow that far out)"
                 )));
             }
-            material_of.extend(std::iter::repeat_n(lookup(&o.material)?, source.len()));
+            let chosen = lookup(&o.material)?;
+            if o.material.is_none() && !own_materials.material_of.is_empty() {
+                // The file's own materials (an OBJ's MTL), where the scene names none.
+                let first = materials.len() as u32;
+                for m in &own_materials.materials {
+                    materials.push(
+                        mtl_material(m).map_err(|e| {
+                            invalid(format!("object {i}: material '{}': {e}", m.name))
+                        })?,
+                    );
+                }
+                material_of.extend(
+                    own_materials
+                        .material_of
+                        .iter()
+                        .map(|m| m.map_or(chosen, |m| first + m)),
+                );
+            } else {
+                material_of.extend(std::iter::repeat_n(chosen, source.len()));
+            }
+            // A scene file's objects are named by their mesh; a mesh rendered alone is the
+            // message's subject already.
+            warnings.extend(own_materials.warnings.into_iter().map(|w| match &o.mesh {
+                Some(p) => format!("object {i} ({p}): {w}"),
+                None => w,
+            }));
             let own = Aabb::from_points(&mesh.positions[first_new..]);
             let offset = ray_offset(own.radius(), farthest(own));
             ray_offsets.resize(mesh.positions.len(), offset);
@@ -451,6 +520,7 @@ impl Scene {
         let ground_triangles = mesh.len() - object_triangles;
         let ground_vertices = mesh.positions.len() - object_vertices;
         Ok(Scene {
+            warnings,
             mesh,
             normals,
             ray_offsets,
@@ -485,9 +555,20 @@ impl Scene {
         Self::from_desc(&desc, path.parent().unwrap_or(Path::new(".")), path)
     }
 
+    /// A mesh file alone, as [`Scene::for_mesh`] stages it, in its own materials where it has
+    /// them (an OBJ's MTL), the default one elsewhere.
+    pub fn for_mesh_file(path: &Path) -> Result<Scene, SceneError> {
+        let (mesh, materials) = raystream_io::load_mesh_with_materials(path)?;
+        Self::staged(mesh, materials, path)
+    }
+
     /// A mesh alone: a key and a fill light, a slightly reflective ground plane under it, the
     /// camera framing it.
     pub fn for_mesh(mesh: TriMesh, name: &Path) -> Result<Scene, SceneError> {
+        Self::staged(mesh, MeshMaterials::default(), name)
+    }
+
+    fn staged(mesh: TriMesh, materials: MeshMaterials, name: &Path) -> Result<Scene, SceneError> {
         let b = mesh.bounds();
         let (c, r) = (b.center(), b.radius());
         let mut desc = SceneDesc::default();
@@ -515,9 +596,12 @@ impl Scene {
             },
         ];
         desc.objects.push(ObjectDesc::default());
-        let mut mesh = Some(mesh);
+        let (mut mesh, mut materials) = (Some(mesh), Some(materials));
         Self::compile(&desc, name, None, |_, _| {
-            Ok(mesh.take().expect("one object"))
+            Ok((
+                mesh.take().expect("one object"),
+                materials.take().unwrap_or_default(),
+            ))
         })
         .map_err(around_the_mesh)
     }
@@ -577,7 +661,7 @@ impl Scene {
         let mut mesh = Some(mesh);
         // A CT grid lies within ±1e6 mm, so its bones' lights and floor are far inside ±1e10.
         let mut scene = Self::compile(&desc, name, None, |_, _| {
-            Ok(mesh.take().expect("one object"))
+            Ok((mesh.take().expect("one object"), MeshMaterials::default()))
         })
         .expect("bones of a checked CT make a valid scene");
         // The volume's gradient normals shade an isosurface better than face-averaged ones.
@@ -727,6 +811,123 @@ impl From<String> for SceneError {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// MTL statements → Phong materials: the highlight only where the model has one, the
+    /// mirror only for the mirror models, `d` and `Ni` as glass, and bad values refused as a
+    /// scene file's are.
+    #[test]
+    fn mtl_materials_become_phong_materials() {
+        let m = |f: &dyn Fn(&mut MtlMaterial)| {
+            let mut m = MtlMaterial {
+                name: "m".into(),
+                diffuse: Some([0.7, 0.35, 0.0]),
+                specular: Some([0.9, 0.6, 0.3]),
+                shininess: Some(80.0),
+                ..Default::default()
+            };
+            f(&mut m);
+            mtl_material(&m)
+        };
+        let plain = m(&|_| {}).unwrap();
+        assert_eq!(plain.diffuse, Vec3::new(0.7, 0.35, 0.0));
+        assert!((plain.ambient - Vec3::new(0.08, 0.04, 0.0)).length() < 1e-6);
+        assert_eq!(
+            (plain.specular, plain.shininess),
+            (Vec3::new(0.9, 0.6, 0.3), 80.0)
+        );
+        assert_eq!((plain.reflectivity, plain.transparency), (0.0, 0.0));
+        let matte = m(&|m| m.illum = Some(1)).unwrap();
+        assert_eq!(matte.specular, Vec3::ZERO);
+        let mirror = m(&|m| m.illum = Some(3)).unwrap();
+        assert!((mirror.reflectivity - 0.6).abs() < 1e-6);
+        let glass = m(&|m| {
+            m.illum = Some(7);
+            m.dissolve = Some(0.1);
+            m.ior = Some(1.5);
+        })
+        .unwrap();
+        assert!((glass.transparency - 0.9).abs() < 1e-6 && glass.ior == 1.5 && glass.fresnel);
+        // Glass reflects by Fresnel's split alone; a mirror that is also transparent gives
+        // way to the transparency (0.6 + 0.9 > 1).
+        assert_eq!(glass.reflectivity, 0.0);
+        let odd = m(&|m| {
+            m.illum = Some(3);
+            m.dissolve = Some(0.1);
+        })
+        .unwrap();
+        assert!((odd.reflectivity - 0.1).abs() < 1e-6, "{odd:?}");
+        // Dissolve alone is see-through without bending.
+        let veil = m(&|m| m.dissolve = Some(0.5)).unwrap();
+        assert!(veil.transparency == 0.5 && veil.ior == 1.0 && !veil.fresnel);
+        let bad: [&dyn Fn(&mut MtlMaterial); 4] = [
+            &|m| m.diffuse = Some([f32::NAN, 0.0, 0.0]),
+            &|m| m.specular = Some([-1.0, 0.0, 0.0]),
+            &|m| m.dissolve = Some(1.5),
+            &|m| m.shininess = Some(f32::INFINITY),
+        ];
+        for bad in bad {
+            assert!(m(bad).is_err());
+        }
+    }
+
+    /// A scene's mesh object keeps its OBJ's materials unless the scene names one; a bad MTL
+    /// value is an error naming the object and the material.
+    #[test]
+    fn scene_objects_keep_their_obj_materials() {
+        let dir = std::env::temp_dir().join(format!("raystream-scene-mtl-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join("two.obj"),
+            "mtllib two.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 2 0 0\nusemtl red\nf 1 2 3\nusemtl blue\nf 2 4 3\n",
+        )
+        .unwrap();
+        std::fs::write(
+            dir.join("two.mtl"),
+            "newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 1\n",
+        )
+        .unwrap();
+        let scene = |text: &str| {
+            let desc: SceneDesc = toml::from_str(text).unwrap();
+            Scene::from_desc(&desc, &dir, Path::new("s.toml"))
+        };
+        let own =
+            scene("[[objects]]\nmesh = \"two.obj\"\n[[objects]]\nshape = \"quad\"\n").unwrap();
+        let colour = |s: &Scene, t: usize| s.materials[s.material_of[t] as usize].diffuse;
+        assert_eq!(colour(&own, 0), Vec3::X);
+        assert_eq!(colour(&own, 1), Vec3::Z);
+        assert_eq!(colour(&own, 2), Material::default().diffuse, "the quad");
+        assert!(own.warnings.is_empty());
+        let named = scene(
+            "[materials.grey]\ndiffuse = [0.5, 0.5, 0.5]\n[[objects]]\nmesh = \"two.obj\"\nmaterial = \"grey\"\n",
+        )
+        .unwrap();
+        assert_eq!(
+            (colour(&named, 0), colour(&named, 1)),
+            (Vec3::splat(0.5), Vec3::splat(0.5))
+        );
+        std::fs::write(
+            dir.join("two.mtl"),
+            "newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 -1\n",
+        )
+        .unwrap();
+        let e = scene("[[objects]]\nmesh = \"two.obj\"\n")
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.starts_with("s.toml: object 0: material 'blue': colours must be finite"),
+            "{e}"
+        );
+        std::fs::remove_file(dir.join("two.mtl")).unwrap();
+        let missing = scene("[[objects]]\nmesh = \"two.obj\"\n").unwrap();
+        assert!(
+            missing.warnings[0].starts_with("object 0 (two.obj): material library")
+                && missing.warnings[0].contains("two.mtl"),
+            "{:?}",
+            missing.warnings
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     fn compile(text: &str) -> Result<Scene, SceneError> {
         let desc: SceneDesc = toml::from_str(text).map_err(|e| e.to_string())?;

@@ -39,6 +39,26 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         return scene_info(a, input);
     }
     let mesh = load_mesh(input)?;
+    // An OBJ's materials (MTL): each with the triangles that use it.
+    let materials =
+        if raystream_io::MeshFormat::from_path(input) == Some(raystream_io::MeshFormat::Obj) {
+            raystream_io::load_mesh_with_materials(input)?.1
+        } else {
+            Default::default()
+        };
+    let used: Vec<(String, usize)> = materials
+        .materials
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let n = materials
+                .material_of
+                .iter()
+                .filter(|&&t| t == Some(i as u32))
+                .count();
+            (m.name.clone(), n)
+        })
+        .collect();
     let tree = a.tree.build(&mesh);
     let b = mesh.bounds();
     let s = &tree.stats;
@@ -51,6 +71,8 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             "degenerate_triangles": mesh.len() - s.triangles,
             "bounds": [b.min.to_array(), b.max.to_array()],
             "kdtree": tree_json(s),
+            "materials": used.iter().map(|(name, n)| json!({"name": name, "triangles": n})).collect::<Vec<_>>(),
+            "warnings": materials.warnings,
         });
         print_line(v);
     } else {
@@ -78,6 +100,12 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             s.references,
             s.build_ms
         );
+        for (name, n) in &used {
+            println!("  material   {name}: {n} triangles");
+        }
+        for w in &materials.warnings {
+            println!("  warning    {w}");
+        }
     }
     Ok(())
 }

@@ -18,8 +18,7 @@ use raystream_cpu::dvr::{DvrMode, DvrOptions, volume_camera_from};
 
 use crate::cli::{FrameFormat, RenderArgs};
 use crate::common::{
-    Backend, Picture, gpu_tracer, image_format, load_mesh, median as median_of, ms, open_device,
-    spinner,
+    Backend, Picture, gpu_tracer, image_format, median as median_of, ms, open_device, spinner,
 };
 use crate::dvr;
 use crate::iso::{Bones, bones, read_volume};
@@ -54,12 +53,21 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
         let scene = Scene::for_bones(mesh, &b.surface.normals, path);
         Ok((scene, Some(b)))
     };
-    match a.input.as_deref() {
+    let loaded = match a.input.as_deref() {
         None => volume_scene(Path::new(DEFAULT_CT_NAME), Some(DEFAULT_CT)),
         Some(p) if is_scene_file(a) => Ok((Scene::load(p)?, None)),
         Some(p) if raystream_io::is_volume_path(p) => volume_scene(p, None),
-        Some(p) => Ok((Scene::for_mesh(load_mesh(p)?, p)?, None)),
+        Some(p) => Ok((Scene::for_mesh_file(p)?, None)),
+    }?;
+    if !a.quiet {
+        for w in &loaded.0.warnings {
+            eprintln!(
+                "raystream: {}: {w}",
+                a.input.as_deref().unwrap_or(Path::new("")).display()
+            );
+        }
     }
+    Ok(loaded)
 }
 
 /// The view `--view` starts from (`default` without it), before `--orbit`; `patient`: the

@@ -732,6 +732,99 @@ fn gpu_volume_shadows_and_clipping_match_cpu_cli() {
     );
 }
 
+/// Four panels side by side in an OBJ with its MTL: red paint (a texture the renderer names and
+/// does not apply), a mirror, glass, blue paint. Returns the OBJ's path.
+fn mtl_panels(name: &str) -> std::path::PathBuf {
+    let dir = tmp(&format!("mtl-panels-{name}"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut obj = String::from("mtllib panels.mtl\n");
+    for (i, m) in ["red", "mirror", "glass", "blue"].iter().enumerate() {
+        let x = i as f32 * 1.1 - 2.2;
+        for (dx, y) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.5), (0.0, 1.5)] {
+            obj += &format!("v {} {y} {}\n", x + dx, 0.3 * i as f32);
+        }
+        obj += &format!(
+            "usemtl {m}\nf {} {} {} {}\n",
+            4 * i + 1,
+            4 * i + 2,
+            4 * i + 3,
+            4 * i + 4
+        );
+    }
+    std::fs::write(dir.join("panels.obj"), obj).unwrap();
+    std::fs::write(
+        dir.join("panels.mtl"),
+        "newmtl red\nKd 0.8 0.1 0.1\nKs 0.3 0.3 0.3\nNs 30\nillum 2\nmap_Kd red.png\n\
+         newmtl mirror\nKd 0.1 0.1 0.1\nKs 0.8 0.8 0.8\nillum 3\n\
+         newmtl glass\nKd 0 0 0\nd 0.2\nNi 1.5\nillum 7\n\
+         newmtl blue\nKd 0.1 0.2 0.9\nillum 1\n",
+    )
+    .unwrap();
+    dir.join("panels.obj")
+}
+
+/// `render MESH.obj` paints each face in its MTL material: red on the left, blue on the right,
+/// and the texture it does not apply is named.
+#[test]
+fn obj_materials_are_rendered() {
+    let out = tmp("mtl-panels.png");
+    let o = run(&[
+        "render",
+        mtl_panels("render").to_str().unwrap(),
+        "--size",
+        "96x48",
+        "--spp",
+        "1",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("material 'red': textures are not applied (red.png)"),
+        "{}",
+        stderr(&o)
+    );
+    let img = image::open(&out).unwrap().to_rgb8();
+    let count = |x0: u32, x1: u32, f: &dyn Fn(&image::Rgb<u8>) -> bool| {
+        (x0..x1)
+            .flat_map(|x| (0..48).map(move |y| (x, y)))
+            .filter(|&(x, y)| f(img.get_pixel(x, y)))
+            .count()
+    };
+    let red = |p: &image::Rgb<u8>| p[0] > 100 && p[0] as u32 > 2 * p[2] as u32;
+    let blue = |p: &image::Rgb<u8>| p[2] > 100 && p[2] as u32 > 2 * p[0] as u32;
+    let (left, right) = ((0, 40), (56, 96));
+    assert!(count(left.0, left.1, &red) > 100 && count(right.0, right.1, &red) == 0);
+    assert!(count(right.0, right.1, &blue) > 100 && count(left.0, left.1, &blue) == 0);
+    // `info` lists them, with their triangles.
+    let o = run(&["info", mtl_panels("info").to_str().unwrap(), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(
+        v["materials"],
+        serde_json::json!([
+            {"name": "red", "triangles": 2},
+            {"name": "mirror", "triangles": 2},
+            {"name": "glass", "triangles": 2},
+            {"name": "blue", "triangles": 2}
+        ])
+    );
+}
+
+#[test]
+fn gpu_matches_cpu_on_obj_materials() {
+    gpu_matches_cpu(
+        "mtl-panels",
+        &[
+            mtl_panels("gpu").to_str().unwrap(),
+            "--size",
+            "96x48",
+            "--spp",
+            "1",
+        ],
+        false,
+    );
+}
+
 /// A gantry-tilted head CT's sheared grid (18.5°, slices resampled to even spacing): the GPU
 /// marches it as the CPU does, seen from the side, where the shear shows.
 #[test]
