@@ -83,19 +83,65 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh, MeshError> {
     parse_mesh(&bytes, format, path)
 }
 
-/// Reads a mesh file and, for an OBJ, the materials of the material libraries it names
-/// (`mtllib`, looked up beside the file) and which triangle has which (`usemtl`). Other
-/// formats carry no materials. A library that is missing or unreadable is a warning, not an
-/// error: the geometry is still the file's.
-pub fn load_mesh_with_materials(path: &Path) -> Result<(TriMesh, MeshMaterials), MeshError> {
+/// Reads a mesh file with what it gives its surface besides the triangles: vertex normals (OBJ
+/// `vn`, PLY `nx ny nz`) and, for an OBJ, the materials of the material libraries it names
+/// (`mtllib`, looked up beside the file) and which triangle has which (`usemtl`). The
+/// triangles are [`load_mesh`]'s, in the same order; an OBJ's vertices are split where a
+/// position carries several normals or materials. A library that is missing or unreadable is a
+/// warning, not an error: the geometry is still the file's.
+pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), MeshError> {
     let (format, bytes) = read_mesh_file(path)?;
     let bytes = gunzip(&bytes, path)?;
-    let (mesh, materials) = match format {
+    let (mesh, mut shading, normals) = match format {
         MeshFormat::Obj => parse_obj(&bytes, path, path.parent())?,
-        _ => (parse_mesh(&bytes, format, path)?, MeshMaterials::default()),
+        MeshFormat::Ply => {
+            let (mesh, normals) = ply::parse(&bytes, path)?;
+            let normals = normals.into_iter().map(Some).collect();
+            (mesh, MeshShading::default(), normals)
+        }
+        MeshFormat::Stl => (
+            stl::parse(&bytes, path)?,
+            MeshShading::default(),
+            Vec::new(),
+        ),
     };
     mesh.check(path)?;
-    Ok((mesh, materials))
+    shading.normals = file_normals(&mesh, normals, &mut shading.warnings);
+    Ok((mesh, shading))
+}
+
+/// A file's vertex normals (`None`: the file gives that vertex none) as unit vectors, the
+/// face-averaged normal standing in for those missing, of zero length or not finite (these last
+/// with a warning); empty when the file gives none at all.
+fn file_normals(mesh: &TriMesh, given: Vec<Option<Vec3>>, warnings: &mut Vec<String>) -> Vec<Vec3> {
+    if given.iter().all(Option::is_none) {
+        return Vec::new();
+    }
+    let averaged = mesh.vertex_normals();
+    let mut bad = 0;
+    let normals = given
+        .iter()
+        .zip(&averaged)
+        .map(|(n, &avg)| match n {
+            None => avg,
+            Some(n) => {
+                let unit = n.normalize_or_zero();
+                if unit == Vec3::ZERO || !unit.is_finite() {
+                    bad += 1;
+                    avg
+                } else {
+                    unit
+                }
+            }
+        })
+        .collect();
+    if bad > 0 {
+        warnings.push(format!(
+            "{bad} vertex normal{} of zero length or not finite: the face-averaged normal stands in",
+            if bad == 1 { " is" } else { "s are" }
+        ));
+    }
+    normals
 }
 
 fn read_mesh_file(path: &Path) -> Result<(MeshFormat, Vec<u8>), MeshError> {
@@ -132,9 +178,14 @@ pub struct MtlMaterial {
     pub texture: Option<String>,
 }
 
-/// The materials a mesh file gives its triangles (an OBJ's `mtllib` and `usemtl`).
+/// What a mesh file gives its surface besides the triangles: vertex normals, and the materials
+/// of an OBJ's `mtllib` and `usemtl`.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct MeshMaterials {
+pub struct MeshShading {
+    /// Per vertex, the file's unit normal; empty when the file gives none. Where it gives some
+    /// vertices none, or one of zero length or not finite, the face-averaged normal
+    /// ([`TriMesh::vertex_normals`]) stands in (the latter with a warning).
+    pub normals: Vec<Vec3>,
     pub materials: Vec<MtlMaterial>,
     /// Per triangle, its material's index in `materials`, `None` where the file names none (or
     /// one its libraries lack); empty when the file uses no material.
@@ -149,7 +200,7 @@ pub fn parse_mesh(bytes: &[u8], format: MeshFormat, path: &Path) -> Result<TriMe
     let bytes = gunzip(bytes, path)?;
     let mesh = match format {
         MeshFormat::Obj => parse_obj(&bytes, path, None)?.0,
-        MeshFormat::Ply => ply::parse(&bytes, path)?,
+        MeshFormat::Ply => ply::parse(&bytes, path)?.0,
         MeshFormat::Stl => stl::parse(&bytes, path)?,
     };
     mesh.check(path)?;
@@ -168,13 +219,13 @@ fn gunzip<'a>(bytes: &'a [u8], path: &Path) -> Result<std::borrow::Cow<'a, [u8]>
     Ok(std::borrow::Cow::Owned(out))
 }
 
-/// An OBJ's triangles and, with `libraries` (the folder its material libraries are looked up
-/// in), its materials.
+/// An OBJ's triangles, its materials with `libraries` (the folder its material libraries are
+/// looked up in), and per vertex the normal the file gives it (if any).
 fn parse_obj(
     bytes: &[u8],
     path: &Path,
     libraries: Option<&Path>,
-) -> Result<(TriMesh, MeshMaterials), MeshError> {
+) -> Result<(TriMesh, MeshShading, Vec<Option<Vec3>>), MeshError> {
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
@@ -206,8 +257,17 @@ fn parse_obj(
         .map_err(|e| MeshError::invalid(path, format!("cannot read OBJ: {e}")))?;
     let mut warnings = warnings.into_inner();
     let libs = libs.unwrap_or_default();
+    // tobj makes up a normal for a corner that names none (its neighbour's): the file's normals
+    // count only where every corner names one.
+    let normals_given = obj_corners_all_have_normals(bytes);
+    if normals_given == Some(false) {
+        warnings.push(
+            "some faces name no normals: the file's normals are left out, and the face-averaged ones used".into(),
+        );
+    }
     let mut mesh = TriMesh::default();
     let mut material_of = Vec::new();
+    let mut normals: Vec<Option<Vec3>> = Vec::new();
     for model in models {
         material_of.extend(std::iter::repeat_n(
             model
@@ -218,20 +278,53 @@ fn parse_obj(
             model.mesh.indices.len() / 3,
         ));
         let m = model.mesh;
-        if m.positions.len() % 3 != 0 || m.indices.len() % 3 != 0 {
+        if m.positions.len() % 3 != 0 || m.indices.len() % 3 != 0 || m.normals.len() % 3 != 0 {
             return Err(MeshError::invalid(path, "OBJ data is not in triples"));
         }
         let base = mesh.positions.len() as u32;
-        mesh.positions.extend(
+        let position = |i: u32| {
+            let i = i as usize * 3;
             m.positions
-                .chunks_exact(3)
-                .map(|p| Vec3::new(p[0], p[1], p[2])),
-        );
-        mesh.triangles.extend(
-            m.indices
-                .chunks_exact(3)
-                .map(|t| [base + t[0], base + t[1], base + t[2]]),
-        );
+                .get(i..i + 3)
+                .map(|p| Vec3::new(p[0], p[1], p[2]))
+        };
+        if normals_given == Some(true) && m.normal_indices.len() == m.indices.len() {
+            // A vertex per (position, normal) pair of this model, in the order corners use them.
+            let mut vertex: std::collections::HashMap<(u32, u32), u32> = Default::default();
+            let mut corners = Vec::with_capacity(m.indices.len());
+            for (&pi, &ni) in m.indices.iter().zip(&m.normal_indices) {
+                let next = mesh.positions.len() as u32;
+                let v = *vertex.entry((pi, ni)).or_insert(next);
+                if v == next {
+                    let n = ni as usize * 3;
+                    let (Some(p), Some(n)) = (position(pi), m.normals.get(n..n + 3)) else {
+                        return Err(MeshError::invalid(
+                            path,
+                            format!(
+                                "a face refers to position {pi} or normal {ni}, which the file lacks"
+                            ),
+                        ));
+                    };
+                    mesh.positions.push(p);
+                    normals.push(Some(Vec3::new(n[0], n[1], n[2])));
+                }
+                corners.push(v);
+            }
+            mesh.triangles
+                .extend(corners.chunks_exact(3).map(|t| [t[0], t[1], t[2]]));
+        } else {
+            mesh.positions.extend(
+                m.positions
+                    .chunks_exact(3)
+                    .map(|p| Vec3::new(p[0], p[1], p[2])),
+            );
+            normals.resize(mesh.positions.len(), None);
+            mesh.triangles.extend(
+                m.indices
+                    .chunks_exact(3)
+                    .map(|t| [base + t[0], base + t[1], base + t[2]]),
+            );
+        }
     }
     let materials: Vec<MtlMaterial> = libs
         .into_iter()
@@ -261,12 +354,37 @@ fn parse_obj(
     }
     Ok((
         mesh,
-        MeshMaterials {
+        MeshShading {
+            normals: Vec::new(),
             materials,
             material_of,
             warnings,
         },
+        normals,
     ))
+}
+
+/// Whether every corner of every face of an OBJ names a normal (`v//vn`, `v/vt/vn`); `None`
+/// when the file has no normals (`vn`) at all.
+fn obj_corners_all_have_normals(bytes: &[u8]) -> Option<bool> {
+    let mut any_normal = false;
+    let mut all_corners = true;
+    for line in bytes.split(|&b| b == b'\n') {
+        let line = line.trim_ascii_start();
+        if !line.starts_with(b"f") && !line.starts_with(b"vn") {
+            continue;
+        }
+        let line = String::from_utf8_lossy(line);
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("vn") => any_normal = true,
+            Some("f") => {
+                all_corners &= words.all(|c| c.split('/').nth(2).is_some_and(|n| !n.is_empty()))
+            }
+            _ => {}
+        }
+    }
+    any_normal.then_some(all_corners)
 }
 
 impl TriMesh {

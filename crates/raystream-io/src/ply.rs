@@ -8,8 +8,9 @@ use ply_rs_bw::ply::{Property, PropertyAccess, PropertyAccessResult};
 
 use crate::{MeshError, TriMesh, Vec3};
 
+/// A vertex row: x, y, z, then nx, ny, nz where the file has them.
 #[derive(Default)]
-struct Vertex([f64; 3]);
+struct Vertex([f64; 6]);
 
 #[derive(Default)]
 struct Face(Vec<i64>);
@@ -37,6 +38,9 @@ impl PropertyAccess for Vertex {
             "x" => 0,
             "y" => 1,
             "z" => 2,
+            "nx" => 3,
+            "ny" => 4,
+            "nz" => 5,
             _ => return PropertyAccessResult::Ignored,
         };
         match scalar(&p) {
@@ -70,13 +74,16 @@ impl PropertyAccess for Face {
     }
 }
 
-pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<TriMesh, MeshError> {
+/// The mesh, and its vertex normals where the vertex element has nx, ny and nz (else empty;
+/// not yet checked or normalised).
+pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<(TriMesh, Vec<Vec3>), MeshError> {
     let bad = |e: &dyn std::fmt::Display| MeshError::invalid(path, format!("cannot read PLY: {e}"));
     let mut reader = Reader::new(std::io::BufReader::new(bytes));
     let header = Parser::<Vertex>::new()
         .read_header(&mut reader)
         .map_err(|e| bad(&e))?;
     let mut mesh = TriMesh::default();
+    let mut normals = Vec::new();
     let mut saw_vertex = false;
     for (name, def) in &header.elements {
         match name.as_str() {
@@ -89,6 +96,13 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<TriMesh, MeshError> {
                     .iter()
                     .map(|v| Vec3::new(v.0[0] as f32, v.0[1] as f32, v.0[2] as f32))
                     .collect();
+                let has = |p: &str| def.properties.contains_key(p);
+                if has("nx") && has("ny") && has("nz") {
+                    normals = rows
+                        .iter()
+                        .map(|v| Vec3::new(v.0[3] as f32, v.0[4] as f32, v.0[5] as f32))
+                        .collect();
+                }
             }
             "face" => {
                 let rows = Parser::<Face>::new()
@@ -118,5 +132,5 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<TriMesh, MeshError> {
     if !saw_vertex {
         return Err(MeshError::invalid(path, "PLY has no vertex element"));
     }
-    Ok(mesh)
+    Ok((mesh, normals))
 }

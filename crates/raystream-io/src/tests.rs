@@ -278,7 +278,7 @@ fn obj_materials_follow_the_faces() {
         "newmtl glass\nKd 0 0 0\nTr 0.9\nNi 1.5\nillum 7\n",
     )
     .unwrap();
-    let (mesh, m) = load_mesh_with_materials(&dir.join("scene.obj")).unwrap();
+    let (mesh, m) = load_mesh_with_shading(&dir.join("scene.obj")).unwrap();
     assert_eq!(mesh.len(), 5);
     let names: Vec<&str> = m.materials.iter().map(|m| m.name.as_str()).collect();
     assert_eq!(names, ["red", "glass"]);
@@ -306,7 +306,7 @@ fn obj_materials_follow_the_faces() {
 
     // A library that is not there: a warning naming it; the faces have no material.
     std::fs::remove_file(dir.join("glass.mtl")).unwrap();
-    let (_, m) = load_mesh_with_materials(&dir.join("scene.obj")).unwrap();
+    let (_, m) = load_mesh_with_shading(&dir.join("scene.obj")).unwrap();
     assert_eq!(m.material_of, [Some(0), Some(0), None, None, Some(0)]);
     assert!(
         m.warnings
@@ -320,7 +320,7 @@ fn obj_materials_follow_the_faces() {
     let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
     std::io::Write::write_all(&mut gz, TWO_LIBRARIES_OBJ.as_bytes()).unwrap();
     std::fs::write(dir.join("scene.obj.gz"), gz.finish().unwrap()).unwrap();
-    let (mesh_gz, m) = load_mesh_with_materials(&dir.join("scene.obj.gz")).unwrap();
+    let (mesh_gz, m) = load_mesh_with_shading(&dir.join("scene.obj.gz")).unwrap();
     assert!((0..5).all(|i| mesh_gz.corners(i) == plain.corners(i)));
     assert_eq!(m.material_of, [Some(0), Some(0), None, None, Some(0)]);
     assert!(
@@ -329,9 +329,78 @@ fn obj_materials_follow_the_faces() {
         m.warnings
     );
     // Other formats, and an OBJ without materials, have none.
-    let (_, m) = load_mesh_with_materials(&shared_mesh("spot.obj")).unwrap();
-    assert_eq!(m, MeshMaterials::default());
-    let (_, m) = load_mesh_with_materials(&shared_mesh("goblet_vase.stl")).unwrap();
-    assert_eq!(m, MeshMaterials::default());
+    let (_, m) = load_mesh_with_shading(&shared_mesh("spot.obj")).unwrap();
+    assert_eq!(m, MeshShading::default());
+    let (_, m) = load_mesh_with_shading(&shared_mesh("goblet_vase.stl")).unwrap();
+    assert_eq!(m, MeshShading::default());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A cube with a normal per face (`vn`), as modelling tools write hard edges.
+const HARD_CUBE_OBJ: &str =
+    "v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1
+vn 0 0 -1\nvn 0 0 1\nvn -1 0 0\nvn 1 0 0\nvn 0 -1 0\nvn 0 2 0
+f 1//1 4//1 3//1 2//1\nf 5//2 6//2 7//2 8//2\nf 1//3 5//3 8//3 4//3
+f 2//4 3//4 7//4 6//4\nf 1//5 2//5 6//5 5//5\nf 4//6 8//6 7//6 3//6
+";
+
+/// Normals from the file: an OBJ's `vn` split its vertices where a position has several (a
+/// hard-edged cube: 24 vertices, each with its face's unit normal), a PLY's nx ny nz are read;
+/// normals of zero length stand in for the face average with a warning; the triangles are the
+/// same as without normals; files without normals give none.
+#[test]
+fn file_normals_are_kept() {
+    let dir = scratch("normals");
+    std::fs::write(dir.join("cube.obj"), HARD_CUBE_OBJ).unwrap();
+    let (mesh, s) = load_mesh_with_shading(&dir.join("cube.obj")).unwrap();
+    // The same faces without their normals: 8 shared vertices.
+    let bare: String = HARD_CUBE_OBJ
+        .lines()
+        .filter(|l| !l.starts_with("vn"))
+        .map(|l| l.replace("//1", "").replace("//2", "").replace("//3", ""))
+        .map(|l| l.replace("//4", "").replace("//5", "").replace("//6", "") + "\n")
+        .collect();
+    let plain = parse_str(&bare, MeshFormat::Obj).unwrap();
+    assert_eq!((plain.positions.len(), mesh.positions.len()), (8, 24));
+    assert_eq!(load_mesh(&dir.join("cube.obj")).unwrap(), mesh);
+    assert_eq!(s.normals.len(), 24);
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    for i in 0..mesh.len() {
+        assert_eq!(mesh.corners(i), plain.corners(i));
+        let [a, b, c] = mesh.corners(i);
+        let face = (b - a).cross(c - a).normalize();
+        for v in mesh.triangles[i] {
+            assert!(
+                (s.normals[v as usize] - face).length() < 1e-6,
+                "triangle {i}"
+            );
+        }
+    }
+    // One face naming no normals: the file's normals are left out (tobj would make some up).
+    let partial = HARD_CUBE_OBJ.replace("f 1//5 2//5 6//5 5//5", "f 1 2 6 5");
+    std::fs::write(dir.join("partial.obj"), partial).unwrap();
+    let (_, s) = load_mesh_with_shading(&dir.join("partial.obj")).unwrap();
+    assert!(s.normals.is_empty() && s.warnings[0].starts_with("some faces name no normals"));
+    // A PLY's normals, one of them zero: the face average stands in, with a warning.
+    let ply = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+               property float z\nproperty float nx\nproperty float ny\nproperty float nz\n\
+               element face 2\nproperty list uchar int vertex_indices\nend_header\n\
+               0 0 0 0 0 3\n1 0 0 0.6 0 0.8\n1 1 0 0 0 0\n0 1 0 0 0 1\n3 0 1 2\n3 0 2 3\n";
+    std::fs::write(dir.join("quad.ply"), ply).unwrap();
+    let (_, s) = load_mesh_with_shading(&dir.join("quad.ply")).unwrap();
+    assert_eq!(s.normals[0], Vec3::Z);
+    assert!((s.normals[1] - Vec3::new(0.6, 0.0, 0.8)).length() < 1e-6);
+    assert_eq!(s.normals[2], Vec3::Z, "averaged over its two faces");
+    assert_eq!(s.warnings.len(), 1);
+    assert!(
+        s.warnings[0].starts_with("1 vertex normal is of zero length"),
+        "{:?}",
+        s.warnings
+    );
+    // Without normals in the file: none.
+    for name in ["stanford_bunny.ply", "spot.obj", "goblet_vase.stl"] {
+        let (_, s) = load_mesh_with_shading(&shared_mesh(name)).unwrap();
+        assert!(s.normals.is_empty(), "{name}");
+    }
     std::fs::remove_dir_all(&dir).ok();
 }

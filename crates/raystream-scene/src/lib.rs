@@ -47,7 +47,7 @@ pub use desc::{
     CameraDesc, Frame, GroundDesc, LightDesc, MaterialDesc, ObjectDesc, Scale, SceneDesc,
     VolumeDesc,
 };
-use raystream_io::{MeshError, MeshMaterials, MtlMaterial, TriMesh, Volume, VolumeError};
+use raystream_io::{MeshError, MeshShading, MtlMaterial, TriMesh, Volume, VolumeError};
 use raystream_math::{Aabb, DVec3, MAX_COORDINATE, Vec3, in_coordinate_range};
 use raystream_volume::{TfPreset, TransferFunction};
 
@@ -329,9 +329,9 @@ impl Scene {
             None => None,
         };
         Self::compile(desc, origin, volume, |i, o| match (&o.mesh, &o.shape) {
-            (Some(p), None) => Ok(raystream_io::load_mesh_with_materials(&base_dir.join(p))?),
+            (Some(p), None) => Ok(raystream_io::load_mesh_with_shading(&base_dir.join(p))?),
             (None, Some(s)) => builtin_shape(s)
-                .map(|m| (m, MeshMaterials::default()))
+                .map(|m| (m, MeshShading::default()))
                 .ok_or_else(|| {
                     format!("object {i}: unknown shape '{s}' (sphere, cylinder, quad, spot)").into()
                 }),
@@ -345,7 +345,7 @@ impl Scene {
         desc: &SceneDesc,
         origin: &Path,
         volume: Option<SceneVolume>,
-        mut load: impl FnMut(usize, &ObjectDesc) -> Result<(TriMesh, MeshMaterials), SceneError>,
+        mut load: impl FnMut(usize, &ObjectDesc) -> Result<(TriMesh, MeshShading), SceneError>,
     ) -> Result<Scene, SceneError> {
         let invalid = |problem: String| SceneError::Invalid {
             path: origin.to_path_buf(),
@@ -382,7 +382,7 @@ impl Scene {
         let mut ray_offsets = Vec::new();
         let mut warnings = Vec::new();
         for (i, o) in desc.objects.iter().enumerate() {
-            let (source, own_materials) = load(i, o).map_err(|e| match e {
+            let (source, mut shading) = load(i, o).map_err(|e| match e {
                 SceneError::Invalid { problem, .. } => invalid(problem),
                 e => e,
             })?;
@@ -392,10 +392,14 @@ impl Scene {
             let t = o.translate.map(Vec3::from).unwrap_or(Vec3::ZERO);
             let frame = o.frame().map_err(|e| invalid(format!("object {i}: {e}")))?;
             let normal_m = m.inverse().transpose();
+            // The file's normals where it gives them, else averaged over the faces.
+            let own = if shading.normals.len() == source.positions.len() {
+                std::mem::take(&mut shading.normals)
+            } else {
+                source.vertex_normals()
+            };
             normals.extend(
-                source
-                    .vertex_normals()
-                    .iter()
+                own.iter()
                     .map(|&n| frame.to_scene(normal_m * n).normalize_or_zero()),
             );
             let first_new = mesh.positions.len();
@@ -409,10 +413,10 @@ impl Scene {
                 )));
             }
             let chosen = lookup(&o.material)?;
-            if o.material.is_none() && !own_materials.material_of.is_empty() {
+            if o.material.is_none() && !shading.material_of.is_empty() {
                 // The file's own materials (an OBJ's MTL), where the scene names none.
                 let first = materials.len() as u32;
-                for m in &own_materials.materials {
+                for m in &shading.materials {
                     materials.push(
                         mtl_material(m).map_err(|e| {
                             invalid(format!("object {i}: material '{}': {e}", m.name))
@@ -420,7 +424,7 @@ impl Scene {
                     );
                 }
                 material_of.extend(
-                    own_materials
+                    shading
                         .material_of
                         .iter()
                         .map(|m| m.map_or(chosen, |m| first + m)),
@@ -430,7 +434,7 @@ impl Scene {
             }
             // A scene file's objects are named by their mesh; a mesh rendered alone is the
             // message's subject already.
-            warnings.extend(own_materials.warnings.into_iter().map(|w| match &o.mesh {
+            warnings.extend(shading.warnings.into_iter().map(|w| match &o.mesh {
                 Some(p) => format!("object {i} ({p}): {w}"),
                 None => w,
             }));
@@ -558,17 +562,17 @@ impl Scene {
     /// A mesh file alone, as [`Scene::for_mesh`] stages it, in its own materials where it has
     /// them (an OBJ's MTL), the default one elsewhere.
     pub fn for_mesh_file(path: &Path) -> Result<Scene, SceneError> {
-        let (mesh, materials) = raystream_io::load_mesh_with_materials(path)?;
+        let (mesh, materials) = raystream_io::load_mesh_with_shading(path)?;
         Self::staged(mesh, materials, path)
     }
 
     /// A mesh alone: a key and a fill light, a slightly reflective ground plane under it, the
     /// camera framing it.
     pub fn for_mesh(mesh: TriMesh, name: &Path) -> Result<Scene, SceneError> {
-        Self::staged(mesh, MeshMaterials::default(), name)
+        Self::staged(mesh, MeshShading::default(), name)
     }
 
-    fn staged(mesh: TriMesh, materials: MeshMaterials, name: &Path) -> Result<Scene, SceneError> {
+    fn staged(mesh: TriMesh, materials: MeshShading, name: &Path) -> Result<Scene, SceneError> {
         let b = mesh.bounds();
         let (c, r) = (b.center(), b.radius());
         let mut desc = SceneDesc::default();
@@ -661,7 +665,7 @@ impl Scene {
         let mut mesh = Some(mesh);
         // A CT grid lies within ±1e6 mm, so its bones' lights and floor are far inside ±1e10.
         let mut scene = Self::compile(&desc, name, None, |_, _| {
-            Ok((mesh.take().expect("one object"), MeshMaterials::default()))
+            Ok((mesh.take().expect("one object"), MeshShading::default()))
         })
         .expect("bones of a checked CT make a valid scene");
         // The volume's gradient normals shade an isosurface better than face-averaged ones.

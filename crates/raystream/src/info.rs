@@ -42,7 +42,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     // An OBJ's materials (MTL): each with the triangles that use it.
     let materials =
         if raystream_io::MeshFormat::from_path(input) == Some(raystream_io::MeshFormat::Obj) {
-            raystream_io::load_mesh_with_materials(input)?.1
+            raystream_io::load_mesh_with_shading(input)?.1
         } else {
             Default::default()
         };

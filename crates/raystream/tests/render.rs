@@ -825,6 +825,78 @@ fn gpu_matches_cpu_on_obj_materials() {
     );
 }
 
+/// A cube whose OBJ gives each face its normal (`vn`) shades flat: every pixel of `--aov
+/// normal` is one of the six axis normals (or the ground's), on both devices. Without the
+/// normals, the averaged ones bend across its faces.
+#[test]
+fn obj_normals_shade_hard_edges() {
+    let dir = tmp("hard-cube");
+    std::fs::create_dir_all(&dir).unwrap();
+    let faces = [
+        ([1, 4, 3, 2], 1),
+        ([5, 6, 7, 8], 2),
+        ([1, 5, 8, 4], 3),
+        ([2, 3, 7, 6], 4),
+        ([1, 2, 6, 5], 5),
+        ([4, 8, 7, 3], 6),
+    ];
+    let mut obj = String::from(
+        "v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1\n\
+         vn 0 0 -1\nvn 0 0 1\nvn -1 0 0\nvn 1 0 0\nvn 0 -1 0\nvn 0 1 0\n",
+    );
+    let mut bare = obj.clone();
+    for (f, n) in faces {
+        obj += &format!("f {}\n", f.map(|v| format!("{v}//{n}")).join(" "));
+        bare += &format!("f {}\n", f.map(|v| v.to_string()).join(" "));
+    }
+    std::fs::write(dir.join("hard.obj"), obj).unwrap();
+    std::fs::write(dir.join("soft.obj"), bare).unwrap();
+    let axis_colours = |name: &str, device: &str| {
+        let out = dir.join(format!("{name}-{device}.png"));
+        let o = run(&[
+            "render",
+            dir.join(format!("{name}.obj")).to_str().unwrap(),
+            "--aov",
+            "normal",
+            "--orbit",
+            "30,25",
+            "--size",
+            "64x48",
+            "--device",
+            device,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let img = image::open(&out).unwrap().to_rgb8();
+        let on_axis = |p: &image::Rgb<u8>| {
+            let far = p.0.iter().filter(|&&c| c.abs_diff(128) > 1).count();
+            let end = p.0.iter().filter(|&&c| c <= 1 || c == 255).count();
+            p.0 == [0, 0, 0] || (far == 1 && end == 1)
+        };
+        let hits = img.pixels().filter(|p| p.0 != [0, 0, 0]).count();
+        let off = img.pixels().filter(|p| !on_axis(p)).count();
+        (hits, off)
+    };
+    let (hits, off) = axis_colours("hard", "cpu");
+    assert!(
+        hits > 1000 && off == 0,
+        "{off} of {hits} pixels off the axes"
+    );
+    let (_, off) = axis_colours("soft", "cpu");
+    assert!(
+        off > 300,
+        "averaged normals: only {off} pixels off the axes"
+    );
+    if gpu_available() {
+        let (hits, off) = axis_colours("hard", "gpu");
+        assert!(
+            hits > 1000 && off == 0,
+            "GPU: {off} of {hits} pixels off the axes"
+        );
+    }
+}
+
 /// A gantry-tilted head CT's sheared grid (18.5°, slices resampled to even spacing): the GPU
 /// marches it as the CPU does, seen from the side, where the shear shows.
 #[test]
