@@ -4,10 +4,11 @@
   .venv/bin/python scripts/fuzz-inputs.py files [--runs N] [--seed S] [--device cpu|gpu]
   .venv/bin/python scripts/fuzz-inputs.py scenes [--runs N] [--seed S]
 
-files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary), tiny volumes (NIfTI, NRRD and
+files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary; an OBJ with normals and an MTL
+        library, either of them mutated; a PLY with normals), tiny volumes (NIfTI, NRRD and
         MetaImage, attached and detached, via SimpleITK) and real DICOM slices from
         ../shared, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
-        and `raystream render --aov prim` (volumes also `--mode` mip, minip, average, slice or
+        and `raystream render --aov prim` (meshes also shaded; volumes also `--mode` mip, minip, average, slice or
         dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
         must name the file.
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
@@ -57,6 +58,18 @@ def seeds(d):
         b += b"".join(struct.pack(e + "3f", *p) for p in v)
         b += b"".join(struct.pack(e + "B3i", 3, *t) for t in f)
         w(f"t_{name}.ply", b)
+    # An OBJ with per-corner normals and materials from its library (fuzzed on its own, or the
+    # library instead: see fuzz_files), and a PLY with normals.
+    w("tm.obj", b"mtllib tm.mtl\n" + "".join(f"v {x} {y} {z}\n" for x, y, z in v).encode()
+      + b"vn 0 0 -1\nvn 0 -1 0\nvn -1 0 0\nvn 1 1 1\n" + b"".join(
+          f"usemtl {m}\nf {a+1}//{k+1} {b+1}//{k+1} {c+1}//{k+1}\n".encode()
+          for k, ((a, b, c), m) in enumerate(zip(f, ["red", "glass", "red", "mirror"]))))
+    w("tm.mtl", b"newmtl red\nKd 0.8 0.1 0.1\nKs 0.3 0.3 0.3\nNs 30\nillum 2\n"
+      b"newmtl glass\nKd 0 0 0\nd 0.2\nNi 1.5\nillum 7\nnewmtl mirror\nKs 0.8 0.8 0.8\nillum 3\n")
+    w("tn.ply", (hdr("ascii").decode().replace(
+        "property float z\n", "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n")
+        + "".join(f"{x} {y} {z} {x} {y} {z - 0.5}\n" for x, y, z in v)
+        + "".join(f"3 {a} {b} {c}\n" for a, b, c in f)).encode())
     s = "solid t\n"
     for t in f:
         s += " facet normal 0 0 0\n  outer loop\n" + "".join(
@@ -128,7 +141,7 @@ def fuzz_files(work, n, device):
     sd = os.path.join(work, "seeds")
     os.makedirs(sd)
     seeds(sd)
-    names = [s for s in sorted(os.listdir(sd)) if s != "v.raw"]
+    names = [s for s in sorted(os.listdir(sd)) if s not in ("v.raw", "tm.mtl")]
     bad = 0
     for i in range(n):
         s = random.choice(names)
@@ -136,12 +149,27 @@ def fuzz_files(work, n, device):
         os.makedirs(d)
         p = os.path.join(d, s)
         text = s.endswith((".obj", ".stl", ".ply", ".mha", ".mhd", ".nhdr", ".nrrd"))
-        open(p, "wb").write(mutate(open(os.path.join(sd, s), "rb").read(), text))
+        data = open(os.path.join(sd, s), "rb").read()
+        if s == "tm.obj":
+            # The OBJ or its material library, mutated; the other as it is.
+            lib = open(os.path.join(sd, "tm.mtl"), "rb").read()
+            if random.random() < 0.5:
+                data = mutate(data, True)
+            else:
+                lib = mutate(lib, True)
+            open(os.path.join(d, "tm.mtl"), "wb").write(lib)
+            open(p, "wb").write(data)
+        else:
+            open(p, "wb").write(mutate(data, text))
         if s in ("v.mhd", "v.nhdr"):
             shutil.copy(os.path.join(sd, "v.raw"), d)
         why = run(["info", p, "--json"], s) or run(
             ["render", p, "--aov", "prim", "--size", "8x8", "-q", "--device", device,
              "-o", os.path.join(d, "o.png")], s)
+        if not why and s.endswith((".obj", ".ply")):
+            # Shaded, so that normals and materials are used.
+            why = run(["render", p, "--size", "8x8", "--spp", "1", "-q", "--device", device,
+                       "-o", os.path.join(d, "s.png")], s)
         if not why and not s.endswith((".obj", ".stl", ".ply")):
             # A volume also goes straight through a windowed mode, its HU into an EXR.
             mode = random.choice(["mip", "minip", "average", "slice", "dvr"])
