@@ -245,6 +245,11 @@ pub struct RenderArgs {
     /// own camera).
     #[arg(long)]
     pub parallel: bool,
+    /// Marks the patient directions at the image's edges, as radiology viewers do (R/L, A/P,
+    /// S/I; two or three letters at an oblique edge): CT volumes, their bones and scenes with
+    /// one, PNG output.
+    #[arg(long)]
+    pub labels: bool,
     /// With --mode: a turntable of N frames, one every 360/N degrees about the image's up axis
     /// (the patient's superior axis unless --view superior/inferior), starting from --view and
     /// --orbit, written as OUTPUT/frame_000.png … (-o names the folder; --format exr for EXRs).

@@ -6,6 +6,7 @@ mod common;
 mod dvr;
 mod info;
 mod iso;
+mod labels;
 mod render;
 mod trace;
 

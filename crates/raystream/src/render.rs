@@ -83,6 +83,29 @@ fn base_view(a: &RenderArgs, default: View, patient: bool) -> Result<View> {
     })
 }
 
+/// `--labels`: the patient directions drawn at the edges of a PNG frame seen by `cam` (scene
+/// frame: x = the patient's left, y = superior, z = anterior).
+fn label(a: &RenderArgs, picture: &mut Picture, cam: &Camera) {
+    if let (true, Picture::Srgb8 { rgb, width, height }) = (a.labels, picture) {
+        let [right, up] = [cam.right, cam.up].map(raystream_cpu::dvr::scene_to_lps);
+        crate::labels::draw(rgb, *width, *height, right, up);
+    }
+}
+
+/// `--labels` needs a patient (a CT volume, its bones, a scene with one) and a PNG.
+fn check_labels(a: &RenderArgs, patient: bool, format: ImageFormat) -> Result<()> {
+    if a.labels && !patient {
+        bail!(
+            "{}: --labels marks a patient's directions, for CT volumes and scenes with one",
+            input_name(a).display()
+        );
+    }
+    if a.labels && format == ImageFormat::Exr {
+        bail!("--labels draws on a PNG; an EXR holds the values themselves");
+    }
+    Ok(())
+}
+
 /// `--parallel` (and always for `--mode slice`, whose pixels then have one size): the framing
 /// camera's projection.
 fn projection(a: &RenderArgs) -> Projection {
@@ -148,6 +171,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         (Some(_), FrameFormat::Exr) => ImageFormat::Exr,
         (None, _) => image_format(&a.output)?,
     };
+    check_labels(a, true, format)?;
     let (volume, load_ms) = read_volume(path, a.series.as_deref(), a.quiet, embedded)?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     // An EXR keeps what the projections found, in HU; the window is for display.
@@ -180,8 +204,9 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         last = Some(f);
     }
     pb.finish_and_clear();
-    let frame = last.expect("at least one frame");
+    let mut frame = last.expect("at least one frame");
     let slab = slab_words(&opt, &volume);
+    label(a, &mut frame.picture, &cam);
     frame
         .picture
         .save(&a.output, &exr_comment(&opt, &volume, &cam))?;
@@ -308,9 +333,10 @@ fn turntable(
             view.orbit(az + 360.0 * i as f32 / n as f32, el),
             projection,
         );
-        let f = renderer.frame(opt, &cam, format)?;
+        let mut f = renderer.frame(opt, &cam, format)?;
         frame_ms.push(f.frame_ms);
         let path = dir.join(format!("frame_{i:0digits$}.{ext}", digits = digits.max(3)));
+        label(a, &mut f.picture, &cam);
         f.picture.save(&path, &exr_comment(opt, volume, &cam))?;
         pb.inc(1);
     }
@@ -403,6 +429,7 @@ fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
         load_ms,
         tree,
     } = load(a)?;
+    check_labels(a, bones.is_some() || scene.volume.is_some(), format)?;
     let traversal = Traversal::from(a.accel.traversal);
     let (width, height) = a.size;
     let cam = scene.camera_for(width as f32 / height as f32);
@@ -479,6 +506,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         );
     }
     if let Some(aov) = a.aov {
+        if a.labels {
+            bail!("--labels marks a rendered picture, not an AOV's values");
+        }
         return render_aov(a, aov.into());
     }
     let format = image_format(&a.output)?;
@@ -489,6 +519,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         load_ms,
         tree,
     } = load(a)?;
+    check_labels(a, bones.is_some() || scene.volume.is_some(), format)?;
     let mut volume_samples = 0u64;
     let opt = RenderOptions {
         width: a.size.0,
@@ -580,8 +611,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         image = Some(img);
     }
     bar.finish_and_clear();
-    let image = image.expect("at least one frame");
+    let mut image = image.expect("at least one frame");
     let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
+    label(a, &mut image, &cam);
     image.save(
         &a.output,
         &format!(

@@ -179,3 +179,79 @@ fn render_dicom_folders_a_tilted_one_too() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("no surface at 1000"), "{}", stderr(&o));
 }
+
+/// `--labels` marks the patient's directions at the edges: in the anterior MIP the patient's
+/// left (L) on the image's right, R on its left, S above, I below, each letter exactly its
+/// glyph in white cells; elsewhere the picture is the unlabelled one. A lateral view (from the
+/// patient's left) puts A on the left and P on the right. Meshes, EXRs and AOVs are refused.
+#[test]
+fn labels_mark_the_patients_directions() {
+    // 5×7 glyphs, a row a byte, the leftmost cell in bit 4 (the oracle: written out here).
+    let glyphs = [
+        ('L', [0x10, 0x10, 0x10, 0x10, 0x10, 0x10, 0x1f]),
+        ('R', [0x1e, 0x11, 0x11, 0x1e, 0x14, 0x12, 0x11]),
+        ('S', [0x0f, 0x10, 0x10, 0x0e, 0x01, 0x01, 0x1e]),
+        ('I', [0x0e, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0e]),
+        ('A', [0x0e, 0x11, 0x11, 0x1f, 0x11, 0x11, 0x11]),
+        ('P', [0x1e, 0x11, 0x11, 0x1e, 0x10, 0x10, 0x10]),
+    ];
+    let (w, h) = (128u32, 96u32);
+    let render = |name: &str, extra: &[&str]| {
+        let out = tmp(&format!("labels-{name}.png"));
+        let mut args = vec!["render", "--mode", "mip", "--size", "128x96", "--quiet"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["-o", out.to_str().unwrap()]);
+        let o = run(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        image::open(&out).unwrap().to_rgb8()
+    };
+    // Where each edge's letter sits at this size (a cell a pixel, two from the edge).
+    let (mid_x, mid_y) = ((w - 5) / 2, (h - 7) / 2);
+    let boxes = [(mid_x, 2), (mid_x, h - 9), (2, mid_y), (w - 7, mid_y)];
+    for (name, view, letters) in [
+        ("anterior", "anterior", ['S', 'I', 'R', 'L']),
+        ("left", "left", ['S', 'I', 'A', 'P']),
+    ] {
+        let plain = render(&format!("{name}-plain"), &["--view", view]);
+        let marked = render(name, &["--view", view, "--labels"]);
+        for ((x0, y0), letter) in boxes.iter().zip(letters) {
+            let g = glyphs.iter().find(|(c, _)| *c == letter).unwrap().1;
+            for row in 0..7u32 {
+                for col in 0..5u32 {
+                    let set = g[row as usize] & (0x10 >> col) != 0;
+                    let p = marked.get_pixel(x0 + col, y0 + row).0;
+                    assert_eq!(p == [255; 3], set, "{name}: {letter} row {row} col {col}");
+                }
+            }
+        }
+        // Outside the letters and their rings, the pixels are the unlabelled frame's.
+        let near = |x: u32, y: u32| {
+            boxes
+                .iter()
+                .any(|&(bx, by)| x + 1 >= bx && x <= bx + 5 && y + 1 >= by && y <= by + 7)
+        };
+        for (x, y, p) in marked.enumerate_pixels() {
+            if !near(x, y) {
+                assert_eq!(p, plain.get_pixel(x, y), "{name}: ({x}, {y})");
+            }
+        }
+    }
+    for (args, why) in [
+        (
+            vec!["render", &mesh("spot.obj"), "--labels", "-o", "x.png"],
+            "--labels marks a patient's directions",
+        ),
+        (
+            vec!["render", "--mode", "mip", "--labels", "-o", "x.exr"],
+            "--labels draws on a PNG",
+        ),
+        (
+            vec!["render", "--aov", "depth", "--labels", "-o", "x.png"],
+            "not an AOV's values",
+        ),
+    ] {
+        let o = run(&args);
+        assert_eq!(o.status.code(), Some(2));
+        assert!(stderr(&o).contains(why), "{}", stderr(&o));
+    }
+}
