@@ -7,6 +7,7 @@
 //! every error names the file and the problem ([`MeshError`]).
 
 mod ply;
+mod secondary_capture;
 mod shapes;
 mod stl;
 pub mod volume;
@@ -17,9 +18,10 @@ use std::io::{BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};
 
 pub use raystream_math::{Aabb, Vec3};
+pub use secondary_capture::write_secondary_capture;
 pub use volume::{
-    DicomSeriesInfo, MAX_VOXELS, ValueUnit, Volume, VolumeError, VolumeFormat, is_volume_path,
-    list_dicom_series, load_volume,
+    DicomSeriesInfo, DicomStudy, MAX_VOXELS, ValueUnit, Volume, VolumeError, VolumeFormat,
+    is_volume_path, list_dicom_series, load_volume,
 };
 
 /// A triangle mesh: shared vertex positions and triangles as vertex-index triples.

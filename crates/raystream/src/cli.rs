@@ -197,7 +197,8 @@ pub struct RenderArgs {
     /// Output image: .png (8-bit sRGB as a viewer shows it; 16-bit grey for --aov depth) or
     /// .exr (32-bit float: the linear film; --aov depth Z, normal N.X/N.Y/N.Z, prim as 32-bit
     /// integers; --mode mip/minip/average/slice the HU values themselves, no window; dvr and
-    /// iso premultiplied RGBA).
+    /// iso premultiplied RGBA) or .dcm (the PNG's pixels as a DICOM Secondary Capture image in
+    /// the source series' study).
     #[arg(short, long, default_value = "render.png")]
     pub output: PathBuf,
     /// Image size, WIDTHxHEIGHT.

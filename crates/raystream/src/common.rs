@@ -151,7 +151,26 @@ impl Picture {
     /// Writes the picture to `path` (PNG for 8-bit sRGB, else EXR); `what` says what the
     /// values are, in the EXR's comments.
     pub fn save(&self, path: &Path, what: &str) -> Result<()> {
+        self.save_as(path, what, &DicomOut::default())
+    }
+
+    /// [`Picture::save`], and where `path` ends in `.dcm`, the 8-bit sRGB frame as a DICOM
+    /// Secondary Capture image of the input's study ([`set_source_study`]), `dicom` saying its
+    /// orientation and whether letters were drawn on it.
+    pub fn save_as(&self, path: &Path, what: &str, dicom: &DicomOut) -> Result<()> {
         match self {
+            Picture::Srgb8 { rgb, width, height } if is_dicom(path) => {
+                raystream_io::write_secondary_capture(
+                    path,
+                    rgb,
+                    (*width, *height),
+                    SOURCE_STUDY.get(),
+                    &dicom.description,
+                    dicom.orientation.clone(),
+                    dicom.annotated,
+                )
+                .map_err(|e| e.to_string())
+            }
             Picture::Srgb8 { rgb, width, height } => {
                 raystream_cpu::save_srgb8_png(path, rgb, *width, *height)
             }
@@ -186,9 +205,63 @@ impl Picture {
     }
 }
 
-/// The image format `-o` names (`.png` or `.exr`), checked before any work.
+/// The image format `-o` names (`.png` or `.exr`, or `.dcm`: a PNG's pixels as a DICOM
+/// Secondary Capture image), checked before any work.
 pub fn image_format(output: &Path) -> Result<ImageFormat> {
-    ImageFormat::of(output).map_err(anyhow::Error::msg)
+    if is_dicom(output) {
+        return Ok(ImageFormat::Png);
+    }
+    ImageFormat::of(output)
+        .map_err(|e| anyhow::anyhow!("{e}, or .dcm (a DICOM Secondary Capture image)"))
+}
+
+/// Whether `path` names a DICOM file (`.dcm`, any case).
+pub fn is_dicom(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("dcm"))
+}
+
+/// What a DICOM picture says beyond its pixels.
+#[derive(Clone, Debug, Default)]
+pub struct DicomOut {
+    /// Patient Orientation: the patient directions of the rows and the columns.
+    pub orientation: Option<[String; 2]>,
+    /// Whether letters were drawn into the pixels (Burned In Annotation).
+    pub annotated: bool,
+    /// How the picture was made (the series' and the derivation's description).
+    pub description: String,
+}
+
+/// This run's options as words, for a DICOM picture's description: `raystream render --mode
+/// mip …`, without the paths of the input and the output (they may name the patient).
+pub fn options_in_words(input: Option<&Path>, output: &Path) -> String {
+    let paths: Vec<std::ffi::OsString> = input
+        .into_iter()
+        .chain([output])
+        .map(|p| p.as_os_str().to_owned())
+        .collect();
+    let mut words = vec!["raystream".to_string()];
+    let mut skip_next = false;
+    for arg in std::env::args_os().skip(1) {
+        if std::mem::take(&mut skip_next) || paths.contains(&arg) {
+            continue;
+        }
+        match arg.to_string_lossy().as_ref() {
+            "-o" | "--output" => skip_next = true,
+            a if a.starts_with("--output=") => {}
+            a => words.push(a.to_string()),
+        }
+    }
+    words.join(" ")
+}
+
+/// The study of the DICOM series this run read, which a `.dcm` output joins (one input a run).
+static SOURCE_STUDY: std::sync::OnceLock<raystream_io::DicomStudy> = std::sync::OnceLock::new();
+
+/// Records the study of the DICOM series read, for a `.dcm` output.
+pub fn set_source_study(study: &raystream_io::DicomStudy) {
+    let _ = SOURCE_STUDY.set(study.clone());
 }
 
 pub fn load_mesh(path: &Path) -> Result<TriMesh> {

@@ -81,6 +81,9 @@ pub fn read_volume(
         None => raystream_io::load_volume(path, series)?,
     };
     pb.finish_and_clear();
+    if let Some(series) = &volume.series {
+        crate::common::set_source_study(&series.study);
+    }
     if !quiet {
         for w in &volume.warnings {
             eprintln!("raystream: {}: {w}", path.display());

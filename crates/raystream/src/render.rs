@@ -18,7 +18,8 @@ use raystream_cpu::dvr::{DvrMode, DvrOptions, volume_camera_from};
 
 use crate::cli::{FrameFormat, RenderArgs};
 use crate::common::{
-    Backend, Picture, gpu_tracer, image_format, median as median_of, ms, open_device, spinner,
+    Backend, DicomOut, Picture, gpu_tracer, image_format, median as median_of, ms, open_device,
+    spinner,
 };
 use crate::dvr;
 use crate::iso::{Bones, bones, read_volume};
@@ -84,11 +85,23 @@ fn base_view(a: &RenderArgs, default: View, patient: bool) -> Result<View> {
 }
 
 /// `--labels`: the patient directions drawn at the edges of a PNG frame seen by `cam` (scene
-/// frame: x = the patient's left, y = superior, z = anterior).
-fn label(a: &RenderArgs, picture: &mut Picture, cam: &Camera) {
-    if let (true, Picture::Srgb8 { rgb, width, height }) = (a.labels, picture) {
-        let [right, up] = [cam.right, cam.up].map(raystream_cpu::dvr::scene_to_lps);
+/// frame: x = the patient's left, y = superior, z = anterior). Returns what a DICOM picture of
+/// it says: its rows' and columns' patient directions (where `patient`), and the letters.
+fn label(a: &RenderArgs, picture: &mut Picture, cam: &Camera, patient: bool) -> DicomOut {
+    let [right, up] = [cam.right, cam.up].map(raystream_cpu::dvr::scene_to_lps);
+    if let (true, Picture::Srgb8 { rgb, width, height }) = (a.labels, &mut *picture) {
         crate::labels::draw(rgb, *width, *height, right, up);
+    }
+    // DICOM's Patient Orientation says H(ead) and F(oot) for superior and inferior.
+    let dicom = |d| {
+        crate::labels::letters(d)
+            .replace('S', "H")
+            .replace('I', "F")
+    };
+    DicomOut {
+        orientation: patient.then(|| [dicom(right), dicom(-up)]),
+        annotated: a.labels,
+        description: crate::common::options_in_words(a.input.as_deref(), &a.output),
     }
 }
 
@@ -206,10 +219,10 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     pb.finish_and_clear();
     let mut frame = last.expect("at least one frame");
     let slab = slab_words(&opt, &volume);
-    label(a, &mut frame.picture, &cam);
+    let dicom = label(a, &mut frame.picture, &cam, true);
     frame
         .picture
-        .save(&a.output, &exr_comment(&opt, &volume, &cam))?;
+        .save_as(&a.output, &exr_comment(&opt, &volume, &cam), &dicom)?;
     if !a.quiet {
         let gpu = frame.stats.is_none();
         let stats = frame
@@ -336,7 +349,7 @@ fn turntable(
         let mut f = renderer.frame(opt, &cam, format)?;
         frame_ms.push(f.frame_ms);
         let path = dir.join(format!("frame_{i:0digits$}.{ext}", digits = digits.max(3)));
-        label(a, &mut f.picture, &cam);
+        label(a, &mut f.picture, &cam, true);
         f.picture.save(&path, &exr_comment(opt, volume, &cam))?;
         pb.inc(1);
     }
@@ -509,6 +522,12 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         if a.labels {
             bail!("--labels marks a rendered picture, not an AOV's values");
         }
+        if crate::common::is_dicom(&a.output) {
+            bail!(
+                "{}: an AOV is written as PNG or EXR, not DICOM",
+                a.output.display()
+            );
+        }
         return render_aov(a, aov.into());
     }
     let format = image_format(&a.output)?;
@@ -613,8 +632,13 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     bar.finish_and_clear();
     let mut image = image.expect("at least one frame");
     let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
-    label(a, &mut image, &cam);
-    image.save(
+    let dicom = label(
+        a,
+        &mut image,
+        &cam,
+        bones.is_some() || scene.volume.is_some(),
+    );
+    image.save_as(
         &a.output,
         &format!(
             "linear RGB, {} spp, depth {}{}",
@@ -622,6 +646,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             opt.max_depth,
             pixel_size(&cam, opt.height, units(&bones))
         ),
+        &dicom,
     )?;
     if !a.quiet {
         let median = median_of(&mut frame_ms);

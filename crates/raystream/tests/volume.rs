@@ -57,9 +57,9 @@ fn info_json_describes_a_dicom_series() {
     assert_eq!(v["series"]["transfer_syntax"], "1.2.840.10008.1.2.4.90");
 }
 
-#[test]
-fn every_format_matches_simpleitk_on_an_oblique_grid() {
-    let Some(py) = python() else { return };
+/// A Python with SimpleITK, or `None` (a skip, except under CI, where it fails).
+fn python_with_simpleitk() -> Option<std::path::PathBuf> {
+    let py = python()?;
     let has_sitk = std::process::Command::new(&py)
         .args(["-c", "import SimpleITK"])
         .status()
@@ -70,8 +70,16 @@ fn every_format_matches_simpleitk_on_an_oblique_grid() {
             panic!("CI=true but SimpleITK is not installed in {}", py.display());
         }
         eprintln!("skipping: SimpleITK is not installed in {}", py.display());
-        return;
+        return None;
     }
+    Some(py)
+}
+
+#[test]
+fn every_format_matches_simpleitk_on_an_oblique_grid() {
+    let Some(py) = python_with_simpleitk() else {
+        return;
+    };
     let dir = tmp("sitk-formats");
     let o = std::process::Command::new(&py)
         .arg(repo().join("crates/raystream/tests/sitk_convert.py"))
@@ -254,4 +262,79 @@ fn labels_mark_the_patients_directions() {
         assert_eq!(o.status.code(), Some(2));
         assert!(stderr(&o).contains(why), "{}", stderr(&o));
     }
+}
+
+/// `-o OUT.dcm`: the PNG's pixels as a DICOM Secondary Capture image that GDCM (through
+/// SimpleITK) reads, filed with the source series' patient and study, in a new series, with
+/// its Patient Orientation (the anterior view: rows toward the patient's left, columns toward
+/// the feet) and the letters drawn said as Burned In Annotation.
+#[test]
+fn renders_save_as_dicom_secondary_capture() {
+    let Some(py) = python_with_simpleitk() else {
+        return;
+    };
+    let head = volume("dicom/head_ct_gantry_tilt_ge");
+    let (dcm, png) = (tmp("sc-head.dcm"), tmp("sc-head.png"));
+    for out in [&dcm, &png] {
+        let o = run(&[
+            "render",
+            &head,
+            "--mode",
+            "mip",
+            "--labels",
+            "--size",
+            "48x40",
+            "--quiet",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let script = r#"
+import sys, json, glob, SimpleITK as sitk
+def tags(path, keys):
+    r = sitk.ImageFileReader(); r.SetFileName(path); r.ReadImageInformation()
+    return {k: r.GetMetaData(k).strip() if r.HasMetaDataKey(k) else None for k in keys}
+keys = ["0008|0016", "0008|0060", "0010|0010", "0010|0020", "0020|000d", "0020|000e",
+        "0020|0020", "0028|0301", "0008|103e"]
+src = tags(sorted(glob.glob(sys.argv[2] + "/*.dcm"))[0], keys)
+out = tags(sys.argv[1], keys)
+pixels = sitk.GetArrayFromImage(sitk.ReadImage(sys.argv[1])).reshape(-1).tolist()
+print(json.dumps({"src": src, "out": out, "pixels": pixels}))
+"#;
+    let o = std::process::Command::new(&py)
+        .args(["-c", script, dcm.to_str().unwrap(), &head])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let (src, out) = (&v["src"], &v["out"]);
+    assert_eq!(
+        out["0008|0016"], "1.2.840.10008.5.1.4.1.1.7",
+        "Secondary Capture"
+    );
+    assert_eq!(out["0008|0060"], "OT");
+    for k in ["0010|0010", "0010|0020", "0020|000d"] {
+        assert!(!src[k].as_str().unwrap().is_empty(), "{k}");
+        assert_eq!(out[k], src[k], "{k}: the source's patient and study");
+    }
+    assert_ne!(out["0020|000e"], src["0020|000e"], "a series of its own");
+    assert_eq!(out["0020|0020"], "L\\F");
+    assert_eq!(out["0028|0301"], "YES");
+    assert_eq!(
+        out["0008|103e"],
+        "raystream render --mode mip --labels --size 48x40 --quiet"
+    );
+    let want = image::open(&png).unwrap().to_rgb8().into_raw();
+    let got: Vec<u8> = v["pixels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p.as_u64().unwrap() as u8)
+        .collect();
+    assert_eq!(got, want, "the PNG's pixels");
+    // An AOV is not written as DICOM.
+    let o = run(&["render", "--aov", "depth", "-o", "x.dcm"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("not DICOM"), "{}", stderr(&o));
 }

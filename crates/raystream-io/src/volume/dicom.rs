@@ -39,6 +39,50 @@ pub struct DicomSeriesInfo {
     pub transfer_syntax_name: String,
     /// Every series found in the folder: (UID, slice count, description).
     pub all: Vec<(String, usize, String)>,
+    /// The patient and study the series belongs to (its first slice's).
+    pub study: DicomStudy,
+}
+
+/// The patient and study of a DICOM series: what an image derived from it (a rendering saved
+/// as DICOM) carries over so that it files with the study. Empty strings where the file has
+/// nothing.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DicomStudy {
+    pub patient_name: String,
+    pub patient_id: String,
+    pub patient_birth_date: String,
+    pub patient_sex: String,
+    pub study_uid: String,
+    pub study_date: String,
+    pub study_time: String,
+    pub study_id: String,
+    pub accession_number: String,
+    pub referring_physician: String,
+    pub study_description: String,
+}
+
+impl DicomStudy {
+    fn of(obj: &InMemDicomObject) -> DicomStudy {
+        let text = |tag| {
+            obj.get(tag)
+                .and_then(|e| e.to_str().ok())
+                .map(|s| s.trim_end_matches(['\0', ' ']).trim().to_string())
+                .unwrap_or_default()
+        };
+        DicomStudy {
+            patient_name: text(tags::PATIENT_NAME),
+            patient_id: text(tags::PATIENT_ID),
+            patient_birth_date: text(tags::PATIENT_BIRTH_DATE),
+            patient_sex: text(tags::PATIENT_SEX),
+            study_uid: text(tags::STUDY_INSTANCE_UID),
+            study_date: text(tags::STUDY_DATE),
+            study_time: text(tags::STUDY_TIME),
+            study_id: text(tags::STUDY_ID),
+            accession_number: text(tags::ACCESSION_NUMBER),
+            referring_physician: text(tags::REFERRING_PHYSICIAN_NAME),
+            study_description: text(tags::STUDY_DESCRIPTION),
+        }
+    }
 }
 
 /// One parsed slice: its header fields and the object to decode pixels from.
@@ -500,6 +544,11 @@ fn assemble(
     let origin = slices[0].position;
     check_geometry(path, dims, spacing, origin, &direction)?;
 
+    let study = slices[0]
+        .obj
+        .as_ref()
+        .map(DicomStudy::of)
+        .unwrap_or_default();
     let per_slice = dims[0] * dims[1];
     let decoded: Vec<Vec<f32>> = slices
         .par_iter_mut()
@@ -532,6 +581,7 @@ fn assemble(
             transfer_syntax: first.ts_uid.clone(),
             transfer_syntax_name: ts_name,
             all,
+            study,
         }),
         warnings,
     })
