@@ -33,20 +33,38 @@ pub fn new_uid() -> String {
     format!("2.25.{bits}")
 }
 
+/// What a Secondary Capture image says besides its pixels.
+#[derive(Clone, Debug, Default)]
+pub struct CaptureInfo<'a> {
+    /// The study it joins; a new one where `None` (or without a Study Instance UID).
+    pub study: Option<&'a DicomStudy>,
+    /// Its series' UID and its number in it (a turntable's frames share a series); a new
+    /// series and number 1 where `None`.
+    pub series: Option<(&'a str, u32)>,
+    /// How it was made: the series' and the derivation's description.
+    pub description: &'a str,
+    /// The patient directions of its rows and columns (DICOM's Patient Orientation, e.g.
+    /// `["L", "F"]`), where known.
+    pub orientation: Option<[String; 2]>,
+    /// Whether text was burnt into the pixels.
+    pub annotated: bool,
+}
+
 /// Writes `rgb` (8-bit RGB, `width`×`height`, row-major from the top-left pixel) to `path` as
-/// a Secondary Capture image of `study` (a new study where `None`), in a new series described
-/// by `description`. `orientation`: the patient directions of the rows and columns (DICOM's
-/// Patient Orientation, e.g. `["L", "F"]`), where known; `annotated`: whether text was burnt
-/// into the pixels.
+/// a Secondary Capture image, as `info` says.
 pub fn write_secondary_capture(
     path: &Path,
     rgb: &[u8],
     (width, height): (u32, u32),
-    study: Option<&DicomStudy>,
-    description: &str,
-    orientation: Option<[String; 2]>,
-    annotated: bool,
+    info: &CaptureInfo,
 ) -> Result<(), VolumeError> {
+    let CaptureInfo {
+        study,
+        series,
+        description,
+        orientation,
+        annotated,
+    } = info.clone();
     let fail =
         |e: &dyn std::fmt::Display| VolumeError::invalid(path, format!("cannot write DICOM: {e}"));
     if rgb.len() != 3 * width as usize * height as usize || width > 65535 || height > 65535 {
@@ -88,7 +106,11 @@ pub fn write_secondary_capture(
         &study.referring_physician,
     );
     put(tags::STUDY_DESCRIPTION, VR::LO, &study.study_description);
-    put(tags::SERIES_INSTANCE_UID, VR::UI, &new_uid());
+    let (series_uid, instance) = match series {
+        Some((uid, n)) => (uid.to_string(), n),
+        None => (new_uid(), 1),
+    };
+    put(tags::SERIES_INSTANCE_UID, VR::UI, &series_uid);
     put(tags::SERIES_NUMBER, VR::IS, "9001");
     put(tags::SERIES_DESCRIPTION, VR::LO, &truncate(description, 64));
     put(
@@ -96,7 +118,7 @@ pub fn write_secondary_capture(
         VR::ST,
         &truncate(description, 1024),
     );
-    put(tags::INSTANCE_NUMBER, VR::IS, "1");
+    put(tags::INSTANCE_NUMBER, VR::IS, &instance.to_string());
     put(
         tags::PATIENT_ORIENTATION,
         VR::CS,
@@ -153,6 +175,11 @@ fn truncate(s: &str, n: usize) -> String {
 mod tests {
     use super::*;
 
+    fn text_of(obj: &dicom_object::DefaultDicomObject, tag: dicom_core::Tag) -> String {
+        let e = obj.element(tag).unwrap().to_str().unwrap();
+        e.trim_end_matches(['\0', ' ']).to_string()
+    }
+
     /// Written and read back with dicom-rs: the study's tags carried over, new UIDs under
     /// 2.25, the pixels byte for byte (an odd count padded), the orientation and annotation.
     #[test]
@@ -169,26 +196,16 @@ mod tests {
             ..Default::default()
         };
         let path = dir.join("sc.dcm");
-        let orientation = Some(["L".to_string(), "F".to_string()]);
-        write_secondary_capture(
-            &path,
-            &rgb,
-            (w, h),
-            Some(&study),
-            "raystream mip",
-            orientation,
-            true,
-        )
-        .unwrap();
-        let obj = dicom_object::open_file(&path).unwrap();
-        let text = |tag| {
-            obj.element(tag)
-                .unwrap()
-                .to_str()
-                .unwrap()
-                .trim_end_matches(['\0', ' '])
-                .to_string()
+        let info = CaptureInfo {
+            study: Some(&study),
+            description: "raystream mip",
+            orientation: Some(["L".to_string(), "F".to_string()]),
+            annotated: true,
+            ..Default::default()
         };
+        write_secondary_capture(&path, &rgb, (w, h), &info).unwrap();
+        let obj = dicom_object::open_file(&path).unwrap();
+        let text = |tag| text_of(&obj, tag);
         assert_eq!(text(tags::SOP_CLASS_UID), SECONDARY_CAPTURE);
         assert_eq!(text(tags::PATIENT_NAME), "DOE^JANE");
         assert_eq!(text(tags::PATIENT_ID), "12345");
@@ -220,18 +237,21 @@ mod tests {
         let pixels = obj.element(tags::PIXEL_DATA).unwrap().to_bytes().unwrap();
         assert_eq!(&pixels[..rgb.len()], &rgb[..]);
         assert_eq!(pixels.len(), rgb.len() + 1, "45 bytes padded to 46");
-        // Without a source study: a new one; a wrong pixel count is an error naming the file.
-        write_secondary_capture(&path, &rgb, (w, h), None, "x", None, false).unwrap();
+        assert_eq!(text(tags::INSTANCE_NUMBER), "1");
+        // Without a source study: a new one; a series given: that series and number; a wrong
+        // pixel count is an error naming the file.
+        let info = CaptureInfo {
+            series: Some(("1.2.3.9", 7)),
+            ..Default::default()
+        };
+        write_secondary_capture(&path, &rgb, (w, h), &info).unwrap();
         let obj = dicom_object::open_file(&path).unwrap();
-        let uid = obj
-            .element(tags::STUDY_INSTANCE_UID)
-            .unwrap()
-            .to_str()
-            .unwrap()
-            .to_string();
-        assert!(uid.starts_with("2.25."), "{uid}");
-        let e =
-            write_secondary_capture(&path, &rgb[1..], (w, h), None, "x", None, false).unwrap_err();
+        let text = |tag| text_of(&obj, tag);
+        assert!(text(tags::STUDY_INSTANCE_UID).starts_with("2.25."));
+        assert_eq!(text(tags::SERIES_INSTANCE_UID), "1.2.3.9");
+        assert_eq!(text(tags::INSTANCE_NUMBER), "7");
+        assert_eq!(text(tags::BURNED_IN_ANNOTATION), "NO");
+        let e = write_secondary_capture(&path, &rgb[1..], (w, h), &info).unwrap_err();
         assert!(
             e.to_string().starts_with(&path.display().to_string()),
             "{e}"

@@ -84,6 +84,8 @@ pub enum FrameFormat {
     Png,
     /// 32-bit float OpenEXR: what `-o OUT.exr` writes for the mode (HU, or premultiplied RGBA).
     Exr,
+    /// DICOM Secondary Capture images of the PNG frames, one series in the source's study.
+    Dcm,
 }
 
 /// `render --aov`: what the image of each pixel's closest hit shows.

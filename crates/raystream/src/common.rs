@@ -148,26 +148,24 @@ impl Picture {
         }
     }
 
-    /// Writes the picture to `path` (PNG for 8-bit sRGB, else EXR); `what` says what the
-    /// values are, in the EXR's comments.
-    pub fn save(&self, path: &Path, what: &str) -> Result<()> {
-        self.save_as(path, what, &DicomOut::default())
-    }
-
-    /// [`Picture::save`], and where `path` ends in `.dcm`, the 8-bit sRGB frame as a DICOM
-    /// Secondary Capture image of the input's study ([`set_source_study`]), `dicom` saying its
-    /// orientation and whether letters were drawn on it.
-    pub fn save_as(&self, path: &Path, what: &str, dicom: &DicomOut) -> Result<()> {
+    /// Writes the picture to `path`: PNG for 8-bit sRGB, else EXR, `what` saying what the
+    /// values are in the EXR's comments; where `path` ends in `.dcm`, the 8-bit sRGB frame as a
+    /// DICOM Secondary Capture image of the input's study ([`set_source_study`]), as `dicom`
+    /// describes it.
+    pub fn save(&self, path: &Path, what: &str, dicom: &DicomOut) -> Result<()> {
         match self {
             Picture::Srgb8 { rgb, width, height } if is_dicom(path) => {
                 raystream_io::write_secondary_capture(
                     path,
                     rgb,
                     (*width, *height),
-                    SOURCE_STUDY.get(),
-                    &dicom.description,
-                    dicom.orientation.clone(),
-                    dicom.annotated,
+                    &raystream_io::CaptureInfo {
+                        study: SOURCE_STUDY.get(),
+                        series: dicom.series.as_ref().map(|(uid, n)| (uid.as_str(), *n)),
+                        description: &dicom.description,
+                        orientation: dicom.orientation.clone(),
+                        annotated: dicom.annotated,
+                    },
                 )
                 .map_err(|e| e.to_string())
             }
@@ -231,6 +229,9 @@ pub struct DicomOut {
     pub annotated: bool,
     /// How the picture was made (the series' and the derivation's description).
     pub description: String,
+    /// The series (UID) it belongs to and its number there: a turntable's frames; a series of
+    /// its own where `None`.
+    pub series: Option<(String, u32)>,
 }
 
 /// This run's options as words, for a DICOM picture's description: `raystream render --mode

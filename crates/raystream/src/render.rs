@@ -102,6 +102,7 @@ fn label(a: &RenderArgs, picture: &mut Picture, cam: &Camera, patient: bool) -> 
         orientation: patient.then(|| [dicom(right), dicom(-up)]),
         annotated: a.labels,
         description: crate::common::options_in_words(a.input.as_deref(), &a.output),
+        series: None,
     }
 }
 
@@ -180,7 +181,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     };
     // A turntable's frames are files in a folder, in --format.
     let format = match (a.turntable, a.format) {
-        (Some(_), FrameFormat::Png) => ImageFormat::Png,
+        (Some(_), FrameFormat::Png | FrameFormat::Dcm) => ImageFormat::Png,
         (Some(_), FrameFormat::Exr) => ImageFormat::Exr,
         (None, _) => image_format(&a.output)?,
     };
@@ -222,7 +223,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let dicom = label(a, &mut frame.picture, &cam, true);
     frame
         .picture
-        .save_as(&a.output, &exr_comment(&opt, &volume, &cam), &dicom)?;
+        .save(&a.output, &exr_comment(&opt, &volume, &cam), &dicom)?;
     if !a.quiet {
         let gpu = frame.stats.is_none();
         let stats = frame
@@ -316,11 +317,14 @@ fn turntable(
     format: ImageFormat,
 ) -> Result<()> {
     let dir = &a.output;
-    let ext = match format {
-        ImageFormat::Png => "png",
-        ImageFormat::Exr => "exr",
+    let ext = match (format, a.format) {
+        (_, FrameFormat::Dcm) => "dcm",
+        (ImageFormat::Png, _) => "png",
+        (ImageFormat::Exr, _) => "exr",
     };
-    if ImageFormat::of(dir).is_ok() {
+    // DICOM frames make one series.
+    let series = raystream_io::new_uid();
+    if crate::common::image_format(dir).is_ok() {
         bail!(
             "{}: --turntable writes frame_000.{ext} … into a folder; name the folder with -o",
             dir.display()
@@ -349,8 +353,12 @@ fn turntable(
         let mut f = renderer.frame(opt, &cam, format)?;
         frame_ms.push(f.frame_ms);
         let path = dir.join(format!("frame_{i:0digits$}.{ext}", digits = digits.max(3)));
-        label(a, &mut f.picture, &cam, true);
-        f.picture.save(&path, &exr_comment(opt, volume, &cam))?;
+        let dicom = DicomOut {
+            series: Some((series.clone(), i + 1)),
+            ..label(a, &mut f.picture, &cam, true)
+        };
+        f.picture
+            .save(&path, &exr_comment(opt, volume, &cam), &dicom)?;
         pb.inc(1);
     }
     pb.finish_and_clear();
@@ -638,7 +646,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         &cam,
         bones.is_some() || scene.volume.is_some(),
     );
-    image.save_as(
+    image.save(
         &a.output,
         &format!(
             "linear RGB, {} spp, depth {}{}",

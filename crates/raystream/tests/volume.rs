@@ -274,20 +274,21 @@ fn renders_save_as_dicom_secondary_capture() {
         return;
     };
     let head = volume("dicom/head_ct_gantry_tilt_ge");
-    let (dcm, png) = (tmp("sc-head.dcm"), tmp("sc-head.png"));
-    for out in [&dcm, &png] {
-        let o = run(&[
-            "render",
-            &head,
-            "--mode",
-            "mip",
-            "--labels",
-            "--size",
-            "48x40",
-            "--quiet",
-            "-o",
-            out.to_str().unwrap(),
-        ]);
+    let (dcm, png, frames) = (tmp("sc-head.dcm"), tmp("sc-head.png"), tmp("sc-turntable"));
+    std::fs::remove_dir_all(&frames).ok();
+    // A frame as DICOM and PNG, and a turntable of DICOM frames (one series, numbered, frame 0
+    // the single frame).
+    for (out, extra) in [
+        (&dcm, &[][..]),
+        (&png, &[][..]),
+        (&frames, &["--turntable", "3", "--format", "dcm"][..]),
+    ] {
+        let mut args = vec![
+            "render", &head, "--mode", "mip", "--labels", "--size", "48x40",
+        ];
+        args.extend_from_slice(&["--quiet", "-o", out.to_str().unwrap()]);
+        args.extend_from_slice(extra);
+        let o = run(&args);
         assert!(o.status.success(), "{}", stderr(&o));
     }
     let script = r#"
@@ -300,10 +301,18 @@ keys = ["0008|0016", "0008|0060", "0010|0010", "0010|0020", "0020|000d", "0020|0
 src = tags(sorted(glob.glob(sys.argv[2] + "/*.dcm"))[0], keys)
 out = tags(sys.argv[1], keys)
 pixels = sitk.GetArrayFromImage(sitk.ReadImage(sys.argv[1])).reshape(-1).tolist()
-print(json.dumps({"src": src, "out": out, "pixels": pixels}))
+frames = [tags(f, ["0020|000e", "0020|0013"]) for f in sorted(glob.glob(sys.argv[3] + "/*"))]
+first = sitk.GetArrayFromImage(sitk.ReadImage(sys.argv[3] + "/frame_000.dcm")).reshape(-1).tolist()
+print(json.dumps({"src": src, "out": out, "pixels": pixels, "frames": frames, "first": first}))
 "#;
     let o = std::process::Command::new(&py)
-        .args(["-c", script, dcm.to_str().unwrap(), &head])
+        .args([
+            "-c",
+            script,
+            dcm.to_str().unwrap(),
+            &head,
+            frames.to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
@@ -333,6 +342,14 @@ print(json.dumps({"src": src, "out": out, "pixels": pixels}))
         .map(|p| p.as_u64().unwrap() as u8)
         .collect();
     assert_eq!(got, want, "the PNG's pixels");
+    let f = v["frames"].as_array().unwrap();
+    assert_eq!(f.len(), 3);
+    for (i, frame) in f.iter().enumerate() {
+        assert_eq!(frame["0020|000e"], f[0]["0020|000e"], "one series");
+        assert_eq!(frame["0020|0013"], (i + 1).to_string(), "numbered from 1");
+    }
+    assert_ne!(f[0]["0020|000e"], out["0020|000e"]);
+    assert_eq!(v["first"], v["pixels"], "frame 0 is the single frame");
     // An AOV is not written as DICOM.
     let o = run(&["render", "--aov", "depth", "-o", "x.dcm"]);
     assert_eq!(o.status.code(), Some(2));
