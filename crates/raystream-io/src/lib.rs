@@ -34,10 +34,12 @@ pub struct TriMesh {
 /// What went wrong reading a mesh, always with the file it came from.
 #[derive(Debug, thiserror::Error)]
 pub enum MeshError {
-    #[error("{path}: {source}")]
+    /// The file could not be read or written. (The I/O error is in the message, not a
+    /// `source`: a chain printed in full would say it twice.)
+    #[error("{path}: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{path}: {problem}")]
     Invalid { path: PathBuf, problem: String },
@@ -153,9 +155,9 @@ fn read_mesh_file(path: &Path) -> Result<(MeshFormat, Vec<u8>), MeshError> {
             "unsupported mesh format (expected .obj, .ply or .stl, optionally .gz)",
         )
     })?;
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+    let bytes = std::fs::read(path).map_err(|error| MeshError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })?;
     Ok((format, bytes))
 }

@@ -14,9 +14,9 @@ pub fn write_mesh(path: &Path, mesh: &TriMesh, normals: Option<&[Vec3]>) -> Resu
         .filter(|_| !path.to_string_lossy().ends_with(".gz"))
         .ok_or_else(|| MeshError::invalid(path, "output must end in .ply, .obj or .stl"))?;
     let normals = normals.filter(|n| n.len() == mesh.positions.len());
-    let file = std::fs::File::create(path).map_err(|source| MeshError::Io {
+    let file = std::fs::File::create(path).map_err(|error| MeshError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })?;
     let mut w = BufWriter::new(file);
     let r = match format {
@@ -24,9 +24,9 @@ pub fn write_mesh(path: &Path, mesh: &TriMesh, normals: Option<&[Vec3]>) -> Resu
         MeshFormat::Obj => write_obj(&mut w, mesh, normals),
         MeshFormat::Stl => write_stl(&mut w, mesh),
     };
-    r.and_then(|()| w.flush()).map_err(|source| MeshError::Io {
+    r.and_then(|()| w.flush()).map_err(|error| MeshError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })
 }
 

@@ -63,6 +63,20 @@ fn missing_and_unsupported_files() {
     );
     let f = write("mesh.xyz", b"1 2 3\n");
     assert_input_error(&["info", &f], "mesh.xyz", "unsupported");
+    // The reason is said once, not once more as the error's cause.
+    for args in [
+        &["info", "no/such/mesh.ply"][..],
+        &["render", "no/such/mesh.ply", "--quiet"],
+        &["info", "no/such/ct.nii"],
+    ] {
+        let e = stderr(&run(args));
+        let reason = if e.contains("No such file") {
+            "No such file"
+        } else {
+            "no such file"
+        };
+        assert_eq!(e.matches(reason).count(), 1, "{e}");
+    }
 }
 
 #[test]

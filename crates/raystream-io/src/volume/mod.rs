@@ -82,10 +82,12 @@ pub fn is_volume_path(path: &Path) -> bool {
 /// What went wrong reading a volume, always with the file (or folder) it came from.
 #[derive(Debug, thiserror::Error)]
 pub enum VolumeError {
-    #[error("{path}: {source}")]
+    /// The file could not be read or written. (The I/O error is in the message, not a
+    /// `source`: a chain printed in full would say it twice.)
+    #[error("{path}: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{path}: {problem}")]
     Invalid { path: PathBuf, problem: String },
@@ -98,10 +100,10 @@ impl VolumeError {
             problem: problem.into(),
         }
     }
-    pub fn io(path: &Path, source: std::io::Error) -> Self {
+    pub fn io(path: &Path, error: std::io::Error) -> Self {
         VolumeError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         }
     }
 }
@@ -351,7 +353,7 @@ pub fn load_volume(path: &Path, series: Option<&str>) -> Result<Volume, VolumeEr
     if !path.exists() {
         return Err(VolumeError::io(
             path,
-            std::io::Error::from(std::io::ErrorKind::NotFound),
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder"),
         ));
     }
     let volume = match format {
