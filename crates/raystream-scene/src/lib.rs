@@ -562,8 +562,8 @@ impl Scene {
     /// A mesh file alone, as [`Scene::for_mesh`] stages it, in its own materials where it has
     /// them (an OBJ's MTL), the default one elsewhere.
     pub fn for_mesh_file(path: &Path) -> Result<Scene, SceneError> {
-        let (mesh, materials) = raystream_io::load_mesh_with_shading(path)?;
-        Self::staged(mesh, materials, path)
+        let (mesh, shading) = raystream_io::load_mesh_with_shading(path)?;
+        Self::staged(mesh, shading, path)
     }
 
     /// A mesh alone: a key and a fill light, a slightly reflective ground plane under it, the
@@ -572,7 +572,7 @@ impl Scene {
         Self::staged(mesh, MeshShading::default(), name)
     }
 
-    fn staged(mesh: TriMesh, materials: MeshShading, name: &Path) -> Result<Scene, SceneError> {
+    fn staged(mesh: TriMesh, shading: MeshShading, name: &Path) -> Result<Scene, SceneError> {
         let b = mesh.bounds();
         let (c, r) = (b.center(), b.radius());
         let mut desc = SceneDesc::default();
@@ -600,12 +600,9 @@ impl Scene {
             },
         ];
         desc.objects.push(ObjectDesc::default());
-        let (mut mesh, mut materials) = (Some(mesh), Some(materials));
+        let mut object = Some((mesh, shading));
         Self::compile(&desc, name, None, |_, _| {
-            Ok((
-                mesh.take().expect("one object"),
-                materials.take().unwrap_or_default(),
-            ))
+            Ok(object.take().expect("one object"))
         })
         .map_err(around_the_mesh)
     }

@@ -7,7 +7,7 @@ use raystream_accel::TreeStats;
 use serde_json::json;
 
 use crate::cli::InfoArgs;
-use crate::common::{file_name, load_mesh, print_line, round3};
+use crate::common::{file_name, print_line, round3};
 
 pub fn tree_json(s: &TreeStats) -> serde_json::Value {
     json!({
@@ -38,26 +38,17 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     {
         return scene_info(a, input);
     }
-    let mesh = load_mesh(input)?;
-    // An OBJ's materials (MTL): each with the triangles that use it.
-    let materials =
-        if raystream_io::MeshFormat::from_path(input) == Some(raystream_io::MeshFormat::Obj) {
-            raystream_io::load_mesh_with_shading(input)?.1
-        } else {
-            Default::default()
-        };
-    let used: Vec<(String, usize)> = materials
+    // The mesh with its materials (an OBJ's MTL), each with the triangles that use it.
+    let (mesh, materials) = raystream_io::load_mesh_with_shading(input)?;
+    let mut counts = vec![0usize; materials.materials.len()];
+    for m in materials.material_of.iter().flatten() {
+        counts[*m as usize] += 1;
+    }
+    let used: Vec<(&str, usize)> = materials
         .materials
         .iter()
-        .enumerate()
-        .map(|(i, m)| {
-            let n = materials
-                .material_of
-                .iter()
-                .filter(|&&t| t == Some(i as u32))
-                .count();
-            (m.name.clone(), n)
-        })
+        .zip(counts)
+        .map(|(m, n)| (m.name.as_str(), n))
         .collect();
     let tree = a.tree.build(&mesh);
     let b = mesh.bounds();
