@@ -1,8 +1,10 @@
 //! DICOM CT series: a folder of single-frame slices (or one `.dcm` file) → one [`Volume`].
 //!
 //! Parsing and pixel decoding are dicom-rs (`dicom-object`, `dicom-pixeldata`: uncompressed,
-//! deflate, RLE, JPEG via jpeg-decoder, JPEG 2000 via the pure-Rust `openjp2`). JPEG-LS would need
-//! the C++ CharLS library and is reported as unsupported rather than built.
+//! deflate, RLE, JPEG via jpeg-decoder, JPEG 2000 via the pure-Rust `openjp2`). JPEG-LS is
+//! decoded here with the pure-Rust `pure_jpegls` (dicom-rs's own JPEG-LS adapter needs the C++
+//! CharLS, built with cmake) into native pixel data, which dicom-pixeldata then converts like any
+//! other, so that sign, bits stored and rescale are handled in one place.
 //!
 //! The file meta group (group 0002) is read here rather than by dicom-rs's `open_file`, which
 //! rejects meta elements whose value is longer than their VR allows (e.g. a 18-character
@@ -18,6 +20,7 @@
 
 use std::path::{Path, PathBuf};
 
+use dicom_core::{DataElement, PrimitiveValue, VR};
 use dicom_dictionary_std::tags;
 use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
 use dicom_pixeldata::PixelDecoder;
@@ -794,31 +797,35 @@ impl Stack {
     }
 }
 
+/// Transfer syntaxes decoded by [`jpeg_ls_to_native`] rather than by dicom-pixeldata.
+const JPEG_LS: [&str; 2] = ["1.2.840.10008.1.2.4.80", "1.2.840.10008.1.2.4.81"];
+const EXPLICIT_LE: &str = "1.2.840.10008.1.2.1";
+
 /// Decodes one slice to modality values (RescaleSlope/Intercept applied: HU for CT).
 pub(crate) fn decode_slice(s: &mut Slice, per_slice: usize) -> Result<Vec<f32>, VolumeError> {
     let ts = TransferSyntaxRegistry.get(&s.ts_uid).ok_or_else(|| {
         VolumeError::invalid(&s.file, format!("unknown transfer syntax {}", s.ts_uid))
     })?;
-    if !ts.can_decode_all() {
+    let mut obj = s.obj.take().expect("each slice is decoded once");
+    let jpeg_ls = JPEG_LS.contains(&s.ts_uid.as_str());
+    if jpeg_ls {
+        obj = jpeg_ls_to_native(obj, s)?;
+    } else if !ts.can_decode_all() {
         return Err(VolumeError::invalid(
             &s.file,
             format!(
-                "pixel data in transfer syntax {} ({}) cannot be decoded by this build{}",
+                "pixel data in transfer syntax {} ({}) cannot be decoded by this build",
                 s.ts_uid,
                 ts.name(),
-                if s.ts_uid.starts_with("1.2.840.10008.1.2.4.8") {
-                    " (JPEG-LS needs the CharLS C++ library)"
-                } else {
-                    ""
-                }
             ),
         ));
     }
-    let obj = s
-        .obj
-        .take()
-        .expect("each slice is decoded once")
-        .with_meta(FileMetaTableBuilder::new().transfer_syntax(s.ts_uid.as_str()))
+    let obj = obj
+        .with_meta(FileMetaTableBuilder::new().transfer_syntax(if jpeg_ls {
+            EXPLICIT_LE
+        } else {
+            s.ts_uid.as_str()
+        }))
         .map_err(|e| {
             VolumeError::invalid(&s.file, format!("cannot build the file meta table: {e}"))
         })?;
@@ -849,4 +856,48 @@ pub(crate) fn decode_slice(s: &mut Slice, per_slice: usize) -> Result<Vec<f32>, 
         ));
     }
     Ok(values)
+}
+
+/// Replaces a JPEG-LS slice's encapsulated pixel data with the decoded samples, as native
+/// (uncompressed) pixel data of the slice's BitsAllocated. The samples are the stored bit
+/// patterns (T.87 codes unsigned values), so a signed image is sign-extended from BitsStored by
+/// dicom-pixeldata afterwards, exactly as for an uncompressed file.
+fn jpeg_ls_to_native(
+    mut obj: InMemDicomObject,
+    s: &Slice,
+) -> Result<InMemDicomObject, VolumeError> {
+    let bad = |what: String| VolumeError::invalid(&s.file, format!("JPEG-LS pixel data: {what}"));
+    let int = |tag| obj.get(tag).and_then(|e| e.to_int::<u32>().ok());
+    let samples = int(tags::SAMPLES_PER_PIXEL).unwrap_or(1);
+    if samples != 1 {
+        return Err(bad(format!(
+            "{samples} samples per pixel; only greyscale (1) is supported"
+        )));
+    }
+    let allocated = int(tags::BITS_ALLOCATED).unwrap_or(16);
+    let stream: Vec<u8> = obj
+        .get(tags::PIXEL_DATA)
+        .and_then(|e| e.value().fragments())
+        .ok_or_else(|| bad("not encapsulated in fragments".into()))?
+        .concat();
+    let (values, _, _) = jpegls::decode(&stream, s.cols, s.rows).map_err(|e| {
+        bad(format!(
+            "cannot decode the {}x{} frame: {e}",
+            s.cols, s.rows
+        ))
+    })?;
+    let value = match allocated {
+        8 => PrimitiveValue::U8(
+            values
+                .iter()
+                .map(|&v| u8::try_from(v))
+                .collect::<Result<_, _>>()
+                .map_err(|_| bad("a sample wider than BitsAllocated 8".into()))?,
+        ),
+        16 => PrimitiveValue::U16(values.into()),
+        n => return Err(bad(format!("BitsAllocated {n}; JPEG-LS carries 8 or 16"))),
+    };
+    let vr = if allocated == 8 { VR::OB } else { VR::OW };
+    obj.put(DataElement::new(tags::PIXEL_DATA, vr, value));
+    Ok(obj)
 }

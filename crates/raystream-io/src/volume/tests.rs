@@ -196,12 +196,33 @@ fn every_decodable_transfer_syntax_gives_the_uncompressed_hu() {
     };
     // Lossless: identical values.
     for ts in [
-        "1.2", "1.2.1.99", "1.2.2", "1.2.5", "1.2.4.57", "1.2.4.70", "1.2.4.90",
+        "1.2", "1.2.1.99", "1.2.2", "1.2.5", "1.2.4.57", "1.2.4.70", "1.2.4.80", "1.2.4.90",
     ] {
         let v = load_ts(ts).unwrap_or_else(|e| panic!("{ts}: {e}"));
         assert_geometry(&v, &EXPECTED[5]);
         assert_eq!(max_diff(&v), 0.0, "transfer syntax 1.2.840.10008.{ts}");
     }
+    // Near-lossless JPEG-LS (NEAR = 1): within 1 HU, and the very values CharLS decodes
+    // (through GDCM in SimpleITK 2.x: 181945 pixels differ from the lossless slice, and these
+    // sums; a decoder off by one anywhere would change them).
+    let v = load_ts("1.2.4.81").unwrap();
+    assert_geometry(&v, &EXPECTED[5]);
+    assert_eq!(max_diff(&v), 1.0);
+    let hu: Vec<i64> = v.data.iter().map(|&x| x as i64).collect();
+    assert!(v.data.iter().zip(&hu).all(|(&x, &h)| x == h as f32));
+    let differ = hu
+        .iter()
+        .zip(&reference.data)
+        .filter(|&(&a, &b)| a as f32 != b)
+        .count();
+    assert_eq!(differ, 181_945);
+    assert_eq!(hu.iter().sum::<i64>(), -248_761_732);
+    let weighted: i64 = hu
+        .iter()
+        .enumerate()
+        .map(|(i, &h)| (i as i64 % 1009) * h)
+        .sum();
+    assert_eq!(weighted, -124_640_169_588);
     // Lossy JPEG 2000: within 5 HU (pydicom + pylibjpeg give the same bound).
     let v = load_ts("1.2.4.91").unwrap();
     assert!(max_diff(&v) <= 5.0, "{}", max_diff(&v));
@@ -222,8 +243,6 @@ fn undecodable_transfer_syntaxes_are_clear_errors() {
     for (ts, says) in [
         ("1.2.4.53", "retired JPEG"),
         ("1.2.4.55", "retired JPEG"),
-        ("1.2.4.80", "JPEG-LS"),
-        ("1.2.4.81", "JPEG-LS"),
         ("1.2.4.51", "12-bit lossy JPEG"),
     ] {
         let e = load_ts(ts).unwrap_err().to_string();
@@ -781,4 +800,65 @@ fn truncated_and_bit_flipped_headers_never_panic() {
         let e = nifti::parse(&nifti_gz[..cut], Path::new("cut.nii.gz")).unwrap_err();
         assert!(e.to_string().starts_with("cut.nii.gz"), "{e}");
     }
+}
+
+/// A damaged JPEG-LS stream (every bit of its frame and scan headers flipped, bytes of the
+/// entropy-coded scan replaced or turned into markers, the scan cut short) decodes to some
+/// values or is an error naming the file and JPEG-LS, never a panic; the decoder runs with
+/// overflow checks in this test build.
+#[test]
+fn damaged_jpeg_ls_pixel_data_is_an_error_never_a_panic() {
+    let dir = shared(TS_DIR);
+    let file = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_str().unwrap().contains("4.80_"))
+        .unwrap();
+    let bytes = std::fs::read(&file).unwrap();
+    let soi = bytes
+        .windows(4)
+        .position(|w| w == [0xFF, 0xD8, 0xFF, 0xF7])
+        .expect("a JPEG-LS frame");
+    let decode = |b: &[u8]| -> Result<(), String> {
+        let mut s = dicom::parse_slice(b, Path::new("ls.dcm")).map_err(|e| e.to_string())?;
+        let n = (s.rows * s.cols) as usize;
+        dicom::decode_slice(&mut s, n)
+            .map(drop)
+            .map_err(|e| e.to_string())
+    };
+    decode(&bytes).expect("the intact slice decodes");
+    let mut errors = 0;
+    let mut check = |b: Vec<u8>, what: &str| {
+        if let Err(e) = decode(&b) {
+            assert!(
+                e.starts_with("ls.dcm") && e.contains("JPEG-LS"),
+                "{what}: {e}"
+            );
+            errors += 1;
+        }
+    };
+    // SOI, SOF55 (13 bytes), SOS (10 bytes) and the first scan bytes.
+    for at in soi..soi + 32 {
+        for bit in 0..8 {
+            let mut b = bytes.clone();
+            b[at] ^= 1 << bit;
+            check(b, &format!("bit {bit} of byte {}", at - soi));
+        }
+    }
+    let scan = soi + 27;
+    let end = bytes.len() - 8;
+    for k in 0..24 {
+        let at = scan + (end - scan) * k / 24;
+        let mut b = bytes.clone();
+        b[at] = 0xFF;
+        b[at + 1] = [0xD9, 0xD0, 0xF7, 0x00][k % 4];
+        check(b, &format!("a marker at scan byte {}", at - scan));
+        let mut b = bytes.clone();
+        b[at..end].fill(if k % 2 == 0 { 0 } else { 0xFF });
+        check(b, &format!("the scan cut at byte {}", at - scan));
+    }
+    assert!(
+        errors > 100,
+        "only {errors} of the damaged streams were refused"
+    );
 }
