@@ -7,7 +7,7 @@
 files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary; an OBJ with normals and an MTL
         library, either of them mutated; a PLY with normals), tiny volumes (NIfTI, NRRD and
         MetaImage, attached and detached, via SimpleITK) and real DICOM slices from
-        ../shared (JPEG-LS among them), each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
+        ../shared (JPEG-LS and 12-bit JPEG among them), each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (meshes also shaded; volumes also `--mode` mip, minip, average, slice or
         dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
         must name the file.
@@ -92,7 +92,7 @@ def seeds(d):
         print("no SimpleITK: volumes other than DICOM left out", file=sys.stderr)
     ts = os.path.join(SHARED, "data/volumes/dicom/ct_slice_transfer_syntaxes")
     names = sorted(os.listdir(ts))
-    for n in names[:4] + [n for n in names if "_1.2.840.10008.1.2.4.8" in n]:
+    for n in names[:4] + [n for n in names if re.search(r"\.4\.(51|80|81)_", n)]:
         shutil.copy(os.path.join(ts, n), os.path.join(d, n))
         os.chmod(os.path.join(d, n), 0o644)
 

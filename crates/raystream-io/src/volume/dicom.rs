@@ -3,8 +3,9 @@
 //! Parsing and pixel decoding are dicom-rs (`dicom-object`, `dicom-pixeldata`: uncompressed,
 //! deflate, RLE, JPEG via jpeg-decoder, JPEG 2000 via the pure-Rust `openjp2`). JPEG-LS is
 //! decoded here with the pure-Rust `pure_jpegls` (dicom-rs's own JPEG-LS adapter needs the C++
-//! CharLS, built with cmake) into native pixel data, which dicom-pixeldata then converts like any
-//! other, so that sign, bits stored and rescale are handled in one place.
+//! CharLS, built with cmake), and 12-bit lossy JPEG, which jpeg-decoder refuses, with the
+//! pure-Rust `libjpeg-turbo-rs`, into native pixel data that dicom-pixeldata then converts like
+//! any other, so that sign, bits stored and rescale are handled in one place.
 //!
 //! The file meta group (group 0002) is read here rather than by dicom-rs's `open_file`, which
 //! rejects meta elements whose value is longer than their VR allows (e.g. a 18-character
@@ -797,8 +798,47 @@ impl Stack {
     }
 }
 
-/// Transfer syntaxes decoded by [`jpeg_ls_to_native`] rather than by dicom-pixeldata.
-const JPEG_LS: [&str; 2] = ["1.2.840.10008.1.2.4.80", "1.2.840.10008.1.2.4.81"];
+/// A codec run here, on the slice's encapsulated frame, rather than by dicom-pixeldata.
+#[derive(Clone, Copy)]
+enum OwnCodec {
+    /// JPEG-LS, lossless or near-lossless (1.2.840.10008.1.2.4.80/81): pure_jpegls.
+    JpegLs,
+    /// 12-bit lossy JPEG (1.2.840.10008.1.2.4.51, precision 12): libjpeg-turbo-rs. The 8-bit
+    /// variant of the same syntax stays with dicom-pixeldata's jpeg-decoder; a stream whose
+    /// precision cannot be read comes here too, for libjpeg-turbo-rs's more precise error.
+    Jpeg12,
+}
+
+impl OwnCodec {
+    fn of(ts_uid: &str, obj: &InMemDicomObject) -> Option<OwnCodec> {
+        match ts_uid {
+            "1.2.840.10008.1.2.4.80" | "1.2.840.10008.1.2.4.81" => Some(OwnCodec::JpegLs),
+            "1.2.840.10008.1.2.4.51" => {
+                let frame = obj.get(tags::PIXEL_DATA)?.value().fragments()?.first()?;
+                (jpeg_precision(frame) != Some(8)).then_some(OwnCodec::Jpeg12)
+            }
+            _ => None,
+        }
+    }
+}
+
+/// The sample precision in a JPEG stream's frame header (SOF0 to SOF15), or `None` if the
+/// markers before it are malformed.
+fn jpeg_precision(stream: &[u8]) -> Option<u8> {
+    let mut at = 2;
+    while at + 4 < stream.len() {
+        if stream[at] != 0xFF {
+            return None;
+        }
+        let marker = stream[at + 1];
+        if (0xC0..=0xCF).contains(&marker) && ![0xC4, 0xC8, 0xCC].contains(&marker) {
+            return Some(stream[at + 4]);
+        }
+        at += 2 + u16::from_be_bytes([stream[at + 2], stream[at + 3]]) as usize;
+    }
+    None
+}
+
 const EXPLICIT_LE: &str = "1.2.840.10008.1.2.1";
 
 /// Decodes one slice to modality values (RescaleSlope/Intercept applied: HU for CT).
@@ -807,9 +847,9 @@ pub(crate) fn decode_slice(s: &mut Slice, per_slice: usize) -> Result<Vec<f32>, 
         VolumeError::invalid(&s.file, format!("unknown transfer syntax {}", s.ts_uid))
     })?;
     let mut obj = s.obj.take().expect("each slice is decoded once");
-    let jpeg_ls = JPEG_LS.contains(&s.ts_uid.as_str());
-    if jpeg_ls {
-        obj = jpeg_ls_to_native(obj, s)?;
+    let own = OwnCodec::of(&s.ts_uid, &obj);
+    if let Some(codec) = own {
+        obj = decode_to_native(obj, s, codec)?;
     } else if !ts.can_decode_all() {
         return Err(VolumeError::invalid(
             &s.file,
@@ -821,26 +861,20 @@ pub(crate) fn decode_slice(s: &mut Slice, per_slice: usize) -> Result<Vec<f32>, 
         ));
     }
     let obj = obj
-        .with_meta(FileMetaTableBuilder::new().transfer_syntax(if jpeg_ls {
-            EXPLICIT_LE
-        } else {
-            s.ts_uid.as_str()
-        }))
+        .with_meta(
+            FileMetaTableBuilder::new().transfer_syntax(if own.is_some() {
+                EXPLICIT_LE
+            } else {
+                s.ts_uid.as_str()
+            }),
+        )
         .map_err(|e| {
             VolumeError::invalid(&s.file, format!("cannot build the file meta table: {e}"))
         })?;
     let pixels = obj.decode_pixel_data().map_err(|e| {
         VolumeError::invalid(
             &s.file,
-            format!(
-                "cannot decode the pixel data ({}{}): {e}",
-                ts.name(),
-                if s.ts_uid == "1.2.840.10008.1.2.4.51" {
-                    "; 12-bit lossy JPEG is not supported by the pure-Rust decoder"
-                } else {
-                    ""
-                }
-            ),
+            format!("cannot decode the pixel data ({}): {e}", ts.name()),
         )
     })?;
     let values: Vec<f32> = pixels.to_vec().map_err(|e| {
@@ -858,15 +892,20 @@ pub(crate) fn decode_slice(s: &mut Slice, per_slice: usize) -> Result<Vec<f32>, 
     Ok(values)
 }
 
-/// Replaces a JPEG-LS slice's encapsulated pixel data with the decoded samples, as native
+/// Replaces a slice's encapsulated pixel data with the samples `codec` decodes, as native
 /// (uncompressed) pixel data of the slice's BitsAllocated. The samples are the stored bit
-/// patterns (T.87 codes unsigned values), so a signed image is sign-extended from BitsStored by
-/// dicom-pixeldata afterwards, exactly as for an uncompressed file.
-fn jpeg_ls_to_native(
+/// patterns (T.87 and T.81 code unsigned values), so a signed image is sign-extended from
+/// BitsStored, and rescaled, by dicom-pixeldata afterwards, exactly as an uncompressed file.
+fn decode_to_native(
     mut obj: InMemDicomObject,
     s: &Slice,
+    codec: OwnCodec,
 ) -> Result<InMemDicomObject, VolumeError> {
-    let bad = |what: String| VolumeError::invalid(&s.file, format!("JPEG-LS pixel data: {what}"));
+    let name = match codec {
+        OwnCodec::JpegLs => "JPEG-LS",
+        OwnCodec::Jpeg12 => "12-bit JPEG",
+    };
+    let bad = |what: String| VolumeError::invalid(&s.file, format!("{name} pixel data: {what}"));
     let int = |tag| obj.get(tag).and_then(|e| e.to_int::<u32>().ok());
     let samples = int(tags::SAMPLES_PER_PIXEL).unwrap_or(1);
     if samples != 1 {
@@ -880,12 +919,30 @@ fn jpeg_ls_to_native(
         .and_then(|e| e.value().fragments())
         .ok_or_else(|| bad("not encapsulated in fragments".into()))?
         .concat();
-    let (values, _, _) = jpegls::decode(&stream, s.cols, s.rows).map_err(|e| {
-        bad(format!(
-            "cannot decode the {}x{} frame: {e}",
-            s.cols, s.rows
-        ))
-    })?;
+    let frame = format!("the {}x{} frame", s.cols, s.rows);
+    let values: Vec<u16> = match codec {
+        OwnCodec::JpegLs => {
+            jpegls::decode(&stream, s.cols, s.rows)
+                .map_err(|e| bad(format!("cannot decode {frame}: {e}")))?
+                .0
+        }
+        OwnCodec::Jpeg12 => {
+            let limits = libjpeg_turbo_rs::DecodeLimits {
+                max_width: s.cols as usize,
+                max_height: s.rows as usize,
+                ..Default::default()
+            };
+            let im = libjpeg_turbo_rs::decompress_12bit_with_limits(&stream, &limits)
+                .map_err(|e| bad(format!("cannot decode {frame}: {e}")))?;
+            if (im.width, im.height, im.num_components) != (s.cols as usize, s.rows as usize, 1) {
+                return Err(bad(format!(
+                    "{}x{} pixels of {} components instead of {frame}",
+                    im.width, im.height, im.num_components
+                )));
+            }
+            im.data.iter().map(|&v| v as u16).collect()
+        }
+    };
     let value = match allocated {
         8 => PrimitiveValue::U8(
             values
@@ -895,7 +952,11 @@ fn jpeg_ls_to_native(
                 .map_err(|_| bad("a sample wider than BitsAllocated 8".into()))?,
         ),
         16 => PrimitiveValue::U16(values.into()),
-        n => return Err(bad(format!("BitsAllocated {n}; JPEG-LS carries 8 or 16"))),
+        n => {
+            return Err(bad(format!(
+                "BitsAllocated {n}; only 8 and 16 are supported"
+            )));
+        }
     };
     let vr = if allocated == 8 { VR::OB } else { VR::OW };
     obj.put(DataElement::new(tags::PIXEL_DATA, vr, value));
