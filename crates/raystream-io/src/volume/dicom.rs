@@ -1,4 +1,5 @@
-//! DICOM CT series: a folder of single-frame slices (or one `.dcm` file) → one [`Volume`].
+//! DICOM CT series: a folder of slices, or one file (a slice, or an enhanced multi-frame image
+//! whose functional groups place each frame) → one [`Volume`].
 //!
 //! Parsing and pixel decoding are dicom-rs (`dicom-object`, `dicom-pixeldata`: uncompressed,
 //! deflate, RLE, JPEG via jpeg-decoder, JPEG 2000 via the pure-Rust `openjp2`). JPEG-LS is
@@ -98,12 +99,18 @@ pub(crate) struct Slice {
     ts_uid: String,
     pub(crate) rows: u32,
     pub(crate) cols: u32,
-    frames: u32,
+    /// The frame of a multi-frame file this slice is, numbered from 0 (`None`: a single-frame
+    /// file).
+    frame: Option<u32>,
     pub(crate) position: [f64; 3],
     orientation: [f64; 6],
     pixel_spacing: [f64; 2],
     between_slices: Option<f64>,
     thickness: Option<f64>,
+    /// What the volume's warnings should say about this file (only some frames read).
+    note: Option<String>,
+    /// The parsed data set, until decoded: a single-frame file's, or a multi-frame file's, held
+    /// by the first frame read from it, which decodes them all ([`decode_all`]).
     obj: Option<InMemDicomObject>,
 }
 
@@ -218,13 +225,14 @@ fn read_folder(path: &Path) -> Result<(Vec<Slice>, Vec<String>), VolumeError> {
     } else {
         vec![path.to_path_buf()]
     };
-    let parsed: Vec<Result<Slice, VolumeError>> = files.par_iter().map(|f| read_slice(f)).collect();
+    let parsed: Vec<Result<Vec<Slice>, VolumeError>> =
+        files.par_iter().map(|f| read_file(f)).collect();
     let mut slices = Vec::new();
     let mut warnings = Vec::new();
     let mut first_error = None;
     for r in parsed {
         match r {
-            Ok(s) => slices.push(s),
+            Ok(s) => slices.extend(s),
             Err(e) => {
                 if path.is_dir() {
                     warnings.push(format!("skipped {e}"));
@@ -296,14 +304,16 @@ fn read_meta(bytes: &[u8], file: &Path) -> Result<(String, usize), VolumeError> 
     Ok((ts, pos))
 }
 
-fn read_slice(file: &Path) -> Result<Slice, VolumeError> {
-    parse_slice(
+fn read_file(file: &Path) -> Result<Vec<Slice>, VolumeError> {
+    parse_file(
         &std::fs::read(file).map_err(|e| VolumeError::io(file, e))?,
         file,
     )
 }
 
-pub(crate) fn parse_slice(bytes: &[u8], file: &Path) -> Result<Slice, VolumeError> {
+/// A DICOM file's slices: one for a single-frame image, one a frame for a multi-frame
+/// (enhanced) one.
+pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, VolumeError> {
     let (ts_uid, start) = read_meta(bytes, file)?;
     let ts = TransferSyntaxRegistry.get(&ts_uid).ok_or_else(|| {
         VolumeError::invalid(
@@ -342,7 +352,6 @@ pub(crate) fn parse_slice(bytes: &[u8], file: &Path) -> Result<Slice, VolumeErro
             .and_then(|e| e.to_str().ok())
             .map(|s| s.trim().to_string())
     };
-    let floats = |tag| obj.get(tag).and_then(|e| e.to_multi_float64().ok());
     let int = |tag| obj.get(tag).and_then(|e| e.to_int::<u32>().ok());
     let missing = |what: &str| VolumeError::invalid(file, format!("DICOM image without {what}"));
     if obj.get(tags::PIXEL_DATA).is_none() {
@@ -350,39 +359,199 @@ pub(crate) fn parse_slice(bytes: &[u8], file: &Path) -> Result<Slice, VolumeErro
     }
     let rows = int(tags::ROWS).ok_or_else(|| missing("Rows"))?;
     let cols = int(tags::COLUMNS).ok_or_else(|| missing("Columns"))?;
-    let frames = int(tags::NUMBER_OF_FRAMES).unwrap_or(1);
-    let position = floats(tags::IMAGE_POSITION_PATIENT)
-        .and_then(|v| <[f64; 3]>::try_from(v).ok())
-        .ok_or_else(|| missing("a valid ImagePositionPatient (0020,0032)"))?;
-    let orientation = floats(tags::IMAGE_ORIENTATION_PATIENT)
-        .and_then(|v| <[f64; 6]>::try_from(v).ok())
-        .ok_or_else(|| missing("a valid ImageOrientationPatient (0020,0037)"))?;
-    let pixel_spacing = floats(tags::PIXEL_SPACING)
-        .and_then(|v| <[f64; 2]>::try_from(v).ok())
-        .ok_or_else(|| missing("a valid PixelSpacing (0028,0030)"))?;
-    Ok(Slice {
-        file: file.to_path_buf(),
-        series_uid: text(tags::SERIES_INSTANCE_UID).unwrap_or_default(),
-        description: text(tags::SERIES_DESCRIPTION).unwrap_or_default(),
-        modality: text(tags::MODALITY).unwrap_or_default(),
-        ts_uid,
-        rows,
-        cols,
-        frames,
-        position,
-        orientation,
-        pixel_spacing,
-        between_slices: floats(tags::SPACING_BETWEEN_SLICES).and_then(|v| v.first().copied()),
-        thickness: floats(tags::SLICE_THICKNESS).and_then(|v| v.first().copied()),
-        obj: Some(obj),
-    })
+    let frames = int(tags::NUMBER_OF_FRAMES).unwrap_or(1).max(1);
+    // dicom-pixeldata asserts these (a panic), so a damaged header is refused here.
+    let allocated =
+        int(tags::BITS_ALLOCATED).ok_or_else(|| missing("BitsAllocated (0028,0100)"))?;
+    let stored = int(tags::BITS_STORED).unwrap_or(allocated);
+    if ![8, 16, 32].contains(&allocated) || stored == 0 || stored > allocated {
+        return Err(VolumeError::invalid(
+            file,
+            format!(
+                "BitsAllocated {allocated}, BitsStored {stored}: expected 8, 16 or 32 bits allocated, and 1 to that many stored"
+            ),
+        ));
+    }
+    let (series_uid, description, modality) = (
+        text(tags::SERIES_INSTANCE_UID).unwrap_or_default(),
+        text(tags::SERIES_DESCRIPTION).unwrap_or_default(),
+        text(tags::MODALITY).unwrap_or_default(),
+    );
+    let enhanced = obj
+        .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+        .is_some();
+    let (geometry, warning) = if frames == 1 && !enhanced {
+        (vec![FrameGeometry::of(&[], Some(&obj))], None)
+    } else {
+        multi_frame_geometry(&obj, frames).map_err(|p| VolumeError::invalid(file, p))?
+    };
+    let (mut obj, mut warning) = (Some(obj), warning);
+    let slices = geometry
+        .into_iter()
+        .map(|g| {
+            let at = match g.frame {
+                Some(k) => format!(" in frame {}", k + 1),
+                None => String::new(),
+            };
+            let need = |what: &str| missing(&format!("a valid {what}{at}"));
+            Ok(Slice {
+                file: file.to_path_buf(),
+                series_uid: series_uid.clone(),
+                description: description.clone(),
+                modality: modality.clone(),
+                ts_uid: ts_uid.clone(),
+                rows,
+                cols,
+                frame: g.frame,
+                position: g
+                    .position
+                    .ok_or_else(|| need("ImagePositionPatient (0020,0032)"))?,
+                orientation: g
+                    .orientation
+                    .ok_or_else(|| need("ImageOrientationPatient (0020,0037)"))?,
+                pixel_spacing: g
+                    .pixel_spacing
+                    .ok_or_else(|| need("PixelSpacing (0028,0030)"))?,
+                between_slices: g.between_slices,
+                thickness: g.thickness,
+                note: warning.take(),
+                obj: obj.take(),
+            })
+        })
+        .collect::<Result<Vec<_>, VolumeError>>()?;
+    Ok(slices)
 }
 
-/// Walks the top-level data elements and refuses a defined length that runs past the end of
-/// the file, before dicom-rs would allocate a buffer of that claimed size (a bit flip in a
-/// length field otherwise costs gigabytes and seconds). Stops at the first undefined length
-/// (sequences, encapsulated pixel data) and for deflated data sets, which dicom-rs bounds itself.
+/// A frame's plane: where it is, how it is turned and its pixels' size, from the first of
+/// several data sets that has each (a frame's functional groups, the shared ones, the top
+/// level).
+#[derive(Default)]
+struct FrameGeometry {
+    /// The frame (from 0) of a multi-frame image; `None` for a single-frame one.
+    frame: Option<u32>,
+    position: Option<[f64; 3]>,
+    orientation: Option<[f64; 6]>,
+    pixel_spacing: Option<[f64; 2]>,
+    between_slices: Option<f64>,
+    thickness: Option<f64>,
+}
+
+impl FrameGeometry {
+    /// From the first of `groups` (functional group items, holding the attributes in the
+    /// standard's macros) that has each attribute, else from the top level of `top`.
+    fn of(groups: &[&InMemDicomObject], top: Option<&InMemDicomObject>) -> FrameGeometry {
+        let find = |tag, macro_tag| {
+            groups
+                .iter()
+                .find_map(|g| {
+                    g.get(macro_tag)?
+                        .items()?
+                        .first()?
+                        .get(tag)?
+                        .to_multi_float64()
+                        .ok()
+                })
+                .or_else(|| top?.get(tag)?.to_multi_float64().ok())
+        };
+        FrameGeometry {
+            frame: None,
+            position: find(tags::IMAGE_POSITION_PATIENT, tags::PLANE_POSITION_SEQUENCE)
+                .and_then(|v| <[f64; 3]>::try_from(v).ok()),
+            orientation: find(
+                tags::IMAGE_ORIENTATION_PATIENT,
+                tags::PLANE_ORIENTATION_SEQUENCE,
+            )
+            .and_then(|v| <[f64; 6]>::try_from(v).ok()),
+            pixel_spacing: find(tags::PIXEL_SPACING, tags::PIXEL_MEASURES_SEQUENCE)
+                .and_then(|v| <[f64; 2]>::try_from(v).ok()),
+            between_slices: find(tags::SPACING_BETWEEN_SLICES, tags::PIXEL_MEASURES_SEQUENCE)
+                .and_then(|v| v.first().copied()),
+            thickness: find(tags::SLICE_THICKNESS, tags::PIXEL_MEASURES_SEQUENCE)
+                .and_then(|v| v.first().copied()),
+        }
+    }
+}
+
+/// The frames of a multi-frame (enhanced) image as planes, from its per-frame and shared
+/// functional groups (PS3.3 C.7.6.16: Plane Position, Plane Orientation, Pixel Measures), with
+/// the top level as the last resort (legacy multi-frame). A file holding several stacks or
+/// temporal positions (a 4D CT) gives the frames of the first one only, and a warning.
+fn multi_frame_geometry(
+    obj: &InMemDicomObject,
+    frames: u32,
+) -> Result<(Vec<FrameGeometry>, Option<String>), String> {
+    let per_frame = obj
+        .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+        .and_then(|e| e.items())
+        .ok_or_else(|| {
+            format!(
+                "multi-frame image ({frames} frames) without a per-frame functional groups sequence \
+                 (5200,9230): where each frame lies is unknown"
+            )
+        })?;
+    if per_frame.len() != frames as usize {
+        return Err(format!(
+            "NumberOfFrames is {frames} but the per-frame functional groups sequence has {} items",
+            per_frame.len()
+        ));
+    }
+    let shared = obj
+        .get(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE)
+        .and_then(|e| e.items())
+        .and_then(|items| items.first());
+    // Which stack and temporal position each frame belongs to (Frame Content macro).
+    let content = |item: &InMemDicomObject| {
+        let fc = item
+            .get(tags::FRAME_CONTENT_SEQUENCE)
+            .and_then(|e| e.items())
+            .and_then(|items| items.first());
+        let get = |tag| {
+            fc.and_then(|fc| fc.get(tag))
+                .and_then(|e| e.to_str().ok())
+                .map(|s| s.trim().to_string())
+        };
+        (get(tags::STACK_ID), get(tags::TEMPORAL_POSITION_INDEX))
+    };
+    let first = content(&per_frame[0]);
+    let mut groups: Vec<(Option<String>, Option<String>)> = Vec::new();
+    let mut out = Vec::new();
+    for (k, item) in per_frame.iter().enumerate() {
+        let c = content(item);
+        if !groups.contains(&c) {
+            groups.push(c.clone());
+        }
+        if c == first {
+            let fgs: Vec<&InMemDicomObject> = [Some(item), shared].into_iter().flatten().collect();
+            out.push(FrameGeometry {
+                frame: Some(k as u32),
+                ..FrameGeometry::of(&fgs, Some(obj))
+            });
+        }
+    }
+    let warning = (groups.len() > 1).then(|| {
+        let what = match (&first.0, &first.1) {
+            (_, Some(t)) => format!("temporal position {t}"),
+            (Some(s), None) => format!("stack {s}"),
+            (None, None) => "the frames without a stack or temporal position".to_string(),
+        };
+        format!(
+            "{} stacks or temporal positions in the multi-frame image; read {} of its {frames} \
+             frames, {what}",
+            groups.len(),
+            out.len()
+        )
+    });
+    Ok((out, warning))
+}
+
+/// Walks every data element, into sequences and their items, and refuses a defined length that
+/// runs past the end of the file, before dicom-rs would allocate a buffer of that claimed size
+/// (a bit flip in a length field, or in an item tag inside a sequence, otherwise costs
+/// gigabytes and seconds). Primitive values and the fragments of encapsulated pixel data are
+/// skipped by their lengths; sequences and items are entered. Deflated data sets are left to
+/// dicom-rs, which bounds them itself.
 fn check_lengths(data: &[u8], ts_uid: &str) -> Result<(), String> {
+    use dicom_core::dictionary::{DataDictionary, DataDictionaryEntry, VirtualVr};
     if ts_uid == "1.2.840.10008.1.2.1.99" {
         return Ok(());
     }
@@ -393,11 +562,42 @@ fn check_lengths(data: &[u8], ts_uid: &str) -> Result<(), String> {
         big_endian: big,
     };
     let (u16_at, u32_at) = (|o| b.u16(o), |o| b.u32(o));
+    let past_end = |what: String, len: u32, from: usize| {
+        format!(
+            "{what} claims {len} bytes but only {} remain (truncated or corrupt file)",
+            data.len().saturating_sub(from)
+        )
+    };
     let mut pos = 0;
+    // Inside encapsulated pixel data, whose items are fragments of bytes, not data sets.
+    let mut fragments = false;
     while pos + 8 <= data.len() {
         let (group, elem) = (u16_at(pos), u16_at(pos + 2));
-        let (len, head) = if implicit {
-            (u32_at(pos + 4), 8)
+        if group == 0xFFFE {
+            // Item, item delimiter, sequence delimiter: a tag and a 4-byte length in any syntax.
+            let len = u32_at(pos + 4);
+            pos += 8;
+            match elem {
+                0xE000 if len == u32::MAX => {}
+                0xE000 => {
+                    if pos + len as usize > data.len() {
+                        return Err(past_end("an item".into(), len, pos));
+                    }
+                    if fragments {
+                        pos += len as usize;
+                    }
+                }
+                0xE00D => {}
+                0xE0DD => fragments = false,
+                _ => return Err(format!("invalid item tag (FFFE,{elem:04X}) (corrupt file)")),
+            }
+            continue;
+        }
+        let (sequence, len, head) = if implicit {
+            let sq = dicom_dictionary_std::StandardDataDictionary
+                .by_tag(dicom_core::Tag(group, elem))
+                .is_some_and(|e| e.vr() == VirtualVr::Exact(dicom_core::VR::SQ));
+            (sq, u32_at(pos + 4), 8)
         } else {
             let vr = &data[pos + 4..pos + 6];
             const SHORT: [&[u8; 2]; 21] = [
@@ -415,22 +615,26 @@ fn check_lengths(data: &[u8], ts_uid: &str) -> Result<(), String> {
                 if pos + 12 > data.len() {
                     break;
                 }
-                (u32_at(pos + 8), 12)
+                (vr == b"SQ", u32_at(pos + 8), 12)
             } else {
-                (u16_at(pos + 6) as u32, 8)
+                (false, u16_at(pos + 6) as u32, 8)
             }
         };
         if len == u32::MAX {
-            return Ok(());
+            // A sequence of undefined length (entered), or encapsulated pixel data.
+            fragments = (group, elem) == (0x7FE0, 0x0010);
+            pos += head;
+            continue;
         }
         let end = pos + head + len as usize;
         if end > data.len() {
-            return Err(format!(
-                "data element ({group:04X},{elem:04X}) claims {len} bytes but only {} remain (truncated or corrupt file)",
-                data.len() - pos - head
+            return Err(past_end(
+                format!("data element ({group:04X},{elem:04X})"),
+                len,
+                pos + head,
             ));
         }
-        pos = end;
+        pos = if sequence { pos + head } else { end };
     }
     Ok(())
 }
@@ -476,12 +680,11 @@ fn assemble(
     mut warnings: Vec<String>,
     files_skipped: bool,
 ) -> Result<Volume, VolumeError> {
-    if let Some(s) = slices.iter().find(|s| s.frames != 1) {
-        return Err(VolumeError::invalid(
-            &s.file,
-            format!("multi-frame DICOM ({} frames) is not supported", s.frames),
-        ));
-    }
+    warnings.extend(
+        slices
+            .iter()
+            .filter_map(|s| Some(format!("{}: {}", s.file.display(), s.note.as_ref()?))),
+    );
     let first = &slices[0];
     for s in slices.iter() {
         let same_grid = s.rows == first.rows
@@ -535,10 +738,11 @@ fn assemble(
         // The folder is the message's subject: its files by name.
         |k| {
             let f = &slices[k].file;
-            f.file_name()
-                .unwrap_or(f.as_os_str())
-                .to_string_lossy()
-                .into_owned()
+            let name = f.file_name().unwrap_or(f.as_os_str()).to_string_lossy();
+            match slices[k].frame {
+                Some(frame) => format!("{name} frame {}", frame + 1),
+                None => name.into_owned(),
+            }
         },
     )?;
     warnings.extend(stack.warnings.iter().cloned());
@@ -548,16 +752,12 @@ fn assemble(
     let origin = slices[0].position;
     check_geometry(path, dims, spacing, origin, &direction)?;
 
-    let study = slices[0]
-        .obj
-        .as_ref()
+    let study = slices
+        .iter()
+        .find_map(|s| s.obj.as_ref())
         .map(DicomStudy::of)
         .unwrap_or_default();
-    let per_slice = dims[0] * dims[1];
-    let decoded: Vec<Vec<f32>> = slices
-        .par_iter_mut()
-        .map(|s| decode_slice(s, per_slice))
-        .collect::<Result<_, _>>()?;
+    let decoded = decode_all(slices, dims[0] * dims[1])?;
     let data = stack.regular(&decoded);
     let ts_name = TransferSyntaxRegistry
         .get(&slices[0].ts_uid)
@@ -841,8 +1041,37 @@ fn jpeg_precision(stream: &[u8]) -> Option<u8> {
 
 const EXPLICIT_LE: &str = "1.2.840.10008.1.2.1";
 
-/// Decodes one slice to modality values (RescaleSlope/Intercept applied: HU for CT).
-pub(crate) fn decode_slice(s: &mut Slice, per_slice: usize) -> Result<Vec<f32>, VolumeError> {
+/// Every slice's modality values, in `slices`' order: each file is decoded once, by the slice
+/// that holds its data set, all the frames of a multi-frame one.
+fn decode_all(slices: &mut [Slice], per_slice: usize) -> Result<Vec<Vec<f32>>, VolumeError> {
+    let mut frames: Vec<Vec<Vec<f32>>> = slices
+        .par_iter_mut()
+        .map(|s| match s.obj {
+            Some(_) => decode_frames(s, per_slice),
+            None => Ok(Vec::new()),
+        })
+        .collect::<Result<_, _>>()?;
+    let holder: std::collections::HashMap<&Path, usize> = slices
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| !frames[*k].is_empty())
+        .map(|(k, s)| (s.file.as_path(), k))
+        .collect();
+    slices
+        .iter()
+        .map(|s| {
+            let k = holder[s.file.as_path()];
+            let frame = s.frame.unwrap_or(0) as usize;
+            frames[k].get_mut(frame).map(std::mem::take).ok_or_else(|| {
+                VolumeError::invalid(&s.file, format!("no frame {} decoded", frame + 1))
+            })
+        })
+        .collect()
+}
+
+/// Decodes a file's frames to modality values (RescaleSlope/Intercept applied, a frame's own
+/// in an enhanced image: HU for CT).
+pub(crate) fn decode_frames(s: &mut Slice, per_slice: usize) -> Result<Vec<Vec<f32>>, VolumeError> {
     let ts = TransferSyntaxRegistry.get(&s.ts_uid).ok_or_else(|| {
         VolumeError::invalid(&s.file, format!("unknown transfer syntax {}", s.ts_uid))
     })?;
@@ -877,19 +1106,27 @@ pub(crate) fn decode_slice(s: &mut Slice, per_slice: usize) -> Result<Vec<f32>, 
             format!("cannot decode the pixel data ({}): {e}", ts.name()),
         )
     })?;
-    let values: Vec<f32> = pixels.to_vec().map_err(|e| {
-        VolumeError::invalid(&s.file, format!("cannot convert the pixel data: {e}"))
-    })?;
-    if values.len() != per_slice {
-        return Err(VolumeError::invalid(
-            &s.file,
-            format!(
-                "{} pixel values decoded, {per_slice} expected",
-                values.len()
-            ),
-        ));
-    }
-    Ok(values)
+    (0..pixels.number_of_frames())
+        .map(|k| {
+            let values: Vec<f32> = pixels.to_vec_frame(k).map_err(|e| {
+                VolumeError::invalid(
+                    &s.file,
+                    format!("cannot convert the pixel data of frame {}: {e}", k + 1),
+                )
+            })?;
+            if values.len() != per_slice {
+                return Err(VolumeError::invalid(
+                    &s.file,
+                    format!(
+                        "{} pixel values decoded in frame {}, {per_slice} expected",
+                        values.len(),
+                        k + 1
+                    ),
+                ));
+            }
+            Ok(values)
+        })
+        .collect()
 }
 
 /// Replaces a slice's encapsulated pixel data with the samples `codec` decodes, as native
@@ -914,35 +1151,31 @@ fn decode_to_native(
         )));
     }
     let allocated = int(tags::BITS_ALLOCATED).unwrap_or(16);
-    let stream: Vec<u8> = obj
+    let frames = int(tags::NUMBER_OF_FRAMES).unwrap_or(1).max(1) as usize;
+    let value = obj
         .get(tags::PIXEL_DATA)
-        .and_then(|e| e.value().fragments())
-        .ok_or_else(|| bad("not encapsulated in fragments".into()))?
-        .concat();
-    let frame = format!("the {}x{} frame", s.cols, s.rows);
-    let values: Vec<u16> = match codec {
-        OwnCodec::JpegLs => {
-            jpegls::decode(&stream, s.cols, s.rows)
-                .map_err(|e| bad(format!("cannot decode {frame}: {e}")))?
-                .0
-        }
-        OwnCodec::Jpeg12 => {
-            let limits = libjpeg_turbo_rs::DecodeLimits {
-                max_width: s.cols as usize,
-                max_height: s.rows as usize,
-                ..Default::default()
+        .map(|e| e.value())
+        .ok_or_else(|| bad("missing".into()))?;
+    let fragments = value
+        .fragments()
+        .ok_or_else(|| bad("not encapsulated in fragments".into()))?;
+    let streams =
+        frame_streams(fragments, value.offset_table().unwrap_or(&[]), frames).map_err(&bad)?;
+    // The frames of a multi-frame image decode in parallel.
+    let values: Vec<u16> = streams
+        .par_iter()
+        .enumerate()
+        .map(|(k, stream)| {
+            let frame = if frames > 1 {
+                format!("frame {} ({}x{})", k + 1, s.cols, s.rows)
+            } else {
+                format!("the {}x{} frame", s.cols, s.rows)
             };
-            let im = libjpeg_turbo_rs::decompress_12bit_with_limits(&stream, &limits)
-                .map_err(|e| bad(format!("cannot decode {frame}: {e}")))?;
-            if (im.width, im.height, im.num_components) != (s.cols as usize, s.rows as usize, 1) {
-                return Err(bad(format!(
-                    "{}x{} pixels of {} components instead of {frame}",
-                    im.width, im.height, im.num_components
-                )));
-            }
-            im.data.iter().map(|&v| v as u16).collect()
-        }
-    };
+            decode_own(codec, stream, s, &frame)
+        })
+        .collect::<Result<Vec<Vec<u16>>, String>>()
+        .map_err(&bad)?
+        .concat();
     let value = match allocated {
         8 => PrimitiveValue::U8(
             values
@@ -961,4 +1194,79 @@ fn decode_to_native(
     let vr = if allocated == 8 { VR::OB } else { VR::OW };
     obj.put(DataElement::new(tags::PIXEL_DATA, vr, value));
     Ok(obj)
+}
+
+/// Each frame's compressed stream: the fragments split by the basic offset table, or one
+/// fragment a frame, or all of them for a single frame (PS3.5 A.4).
+fn frame_streams(
+    fragments: &[Vec<u8>],
+    offsets: &[u32],
+    frames: usize,
+) -> Result<Vec<Vec<u8>>, String> {
+    if frames == 1 {
+        return Ok(vec![fragments.concat()]);
+    }
+    if offsets.len() == frames {
+        // Offsets count bytes from the first fragment's item tag: 8 bytes of tag and length,
+        // then the fragment, for each.
+        let mut starts = Vec::with_capacity(fragments.len());
+        let mut at = 0u64;
+        for f in fragments {
+            starts.push(at);
+            at += 8 + f.len() as u64;
+        }
+        return offsets
+            .iter()
+            .enumerate()
+            .map(|(k, &o)| {
+                let first = starts.iter().position(|&a| a == o as u64).ok_or_else(|| {
+                    format!(
+                        "the offset table puts frame {} at byte {o}, where no fragment starts",
+                        k + 1
+                    )
+                })?;
+                let end = offsets.get(k + 1).map_or(u64::MAX, |&e| e as u64);
+                Ok(fragments[first..]
+                    .iter()
+                    .zip(&starts[first..])
+                    .take_while(|(_, a)| **a < end)
+                    .flat_map(|(f, _)| f.iter().copied())
+                    .collect())
+            })
+            .collect();
+    }
+    if fragments.len() == frames {
+        return Ok(fragments.to_vec());
+    }
+    Err(format!(
+        "{} fragments for {frames} frames, and no offset table to tell which belong to which",
+        fragments.len()
+    ))
+}
+
+/// One frame's stored samples, decoded by `codec`.
+fn decode_own(codec: OwnCodec, stream: &[u8], s: &Slice, frame: &str) -> Result<Vec<u16>, String> {
+    Ok(match codec {
+        OwnCodec::JpegLs => {
+            jpegls::decode(stream, s.cols, s.rows)
+                .map_err(|e| format!("cannot decode {frame}: {e}"))?
+                .0
+        }
+        OwnCodec::Jpeg12 => {
+            let limits = libjpeg_turbo_rs::DecodeLimits {
+                max_width: s.cols as usize,
+                max_height: s.rows as usize,
+                ..Default::default()
+            };
+            let im = libjpeg_turbo_rs::decompress_12bit_with_limits(stream, &limits)
+                .map_err(|e| format!("cannot decode {frame}: {e}"))?;
+            if (im.width, im.height, im.num_components) != (s.cols as usize, s.rows as usize, 1) {
+                return Err(format!(
+                    "{}x{} pixels of {} components instead of {frame}",
+                    im.width, im.height, im.num_components
+                ));
+            }
+            im.data.iter().map(|&v| v as u16).collect()
+        }
+    })
 }

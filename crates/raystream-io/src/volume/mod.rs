@@ -397,4 +397,6 @@ pub(crate) fn is_orthonormal(d: &[[f64; 3]; 3], tol: f64) -> bool {
 }
 
 #[cfg(test)]
+mod multiframe_tests;
+#[cfg(test)]
 mod tests;

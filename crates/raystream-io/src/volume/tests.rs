@@ -539,8 +539,8 @@ fn a_gap_left_by_an_unreadable_slice_names_the_file() {
     let mut by_z: Vec<(f64, &std::ffi::OsString)> = names
         .iter()
         .map(|n| {
-            let s = dicom::parse_slice(&std::fs::read(dir.join(n)).unwrap(), Path::new("x"));
-            (s.unwrap().position[2], n)
+            let s = dicom::parse_file(&std::fs::read(dir.join(n)).unwrap(), Path::new("x"));
+            (s.unwrap()[0].position[2], n)
         })
         .collect();
     by_z.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -775,9 +775,7 @@ fn truncated_and_bit_flipped_headers_never_panic() {
         }),
         ("t.mha", mha_bytes, 220, |b, p| mha::parse(b, p).map(drop)),
         ("t.dcm", tiny_dicom(&dicom_bytes), 1400, |b, p| {
-            let mut s = dicom::parse_slice(b, p)?;
-            let n = (s.rows * s.cols) as usize;
-            dicom::decode_slice(&mut s, n).map(drop)
+            decode_dicom(b, p).map(drop)
         }),
     ];
     for (name, bytes, header, parse) in cases {
@@ -803,10 +801,7 @@ fn truncated_and_bit_flipped_headers_never_panic() {
         dicom_bytes.len() - 1000,
         dicom_bytes.len() / 2,
     ] {
-        let e = dicom::parse_slice(&dicom_bytes[..cut], Path::new("cut.dcm")).and_then(|mut s| {
-            let n = (s.rows * s.cols) as usize;
-            dicom::decode_slice(&mut s, n)
-        });
+        let e = decode_dicom(&dicom_bytes[..cut], Path::new("cut.dcm"));
         assert!(e.unwrap_err().to_string().starts_with("cut.dcm"));
     }
     // A truncated gzip stream of the real CT.
@@ -842,10 +837,8 @@ fn damaged_jpeg_ls_and_12_bit_jpeg_are_errors_never_panics() {
                 .position(|w| w == [0xFF, 0xDA])
                 .unwrap();
         let scan = sos + 2 + u16::from_be_bytes([bytes[sos + 2], bytes[sos + 3]]) as usize;
-        let decode = |b: &[u8]| -> Result<(), String> {
-            let mut s = dicom::parse_slice(b, Path::new("j.dcm")).map_err(|e| e.to_string())?;
-            let n = (s.rows * s.cols) as usize;
-            dicom::decode_slice(&mut s, n)
+        let decode = |b: &[u8]| {
+            decode_dicom(b, Path::new("j.dcm"))
                 .map(drop)
                 .map_err(|e| e.to_string())
         };
@@ -890,4 +883,11 @@ fn damaged_jpeg_ls_and_12_bit_jpeg_are_errors_never_panics() {
             "{ts}: only {errors} of {cases} damaged streams were refused"
         );
     }
+}
+
+/// A DICOM file's frames, decoded as a volume's would be (each frame's modality values).
+fn decode_dicom(bytes: &[u8], path: &Path) -> Result<Vec<Vec<f32>>, VolumeError> {
+    let mut s = dicom::parse_file(bytes, path)?.swap_remove(0);
+    let n = (s.rows * s.cols) as usize;
+    dicom::decode_frames(&mut s, n)
 }
