@@ -18,7 +18,9 @@ use std::io::{BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};
 
 pub use raystream_math::{Aabb, Vec3};
-pub use secondary_capture::{CaptureInfo, new_uid, write_secondary_capture};
+pub use secondary_capture::{
+    CaptureInfo, CapturePixels, HU_PADDING, new_uid, write_secondary_capture,
+};
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, ValueUnit, Volume, VolumeError, VolumeFormat,
     is_volume_path, list_dicom_series, load_volume,

@@ -1,6 +1,8 @@
 //! A rendering as a DICOM Secondary Capture image (SOP class 1.2.840.10008.5.1.4.1.1.7), so
 //! that it can be sent to a PACS and filed with the study it was made from: the source series'
-//! patient and study, a new series and instance, 8-bit RGB pixels, Explicit VR Little Endian.
+//! patient and study, a new series and instance, Explicit VR Little Endian: 8-bit RGB as the
+//! picture is seen, or, for a projection or slice of a CT, its Hounsfield units as 16-bit
+//! greyscale with the window it was shown in, so that a viewer can window it again.
 //! Written through dicom-rs (`dicom-object`).
 
 use std::hash::{BuildHasher, Hasher};
@@ -50,11 +52,26 @@ pub struct CaptureInfo<'a> {
     pub annotated: bool,
 }
 
-/// Writes `rgb` (8-bit RGB, `width`×`height`, row-major from the top-left pixel) to `path` as
-/// a Secondary Capture image, as `info` says.
+/// A Secondary Capture image's pixels, `width`×`height`, row-major from the top-left pixel.
+#[derive(Clone, Copy, Debug)]
+pub enum CapturePixels<'a> {
+    /// 8-bit RGB, three bytes a pixel.
+    Rgb8(&'a [u8]),
+    /// Hounsfield units (NaN: no value, e.g. a ray that missed the volume), written as signed
+    /// 16-bit MONOCHROME2 rounded to 1 HU, with `window` (width, level) as the VOI LUT.
+    Hu {
+        values: &'a [f32],
+        window: (f32, f32),
+    },
+}
+
+/// The stored value of a pixel without one: Pixel Padding Value, far below any HU.
+pub const HU_PADDING: i16 = i16::MIN;
+
+/// Writes `pixels` to `path` as a Secondary Capture image, as `info` says.
 pub fn write_secondary_capture(
     path: &Path,
-    rgb: &[u8],
+    pixels: CapturePixels,
     (width, height): (u32, u32),
     info: &CaptureInfo,
 ) -> Result<(), VolumeError> {
@@ -67,10 +84,13 @@ pub fn write_secondary_capture(
     } = info.clone();
     let fail =
         |e: &dyn std::fmt::Display| VolumeError::invalid(path, format!("cannot write DICOM: {e}"));
-    if rgb.len() != 3 * width as usize * height as usize || width > 65535 || height > 65535 {
+    let (len, per) = match pixels {
+        CapturePixels::Rgb8(rgb) => (rgb.len(), 3),
+        CapturePixels::Hu { values, .. } => (values.len(), 1),
+    };
+    if len != per * width as usize * height as usize || width > 65535 || height > 65535 {
         return Err(fail(&format!(
-            "{} bytes for {width}x{height} RGB pixels (at most 65535 a side)",
-            rgb.len()
+            "{len} values for {width}x{height} pixels of {per} (at most 65535 a side)"
         )));
     }
     let new_study = DicomStudy {
@@ -83,43 +103,68 @@ pub fn write_secondary_capture(
     };
     let sop_uid = new_uid();
     let mut obj = InMemDicomObject::new_empty();
-    let mut put = |tag, vr, value: &str| {
-        obj.put(DataElement::new(tag, vr, PrimitiveValue::from(value)));
-    };
-    put(tags::SOP_CLASS_UID, VR::UI, SECONDARY_CAPTURE);
-    put(tags::SOP_INSTANCE_UID, VR::UI, &sop_uid);
-    put(tags::IMAGE_TYPE, VR::CS, "DERIVED\\SECONDARY");
-    put(tags::MODALITY, VR::CS, "OT");
-    put(tags::CONVERSION_TYPE, VR::CS, "WSD");
-    put(tags::PATIENT_NAME, VR::PN, &study.patient_name);
-    put(tags::PATIENT_ID, VR::LO, &study.patient_id);
-    put(tags::PATIENT_BIRTH_DATE, VR::DA, &study.patient_birth_date);
-    put(tags::PATIENT_SEX, VR::CS, &study.patient_sex);
-    put(tags::STUDY_INSTANCE_UID, VR::UI, &study.study_uid);
-    put(tags::STUDY_DATE, VR::DA, &study.study_date);
-    put(tags::STUDY_TIME, VR::TM, &study.study_time);
-    put(tags::STUDY_ID, VR::SH, &study.study_id);
-    put(tags::ACCESSION_NUMBER, VR::SH, &study.accession_number);
+    put(&mut obj, tags::SOP_CLASS_UID, VR::UI, SECONDARY_CAPTURE);
+    put(&mut obj, tags::SOP_INSTANCE_UID, VR::UI, &sop_uid);
+    put(&mut obj, tags::IMAGE_TYPE, VR::CS, "DERIVED\\SECONDARY");
+    put(&mut obj, tags::MODALITY, VR::CS, "OT");
+    put(&mut obj, tags::CONVERSION_TYPE, VR::CS, "WSD");
+    put(&mut obj, tags::PATIENT_NAME, VR::PN, &study.patient_name);
+    put(&mut obj, tags::PATIENT_ID, VR::LO, &study.patient_id);
     put(
+        &mut obj,
+        tags::PATIENT_BIRTH_DATE,
+        VR::DA,
+        &study.patient_birth_date,
+    );
+    put(&mut obj, tags::PATIENT_SEX, VR::CS, &study.patient_sex);
+    put(&mut obj, tags::STUDY_INSTANCE_UID, VR::UI, &study.study_uid);
+    put(&mut obj, tags::STUDY_DATE, VR::DA, &study.study_date);
+    put(&mut obj, tags::STUDY_TIME, VR::TM, &study.study_time);
+    put(&mut obj, tags::STUDY_ID, VR::SH, &study.study_id);
+    put(
+        &mut obj,
+        tags::ACCESSION_NUMBER,
+        VR::SH,
+        &study.accession_number,
+    );
+    put(
+        &mut obj,
         tags::REFERRING_PHYSICIAN_NAME,
         VR::PN,
         &study.referring_physician,
     );
-    put(tags::STUDY_DESCRIPTION, VR::LO, &study.study_description);
+    put(
+        &mut obj,
+        tags::STUDY_DESCRIPTION,
+        VR::LO,
+        &study.study_description,
+    );
     let (series_uid, instance) = match series {
         Some((uid, n)) => (uid.to_string(), n),
         None => (new_uid(), 1),
     };
-    put(tags::SERIES_INSTANCE_UID, VR::UI, &series_uid);
-    put(tags::SERIES_NUMBER, VR::IS, "9001");
-    put(tags::SERIES_DESCRIPTION, VR::LO, &truncate(description, 64));
+    put(&mut obj, tags::SERIES_INSTANCE_UID, VR::UI, &series_uid);
+    put(&mut obj, tags::SERIES_NUMBER, VR::IS, "9001");
     put(
+        &mut obj,
+        tags::SERIES_DESCRIPTION,
+        VR::LO,
+        &truncate(description, 64),
+    );
+    put(
+        &mut obj,
         tags::DERIVATION_DESCRIPTION,
         VR::ST,
         &truncate(description, 1024),
     );
-    put(tags::INSTANCE_NUMBER, VR::IS, &instance.to_string());
     put(
+        &mut obj,
+        tags::INSTANCE_NUMBER,
+        VR::IS,
+        &instance.to_string(),
+    );
+    put(
+        &mut obj,
         tags::PATIENT_ORIENTATION,
         VR::CS,
         &orientation
@@ -127,34 +172,86 @@ pub fn write_secondary_capture(
             .unwrap_or_default(),
     );
     put(
+        &mut obj,
         tags::BURNED_IN_ANNOTATION,
         VR::CS,
         if annotated { "YES" } else { "NO" },
     );
-    put(tags::MANUFACTURER, VR::LO, "raystream");
-    put(tags::PHOTOMETRIC_INTERPRETATION, VR::CS, "RGB");
-    for (tag, v) in [
-        (tags::SAMPLES_PER_PIXEL, 3u16),
-        (tags::PLANAR_CONFIGURATION, 0),
-        (tags::ROWS, height as u16),
-        (tags::COLUMNS, width as u16),
-        (tags::BITS_ALLOCATED, 8),
-        (tags::BITS_STORED, 8),
-        (tags::HIGH_BIT, 7),
-        (tags::PIXEL_REPRESENTATION, 0),
-    ] {
-        obj.put(DataElement::new(tag, VR::US, PrimitiveValue::from(v)));
+    put(&mut obj, tags::MANUFACTURER, VR::LO, "raystream");
+    let us = |tag, v: u16| DataElement::new(tag, VR::US, PrimitiveValue::from(v));
+    obj.put(us(tags::ROWS, height as u16));
+    obj.put(us(tags::COLUMNS, width as u16));
+    match pixels {
+        CapturePixels::Rgb8(rgb) => {
+            put(&mut obj, tags::PHOTOMETRIC_INTERPRETATION, VR::CS, "RGB");
+            for (tag, v) in [
+                (tags::SAMPLES_PER_PIXEL, 3u16),
+                (tags::PLANAR_CONFIGURATION, 0),
+                (tags::BITS_ALLOCATED, 8),
+                (tags::BITS_STORED, 8),
+                (tags::HIGH_BIT, 7),
+                (tags::PIXEL_REPRESENTATION, 0),
+            ] {
+                obj.put(us(tag, v));
+            }
+            // A value's length is even: an odd pixel count gets a pad byte.
+            let mut bytes = rgb.to_vec();
+            if bytes.len() % 2 == 1 {
+                bytes.push(0);
+            }
+            obj.put(DataElement::new(
+                tags::PIXEL_DATA,
+                VR::OB,
+                PrimitiveValue::U8(bytes.into()),
+            ));
+        }
+        CapturePixels::Hu {
+            values,
+            window: (w, l),
+        } => {
+            put(
+                &mut obj,
+                tags::PHOTOMETRIC_INTERPRETATION,
+                VR::CS,
+                "MONOCHROME2",
+            );
+            for (tag, v) in [
+                (tags::SAMPLES_PER_PIXEL, 1u16),
+                (tags::BITS_ALLOCATED, 16),
+                (tags::BITS_STORED, 16),
+                (tags::HIGH_BIT, 15),
+                (tags::PIXEL_REPRESENTATION, 1),
+            ] {
+                obj.put(us(tag, v));
+            }
+            put(&mut obj, tags::RESCALE_INTERCEPT, VR::DS, "0");
+            put(&mut obj, tags::RESCALE_SLOPE, VR::DS, "1");
+            put(&mut obj, tags::RESCALE_TYPE, VR::LO, "HU");
+            put(&mut obj, tags::WINDOW_CENTER, VR::DS, &decimal(l));
+            put(&mut obj, tags::WINDOW_WIDTH, VR::DS, &decimal(w));
+            obj.put(DataElement::new(
+                tags::PIXEL_PADDING_VALUE,
+                VR::SS,
+                PrimitiveValue::from(HU_PADDING),
+            ));
+            let stored: Vec<i16> = values
+                .iter()
+                .map(|&v| {
+                    if v.is_nan() {
+                        HU_PADDING
+                    } else {
+                        // Above the padding value, so that no HU reads as "no value".
+                        v.round().clamp(HU_PADDING as f32 + 1.0, i16::MAX as f32) as i16
+                    }
+                })
+                .collect();
+            obj.put(DataElement::new(
+                tags::PIXEL_DATA,
+                VR::OW,
+                PrimitiveValue::I16(stored.into()),
+            ));
+        }
     }
-    // A value's length is even: an odd pixel count gets a pad byte.
-    let mut pixels = rgb.to_vec();
-    if pixels.len() % 2 == 1 {
-        pixels.push(0);
-    }
-    obj.put(DataElement::new(
-        tags::PIXEL_DATA,
-        VR::OB,
-        PrimitiveValue::U8(pixels.into()),
-    ));
     let file = obj
         .with_meta(
             FileMetaTableBuilder::new()
@@ -164,6 +261,16 @@ pub fn write_secondary_capture(
         )
         .map_err(|e| fail(&e))?;
     file.write_to_file(path).map_err(|e| fail(&e))
+}
+
+fn put(obj: &mut InMemDicomObject, tag: dicom_core::Tag, vr: VR, value: &str) {
+    obj.put(DataElement::new(tag, vr, PrimitiveValue::from(value)));
+}
+
+/// `v` as a DS value: at most 16 characters.
+fn decimal(v: f32) -> String {
+    let s = format!("{v}");
+    if s.len() <= 16 { s } else { format!("{v:.6e}") }
 }
 
 /// `s` cut to at most `n` characters (a VR's length limit).
@@ -203,7 +310,7 @@ mod tests {
             annotated: true,
             ..Default::default()
         };
-        write_secondary_capture(&path, &rgb, (w, h), &info).unwrap();
+        write_secondary_capture(&path, CapturePixels::Rgb8(&rgb), (w, h), &info).unwrap();
         let obj = dicom_object::open_file(&path).unwrap();
         let text = |tag| text_of(&obj, tag);
         assert_eq!(text(tags::SOP_CLASS_UID), SECONDARY_CAPTURE);
@@ -244,17 +351,51 @@ mod tests {
             series: Some(("1.2.3.9", 7)),
             ..Default::default()
         };
-        write_secondary_capture(&path, &rgb, (w, h), &info).unwrap();
+        write_secondary_capture(&path, CapturePixels::Rgb8(&rgb), (w, h), &info).unwrap();
         let obj = dicom_object::open_file(&path).unwrap();
         let text = |tag| text_of(&obj, tag);
         assert!(text(tags::STUDY_INSTANCE_UID).starts_with("2.25."));
         assert_eq!(text(tags::SERIES_INSTANCE_UID), "1.2.3.9");
         assert_eq!(text(tags::INSTANCE_NUMBER), "7");
         assert_eq!(text(tags::BURNED_IN_ANNOTATION), "NO");
-        let e = write_secondary_capture(&path, &rgb[1..], (w, h), &info).unwrap_err();
+        let e = write_secondary_capture(&path, CapturePixels::Rgb8(&rgb[1..]), (w, h), &info)
+            .unwrap_err();
         assert!(
             e.to_string().starts_with(&path.display().to_string()),
             "{e}"
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// HU pixels: signed 16-bit MONOCHROME2 that dicom-pixeldata turns back into the values,
+    /// rounded to 1 HU and clamped to 16 bits, NaN as the padding value, with the window.
+    #[test]
+    fn hu_pixels_round_trip() {
+        use dicom_pixeldata::PixelDecoder;
+        let dir = std::env::temp_dir().join(format!("raystream-sc-hu-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("hu.dcm");
+        let values = [-1000.4, -0.6, 0.0, 12.5, 1e6, -1e6, f32::NAN, 3071.0];
+        let pixels = CapturePixels::Hu {
+            values: &values,
+            window: (400.0, 40.0),
+        };
+        write_secondary_capture(&path, pixels, (4, 2), &CaptureInfo::default()).unwrap();
+        let obj = dicom_object::open_file(&path).unwrap();
+        let text = |tag| text_of(&obj, tag);
+        assert_eq!(text(tags::PHOTOMETRIC_INTERPRETATION), "MONOCHROME2");
+        assert_eq!(text(tags::RESCALE_TYPE), "HU");
+        assert_eq!(text(tags::WINDOW_CENTER), "40");
+        assert_eq!(text(tags::WINDOW_WIDTH), "400");
+        let int = |tag| obj.element(tag).unwrap().to_int::<i32>().unwrap();
+        assert_eq!(int(tags::PIXEL_REPRESENTATION), 1);
+        assert_eq!(int(tags::PIXEL_PADDING_VALUE), -32768);
+        let got: Vec<f32> = obj.decode_pixel_data().unwrap().to_vec().unwrap();
+        assert_eq!(
+            got,
+            [
+                -1000.0, -1.0, 0.0, 13.0, 32767.0, -32767.0, -32768.0, 3071.0
+            ]
         );
         std::fs::remove_dir_all(&dir).ok();
     }

@@ -149,25 +149,29 @@ impl Picture {
     }
 
     /// Writes the picture to `path`: PNG for 8-bit sRGB, else EXR, `what` saying what the
-    /// values are in the EXR's comments; where `path` ends in `.dcm`, the 8-bit sRGB frame as a
-    /// DICOM Secondary Capture image of the input's study ([`set_source_study`]), as `dicom`
-    /// describes it.
+    /// values are in the EXR's comments; where `path` ends in `.dcm`, a DICOM Secondary Capture
+    /// image of the input's study ([`set_source_study`]), as `dicom` describes it: the 8-bit
+    /// sRGB frame, or a projection's or slice's HU values as 16-bit greyscale with its window.
     pub fn save(&self, path: &Path, what: &str, dicom: &DicomOut) -> Result<()> {
         match self {
-            Picture::Srgb8 { rgb, width, height } if is_dicom(path) => {
-                raystream_io::write_secondary_capture(
+            Picture::Srgb8 { rgb, width, height } if is_dicom(path) => dicom.write(
+                path,
+                raystream_io::CapturePixels::Rgb8(rgb),
+                (*width, *height),
+            ),
+            Picture::Values(film) if is_dicom(path) => {
+                let values: Vec<f32> = film.pixels.iter().map(|p| p.x).collect();
+                let window = dicom
+                    .window
+                    .expect("a projection's DICOM picture is given its window");
+                dicom.write(
                     path,
-                    rgb,
-                    (*width, *height),
-                    &raystream_io::CaptureInfo {
-                        study: SOURCE_STUDY.get(),
-                        series: dicom.series.as_ref().map(|(uid, n)| (uid.as_str(), *n)),
-                        description: &dicom.description,
-                        orientation: dicom.orientation.clone(),
-                        annotated: dicom.annotated,
+                    raystream_io::CapturePixels::Hu {
+                        values: &values,
+                        window,
                     },
+                    (film.width, film.height),
                 )
-                .map_err(|e| e.to_string())
             }
             Picture::Srgb8 { rgb, width, height } => {
                 raystream_cpu::save_srgb8_png(path, rgb, *width, *height)
@@ -232,6 +236,31 @@ pub struct DicomOut {
     /// The series (UID) it belongs to and its number there: a turntable's frames; a series of
     /// its own where `None`.
     pub series: Option<(String, u32)>,
+    /// HU pictures (projections, slices): the window (width, level) they were shown in.
+    pub window: Option<(f32, f32)>,
+}
+
+impl DicomOut {
+    fn write(
+        &self,
+        path: &Path,
+        pixels: raystream_io::CapturePixels,
+        size: (u32, u32),
+    ) -> std::result::Result<(), String> {
+        raystream_io::write_secondary_capture(
+            path,
+            pixels,
+            size,
+            &raystream_io::CaptureInfo {
+                study: SOURCE_STUDY.get(),
+                series: self.series.as_ref().map(|(uid, n)| (uid.as_str(), *n)),
+                description: &self.description,
+                orientation: self.orientation.clone(),
+                annotated: self.annotated,
+            },
+        )
+        .map_err(|e| e.to_string())
+    }
 }
 
 /// This run's options as words, for a DICOM picture's description: `raystream render --mode

@@ -162,7 +162,8 @@ impl<'a> Renderer<'a> {
     /// HU values with `opt.hu_values`), or dvr's and iso's premultiplied RGBA (one pass).
     pub fn frame(&self, opt: &DvrOptions, cam: &Camera, format: ImageFormat) -> Result<Frame> {
         let t = Instant::now();
-        if let (Renderer::Gpu(g), ImageFormat::Png) = (self, format) {
+        let hu = opt.mode.is_windowed() && opt.hu_values;
+        if let (Renderer::Gpu(g), ImageFormat::Png, false) = (self, format, hu) {
             let (rgb, times) = g.render_srgb8(opt, cam)?;
             let picture = Picture::Srgb8 {
                 rgb,
@@ -199,7 +200,7 @@ impl<'a> Renderer<'a> {
             });
         }
         let (film, kernel_ms, samples, stats) = self.film(opt, cam)?;
-        let picture = if opt.mode.is_windowed() && opt.hu_values {
+        let picture = if hu {
             Picture::Values(film)
         } else {
             Picture::of_film(film, format)

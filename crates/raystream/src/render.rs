@@ -103,6 +103,7 @@ fn label(a: &RenderArgs, picture: &mut Picture, cam: &Camera, patient: bool) -> 
         annotated: a.labels,
         description: crate::common::options_in_words(a.input.as_deref(), &a.output),
         series: None,
+        window: None,
     }
 }
 
@@ -188,8 +189,14 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     check_labels(a, true, format)?;
     let (volume, load_ms) = read_volume(path, a.series.as_deref(), a.quiet, embedded)?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
-    // An EXR keeps what the projections found, in HU; the window is for display.
-    opt.hu_values = format == ImageFormat::Exr;
+    // An EXR keeps what the projections found, in HU; the window is for display. So does a
+    // DICOM picture, with the window as its VOI LUT, unless letters are drawn into it.
+    let dicom_out = match a.turntable {
+        Some(_) => a.format == FrameFormat::Dcm,
+        None => crate::common::is_dicom(&a.output),
+    };
+    opt.hu_values = format == ImageFormat::Exr || (dicom_out && mode.is_windowed() && !a.labels);
+    let window = opt.window.unwrap_or(mode.default_window());
     let aspect = opt.width as f32 / opt.height as f32;
     let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
     let view = base_view(a, VOLUME_VIEW, true)?;
@@ -220,7 +227,10 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     pb.finish_and_clear();
     let mut frame = last.expect("at least one frame");
     let slab = slab_words(&opt, &volume);
-    let dicom = label(a, &mut frame.picture, &cam, true);
+    let dicom = DicomOut {
+        window: Some(window),
+        ..label(a, &mut frame.picture, &cam, true)
+    };
     frame
         .picture
         .save(&a.output, &exr_comment(&opt, &volume, &cam), &dicom)?;
@@ -238,6 +248,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             mode.name(),
             if opt.shadows { " --shadows" } else { "" },
             match format {
+                _ if opt.hu_values && dicom_out => ", HU values with the window as VOI LUT",
                 ImageFormat::Exr if mode.is_windowed() => ", HU values, no window",
                 ImageFormat::Exr => ", premultiplied float RGBA",
                 ImageFormat::Png => "",
@@ -355,6 +366,7 @@ fn turntable(
         let path = dir.join(format!("frame_{i:0digits$}.{ext}", digits = digits.max(3)));
         let dicom = DicomOut {
             series: Some((series.clone(), i + 1)),
+            window: Some(opt.window.unwrap_or(opt.mode.default_window())),
             ..label(a, &mut f.picture, &cam, true)
         };
         f.picture

@@ -632,3 +632,92 @@ fn turntables_write_exr_frames() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--turntable"), "{}", stderr(&o));
 }
+
+/// `render --mode mip|average|slice -o OUT.dcm` (and a turntable's `--format dcm` frames): the
+/// EXR's Hounsfield units as 16-bit greyscale DICOM, rounded to 1 HU, the rays that missed as
+/// the Pixel Padding Value, with the window it was shown in (the mode's unless given) as the
+/// VOI LUT, so that a viewer can window it again; on each device, its own EXR's values. With
+/// `--labels` the letters need the picture as seen: 8-bit RGB.
+#[test]
+fn dicom_projections_hold_the_exrs_hounsfield_units() {
+    use dicom_dictionary_std::tags;
+    use dicom_pixeldata::PixelDecoder;
+    let vol = block_volume();
+    let vol = vol.to_str().unwrap();
+    let base = [vol, "--size", "48x40", "--parallel", "--view", "anterior"];
+    for dev in devices() {
+        for (mode, window, want_window) in [
+            ("mip", &[][..], ("500", "2000")),
+            (
+                "average",
+                &["--window", "1000", "--level", "500"][..],
+                ("500", "1000"),
+            ),
+            (
+                "slice",
+                &["--window", "400", "--level", "40"][..],
+                ("40", "400"),
+            ),
+        ] {
+            let args = [&base[..], &["--mode", mode], window].concat();
+            let exr = read_exr(&render(&format!("dcm-block-{mode}-{dev}.exr"), dev, &args));
+            let hu = floats(&exr, "Y");
+            let dcm = render(&format!("dcm-block-{mode}-{dev}.dcm"), dev, &args);
+            let obj = dicom_object::open_file(&dcm).unwrap();
+            let text = |tag| {
+                obj.element(tag)
+                    .unwrap()
+                    .to_str()
+                    .unwrap()
+                    .trim()
+                    .to_string()
+            };
+            assert_eq!(text(tags::PHOTOMETRIC_INTERPRETATION), "MONOCHROME2");
+            assert_eq!(text(tags::RESCALE_TYPE), "HU");
+            assert_eq!(text(tags::BURNED_IN_ANNOTATION), "NO");
+            assert_eq!(
+                (text(tags::WINDOW_CENTER), text(tags::WINDOW_WIDTH)),
+                (want_window.0.to_string(), want_window.1.to_string()),
+                "{dev} {mode}"
+            );
+            let got: Vec<f32> = obj.decode_pixel_data().unwrap().to_vec().unwrap();
+            assert_eq!(got.len(), hu.len());
+            let mut missed = 0;
+            for (g, h) in got.iter().zip(hu) {
+                if h.is_nan() {
+                    assert_eq!(*g, -32768.0, "{dev} {mode}: a miss is the padding value");
+                    missed += 1;
+                } else {
+                    assert_eq!(*g, h.round(), "{dev} {mode}: {h} HU");
+                }
+            }
+            assert!(
+                missed > 0 || mode == "slice",
+                "{dev} {mode}: rays miss the block"
+            );
+        }
+        // A turntable's frames are HU too; letters make an RGB picture.
+        let frames = tmp(&format!("dcm-block-turntable-{dev}"));
+        std::fs::remove_dir_all(&frames).ok();
+        let args = [
+            &base[..],
+            &["--mode", "mip", "--turntable", "2", "--format", "dcm"],
+        ]
+        .concat();
+        let mut all = vec!["render", "--quiet", "--device", dev];
+        all.extend_from_slice(&args);
+        all.extend_from_slice(&["-o", frames.to_str().unwrap()]);
+        let o = run(&all);
+        assert!(o.status.success(), "{}", stderr(&o));
+        for f in ["frame_000.dcm", "frame_001.dcm"] {
+            let obj = dicom_object::open_file(frames.join(f)).unwrap();
+            let p = obj.element(tags::PHOTOMETRIC_INTERPRETATION).unwrap();
+            assert_eq!(p.to_str().unwrap().trim(), "MONOCHROME2", "{f}");
+        }
+        let labelled = [&base[..], &["--mode", "mip", "--labels"]].concat();
+        let dcm = render(&format!("dcm-block-labels-{dev}.dcm"), dev, &labelled);
+        let obj = dicom_object::open_file(&dcm).unwrap();
+        let p = obj.element(tags::PHOTOMETRIC_INTERPRETATION).unwrap();
+        assert_eq!(p.to_str().unwrap().trim(), "RGB");
+    }
+}
