@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 pub use raystream_math::{Aabb, Vec3};
 pub use secondary_capture::{
-    CaptureInfo, CapturePixels, HU_PADDING, new_uid, write_secondary_capture,
+    CaptureInfo, CapturePixels, HU_PADDING, ImagePlane, new_uid, write_secondary_capture,
 };
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, ValueUnit, Volume, VolumeError, VolumeFormat,

@@ -50,7 +50,30 @@ pub struct CaptureInfo<'a> {
     pub orientation: Option<[String; 2]>,
     /// Whether text was burnt into the pixels.
     pub annotated: bool,
+    /// Where the pixels lie in the patient, for HU pixels sampled on a plane (a slice, a slab's
+    /// projection seen square on): the image is then a derived CT image (CT Image Storage,
+    /// DERIVED\SECONDARY\REFORMATTED) in the source's frame of reference, as scanners store
+    /// reformats, rather than a Secondary Capture.
+    pub plane: Option<ImagePlane>,
 }
+
+/// A reformatted image's plane in LPS millimetres (DICOM's Image Plane module).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImagePlane {
+    /// The centre of the top-left pixel (Image Position (Patient)).
+    pub position: [f64; 3],
+    /// Unit directions of increasing column and of increasing row (Image Orientation
+    /// (Patient)).
+    pub row: [f64; 3],
+    pub column: [f64; 3],
+    /// The square pixels' size (Pixel Spacing).
+    pub spacing: f64,
+    /// A slab's thickness (Slice Thickness); `None` for a plane sampled once.
+    pub thickness: Option<f64>,
+}
+
+/// CT Image Storage.
+pub const CT_IMAGE: &str = "1.2.840.10008.5.1.4.1.1.2";
 
 /// A Secondary Capture image's pixels, `width`×`height`, row-major from the top-left pixel.
 #[derive(Clone, Copy, Debug)]
@@ -81,6 +104,7 @@ pub fn write_secondary_capture(
         description,
         orientation,
         annotated,
+        plane,
     } = info.clone();
     let fail =
         |e: &dyn std::fmt::Display| VolumeError::invalid(path, format!("cannot write DICOM: {e}"));
@@ -93,6 +117,17 @@ pub fn write_secondary_capture(
             "{len} values for {width}x{height} pixels of {per} (at most 65535 a side)"
         )));
     }
+    if plane.is_some() && per != 1 {
+        return Err(fail(&"a reformatted CT image holds HU, not RGB"));
+    }
+    let sop_class = if plane.is_some() {
+        CT_IMAGE
+    } else {
+        SECONDARY_CAPTURE
+    };
+    // A reformat stays in its source's patient coordinates even where the source names no
+    // study (an anonymised series).
+    let source_frame = study.map_or("", |s| s.frame_of_reference_uid.as_str());
     let new_study = DicomStudy {
         study_uid: new_uid(),
         ..Default::default()
@@ -103,11 +138,49 @@ pub fn write_secondary_capture(
     };
     let sop_uid = new_uid();
     let mut obj = InMemDicomObject::new_empty();
-    put(&mut obj, tags::SOP_CLASS_UID, VR::UI, SECONDARY_CAPTURE);
+    put(&mut obj, tags::SOP_CLASS_UID, VR::UI, sop_class);
     put(&mut obj, tags::SOP_INSTANCE_UID, VR::UI, &sop_uid);
-    put(&mut obj, tags::IMAGE_TYPE, VR::CS, "DERIVED\\SECONDARY");
-    put(&mut obj, tags::MODALITY, VR::CS, "OT");
-    put(&mut obj, tags::CONVERSION_TYPE, VR::CS, "WSD");
+    match plane {
+        Some(p) => {
+            put(
+                &mut obj,
+                tags::IMAGE_TYPE,
+                VR::CS,
+                "DERIVED\\SECONDARY\\REFORMATTED",
+            );
+            put(&mut obj, tags::MODALITY, VR::CS, "CT");
+            let frame = match source_frame {
+                "" => new_uid(),
+                uid => uid.to_string(),
+            };
+            put(&mut obj, tags::FRAME_OF_REFERENCE_UID, VR::UI, &frame);
+            put(&mut obj, tags::POSITION_REFERENCE_INDICATOR, VR::LO, "");
+            let ds = |v: &[f64]| v.iter().map(|&x| decimal(x)).collect::<Vec<_>>().join("\\");
+            put(
+                &mut obj,
+                tags::IMAGE_POSITION_PATIENT,
+                VR::DS,
+                &ds(&p.position),
+            );
+            let o: Vec<f64> = p.row.iter().chain(&p.column).copied().collect();
+            put(&mut obj, tags::IMAGE_ORIENTATION_PATIENT, VR::DS, &ds(&o));
+            put(
+                &mut obj,
+                tags::PIXEL_SPACING,
+                VR::DS,
+                &ds(&[p.spacing, p.spacing]),
+            );
+            let thickness = p.thickness.map(decimal).unwrap_or_default();
+            put(&mut obj, tags::SLICE_THICKNESS, VR::DS, &thickness);
+            put(&mut obj, tags::KVP, VR::DS, "");
+            put(&mut obj, tags::ACQUISITION_NUMBER, VR::IS, "");
+        }
+        None => {
+            put(&mut obj, tags::IMAGE_TYPE, VR::CS, "DERIVED\\SECONDARY");
+            put(&mut obj, tags::MODALITY, VR::CS, "OT");
+            put(&mut obj, tags::CONVERSION_TYPE, VR::CS, "WSD");
+        }
+    }
     put(&mut obj, tags::PATIENT_NAME, VR::PN, &study.patient_name);
     put(&mut obj, tags::PATIENT_ID, VR::LO, &study.patient_id);
     put(
@@ -227,8 +300,8 @@ pub fn write_secondary_capture(
             put(&mut obj, tags::RESCALE_INTERCEPT, VR::DS, "0");
             put(&mut obj, tags::RESCALE_SLOPE, VR::DS, "1");
             put(&mut obj, tags::RESCALE_TYPE, VR::LO, "HU");
-            put(&mut obj, tags::WINDOW_CENTER, VR::DS, &decimal(l));
-            put(&mut obj, tags::WINDOW_WIDTH, VR::DS, &decimal(w));
+            put(&mut obj, tags::WINDOW_CENTER, VR::DS, &decimal(l as f64));
+            put(&mut obj, tags::WINDOW_WIDTH, VR::DS, &decimal(w as f64));
             obj.put(DataElement::new(
                 tags::PIXEL_PADDING_VALUE,
                 VR::SS,
@@ -256,7 +329,7 @@ pub fn write_secondary_capture(
         .with_meta(
             FileMetaTableBuilder::new()
                 .transfer_syntax("1.2.840.10008.1.2.1")
-                .media_storage_sop_class_uid(SECONDARY_CAPTURE)
+                .media_storage_sop_class_uid(sop_class)
                 .media_storage_sop_instance_uid(sop_uid.as_str()),
         )
         .map_err(|e| fail(&e))?;
@@ -267,10 +340,21 @@ fn put(obj: &mut InMemDicomObject, tag: dicom_core::Tag, vr: VR, value: &str) {
     obj.put(DataElement::new(tag, vr, PrimitiveValue::from(value)));
 }
 
-/// `v` as a DS value: at most 16 characters.
-fn decimal(v: f32) -> String {
+/// `v` as a DS value: at most 16 characters, as many significant digits as fit.
+fn decimal(v: f64) -> String {
     let s = format!("{v}");
-    if s.len() <= 16 { s } else { format!("{v:.6e}") }
+    if s.len() <= 16 {
+        return s;
+    }
+    // Fixed notation with fewer decimals, else scientific.
+    let int = format!("{v:.0}").len();
+    if int <= 14 {
+        let s = format!("{v:.*}", 15 - int);
+        if s.len() <= 16 {
+            return s;
+        }
+    }
+    format!("{v:.8e}")
 }
 
 /// `s` cut to at most `n` characters (a VR's length limit).

@@ -238,6 +238,9 @@ pub struct DicomOut {
     pub series: Option<(String, u32)>,
     /// HU pictures (projections, slices): the window (width, level) they were shown in.
     pub window: Option<(f32, f32)>,
+    /// HU pictures sampled on a plane (a slice, a slab seen square on): where their pixels lie,
+    /// which makes them a reformatted CT image.
+    pub plane: Option<raystream_io::ImagePlane>,
 }
 
 impl DicomOut {
@@ -257,6 +260,7 @@ impl DicomOut {
                 description: &self.description,
                 orientation: self.orientation.clone(),
                 annotated: self.annotated,
+                plane: self.plane,
             },
         )
         .map_err(|e| e.to_string())

@@ -104,6 +104,7 @@ fn label(a: &RenderArgs, picture: &mut Picture, cam: &Camera, patient: bool) -> 
         description: crate::common::options_in_words(a.input.as_deref(), &a.output),
         series: None,
         window: None,
+        plane: None,
     }
 }
 
@@ -142,6 +143,44 @@ fn pixel_size(cam: &Camera, height: u32, units: &str) -> String {
     } else {
         String::new()
     }
+}
+
+/// Where the pixels of a slice, or of a slab's projection, lie in the patient (LPS mm): on the
+/// plane through the slice point facing the camera, each where its pixel's ray crosses it, as
+/// the renderers sample it (parallel projection only; `None` for a whole-volume projection,
+/// whose pixels lie on no one plane, and for HU not written as such).
+fn image_plane(
+    opt: &DvrOptions,
+    volume: &raystream_io::Volume,
+    cam: &Camera,
+) -> Option<raystream_io::ImagePlane> {
+    let planar = opt.mode == DvrMode::Slice || (opt.mode.is_windowed() && opt.slab.is_some());
+    if !opt.hu_values || !planar || cam.parallel <= 0.0 {
+        return None;
+    }
+    let lps = |v| raystream_cpu::dvr::scene_to_lps(v).as_dvec3();
+    let (n, right, up, eye) = (
+        lps(cam.fwd).normalize(),
+        lps(cam.right),
+        lps(cam.up),
+        lps(cam.eye),
+    );
+    let (w, h, half) = (opt.width as f64, opt.height as f64, cam.parallel as f64);
+    // The top-left pixel's ray, as Camera::ray casts it through the pixel's centre.
+    let (px, py) = ((1.0 / w - 1.0) * (w / h), 1.0 - 1.0 / h);
+    let origin = eye + (right * px + up * py) * half;
+    let at = opt.slice_point(volume).as_dvec3();
+    let position = origin + n * (at - origin).dot(n);
+    Some(raystream_io::ImagePlane {
+        position: position.to_array(),
+        row: right.to_array(),
+        column: (-up).to_array(),
+        spacing: 2.0 * half / h,
+        thickness: (opt.mode != DvrMode::Slice)
+            .then_some(opt.slab)
+            .flatten()
+            .map(f64::from),
+    })
 }
 
 /// `--slab`, in words for the summary and an EXR's comments: its thickness and middle.
@@ -229,6 +268,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let slab = slab_words(&opt, &volume);
     let dicom = DicomOut {
         window: Some(window),
+        plane: image_plane(&opt, &volume, &cam),
         ..label(a, &mut frame.picture, &cam, true)
     };
     frame
@@ -367,6 +407,7 @@ fn turntable(
         let dicom = DicomOut {
             series: Some((series.clone(), i + 1)),
             window: Some(opt.window.unwrap_or(opt.mode.default_window())),
+            plane: image_plane(opt, volume, &cam),
             ..label(a, &mut f.picture, &cam, true)
         };
         f.picture

@@ -664,14 +664,7 @@ fn dicom_projections_hold_the_exrs_hounsfield_units() {
             let hu = floats(&exr, "Y");
             let dcm = render(&format!("dcm-block-{mode}-{dev}.dcm"), dev, &args);
             let obj = dicom_object::open_file(&dcm).unwrap();
-            let text = |tag| {
-                obj.element(tag)
-                    .unwrap()
-                    .to_str()
-                    .unwrap()
-                    .trim()
-                    .to_string()
-            };
+            let text = |tag| dicom_text(&obj, tag);
             assert_eq!(text(tags::PHOTOMETRIC_INTERPRETATION), "MONOCHROME2");
             assert_eq!(text(tags::RESCALE_TYPE), "HU");
             assert_eq!(text(tags::BURNED_IN_ANNOTATION), "NO");

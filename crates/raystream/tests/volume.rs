@@ -355,3 +355,163 @@ print(json.dumps({"src": src, "out": out, "pixels": pixels, "frames": frames, "f
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("not DICOM"), "{}", stderr(&o));
 }
+
+/// `--mode slice -o OUT.dcm` (and a slab's projection seen square on) is a reformatted CT
+/// image, as scanners store reformats: CT Image Storage, DERIVED\SECONDARY\REFORMATTED, in the
+/// source's frame of reference, with its plane. Read back as a volume, every pixel holds the
+/// source's value (trilinear, rounded to 1 HU) at the point its plane puts it, for a sagittal
+/// slice and an oblique one; a slab MIP's plane passes through its middle with its thickness.
+/// GDCM (SimpleITK) reads the same plane. A whole-volume MIP lies on no plane: a Secondary
+/// Capture.
+#[test]
+fn slices_save_as_reformatted_ct_where_their_pixels_lie() {
+    use raystream_math::DVec3;
+    // The tilted head CT: its grid is sheared, which the plane must not care about.
+    let series = volume("dicom/head_ct_gantry_tilt_ge");
+    let src = raystream_io::load_volume(std::path::Path::new(&series), None).unwrap();
+    // The source's value at a world point, as the renderers sample it (trilinear in the
+    // index space), or None outside the voxel-centre box.
+    let sample = |p: DVec3| {
+        let q = src.world_to_index(p);
+        let d = src.dims.map(|n| n as f64 - 1.0);
+        if (0..3).any(|a| q[a] < -1e-6 || q[a] > d[a] + 1e-6) {
+            return None;
+        }
+        let q = DVec3::new(
+            q.x.clamp(0.0, d[0]),
+            q.y.clamp(0.0, d[1]),
+            q.z.clamp(0.0, d[2]),
+        );
+        let i = q.floor().as_uvec3();
+        let f = q - q.floor();
+        let at = |a: u32, b: u32, c: u32| {
+            let [x, y, z] = [i.x + a, i.y + b, i.z + c].map(|v| v as usize);
+            src.at(
+                x.min(src.dims[0] - 1),
+                y.min(src.dims[1] - 1),
+                z.min(src.dims[2] - 1),
+            ) as f64
+        };
+        let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
+        let x00 = lerp(at(0, 0, 0), at(1, 0, 0), f.x);
+        let x10 = lerp(at(0, 1, 0), at(1, 1, 0), f.x);
+        let x01 = lerp(at(0, 0, 1), at(1, 0, 1), f.x);
+        let x11 = lerp(at(0, 1, 1), at(1, 1, 1), f.x);
+        Some(lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z))
+    };
+    let source_frame = "1.2.826.0.1.3680043.9.4245.7256807831338624888091981779758557877";
+    for (name, args) in [
+        ("sagittal", &["--view", "left"][..]),
+        (
+            "oblique",
+            &["--orbit", "35,25", "--slice-at", "-20,10,70"][..],
+        ),
+    ] {
+        let out = tmp(&format!("reformat-{name}.dcm"));
+        let mut all = vec![
+            "render", &series, "--mode", "slice", "--size", "64x56", "--device", "cpu",
+        ];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--quiet", "-o", out.to_str().unwrap()]);
+        let o = run(&all);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v = info(out.to_str().unwrap());
+        assert_eq!(v["series"]["modality"], "CT", "{name}");
+        let img = raystream_io::load_volume(&out, None).unwrap();
+        assert_eq!(img.dims, [64, 56, 1], "{name}");
+        let (mut compared, mut matching) = (0, 0);
+        for j in 0..56 {
+            for i in 0..64 {
+                let hu = img.at(i, j, 0) as f64;
+                let world = img.index_to_world(DVec3::new(i as f64, j as f64, 0.0));
+                match sample(world) {
+                    Some(want) => {
+                        compared += 1;
+                        if (hu - want.round()).abs() <= 1.0 {
+                            matching += 1;
+                        }
+                    }
+                    None => assert!(hu == -32768.0 || hu.abs() < 4000.0, "{name}"),
+                }
+            }
+        }
+        assert!(
+            compared > 64 * 56 / 4,
+            "{name}: only {compared} pixels inside"
+        );
+        assert!(
+            matching as f64 >= 0.99 * compared as f64,
+            "{name}: {matching} of {compared} pixels hold the source's value where they lie"
+        );
+        let file = std::fs::read(&out).unwrap();
+        let has = |s: &str| file.windows(s.len()).any(|w| w == s.as_bytes());
+        assert!(
+            has("DERIVED\\SECONDARY\\REFORMATTED") && has(source_frame),
+            "{name}"
+        );
+        // GDCM's reading of the plane is ours.
+        if let Some(py) = python_with_simpleitk() {
+            let script = "import sys, json, SimpleITK as s; i = s.ReadImage(sys.argv[1]); \
+                          print(json.dumps([i.GetOrigin(), i.GetDirection(), i.GetSpacing()[:2]]))";
+            let o = std::process::Command::new(&py)
+                .args(["-c", script, out.to_str().unwrap()])
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", stderr(&o));
+            let g: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+            close(&g[0], &v["origin"], 1e-4, "origin");
+            close(&g[1], &v["direction"], 1e-5, "direction");
+            close(
+                &g[2],
+                &serde_json::json!(v["spacing"].as_array().unwrap()[..2]),
+                1e-6,
+                "spacing",
+            );
+        }
+    }
+    // A slab MIP, seen from the front: its plane through the slab's middle, 10 mm thick.
+    let out = tmp("reformat-slab.dcm");
+    let o = run(&[
+        "render",
+        &series,
+        "--mode",
+        "mip",
+        "--slab",
+        "10",
+        "--slice-at",
+        "0,-30,80",
+        "--view",
+        "anterior",
+        "--parallel",
+        "--size",
+        "48x40",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v = info(out.to_str().unwrap());
+    let origin = v["origin"].as_array().unwrap()[1].as_f64().unwrap();
+    assert!((origin + 30.0).abs() < 1e-3, "the plane is y = -30 mm: {v}");
+    let obj = dicom_object::open_file(&out).unwrap();
+    let text = |tag| dicom_text(&obj, tag);
+    use dicom_dictionary_std::tags;
+    assert_eq!(text(tags::SLICE_THICKNESS), "10");
+    assert_eq!(text(tags::SOP_CLASS_UID), "1.2.840.10008.5.1.4.1.1.2");
+    // A whole-volume MIP: a Secondary Capture.
+    let out = tmp("reformat-mip.dcm");
+    let o = run(&[
+        "render",
+        &series,
+        "--mode",
+        "mip",
+        "--size",
+        "48x40",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let file = std::fs::read(&out).unwrap();
+    assert!(file.windows(25).any(|w| w == b"1.2.840.10008.5.1.4.1.1.7"));
+}

@@ -64,6 +64,9 @@ pub struct DicomStudy {
     pub accession_number: String,
     pub referring_physician: String,
     pub study_description: String,
+    /// The series' Frame of Reference UID: a derived image in the same patient coordinates
+    /// (a reformatted slice) shares it, so that viewers can cross-reference the two.
+    pub frame_of_reference_uid: String,
 }
 
 impl DicomStudy {
@@ -86,6 +89,7 @@ impl DicomStudy {
             accession_number: text(tags::ACCESSION_NUMBER),
             referring_physician: text(tags::REFERRING_PHYSICIAN_NAME),
             study_description: text(tags::STUDY_DESCRIPTION),
+            frame_of_reference_uid: text(tags::FRAME_OF_REFERENCE_UID),
         }
     }
 }

@@ -189,3 +189,13 @@ pub fn in_ci() -> bool {
 pub fn f32s(v: &[f32]) -> Vec<u8> {
     v.iter().flat_map(|x| x.to_le_bytes()).collect()
 }
+
+/// A DICOM file's text element, trimmed (its padding and spaces).
+pub fn dicom_text(obj: &dicom_object::DefaultDicomObject, tag: dicom_object::Tag) -> String {
+    obj.element(tag)
+        .unwrap()
+        .to_str()
+        .unwrap()
+        .trim()
+        .to_string()
+}
