@@ -183,6 +183,7 @@ fn parse_traversal_cost(s: &str) -> Result<f32, String> {
 }
 
 #[derive(Args)]
+#[command(group(clap::ArgGroup::new("frames").args(["turntable", "slices"])))]
 pub struct RenderArgs {
     /// Mesh (.obj, .ply, .stl, optionally .gz), scene (.toml) or CT volume (DICOM folder,
     /// .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd); none: the built-in abdomen CT.
@@ -258,10 +259,23 @@ pub struct RenderArgs {
     /// --orbit, written as OUTPUT/frame_000.png … (-o names the folder; --format exr for EXRs).
     #[arg(long, requires = "mode", value_parser = clap::value_parser!(u32).range(1..=3600))]
     pub turntable: Option<u32>,
-    /// With --turntable: the frames' format; `exr` writes frame_000.exr … holding what
-    /// `-o OUT.exr` holds for the mode (HU before the window for mip, minip, average and
-    /// slice; premultiplied float RGBA for dvr and iso).
-    #[arg(long, requires = "turntable", value_enum, default_value_t = FrameFormat::Png)]
+    /// With --mode slice (or a --slab): N parallel planes facing the camera, --slice-step
+    /// apart, centred on --slice-at, written as OUTPUT/frame_000.png … (-o names the folder):
+    /// a reformatted series; with --format dcm, one DICOM series of reformatted CT images.
+    #[arg(
+        long,
+        requires = "mode",
+        conflicts_with = "turntable",
+        value_parser = clap::value_parser!(u32).range(1..=4096)
+    )]
+    pub slices: Option<u32>,
+    /// With --slices: the planes' spacing in mm (default: the pixel size, for cubic voxels).
+    #[arg(long, value_name = "MM", requires = "slices")]
+    pub slice_step: Option<f32>,
+    /// With --turntable or --slices: the frames' format; `exr` writes frame_000.exr …
+    /// holding what `-o OUT.exr` holds for the mode (HU before the window for mip, minip,
+    /// average and slice; premultiplied float RGBA for dvr and iso); `dcm` one DICOM series.
+    #[arg(long, requires = "frames", value_enum, default_value_t = FrameFormat::Png)]
     pub format: FrameFormat,
     /// Render the frame this many times and report the median frame time and frames per
     /// second (scene loading, kd-tree build and upload apart).

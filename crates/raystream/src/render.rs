@@ -219,20 +219,21 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             mode.name()
         ),
     };
-    // A turntable's frames are files in a folder, in --format.
-    let format = match (a.turntable, a.format) {
-        (Some(_), FrameFormat::Png | FrameFormat::Dcm) => ImageFormat::Png,
-        (Some(_), FrameFormat::Exr) => ImageFormat::Exr,
-        (None, _) => image_format(&a.output)?,
+    // A turntable's or a slice series' frames are files in a folder, in --format.
+    let frames = a.turntable.is_some() || a.slices.is_some();
+    let format = match (frames, a.format) {
+        (true, FrameFormat::Png | FrameFormat::Dcm) => ImageFormat::Png,
+        (true, FrameFormat::Exr) => ImageFormat::Exr,
+        (false, _) => image_format(&a.output)?,
     };
     check_labels(a, true, format)?;
     let (volume, load_ms) = read_volume(path, a.series.as_deref(), a.quiet, embedded)?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     // An EXR keeps what the projections found, in HU; the window is for display. So does a
     // DICOM picture, with the window as its VOI LUT, unless letters are drawn into it.
-    let dicom_out = match a.turntable {
-        Some(_) => a.format == FrameFormat::Dcm,
-        None => crate::common::is_dicom(&a.output),
+    let dicom_out = match frames {
+        true => a.format == FrameFormat::Dcm,
+        false => crate::common::is_dicom(&a.output),
     };
     opt.hu_values = format == ImageFormat::Exr || (dicom_out && mode.is_windowed() && !a.labels);
     let window = opt.window.unwrap_or(mode.default_window());
@@ -244,6 +245,9 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     }
     let [az, el] = orbit_angles(a);
     let cam = volume_camera_from(&volume, aspect, view.orbit(az, el), projection(a));
+    if let Some(n) = a.slices {
+        return slice_series(a, &renderer, &volume, &opt, &cam, n, format);
+    }
     let pb = spinner(
         a.quiet,
         &format!(
@@ -367,6 +371,66 @@ fn turntable(
     n: u32,
     format: ImageFormat,
 ) -> Result<()> {
+    let ([az, el], projection) = (orbit_angles(a), projection(a));
+    frame_series(a, renderer, volume, n, format, "turntable", |i| {
+        let cam = volume_camera_from(
+            volume,
+            opt.width as f32 / opt.height as f32,
+            view.orbit(az + 360.0 * i as f32 / n as f32, el),
+            projection,
+        );
+        (cam, *opt)
+    })
+}
+
+/// `render --mode slice --slices N [--slice-step MM] -o DIR` (or a projection's `--slab`): N
+/// parallel planes facing the camera, `--slice-step` apart (default: the pixel size, for cubic
+/// voxels), centred on `--slice-at` (default: the volume's centre), the first nearest the
+/// camera: a reformatted series (coronal, sagittal, oblique; thin slices or slabs).
+fn slice_series(
+    a: &RenderArgs,
+    renderer: &dvr::Renderer,
+    volume: &raystream_io::Volume,
+    opt: &DvrOptions,
+    cam: &Camera,
+    n: u32,
+    format: ImageFormat,
+) -> Result<()> {
+    if opt.mode != DvrMode::Slice && opt.slab.is_none() {
+        bail!(
+            "--slices steps the plane of --mode slice, or a --slab, through the volume (not --mode {} alone)",
+            opt.mode.name()
+        );
+    }
+    let step = match a.slice_step {
+        Some(s) if s.is_finite() && s > 0.0 => s,
+        Some(s) => bail!("--slice-step {s}: the step must be a positive number of mm"),
+        None if cam.parallel > 0.0 => 2.0 * cam.parallel / opt.height as f32,
+        None => bail!("--slices without --parallel: give the step with --slice-step MM"),
+    };
+    let normal = raystream_cpu::dvr::scene_to_lps(cam.fwd).normalize();
+    let centre = opt.slice_point(volume);
+    frame_series(a, renderer, volume, n, format, "slices", |i| {
+        let offset = (i as f32 - (n - 1) as f32 / 2.0) * step;
+        let opt = DvrOptions {
+            slice_at: Some(centre + normal * offset),
+            ..*opt
+        };
+        (*cam, opt)
+    })
+}
+
+/// Renders `n` frames, the i-th seen by and with `frame(i)`'s camera and options, into the
+/// folder `-o` names (frame_000.png …, or .exr, or .dcm: then one series, numbered from 1).
+fn frame_series(
+    a: &RenderArgs,
+    renderer: &dvr::Renderer,
+    volume: &raystream_io::Volume,
+    n: u32,
+    format: ImageFormat,
+    what: &str,
+    frame: impl Fn(u32) -> (Camera, DvrOptions),
+) -> Result<()> {
     let dir = &a.output;
     let ext = match (format, a.format) {
         (_, FrameFormat::Dcm) => "dcm",
@@ -377,7 +441,7 @@ fn turntable(
     let series = raystream_io::new_uid();
     if crate::common::image_format(dir).is_ok() {
         bail!(
-            "{}: --turntable writes frame_000.{ext} … into a folder; name the folder with -o",
+            "{}: --{what} writes frame_000.{ext} … into a folder; name the folder with -o",
             dir.display()
         );
     }
@@ -390,28 +454,25 @@ fn turntable(
                 .expect("valid template"),
         )
     };
-    pb.set_message("turntable");
+    pb.set_message(what.to_string());
     let digits = (n - 1).max(1).ilog10() as usize + 1;
     let mut frame_ms = Vec::new();
-    let ([az, el], projection) = (orbit_angles(a), projection(a));
+    let mut mode = DvrMode::Dvr;
+    let mut size = (0, 0);
     for i in 0..n {
-        let cam = volume_camera_from(
-            volume,
-            opt.width as f32 / opt.height as f32,
-            view.orbit(az + 360.0 * i as f32 / n as f32, el),
-            projection,
-        );
-        let mut f = renderer.frame(opt, &cam, format)?;
+        let (cam, opt) = frame(i);
+        (mode, size) = (opt.mode, (opt.width, opt.height));
+        let mut f = renderer.frame(&opt, &cam, format)?;
         frame_ms.push(f.frame_ms);
         let path = dir.join(format!("frame_{i:0digits$}.{ext}", digits = digits.max(3)));
         let dicom = DicomOut {
             series: Some((series.clone(), i + 1)),
             window: Some(opt.window.unwrap_or(opt.mode.default_window())),
-            plane: image_plane(opt, volume, &cam),
+            plane: image_plane(&opt, volume, &cam),
             ..label(a, &mut f.picture, &cam, true)
         };
         f.picture
-            .save(&path, &exr_comment(opt, volume, &cam), &dicom)?;
+            .save(&path, &exr_comment(&opt, volume, &cam), &dicom)?;
         pb.inc(1);
     }
     pb.finish_and_clear();
@@ -420,9 +481,9 @@ fn turntable(
         eprintln!(
             "raystream: wrote {n} frames to {} ({}x{}, --mode {}, {ext}): median render {median:.1} ms ({:.2} frames/s, file writing apart)",
             dir.display(),
-            opt.width,
-            opt.height,
-            opt.mode.name(),
+            size.0,
+            size.1,
+            mode.name(),
             1e3 / median
         );
     }

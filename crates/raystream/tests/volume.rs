@@ -365,40 +365,9 @@ print(json.dumps({"src": src, "out": out, "pixels": pixels, "frames": frames, "f
 /// Capture.
 #[test]
 fn slices_save_as_reformatted_ct_where_their_pixels_lie() {
-    use raystream_math::DVec3;
     // The tilted head CT: its grid is sheared, which the plane must not care about.
     let series = volume("dicom/head_ct_gantry_tilt_ge");
     let src = raystream_io::load_volume(std::path::Path::new(&series), None).unwrap();
-    // The source's value at a world point, as the renderers sample it (trilinear in the
-    // index space), or None outside the voxel-centre box.
-    let sample = |p: DVec3| {
-        let q = src.world_to_index(p);
-        let d = src.dims.map(|n| n as f64 - 1.0);
-        if (0..3).any(|a| q[a] < -1e-6 || q[a] > d[a] + 1e-6) {
-            return None;
-        }
-        let q = DVec3::new(
-            q.x.clamp(0.0, d[0]),
-            q.y.clamp(0.0, d[1]),
-            q.z.clamp(0.0, d[2]),
-        );
-        let i = q.floor().as_uvec3();
-        let f = q - q.floor();
-        let at = |a: u32, b: u32, c: u32| {
-            let [x, y, z] = [i.x + a, i.y + b, i.z + c].map(|v| v as usize);
-            src.at(
-                x.min(src.dims[0] - 1),
-                y.min(src.dims[1] - 1),
-                z.min(src.dims[2] - 1),
-            ) as f64
-        };
-        let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
-        let x00 = lerp(at(0, 0, 0), at(1, 0, 0), f.x);
-        let x10 = lerp(at(0, 1, 0), at(1, 1, 0), f.x);
-        let x01 = lerp(at(0, 0, 1), at(1, 0, 1), f.x);
-        let x11 = lerp(at(0, 1, 1), at(1, 1, 1), f.x);
-        Some(lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z))
-    };
     let source_frame = "1.2.826.0.1.3680043.9.4245.7256807831338624888091981779758557877";
     for (name, args) in [
         ("sagittal", &["--view", "left"][..]),
@@ -419,22 +388,7 @@ fn slices_save_as_reformatted_ct_where_their_pixels_lie() {
         assert_eq!(v["series"]["modality"], "CT", "{name}");
         let img = raystream_io::load_volume(&out, None).unwrap();
         assert_eq!(img.dims, [64, 56, 1], "{name}");
-        let (mut compared, mut matching) = (0, 0);
-        for j in 0..56 {
-            for i in 0..64 {
-                let hu = img.at(i, j, 0) as f64;
-                let world = img.index_to_world(DVec3::new(i as f64, j as f64, 0.0));
-                match sample(world) {
-                    Some(want) => {
-                        compared += 1;
-                        if (hu - want.round()).abs() <= 1.0 {
-                            matching += 1;
-                        }
-                    }
-                    None => assert!(hu == -32768.0 || hu.abs() < 4000.0, "{name}"),
-                }
-            }
-        }
+        let (matching, compared) = voxels_where_they_lie(&img, &src);
         assert!(
             compared > 64 * 56 / 4,
             "{name}: only {compared} pixels inside"
@@ -514,4 +468,133 @@ fn slices_save_as_reformatted_ct_where_their_pixels_lie() {
     assert!(o.status.success(), "{}", stderr(&o));
     let file = std::fs::read(&out).unwrap();
     assert!(file.windows(25).any(|w| w == b"1.2.840.10008.5.1.4.1.1.7"));
+}
+
+/// `src`'s value at a world point, as the renderers sample it (trilinear in the index space),
+/// or `None` outside its voxel-centre box.
+fn sample(src: &raystream_io::Volume, p: raystream_math::DVec3) -> Option<f64> {
+    use raystream_math::DVec3;
+    let q = src.world_to_index(p);
+    let d = src.dims.map(|n| n as f64 - 1.0);
+    if (0..3).any(|a| q[a] < -1e-6 || q[a] > d[a] + 1e-6) {
+        return None;
+    }
+    let q = DVec3::new(
+        q.x.clamp(0.0, d[0]),
+        q.y.clamp(0.0, d[1]),
+        q.z.clamp(0.0, d[2]),
+    );
+    let i = q.floor().as_uvec3();
+    let f = q - q.floor();
+    let at = |a: u32, b: u32, c: u32| {
+        let [x, y, z] = [i.x + a, i.y + b, i.z + c].map(|v| v as usize);
+        src.at(
+            x.min(src.dims[0] - 1),
+            y.min(src.dims[1] - 1),
+            z.min(src.dims[2] - 1),
+        ) as f64
+    };
+    let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
+    let x00 = lerp(at(0, 0, 0), at(1, 0, 0), f.x);
+    let x10 = lerp(at(0, 1, 0), at(1, 1, 0), f.x);
+    let x01 = lerp(at(0, 0, 1), at(1, 0, 1), f.x);
+    let x11 = lerp(at(0, 1, 1), at(1, 1, 1), f.x);
+    Some(lerp(lerp(x00, x10, f.y), lerp(x01, x11, f.y), f.z))
+}
+
+/// How many of `img`'s voxels inside `src` hold `src`'s value where they lie (within 1 HU of
+/// it rounded), of how many inside.
+fn voxels_where_they_lie(img: &raystream_io::Volume, src: &raystream_io::Volume) -> (usize, usize) {
+    let (mut matching, mut inside) = (0, 0);
+    for k in 0..img.dims[2] {
+        for j in 0..img.dims[1] {
+            for i in 0..img.dims[0] {
+                let p = raystream_math::DVec3::new(i as f64, j as f64, k as f64);
+                if let Some(want) = sample(src, img.index_to_world(p)) {
+                    inside += 1;
+                    if (img.at(i, j, k) as f64 - want.round()).abs() <= 1.0 {
+                        matching += 1;
+                    }
+                }
+            }
+        }
+    }
+    (matching, inside)
+}
+
+/// `--mode slice --slices N --slice-step MM --format dcm -o DIR`: a reformatted series (N
+/// parallel planes, one DICOM series) that reads back as a volume: N slices MM apart along the
+/// view, the pixels' size across, and every voxel the source's value where it lies, for a
+/// coronal series and an oblique one of the tilted head CT. Without a plane to step
+/// (--mode mip alone) it is refused.
+#[test]
+fn a_slice_series_reads_back_as_the_reformatted_volume() {
+    let series = volume("dicom/head_ct_gantry_tilt_ge");
+    let src = raystream_io::load_volume(std::path::Path::new(&series), None).unwrap();
+    for (name, n, step, args) in [
+        ("coronal", 12, 3.0, &["--view", "anterior"][..]),
+        (
+            "oblique",
+            5,
+            4.5,
+            &["--orbit", "20,-15", "--slice-at", "0,0,90"][..],
+        ),
+    ] {
+        let dir = tmp(&format!("reformat-series-{name}"));
+        std::fs::remove_dir_all(&dir).ok();
+        let (n_arg, step_arg) = (n.to_string(), step.to_string());
+        let mut all = vec![
+            "render",
+            &series,
+            "--mode",
+            "slice",
+            "--size",
+            "48x40",
+            "--device",
+            "cpu",
+            "--slices",
+            &n_arg,
+            "--slice-step",
+            &step_arg,
+            "--format",
+            "dcm",
+        ];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--quiet", "-o", dir.to_str().unwrap()]);
+        let o = run(&all);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let img = raystream_io::load_volume(&dir, None).unwrap();
+        assert_eq!(img.dims, [48, 40, n], "{name}");
+        assert!(
+            (img.spacing[2] - step).abs() < 1e-6,
+            "{name}: {:?}",
+            img.spacing
+        );
+        assert!(img.warnings.is_empty(), "{name}: {:?}", img.warnings);
+        let (matching, inside) = voxels_where_they_lie(&img, &src);
+        assert!(
+            inside > 48 * 40 * n / 4,
+            "{name}: only {inside} voxels inside"
+        );
+        assert!(
+            matching as f64 >= 0.99 * inside as f64,
+            "{name}: {matching} of {inside} voxels hold the source's value where they lie"
+        );
+    }
+    let o = run(&[
+        "render",
+        &series,
+        "--mode",
+        "mip",
+        "--slices",
+        "3",
+        "-o",
+        tmp("refused-series").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("--slices steps the plane"),
+        "{}",
+        stderr(&o)
+    );
 }
