@@ -7,7 +7,7 @@
 files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary; an OBJ with normals and an MTL
         library, either of them mutated; a PLY with normals), tiny volumes (NIfTI, NRRD and
         MetaImage, attached and detached, via SimpleITK) and real DICOM slices from
-        ../shared (JPEG-LS and 12-bit JPEG among them), each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
+        ../shared (JPEG-LS and 12-bit JPEG among them) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (meshes also shaded; volumes also `--mode` mip, minip, average, slice or
         dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
         must name the file.
@@ -90,11 +90,51 @@ def seeds(d):
             sitk.WriteImage(img, os.path.join(d, n))
     except ImportError:
         print("no SimpleITK: volumes other than DICOM left out", file=sys.stderr)
+    try:
+        w("mf.dcm", enhanced_ct())
+    except ImportError:
+        print("no pydicom: the enhanced (multi-frame) CT seed left out", file=sys.stderr)
     ts = os.path.join(SHARED, "data/volumes/dicom/ct_slice_transfer_syntaxes")
     names = sorted(os.listdir(ts))
     for n in names[:4] + [n for n in names if re.search(r"\.4\.(51|80|81)_", n)]:
         shutil.copy(os.path.join(ts, n), os.path.join(d, n))
         os.chmod(os.path.join(d, n), 0o644)
+
+
+def enhanced_ct():
+    """A 3-frame 8x6 enhanced CT: per-frame positions and rescales, shared plane and spacing."""
+    import io
+    from pydicom.dataset import Dataset, FileMetaDataset
+    from pydicom.sequence import Sequence
+    from pydicom.uid import ExplicitVRLittleEndian
+
+    def item(**kw):
+        d = Dataset()
+        for k, v in kw.items():
+            setattr(d, k, v)
+        return d
+    ds = Dataset()
+    ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.2.1", "2.25.7"
+    ds.Modality, ds.SeriesInstanceUID, ds.NumberOfFrames = "CT", "2.25.8", 3
+    ds.Rows, ds.Columns, ds.SamplesPerPixel = 6, 8, 1
+    ds.PhotometricInterpretation = "MONOCHROME2"
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 0
+    ds.SharedFunctionalGroupsSequence = Sequence([item(
+        PixelMeasuresSequence=Sequence([item(PixelSpacing=[0.7, 0.8], SliceThickness=2)]),
+        PlaneOrientationSequence=Sequence([item(ImageOrientationPatient=[1, 0, 0, 0, 1, 0])]))])
+    ds.PerFrameFunctionalGroupsSequence = Sequence([item(
+        PlanePositionSequence=Sequence([item(ImagePositionPatient=[-10, 20, 30 + 2 * k])]),
+        PixelValueTransformationSequence=Sequence([item(
+            RescaleIntercept=-1024 - k, RescaleSlope=1, RescaleType="HU")]))
+        for k in (2, 0, 1)])
+    ds.PixelData = struct.pack("<144H", *[(i * 37) % 3000 for i in range(144)])
+    ds.file_meta = FileMetaDataset()
+    ds.file_meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    ds.file_meta.MediaStorageSOPClassUID = ds.SOPClassUID
+    ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
+    out = io.BytesIO()
+    ds.save_as(out, enforce_file_format=True)
+    return out.getvalue()
 
 
 def mutate(b, text):
