@@ -59,17 +59,22 @@ fn info_json_describes_a_dicom_series() {
 
 /// A Python with SimpleITK, or `None` (a skip, except under CI, where it fails).
 fn python_with_simpleitk() -> Option<std::path::PathBuf> {
+    python_with("SimpleITK")
+}
+
+/// A Python that imports `module`, or `None` (a skip, except under CI, where it fails).
+fn python_with(module: &str) -> Option<std::path::PathBuf> {
     let py = python()?;
-    let has_sitk = std::process::Command::new(&py)
-        .args(["-c", "import SimpleITK"])
+    let has = std::process::Command::new(&py)
+        .args(["-c", &format!("import {module}")])
         .status()
         .unwrap()
         .success();
-    if !has_sitk {
+    if !has {
         if in_ci() {
-            panic!("CI=true but SimpleITK is not installed in {}", py.display());
+            panic!("CI=true but {module} is not installed in {}", py.display());
         }
-        eprintln!("skipping: SimpleITK is not installed in {}", py.display());
+        eprintln!("skipping: {module} is not installed in {}", py.display());
         return None;
     }
     Some(py)
@@ -604,23 +609,9 @@ fn a_slice_series_reads_back_as_the_reformatted_volume() {
 /// functional groups describe. Skipped without pydicom, except under CI.
 #[test]
 fn an_enhanced_ct_written_by_pydicom_reads_as_described() {
-    let Some(py) = python() else {
+    let Some(py) = python_with("pydicom") else {
         return;
     };
-    let has = std::process::Command::new(&py)
-        .args(["-c", "import pydicom"])
-        .status()
-        .unwrap()
-        .success();
-    if !has {
-        assert!(
-            !in_ci(),
-            "CI=true but pydicom is not installed in {}",
-            py.display()
-        );
-        eprintln!("skipping: no pydicom");
-        return;
-    }
     let out = tmp("pydicom-enhanced.dcm");
     let script = "import sys, importlib.util as u\n\
         s = u.spec_from_file_location('f', sys.argv[1]); m = u.module_from_spec(s)\n\
