@@ -1064,11 +1064,14 @@ fn decode_all(slices: &mut [Slice], per_slice: usize) -> Result<Vec<Vec<f32>>, V
     slices
         .iter()
         .map(|s| {
-            let k = holder[s.file.as_path()];
             let frame = s.frame.unwrap_or(0) as usize;
-            frames[k].get_mut(frame).map(std::mem::take).ok_or_else(|| {
-                VolumeError::invalid(&s.file, format!("no frame {} decoded", frame + 1))
-            })
+            holder
+                .get(s.file.as_path())
+                .and_then(|&k| frames[k].get_mut(frame))
+                .map(std::mem::take)
+                .ok_or_else(|| {
+                    VolumeError::invalid(&s.file, format!("no frame {} decoded", frame + 1))
+                })
         })
         .collect()
 }
