@@ -530,8 +530,9 @@ fn voxels_where_they_lie(img: &raystream_io::Volume, src: &raystream_io::Volume)
 /// `--mode slice --slices N --slice-step MM --format dcm -o DIR`: a reformatted series (N
 /// parallel planes, one DICOM series) that reads back as a volume: N slices MM apart along the
 /// view, the pixels' size across, and every voxel the source's value where it lies, for a
-/// coronal series and an oblique one of the tilted head CT. Without a plane to step
-/// (--mode mip alone) it is refused.
+/// coronal series and an oblique one of the tilted head CT; the GPU's series is the CPU's
+/// (the same planes, the values within its half-float texture's error). Without a plane to
+/// step (--mode mip alone) it is refused.
 #[test]
 fn a_slice_series_reads_back_as_the_reformatted_volume() {
     let series = volume("dicom/head_ct_gantry_tilt_ge");
@@ -545,30 +546,9 @@ fn a_slice_series_reads_back_as_the_reformatted_volume() {
             &["--orbit", "20,-15", "--slice-at", "0,0,90"][..],
         ),
     ] {
-        let dir = tmp(&format!("reformat-series-{name}"));
-        std::fs::remove_dir_all(&dir).ok();
         let (n_arg, step_arg) = (n.to_string(), step.to_string());
-        let mut all = vec![
-            "render",
-            &series,
-            "--mode",
-            "slice",
-            "--size",
-            "48x40",
-            "--device",
-            "cpu",
-            "--slices",
-            &n_arg,
-            "--slice-step",
-            &step_arg,
-            "--format",
-            "dcm",
-        ];
-        all.extend_from_slice(args);
-        all.extend_from_slice(&["--quiet", "-o", dir.to_str().unwrap()]);
-        let o = run(&all);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let img = raystream_io::load_volume(&dir, None).unwrap();
+        let all = [&["--slices", &n_arg, "--slice-step", &step_arg][..], args].concat();
+        let img = reformat_series(&series, "cpu", name, &all);
         assert_eq!(img.dims, [48, 40, n], "{name}");
         assert!(
             (img.spacing[2] - step).abs() < 1e-6,
@@ -584,6 +564,29 @@ fn a_slice_series_reads_back_as_the_reformatted_volume() {
         assert!(
             matching as f64 >= 0.99 * inside as f64,
             "{name}: {matching} of {inside} voxels hold the source's value where they lie"
+        );
+    }
+    // The GPU writes the same series: the same planes, the same pixels outside the volume, the
+    // values within a half-float texture's error (f16 steps 2 HU near 2000 HU; hardware
+    // filtering weighs neighbours to 1/256, 3600 HU apart at most: 14 HU).
+    if gpu_available() {
+        let args = ["--slices", "4", "--view", "left"];
+        let series_on = |dev: &str| reformat_series(&series, dev, dev, &args);
+        let (cpu, gpu) = (series_on("cpu"), series_on("gpu"));
+        assert_eq!((cpu.dims, cpu.origin), (gpu.dims, gpu.origin));
+        assert_eq!((cpu.spacing, cpu.direction), (gpu.spacing, gpu.direction));
+        let mut diffs: Vec<f32> = Vec::new();
+        for (c, g) in cpu.data.iter().zip(&gpu.data) {
+            assert_eq!(*c == -32768.0, *g == -32768.0, "the same pixels miss");
+            if *c != -32768.0 {
+                diffs.push((c - g).abs());
+            }
+        }
+        diffs.sort_by(f32::total_cmp);
+        let (p99, max) = (diffs[diffs.len() * 99 / 100], diffs[diffs.len() - 1]);
+        assert!(
+            p99 <= 2.0 && max <= 16.0,
+            "GPU off by {p99} HU (p99), {max} (max)"
         );
     }
     let o = run(&[
@@ -648,4 +651,20 @@ fn an_enhanced_ct_written_by_pydicom_reads_as_described() {
             assert_eq!(vol.at(i, j, k), want, "({i}, {j}) at z = {}", 30 + 2 * k);
         }
     }
+}
+
+/// `render SERIES --mode slice --size 48x40 --device DEV ARGS --format dcm` into a fresh folder
+/// (named by `name`), read back as a volume.
+fn reformat_series(series: &str, dev: &str, name: &str, args: &[&str]) -> raystream_io::Volume {
+    let dir = tmp(&format!("reformat-series-{name}"));
+    std::fs::remove_dir_all(&dir).ok();
+    let mut all = vec![
+        "render", series, "--mode", "slice", "--size", "48x40", "--device", dev, "--format", "dcm",
+        "--quiet", "-o",
+    ];
+    all.push(dir.to_str().unwrap());
+    all.extend_from_slice(args);
+    let o = run(&all);
+    assert!(o.status.success(), "{name}: {}", stderr(&o));
+    raystream_io::load_volume(&dir, None).unwrap()
 }
