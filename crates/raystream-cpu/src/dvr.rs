@@ -130,6 +130,12 @@ impl DvrOptions {
         step_for(self.step_mm, vol)
     }
 
+    /// The window (width, level) in HU the windowed modes are shown in: `window`, or the
+    /// mode's own ([`DvrMode::default_window`]).
+    pub fn shown_window(&self) -> (f32, f32) {
+        self.window.unwrap_or(self.mode.default_window())
+    }
+
     /// The plane of a slice passes through this point (LPS mm): `slice_at`, or the centre of
     /// the volume's voxel-centre box.
     pub fn slice_point(&self, vol: &Volume) -> Vec3 {
@@ -774,7 +780,7 @@ fn march_frame(
         (opt.skip_empty && opt.mode == DvrMode::Dvr).then_some(tf),
     );
     let step = opt.step_for(vol);
-    let win = opt.window.unwrap_or(opt.mode.default_window());
+    let win = opt.shown_window();
     let light = (opt.shadows && opt.mode == DvrMode::Dvr).then(|| key_light(cam));
     let grid = light.map(|l| LightGrid::new(&marcher, tf, l, opt.shadow_step_for(vol)));
     // A slice's plane: through its point, facing the camera.

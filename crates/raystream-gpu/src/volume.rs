@@ -252,7 +252,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let ([r0, r1, r2], origin) = self.gpu.to_index;
-        let (w, l) = opt.window.unwrap_or(opt.mode.default_window());
+        let (w, l) = opt.shown_window();
         let s = self.tf.shading;
         let v3 = |v: Vec3| v.to_array();
         let planes: Vec<(Vec3, f32)> = opt

@@ -138,106 +138,82 @@ pub fn write_secondary_capture(
     };
     let sop_uid = new_uid();
     let mut obj = InMemDicomObject::new_empty();
-    put(&mut obj, tags::SOP_CLASS_UID, VR::UI, sop_class);
-    put(&mut obj, tags::SOP_INSTANCE_UID, VR::UI, &sop_uid);
+    let o = &mut obj;
+    put(o, tags::SOP_CLASS_UID, VR::UI, sop_class);
+    put(o, tags::SOP_INSTANCE_UID, VR::UI, &sop_uid);
     match plane {
         Some(p) => {
             put(
-                &mut obj,
+                o,
                 tags::IMAGE_TYPE,
                 VR::CS,
                 "DERIVED\\SECONDARY\\REFORMATTED",
             );
-            put(&mut obj, tags::MODALITY, VR::CS, "CT");
+            put(o, tags::MODALITY, VR::CS, "CT");
             let frame = match source_frame {
                 "" => new_uid(),
                 uid => uid.to_string(),
             };
-            put(&mut obj, tags::FRAME_OF_REFERENCE_UID, VR::UI, &frame);
-            put(&mut obj, tags::POSITION_REFERENCE_INDICATOR, VR::LO, "");
+            put(o, tags::FRAME_OF_REFERENCE_UID, VR::UI, &frame);
+            put(o, tags::POSITION_REFERENCE_INDICATOR, VR::LO, "");
             let ds = |v: &[f64]| v.iter().map(|&x| decimal(x)).collect::<Vec<_>>().join("\\");
-            put(
-                &mut obj,
-                tags::IMAGE_POSITION_PATIENT,
-                VR::DS,
-                &ds(&p.position),
-            );
-            let o: Vec<f64> = p.row.iter().chain(&p.column).copied().collect();
-            put(&mut obj, tags::IMAGE_ORIENTATION_PATIENT, VR::DS, &ds(&o));
-            put(
-                &mut obj,
-                tags::PIXEL_SPACING,
-                VR::DS,
-                &ds(&[p.spacing, p.spacing]),
-            );
+            put(o, tags::IMAGE_POSITION_PATIENT, VR::DS, &ds(&p.position));
+            let turn: Vec<f64> = p.row.iter().chain(&p.column).copied().collect();
+            put(o, tags::IMAGE_ORIENTATION_PATIENT, VR::DS, &ds(&turn));
+            put(o, tags::PIXEL_SPACING, VR::DS, &ds(&[p.spacing, p.spacing]));
             let thickness = p.thickness.map(decimal).unwrap_or_default();
-            put(&mut obj, tags::SLICE_THICKNESS, VR::DS, &thickness);
-            put(&mut obj, tags::KVP, VR::DS, "");
-            put(&mut obj, tags::ACQUISITION_NUMBER, VR::IS, "");
+            put(o, tags::SLICE_THICKNESS, VR::DS, &thickness);
+            put(o, tags::KVP, VR::DS, "");
+            put(o, tags::ACQUISITION_NUMBER, VR::IS, "");
         }
         None => {
-            put(&mut obj, tags::IMAGE_TYPE, VR::CS, "DERIVED\\SECONDARY");
-            put(&mut obj, tags::MODALITY, VR::CS, "OT");
-            put(&mut obj, tags::CONVERSION_TYPE, VR::CS, "WSD");
+            put(o, tags::IMAGE_TYPE, VR::CS, "DERIVED\\SECONDARY");
+            put(o, tags::MODALITY, VR::CS, "OT");
+            put(o, tags::CONVERSION_TYPE, VR::CS, "WSD");
         }
     }
-    put(&mut obj, tags::PATIENT_NAME, VR::PN, &study.patient_name);
-    put(&mut obj, tags::PATIENT_ID, VR::LO, &study.patient_id);
+    put(o, tags::PATIENT_NAME, VR::PN, &study.patient_name);
+    put(o, tags::PATIENT_ID, VR::LO, &study.patient_id);
     put(
-        &mut obj,
+        o,
         tags::PATIENT_BIRTH_DATE,
         VR::DA,
         &study.patient_birth_date,
     );
-    put(&mut obj, tags::PATIENT_SEX, VR::CS, &study.patient_sex);
-    put(&mut obj, tags::STUDY_INSTANCE_UID, VR::UI, &study.study_uid);
-    put(&mut obj, tags::STUDY_DATE, VR::DA, &study.study_date);
-    put(&mut obj, tags::STUDY_TIME, VR::TM, &study.study_time);
-    put(&mut obj, tags::STUDY_ID, VR::SH, &study.study_id);
+    put(o, tags::PATIENT_SEX, VR::CS, &study.patient_sex);
+    put(o, tags::STUDY_INSTANCE_UID, VR::UI, &study.study_uid);
+    put(o, tags::STUDY_DATE, VR::DA, &study.study_date);
+    put(o, tags::STUDY_TIME, VR::TM, &study.study_time);
+    put(o, tags::STUDY_ID, VR::SH, &study.study_id);
+    put(o, tags::ACCESSION_NUMBER, VR::SH, &study.accession_number);
     put(
-        &mut obj,
-        tags::ACCESSION_NUMBER,
-        VR::SH,
-        &study.accession_number,
-    );
-    put(
-        &mut obj,
+        o,
         tags::REFERRING_PHYSICIAN_NAME,
         VR::PN,
         &study.referring_physician,
     );
-    put(
-        &mut obj,
-        tags::STUDY_DESCRIPTION,
-        VR::LO,
-        &study.study_description,
-    );
+    put(o, tags::STUDY_DESCRIPTION, VR::LO, &study.study_description);
     let (series_uid, instance) = match series {
         Some((uid, n)) => (uid.to_string(), n),
         None => (new_uid(), 1),
     };
-    put(&mut obj, tags::SERIES_INSTANCE_UID, VR::UI, &series_uid);
-    put(&mut obj, tags::SERIES_NUMBER, VR::IS, "9001");
+    put(o, tags::SERIES_INSTANCE_UID, VR::UI, &series_uid);
+    put(o, tags::SERIES_NUMBER, VR::IS, "9001");
     put(
-        &mut obj,
+        o,
         tags::SERIES_DESCRIPTION,
         VR::LO,
         &truncate(description, 64),
     );
     put(
-        &mut obj,
+        o,
         tags::DERIVATION_DESCRIPTION,
         VR::ST,
         &truncate(description, 1024),
     );
+    put(o, tags::INSTANCE_NUMBER, VR::IS, &instance.to_string());
     put(
-        &mut obj,
-        tags::INSTANCE_NUMBER,
-        VR::IS,
-        &instance.to_string(),
-    );
-    put(
-        &mut obj,
+        o,
         tags::PATIENT_ORIENTATION,
         VR::CS,
         &orientation
@@ -245,34 +221,42 @@ pub fn write_secondary_capture(
             .unwrap_or_default(),
     );
     put(
-        &mut obj,
+        o,
         tags::BURNED_IN_ANNOTATION,
         VR::CS,
         if annotated { "YES" } else { "NO" },
     );
-    put(&mut obj, tags::MANUFACTURER, VR::LO, "raystream");
-    let us = |tag, v: u16| DataElement::new(tag, VR::US, PrimitiveValue::from(v));
-    obj.put(us(tags::ROWS, height as u16));
-    obj.put(us(tags::COLUMNS, width as u16));
+    put(o, tags::MANUFACTURER, VR::LO, "raystream");
+    // The Image Pixel module: RGB bytes as seen, or signed 16-bit HU.
+    let (photometric, samples, bits, signed) = match pixels {
+        CapturePixels::Rgb8(_) => ("RGB", 3, 8, 0),
+        CapturePixels::Hu { .. } => ("MONOCHROME2", 1, 16, 1),
+    };
+    put(o, tags::PHOTOMETRIC_INTERPRETATION, VR::CS, photometric);
+    for (tag, v) in [
+        (tags::ROWS, height as u16),
+        (tags::COLUMNS, width as u16),
+        (tags::SAMPLES_PER_PIXEL, samples),
+        (tags::BITS_ALLOCATED, bits),
+        (tags::BITS_STORED, bits),
+        (tags::HIGH_BIT, bits - 1),
+        (tags::PIXEL_REPRESENTATION, signed),
+    ] {
+        o.put(DataElement::new(tag, VR::US, PrimitiveValue::from(v)));
+    }
     match pixels {
         CapturePixels::Rgb8(rgb) => {
-            put(&mut obj, tags::PHOTOMETRIC_INTERPRETATION, VR::CS, "RGB");
-            for (tag, v) in [
-                (tags::SAMPLES_PER_PIXEL, 3u16),
-                (tags::PLANAR_CONFIGURATION, 0),
-                (tags::BITS_ALLOCATED, 8),
-                (tags::BITS_STORED, 8),
-                (tags::HIGH_BIT, 7),
-                (tags::PIXEL_REPRESENTATION, 0),
-            ] {
-                obj.put(us(tag, v));
-            }
+            o.put(DataElement::new(
+                tags::PLANAR_CONFIGURATION,
+                VR::US,
+                PrimitiveValue::from(0u16),
+            ));
             // A value's length is even: an odd pixel count gets a pad byte.
             let mut bytes = rgb.to_vec();
             if bytes.len() % 2 == 1 {
                 bytes.push(0);
             }
-            obj.put(DataElement::new(
+            o.put(DataElement::new(
                 tags::PIXEL_DATA,
                 VR::OB,
                 PrimitiveValue::U8(bytes.into()),
@@ -282,27 +266,12 @@ pub fn write_secondary_capture(
             values,
             window: (w, l),
         } => {
-            put(
-                &mut obj,
-                tags::PHOTOMETRIC_INTERPRETATION,
-                VR::CS,
-                "MONOCHROME2",
-            );
-            for (tag, v) in [
-                (tags::SAMPLES_PER_PIXEL, 1u16),
-                (tags::BITS_ALLOCATED, 16),
-                (tags::BITS_STORED, 16),
-                (tags::HIGH_BIT, 15),
-                (tags::PIXEL_REPRESENTATION, 1),
-            ] {
-                obj.put(us(tag, v));
-            }
-            put(&mut obj, tags::RESCALE_INTERCEPT, VR::DS, "0");
-            put(&mut obj, tags::RESCALE_SLOPE, VR::DS, "1");
-            put(&mut obj, tags::RESCALE_TYPE, VR::LO, "HU");
-            put(&mut obj, tags::WINDOW_CENTER, VR::DS, &decimal(l as f64));
-            put(&mut obj, tags::WINDOW_WIDTH, VR::DS, &decimal(w as f64));
-            obj.put(DataElement::new(
+            put(o, tags::RESCALE_INTERCEPT, VR::DS, "0");
+            put(o, tags::RESCALE_SLOPE, VR::DS, "1");
+            put(o, tags::RESCALE_TYPE, VR::LO, "HU");
+            put(o, tags::WINDOW_CENTER, VR::DS, &decimal(l as f64));
+            put(o, tags::WINDOW_WIDTH, VR::DS, &decimal(w as f64));
+            o.put(DataElement::new(
                 tags::PIXEL_PADDING_VALUE,
                 VR::SS,
                 PrimitiveValue::from(HU_PADDING),
@@ -318,7 +287,7 @@ pub fn write_secondary_capture(
                     }
                 })
                 .collect();
-            obj.put(DataElement::new(
+            o.put(DataElement::new(
                 tags::PIXEL_DATA,
                 VR::OW,
                 PrimitiveValue::I16(stored.into()),

@@ -108,6 +108,22 @@ fn label(a: &RenderArgs, picture: &mut Picture, cam: &Camera, patient: bool) -> 
     }
 }
 
+/// What a DICOM picture of a direct volume rendering says ([`label`]'s, with the window it was
+/// shown in and, for a slice or slab seen square on, its plane).
+fn volume_dicom(
+    a: &RenderArgs,
+    picture: &mut Picture,
+    cam: &Camera,
+    opt: &DvrOptions,
+    volume: &raystream_io::Volume,
+) -> DicomOut {
+    DicomOut {
+        window: Some(opt.shown_window()),
+        plane: image_plane(opt, volume, cam),
+        ..label(a, picture, cam, true)
+    }
+}
+
 /// `--labels` needs a patient (a CT volume, its bones, a scene with one) and a PNG.
 fn check_labels(a: &RenderArgs, patient: bool, format: ImageFormat) -> Result<()> {
     if a.labels && !patient {
@@ -176,9 +192,9 @@ fn image_plane(
         row: right.to_array(),
         column: (-up).to_array(),
         spacing: 2.0 * half / h,
-        thickness: (opt.mode != DvrMode::Slice)
-            .then_some(opt.slab)
-            .flatten()
+        thickness: opt
+            .slab
+            .filter(|_| opt.mode != DvrMode::Slice)
             .map(f64::from),
     })
 }
@@ -231,12 +247,12 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     // An EXR keeps what the projections found, in HU; the window is for display. So does a
     // DICOM picture, with the window as its VOI LUT, unless letters are drawn into it.
-    let dicom_out = match frames {
-        true => a.format == FrameFormat::Dcm,
-        false => crate::common::is_dicom(&a.output),
+    let dicom_out = if frames {
+        a.format == FrameFormat::Dcm
+    } else {
+        crate::common::is_dicom(&a.output)
     };
     opt.hu_values = format == ImageFormat::Exr || (dicom_out && mode.is_windowed() && !a.labels);
-    let window = opt.window.unwrap_or(mode.default_window());
     let aspect = opt.width as f32 / opt.height as f32;
     let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
     let view = base_view(a, VOLUME_VIEW, true)?;
@@ -270,11 +286,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     pb.finish_and_clear();
     let mut frame = last.expect("at least one frame");
     let slab = slab_words(&opt, &volume);
-    let dicom = DicomOut {
-        window: Some(window),
-        plane: image_plane(&opt, &volume, &cam),
-        ..label(a, &mut frame.picture, &cam, true)
-    };
+    let dicom = volume_dicom(a, &mut frame.picture, &cam, &opt, &volume);
     frame
         .picture
         .save(&a.output, &exr_comment(&opt, &volume, &cam), &dicom)?;
@@ -457,19 +469,14 @@ fn frame_series(
     pb.set_message(what.to_string());
     let digits = (n - 1).max(1).ilog10() as usize + 1;
     let mut frame_ms = Vec::new();
-    let mut mode = DvrMode::Dvr;
-    let mut size = (0, 0);
     for i in 0..n {
         let (cam, opt) = frame(i);
-        (mode, size) = (opt.mode, (opt.width, opt.height));
         let mut f = renderer.frame(&opt, &cam, format)?;
         frame_ms.push(f.frame_ms);
         let path = dir.join(format!("frame_{i:0digits$}.{ext}", digits = digits.max(3)));
         let dicom = DicomOut {
             series: Some((series.clone(), i + 1)),
-            window: Some(opt.window.unwrap_or(opt.mode.default_window())),
-            plane: image_plane(&opt, volume, &cam),
-            ..label(a, &mut f.picture, &cam, true)
+            ..volume_dicom(a, &mut f.picture, &cam, &opt, volume)
         };
         f.picture
             .save(&path, &exr_comment(&opt, volume, &cam), &dicom)?;
@@ -477,13 +484,15 @@ fn frame_series(
     }
     pb.finish_and_clear();
     if !a.quiet {
+        // The frames differ in their camera or plane only.
+        let (_, base) = frame(0);
         let median = median_of(&mut frame_ms);
         eprintln!(
             "raystream: wrote {n} frames to {} ({}x{}, --mode {}, {ext}): median render {median:.1} ms ({:.2} frames/s, file writing apart)",
             dir.display(),
-            size.0,
-            size.1,
-            mode.name(),
+            base.width,
+            base.height,
+            base.mode.name(),
             1e3 / median
         );
     }

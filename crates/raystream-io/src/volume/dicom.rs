@@ -20,6 +20,7 @@
 //! grid, and one with uneven spacing is interpolated onto a regular one ([`Stack`]); the volume's
 //! warnings say which, so that no geometry is silently wrong or silently invented.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use dicom_core::{DataElement, PrimitiveValue, VR};
@@ -384,12 +385,12 @@ pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, Volume
     let enhanced = obj
         .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
         .is_some();
-    let (geometry, warning) = if frames == 1 && !enhanced {
+    let (geometry, mut warning) = if frames == 1 && !enhanced {
         (vec![FrameGeometry::of(&[], Some(&obj))], None)
     } else {
         multi_frame_geometry(&obj, frames).map_err(|p| VolumeError::invalid(file, p))?
     };
-    let (mut obj, mut warning) = (Some(obj), warning);
+    let mut obj = Some(obj);
     let slices = geometry
         .into_iter()
         .map(|g| {
@@ -1204,14 +1205,19 @@ fn decode_to_native(
 }
 
 /// Each frame's compressed stream: the fragments split by the basic offset table, or one
-/// fragment a frame, or all of them for a single frame (PS3.5 A.4).
-fn frame_streams(
-    fragments: &[Vec<u8>],
+/// fragment a frame, or all of them for a single frame (PS3.5 A.4); a frame of one fragment is
+/// that fragment, not a copy.
+fn frame_streams<'a>(
+    fragments: &'a [Vec<u8>],
     offsets: &[u32],
     frames: usize,
-) -> Result<Vec<Vec<u8>>, String> {
+) -> Result<Vec<Cow<'a, [u8]>>, String> {
+    let joined = |parts: &'a [Vec<u8>]| match parts {
+        [one] => Cow::Borrowed(one.as_slice()),
+        many => Cow::Owned(many.concat()),
+    };
     if frames == 1 {
-        return Ok(vec![fragments.concat()]);
+        return Ok(vec![joined(fragments)]);
     }
     if offsets.len() == frames {
         // Offsets count bytes from the first fragment's item tag: 8 bytes of tag and length,
@@ -1222,28 +1228,39 @@ fn frame_streams(
             starts.push(at);
             at += 8 + f.len() as u64;
         }
+        // The fragments from where the offset table puts a frame to where it puts the next.
+        let first = |k: usize, o: u32| {
+            starts.binary_search(&(o as u64)).map_err(|_| {
+                format!(
+                    "the offset table puts frame {} at byte {o}, where no fragment starts",
+                    k + 1
+                )
+            })
+        };
         return offsets
             .iter()
             .enumerate()
             .map(|(k, &o)| {
-                let first = starts.iter().position(|&a| a == o as u64).ok_or_else(|| {
-                    format!(
-                        "the offset table puts frame {} at byte {o}, where no fragment starts",
-                        k + 1
-                    )
-                })?;
-                let end = offsets.get(k + 1).map_or(u64::MAX, |&e| e as u64);
-                Ok(fragments[first..]
-                    .iter()
-                    .zip(&starts[first..])
-                    .take_while(|(_, a)| **a < end)
-                    .flat_map(|(f, _)| f.iter().copied())
-                    .collect())
+                let end = match offsets.get(k + 1) {
+                    Some(&next) => first(k + 1, next)?,
+                    None => fragments.len(),
+                };
+                let start = first(k, o)?;
+                if start >= end {
+                    return Err(format!(
+                        "the offset table puts frame {} out of order",
+                        k + 2
+                    ));
+                }
+                Ok(joined(&fragments[start..end]))
             })
             .collect();
     }
     if fragments.len() == frames {
-        return Ok(fragments.to_vec());
+        return Ok(fragments
+            .iter()
+            .map(|f| Cow::Borrowed(f.as_slice()))
+            .collect());
     }
     Err(format!(
         "{} fragments for {frames} frames, and no offset table to tell which belong to which",
