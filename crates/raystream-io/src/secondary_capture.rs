@@ -172,27 +172,26 @@ pub fn write_secondary_capture(
             put(o, tags::CONVERSION_TYPE, VR::CS, "WSD");
         }
     }
-    put(o, tags::PATIENT_NAME, VR::PN, &study.patient_name);
-    put(o, tags::PATIENT_ID, VR::LO, &study.patient_id);
-    put(
-        o,
-        tags::PATIENT_BIRTH_DATE,
-        VR::DA,
-        &study.patient_birth_date,
-    );
-    put(o, tags::PATIENT_SEX, VR::CS, &study.patient_sex);
-    put(o, tags::STUDY_INSTANCE_UID, VR::UI, &study.study_uid);
-    put(o, tags::STUDY_DATE, VR::DA, &study.study_date);
-    put(o, tags::STUDY_TIME, VR::TM, &study.study_time);
-    put(o, tags::STUDY_ID, VR::SH, &study.study_id);
-    put(o, tags::ACCESSION_NUMBER, VR::SH, &study.accession_number);
-    put(
-        o,
-        tags::REFERRING_PHYSICIAN_NAME,
-        VR::PN,
-        &study.referring_physician,
-    );
-    put(o, tags::STUDY_DESCRIPTION, VR::LO, &study.study_description);
+    // The patient and the study it files with.
+    for (tag, vr, value) in [
+        (tags::PATIENT_NAME, VR::PN, &study.patient_name),
+        (tags::PATIENT_ID, VR::LO, &study.patient_id),
+        (tags::PATIENT_BIRTH_DATE, VR::DA, &study.patient_birth_date),
+        (tags::PATIENT_SEX, VR::CS, &study.patient_sex),
+        (tags::STUDY_INSTANCE_UID, VR::UI, &study.study_uid),
+        (tags::STUDY_DATE, VR::DA, &study.study_date),
+        (tags::STUDY_TIME, VR::TM, &study.study_time),
+        (tags::STUDY_ID, VR::SH, &study.study_id),
+        (tags::ACCESSION_NUMBER, VR::SH, &study.accession_number),
+        (
+            tags::REFERRING_PHYSICIAN_NAME,
+            VR::PN,
+            &study.referring_physician,
+        ),
+        (tags::STUDY_DESCRIPTION, VR::LO, &study.study_description),
+    ] {
+        put(o, tag, vr, value);
+    }
     let (series_uid, instance) = match series {
         Some((uid, n)) => (uid.to_string(), n),
         None => (new_uid(), 1),
