@@ -1116,6 +1116,7 @@ mod tests {
             format: VolumeFormat::Nifti,
             series: None,
             warnings: Vec::new(),
+            phase: Default::default(),
         }
     }
 
@@ -1742,7 +1743,7 @@ mod tests {
     fn abdomen() -> Volume {
         let p = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
-        raystream_io::load_volume(&p, None).expect("the embedded CT loads")
+        raystream_io::load_volume(&p, &Default::default()).expect("the embedded CT loads")
     }
 
     /// Empty-space skipping keeps the sample lattice: the same picture, fewer samples.

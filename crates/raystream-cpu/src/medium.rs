@@ -180,6 +180,7 @@ mod tests {
             format: VolumeFormat::Nifti,
             series: None,
             warnings: Vec::new(),
+            phase: Default::default(),
         }
     }
 

@@ -1087,7 +1087,7 @@ fn gpu_volume_rendering_matches_cpu() {
     let Some(ctx) = gpu() else { return };
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
-    let vol = raystream_io::load_volume(&path, None).unwrap();
+    let vol = raystream_io::load_volume(&path, &Default::default()).unwrap();
     let plain = DvrOptions {
         width: 64,
         height: 48,
@@ -1198,7 +1198,7 @@ fn gpu_projections_give_the_cpus_hounsfield_units() {
     let Some(ctx) = gpu() else { return };
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
-    let vol = raystream_io::load_volume(&path, None).unwrap();
+    let vol = raystream_io::load_volume(&path, &Default::default()).unwrap();
     let tf = TfPreset::MipBone.function();
     let gpu = GpuVolumeRenderer::new(&ctx, &vol, &tf).unwrap();
     let cam = volume_camera(&vol, 64.0 / 48.0);
@@ -1263,7 +1263,7 @@ fn gpu_srgb8_frames_of_any_size() {
     let Some(ctx) = gpu() else { return };
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
-    let vol = raystream_io::load_volume(&path, None).unwrap();
+    let vol = raystream_io::load_volume(&path, &Default::default()).unwrap();
     let tf = TfPreset::CtBones.function();
     let gpu = GpuVolumeRenderer::new(&ctx, &vol, &tf).unwrap();
     for (w, h) in [(13, 7), (31, 9), (2, 1)] {

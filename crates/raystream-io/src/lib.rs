@@ -22,8 +22,8 @@ pub use secondary_capture::{
     CaptureInfo, CapturePixels, HU_PADDING, ImagePlane, new_uid, write_secondary_capture,
 };
 pub use volume::{
-    DicomSeriesInfo, DicomStudy, MAX_VOXELS, ValueUnit, Volume, VolumeError, VolumeFormat,
-    is_volume_path, list_dicom_series, load_volume,
+    DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, ValueUnit, Volume, VolumeError, VolumeFormat,
+    VolumeSelect, is_volume_path, list_dicom_series, load_volume,
 };
 
 /// A triangle mesh: shared vertex positions and triangles as vertex-index triples.

@@ -33,6 +33,8 @@ pub struct VolumeDesc {
     pub path: String,
     /// DICOM series UID (default: the largest series).
     pub series: Option<String>,
+    /// The temporal position (phase) of a 4-D CT, from 1 (default: the first).
+    pub phase: Option<usize>,
     /// Transfer-function preset: ct-bone (default), ct-bones, ct-aaa, ct-muscle, ct-lung,
     /// mip-bone.
     pub preset: Option<String>,

@@ -172,7 +172,13 @@ impl SceneVolume {
         {
             return Err(format!("volume: step {s} must be a positive number of mm").into());
         }
-        let volume = raystream_io::load_volume(&base_dir.join(&d.path), d.series.as_deref())?;
+        let volume = raystream_io::load_volume(
+            &base_dir.join(&d.path),
+            &raystream_io::VolumeSelect {
+                series: d.series.clone(),
+                phase: d.phase,
+            },
+        )?;
         Ok(SceneVolume {
             volume,
             tf,

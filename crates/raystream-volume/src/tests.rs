@@ -25,6 +25,7 @@ fn analytic(
         format: VolumeFormat::Nifti,
         series: None,
         warnings: Vec::new(),
+        phase: Default::default(),
     };
     let mut data = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
     for k in 0..dims[2] {

@@ -344,7 +344,7 @@ fn bench_iso(a: &BenchArgs) -> Result<()> {
     let hu = a.threshold.hu()?;
     let t0 = Instant::now();
     let pb = spinner(quiet, &format!("reading {}", a.input.display()));
-    let volume = raystream_io::load_volume(&a.input, None)?;
+    let volume = raystream_io::load_volume(&a.input, &Default::default())?;
     pb.finish_and_clear();
     let load_ms = ms(t0.elapsed());
     let pb = spinner(quiet, "marching cubes");
@@ -410,7 +410,7 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
     let quiet = a.quiet || a.json;
     let t0 = Instant::now();
     let pb = spinner(quiet, &format!("reading {}", a.input.display()));
-    let mut volume = raystream_io::load_volume(&a.input, None)?;
+    let mut volume = raystream_io::load_volume(&a.input, &Default::default())?;
     pb.finish_and_clear();
     let load_ms = ms(t0.elapsed());
     let source_dims = volume.dims;

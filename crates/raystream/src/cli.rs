@@ -182,6 +182,28 @@ fn parse_traversal_cost(s: &str) -> Result<f32, String> {
     }
 }
 
+/// Which image of a CT folder or file to read.
+#[derive(Args, Clone, Debug, Default)]
+pub struct VolumePick {
+    /// DICOM: the SeriesInstanceUID to read (default: the series with the most slices).
+    #[arg(long)]
+    pub series: Option<String>,
+    /// 4-D CT (cardiac phases, perfusion): the temporal position to read, from 1 (default: the
+    /// first, with a warning): a NIfTI's volumes along its fourth axis, a DICOM series'
+    /// temporal positions in increasing order. `info` says how many there are.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    pub phase: Option<u32>,
+}
+
+impl VolumePick {
+    pub fn select(&self) -> raystream_io::VolumeSelect {
+        raystream_io::VolumeSelect {
+            series: self.series.clone(),
+            phase: self.phase.map(|p| p as usize),
+        }
+    }
+}
+
 #[derive(Args)]
 #[command(group(clap::ArgGroup::new("frames").args(["turntable", "slices"])))]
 pub struct RenderArgs {
@@ -190,9 +212,8 @@ pub struct RenderArgs {
     pub input: Option<PathBuf>,
     #[command(flatten)]
     pub threshold: Threshold,
-    /// DICOM: the SeriesInstanceUID to read (default: the series with the most slices).
-    #[arg(long)]
-    pub series: Option<String>,
+    #[command(flatten)]
+    pub pick: VolumePick,
     /// Volumes: Taubin smoothing iterations of the bone surface (0: raw marching cubes with
     /// gradient normals).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=100))]
@@ -543,9 +564,8 @@ pub struct IsoArgs {
     pub output: PathBuf,
     #[command(flatten)]
     pub threshold: Threshold,
-    /// DICOM: the SeriesInstanceUID to read (default: the series with the most slices).
-    #[arg(long)]
-    pub series: Option<String>,
+    #[command(flatten)]
+    pub pick: VolumePick,
     /// Taubin smoothing iterations (0: the raw marching-cubes surface, gradient normals).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=100))]
     pub smooth: u32,
@@ -600,9 +620,8 @@ pub struct InfoArgs {
     /// `--device gpu` prefers them, with what each offers raystream.
     #[arg(long, conflicts_with = "input")]
     pub gpu: bool,
-    /// DICOM: the SeriesInstanceUID to read (default: the series with the most slices).
-    #[arg(long)]
-    pub series: Option<String>,
+    #[command(flatten)]
+    pub pick: VolumePick,
     #[command(flatten)]
     pub tree: TreeArgs,
     #[arg(long)]

@@ -124,6 +124,7 @@ fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 "spacing": v.volume.spacing,
                 "step_mm": v.step_mm,
                 "shadows": v.shadows,
+                "phase": {"index": v.volume.phase.index, "count": v.volume.phase.count},
             })
         });
         print_line(json!({
@@ -181,11 +182,19 @@ fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     );
     if let Some(v) = &scene.volume {
         println!(
-            "  volume     {} x {} x {} voxels of {:?} mm{}",
+            "  volume     {} x {} x {} voxels of {:?} mm{}{}",
             v.volume.dims[0],
             v.volume.dims[1],
             v.volume.dims[2],
             v.volume.spacing,
+            if v.volume.phase.count > 1 {
+                format!(
+                    ", phase {} of {}",
+                    v.volume.phase.index, v.volume.phase.count
+                )
+            } else {
+                String::new()
+            },
             if v.shadows {
                 ", lit through shadow rays"
             } else {
@@ -202,7 +211,7 @@ fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
 }
 
 fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
-    let v = raystream_io::load_volume(input, a.series.as_deref())?;
+    let v = raystream_io::load_volume(input, &a.pick.select())?;
     let range = v.value_range();
     let unit = match v.unit {
         raystream_io::ValueUnit::Hounsfield => "HU",
@@ -229,6 +238,7 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             "origin": v.origin,
             "direction": v.direction.concat().iter().map(|d| d + 0.0).collect::<Vec<f64>>(),
             "unit": unit,
+            "phase": {"index": v.phase.index, "count": v.phase.count},
             "warnings": v.warnings,
         });
         out["hu_range"] = match (v.unit, range) {
@@ -258,6 +268,12 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
         match range {
             Some((lo, hi)) => println!("  values     {lo} .. {hi} ({unit})"),
             None => println!("  values     all NaN"),
+        }
+        if v.phase.count > 1 {
+            println!(
+                "  phase      {} of {} (temporal positions; --phase K reads another)",
+                v.phase.index, v.phase.count
+            );
         }
         if let Some(s) = &v.series {
             // Some files carry no SeriesInstanceUID; their slices form one series with an

@@ -5,7 +5,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use raystream_io::{ValueUnit, Volume};
+use raystream_io::{ValueUnit, Volume, VolumeSelect};
 use raystream_volume::{IsoSurface, extract_isosurface};
 
 use crate::cli::IsoArgs;
@@ -24,13 +24,13 @@ pub struct Bones {
 /// Loads `path` (or takes `embedded` bytes as NIfTI) and extracts the surface at `hu`.
 pub fn bones(
     path: &Path,
-    series: Option<&str>,
+    select: &VolumeSelect,
     hu: f32,
     smoothing: u32,
     quiet: bool,
     embedded: Option<&[u8]>,
 ) -> Result<Bones> {
-    let (volume, load_ms) = read_volume(path, series, quiet, embedded)?;
+    let (volume, load_ms) = read_volume(path, select, quiet, embedded)?;
     if !quiet && volume.unit != ValueUnit::Hounsfield {
         eprintln!(
             "raystream: {}: values are not known to be Hounsfield units; the threshold {hu} applies to the raw values",
@@ -70,15 +70,15 @@ pub fn bones(
 /// took, ms.
 pub fn read_volume(
     path: &Path,
-    series: Option<&str>,
+    select: &VolumeSelect,
     quiet: bool,
     embedded: Option<&[u8]>,
 ) -> Result<(Volume, f64)> {
     let t0 = Instant::now();
     let pb = spinner(quiet, &format!("reading {}", path.display()));
     let volume: Volume = match embedded {
-        Some(bytes) => raystream_io::volume::parse_nifti(bytes, path)?,
-        None => raystream_io::load_volume(path, series)?,
+        Some(bytes) => raystream_io::volume::parse_nifti(bytes, path, select.phase)?,
+        None => raystream_io::load_volume(path, select)?,
     };
     pb.finish_and_clear();
     if let Some(series) = &volume.series {
@@ -94,7 +94,7 @@ pub fn read_volume(
 
 pub fn run(a: &IsoArgs) -> Result<()> {
     let hu = a.threshold.hu()?;
-    let b = bones(&a.input, a.series.as_deref(), hu, a.smooth, a.quiet, None)?;
+    let b = bones(&a.input, &a.pick.select(), hu, a.smooth, a.quiet, None)?;
     let t = Instant::now();
     raystream_io::write_mesh(&a.output, &b.surface.mesh, Some(&b.surface.normals))?;
     if !a.quiet {

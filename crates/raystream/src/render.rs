@@ -49,7 +49,7 @@ fn is_scene_file(a: &RenderArgs) -> bool {
 fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
     let hu = a.threshold.hu()?;
     let volume_scene = |path: &Path, embedded: Option<&[u8]>| -> Result<(Scene, Option<Bones>)> {
-        let mut b = bones(path, a.series.as_deref(), hu, a.smooth, a.quiet, embedded)?;
+        let mut b = bones(path, &a.pick.select(), hu, a.smooth, a.quiet, embedded)?;
         let mesh = std::mem::take(&mut b.surface.mesh);
         let scene = Scene::for_bones(mesh, &b.surface.normals, path);
         Ok((scene, Some(b)))
@@ -243,7 +243,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         (false, _) => image_format(&a.output)?,
     };
     check_labels(a, true, format)?;
-    let (volume, load_ms) = read_volume(path, a.series.as_deref(), a.quiet, embedded)?;
+    let (volume, load_ms) = read_volume(path, &a.pick.select(), a.quiet, embedded)?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     // An EXR keeps what the projections found, in HU; the window is for display. So does a
     // DICOM picture, with the window as its VOI LUT, unless letters are drawn into it.

@@ -372,7 +372,8 @@ print(json.dumps({"src": src, "out": out, "pixels": pixels, "frames": frames, "f
 fn slices_save_as_reformatted_ct_where_their_pixels_lie() {
     // The tilted head CT: its grid is sheared, which the plane must not care about.
     let series = volume("dicom/head_ct_gantry_tilt_ge");
-    let src = raystream_io::load_volume(std::path::Path::new(&series), None).unwrap();
+    let src =
+        raystream_io::load_volume(std::path::Path::new(&series), &Default::default()).unwrap();
     let source_frame = "1.2.826.0.1.3680043.9.4245.7256807831338624888091981779758557877";
     for (name, args) in [
         ("sagittal", &["--view", "left"][..]),
@@ -391,7 +392,7 @@ fn slices_save_as_reformatted_ct_where_their_pixels_lie() {
         assert!(o.status.success(), "{}", stderr(&o));
         let v = info(out.to_str().unwrap());
         assert_eq!(v["series"]["modality"], "CT", "{name}");
-        let img = raystream_io::load_volume(&out, None).unwrap();
+        let img = raystream_io::load_volume(&out, &Default::default()).unwrap();
         assert_eq!(img.dims, [64, 56, 1], "{name}");
         let (matching, compared) = voxels_where_they_lie(&img, &src);
         assert!(
@@ -536,7 +537,8 @@ fn voxels_where_they_lie(img: &raystream_io::Volume, src: &raystream_io::Volume)
 #[test]
 fn a_slice_series_reads_back_as_the_reformatted_volume() {
     let series = volume("dicom/head_ct_gantry_tilt_ge");
-    let src = raystream_io::load_volume(std::path::Path::new(&series), None).unwrap();
+    let src =
+        raystream_io::load_volume(std::path::Path::new(&series), &Default::default()).unwrap();
     for (name, n, step, args) in [
         ("coronal", 12, 3.0, &["--view", "anterior"][..]),
         (
@@ -643,7 +645,7 @@ fn an_enhanced_ct_written_by_pydicom_reads_as_described() {
     // Sample n of the file holds (n·37) mod 3000; its frames, in file order, lie at z = 34,
     // 30, 32 (k = 2, 0, 1) with intercepts −1024 − k.
     assert_eq!(v["hu_range"], serde_json::json!([-1026.0, 1973.0]));
-    let vol = raystream_io::load_volume(&out, None).unwrap();
+    let vol = raystream_io::load_volume(&out, &Default::default()).unwrap();
     for (f, k) in [(0, 2), (1, 0), (2, 1)] {
         for (i, j) in [(0, 0), (5, 0), (7, 5)] {
             let stored = ((f * 48 + j * 8 + i) * 37 % 3000) as i32;
@@ -666,5 +668,132 @@ fn reformat_series(series: &str, dev: &str, name: &str, args: &[&str]) -> raystr
     all.extend_from_slice(args);
     let o = run(&all);
     assert!(o.status.success(), "{name}: {}", stderr(&o));
-    raystream_io::load_volume(&dir, None).unwrap()
+    raystream_io::load_volume(&dir, &Default::default()).unwrap()
+}
+
+/// A 4-D NIfTI written by SimpleITK (the abdomen CT, then +100 and +200 HU along its fourth
+/// axis): `info` says which phase it read of how many and warns when it chose; `--phase K`
+/// reads the K-th in `info`, `render` (a projection's HU in its EXR) and `iso`; a phase the file
+/// lacks is an error naming it and how many there are.
+#[test]
+fn phase_picks_the_temporal_position_of_a_4d_ct() {
+    let Some(py) = python_with_simpleitk() else {
+        return;
+    };
+    let file = tmp("phases-4d.nii.gz");
+    let script = "import sys, SimpleITK as sitk\n\
+        im = sitk.Cast(sitk.ReadImage(sys.argv[1]), sitk.sitkInt16)\n\
+        sitk.WriteImage(sitk.JoinSeries([im, im + 100, im + 200]), sys.argv[2])";
+    let o = std::process::Command::new(&py)
+        .args(["-c", script])
+        .arg(volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz"))
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let path = file.to_str().unwrap();
+    let src = info(&volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz"));
+    let lo = src["hu_range"][0].as_f64().unwrap();
+    let hi = src["hu_range"][1].as_f64().unwrap();
+    let first = info(path);
+    assert_eq!(first["phase"], serde_json::json!({"index": 1, "count": 3}));
+    assert_eq!(first["dims"], src["dims"]);
+    close(&first["spacing"], &src["spacing"], 1e-6, "spacing");
+    close(&first["origin"], &src["origin"], 1e-3, "origin");
+    assert_eq!(first["hu_range"], serde_json::json!([lo, hi]));
+    assert!(
+        first["warnings"]
+            .to_string()
+            .contains("3 temporal positions"),
+        "{}",
+        first["warnings"]
+    );
+    let o = run(&["info", "--json", "--phase", "3", path]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let third: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(third["phase"], serde_json::json!({"index": 3, "count": 3}));
+    assert_eq!(
+        third["hu_range"],
+        serde_json::json!([lo + 200.0, hi + 200.0])
+    );
+    assert_eq!(third["warnings"], serde_json::json!([]));
+
+    // A parallel MIP of phase 2 is phase 1's plus 100 HU wherever a ray met the volume.
+    let mip = |phase: &str| {
+        let out = tmp(&format!("phases-mip-{phase}.exr"));
+        let o = run(&[
+            "render",
+            "--quiet",
+            path,
+            "--phase",
+            phase,
+            "--mode",
+            "mip",
+            "--parallel",
+            "--size",
+            "48x40",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let e = raystream_cpu::load_exr(&out).unwrap();
+        e.channels["Y"].as_f32().unwrap().to_vec()
+    };
+    let (one, two) = (mip("1"), mip("2"));
+    let hit = one.iter().filter(|v| !v.is_nan()).count();
+    assert!(
+        hit > one.len() / 2,
+        "{hit} of {} pixels meet the CT",
+        one.len()
+    );
+    for (a, b) in one.iter().zip(&two) {
+        assert!(
+            (a.is_nan() && b.is_nan()) || (b - a - 100.0).abs() < 1e-2,
+            "phase 1 {a}, phase 2 {b}"
+        );
+    }
+
+    for cmd in [
+        vec!["info", "--phase", "4", path],
+        vec!["render", "--quiet", "--phase", "4", path, "-o", "x.png"],
+        vec!["iso", "--quiet", "--phase", "4", path, "-o", "x.ply"],
+    ] {
+        let o = run(&cmd);
+        let e = stderr(&o);
+        assert!(
+            !o.status.success()
+                && e.contains("phases-4d.nii.gz")
+                && e.contains("phase 4 requested, but the image has 3 temporal positions"),
+            "{cmd:?}: {e}"
+        );
+    }
+    let o = run(&["info", "--phase", "0", path]);
+    assert!(!o.status.success(), "phase 0 is refused");
+
+    // A scene file's volume takes `phase`, too.
+    for (phase, ok) in [(3, true), (9, false)] {
+        let scene = tmp(&format!("phases-{phase}.toml"));
+        std::fs::write(
+            &scene,
+            format!(
+                "[volume]\npath = \"phases-4d.nii.gz\"\nphase = {phase}\n\n[[objects]]\nshape = \"sphere\"\n"
+            ),
+        )
+        .unwrap();
+        let o = run(&["info", "--json", scene.to_str().unwrap()]);
+        if ok {
+            assert!(o.status.success(), "{}", stderr(&o));
+            let v: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+            assert_eq!(
+                v["volume"]["phase"],
+                serde_json::json!({"index": 3, "count": 3})
+            );
+        } else {
+            assert!(
+                !o.status.success() && stderr(&o).contains("phase 9 requested"),
+                "{}",
+                stderr(&o)
+            );
+        }
+    }
 }

@@ -30,7 +30,9 @@ use dicom_pixeldata::PixelDecoder;
 use dicom_transfer_syntax_registry::{TransferSyntaxIndex, TransferSyntaxRegistry};
 use rayon::prelude::*;
 
-use super::{ValueUnit, Volume, VolumeError, VolumeFormat, check_geometry, voxel_count};
+use super::{
+    Phase, ValueUnit, Volume, VolumeError, VolumeFormat, VolumeSelect, check_geometry, voxel_count,
+};
 
 /// The series a DICOM volume was read from, and the other series in its folder.
 #[derive(Clone, Debug, Default)]
@@ -108,6 +110,9 @@ pub(crate) struct Slice {
     /// file).
     frame: Option<u32>,
     pub(crate) position: [f64; 3],
+    /// Its temporal position in a 4-D series: a single-frame file's TemporalPositionIdentifier
+    /// (0020,0100), an enhanced image frame's TemporalPositionIndex (0020,9128).
+    temporal: Option<u32>,
     orientation: [f64; 6],
     pixel_spacing: [f64; 2],
     between_slices: Option<f64>,
@@ -125,13 +130,13 @@ pub fn list_dicom_series(path: &Path) -> Result<Vec<(String, usize, String)>, Vo
     Ok(group(&slices))
 }
 
-pub(crate) fn load(path: &Path, series: Option<&str>) -> Result<Volume, VolumeError> {
+pub(crate) fn load(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeError> {
     let (slices, mut warnings) = read_folder(path)?;
     // So far the warnings are the files skipped as unreadable; a problem with the series (a
     // gap, above all) is often one of them, so its error names them.
     let skipped = warnings.clone();
     let all = group(&slices);
-    let uid = match series {
+    let uid = match select.series.as_deref() {
         Some(s) => all
             .iter()
             .find(|(u, _, _)| u == s)
@@ -166,9 +171,56 @@ pub(crate) fn load(path: &Path, series: Option<&str>) -> Result<Volume, VolumeEr
             all[0].0.clone()
         }
     };
-    let mut chosen: Vec<Slice> = slices.into_iter().filter(|s| s.series_uid == uid).collect();
-    assemble(path, &mut chosen, all, warnings, !skipped.is_empty())
-        .map_err(|e| mention_skipped(e, &skipped))
+    let chosen: Vec<Slice> = slices.into_iter().filter(|s| s.series_uid == uid).collect();
+    let (mut chosen, phase) = keep_phase(path, chosen, select.phase, &mut warnings)?;
+    let mut volume = assemble(path, &mut chosen, all, warnings, !skipped.is_empty())
+        .map_err(|e| mention_skipped(e, &skipped))?;
+    volume.phase = phase;
+    Ok(volume)
+}
+
+/// The slices of one temporal position (phase) of a series: the `requested` one (from 1), else
+/// the first. A series is 4-D when its slices repeat positions: it is then split by their
+/// temporal positions ([`Slice::temporal`]), in increasing order. A series without repeated
+/// positions is one phase whatever its tags say, as a 3-D series has always been read. A
+/// multi-frame file's parsed data set moves to a frame of it that is kept, which decodes it.
+fn keep_phase(
+    path: &Path,
+    slices: Vec<Slice>,
+    requested: Option<usize>,
+    warnings: &mut Vec<String>,
+) -> Result<(Vec<Slice>, Phase), VolumeError> {
+    // Positions to a thousandth of a millimetre, as the stacking check tells them apart.
+    let key = |s: &Slice| s.position.map(|v| (v * 1e3).round() as i64);
+    let mut seen = std::collections::HashSet::new();
+    let repeats = !slices.iter().all(|s| seen.insert(key(s)));
+    let mut times: Vec<Option<u32>> = if repeats {
+        slices.iter().map(|s| s.temporal).collect()
+    } else {
+        vec![None]
+    };
+    times.sort_unstable();
+    times.dedup();
+    let phase = Phase::pick(path, requested, times.len(), warnings)?;
+    if times.len() == 1 {
+        return Ok((slices, phase));
+    }
+    let chosen = times[phase.index - 1];
+    let mut kept = Vec::new();
+    let mut spare: std::collections::HashMap<PathBuf, InMemDicomObject> = Default::default();
+    for mut s in slices {
+        if s.temporal == chosen {
+            kept.push(s);
+        } else if let Some(obj) = s.obj.take() {
+            spare.insert(s.file.clone(), obj);
+        }
+    }
+    for s in &mut kept {
+        if s.obj.is_none() {
+            s.obj = spare.remove(&s.file);
+        }
+    }
+    Ok((kept, phase))
 }
 
 /// `e`, with the files of the folder that were skipped as unreadable (`skipped`: "skipped
@@ -408,6 +460,7 @@ pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, Volume
                 rows,
                 cols,
                 frame: g.frame,
+                temporal: g.temporal,
                 position: g
                     .position
                     .ok_or_else(|| need("ImagePositionPatient (0020,0032)"))?,
@@ -434,6 +487,8 @@ pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, Volume
 struct FrameGeometry {
     /// The frame (from 0) of a multi-frame image; `None` for a single-frame one.
     frame: Option<u32>,
+    /// Its temporal position (see [`Slice::temporal`]).
+    temporal: Option<u32>,
     position: Option<[f64; 3]>,
     orientation: Option<[f64; 6]>,
     pixel_spacing: Option<[f64; 2]>,
@@ -460,6 +515,9 @@ impl FrameGeometry {
         };
         FrameGeometry {
             frame: None,
+            temporal: top
+                .and_then(|t| t.get(tags::TEMPORAL_POSITION_IDENTIFIER))
+                .and_then(|e| e.to_int::<u32>().ok()),
             position: find(tags::IMAGE_POSITION_PATIENT, tags::PLANE_POSITION_SEQUENCE)
                 .and_then(|v| <[f64; 3]>::try_from(v).ok()),
             orientation: find(
@@ -479,8 +537,9 @@ impl FrameGeometry {
 
 /// The frames of a multi-frame (enhanced) image as planes, from its per-frame and shared
 /// functional groups (PS3.3 C.7.6.16: Plane Position, Plane Orientation, Pixel Measures), with
-/// the top level as the last resort (legacy multi-frame). A file holding several stacks or
-/// temporal positions (a 4D CT) gives the frames of the first one only, and a warning.
+/// the top level as the last resort (legacy multi-frame), each with its temporal position (Frame
+/// Content), which [`keep_phase`] chooses among. A file holding several stacks gives the frames
+/// of the first one only, and a warning.
 fn multi_frame_geometry(
     obj: &InMemDicomObject,
     frames: u32,
@@ -510,39 +569,40 @@ fn multi_frame_geometry(
             .get(tags::FRAME_CONTENT_SEQUENCE)
             .and_then(|e| e.items())
             .and_then(|items| items.first());
-        let get = |tag| {
-            fc.and_then(|fc| fc.get(tag))
-                .and_then(|e| e.to_str().ok())
-                .map(|s| s.trim().to_string())
-        };
-        (get(tags::STACK_ID), get(tags::TEMPORAL_POSITION_INDEX))
+        let stack = fc
+            .and_then(|fc| fc.get(tags::STACK_ID))
+            .and_then(|e| e.to_str().ok())
+            .map(|s| s.trim().to_string());
+        let temporal = fc
+            .and_then(|fc| fc.get(tags::TEMPORAL_POSITION_INDEX))
+            .and_then(|e| e.to_int::<u32>().ok());
+        (stack, temporal)
     };
-    let first = content(&per_frame[0]);
-    let mut groups: Vec<(Option<String>, Option<String>)> = Vec::new();
+    let first_stack = content(&per_frame[0]).0;
+    let mut stacks: Vec<Option<String>> = Vec::new();
     let mut out = Vec::new();
     for (k, item) in per_frame.iter().enumerate() {
-        let c = content(item);
-        if !groups.contains(&c) {
-            groups.push(c.clone());
+        let (stack, temporal) = content(item);
+        if !stacks.contains(&stack) {
+            stacks.push(stack.clone());
         }
-        if c == first {
+        if stack == first_stack {
             let fgs: Vec<&InMemDicomObject> = [Some(item), shared].into_iter().flatten().collect();
             out.push(FrameGeometry {
                 frame: Some(k as u32),
+                temporal,
                 ..FrameGeometry::of(&fgs, Some(obj))
             });
         }
     }
-    let warning = (groups.len() > 1).then(|| {
-        let what = match (&first.0, &first.1) {
-            (_, Some(t)) => format!("temporal position {t}"),
-            (Some(s), None) => format!("stack {s}"),
-            (None, None) => "the frames without a stack or temporal position".to_string(),
+    let warning = (stacks.len() > 1).then(|| {
+        let what = match &first_stack {
+            Some(s) => format!("stack {s}"),
+            None => "the frames without a stack".to_string(),
         };
         format!(
-            "{} stacks or temporal positions in the multi-frame image; read {} of its {frames} \
-             frames, {what}",
-            groups.len(),
+            "{} stacks in the multi-frame image; read {} of its {frames} frames, {what}",
+            stacks.len(),
             out.len()
         )
     });
@@ -792,6 +852,7 @@ fn assemble(
             all,
             study,
         }),
+        phase: Phase::default(),
         warnings,
     })
 }
@@ -1047,12 +1108,19 @@ fn jpeg_precision(stream: &[u8]) -> Option<u8> {
 const EXPLICIT_LE: &str = "1.2.840.10008.1.2.1";
 
 /// Every slice's modality values, in `slices`' order: each file is decoded once, by the slice
-/// that holds its data set, all the frames of a multi-frame one.
+/// that holds its data set, the frames of a multi-frame one that `slices` has (one phase's).
 fn decode_all(slices: &mut [Slice], per_slice: usize) -> Result<Vec<Vec<f32>>, VolumeError> {
+    let mut wanted: std::collections::HashMap<PathBuf, Vec<usize>> = Default::default();
+    for s in slices.iter() {
+        wanted
+            .entry(s.file.clone())
+            .or_default()
+            .push(s.frame.unwrap_or(0) as usize);
+    }
     let mut frames: Vec<Vec<Vec<f32>>> = slices
         .par_iter_mut()
         .map(|s| match s.obj {
-            Some(_) => decode_frames(s, per_slice),
+            Some(_) => decode_frames(s, per_slice, Some(&wanted[&s.file])),
             None => Ok(Vec::new()),
         })
         .collect::<Result<_, _>>()?;
@@ -1069,6 +1137,7 @@ fn decode_all(slices: &mut [Slice], per_slice: usize) -> Result<Vec<Vec<f32>>, V
             holder
                 .get(s.file.as_path())
                 .and_then(|&k| frames[k].get_mut(frame))
+                .filter(|v| !v.is_empty())
                 .map(std::mem::take)
                 .ok_or_else(|| {
                     VolumeError::invalid(&s.file, format!("no frame {} decoded", frame + 1))
@@ -1078,15 +1147,20 @@ fn decode_all(slices: &mut [Slice], per_slice: usize) -> Result<Vec<Vec<f32>>, V
 }
 
 /// Decodes a file's frames to modality values (RescaleSlope/Intercept applied, a frame's own
-/// in an enhanced image: HU for CT).
-pub(crate) fn decode_frames(s: &mut Slice, per_slice: usize) -> Result<Vec<Vec<f32>>, VolumeError> {
+/// in an enhanced image: HU for CT): the `wanted` ones (from 0; `None`: all), the others empty.
+pub(crate) fn decode_frames(
+    s: &mut Slice,
+    per_slice: usize,
+    wanted: Option<&[usize]>,
+) -> Result<Vec<Vec<f32>>, VolumeError> {
+    let is_wanted = |k: usize| wanted.is_none_or(|w| w.contains(&k));
     let ts = TransferSyntaxRegistry.get(&s.ts_uid).ok_or_else(|| {
         VolumeError::invalid(&s.file, format!("unknown transfer syntax {}", s.ts_uid))
     })?;
     let mut obj = s.obj.take().expect("each slice is decoded once");
     let own = OwnCodec::of(&s.ts_uid, &obj);
     if let Some(codec) = own {
-        obj = decode_to_native(obj, s, codec)?;
+        obj = decode_to_native(obj, s, codec, &is_wanted)?;
     } else if !ts.can_decode_all() {
         return Err(VolumeError::invalid(
             &s.file,
@@ -1116,6 +1190,9 @@ pub(crate) fn decode_frames(s: &mut Slice, per_slice: usize) -> Result<Vec<Vec<f
     })?;
     (0..pixels.number_of_frames())
         .map(|k| {
+            if !is_wanted(k as usize) {
+                return Ok(Vec::new());
+            }
             let values: Vec<f32> = pixels.to_vec_frame(k).map_err(|e| {
                 VolumeError::invalid(
                     &s.file,
@@ -1141,10 +1218,12 @@ pub(crate) fn decode_frames(s: &mut Slice, per_slice: usize) -> Result<Vec<Vec<f
 /// (uncompressed) pixel data of the slice's BitsAllocated. The samples are the stored bit
 /// patterns (T.87 and T.81 code unsigned values), so a signed image is sign-extended from
 /// BitsStored, and rescaled, by dicom-pixeldata afterwards, exactly as an uncompressed file.
+/// Frames not `wanted` (another phase's) are left zero rather than decoded.
 fn decode_to_native(
     mut obj: InMemDicomObject,
     s: &Slice,
     codec: OwnCodec,
+    wanted: &(dyn Fn(usize) -> bool + Sync),
 ) -> Result<InMemDicomObject, VolumeError> {
     let name = match codec {
         OwnCodec::JpegLs => "JPEG-LS",
@@ -1174,6 +1253,9 @@ fn decode_to_native(
         .par_iter()
         .enumerate()
         .map(|(k, stream)| {
+            if !wanted(k) {
+                return Ok(vec![0; s.rows as usize * s.cols as usize]);
+            }
             let frame = if frames > 1 {
                 format!("frame {} ({}x{})", k + 1, s.cols, s.rows)
             } else {

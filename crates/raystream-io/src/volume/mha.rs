@@ -177,6 +177,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
         unit,
         format: VolumeFormat::MetaImage,
         series: None,
+        phase: Default::default(),
         warnings,
     })
 }

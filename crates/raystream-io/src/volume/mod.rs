@@ -79,6 +79,78 @@ pub fn is_volume_path(path: &Path) -> bool {
     VolumeFormat::from_path(path).is_some()
 }
 
+/// Which image of a file or folder [`load_volume`] reads.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct VolumeSelect {
+    /// DICOM: the SeriesInstanceUID (default: the series with the most slices).
+    pub series: Option<String>,
+    /// The temporal position (phase) of a 4-D acquisition, from 1, in increasing order of the
+    /// file's own numbering: a NIfTI's volumes along its fourth axis (and any further ones), a
+    /// DICOM series' TemporalPositionIdentifier (0020,0100), an enhanced CT's
+    /// TemporalPositionIndex (0020,9128). Default: the first, with a warning when there are
+    /// more. NRRD and MetaImage files are read as 3-D only: phase 1.
+    pub phase: Option<usize>,
+}
+
+impl VolumeSelect {
+    /// The series `uid` (if any), its first phase.
+    pub fn series(uid: Option<&str>) -> Self {
+        VolumeSelect {
+            series: uid.map(str::to_string),
+            phase: None,
+        }
+    }
+}
+
+/// Which temporal position (phase) of a 4-D acquisition a volume is: `index` of `count`, from 1.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Phase {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Default for Phase {
+    /// A 3-D volume: phase 1 of 1.
+    fn default() -> Self {
+        Phase { index: 1, count: 1 }
+    }
+}
+
+impl Phase {
+    /// The phase `requested` (from 1; `None`: the first) of `count` in `path`, or an error
+    /// naming the phases there are; a warning when the first of several is taken by default.
+    pub(crate) fn pick(
+        path: &Path,
+        requested: Option<usize>,
+        count: usize,
+        warnings: &mut Vec<String>,
+    ) -> Result<Phase, VolumeError> {
+        match requested {
+            Some(k) if k == 0 || k > count => Err(VolumeError::invalid(
+                path,
+                if count == 1 {
+                    format!(
+                        "phase {k} requested, but the image has one temporal position (phase 1)"
+                    )
+                } else {
+                    format!(
+                        "phase {k} requested, but the image has {count} temporal positions (phases 1 to {count})"
+                    )
+                },
+            )),
+            Some(k) => Ok(Phase { index: k, count }),
+            None => {
+                if count > 1 {
+                    warnings.push(format!(
+                        "{count} temporal positions (phases) in the image; reading phase 1; pick another with --phase K"
+                    ));
+                }
+                Ok(Phase { index: 1, count })
+            }
+        }
+    }
+}
+
 /// What went wrong reading a volume, always with the file (or folder) it came from.
 #[derive(Debug, thiserror::Error)]
 pub enum VolumeError {
@@ -126,6 +198,9 @@ pub struct Volume {
     pub format: VolumeFormat,
     /// For DICOM: the series read, and the others found in the folder.
     pub series: Option<DicomSeriesInfo>,
+    /// The temporal position (phase) of a 4-D acquisition this volume is, and how many the
+    /// file or series holds (1 of 1 for a 3-D one).
+    pub phase: Phase,
     /// Things a user should know (e.g. "sform and qform disagree; used sform").
     pub warnings: Vec<String>,
 }
@@ -341,9 +416,9 @@ pub(crate) fn voxel_count(path: &Path, dims: [usize; 3]) -> Result<usize, Volume
     }
 }
 
-/// Reads a volume: a folder is a DICOM series (the largest, or the one with UID `series`),
-/// files go by extension.
-pub fn load_volume(path: &Path, series: Option<&str>) -> Result<Volume, VolumeError> {
+/// Reads a volume: a folder is a DICOM series (the largest, or the one `select` names), files go
+/// by extension; of a 4-D acquisition, the phase `select` names.
+pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeError> {
     let format = VolumeFormat::from_path(path).ok_or_else(|| {
         VolumeError::invalid(
             path,
@@ -357,18 +432,21 @@ pub fn load_volume(path: &Path, series: Option<&str>) -> Result<Volume, VolumeEr
         ));
     }
     let volume = match format {
-        VolumeFormat::Dicom => dicom::load(path, series)?,
-        VolumeFormat::Nifti => nifti::load(path)?,
+        VolumeFormat::Dicom => dicom::load(path, select)?,
+        VolumeFormat::Nifti => nifti::load(path, select.phase)?,
         VolumeFormat::Nrrd => nrrd::load(path)?,
         VolumeFormat::MetaImage => mha::load(path)?,
     };
+    // The readers of 3-D-only formats refuse any phase but the one they read.
+    Phase::pick(path, select.phase, volume.phase.count, &mut Vec::new())?;
     volume.check(path)?;
     Ok(volume)
 }
 
-/// Parses NIfTI bytes held in memory (an embedded volume); `path` names it in errors.
-pub fn parse_nifti(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
-    let v = nifti::parse(bytes, path)?;
+/// Parses NIfTI bytes held in memory (an embedded volume), its volume `phase` (from 1; `None`:
+/// the first) if 4-D; `path` names it in errors.
+pub fn parse_nifti(bytes: &[u8], path: &Path, phase: Option<usize>) -> Result<Volume, VolumeError> {
+    let v = nifti::parse(bytes, path, phase)?;
     v.check(path)?;
     Ok(v)
 }

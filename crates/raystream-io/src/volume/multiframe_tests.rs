@@ -2,6 +2,7 @@
 //! multi-frame file in the layouts scanners write (frames out of order, each with its own
 //! rescale; uncompressed, or JPEG-LS a frame or split by an offset table; two temporal
 //! positions), read back as the series itself, voxel for voxel; and what is wrong in one named.
+//! Also the 4-D series of single-frame files: the same slices at two temporal positions.
 
 use std::path::{Path, PathBuf};
 
@@ -15,7 +16,7 @@ use super::*;
 fn series() -> Volume {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/data/volumes/dicom/abdomen_ct_j2k_totalseg");
-    load_volume(&dir, None).unwrap()
+    load_volume(&dir, &Default::default()).unwrap()
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -246,7 +247,7 @@ fn an_enhanced_ct_reads_as_the_series_it_was_made_from() {
         ),
     ] {
         let file = write_enhanced(&want, layout, name);
-        let got = load_volume(&file, None).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let got = load_volume(&file, &Default::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
         std::fs::remove_file(&file).unwrap();
         assert_same(&got, &want, name);
         assert!(got.warnings.is_empty(), "{name}: {:?}", got.warnings);
@@ -254,22 +255,134 @@ fn an_enhanced_ct_reads_as_the_series_it_was_made_from() {
     }
 }
 
+/// A 4-D enhanced CT (every slice at two temporal positions, the second 100 HU brighter), plain
+/// and JPEG-LS split by an offset table: phase 1 by default, with a warning; `--phase 2` the
+/// brighter one, only its frames decoded; a phase beyond the file's an error saying how many
+/// there are.
 #[test]
-fn a_4d_enhanced_ct_reads_its_first_temporal_position() {
-    let want = series();
-    let layout = Layout {
-        temporal: true,
-        ..Default::default()
+fn a_4d_enhanced_ct_reads_the_phase_asked_for() {
+    let first = series();
+    let second = Volume {
+        data: first.data.iter().map(|v| v + 100.0).collect(),
+        ..first.clone()
     };
-    let file = write_enhanced(&want, layout, "4d.dcm");
-    let got = load_volume(&file, None).unwrap();
-    std::fs::remove_file(&file).unwrap();
-    assert_same(&got, &want, "4d");
-    let w = got.warnings.join("\n");
+    for (name, jpeg_ls) in [("4d.dcm", false), ("4d-ls.dcm", true)] {
+        let layout = Layout {
+            temporal: true,
+            jpeg_ls,
+            split: jpeg_ls,
+            ..Default::default()
+        };
+        let file = write_enhanced(&first, layout, name);
+        let read = |phase| {
+            load_volume(
+                &file,
+                &VolumeSelect {
+                    series: None,
+                    phase,
+                },
+            )
+        };
+        let got = read(None).unwrap();
+        assert_same(&got, &first, name);
+        assert_eq!(got.phase, Phase { index: 1, count: 2 }, "{name}");
+        let w = got.warnings.join("\n");
+        assert!(
+            w.contains("2 temporal positions (phases) in the image; reading phase 1"),
+            "{name}: {w}"
+        );
+        let got = read(Some(2)).unwrap();
+        assert_same(&got, &second, name);
+        assert_eq!(got.phase, Phase { index: 2, count: 2 }, "{name}");
+        assert!(got.warnings.is_empty(), "{name}: {:?}", got.warnings);
+        assert_eq!(got.series.as_ref().unwrap().count, 20, "{name}");
+        let e = read(Some(3)).unwrap_err().to_string();
+        assert!(
+            e.starts_with(file.to_str().unwrap())
+                && e.contains("phase 3 requested, but the image has 2 temporal positions"),
+            "{name}: {e}"
+        );
+        std::fs::remove_file(&file).unwrap();
+    }
+}
+
+/// The abdomen series' files copied twice into one folder, TemporalPositionIdentifier 1 and 2,
+/// the second 100 HU brighter (its RescaleIntercept raised): one 4-D series, read phase by phase.
+/// The same files once, each slice with its own TemporalPositionIdentifier but no position
+/// repeated, stay one 3-D series, as before.
+#[test]
+fn a_4d_series_of_single_frame_files_reads_the_phase_asked_for() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/volumes/dicom/abdomen_ct_j2k_totalseg");
+    let first = series();
+    let second = Volume {
+        data: first.data.iter().map(|v| v + 100.0).collect(),
+        ..first.clone()
+    };
+    let dir = std::env::temp_dir().join(format!("raystream-4d-{}", std::process::id()));
+    let flat = dir.join("3d");
+    std::fs::create_dir_all(&flat).unwrap();
+    let mut names: Vec<_> = std::fs::read_dir(&src)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    names.sort();
+    for (k, file) in names.iter().enumerate() {
+        let name = file.file_name().unwrap().to_str().unwrap();
+        for (t, to) in [
+            (1, dir.join(format!("b{name}"))),
+            (2, dir.join(format!("a{name}"))),
+            (k + 1, flat.join(name)),
+        ] {
+            let mut obj = dicom_object::open_file(file).unwrap();
+            let intercept = obj
+                .element(tags::RESCALE_INTERCEPT)
+                .unwrap()
+                .to_float64()
+                .unwrap();
+            let shift = if to.parent() == Some(&dir) && t == 2 {
+                100.0
+            } else {
+                0.0
+            };
+            obj.put(decimals(tags::RESCALE_INTERCEPT, &[intercept + shift]));
+            obj.put(text(
+                tags::TEMPORAL_POSITION_IDENTIFIER,
+                VR::IS,
+                &t.to_string(),
+            ));
+            obj.write_to_file(&to).unwrap();
+        }
+    }
+    let read = |phase| {
+        load_volume(
+            &dir,
+            &VolumeSelect {
+                series: None,
+                phase,
+            },
+        )
+    };
+    let got = read(None).unwrap();
+    assert_same(&got, &first, "phase 1");
+    assert_eq!(got.phase, Phase { index: 1, count: 2 });
     assert!(
-        w.contains("2 stacks or temporal positions") && w.contains("read 20 of its 40 frames"),
-        "{w}"
+        got.warnings
+            .iter()
+            .any(|w| w.contains("2 temporal positions")),
+        "{:?}",
+        got.warnings
     );
+    let got = read(Some(2)).unwrap();
+    assert_same(&got, &second, "phase 2");
+    assert_eq!(got.phase, Phase { index: 2, count: 2 });
+    assert_eq!(got.series.as_ref().unwrap().count, 20);
+    let e = read(Some(3)).unwrap_err().to_string();
+    assert!(e.contains("phase 3 requested, but the image has 2"), "{e}");
+    let got = load_volume(&flat, &Default::default()).unwrap();
+    assert_same(&got, &first, "3-D");
+    assert_eq!(got.phase, Phase::default());
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -294,7 +407,9 @@ fn a_broken_enhanced_ct_is_an_error_naming_the_file_and_frame() {
         ),
     ] {
         let file = write_enhanced(&v, layout, name);
-        let e = load_volume(&file, None).unwrap_err().to_string();
+        let e = load_volume(&file, &Default::default())
+            .unwrap_err()
+            .to_string();
         std::fs::remove_file(&file).unwrap();
         assert!(
             e.starts_with(file.to_str().unwrap()) && e.contains(says),
@@ -342,7 +457,7 @@ fn damaged_enhanced_ct_files_are_errors_never_panics() {
         let decode = |b: &[u8]| -> Result<usize, VolumeError> {
             let mut slices = dicom::parse_file(b, path)?;
             let n = (slices[0].rows * slices[0].cols) as usize;
-            Ok(dicom::decode_frames(&mut slices[0], n)?.len())
+            Ok(dicom::decode_frames(&mut slices[0], n, None)?.len())
         };
         assert_eq!(decode(&bytes).unwrap(), nz, "{name}");
         let mut errors = 0;

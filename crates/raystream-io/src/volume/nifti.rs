@@ -11,8 +11,8 @@ use std::path::Path;
 
 use super::raw::{Bytes, Scalar, decode, open_payload, read_exact_n, read_file, skip_n};
 use super::{
-    ValueUnit, Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal, unit_columns,
-    voxel_count,
+    Phase, ValueUnit, Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal,
+    unit_columns, voxel_count,
 };
 
 /// The header fields raystream uses, widened to the NIfTI-2 types.
@@ -31,12 +31,18 @@ struct Header {
     big_endian: bool,
 }
 
-pub(crate) fn load(path: &Path) -> Result<Volume, VolumeError> {
-    parse(&read_file(path)?, path)
+pub(crate) fn load(path: &Path, phase: Option<usize>) -> Result<Volume, VolumeError> {
+    parse(&read_file(path)?, path, phase)
 }
 
-/// Parses a `.nii` / `.nii.gz` file's bytes; `path` names it in errors.
-pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
+/// Parses a `.nii` / `.nii.gz` file's bytes; `path` names it in errors. Of a 4-D (or higher)
+/// image, the 3-D volume `phase` (from 1, default 1) is read: the volumes follow each other in
+/// the file, the fourth axis first.
+pub(crate) fn parse(
+    bytes: &[u8],
+    path: &Path,
+    phase: Option<usize>,
+) -> Result<Volume, VolumeError> {
     let gzip = bytes.starts_with(&[0x1f, 0x8b]);
     let mut r = open_payload(bytes, 0, gzip, path)?;
     let first = read_exact_n(&mut r, 4, path, "the NIfTI header")?;
@@ -62,7 +68,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
     } else {
         parse_nifti2(&raw, big_endian, path)?
     };
-    build(path, h, &mut r, hdr_len)
+    build(path, h, &mut r, hdr_len, phase)
 }
 
 fn parse_nifti1(raw: &[u8], path: &Path) -> Result<Header, VolumeError> {
@@ -138,7 +144,13 @@ fn scalar_of(datatype: i16) -> Option<Scalar> {
     })
 }
 
-fn build(path: &Path, h: Header, r: &mut dyn Read, hdr_len: usize) -> Result<Volume, VolumeError> {
+fn build(
+    path: &Path,
+    h: Header,
+    r: &mut dyn Read,
+    hdr_len: usize,
+    phase: Option<usize>,
+) -> Result<Volume, VolumeError> {
     let mut warnings = Vec::new();
     let ndim = h.dim[0];
     if !(1..=7).contains(&ndim) {
@@ -155,13 +167,21 @@ fn build(path: &Path, h: Header, r: &mut dyn Read, hdr_len: usize) -> Result<Vol
         ));
     }
     let dims = [d(1), d(2), d(3)].map(|v| v as usize);
-    if (4..=7).any(|i| d(i) > 1) {
-        warnings.push(format!(
-            "{}-D image ({:?}): using the first 3-D volume",
-            ndim,
-            &h.dim[1..=ndim as usize]
-        ));
-    }
+    // The 3-D volumes of a 4-D (or higher) image: dims 4 to 7 together, as one list.
+    let volumes = (4..=7)
+        .map(|i| d(i).max(1) as u64)
+        .try_fold(1u64, u64::checked_mul)
+        .filter(|&v| v <= u32::MAX as u64)
+        .ok_or_else(|| {
+            VolumeError::invalid(
+                path,
+                format!(
+                    "dimensions {:?} claim too many volumes",
+                    &h.dim[1..=ndim as usize]
+                ),
+            )
+        })? as usize;
+    let phase = Phase::pick(path, phase, volumes, &mut warnings)?;
     let n = voxel_count(path, dims)?;
     let scalar = scalar_of(h.datatype).ok_or_else(|| {
         VolumeError::invalid(
@@ -229,7 +249,9 @@ fn build(path: &Path, h: Header, r: &mut dyn Read, hdr_len: usize) -> Result<Vol
             format!("vox_offset {} is invalid", h.vox_offset),
         ));
     }
-    skip_n(r, offset as u64 - hdr_len as u64, path)?;
+    // The volumes before the phase read are skipped, not kept.
+    let before = (phase.index as u64 - 1) * (n * scalar.size()) as u64;
+    skip_n(r, offset as u64 - hdr_len as u64 + before, path)?;
     let bytes = read_exact_n(r, n * scalar.size(), path, "the NIfTI voxel data")?;
     // scl_slope 0 or NaN means "no scaling" (NIfTI-1 standard).
     let (slope, inter) = if h.scl_slope == 0.0 || !h.scl_slope.is_finite() {
@@ -255,6 +277,7 @@ fn build(path: &Path, h: Header, r: &mut dyn Read, hdr_len: usize) -> Result<Vol
         unit,
         format: VolumeFormat::Nifti,
         series: None,
+        phase,
         warnings,
     })
 }

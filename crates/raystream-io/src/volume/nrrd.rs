@@ -200,6 +200,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
         unit,
         format: VolumeFormat::Nrrd,
         series: None,
+        phase: Default::default(),
         warnings,
     })
 }

@@ -106,7 +106,8 @@ fn assert_geometry(v: &Volume, e: &Expected) {
 #[test]
 fn geometry_and_values_match_simpleitk() {
     for e in EXPECTED {
-        let v = load_volume(&shared(e.path), None).unwrap_or_else(|err| panic!("{err}"));
+        let v =
+            load_volume(&shared(e.path), &Default::default()).unwrap_or_else(|err| panic!("{err}"));
         assert_geometry(&v, e);
         assert_eq!(v.value_range(), Some(e.range), "{}", e.path);
     }
@@ -114,11 +115,15 @@ fn geometry_and_values_match_simpleitk() {
 
 #[test]
 fn units_follow_the_data() {
-    let ct = load_volume(&shared(EXPECTED[0].path), None).unwrap();
+    let ct = load_volume(&shared(EXPECTED[0].path), &Default::default()).unwrap();
     assert_eq!(ct.unit, ValueUnit::Hounsfield);
-    let engine = load_volume(&shared("nifti/scivis_engine.nii.gz"), None).unwrap();
+    let engine = load_volume(&shared("nifti/scivis_engine.nii.gz"), &Default::default()).unwrap();
     assert_eq!(engine.unit, ValueUnit::Unknown);
-    let series = load_volume(&shared("dicom/abdomen_ct_j2k_totalseg"), None).unwrap();
+    let series = load_volume(
+        &shared("dicom/abdomen_ct_j2k_totalseg"),
+        &Default::default(),
+    )
+    .unwrap();
     assert_eq!(series.unit, ValueUnit::Hounsfield);
     let info = series.series.unwrap();
     assert_eq!(info.count, 20);
@@ -127,7 +132,11 @@ fn units_follow_the_data() {
 
 #[test]
 fn index_and_world_transforms_invert_each_other() {
-    let v = load_volume(&shared("nifti/abdomen_pelvis_ct_totalseg.nii.gz"), None).unwrap();
+    let v = load_volume(
+        &shared("nifti/abdomen_pelvis_ct_totalseg.nii.gz"),
+        &Default::default(),
+    )
+    .unwrap();
     let p = DVec3::new(10.0, 20.5, 30.25);
     let w = v.index_to_world(p);
     // RAS-stored file: i runs to the patient's right (−x in LPS), j to anterior (−y).
@@ -148,7 +157,11 @@ fn index_and_world_transforms_invert_each_other() {
 /// is exact for (linear in each axis), at the new grid's world positions.
 #[test]
 fn resample_keeps_geometry_and_linear_fields() {
-    let src = load_volume(&shared("nifti/abdomen_pelvis_ct_totalseg.nii.gz"), None).unwrap();
+    let src = load_volume(
+        &shared("nifti/abdomen_pelvis_ct_totalseg.nii.gz"),
+        &Default::default(),
+    )
+    .unwrap();
     let [nx, ny, nz] = src.dims;
     let f = |p: DVec3| (2.0 * p.x + 3.0 * p.y - 1.5 * p.z + 0.01 * p.x * p.y * p.z + 5.0) as f32;
     let mut lin = src.resample(src.dims);
@@ -186,7 +199,7 @@ fn resample_keeps_geometry_and_linear_fields() {
 
 #[test]
 fn every_decodable_transfer_syntax_gives_the_uncompressed_hu() {
-    let reference = load_volume(&shared(LE_EXPLICIT), None).unwrap();
+    let reference = load_volume(&shared(LE_EXPLICIT), &Default::default()).unwrap();
     let max_diff = |v: &Volume| {
         v.data
             .iter()
@@ -281,7 +294,7 @@ fn load_ts(ts: &str) -> Result<Volume, VolumeError> {
                 .starts_with(&prefix)
         })
         .unwrap();
-    load_volume(&file, None)
+    load_volume(&file, &Default::default())
 }
 
 /// The GE head CT (../shared: gantry tilted 18.5°, 4 mm slices through the posterior fossa
@@ -293,7 +306,7 @@ fn load_ts(ts: &str) -> Result<Volume, VolumeError> {
 #[test]
 fn a_tilted_unevenly_spaced_series_is_sheared_and_interpolated() {
     let dir = shared("dicom/head_ct_gantry_tilt_ge");
-    let v = load_volume(&dir, None).unwrap();
+    let v = load_volume(&dir, &Default::default()).unwrap();
     let w = v.warnings.join("\n");
     assert!(
         w.contains("gantry tilt of 18.5°")
@@ -303,7 +316,7 @@ fn a_tilted_unevenly_spaced_series_is_sheared_and_interpolated() {
     );
     let mut files: Vec<Volume> = std::fs::read_dir(&dir)
         .unwrap()
-        .map(|e| load_volume(&e.unwrap().path(), None).unwrap())
+        .map(|e| load_volume(&e.unwrap().path(), &Default::default()).unwrap())
         .collect();
     files.sort_by(|a, b| a.origin[2].total_cmp(&b.origin[2]));
     assert_eq!(files.len(), 28);
@@ -508,9 +521,12 @@ fn stacks_of_slices() {
 
 #[test]
 fn unknown_series_lists_the_ones_there() {
-    let e = load_volume(&shared("dicom/abdomen_ct_j2k_totalseg"), Some("1.2.3"))
-        .unwrap_err()
-        .to_string();
+    let e = load_volume(
+        &shared("dicom/abdomen_ct_j2k_totalseg"),
+        &VolumeSelect::series(Some("1.2.3")),
+    )
+    .unwrap_err()
+    .to_string();
     // These files carry no SeriesInstanceUID (SimpleITK's GDCM finds the same empty ID).
     assert!(
         e.contains("no series with UID 1.2.3")
@@ -535,7 +551,10 @@ fn a_gap_left_by_an_unreadable_slice_names_the_file() {
         std::fs::copy(src.join(n), dir.join(n)).unwrap();
     }
     // Cut the slice in the middle of the stack (by position, not by name) to 3000 bytes.
-    assert_eq!(load_volume(&dir, None).unwrap().dims[2], names.len());
+    assert_eq!(
+        load_volume(&dir, &Default::default()).unwrap().dims[2],
+        names.len()
+    );
     let mut by_z: Vec<(f64, &std::ffi::OsString)> = names
         .iter()
         .map(|n| {
@@ -547,7 +566,9 @@ fn a_gap_left_by_an_unreadable_slice_names_the_file() {
     let cut = by_z[by_z.len() / 2].1;
     let bytes = std::fs::read(dir.join(cut)).unwrap();
     std::fs::write(dir.join(cut), &bytes[..3000]).unwrap();
-    let e = load_volume(&dir, None).unwrap_err().to_string();
+    let e = load_volume(&dir, &Default::default())
+        .unwrap_err()
+        .to_string();
     std::fs::remove_dir_all(&dir).ok();
     assert!(
         e.contains("uneven slice spacing")
@@ -600,7 +621,7 @@ fn nrrd_gzip_and_detached_data() {
     std::fs::write(dir.join("ramp.raw.gz"), gz.finish().unwrap()).unwrap();
     let header = "NRRD0005\ntype: int16\ndimension: 3\nspace: LPS\nsizes: 4 3 2\nspace directions: (0,1,0) (1,0,0) (0,0,1)\nencoding: gzip\ndata file: ramp.raw.gz\n\n";
     std::fs::write(dir.join("ramp.nhdr"), header).unwrap();
-    let v = load_volume(&dir.join("ramp.nhdr"), None).unwrap();
+    let v = load_volume(&dir.join("ramp.nhdr"), &Default::default()).unwrap();
     check_ramp(&v);
     assert_eq!(
         v.direction,
@@ -688,7 +709,7 @@ fn nifti2(big: bool) -> Vec<u8> {
 #[test]
 fn nifti2_both_byte_orders_sform_wins() {
     for big in [false, true] {
-        let v = nifti::parse(&nifti2(big), Path::new("t.nii")).unwrap();
+        let v = nifti::parse(&nifti2(big), Path::new("t.nii"), None).unwrap();
         check_ramp(&v);
         assert_eq!(v.spacing, [0.5, 0.7, 2.5]);
         assert_eq!(v.origin, [-10.0, -20.0, 30.0]);
@@ -697,6 +718,75 @@ fn nifti2_both_byte_orders_sform_wins() {
             [[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]]
         );
     }
+}
+
+/// A 4-D NIfTI-2 (the ramp, then the ramp + 1000, then + 2000 along its fourth axis): each phase
+/// is its own volume, the first by default with a warning; a phase beyond the file's, or one cut
+/// off by its end, is an error naming the file; a NRRD (3-D only) has phase 1 alone.
+#[test]
+fn a_4d_nifti_reads_the_phase_asked_for() {
+    let mut b = nifti2(false);
+    b[16..24].copy_from_slice(&4i64.to_le_bytes()); // dim[0]: 4-D
+    b[16 + 32..16 + 40].copy_from_slice(&3i64.to_le_bytes()); // dim[4]: 3 volumes
+    for shift in [1000i16, 2000] {
+        for c in ramp_i16().chunks(2) {
+            b.extend((i16::from_le_bytes([c[0], c[1]]) + shift).to_le_bytes());
+        }
+    }
+    let path = Path::new("t4.nii");
+    for k in 1..=3 {
+        let v = nifti::parse(&b, path, Some(k)).unwrap();
+        assert_eq!(v.phase, Phase { index: k, count: 3 });
+        assert!(v.warnings.is_empty(), "{:?}", v.warnings);
+        let shift = 1000.0 * (k - 1) as f32;
+        assert_eq!(v.at(0, 0, 0), -1000.0 + shift);
+        assert_eq!(v.at(3, 2, 1), 3.0 + 20.0 + 100.0 - 1000.0 + shift);
+        assert_eq!(v.spacing, [0.5, 0.7, 2.5]);
+    }
+    let v = nifti::parse(&b, path, None).unwrap();
+    assert_eq!((v.phase.index, v.at(0, 0, 0)), (1, -1000.0));
+    assert!(
+        v.warnings.iter().any(|w| w.contains(
+            "3 temporal positions (phases) in the image; reading phase 1; pick another with --phase K"
+        )),
+        "{:?}",
+        v.warnings
+    );
+    let e = nifti::parse(&b, path, Some(4)).unwrap_err().to_string();
+    assert!(
+        e.starts_with("t4.nii")
+            && e.contains(
+                "phase 4 requested, but the image has 3 temporal positions (phases 1 to 3)"
+            ),
+        "{e}"
+    );
+    // Cut inside the third volume: the first two still read, the third is an error.
+    let cut = &b[..b.len() - 10];
+    assert!(nifti::parse(cut, path, Some(2)).is_ok());
+    let e = nifti::parse(cut, path, Some(3)).unwrap_err().to_string();
+    assert!(e.starts_with("t4.nii") && e.contains("truncated"), "{e}");
+
+    let dir = std::env::temp_dir().join(format!("raystream-phase-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut nrrd_bytes = b"NRRD0004\ntype: short\ndimension: 3\nspace: LPS\nsizes: 4 3 2\nspace directions: (1,0,0) (0,1,0) (0,0,1)\nencoding: raw\n\n".to_vec();
+    nrrd_bytes.extend(ramp_i16());
+    let file = dir.join("ramp.nrrd");
+    std::fs::write(&file, nrrd_bytes).unwrap();
+    let pick = |phase| VolumeSelect {
+        series: None,
+        phase: Some(phase),
+    };
+    assert_eq!(
+        load_volume(&file, &pick(1)).unwrap().phase,
+        Phase::default()
+    );
+    let e = load_volume(&file, &pick(2)).unwrap_err().to_string();
+    assert!(
+        e.contains("ramp.nrrd")
+            && e.contains("phase 2 requested, but the image has one temporal position (phase 1)"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -728,7 +818,7 @@ fn absurd_headers_are_refused_before_allocating() {
     // 2.5 km, or as truncated.
     let mut n2 = nifti2(false);
     n2[16 + 24..16 + 32].copy_from_slice(&1_000_000i64.to_le_bytes());
-    let e = nifti::parse(&n2, Path::new("t.nii"))
+    let e = nifti::parse(&n2, Path::new("t.nii"), None)
         .unwrap_err()
         .to_string();
     assert!(
@@ -765,10 +855,10 @@ fn truncated_and_bit_flipped_headers_never_panic() {
     type Parse = fn(&[u8], &Path) -> Result<(), VolumeError>;
     let cases: [(&str, Vec<u8>, usize, Parse); 5] = [
         ("t.nii", nifti2(false), 544, |b, p| {
-            nifti::parse(b, p).map(drop)
+            nifti::parse(b, p, None).map(drop)
         }),
         ("t.nii", nifti2(true), 544, |b, p| {
-            nifti::parse(b, p).map(drop)
+            nifti::parse(b, p, None).map(drop)
         }),
         ("t.nrrd", nrrd_bytes, 160, |b, p| {
             nrrd::parse(b, p).map(drop)
@@ -806,7 +896,7 @@ fn truncated_and_bit_flipped_headers_never_panic() {
     }
     // A truncated gzip stream of the real CT.
     for cut in [10, 100, 1000, nifti_gz.len() / 2, nifti_gz.len() - 2000] {
-        let e = nifti::parse(&nifti_gz[..cut], Path::new("cut.nii.gz")).unwrap_err();
+        let e = nifti::parse(&nifti_gz[..cut], Path::new("cut.nii.gz"), None).unwrap_err();
         assert!(e.to_string().starts_with("cut.nii.gz"), "{e}");
     }
 }
@@ -889,5 +979,5 @@ fn damaged_jpeg_ls_and_12_bit_jpeg_are_errors_never_panics() {
 fn decode_dicom(bytes: &[u8], path: &Path) -> Result<Vec<Vec<f32>>, VolumeError> {
     let mut s = dicom::parse_file(bytes, path)?.swap_remove(0);
     let n = (s.rows * s.cols) as usize;
-    dicom::decode_frames(&mut s, n)
+    dicom::decode_frames(&mut s, n, None)
 }
