@@ -33,12 +33,22 @@ import struct
 import subprocess
 import sys
 import tempfile
+import zlib
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BIN = os.path.join(ROOT, "target/release/raystream")
 SHARED = os.path.join(ROOT, "..", "shared")
 ABSURD = [b"4294967295", b"1000000", b"-1", b"0", b"nan", b"inf", b"1e39",
           b"99999999999999999999", b"2147483648", b"-2147483649"]
+
+
+def png(width, height, rgba):
+    """A PNG of 8-bit RGBA texels (row by row), written by hand: no imaging library needed."""
+    chunk = lambda kind, data: (struct.pack(">I", len(data)) + kind + data
+                                + struct.pack(">I", zlib.crc32(kind + data)))
+    rows = b"".join(b"\0" + rgba[4 * width * y:4 * width * (y + 1)] for y in range(height))
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 6, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(rows)) + chunk(b"IEND", b""))
 
 
 def seeds(d):
@@ -58,14 +68,16 @@ def seeds(d):
         b += b"".join(struct.pack(e + "3f", *p) for p in v)
         b += b"".join(struct.pack(e + "B3i", 3, *t) for t in f)
         w(f"t_{name}.ply", b)
-    # An OBJ with per-corner normals and materials from its library (fuzzed on its own, or the
-    # library instead: see fuzz_files), and a PLY with normals.
+    # An OBJ with per-corner normals, texture coordinates and materials from its library, one
+    # with a texture (fuzzed on its own, or the library or the texture instead: see
+    # fuzz_files), and a PLY with normals.
     w("tm.obj", b"mtllib tm.mtl\n" + "".join(f"v {x} {y} {z}\n" for x, y, z in v).encode()
-      + b"vn 0 0 -1\nvn 0 -1 0\nvn -1 0 0\nvn 1 1 1\n" + b"".join(
-          f"usemtl {m}\nf {a+1}//{k+1} {b+1}//{k+1} {c+1}//{k+1}\n".encode()
+      + b"vn 0 0 -1\nvn 0 -1 0\nvn -1 0 0\nvn 1 1 1\nvt 0 0\nvt 1 0\nvt 0.5 1.5\n" + b"".join(
+          f"usemtl {m}\nf {a+1}/1/{k+1} {b+1}/2/{k+1} {c+1}/3/{k+1}\n".encode()
           for k, ((a, b, c), m) in enumerate(zip(f, ["red", "glass", "red", "mirror"]))))
-    w("tm.mtl", b"newmtl red\nKd 0.8 0.1 0.1\nKs 0.3 0.3 0.3\nNs 30\nillum 2\n"
+    w("tm.mtl", b"newmtl red\nKd 0.8 0.1 0.1\nKs 0.3 0.3 0.3\nNs 30\nillum 2\nmap_Kd tm.png\n"
       b"newmtl glass\nKd 0 0 0\nd 0.2\nNi 1.5\nillum 7\nnewmtl mirror\nKs 0.8 0.8 0.8\nillum 3\n")
+    w("tm.png", png(3, 2, bytes(range(0, 240, 10))))
     w("tn.ply", (hdr("ascii").decode().replace(
         "property float z\n", "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n")
         + "".join(f"{x} {y} {z} {x} {y} {z - 0.5}\n" for x, y, z in v)
@@ -182,7 +194,7 @@ def fuzz_files(work, n, device):
     sd = os.path.join(work, "seeds")
     os.makedirs(sd)
     seeds(sd)
-    names = [s for s in sorted(os.listdir(sd)) if s not in ("v.raw", "tm.mtl")]
+    names = [s for s in sorted(os.listdir(sd)) if s not in ("v.raw", "tm.mtl", "tm.png")]
     bad = 0
     for i in range(n):
         s = random.choice(names)
@@ -192,13 +204,18 @@ def fuzz_files(work, n, device):
         text = s.endswith((".obj", ".stl", ".ply", ".mha", ".mhd", ".nhdr", ".nrrd"))
         data = open(os.path.join(sd, s), "rb").read()
         if s == "tm.obj":
-            # The OBJ or its material library, mutated; the other as it is.
+            # The OBJ, its material library or its texture, mutated; the others as they are.
             lib = open(os.path.join(sd, "tm.mtl"), "rb").read()
-            if random.random() < 0.5:
+            tex = open(os.path.join(sd, "tm.png"), "rb").read()
+            r = random.random()
+            if r < 0.4:
                 data = mutate(data, True)
-            else:
+            elif r < 0.7:
                 lib = mutate(lib, True)
+            else:
+                tex = mutate(tex, False)
             open(os.path.join(d, "tm.mtl"), "wb").write(lib)
+            open(os.path.join(d, "tm.png"), "wb").write(tex)
             open(p, "wb").write(data)
         else:
             open(p, "wb").write(mutate(data, text))

@@ -473,8 +473,18 @@ fn shade_hit(scene: &Scene, h: &HitWorkItem, spawn: bool, out: &mut Shaded) {
     let m = &scene.materials[scene.material_of[h.hit.prim as usize] as usize];
     let (k, r, t, refr) = coefficients(m, &s);
     let pixel = h.item.pixel;
+    // A texture tints the ambient and diffuse colours (MTL: `map_Kd` multiplies `Kd`).
+    let tint = match m.texture {
+        Some(i) => {
+            let [a, b, c] = scene.uvs[h.hit.prim as usize];
+            let (u, v) = (h.hit.u, h.hit.v);
+            scene.textures[i as usize].sample(a * (1.0 - u - v) + b * u + c * v)
+        }
+        None => Vec3::ONE,
+    };
+    let (ambient, diffuse) = (m.ambient * tint, m.diffuse * tint);
     out.local
-        .push((pixel, h.item.weight * k * m.ambient * scene.ambient_light));
+        .push((pixel, h.item.weight * k * ambient * scene.ambient_light));
     let origin = s.p + s.ng * s.offset;
     let w = h.item.weight * k;
     for light in &scene.lights {
@@ -488,7 +498,7 @@ fn shade_hit(scene: &Scene, h: &HitWorkItem, spawn: bool, out: &mut Shaded) {
         out.shadows.push(ShadowWorkItem {
             ray: Ray::new(origin, to_light, 0.0, 1.0 - 1e-4),
             pixel,
-            radiance: w * (m.diffuse * cos + m.specular * spec) * light.color,
+            radiance: w * (diffuse * cos + m.specular * spec) * light.color,
         });
     }
     if !spawn {

@@ -140,8 +140,29 @@ pub struct GpuMaterial {
     pub ior: f32,
     /// 1 = Schlick's Fresnel term splits transmitted light (byte 52).
     pub fresnel: u32,
-    pub pad: [u32; 2],
+    /// Its colour texture in the texture table, [`NO_TEXTURE`] for none (byte 56).
+    pub texture: u32,
+    pub pad: u32,
 }
+
+/// `GpuMaterial::texture` of a material without one.
+pub const NO_TEXTURE: u32 = u32::MAX;
+
+/// `TriUv` in render.wgsl, 24 bytes: a triangle's corners' texture coordinates, by prim id.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct TriUv {
+    pub a: [f32; 2],
+    /// Byte 8.
+    pub b: [f32; 2],
+    /// Byte 16.
+    pub c: [f32; 2],
+}
+
+/// Where the texture table (`textures` in render.wgsl, one array of u32) keeps its parts: the
+/// 256 words of [`raystream_io::SRGB_TO_LINEAR`] (f32 bits), then per texture its first texel's
+/// word, width and height (and a 0), then the texels, RGBA8 packed with R in the low byte.
+pub const TEXTURE_INFO: u32 = 256;
 
 /// `Light` in render.wgsl, 32 bytes (w unused).
 #[repr(C)]
@@ -316,6 +337,7 @@ const _: () = assert!(std::mem::size_of::<ShadowWork>() == 48);
 const _: () = assert!(std::mem::size_of::<Vertex>() == 32);
 const _: () = assert!(std::mem::size_of::<ShadeTri>() == 16);
 const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
+const _: () = assert!(std::mem::size_of::<TriUv>() == 24);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
 const _: () = assert!(std::mem::size_of::<DvrParams>() == 320);

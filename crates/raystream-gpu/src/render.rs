@@ -28,8 +28,8 @@ use raystream_math::Vec3;
 use raystream_scene::Scene;
 
 use crate::layout::{
-    GpuLight, GpuMaterial, MediumParams, RayWork, RenderParams, ShadeTri, ShadowWork, Vertex,
-    counter,
+    GpuLight, GpuMaterial, MediumParams, NO_TEXTURE, RayWork, RenderParams, ShadeTri, ShadowWork,
+    TEXTURE_INFO, TriUv, Vertex, counter,
 };
 use crate::volume::{GpuVolume, volume_core_wgsl};
 use crate::{
@@ -61,7 +61,7 @@ pub const MAX_CONTRIBUTION: f32 = 255.0;
 pub fn render_wgsl() -> String {
     use counter::*;
     format!(
-        "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\nconst DEPTH: u32 = {DEPTH}u;\n\n{COMMON_WGSL}\n{RENDER_WGSL}\n{}\n{MEDIUM_WGSL}",
+        "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\nconst DEPTH: u32 = {DEPTH}u;\nconst NO_TEXTURE: u32 = {NO_TEXTURE}u;\nconst TEXTURE_INFO: u32 = {TEXTURE_INFO}u;\n\n{COMMON_WGSL}\n{RENDER_WGSL}\n{}\n{MEDIUM_WGSL}",
         kdtree_wgsl(),
         volume_core_wgsl()
     )
@@ -140,6 +140,9 @@ pub struct GpuRenderer<'a> {
     shade_tris: wgpu::Buffer,
     materials: wgpu::Buffer,
     lights: wgpu::Buffer,
+    /// Per triangle its texture coordinates, and the texture table (layout::TEXTURE_INFO).
+    tri_uvs: wgpu::Buffer,
+    textures: wgpu::Buffer,
     params: wgpu::Buffer,
     layouts: [wgpu::BindGroupLayout; 4],
     /// Per stage of [`STAGES`]; the volume stages only for scenes with a volume.
@@ -305,6 +308,31 @@ impl Tally {
 
 const COUNTER_BYTES: u64 = counter::SLOTS as u64 * 4;
 
+/// The scene's textures as render.wgsl's `textures` reads them (layout::TEXTURE_INFO): the sRGB
+/// table, each texture's first texel, width and height, then the texels packed RGBA8.
+fn texture_table(scene: &Scene) -> Vec<u32> {
+    let infos = 4 * scene.textures.len() as u32;
+    let mut table: Vec<u32> = raystream_io::SRGB_TO_LINEAR
+        .iter()
+        .map(|v| v.to_bits())
+        .collect();
+    // A table past u32 offsets is over 16 GiB, which no adapter binds (`storage` refuses it).
+    let mut first = (TEXTURE_INFO + infos) as u64;
+    for t in &scene.textures {
+        table.extend([
+            u32::try_from(first).unwrap_or(u32::MAX),
+            t.width,
+            t.height,
+            0,
+        ]);
+        first += t.texels.len() as u64;
+    }
+    for t in &scene.textures {
+        table.extend(t.texels.iter().map(|&p| u32::from_le_bytes(p)));
+    }
+    table
+}
+
 impl<'a> GpuRenderer<'a> {
     /// Uploads `scene`'s vertices, triangles, materials and lights, whose kd-tree `tree` is
     /// `tracer`'s, and builds the render pipelines. A scene's volume goes up as a texture
@@ -315,7 +343,7 @@ impl<'a> GpuRenderer<'a> {
         tree: &KdTree,
     ) -> Result<GpuRenderer<'a>, GpuError> {
         let ctx = tracer.ctx;
-        let need = 3 + 4 + 6 + if scene.volume.is_some() { 4 } else { 1 };
+        let need = 3 + 6 + 6 + if scene.volume.is_some() { 4 } else { 1 };
         if ctx.limits.max_storage_buffers_per_shader_stage < need {
             return Err(ctx.err(format!(
                 "the render kernels bind {need} storage buffers, the adapter allows {}",
@@ -353,7 +381,8 @@ impl<'a> GpuRenderer<'a> {
                 shininess: m.shininess,
                 ior: m.ior,
                 fresnel: m.fresnel as u32,
-                pad: [0; 2],
+                texture: m.texture.unwrap_or(NO_TEXTURE),
+                pad: 0,
             })
             .collect();
         let lights: Vec<GpuLight> = scene
@@ -370,6 +399,22 @@ impl<'a> GpuRenderer<'a> {
             ctx.storage("shading triangles", bytemuck::cast_slice(&shade_tris), none)?;
         let materials = ctx.storage("materials", bytemuck::cast_slice(&materials), none)?;
         let lights = ctx.storage("lights", bytemuck::cast_slice(&lights), none)?;
+        let tri_uvs: Vec<TriUv> = scene
+            .uvs
+            .iter()
+            .map(|[a, b, c]| TriUv {
+                a: a.to_array(),
+                b: b.to_array(),
+                c: c.to_array(),
+            })
+            .collect();
+        // A scene without textures binds a zeroed element it never reads.
+        let tri_uvs = ctx.storage("texture coordinates", bytemuck::cast_slice(&tri_uvs), none)?;
+        let textures = ctx.storage(
+            "textures",
+            bytemuck::cast_slice(&texture_table(scene)),
+            none,
+        )?;
         let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("render params"),
             size: std::mem::size_of::<RenderParams>() as u64,
@@ -381,7 +426,7 @@ impl<'a> GpuRenderer<'a> {
         let rw = wgpu::BufferBindingType::Storage { read_only: false };
         let layouts = [
             ctx.buffer_layout("kd-tree", &[uniform, ro, ro, ro]),
-            ctx.buffer_layout("scene", &[uniform, ro, ro, ro, ro]),
+            ctx.buffer_layout("scene", &[uniform, ro, ro, ro, ro, ro, ro]),
             ctx.buffer_layout("queues", &[rw; 6]),
             ctx.buffer_layout("dispatch args", &[rw]),
         ];
@@ -494,6 +539,8 @@ impl<'a> GpuRenderer<'a> {
             shade_tris,
             materials,
             lights,
+            tri_uvs,
+            textures,
             params,
             layouts,
             pipelines,
@@ -742,6 +789,8 @@ impl<'a> GpuRenderer<'a> {
                 &self.shade_tris,
                 &self.materials,
                 &self.lights,
+                &self.tri_uvs,
+                &self.textures,
             ],
         );
         let args_group = ctx.bind_buffers("args", &self.layouts[3], &[&q.args]);

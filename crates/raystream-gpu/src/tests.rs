@@ -266,8 +266,17 @@ fn render_wgsl_structs_match_rust() {
             ("shininess", offset_of!(GpuMaterial, shininess)),
             ("ior", offset_of!(GpuMaterial, ior)),
             ("fresnel", offset_of!(GpuMaterial, fresnel)),
-            ("pad0", pad),
-            ("pad1", pad + 4),
+            ("texture", offset_of!(GpuMaterial, texture)),
+            ("pad", pad),
+        ],
+    );
+    check(
+        "TriUv",
+        size_of::<TriUv>(),
+        &[
+            ("a", offset_of!(TriUv, a)),
+            ("b", offset_of!(TriUv, b)),
+            ("c", offset_of!(TriUv, c)),
         ],
     );
     check(

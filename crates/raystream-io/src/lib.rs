@@ -10,6 +10,7 @@ mod ply;
 mod secondary_capture;
 mod shapes;
 mod stl;
+mod texture;
 pub mod volume;
 mod write;
 pub use write::write_mesh;
@@ -17,10 +18,11 @@ pub use write::write_mesh;
 use std::io::{BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};
 
-pub use raystream_math::{Aabb, Vec3};
+pub use raystream_math::{Aabb, Vec2, Vec3};
 pub use secondary_capture::{
     CaptureInfo, CapturePixels, HU_PADDING, ImagePlane, new_uid, write_secondary_capture,
 };
+pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture};
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, ValueUnit, Volume, VolumeError, VolumeFormat,
     VolumeSelect, is_volume_path, list_dicom_series, load_volume,
@@ -113,7 +115,47 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
     };
     mesh.check(path)?;
     shading.normals = file_normals(&mesh, normals, &mut shading.warnings);
+    load_textures(&mut shading, path.parent().unwrap_or(Path::new(".")));
     Ok((mesh, shading))
+}
+
+/// Reads the images of the materials' textures (`map_Kd`), named relative to `dir`. One that
+/// cannot be read, or that the mesh could not apply (no texture coordinates), is a warning and
+/// is left out: its `Kd` stands in.
+fn load_textures(shading: &mut MeshShading, dir: &Path) {
+    let used: std::collections::HashSet<u32> =
+        shading.material_of.iter().flatten().copied().collect();
+    for (k, m) in shading.materials.iter_mut().enumerate() {
+        let Some(name) = m.texture.as_deref() else {
+            continue;
+        };
+        if !used.contains(&(k as u32)) {
+            continue;
+        }
+        if shading.uvs.is_empty() {
+            shading.warnings.push(format!(
+                "material '{}': texture {name} is not applied: not every face corner gives texture coordinates (vt); its diffuse colour stands in",
+                m.name
+            ));
+            continue;
+        }
+        // `map_Kd` may carry options before the file name (`-s 1 1 1 wood.png`): the whole
+        // statement if it names a file, else its last word.
+        let whole = dir.join(name);
+        let file = if whole.is_file() {
+            whole
+        } else {
+            dir.join(name.split_whitespace().last().unwrap_or(name))
+        };
+        match Texture::load(&file) {
+            Ok(t) => m.image = Some(t),
+            Err(e) => shading.warnings.push(format!(
+                "material '{}': texture {}: {e}; its diffuse colour stands in",
+                m.name,
+                file.display()
+            )),
+        }
+    }
 }
 
 /// A file's vertex normals (`None`: the file gives that vertex none) as unit vectors, the
@@ -180,8 +222,11 @@ pub struct MtlMaterial {
     /// `illum`, the illumination model: 3, 5 and 8 reflect as mirrors, 4, 6, 7 and 9 are
     /// transparent.
     pub illum: Option<u8>,
-    /// `map_Kd`: a texture, which raystream does not apply (its `Kd` stands in).
+    /// `map_Kd`: the colour texture's file name, as the library gives it.
     pub texture: Option<String>,
+    /// That texture's image, read from beside the library (`None`: there is none, or it could
+    /// not be read or applied, which the warnings say); it multiplies `Kd`.
+    pub image: Option<Texture>,
 }
 
 /// What a mesh file gives its surface besides the triangles: vertex normals, and the materials
@@ -196,6 +241,9 @@ pub struct MeshShading {
     /// Per triangle, its material's index in `materials`, `None` where the file names none (or
     /// one its libraries lack); empty when the file uses no material.
     pub material_of: Vec<Option<u32>>,
+    /// Per triangle, its corners' texture coordinates (OBJ `vt`); empty when the file gives
+    /// none, or not at every corner.
+    pub uvs: Vec<[Vec2; 3]>,
     /// What a user should know: a library missing or unreadable, a texture not applied.
     pub warnings: Vec<String>,
 }
@@ -265,7 +313,8 @@ fn parse_obj(
     let libs = libs.unwrap_or_default();
     // tobj makes up a normal for a corner that names none (its neighbour's): the file's normals
     // count only where every corner names one.
-    let normals_given = obj_corners_all_have_normals(bytes);
+    let normals_given = obj_corners_all_name(bytes, "vn", 2);
+    let uvs_given = obj_corners_all_name(bytes, "vt", 1);
     if normals_given == Some(false) {
         warnings.push(
             "some faces name no normals: the file's normals are left out, and the face-averaged ones used".into(),
@@ -274,6 +323,7 @@ fn parse_obj(
     let mut mesh = TriMesh::default();
     let mut material_of = Vec::new();
     let mut normals: Vec<Option<Vec3>> = Vec::new();
+    let mut uvs: Vec<[Vec2; 3]> = Vec::new();
     for model in models {
         material_of.extend(std::iter::repeat_n(
             model
@@ -286,6 +336,26 @@ fn parse_obj(
         let m = model.mesh;
         if m.positions.len() % 3 != 0 || m.indices.len() % 3 != 0 || m.normals.len() % 3 != 0 {
             return Err(MeshError::invalid(path, "OBJ data is not in triples"));
+        }
+        if uvs_given == Some(true) && m.texcoord_indices.len() == m.indices.len() {
+            let uv = |t: u32| {
+                let t = t as usize * 2;
+                m.texcoords
+                    .get(t..t + 2)
+                    .map(|c| Vec2::new(c[0], c[1]))
+                    .ok_or_else(|| {
+                        MeshError::invalid(
+                            path,
+                            format!(
+                                "a face refers to texture coordinate {}, which the file lacks",
+                                t / 2
+                            ),
+                        )
+                    })
+            };
+            for c in m.texcoord_indices.chunks_exact(3) {
+                uvs.push([uv(c[0])?, uv(c[1])?, uv(c[2])?]);
+            }
         }
         let base = mesh.positions.len() as u32;
         let position = |i: u32| {
@@ -346,17 +416,14 @@ fn parse_obj(
             ior: m.optical_density,
             illum: m.illumination_model,
             texture: m.diffuse_texture,
+            image: None,
         })
         .collect();
-    for m in materials.iter().filter(|m| m.texture.is_some()) {
-        warnings.push(format!(
-            "material '{}': textures are not applied ({}); its diffuse colour stands in",
-            m.name,
-            m.texture.as_deref().unwrap_or_default()
-        ));
-    }
     if material_of.iter().all(Option::is_none) {
         material_of.clear();
+    }
+    if uvs.len() != mesh.len() {
+        uvs.clear();
     }
     Ok((
         mesh,
@@ -364,33 +431,35 @@ fn parse_obj(
             normals: Vec::new(),
             materials,
             material_of,
+            uvs,
             warnings,
         },
         normals,
     ))
 }
 
-/// Whether every corner of every face of an OBJ names a normal (`v//vn`, `v/vt/vn`); `None`
-/// when the file has no normals (`vn`) at all.
-fn obj_corners_all_have_normals(bytes: &[u8]) -> Option<bool> {
-    let mut any_normal = false;
+/// Whether every corner of every face of an OBJ names an element of the kind `statement`
+/// declares (`vn` at `slot` 2 of `v/vt/vn`, `vt` at slot 1); `None` when the file has no such
+/// statement at all.
+fn obj_corners_all_name(bytes: &[u8], statement: &str, slot: usize) -> Option<bool> {
+    let mut any = false;
     let mut all_corners = true;
     for line in bytes.split(|&b| b == b'\n') {
         let line = line.trim_ascii_start();
-        if !line.starts_with(b"f") && !line.starts_with(b"vn") {
+        if !line.starts_with(b"f") && !line.starts_with(statement.as_bytes()) {
             continue;
         }
         let line = String::from_utf8_lossy(line);
         let mut words = line.split_whitespace();
         match words.next() {
-            Some("vn") => any_normal = true,
+            Some(w) if w == statement => any = true,
             Some("f") => {
-                all_corners &= words.all(|c| c.split('/').nth(2).is_some_and(|n| !n.is_empty()))
+                all_corners &= words.all(|c| c.split('/').nth(slot).is_some_and(|n| !n.is_empty()))
             }
             _ => {}
         }
     }
-    any_normal.then_some(all_corners)
+    any.then_some(all_corners)
 }
 
 impl TriMesh {

@@ -261,6 +261,66 @@ usemtl red
 f 1 2 4
 ";
 
+/// An OBJ's texture coordinates are kept per triangle corner, as the fan triangulation takes
+/// its polygon's; `map_Kd` (options before the file name allowed) reads the image beside the
+/// library. A missing image, or faces without texture coordinates, are warnings that leave the
+/// texture out; the geometry is the same either way.
+#[test]
+fn obj_textures_and_their_coordinates() {
+    let dir = scratch("uv");
+    let quad = "mtllib t.mtl\nusemtl painted\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n\
+                vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvt 0.5 0.5\nf 1/1 2/2 3/3 4/4\nf 1/5 3/3 4/4\n";
+    std::fs::write(dir.join("q.obj"), quad).unwrap();
+    std::fs::write(
+        dir.join("t.mtl"),
+        "newmtl painted\nKd 1 1 1\nmap_Kd -s 1 1 1 tex.png\n",
+    )
+    .unwrap();
+    image::RgbaImage::from_pixel(4, 2, image::Rgba([200, 100, 50, 255]))
+        .save(dir.join("tex.png"))
+        .unwrap();
+    let (mesh, m) = load_mesh_with_shading(&dir.join("q.obj")).unwrap();
+    assert_eq!(mesh.len(), 3);
+    let uv = |x: f32, y: f32| Vec2::new(x, y);
+    assert_eq!(
+        m.uvs,
+        [
+            [uv(0.0, 0.0), uv(1.0, 0.0), uv(1.0, 1.0)],
+            [uv(0.0, 0.0), uv(1.0, 1.0), uv(0.0, 1.0)],
+            [uv(0.5, 0.5), uv(1.0, 1.0), uv(0.0, 1.0)],
+        ]
+    );
+    let image = m.materials[0].image.as_ref().expect("the texture is read");
+    assert_eq!((image.width, image.height), (4, 2));
+    assert_eq!(image.texels[7], [200, 100, 50, 255]);
+    assert!(m.warnings.is_empty(), "{:?}", m.warnings);
+    // The same triangles as the plain reader's.
+    let plain = load_mesh(&dir.join("q.obj")).unwrap();
+    assert!((0..3).all(|i| mesh.corners(i) == plain.corners(i)));
+
+    // The image missing: a warning naming it; no image.
+    std::fs::remove_file(dir.join("tex.png")).unwrap();
+    let (_, m) = load_mesh_with_shading(&dir.join("q.obj")).unwrap();
+    assert!(m.materials[0].image.is_none());
+    assert!(
+        m.warnings.len() == 1
+            && m.warnings[0].contains("'painted': texture")
+            && m.warnings[0].contains("tex.png"),
+        "{:?}",
+        m.warnings
+    );
+    // A face without texture coordinates: none are kept, and the texture is not applied.
+    std::fs::write(dir.join("q.obj"), format!("{quad}f 1 2 3\n")).unwrap();
+    let (mesh, m) = load_mesh_with_shading(&dir.join("q.obj")).unwrap();
+    assert_eq!(mesh.len(), 4);
+    assert!(m.uvs.is_empty());
+    assert!(
+        m.warnings.iter().any(|w| w.contains("not applied")),
+        "{:?}",
+        m.warnings
+    );
+}
+
 /// An OBJ's materials from two libraries, in file order: a quad's two fan triangles share
 /// their polygon's material, a material used again keeps its number, a name no library has
 /// gives none; `Tr` stands for 1 − `d`; textures are named in a warning.
@@ -298,7 +358,7 @@ fn obj_materials_follow_the_faces() {
     let glass = &m.materials[1];
     assert!((glass.dissolve.unwrap() - 0.1).abs() < 1e-6 && glass.ior == Some(1.5));
     assert_eq!(m.warnings.len(), 1);
-    assert!(m.warnings[0].contains("'red': textures are not applied (red.png)"));
+    assert!(m.warnings[0].contains("'red': texture red.png is not applied"));
     // The triangles are the same as without materials (each material's faces keep their own
     // copies of the vertices, as tobj splits the file there).
     let plain = load_mesh(&dir.join("scene.obj")).unwrap();
@@ -328,9 +388,27 @@ fn obj_materials_follow_the_faces() {
         "{:?}",
         m.warnings
     );
-    // Other formats, and an OBJ without materials, have none.
-    let (_, m) = load_mesh_with_shading(&shared_mesh("spot.obj")).unwrap();
-    assert_eq!(m, MeshShading::default());
+    // Other formats, and an OBJ without materials, have none (Spot has its texture
+    // coordinates, a triangle's corners each).
+    let (spot, m) = load_mesh_with_shading(&shared_mesh("spot.obj")).unwrap();
+    assert_eq!(m.uvs.len(), spot.len());
+    // Its first face is `f 739/1 735/2 736/3`.
+    let vt = |u: f32, v: f32| Vec2::new(u, v);
+    assert_eq!(
+        m.uvs[0],
+        [
+            vt(0.800375, 0.667457),
+            vt(0.789584, 0.668215),
+            vt(0.799923, 0.663933)
+        ]
+    );
+    assert_eq!(
+        MeshShading {
+            uvs: Vec::new(),
+            ..m
+        },
+        MeshShading::default()
+    );
     let (_, m) = load_mesh_with_shading(&shared_mesh("goblet_vase.stl")).unwrap();
     assert_eq!(m, MeshShading::default());
     std::fs::remove_dir_all(&dir).ok();

@@ -131,6 +131,7 @@ impl MaterialDesc {
             transparency: self.transparency.unwrap_or(d.transparency),
             ior: self.ior.unwrap_or(d.ior),
             fresnel: self.fresnel.unwrap_or(d.fresnel),
+            texture: None,
         };
         let unit = |x: f32| (0.0..=1.0).contains(&x);
         if !unit(m.reflectivity) || !unit(m.transparency) || m.reflectivity + m.transparency > 1.0 {

@@ -47,8 +47,8 @@ pub use desc::{
     CameraDesc, Frame, GroundDesc, LightDesc, MaterialDesc, ObjectDesc, Scale, SceneDesc,
     VolumeDesc,
 };
-use raystream_io::{MeshError, MeshShading, MtlMaterial, TriMesh, Volume, VolumeError};
-use raystream_math::{Aabb, DVec3, MAX_COORDINATE, Vec3, in_coordinate_range};
+use raystream_io::{MeshError, MeshShading, MtlMaterial, Texture, TriMesh, Volume, VolumeError};
+use raystream_math::{Aabb, DVec3, MAX_COORDINATE, Vec2, Vec3, in_coordinate_range};
 use raystream_volume::{TfPreset, TransferFunction};
 
 /// What went wrong building a scene, naming the file.
@@ -85,6 +85,9 @@ pub struct Material {
     /// Whether transmitted light is split by Schlick's Fresnel term into reflection and
     /// refraction (otherwise the fixed coefficients apply).
     pub fresnel: bool,
+    /// A colour texture ([`Scene::textures`]) that multiplies `ambient` and `diffuse` at each
+    /// point, looked up at the triangle's texture coordinates ([`Scene::uvs`]).
+    pub texture: Option<u32>,
 }
 
 impl Default for Material {
@@ -98,6 +101,7 @@ impl Default for Material {
             transparency: 0.0,
             ior: 1.5,
             fresnel: true,
+            texture: None,
         }
     }
 }
@@ -113,6 +117,11 @@ pub struct Scene {
     pub ray_offsets: Vec<f32>,
     pub material_of: Vec<u32>,
     pub materials: Vec<Material>,
+    /// The materials' colour textures (an OBJ's `map_Kd`).
+    pub textures: Vec<Texture>,
+    /// Per triangle, its corners' texture coordinates: the file's where it gives them, else 0;
+    /// empty when no material has a texture.
+    pub uvs: Vec<[Vec2; 3]>,
     pub lights: Vec<Light>,
     /// The camera, or `None` to frame the scene's objects.
     pub camera: Option<Camera>,
@@ -387,6 +396,8 @@ impl Scene {
         let mut material_of = Vec::new();
         let mut ray_offsets = Vec::new();
         let mut warnings = Vec::new();
+        let mut textures = Vec::new();
+        let mut uvs = Vec::new();
         for (i, o) in desc.objects.iter().enumerate() {
             let (source, mut shading) = load(i, o).map_err(|e| match e {
                 SceneError::Invalid { problem, .. } => invalid(problem),
@@ -422,12 +433,14 @@ impl Scene {
             if o.material.is_none() && !shading.material_of.is_empty() {
                 // The file's own materials (an OBJ's MTL), where the scene names none.
                 let first = materials.len() as u32;
-                for m in &shading.materials {
-                    materials.push(
-                        mtl_material(m).map_err(|e| {
-                            invalid(format!("object {i}: material '{}': {e}", m.name))
-                        })?,
-                    );
+                for m in &mut shading.materials {
+                    let mut material = mtl_material(m)
+                        .map_err(|e| invalid(format!("object {i}: material '{}': {e}", m.name)))?;
+                    if let Some(image) = m.image.take() {
+                        material.texture = Some(textures.len() as u32);
+                        textures.push(image);
+                    }
+                    materials.push(material);
                 }
                 material_of.extend(
                     shading
@@ -437,6 +450,11 @@ impl Scene {
                 );
             } else {
                 material_of.extend(std::iter::repeat_n(chosen, source.len()));
+            }
+            if shading.uvs.len() == source.len() {
+                uvs.append(&mut shading.uvs);
+            } else {
+                uvs.resize(material_of.len(), [Vec2::ZERO; 3]);
             }
             // A scene file's objects are named by their mesh; a mesh rendered alone is the
             // message's subject already.
@@ -529,6 +547,11 @@ impl Scene {
         .map_err(invalid)?;
         let ground_triangles = mesh.len() - object_triangles;
         let ground_vertices = mesh.positions.len() - object_vertices;
+        if textures.is_empty() {
+            uvs.clear();
+        } else {
+            uvs.resize(mesh.len(), [Vec2::ZERO; 3]);
+        }
         Ok(Scene {
             warnings,
             mesh,
@@ -536,6 +559,8 @@ impl Scene {
             ray_offsets,
             material_of,
             materials,
+            textures,
+            uvs,
             lights,
             camera,
             background,
@@ -694,6 +719,9 @@ impl Scene {
         let (t, v) = (self.mesh.len(), self.mesh.positions.len());
         self.mesh.triangles.truncate(t - self.ground_triangles);
         self.material_of.truncate(t - self.ground_triangles);
+        if !self.uvs.is_empty() {
+            self.uvs.truncate(t - self.ground_triangles);
+        }
         for n in [&mut self.mesh.positions, &mut self.normals] {
             n.truncate(v - self.ground_vertices);
         }

@@ -44,11 +44,15 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     for m in materials.material_of.iter().flatten() {
         counts[*m as usize] += 1;
     }
-    let used: Vec<(&str, usize)> = materials
+    // Each with the size of the texture it applies, if any.
+    let used: Vec<(&str, usize, Option<[u32; 2]>)> = materials
         .materials
         .iter()
         .zip(counts)
-        .map(|(m, n)| (m.name.as_str(), n))
+        .map(|(m, n)| {
+            let texture = m.image.as_ref().map(|t| [t.width, t.height]);
+            (m.name.as_str(), n, texture)
+        })
         .collect();
     let tree = a.tree.build(&mesh);
     let b = mesh.bounds();
@@ -62,7 +66,8 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             "degenerate_triangles": mesh.len() - s.triangles,
             "bounds": [b.min.to_array(), b.max.to_array()],
             "kdtree": tree_json(s),
-            "materials": used.iter().map(|(name, n)| json!({"name": name, "triangles": n})).collect::<Vec<_>>(),
+            "materials": used.iter().map(|(name, n, t)| json!({"name": name, "triangles": n, "texture": t})).collect::<Vec<_>>(),
+            "texture_coordinates": !materials.uvs.is_empty(),
             "warnings": materials.warnings,
         });
         print_line(v);
@@ -91,8 +96,11 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             s.references,
             s.build_ms
         );
-        for (name, n) in &used {
-            println!("  material   {name}: {n} triangles");
+        for (name, n, texture) in &used {
+            match texture {
+                Some([w, h]) => println!("  material   {name}: {n} triangles, a {w}x{h} texture"),
+                None => println!("  material   {name}: {n} triangles"),
+            }
         }
         for w in &materials.warnings {
             println!("  warning    {w}");

@@ -32,14 +32,6 @@ fn render(name: &str, dev: &str, args: &[&str]) -> std::path::PathBuf {
     out
 }
 
-fn devices() -> &'static [&'static str] {
-    if gpu_available() {
-        &["cpu", "gpu"]
-    } else {
-        &["cpu"]
-    }
-}
-
 /// The film of an EXR's R, G, B channels.
 fn film(e: &ExrFile) -> Image {
     let (r, g, b) = (floats(e, "R"), floats(e, "G"), floats(e, "B"));

@@ -561,12 +561,7 @@ fn cow_scene(beside: bool) -> String {
 /// the CPU's picture of it.
 #[test]
 fn a_small_object_beside_a_huge_one_is_shaded_as_if_alone() {
-    let devices: &[&str] = if gpu_available() {
-        &["cpu", "gpu"]
-    } else {
-        &["cpu"]
-    };
-    for dev in devices {
+    for dev in devices() {
         let mut images = Vec::new();
         for beside in [false, true] {
             let out = tmp(&format!("cow-beside-{beside}-{dev}.png"));
@@ -780,7 +775,7 @@ fn obj_materials_are_rendered() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
-        stderr(&o).contains("material 'red': textures are not applied (red.png)"),
+        stderr(&o).contains("material 'red': texture red.png is not applied"),
         "{}",
         stderr(&o)
     );
@@ -802,10 +797,10 @@ fn obj_materials_are_rendered() {
     assert_eq!(
         v["materials"],
         serde_json::json!([
-            {"name": "red", "triangles": 2},
-            {"name": "mirror", "triangles": 2},
-            {"name": "glass", "triangles": 2},
-            {"name": "blue", "triangles": 2}
+            {"name": "red", "triangles": 2, "texture": null},
+            {"name": "mirror", "triangles": 2, "texture": null},
+            {"name": "glass", "triangles": 2, "texture": null},
+            {"name": "blue", "triangles": 2, "texture": null}
         ])
     );
 }
@@ -1260,11 +1255,7 @@ fn bench_volume_rendering() {
 #[test]
 fn aovs_on_the_gpu_match_the_cpu() {
     let bunny = mesh("stanford_bunny.ply");
-    let devices: &[&str] = if gpu_available() {
-        &["cpu", "gpu"]
-    } else {
-        &["cpu"]
-    };
+    let devices = devices();
     for aov in ["prim", "normal", "depth"] {
         let mut images = Vec::new();
         for dev in devices {
@@ -1337,11 +1328,7 @@ fn aovs_on_the_gpu_match_the_cpu() {
 /// 40 radii wide reaching 5·10⁹, near the ±10¹⁰ limit of the input checks).
 #[test]
 fn the_picture_does_not_depend_on_the_scale() {
-    let devices: &[&str] = if gpu_available() {
-        &["cpu", "gpu"]
-    } else {
-        &["cpu"]
-    };
+    let devices = devices();
     let mut first: Option<(String, Vec<u8>)> = None;
     for scale in [1.0f64, 67108864.0, 0.0009765625] {
         let scene = tmp(&format!("scaled-{scale}.toml"));
@@ -1441,4 +1428,130 @@ fn named_windows_are_their_numbers() {
         let e = render("refused", &args).unwrap_err();
         assert!(e.contains(want), "{args:?}: {e}");
     }
+}
+
+/// A folder with a 2 × 2 square OBJ (texture coordinates (0, 0) at its lower left corner to
+/// (1, 1) at its upper right), its MTL, a 2 × 2 texture (red, green over blue, white) and a
+/// scene that looks at it head-on in a parallel projection, lit from the camera.
+fn textured_square(name: &str, texture: bool) -> std::path::PathBuf {
+    let dir = tmp(&format!("textured-square-{name}"));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("square.obj"),
+        "mtllib square.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n\
+         vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl paint\nf 1/1 2/2 3/3 4/4\n",
+    )
+    .unwrap();
+    let map = if texture { "map_Kd quads.png\n" } else { "" };
+    std::fs::write(
+        dir.join("square.mtl"),
+        format!("newmtl paint\nKd 1 1 1\nKs 0 0 0\nillum 1\n{map}"),
+    )
+    .unwrap();
+    let mut img = image::RgbaImage::new(2, 2);
+    for (x, y, c) in [
+        (0, 0, [255, 0, 0]),
+        (1, 0, [0, 255, 0]),
+        (0, 1, [0, 0, 255]),
+        (1, 1, [255, 255, 255]),
+    ] {
+        img.put_pixel(x, y, image::Rgba([c[0], c[1], c[2], 255]));
+    }
+    img.save(dir.join("quads.png")).unwrap();
+    let scene = dir.join("square.toml");
+    std::fs::write(
+        &scene,
+        "background = [0, 0, 0]\nambient = [0.2, 0.2, 0.2]\n\
+         [camera]\neye = [0, 0, 5]\ntarget = [0, 0, 0]\nparallel_height = 2.4\n\
+         [[lights]]\nposition = [0, 0, 10]\n\
+         [[objects]]\nmesh = \"square.obj\"\n",
+    )
+    .unwrap();
+    scene
+}
+
+/// `map_Kd` paints the square: each quarter of the picture shows its texel, u to the right and
+/// v up (the image's first row at the top), blended bilinearly only across the middle; the
+/// same square without the texture is white. On both devices.
+#[test]
+fn obj_textures_are_applied_u_right_and_v_up() {
+    for dev in devices() {
+        for texture in [true, false] {
+            let scene = textured_square(&format!("{dev}-{texture}"), texture);
+            let out = scene.with_file_name("square.png");
+            let o = run(&[
+                "render",
+                scene.to_str().unwrap(),
+                "--size",
+                "48x48",
+                "--spp",
+                "1",
+                "--quiet",
+                "--device",
+                dev,
+                "-o",
+                out.to_str().unwrap(),
+            ]);
+            assert!(o.status.success(), "{}", stderr(&o));
+            let img = image::open(&out).unwrap().to_rgb8();
+            // The square spans 40 of the 48 pixels; each quarter's middle lies near its
+            // texel's centre, where a neighbour's bilinear weight is a few per cent.
+            for (x, y, want) in [
+                (14, 14, [1, 0, 0]),
+                (34, 14, [0, 1, 0]),
+                (14, 34, [0, 0, 1]),
+                (34, 34, [1, 1, 1]),
+            ] {
+                let want = if texture { want } else { [1, 1, 1] };
+                let p = img.get_pixel(x, y).0;
+                for c in 0..3 {
+                    let lit = p[c] > 200;
+                    let dark = p[c] < 80;
+                    assert!(
+                        if want[c] == 1 { lit } else { dark },
+                        "{dev}, texture {texture}: pixel ({x}, {y}) is {p:?}, expected {want:?}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Spot (../shared's OBJ, with its texture coordinates) under a texture made here (hue bands
+/// along u, a checker along v, 64 × 64): the GPU's picture is the CPU's.
+#[test]
+fn gpu_matches_cpu_on_a_textured_mesh() {
+    let dir = tmp("textured-spot");
+    std::fs::create_dir_all(&dir).unwrap();
+    let obj = std::fs::read_to_string(mesh("spot.obj")).unwrap();
+    std::fs::write(
+        dir.join("spot.obj"),
+        format!("mtllib spot.mtl\nusemtl skin\n{obj}"),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("spot.mtl"),
+        "newmtl skin\nKd 0.9 0.9 0.9\nKs 0.2 0.2 0.2\nNs 30\nillum 2\nmap_Kd skin.png\n",
+    )
+    .unwrap();
+    let skin = image::RgbaImage::from_fn(64, 64, |x, y| {
+        let check = if (x / 8 + y / 8) % 2 == 0 { 255 } else { 90 };
+        image::Rgba([(x * 4) as u8, (255 - x * 4) as u8, check, 255])
+    });
+    skin.save(dir.join("skin.png")).unwrap();
+    let spot = dir.join("spot.obj");
+    let o = run(&["info", "--json", spot.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(
+        info["materials"],
+        serde_json::json!([{"name": "skin", "triangles": 5856, "texture": [64, 64]}])
+    );
+    assert_eq!(info["texture_coordinates"], true);
+    assert_eq!(info["warnings"], serde_json::json!([]));
+    gpu_matches_cpu(
+        "textured-spot",
+        &[spot.to_str().unwrap(), "--size", "96x72", "--spp", "1"],
+        false,
+    );
 }

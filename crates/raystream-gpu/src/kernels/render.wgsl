@@ -50,8 +50,15 @@ struct Material {
     shininess: f32,
     ior: f32,
     fresnel: u32,
-    pad0: u32,
-    pad1: u32,
+    // In the texture table; NO_TEXTURE: none.
+    texture: u32,
+    pad: u32,
+}
+
+struct TriUv {
+    a: vec2<f32>,
+    b: vec2<f32>,
+    c: vec2<f32>,
 }
 
 struct Light {
@@ -88,6 +95,10 @@ struct RenderParams {
 @group(1) @binding(2) var<storage, read> shade_tris: array<ShadeTri>;
 @group(1) @binding(3) var<storage, read> materials: array<Material>;
 @group(1) @binding(4) var<storage, read> lights: array<Light>;
+@group(1) @binding(5) var<storage, read> tri_uvs: array<TriUv>;
+// The sRGB table, each texture's (first texel, width, height, 0) from TEXTURE_INFO, the texels
+// (layout.rs says how).
+@group(1) @binding(6) var<storage, read> textures: array<u32>;
 
 @group(2) @binding(0) var<storage, read_write> counters: array<atomic<u32>, COUNTER_SLOTS>;
 @group(2) @binding(1) var<storage, read_write> queue_in: array<RayWork>;
@@ -192,6 +203,49 @@ fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(0.0);
 }
 
+// A texel of texture `k` (first texel `base`, w × h), wrapping around, in linear light.
+fn texel(base: u32, w: i32, h: i32, i: i32, j: i32) -> vec3<f32> {
+    let ii = ((i % w) + w) % w;
+    let jj = ((j % h) + h) % h;
+    let t = textures[base + u32(jj * w + ii)];
+    return vec3<f32>(
+        bitcast<f32>(textures[t & 0xffu]),
+        bitcast<f32>(textures[(t >> 8u) & 0xffu]),
+        bitcast<f32>(textures[(t >> 16u) & 0xffu]),
+    );
+}
+
+fn wrap_unit(t: f32) -> f32 {
+    if not_finite(t) {
+        return 0.0;
+    }
+    return t - floor(t);
+}
+
+fn lerp3(a: vec3<f32>, b: vec3<f32>, t: f32) -> vec3<f32> {
+    return a + (b - a) * t;
+}
+
+// raystream_io::Texture::sample, step for step: texture `k`'s linear colour at `uv` (wrapping;
+// v up; bilinear between texel centres).
+fn texture_colour(k: u32, uv: vec2<f32>) -> vec3<f32> {
+    let info = TEXTURE_INFO + 4u * k;
+    let base = textures[info];
+    let w = i32(textures[info + 1u]);
+    let h = i32(textures[info + 2u]);
+    let x = wrap_unit(uv.x) * f32(w) - 0.5;
+    let y = (1.0 - wrap_unit(uv.y)) * f32(h) - 0.5;
+    let x0 = floor(x);
+    let y0 = floor(y);
+    let fx = x - x0;
+    let fy = y - y0;
+    let i0 = i32(x0);
+    let j0 = i32(y0);
+    let top = lerp3(texel(base, w, h, i0, j0), texel(base, w, h, i0 + 1, j0), fx);
+    let bottom = lerp3(texel(base, w, h, i0, j0 + 1), texel(base, w, h, i0 + 1, j0 + 1), fx);
+    return lerp3(top, bottom, fy);
+}
+
 struct Surface {
     p: vec3<f32>,
     offset: f32,
@@ -285,7 +339,15 @@ fn shade_hits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     let m = materials[shade_tris[h.prim].material];
     let split = coefficients(m, s);
     let k = split.local;
-    add_film(w.pixel, w.weight * k * m.ambient * rp.ambient_light);
+    // A texture tints the ambient and diffuse colours (MTL: `map_Kd` multiplies `Kd`).
+    var tint = vec3<f32>(1.0);
+    if m.texture != NO_TEXTURE {
+        let uv = tri_uvs[h.prim];
+        tint = texture_colour(m.texture, uv.a * (1.0 - h.u - h.v) + uv.b * h.u + uv.c * h.v);
+    }
+    let ambient = m.ambient * tint;
+    let diffuse = m.diffuse * tint;
+    add_film(w.pixel, w.weight * k * ambient * rp.ambient_light);
 
     // Diffuse and specular, behind one shadow ray per light.
     let origin = s.p + s.ng * s.offset;
@@ -303,7 +365,7 @@ fn shade_hits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
         if rd > 0.0 {
             spec = pow(rd, m.shininess);
         }
-        let radiance = wk * (m.diffuse * cos + m.specular * spec) * light.color.xyz;
+        let radiance = wk * (diffuse * cos + m.specular * spec) * light.color.xyz;
         let at = atomicAdd(&counters[SHADOWS], 1u);
         shadows[at] = ShadowWork(RayIn(origin, 0.0, to_light, 1.0 - 1e-4), radiance, w.pixel);
     }

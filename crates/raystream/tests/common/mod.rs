@@ -179,6 +179,15 @@ pub fn gpu_available() -> bool {
     false
 }
 
+/// The devices a test compares: the CPU, and the GPU when one is found (always under CI).
+pub fn devices() -> &'static [&'static str] {
+    if gpu_available() {
+        &["cpu", "gpu"]
+    } else {
+        &["cpu"]
+    }
+}
+
 /// Under CI (`CI=true`): the GPU is lavapipe, which has subgroups, and Python with rays.py's
 /// requirements is installed; nothing that needs them may skip.
 pub fn in_ci() -> bool {

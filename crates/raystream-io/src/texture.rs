@@ -1,0 +1,167 @@
+//! Colour textures of OBJ materials (`map_Kd`): an image file's texels, and the one lookup both
+//! renderers make. The GPU's `texture_colour` (raystream-gpu's render.wgsl) is
+//! [`Texture::sample`] step for step, with the same sRGB table ([`SRGB_TO_LINEAR`]), so that the
+//! two back-ends shade a textured surface alike.
+//!
+//! The lookup: texture coordinates wrap (repeat); `v` grows upward, as OBJ's `vt` does (the
+//! image's first row is `v` = 1); texel centres are at half-integers; four texels are turned to
+//! linear light and blended bilinearly. There is no mipmapping, so a texture seen from far away
+//! aliases rather than blurs.
+
+use std::path::Path;
+
+use raystream_math::{Vec2, Vec3};
+
+/// The most texels a texture may have: 2²⁶ (8192², 256 MiB of RGBA8).
+pub const MAX_TEXELS: u64 = 1 << 26;
+
+/// An image's texels as sRGB RGBA8, row by row from its top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Texture {
+    pub width: u32,
+    pub height: u32,
+    pub texels: Vec<[u8; 4]>,
+}
+
+/// sRGB-encoded 8-bit values as linear light (IEC 61966-2-1), a table both renderers read.
+pub static SRGB_TO_LINEAR: std::sync::LazyLock<[f32; 256]> = std::sync::LazyLock::new(|| {
+    std::array::from_fn(|i| {
+        let c = i as f64 / 255.0;
+        (if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }) as f32
+    })
+});
+
+impl Texture {
+    /// Reads a PNG or JPEG file (by its content); an error says what is wrong, the caller names
+    /// the file. Images over [`MAX_TEXELS`] are refused from their header, before decoding.
+    pub fn load(path: &Path) -> Result<Texture, String> {
+        let open = || {
+            image::ImageReader::open(path)
+                .and_then(|r| r.with_guessed_format())
+                .map_err(|e| e.to_string())
+        };
+        let (w, h) = open()?
+            .into_dimensions()
+            .map_err(|e| format!("not a readable PNG or JPEG image ({e})"))?;
+        if w == 0 || h == 0 || w as u64 * h as u64 > MAX_TEXELS {
+            return Err(format!(
+                "a {w}x{h} image: empty, or over the {MAX_TEXELS}-texel limit"
+            ));
+        }
+        let img = open()?
+            .decode()
+            .map_err(|e| format!("not a readable PNG or JPEG image ({e})"))?
+            .to_rgba8();
+        Ok(Texture {
+            width: img.width(),
+            height: img.height(),
+            texels: img.pixels().map(|p| p.0).collect(),
+        })
+    }
+
+    /// The linear RGB colour at texture coordinates `uv` (see the module docs); a coordinate
+    /// that is not finite reads as 0.
+    pub fn sample(&self, uv: Vec2) -> Vec3 {
+        let (w, h) = (self.width as i32, self.height as i32);
+        let wrap = |t: f32| if t.is_finite() { t - t.floor() } else { 0.0 };
+        let x = wrap(uv.x) * w as f32 - 0.5;
+        let y = (1.0 - wrap(uv.y)) * h as f32 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (i0, j0) = (x0 as i32, y0 as i32);
+        let lut = &*SRGB_TO_LINEAR;
+        let texel = |i: i32, j: i32| {
+            let t = self.texels[(j.rem_euclid(h) * w + i.rem_euclid(w)) as usize];
+            Vec3::new(lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize])
+        };
+        let top = texel(i0, j0).lerp(texel(i0 + 1, j0), fx);
+        let bottom = texel(i0, j0 + 1).lerp(texel(i0 + 1, j0 + 1), fx);
+        top.lerp(bottom, fy)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 2×2 texture: red, green on the top row; blue, white below.
+    fn quad() -> Texture {
+        Texture {
+            width: 2,
+            height: 2,
+            texels: vec![
+                [255, 0, 0, 255],
+                [0, 255, 0, 255],
+                [0, 0, 255, 255],
+                [255, 255, 255, 255],
+            ],
+        }
+    }
+
+    #[test]
+    fn texel_centres_give_their_colour_and_v_grows_upward() {
+        let t = quad();
+        // Texel centres: u = 0.25 / 0.75, v = 0.75 (top row) / 0.25 (bottom row).
+        assert_eq!(t.sample(Vec2::new(0.25, 0.75)), Vec3::X);
+        assert_eq!(t.sample(Vec2::new(0.75, 0.75)), Vec3::Y);
+        assert_eq!(t.sample(Vec2::new(0.25, 0.25)), Vec3::Z);
+        assert_eq!(t.sample(Vec2::new(0.75, 0.25)), Vec3::ONE);
+        // Repeats: one period on, or back.
+        assert_eq!(t.sample(Vec2::new(1.25, -0.75)), Vec3::Z);
+        // Halfway between red and green: the mean in linear light.
+        let mid = t.sample(Vec2::new(0.5, 0.75));
+        assert!((mid - Vec3::new(0.5, 0.5, 0.0)).length() < 1e-6, "{mid}");
+        // The edge u = 0 blends the row's two texels, wrapping around.
+        assert!((t.sample(Vec2::new(0.0, 0.75)) - mid).length() < 1e-6);
+        // Not finite: as 0 (the corner texel blend), never a panic.
+        let nan = t.sample(Vec2::new(f32::NAN, f32::INFINITY));
+        assert!(nan.is_finite());
+        assert!(t.sample(Vec2::new(1e30, -1e30)).is_finite());
+    }
+
+    #[test]
+    fn the_srgb_table_is_the_standard_curve() {
+        let lut = &*SRGB_TO_LINEAR;
+        assert_eq!((lut[0], lut[255]), (0.0, 1.0));
+        // 128/255 (about 50 % grey): 0.2159 linear; the linear segment at the bottom.
+        assert!((lut[128] - 0.21586).abs() < 1e-4, "{}", lut[128]);
+        assert!((lut[10] - 10.0 / 255.0 / 12.92).abs() < 1e-7);
+        assert!(lut.windows(2).all(|w| w[0] < w[1]));
+    }
+
+    #[test]
+    fn bad_images_are_errors() {
+        let dir = std::env::temp_dir().join(format!("raystream-tex-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let png = dir.join("t.png");
+        image::RgbaImage::from_pixel(3, 2, image::Rgba([10, 20, 30, 255]))
+            .save(&png)
+            .unwrap();
+        let t = Texture::load(&png).unwrap();
+        assert_eq!((t.width, t.height, t.texels[5]), (3, 2, [10, 20, 30, 255]));
+        let bytes = std::fs::read(&png).unwrap();
+        std::fs::write(&png, &bytes[..bytes.len() / 2]).unwrap();
+        assert!(Texture::load(&png).is_err());
+        std::fs::write(&png, b"not an image").unwrap();
+        assert!(Texture::load(&png).unwrap_err().contains("not a readable"));
+        assert!(Texture::load(&dir.join("missing.png")).is_err());
+        // A PNG header claiming 100000 × 100000 texels: refused before decoding.
+        let mut huge = bytes.clone();
+        huge[16..20].copy_from_slice(&100_000u32.to_be_bytes());
+        huge[20..24].copy_from_slice(&100_000u32.to_be_bytes());
+        let mut crc = flate2::Crc::new();
+        crc.update(&huge[12..29]);
+        huge[29..33].copy_from_slice(&crc.sum().to_be_bytes());
+        std::fs::write(&png, &huge).unwrap();
+        let e = Texture::load(&png).unwrap_err();
+        assert!(
+            e.contains("100000x100000 image") && e.contains("limit"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
