@@ -205,7 +205,7 @@ impl VolumePick {
 }
 
 #[derive(Args)]
-#[command(group(clap::ArgGroup::new("frames").args(["turntable", "slices"])))]
+#[command(group(clap::ArgGroup::new("frames").args(["turntable", "slices", "cine"])))]
 pub struct RenderArgs {
     /// Mesh (.obj, .ply, .stl, optionally .gz), scene (.toml) or CT volume (DICOM folder,
     /// .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd); none: the built-in abdomen CT.
@@ -290,10 +290,15 @@ pub struct RenderArgs {
         value_parser = clap::value_parser!(u32).range(1..=4096)
     )]
     pub slices: Option<u32>,
+    /// With --mode, of a 4-D CT (cardiac phases, perfusion): a cine, one frame per temporal
+    /// position in order, all from the same camera with the same window or transfer function,
+    /// written as OUTPUT/frame_000.png … (-o names the folder); with --format dcm, one series.
+    #[arg(long, requires = "mode", conflicts_with_all = ["turntable", "slices", "phase"])]
+    pub cine: bool,
     /// With --slices: the planes' spacing in mm (default: the pixel size, for cubic voxels).
     #[arg(long, value_name = "MM", requires = "slices")]
     pub slice_step: Option<f32>,
-    /// With --turntable or --slices: the frames' format; `exr` writes frame_000.exr …
+    /// With --turntable, --slices or --cine: the frames' format; `exr` writes frame_000.exr …
     /// holding what `-o OUT.exr` holds for the mode (HU before the window for mip, minip,
     /// average and slice; premultiplied float RGBA for dvr and iso); `dcm` one DICOM series.
     #[arg(long, requires = "frames", value_enum, default_value_t = FrameFormat::Png)]

@@ -235,15 +235,20 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             mode.name()
         ),
     };
-    // A turntable's or a slice series' frames are files in a folder, in --format.
-    let frames = a.turntable.is_some() || a.slices.is_some();
+    // A turntable's, a slice series' or a cine's frames are files in a folder, in --format.
+    let frames = a.turntable.is_some() || a.slices.is_some() || a.cine;
     let format = match (frames, a.format) {
         (true, FrameFormat::Png | FrameFormat::Dcm) => ImageFormat::Png,
         (true, FrameFormat::Exr) => ImageFormat::Exr,
         (false, _) => image_format(&a.output)?,
     };
     check_labels(a, true, format)?;
-    let (volume, load_ms) = read_volume(path, &a.pick.select(), a.quiet, embedded)?;
+    // A cine reads its phases one by one, the first here (no warning that it chose one).
+    let mut select = a.pick.select();
+    if a.cine {
+        select.phase = Some(1);
+    }
+    let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     // An EXR keeps what the projections found, in HU; the window is for display. So does a
     // DICOM picture, with the window as its VOI LUT, unless letters are drawn into it.
@@ -263,6 +268,16 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let cam = volume_camera_from(&volume, aspect, view.orbit(az, el), projection(a));
     if let Some(n) = a.slices {
         return slice_series(a, &renderer, &volume, &opt, &cam, n, format);
+    }
+    if a.cine {
+        return cine(
+            a,
+            (path, &volume, renderer),
+            (&backend, &tf),
+            &opt,
+            &cam,
+            format,
+        );
     }
     let pb = spinner(
         a.quiet,
@@ -384,14 +399,14 @@ fn turntable(
     format: ImageFormat,
 ) -> Result<()> {
     let ([az, el], projection) = (orbit_angles(a), projection(a));
-    frame_series(a, renderer, volume, n, format, "turntable", |i| {
+    frame_series(a, volume, n, format, "turntable", |i| {
         let cam = volume_camera_from(
             volume,
             opt.width as f32 / opt.height as f32,
             view.orbit(az + 360.0 * i as f32 / n as f32, el),
             projection,
         );
-        (cam, *opt)
+        Ok((renderer.frame(opt, &cam, format)?, cam, *opt))
     })
 }
 
@@ -422,26 +437,87 @@ fn slice_series(
     };
     let normal = raystream_cpu::dvr::scene_to_lps(cam.fwd).normalize();
     let centre = opt.slice_point(volume);
-    frame_series(a, renderer, volume, n, format, "slices", |i| {
+    frame_series(a, volume, n, format, "slices", |i| {
         let offset = (i as f32 - (n - 1) as f32 / 2.0) * step;
         let opt = DvrOptions {
             slice_at: Some(centre + normal * offset),
             ..*opt
         };
-        (*cam, opt)
+        Ok((renderer.frame(&opt, cam, format)?, *cam, opt))
     })
 }
 
-/// Renders `n` frames, the i-th seen by and with `frame(i)`'s camera and options, into the
-/// folder `-o` names (frame_000.png …, or .exr, or .dcm: then one series, numbered from 1).
+/// `render --mode … --cine -o DIR`: a frame of each temporal position of a 4-D CT (`first` is
+/// phase 1, read already, with its renderer), in order, all seen by `cam` with `opt`: the
+/// heart's or the lungs' motion as a loop. Each later phase is read, uploaded and rendered in
+/// turn, one volume in memory at a time; all must share phase 1's grid.
+fn cine(
+    a: &RenderArgs,
+    (path, first, renderer): (&Path, &raystream_io::Volume, dvr::Renderer),
+    (backend, tf): (&Backend, &raystream_volume::TransferFunction),
+    opt: &DvrOptions,
+    cam: &Camera,
+    format: ImageFormat,
+) -> Result<()> {
+    let n = first.phase.count;
+    if n < 2 {
+        bail!(
+            "{}: --cine renders each temporal position of a 4-D CT, and this image has one (info shows a volume's phases)",
+            path.display()
+        );
+    }
+    let mut warnings = Vec::new();
+    frame_series(a, first, n as u32, format, "cine", |i| {
+        if i == 0 {
+            return Ok((renderer.frame(opt, cam, format)?, *cam, *opt));
+        }
+        let select = raystream_io::VolumeSelect {
+            phase: Some(i as usize + 1),
+            ..a.pick.select()
+        };
+        let volume = raystream_io::load_volume(path, &select)?;
+        let grid = |v: &raystream_io::Volume| (v.dims, v.spacing, v.origin, v.direction);
+        if grid(&volume) != grid(first) {
+            bail!(
+                "{}: phase {} lies on another grid than phase 1 ({:?} voxels of {:?} mm at {:?} against {:?} of {:?} at {:?}): a cine needs one",
+                path.display(),
+                i + 1,
+                volume.dims,
+                volume.spacing,
+                volume.origin,
+                first.dims,
+                first.spacing,
+                first.origin
+            );
+        }
+        for w in volume
+            .warnings
+            .iter()
+            .filter(|w| !first.warnings.contains(w))
+        {
+            warnings.push(format!("phase {}: {w}", i + 1));
+        }
+        let frame = dvr::Renderer::new(backend, &volume, tf)?.frame(opt, cam, format)?;
+        Ok((frame, *cam, *opt))
+    })?;
+    if !a.quiet {
+        for w in warnings {
+            eprintln!("raystream: {}: {w}", path.display());
+        }
+    }
+    Ok(())
+}
+
+/// Writes `n` frames, the i-th `frame(i)`'s, rendered with the camera and options it returns
+/// too, into the folder `-o` names (frame_000.png …, or .exr, or .dcm: then one series,
+/// numbered from 1); `volume` is where the frames' DICOM descriptions come from.
 fn frame_series(
     a: &RenderArgs,
-    renderer: &dvr::Renderer,
     volume: &raystream_io::Volume,
     n: u32,
     format: ImageFormat,
     what: &str,
-    frame: impl Fn(u32) -> (Camera, DvrOptions),
+    mut frame: impl FnMut(u32) -> Result<(dvr::Frame, Camera, DvrOptions)>,
 ) -> Result<()> {
     let dir = &a.output;
     let ext = match (format, a.format) {
@@ -469,9 +545,10 @@ fn frame_series(
     pb.set_message(what.to_string());
     let digits = (n - 1).max(1).ilog10() as usize + 1;
     let mut frame_ms = Vec::new();
+    let mut base = None;
     for i in 0..n {
-        let (cam, opt) = frame(i);
-        let mut f = renderer.frame(&opt, &cam, format)?;
+        let (mut f, cam, opt) = frame(i)?;
+        base.get_or_insert(opt);
         frame_ms.push(f.frame_ms);
         let path = dir.join(format!("frame_{i:0digits$}.{ext}", digits = digits.max(3)));
         let dicom = DicomOut {
@@ -484,8 +561,8 @@ fn frame_series(
     }
     pb.finish_and_clear();
     if !a.quiet {
-        // The frames differ in their camera or plane only.
-        let (_, base) = frame(0);
+        // The frames differ in their camera, plane or phase only.
+        let base = base.expect("at least one frame");
         let median = median_of(&mut frame_ms);
         eprintln!(
             "raystream: wrote {n} frames to {} ({}x{}, --mode {}, {ext}): median render {median:.1} ms ({:.2} frames/s, file writing apart)",

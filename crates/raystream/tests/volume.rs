@@ -719,22 +719,24 @@ fn phase_picks_the_temporal_position_of_a_4d_ct() {
     assert_eq!(third["warnings"], serde_json::json!([]));
 
     // A parallel MIP of phase 2 is phase 1's plus 100 HU wherever a ray met the volume.
-    let mip = |phase: &str| {
-        let out = tmp(&format!("phases-mip-{phase}.exr"));
-        let o = run(&[
+    let render_mip = |out: &std::path::Path, more: &[&str]| {
+        let to = out.to_str().unwrap();
+        let args = [
             "render",
-            "--quiet",
             path,
-            "--phase",
-            phase,
             "--mode",
             "mip",
             "--parallel",
             "--size",
             "48x40",
             "-o",
-            out.to_str().unwrap(),
-        ]);
+            to,
+        ];
+        run(&[&args[..], more].concat())
+    };
+    let mip = |phase: &str| {
+        let out = tmp(&format!("phases-mip-{phase}.exr"));
+        let o = render_mip(&out, &["--quiet", "--phase", phase]);
         assert!(o.status.success(), "{}", stderr(&o));
         let e = raystream_cpu::load_exr(&out).unwrap();
         e.channels["Y"].as_f32().unwrap().to_vec()
@@ -769,6 +771,46 @@ fn phase_picks_the_temporal_position_of_a_4d_ct() {
     }
     let o = run(&["info", "--phase", "0", path]);
     assert!(!o.status.success(), "phase 0 is refused");
+
+    // --cine: a frame per phase, in order, each the very picture --phase K renders.
+    let cine = tmp("phases-cine");
+    let _ = std::fs::remove_dir_all(&cine);
+    let o = render_mip(&cine, &["--cine", "--format", "exr"]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains("wrote 3 frames") && !e.contains("temporal positions"),
+        "{e}"
+    );
+    for (k, want) in [one, two, mip("3")].iter().enumerate() {
+        let f = raystream_cpu::load_exr(&cine.join(format!("frame_00{k}.exr"))).unwrap();
+        let got = f.channels["Y"].as_f32().unwrap();
+        assert!(
+            got.iter()
+                .zip(want)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "cine frame {k} is not phase {}'s picture",
+            k + 1
+        );
+    }
+    assert!(!cine.join("frame_003.exr").exists());
+    let src_path = volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz");
+    for (args, want) in [
+        (
+            vec![src_path.as_str(), "--mode", "mip", "--cine"],
+            "abdomen_pelvis_ct_totalseg.nii.gz: --cine renders each temporal position of a 4-D CT, and this image has one",
+        ),
+        (
+            vec![path, "--mode", "mip", "--cine", "--phase", "2"],
+            "cannot be used with",
+        ),
+        (vec![path, "--cine"], "--mode"),
+    ] {
+        let out = tmp("phases-cine-bad");
+        let o = run(&[&["render", "-o", out.to_str().unwrap()], &args[..]].concat());
+        let e = stderr(&o);
+        assert!(!o.status.success() && e.contains(want), "{args:?}: {e}");
+    }
 
     // A scene file's volume takes `phase`, too.
     for (phase, ok) in [(3, true), (9, false)] {
