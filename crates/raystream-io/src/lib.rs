@@ -297,6 +297,7 @@ fn parse_obj(
             let read = std::fs::read(&file)
                 .map_err(|e| e.to_string())
                 .and_then(|b| {
+                    let b = mtl_colours_in_threes(&b)?;
                     tobj::load_mtl_buf(&mut BufReader::new(Cursor::new(b)))
                         .map_err(|e| e.to_string())
                 });
@@ -436,6 +437,32 @@ fn parse_obj(
         },
         normals,
     ))
+}
+
+/// An MTL library's colour statements (`Ka`, `Kd`, `Ks`, `Ke`) with three numbers each: MTL
+/// lets one number stand for all three (`Kd 0.5`), which tobj 4.0.5 does not read (it panics on
+/// fewer than three), so the one is written out thrice here; two numbers, or none, are an error
+/// naming the line.
+fn mtl_colours_in_threes(bytes: &[u8]) -> Result<Vec<u8>, String> {
+    let mut out = Vec::with_capacity(bytes.len() + 64);
+    for (i, line) in bytes.split_inclusive(|&b| b == b'\n').enumerate() {
+        let text = String::from_utf8_lossy(line);
+        let words: Vec<&str> = text.split_whitespace().collect();
+        match words[..] {
+            ["Ka" | "Kd" | "Ks" | "Ke", v] if v.parse::<f32>().is_ok() => {
+                out.extend_from_slice(format!("{} {v} {v} {v}\n", words[0]).as_bytes());
+            }
+            ["Ka" | "Kd" | "Ks" | "Ke"] | ["Ka" | "Kd" | "Ks" | "Ke", _, _] => {
+                return Err(format!(
+                    "line {}: `{}` needs one or three numbers",
+                    i + 1,
+                    text.trim()
+                ));
+            }
+            _ => out.extend_from_slice(line),
+        }
+    }
+    Ok(out)
 }
 
 /// Whether every corner of every face of an OBJ names an element of the kind `statement`

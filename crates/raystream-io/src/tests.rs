@@ -388,6 +388,22 @@ fn obj_materials_follow_the_faces() {
         "{:?}",
         m.warnings
     );
+    // One number for a colour stands for all three (MTL's short form); two are a warning
+    // naming the line (tobj alone panicked on both).
+    std::fs::write(dir.join("glass.mtl"), "newmtl glass\n  Kd 0.25\nKs 1\n").unwrap();
+    let (_, m) = load_mesh_with_shading(&dir.join("scene.obj")).unwrap();
+    assert_eq!(m.materials[1].diffuse, Some([0.25; 3]));
+    assert_eq!(m.materials[1].specular, Some([1.0; 3]));
+    std::fs::write(dir.join("glass.mtl"), "newmtl glass\nKd 0 0 0\nKs 1 2\n").unwrap();
+    let (_, m) = load_mesh_with_shading(&dir.join("scene.obj")).unwrap();
+    assert_eq!(m.material_of, [Some(0), Some(0), None, None, Some(0)]);
+    assert!(
+        m.warnings
+            .iter()
+            .any(|w| w.contains("glass.mtl: line 3: `Ks 1 2` needs one or three numbers")),
+        "{:?}",
+        m.warnings
+    );
     // Other formats, and an OBJ without materials, have none (Spot has its texture
     // coordinates, a triangle's corners each).
     let (spot, m) = load_mesh_with_shading(&shared_mesh("spot.obj")).unwrap();
