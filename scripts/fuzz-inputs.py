@@ -5,8 +5,9 @@
   .venv/bin/python scripts/fuzz-inputs.py scenes [--runs N] [--seed S]
 
 files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary; an OBJ with normals and an MTL
-        library, either of them mutated; a PLY with normals), tiny volumes (NIfTI, NRRD and
-        MetaImage, attached and detached, via SimpleITK) and real DICOM slices from
+        library and a PNG texture, any of them mutated; a PLY with normals), tiny volumes
+        (NIfTI, NRRD and MetaImage, attached and detached, via SimpleITK; 4-D ones, and
+        3D Slicer's interleaved 4-D NRRD, read at a --phase or as a --cine) and real DICOM slices from
         ../shared (JPEG-LS and 12-bit JPEG among them) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (meshes also shaded; volumes also `--mode` mip, minip, average, slice or
         dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
@@ -100,6 +101,14 @@ def seeds(d):
         img.SetDirection((0, 1, 0, 1, 0, 0, 0, 0, -1))
         for n in ["v.nii", "v.nii.gz", "v.nrrd", "v.mha", "v.mhd", "v.nhdr"]:
             sitk.WriteImage(img, os.path.join(d, n))
+        # 4-D: two phases, as SimpleITK writes them, and 3D Slicer's interleaved NRRD.
+        for n in ["v4.nii.gz", "v4.nrrd", "v4.mha"]:
+            sitk.WriteImage(sitk.JoinSeries([img, img + 100]), os.path.join(d, n))
+        a = (np.arange(120).reshape(4, 5, 6) * 10 - 500).astype("<i2")
+        w("v4s.nrrd", b"NRRD0004\ntype: short\ndimension: 4\nspace: left-posterior-superior\n"
+          b"sizes: 2 6 5 4\nspace directions: none (0,0.7,0) (0.8,0,0) (0,0,-2.5)\n"
+          b"kinds: list domain domain domain\nendian: little\nencoding: raw\n"
+          b"space origin: (-10,20,30)\n\n" + np.stack([a, a + 100], axis=-1).tobytes())
     except ImportError:
         print("no SimpleITK: volumes other than DICOM left out", file=sys.stderr)
     try:
@@ -221,7 +230,10 @@ def fuzz_files(work, n, device):
             open(p, "wb").write(mutate(data, text))
         if s in ("v.mhd", "v.nhdr"):
             shutil.copy(os.path.join(sd, "v.raw"), d)
-        why = run(["info", p, "--json"], s) or run(
+        # A 4-D image's phases: one picked (maybe one it lacks), or all as a cine.
+        four_d = s.startswith("v4")
+        phase = ["--phase", random.choice("123")] if four_d and random.random() < 0.5 else []
+        why = run(["info", p, "--json"] + phase, s) or run(
             ["render", p, "--aov", "prim", "--size", "8x8", "-q", "--device", device,
              "-o", os.path.join(d, "o.png")], s)
         if not why and s.endswith((".obj", ".ply")):
@@ -233,8 +245,9 @@ def fuzz_files(work, n, device):
             mode = random.choice(["mip", "minip", "average", "slice", "dvr"])
             extra = ["--slab", "3"] if mode != "slice" and random.random() < 0.5 else []
             # Some as a turntable of EXR frames into a folder.
-            out = (["--turntable", "2", "--format", "exr", "-o", os.path.join(d, "frames")]
-                   if random.random() < 0.25 else ["-o", os.path.join(d, "o.exr")])
+            frames = ["--cine"] if four_d and not phase else ["--turntable", "2"]
+            out = (frames + ["--format", "exr", "-o", os.path.join(d, "frames")]
+                   if random.random() < 0.25 else ["-o", os.path.join(d, "o.exr")] + phase)
             why = run(["render", p, "--mode", mode, "--size", "8x8", "-q", "--device", device,
                        "--view", random.choice(["inferior", "left", "anterior"])] + extra + out, s)
         if why:

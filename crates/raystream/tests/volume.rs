@@ -683,11 +683,12 @@ fn phase_picks_the_temporal_position_of_a_4d_ct() {
     let file = tmp("phases-4d.nii.gz");
     let script = "import sys, SimpleITK as sitk\n\
         im = sitk.Cast(sitk.ReadImage(sys.argv[1]), sitk.sitkInt16)\n\
-        sitk.WriteImage(sitk.JoinSeries([im, im + 100, im + 200]), sys.argv[2])";
+        four = sitk.JoinSeries([im, im + 100, im + 200])\n\
+        for out in sys.argv[2:]: sitk.WriteImage(four, out)";
     let o = std::process::Command::new(&py)
         .args(["-c", script])
         .arg(volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz"))
-        .arg(&file)
+        .args([&file, &tmp("phases-4d.nrrd"), &tmp("phases-4d.mha")])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
@@ -717,13 +718,32 @@ fn phase_picks_the_temporal_position_of_a_4d_ct() {
         serde_json::json!([lo + 200.0, hi + 200.0])
     );
     assert_eq!(third["warnings"], serde_json::json!([]));
+    // The same series as ITK writes 4-D NRRD (time the fourth axis of a 4-D space) and
+    // MetaImage: each phase with the NIfTI's geometry and values.
+    for other in ["phases-4d.nrrd", "phases-4d.mha"] {
+        let o = run(&[
+            "info",
+            "--json",
+            "--phase",
+            "3",
+            tmp(other).to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{other}: {}", stderr(&o));
+        let v: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        assert_eq!(v["phase"], third["phase"], "{other}");
+        assert_eq!(v["dims"], third["dims"], "{other}");
+        close(&v["spacing"], &third["spacing"], 1e-6, other);
+        close(&v["origin"], &third["origin"], 1e-3, other);
+        close(&v["direction"], &third["direction"], 1e-6, other);
+        assert_eq!(v["hu_range"], third["hu_range"], "{other}");
+    }
 
     // A parallel MIP of phase 2 is phase 1's plus 100 HU wherever a ray met the volume.
-    let render_mip = |out: &std::path::Path, more: &[&str]| {
+    let render_mip = |input: &str, out: &std::path::Path, more: &[&str]| {
         let to = out.to_str().unwrap();
         let args = [
             "render",
-            path,
+            input,
             "--mode",
             "mip",
             "--parallel",
@@ -734,14 +754,25 @@ fn phase_picks_the_temporal_position_of_a_4d_ct() {
         ];
         run(&[&args[..], more].concat())
     };
-    let mip = |phase: &str| {
+    let mip_of = |input: &str, phase: &str| {
         let out = tmp(&format!("phases-mip-{phase}.exr"));
-        let o = render_mip(&out, &["--quiet", "--phase", phase]);
+        let o = render_mip(input, &out, &["--quiet", "--phase", phase]);
         assert!(o.status.success(), "{}", stderr(&o));
         let e = raystream_cpu::load_exr(&out).unwrap();
         e.channels["Y"].as_f32().unwrap().to_vec()
     };
+    let mip = |phase: &str| mip_of(path, phase);
     let (one, two) = (mip("1"), mip("2"));
+    // The NRRD's and the MetaImage's phase 2 is the NIfTI's, bit for bit.
+    for other in ["phases-4d.nrrd", "phases-4d.mha"] {
+        let got = mip_of(tmp(other).to_str().unwrap(), "2");
+        assert!(
+            got.iter()
+                .zip(&two)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{other}"
+        );
+    }
     let hit = one.iter().filter(|v| !v.is_nan()).count();
     assert!(
         hit > one.len() / 2,
@@ -775,7 +806,7 @@ fn phase_picks_the_temporal_position_of_a_4d_ct() {
     // --cine: a frame per phase, in order, each the very picture --phase K renders.
     let cine = tmp("phases-cine");
     let _ = std::fs::remove_dir_all(&cine);
-    let o = render_mip(&cine, &["--cine", "--format", "exr"]);
+    let o = render_mip(path, &cine, &["--cine", "--format", "exr"]);
     let e = stderr(&o);
     assert!(o.status.success(), "{e}");
     assert!(

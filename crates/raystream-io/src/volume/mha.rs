@@ -1,5 +1,5 @@
 //! MetaImage volumes (`.mha` with the data after the header, `.mhd` with a separate data file),
-//! raw or zlib-compressed. Written by hand: the only MetaImage crates on crates.io are
+//! raw or zlib-compressed, 3-D or 4-D (phases along the fourth axis). Written by hand: the only MetaImage crates on crates.io are
 //! unmaintained. World coordinates are LPS (ITK's convention); `TransformMatrix` lists the axis
 //! directions one axis after another (ITK's MetaImageIO reads axis i from elements 3i..3i+3).
 
@@ -7,17 +7,19 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use super::nifti::guess_unit;
-use super::raw::{Scalar, decode, read_exact_n, read_file, skip_n};
+use super::raw::{PhaseLayout, Scalar, decode, read_phase, skip_n};
 use super::{
-    Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal, unit_columns, voxel_count,
+    Phase, Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal, unit_columns,
+    voxel_count,
 };
 
-pub(crate) fn load(path: &Path) -> Result<Volume, VolumeError> {
-    parse(&read_file(path)?, path)
-}
-
-/// Parses a `.mha` / `.mhd` file's bytes; a separate data file is looked up beside `path`.
-pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
+/// Parses a `.mha` / `.mhd` file's bytes; a separate data file is looked up beside `path`. Of
+/// a 4-D image, the 3-D volume `phase` (from 1, default 1) along its fourth axis.
+pub(crate) fn parse(
+    bytes: &[u8],
+    path: &Path,
+    phase: Option<usize>,
+) -> Result<Volume, VolumeError> {
     let mut fields = HashMap::new();
     let mut pos = 0;
     let mut found_data_file = false;
@@ -67,15 +69,18 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
                 .ok_or_else(|| VolumeError::invalid(path, format!("MetaImage header has no {k}"))),
         }
     };
-    let ndims = nums("NDims", None)?;
-    if ndims != [3.0] {
-        return Err(VolumeError::invalid(
-            path,
-            format!("MetaImage NDims {ndims:?}: only 3-D volumes are read"),
-        ));
-    }
+    let nd = match nums("NDims", None)?[..] {
+        [3.0] => 3,
+        [4.0] => 4,
+        ref d => {
+            return Err(VolumeError::invalid(
+                path,
+                format!("MetaImage NDims {d:?}: 3-D volumes, and 4-D series of them, are read"),
+            ));
+        }
+    };
     let dim = nums("DimSize", None)?;
-    if dim.len() != 3 || dim.iter().any(|d| *d < 1.0 || d.fract() != 0.0 || *d > 1e9) {
+    if dim.len() != nd || dim.iter().any(|d| *d < 1.0 || d.fract() != 0.0 || *d > 1e9) {
         return Err(VolumeError::invalid(
             path,
             format!("bad MetaImage DimSize {dim:?}"),
@@ -83,6 +88,10 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
     }
     let dims = [dim[0] as usize, dim[1] as usize, dim[2] as usize];
     let n = voxel_count(path, dims)?;
+    // A 4-D image's fourth axis holds the phases (time), one 3-D volume after another.
+    let count = dim.get(3).map_or(1, |&t| t as usize);
+    let mut warnings = Vec::new();
+    let phase = Phase::pick(path, phase, count, &mut warnings)?;
     if get("ElementNumberOfChannels").is_some_and(|c| c.trim() != "1") {
         return Err(VolumeError::invalid(
             path,
@@ -103,33 +112,41 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
         .flatten()
         .any(|v| v.eq_ignore_ascii_case("true"));
     let compressed = get("CompressedData").is_some_and(|v| v.eq_ignore_ascii_case("true"));
-    let spacing_v = nums("ElementSpacing", Some(vec![1.0; 3]))?;
+    let spacing_v = nums("ElementSpacing", Some(vec![1.0; nd]))?;
     let first_of = |keys: [&'static str; 3]| keys.into_iter().find(|k| get(k).is_some());
     let origin_v = match first_of(["Offset", "Origin", "Position"]) {
         Some(k) => nums(k, None)?,
-        None => vec![0.0; 3],
+        None => vec![0.0; nd],
     };
     let tm = match first_of(["TransformMatrix", "Rotation", "Orientation"]) {
         Some(k) => nums(k, None)?,
-        None => vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        None => (0..nd * nd)
+            .map(|i| (i % (nd + 1) == 0) as u8 as f64)
+            .collect(),
     };
-    if spacing_v.len() != 3 || origin_v.len() != 3 || tm.len() != 9 {
+    if spacing_v.len() != nd || origin_v.len() != nd || tm.len() != nd * nd {
         return Err(VolumeError::invalid(
             path,
             "MetaImage ElementSpacing/Offset/TransformMatrix have the wrong length",
         ));
     }
-    // Axis c is tm[3c..3c+3]; scale by spacing, then split into unit direction and spacing.
-    let axes = std::array::from_fn(|r| std::array::from_fn(|c| tm[3 * c + r] * spacing_v[c]));
+    // Time may not turn into space: the fourth axis and the fourth coordinate are their own.
+    if nd == 4 && (0..3).any(|i| tm[4 * i + 3] != 0.0 || tm[12 + i] != 0.0) {
+        return Err(VolumeError::invalid(
+            path,
+            format!("MetaImage TransformMatrix {tm:?} mixes space and time"),
+        ));
+    }
+    // Axis c is tm[nd·c..nd·c+3]; scale by spacing, then split into unit direction and spacing.
+    let axes = std::array::from_fn(|r| std::array::from_fn(|c| tm[nd * c + r] * spacing_v[c]));
     let (direction, spacing) = unit_columns(axes);
     let origin = [origin_v[0], origin_v[1], origin_v[2]];
     check_geometry(path, dims, spacing, origin, &direction)?;
-    let mut warnings = Vec::new();
     if !is_orthonormal(&direction, 1e-4) {
         warnings.push("the voxel axes are not orthogonal".into());
     }
 
-    let nbytes = n * scalar.size();
+    let nbytes = n * scalar.size() * count;
     let data_file = need("ElementDataFile")?;
     let detached;
     let payload: &[u8] = if data_file.eq_ignore_ascii_case("LOCAL") {
@@ -153,9 +170,18 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
             .map_err(|_| VolumeError::invalid(path, format!("bad MetaImage HeaderSize {h:?}")))?,
         None => 0,
     };
+    let (layout, what) = (
+        PhaseLayout {
+            inner: n,
+            count,
+            outer: 1,
+        },
+        "the MetaImage voxel data",
+    );
+    let index = phase.index - 1;
     let data_bytes = if compressed {
         let mut r = flate2::read::ZlibDecoder::new(payload);
-        read_exact_n(&mut r, nbytes, path, "the MetaImage voxel data")?
+        read_phase(&mut r, layout, index, scalar.size(), path, what)?
     } else {
         let start = if header_size == -1 {
             payload.len().saturating_sub(nbytes)
@@ -164,7 +190,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
         };
         let mut r: &[u8] = payload;
         skip_n(&mut r, start as u64, path)?;
-        read_exact_n(&mut r, nbytes, path, "the MetaImage voxel data")?
+        read_phase(&mut r, layout, index, scalar.size(), path, what)?
     };
     let data = decode(&data_bytes, scalar, big_endian, 1.0, 0.0);
     let unit = guess_unit(&data, scalar);
@@ -177,7 +203,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
         unit,
         format: VolumeFormat::MetaImage,
         series: None,
-        phase: Default::default(),
+        phase,
         warnings,
     })
 }

@@ -433,12 +433,15 @@ pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeE
     }
     let volume = match format {
         VolumeFormat::Dicom => dicom::load(path, select)?,
-        VolumeFormat::Nifti => nifti::load(path, select.phase)?,
-        VolumeFormat::Nrrd => nrrd::load(path)?,
-        VolumeFormat::MetaImage => mha::load(path)?,
+        file_format => {
+            let parse = match file_format {
+                VolumeFormat::Nifti => nifti::parse,
+                VolumeFormat::Nrrd => nrrd::parse,
+                _ => mha::parse,
+            };
+            parse(&raw::read_file(path)?, path, select.phase)?
+        }
     };
-    // The readers of 3-D-only formats refuse any phase but the one they read.
-    Phase::pick(path, select.phase, volume.phase.count, &mut Vec::new())?;
     volume.check(path)?;
     Ok(volume)
 }

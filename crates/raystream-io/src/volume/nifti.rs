@@ -9,7 +9,9 @@
 use std::io::Read;
 use std::path::Path;
 
-use super::raw::{Bytes, Scalar, decode, open_payload, read_exact_n, read_file, skip_n};
+use super::raw::{
+    Bytes, PhaseLayout, Scalar, decode, open_payload, read_exact_n, read_phase, skip_n,
+};
 use super::{
     Phase, ValueUnit, Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal,
     unit_columns, voxel_count,
@@ -29,10 +31,6 @@ struct Header {
     qoffset: [f64; 3],
     srow: [[f64; 4]; 3],
     big_endian: bool,
-}
-
-pub(crate) fn load(path: &Path, phase: Option<usize>) -> Result<Volume, VolumeError> {
-    parse(&read_file(path)?, path, phase)
 }
 
 /// Parses a `.nii` / `.nii.gz` file's bytes; `path` names it in errors. Of a 4-D (or higher)
@@ -249,10 +247,15 @@ fn build(
             format!("vox_offset {} is invalid", h.vox_offset),
         ));
     }
-    // The volumes before the phase read are skipped, not kept.
-    let before = (phase.index as u64 - 1) * (n * scalar.size()) as u64;
-    skip_n(r, offset as u64 - hdr_len as u64 + before, path)?;
-    let bytes = read_exact_n(r, n * scalar.size(), path, "the NIfTI voxel data")?;
+    skip_n(r, offset as u64 - hdr_len as u64, path)?;
+    // The volumes follow each other: those before the phase read are skipped, not kept.
+    let layout = PhaseLayout {
+        inner: n,
+        count: phase.count,
+        outer: 1,
+    };
+    let what = "the NIfTI voxel data";
+    let bytes = read_phase(r, layout, phase.index - 1, scalar.size(), path, what)?;
     // scl_slope 0 or NaN means "no scaling" (NIfTI-1 standard).
     let (slope, inter) = if h.scl_slope == 0.0 || !h.scl_slope.is_finite() {
         (1.0, 0.0)

@@ -1,7 +1,9 @@
 //! NRRD volumes (`.nrrd` with attached data, `.nhdr` with a detached data file), raw or gzip.
 //!
 //! No NRRD crate exists on crates.io (`cargo info nrrd`: not found), and the format is a short
-//! text header, so it is parsed here. Reads 3-D scalar images: `type`, `dimension`, `sizes`,
+//! text header, so it is parsed here. Reads 3-D scalar images and 4-D series of them (the
+//! phase axis: `none` among the space directions, as 3D Slicer writes sequences; the fourth
+//! coordinate of ITK's 4-D space; or a non-`domain` kind): `type`, `dimension`, `sizes`,
 //! `endian`, `encoding` (raw, gzip), `space` (LPS, RAS, LAS and their long names; anything
 //! else is refused), `space directions`, `space origin`, `spacings` (no space), `data file`,
 //! `line skip`, `byte skip`.
@@ -10,17 +12,19 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use super::nifti::guess_unit;
-use super::raw::{Scalar, decode, open_payload, read_exact_n, read_file, skip_n};
+use super::raw::{PhaseLayout, Scalar, decode, open_payload, read_phase, skip_n};
 use super::{
-    Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal, unit_columns, voxel_count,
+    Phase, Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal, unit_columns,
+    voxel_count,
 };
 
-pub(crate) fn load(path: &Path) -> Result<Volume, VolumeError> {
-    parse(&read_file(path)?, path)
-}
-
 /// Parses a `.nrrd` / `.nhdr` file's bytes; a detached data file is looked up beside `path`.
-pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
+/// Of a 4-D image, the 3-D volume `phase` (from 1, default 1) along its non-spatial axis.
+pub(crate) fn parse(
+    bytes: &[u8],
+    path: &Path,
+    phase: Option<usize>,
+) -> Result<Volume, VolumeError> {
     if !bytes.starts_with(b"NRRD000") {
         return Err(VolumeError::invalid(
             path,
@@ -52,21 +56,24 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
     };
 
     let dimension: usize = parse_num(need("dimension")?, path, "dimension")?;
-    if dimension != 3 {
+    if !(3..=4).contains(&dimension) {
         return Err(VolumeError::invalid(
             path,
-            format!("NRRD dimension {dimension}: only 3-D scalar volumes are read"),
+            format!(
+                "NRRD dimension {dimension}: 3-D scalar volumes, and 4-D series of them, are read"
+            ),
         ));
     }
     let sizes: Vec<usize> = need("sizes")?
         .split_whitespace()
         .map(|s| parse_num(s, path, "sizes"))
         .collect::<Result<_, _>>()?;
-    if sizes.len() != 3 {
-        return Err(VolumeError::invalid(path, "NRRD sizes must list 3 numbers"));
+    if sizes.len() != dimension {
+        return Err(VolumeError::invalid(
+            path,
+            format!("NRRD sizes must list {dimension} numbers"),
+        ));
     }
-    let dims = [sizes[0], sizes[1], sizes[2]];
-    let n = voxel_count(path, dims)?;
     let scalar = scalar_of(need("type")?).ok_or_else(|| {
         VolumeError::invalid(
             path,
@@ -90,52 +97,37 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
     };
 
     let mut warnings = Vec::new();
-    let (axes, origin) = match get("space") {
-        Some(space) => {
-            let signs = space_signs(space).ok_or_else(|| {
-                VolumeError::invalid(path, format!("NRRD space {space:?} is not supported"))
-            })?;
-            let dirs = parse_vectors(need("space directions")?, path, "space directions")?;
-            if dirs.len() != 3 {
-                return Err(VolumeError::invalid(
-                    path,
-                    "NRRD space directions must list 3 vectors",
-                ));
-            }
-            let origin = match get("space origin") {
-                Some(o) => {
-                    let v = parse_vectors(o, path, "space origin")?;
-                    if v.len() != 1 {
-                        return Err(VolumeError::invalid(path, "bad NRRD space origin"));
-                    }
-                    v[0]
-                }
-                None => [0.0; 3],
-            };
-            let axes = std::array::from_fn(|r| std::array::from_fn(|c| dirs[c][r] * signs[r]));
-            (axes, std::array::from_fn(|r| origin[r] * signs[r]))
-        }
-        None => {
-            warnings.push("NRRD has no space: orientation unknown, assuming LPS axes".into());
-            let sp: Vec<f64> = match get("spacings") {
-                Some(s) => s
-                    .split_whitespace()
-                    .map(|v| parse_num(v, path, "spacings"))
-                    .collect::<Result<_, _>>()?,
-                None => vec![1.0; 3],
-            };
-            if sp.len() != 3 {
-                return Err(VolumeError::invalid(
-                    path,
-                    "NRRD spacings must list 3 numbers",
-                ));
-            }
-            (
-                std::array::from_fn(|r| std::array::from_fn(|c| if r == c { sp[c] } else { 0.0 })),
-                [0.0; 3],
-            )
-        }
+    let (steps, origin) = axis_steps(&fields, dimension, path, &mut warnings)?;
+    // Three axes in space; a fourth, if any, holds the phases (time, or a list).
+    let spatial: Vec<usize> = (0..dimension).filter(|&i| steps[i].is_some()).collect();
+    let [i, j, k] = spatial[..] else {
+        return Err(VolumeError::invalid(
+            path,
+            format!(
+                "NRRD image has {} axes in space: 3 are read, and at most one other (phases)",
+                spatial.len()
+            ),
+        ));
     };
+    let dims = [sizes[i], sizes[j], sizes[k]];
+    let n = voxel_count(path, dims)?;
+    let phase_axis = (0..dimension).find(|&a| steps[a].is_none());
+    let layout = match phase_axis {
+        Some(p) => PhaseLayout {
+            inner: sizes[..p].iter().product(),
+            count: sizes[p],
+            outer: sizes[p + 1..].iter().product(),
+        },
+        None => PhaseLayout::single(n),
+    };
+    if layout.count == 0 || layout.count > u32::MAX as usize {
+        return Err(VolumeError::invalid(
+            path,
+            format!("NRRD sizes {sizes:?}: {} phases", layout.count),
+        ));
+    }
+    let phase = Phase::pick(path, phase, layout.count, &mut warnings)?;
+    let axes = std::array::from_fn(|r| std::array::from_fn(|c| steps[spatial[c]].unwrap()[r]));
     let (direction, spacing) = unit_columns(axes);
     check_geometry(path, dims, spacing, origin, &direction)?;
     if !is_orthonormal(&direction, 1e-4) {
@@ -144,7 +136,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
 
     let line_skip: usize = get("line skip").map_or(Ok(0), |v| parse_num(v, path, "line skip"))?;
     let byte_skip: i64 = get("byte skip").map_or(Ok(0), |v| parse_num(v, path, "byte skip"))?;
-    let nbytes = n * scalar.size();
+    let nbytes = n * scalar.size() * layout.count;
     let detached;
     let (payload, start): (&[u8], usize) = match get("data file").or_else(|| get("datafile")) {
         Some(name) => {
@@ -188,7 +180,8 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
     if byte_skip > 0 {
         skip_n(&mut r, byte_skip as u64, path)?;
     }
-    let data_bytes = read_exact_n(&mut r, nbytes, path, "the NRRD voxel data")?;
+    let what = "the NRRD voxel data";
+    let data_bytes = read_phase(&mut r, layout, phase.index - 1, scalar.size(), path, what)?;
     let data = decode(&data_bytes, scalar, big_endian, 1.0, 0.0);
     let unit = guess_unit(&data, scalar);
     Ok(Volume {
@@ -200,7 +193,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Volume, VolumeError> {
         unit,
         format: VolumeFormat::Nrrd,
         series: None,
-        phase: Default::default(),
+        phase,
         warnings,
     })
 }
@@ -228,27 +221,149 @@ fn parse_num<T: std::str::FromStr>(s: &str, path: &Path, what: &str) -> Result<T
         .map_err(|_| VolumeError::invalid(path, format!("bad number {s:?} in NRRD {what}")))
 }
 
-/// `(a,b,c) (d,e,f) …` → vectors.
-fn parse_vectors(s: &str, path: &Path, what: &str) -> Result<Vec<[f64; 3]>, VolumeError> {
-    s.split(')')
-        .map(str::trim)
-        .filter(|t| !t.is_empty())
-        .map(|t| {
-            let inner = t.trim_start_matches('(');
-            if t == "none" || inner == t {
-                return Err(VolumeError::invalid(
-                    path,
-                    format!("bad NRRD {what}: {s:?}"),
-                ));
+/// Each axis's step in LPS mm (`None`: the axis of a 4-D image's phases) and the origin, from
+/// `space` (or ITK's bare `space dimension`), `space directions` and `space origin`, or, with
+/// no space, `spacings` (and `kinds`, which may name the phase axis).
+#[allow(clippy::type_complexity)]
+fn axis_steps(
+    fields: &HashMap<String, String>,
+    dimension: usize,
+    path: &Path,
+    warnings: &mut Vec<String>,
+) -> Result<(Vec<Option<[f64; 3]>>, [f64; 3]), VolumeError> {
+    let get = |k: &str| fields.get(k).map(String::as_str);
+    let bad = |what: String| VolumeError::invalid(path, what);
+    let (signs, space_dim) = match (get("space"), get("space dimension")) {
+        (Some(space), _) => (
+            space_signs(space)
+                .ok_or_else(|| bad(format!("NRRD space {space:?} is not supported")))?,
+            3,
+        ),
+        (None, Some(d)) => {
+            let d: usize = parse_num(d, path, "space dimension")?;
+            if !(3..=4).contains(&d) {
+                return Err(bad(format!("NRRD space dimension {d} is not supported")));
             }
-            let v: Vec<f64> = inner
-                .split(',')
-                .map(|x| parse_num(x, path, what))
-                .collect::<Result<_, _>>()?;
-            <[f64; 3]>::try_from(v)
-                .map_err(|_| VolumeError::invalid(path, format!("NRRD {what} needs 3-vectors")))
+            warnings.push(
+                "NRRD names no space: its coordinates are taken as LPS, as ITK writes them".into(),
+            );
+            ([1.0; 3], d)
+        }
+        (None, None) => {
+            warnings.push("NRRD has no space: orientation unknown, assuming LPS axes".into());
+            return spacings_only(fields, dimension, path);
+        }
+    };
+    let lps = |v: &[f64]| -> [f64; 3] { std::array::from_fn(|r| v[r] * signs[r]) };
+    let dirs = parse_vectors(
+        get("space directions")
+            .ok_or_else(|| bad("NRRD header has no \"space directions\" field".into()))?,
+        space_dim,
+        path,
+        "space directions",
+    )?;
+    if dirs.len() != dimension {
+        return Err(bad(format!(
+            "NRRD space directions must list {dimension} entries"
+        )));
+    }
+    let mut steps = Vec::new();
+    for d in dirs {
+        steps.push(match d {
+            // In ITK's 4-D space the time axis steps along the fourth coordinate alone.
+            Some(v) if space_dim == 4 && v[..3].iter().all(|&x| x == 0.0) => None,
+            Some(v) if space_dim == 4 && v[3] != 0.0 => {
+                return Err(bad(format!(
+                    "NRRD space direction {v:?} mixes space and time"
+                )));
+            }
+            Some(v) => Some(lps(&v)),
+            None => None,
+        });
+    }
+    let origin = match get("space origin") {
+        Some(o) => match &parse_vectors(o, space_dim, path, "space origin")?[..] {
+            [Some(v)] => lps(v),
+            _ => return Err(bad("bad NRRD space origin".into())),
+        },
+        None => [0.0; 3],
+    };
+    Ok((steps, origin))
+}
+
+/// Axis steps from `spacings` alone (no space: the axes taken as L, P, S in turn); of a 4-D
+/// image, the phase axis is the one whose kind is not `domain` or `space`, or whose spacing is
+/// `nan`, else the last.
+#[allow(clippy::type_complexity)]
+fn spacings_only(
+    fields: &HashMap<String, String>,
+    dimension: usize,
+    path: &Path,
+) -> Result<(Vec<Option<[f64; 3]>>, [f64; 3]), VolumeError> {
+    let sp: Vec<f64> = match fields.get("spacings") {
+        Some(s) => s
+            .split_whitespace()
+            .map(|v| parse_num(v, path, "spacings"))
+            .collect::<Result<_, _>>()?,
+        None => vec![1.0; dimension],
+    };
+    if sp.len() != dimension {
+        return Err(VolumeError::invalid(
+            path,
+            format!("NRRD spacings must list {dimension} numbers"),
+        ));
+    }
+    let kinds: Vec<String> = fields
+        .get("kinds")
+        .map(|k| k.split_whitespace().map(str::to_ascii_lowercase).collect())
+        .unwrap_or_default();
+    let listed =
+        |a: usize| sp[a].is_nan() || kinds.get(a).is_some_and(|k| k != "domain" && k != "space");
+    let phase_axis = (dimension == 4).then(|| (0..4).find(|&a| listed(a)).unwrap_or(3));
+    let mut next = 0;
+    let steps = (0..dimension)
+        .map(|a| {
+            (Some(a) != phase_axis).then(|| {
+                next += 1;
+                std::array::from_fn(|r| if r == next - 1 { sp[a] } else { 0.0 })
+            })
         })
-        .collect()
+        .collect();
+    Ok((steps, [0.0; 3]))
+}
+
+/// `(a,b,c) none (d,e,f) …` → vectors of `len` numbers (`None` for `none`).
+fn parse_vectors(
+    s: &str,
+    len: usize,
+    path: &Path,
+    what: &str,
+) -> Result<Vec<Option<Vec<f64>>>, VolumeError> {
+    let bad = || VolumeError::invalid(path, format!("bad NRRD {what}: {s:?}"));
+    let mut out = Vec::new();
+    let mut rest = s.trim_start();
+    while !rest.is_empty() {
+        if let Some(r) = rest.strip_prefix("none") {
+            out.push(None);
+            rest = r.trim_start();
+            continue;
+        }
+        let inner = rest.strip_prefix('(').ok_or_else(bad)?;
+        let (inner, r) = inner.split_once(')').ok_or_else(bad)?;
+        let v: Vec<f64> = inner
+            .split(',')
+            .map(|x| parse_num(x, path, what))
+            .collect::<Result<_, _>>()?;
+        if v.len() != len {
+            return Err(VolumeError::invalid(
+                path,
+                format!("NRRD {what} needs {len}-vectors: {s:?}"),
+            ));
+        }
+        out.push(Some(v));
+        rest = r.trim_start();
+    }
+    Ok(out)
 }
 
 /// Per world axis, the sign that turns the NRRD space into LPS.

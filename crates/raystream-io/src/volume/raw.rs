@@ -57,6 +57,86 @@ pub(crate) fn read_exact_n(
     Ok(out)
 }
 
+/// Where the values of one phase lie in a 4-D payload: the phase axis has `count` positions,
+/// the axes before it make runs of `inner` values, the axes after it `outer` such runs. Time
+/// last (NIfTI, MetaImage, ITK's NRRD): `outer` = 1; a list axis first (3D Slicer's
+/// sequences): `inner` = 1. A 3-D payload is one phase of `count` 1.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PhaseLayout {
+    pub inner: usize,
+    pub count: usize,
+    pub outer: usize,
+}
+
+impl PhaseLayout {
+    /// A 3-D payload of `n` values.
+    pub fn single(n: usize) -> PhaseLayout {
+        PhaseLayout {
+            inner: n,
+            count: 1,
+            outer: 1,
+        }
+    }
+}
+
+/// Reads the bytes of phase `index` (from 0) of `layout`, values of `size` bytes, streaming:
+/// the other phases are skipped as they pass, and memory grows only with the bytes kept.
+pub(crate) fn read_phase(
+    r: &mut dyn Read,
+    layout: PhaseLayout,
+    index: usize,
+    size: usize,
+    path: &Path,
+    what: &str,
+) -> Result<Vec<u8>, VolumeError> {
+    let run = layout.inner * size;
+    // Byte counts of a header's lying sizes saturate: skipping them runs into the file's end.
+    let bytes = |runs: usize| (runs as u64).saturating_mul(run as u64);
+    if layout.outer == 1 {
+        skip_n(r, bytes(index), path)?;
+        return read_exact_n(r, run, path, what);
+    }
+    let truncated = || {
+        VolumeError::invalid(
+            path,
+            format!(
+                "{what} is truncated: the header implies {} bytes, the file holds fewer",
+                bytes(layout.count).saturating_mul(layout.outer as u64)
+            ),
+        )
+    };
+    let mut r = std::io::BufReader::with_capacity(1 << 16, r);
+    let mut out = Vec::with_capacity(run.saturating_mul(layout.outer).min(64 << 20));
+    // Runs of a few values (a list axis first) are read a whole group of phases at a time.
+    let group_bytes = bytes(layout.count);
+    let mut group = vec![
+        0u8;
+        if group_bytes <= 1 << 16 {
+            group_bytes as usize
+        } else {
+            0
+        }
+    ];
+    for _ in 0..layout.outer {
+        if group.is_empty() {
+            skip_n(&mut r, bytes(index), path).map_err(|_| truncated())?;
+            let kept = out.len();
+            (&mut r)
+                .take(run as u64)
+                .read_to_end(&mut out)
+                .map_err(|e| VolumeError::invalid(path, format!("reading {what}: {e}")))?;
+            if out.len() - kept < run {
+                return Err(truncated());
+            }
+            skip_n(&mut r, bytes(layout.count - 1 - index), path).map_err(|_| truncated())?;
+        } else {
+            r.read_exact(&mut group).map_err(|_| truncated())?;
+            out.extend_from_slice(&group[index * run..(index + 1) * run]);
+        }
+    }
+    Ok(out)
+}
+
 /// Skips `n` bytes of `r`, erroring if the stream ends first.
 pub(crate) fn skip_n(r: &mut dyn Read, n: u64, path: &Path) -> Result<(), VolumeError> {
     let skipped = std::io::copy(&mut r.take(n), &mut std::io::sink())

@@ -601,7 +601,7 @@ fn check_ramp(v: &Volume) {
 fn nrrd_attached_raw_in_ras_is_turned_into_lps() {
     let mut bytes = b"NRRD0004\n# a comment\ntype: short\ndimension: 3\nspace: right-anterior-superior\nsizes: 4 3 2\nspace directions: (0.5,0,0) (0,0.7,0) (0,0,2.5)\nkinds: domain domain domain\nendian: little\nencoding: raw\nspace origin: (10,20,30)\n\n".to_vec();
     bytes.extend(ramp_i16());
-    let v = nrrd::parse(&bytes, Path::new("t.nrrd")).unwrap();
+    let v = nrrd::parse(&bytes, Path::new("t.nrrd"), None).unwrap();
     check_ramp(&v);
     assert_eq!(v.spacing, [0.5, 0.7, 2.5]);
     assert_eq!(v.origin, [-10.0, -20.0, 30.0]);
@@ -630,6 +630,145 @@ fn nrrd_gzip_and_detached_data() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// The ramp's three phases, `ramp + 100 t` for t = 0, 1, 2: one volume after another
+/// (`time_last`), or interleaved, each voxel's phases side by side (a list axis first).
+fn ramp_phases(time_last: bool) -> Vec<u8> {
+    let phase = |t: i16| -> Vec<i16> {
+        ramp_i16()
+            .chunks_exact(2)
+            .map(|c| i16::from_le_bytes([c[0], c[1]]) + 100 * t)
+            .collect()
+    };
+    let p: Vec<Vec<i16>> = (0..3).map(phase).collect();
+    let values: Vec<i16> = if time_last {
+        p.concat()
+    } else {
+        (0..p[0].len())
+            .flat_map(|v| p.iter().map(move |q| q[v]))
+            .collect()
+    };
+    values.iter().flat_map(|v| v.to_le_bytes()).collect()
+}
+
+/// 4-D NRRD and MetaImage: the phase asked for, whichever axis holds the phases (3D Slicer's
+/// list axis first, `none` among the directions; ITK's time last in a 4-D space; MetaImage's
+/// fourth axis), raw or compressed, with the 3-D geometry; a phase the file lacks and a cut
+/// file are errors naming the problem.
+#[test]
+fn four_d_nrrd_and_metaimage_read_the_phase_asked_for() {
+    use std::io::Write;
+    let gzip = |b: &[u8]| {
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        gz.write_all(b).unwrap();
+        gz.finish().unwrap()
+    };
+    let slicer = "NRRD0004\ntype: short\ndimension: 4\nspace: left-posterior-superior\nsizes: 3 4 3 2\nspace directions: none (0.5,0,0) (0,0.7,0) (0,0,2.5)\nkinds: list domain domain domain\nendian: little\nencoding: ENC\nspace origin: (10,20,30)\n\n";
+    let itk = "NRRD0004\ntype: short\ndimension: 4\nspace dimension: 4\nsizes: 4 3 2 3\nspace directions: (0.5,0,0,0) (0,0.7,0,0) (0,0,2.5,0) (0,0,0,1)\nkinds: domain domain domain domain\nendian: little\nencoding: ENC\nspace origin: (10,20,30,0)\n\n";
+    let mha = "ObjectType = Image\nNDims = 4\nBinaryData = True\nCompressedData = ENC\nTransformMatrix = 1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\nOffset = 10 20 30 0\nElementSpacing = 0.5 0.7 2.5 1\nDimSize = 4 3 2 3\nElementType = MET_SHORT\nElementDataFile = LOCAL\n";
+    let mut files = Vec::new();
+    for (name, header, time_last) in [("t.nrrd", slicer, false), ("t.nrrd", itk, true)] {
+        for packed in [false, true] {
+            let enc = if packed { "gzip" } else { "raw" };
+            let mut b = header.replace("ENC", enc).into_bytes();
+            let data = ramp_phases(time_last);
+            b.extend(if packed { gzip(&data) } else { data });
+            files.push((name, b));
+        }
+    }
+    for packed in [false, true] {
+        let mut b = mha
+            .replace("ENC", if packed { "True" } else { "False" })
+            .into_bytes();
+        let data = ramp_phases(true);
+        b.extend(if packed {
+            let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+            z.write_all(&data).unwrap();
+            z.finish().unwrap()
+        } else {
+            data
+        });
+        files.push(("t.mha", b));
+    }
+    for (name, bytes) in &files {
+        let parse = |phase: Option<usize>| {
+            let path = Path::new(name);
+            if name.ends_with(".mha") {
+                mha::parse(bytes, path, phase)
+            } else {
+                nrrd::parse(bytes, path, phase)
+            }
+        };
+        for t in 1..=3 {
+            let v = parse(Some(t)).unwrap();
+            assert_eq!(v.phase, Phase { index: t, count: 3 });
+            assert_eq!(v.dims, [4, 3, 2]);
+            assert_eq!(v.spacing, [0.5, 0.7, 2.5]);
+            assert_eq!(v.origin, [10.0, 20.0, 30.0]);
+            assert_eq!(
+                v.direction,
+                [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+            );
+            let shift = 100.0 * (t - 1) as f32;
+            assert_eq!(v.at(0, 0, 0), -1000.0 + shift, "{name} phase {t}");
+            assert_eq!(v.at(3, 2, 1), 3.0 + 20.0 + 100.0 - 1000.0 + shift, "{name}");
+            assert!(
+                !v.warnings.iter().any(|w| w.contains("temporal positions")),
+                "{:?}",
+                v.warnings
+            );
+        }
+        let first = parse(None).unwrap();
+        assert_eq!(first.phase, Phase { index: 1, count: 3 });
+        assert!(
+            first
+                .warnings
+                .iter()
+                .any(|w| w.contains("3 temporal positions")),
+            "{:?}",
+            first.warnings
+        );
+        let e = parse(Some(4)).unwrap_err().to_string();
+        assert!(
+            e.contains("phase 4 requested, but the image has 3 temporal positions"),
+            "{e}"
+        );
+        // Cut in the last phase's data (past a gzip stream's 8-byte trailer).
+        let cut = &bytes[..bytes.len() - 40];
+        let e = if name.ends_with(".mha") {
+            mha::parse(cut, Path::new(name), Some(3))
+        } else {
+            nrrd::parse(cut, Path::new(name), Some(3))
+        }
+        .unwrap_err()
+        .to_string();
+        let cut_words = ["truncated", "ends before", "incomplete"];
+        assert!(cut_words.iter().any(|w| e.contains(w)), "{name}: {e}");
+    }
+    // The ITK form names no space: taken as LPS, with a warning.
+    assert!(
+        nrrd::parse(&files[2].1, Path::new("t.nrrd"), Some(1))
+            .unwrap()
+            .warnings
+            .iter()
+            .any(|w| w.contains("taken as LPS")),
+    );
+    // Two axes that are not in space, and a time axis that moves in space, are refused.
+    let slicer = slicer.replace("ENC", "raw");
+    let two_lists = slicer
+        .replace("sizes: 3 4 3 2", "sizes: 3 4 3 2 1")
+        .replace("dimension: 4", "dimension: 5");
+    let e = nrrd::parse(two_lists.as_bytes(), Path::new("t.nrrd"), None).unwrap_err();
+    assert!(e.to_string().contains("NRRD dimension 5"), "{e}");
+    let none_twice = slicer.replace("(0.5,0,0)", "none");
+    let e = nrrd::parse(none_twice.as_bytes(), Path::new("t.nrrd"), None).unwrap_err();
+    assert!(e.to_string().contains("2 axes in space"), "{e}");
+    let mixed = mha
+        .replace("ENC", "False")
+        .replace("0 0 0 1\nOffset", "0.5 0 0 1\nOffset");
+    let e = mha::parse(mixed.as_bytes(), Path::new("t.mha"), None).unwrap_err();
+    assert!(e.to_string().contains("mixes space and time"), "{e}");
+}
+
 #[test]
 fn metaimage_local_and_compressed() {
     use std::io::Write;
@@ -646,7 +785,7 @@ fn metaimage_local_and_compressed() {
     let mut packed = header(true).into_bytes();
     packed.extend(z.finish().unwrap());
     for bytes in [raw, packed] {
-        let v = mha::parse(&bytes, Path::new("t.mha")).unwrap();
+        let v = mha::parse(&bytes, Path::new("t.mha"), None).unwrap();
         check_ramp(&v);
         assert_eq!(v.spacing, [0.5, 0.25, 2.0]);
         assert_eq!(v.origin, [1.0, 2.0, 3.0]);
@@ -793,7 +932,7 @@ fn a_4d_nifti_reads_the_phase_asked_for() {
 fn absurd_headers_are_refused_before_allocating() {
     let mut bytes = b"NRRD0004\ntype: short\ndimension: 3\nspace: LPS\nsizes: 512 512 1000000\nspace directions: (1,0,0) (0,1,0) (0,0,1)\nencoding: raw\n\n".to_vec();
     bytes.extend(ramp_i16());
-    let e = nrrd::parse(&bytes, Path::new("huge.nrrd"))
+    let e = nrrd::parse(&bytes, Path::new("huge.nrrd"), None)
         .unwrap_err()
         .to_string();
     assert!(e.contains("huge.nrrd") && e.contains("limit"), "{e}");
@@ -809,7 +948,7 @@ fn absurd_headers_are_refused_before_allocating() {
         );
         let mut bytes = text.into_bytes();
         bytes.extend(ramp_i16());
-        let e = nrrd::parse(&bytes, Path::new("bad.nrrd"))
+        let e = nrrd::parse(&bytes, Path::new("bad.nrrd"), None)
             .unwrap_err()
             .to_string();
         assert!(e.contains(says), "{dirs}: {e}");
@@ -861,9 +1000,11 @@ fn truncated_and_bit_flipped_headers_never_panic() {
             nifti::parse(b, p, None).map(drop)
         }),
         ("t.nrrd", nrrd_bytes, 160, |b, p| {
-            nrrd::parse(b, p).map(drop)
+            nrrd::parse(b, p, None).map(drop)
         }),
-        ("t.mha", mha_bytes, 220, |b, p| mha::parse(b, p).map(drop)),
+        ("t.mha", mha_bytes, 220, |b, p| {
+            mha::parse(b, p, None).map(drop)
+        }),
         ("t.dcm", tiny_dicom(&dicom_bytes), 1400, |b, p| {
             decode_dicom(b, p).map(drop)
         }),
