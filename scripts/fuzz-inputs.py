@@ -76,7 +76,7 @@ def seeds(d):
       + b"vn 0 0 -1\nvn 0 -1 0\nvn -1 0 0\nvn 1 1 1\nvt 0 0\nvt 1 0\nvt 0.5 1.5\n" + b"".join(
           f"usemtl {m}\nf {a+1}/1/{k+1} {b+1}/2/{k+1} {c+1}/3/{k+1}\n".encode()
           for k, ((a, b, c), m) in enumerate(zip(f, ["red", "glass", "red", "mirror"]))))
-    w("tm.mtl", b"newmtl red\nKd 0.8 0.1 0.1\nKs 0.3 0.3 0.3\nNs 30\nillum 2\nmap_Kd tm.png\n"
+    w("tm.mtl", b"newmtl red\nKd 0.8 0.1 0.1\nKs 0.3 0.3 0.3\nNs 30\nillum 2\nmap_Kd -s 2 1 -o 0.5 0 -clamp on -mm 0 1 tm.png\n"
       b"newmtl glass\nKd 0 0 0\nd 0.2\nNi 1.5\nillum 7\nnewmtl mirror\nKs 0.8 0.8 0.8\nillum 3\n")
     w("tm.png", png(3, 2, bytes(range(0, 240, 10))))
     w("tn.ply", (hdr("ascii").decode().replace(

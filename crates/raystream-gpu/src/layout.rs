@@ -160,9 +160,14 @@ pub struct TriUv {
 }
 
 /// Where the texture table (`textures` in render.wgsl, one array of u32) keeps its parts: the
-/// 256 words of [`raystream_io::SRGB_TO_LINEAR`] (f32 bits), then per texture its first texel's
-/// word, width and height (and a 0), then the texels, RGBA8 packed with R in the low byte.
+/// 256 words of [`raystream_io::SRGB_TO_LINEAR`] (f32 bits), then per texture
+/// [`TEXTURE_INFO_WORDS`]: its first texel's word, width, height, clamp (0 or 1), and the f32
+/// bits of its scale's u, v and offset's u, v; then the texels, RGBA8 packed with R in the low
+/// byte.
 pub const TEXTURE_INFO: u32 = 256;
+
+/// Words per texture in the texture table's description part (see [`TEXTURE_INFO`]).
+pub const TEXTURE_INFO_WORDS: u32 = 8;
 
 /// `Light` in render.wgsl, 32 bytes (w unused).
 #[repr(C)]

@@ -29,7 +29,7 @@ use raystream_scene::Scene;
 
 use crate::layout::{
     GpuLight, GpuMaterial, MediumParams, NO_TEXTURE, RayWork, RenderParams, ShadeTri, ShadowWork,
-    TEXTURE_INFO, TriUv, Vertex, counter,
+    TEXTURE_INFO, TEXTURE_INFO_WORDS, TriUv, Vertex, counter,
 };
 use crate::volume::{GpuVolume, volume_core_wgsl};
 use crate::{
@@ -61,7 +61,7 @@ pub const MAX_CONTRIBUTION: f32 = 255.0;
 pub fn render_wgsl() -> String {
     use counter::*;
     format!(
-        "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\nconst DEPTH: u32 = {DEPTH}u;\nconst NO_TEXTURE: u32 = {NO_TEXTURE}u;\nconst TEXTURE_INFO: u32 = {TEXTURE_INFO}u;\n\n{COMMON_WGSL}\n{RENDER_WGSL}\n{}\n{MEDIUM_WGSL}",
+        "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\nconst DEPTH: u32 = {DEPTH}u;\nconst NO_TEXTURE: u32 = {NO_TEXTURE}u;\nconst TEXTURE_INFO: u32 = {TEXTURE_INFO}u;\nconst TEXTURE_INFO_WORDS: u32 = {TEXTURE_INFO_WORDS}u;\n\n{COMMON_WGSL}\n{RENDER_WGSL}\n{}\n{MEDIUM_WGSL}",
         kdtree_wgsl(),
         volume_core_wgsl()
     )
@@ -311,7 +311,7 @@ const COUNTER_BYTES: u64 = counter::SLOTS as u64 * 4;
 /// The scene's textures as render.wgsl's `textures` reads them (layout::TEXTURE_INFO): the sRGB
 /// table, each texture's first texel, width and height, then the texels packed RGBA8.
 fn texture_table(scene: &Scene) -> Vec<u32> {
-    let infos = 4 * scene.textures.len() as u32;
+    let infos = TEXTURE_INFO_WORDS * scene.textures.len() as u32;
     let mut table: Vec<u32> = raystream_io::SRGB_TO_LINEAR
         .iter()
         .map(|v| v.to_bits())
@@ -323,7 +323,11 @@ fn texture_table(scene: &Scene) -> Vec<u32> {
             u32::try_from(first).unwrap_or(u32::MAX),
             t.width,
             t.height,
-            0,
+            t.clamp as u32,
+            t.scale.x.to_bits(),
+            t.scale.y.to_bits(),
+            t.offset.x.to_bits(),
+            t.offset.y.to_bits(),
         ]);
         first += t.texels.len() as u64;
     }

@@ -139,16 +139,27 @@ fn load_textures(shading: &mut MeshShading, dir: &Path) {
             ));
             continue;
         }
-        // `map_Kd` may carry options before the file name (`-s 1 1 1 wood.png`): the whole
-        // statement if it names a file, else its last word.
-        let whole = dir.join(name);
-        let file = if whole.is_file() {
-            whole
-        } else {
-            dir.join(name.split_whitespace().last().unwrap_or(name))
+        // A file whose name looks like options is taken whole.
+        let (map, ignored) = match dir.join(name).is_file() {
+            true => (TextureMap::plain(name), Vec::new()),
+            false => texture_options(name),
         };
+        let file = dir.join(map.file);
+        for option in ignored {
+            shading.warnings.push(format!(
+                "material '{}': texture option {option} is not applied",
+                m.name
+            ));
+        }
         match Texture::load(&file) {
-            Ok(t) => m.image = Some(t),
+            Ok(t) => {
+                m.image = Some(Texture {
+                    scale: map.scale,
+                    offset: map.offset,
+                    clamp: map.clamp,
+                    ..t
+                })
+            }
             Err(e) => shading.warnings.push(format!(
                 "material '{}': texture {}: {e}; its diffuse colour stands in",
                 m.name,
@@ -156,6 +167,74 @@ fn load_textures(shading: &mut MeshShading, dir: &Path) {
             )),
         }
     }
+}
+
+/// A `map_Kd` statement's file name and the options before it that raystream applies.
+#[derive(Debug, PartialEq)]
+struct TextureMap<'a> {
+    file: &'a str,
+    scale: Vec2,
+    offset: Vec2,
+    clamp: bool,
+}
+
+impl TextureMap<'_> {
+    fn plain(file: &str) -> TextureMap<'_> {
+        TextureMap {
+            file,
+            scale: Vec2::ONE,
+            offset: Vec2::ZERO,
+            clamp: false,
+        }
+    }
+}
+
+/// Reads `map_Kd`'s options (`-s u [v [w]]`, `-o u [v [w]]`, `-clamp on|off`; the others,
+/// such as `-mm`, `-t` or `-blendu`, are skipped with their arguments and returned to be
+/// warned of); the rest of the statement is the file name, spaces included.
+fn texture_options(statement: &str) -> (TextureMap<'_>, Vec<String>) {
+    let mut map = TextureMap::plain(statement.trim());
+    let mut ignored = Vec::new();
+    let mut rest = statement.trim_start();
+    loop {
+        let word = rest.split_whitespace().next().unwrap_or("");
+        if !word.starts_with('-') || word.parse::<f32>().is_ok() {
+            break;
+        }
+        let after = rest[word.len()..].trim_start();
+        // Up to three numbers follow -s, -o and -t; one word the others.
+        let numbers: Vec<f32> = after
+            .split_whitespace()
+            .map_while(|w| w.parse().ok())
+            .take(3)
+            .collect();
+        let mut skip = match word {
+            "-s" | "-o" | "-t" => numbers.len(),
+            "-mm" => 2,
+            _ => 1,
+        };
+        match (word, &numbers[..]) {
+            ("-s", [u, v, ..]) => map.scale = Vec2::new(*u, *v),
+            ("-s", [u]) => map.scale = Vec2::new(*u, 1.0),
+            ("-o", [u, v, ..]) => map.offset = Vec2::new(*u, *v),
+            ("-o", [u]) => map.offset = Vec2::new(*u, 0.0),
+            ("-clamp", _) => map.clamp = after.split_whitespace().next() == Some("on"),
+            _ => {
+                skip = skip.min(after.split_whitespace().count());
+                let args: Vec<&str> = after.split_whitespace().take(skip).collect();
+                ignored.push([word].into_iter().chain(args).collect::<Vec<_>>().join(" "));
+            }
+        }
+        rest = after;
+        for _ in 0..skip {
+            let w = rest.split_whitespace().next().unwrap_or("");
+            rest = rest.trim_start()[w.len()..].trim_start();
+        }
+    }
+    if !rest.is_empty() {
+        map.file = rest.trim_end();
+    }
+    (map, ignored)
 }
 
 /// A file's vertex normals (`None`: the file gives that vertex none) as unit vectors, the

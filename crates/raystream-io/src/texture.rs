@@ -3,9 +3,11 @@
 //! [`Texture::sample`] step for step, with the same sRGB table ([`SRGB_TO_LINEAR`]), so that the
 //! two back-ends shade a textured surface alike.
 //!
-//! The lookup: texture coordinates wrap (repeat); `v` grows upward, as OBJ's `vt` does (the
-//! image's first row is `v` = 1); texel centres are at half-integers; four texels are turned to
-//! linear light and blended bilinearly. There is no mipmapping, so a texture seen from far away
+//! The lookup: texture coordinates are scaled and offset (MTL's `-s` and `-o`: `uv·s + o`, as
+//! three.js's MTLLoader reads them), then wrap (repeat), or with `-clamp on` stop at the
+//! image's edges; `v` grows upward, as OBJ's `vt` does (the image's first row is `v` = 1);
+//! texel centres are at half-integers; four texels are turned to linear light and blended
+//! bilinearly. There is no mipmapping, so a texture seen from far away
 //! aliases rather than blurs.
 
 use std::path::Path;
@@ -15,12 +17,18 @@ use raystream_math::{Vec2, Vec3};
 /// The most texels a texture may have: 2²⁶ (8192², 256 MiB of RGBA8).
 pub const MAX_TEXELS: u64 = 1 << 26;
 
-/// An image's texels as sRGB RGBA8, row by row from its top.
+/// An image's texels as sRGB RGBA8, row by row from its top, and how a material maps it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Texture {
     pub width: u32,
     pub height: u32,
     pub texels: Vec<[u8; 4]>,
+    /// `-s u v`: texture coordinates are multiplied by this (1, 1 by default)…
+    pub scale: Vec2,
+    /// … then `-o u v` is added (0, 0 by default).
+    pub offset: Vec2,
+    /// `-clamp on`: coordinates outside [0, 1] take the edge's texels instead of repeating.
+    pub clamp: bool,
 }
 
 /// sRGB-encoded 8-bit values as linear light (IEC 61966-2-1), a table both renderers read.
@@ -60,6 +68,9 @@ impl Texture {
             width: img.width(),
             height: img.height(),
             texels: img.pixels().map(|p| p.0).collect(),
+            scale: Vec2::ONE,
+            offset: Vec2::ZERO,
+            clamp: false,
         })
     }
 
@@ -67,15 +78,28 @@ impl Texture {
     /// that is not finite reads as 0.
     pub fn sample(&self, uv: Vec2) -> Vec3 {
         let (w, h) = (self.width as i32, self.height as i32);
-        let wrap = |t: f32| if t.is_finite() { t - t.floor() } else { 0.0 };
-        let x = wrap(uv.x) * w as f32 - 0.5;
-        let y = (1.0 - wrap(uv.y)) * h as f32 - 0.5;
+        let clamp = self.clamp;
+        let uv = uv * self.scale + self.offset;
+        let fold = |t: f32| match t.is_finite() {
+            false => 0.0,
+            true if clamp => t.clamp(0.0, 1.0),
+            true => t - t.floor(),
+        };
+        let index = |i: i32, n: i32| {
+            if clamp {
+                i.clamp(0, n - 1)
+            } else {
+                i.rem_euclid(n)
+            }
+        };
+        let x = fold(uv.x) * w as f32 - 0.5;
+        let y = (1.0 - fold(uv.y)) * h as f32 - 0.5;
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = (x - x0, y - y0);
         let (i0, j0) = (x0 as i32, y0 as i32);
         let lut = &*SRGB_TO_LINEAR;
         let texel = |i: i32, j: i32| {
-            let t = self.texels[(j.rem_euclid(h) * w + i.rem_euclid(w)) as usize];
+            let t = self.texels[(index(j, h) * w + index(i, w)) as usize];
             Vec3::new(lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize])
         };
         let top = texel(i0, j0).lerp(texel(i0 + 1, j0), fx);
@@ -99,7 +123,41 @@ mod tests {
                 [0, 0, 255, 255],
                 [255, 255, 255, 255],
             ],
+            scale: Vec2::ONE,
+            offset: Vec2::ZERO,
+            clamp: false,
         }
+    }
+
+    #[test]
+    fn scale_offset_and_clamp_move_the_lookup() {
+        let plain = quad();
+        // Offset by half the image: each texel centre shows the diagonally opposite texel.
+        let moved = Texture {
+            offset: Vec2::splat(0.5),
+            ..quad()
+        };
+        assert_eq!(moved.sample(Vec2::new(0.25, 0.75)), Vec3::ONE);
+        assert_eq!(moved.sample(Vec2::new(0.75, 0.25)), Vec3::X);
+        // Three times as large, one back: the quarters' centres fall outside [0, 1]; repeating
+        // they wrap to the opposite texel, clamped they keep their own.
+        let big = |clamp| Texture {
+            scale: Vec2::splat(3.0),
+            offset: Vec2::splat(-1.0),
+            clamp,
+            ..quad()
+        };
+        for (uv, own, opposite) in [
+            (Vec2::new(0.25, 0.75), Vec3::X, Vec3::ONE),
+            (Vec2::new(0.75, 0.25), Vec3::ONE, Vec3::X),
+            (Vec2::new(0.25, 0.25), Vec3::Z, Vec3::Y),
+        ] {
+            assert_eq!(plain.sample(uv), own);
+            assert_eq!(big(true).sample(uv), own);
+            assert_eq!(big(false).sample(uv), opposite);
+        }
+        // Clamped, an edge's texel is not blended with the opposite edge's.
+        assert_eq!(big(true).sample(Vec2::new(0.0, 1.0)), Vec3::X);
     }
 
     #[test]

@@ -1433,7 +1433,7 @@ fn named_windows_are_their_numbers() {
 /// A folder with a 2 × 2 square OBJ (texture coordinates (0, 0) at its lower left corner to
 /// (1, 1) at its upper right), its MTL, a 2 × 2 texture (red, green over blue, white) and a
 /// scene that looks at it head-on in a parallel projection, lit from the camera.
-fn textured_square(name: &str, texture: bool) -> std::path::PathBuf {
+fn textured_square(name: &str, map: Option<&str>) -> std::path::PathBuf {
     let dir = tmp(&format!("textured-square-{name}"));
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(
@@ -1442,7 +1442,7 @@ fn textured_square(name: &str, texture: bool) -> std::path::PathBuf {
          vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl paint\nf 1/1 2/2 3/3 4/4\n",
     )
     .unwrap();
-    let map = if texture { "map_Kd quads.png\n" } else { "" };
+    let map = map.map_or(String::new(), |m| format!("map_Kd {m}\n"));
     std::fs::write(
         dir.join("square.mtl"),
         format!("newmtl paint\nKd 1 1 1\nKs 0 0 0\nillum 1\n{map}"),
@@ -1472,18 +1472,33 @@ fn textured_square(name: &str, texture: bool) -> std::path::PathBuf {
 
 /// `map_Kd` paints the square: each quarter of the picture shows its texel, u to the right and
 /// v up (the image's first row at the top), blended bilinearly only across the middle; the
-/// same square without the texture is white. On both devices.
+/// same square without the texture is white. Offset by half the image (`-o`), each quarter
+/// shows the opposite texel; three times as large and one back (`-s`, `-o`), the quarters'
+/// centres fall outside [0, 1] and wrap to the opposite texel, or with `-clamp on` keep their
+/// own. On both devices.
 #[test]
 fn obj_textures_are_applied_u_right_and_v_up() {
+    let (own, opposite, none) = ([0, 1, 2, 3], [3, 2, 1, 0], [4; 4]);
+    let white = [1, 1, 1];
+    let colours = [[1, 0, 0], [0, 1, 0], [0, 0, 1], white, white];
     for dev in devices() {
-        for texture in [true, false] {
-            let scene = textured_square(&format!("{dev}-{texture}"), texture);
+        for (k, (map, texels)) in [
+            (Some("quads.png"), own),
+            (None, none),
+            (Some("-o 0.5 0.5 quads.png"), opposite),
+            (Some("-s 3 3 -o -1 -1 quads.png"), opposite),
+            (Some("-clamp on -s 3 3 -o -1 -1 quads.png"), own),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let scene = textured_square(&format!("{dev}-{k}"), map);
             let out = scene.with_file_name("square.png");
             let o = run(&[
                 "render",
                 scene.to_str().unwrap(),
                 "--size",
-                "48x48",
+                "96x96",
                 "--spp",
                 "1",
                 "--quiet",
@@ -1494,22 +1509,20 @@ fn obj_textures_are_applied_u_right_and_v_up() {
             ]);
             assert!(o.status.success(), "{}", stderr(&o));
             let img = image::open(&out).unwrap().to_rgb8();
-            // The square spans 40 of the 48 pixels; each quarter's middle lies near its
+            // The square spans 80 of the 96 pixels; each quarter's middle lies near its
             // texel's centre, where a neighbour's bilinear weight is a few per cent.
-            for (x, y, want) in [
-                (14, 14, [1, 0, 0]),
-                (34, 14, [0, 1, 0]),
-                (14, 34, [0, 0, 1]),
-                (34, 34, [1, 1, 1]),
-            ] {
-                let want = if texture { want } else { [1, 1, 1] };
+            for ((x, y), texel) in [(28, 28), (68, 28), (28, 68), (68, 68)]
+                .into_iter()
+                .zip(texels)
+            {
+                let want = colours[texel];
                 let p = img.get_pixel(x, y).0;
                 for c in 0..3 {
                     let lit = p[c] > 200;
                     let dark = p[c] < 80;
                     assert!(
                         if want[c] == 1 { lit } else { dark },
-                        "{dev}, texture {texture}: pixel ({x}, {y}) is {p:?}, expected {want:?}"
+                        "{dev}, {map:?}: pixel ({x}, {y}) is {p:?}, expected {want:?}"
                     );
                 }
             }

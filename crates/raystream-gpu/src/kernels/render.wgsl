@@ -96,8 +96,8 @@ struct RenderParams {
 @group(1) @binding(3) var<storage, read> materials: array<Material>;
 @group(1) @binding(4) var<storage, read> lights: array<Light>;
 @group(1) @binding(5) var<storage, read> tri_uvs: array<TriUv>;
-// The sRGB table, each texture's (first texel, width, height, 0) from TEXTURE_INFO, the texels
-// (layout.rs says how).
+// The sRGB table, each texture's (first texel, width, height, clamp, scale, offset) from
+// TEXTURE_INFO, the texels (layout.rs says how).
 @group(1) @binding(6) var<storage, read> textures: array<u32>;
 
 @group(2) @binding(0) var<storage, read_write> counters: array<atomic<u32>, COUNTER_SLOTS>;
@@ -203,10 +203,18 @@ fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(0.0);
 }
 
-// A texel of texture `k` (first texel `base`, w × h), wrapping around, in linear light.
-fn texel(base: u32, w: i32, h: i32, i: i32, j: i32) -> vec3<f32> {
-    let ii = ((i % w) + w) % w;
-    let jj = ((j % h) + h) % h;
+// A texel index along an axis of n texels: repeating, or clamped to the edge.
+fn texel_index(i: i32, n: i32, cl: bool) -> i32 {
+    if cl {
+        return clamp(i, 0, n - 1);
+    }
+    return ((i % n) + n) % n;
+}
+
+// A texel of a texture (first texel `base`, w × h), in linear light.
+fn texel(base: u32, w: i32, h: i32, cl: bool, i: i32, j: i32) -> vec3<f32> {
+    let ii = texel_index(i, w, cl);
+    let jj = texel_index(j, h, cl);
     let t = textures[base + u32(jj * w + ii)];
     return vec3<f32>(
         bitcast<f32>(textures[t & 0xffu]),
@@ -215,9 +223,12 @@ fn texel(base: u32, w: i32, h: i32, i: i32, j: i32) -> vec3<f32> {
     );
 }
 
-fn wrap_unit(t: f32) -> f32 {
+fn fold_unit(t: f32, cl: bool) -> f32 {
     if not_finite(t) {
         return 0.0;
+    }
+    if cl {
+        return clamp(t, 0.0, 1.0);
     }
     return t - floor(t);
 }
@@ -226,23 +237,27 @@ fn lerp3(a: vec3<f32>, b: vec3<f32>, t: f32) -> vec3<f32> {
     return a + (b - a) * t;
 }
 
-// raystream_io::Texture::sample, step for step: texture `k`'s linear colour at `uv` (wrapping;
-// v up; bilinear between texel centres).
-fn texture_colour(k: u32, uv: vec2<f32>) -> vec3<f32> {
-    let info = TEXTURE_INFO + 4u * k;
+// raystream_io::Texture::sample, step for step: texture `k`'s linear colour at `uv` (scaled
+// and offset; repeating or clamped; v up; bilinear between texel centres).
+fn texture_colour(k: u32, uv_in: vec2<f32>) -> vec3<f32> {
+    let info = TEXTURE_INFO + TEXTURE_INFO_WORDS * k;
     let base = textures[info];
     let w = i32(textures[info + 1u]);
     let h = i32(textures[info + 2u]);
-    let x = wrap_unit(uv.x) * f32(w) - 0.5;
-    let y = (1.0 - wrap_unit(uv.y)) * f32(h) - 0.5;
+    let cl = textures[info + 3u] != 0u;
+    let scale = vec2<f32>(bitcast<f32>(textures[info + 4u]), bitcast<f32>(textures[info + 5u]));
+    let offset = vec2<f32>(bitcast<f32>(textures[info + 6u]), bitcast<f32>(textures[info + 7u]));
+    let uv = uv_in * scale + offset;
+    let x = fold_unit(uv.x, cl) * f32(w) - 0.5;
+    let y = (1.0 - fold_unit(uv.y, cl)) * f32(h) - 0.5;
     let x0 = floor(x);
     let y0 = floor(y);
     let fx = x - x0;
     let fy = y - y0;
     let i0 = i32(x0);
     let j0 = i32(y0);
-    let top = lerp3(texel(base, w, h, i0, j0), texel(base, w, h, i0 + 1, j0), fx);
-    let bottom = lerp3(texel(base, w, h, i0, j0 + 1), texel(base, w, h, i0 + 1, j0 + 1), fx);
+    let top = lerp3(texel(base, w, h, cl, i0, j0), texel(base, w, h, cl, i0 + 1, j0), fx);
+    let bottom = lerp3(texel(base, w, h, cl, i0, j0 + 1), texel(base, w, h, cl, i0 + 1, j0 + 1), fx);
     return lerp3(top, bottom, fy);
 }
 
