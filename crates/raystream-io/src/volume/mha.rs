@@ -146,7 +146,7 @@ pub(crate) fn parse(
         warnings.push("the voxel axes are not orthogonal".into());
     }
 
-    let nbytes = n * scalar.size() * count;
+    let nbytes = (n * scalar.size()).saturating_mul(count);
     let data_file = need("ElementDataFile")?;
     let detached;
     let payload: &[u8] = if data_file.eq_ignore_ascii_case("LOCAL") {

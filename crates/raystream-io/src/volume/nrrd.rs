@@ -136,7 +136,8 @@ pub(crate) fn parse(
 
     let line_skip: usize = get("line skip").map_or(Ok(0), |v| parse_num(v, path, "line skip"))?;
     let byte_skip: i64 = get("byte skip").map_or(Ok(0), |v| parse_num(v, path, "byte skip"))?;
-    let nbytes = n * scalar.size() * layout.count;
+    // A lying phase count saturates: the data then runs short, a truncation error.
+    let nbytes = (n * scalar.size()).saturating_mul(layout.count);
     let detached;
     let (payload, start): (&[u8], usize) = match get("data file").or_else(|| get("datafile")) {
         Some(name) => {

@@ -762,6 +762,28 @@ fn four_d_nrrd_and_metaimage_read_the_phase_asked_for() {
     let none_twice = slicer.replace("(0.5,0,0)", "none");
     let e = nrrd::parse(none_twice.as_bytes(), Path::new("t.nrrd"), None).unwrap_err();
     assert!(e.to_string().contains("2 axes in space"), "{e}");
+    // A phase count whose bytes pass 2⁶⁴: an error, not an overflow.
+    for (name, header) in [
+        (
+            "huge.nrrd",
+            "NRRD0004\ntype: double\ndimension: 4\nspace: LPS\nsizes: 1024 1024 1024 4000000000\nspace directions: (1,0,0) (0,1,0) (0,0,1) none\nencoding: raw\nbyte skip: -1\n\n",
+        ),
+        (
+            "huge.mha",
+            "NDims = 4\nDimSize = 1024 1024 1024 1000000000\nElementType = MET_DOUBLE\nHeaderSize = -1\nElementDataFile = LOCAL\n",
+        ),
+    ] {
+        let mut b = header.as_bytes().to_vec();
+        b.extend([0u8; 64]);
+        let e = if name.ends_with(".mha") {
+            mha::parse(&b, Path::new(name), Some(999_999_999))
+        } else {
+            nrrd::parse(&b, Path::new(name), Some(3_999_999_999))
+        }
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("truncated") || e.contains("ends before"), "{e}");
+    }
     let mixed = mha
         .replace("ENC", "False")
         .replace("0 0 0 1\nOffset", "0.5 0 0 1\nOffset");
