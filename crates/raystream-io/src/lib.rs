@@ -393,8 +393,7 @@ fn parse_obj(
     let libs = libs.unwrap_or_default();
     // tobj makes up a normal for a corner that names none (its neighbour's): the file's normals
     // count only where every corner names one.
-    let normals_given = obj_corners_all_name(bytes, "vn", 2);
-    let uvs_given = obj_corners_all_name(bytes, "vt", 1);
+    let [uvs_given, normals_given] = obj_corners_all_name(bytes);
     if normals_given == Some(false) {
         warnings.push(
             "some faces name no normals: the file's normals are left out, and the face-averaged ones used".into(),
@@ -544,28 +543,34 @@ fn mtl_colours_in_threes(bytes: &[u8]) -> Result<Vec<u8>, String> {
     Ok(out)
 }
 
-/// Whether every corner of every face of an OBJ names an element of the kind `statement`
-/// declares (`vn` at `slot` 2 of `v/vt/vn`, `vt` at slot 1); `None` when the file has no such
-/// statement at all.
-fn obj_corners_all_name(bytes: &[u8], statement: &str, slot: usize) -> Option<bool> {
-    let mut any = false;
-    let mut all_corners = true;
+/// For texture coordinates (`vt`, slot 1 of `v/vt/vn`) and normals (`vn`, slot 2), in that
+/// order: whether every corner of every face names one; `None` when the file declares none at
+/// all. One pass over the file answers both.
+fn obj_corners_all_name(bytes: &[u8]) -> [Option<bool>; 2] {
+    let mut any = [false; 2];
+    let mut all_corners = [true; 2];
     for line in bytes.split(|&b| b == b'\n') {
         let line = line.trim_ascii_start();
-        if !line.starts_with(b"f") && !line.starts_with(statement.as_bytes()) {
+        if ![&b"f"[..], b"vt", b"vn"].iter().any(|k| line.starts_with(k)) {
             continue;
         }
         let line = String::from_utf8_lossy(line);
         let mut words = line.split_whitespace();
         match words.next() {
-            Some(w) if w == statement => any = true,
+            Some("vt") => any[0] = true,
+            Some("vn") => any[1] = true,
             Some("f") => {
-                all_corners &= words.all(|c| c.split('/').nth(slot).is_some_and(|n| !n.is_empty()))
+                for corner in words {
+                    let mut slots = corner.split('/').skip(1);
+                    for named in &mut all_corners {
+                        *named &= slots.next().is_some_and(|n| !n.is_empty());
+                    }
+                }
             }
             _ => {}
         }
     }
-    any.then_some(all_corners)
+    std::array::from_fn(|k| any[k].then_some(all_corners[k]))
 }
 
 impl TriMesh {
