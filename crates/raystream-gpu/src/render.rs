@@ -323,11 +323,11 @@ fn texture_table(scene: &Scene) -> Vec<u32> {
             u32::try_from(first).unwrap_or(u32::MAX),
             t.width,
             t.height,
-            t.clamp as u32,
-            t.scale.x.to_bits(),
-            t.scale.y.to_bits(),
-            t.offset.x.to_bits(),
-            t.offset.y.to_bits(),
+            t.mapping.clamp as u32,
+            t.mapping.scale.x.to_bits(),
+            t.mapping.scale.y.to_bits(),
+            t.mapping.offset.x.to_bits(),
+            t.mapping.offset.y.to_bits(),
         ]);
         first += t.texels.len() as u64;
     }

@@ -22,7 +22,7 @@ pub use raystream_math::{Aabb, Vec2, Vec3};
 pub use secondary_capture::{
     CaptureInfo, CapturePixels, HU_PADDING, ImagePlane, new_uid, write_secondary_capture,
 };
-pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture};
+pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping};
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, ValueUnit, Volume, VolumeError, VolumeFormat,
     VolumeSelect, is_volume_path, list_dicom_series, load_volume,
@@ -140,11 +140,11 @@ fn load_textures(shading: &mut MeshShading, dir: &Path) {
             continue;
         }
         // A file whose name looks like options is taken whole.
-        let (map, ignored) = match dir.join(name).is_file() {
-            true => (TextureMap::plain(name), Vec::new()),
+        let (file, mapping, ignored) = match dir.join(name).is_file() {
+            true => (name, TextureMapping::default(), Vec::new()),
             false => texture_options(name),
         };
-        let file = dir.join(map.file);
+        let file = dir.join(file);
         for option in ignored {
             shading.warnings.push(format!(
                 "material '{}': texture option {option} is not applied",
@@ -152,14 +152,7 @@ fn load_textures(shading: &mut MeshShading, dir: &Path) {
             ));
         }
         match Texture::load(&file) {
-            Ok(t) => {
-                m.image = Some(Texture {
-                    scale: map.scale,
-                    offset: map.offset,
-                    clamp: map.clamp,
-                    ..t
-                })
-            }
+            Ok(t) => m.image = Some(Texture { mapping, ..t }),
             Err(e) => shading.warnings.push(format!(
                 "material '{}': texture {}: {e}; its diffuse colour stands in",
                 m.name,
@@ -169,72 +162,47 @@ fn load_textures(shading: &mut MeshShading, dir: &Path) {
     }
 }
 
-/// A `map_Kd` statement's file name and the options before it that raystream applies.
-#[derive(Debug, PartialEq)]
-struct TextureMap<'a> {
-    file: &'a str,
-    scale: Vec2,
-    offset: Vec2,
-    clamp: bool,
-}
-
-impl TextureMap<'_> {
-    fn plain(file: &str) -> TextureMap<'_> {
-        TextureMap {
-            file,
-            scale: Vec2::ONE,
-            offset: Vec2::ZERO,
-            clamp: false,
-        }
-    }
-}
-
 /// Reads `map_Kd`'s options (`-s u [v [w]]`, `-o u [v [w]]`, `-clamp on|off`; the others,
 /// such as `-mm`, `-t` or `-blendu`, are skipped with their arguments and returned to be
 /// warned of); the rest of the statement is the file name, spaces included.
-fn texture_options(statement: &str) -> (TextureMap<'_>, Vec<String>) {
-    let mut map = TextureMap::plain(statement.trim());
+fn texture_options(statement: &str) -> (&str, TextureMapping, Vec<String>) {
+    let words: Vec<&str> = statement.split_whitespace().collect();
+    let mut mapping = TextureMapping::default();
     let mut ignored = Vec::new();
-    let mut rest = statement.trim_start();
-    loop {
-        let word = rest.split_whitespace().next().unwrap_or("");
-        if !word.starts_with('-') || word.parse::<f32>().is_ok() {
-            break;
-        }
-        let after = rest[word.len()..].trim_start();
-        // Up to three numbers follow -s, -o and -t; one word the others.
-        let numbers: Vec<f32> = after
-            .split_whitespace()
-            .map_while(|w| w.parse().ok())
-            .take(3)
-            .collect();
-        let mut skip = match word {
+    let mut i = 0;
+    while let Some(&word) = words
+        .get(i)
+        .filter(|w| w.starts_with('-') && w.parse::<f32>().is_err())
+    {
+        let args = &words[i + 1..];
+        // Up to three numbers follow -s, -o and -t; two -mm; one word the others.
+        let numbers: Vec<f32> = args.iter().map_while(|w| w.parse().ok()).take(3).collect();
+        let takes = match word {
             "-s" | "-o" | "-t" => numbers.len(),
             "-mm" => 2,
             _ => 1,
-        };
+        }
+        .min(args.len());
         match (word, &numbers[..]) {
-            ("-s", [u, v, ..]) => map.scale = Vec2::new(*u, *v),
-            ("-s", [u]) => map.scale = Vec2::new(*u, 1.0),
-            ("-o", [u, v, ..]) => map.offset = Vec2::new(*u, *v),
-            ("-o", [u]) => map.offset = Vec2::new(*u, 0.0),
-            ("-clamp", _) => map.clamp = after.split_whitespace().next() == Some("on"),
-            _ => {
-                skip = skip.min(after.split_whitespace().count());
-                let args: Vec<&str> = after.split_whitespace().take(skip).collect();
-                ignored.push([word].into_iter().chain(args).collect::<Vec<_>>().join(" "));
-            }
+            ("-s", [u, v, ..]) => mapping.scale = Vec2::new(*u, *v),
+            ("-s", [u]) => mapping.scale = Vec2::new(*u, 1.0),
+            ("-o", [u, v, ..]) => mapping.offset = Vec2::new(*u, *v),
+            ("-o", [u]) => mapping.offset = Vec2::new(*u, 0.0),
+            ("-clamp", _) => mapping.clamp = args.first() == Some(&"on"),
+            _ => ignored.push(words[i..=i + takes].join(" ")),
         }
-        rest = after;
-        for _ in 0..skip {
-            let w = rest.split_whitespace().next().unwrap_or("");
-            rest = rest.trim_start()[w.len()..].trim_start();
+        i += 1 + takes;
+    }
+    // The file name runs from its first word to the end, inner spaces kept (the word's offset
+    // in the statement, from the pointers of the same string); options and nothing after them
+    // leave the whole statement, a file that will not be found.
+    let file = match words.get(i) {
+        Some(first) => {
+            statement[first.as_ptr() as usize - statement.as_ptr() as usize..].trim_end()
         }
-    }
-    if !rest.is_empty() {
-        map.file = rest.trim_end();
-    }
-    (map, ignored)
+        None => statement.trim(),
+    };
+    (file, mapping, ignored)
 }
 
 /// A file's vertex normals (`None`: the file gives that vertex none) as unit vectors, the
@@ -551,7 +519,10 @@ fn obj_corners_all_name(bytes: &[u8]) -> [Option<bool>; 2] {
     let mut all_corners = [true; 2];
     for line in bytes.split(|&b| b == b'\n') {
         let line = line.trim_ascii_start();
-        if ![&b"f"[..], b"vt", b"vn"].iter().any(|k| line.starts_with(k)) {
+        if ![&b"f"[..], b"vt", b"vn"]
+            .iter()
+            .any(|k| line.starts_with(k))
+        {
             continue;
         }
         let line = String::from_utf8_lossy(line);

@@ -328,31 +328,36 @@ fn obj_textures_and_their_coordinates() {
 /// arguments and named; the file name is what follows, spaces and all.
 #[test]
 fn texture_options_are_read_or_named() {
-    let (m, ignored) = texture_options("  wood grain.png ");
-    assert_eq!(m, TextureMap::plain("wood grain.png"));
+    let (file, mapping, ignored) = texture_options("  wood grain.png ");
+    assert_eq!(
+        (file, mapping),
+        ("wood grain.png", TextureMapping::default())
+    );
     assert!(ignored.is_empty());
-    let (m, ignored) =
+    let (file, mapping, ignored) =
         texture_options("-s 2 3 1 -blendu off -o 0.5 -0.25 -mm 0 1 -clamp on -t 1 1 wood.png");
     assert_eq!(
-        m,
-        TextureMap {
-            file: "wood.png",
-            scale: Vec2::new(2.0, 3.0),
-            offset: Vec2::new(0.5, -0.25),
-            clamp: true,
-        }
+        (file, mapping),
+        (
+            "wood.png",
+            TextureMapping {
+                scale: Vec2::new(2.0, 3.0),
+                offset: Vec2::new(0.5, -0.25),
+                clamp: true,
+            }
+        )
     );
     assert_eq!(ignored, ["-blendu off", "-mm 0 1", "-t 1 1"]);
     // One number: u alone; a file name that is a number stays the file.
-    let (m, _) = texture_options("-o 0.5 -s 4 7.png");
+    let (file, mapping, _) = texture_options("-o 0.5 -s 4 7.png");
     assert_eq!(
-        (m.file, m.offset, m.scale),
+        (file, mapping.offset, mapping.scale),
         ("7.png", Vec2::new(0.5, 0.0), Vec2::new(4.0, 1.0))
     );
     // Options and nothing after them: the statement is the (missing) file, never a panic.
     for s in ["-clamp", "-s", "-mm 1", "-o x"] {
-        let (m, _) = texture_options(s);
-        assert!(!m.file.is_empty(), "{s}");
+        let (file, _, _) = texture_options(s);
+        assert!(!file.is_empty(), "{s}");
     }
 }
 

@@ -23,12 +23,28 @@ pub struct Texture {
     pub width: u32,
     pub height: u32,
     pub texels: Vec<[u8; 4]>,
+    pub mapping: TextureMapping,
+}
+
+/// How a material lays its texture on the surface: MTL's `map_Kd` options.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TextureMapping {
     /// `-s u v`: texture coordinates are multiplied by this (1, 1 by default)…
     pub scale: Vec2,
     /// … then `-o u v` is added (0, 0 by default).
     pub offset: Vec2,
     /// `-clamp on`: coordinates outside [0, 1] take the edge's texels instead of repeating.
     pub clamp: bool,
+}
+
+impl Default for TextureMapping {
+    fn default() -> Self {
+        TextureMapping {
+            scale: Vec2::ONE,
+            offset: Vec2::ZERO,
+            clamp: false,
+        }
+    }
 }
 
 /// sRGB-encoded 8-bit values as linear light (IEC 61966-2-1), a table both renderers read.
@@ -68,9 +84,7 @@ impl Texture {
             width: img.width(),
             height: img.height(),
             texels: img.pixels().map(|p| p.0).collect(),
-            scale: Vec2::ONE,
-            offset: Vec2::ZERO,
-            clamp: false,
+            mapping: TextureMapping::default(),
         })
     }
 
@@ -78,8 +92,12 @@ impl Texture {
     /// that is not finite reads as 0.
     pub fn sample(&self, uv: Vec2) -> Vec3 {
         let (w, h) = (self.width as i32, self.height as i32);
-        let clamp = self.clamp;
-        let uv = uv * self.scale + self.offset;
+        let TextureMapping {
+            scale,
+            offset,
+            clamp,
+        } = self.mapping;
+        let uv = uv * scale + offset;
         let fold = |t: f32| match t.is_finite() {
             false => 0.0,
             true if clamp => t.clamp(0.0, 1.0),
@@ -123,9 +141,18 @@ mod tests {
                 [0, 0, 255, 255],
                 [255, 255, 255, 255],
             ],
-            scale: Vec2::ONE,
-            offset: Vec2::ZERO,
-            clamp: false,
+            mapping: TextureMapping::default(),
+        }
+    }
+
+    fn mapped(scale: f32, offset: f32, clamp: bool) -> Texture {
+        Texture {
+            mapping: TextureMapping {
+                scale: Vec2::splat(scale),
+                offset: Vec2::splat(offset),
+                clamp,
+            },
+            ..quad()
         }
     }
 
@@ -133,20 +160,12 @@ mod tests {
     fn scale_offset_and_clamp_move_the_lookup() {
         let plain = quad();
         // Offset by half the image: each texel centre shows the diagonally opposite texel.
-        let moved = Texture {
-            offset: Vec2::splat(0.5),
-            ..quad()
-        };
+        let moved = mapped(1.0, 0.5, false);
         assert_eq!(moved.sample(Vec2::new(0.25, 0.75)), Vec3::ONE);
         assert_eq!(moved.sample(Vec2::new(0.75, 0.25)), Vec3::X);
         // Three times as large, one back: the quarters' centres fall outside [0, 1]; repeating
         // they wrap to the opposite texel, clamped they keep their own.
-        let big = |clamp| Texture {
-            scale: Vec2::splat(3.0),
-            offset: Vec2::splat(-1.0),
-            clamp,
-            ..quad()
-        };
+        let big = |clamp| mapped(3.0, -1.0, clamp);
         for (uv, own, opposite) in [
             (Vec2::new(0.25, 0.75), Vec3::X, Vec3::ONE),
             (Vec2::new(0.75, 0.25), Vec3::ONE, Vec3::X),
