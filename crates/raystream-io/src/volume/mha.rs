@@ -170,15 +170,8 @@ pub(crate) fn parse(
             .map_err(|_| VolumeError::invalid(path, format!("bad MetaImage HeaderSize {h:?}")))?,
         None => 0,
     };
-    let (layout, what) = (
-        PhaseLayout {
-            inner: n,
-            count,
-            outer: 1,
-        },
-        "the MetaImage voxel data",
-    );
-    let index = phase.index - 1;
+    let layout = PhaseLayout::time_last(n, count);
+    let (index, what) = (phase.index - 1, "the MetaImage voxel data");
     let data_bytes = if compressed {
         let mut r = flate2::read::ZlibDecoder::new(payload);
         read_phase(&mut r, layout, index, scalar.size(), path, what)?

@@ -249,11 +249,7 @@ fn build(
     }
     skip_n(r, offset as u64 - hdr_len as u64, path)?;
     // The volumes follow each other: those before the phase read are skipped, not kept.
-    let layout = PhaseLayout {
-        inner: n,
-        count: phase.count,
-        outer: 1,
-    };
+    let layout = PhaseLayout::time_last(n, phase.count);
     let what = "the NIfTI voxel data";
     let bytes = read_phase(r, layout, phase.index - 1, scalar.size(), path, what)?;
     // scl_slope 0 or NaN means "no scaling" (NIfTI-1 standard).

@@ -118,7 +118,7 @@ pub(crate) fn parse(
             count: sizes[p],
             outer: sizes[p + 1..].iter().product(),
         },
-        None => PhaseLayout::single(n),
+        None => PhaseLayout::time_last(n, 1),
     };
     if layout.count == 0 || layout.count > u32::MAX as usize {
         return Err(VolumeError::invalid(

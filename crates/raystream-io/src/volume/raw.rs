@@ -69,11 +69,11 @@ pub(crate) struct PhaseLayout {
 }
 
 impl PhaseLayout {
-    /// A 3-D payload of `n` values.
-    pub fn single(n: usize) -> PhaseLayout {
+    /// `count` volumes of `n` values one after another (time last); one is a 3-D payload.
+    pub fn time_last(n: usize, count: usize) -> PhaseLayout {
         PhaseLayout {
             inner: n,
-            count: 1,
+            count,
             outer: 1,
         }
     }
@@ -107,18 +107,16 @@ pub(crate) fn read_phase(
     };
     let mut r = std::io::BufReader::with_capacity(1 << 16, r);
     let mut out = Vec::with_capacity(run.saturating_mul(layout.outer).min(64 << 20));
-    // Runs of a few values (a list axis first) are read a whole group of phases at a time.
     let group_bytes = bytes(layout.count);
-    let mut group = vec![
-        0u8;
-        if group_bytes <= 1 << 16 {
-            group_bytes as usize
-        } else {
-            0
+    if group_bytes <= 1 << 16 {
+        // Runs of a few values (a list axis first): a whole group of phases at a time.
+        let mut group = vec![0u8; group_bytes as usize];
+        for _ in 0..layout.outer {
+            r.read_exact(&mut group).map_err(|_| truncated())?;
+            out.extend_from_slice(&group[index * run..(index + 1) * run]);
         }
-    ];
-    for _ in 0..layout.outer {
-        if group.is_empty() {
+    } else {
+        for _ in 0..layout.outer {
             skip_n(&mut r, bytes(index), path).map_err(|_| truncated())?;
             let kept = out.len();
             (&mut r)
@@ -129,9 +127,6 @@ pub(crate) fn read_phase(
                 return Err(truncated());
             }
             skip_n(&mut r, bytes(layout.count - 1 - index), path).map_err(|_| truncated())?;
-        } else {
-            r.read_exact(&mut group).map_err(|_| truncated())?;
-            out.extend_from_slice(&group[index * run..(index + 1) * run]);
         }
     }
     Ok(out)
