@@ -11,7 +11,8 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary; an OBJ with normals
         ../shared (JPEG-LS and 12-bit JPEG among them) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (meshes also shaded; volumes also `--mode` mip, minip, average, slice or
         dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
-        must name the file.
+        must name the file. Paths (text and 3D Slicer markups) are mutated too and rendered as a
+        curved planar reformation (--path) through an intact volume.
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
         absurd ones (0, -1, ±inf, nan, 1e30 ...), rendered on the CPU and the GPU: either both
         refuse it (exit 2, naming the file) or rays.py imgdiff finds them within the GPU tests'
@@ -111,6 +112,11 @@ def seeds(d):
           b"space origin: (-10,20,30)\n\n" + np.stack([a, a + 100], axis=-1).tobytes())
     except ImportError:
         print("no SimpleITK: volumes other than DICOM left out", file=sys.stderr)
+    # Paths for curved planar reformation through v.nii (LPS mm), as text and Slicer markups.
+    path = [(-9.0, 20.5, 29.0), (-8.0, 22.0, 27.0), (-7.5, 23.5, 24.0)]
+    w("c.txt", "".join(f"{x} {y} {z}\n" for x, y, z in path).encode())
+    w("c.mrk.json", json.dumps({"markups": [{"type": "Curve", "coordinateSystem": "LPS",
+                                             "controlPoints": [{"position": p} for p in path]}]}).encode())
     try:
         w("mf.dcm", enhanced_ct())
     except ImportError:
@@ -210,7 +216,7 @@ def fuzz_files(work, n, device):
         d = os.path.join(work, f"case{i}")
         os.makedirs(d)
         p = os.path.join(d, s)
-        text = s.endswith((".obj", ".stl", ".ply", ".mha", ".mhd", ".nhdr", ".nrrd"))
+        text = s.endswith((".obj", ".stl", ".ply", ".mha", ".mhd", ".nhdr", ".nrrd", ".txt", ".json"))
         data = open(os.path.join(sd, s), "rb").read()
         if s == "tm.obj":
             # The OBJ, its material library or its texture, mutated; the others as they are.
@@ -230,6 +236,21 @@ def fuzz_files(work, n, device):
             open(p, "wb").write(mutate(data, text))
         if s in ("v.mhd", "v.nhdr"):
             shutil.copy(os.path.join(sd, "v.raw"), d)
+        if s.startswith("c."):
+            # A curved reformation along the mutated path, through the intact volume.
+            vol = os.path.join(sd, "v.nii")
+            mode = random.choice([["slice"], ["mip", "--slab", "2"], ["average", "--slab", "5"]])
+            out = (["--turntable", "2", "--format", "exr", "-o", os.path.join(d, "frames")]
+                   if random.random() < 0.25 else ["-o", os.path.join(d, "o.exr")])
+            why = os.path.exists(vol) and run(
+                ["render", vol, "--path", p, "--mode"] + mode + ["--size", "8x16", "-q",
+                 "--device", device, "--orbit", str(random.choice([0, 45, 90]))] + out, s)
+            if why:
+                bad += 1
+                print(f"FAIL {p}: {why}")
+            else:
+                shutil.rmtree(d)
+            continue
         # A 4-D image's phases: one picked (maybe one it lacks), or all as a cine.
         four_d = s.startswith("v4")
         phase = ["--phase", random.choice("123")] if four_d and random.random() < 0.5 else []

@@ -24,6 +24,7 @@ use raystream_scene::{Camera, Projection, VOLUME_VIEW, View};
 use raystream_volume::TransferFunction;
 
 use crate::Image;
+use crate::cpr::CurvedPlane;
 
 /// What a ray computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -722,13 +723,13 @@ pub fn windowed(v: f32, win: (f32, f32)) -> f32 {
 
 /// Renders `vol` (HU) with `tf` (dvr mode; `None` elsewhere is fine) over `opt.background`
 /// (with `opt.hu_values`, a windowed mode's pixels without a sample are NaN).
-pub fn render_volume(
+pub fn render_volume<'a>(
     vol: &Volume,
     tf: &TransferFunction,
     opt: &DvrOptions,
-    cam: &Camera,
+    sight: impl Into<Sight<'a>>,
 ) -> (Image, DvrStats) {
-    let (rays, stats) = march_frame(vol, tf, opt, cam);
+    let (rays, stats) = march_frame(vol, tf, opt, sight.into());
     let background = if opt.hu_values && opt.mode.is_windowed() {
         Vec3::NAN
     } else {
@@ -748,13 +749,13 @@ pub fn render_volume(
 /// Renders `vol` with no background, in one pass: the premultiplied light each pixel sends
 /// (C) and its opacity α = 1 − T (T: the fraction of what lies behind that it lets through),
 /// so that over any background B the pixel is C + (1 − α)·B, exactly [`render_volume`]'s.
-pub fn render_volume_rgba(
+pub fn render_volume_rgba<'a>(
     vol: &Volume,
     tf: &TransferFunction,
     opt: &DvrOptions,
-    cam: &Camera,
+    sight: impl Into<Sight<'a>>,
 ) -> (Image, Vec<f32>, DvrStats) {
-    let (rays, stats) = march_frame(vol, tf, opt, cam);
+    let (rays, stats) = march_frame(vol, tf, opt, sight.into());
     let film = Image {
         width: opt.width,
         height: opt.height,
@@ -763,15 +764,78 @@ pub fn render_volume_rgba(
     (film, rays.iter().map(|c| 1.0 - c.transmit).collect(), stats)
 }
 
+/// Where a frame's rays come from: a camera's pixels, or a curved plane's (a CPR: each
+/// pixel's ray runs along the plane's normal through the `slab` about its point).
+#[derive(Clone, Copy)]
+pub enum Sight<'a> {
+    Camera(&'a Camera),
+    Curved(&'a CurvedPlane),
+}
+
+impl<'a> From<&'a Camera> for Sight<'a> {
+    fn from(cam: &'a Camera) -> Self {
+        Sight::Camera(cam)
+    }
+}
+
+impl<'a> From<&'a CurvedPlane> for Sight<'a> {
+    fn from(plane: &'a CurvedPlane) -> Self {
+        Sight::Curved(plane)
+    }
+}
+
+impl Sight<'_> {
+    /// The clip planes its rays are cut to (`opt.planes_for` a camera; a curved plane's slab is
+    /// its rays' own reach, so only the user's planes).
+    pub fn planes(&self, opt: &DvrOptions, vol: &Volume) -> [Option<(Vec3, f32)>; 2] {
+        match self {
+            Sight::Camera(cam) => opt.planes_for(vol, cam),
+            Sight::Curved(_) => opt.clip_planes,
+        }
+    }
+
+    /// Pixel `pixel`'s ray and the plane a slice samples on it (with how far the ray reaches,
+    /// mm): a camera's ray and the plane through `slice_at` facing it; a curved plane's ray
+    /// from half the slab (`half_slab`, mm) before the pixel's point, along the normal there,
+    /// to half the slab beyond, and the plane through that point.
+    fn ray(&self, opt: &DvrOptions, pixel: u32, slice_at: Vec3, half_slab: f32) -> (Ray3, Slice) {
+        let (x, y) = (pixel % opt.width, pixel / opt.width);
+        let jitter = start_jitter(pixel);
+        match self {
+            Sight::Camera(cam) => {
+                let r = cam.ray(x as f32 + 0.5, y as f32 + 0.5, opt.width, opt.height);
+                let (o, d) = (scene_to_lps(r.origin), scene_to_lps(r.dir));
+                let slice = Slice {
+                    at: slice_at,
+                    normal: scene_to_lps(cam.fwd),
+                    reach: f32::INFINITY,
+                };
+                (Ray3 { o, d, jitter }, slice)
+            }
+            Sight::Curved(plane) => {
+                let (p, n) = plane.point(x, y);
+                let slice = Slice {
+                    at: p,
+                    normal: n,
+                    reach: 2.0 * half_slab,
+                };
+                let o = p - half_slab * n;
+                (Ray3 { o, d: n, jitter }, slice)
+            }
+        }
+    }
+}
+
 /// Every pixel's ray, marched.
 fn march_frame(
     vol: &Volume,
     tf: &TransferFunction,
     opt: &DvrOptions,
-    cam: &Camera,
+    sight: Sight,
 ) -> (Vec<Marched>, DvrStats) {
+    let half_slab = 0.5 * opt.slab.unwrap_or(0.0);
     let opt = &DvrOptions {
-        clip_planes: opt.planes_for(vol, cam),
+        clip_planes: sight.planes(opt, vol),
         slab: None,
         ..*opt
     };
@@ -781,28 +845,17 @@ fn march_frame(
     );
     let step = opt.step_for(vol);
     let win = opt.shown_window();
-    let light = (opt.shadows && opt.mode == DvrMode::Dvr).then(|| key_light(cam));
-    let grid = light.map(|l| LightGrid::new(&marcher, tf, l, opt.shadow_step_for(vol)));
-    // A slice's plane: through its point, facing the camera.
-    let slice = Slice {
-        at: opt.slice_point(vol),
-        normal: scene_to_lps(cam.fwd),
+    let light = match sight {
+        Sight::Camera(cam) if opt.shadows && opt.mode == DvrMode::Dvr => Some(key_light(cam)),
+        _ => None,
     };
+    let grid = light.map(|l| LightGrid::new(&marcher, tf, l, opt.shadow_step_for(vol)));
+    let slice_at = opt.slice_point(vol);
     let rays: Vec<Marched> = (0..opt.width * opt.height)
         .into_par_iter()
         .with_min_len(64)
         .map(|pixel| {
-            let (x, y) = (
-                (pixel % opt.width) as f32 + 0.5,
-                (pixel / opt.width) as f32 + 0.5,
-            );
-            let r = cam.ray(x, y, opt.width, opt.height);
-            let (o, d) = (scene_to_lps(r.origin), scene_to_lps(r.dir));
-            let ray = Ray3 {
-                o,
-                d,
-                jitter: start_jitter(pixel),
-            };
+            let (ray, slice) = sight.ray(opt, pixel, slice_at, half_slab);
             let light = light.zip(grid.as_ref());
             march(&marcher, tf, opt, (win, step, slice), light, ray)
         })
@@ -944,11 +997,13 @@ fn phong(tf: &TransferFunction, n: Vec3, d: Vec3, l: Vec3) -> (f32, f32) {
 /// Gradient magnitude (HU/mm) at which shading is fully on.
 const FULL_SHADING_GRADIENT: f32 = 100.0;
 
-/// The plane of a slice: a point and its normal (LPS).
-#[derive(Clone, Copy)]
+/// The plane of a slice: a point and its normal (LPS), and how far along its ray a sample may
+/// lie (mm; a curved plane's slab, else unbounded).
+#[derive(Clone, Copy, Debug)]
 struct Slice {
     at: Vec3,
     normal: Vec3,
+    reach: f32,
 }
 
 /// One ray: colour, samples taken, samples skipped; `win`, `step` and `slice` resolved from
@@ -965,7 +1020,7 @@ fn march(
     let (o_idx, d_idx) = (m.index_of(o), m.index_dir(d));
     let Some((t0, t1)) = m
         .clip(o_idx, d_idx)
-        .and_then(|(t0, t1)| clip_interval(opt, o, d, t0, t1))
+        .and_then(|(t0, t1)| clip_interval(opt, o, d, t0, t1.min(slice.reach)))
     else {
         return miss;
     };

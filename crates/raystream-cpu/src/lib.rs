@@ -18,6 +18,7 @@
 //! depend on them.
 
 mod aov;
+pub mod cpr;
 pub mod dvr;
 mod image_out;
 pub mod medium;

@@ -328,10 +328,30 @@ pub struct DvrParams {
     /// 1: premultiplied RGBA, no background: the pixels hold C and the second half of the
     /// pixel buffer the opacity 1 − T (byte 296).
     pub premultiplied: u32,
-    pub pad: u32,
+    /// 1: the pixels' rays come from the curved plane's rows (`cpr_rows`, [`GpuCprRow`]), not
+    /// the camera (byte 300).
+    pub curved: u32,
     /// A point of a slice's plane, LPS mm (byte 304); the plane faces `fwd`.
     pub slice_at: [f32; 3],
-    pub pad3: u32,
+    /// A curved plane's slab: half its thickness, mm, 0 for the thin plane (byte 316).
+    pub slab_half: f32,
+}
+
+/// `CprRow` in dvr.wgsl, 48 bytes: one image row of a curved planar reformation
+/// (`raystream_cpu::cpr::CprRow`, LPS).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuCprRow {
+    /// The path's point at the row's arc length, mm (byte 0).
+    pub centre: [f32; 3],
+    /// The pixels' side, mm (byte 12).
+    pub pixel_mm: f32,
+    /// Unit direction from pixel to pixel along the row (byte 16).
+    pub lateral: [f32; 3],
+    pub pad0: u32,
+    /// Unit direction of the row's rays (byte 32).
+    pub normal: [f32; 3],
+    pub pad1: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
@@ -346,4 +366,5 @@ const _: () = assert!(std::mem::size_of::<TriUv>() == 24);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
 const _: () = assert!(std::mem::size_of::<DvrParams>() == 320);
+const _: () = assert!(std::mem::size_of::<GpuCprRow>() == 48);
 const _: () = assert!(std::mem::size_of::<MediumParams>() == 128);

@@ -1079,11 +1079,21 @@ fn dvr_wgsl_params_match_rust() {
         ("parallel", offset_of!(DvrParams, parallel)),
         ("hu_values", offset_of!(DvrParams, hu_values)),
         ("premultiplied", offset_of!(DvrParams, premultiplied)),
-        ("pad2", offset_of!(DvrParams, pad)),
+        ("curved", offset_of!(DvrParams, curved)),
         ("slice_at", offset_of!(DvrParams, slice_at)),
-        ("pad3", offset_of!(DvrParams, pad3)),
+        ("slab_half", offset_of!(DvrParams, slab_half)),
     ];
     check_struct(&module, "DvrParams", size_of::<DvrParams>(), &names);
+    use layout::GpuCprRow;
+    let names = [
+        ("centre", offset_of!(GpuCprRow, centre)),
+        ("pixel_mm", offset_of!(GpuCprRow, pixel_mm)),
+        ("lateral", offset_of!(GpuCprRow, lateral)),
+        ("pad0", offset_of!(GpuCprRow, pad0)),
+        ("normal", offset_of!(GpuCprRow, normal)),
+        ("pad1", offset_of!(GpuCprRow, pad1)),
+    ];
+    check_struct(&module, "CprRow", size_of::<GpuCprRow>(), &names);
 }
 
 /// GPU volume rendering against the CPU reference on the abdomen CT, every mode: mean absolute

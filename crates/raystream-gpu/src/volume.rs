@@ -7,14 +7,15 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use raystream_cpu::Image;
-use raystream_cpu::dvr::{BRICK, DvrMode, DvrOptions, LightGrid, Marcher, key_light, scene_to_lps};
+use raystream_cpu::dvr::{
+    BRICK, DvrMode, DvrOptions, LightGrid, Marcher, Sight, key_light, scene_to_lps,
+};
 use raystream_io::Volume;
 use raystream_math::Vec3;
-use raystream_scene::Camera;
 use raystream_volume::TransferFunction;
 use wgpu::util::DeviceExt;
 
-use crate::layout::DvrParams;
+use crate::layout::{DvrParams, GpuCprRow};
 use crate::render::COMMON_WGSL;
 use crate::{GpuContext, GpuError, Pixels, Timer, read_elapsed_ms, read_words};
 
@@ -140,6 +141,8 @@ pub struct GpuVolumeRenderer<'a> {
     pack_pipeline: wgpu::ComputePipeline,
     light_values: wgpu::Buffer,
     light_dims: [u32; 3],
+    /// The curved plane rows' binding of frames a camera casts (one placeholder row).
+    no_rows: wgpu::Buffer,
     /// The last frame's output buffers, kept for the next frame of the same size or smaller.
     frame: Mutex<Option<FrameBuffers>>,
     /// Milliseconds spent uploading the volume and building the pipeline.
@@ -192,6 +195,11 @@ impl<'a> GpuVolumeRenderer<'a> {
             4 * light_dims.iter().product::<usize>() as u64,
             wgpu::BufferUsages::empty(),
         )?;
+        let no_rows = ctx.storage(
+            "no curved plane",
+            bytemuck::bytes_of(&GpuCprRow::default()),
+            wgpu::BufferUsages::empty(),
+        )?;
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
@@ -206,44 +214,50 @@ impl<'a> GpuVolumeRenderer<'a> {
             pack_pipeline,
             light_values,
             light_dims: light_dims.map(|n| n as u32),
+            no_rows,
             frame: Mutex::new(None),
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }
 
-    /// Renders one frame with `cam` (the scene frame of `raystream_cpu::dvr::volume_camera`).
-    pub fn render(&self, opt: &DvrOptions, cam: &Camera) -> Result<(Image, GpuDvrTimes), GpuError> {
-        let (pixels, _, times) = self.run(opt, cam, Output::Linear)?;
+    /// Renders one frame seen by `sight`: a camera (the scene frame of
+    /// `raystream_cpu::dvr::volume_camera`) or a curved plane.
+    pub fn render<'s>(
+        &self,
+        opt: &DvrOptions,
+        sight: impl Into<Sight<'s>>,
+    ) -> Result<(Image, GpuDvrTimes), GpuError> {
+        let (pixels, _, times) = self.run(opt, sight.into(), Output::Linear)?;
         Ok((pixels.into_linear(), times))
     }
 
     /// Renders one frame with no background, in one pass, as
     /// `raystream_cpu::dvr::render_volume_rgba`: the premultiplied light of each pixel and its
     /// opacity 1 − T.
-    pub fn render_rgba(
+    pub fn render_rgba<'s>(
         &self,
         opt: &DvrOptions,
-        cam: &Camera,
+        sight: impl Into<Sight<'s>>,
     ) -> Result<(Image, Vec<f32>, GpuDvrTimes), GpuError> {
-        let (pixels, alpha, times) = self.run(opt, cam, Output::Premultiplied)?;
+        let (pixels, alpha, times) = self.run(opt, sight.into(), Output::Premultiplied)?;
         Ok((pixels.into_linear(), alpha, times))
     }
 
     /// Renders one frame as a viewer shows it: 8-bit sRGB, 3 bytes a pixel (as
     /// [`Image::to_srgb8`]), converted on the GPU so that a fifth of the bytes come back.
-    pub fn render_srgb8(
+    pub fn render_srgb8<'s>(
         &self,
         opt: &DvrOptions,
-        cam: &Camera,
+        sight: impl Into<Sight<'s>>,
     ) -> Result<(Vec<u8>, GpuDvrTimes), GpuError> {
-        let (pixels, _, times) = self.run(opt, cam, Output::Srgb8)?;
+        let (pixels, _, times) = self.run(opt, sight.into(), Output::Srgb8)?;
         Ok((pixels.into_srgb8(), times))
     }
 
     fn run(
         &self,
         opt: &DvrOptions,
-        cam: &Camera,
+        sight: Sight,
         output: Output,
     ) -> Result<(Pixels, Vec<f32>, GpuDvrTimes), GpuError> {
         let srgb8 = output == Output::Srgb8;
@@ -255,12 +269,35 @@ impl<'a> GpuVolumeRenderer<'a> {
         let (w, l) = opt.shown_window();
         let s = self.tf.shading;
         let v3 = |v: Vec3| v.to_array();
-        let planes: Vec<(Vec3, f32)> = opt
-            .planes_for(self.vol, cam)
+        let planes: Vec<(Vec3, f32)> = sight
+            .planes(opt, self.vol)
             .iter()
             .flatten()
             .copied()
             .collect();
+        // A curved plane has no camera: its rows cast the rays (the kernel reads no camera
+        // field then; a placeholder fills them).
+        let (cam, rows) = match sight {
+            Sight::Camera(cam) => (*cam, None),
+            Sight::Curved(plane) => {
+                let rows: Vec<GpuCprRow> = plane
+                    .rows
+                    .iter()
+                    .map(|r| GpuCprRow {
+                        centre: v3(r.centre),
+                        pixel_mm: plane.pixel_mm,
+                        lateral: v3(r.lateral),
+                        normal: v3(r.normal),
+                        ..Default::default()
+                    })
+                    .collect();
+                (
+                    raystream_scene::Camera::look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 60.0),
+                    Some(rows),
+                )
+            }
+        };
+        let curved = matches!(sight, Sight::Curved(_));
         let params = DvrParams {
             eye: v3(scene_to_lps(cam.eye)),
             tan_y: cam.tan_y,
@@ -292,8 +329,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             background: v3(opt.background),
             color_count: self.tf.color.len() as u32,
             shading: [s.ambient, s.diffuse, s.specular, s.power],
-            light: v3(key_light(cam)),
-            shadows: (opt.shadows && opt.mode == DvrMode::Dvr) as u32,
+            light: v3(key_light(&cam)),
+            shadows: (opt.shadows && opt.mode == DvrMode::Dvr && !curved) as u32,
             crop_min: v3(opt.crop.map_or(Vec3::ZERO, |c| c[0])),
             crop: opt.crop.is_some() as u32,
             crop_max: v3(opt.crop.map_or(Vec3::ZERO, |c| c[1])),
@@ -304,10 +341,23 @@ impl<'a> GpuVolumeRenderer<'a> {
             parallel: cam.parallel,
             hu_values: (opt.hu_values && opt.mode.is_windowed()) as u32,
             premultiplied: premultiplied as u32,
-            pad: 0,
+            curved: curved as u32,
             slice_at: v3(opt.slice_point(self.vol)),
-            pad3: 0,
+            slab_half: if curved {
+                0.5 * opt.slab.unwrap_or(0.0)
+            } else {
+                0.0
+            },
         };
+        let row_buf = match &rows {
+            Some(rows) => Some(ctx.storage(
+                "curved plane rows",
+                bytemuck::cast_slice(rows),
+                wgpu::BufferUsages::empty(),
+            )?),
+            None => None,
+        };
+        let row_buf = row_buf.as_ref().unwrap_or(&self.no_rows);
         let param_buf = ctx
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -373,7 +423,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             6 => pixels.as_entire_binding(),
             7 => self.light_values.as_entire_binding(),
             8 => packed.as_entire_binding(),
-            _ => sum.as_entire_binding(),
+            9 => sum.as_entire_binding(),
+            _ => row_buf.as_entire_binding(),
         };
         let group = |label, pipeline: &wgpu::ComputePipeline, bindings: &[u32]| {
             let entries: Vec<_> = bindings
@@ -389,7 +440,7 @@ impl<'a> GpuVolumeRenderer<'a> {
                 entries: &entries,
             })
         };
-        let bind = group("dvr", &self.pipeline, &[0, 1, 2, 3, 4, 5, 6, 7]);
+        let bind = group("dvr", &self.pipeline, &[0, 1, 2, 3, 4, 5, 6, 7, 10]);
         let light_bind =
             shadows.then(|| group("light grid", &self.light_pipeline, &[0, 1, 2, 3, 5, 7]));
         let mut enc = ctx

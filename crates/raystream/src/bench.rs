@@ -481,8 +481,8 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
             }
             pb.finish_and_clear();
             let estimated = stats.is_none();
-            let stats =
-                stats.unwrap_or_else(|| crate::dvr::estimate_stats(&volume, &tf, &opt, &cam0));
+            let stats = stats
+                .unwrap_or_else(|| crate::dvr::estimate_stats(&volume, &tf, &opt, (&cam0).into()));
             let frame_min = frame_ms.iter().cloned().fold(f64::INFINITY, f64::min);
             let frame = median(&mut frame_ms);
             let kernel = (!kernel_ms.is_empty()).then(|| median(&mut kernel_ms));

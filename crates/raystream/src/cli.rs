@@ -295,6 +295,14 @@ pub struct RenderArgs {
     /// written as OUTPUT/frame_000.png … (-o names the folder); with --format dcm, one series.
     #[arg(long, requires = "mode", conflicts_with_all = ["turntable", "slices", "phase"])]
     pub cine: bool,
+    /// With --mode slice, or --mode mip/minip/average and a --slab: a curved planar
+    /// reformation (CPR) along the path in FILE (3D Slicer markups .mrk.json, or text: x y z
+    /// per line, LPS mm): the path straightened down the image's height, its first point at
+    /// the top, square pixels (the path's length over the height), the cut facing --view and
+    /// turned about the path by --orbit AZ (--turntable N: a rotational CPR; --slices N: N
+    /// cross-sections perpendicular to the path, evenly along it).
+    #[arg(long, value_name = "FILE", requires = "mode", conflicts_with_all = ["cine", "slice_at", "labels"])]
+    pub path: Option<PathBuf>,
     /// With --slices: the planes' spacing in mm (default: the pixel size, for cubic voxels).
     #[arg(long, value_name = "MM", requires = "slices")]
     pub slice_step: Option<f32>,

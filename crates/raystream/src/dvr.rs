@@ -4,12 +4,11 @@
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, render_volume, render_volume_rgba};
+use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, Sight, render_volume, render_volume_rgba};
 use raystream_cpu::{Image, ImageFormat};
 use raystream_gpu::GpuVolumeRenderer;
 use raystream_io::Volume;
 use raystream_math::Vec3;
-use raystream_scene::Camera;
 use raystream_volume::{TfPreset, TransferFunction};
 
 use crate::cli::{Threshold, VolumeLook, WindowArg};
@@ -158,13 +157,20 @@ impl<'a> Renderer<'a> {
         })
     }
 
-    /// One frame with `cam`, as `format` writes it: for an EXR, the windowed modes' film (their
-    /// HU values with `opt.hu_values`), or dvr's and iso's premultiplied RGBA (one pass).
-    pub fn frame(&self, opt: &DvrOptions, cam: &Camera, format: ImageFormat) -> Result<Frame> {
+    /// One frame seen by `sight` (a camera or a curved plane), as `format` writes it: for an
+    /// EXR, the windowed modes' film (their HU values with `opt.hu_values`), or dvr's and iso's
+    /// premultiplied RGBA (one pass).
+    pub fn frame<'s>(
+        &self,
+        opt: &DvrOptions,
+        sight: impl Into<Sight<'s>>,
+        format: ImageFormat,
+    ) -> Result<Frame> {
+        let sight: Sight = sight.into();
         let t = Instant::now();
         let hu = opt.mode.is_windowed() && opt.hu_values;
         if let (Renderer::Gpu(g), ImageFormat::Png, false) = (self, format, hu) {
-            let (rgb, times) = g.render_srgb8(opt, cam)?;
+            let (rgb, times) = g.render_srgb8(opt, sight)?;
             let picture = Picture::Srgb8 {
                 rgb,
                 width: opt.width,
@@ -183,11 +189,11 @@ impl<'a> Renderer<'a> {
             // pixel's light C and opacity 1 − T, so that over a background B it is C + T·B.
             let (film, alpha, kernel_ms, samples, stats) = match self {
                 Renderer::Gpu(g) => {
-                    let (film, alpha, times) = g.render_rgba(opt, cam)?;
+                    let (film, alpha, times) = g.render_rgba(opt, sight)?;
                     (film, alpha, times.kernel_gpu_ms, times.samples, None)
                 }
                 Renderer::Cpu { volume, tf } => {
-                    let (film, alpha, stats) = render_volume_rgba(volume, tf, opt, cam);
+                    let (film, alpha, stats) = render_volume_rgba(volume, tf, opt, sight);
                     (film, alpha, None, stats.samples, Some(stats))
                 }
             };
@@ -199,7 +205,7 @@ impl<'a> Renderer<'a> {
                 stats,
             });
         }
-        let (film, kernel_ms, samples, stats) = self.film(opt, cam)?;
+        let (film, kernel_ms, samples, stats) = self.film(opt, sight)?;
         let picture = if hu {
             Picture::Values(film)
         } else {
@@ -219,15 +225,15 @@ impl<'a> Renderer<'a> {
     fn film(
         &self,
         opt: &DvrOptions,
-        cam: &Camera,
+        sight: Sight,
     ) -> Result<(Image, Option<f64>, u64, Option<DvrStats>)> {
         Ok(match self {
             Renderer::Gpu(g) => {
-                let (film, times) = g.render(opt, cam)?;
+                let (film, times) = g.render(opt, sight)?;
                 (film, times.kernel_gpu_ms, times.samples, None)
             }
             Renderer::Cpu { volume, tf } => {
-                let (film, stats) = render_volume(volume, tf, opt, cam);
+                let (film, stats) = render_volume(volume, tf, opt, sight);
                 (film, None, stats.samples, Some(stats))
             }
         })
@@ -241,14 +247,18 @@ pub fn estimate_stats(
     volume: &Volume,
     tf: &TransferFunction,
     opt: &DvrOptions,
-    cam: &Camera,
+    sight: Sight,
 ) -> DvrStats {
+    // A curved plane's rows are fixed to its image's size: it is counted as it is.
+    if let Sight::Curved(_) = sight {
+        return render_volume(volume, tf, opt, sight).1;
+    }
     let small = DvrOptions {
         width: opt.width.min(256),
         height: opt.height.min(256),
         ..*opt
     };
-    let (_, s) = render_volume(volume, tf, &small, cam);
+    let (_, s) = render_volume(volume, tf, &small, sight);
     let scale = (opt.width as f64 * opt.height as f64) / (small.width as f64 * small.height as f64);
     let up = |n: u64| (n as f64 * scale) as u64;
     DvrStats {

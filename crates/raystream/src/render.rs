@@ -14,7 +14,8 @@ use raystream_cpu::{
 use raystream_gpu::GpuRenderer;
 use raystream_scene::{Camera, PatientView, Projection, Scene, VOLUME_VIEW, View};
 
-use raystream_cpu::dvr::{DvrMode, DvrOptions, volume_camera_from};
+use raystream_cpu::cpr::CurvedPlane;
+use raystream_cpu::dvr::{DvrMode, DvrOptions, Sight, volume_camera_from};
 
 use crate::cli::{FrameFormat, RenderArgs};
 use crate::common::{
@@ -108,20 +109,89 @@ fn label(a: &RenderArgs, picture: &mut Picture, cam: &Camera, patient: bool) -> 
     }
 }
 
+/// What a frame of a direct volume rendering was seen by: a camera, or the curved plane of a
+/// curved planar reformation.
+enum Seen {
+    Camera(Camera),
+    Curved(Box<CurvedPlane>),
+}
+
+impl Seen {
+    fn sight(&self) -> Sight<'_> {
+        match self {
+            Seen::Camera(cam) => Sight::Camera(cam),
+            Seen::Curved(plane) => Sight::Curved(plane),
+        }
+    }
+}
+
 /// What a DICOM picture of a direct volume rendering says ([`label`]'s, with the window it was
-/// shown in and, for a slice or slab seen square on, its plane).
+/// shown in and, for a slice or slab seen square on, its plane). A curved reformation's rows
+/// follow the path, so it names no patient orientation and no plane.
 fn volume_dicom(
     a: &RenderArgs,
     picture: &mut Picture,
-    cam: &Camera,
+    seen: &Seen,
     opt: &DvrOptions,
     volume: &raystream_io::Volume,
 ) -> DicomOut {
-    DicomOut {
-        window: Some(opt.shown_window()),
-        plane: image_plane(opt, volume, cam),
-        ..label(a, picture, cam, true)
+    let window = Some(opt.shown_window());
+    match seen {
+        Seen::Camera(cam) => DicomOut {
+            window,
+            plane: image_plane(opt, volume, cam),
+            ..label(a, picture, cam, true)
+        },
+        Seen::Curved(_) => DicomOut {
+            orientation: None,
+            annotated: false,
+            description: crate::common::options_in_words(a.input.as_deref(), &a.output),
+            series: None,
+            window,
+            plane: None,
+        },
     }
+}
+
+/// `--path FILE`: the curved plane along the path for `opt`'s image, its cut facing `view` and
+/// turned `turn` degrees about the path; a warning where the path leaves the volume, an error
+/// where it misses it.
+fn curved_plane(
+    file: &Path,
+    points: &[raystream_math::DVec3],
+    volume: &raystream_io::Volume,
+    opt: &DvrOptions,
+    (view, turn): (View, f32),
+) -> Result<CurvedPlane> {
+    let right = raystream_cpu::dvr::scene_to_lps(view.basis().col(0)).as_dvec3();
+    let plane = CurvedPlane::new(points, right, turn as f64, opt.width, opt.height)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?;
+    let inside = plane.rows_inside(volume);
+    if inside == 0 {
+        let [x, y, z] = points[0].to_array();
+        bail!(
+            "{}: the path lies outside the volume (its first point ({x:.1}, {y:.1}, {z:.1}) mm LPS; `info` gives the volume's extent): coordinates in LPS mm, or a markups file naming RAS",
+            file.display()
+        );
+    }
+    Ok(plane)
+}
+
+/// A curved reformation in words, for the summary and an EXR's comments (ASCII, as an EXR's
+/// comments must be).
+fn curved_words(file: &Path, plane: &CurvedPlane, opt: &DvrOptions) -> String {
+    format!(
+        "; a curved planar reformation along {} ({} points, {:.1} mm) straightened: row y at arc length (y + 0.5) * {p:.5} mm from its first point, column x (x + 0.5 - {}) * {p:.5} mm across it{}",
+        file.display(),
+        plane.points,
+        plane.length_mm,
+        0.5 * plane.width as f32,
+        match opt.slab {
+            Some(t) => format!(", a slab {t} mm thick about the curved plane"),
+            None => String::new(),
+        },
+        p = plane.pixel_mm,
+    )
 }
 
 /// `--labels` needs a patient (a CT volume, its bones, a scene with one) and a PNG.
@@ -243,6 +313,15 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         (false, _) => image_format(&a.output)?,
     };
     check_labels(a, true, format)?;
+    check_path(a, mode)?;
+    // A curved reformation's path, read before the volume: a bad one fails at once.
+    let curve = match &a.path {
+        Some(file) => Some(Curve {
+            file,
+            points: raystream_io::read_curve(file)?,
+        }),
+        None => None,
+    };
     // A cine reads its phases one by one, the first here (no warning that it chose one).
     let mut select = a.pick.select();
     if a.cine {
@@ -262,10 +341,21 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
     let view = base_view(a, VOLUME_VIEW, true)?;
     if let Some(n) = a.turntable {
-        return turntable(a, &renderer, &volume, &opt, view, n, format);
+        return turntable(
+            a,
+            (&renderer, &volume),
+            &opt,
+            (view, curve.as_ref()),
+            n,
+            format,
+        );
     }
     let [az, el] = orbit_angles(a);
+    let seen = seen_from(a, &volume, &opt, (view, curve.as_ref()), az)?;
     let cam = volume_camera_from(&volume, aspect, view.orbit(az, el), projection(a));
+    if let (Some(n), Some(curve)) = (a.slices, &curve) {
+        return path_sections(a, (&renderer, &volume), &opt, (view, curve), n, format);
+    }
     if let Some(n) = a.slices {
         return slice_series(a, &renderer, &volume, &opt, &cam, n, format);
     }
@@ -293,23 +383,26 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let mut kernel_ms = Vec::new();
     let mut last = None;
     for _ in 0..a.repeat {
-        let f = renderer.frame(&opt, &cam, format)?;
+        let f = renderer.frame(&opt, seen.sight(), format)?;
         frame_ms.push(f.frame_ms);
         kernel_ms.extend(f.kernel_ms);
         last = Some(f);
     }
     pb.finish_and_clear();
     let mut frame = last.expect("at least one frame");
-    let slab = slab_words(&opt, &volume);
-    let dicom = volume_dicom(a, &mut frame.picture, &cam, &opt, &volume);
+    let slab = match (&seen, &a.path) {
+        (Seen::Curved(plane), Some(file)) => curved_words(file, plane, &opt),
+        _ => slab_words(&opt, &volume),
+    };
+    let dicom = volume_dicom(a, &mut frame.picture, &seen, &opt, &volume);
     frame
         .picture
-        .save(&a.output, &exr_comment(&opt, &volume, &cam), &dicom)?;
+        .save(&a.output, &exr_comment(a, &opt, &volume, &seen), &dicom)?;
     if !a.quiet {
         let gpu = frame.stats.is_none();
         let stats = frame
             .stats
-            .unwrap_or_else(|| dvr::estimate_stats(&volume, &tf, &opt, &cam));
+            .unwrap_or_else(|| dvr::estimate_stats(&volume, &tf, &opt, seen.sight()));
         let median = median_of(&mut frame_ms);
         eprintln!(
             "raystream: wrote {} ({}x{}, --mode {}{}{}{slab}, step {:.3} mm) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples, {} skipped as empty ({:.0} %{}){}, {:.1} M samples/s",
@@ -359,10 +452,57 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     Ok(())
 }
 
+/// `--path`: a curved reformation samples the curved plane (`--mode slice`) or projects a slab
+/// about it (mip, minip, average with `--slab`), turned about the path by `--orbit AZ` alone.
+fn check_path(a: &RenderArgs, mode: DvrMode) -> Result<()> {
+    let Some(file) = &a.path else {
+        return Ok(());
+    };
+    let file = file.display();
+    match mode {
+        DvrMode::Slice => {}
+        DvrMode::Mip | DvrMode::MinIp | DvrMode::Average if a.look.slab.is_some() => {}
+        DvrMode::Mip | DvrMode::MinIp | DvrMode::Average => bail!(
+            "--path {file} with --mode {}: give the slab's thickness about the curved plane with --slab MM (or --mode slice for the plane itself)",
+            mode.name()
+        ),
+        DvrMode::Dvr | DvrMode::Iso => bail!(
+            "--path {file}: a curved reformation is --mode slice, or mip, minip, average with --slab (not --mode {})",
+            mode.name()
+        ),
+    }
+    if let Some([_, el]) = a.orbit
+        && el != 0.0
+    {
+        bail!("--path {file} --orbit AZ,{el}: a curved reformation turns about its path (AZ) only");
+    }
+    Ok(())
+}
+
 /// What an EXR of a direct rendering holds, for its comments: the channels, the slab and, in a
 /// parallel projection, the pixel size.
-fn exr_comment(opt: &DvrOptions, volume: &raystream_io::Volume, cam: &Camera) -> String {
+fn exr_comment(
+    a: &RenderArgs,
+    opt: &DvrOptions,
+    volume: &raystream_io::Volume,
+    seen: &Seen,
+) -> String {
     let mode = opt.mode;
+    let cam = match seen {
+        Seen::Camera(cam) => cam,
+        Seen::Curved(plane) => {
+            let what = match mode {
+                DvrMode::Slice => "HU on the curved plane".to_string(),
+                _ => format!("the {} of the HU values along each ray", mode.name()),
+            };
+            let file = a.path.as_deref().unwrap_or(Path::new("?"));
+            return format!(
+                "Y: {what} (no window); NaN: outside the volume or its crop{}; pixels {} mm square",
+                curved_words(file, plane, opt),
+                plane.pixel_mm
+            );
+        }
+    };
     let what = if opt.hu_values && mode == DvrMode::Slice {
         let [x, y, z] = opt.slice_point(volume).to_array();
         let [nx, ny, nz] = raystream_cpu::dvr::scene_to_lps(cam.fwd).to_array();
@@ -391,22 +531,95 @@ fn exr_comment(opt: &DvrOptions, volume: &raystream_io::Volume, cam: &Camera) ->
 /// superior axis unless the view is from above or below), from `--orbit`'s angles on.
 fn turntable(
     a: &RenderArgs,
-    renderer: &dvr::Renderer,
-    volume: &raystream_io::Volume,
+    (renderer, volume): (&dvr::Renderer, &raystream_io::Volume),
     opt: &DvrOptions,
-    view: View,
+    look: (View, Option<&Curve>),
     n: u32,
     format: ImageFormat,
 ) -> Result<()> {
-    let ([az, el], projection) = (orbit_angles(a), projection(a));
+    let [az, _] = orbit_angles(a);
     frame_series(a, volume, n, format, "turntable", |i| {
-        let cam = volume_camera_from(
+        let seen = seen_from(a, volume, opt, look, az + 360.0 * i as f32 / n as f32)?;
+        Ok((renderer.frame(opt, seen.sight(), format)?, seen, *opt))
+    })
+}
+
+/// `render --mode slice --path FILE --slices N -o DIR` (or a projection's `--slab`): N
+/// cross-sections of the path, each perpendicular to it at the arc length (i + ½)·L/N, centred
+/// on it at the volume's finest spacing, the CPR's lateral direction to the right: the planes
+/// a vessel's diameter is measured on, as reformatted CT images with their planes.
+fn path_sections(
+    a: &RenderArgs,
+    (renderer, volume): (&dvr::Renderer, &raystream_io::Volume),
+    opt: &DvrOptions,
+    (view, curve): (View, &Curve),
+    n: u32,
+    format: ImageFormat,
+) -> Result<()> {
+    if opt.mode != DvrMode::Slice && opt.slab.is_none() {
+        bail!(
+            "--path --slices cuts the path across with --mode slice, or a --slab (not --mode {} alone)",
+            opt.mode.name()
+        );
+    }
+    if a.slice_step.is_some() {
+        bail!(
+            "--path --slices spaces its {n} cross-sections evenly along the path; --slice-step is for planes facing the camera"
+        );
+    }
+    let [az, _] = orbit_angles(a);
+    let stations = DvrOptions {
+        width: 1,
+        height: n,
+        ..*opt
+    };
+    let stations = curved_plane(curve.file, &curve.points, volume, &stations, (view, az))?;
+    let pixel = volume.spacing.iter().cloned().fold(f64::INFINITY, f64::min) as f32;
+    let extent = volume.dims.map(|d| d as f64);
+    let reach = (0..3)
+        .map(|i| (extent[i] * volume.spacing[i]).powi(2))
+        .sum::<f64>()
+        .sqrt() as f32;
+    frame_series(a, volume, n, format, "slices", |i| {
+        let cam = stations.section_camera(i, 0.5 * pixel * opt.height as f32, reach);
+        let opt = DvrOptions {
+            slice_at: Some(stations.rows[i as usize].centre),
+            ..*opt
+        };
+        Ok((renderer.frame(&opt, &cam, format)?, Seen::Camera(cam), opt))
+    })
+}
+
+/// `--path FILE`'s points, read once.
+struct Curve<'a> {
+    file: &'a Path,
+    points: Vec<raystream_math::DVec3>,
+}
+
+/// What sees the volume from `view` turned `az` degrees (`--orbit`'s elevation kept): the
+/// framing camera, or with a `curve` the curved plane along it.
+fn seen_from(
+    a: &RenderArgs,
+    volume: &raystream_io::Volume,
+    opt: &DvrOptions,
+    (view, curve): (View, Option<&Curve>),
+    az: f32,
+) -> Result<Seen> {
+    let [_, el] = orbit_angles(a);
+    Ok(match curve {
+        Some(c) => Seen::Curved(Box::new(curved_plane(
+            c.file,
+            &c.points,
+            volume,
+            opt,
+            (view, az),
+        )?)),
+        None => Seen::Camera(volume_camera_from(
             volume,
             opt.width as f32 / opt.height as f32,
-            view.orbit(az + 360.0 * i as f32 / n as f32, el),
-            projection,
-        );
-        Ok((renderer.frame(opt, &cam, format)?, cam, *opt))
+            view.orbit(az, el),
+            projection(a),
+        )),
     })
 }
 
@@ -443,7 +656,7 @@ fn slice_series(
             slice_at: Some(centre + normal * offset),
             ..*opt
         };
-        Ok((renderer.frame(&opt, cam, format)?, *cam, opt))
+        Ok((renderer.frame(&opt, cam, format)?, Seen::Camera(*cam), opt))
     })
 }
 
@@ -469,7 +682,7 @@ fn cine(
     let mut warnings = Vec::new();
     frame_series(a, first, n as u32, format, "cine", |i| {
         if i == 0 {
-            return Ok((renderer.frame(opt, cam, format)?, *cam, *opt));
+            return Ok((renderer.frame(opt, cam, format)?, Seen::Camera(*cam), *opt));
         }
         let select = raystream_io::VolumeSelect {
             phase: Some(i as usize + 1),
@@ -498,7 +711,7 @@ fn cine(
             warnings.push(format!("phase {}: {w}", i + 1));
         }
         let frame = dvr::Renderer::new(backend, &volume, tf)?.frame(opt, cam, format)?;
-        Ok((frame, *cam, *opt))
+        Ok((frame, Seen::Camera(*cam), *opt))
     })?;
     if !a.quiet {
         for w in warnings {
@@ -508,7 +721,7 @@ fn cine(
     Ok(())
 }
 
-/// Writes `n` frames, the i-th `frame(i)`'s, rendered with the camera and options it returns
+/// Writes `n` frames, the i-th `frame(i)`'s, rendered with the sight and options it returns
 /// too, into the folder `-o` names (frame_000.png …, or .exr, or .dcm: then one series,
 /// numbered from 1); `volume` is where the frames' DICOM descriptions come from.
 fn frame_series(
@@ -517,7 +730,7 @@ fn frame_series(
     n: u32,
     format: ImageFormat,
     what: &str,
-    mut frame: impl FnMut(u32) -> Result<(dvr::Frame, Camera, DvrOptions)>,
+    mut frame: impl FnMut(u32) -> Result<(dvr::Frame, Seen, DvrOptions)>,
 ) -> Result<()> {
     let dir = &a.output;
     let ext = match (format, a.format) {
@@ -547,16 +760,16 @@ fn frame_series(
     let mut frame_ms = Vec::new();
     let mut base = None;
     for i in 0..n {
-        let (mut f, cam, opt) = frame(i)?;
+        let (mut f, seen, opt) = frame(i)?;
         base.get_or_insert(opt);
         frame_ms.push(f.frame_ms);
         let path = dir.join(format!("frame_{i:0digits$}.{ext}", digits = digits.max(3)));
         let dicom = DicomOut {
             series: Some((series.clone(), i + 1)),
-            ..volume_dicom(a, &mut f.picture, &cam, &opt, volume)
+            ..volume_dicom(a, &mut f.picture, &seen, &opt, volume)
         };
         f.picture
-            .save(&path, &exr_comment(&opt, volume, &cam), &dicom)?;
+            .save(&path, &exr_comment(a, &opt, volume, &seen), &dicom)?;
         pb.inc(1);
     }
     pb.finish_and_clear();

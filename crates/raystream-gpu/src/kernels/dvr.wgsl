@@ -51,10 +51,23 @@ struct DvrParams {
     hu_values: u32,
     // 1: premultiplied RGBA (no background): pixels[i] = (C, samples), pixels[n + i].x = 1 - T.
     premultiplied: u32,
-    pad2: u32,
+    // 1: the pixels' rays come from cpr_rows (a curved planar reformation), not the camera.
+    curved: u32,
     // A point of a slice's plane (LPS mm); the plane faces fwd.
     slice_at: vec3<f32>,
-    pad3: u32,
+    // A curved plane's slab: half its thickness, mm (0: the thin plane).
+    slab_half: f32,
+}
+
+// One image row of a curved plane (raystream_cpu::cpr::CprRow, LPS): the path's point, the
+// pixels' side (mm), the unit step along the row and the unit direction of its rays.
+struct CprRow {
+    centre: vec3<f32>,
+    pixel_mm: f32,
+    lateral: vec3<f32>,
+    pad0: u32,
+    normal: vec3<f32>,
+    pad1: u32,
 }
 
 // (HU, opacity per mm) and (HU, r, g, b) control points.
@@ -67,6 +80,8 @@ struct DvrParams {
 @group(0) @binding(6) var<storage, read_write> pixels: array<vec4<f32>>;
 // Transmittance toward the light at the light grid's points (x fastest).
 @group(0) @binding(7) var<storage, read_write> light_values: array<f32>;
+// A curved plane's rows, top first (one placeholder row when the camera casts the rays).
+@group(0) @binding(10) var<storage, read> cpr_rows: array<CprRow>;
 
 const MODE_DVR: u32 = 0u;
 const MODE_MIP: u32 = 1u;
@@ -180,10 +195,14 @@ fn missed(taken: f32) -> Marched {
     return Marched(vec3<f32>(0.0), 1.0, taken);
 }
 
-fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> Marched {
+// The ray o + t d marched (as the CPU's march): a slice samples it where it crosses the plane
+// through at with normal n, and no sample lies beyond t = reach.
+fn march(o: vec3<f32>, d: vec3<f32>, jit: f32, at: vec3<f32>, n: vec3<f32>, reach: f32) -> Marched {
     let o_idx = to_index(o - dp.origin);
     let d_idx = to_index(d);
-    let tt = clip_world(o, d, clip_grid(o_idx, d_idx));
+    var grid = clip_grid(o_idx, d_idx);
+    grid.y = min(grid.y, reach);
+    let tt = clip_world(o, d, grid);
     if !(tt.x <= tt.y) {
         return missed(0.0);
     }
@@ -197,7 +216,7 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32) -> Marched {
     }
     if dp.mode == MODE_SLICE {
         // One sample, where the ray crosses the plane (as the CPU's march).
-        let t = dot(dp.slice_at - o, dp.fwd) / dot(d, dp.fwd);
+        let t = dot(at - o, n) / dot(d, n);
         if !(t >= t0 && t <= t1) {
             return missed(0.0);
         }
@@ -285,18 +304,29 @@ fn render_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
     let pixel = gid.x + gid.y * dp.width;
     let w = f32(dp.width);
     let h = f32(dp.height);
+    let jit = jitter(pixel, 0u, 7u);
+    // No bound: the largest f32 (the compiler may assume arithmetic finite).
+    let unbounded = 3.4028235e38;
+    // A curved plane's pixel, as raystream_cpu::dvr::Sight::ray: its point on the surface,
+    // the ray along the row's normal from half the slab before it to half the slab beyond.
+    if dp.curved != 0u {
+        let r = cpr_rows[gid.y];
+        let p = r.centre + ((f32(gid.x) + 0.5) - 0.5 * w) * r.pixel_mm * r.lateral;
+        store(pixel, march(p - dp.slab_half * r.normal, r.normal, jit, p, r.normal, 2.0 * dp.slab_half));
+        return;
+    }
     // As raystream_scene::Camera::ray.
     if dp.parallel > 0.0 {
         let sx = ((f32(gid.x) + 0.5) / w * 2.0 - 1.0) * (w / h);
         let sy = 1.0 - (f32(gid.y) + 0.5) / h * 2.0;
         let o = dp.eye + (sx * dp.right + sy * dp.up) * dp.parallel;
-        store(pixel, march(o, dp.fwd, jitter(pixel, 0u, 7u)));
+        store(pixel, march(o, dp.fwd, jit, dp.slice_at, dp.fwd, unbounded));
         return;
     }
     let px = ((f32(gid.x) + 0.5) / w * 2.0 - 1.0) * dp.tan_y * (w / h);
     let py = (1.0 - (f32(gid.y) + 0.5) / h * 2.0) * dp.tan_y;
     let d = normalize(dp.fwd + px * dp.right + py * dp.up);
-    store(pixel, march(dp.eye, d, jitter(pixel, 0u, 7u)));
+    store(pixel, march(dp.eye, d, jit, dp.slice_at, dp.fwd, unbounded));
 }
 
 // A pixel over the background (opaque pixels keep their value, as the CPU's Marched::over),
