@@ -833,6 +833,13 @@ fn march_frame(
     opt: &DvrOptions,
     sight: Sight,
 ) -> (Vec<Marched>, DvrStats) {
+    if let Sight::Curved(plane) = sight {
+        assert_eq!(
+            (plane.width, plane.height),
+            (opt.width, opt.height),
+            "a curved plane is made for its image's size"
+        );
+    }
     let half_slab = 0.5 * opt.slab.unwrap_or(0.0);
     let opt = &DvrOptions {
         clip_planes: sight.planes(opt, vol),

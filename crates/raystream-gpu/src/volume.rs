@@ -280,6 +280,11 @@ impl<'a> GpuVolumeRenderer<'a> {
         let (cam, rows) = match sight {
             Sight::Camera(cam) => (*cam, None),
             Sight::Curved(plane) => {
+                assert_eq!(
+                    (plane.width, plane.height),
+                    (opt.width, opt.height),
+                    "a curved plane is made for its image's size"
+                );
                 let rows: Vec<GpuCprRow> = plane
                     .rows
                     .iter()

@@ -154,8 +154,8 @@ fn volume_dicom(
 }
 
 /// `--path FILE`: the curved plane along the path for `opt`'s image, its cut facing `view` and
-/// turned `turn` degrees about the path; a warning where the path leaves the volume, an error
-/// where it misses it.
+/// turned `turn` degrees about the path; an error where the path misses the volume (where it
+/// leaves it, the picture shows so: no values there).
 fn curved_plane(
     file: &Path,
     points: &[raystream_math::DVec3],
@@ -351,7 +351,6 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         );
     }
     let [az, el] = orbit_angles(a);
-    let seen = seen_from(a, &volume, &opt, (view, curve.as_ref()), az)?;
     let cam = volume_camera_from(&volume, aspect, view.orbit(az, el), projection(a));
     if let (Some(n), Some(curve)) = (a.slices, &curve) {
         return path_sections(a, (&renderer, &volume), &opt, (view, curve), n, format);
@@ -369,6 +368,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             format,
         );
     }
+    let seen = seen_from(a, &volume, &opt, (view, curve.as_ref()), az)?;
     let pb = spinner(
         a.quiet,
         &format!(
@@ -556,12 +556,6 @@ fn path_sections(
     n: u32,
     format: ImageFormat,
 ) -> Result<()> {
-    if opt.mode != DvrMode::Slice && opt.slab.is_none() {
-        bail!(
-            "--path --slices cuts the path across with --mode slice, or a --slab (not --mode {} alone)",
-            opt.mode.name()
-        );
-    }
     if a.slice_step.is_some() {
         bail!(
             "--path --slices spaces its {n} cross-sections evenly along the path; --slice-step is for planes facing the camera"

@@ -3,7 +3,7 @@
 //! aorta, `examples/chest_aorta.mrk.json`), on both devices.
 
 mod common;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use common::*;
 
@@ -18,17 +18,6 @@ fn chest() -> String {
 
 fn aorta() -> String {
     repo().join(PATH).to_string_lossy().into_owned()
-}
-
-/// `render ARGS -o NAME` on `dev`, quiet; the output's path.
-fn render(name: &str, dev: &str, args: &[&str]) -> PathBuf {
-    let out = tmp(name);
-    let mut all = vec!["render", "--quiet", "--device", dev];
-    all.extend_from_slice(args);
-    all.extend_from_slice(&["-o", out.to_str().unwrap()]);
-    let o = run(&all);
-    assert!(o.status.success(), "{all:?}: {}", stderr(&o));
-    out
 }
 
 /// The HU of an EXR's one channel, and its comments.
@@ -55,7 +44,7 @@ fn curved_reformation_straightens_the_stented_aorta() {
     for dev in devices() {
         for view in ["anterior", "left"] {
             let args = [&base[..], &["--mode", "slice", "--view", view]].concat();
-            let (thin, comments) = hu(&render(&format!("cpr-{view}-{dev}.exr"), dev, &args));
+            let (thin, comments) = hu(&render_to(&format!("cpr-{view}-{dev}.exr"), dev, &args));
             assert_eq!(thin.len(), w * h);
             assert!(
                 comments.contains("curved planar reformation") && comments.contains("154."),
@@ -82,7 +71,7 @@ fn curved_reformation_straightens_the_stented_aorta() {
         }
         let slab = |mode: &str| {
             let args = [&base[..], &["--mode", mode, "--slab", "10"]].concat();
-            hu(&render(&format!("cpr-{mode}-{dev}.exr"), dev, &args)).0
+            hu(&render_to(&format!("cpr-{mode}-{dev}.exr"), dev, &args)).0
         };
         let (mip, avg, min) = (slab("mip"), slab("average"), slab("minip"));
         by_dev.push((*dev, "mip", mip.clone(), f32::NAN));
@@ -180,7 +169,7 @@ fn rotational_cpr_turns_about_the_path() {
         .map(|i| hu(&dir.join(format!("frame_00{i}.exr"))).0)
         .collect();
     let orbit = [&base[..], &["--orbit", "90"]].concat();
-    let single = hu(&render("cpr-orbit90.exr", "cpu", &orbit)).0;
+    let single = hu(&render_to("cpr-orbit90.exr", "cpu", &orbit)).0;
     assert_eq!(frames[1], single, "frame 1 is --orbit 90");
     assert_ne!(frames[0], frames[1]);
     let middle = |f: &[f32]| (0..90).map(|y| f[y * 31 + 15]).collect::<Vec<_>>();
@@ -214,8 +203,8 @@ fn a_dicom_cpr_is_a_secondary_capture_of_hounsfield_units() {
         "--window",
         "mediastinum",
     ];
-    let (values, _) = hu(&render("cpr-dcm.exr", "cpu", &args));
-    let obj = dicom_object::open_file(render("cpr.dcm", "cpu", &args)).unwrap();
+    let (values, _) = hu(&render_to("cpr-dcm.exr", "cpu", &args));
+    let obj = dicom_object::open_file(render_to("cpr.dcm", "cpu", &args)).unwrap();
     let text = |tag| dicom_text(&obj, tag);
     assert_eq!(text(tags::SOP_CLASS_UID), "1.2.840.10008.5.1.4.1.1.7");
     assert_eq!(text(tags::RESCALE_TYPE), "HU");
@@ -336,7 +325,7 @@ fn cross_sections_cut_the_path_square() {
         "--size",
         &size,
     ];
-    let (cpr, _) = hu(&render("cpr-stations.exr", "cpu", &cpr));
+    let (cpr, _) = hu(&render_to("cpr-stations.exr", "cpu", &cpr));
     let mut centres = Vec::new();
     let mut normals = Vec::new();
     let mut lumen = 0;

@@ -21,17 +21,6 @@ fn floats<'a>(e: &'a ExrFile, name: &str) -> &'a [f32] {
     e.channels[name].as_f32().expect("a float channel")
 }
 
-/// `render ARGS -o NAME` on `dev`, quiet; the output's path.
-fn render(name: &str, dev: &str, args: &[&str]) -> std::path::PathBuf {
-    let out = tmp(name);
-    let mut all = vec!["render", "--quiet", "--device", dev];
-    all.extend_from_slice(args);
-    all.extend_from_slice(&["-o", out.to_str().unwrap()]);
-    let o = run(&all);
-    assert!(o.status.success(), "{all:?}: {}", stderr(&o));
-    out
-}
-
 /// The film of an EXR's R, G, B channels.
 fn film(e: &ExrFile) -> Image {
     let (r, g, b) = (floats(e, "R"), floats(e, "G"), floats(e, "B"));
@@ -51,8 +40,8 @@ fn exr_holds_the_film_behind_the_png() {
     let args = [spot.to_str().unwrap(), "--size", "64x48", "--spp", "2"];
     let mut films = Vec::new();
     for dev in devices() {
-        let png = render(&format!("exr-spot-{dev}.png"), dev, &args);
-        let exr = read_exr(&render(&format!("exr-spot-{dev}.exr"), dev, &args));
+        let png = render_to(&format!("exr-spot-{dev}.png"), dev, &args);
+        let exr = read_exr(&render_to(&format!("exr-spot-{dev}.exr"), dev, &args));
         assert_eq!((exr.width, exr.height), (64, 48));
         assert_eq!(exr.channels.len(), 3, "R, G, B");
         assert!(
@@ -93,7 +82,7 @@ fn exr_aovs_hold_distances_normals_and_triangles() {
     for dev in devices() {
         let aov = |kind: &str, ext: &str| {
             let args = [&bunny[..], "--aov", kind, size[0], size[1]];
-            render(&format!("exr-aov-{kind}-{dev}.{ext}"), dev, &args)
+            render_to(&format!("exr-aov-{kind}-{dev}.{ext}"), dev, &args)
         };
         let depth = read_exr(&aov("depth", "exr"));
         let z = floats(&depth, "Z").to_vec();
@@ -250,7 +239,7 @@ fn slices_show_the_plane_as_radiology_does() {
                 let name = format!("exr-slice-{view}-{grid}-{dev}.exr");
                 let args = [vol, "--mode", "slice", "--view", view, "--size", "48x40"];
                 let args = [&args[..], &["--slice-at", &at_arg]].concat();
-                read_exr(&render(&name, dev, &args))
+                read_exr(&render_to(&name, dev, &args))
             };
             let flat = slice(constant);
             let px = pixel_mm(&flat);
@@ -318,7 +307,7 @@ fn exr_projections_hold_hounsfield_units() {
     for dev in devices() {
         let project = |mode: &str, ext: &str, window: &[&str]| {
             let args = [&base[..], &["--mode", mode], window].concat();
-            render(&format!("exr-block-{mode}-{dev}.{ext}"), dev, &args)
+            render_to(&format!("exr-block-{mode}-{dev}.{ext}"), dev, &args)
         };
         let mip = read_exr(&project("mip", "exr", &[]));
         assert_eq!(mip.channels.len(), 1, "one channel, Y");
@@ -431,7 +420,11 @@ fn slabs_keep_only_their_thickness() {
         let project = |name: &str, extra: &[&str]| {
             let args = [vol, "--size", "48x48", "--view", "anterior", "--parallel"];
             let args = [&args[..], extra].concat();
-            let e = read_exr(&render(&format!("exr-slab-{name}-{dev}.exr"), dev, &args));
+            let e = read_exr(&render_to(
+                &format!("exr-slab-{name}-{dev}.exr"),
+                dev,
+                &args,
+            ));
             floats(&e, "Y").to_vec()
         };
         let slab = ["--slab", "4"];
@@ -496,8 +489,12 @@ fn volume_renderings_are_premultiplied_rgba() {
         let mut rgba = Vec::new();
         for dev in devices() {
             let args = ["--mode", mode, "--preset", "ct-bones", "--size", "64x48"];
-            let png = render(&format!("exr-rgba-{mode}-{dev}.png"), dev, &args);
-            let exr = read_exr(&render(&format!("exr-rgba-{mode}-{dev}.exr"), dev, &args));
+            let png = render_to(&format!("exr-rgba-{mode}-{dev}.png"), dev, &args);
+            let exr = read_exr(&render_to(
+                &format!("exr-rgba-{mode}-{dev}.exr"),
+                dev,
+                &args,
+            ));
             assert_eq!(exr.channels.len(), 4, "R, G, B, A");
             assert!(exr.comments.contains("premultiplied"), "{}", exr.comments);
             let (f, a) = (film(&exr), floats(&exr, "A").to_vec());
@@ -592,7 +589,7 @@ fn turntables_write_exr_frames() {
             for (i, az) in ["0", "120", "240"].iter().enumerate() {
                 let frame = read_exr(&dir.join(&names[i]));
                 let orbit = format!("{az},0");
-                let one = read_exr(&render(
+                let one = read_exr(&render_to(
                     &format!("turntable-exr-{mode}-{dev}-{i}.exr"),
                     dev,
                     &["--mode", mode, "--size", "48x40", "--orbit", &orbit],
@@ -652,9 +649,13 @@ fn dicom_projections_hold_the_exrs_hounsfield_units() {
             ),
         ] {
             let args = [&base[..], &["--mode", mode], window].concat();
-            let exr = read_exr(&render(&format!("dcm-block-{mode}-{dev}.exr"), dev, &args));
+            let exr = read_exr(&render_to(
+                &format!("dcm-block-{mode}-{dev}.exr"),
+                dev,
+                &args,
+            ));
             let hu = floats(&exr, "Y");
-            let dcm = render(&format!("dcm-block-{mode}-{dev}.dcm"), dev, &args);
+            let dcm = render_to(&format!("dcm-block-{mode}-{dev}.dcm"), dev, &args);
             let obj = dicom_object::open_file(&dcm).unwrap();
             let text = |tag| dicom_text(&obj, tag);
             assert_eq!(text(tags::PHOTOMETRIC_INTERPRETATION), "MONOCHROME2");
@@ -700,7 +701,7 @@ fn dicom_projections_hold_the_exrs_hounsfield_units() {
             assert_eq!(p.to_str().unwrap().trim(), "MONOCHROME2", "{f}");
         }
         let labelled = [&base[..], &["--mode", "mip", "--labels"]].concat();
-        let dcm = render(&format!("dcm-block-labels-{dev}.dcm"), dev, &labelled);
+        let dcm = render_to(&format!("dcm-block-labels-{dev}.dcm"), dev, &labelled);
         let obj = dicom_object::open_file(&dcm).unwrap();
         let p = obj.element(tags::PHOTOMETRIC_INTERPRETATION).unwrap();
         assert_eq!(p.to_str().unwrap().trim(), "RGB");

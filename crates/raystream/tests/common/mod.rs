@@ -39,6 +39,18 @@ pub fn tmp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
+/// `render --quiet --device DEV ARGS -o NAME` (NAME under the test folder), which must succeed;
+/// the output's path.
+pub fn render_to(name: &str, dev: &str, args: &[&str]) -> PathBuf {
+    let out = tmp(name);
+    let mut all = vec!["render", "--quiet", "--device", dev];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["-o", out.to_str().unwrap()]);
+    let o = run(&all);
+    assert!(o.status.success(), "{all:?}: {}", stderr(&o));
+    out
+}
+
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
