@@ -63,12 +63,7 @@ impl CurvedPlane {
         width: u32,
         height: u32,
     ) -> Result<CurvedPlane, String> {
-        let mut p: Vec<DVec3> = Vec::with_capacity(points.len());
-        for &q in points {
-            if p.last() != Some(&q) {
-                p.push(q);
-            }
-        }
+        let p = distinct(points);
         if p.len() < 2 {
             return Err("a path needs two distinct points".into());
         }
@@ -171,6 +166,27 @@ impl CurvedPlane {
         let off = (x as f32 + 0.5) - 0.5 * self.width as f32;
         (r.centre + off * self.pixel_mm * r.lateral, r.normal)
     }
+}
+
+/// The spline through `points` (LPS mm, repeats dropped) sampled densely, as a curved plane
+/// follows it: for drawing the path over a picture. Fewer than two distinct points: them.
+pub fn spline(points: &[DVec3]) -> Vec<DVec3> {
+    let p = distinct(points);
+    if p.len() < 2 {
+        return p;
+    }
+    arc_samples(&p).0
+}
+
+/// `points` without consecutive repeats.
+fn distinct(points: &[DVec3]) -> Vec<DVec3> {
+    let mut p: Vec<DVec3> = Vec::with_capacity(points.len());
+    for &q in points {
+        if p.last() != Some(&q) {
+            p.push(q);
+        }
+    }
+    p
 }
 
 /// The centripetal Catmull–Rom spline through `p` (distinct neighbours), sampled densely, and

@@ -303,6 +303,11 @@ pub struct RenderArgs {
     /// cross-sections perpendicular to the path, evenly along it).
     #[arg(long, value_name = "FILE", requires = "mode", conflicts_with_all = ["cine", "slice_at", "labels"])]
     pub path: Option<PathBuf>,
+    /// With --mode (a camera's view): draws the path in FILE (read as --path reads it) over the
+    /// picture, a yellow line ringed in black, as a workstation shows a centreline on its
+    /// reference view; PNG, or DICOM as the picture (RGB, Burned In Annotation YES).
+    #[arg(long, value_name = "FILE", requires = "mode", conflicts_with = "path")]
+    pub draw_path: Option<PathBuf>,
     /// With --slices: the planes' spacing in mm (default: the pixel size, for cubic voxels).
     #[arg(long, value_name = "MM", requires = "slices")]
     pub slice_step: Option<f32>,

@@ -7,6 +7,7 @@ mod dvr;
 mod info;
 mod iso;
 mod labels;
+mod overlay;
 mod render;
 mod trace;
 

@@ -133,15 +133,23 @@ fn volume_dicom(
     picture: &mut Picture,
     seen: &Seen,
     opt: &DvrOptions,
-    volume: &raystream_io::Volume,
+    (volume, overlay): (&raystream_io::Volume, Overlay),
 ) -> DicomOut {
     let window = Some(opt.shown_window());
     match seen {
-        Seen::Camera(cam) => DicomOut {
-            window,
-            plane: image_plane(opt, volume, cam),
-            ..label(a, picture, cam, true)
-        },
+        Seen::Camera(cam) => {
+            // The path under the letters.
+            if let (Some(dense), Picture::Srgb8 { rgb, width, height }) = (overlay, &mut *picture) {
+                crate::overlay::draw_path(rgb, *width, *height, cam, dense);
+            }
+            let marked = label(a, picture, cam, true);
+            DicomOut {
+                window,
+                plane: image_plane(opt, volume, cam),
+                annotated: marked.annotated || overlay.is_some(),
+                ..marked
+            }
+        }
         Seen::Curved(_) => DicomOut {
             orientation: None,
             annotated: false,
@@ -322,6 +330,14 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         }),
         None => None,
     };
+    let overlay = match &a.draw_path {
+        Some(file) => Some(raystream_cpu::cpr::spline(&raystream_io::read_curve(file)?)),
+        None => None,
+    };
+    let overlay = overlay.as_deref();
+    if a.draw_path.is_some() && format == ImageFormat::Exr {
+        bail!("--draw-path draws on a PNG; an EXR holds the values themselves");
+    }
     // A cine reads its phases one by one, the first here (no warning that it chose one).
     let mut select = a.pick.select();
     if a.cine {
@@ -336,14 +352,16 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     } else {
         crate::common::is_dicom(&a.output)
     };
-    opt.hu_values = format == ImageFormat::Exr || (dicom_out && mode.is_windowed() && !a.labels);
+    // Letters or a path drawn need the picture as seen.
+    let drawn = a.labels || a.draw_path.is_some();
+    opt.hu_values = format == ImageFormat::Exr || (dicom_out && mode.is_windowed() && !drawn);
     let aspect = opt.width as f32 / opt.height as f32;
     let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
     let view = base_view(a, VOLUME_VIEW, true)?;
     if let Some(n) = a.turntable {
         return turntable(
             a,
-            (&renderer, &volume),
+            (&renderer, &volume, overlay),
             &opt,
             (view, curve.as_ref()),
             n,
@@ -356,13 +374,13 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         return path_sections(a, (&renderer, &volume), &opt, (view, curve), n, format);
     }
     if let Some(n) = a.slices {
-        return slice_series(a, &renderer, &volume, &opt, &cam, n, format);
+        return slice_series(a, (&renderer, &volume, overlay), &opt, &cam, n, format);
     }
     if a.cine {
         return cine(
             a,
             (path, &volume, renderer),
-            (&backend, &tf),
+            (&backend, &tf, overlay),
             &opt,
             &cam,
             format,
@@ -394,7 +412,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         (Seen::Curved(plane), Some(file)) => curved_words(file, plane, &opt),
         _ => slab_words(&opt, &volume),
     };
-    let dicom = volume_dicom(a, &mut frame.picture, &seen, &opt, &volume);
+    let dicom = volume_dicom(a, &mut frame.picture, &seen, &opt, (&volume, overlay));
     frame
         .picture
         .save(&a.output, &exr_comment(a, &opt, &volume, &seen), &dicom)?;
@@ -531,14 +549,14 @@ fn exr_comment(
 /// superior axis unless the view is from above or below), from `--orbit`'s angles on.
 fn turntable(
     a: &RenderArgs,
-    (renderer, volume): (&dvr::Renderer, &raystream_io::Volume),
+    (renderer, volume, overlay): (&dvr::Renderer, &raystream_io::Volume, Overlay),
     opt: &DvrOptions,
     look: (View, Option<&Curve>),
     n: u32,
     format: ImageFormat,
 ) -> Result<()> {
     let [az, _] = orbit_angles(a);
-    frame_series(a, volume, n, format, "turntable", |i| {
+    frame_series(a, (volume, overlay), n, format, "turntable", |i| {
         let seen = seen_from(a, volume, opt, look, az + 360.0 * i as f32 / n as f32)?;
         Ok((renderer.frame(opt, seen.sight(), format)?, seen, *opt))
     })
@@ -574,7 +592,7 @@ fn path_sections(
         .map(|i| (extent[i] * volume.spacing[i]).powi(2))
         .sum::<f64>()
         .sqrt() as f32;
-    frame_series(a, volume, n, format, "slices", |i| {
+    frame_series(a, (volume, None), n, format, "slices", |i| {
         let cam = stations.section_camera(i, 0.5 * pixel * opt.height as f32, reach);
         let opt = DvrOptions {
             slice_at: Some(stations.rows[i as usize].centre),
@@ -583,6 +601,9 @@ fn path_sections(
         Ok((renderer.frame(&opt, &cam, format)?, Seen::Camera(cam), opt))
     })
 }
+
+/// `--draw-path FILE`'s spline, sampled densely (LPS mm), drawn over every frame of a camera.
+type Overlay<'a> = Option<&'a [raystream_math::DVec3]>;
 
 /// `--path FILE`'s points, read once.
 struct Curve<'a> {
@@ -623,8 +644,7 @@ fn seen_from(
 /// camera: a reformatted series (coronal, sagittal, oblique; thin slices or slabs).
 fn slice_series(
     a: &RenderArgs,
-    renderer: &dvr::Renderer,
-    volume: &raystream_io::Volume,
+    (renderer, volume, overlay): (&dvr::Renderer, &raystream_io::Volume, Overlay),
     opt: &DvrOptions,
     cam: &Camera,
     n: u32,
@@ -644,7 +664,7 @@ fn slice_series(
     };
     let normal = raystream_cpu::dvr::scene_to_lps(cam.fwd).normalize();
     let centre = opt.slice_point(volume);
-    frame_series(a, volume, n, format, "slices", |i| {
+    frame_series(a, (volume, overlay), n, format, "slices", |i| {
         let offset = (i as f32 - (n - 1) as f32 / 2.0) * step;
         let opt = DvrOptions {
             slice_at: Some(centre + normal * offset),
@@ -661,7 +681,7 @@ fn slice_series(
 fn cine(
     a: &RenderArgs,
     (path, first, renderer): (&Path, &raystream_io::Volume, dvr::Renderer),
-    (backend, tf): (&Backend, &raystream_volume::TransferFunction),
+    (backend, tf, overlay): (&Backend, &raystream_volume::TransferFunction, Overlay),
     opt: &DvrOptions,
     cam: &Camera,
     format: ImageFormat,
@@ -674,7 +694,7 @@ fn cine(
         );
     }
     let mut warnings = Vec::new();
-    frame_series(a, first, n as u32, format, "cine", |i| {
+    frame_series(a, (first, overlay), n as u32, format, "cine", |i| {
         if i == 0 {
             return Ok((renderer.frame(opt, cam, format)?, Seen::Camera(*cam), *opt));
         }
@@ -720,7 +740,7 @@ fn cine(
 /// numbered from 1); `volume` is where the frames' DICOM descriptions come from.
 fn frame_series(
     a: &RenderArgs,
-    volume: &raystream_io::Volume,
+    (volume, overlay): (&raystream_io::Volume, Overlay),
     n: u32,
     format: ImageFormat,
     what: &str,
@@ -760,7 +780,7 @@ fn frame_series(
         let path = dir.join(format!("frame_{i:0digits$}.{ext}", digits = digits.max(3)));
         let dicom = DicomOut {
             series: Some((series.clone(), i + 1)),
-            ..volume_dicom(a, &mut f.picture, &seen, &opt, volume)
+            ..volume_dicom(a, &mut f.picture, &seen, &opt, (volume, overlay))
         };
         f.picture
             .save(&path, &exr_comment(a, &opt, volume, &seen), &dicom)?;

@@ -390,3 +390,77 @@ fn cross_sections_cut_the_path_square() {
         );
     }
 }
+
+/// `--draw-path FILE` draws the path over a camera's view of the volume, where the camera
+/// sees it: a vertical line through the chest CT's centre, seen from the front in parallel,
+/// is a yellow line down the middle column between the rows of its ends (the pixel size from
+/// the EXR of the same view), and nothing else in the picture changes; as DICOM the picture
+/// is RGB with Burned In Annotation YES; an EXR is refused.
+#[test]
+fn draw_path_marks_the_centreline_on_the_reference_view() {
+    use dicom_dictionary_std::tags;
+    let vol = chest();
+    let line = tmp("cpr-line.txt");
+    // The volume's centre: origin + 1.5 mm x (dims - 1) / 2, from z 600 to 720 mm.
+    let (cx, cy, cz) = (-71.658203 + 89.25, -255.658203 + 93.75, 540.2 + 122.25);
+    std::fs::write(&line, format!("{cx} {cy} 720\n{cx} {cy} 600\n")).unwrap();
+    let line = line.to_str().unwrap();
+    let view = [
+        &vol[..],
+        "--mode",
+        "mip",
+        "--parallel",
+        "--view",
+        "anterior",
+        "--size",
+        "97x97",
+    ];
+    let exr = raystream_cpu::load_exr(&render_to("cpr-line.exr", "cpu", &view)).unwrap();
+    let pixel_mm: f32 = exr
+        .comments
+        .split("pixels ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap();
+    let plain = image::open(render_to("cpr-line-plain.png", "cpu", &view))
+        .unwrap()
+        .to_rgb8();
+    let drawn = [&view[..], &["--draw-path", line]].concat();
+    let marked = image::open(render_to("cpr-line.png", "cpu", &drawn))
+        .unwrap()
+        .to_rgb8();
+    let row = |z: f32| 48.5 - (z - cz as f32) / pixel_mm;
+    let (top, bottom) = (row(720.0), row(600.0));
+    let mut yellow_rows = 0;
+    for (x, y, p) in marked.enumerate_pixels() {
+        if p != plain.get_pixel(x, y) {
+            assert!(
+                (46..=50).contains(&x) && (y as f32) >= top - 3.0 && (y as f32) <= bottom + 3.0,
+                "({x}, {y}) changed, the line runs down column 48 from row {top} to {bottom}"
+            );
+        }
+        if x == 48 && p.0 == [255, 214, 0] {
+            yellow_rows += 1;
+        }
+    }
+    let want = (bottom - top).floor() as i32;
+    assert!(
+        yellow_rows >= want,
+        "{yellow_rows} yellow rows, want {want}"
+    );
+    let dcm = dicom_object::open_file(render_to("cpr-line.dcm", "cpu", &drawn)).unwrap();
+    assert_eq!(dicom_text(&dcm, tags::PHOTOMETRIC_INTERPRETATION), "RGB");
+    assert_eq!(dicom_text(&dcm, tags::BURNED_IN_ANNOTATION), "YES");
+    let out = tmp("cpr-line-refused.exr");
+    let mut args = vec!["render", "--device", "cpu"];
+    args.extend_from_slice(&drawn);
+    args.extend_from_slice(&["-o", out.to_str().unwrap()]);
+    let o = run(&args);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("--draw-path draws on a PNG"),
+        "{}",
+        stderr(&o)
+    );
+}

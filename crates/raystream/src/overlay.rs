@@ -1,0 +1,140 @@
+//! `render --mode … --draw-path FILE`: a centreline drawn over the picture of a volume, as a
+//! vascular workstation shows the path of its curved reformation on the reference view: the
+//! path's spline (the one `--path` follows) projected through the frame's camera, a yellow
+//! line ringed in black, over whatever the rays saw (it is an overlay, not occluded).
+//!
+//! A line of one colour is all it draws, so it is drawn here rather than through a vector
+//! graphics crate.
+
+use raystream_cpu::dvr::lps_to_scene;
+use raystream_math::{DVec3, Vec3};
+use raystream_scene::Camera;
+
+/// The line's colour (8-bit sRGB) and its ring's.
+const LINE: [u8; 3] = [255, 214, 0];
+const RING: [u8; 3] = [0, 0, 0];
+
+/// Where the LPS point `p` falls in a `width`×`height` frame of `cam` (scene frame), in pixel
+/// coordinates (the top-left corner at 0, 0), as `Camera::ray` casts pixels; `None` behind a
+/// perspective eye.
+pub fn project(cam: &Camera, p: DVec3, width: u32, height: u32) -> Option<(f32, f32)> {
+    let q = lps_to_scene(p.as_vec3()) - cam.eye;
+    let (w, h) = (width as f32, height as f32);
+    let aspect = w / h;
+    let (x, y) = if cam.parallel > 0.0 {
+        (
+            q.dot(cam.right) / (cam.parallel * aspect),
+            q.dot(cam.up) / cam.parallel,
+        )
+    } else {
+        let z = q.dot(cam.fwd);
+        if z <= 0.0 {
+            return None;
+        }
+        (
+            q.dot(cam.right) / (z * cam.tan_y * aspect),
+            q.dot(cam.up) / (z * cam.tan_y),
+        )
+    };
+    Some(((x + 1.0) * 0.5 * w, (1.0 - y) * 0.5 * h))
+}
+
+/// Draws the polyline `dense` (LPS mm, the spline's samples) seen by `cam` into the 8-bit RGB
+/// `rgb`: about a pixel per 256 rows wide (at least one), ringed by a pixel of black.
+pub fn draw_path(rgb: &mut [u8], width: u32, height: u32, cam: &Camera, dense: &[DVec3]) {
+    let half = (height / 512) as i64;
+    let pts: Vec<Option<(f32, f32)>> = dense
+        .iter()
+        .map(|&p| project(cam, p, width, height))
+        .collect();
+    // The ring first, under the whole line, then the line.
+    for (colour, grow) in [(RING, 1), (LINE, 0)] {
+        let r = half + grow;
+        let mut put = |x: f32, y: f32| {
+            let (cx, cy) = (x.floor() as i64, y.floor() as i64);
+            for py in cy - r..=cy + r {
+                for px in cx - r..=cx + r {
+                    if px >= 0 && py >= 0 && px < width as i64 && py < height as i64 {
+                        let i = 3 * (py as usize * width as usize + px as usize);
+                        rgb[i..i + 3].copy_from_slice(&colour);
+                    }
+                }
+            }
+        };
+        for w in pts.windows(2) {
+            let (Some(a), Some(b)) = (w[0], w[1]) else {
+                continue;
+            };
+            // Half-pixel steps along the segment (clipped to a frame's reach: a point far
+            // outside the picture draws nothing, however far).
+            let (a, b) = (Vec3::new(a.0, a.1, 0.0), Vec3::new(b.0, b.1, 0.0));
+            let steps = ((b - a).length() * 2.0)
+                .ceil()
+                .min(4.0 * (width + height) as f32);
+            let n = steps.max(1.0) as u32;
+            for k in 0..=n {
+                let p = a.lerp(b, k as f32 / n as f32);
+                put(p.x, p.y);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn points_project_where_the_camera_casts_their_pixels() {
+        // Each pixel centre's ray passes through the point that projects to it.
+        for cam in [
+            Camera::look_at(Vec3::new(1.0, 2.0, 9.0), Vec3::ZERO, Vec3::Y, 50.0),
+            Camera {
+                parallel: 3.0,
+                ..Camera::look_at(Vec3::new(-4.0, 1.0, 5.0), Vec3::ZERO, Vec3::Y, 60.0)
+            },
+        ] {
+            for (x, y) in [(0.5, 0.5), (31.5, 12.5), (63.5, 47.5)] {
+                let r = cam.ray(x, y, 64, 48);
+                let p = r.origin + r.dir * 3.0;
+                let lps = raystream_cpu::dvr::scene_to_lps(p).as_dvec3();
+                let (px, py) = project(&cam, lps, 64, 48).unwrap();
+                assert!(
+                    (px - x).abs() < 1e-3 && (py - y).abs() < 1e-3,
+                    "({x}, {y}): ({px}, {py})"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_line_is_drawn_ringed_and_nothing_beyond_the_frame() {
+        let cam = Camera {
+            parallel: 1.0,
+            ..Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 60.0)
+        };
+        // Scene y is LPS superior (z): a vertical line through the middle of a 33×33 frame.
+        let line = [
+            DVec3::new(0.0, 0.0, -0.5),
+            DVec3::new(0.0, 0.0, 0.5),
+            DVec3::new(0.0, 0.0, 1e9),
+        ];
+        let mut rgb = vec![100u8; 33 * 33 * 3];
+        draw_path(&mut rgb, 33, 33, &cam, &line);
+        let at = |x: usize, y: usize| {
+            [
+                rgb[3 * (y * 33 + x)],
+                rgb[3 * (y * 33 + x) + 1],
+                rgb[3 * (y * 33 + x) + 2],
+            ]
+        };
+        assert_eq!(at(16, 16), LINE);
+        assert_eq!(at(15, 16), RING);
+        assert_eq!(at(17, 16), RING);
+        assert_eq!(at(14, 16), [100; 3]);
+        assert_eq!(at(16, 10), LINE);
+        // Beyond the line's end (row 8.25) only the far point's segment starts, and stops.
+        assert_eq!(at(16, 4), [100; 3]);
+        assert_eq!(at(5, 5), [100; 3]);
+    }
+}
