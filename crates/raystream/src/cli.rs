@@ -301,7 +301,7 @@ pub struct RenderArgs {
     /// the top, square pixels (the path's length over the height), the cut facing --view and
     /// turned about the path by --orbit AZ (--turntable N: a rotational CPR; --slices N: N
     /// cross-sections perpendicular to the path, evenly along it).
-    #[arg(long, value_name = "FILE", requires = "mode", conflicts_with_all = ["cine", "slice_at", "labels"])]
+    #[arg(long, value_name = "FILE", requires = "mode", conflicts_with_all = ["cine", "slice_at"])]
     pub path: Option<PathBuf>,
     /// With --mode (a camera's view): draws the path in FILE (read as --path reads it) over the
     /// picture, a yellow line ringed in black, as a workstation shows a centreline on its

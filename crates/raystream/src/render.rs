@@ -494,6 +494,11 @@ fn check_path(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     {
         bail!("--path {file} --orbit AZ,{el}: a curved reformation turns about its path (AZ) only");
     }
+    if a.labels && a.slices.is_none() {
+        bail!(
+            "--path {file} --labels: a curved reformation's rows follow the path, no patient direction; its cross-sections (--slices N) take letters"
+        );
+    }
     Ok(())
 }
 

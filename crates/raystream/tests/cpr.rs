@@ -269,7 +269,7 @@ fn curved_reformation_misuse_is_a_clear_error() {
         ),
         (
             vec!["--mode", "slice", "--path", &path, "--labels"],
-            "--labels",
+            "its cross-sections (--slices N) take letters",
         ),
         (vec!["--path", &path], "--mode"),
     ] {
@@ -355,6 +355,14 @@ fn cross_sections_cut_the_path_square() {
                 .map(|x| x.trim().parse().unwrap())
                 .collect()
         };
+        if i == 0 {
+            // The first, at the top of the descending aorta (running to the feet), seen from
+            // below as axial images are: the patient's left to the right, anterior up (its
+            // columns run posterior), as the DICOM's patient orientation says.
+            let o = dicom_text(&obj, tags::PATIENT_ORIENTATION);
+            let (rows, cols) = o.split_once('\\').unwrap();
+            assert!(rows.starts_with('L') && cols.starts_with('P'), "{o}");
+        }
         let iop = nums(tags::IMAGE_ORIENTATION_PATIENT);
         let (row, col) = (
             raystream_math::DVec3::new(iop[0], iop[1], iop[2]),
