@@ -173,7 +173,7 @@ impl DvrOptions {
 }
 
 /// The smallest voxel spacing, mm.
-fn min_spacing(vol: &Volume) -> f32 {
+pub fn min_spacing(vol: &Volume) -> f32 {
     vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min) as f32
 }
 

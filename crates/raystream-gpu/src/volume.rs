@@ -277,7 +277,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             .collect();
         // A curved plane has no camera: its rows cast the rays (the kernel reads no camera
         // field then; a placeholder fills them).
-        let (cam, rows) = match sight {
+        let (cam, row_buf) = match sight {
             Sight::Camera(cam) => (*cam, None),
             Sight::Curved(plane) => {
                 assert_eq!(
@@ -296,13 +296,18 @@ impl<'a> GpuVolumeRenderer<'a> {
                         ..Default::default()
                     })
                     .collect();
+                let buf = ctx.storage(
+                    "curved plane rows",
+                    bytemuck::cast_slice(&rows),
+                    wgpu::BufferUsages::empty(),
+                )?;
                 (
                     raystream_scene::Camera::look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 60.0),
-                    Some(rows),
+                    Some(buf),
                 )
             }
         };
-        let curved = matches!(sight, Sight::Curved(_));
+        let curved = row_buf.is_some();
         let params = DvrParams {
             eye: v3(scene_to_lps(cam.eye)),
             tan_y: cam.tan_y,
@@ -353,14 +358,6 @@ impl<'a> GpuVolumeRenderer<'a> {
             } else {
                 0.0
             },
-        };
-        let row_buf = match &rows {
-            Some(rows) => Some(ctx.storage(
-                "curved plane rows",
-                bytemuck::cast_slice(rows),
-                wgpu::BufferUsages::empty(),
-            )?),
-            None => None,
         };
         let row_buf = row_buf.as_ref().unwrap_or(&self.no_rows);
         let param_buf = ctx

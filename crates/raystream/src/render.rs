@@ -591,7 +591,7 @@ fn path_sections(
         ..*opt
     };
     let stations = curved_plane(curve.file, &curve.points, volume, &stations, (view, az))?;
-    let pixel = volume.spacing.iter().cloned().fold(f64::INFINITY, f64::min) as f32;
+    let pixel = raystream_cpu::dvr::min_spacing(volume);
     let extent = volume.dims.map(|d| d as f64);
     let reach = (0..3)
         .map(|i| (extent[i] * volume.spacing[i]).powi(2))
