@@ -43,6 +43,11 @@ pub struct CurvedPlane {
     pub rows: Vec<CprRow>,
 }
 
+/// Cross-sections are perpendicular to the chord this long, mm, about their point: the
+/// spline's own direction there (between the dense samples' quarter millimetre and the bends
+/// of a vessel).
+pub const SECTION_CHORD_MM: f64 = 0.5;
+
 /// Spline pieces are sampled about this finely for their arc length, mm (the chord of a
 /// quarter millimetre strays from a 5 mm-radius bend by 1.6 µm).
 const ARC_STEP_MM: f64 = 0.25;
@@ -63,65 +68,51 @@ impl CurvedPlane {
         width: u32,
         height: u32,
     ) -> Result<CurvedPlane, String> {
-        let p = distinct(points);
-        if p.len() < 2 {
-            return Err("a path needs two distinct points".into());
-        }
+        Self::with_chord(points, image_right, turn_deg, (width, height), None)
+    }
+
+    /// The frames of `n` cross-sections of the path at the middle of `n` equal parts of it,
+    /// as rows of a curved plane one pixel wide (so [`CurvedPlane::section_camera`] frames
+    /// them), each perpendicular to the spline's own direction at its point (a chord of
+    /// [`SECTION_CHORD_MM`] about it, however far apart they are).
+    pub fn sections(
+        points: &[DVec3],
+        image_right: DVec3,
+        turn_deg: f64,
+        n: u32,
+    ) -> Result<CurvedPlane, String> {
+        Self::with_chord(
+            points,
+            image_right,
+            turn_deg,
+            (1, n),
+            Some(SECTION_CHORD_MM),
+        )
+    }
+
+    /// A curved plane whose rows' tangents are chords `chord` mm long (None: a row's height).
+    fn with_chord(
+        points: &[DVec3],
+        image_right: DVec3,
+        turn_deg: f64,
+        (width, height): (u32, u32),
+        chord: Option<f64>,
+    ) -> Result<CurvedPlane, String> {
+        let spline = Spline::new(points)?;
         if width == 0 || height == 0 {
             return Err("an empty image".into());
         }
-        let (dense, arc) = arc_samples(&p);
-        let length = *arc.last().unwrap();
-        if length.is_nan() || length < 1e-3 {
-            return Err(format!(
-                "a path {length:.2e} mm long: shorter than a micrometre"
-            ));
-        }
+        let length = spline.length();
         let pixel = length / height as f64;
-        let at = |s: f64| position(&dense, &arc, s);
-        let centres: Vec<DVec3> = (0..height).map(|y| at((y as f64 + 0.5) * pixel)).collect();
-        let tangents: Vec<DVec3> = (0..height)
-            .map(|y| {
-                let s = (y as f64 + 0.5) * pixel;
-                let e = 0.5 * pixel;
-                (at((s + e).min(length)) - at((s - e).max(0.0))).normalize_or_zero()
-            })
-            .collect();
-        let t0 = tangents[0];
-        let mut n = image_right.reject_from(t0);
-        if n.length() < 1e-6 * image_right.length().max(1e-30) {
-            // The path starts along the image's right: any direction across it.
-            n = t0.any_orthonormal_vector();
-        }
-        let n = n.normalize();
-        // About the image's up axis at the start, -t0 (rows run down the image).
-        let (s, c) = turn_deg.to_radians().sin_cos();
-        let up = -t0;
-        let mut lateral = n * c + up.cross(n) * s;
-        let mut rows = Vec::with_capacity(height as usize);
-        for y in 0..height as usize {
-            if y > 0 {
-                lateral = transport(
-                    (centres[y - 1], tangents[y - 1]),
-                    (centres[y], tangents[y]),
-                    lateral,
-                );
-            }
-            let t = tangents[y];
-            let l = lateral.reject_from(t).normalize_or(lateral);
-            lateral = l;
-            rows.push(CprRow {
-                centre: centres[y].as_vec3(),
-                lateral: l.as_vec3(),
-                normal: l.cross(t).normalize_or_zero().as_vec3(),
-            });
-        }
+        let arcs: Vec<f64> = (0..height).map(|y| (y as f64 + 0.5) * pixel).collect();
+        let e = 0.5 * chord.unwrap_or(pixel);
+        let rows = spline.frames(&arcs, e, image_right, turn_deg);
         Ok(CurvedPlane {
             width,
             height,
             pixel_mm: pixel as f32,
             length_mm: length,
-            points: p.len(),
+            points: spline.points,
             rows,
         })
     }
@@ -176,6 +167,96 @@ pub fn spline(points: &[DVec3]) -> Vec<DVec3> {
         return p;
     }
     arc_samples(&p).0
+}
+
+/// A path's spline, sampled densely by arc length: where its frames are taken.
+#[derive(Clone, Debug)]
+pub struct Spline {
+    dense: Vec<DVec3>,
+    arc: Vec<f64>,
+    /// The path's points after consecutive repeats are dropped.
+    pub points: usize,
+}
+
+impl Spline {
+    /// The spline through `points` (LPS mm; at least two distinct, a micrometre or more long).
+    pub fn new(points: &[DVec3]) -> Result<Spline, String> {
+        let p = distinct(points);
+        if p.len() < 2 {
+            return Err("a path needs two distinct points".into());
+        }
+        let (dense, arc) = arc_samples(&p);
+        let length = *arc.last().unwrap();
+        if length.is_nan() || length < 1e-3 {
+            return Err(format!(
+                "a path {length:.2e} mm long: shorter than a micrometre"
+            ));
+        }
+        Ok(Spline {
+            dense,
+            arc,
+            points: p.len(),
+        })
+    }
+
+    /// The spline's length, mm.
+    pub fn length(&self) -> f64 {
+        *self.arc.last().unwrap()
+    }
+
+    /// The point at arc length `s` (clamped to the ends).
+    pub fn at(&self, s: f64) -> DVec3 {
+        position(&self.dense, &self.arc, s)
+    }
+
+    /// The frames at arc lengths `arcs` (increasing): each its point, the unit tangent (the
+    /// chord from `s − e` to `s + e`, within the ends), and the lateral direction, which starts
+    /// as `image_right` made perpendicular to the first tangent, turned `turn_deg` about the
+    /// image's up axis there (the path's backward direction, right-handed, as `--orbit` turns
+    /// a camera), and is carried from frame to frame by parallel transport; the normal is
+    /// lateral × tangent.
+    pub fn frames(&self, arcs: &[f64], e: f64, image_right: DVec3, turn_deg: f64) -> Vec<CprRow> {
+        let length = self.length();
+        let centres: Vec<DVec3> = arcs.iter().map(|&s| self.at(s)).collect();
+        let tangents: Vec<DVec3> = arcs
+            .iter()
+            .map(|&s| {
+                (self.at((s + e).min(length)) - self.at((s - e).max(0.0))).normalize_or_zero()
+            })
+            .collect();
+        let Some(&t0) = tangents.first() else {
+            return Vec::new();
+        };
+        let mut n = image_right.reject_from(t0);
+        if n.length() < 1e-6 * image_right.length().max(1e-30) {
+            // The path starts along the image's right: any direction across it.
+            n = t0.any_orthonormal_vector();
+        }
+        let n = n.normalize();
+        // About the image's up axis at the start, -t0 (rows run down the image).
+        let (s, c) = turn_deg.to_radians().sin_cos();
+        let up = -t0;
+        let mut lateral = n * c + up.cross(n) * s;
+        let mut rows = Vec::with_capacity(arcs.len());
+        for y in 0..arcs.len() {
+            if y > 0 {
+                lateral = transport(
+                    (centres[y - 1], tangents[y - 1]),
+                    (centres[y], tangents[y]),
+                    lateral,
+                );
+            }
+            let t = tangents[y];
+            let l = lateral.reject_from(t).normalize_or(lateral);
+            lateral = l;
+            rows.push(CprRow {
+                centre: centres[y].as_vec3(),
+                lateral: l.as_vec3(),
+                normal: l.cross(t).normalize_or_zero().as_vec3(),
+            });
+        }
+        rows
+    }
 }
 
 /// `points` without consecutive repeats.

@@ -21,6 +21,7 @@ mod aov;
 pub mod cpr;
 pub mod dvr;
 mod image_out;
+pub mod lumen;
 pub mod medium;
 
 use rayon::prelude::*;

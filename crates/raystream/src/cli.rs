@@ -25,6 +25,9 @@ pub enum Command {
     Trace(TraceArgs),
     /// Extract a bone isosurface from a CT volume and write it as a mesh (PLY, OBJ or STL).
     Iso(IsoArgs),
+    /// Measure a vessel's lumen on cross-sections along a path through a CT volume: area,
+    /// equivalent, largest and smallest diameters, centroid.
+    Measure(MeasureArgs),
     /// Describe a mesh and its kd-tree, or a CT volume's geometry and values.
     Info(InfoArgs),
     /// Measure build time and traversal throughput on standard ray sets.
@@ -308,6 +311,11 @@ pub struct RenderArgs {
     /// reference view; PNG, or DICOM as the picture (RGB, Burned In Annotation YES).
     #[arg(long, value_name = "FILE", requires = "mode", conflicts_with = "path")]
     pub draw_path: Option<PathBuf>,
+    /// With --path FILE --slices N: draws on each cross-section the lumen `measure` finds
+    /// there at HU (its edge in cyan, its largest diameter as a yellow line ringed in black);
+    /// PNG, or DICOM as the picture (RGB, Burned In Annotation YES).
+    #[arg(long, value_name = "HU", requires_all = ["path", "slices"], allow_negative_numbers = true)]
+    pub draw_lumen: Option<f32>,
     /// With --slices: the planes' spacing in mm (default: the pixel size, for cubic voxels).
     #[arg(long, value_name = "MM", requires = "slices")]
     pub slice_step: Option<f32>,
@@ -587,6 +595,74 @@ pub struct IsoArgs {
     /// Taubin smoothing iterations (0: the raw marching-cubes surface, gradient normals).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=100))]
     pub smooth: u32,
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+#[derive(Args)]
+pub struct MeasureArgs {
+    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd).
+    pub input: PathBuf,
+    /// The vessel's path: 3D Slicer markups (.mrk.json) or text (x y z per line, LPS mm), as
+    /// `render --path` reads it.
+    #[arg(long, value_name = "FILE")]
+    pub path: PathBuf,
+    /// A cross-section every MM along the path (at the middle of equal parts, as `render
+    /// --path --slices` places them).
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 1.0,
+        conflicts_with = "sections"
+    )]
+    pub every: f64,
+    /// Exactly N cross-sections, evenly along the path.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub sections: Option<u32>,
+    /// Lumen: the samples at or above this, HU, connected to the path's point (contrast-filled
+    /// blood; the default sits above the vessel wall's and soft tissue's 30-60 HU).
+    #[arg(
+        long,
+        value_name = "HU",
+        default_value_t = 150.0,
+        allow_negative_numbers = true
+    )]
+    pub lumen: f32,
+    /// The square sampled about the path's point on each section, mm (a lumen reaching its
+    /// edge is reported open).
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 100.0,
+        allow_negative_numbers = true
+    )]
+    pub field: f64,
+    /// The lumen's nearest sample may lie this far from the path's point, mm.
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 5.0,
+        allow_negative_numbers = true
+    )]
+    pub seed: f64,
+    /// Open the lumen with a disc of this radius, mm: what the disc cannot reach from the
+    /// path's side and runs on beyond its reach (a side branch, a neighbour joined by a
+    /// narrower neck) is cut off; 0 keeps all that is connected.
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 2.0,
+        allow_negative_numbers = true
+    )]
+    pub open: f64,
+    /// Write the table as CSV to FILE.
+    #[arg(short, long, value_name = "FILE.csv")]
+    pub output: Option<PathBuf>,
+    #[command(flatten)]
+    pub pick: VolumePick,
+    /// Print JSON instead of the table.
+    #[arg(long)]
+    pub json: bool,
     #[arg(short, long)]
     pub quiet: bool,
 }

@@ -7,6 +7,7 @@ mod dvr;
 mod info;
 mod iso;
 mod labels;
+mod measure;
 mod overlay;
 mod render;
 mod trace;
@@ -21,6 +22,7 @@ fn main() -> ExitCode {
         cli::Command::Render(a) => render::run(&a),
         cli::Command::Trace(a) => trace::run(&a),
         cli::Command::Iso(a) => iso::run(&a),
+        cli::Command::Measure(a) => measure::run(&a),
         cli::Command::Info(a) => info::run(&a),
         cli::Command::Bench(a) => bench::run(&a),
     };

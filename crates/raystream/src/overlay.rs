@@ -6,13 +6,17 @@
 //! A line of one colour is all it draws, so it is drawn here rather than through a vector
 //! graphics crate.
 
+use raystream_cpu::cpr::CprRow;
 use raystream_cpu::dvr::lps_to_scene;
-use raystream_math::{DVec3, Vec3};
+use raystream_cpu::lumen::Lumen;
+use raystream_math::{DVec2, DVec3, Vec3};
 use raystream_scene::Camera;
 
 /// The line's colour (8-bit sRGB) and its ring's.
 const LINE: [u8; 3] = [255, 214, 0];
 const RING: [u8; 3] = [0, 0, 0];
+/// A lumen's edge.
+const EDGE: [u8; 3] = [0, 230, 255];
 
 /// Where the LPS point `p` falls in a `width`×`height` frame of `cam` (scene frame), in pixel
 /// coordinates (the top-left corner at 0, 0), as `Camera::ray` casts pixels; `None` behind a
@@ -78,6 +82,34 @@ pub fn draw_path(rgb: &mut [u8], width: u32, height: u32, cam: &Camera, dense: &
             }
         }
     }
+}
+
+/// Draws a cross-section's lumen (`measure_section`'s, on the plane of `row` seen by `cam`)
+/// into the 8-bit RGB `rgb`: its edge points in cyan, a pixel each, then its largest diameter
+/// as [`draw_path`] draws a line.
+pub fn draw_lumen(
+    rgb: &mut [u8],
+    (width, height): (u32, u32),
+    cam: &Camera,
+    row: &CprRow,
+    (lumen, edge): (&Lumen, &[DVec2]),
+) {
+    let (c, l, d) = (
+        row.centre.as_dvec3(),
+        row.lateral.as_dvec3(),
+        row.normal.as_dvec3(),
+    );
+    for q in edge {
+        let Some((x, y)) = project(cam, c + q.x * l + q.y * d, width, height) else {
+            continue;
+        };
+        let (px, py) = (x.floor() as i64, y.floor() as i64);
+        if px >= 0 && py >= 0 && px < width as i64 && py < height as i64 {
+            let i = 3 * (py as usize * width as usize + px as usize);
+            rgb[i..i + 3].copy_from_slice(&EDGE);
+        }
+    }
+    draw_path(rgb, width, height, cam, &lumen.max_ends);
 }
 
 #[cfg(test)]

@@ -16,6 +16,7 @@ use raystream_scene::{Camera, PatientView, Projection, Scene, VOLUME_VIEW, View}
 
 use raystream_cpu::cpr::CurvedPlane;
 use raystream_cpu::dvr::{DvrMode, DvrOptions, Sight, volume_camera_from};
+use raystream_cpu::lumen::LumenOptions;
 
 use crate::cli::{FrameFormat, RenderArgs};
 use crate::common::{
@@ -146,7 +147,7 @@ fn volume_dicom(
             DicomOut {
                 window,
                 plane: image_plane(opt, volume, cam),
-                annotated: marked.annotated || overlay.is_some(),
+                annotated: marked.annotated || overlay.is_some() || a.draw_lumen.is_some(),
                 ..marked
             }
         }
@@ -174,15 +175,20 @@ fn curved_plane(
     let right = raystream_cpu::dvr::scene_to_lps(view.basis().col(0)).as_dvec3();
     let plane = CurvedPlane::new(points, right, turn as f64, opt.width, opt.height)
         .map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?;
-    let inside = plane.rows_inside(volume);
-    if inside == 0 {
-        let [x, y, z] = points[0].to_array();
+    inside(file, &plane, volume)?;
+    Ok(plane)
+}
+
+/// An error where none of `plane`'s rows along the path in `file` lie in `volume`.
+pub fn inside(file: &Path, plane: &CurvedPlane, volume: &raystream_io::Volume) -> Result<()> {
+    if plane.rows_inside(volume) == 0 {
+        let [x, y, z] = plane.rows[0].centre.to_array();
         bail!(
-            "{}: the path lies outside the volume (its first point ({x:.1}, {y:.1}, {z:.1}) mm LPS; `info` gives the volume's extent): coordinates in LPS mm, or a markups file naming RAS",
+            "{}: the path lies outside the volume (its start ({x:.1}, {y:.1}, {z:.1}) mm LPS; `info` gives the volume's extent): coordinates in LPS mm, or a markups file naming RAS",
             file.display()
         );
     }
-    Ok(plane)
+    Ok(())
 }
 
 /// A curved reformation in words, for the summary and an EXR's comments (ASCII, as an EXR's
@@ -338,6 +344,9 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     if a.draw_path.is_some() && format == ImageFormat::Exr {
         bail!("--draw-path draws on a PNG; an EXR holds the values themselves");
     }
+    if a.draw_lumen.is_some() && format == ImageFormat::Exr {
+        bail!("--draw-lumen draws on a PNG; an EXR holds the values themselves");
+    }
     // A cine reads its phases one by one, the first here (no warning that it chose one).
     let mut select = a.pick.select();
     if a.cine {
@@ -353,7 +362,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         crate::common::is_dicom(&a.output)
     };
     // Letters or a path drawn need the picture as seen.
-    let drawn = a.labels || a.draw_path.is_some();
+    let drawn = a.labels || a.draw_path.is_some() || a.draw_lumen.is_some();
     opt.hu_values = format == ImageFormat::Exr || (dicom_out && mode.is_windowed() && !drawn);
     let aspect = opt.width as f32 / opt.height as f32;
     let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
@@ -585,25 +594,43 @@ fn path_sections(
         );
     }
     let [az, _] = orbit_angles(a);
-    let stations = DvrOptions {
-        width: 1,
-        height: n,
-        ..*opt
-    };
-    let stations = curved_plane(curve.file, &curve.points, volume, &stations, (view, az))?;
+    let right = raystream_cpu::dvr::scene_to_lps(view.basis().col(0)).as_dvec3();
+    let stations = CurvedPlane::sections(&curve.points, right, az as f64, n)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", curve.file.display()))?;
+    inside(curve.file, &stations, volume)?;
     let pixel = raystream_cpu::dvr::min_spacing(volume);
     let extent = volume.dims.map(|d| d as f64);
     let reach = (0..3)
         .map(|i| (extent[i] * volume.spacing[i]).powi(2))
         .sum::<f64>()
         .sqrt() as f32;
+    let lumen = match a.draw_lumen {
+        Some(hu) => {
+            let o = LumenOptions {
+                threshold_hu: hu,
+                ..LumenOptions::for_volume(volume)
+            };
+            o.check()
+                .map_err(|e| anyhow::anyhow!("--draw-lumen {hu}: {e}"))?;
+            Some((o, raystream_cpu::dvr::Marcher::new(volume, None)))
+        }
+        None => None,
+    };
     frame_series(a, (volume, None), n, format, "slices", |i| {
         let cam = stations.section_camera(i, 0.5 * pixel * opt.height as f32, reach);
+        let row = &stations.rows[i as usize];
         let opt = DvrOptions {
-            slice_at: Some(stations.rows[i as usize].centre),
+            slice_at: Some(row.centre),
             ..*opt
         };
-        Ok((renderer.frame(&opt, &cam, format)?, Seen::Camera(cam), opt))
+        let mut f = renderer.frame(&opt, &cam, format)?;
+        if let (Some((o, m)), crate::common::Picture::Srgb8 { rgb, width, height }) =
+            (&lumen, &mut f.picture)
+            && let Some((l, edge)) = raystream_cpu::lumen::measure_section(volume, m, row, o)
+        {
+            crate::overlay::draw_lumen(rgb, (*width, *height), &cam, row, (&l, &edge));
+        }
+        Ok((f, Seen::Camera(cam), opt))
     })
 }
 

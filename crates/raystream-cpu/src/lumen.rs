@@ -1,0 +1,804 @@
+//! A vessel's lumen measured on cross-sections of its path, as a vascular workstation sizes an
+//! aorta for a stent graft or grades a stenosis: on each plane perpendicular to the path, the
+//! contrast-filled lumen is the region at or above a threshold (HU) connected to the path's
+//! point, its holes filled, and opened with a small disc (a side branch or a neighbour joined by
+//! a narrow neck is cut off); from it come the area, the diameter of a circle of that area, the
+//! largest and smallest calliper diameters (the Feret diameters: the longest chord, and the
+//! narrowest gap between two parallel lines that hold it), and the centroid and its distance
+//! from the path.
+//!
+//! The section is sampled on a square grid of `pixel_mm` (trilinear, in the volume's own
+//! orientation, as `--mode slice`); the area counts the grid's pixels (a pixel's worth of error
+//! along the edge averages out), the diameters run between sub-pixel edge points where the
+//! interpolated HU crosses the threshold between a lumen pixel and its neighbour. This is the
+//! lumen, not the outer wall: a thrombus-lined aneurysm is wider than its lumen.
+
+use rayon::prelude::*;
+use raystream_io::Volume;
+use raystream_math::{DVec2, DVec3, Vec3};
+
+use crate::cpr::{CprRow, CurvedPlane};
+use crate::dvr::Marcher;
+
+/// How the lumen is found on a section.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LumenOptions {
+    /// Samples at or above this are lumen, HU.
+    pub threshold_hu: f32,
+    /// The side of the square sampled about the path's point, mm: the widest lumen measured
+    /// whole (a lumen that reaches its edge is reported as open).
+    pub field_mm: f64,
+    /// The grid's spacing, mm.
+    pub pixel_mm: f64,
+    /// How far from the path's point the lumen's nearest sample may lie, mm.
+    pub seed_mm: f64,
+    /// The radius of the disc the lumen is opened with, mm (0: not opened): parts it cannot
+    /// reach from inside (side branches, a neighbour joined by a narrower neck) are cut off.
+    pub open_mm: f64,
+}
+
+impl LumenOptions {
+    /// Defaults for `vol`: 150 HU (contrast-filled blood, above the 30–60 HU of the vessel's
+    /// wall and the unenhanced soft tissue about it), a 100 mm field (an aortic aneurysm's
+    /// lumen fits), a quarter of the finest voxel spacing (at most 1024 samples across), the
+    /// lumen within 5 mm, opened with a disc of 2 mm (branches under 4 mm across cut off).
+    pub fn for_volume(vol: &Volume) -> LumenOptions {
+        LumenOptions {
+            threshold_hu: 150.0,
+            field_mm: 100.0,
+            pixel_mm: (crate::dvr::min_spacing(vol) as f64 / 4.0).max(100.0 / 1024.0),
+            seed_mm: 5.0,
+            open_mm: 2.0,
+        }
+    }
+
+    /// The grid's side in pixels.
+    fn side(&self) -> usize {
+        (self.field_mm / self.pixel_mm).ceil().max(1.0) as usize
+    }
+
+    pub fn check(&self) -> Result<(), String> {
+        if !self.threshold_hu.is_finite() {
+            return Err(format!(
+                "a threshold of {} HU: it must be a number",
+                self.threshold_hu
+            ));
+        }
+        if !(self.pixel_mm.is_finite() && self.pixel_mm > 0.0) {
+            return Err(format!(
+                "a sample spacing of {} mm: it must be positive",
+                self.pixel_mm
+            ));
+        }
+        if !(self.field_mm.is_finite() && self.field_mm >= self.pixel_mm) {
+            return Err(format!(
+                "a field of {} mm: it must be at least a sample ({} mm) wide",
+                self.field_mm, self.pixel_mm
+            ));
+        }
+        if self.side() > MAX_SIDE {
+            return Err(format!(
+                "a field of {} mm at {} mm a sample is {} samples across; at most {MAX_SIDE}",
+                self.field_mm,
+                self.pixel_mm,
+                self.side()
+            ));
+        }
+        if !(self.open_mm.is_finite() && self.open_mm >= 0.0) {
+            return Err(format!(
+                "an opening radius of {} mm: it must be zero or more",
+                self.open_mm
+            ));
+        }
+        if !(self.seed_mm.is_finite() && self.seed_mm >= 0.0) {
+            return Err(format!(
+                "a seed radius of {} mm: it must be zero or more",
+                self.seed_mm
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The most samples across a section's field (4096² samples, 64 MiB of f32).
+pub const MAX_SIDE: usize = 4096;
+
+/// The lumen found on one cross-section.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lumen {
+    /// mm², holes included.
+    pub area_mm2: f64,
+    /// The diameter of a circle of the same area, mm.
+    pub equivalent_diameter_mm: f64,
+    /// The longest chord between two edge points, mm, and its ends (LPS mm).
+    pub max_diameter_mm: f64,
+    pub max_ends: [DVec3; 2],
+    /// The narrowest calliper width, mm (the gap between the closest pair of parallel lines
+    /// that hold the lumen between them), and the unit direction it is measured along (LPS).
+    pub min_diameter_mm: f64,
+    pub min_direction: DVec3,
+    /// The centroid (LPS mm) and its distance from the path's point, mm.
+    pub centroid: DVec3,
+    pub offset_mm: f64,
+    /// The lumen reaches the field's edge (it is wider than the field, or it leaks into a
+    /// neighbouring bright structure): its figures are then of the part in the field.
+    pub open: bool,
+}
+
+/// One station along the path.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Section {
+    /// Arc length from the path's first point, mm.
+    pub arc_mm: f64,
+    /// The section's frame: the path's point, its image-right (lateral) and down (normal)
+    /// directions; the plane's normal is the path's tangent.
+    pub row: CprRow,
+    /// The lumen, or none within `seed_mm` of the path's point.
+    pub lumen: Option<Lumen>,
+}
+
+impl Section {
+    /// The path's tangent (LPS), the section plane's normal.
+    pub fn tangent(&self) -> Vec3 {
+        self.row.normal.cross(self.row.lateral).normalize()
+    }
+}
+
+/// The lumen on `n` cross-sections of the path through `points`, at the middle of `n` equal
+/// parts of it, framed from `image_right` ([`CurvedPlane::sections`]: the planes `render
+/// --path --slices N` shows).
+pub fn measure_path(
+    vol: &Volume,
+    points: &[DVec3],
+    n: u32,
+    image_right: DVec3,
+    opt: &LumenOptions,
+) -> Result<Vec<Section>, String> {
+    let plane = CurvedPlane::sections(points, image_right, 0.0, n)?;
+    let m = Marcher::new(vol, None);
+    let step = plane.length_mm / n as f64;
+    Ok(plane
+        .rows
+        .into_par_iter()
+        .enumerate()
+        .map(|(i, row)| Section {
+            arc_mm: (i as f64 + 0.5) * step,
+            row,
+            lumen: measure_section(vol, &m, &row, opt).map(|(l, _)| l),
+        })
+        .collect())
+}
+
+/// The lumen on the plane through `row.centre` spanned by `row.lateral` and `row.normal`, and
+/// its edge points in the section's own coordinates (mm from the path's point along the
+/// lateral direction and the normal: as the cross-section's image has them, right and down).
+pub fn measure_section(
+    vol: &Volume,
+    m: &Marcher,
+    row: &CprRow,
+    opt: &LumenOptions,
+) -> Option<(Lumen, Vec<DVec2>)> {
+    let n = opt.side();
+    let p = opt.pixel_mm;
+    let half = 0.5 * n as f64;
+    let (c, l, d) = (
+        row.centre.as_dvec3(),
+        row.lateral.as_dvec3(),
+        row.normal.as_dvec3(),
+    );
+    // The pixel's offset from the path's point, mm, right and down.
+    let offset =
+        |i: usize, j: usize| DVec2::new((i as f64 + 0.5 - half) * p, (j as f64 + 0.5 - half) * p);
+    let world = |q: DVec2| c + q.x * l + q.y * d;
+    let hi = vol.dims.map(|k| k.max(1) as f32 - 1.0);
+    let values: Vec<f32> = (0..n * n)
+        .map(|k| {
+            let q = m.index_of(world(offset(k % n, k / n)).as_vec3());
+            let inside = (0..3).all(|a| (-1e-3..=hi[a] + 1e-3).contains(&q[a]));
+            if inside { m.sample(q) } else { f32::NAN }
+        })
+        .collect();
+    let lumen = |k: usize| values[k] >= opt.threshold_hu;
+    // The seed: the lumen pixel nearest the path's point, within seed_mm.
+    let seed = (0..n * n)
+        .filter(|&k| lumen(k))
+        .map(|k| (offset(k % n, k / n).length(), k))
+        .filter(|&(r, _)| r <= opt.seed_mm.max(0.5 * p * std::f64::consts::SQRT_2))
+        .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))?
+        .1;
+    // The region: 4-connected lumen pixels from the seed, its holes filled.
+    let mut region = vec![false; n * n];
+    flood(n, seed, &mut region, lumen, false);
+    let mut mask = fill_holes(n, &region);
+    // Opened: the parts a disc of `open_mm` cannot reach from the seed's side of the lumen
+    // are cut off where they run on beyond the disc's reach (a side branch, a neighbour joined
+    // by a neck narrower than the disc); a tip or corner too sharp for the disc stays.
+    let r = opt.open_mm / p;
+    if r > 0.0 {
+        mask = opened(n, &mask, r, seed);
+    }
+    let filled = |k: usize| mask[k];
+    let mut count = 0usize;
+    let mut sum = DVec2::ZERO;
+    let mut open = false;
+    let mut edge = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let k = j * n + i;
+            if !filled(k) {
+                continue;
+            }
+            count += 1;
+            let q = offset(i, j);
+            sum += q;
+            open |= i == 0 || j == 0 || i == n - 1 || j == n - 1;
+            // Edge points: where the HU crosses the threshold towards each neighbour outside.
+            for (di, dj) in [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)] {
+                let (a, b) = (i as i64 + di, j as i64 + dj);
+                if a < 0 || b < 0 || a >= n as i64 || b >= n as i64 {
+                    continue;
+                }
+                let o = b as usize * n + a as usize;
+                if filled(o) {
+                    continue;
+                }
+                // Where the HU falls through the threshold, there; where the region was cut
+                // (the neighbour is lumen, off beyond a neck) or leaves the volume, halfway.
+                let (vi, vo) = (values[k], values[o]);
+                let t = if vi.is_finite()
+                    && vo.is_finite()
+                    && vi >= opt.threshold_hu
+                    && vo < opt.threshold_hu
+                {
+                    ((vi - opt.threshold_hu) / (vi - vo)).clamp(0.0, 1.0) as f64
+                } else {
+                    0.5
+                };
+                edge.push(q + t * (offset(a as usize, b as usize) - q));
+            }
+        }
+    }
+    let area = count as f64 * p * p;
+    let centre = sum / count as f64;
+    let hull = convex_hull(&edge);
+    let (max_d, ends) = max_chord(&hull);
+    let (min_d, across) = min_width(&hull);
+    let lumen = Lumen {
+        area_mm2: area,
+        equivalent_diameter_mm: 2.0 * (area / std::f64::consts::PI).sqrt(),
+        max_diameter_mm: max_d,
+        max_ends: ends.map(world),
+        min_diameter_mm: min_d,
+        min_direction: (across.x * l + across.y * d).normalize_or_zero(),
+        centroid: world(centre),
+        offset_mm: centre.length(),
+        open,
+    };
+    Some((lumen, edge))
+}
+
+/// Marks in `mark` the pixels of an `n`×`n` grid reached from `seed` through pixels that are
+/// `passable` (4-connected, or 8-connected with `diagonal`). A stack, not recursion.
+fn flood(
+    n: usize,
+    seed: usize,
+    mark: &mut [bool],
+    passable: impl Fn(usize) -> bool,
+    diagonal: bool,
+) {
+    let steps: &[(i64, i64)] = if diagonal {
+        &[
+            (1, 0),
+            (-1, 0),
+            (0, 1),
+            (0, -1),
+            (1, 1),
+            (1, -1),
+            (-1, 1),
+            (-1, -1),
+        ]
+    } else {
+        &[(1, 0), (-1, 0), (0, 1), (0, -1)]
+    };
+    mark[seed] = true;
+    let mut stack = vec![seed];
+    while let Some(k) = stack.pop() {
+        let (i, j) = ((k % n) as i64, (k / n) as i64);
+        for &(di, dj) in steps {
+            let (a, b) = (i + di, j + dj);
+            if a < 0 || b < 0 || a >= n as i64 || b >= n as i64 {
+                continue;
+            }
+            let q = b as usize * n + a as usize;
+            if !mark[q] && passable(q) {
+                mark[q] = true;
+                stack.push(q);
+            }
+        }
+    }
+}
+
+/// `mask` (an `n`×`n` grid) opened about `seed` with a disc of radius `r` pixels: its core
+/// (the pixels deeper than `r` inside it) has parts; the one nearest the seed, grown back by
+/// `r` and a pixel, is the body. What is left of `mask` is cut off where a part of it reaches
+/// further than `r` from the body, and kept where it does not (a tip too sharp for the disc).
+/// A mask with no core (narrower than the disc everywhere) comes back as it is.
+fn opened(n: usize, mask: &[bool], r: f64, seed: usize) -> Vec<bool> {
+    let depth = distance_to(n, |k| !mask[k]);
+    let core: Vec<bool> = depth.iter().map(|&d2| d2 > r * r).collect();
+    let (si, sj) = ((seed % n) as f64, (seed / n) as f64);
+    let gap = |k: usize| ((k % n) as f64 - si).powi(2) + ((k / n) as f64 - sj).powi(2);
+    let Some(start) = (0..n * n)
+        .filter(|&k| core[k])
+        .min_by(|&a, &b| gap(a).total_cmp(&gap(b)).then(a.cmp(&b)))
+    else {
+        return mask.to_vec();
+    };
+    let mut part = vec![false; n * n];
+    flood(n, start, &mut part, |k| core[k], true);
+    let reach = distance_to(n, |k| part[k]);
+    let grown = (r + 1.0) * (r + 1.0);
+    let body: Vec<bool> = (0..n * n).map(|k| mask[k] && reach[k] <= grown).collect();
+    let beyond = distance_to(n, |k| body[k]);
+    let mut out = body.clone();
+    let mut seen = vec![false; n * n];
+    for k in 0..n * n {
+        if mask[k] && !body[k] && !seen[k] {
+            let mut piece = vec![false; n * n];
+            flood(n, k, &mut piece, |q| mask[q] && !body[q], false);
+            let far = (0..n * n)
+                .filter(|&q| piece[q])
+                .map(|q| beyond[q])
+                .fold(0.0, f64::max);
+            for q in 0..n * n {
+                if piece[q] {
+                    seen[q] = true;
+                    out[q] = far <= r * r;
+                }
+            }
+        }
+    }
+    fill_holes(n, &out)
+}
+
+/// `region` with its holes filled: all but what the outside reaches from the grid's border
+/// (8-connected, as the complement of a 4-connected region is).
+fn fill_holes(n: usize, region: &[bool]) -> Vec<bool> {
+    let mut outside = vec![false; n * n];
+    for k in 0..n * n {
+        let (i, j) = (k % n, k / n);
+        if (i == 0 || j == 0 || i == n - 1 || j == n - 1) && !region[k] && !outside[k] {
+            flood(n, k, &mut outside, |q| !region[q], true);
+        }
+    }
+    outside.iter().map(|&o| !o).collect()
+}
+
+/// Per pixel of an `n`×`n` grid, the squared distance (pixels²) to the nearest pixel that is
+/// `target` (+∞ where there is none, and beyond the grid's border none is assumed): the exact
+/// Euclidean distance transform of Felzenszwalb and Huttenlocher (2012), a lower envelope of
+/// parabolas along the rows, then the columns. Written here: it is a few dozen lines, and the
+/// image-processing crates that have one would add a large dependency for it.
+fn distance_to(n: usize, target: impl Fn(usize) -> bool) -> Vec<f64> {
+    let mut d: Vec<f64> = (0..n * n)
+        .map(|k| if target(k) { 0.0 } else { f64::INFINITY })
+        .collect();
+    let mut f = vec![0.0; n];
+    let mut out = vec![0.0; n];
+    let (mut v, mut z) = (vec![0usize; n], vec![0.0f64; n + 1]);
+    let mut pass = |d: &mut [f64], at: &dyn Fn(usize) -> usize| {
+        for (q, x) in f.iter_mut().enumerate() {
+            *x = d[at(q)];
+        }
+        envelope(&f, &mut out, &mut v, &mut z);
+        for (q, &x) in out.iter().enumerate() {
+            d[at(q)] = x;
+        }
+    };
+    for j in 0..n {
+        pass(&mut d, &|i| j * n + i);
+    }
+    for i in 0..n {
+        pass(&mut d, &|j| j * n + i);
+    }
+    d
+}
+
+/// The 1-D squared distance transform of `f` (0 at targets, +∞ elsewhere, or the squared
+/// distances of an earlier pass) into `out`: min over q of (p − q)² + f(q).
+fn envelope(f: &[f64], out: &mut [f64], v: &mut [usize], z: &mut [f64]) {
+    let Some(first) = f.iter().position(|x| x.is_finite()) else {
+        out.fill(f64::INFINITY);
+        return;
+    };
+    let meet = |q: usize, p: usize| {
+        ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64))
+    };
+    let mut k = 0;
+    v[0] = first;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    for (q, fq) in f.iter().enumerate().skip(first + 1) {
+        if !fq.is_finite() {
+            continue;
+        }
+        let mut s = meet(q, v[k]);
+        while s <= z[k] {
+            k -= 1;
+            s = meet(q, v[k]);
+        }
+        k += 1;
+        v[k] = q;
+        z[k] = s;
+        z[k + 1] = f64::INFINITY;
+    }
+    let mut k = 0;
+    for (p, o) in out.iter_mut().enumerate() {
+        while z[k + 1] < p as f64 {
+            k += 1;
+        }
+        let dq = p as f64 - v[k] as f64;
+        *o = dq * dq + f[v[k]];
+    }
+}
+
+/// The convex hull of `pts`, counter-clockwise, without collinear points (Andrew's monotone
+/// chain). Written here: a few lines, and no crate for 2-D hulls is worth the dependency.
+pub fn convex_hull(pts: &[DVec2]) -> Vec<DVec2> {
+    let mut p: Vec<DVec2> = pts.to_vec();
+    p.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: DVec2, a: DVec2, b: DVec2| (a - o).perp_dot(b - o);
+    let mut hull: Vec<DVec2> = Vec::with_capacity(2 * p.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &DVec2>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// The longest chord between two of `hull`'s points, and its ends (every pair: hulls of a
+/// lumen's edge hold hundreds of points, not millions).
+fn max_chord(hull: &[DVec2]) -> (f64, [DVec2; 2]) {
+    let mut best = (0.0, [hull.first().copied().unwrap_or_default(); 2]);
+    for (a, &p) in hull.iter().enumerate() {
+        for &q in &hull[a + 1..] {
+            let d = p.distance(q);
+            if d > best.0 {
+                best = (d, [p, q]);
+            }
+        }
+    }
+    best
+}
+
+/// The convex polygon `hull`'s narrowest width and the unit direction across it: the
+/// narrowest pair of parallel supporting lines has one of them along an edge of the hull, so
+/// each edge's farthest point gives a candidate (every edge against every point).
+fn min_width(hull: &[DVec2]) -> (f64, DVec2) {
+    if hull.len() < 3 {
+        let along = if hull.len() == 2 {
+            (hull[1] - hull[0]).normalize_or_zero()
+        } else {
+            DVec2::X
+        };
+        return (0.0, along.perp());
+    }
+    let mut best = (f64::INFINITY, DVec2::X);
+    for (a, &p) in hull.iter().enumerate() {
+        let q = hull[(a + 1) % hull.len()];
+        let Some(u) = (q - p).try_normalize() else {
+            continue;
+        };
+        let across = u.perp();
+        let w = hull
+            .iter()
+            .map(|&r| (r - p).dot(across).abs())
+            .fold(0.0, f64::max);
+        if w < best.0 {
+            best = (w, across);
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A CT on a grid of `h` mm (LPS = index·h) 64 mm square and `nz` voxels deep whose HU
+    /// fall linearly across the surface `f = 0` of `f` (mm, positive inside): 500 HU a mm,
+    /// from −1000 to 1000, so that the 0 HU crossing lies on the surface within trilinear
+    /// error.
+    fn phantom_at(h: f64, nz: usize, f: impl Fn(DVec3) -> f64 + Sync) -> Volume {
+        let n = (64.0 / h).round() as usize;
+        let dims = [n, n, nz];
+        let data: Vec<f32> = (0..dims.iter().product::<usize>())
+            .into_par_iter()
+            .map(|k| {
+                let p = DVec3::new((k % n) as f64, (k / n % n) as f64, (k / (n * n)) as f64);
+                (500.0 * f(p * h)).clamp(-1000.0, 1000.0) as f32
+            })
+            .collect();
+        Volume {
+            dims,
+            spacing: [h; 3],
+            origin: [0.0; 3],
+            direction: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            data,
+            unit: raystream_io::ValueUnit::Hounsfield,
+            format: raystream_io::VolumeFormat::Nifti,
+            series: None,
+            warnings: Vec::new(),
+            phase: Default::default(),
+        }
+    }
+
+    /// [`phantom_at`] on a 1 mm grid.
+    fn phantom(nz: usize, f: impl Fn(DVec3) -> f64 + Sync) -> Volume {
+        phantom_at(1.0, nz, f)
+    }
+
+    fn opt(vol: &Volume) -> LumenOptions {
+        LumenOptions {
+            threshold_hu: 0.0,
+            field_mm: 60.0,
+            ..LumenOptions::for_volume(vol)
+        }
+    }
+
+    #[test]
+    fn a_round_tube_measures_its_radius() {
+        // A tube of radius 7.3 mm along z through (31.6, 32.2): every section's area is
+        // π r², its diameters 2r, its centroid on the axis.
+        let (r, axis) = (7.3, DVec2::new(31.6, 32.2));
+        let vol = phantom(24, |p| r - (p.truncate() - axis).length());
+        let path = [DVec3::new(31.0, 33.0, 2.0), DVec3::new(31.0, 33.0, 21.0)];
+        let sections = measure_path(&vol, &path, 5, DVec3::X, &opt(&vol)).unwrap();
+        assert_eq!(sections.len(), 5);
+        for s in &sections {
+            let l = s.lumen.as_ref().expect("the tube");
+            let area = std::f64::consts::PI * r * r;
+            assert!(
+                (l.area_mm2 - area).abs() < 0.01 * area,
+                "{} mm² for {area}",
+                l.area_mm2
+            );
+            assert!((l.equivalent_diameter_mm - 2.0 * r).abs() < 0.05, "{l:?}");
+            assert!(
+                (l.max_diameter_mm - 2.0 * r).abs() < 0.05,
+                "{}",
+                l.max_diameter_mm
+            );
+            assert!(
+                (l.min_diameter_mm - 2.0 * r).abs() < 0.08,
+                "{}",
+                l.min_diameter_mm
+            );
+            assert!(
+                (l.centroid.truncate() - axis).length() < 0.02,
+                "{}",
+                l.centroid
+            );
+            assert!((l.offset_mm - (axis - DVec2::new(31.0, 33.0)).length()).abs() < 0.02);
+            assert!(!l.open);
+            // Every edge point on the circle.
+            let m = Marcher::new(&vol, None);
+            let (again, edge) = measure_section(&vol, &m, &s.row, &opt(&vol)).unwrap();
+            assert_eq!(&again, l);
+            for q in &edge {
+                let w = s.row.centre.as_dvec3()
+                    + q.x * s.row.lateral.as_dvec3()
+                    + q.y * s.row.normal.as_dvec3();
+                assert!(((w.truncate() - axis).length() - r).abs() < 0.03, "{w}");
+            }
+        }
+    }
+
+    #[test]
+    fn an_elliptic_lumen_has_its_axes_as_feret_diameters() {
+        // Semi-axes 9 and 4 mm, the long one at 30° to x: max 18, min 8, area π·36. On a
+        // half-millimetre grid: at its tips the edge bends with a radius of 1.8 mm, and on a
+        // 1 mm grid trilinear interpolation would draw each tip in by 0.07 mm.
+        let (a, b) = (9.0, 4.0);
+        let (s, c) = 30f64.to_radians().sin_cos();
+        let centre = DVec2::new(32.0, 32.0);
+        let vol = phantom_at(0.5, 24, |p| {
+            let q = p.truncate() - centre;
+            let (u, v) = (q.x * c + q.y * s, -q.x * s + q.y * c);
+            // Scaled so that its gradient is about 1 mm⁻¹ at the surface.
+            4.0 * (1.0 - ((u / a).powi(2) + (v / b).powi(2)).sqrt())
+        });
+        let path = [DVec3::new(32.0, 32.0, 1.0), DVec3::new(32.0, 32.0, 10.0)];
+        let sections = measure_path(&vol, &path, 1, DVec3::X, &opt(&vol)).unwrap();
+        let l = sections[0].lumen.as_ref().unwrap();
+        assert!(
+            (l.max_diameter_mm - 2.0 * a).abs() < 0.1,
+            "{}",
+            l.max_diameter_mm
+        );
+        assert!(
+            (l.min_diameter_mm - 2.0 * b).abs() < 0.1,
+            "{}",
+            l.min_diameter_mm
+        );
+        let area = std::f64::consts::PI * a * b;
+        assert!((l.area_mm2 - area).abs() < 0.01 * area, "{}", l.area_mm2);
+        // The long chord along the long axis, the narrow width across it.
+        let long = (l.max_ends[1] - l.max_ends[0]).truncate().normalize();
+        assert!(long.dot(DVec2::new(c, s)).abs() > 0.999, "{long}");
+        assert!(l.min_direction.truncate().dot(DVec2::new(-s, c)).abs() > 0.999);
+    }
+
+    #[test]
+    fn holes_are_filled_and_a_lumen_beyond_the_seed_radius_is_missed() {
+        // A ring (a tube with a dark core of radius 2 inside radius 6): the area is the
+        // disc's; a path 12 mm from it finds no lumen within 5 mm.
+        let centre = DVec2::new(30.0, 30.0);
+        let vol = phantom(8, |p| {
+            let d = (p.truncate() - centre).length();
+            (6.0 - d).min(d - 2.0)
+        });
+        let o = LumenOptions {
+            seed_mm: 5.0,
+            ..opt(&vol)
+        };
+        let at = |x: f64| {
+            let path = [DVec3::new(x, 30.0, 1.0), DVec3::new(x, 30.0, 6.0)];
+            measure_path(&vol, &path, 1, DVec3::X, &o)
+                .unwrap()
+                .remove(0)
+        };
+        // The path through the dark core: the ring is found 2 mm away, its hole filled.
+        let l = at(30.0).lumen.expect("the ring about the path");
+        let disc = std::f64::consts::PI * 36.0;
+        assert!((l.area_mm2 - disc).abs() < 0.01 * disc, "{}", l.area_mm2);
+        assert!(l.offset_mm < 0.02);
+        assert!(at(42.0).lumen.is_none());
+    }
+
+    #[test]
+    fn a_lumen_wider_than_the_field_is_open() {
+        let vol = phantom(8, |p| 25.0 - (p.truncate() - DVec2::splat(32.0)).length());
+        let o = LumenOptions {
+            field_mm: 30.0,
+            ..opt(&vol)
+        };
+        let path = [DVec3::new(32.0, 32.0, 1.0), DVec3::new(32.0, 32.0, 6.0)];
+        let s = measure_path(&vol, &path, 1, DVec3::X, &o).unwrap();
+        let l = s[0].lumen.as_ref().unwrap();
+        assert!(l.open);
+        // All of the field, which the lumen fills.
+        assert!((l.area_mm2 - 900.0).abs() < 1.0, "{}", l.area_mm2);
+    }
+
+    #[test]
+    fn sections_are_the_rows_of_a_curved_plane_as_high_as_they_are_many() {
+        // measure's sections are the planes `render --path --slices N` shows.
+        let pts: Vec<DVec3> = (0..=6)
+            .map(|i| {
+                let a = (i as f64 * 15.0).to_radians();
+                DVec3::new(10.0 + 30.0 * a.cos(), 32.0, 10.0 + 30.0 * a.sin())
+            })
+            .collect();
+        let vol = phantom(8, |_| -1.0);
+        let s = measure_path(&vol, &pts, 7, DVec3::X, &opt(&vol)).unwrap();
+        let c = CurvedPlane::sections(&pts, DVec3::X, 0.0, 7).unwrap();
+        assert_eq!(s.len(), 7);
+        for (a, b) in s.iter().zip(&c.rows) {
+            assert_eq!(a.row, *b);
+            assert!(a.lumen.is_none());
+        }
+    }
+
+    #[test]
+    fn the_distance_transform_is_the_brute_force_one() {
+        // Random targets on grids of a few sizes (and none at all): every pixel's squared
+        // distance to its nearest target, exactly.
+        let mut seed = 12345u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) as f64 / (1u64 << 31) as f64
+        };
+        for (n, density) in [(1usize, 1.0), (7, 0.2), (33, 0.05), (50, 0.01), (9, 0.0)] {
+            let target: Vec<bool> = (0..n * n).map(|_| rnd() < density).collect();
+            let d = distance_to(n, |k| target[k]);
+            for (k, &got) in d.iter().enumerate() {
+                let want = (0..n * n)
+                    .filter(|&t| target[t])
+                    .map(|t| {
+                        let dx = (t % n) as f64 - (k % n) as f64;
+                        let dy = (t / n) as f64 - (k / n) as f64;
+                        dx * dx + dy * dy
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                assert_eq!(got, want, "n {n}, pixel {k}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_side_branch_is_cut_off_by_the_opening() {
+        // A tube of radius 8 mm along z with a branch 2.4 mm across leaving it along +x to the
+        // field's edge: opened, the lumen is the tube's (16 mm across, closed); not opened, the
+        // branch joins it and runs out of the field.
+        let c = DVec2::new(28.0, 32.0);
+        let vol = phantom_at(0.5, 16, |p| {
+            let q = p.truncate() - c;
+            let tube = 8.0 - q.length();
+            let branch = if q.x > 0.0 { 1.2 - q.y.abs() } else { -10.0 };
+            tube.max(branch)
+        });
+        let path = [DVec3::new(c.x, c.y, 1.0), DVec3::new(c.x, c.y, 6.0)];
+        let at = |open_mm| {
+            let o = LumenOptions {
+                open_mm,
+                ..opt(&vol)
+            };
+            measure_path(&vol, &path, 1, DVec3::X, &o)
+                .unwrap()
+                .remove(0)
+                .lumen
+                .unwrap()
+        };
+        let opened = at(2.0);
+        assert!(!opened.open);
+        // Across the branch the tube's 16 mm; along it a little more, the branch's root
+        // (where the two meet, the lumen is deeper than the disc a little further out).
+        assert!(
+            (opened.min_diameter_mm - 16.0).abs() < 0.1,
+            "{}",
+            opened.min_diameter_mm
+        );
+        assert!(
+            (16.0..16.8).contains(&opened.max_diameter_mm),
+            "{}",
+            opened.max_diameter_mm
+        );
+        let disc = std::f64::consts::PI * 64.0;
+        // The branch's stub within the disc's reach of the tube stays: a sliver.
+        assert!(
+            (opened.area_mm2 - disc).abs() < 0.02 * disc,
+            "{}",
+            opened.area_mm2
+        );
+        let raw = at(0.0);
+        assert!(raw.open && raw.max_diameter_mm > 30.0, "{raw:?}");
+    }
+
+    #[test]
+    fn the_hull_and_callipers_of_a_square() {
+        let pts = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(2.0, 0.0),
+            DVec2::new(2.0, 2.0),
+            DVec2::new(0.0, 2.0),
+            DVec2::new(1.0, 1.0),
+            DVec2::new(1.0, 0.0),
+        ];
+        let h = convex_hull(&pts);
+        assert_eq!(h.len(), 4, "{h:?}");
+        let (d, _) = max_chord(&h);
+        assert!((d - 8f64.sqrt()).abs() < 1e-12);
+        let (w, _) = min_width(&h);
+        assert!((w - 2.0).abs() < 1e-12);
+    }
+}
