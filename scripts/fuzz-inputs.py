@@ -11,8 +11,9 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary; an OBJ with normals
         ../shared (JPEG-LS and 12-bit JPEG among them) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (meshes also shaded; volumes also `--mode` mip, minip, average, slice or
         dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
-        must name the file. Paths (text and 3D Slicer markups) are mutated too and rendered as a
-        curved planar reformation (--path) through an intact volume.
+        must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
+        curved planar reformation (--path) through an intact volume and measured along
+        (`raystream measure`).
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
         absurd ones (0, -1, ±inf, nan, 1e30 ...), rendered on the CPU and the GPU: either both
         refuse it (exit 2, naming the file) or rays.py imgdiff finds them within the GPU tests'
@@ -245,6 +246,12 @@ def fuzz_files(work, n, device):
             why = os.path.exists(vol) and run(
                 ["render", vol, "--path", p, "--mode"] + mode + ["--size", "8x16", "-q",
                  "--device", device, "--orbit", str(random.choice([0, 45, 90]))] + out, s)
+            # And the lumen measured along it (`measure`), with some valid options.
+            count = random.choice([[], ["--sections", random.choice(["1", "3", "50"])]])
+            why = why or (os.path.exists(vol) and run(
+                ["measure", vol, "--path", p, "-q", "--json", "-o", os.path.join(d, "m.csv"),
+                 "--lumen", random.choice(["-500", "0", "150"]),
+                 "--open", random.choice(["0", "2"])] + count, s))
             if why:
                 bad += 1
                 print(f"FAIL {p}: {why}")
