@@ -12,8 +12,8 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary; an OBJ with normals
         and `raystream render --aov prim` (meshes also shaded; volumes also `--mode` mip, minip, average, slice or
         dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
-        curved planar reformation (--path) through an intact volume and measured along
-        (`raystream measure`).
+        curved planar reformation (--path) through an intact volume, measured along
+        (`raystream measure`) and tracked through (`raystream centreline`).
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
         absurd ones (0, -1, ±inf, nan, 1e30 ...), rendered on the CPU and the GPU: either both
         refuse it (exit 2, naming the file) or rays.py imgdiff finds them within the GPU tests'
@@ -252,6 +252,10 @@ def fuzz_files(work, n, device):
                 ["measure", vol, "--path", p, "-q", "--json", "-o", os.path.join(d, "m.csv"),
                  "--lumen", random.choice(["-500", "0", "150"]),
                  "--open", random.choice(["0", "2"])] + count, s))
+            # And a centreline tracked through its points.
+            why = why or (os.path.exists(vol) and run(
+                ["centreline", vol, "--path", p, "-q", "-o", os.path.join(d, "cl.mrk.json"),
+                 "--lumen", random.choice(["-500", "0", "150"])], s))
             if why:
                 bad += 1
                 print(f"FAIL {p}: {why}")

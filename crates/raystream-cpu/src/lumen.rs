@@ -375,71 +375,9 @@ fn fill_holes(n: usize, region: &[bool]) -> Vec<bool> {
 }
 
 /// Per pixel of an `n`×`n` grid, the squared distance (pixels²) to the nearest pixel that is
-/// `target` (+∞ where there is none, and beyond the grid's border none is assumed): the exact
-/// Euclidean distance transform of Felzenszwalb and Huttenlocher (2012), a lower envelope of
-/// parabolas along the rows, then the columns. Written here: it is a few dozen lines, and the
-/// image-processing crates that have one would add a large dependency for it.
+/// `target` (+∞ where there is none).
 fn distance_to(n: usize, target: impl Fn(usize) -> bool) -> Vec<f64> {
-    let mut d: Vec<f64> = (0..n * n)
-        .map(|k| if target(k) { 0.0 } else { f64::INFINITY })
-        .collect();
-    let mut f = vec![0.0; n];
-    let mut out = vec![0.0; n];
-    let (mut v, mut z) = (vec![0usize; n], vec![0.0f64; n + 1]);
-    let mut pass = |d: &mut [f64], at: &dyn Fn(usize) -> usize| {
-        for (q, x) in f.iter_mut().enumerate() {
-            *x = d[at(q)];
-        }
-        envelope(&f, &mut out, &mut v, &mut z);
-        for (q, &x) in out.iter().enumerate() {
-            d[at(q)] = x;
-        }
-    };
-    for j in 0..n {
-        pass(&mut d, &|i| j * n + i);
-    }
-    for i in 0..n {
-        pass(&mut d, &|j| j * n + i);
-    }
-    d
-}
-
-/// The 1-D squared distance transform of `f` (0 at targets, +∞ elsewhere, or the squared
-/// distances of an earlier pass) into `out`: min over q of (p − q)² + f(q).
-fn envelope(f: &[f64], out: &mut [f64], v: &mut [usize], z: &mut [f64]) {
-    let Some(first) = f.iter().position(|x| x.is_finite()) else {
-        out.fill(f64::INFINITY);
-        return;
-    };
-    let meet = |q: usize, p: usize| {
-        ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64))
-    };
-    let mut k = 0;
-    v[0] = first;
-    z[0] = f64::NEG_INFINITY;
-    z[1] = f64::INFINITY;
-    for (q, fq) in f.iter().enumerate().skip(first + 1) {
-        if !fq.is_finite() {
-            continue;
-        }
-        let mut s = meet(q, v[k]);
-        while s <= z[k] {
-            k -= 1;
-            s = meet(q, v[k]);
-        }
-        k += 1;
-        v[k] = q;
-        z[k] = s;
-        z[k + 1] = f64::INFINITY;
-    }
-    let mut k = 0;
-    for (p, o) in out.iter_mut().enumerate() {
-        while z[k + 1] < p as f64 {
-            k += 1;
-        }
-        let dq = p as f64 - v[k] as f64;
-        *o = dq * dq + f[v[k]];
-    }
+    raystream_volume::distance::squared_distance([n, n], [1.0, 1.0], target)
 }
 
 /// The convex hull of `pts`, counter-clockwise, without collinear points (Andrew's monotone
@@ -704,34 +642,6 @@ mod tests {
         for (a, b) in s.iter().zip(&c.rows) {
             assert_eq!(a.row, *b);
             assert!(a.lumen.is_none());
-        }
-    }
-
-    #[test]
-    fn the_distance_transform_is_the_brute_force_one() {
-        // Random targets on grids of a few sizes (and none at all): every pixel's squared
-        // distance to its nearest target, exactly.
-        let mut seed = 12345u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 33) as f64 / (1u64 << 31) as f64
-        };
-        for (n, density) in [(1usize, 1.0), (7, 0.2), (33, 0.05), (50, 0.01), (9, 0.0)] {
-            let target: Vec<bool> = (0..n * n).map(|_| rnd() < density).collect();
-            let d = distance_to(n, |k| target[k]);
-            for (k, &got) in d.iter().enumerate() {
-                let want = (0..n * n)
-                    .filter(|&t| target[t])
-                    .map(|t| {
-                        let dx = (t % n) as f64 - (k % n) as f64;
-                        let dy = (t / n) as f64 - (k / n) as f64;
-                        dx * dx + dy * dy
-                    })
-                    .fold(f64::INFINITY, f64::min);
-                assert_eq!(got, want, "n {n}, pixel {k}");
-            }
         }
     }
 

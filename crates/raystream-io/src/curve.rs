@@ -217,6 +217,53 @@ fn check(points: &[DVec3]) -> Result<(), String> {
     Ok(())
 }
 
+/// Writes `points` (LPS mm) as a path [`read_curve`] reads back: 3D Slicer markups JSON (an
+/// open `Curve` in LPS, every point placed, `what` as its description) for a `.json` name, else
+/// text, `x y z` a line under `#` lines saying what they are. Coordinates to the micrometre.
+pub fn write_curve(path: &Path, points: &[DVec3], what: &str) -> Result<(), VolumeError> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let micron = |v: f64| (v * 1e3).round() / 1e3;
+    let text = if name.ends_with(".json") {
+        let control: Vec<serde_json::Value> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                serde_json::json!({
+                    "id": (i + 1).to_string(),
+                    "label": format!("C-{}", i + 1),
+                    "position": [micron(p.x), micron(p.y), micron(p.z)],
+                    "positionStatus": "defined",
+                })
+            })
+            .collect();
+        let doc = serde_json::json!({
+            "@schema": "https://raw.githubusercontent.com/slicer/slicer/master/Modules/Loadable/Markups/Resources/Schema/markups-schema-v1.0.3.json#",
+            "markups": [{
+                "type": "Curve",
+                "coordinateSystem": "LPS",
+                "coordinateUnits": "mm",
+                "description": what,
+                "controlPoints": control,
+            }],
+        });
+        serde_json::to_string_pretty(&doc).expect("a JSON value serialises") + "\n"
+    } else {
+        let mut t = String::new();
+        for line in what.lines() {
+            t += &format!("# {line}\n");
+        }
+        t += "# x y z, LPS mm\n";
+        for p in points {
+            t += &format!("{:.3} {:.3} {:.3}\n", p.x, p.y, p.z);
+        }
+        t
+    };
+    std::fs::write(path, text).map_err(|e| VolumeError::io(path, e))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -322,5 +369,31 @@ mod tests {
     fn too_many_points_are_refused_before_they_are_kept() {
         let text = "0 0 0\n".repeat(MAX_CURVE_POINTS + 1);
         assert!(read("big.txt", &text).unwrap_err().contains("more than"));
+    }
+
+    #[test]
+    fn a_written_path_reads_back_to_the_micrometre_in_either_format() {
+        let dir = std::env::temp_dir().join(format!("raystream-curve-w-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let points = vec![
+            DVec3::new(-12.3456789, 200.0001, -0.0004),
+            DVec3::new(1.0, 2.0, 3.0),
+            DVec3::new(1e5, -1e5, 42.4242),
+        ];
+        for name in ["c.mrk.json", "c.txt"] {
+            let file = dir.join(name);
+            write_curve(&file, &points, "a test path\nof three points").unwrap();
+            let back = read_curve(&file).unwrap();
+            assert_eq!(back.len(), points.len(), "{name}");
+            for (a, b) in back.iter().zip(&points) {
+                assert!(
+                    (*a - *b).abs().max_element() <= 5.0001e-4,
+                    "{name}: {a} for {b}"
+                );
+            }
+            std::fs::remove_file(&file).unwrap();
+        }
+        let e = write_curve(Path::new("/nonexistent/p.txt"), &points, "").unwrap_err();
+        assert!(e.to_string().contains("/nonexistent/p.txt"), "{e}");
     }
 }

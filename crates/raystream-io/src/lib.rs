@@ -19,7 +19,7 @@ pub use write::write_mesh;
 use std::io::{BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};
 
-pub use curve::{MAX_CURVE_POINTS, read_curve};
+pub use curve::{MAX_CURVE_POINTS, read_curve, write_curve};
 pub use raystream_math::{Aabb, Vec2, Vec3};
 pub use secondary_capture::{
     CaptureInfo, CapturePixels, HU_PADDING, ImagePlane, new_uid, write_secondary_capture,

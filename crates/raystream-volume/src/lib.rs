@@ -2,6 +2,8 @@
 //! ([`Preset`]) that `raystream iso` and `raystream render VOLUME` use.
 
 mod cases;
+pub mod centreline;
+pub mod distance;
 mod marching;
 mod tf;
 

@@ -28,6 +28,10 @@ pub enum Command {
     /// Measure a vessel's lumen on cross-sections along a path through a CT volume: area,
     /// equivalent, largest and smallest diameters, centroid.
     Measure(MeasureArgs),
+    /// Find a vessel's centreline through a CT volume's contrast-filled lumen from a few points
+    /// placed in it (its ends, and any points it must pass), as a path for `render --path` and
+    /// `measure --path`.
+    Centreline(CentrelineArgs),
     /// Describe a mesh and its kd-tree, or a CT volume's geometry and values.
     Info(InfoArgs),
     /// Measure build time and traversal throughput on standard ray sets.
@@ -663,6 +667,73 @@ pub struct MeasureArgs {
     /// Print JSON instead of the table.
     #[arg(long)]
     pub json: bool,
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+#[derive(Args)]
+pub struct CentrelineArgs {
+    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd).
+    pub input: PathBuf,
+    /// The points placed in the vessel, in order (its two ends, and any between that it must
+    /// pass): 3D Slicer markups (.mrk.json) or text (x y z per line, LPS mm), as `render
+    /// --path` reads a path.
+    #[arg(long, value_name = "FILE")]
+    pub path: PathBuf,
+    /// Where to write the centreline: 3D Slicer markups (.mrk.json, .json) or text.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: PathBuf,
+    /// Lumen: the voxels at or above this, HU (contrast-filled blood).
+    #[arg(
+        long,
+        value_name = "HU",
+        default_value_t = 150.0,
+        allow_negative_numbers = true
+    )]
+    pub lumen: f32,
+    /// Each point placed is moved to the deepest lumen voxel within this distance, mm.
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 5.0,
+        allow_negative_numbers = true
+    )]
+    pub seed: f64,
+    /// The search reaches this far beyond the points' extent, mm.
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 30.0,
+        allow_negative_numbers = true
+    )]
+    pub margin: f64,
+    /// Gaps in the lumen narrower than twice this (a dissection flap, a graft's fabric, noise)
+    /// are closed before its middle is found, mm (0: none).
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 3.0,
+        allow_negative_numbers = true
+    )]
+    pub close: f64,
+    /// The path is smoothed over this length of it, mm (0: the voxel path as found).
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 5.0,
+        allow_negative_numbers = true
+    )]
+    pub smooth: f64,
+    /// The control points written are this far apart along the path, mm.
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 2.0,
+        allow_negative_numbers = true
+    )]
+    pub step: f64,
+    #[command(flatten)]
+    pub pick: VolumePick,
     #[arg(short, long)]
     pub quiet: bool,
 }

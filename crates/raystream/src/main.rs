@@ -1,6 +1,7 @@
 //! `raystream`: render, trace, bench and info over the library crates.
 
 mod bench;
+mod centreline;
 mod cli;
 mod common;
 mod dvr;
@@ -23,6 +24,7 @@ fn main() -> ExitCode {
         cli::Command::Trace(a) => trace::run(&a),
         cli::Command::Iso(a) => iso::run(&a),
         cli::Command::Measure(a) => measure::run(&a),
+        cli::Command::Centreline(a) => centreline::run(&a),
         cli::Command::Info(a) => info::run(&a),
         cli::Command::Bench(a) => bench::run(&a),
     };
