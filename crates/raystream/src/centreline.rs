@@ -19,12 +19,12 @@ pub fn run(a: &CentrelineArgs) -> Result<()> {
         eprintln!(
             "raystream: {}: values are not known to be Hounsfield units; --lumen {} applies to the raw values",
             a.input.display(),
-            a.lumen
+            a.vessel.lumen
         );
     }
     let opt = CentrelineOptions {
-        threshold_hu: a.lumen,
-        seed_mm: a.seed,
+        threshold_hu: a.vessel.lumen,
+        seed_mm: a.vessel.seed,
         margin_mm: a.margin,
         close_mm: a.close,
         smooth_mm: a.smooth,
@@ -42,7 +42,7 @@ pub fn run(a: &CentrelineArgs) -> Result<()> {
     pb.finish_and_clear();
     let what = format!(
         "raystream centreline: the lumen (>= {} HU) of {} through the {} points of {}, {:.1} mm",
-        a.lumen,
+        a.vessel.lumen,
         file_name(&a.input),
         points.len(),
         file_name(&a.path),

@@ -603,6 +603,29 @@ pub struct IsoArgs {
     pub quiet: bool,
 }
 
+/// A vessel's lumen in a CT volume: `measure` and `centreline`.
+#[derive(Args, Clone, Copy, Debug)]
+pub struct LumenPick {
+    /// Lumen: the voxels at or above this, HU (contrast-filled blood; the default sits above
+    /// the vessel wall's and soft tissue's 30-60 HU).
+    #[arg(
+        long,
+        value_name = "HU",
+        default_value_t = 150.0,
+        allow_negative_numbers = true
+    )]
+    pub lumen: f32,
+    /// The lumen is looked for this far from the path's points, mm (`measure`: its sample
+    /// nearest the point; `centreline`: its deepest voxel, where the point is moved).
+    #[arg(
+        long,
+        value_name = "MM",
+        default_value_t = 5.0,
+        allow_negative_numbers = true
+    )]
+    pub seed: f64,
+}
+
 #[derive(Args)]
 pub struct MeasureArgs {
     /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd).
@@ -623,15 +646,8 @@ pub struct MeasureArgs {
     /// Exactly N cross-sections, evenly along the path.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub sections: Option<u32>,
-    /// Lumen: the samples at or above this, HU, connected to the path's point (contrast-filled
-    /// blood; the default sits above the vessel wall's and soft tissue's 30-60 HU).
-    #[arg(
-        long,
-        value_name = "HU",
-        default_value_t = 150.0,
-        allow_negative_numbers = true
-    )]
-    pub lumen: f32,
+    #[command(flatten)]
+    pub vessel: LumenPick,
     /// The square sampled about the path's point on each section, mm (a lumen reaching its
     /// edge is reported open).
     #[arg(
@@ -641,14 +657,6 @@ pub struct MeasureArgs {
         allow_negative_numbers = true
     )]
     pub field: f64,
-    /// The lumen's nearest sample may lie this far from the path's point, mm.
-    #[arg(
-        long,
-        value_name = "MM",
-        default_value_t = 5.0,
-        allow_negative_numbers = true
-    )]
-    pub seed: f64,
     /// Open the lumen with a disc of this radius, mm: what the disc cannot reach from the
     /// path's side and runs on beyond its reach (a side branch, a neighbour joined by a
     /// narrower neck) is cut off; 0 keeps all that is connected.
@@ -683,22 +691,8 @@ pub struct CentrelineArgs {
     /// Where to write the centreline: 3D Slicer markups (.mrk.json, .json) or text.
     #[arg(short, long, value_name = "FILE")]
     pub output: PathBuf,
-    /// Lumen: the voxels at or above this, HU (contrast-filled blood).
-    #[arg(
-        long,
-        value_name = "HU",
-        default_value_t = 150.0,
-        allow_negative_numbers = true
-    )]
-    pub lumen: f32,
-    /// Each point placed is moved to the deepest lumen voxel within this distance, mm.
-    #[arg(
-        long,
-        value_name = "MM",
-        default_value_t = 5.0,
-        allow_negative_numbers = true
-    )]
-    pub seed: f64,
+    #[command(flatten)]
+    pub vessel: LumenPick,
     /// The search reaches this far beyond the points' extent, mm.
     #[arg(
         long,

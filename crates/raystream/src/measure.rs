@@ -28,9 +28,9 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     let points = raystream_io::read_curve(&a.path)?;
     let (volume, _) = read_volume(&a.input, &a.pick.select(), a.quiet, None)?;
     let opt = LumenOptions {
-        threshold_hu: a.lumen,
+        threshold_hu: a.vessel.lumen,
         field_mm: a.field,
-        seed_mm: a.seed,
+        seed_mm: a.vessel.seed,
         open_mm: a.open,
         ..LumenOptions::for_volume(&volume)
     };
@@ -46,7 +46,7 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         eprintln!(
             "raystream: {}: values are not known to be Hounsfield units; --lumen {} applies to the raw values",
             a.input.display(),
-            a.lumen
+            a.vessel.lumen
         );
     }
     let length = spline.length();
@@ -84,8 +84,8 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     if sections.iter().all(|s| s.lumen.is_none()) {
         bail!(
             "{file}: no lumen at or above {} HU within {} mm of the path on any of its {n} sections (a non-contrast scan, or the path off the vessel: --lumen HU, --seed MM)",
-            a.lumen,
-            a.seed
+            a.vessel.lumen,
+            a.vessel.seed
         );
     }
     Ok(())

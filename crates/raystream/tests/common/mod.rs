@@ -51,6 +51,17 @@ pub fn render_to(name: &str, dev: &str, args: &[&str]) -> PathBuf {
     out
 }
 
+/// Runs `args`, which must be refused as bad input: exit status 2, `want` in the error, no
+/// panic. The error.
+pub fn refused(args: &[&str], want: &str) -> String {
+    let o = run(args);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+    assert!(e.contains(want), "{args:?}: {e}");
+    assert!(!e.contains("panicked"), "{e}");
+    e
+}
+
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
