@@ -7,19 +7,6 @@ use std::path::Path;
 
 use common::*;
 
-const PATH: &str = "examples/chest_aorta.mrk.json";
-
-fn chest() -> String {
-    shared()
-        .join("data/volumes/nifti/chest_ct_stents_totalseg.nii.gz")
-        .to_string_lossy()
-        .into_owned()
-}
-
-fn aorta() -> String {
-    repo().join(PATH).to_string_lossy().into_owned()
-}
-
 /// The HU of an EXR's one channel, and its comments.
 fn hu(path: &Path) -> (Vec<f32>, String) {
     let e = raystream_cpu::load_exr(path).unwrap();

@@ -1,26 +1,13 @@
 //! `raystream measure`: the lumen on cross-sections along a path, on the chest CT of
 //! `../shared` (its stented descending aorta, `examples/chest_aorta.mrk.json`), checked against
 //! the cross-sections `render --path --slices N` shows of the same planes; the text table and
-//! the CSV, bad input, and `render --draw-lumen`.
+//! the CSV, bad input, and `render --draw-lumen`; and `raystream centreline`, tracked from the
+//! path's two ends.
 
 mod common;
 
 use common::*;
 use raystream_math::DVec3;
-
-fn chest() -> String {
-    shared()
-        .join("data/volumes/nifti/chest_ct_stents_totalseg.nii.gz")
-        .to_string_lossy()
-        .into_owned()
-}
-
-fn aorta() -> String {
-    repo()
-        .join("examples/chest_aorta.mrk.json")
-        .to_string_lossy()
-        .into_owned()
-}
 
 /// `measure VOLUME --path PATH ARGS --json`, which must succeed: its JSON.
 fn measure(vol: &str, path: &str, args: &[&str]) -> serde_json::Value {

@@ -25,6 +25,22 @@ pub fn shared() -> PathBuf {
     repo().join("../shared")
 }
 
+/// The chest CT of `../shared`, with its stented descending aorta.
+pub fn chest() -> String {
+    shared()
+        .join("data/volumes/nifti/chest_ct_stents_totalseg.nii.gz")
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// The hand-made path down that aorta (the contrast lumen's centroids, smoothed).
+pub fn aorta() -> String {
+    repo()
+        .join("examples/chest_aorta.mrk.json")
+        .to_string_lossy()
+        .into_owned()
+}
+
 pub fn mesh(name: &str) -> String {
     shared()
         .join("data/meshes")
