@@ -100,8 +100,10 @@ impl LumenOptions {
     }
 }
 
-/// The most samples across a section's field (4096² samples, 64 MiB of f32).
-pub const MAX_SIDE: usize = 4096;
+/// The most samples across a section's field: 2048² samples, about 170 MiB of working grids
+/// (values, masks, three distance transforms in f64) for each section measured at once, one
+/// per core.
+pub const MAX_SIDE: usize = 2048;
 
 /// The lumen found on one cross-section.
 #[derive(Clone, Debug, PartialEq)]

@@ -274,7 +274,7 @@ fn bad_measurements_are_refused() {
             "positive number of mm",
         ),
         (vec!["--path", &path, "--field", "-3"], "a field of -3"),
-        (vec!["--path", &path, "--field", "1e6"], "at most 4096"),
+        (vec!["--path", &path, "--field", "1e6"], "at most 2048"),
         (vec!["--path", far], "outside the volume"),
         (
             vec!["--path", &path, "--lumen", "5000"],
