@@ -119,6 +119,9 @@ pub struct Lumen {
     /// that hold the lumen between them), and the unit direction it is measured along (LPS).
     pub min_diameter_mm: f64,
     pub min_direction: DVec3,
+    /// The calliper width across the largest diameter (perpendicular to it, in the section),
+    /// mm: the second of the two diameters an aneurysm is reported by.
+    pub cross_diameter_mm: f64,
     /// The centroid (LPS mm) and its distance from the path's point, mm.
     pub centroid: DVec3,
     pub offset_mm: f64,
@@ -265,6 +268,14 @@ pub fn measure_section(
     let hull = convex_hull(&edge);
     let (max_d, ends) = max_chord(&hull);
     let (min_d, across) = min_width(&hull);
+    let perp = (ends[1] - ends[0]).normalize_or_zero().perp();
+    let (lo, hi) = hull
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), q| {
+            let t = q.dot(perp);
+            (lo.min(t), hi.max(t))
+        });
+    let cross = if hull.is_empty() { 0.0 } else { hi - lo };
     let lumen = Lumen {
         area_mm2: area,
         equivalent_diameter_mm: 2.0 * (area / std::f64::consts::PI).sqrt(),
@@ -272,6 +283,7 @@ pub fn measure_section(
         max_ends: ends.map(world),
         min_diameter_mm: min_d,
         min_direction: (across.x * l + across.y * d).normalize_or_zero(),
+        cross_diameter_mm: cross,
         centroid: world(centre),
         offset_mm: centre.length(),
         open,

@@ -103,7 +103,7 @@ fn status(s: &Section) -> &'static str {
 /// The table as CSV, a section a row (LPS mm; empty fields where no lumen was found).
 fn csv(sections: &[Section]) -> String {
     let mut t = String::from(
-        "section,arc_mm,x,y,z,tangent_x,tangent_y,tangent_z,status,area_mm2,equivalent_diameter_mm,max_diameter_mm,min_diameter_mm,centroid_x,centroid_y,centroid_z,offset_mm\n",
+        "section,arc_mm,x,y,z,tangent_x,tangent_y,tangent_z,status,area_mm2,equivalent_diameter_mm,max_diameter_mm,cross_diameter_mm,min_diameter_mm,centroid_x,centroid_y,centroid_z,offset_mm\n",
     );
     for (i, s) in sections.iter().enumerate() {
         let c = s.row.centre;
@@ -125,10 +125,11 @@ fn csv(sections: &[Section]) -> String {
             Some(l) => {
                 let _ = writeln!(
                     t,
-                    ",{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
+                    ",{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
                     l.area_mm2,
                     l.equivalent_diameter_mm,
                     l.max_diameter_mm,
+                    l.cross_diameter_mm,
                     l.min_diameter_mm,
                     l.centroid.x,
                     l.centroid.y,
@@ -136,7 +137,7 @@ fn csv(sections: &[Section]) -> String {
                     l.offset_mm
                 );
             }
-            None => t.push_str(",,,,,,,,\n"),
+            None => t.push_str(",,,,,,,,,\n"),
         }
     }
     t
@@ -172,7 +173,7 @@ fn report_text(a: &MeasureArgs, opt: &LumenOptions, length: f64, sections: &[Sec
         opt.pixel_mm,
         opt.field_mm,
     );
-    t += "section   arc mm         x         y         z   area mm2   D eq mm  D max mm  D min mm  offset mm  lumen\n";
+    t += "section   arc mm         x         y         z   area mm2   D eq mm  D max mm  D cross mm  D min mm  offset mm  lumen\n";
     for (i, s) in sections.iter().enumerate() {
         let c = s.row.centre;
         let _ = write!(
@@ -188,10 +189,11 @@ fn report_text(a: &MeasureArgs, opt: &LumenOptions, length: f64, sections: &[Sec
             Some(l) => {
                 let _ = writeln!(
                     t,
-                    " {:>10.1} {:>9.2} {:>9.2} {:>9.2} {:>10.2}  {}",
+                    " {:>10.1} {:>9.2} {:>9.2} {:>11.2} {:>9.2} {:>10.2}  {}",
                     l.area_mm2,
                     l.equivalent_diameter_mm,
                     l.max_diameter_mm,
+                    l.cross_diameter_mm,
                     l.min_diameter_mm,
                     l.offset_mm,
                     status(s)
@@ -200,7 +202,7 @@ fn report_text(a: &MeasureArgs, opt: &LumenOptions, length: f64, sections: &[Sec
             None => {
                 let _ = writeln!(
                     t,
-                    "          -         -         -         -          -  none"
+                    "          -         -         -           -         -          -  none"
                 );
             }
         }
@@ -211,13 +213,14 @@ fn report_text(a: &MeasureArgs, opt: &LumenOptions, length: f64, sections: &[Sec
             let l = s.lumen.as_ref().unwrap();
             let c = l.centroid;
             format!(
-                "{what}: section {} at {:.1} mm, ({:.1}, {:.1}, {:.1}) mm LPS: D max {:.2} mm, D min {:.2} mm, D eq {:.2} mm, {:.1} mm2\n",
+                "{what}: section {} at {:.1} mm, ({:.1}, {:.1}, {:.1}) mm LPS: D max {:.2} mm (across it {:.2} mm), D min {:.2} mm, D eq {:.2} mm, {:.1} mm2\n",
                 i + 1,
                 s.arc_mm,
                 c.x,
                 c.y,
                 c.z,
                 l.max_diameter_mm,
+                l.cross_diameter_mm,
                 l.min_diameter_mm,
                 l.equivalent_diameter_mm,
                 l.area_mm2
@@ -272,6 +275,10 @@ fn report_json(
                 m.insert(
                     "max_diameter_ends".into(),
                     json!([v3(l.max_ends[0]), v3(l.max_ends[1])]),
+                );
+                m.insert(
+                    "cross_diameter_mm".into(),
+                    json!(round3(l.cross_diameter_mm)),
                 );
                 m.insert("min_diameter_mm".into(), json!(round3(l.min_diameter_mm)));
                 m.insert(

@@ -200,6 +200,9 @@ fn the_lumen_measured_is_the_lumen_the_cross_sections_show() {
             num(s, "min_diameter_mm"),
         );
         assert!(min <= max && eq <= max, "{s}");
+        // A width across any direction lies between the narrowest and the longest chord.
+        let cross = num(s, "cross_diameter_mm");
+        assert!(min - 1e-3 <= cross && cross <= max + 1e-3, "{s}");
         let ends = s["max_diameter_ends"].as_array().unwrap();
         assert!(((point(&ends[0]) - point(&ends[1])).length() - max).abs() < 0.01);
         if num(s, "arc_mm") > 20.0 {
