@@ -310,10 +310,11 @@ pub struct RenderArgs {
     /// cross-sections perpendicular to the path, evenly along it).
     #[arg(long, value_name = "FILE", requires = "mode", conflicts_with_all = ["cine", "slice_at"])]
     pub path: Option<PathBuf>,
-    /// With --mode (a camera's view): draws the path in FILE (read as --path reads it) over the
-    /// picture, a yellow line ringed in black, as a workstation shows a centreline on its
-    /// reference view; PNG, or DICOM as the picture (RGB, Burned In Annotation YES).
-    #[arg(long, value_name = "FILE", requires = "mode", conflicts_with = "path")]
+    /// A CT volume (--mode, or its bones) or a scene with one: draws the path in FILE (read
+    /// as --path reads it) over the picture, a yellow line ringed in black, as a workstation
+    /// shows a centreline on its reference view; PNG, or DICOM as the picture (RGB, Burned In
+    /// Annotation YES).
+    #[arg(long, value_name = "FILE", conflicts_with = "path")]
     pub draw_path: Option<PathBuf>,
     /// With --path FILE --slices N: draws on each cross-section the lumen `measure` finds
     /// there at HU (its edge in cyan, its largest diameter as a yellow line ringed in black);

@@ -986,8 +986,8 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         );
     }
     if let Some(aov) = a.aov {
-        if a.labels {
-            bail!("--labels marks a rendered picture, not an AOV's values");
+        if a.labels || a.draw_path.is_some() {
+            bail!("--labels and --draw-path mark a rendered picture, not an AOV's values");
         }
         if crate::common::is_dicom(&a.output) {
             bail!(
@@ -1005,7 +1005,20 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         load_ms,
         tree,
     } = load(a)?;
-    check_labels(a, bones.is_some() || scene.volume.is_some(), format)?;
+    let patient = bones.is_some() || scene.volume.is_some();
+    check_labels(a, patient, format)?;
+    // `--draw-path`: over the bones or a scene with a CT volume, in its LPS millimetres.
+    let overlay = match &a.draw_path {
+        Some(file) if !patient => bail!(
+            "--draw-path {}: a path through a CT volume, drawn over the volume (--mode …), its bones or a scene with one",
+            file.display()
+        ),
+        Some(_) if format == ImageFormat::Exr => {
+            bail!("--draw-path draws on a PNG; an EXR holds the values themselves")
+        }
+        Some(file) => Some(raystream_cpu::cpr::spline(&raystream_io::read_curve(file)?)),
+        None => None,
+    };
     let mut volume_samples = 0u64;
     let opt = RenderOptions {
         width: a.size.0,
@@ -1099,12 +1112,15 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     bar.finish_and_clear();
     let mut image = image.expect("at least one frame");
     let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
-    let dicom = label(
-        a,
-        &mut image,
-        &cam,
-        bones.is_some() || scene.volume.is_some(),
-    );
+    // The path under the letters.
+    if let (Some(dense), Picture::Srgb8 { rgb, width, height }) = (&overlay, &mut image) {
+        crate::overlay::draw_path(rgb, *width, *height, &cam, dense);
+    }
+    let marked = label(a, &mut image, &cam, patient);
+    let dicom = DicomOut {
+        annotated: marked.annotated || overlay.is_some(),
+        ..marked
+    };
     image.save(
         &a.output,
         &format!(

@@ -499,3 +499,69 @@ fn bad_centrelines_are_refused() {
         }
     }
 }
+
+/// `render VOLUME --draw-path FILE` over the bones (here the contrast preset's surface, bones
+/// and contrast-filled vessels): the picture of the same render with the path's line on it,
+/// nothing else changed, the line within the projected path's extent; a mesh without a volume,
+/// and an AOV, are refused.
+#[test]
+fn draw_path_over_the_bones_of_a_volume() {
+    let (vol, path) = (chest(), aorta());
+    let base = [
+        &vol[..],
+        "--preset",
+        "contrast",
+        "--size",
+        "60x80",
+        "--spp",
+        "1",
+    ];
+    let plain = render_to("draw-bones-plain.png", "cpu", &base);
+    let drawn = render_to(
+        "draw-bones-path.png",
+        "cpu",
+        &[&base[..], &["--draw-path", &path]].concat(),
+    );
+    let (a, b) = (
+        image::open(plain).unwrap().to_rgb8(),
+        image::open(drawn).unwrap().to_rgb8(),
+    );
+    let mut line = Vec::new();
+    for (x, y, q) in b.enumerate_pixels() {
+        let p = a.get_pixel(x, y);
+        if p == q {
+            continue;
+        }
+        match q.0 {
+            [255, 214, 0] => line.push((x, y)),
+            [0, 0, 0] => {}
+            other => panic!("({x}, {y}) changed to {other:?}"),
+        }
+    }
+    // 154 mm of aorta in a view about 400 mm high: a line some 30 rows long.
+    assert!(line.len() >= 20, "{} line pixels", line.len());
+    let rows: Vec<u32> = line.iter().map(|p| p.1).collect();
+    let (top, bottom) = (*rows.iter().min().unwrap(), *rows.iter().max().unwrap());
+    assert!(bottom - top >= 15, "rows {top}..{bottom}");
+    // Left of the image's middle is the patient's right: the descending aorta lies left of
+    // the spine, on the image's right half.
+    let mean_x = line.iter().map(|p| p.0 as f64).sum::<f64>() / line.len() as f64;
+    assert!(mean_x > 30.0, "the line at x = {mean_x}");
+    let out = tmp("draw-bad.png");
+    let out = out.to_str().unwrap();
+    let bunny = mesh("utah_teapot.obj");
+    for (args, want) in [
+        (
+            vec![&bunny[..], "--draw-path", &path],
+            "a path through a CT volume",
+        ),
+        (
+            vec![&vol[..], "--aov", "depth", "--draw-path", &path],
+            "not an AOV's values",
+        ),
+    ] {
+        let mut all = vec!["render", "--quiet", "--device", "cpu", "-o", out];
+        all.extend(args);
+        refused(&all, want);
+    }
+}
