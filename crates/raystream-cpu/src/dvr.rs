@@ -696,7 +696,7 @@ pub fn clip_interval(opt: &DvrOptions, o: Vec3, d: Vec3, t0: f32, t1: f32) -> Op
 
 /// LPS → the scene frame of [`volume_camera`] (and of `Scene::for_bones`).
 pub fn lps_to_scene(p: Vec3) -> Vec3 {
-    Vec3::new(p.x, p.z, -p.y)
+    raystream_scene::Frame::Lps.to_scene(p)
 }
 
 /// The scene frame of [`volume_camera`] → LPS.

@@ -643,7 +643,7 @@ impl Scene {
     /// z = anterior: the anterior view, patient's right on the image's left), in an ivory bone
     /// material on a dark, slightly reflective floor, with a key light above-front and a fill.
     pub fn for_bones(mut mesh: TriMesh, normals: &[Vec3], name: &Path) -> Scene {
-        let lps_to_scene = |p: Vec3| Vec3::new(p.x, p.z, -p.y);
+        let lps_to_scene = |p: Vec3| Frame::Lps.to_scene(p);
         for p in &mut mesh.positions {
             *p = lps_to_scene(*p);
         }
