@@ -174,6 +174,12 @@ pub fn centreline(
             })?;
         voxels.extend(leg.into_iter().skip(1));
     }
+    if voxels.len() < 2 {
+        return Err(format!(
+            "the {} points placed all move to one voxel of the lumen: place the ends further apart",
+            waypoints.len()
+        ));
+    }
     let raw: Vec<DVec3> = voxels.iter().map(|&k| grid.world(vol, k)).collect();
     let smoothed = smooth(&raw, opt.smooth_mm);
     let length_mm = smoothed.windows(2).map(|w| w[0].distance(w[1])).sum();
@@ -588,6 +594,8 @@ mod tests {
         assert!(e.contains("two points"), "{e}");
         let e = centreline(&vol, &[on(2.0) + 1e4, on(20.0) + 1e4], &o).unwrap_err();
         assert!(e.contains("outside the volume"), "{e}");
+        let e = centreline(&vol, &[on(10.0), on(10.2)], &o).unwrap_err();
+        assert!(e.contains("one voxel"), "{e}");
         let bad = CentrelineOptions { step_mm: 0.0, ..o };
         assert!(
             centreline(&vol, &[on(2.0), on(20.0)], &bad)
