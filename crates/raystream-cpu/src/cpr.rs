@@ -171,16 +171,16 @@ pub fn spline(points: &[DVec3]) -> Vec<DVec3> {
 
 /// A path's spline, sampled densely by arc length: where its frames are taken.
 #[derive(Clone, Debug)]
-pub struct Spline {
+struct Spline {
     dense: Vec<DVec3>,
     arc: Vec<f64>,
     /// The path's points after consecutive repeats are dropped.
-    pub points: usize,
+    points: usize,
 }
 
 impl Spline {
     /// The spline through `points` (LPS mm; at least two distinct, a micrometre or more long).
-    pub fn new(points: &[DVec3]) -> Result<Spline, String> {
+    fn new(points: &[DVec3]) -> Result<Spline, String> {
         let p = distinct(points);
         if p.len() < 2 {
             return Err("a path needs two distinct points".into());
@@ -200,12 +200,12 @@ impl Spline {
     }
 
     /// The spline's length, mm.
-    pub fn length(&self) -> f64 {
+    fn length(&self) -> f64 {
         *self.arc.last().unwrap()
     }
 
     /// The point at arc length `s` (clamped to the ends).
-    pub fn at(&self, s: f64) -> DVec3 {
+    fn at(&self, s: f64) -> DVec3 {
         position(&self.dense, &self.arc, s)
     }
 
@@ -215,7 +215,7 @@ impl Spline {
     /// image's up axis there (the path's backward direction, right-handed, as `--orbit` turns
     /// a camera), and is carried from frame to frame by parallel transport; the normal is
     /// lateral × tangent.
-    pub fn frames(&self, arcs: &[f64], e: f64, image_right: DVec3, turn_deg: f64) -> Vec<CprRow> {
+    fn frames(&self, arcs: &[f64], e: f64, image_right: DVec3, turn_deg: f64) -> Vec<CprRow> {
         let length = self.length();
         let centres: Vec<DVec3> = arcs.iter().map(|&s| self.at(s)).collect();
         let tangents: Vec<DVec3> = arcs

@@ -222,7 +222,6 @@ pub fn measure_section(
     if r > 0.0 {
         mask = opened(n, &mask, r, seed);
     }
-    let filled = |k: usize| mask[k];
     let mut count = 0usize;
     let mut sum = DVec2::ZERO;
     let mut open = false;
@@ -230,7 +229,7 @@ pub fn measure_section(
     for j in 0..n {
         for i in 0..n {
             let k = j * n + i;
-            if !filled(k) {
+            if !mask[k] {
                 continue;
             }
             count += 1;
@@ -244,7 +243,7 @@ pub fn measure_section(
                     continue;
                 }
                 let o = b as usize * n + a as usize;
-                if filled(o) {
+                if mask[o] {
                     continue;
                 }
                 // Where the HU falls through the threshold, there; where the region was cut
@@ -292,14 +291,15 @@ pub fn measure_section(
 }
 
 /// Marks in `mark` the pixels of an `n`×`n` grid reached from `seed` through pixels that are
-/// `passable` (4-connected, or 8-connected with `diagonal`). A stack, not recursion.
+/// `passable` (4-connected, or 8-connected with `diagonal`), and returns them. A stack, not
+/// recursion.
 fn flood(
     n: usize,
     seed: usize,
     mark: &mut [bool],
     passable: impl Fn(usize) -> bool,
     diagonal: bool,
-) {
+) -> Vec<usize> {
     let steps: &[(i64, i64)] = if diagonal {
         &[
             (1, 0),
@@ -315,6 +315,7 @@ fn flood(
         &[(1, 0), (-1, 0), (0, 1), (0, -1)]
     };
     mark[seed] = true;
+    let mut reached = vec![seed];
     let mut stack = vec![seed];
     while let Some(k) = stack.pop() {
         let (i, j) = ((k % n) as i64, (k / n) as i64);
@@ -326,10 +327,12 @@ fn flood(
             let q = b as usize * n + a as usize;
             if !mark[q] && passable(q) {
                 mark[q] = true;
+                reached.push(q);
                 stack.push(q);
             }
         }
     }
+    reached
 }
 
 /// `mask` (an `n`×`n` grid) opened about `seed` with a disc of radius `r` pixels: its core
@@ -358,17 +361,10 @@ fn opened(n: usize, mask: &[bool], r: f64, seed: usize) -> Vec<bool> {
     let mut seen = vec![false; n * n];
     for k in 0..n * n {
         if mask[k] && !body[k] && !seen[k] {
-            let mut piece = vec![false; n * n];
-            flood(n, k, &mut piece, |q| mask[q] && !body[q], false);
-            let far = (0..n * n)
-                .filter(|&q| piece[q])
-                .map(|q| beyond[q])
-                .fold(0.0, f64::max);
-            for q in 0..n * n {
-                if piece[q] {
-                    seen[q] = true;
-                    out[q] = far <= r * r;
-                }
+            let piece = flood(n, k, &mut seen, |q| mask[q] && !body[q], false);
+            let far = piece.iter().map(|&q| beyond[q]).fold(0.0, f64::max);
+            for q in piece {
+                out[q] = far <= r * r;
             }
         }
     }

@@ -6,7 +6,7 @@
 use std::fmt::Write as _;
 
 use anyhow::{Context, Result, bail};
-use raystream_cpu::cpr::Spline;
+use raystream_cpu::cpr::CurvedPlane;
 use raystream_cpu::lumen::{self, LumenOptions, Section};
 use raystream_math::DVec3;
 use serde_json::json;
@@ -37,9 +37,8 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     opt.check()
         .map_err(|e| anyhow::anyhow!("--lumen/--field/--seed/--open: {e}"))?;
     let file = a.path.display();
-    let spline = Spline::new(&points).map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     // The check `render --path` makes: some of the path lies in the grid.
-    let rows = raystream_cpu::cpr::CurvedPlane::new(&points, DVec3::X, 0.0, 1, 256)
+    let rows = CurvedPlane::new(&points, DVec3::X, 0.0, 1, 256)
         .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     crate::render::inside(&a.path, &rows, &volume)?;
     if !a.quiet && volume.unit != raystream_io::ValueUnit::Hounsfield {
@@ -49,7 +48,7 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
             a.vessel.lumen
         );
     }
-    let length = spline.length();
+    let length = rows.length_mm;
     let n = match a.sections {
         Some(n) => n as usize,
         None => {

@@ -86,13 +86,26 @@ fn base_view(a: &RenderArgs, default: View, patient: bool) -> Result<View> {
     })
 }
 
-/// `--labels`: the patient directions drawn at the edges of a PNG frame seen by `cam` (scene
-/// frame: x = the patient's left, y = superior, z = anterior). Returns what a DICOM picture of
-/// it says: its rows' and columns' patient directions (where `patient`), and the letters.
-fn label(a: &RenderArgs, picture: &mut Picture, cam: &Camera, patient: bool) -> DicomOut {
+/// What is drawn over a PNG frame seen by `cam` (scene frame: x = the patient's left,
+/// y = superior, z = anterior): `--draw-path`'s `overlay`, then over it `--labels`' patient
+/// directions at the edges. Returns what a DICOM picture of it says: its rows' and columns'
+/// patient directions (where `patient`), and whether anything is drawn on it (the path, the
+/// letters, or `--draw-lumen`'s lumen, drawn before).
+fn label(
+    a: &RenderArgs,
+    picture: &mut Picture,
+    cam: &Camera,
+    patient: bool,
+    overlay: Overlay,
+) -> DicomOut {
     let [right, up] = [cam.right, cam.up].map(raystream_cpu::dvr::scene_to_lps);
-    if let (true, Picture::Srgb8 { rgb, width, height }) = (a.labels, &mut *picture) {
-        crate::labels::draw(rgb, *width, *height, right, up);
+    if let Picture::Srgb8 { rgb, width, height } = &mut *picture {
+        if let Some(dense) = overlay {
+            crate::overlay::draw_path(rgb, *width, *height, cam, dense);
+        }
+        if a.labels {
+            crate::labels::draw(rgb, *width, *height, right, up);
+        }
     }
     // DICOM's Patient Orientation says H(ead) and F(oot) for superior and inferior.
     let dicom = |d| {
@@ -102,7 +115,7 @@ fn label(a: &RenderArgs, picture: &mut Picture, cam: &Camera, patient: bool) -> 
     };
     DicomOut {
         orientation: patient.then(|| [dicom(right), dicom(-up)]),
-        annotated: a.labels,
+        annotated: a.labels || overlay.is_some() || a.draw_lumen.is_some(),
         description: crate::common::options_in_words(a.input.as_deref(), &a.output),
         series: None,
         window: None,
@@ -138,19 +151,11 @@ fn volume_dicom(
 ) -> DicomOut {
     let window = Some(opt.shown_window());
     match seen {
-        Seen::Camera(cam) => {
-            // The path under the letters.
-            if let (Some(dense), Picture::Srgb8 { rgb, width, height }) = (overlay, &mut *picture) {
-                crate::overlay::draw_path(rgb, *width, *height, cam, dense);
-            }
-            let marked = label(a, picture, cam, true);
-            DicomOut {
-                window,
-                plane: image_plane(opt, volume, cam),
-                annotated: marked.annotated || overlay.is_some() || a.draw_lumen.is_some(),
-                ..marked
-            }
-        }
+        Seen::Camera(cam) => DicomOut {
+            window,
+            plane: image_plane(opt, volume, cam),
+            ..label(a, picture, cam, true, overlay)
+        },
         Seen::Curved(_) => DicomOut {
             orientation: None,
             annotated: false,
@@ -1112,15 +1117,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     bar.finish_and_clear();
     let mut image = image.expect("at least one frame");
     let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
-    // The path under the letters.
-    if let (Some(dense), Picture::Srgb8 { rgb, width, height }) = (&overlay, &mut image) {
-        crate::overlay::draw_path(rgb, *width, *height, &cam, dense);
-    }
-    let marked = label(a, &mut image, &cam, patient);
-    let dicom = DicomOut {
-        annotated: marked.annotated || overlay.is_some(),
-        ..marked
-    };
+    let dicom = label(a, &mut image, &cam, patient, overlay.as_deref());
     image.save(
         &a.output,
         &format!(
