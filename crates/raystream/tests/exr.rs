@@ -175,8 +175,12 @@ fn metaimage(
             }
         }
     }
+    // Tests running at once write the same volume: each writes its own copy and renames it
+    // into place, so that none reads a file another is still writing.
     let path = tmp(name);
-    std::fs::write(&path, bytes).unwrap();
+    let part = tmp(&format!("{name}.{:?}.part", std::thread::current().id()));
+    std::fs::write(&part, bytes).unwrap();
+    std::fs::rename(&part, &path).unwrap();
     path
 }
 
