@@ -13,7 +13,8 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary; an OBJ with normals
         dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
         curved planar reformation (--path) through an intact volume, measured along
-        (`raystream measure`) and tracked through (`raystream centreline`).
+        (`raystream measure`, sometimes grading a stenosis) and tracked through (`raystream
+        centreline`).
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
         absurd ones (0, -1, ±inf, nan, 1e30 ...), rendered on the CPU and the GPU: either both
         refuse it (exit 2, naming the file) or rays.py imgdiff finds them within the GPU tests'
@@ -248,10 +249,14 @@ def fuzz_files(work, n, device):
                  "--device", device, "--orbit", str(random.choice([0, 45, 90]))] + out, s)
             # And the lumen measured along it (`measure`), with some valid options.
             count = random.choice([[], ["--sections", random.choice(["1", "3", "50"])]])
+            # Sometimes a stenosis graded too, its lesion and references placed at random.
+            grade = random.choice([[], ["--stenosis"], ["--lesion", random.choice(["0", "5", "1e9"])],
+                                   ["--reference", random.choice(["3", "2,30", "1,2,3", "-1"])],
+                                   ["--span", random.choice(["0.1", "5", "1e9"])]])
             why = why or (os.path.exists(vol) and run(
                 ["measure", vol, "--path", p, "-q", "--json", "-o", os.path.join(d, "m.csv"),
                  "--lumen", random.choice(["-500", "0", "150"]),
-                 "--open", random.choice(["0", "2"])] + count, s))
+                 "--open", random.choice(["0", "2"])] + count + grade, s))
             # And a centreline tracked through its points.
             why = why or (os.path.exists(vol) and run(
                 ["centreline", vol, "--path", p, "-q", "-o", os.path.join(d, "cl.mrk.json"),

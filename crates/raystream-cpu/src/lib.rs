@@ -23,6 +23,7 @@ pub mod dvr;
 mod image_out;
 pub mod lumen;
 pub mod medium;
+pub mod stenosis;
 
 use rayon::prelude::*;
 use raystream_accel::{Hit, KdTree, Traversal};

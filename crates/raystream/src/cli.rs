@@ -668,6 +668,29 @@ pub struct MeasureArgs {
         allow_negative_numbers = true
     )]
     pub open: f64,
+    /// Grade a stenosis: the lesion's area and smallest diameter against the reference, the
+    /// vessel's diameter there without it (fitted to the sections about it, or --reference),
+    /// and the narrowed segment's length.
+    #[arg(long)]
+    pub stenosis: bool,
+    /// The lesion's arc length along the path, mm (the section nearest it); by default the
+    /// closed section of least area. Implies --stenosis.
+    #[arg(long, value_name = "MM", allow_negative_numbers = true)]
+    pub lesion: Option<f64>,
+    /// The reference: one section's diameter (distal, as NASCET), or the line through two
+    /// (proximal and distal), at these arc lengths, mm; by default a line fitted to the
+    /// sections within --span of the lesion, the narrowed ones left out. Implies --stenosis.
+    #[arg(
+        long,
+        value_name = "MM[,MM]",
+        value_delimiter = ',',
+        allow_negative_numbers = true
+    )]
+    pub reference: Vec<f64>,
+    /// The fitted reference uses the sections within this many mm of the lesion, either side
+    /// [default: 20]. Implies --stenosis.
+    #[arg(long, value_name = "MM", allow_negative_numbers = true)]
+    pub span: Option<f64>,
     /// Write the table as CSV to FILE.
     #[arg(short, long, value_name = "FILE.csv")]
     pub output: Option<PathBuf>,
@@ -678,6 +701,22 @@ pub struct MeasureArgs {
     pub json: bool,
     #[arg(short, long)]
     pub quiet: bool,
+}
+
+impl MeasureArgs {
+    /// How to grade a stenosis, if one is asked for.
+    pub fn stenosis(&self) -> Option<raystream_cpu::stenosis::StenosisOptions> {
+        let asked = self.stenosis
+            || self.lesion.is_some()
+            || !self.reference.is_empty()
+            || self.span.is_some();
+        let default = raystream_cpu::stenosis::StenosisOptions::default();
+        asked.then(|| raystream_cpu::stenosis::StenosisOptions {
+            lesion_mm: self.lesion,
+            reference_mm: self.reference.clone(),
+            span_mm: self.span.unwrap_or(default.span_mm),
+        })
+    }
 }
 
 #[derive(Args)]

@@ -8,6 +8,7 @@ use std::fmt::Write as _;
 use anyhow::{Context, Result, bail};
 use raystream_cpu::cpr::CurvedPlane;
 use raystream_cpu::lumen::{self, LumenOptions, Section};
+use raystream_cpu::stenosis::{self, ReferenceSource, Stenosis};
 use raystream_math::DVec3;
 use serde_json::json;
 
@@ -71,16 +72,26 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     let sections = lumen::measure_path(&volume, &points, n as u32, DVec3::X, &opt)
         .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     pb.finish_and_clear();
+    let found = sections.iter().any(|s| s.lumen.is_some());
+    // Graded before anything is written: a grade asked for and not given is an error.
+    let graded = match a.stenosis() {
+        Some(o) if found => Some(
+            stenosis::grade(&sections, length, &o)
+                .map_err(|e| anyhow::anyhow!("{file}: stenosis: {e}"))?,
+        ),
+        _ => None,
+    };
+    let graded = graded.as_ref();
     if let Some(out) = &a.output {
-        std::fs::write(out, csv(&sections))
+        std::fs::write(out, csv(&sections, graded))
             .with_context(|| format!("cannot write {}", out.display()))?;
     }
     if a.json {
-        print_line(report_json(a, &opt, length, &sections));
+        print_line(report_json(a, &opt, length, &sections, graded));
     } else {
-        print_line(report_text(a, &opt, length, &sections));
+        print_line(report_text(a, &opt, length, &sections, graded));
     }
-    if sections.iter().all(|s| s.lumen.is_none()) {
+    if !found {
         bail!(
             "{file}: no lumen at or above {} HU within {} mm of the path on any of its {n} sections (a non-contrast scan, or the path off the vessel: --lumen HU, --seed MM)",
             a.vessel.lumen,
@@ -99,11 +110,17 @@ fn status(s: &Section) -> &'static str {
     }
 }
 
-/// The table as CSV, a section a row (LPS mm; empty fields where no lumen was found).
-fn csv(sections: &[Section]) -> String {
+/// The table as CSV, a section a row (LPS mm; empty fields where no lumen was found); with a
+/// graded stenosis, the reference diameter where it is defined in a last column.
+fn csv(sections: &[Section], graded: Option<&Stenosis>) -> String {
     let mut t = String::from(
-        "section,arc_mm,x,y,z,tangent_x,tangent_y,tangent_z,status,area_mm2,equivalent_diameter_mm,max_diameter_mm,cross_diameter_mm,min_diameter_mm,centroid_x,centroid_y,centroid_z,offset_mm\n",
+        "section,arc_mm,x,y,z,tangent_x,tangent_y,tangent_z,status,area_mm2,equivalent_diameter_mm,max_diameter_mm,cross_diameter_mm,min_diameter_mm,centroid_x,centroid_y,centroid_z,offset_mm",
     );
+    t += if graded.is_some() {
+        ",reference_diameter_mm\n"
+    } else {
+        "\n"
+    };
     for (i, s) in sections.iter().enumerate() {
         let c = s.row.centre;
         let t3 = s.tangent();
@@ -122,7 +139,7 @@ fn csv(sections: &[Section]) -> String {
         );
         match &s.lumen {
             Some(l) => {
-                let _ = writeln!(
+                let _ = write!(
                     t,
                     ",{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
                     l.area_mm2,
@@ -136,8 +153,15 @@ fn csv(sections: &[Section]) -> String {
                     l.offset_mm
                 );
             }
-            None => t.push_str(",,,,,,,,,\n"),
+            None => t.push_str(",,,,,,,,,"),
         }
+        if let Some(g) = graded {
+            t.push(',');
+            if let Some(d) = g.reference_at(s.arc_mm) {
+                let _ = write!(t, "{d:.3}");
+            }
+        }
+        t.push('\n');
     }
     t
 }
@@ -159,7 +183,13 @@ fn extremes(sections: &[Section]) -> Option<(usize, usize)> {
     Some((widest.0, narrowest.0))
 }
 
-fn report_text(a: &MeasureArgs, opt: &LumenOptions, length: f64, sections: &[Section]) -> String {
+fn report_text(
+    a: &MeasureArgs,
+    opt: &LumenOptions,
+    length: f64,
+    sections: &[Section],
+    graded: Option<&Stenosis>,
+) -> String {
     let n = sections.len();
     let mut t = format!(
         "{}: the lumen (>= {} HU, connected to the path within {} mm, opened by a {} mm disc) on {n} sections of {} ({length:.1} mm), {:.2} mm apart, sampled every {:.3} mm over {} mm\n",
@@ -244,7 +274,125 @@ fn report_text(a: &MeasureArgs, opt: &LumenOptions, length: f64, sections: &[Sec
             opt.threshold_hu, opt.seed_mm
         );
     }
+    if let Some(g) = graded {
+        t += &stenosis_text(sections, g);
+    }
     t.trim_end().to_string()
+}
+
+/// Where a stenosis's reference came from, in words.
+fn reference_words(sections: &[Section], g: &Stenosis) -> String {
+    let at = |i: usize| format!("section {} at {:.1} mm", i + 1, sections[i].arc_mm);
+    match &g.source {
+        ReferenceSource::Fitted {
+            used,
+            dropped,
+            sloped,
+        } => format!(
+            "{} {} sections within {:.1} to {:.1} mm ({dropped} narrowed left out){}",
+            if *sloped {
+                "a line fitted to"
+            } else {
+                "the mean of"
+            },
+            used.len(),
+            g.domain_mm[0],
+            g.domain_mm[1],
+            if *sloped {
+                format!(", {:+.3} mm a mm", g.slope)
+            } else {
+                ", all on one side of the lesion".into()
+            }
+        ),
+        ReferenceSource::Placed(r) if r.len() == 1 => format!("placed: {}", at(r[0])),
+        ReferenceSource::Placed(r) => format!(
+            "placed: the line through {} and {}",
+            at(r[0]),
+            at(r[r.len() - 1])
+        ),
+    }
+}
+
+/// The graded stenosis, four lines of the text report.
+fn stenosis_text(sections: &[Section], g: &Stenosis) -> String {
+    let s = &sections[g.lesion];
+    let l = s.lumen.as_ref().expect("a graded lesion has a lumen");
+    let c = l.centroid;
+    let pct = 100.0 * stenosis::NARROWED;
+    let narrowed = match &g.narrowed {
+        Some(n) => format!(
+            "{:.1} to {:.1} mm ({:.1} mm, sections {} to {}), D eq below {pct:.0} % of the reference",
+            n.mm[0],
+            n.mm[1],
+            n.mm[1] - n.mm[0],
+            n.sections[0] + 1,
+            n.sections[1] + 1,
+        ),
+        None => format!("none (the lesion's D eq is not below {pct:.0} % of the reference)"),
+    };
+    format!(
+        "stenosis: section {} at {:.1} mm, ({:.1}, {:.1}, {:.1}) mm LPS: {:.1} mm2, D min {:.2} mm, D eq {:.2} mm\n\
+         reference: {:.2} mm ({:.1} mm2) at the lesion, {}\n\
+         grade: {:.1} % by diameter (D min against the reference), {:.1} % by area\n\
+         narrowed: {narrowed}\n",
+        g.lesion + 1,
+        s.arc_mm,
+        c.x,
+        c.y,
+        c.z,
+        l.area_mm2,
+        l.min_diameter_mm,
+        l.equivalent_diameter_mm,
+        g.at_lesion_mm,
+        g.reference_area_mm2,
+        reference_words(sections, g),
+        g.diameter_pct,
+        g.area_pct,
+    )
+}
+
+/// The graded stenosis as JSON (sections numbered from 1, as in the table).
+fn stenosis_json(sections: &[Section], g: &Stenosis) -> serde_json::Value {
+    let l = sections[g.lesion]
+        .lumen
+        .as_ref()
+        .expect("a graded lesion has a lumen");
+    let (method, used, dropped, sloped) = match &g.source {
+        ReferenceSource::Fitted {
+            used,
+            dropped,
+            sloped,
+        } => ("fitted", used, json!(dropped), json!(sloped)),
+        ReferenceSource::Placed(r) => ("placed", r, json!(null), json!(r.len() == 2)),
+    };
+    json!({
+        "lesion_section": g.lesion + 1,
+        "lesion_arc_mm": round3(g.lesion_mm),
+        "area_mm2": round3(l.area_mm2),
+        "min_diameter_mm": round3(l.min_diameter_mm),
+        "equivalent_diameter_mm": round3(l.equivalent_diameter_mm),
+        "reference": {
+            "method": method,
+            "sections": used.iter().map(|i| i + 1).collect::<Vec<_>>(),
+            "dropped": dropped,
+            "sloped": sloped,
+            "diameter_mm": round3(g.at_lesion_mm),
+            "area_mm2": round3(g.reference_area_mm2),
+            "slope": g.slope,
+            "from_mm": round3(g.domain_mm[0]),
+            "to_mm": round3(g.domain_mm[1]),
+        },
+        "diameter_stenosis_pct": round3(g.diameter_pct),
+        "area_stenosis_pct": round3(g.area_pct),
+        "narrowed_below": stenosis::NARROWED,
+        "narrowed": g.narrowed.as_ref().map(|n| json!({
+            "from_section": n.sections[0] + 1,
+            "to_section": n.sections[1] + 1,
+            "from_mm": round3(n.mm[0]),
+            "to_mm": round3(n.mm[1]),
+            "length_mm": round3(n.mm[1] - n.mm[0]),
+        })),
+    })
 }
 
 fn report_json(
@@ -252,6 +400,7 @@ fn report_json(
     opt: &LumenOptions,
     length: f64,
     sections: &[Section],
+    graded: Option<&Stenosis>,
 ) -> serde_json::Value {
     let v3 = |v: DVec3| [round3(v.x), round3(v.y), round3(v.z)];
     let rows: Vec<serde_json::Value> = sections
@@ -287,6 +436,11 @@ fn report_json(
                 m.insert("centroid".into(), json!(v3(l.centroid)));
                 m.insert("offset_mm".into(), json!(round3(l.offset_mm)));
             }
+            if let Some(d) = graded.and_then(|g| g.reference_at(s.arc_mm)) {
+                o.as_object_mut()
+                    .unwrap()
+                    .insert("reference_diameter_mm".into(), json!(round3(d)));
+            }
             o
         })
         .collect();
@@ -294,7 +448,7 @@ fn report_json(
         Some((w, n)) => (json!(w + 1), json!(n + 1)),
         None => (json!(null), json!(null)),
     };
-    json!({
+    let mut report = json!({
         "input": file_name(&a.input),
         "path": file_name(&a.path),
         "length_mm": round3(length),
@@ -306,5 +460,12 @@ fn report_json(
         "widest_section": widest,
         "narrowest_section": narrowest,
         "sections": rows,
-    })
+    });
+    if let Some(g) = graded {
+        report
+            .as_object_mut()
+            .unwrap()
+            .insert("stenosis".into(), stenosis_json(sections, g));
+    }
+    report
 }
