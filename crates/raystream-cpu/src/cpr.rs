@@ -15,6 +15,11 @@
 //! Each pixel's ray runs along the row's normal (lateral × tangent, away from the viewer)
 //! through a slab about the curved surface: the thin CPR samples the surface itself, a slab a
 //! curved slab MIP, MinIP or average.
+//!
+//! The *stretched* CPR (Kanitsar et al. 2002, [`CurvedPlane::stretched`]) keeps one direction
+//! fixed instead, the vector of interest: every row's pixels step along it, and the rows are
+//! spaced by the path's run across it, its run along it shifting the row, so the path is a
+//! curve in the picture as long as itself and what lies about it keeps its shape.
 
 use raystream_math::{DVec3, Vec3};
 use raystream_scene::Camera;
@@ -28,12 +33,14 @@ pub struct CprRow {
     pub normal: Vec3,
 }
 
-/// A straightened curved plane through a volume, ready to be sampled row by row.
+/// A curved plane through a volume, straightened or stretched, ready to be sampled row by
+/// row.
 #[derive(Clone, Debug)]
 pub struct CurvedPlane {
     pub width: u32,
     pub height: u32,
-    /// The pixels' side, mm: the path's length over the image's height.
+    /// The pixels' side, mm: the path's length over the image's height (stretched: its length
+    /// across the vector of interest).
     pub pixel_mm: f32,
     /// The spline's length, mm.
     pub length_mm: f64,
@@ -41,6 +48,11 @@ pub struct CurvedPlane {
     pub points: usize,
     /// `height` rows, the path's first point at the top.
     pub rows: Vec<CprRow>,
+    /// Where the path crosses each row: `shift_mm[y]` mm along the row's lateral direction
+    /// from its centre (all 0 when straightened: the path is the middle column).
+    pub shift_mm: Vec<f32>,
+    /// Stretched along this vector of interest (LPS, unit), or straightened.
+    pub stretched: Option<DVec3>,
 }
 
 /// Cross-sections are perpendicular to the chord this long, mm, about their point: the
@@ -113,8 +125,102 @@ impl CurvedPlane {
             pixel_mm: pixel as f32,
             length_mm: length,
             points: spline.points,
+            shift_mm: vec![0.0; rows.len()],
             rows,
+            stretched: None,
         })
+    }
+
+    /// The *stretched* CPR along `points` (Kanitsar et al. 2002) for a `width`×`height` image:
+    /// the surface swept by the lines along `interest` (the vector of interest, LPS; the
+    /// view's image-right) through the path, unrolled so that the path keeps its length. Row
+    /// `y` is where the path has run (y + ½)·p across `interest` from its first point (its
+    /// run along `interest` is the row's shift instead), p being that run across over the
+    /// rows; its pixels lie p apart along `interest`, the middle of the image at the middle
+    /// of the path's run along it, so the path is drawn as a curve whose length in the image
+    /// is its length in the patient, and where it lies in a plane that holds `interest`, the
+    /// picture is that plane's slice. Each ray runs along `interest` × the path's tangent.
+    /// A path that runs along `interest` has no such surface: an error.
+    pub fn stretched(
+        points: &[DVec3],
+        interest: DVec3,
+        width: u32,
+        height: u32,
+    ) -> Result<CurvedPlane, String> {
+        let spline = Spline::new(points)?;
+        if width == 0 || height == 0 {
+            return Err("an empty image".into());
+        }
+        let v = interest.normalize_or_zero();
+        if v == DVec3::ZERO || !v.is_finite() {
+            return Err(format!("a vector of interest {interest}: not a direction"));
+        }
+        let d = &spline.dense;
+        // Per dense sample, the run across `v` (down the image) and along it (across).
+        let mut down = Vec::with_capacity(d.len());
+        down.push(0.0);
+        for w in d.windows(2) {
+            let step = w[1] - w[0];
+            down.push(down.last().unwrap() + step.reject_from_normalized(v).length());
+        }
+        let along: Vec<f64> = d.iter().map(|&q| v.dot(q - d[0])).collect();
+        let total = *down.last().unwrap();
+        let length = spline.length();
+        if total.is_nan() || total <= 1e-3 * length {
+            return Err(format!(
+                "a path {length:.1} mm long that runs {total:.2} mm across the vector of interest ({:.3}, {:.3}, {:.3} LPS, the view's right): a stretched CPR unrolls the path across it; face the view across the path, or straighten it",
+                v.x, v.y, v.z
+            ));
+        }
+        let pixel = total / height as f64;
+        let (lo, hi) = along
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(lo, hi), &a| (lo.min(a), hi.max(a)));
+        let middle = 0.5 * (lo + hi);
+        let mut rows = Vec::with_capacity(height as usize);
+        let mut shift_mm = Vec::with_capacity(height as usize);
+        let mut last_normal = v.any_orthonormal_vector();
+        for y in 0..height {
+            let target = (y as f64 + 0.5) * pixel;
+            // The dense piece that runs across `v` through the row.
+            let k = down.partition_point(|&h| h < target).clamp(1, d.len() - 1);
+            let (h0, h1) = (down[k - 1], down[k]);
+            let f = if h1 > h0 {
+                ((target - h0) / (h1 - h0)).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let point = d[k - 1].lerp(d[k], f);
+            let arc = spline.arc[k - 1] + f * (spline.arc[k] - spline.arc[k - 1]);
+            let e = 0.5 * pixel;
+            let tangent = spline.at((arc + e).min(length)) - spline.at((arc - e).max(0.0));
+            // Where the path runs along `v` here, the last row's normal.
+            let normal = v.cross(tangent).normalize_or(last_normal);
+            last_normal = normal;
+            let shift = v.dot(point - d[0]) - middle;
+            rows.push(CprRow {
+                centre: (point - shift * v).as_vec3(),
+                lateral: v.as_vec3(),
+                normal: normal.as_vec3(),
+            });
+            shift_mm.push(shift as f32);
+        }
+        Ok(CurvedPlane {
+            width,
+            height,
+            pixel_mm: pixel as f32,
+            length_mm: length,
+            points: spline.points,
+            rows,
+            shift_mm,
+            stretched: Some(v),
+        })
+    }
+
+    /// The path's point on row `y` (LPS).
+    pub fn path_point(&self, y: u32) -> Vec3 {
+        let r = &self.rows[y as usize];
+        r.centre + self.shift_mm[y as usize] * r.lateral
     }
 
     /// The cross-section of the path at row `y`: a parallel camera (the scene frame of
@@ -141,10 +247,9 @@ impl CurvedPlane {
     /// misses the volume, as a path in the wrong coordinates does).
     pub fn rows_inside(&self, vol: &raystream_io::Volume) -> usize {
         let hi = vol.dims.map(|n| n.max(1) as f64 - 1.0);
-        self.rows
-            .iter()
-            .filter(|r| {
-                let q = vol.world_to_index(r.centre.as_dvec3());
+        (0..self.height)
+            .filter(|&y| {
+                let q = vol.world_to_index(self.path_point(y).as_dvec3());
                 (0..3).all(|a| (-1e-6..=hi[a] + 1e-6).contains(&q[a]))
             })
             .count()
@@ -395,6 +500,112 @@ mod tests {
         let (b, _) = c.point(21, 10);
         assert!((a - Vec3::new(0.5, 0.0, 39.5)).length() < 1e-4, "{a}");
         assert!((b - a - Vec3::X).length() < 1e-5);
+    }
+
+    #[test]
+    fn a_path_in_a_plane_holding_the_interest_stretches_into_that_plane() {
+        // A quarter circle of 40 mm in the x–z plane, stretched along x: the swept surface is
+        // the plane y = 0 itself, so the picture is its slice, rows 0.2 mm apart down z and
+        // columns along x about the middle of the path's run (x = 20), and the path crosses
+        // each row where the circle does.
+        let r = 40.0;
+        let c = CurvedPlane::stretched(&arc(r, 10.0), DVec3::X, 51, 200).unwrap();
+        assert_eq!(c.stretched, Some(DVec3::X));
+        assert!((c.pixel_mm - 0.2).abs() < 1e-6, "{}", c.pixel_mm);
+        for y in 0..200 {
+            let row = &c.rows[y as usize];
+            let z = -(y as f32 + 0.5) * 0.2;
+            assert!(
+                (row.centre - Vec3::new(20.0, 0.0, z)).length() < 1e-4,
+                "{y}: {}",
+                row.centre
+            );
+            assert_eq!(row.lateral, Vec3::X);
+            // lateral × tangent: away from an anterior viewer, as straightened.
+            assert!(
+                (row.normal - Vec3::Y).length() < 1e-3,
+                "{y}: {}",
+                row.normal
+            );
+            let p = c.path_point(y).as_dvec3();
+            assert!((p.length() - r).abs() < 0.1, "{y}: {p}");
+            assert!((p.z - z as f64).abs() < 1e-4);
+        }
+        // A pixel's point: the plane's, p apart.
+        let (a, _) = c.point(0, 0);
+        assert!(
+            (a - Vec3::new(20.0 - 25.0 * 0.2, 0.0, -0.1)).length() < 1e-4,
+            "{a}"
+        );
+    }
+
+    #[test]
+    fn a_path_across_the_interest_stretches_as_it_straightens() {
+        // A quarter circle in the y–z plane (bending away from an anterior viewer), stretched
+        // along x: nowhere does it run along x, so the stretched CPR is the straightened one.
+        let pts: Vec<DVec3> = arc(40.0, 10.0)
+            .iter()
+            .map(|p| DVec3::new(0.0, p.x, p.z))
+            .collect();
+        let s = CurvedPlane::stretched(&pts, DVec3::X, 33, 300).unwrap();
+        let t = CurvedPlane::new(&pts, DVec3::X, 0.0, 33, 300).unwrap();
+        assert!((s.pixel_mm - t.pixel_mm).abs() < 1e-4 * t.pixel_mm);
+        for (a, b) in s.rows.iter().zip(&t.rows) {
+            assert!((a.centre - b.centre).length() < 1e-3, "{a:?} {b:?}");
+            assert!((a.lateral - b.lateral).length() < 1e-5);
+            assert!((a.normal - b.normal).length() < 1e-3, "{a:?} {b:?}");
+        }
+        assert!(s.shift_mm.iter().all(|&x| x.abs() < 1e-5));
+        assert!(t.shift_mm.iter().all(|&x| x == 0.0));
+    }
+
+    #[test]
+    fn a_stretched_path_keeps_its_length_in_the_picture() {
+        // A helix about z (radius 10 mm, 30 mm a turn, one and a half turns), stretched along
+        // x: the curve the path draws in the picture (its shift across, its row down) is as
+        // long as the path, and each row's path point lies on the helix.
+        let pts: Vec<DVec3> = (0..=54)
+            .map(|i| {
+                let a = (i as f64 * 10.0).to_radians();
+                DVec3::new(
+                    10.0 * a.cos(),
+                    10.0 * a.sin(),
+                    -30.0 * a / std::f64::consts::TAU,
+                )
+            })
+            .collect();
+        let c = CurvedPlane::stretched(&pts, DVec3::X, 64, 600).unwrap();
+        let p = c.pixel_mm as f64;
+        let drawn: f64 = c
+            .shift_mm
+            .windows(2)
+            .map(|w| (w[1] as f64 - w[0] as f64).hypot(p))
+            .sum::<f64>()
+            + p;
+        assert!(
+            (drawn - c.length_mm).abs() < 0.01 * c.length_mm,
+            "{drawn} mm drawn for {} mm",
+            c.length_mm
+        );
+        for y in 0..600 {
+            let q = c.path_point(y).as_dvec3();
+            assert!((q.truncate().length() - 10.0).abs() < 0.1, "{y}: {q}");
+            // Down the picture is across x: the run in y and z down to the row.
+            assert_eq!(c.rows[y as usize].lateral, Vec3::X);
+        }
+        // The middle of the image is the middle of the path's run along x (−10 to 10 mm).
+        let (lo, hi) = c
+            .shift_mm
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+        assert!(
+            (lo + 10.0).abs() < 0.1 && (hi - 10.0).abs() < 0.1,
+            "{lo} {hi}"
+        );
+        // A path along the vector of interest has no stretched CPR.
+        let e = CurvedPlane::stretched(&[DVec3::ZERO, DVec3::new(50.0, 0.0, 0.0)], DVec3::X, 8, 8)
+            .unwrap_err();
+        assert!(e.contains("across the vector of interest"), "{e}");
     }
 
     #[test]

@@ -84,6 +84,13 @@ pub enum KernelsArg {
     Ifif,
 }
 
+/// `render --path --cpr`: how the curved plane is laid out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum CprArg {
+    Straightened,
+    Stretched,
+}
+
 /// `render --turntable --format`: the frames' file format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum FrameFormat {
@@ -310,6 +317,12 @@ pub struct RenderArgs {
     /// cross-sections perpendicular to the path, evenly along it).
     #[arg(long, value_name = "FILE", requires = "mode", conflicts_with_all = ["cine", "slice_at"])]
     pub path: Option<PathBuf>,
+    /// With --path: the CPR straightened (the path down the middle column, rows at its arc
+    /// length) or stretched (Kanitsar 2002: the surface swept through the path along the
+    /// view's right, unrolled so that the path keeps its length, drawn as the curve it makes
+    /// across that direction; a path in a plane holding it gives that plane's slice).
+    #[arg(long, value_enum, requires = "path", default_value_t = CprArg::Straightened)]
+    pub cpr: CprArg,
     /// A CT volume (--mode, or its bones) or a scene with one: draws the path in FILE (read
     /// as --path reads it) over the picture, a yellow line ringed in black, as a workstation
     /// shows a centreline on its reference view; PNG, or DICOM as the picture (RGB, Burned In

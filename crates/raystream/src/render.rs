@@ -18,7 +18,7 @@ use raystream_cpu::cpr::CurvedPlane;
 use raystream_cpu::dvr::{DvrMode, DvrOptions, Sight, volume_camera_from};
 use raystream_cpu::lumen::LumenOptions;
 
-use crate::cli::{FrameFormat, RenderArgs};
+use crate::cli::{CprArg, FrameFormat, RenderArgs};
 use crate::common::{
     Backend, DicomOut, Picture, gpu_tracer, image_format, median as median_of, ms, open_device,
     spinner,
@@ -167,19 +167,30 @@ fn volume_dicom(
     }
 }
 
-/// `--path FILE`: the curved plane along the path for `opt`'s image, its cut facing `view` and
-/// turned `turn` degrees about the path; an error where the path misses the volume (where it
-/// leaves it, the picture shows so: no values there).
+/// `--path FILE`: the curved plane along the path for `opt`'s image, straightened (its cut
+/// facing `view`, turned `turn` degrees about the path) or stretched (along `view`'s right
+/// turned `turn` degrees as `--orbit` turns it); an error where the path misses the volume
+/// (where it leaves it, the picture shows so: no values there).
 fn curved_plane(
     file: &Path,
     points: &[raystream_math::DVec3],
     volume: &raystream_io::Volume,
     opt: &DvrOptions,
-    (view, turn): (View, f32),
+    (view, turn, kind): (View, f32, CprArg),
 ) -> Result<CurvedPlane> {
-    let right = raystream_cpu::dvr::scene_to_lps(view.basis().col(0)).as_dvec3();
-    let plane = CurvedPlane::new(points, right, turn as f64, opt.width, opt.height)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?;
+    let plane = match kind {
+        CprArg::Straightened => {
+            let right = raystream_cpu::dvr::scene_to_lps(view.basis().col(0)).as_dvec3();
+            CurvedPlane::new(points, right, turn as f64, opt.width, opt.height)
+        }
+        CprArg::Stretched => {
+            // The vector of interest: the right of the view turned as --orbit AZ turns it.
+            let right = view.orbit(turn, 0.0).basis().col(0);
+            let interest = raystream_cpu::dvr::scene_to_lps(right).as_dvec3();
+            CurvedPlane::stretched(points, interest, opt.width, opt.height)
+        }
+    }
+    .map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?;
     inside(file, &plane, volume)?;
     Ok(plane)
 }
@@ -199,17 +210,30 @@ pub fn inside(file: &Path, plane: &CurvedPlane, volume: &raystream_io::Volume) -
 /// A curved reformation in words, for the summary and an EXR's comments (ASCII, as an EXR's
 /// comments must be).
 fn curved_words(file: &Path, plane: &CurvedPlane, opt: &DvrOptions) -> String {
+    let layout = match plane.stretched {
+        None => format!(
+            "straightened: row y at arc length (y + 0.5) * {p:.5} mm from its first point, column x (x + 0.5 - {}) * {p:.5} mm across it",
+            0.5 * plane.width as f32,
+            p = plane.pixel_mm
+        ),
+        Some(v) => format!(
+            "stretched along ({:.4}, {:.4}, {:.4}) LPS: row y where the path has run (y + 0.5) * {p:.5} mm across that direction, column x (x + 0.5 - {}) * {p:.5} mm along it from the middle of the path's run along it",
+            v.x,
+            v.y,
+            v.z,
+            0.5 * plane.width as f32,
+            p = plane.pixel_mm
+        ),
+    };
     format!(
-        "; a curved planar reformation along {} ({} points, {:.1} mm) straightened: row y at arc length (y + 0.5) * {p:.5} mm from its first point, column x (x + 0.5 - {}) * {p:.5} mm across it{}",
+        "; a curved planar reformation along {} ({} points, {:.1} mm) {layout}{}",
         file.display(),
         plane.points,
         plane.length_mm,
-        0.5 * plane.width as f32,
         match opt.slab {
             Some(t) => format!(", a slab {t} mm thick about the curved plane"),
             None => String::new(),
         },
-        p = plane.pixel_mm,
     )
 }
 
@@ -513,6 +537,11 @@ fn check_path(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             "--path {file} --labels: a curved reformation's rows follow the path, no patient direction; its cross-sections (--slices N) take letters"
         );
     }
+    if a.cpr == CprArg::Stretched && a.slices.is_some() {
+        bail!(
+            "--path {file} --slices N --cpr stretched: cross-sections are perpendicular to the path however its CPR is laid out; drop --cpr"
+        );
+    }
     Ok(())
 }
 
@@ -664,7 +693,7 @@ fn seen_from(
             &c.points,
             volume,
             opt,
-            (view, az),
+            (view, az, a.cpr),
         )?)),
         None => Seen::Camera(volume_camera_from(
             volume,
