@@ -93,31 +93,65 @@ impl CurvedPlane {
         turn_deg: f64,
         n: u32,
     ) -> Result<CurvedPlane, String> {
+        Self::sections_spaced(points, image_right, turn_deg, n, None)
+    }
+
+    /// [`CurvedPlane::sections`], but with `step_mm`, `n` cross-sections that far apart
+    /// along the path, centred on its middle (as a flat series is on its centre): an error if
+    /// they reach beyond its ends. The plane's `pixel_mm` is their spacing.
+    pub fn sections_spaced(
+        points: &[DVec3],
+        image_right: DVec3,
+        turn_deg: f64,
+        n: u32,
+        step_mm: Option<f64>,
+    ) -> Result<CurvedPlane, String> {
         Self::with_chord(
             points,
             image_right,
             turn_deg,
             (1, n),
-            Some(SECTION_CHORD_MM),
+            Some((SECTION_CHORD_MM, step_mm)),
         )
     }
 
-    /// A curved plane whose rows' tangents are chords `chord` mm long (None: a row's height).
+    /// A curved plane whose rows lie a row's height apart along the path about its middle,
+    /// and whose tangents are chords a row's height long; or, with `sections` (a chord's
+    /// length, and perhaps a spacing), cross-sections' frames, their tangents chords that
+    /// long.
     fn with_chord(
         points: &[DVec3],
         image_right: DVec3,
         turn_deg: f64,
         (width, height): (u32, u32),
-        chord: Option<f64>,
+        sections: Option<(f64, Option<f64>)>,
     ) -> Result<CurvedPlane, String> {
         let spline = Spline::new(points)?;
         if width == 0 || height == 0 {
             return Err("an empty image".into());
         }
         let length = spline.length();
-        let pixel = length / height as f64;
-        let arcs: Vec<f64> = (0..height).map(|y| (y as f64 + 0.5) * pixel).collect();
-        let e = 0.5 * chord.unwrap_or(pixel);
+        let pixel = match sections {
+            Some((_, Some(step))) => {
+                if !(step.is_finite() && step > 0.0) {
+                    return Err(format!(
+                        "cross-sections {step} mm apart: the spacing must be a positive number"
+                    ));
+                }
+                let span = step * (height - 1) as f64;
+                if span > length + 1e-6 {
+                    return Err(format!(
+                        "{height} cross-sections {step} mm apart span {span:.1} mm: more than the path's {length:.1} mm"
+                    ));
+                }
+                step
+            }
+            _ => length / height as f64,
+        };
+        // Centred on the path's middle: (y + ½)·p when the rows fill it.
+        let first = 0.5 * (length - pixel * (height - 1) as f64);
+        let arcs: Vec<f64> = (0..height).map(|y| first + y as f64 * pixel).collect();
+        let e = 0.5 * sections.map_or(pixel, |s| s.0);
         let rows = spline.frames(&arcs, e, image_right, turn_deg);
         Ok(CurvedPlane {
             width,
@@ -606,6 +640,34 @@ mod tests {
         let e = CurvedPlane::stretched(&[DVec3::ZERO, DVec3::new(50.0, 0.0, 0.0)], DVec3::X, 8, 8)
             .unwrap_err();
         assert!(e.contains("across the vector of interest"), "{e}");
+    }
+
+    #[test]
+    fn sections_spaced_lie_that_far_apart_about_the_middle() {
+        // A straight path of 100 mm down z: five sections 10 mm apart about its middle, and
+        // what cannot be spaced so.
+        let p = [DVec3::new(0.0, 0.0, 50.0), DVec3::new(0.0, 0.0, -50.0)];
+        let c = CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, 5, Some(10.0)).unwrap();
+        assert_eq!(c.pixel_mm, 10.0);
+        for (i, r) in c.rows.iter().enumerate() {
+            let want = Vec3::new(0.0, 0.0, 20.0 - 10.0 * i as f32);
+            assert!((r.centre - want).length() < 1e-4, "{i}: {}", r.centre);
+            assert!((r.normal - Vec3::Y).length() < 1e-6);
+        }
+        // Without a spacing, the middles of equal parts, as `sections`.
+        let even = CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, 4, None).unwrap();
+        assert_eq!(
+            even.rows,
+            CurvedPlane::sections(&p, DVec3::X, 0.0, 4).unwrap().rows
+        );
+        assert!((even.rows[0].centre.z - 37.5).abs() < 1e-4);
+        // Exactly the path's length fits; beyond it, or no spacing, does not.
+        let ends = CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, 3, Some(50.0)).unwrap();
+        assert!((ends.rows[0].centre.z - 50.0).abs() < 1e-4);
+        let err = |n, step| CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, n, Some(step));
+        assert!(err(12, 10.0).unwrap_err().contains("span 110.0 mm"));
+        assert!(err(2, 0.0).unwrap_err().contains("positive"));
+        assert!(err(2, f64::NAN).unwrap_err().contains("positive"));
     }
 
     #[test]

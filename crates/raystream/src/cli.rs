@@ -334,7 +334,9 @@ pub struct RenderArgs {
     /// PNG, or DICOM as the picture (RGB, Burned In Annotation YES).
     #[arg(long, value_name = "HU", requires_all = ["path", "slices"], allow_negative_numbers = true)]
     pub draw_lumen: Option<f32>,
-    /// With --slices: the planes' spacing in mm (default: the pixel size, for cubic voxels).
+    /// With --slices: the planes' spacing in mm (default: the pixel size, for cubic voxels);
+    /// with --path, the cross-sections' spacing along the path, about its middle (default:
+    /// evenly along all of it).
     #[arg(long, value_name = "MM", requires = "slices")]
     pub slice_step: Option<f32>,
     /// With --turntable, --slices or --cine: the frames' format; `exr` writes frame_000.exr …

@@ -611,9 +611,10 @@ fn turntable(
 }
 
 /// `render --mode slice --path FILE --slices N -o DIR` (or a projection's `--slab`): N
-/// cross-sections of the path, each perpendicular to it at the arc length (i + ½)·L/N, centred
-/// on it at the volume's finest spacing, the CPR's lateral direction to the right: the planes
-/// a vessel's diameter is measured on, as reformatted CT images with their planes.
+/// cross-sections of the path, each perpendicular to it at the arc length (i + ½)·L/N (with
+/// `--slice-step MM`, MM apart about its middle), centred on it at the volume's finest
+/// spacing, the CPR's lateral direction to the right: the planes a vessel's diameter is
+/// measured on, as reformatted CT images with their planes.
 fn path_sections(
     a: &RenderArgs,
     (renderer, volume): (&dvr::Renderer, &raystream_io::Volume),
@@ -622,15 +623,11 @@ fn path_sections(
     n: u32,
     format: ImageFormat,
 ) -> Result<()> {
-    if a.slice_step.is_some() {
-        bail!(
-            "--path --slices spaces its {n} cross-sections evenly along the path; --slice-step is for planes facing the camera"
-        );
-    }
     let [az, _] = orbit_angles(a);
     let right = raystream_cpu::dvr::scene_to_lps(view.basis().col(0)).as_dvec3();
-    let stations = CurvedPlane::sections(&curve.points, right, az as f64, n)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", curve.file.display()))?;
+    let step = a.slice_step.map(f64::from);
+    let stations = CurvedPlane::sections_spaced(&curve.points, right, az as f64, n, step)
+        .map_err(|e| anyhow::anyhow!("{}: --slices {n}: {e}", curve.file.display()))?;
     inside(curve.file, &stations, volume)?;
     let pixel = raystream_cpu::dvr::min_spacing(volume);
     let extent = volume.dims.map(|d| d as f64);

@@ -6,6 +6,7 @@ mod common;
 use std::path::Path;
 
 use common::*;
+use raystream_math::DVec3;
 
 /// The HU of an EXR's one channel, and its comments.
 fn hu(path: &Path) -> (Vec<f32>, String) {
@@ -167,7 +168,7 @@ fn a_stretched_cpr_keeps_the_aortas_bend() {
                 .split(", ")
                 .map(|x| x.parse().unwrap())
                 .collect();
-            let interest = raystream_math::DVec3::new(d[0], d[1], d[2]);
+            let interest = DVec3::new(d[0], d[1], d[2]);
             let plane =
                 raystream_cpu::cpr::CurvedPlane::stretched(&points, interest, w as u32, h as u32)
                     .unwrap();
@@ -367,6 +368,100 @@ fn curved_reformation_misuse_is_a_clear_error() {
     assert!(!Path::new(out).exists());
 }
 
+/// A DICOM attribute's numbers (a backslash-separated list).
+fn dicom_numbers(obj: &dicom_object::DefaultDicomObject, tag: dicom_object::Tag) -> Vec<f64> {
+    dicom_text(obj, tag)
+        .split('\\')
+        .map(|x| x.trim().parse().unwrap())
+        .collect()
+}
+
+/// A DICOM image's pixel (`k`, `k`) (LPS mm: the centre of an image 2k + 1 pixels square) and
+/// its plane's normal, row × column.
+fn plane_of(obj: &dicom_object::DefaultDicomObject, k: usize) -> (DVec3, DVec3) {
+    use dicom_dictionary_std::tags;
+    let iop = dicom_numbers(obj, tags::IMAGE_ORIENTATION_PATIENT);
+    let (row, col) = (
+        DVec3::new(iop[0], iop[1], iop[2]),
+        DVec3::new(iop[3], iop[4], iop[5]),
+    );
+    let ipp = dicom_numbers(obj, tags::IMAGE_POSITION_PATIENT);
+    let spacing = dicom_numbers(obj, tags::PIXEL_SPACING);
+    let at = DVec3::new(ipp[0], ipp[1], ipp[2])
+        + row * k as f64 * spacing[1]
+        + col * k as f64 * spacing[0];
+    (at, row.cross(col))
+}
+
+/// `--path --slices N --slice-step MM`: N cross-sections MM apart along the path about its
+/// middle: their centres MM apart (chords of a gently curving path), the middle one the
+/// single section `--slices 1` cuts at the path's middle, each plane perpendicular to the
+/// chord to its neighbours; sections that would reach beyond the path's ends are refused.
+#[test]
+fn cross_sections_step_along_the_path() {
+    let (vol, path) = (chest(), aorta());
+    let sections = |n: &str, step: &[&str]| -> Vec<(DVec3, DVec3)> {
+        let dir = tmp(&format!("cpr-step-{n}"));
+        std::fs::remove_dir_all(&dir).ok();
+        let args = [
+            &[
+                "render",
+                "--quiet",
+                "--device",
+                "cpu",
+                &vol[..],
+                "--mode",
+                "slice",
+            ][..],
+            &[
+                "--path", &path, "--slices", n, "--size", "9x9", "--format", "dcm",
+            ],
+            step,
+            &["-o", dir.to_str().unwrap()],
+        ]
+        .concat();
+        let o = run(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let count: usize = n.parse().unwrap();
+        (0..count)
+            .map(|i| {
+                let obj = dicom_object::open_file(dir.join(format!("frame_{i:03}.dcm"))).unwrap();
+                plane_of(&obj, 4)
+            })
+            .collect()
+    };
+    let s = sections("7", &["--slice-step", "5"]);
+    let middle = sections("1", &[]);
+    assert!(
+        (s[3].0 - middle[0].0).length() < 0.01,
+        "{:?} {:?}",
+        s[3],
+        middle[0]
+    );
+    for w in s.windows(2) {
+        let chord = w[1].0 - w[0].0;
+        assert!((chord.length() - 5.0).abs() < 0.05, "{}", chord.length());
+        for (_, normal) in w {
+            assert!(normal.dot(chord.normalize()).abs() > 0.98);
+        }
+    }
+    let mut all = vec!["render", &vol[..], "--device", "cpu", "--mode", "slice"];
+    all.extend([
+        "--path",
+        &path,
+        "--slices",
+        "40",
+        "--slice-step",
+        "5",
+        "-o",
+        "/tmp/x",
+    ]);
+    refused(
+        &all,
+        "40 cross-sections 5 mm apart span 195.0 mm: more than the path's 154.2 mm",
+    );
+}
+
 /// `--path --slices N`: cross-sections perpendicular to the path, evenly along it. Nearly each
 /// is centred on the lumen (a few on the septum seen in the lumen below the graft), and its
 /// centre pixel is the middle pixel of its row in the CPR of N rows: the same point of the
@@ -432,12 +527,7 @@ fn cross_sections_cut_the_path_square() {
             assert!(width >= 8, "section {i}: the lumen {width} px wide");
         }
         let obj = dicom_object::open_file(dcm_dir.join(format!("frame_{i:03}.dcm"))).unwrap();
-        let nums = |tag| -> Vec<f64> {
-            dicom_text(&obj, tag)
-                .split('\\')
-                .map(|x| x.trim().parse().unwrap())
-                .collect()
-        };
+        let nums = |tag| dicom_numbers(&obj, tag);
         if i == 0 {
             // The first, at the top of the descending aorta (running to the feet), seen from
             // below as axial images are: the patient's left to the right, anterior up (its
@@ -446,19 +536,11 @@ fn cross_sections_cut_the_path_square() {
             let (rows, cols) = o.split_once('\\').unwrap();
             assert!(rows.starts_with('L') && cols.starts_with('P'), "{o}");
         }
-        let iop = nums(tags::IMAGE_ORIENTATION_PATIENT);
-        let (row, col) = (
-            raystream_math::DVec3::new(iop[0], iop[1], iop[2]),
-            raystream_math::DVec3::new(iop[3], iop[4], iop[5]),
-        );
-        normals.push(row.cross(col));
-        let ipp = nums(tags::IMAGE_POSITION_PATIENT);
         let spacing = nums(tags::PIXEL_SPACING)[0];
         assert!((spacing - 1.5).abs() < 1e-6);
-        // The centre pixel: 24 pixels along the row and the column from the first.
-        centres.push(
-            raystream_math::DVec3::new(ipp[0], ipp[1], ipp[2]) + (row + col) * 24.0 * spacing,
-        );
+        let (centre, normal) = plane_of(&obj, 24);
+        centres.push(centre);
+        normals.push(normal);
     }
     assert!(
         lumen * 100 >= 90 * n,
