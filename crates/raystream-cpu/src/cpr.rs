@@ -776,18 +776,7 @@ mod tests {
                 }
             }
         }
-        let vol = Volume {
-            dims,
-            spacing: [1.0; 3],
-            origin: [0.0; 3],
-            direction: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-            data,
-            unit: raystream_io::ValueUnit::Hounsfield,
-            format: raystream_io::VolumeFormat::Nifti,
-            series: None,
-            warnings: Vec::new(),
-            phase: Default::default(),
-        };
+        let vol = Volume::hounsfield(dims, [1.0; 3], data);
         let points = arc(40.0, 10.0).into_iter().map(|p| p + at).collect();
         (vol, points)
     }

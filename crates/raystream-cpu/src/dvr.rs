@@ -1148,12 +1148,9 @@ fn march(
 mod tests {
     use std::path::Path;
 
-    use raystream_io::{ValueUnit, VolumeFormat};
     use raystream_volume::TfPreset;
 
     use super::*;
-
-    const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
     fn volume(
         dims: [usize; 3],
@@ -1168,18 +1165,7 @@ mod tests {
                 }
             }
         }
-        Volume {
-            dims,
-            spacing,
-            origin: [0.0; 3],
-            direction: IDENTITY,
-            data,
-            unit: ValueUnit::Hounsfield,
-            format: VolumeFormat::Nifti,
-            series: None,
-            warnings: Vec::new(),
-            phase: Default::default(),
-        }
+        Volume::hounsfield(dims, spacing, data)
     }
 
     /// A camera (scene frame) whose centre pixel of a 3×3 image looks along LPS +y (anterior to

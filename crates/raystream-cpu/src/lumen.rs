@@ -484,18 +484,7 @@ mod tests {
                 (500.0 * f(p * h)).clamp(-1000.0, 1000.0) as f32
             })
             .collect();
-        Volume {
-            dims,
-            spacing: [h; 3],
-            origin: [0.0; 3],
-            direction: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-            data,
-            unit: raystream_io::ValueUnit::Hounsfield,
-            format: raystream_io::VolumeFormat::Nifti,
-            series: None,
-            warnings: Vec::new(),
-            phase: Default::default(),
-        }
+        Volume::hounsfield(dims, [h; 3], data)
     }
 
     /// [`phantom_at`] on a 1 mm grid.

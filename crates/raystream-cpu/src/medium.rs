@@ -160,7 +160,7 @@ mod tests {
     use std::path::Path;
 
     use raystream_accel::{Builder, KdTree};
-    use raystream_io::{ValueUnit, Volume, VolumeFormat};
+    use raystream_io::Volume;
     use raystream_scene::{Scene, SceneDesc, SceneVolume};
     use raystream_volume::{Shading, TransferFunction};
 
@@ -170,18 +170,7 @@ mod tests {
     /// A homogeneous 21³ volume of 1 mm voxels at the LPS origin: in the scene frame it fills
     /// x ∈ [0, 20], y ∈ [0, 20], z ∈ [−20, 0].
     fn cube() -> Volume {
-        Volume {
-            dims: [21; 3],
-            spacing: [1.0; 3],
-            origin: [0.0; 3],
-            direction: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-            data: vec![40.0; 21 * 21 * 21],
-            unit: ValueUnit::Hounsfield,
-            format: VolumeFormat::Nifti,
-            series: None,
-            warnings: Vec::new(),
-            phase: Default::default(),
-        }
+        Volume::hounsfield([21; 3], [1.0; 3], vec![40.0; 21 * 21 * 21])
     }
 
     /// Opacity `alpha` per mm everywhere, colour `c`, ambient `ambient`.

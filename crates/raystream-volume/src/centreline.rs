@@ -446,18 +446,7 @@ mod tests {
                 }
             }
         }
-        Volume {
-            dims: [n; 3],
-            spacing: [h; 3],
-            origin: [0.0; 3],
-            direction: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-            data,
-            unit: raystream_io::ValueUnit::Hounsfield,
-            format: raystream_io::VolumeFormat::Nifti,
-            series: None,
-            warnings: Vec::new(),
-            phase: Default::default(),
-        }
+        Volume::hounsfield([n; 3], [h; 3], data)
     }
 
     /// The distance from `p` to the quarter circle of radius `r` about `c` in the x–z plane.

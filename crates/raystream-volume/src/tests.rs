@@ -2,7 +2,7 @@
 
 use std::collections::HashMap;
 
-use raystream_io::{ValueUnit, Volume, VolumeFormat};
+use raystream_io::Volume;
 use raystream_math::Vec3;
 
 use super::*;
@@ -16,16 +16,9 @@ fn analytic(
     f: impl Fn(raystream_math::DVec3) -> f32,
 ) -> Volume {
     let mut v = Volume {
-        dims,
-        spacing,
         origin,
         direction,
-        data: Vec::new(),
-        unit: ValueUnit::Hounsfield,
-        format: VolumeFormat::Nifti,
-        series: None,
-        warnings: Vec::new(),
-        phase: Default::default(),
+        ..Volume::hounsfield(dims, spacing, Vec::new())
     };
     let mut data = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
     for k in 0..dims[2] {

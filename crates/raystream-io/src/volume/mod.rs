@@ -206,6 +206,23 @@ pub struct Volume {
 }
 
 impl Volume {
+    /// A CT of Hounsfield units `data` on a `dims` grid of `spacing` mm, voxel (0, 0, 0) at
+    /// the origin and the index axes along L, P, S: a phantom's volume, as tests build them.
+    pub fn hounsfield(dims: [usize; 3], spacing: [f64; 3], data: Vec<f32>) -> Volume {
+        Volume {
+            dims,
+            spacing,
+            origin: [0.0; 3],
+            direction: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            data,
+            unit: ValueUnit::Hounsfield,
+            format: VolumeFormat::Nifti,
+            series: None,
+            warnings: Vec::new(),
+            phase: Default::default(),
+        }
+    }
+
     pub fn voxel_count(&self) -> usize {
         self.dims[0] * self.dims[1] * self.dims[2]
     }
