@@ -135,8 +135,9 @@ fn curved_reformation_straightens_the_stented_aorta() {
 /// nearly every row; from the left, where the arch and the descent bend along the view's
 /// right, the path's column wanders more than 20 mm across the picture, the picture is not
 /// the straightened one, and its rows are closer than the straightened ones (the path runs
-/// shorter across that direction than along itself). The GPU's values are the CPU's within
-/// its half-float texture's error.
+/// shorter across that direction than along itself). From the front, a 6 mm slab about the
+/// stretched surface gives MinIP ≤ average ≤ MIP per pixel, the MIP above the thin cut on
+/// most. The GPU's values are the CPU's within its half-float texture's error.
 #[test]
 fn a_stretched_cpr_keeps_the_aortas_bend() {
     let (vol, path) = (chest(), aorta());
@@ -194,6 +195,31 @@ fn a_stretched_cpr_keeps_the_aortas_bend() {
                 let differ = v.iter().zip(&s).filter(|(a, b)| (*a - *b).abs() > 50.0);
                 assert!(differ.count() * 4 > w * h, "{dev}: as the straightened CPR");
             }
+            if view == "anterior" {
+                // A slab about the stretched surface, along its normal (the direction × the
+                // path's tangent): per pixel MinIP ≤ average ≤ MIP.
+                let slab = |mode: &str| {
+                    let args = [
+                        &args[..5],
+                        &["--mode", mode, "--slab", "6", "--cpr", "stretched"],
+                    ]
+                    .concat();
+                    hu(&render_to(
+                        &format!("cpr-stretched-{mode}-{dev}.exr"),
+                        dev,
+                        &args,
+                    ))
+                    .0
+                };
+                let (mip, avg, min) = (slab("mip"), slab("average"), slab("minip"));
+                for i in 0..w * h {
+                    assert!(
+                        min[i] <= avg[i] + 1e-3 && avg[i] <= mip[i] + 1e-3,
+                        "{dev} pixel {i}"
+                    );
+                }
+                assert!(mip.iter().zip(&v).filter(|(m, t)| *m > *t).count() * 2 > w * h);
+            }
             by_dev.push((*dev, view, v));
         }
     }
@@ -207,43 +233,67 @@ fn a_stretched_cpr_keeps_the_aortas_bend() {
 
 /// A rotational CPR: `--turntable N` turns the cut about the path, each frame exactly the
 /// picture `--orbit` gives at its angle, and the middle column of an odd-width image (the path
-/// itself) the same in every frame.
+/// itself) the same in every frame; half a turn mirrors it. Stretched, the vector of interest
+/// turns with the camera: a quarter turn from the front is the view from the left, half a
+/// turn the mirror image.
 #[test]
 fn rotational_cpr_turns_about_the_path() {
     let (vol, path) = (chest(), aorta());
-    let base = [
-        &vol[..],
-        "--mode",
-        "slice",
-        "--path",
-        &path,
-        "--size",
-        "31x90",
-    ];
-    let dir = tmp("cpr-turntable");
-    std::fs::remove_dir_all(&dir).ok();
-    let args = [&base[..], &["--turntable", "4", "--format", "exr"]].concat();
-    let mut all = vec!["render", "--quiet", "--device", "cpu"];
-    all.extend_from_slice(&args);
-    all.extend_from_slice(&["-o", dir.to_str().unwrap()]);
-    let o = run(&all);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let frames: Vec<Vec<f32>> = (0..4)
-        .map(|i| hu(&dir.join(format!("frame_00{i}.exr"))).0)
-        .collect();
-    let orbit = [&base[..], &["--orbit", "90"]].concat();
-    let single = hu(&render_to("cpr-orbit90.exr", "cpu", &orbit)).0;
-    assert_eq!(frames[1], single, "frame 1 is --orbit 90");
-    assert_ne!(frames[0], frames[1]);
-    let middle = |f: &[f32]| (0..90).map(|y| f[y * 31 + 15]).collect::<Vec<_>>();
-    for f in &frames[1..] {
-        assert_eq!(middle(f), middle(&frames[0]));
-    }
-    // Half a turn shows the same cut from behind: mirrored left to right.
-    for y in 0..90 {
-        for x in 0..31 {
-            let (a, b) = (frames[0][y * 31 + x], frames[2][y * 31 + 30 - x]);
-            assert!((a - b).abs() < 1e-2, "({x}, {y}): {a} {b}");
+    for cpr in ["straightened", "stretched"] {
+        let base = [
+            &vol[..],
+            "--mode",
+            "slice",
+            "--path",
+            &path,
+            "--size",
+            "31x90",
+            "--cpr",
+            cpr,
+        ];
+        let dir = tmp(&format!("cpr-turntable-{cpr}"));
+        std::fs::remove_dir_all(&dir).ok();
+        let args = [&base[..], &["--turntable", "4", "--format", "exr"]].concat();
+        let mut all = vec!["render", "--quiet", "--device", "cpu"];
+        all.extend_from_slice(&args);
+        all.extend_from_slice(&["-o", dir.to_str().unwrap()]);
+        let o = run(&all);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let frames: Vec<Vec<f32>> = (0..4)
+            .map(|i| hu(&dir.join(format!("frame_00{i}.exr"))).0)
+            .collect();
+        let orbit = [&base[..], &["--orbit", "90"]].concat();
+        let single = hu(&render_to(&format!("cpr-orbit90-{cpr}.exr"), "cpu", &orbit)).0;
+        assert_eq!(frames[1], single, "{cpr}: frame 1 is --orbit 90");
+        assert_ne!(frames[0], frames[1]);
+        if cpr == "straightened" {
+            // The path itself, the middle column, whichever way the cut faces.
+            let middle = |f: &[f32]| (0..90).map(|y| f[y * 31 + 15]).collect::<Vec<_>>();
+            for f in &frames[1..] {
+                assert_eq!(middle(f), middle(&frames[0]));
+            }
+        } else {
+            // The anterior view turned a quarter is the view from the left: the vector of
+            // interest turns with the camera.
+            let left = [&base[..], &["--view", "left"]].concat();
+            let left = hu(&render_to("cpr-stretched-left.exr", "cpu", &left)).0;
+            let mut d: Vec<f32> = left
+                .iter()
+                .zip(&frames[1])
+                .map(|(a, b)| (a - b).abs())
+                .collect();
+            d.sort_by(f32::total_cmp);
+            assert!(
+                d[d.len() * 999 / 1000] < 0.5 && d[d.len() - 1] < 5.0,
+                "{d:?}"
+            );
+        }
+        // Half a turn shows the same cut from behind: mirrored left to right.
+        for y in 0..90 {
+            for x in 0..31 {
+                let (a, b) = (frames[0][y * 31 + x], frames[2][y * 31 + 30 - x]);
+                assert!((a - b).abs() < 1e-2, "{cpr} ({x}, {y}): {a} {b}");
+            }
         }
     }
 }
