@@ -308,6 +308,44 @@ pub fn spline(points: &[DVec3]) -> Vec<DVec3> {
     arc_samples(&p).0
 }
 
+/// How a path winds (Bullitt et al. 2003, "Measuring tortuosity of the intracerebral
+/// vasculature from MRA images"): its spline's length, the distance between its ends, their
+/// ratio (the distance metric: 1 for a straight path; none for a closed one), and the angle
+/// its direction turns through per centimetre (the curvature part of their sum-of-angles
+/// metric: 0 straight, 57.3°/r for a circle of r cm).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tortuosity {
+    pub length_mm: f64,
+    pub chord_mm: f64,
+    pub distance_metric: Option<f64>,
+    pub turning_deg_per_cm: f64,
+}
+
+/// The tortuosity of the spline through `points` (LPS mm), as a curved plane follows it.
+pub fn tortuosity(points: &[DVec3]) -> Result<Tortuosity, String> {
+    let spline = Spline::new(points)?;
+    let d = &spline.dense;
+    let length_mm = spline.length();
+    let chord_mm = d[0].distance(d[d.len() - 1]);
+    // The dense pieces' turns, zero-length pieces (repeated samples) skipped.
+    let steps: Vec<DVec3> = d
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|v| v.length() > 1e-9)
+        .collect();
+    let turned: f64 = steps
+        .windows(2)
+        .map(|w| w[0].angle_between(w[1]))
+        .filter(|a| a.is_finite())
+        .sum();
+    Ok(Tortuosity {
+        length_mm,
+        chord_mm,
+        distance_metric: (chord_mm > 1e-6 * length_mm).then(|| length_mm / chord_mm),
+        turning_deg_per_cm: turned.to_degrees() / (0.1 * length_mm),
+    })
+}
+
 /// A path's spline, sampled densely by arc length: where its frames are taken.
 #[derive(Clone, Debug)]
 struct Spline {
@@ -668,6 +706,41 @@ mod tests {
         assert!(err(12, 10.0).unwrap_err().contains("span 110.0 mm"));
         assert!(err(2, 0.0).unwrap_err().contains("positive"));
         assert!(err(2, f64::NAN).unwrap_err().contains("positive"));
+    }
+
+    #[test]
+    fn tortuosity_of_a_line_and_a_quarter_circle() {
+        let line = tortuosity(&[
+            DVec3::ZERO,
+            DVec3::new(3.0, 4.0, 0.0),
+            DVec3::new(6.0, 8.0, 0.0),
+        ])
+        .unwrap();
+        assert!((line.length_mm - 10.0).abs() < 1e-9 && (line.chord_mm - 10.0).abs() < 1e-9);
+        assert!((line.distance_metric.unwrap() - 1.0).abs() < 1e-9);
+        assert!(line.turning_deg_per_cm.abs() < 1e-6, "{line:?}");
+        // A quarter circle of 40 mm: π r / 2 over r √2.
+        let q = tortuosity(&arc(40.0, 10.0)).unwrap();
+        let pi = std::f64::consts::PI;
+        let metric = q.distance_metric.unwrap();
+        assert!((metric - pi / 8f64.sqrt()).abs() < 1e-3, "{q:?}");
+        // 90° over 6.28 cm, but for the spline's end spans: it starts and ends along its end
+        // chords (mirrored end points), half a span's angle off the circle's tangents, and
+        // turns about 2° less on points 5° apart (3.7° less on points 10° apart).
+        let q = tortuosity(&arc(40.0, 5.0)).unwrap();
+        let circle = 90.0 / (pi * 40.0 / 2.0 / 10.0);
+        assert!(
+            (q.turning_deg_per_cm - circle).abs() < 0.03 * circle,
+            "{q:?} for {circle}"
+        );
+        // A closed path has no distance metric.
+        let closed: Vec<DVec3> = (0..=12)
+            .map(|i| {
+                let a = (i as f64 * 30.0).to_radians();
+                DVec3::new(10.0 * a.cos(), 10.0 * a.sin(), 0.0)
+            })
+            .collect();
+        assert_eq!(tortuosity(&closed).unwrap().distance_metric, None);
     }
 
     #[test]

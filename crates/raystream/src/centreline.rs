@@ -55,8 +55,18 @@ pub fn run(a: &CentrelineArgs) -> Result<()> {
             .zip(&line.anchors)
             .map(|(p, (q, _))| format!("{:.1}", p.distance(*q)))
             .collect();
+        let winding = match raystream_cpu::cpr::tortuosity(&line.points) {
+            Ok(w) => match w.distance_metric {
+                Some(m) => format!(
+                    " (distance metric {m:.3}, turning {:.1} deg a cm)",
+                    w.turning_deg_per_cm
+                ),
+                None => String::new(),
+            },
+            Err(_) => String::new(),
+        };
         eprintln!(
-            "raystream: wrote {}: a centreline {:.1} mm long, {} control points {} mm apart, through the {} points of {file} (moved onto the lumen's centre by {} mm); {} voxels searched, {} of them lumen, in {:.0} ms",
+            "raystream: wrote {}: a centreline {:.1} mm long{winding}, {} control points {} mm apart, through the {} points of {file} (moved onto the lumen's centre by {} mm); {} voxels searched, {} of them lumen, in {:.0} ms",
             a.output.display(),
             line.length_mm,
             line.points.len(),

@@ -6,7 +6,7 @@
 use std::fmt::Write as _;
 
 use anyhow::{Context, Result, bail};
-use raystream_cpu::cpr::CurvedPlane;
+use raystream_cpu::cpr::{CurvedPlane, Tortuosity};
 use raystream_cpu::lumen::{self, LumenOptions, Section};
 use raystream_cpu::stenosis::{self, ReferenceSource, Stenosis};
 use raystream_math::DVec3;
@@ -82,14 +82,16 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         _ => None,
     };
     let graded = graded.as_ref();
+    let winding =
+        raystream_cpu::cpr::tortuosity(&points).map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     if let Some(out) = &a.output {
         std::fs::write(out, csv(&sections, graded))
             .with_context(|| format!("cannot write {}", out.display()))?;
     }
     if a.json {
-        print_line(report_json(a, &opt, length, &sections, graded));
+        print_line(report_json(a, &opt, &winding, &sections, graded));
     } else {
-        print_line(report_text(a, &opt, length, &sections, graded));
+        print_line(report_text(a, &opt, &winding, &sections, graded));
     }
     if !found {
         bail!(
@@ -183,13 +185,28 @@ fn extremes(sections: &[Section]) -> Option<(usize, usize)> {
     Some((widest.0, narrowest.0))
 }
 
+/// The path's tortuosity in words.
+fn winding_words(w: &Tortuosity) -> String {
+    format!(
+        "path: {:.1} mm, its ends {:.1} mm apart: {}, turning {:.1} deg a cm",
+        w.length_mm,
+        w.chord_mm,
+        match w.distance_metric {
+            Some(m) => format!("distance metric (length over ends' distance) {m:.3}"),
+            None => "closed (no distance metric)".into(),
+        },
+        w.turning_deg_per_cm
+    )
+}
+
 fn report_text(
     a: &MeasureArgs,
     opt: &LumenOptions,
-    length: f64,
+    winding: &Tortuosity,
     sections: &[Section],
     graded: Option<&Stenosis>,
 ) -> String {
+    let length = winding.length_mm;
     let n = sections.len();
     let mut t = format!(
         "{}: the lumen (>= {} HU, connected to the path within {} mm, opened by a {} mm disc) on {n} sections of {} ({length:.1} mm), {:.2} mm apart, sampled every {:.3} mm over {} mm\n",
@@ -274,6 +291,8 @@ fn report_text(
             opt.threshold_hu, opt.seed_mm
         );
     }
+    t += &winding_words(winding);
+    t.push('\n');
     if let Some(g) = graded {
         t += &stenosis_text(sections, g);
     }
@@ -398,7 +417,7 @@ fn stenosis_json(sections: &[Section], g: &Stenosis) -> serde_json::Value {
 fn report_json(
     a: &MeasureArgs,
     opt: &LumenOptions,
-    length: f64,
+    winding: &Tortuosity,
     sections: &[Section],
     graded: Option<&Stenosis>,
 ) -> serde_json::Value {
@@ -451,7 +470,10 @@ fn report_json(
     let mut report = json!({
         "input": file_name(&a.input),
         "path": file_name(&a.path),
-        "length_mm": round3(length),
+        "length_mm": round3(winding.length_mm),
+        "ends_distance_mm": round3(winding.chord_mm),
+        "distance_metric": winding.distance_metric.map(round3),
+        "turning_deg_per_cm": round3(winding.turning_deg_per_cm),
         "threshold_hu": opt.threshold_hu,
         "field_mm": opt.field_mm,
         "seed_mm": opt.seed_mm,

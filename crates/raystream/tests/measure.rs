@@ -249,6 +249,26 @@ fn the_table_as_text_and_csv() {
             assert!((v - num(row, "max_diameter_mm")).abs() < 1e-3);
         }
     }
+    // The path's tortuosity: its ends' distance is the file's first and last points',
+    // the distance metric the length over it, turning a few degrees a cm (a gently curving
+    // aorta below the arch).
+    let pts = raystream_io::read_curve(std::path::Path::new(&path)).unwrap();
+    let ends = pts[0].distance(pts[pts.len() - 1]);
+    assert!(
+        (num(&json, "ends_distance_mm") - ends).abs() < 2e-3,
+        "{ends}"
+    );
+    let metric = num(&json, "length_mm") / ends;
+    assert!((num(&json, "distance_metric") - metric).abs() < 2e-3);
+    assert!((1.0..=20.0).contains(&num(&json, "turning_deg_per_cm")));
+    assert!(
+        text.contains(&format!(
+            "path: {:.1} mm, its ends {ends:.1} mm apart: distance metric (length over ends' distance) {:.3}",
+            num(&json, "length_mm"),
+            num(&json, "distance_metric")
+        )),
+        "{text}"
+    );
     // Text lines name a section each, between the header and the summary.
     let widest = json["widest_section"].as_u64().unwrap();
     let w = &rows[widest as usize - 1];
