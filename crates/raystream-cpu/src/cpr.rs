@@ -55,6 +55,14 @@ pub struct CurvedPlane {
     pub stretched: Option<DVec3>,
 }
 
+/// Where cross-sections of a path lie: `step_mm` apart (default: the path's length over their
+/// count) about `centre_mm` along it (default: its middle).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Spacing {
+    pub step_mm: Option<f64>,
+    pub centre_mm: Option<f64>,
+}
+
 /// Cross-sections are perpendicular to the chord this long, mm, about their point: the
 /// spline's own direction there (between the dense samples' quarter millimetre and the bends
 /// of a vessel).
@@ -93,63 +101,67 @@ impl CurvedPlane {
         turn_deg: f64,
         n: u32,
     ) -> Result<CurvedPlane, String> {
-        Self::sections_spaced(points, image_right, turn_deg, n, None)
+        Self::sections_spaced(points, image_right, turn_deg, n, Spacing::default())
     }
 
-    /// [`CurvedPlane::sections`], but with `step_mm`, `n` cross-sections that far apart
-    /// along the path, centred on its middle (as a flat series is on its centre): an error if
-    /// they reach beyond its ends. The plane's `pixel_mm` is their spacing.
+    /// [`CurvedPlane::sections`], spaced as `spacing` says (by default the middles of `n`
+    /// equal parts): an error if they reach beyond the path's ends. The plane's `pixel_mm`
+    /// is their spacing.
     pub fn sections_spaced(
         points: &[DVec3],
         image_right: DVec3,
         turn_deg: f64,
         n: u32,
-        step_mm: Option<f64>,
+        spacing: Spacing,
     ) -> Result<CurvedPlane, String> {
         Self::with_chord(
             points,
             image_right,
             turn_deg,
             (1, n),
-            Some((SECTION_CHORD_MM, step_mm)),
+            Some((SECTION_CHORD_MM, spacing)),
         )
     }
 
     /// A curved plane whose rows lie a row's height apart along the path about its middle,
     /// and whose tangents are chords a row's height long; or, with `sections` (a chord's
-    /// length, and perhaps a spacing), cross-sections' frames, their tangents chords that
-    /// long.
+    /// length and a spacing), cross-sections' frames, their tangents chords that long.
     fn with_chord(
         points: &[DVec3],
         image_right: DVec3,
         turn_deg: f64,
         (width, height): (u32, u32),
-        sections: Option<(f64, Option<f64>)>,
+        sections: Option<(f64, Spacing)>,
     ) -> Result<CurvedPlane, String> {
         let spline = Spline::new(points)?;
         if width == 0 || height == 0 {
             return Err("an empty image".into());
         }
         let length = spline.length();
-        let pixel = match sections {
-            Some((_, Some(step))) => {
-                if !(step.is_finite() && step > 0.0) {
-                    return Err(format!(
-                        "cross-sections {step} mm apart: the spacing must be a positive number"
-                    ));
-                }
-                let span = step * (height - 1) as f64;
-                if span > length + 1e-6 {
-                    return Err(format!(
-                        "{height} cross-sections {step} mm apart span {span:.1} mm: more than the path's {length:.1} mm"
-                    ));
-                }
-                step
+        let spacing = sections.map(|s| s.1).unwrap_or_default();
+        let pixel = match spacing.step_mm {
+            Some(step) if !(step.is_finite() && step > 0.0) => {
+                return Err(format!(
+                    "cross-sections {step} mm apart: the spacing must be a positive number"
+                ));
             }
-            _ => length / height as f64,
+            Some(step) => step,
+            None => length / height as f64,
         };
-        // Centred on the path's middle: (y + ½)·p when the rows fill it.
-        let first = 0.5 * (length - pixel * (height - 1) as f64);
+        let span = pixel * (height - 1) as f64;
+        let centre = spacing.centre_mm.unwrap_or(0.5 * length);
+        // The rows about `centre`: (y + ½)·p when they fill the path.
+        let first = centre - 0.5 * span;
+        if !(first >= -1e-6 && first + span <= length + 1e-6) {
+            let about = match spacing.centre_mm {
+                Some(c) => format!("about {c} mm along it"),
+                None => "about its middle".into(),
+            };
+            return Err(format!(
+                "{height} cross-sections {pixel:.2} mm apart {about} run from {first:.1} to {:.1} mm: beyond the path's 0 to {length:.1} mm",
+                first + span
+            ));
+        }
         let arcs: Vec<f64> = (0..height).map(|y| first + y as f64 * pixel).collect();
         let e = 0.5 * sections.map_or(pixel, |s| s.0);
         let rows = spline.frames(&arcs, e, image_right, turn_deg);
@@ -685,7 +697,11 @@ mod tests {
         // A straight path of 100 mm down z: five sections 10 mm apart about its middle, and
         // what cannot be spaced so.
         let p = [DVec3::new(0.0, 0.0, 50.0), DVec3::new(0.0, 0.0, -50.0)];
-        let c = CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, 5, Some(10.0)).unwrap();
+        let step = |mm| Spacing {
+            step_mm: Some(mm),
+            centre_mm: None,
+        };
+        let c = CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, 5, step(10.0)).unwrap();
         assert_eq!(c.pixel_mm, 10.0);
         for (i, r) in c.rows.iter().enumerate() {
             let want = Vec3::new(0.0, 0.0, 20.0 - 10.0 * i as f32);
@@ -693,19 +709,46 @@ mod tests {
             assert!((r.normal - Vec3::Y).length() < 1e-6);
         }
         // Without a spacing, the middles of equal parts, as `sections`.
-        let even = CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, 4, None).unwrap();
+        let even = CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, 4, Spacing::default()).unwrap();
         assert_eq!(
             even.rows,
             CurvedPlane::sections(&p, DVec3::X, 0.0, 4).unwrap().rows
         );
         assert!((even.rows[0].centre.z - 37.5).abs() < 1e-4);
         // Exactly the path's length fits; beyond it, or no spacing, does not.
-        let ends = CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, 3, Some(50.0)).unwrap();
+        let ends = CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, 3, step(50.0)).unwrap();
         assert!((ends.rows[0].centre.z - 50.0).abs() < 1e-4);
-        let err = |n, step| CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, n, Some(step));
-        assert!(err(12, 10.0).unwrap_err().contains("span 110.0 mm"));
+        let err = |n, mm| CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, n, step(mm));
+        assert!(
+            err(12, 10.0)
+                .unwrap_err()
+                .contains("run from -5.0 to 105.0 mm: beyond the path's 0 to 100.0 mm")
+        );
         assert!(err(2, 0.0).unwrap_err().contains("positive"));
         assert!(err(2, f64::NAN).unwrap_err().contains("positive"));
+        // About a point of the path: three 4 mm apart about 10 mm along it; one at either
+        // end; none past them.
+        let at = |n, step_mm, c| {
+            let spacing = Spacing {
+                step_mm,
+                centre_mm: Some(c),
+            };
+            CurvedPlane::sections_spaced(&p, DVec3::X, 0.0, n, spacing)
+        };
+        let three = at(3, Some(4.0), 10.0).unwrap();
+        let z: Vec<f32> = three.rows.iter().map(|r| r.centre.z).collect();
+        for (a, b) in z.iter().zip([44.0, 40.0, 36.0]) {
+            assert!((a - b).abs() < 1e-4, "{z:?}");
+        }
+        assert!((at(1, None, 0.0).unwrap().rows[0].centre.z - 50.0).abs() < 1e-4);
+        assert!((at(1, None, 100.0).unwrap().rows[0].centre.z + 50.0).abs() < 1e-4);
+        assert!(
+            at(1, None, 100.5)
+                .unwrap_err()
+                .contains("about 100.5 mm along it")
+        );
+        assert!(at(3, Some(4.0), 2.0).is_err());
+        assert!(at(1, None, f64::NAN).is_err());
     }
 
     #[test]

@@ -334,6 +334,11 @@ pub struct RenderArgs {
     /// PNG, or DICOM as the picture (RGB, Burned In Annotation YES).
     #[arg(long, value_name = "HU", requires_all = ["path", "slices"], allow_negative_numbers = true)]
     pub draw_lumen: Option<f32>,
+    /// With --path FILE --slices N: the cross-sections lie about this point of the path, mm
+    /// along it from its first point (default: its middle), as `measure` gives a section's
+    /// arc length: `--slices 1 --path-at MM` is the cross-section there.
+    #[arg(long, value_name = "MM", requires_all = ["path", "slices"], allow_negative_numbers = true)]
+    pub path_at: Option<f64>,
     /// With --slices: the planes' spacing in mm (default: the pixel size, for cubic voxels);
     /// with --path, the cross-sections' spacing along the path, about its middle (default:
     /// evenly along all of it).

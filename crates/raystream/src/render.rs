@@ -625,9 +625,12 @@ fn path_sections(
 ) -> Result<()> {
     let [az, _] = orbit_angles(a);
     let right = raystream_cpu::dvr::scene_to_lps(view.basis().col(0)).as_dvec3();
-    let step = a.slice_step.map(f64::from);
-    let stations = CurvedPlane::sections_spaced(&curve.points, right, az as f64, n, step)
-        .map_err(|e| anyhow::anyhow!("{}: --slices {n}: {e}", curve.file.display()))?;
+    let spacing = raystream_cpu::cpr::Spacing {
+        step_mm: a.slice_step.map(f64::from),
+        centre_mm: a.path_at,
+    };
+    let stations = CurvedPlane::sections_spaced(&curve.points, right, az as f64, n, spacing)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", curve.file.display()))?;
     inside(curve.file, &stations, volume)?;
     let pixel = raystream_cpu::dvr::min_spacing(volume);
     let extent = volume.dims.map(|d| d as f64);

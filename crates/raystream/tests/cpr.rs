@@ -447,6 +447,8 @@ fn plane_of(obj: &dicom_object::DefaultDicomObject, k: usize) -> (DVec3, DVec3) 
 /// middle: their centres MM apart (chords of a gently curving path), the middle one the
 /// single section `--slices 1` cuts at the path's middle, each plane perpendicular to the
 /// chord to its neighbours; sections that would reach beyond the path's ends are refused.
+/// With `--path-at MM` about that point of the path: the one `measure` gives at that arc
+/// length.
 #[test]
 fn cross_sections_step_along_the_path() {
     let (vol, path) = (chest(), aorta());
@@ -508,7 +510,54 @@ fn cross_sections_step_along_the_path() {
     ]);
     refused(
         &all,
-        "40 cross-sections 5 mm apart span 195.0 mm: more than the path's 154.2 mm",
+        "40 cross-sections 5.00 mm apart about its middle run from -20.4 to 174.6 mm: beyond the path's 0 to 154.2 mm",
+    );
+
+    // `--path-at MM`: about the point `measure` gives a section's figures at.
+    let o = run(&[
+        "measure", "--quiet", &vol, "--path", &path, "--every", "10", "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let row = &m["sections"][3];
+    let arc = row["arc_mm"].as_f64().unwrap().to_string();
+    let p: Vec<f64> = row["point"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let point = DVec3::new(p[0], p[1], p[2]);
+    let one = sections("1", &["--path-at", &arc]);
+    assert!(
+        (one[0].0 - point).length() < 0.01,
+        "{:?} for {point}",
+        one[0]
+    );
+    let three = sections("3", &["--slice-step", "5", "--path-at", &arc]);
+    assert!(
+        (three[1].0 - point).length() < 0.01,
+        "{:?} for {point}",
+        three[1]
+    );
+    assert!(((three[0].0 - point).length() - 5.0).abs() < 0.05);
+    let far = [
+        &all[..6],
+        &[
+            "--path",
+            &path,
+            "--slices",
+            "1",
+            "--path-at",
+            "1000",
+            "-o",
+            "/tmp/x",
+        ],
+    ]
+    .concat();
+    refused(
+        &far,
+        "about 1000 mm along it run from 1000.0 to 1000.0 mm: beyond the path's",
     );
 }
 
