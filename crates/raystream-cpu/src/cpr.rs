@@ -51,6 +51,8 @@ pub struct CurvedPlane {
     /// Where the path crosses each row: `shift_mm[y]` mm along the row's lateral direction
     /// from its centre (all 0 when straightened: the path is the middle column).
     pub shift_mm: Vec<f32>,
+    /// The arc length of the path's point on each row, mm from its first point (increasing).
+    pub arc_mm: Vec<f64>,
     /// Stretched along this vector of interest (LPS, unit), or straightened.
     pub stretched: Option<DVec3>,
 }
@@ -172,6 +174,7 @@ impl CurvedPlane {
             length_mm: length,
             points: spline.points,
             shift_mm: vec![0.0; rows.len()],
+            arc_mm: arcs,
             rows,
             stretched: None,
         })
@@ -225,6 +228,7 @@ impl CurvedPlane {
         let middle = 0.5 * (lo + hi);
         let mut rows = Vec::with_capacity(height as usize);
         let mut shift_mm = Vec::with_capacity(height as usize);
+        let mut arc_mm = Vec::with_capacity(height as usize);
         let mut last_normal = v.any_orthonormal_vector();
         for y in 0..height {
             let target = (y as f64 + 0.5) * pixel;
@@ -250,6 +254,7 @@ impl CurvedPlane {
                 normal: normal.as_vec3(),
             });
             shift_mm.push(shift as f32);
+            arc_mm.push(arc);
         }
         Ok(CurvedPlane {
             width,
@@ -259,8 +264,30 @@ impl CurvedPlane {
             points: spline.points,
             rows,
             shift_mm,
+            arc_mm,
             stretched: Some(v),
         })
+    }
+
+    /// Where the path is at arc length `s` (mm from its first point) in the picture: the
+    /// fractional row (row y's centre at y + ½) and column, between the two rows whose points
+    /// hold it (beyond the first or last, along those two rows' line); none off the picture.
+    pub fn picture_at(&self, s: f64) -> Option<(f32, f32)> {
+        let a = &self.arc_mm;
+        let n = a.len();
+        if n < 2 || !s.is_finite() {
+            return None;
+        }
+        let k = a.partition_point(|&x| x <= s).clamp(1, n - 1);
+        let gap = a[k] - a[k - 1];
+        let f = if gap > 0.0 { (s - a[k - 1]) / gap } else { 0.0 };
+        let row = (k - 1) as f64 + f + 0.5;
+        if !(0.0..=self.height as f64).contains(&row) {
+            return None;
+        }
+        let (s0, s1) = (self.shift_mm[k - 1] as f64, self.shift_mm[k] as f64);
+        let column = 0.5 * self.width as f64 + (s0 + f * (s1 - s0)) / self.pixel_mm as f64;
+        Some((row as f32, column as f32))
     }
 
     /// The path's point on row `y` (LPS).
@@ -784,6 +811,37 @@ mod tests {
             })
             .collect();
         assert_eq!(tortuosity(&closed).unwrap().distance_metric, None);
+    }
+
+    #[test]
+    fn arc_lengths_are_found_in_the_picture() {
+        // Straightened: row (s / p) at the middle column; stretched along x, a quarter circle
+        // in the x–z plane puts arc s at depth r sin(s / r) and the path's x there.
+        let p = [DVec3::new(0.0, 0.0, 50.0), DVec3::new(0.0, 0.0, -50.0)];
+        let c = CurvedPlane::new(&p, DVec3::X, 0.0, 40, 100).unwrap();
+        for s in [0.0, 0.5, 37.25, 99.5, 100.0] {
+            let (row, col) = c.picture_at(s).unwrap();
+            assert!(
+                (row - s as f32).abs() < 1e-4 && (col - 20.0).abs() < 1e-4,
+                "{s}"
+            );
+        }
+        assert!(c.picture_at(100.5).is_none() && c.picture_at(-0.5).is_none());
+        assert!(c.picture_at(f64::NAN).is_none());
+        let r = 40.0;
+        let c = CurvedPlane::stretched(&arc(r, 5.0), DVec3::X, 51, 400).unwrap();
+        for s in [10.0, 31.4, 50.0] {
+            let (row, col) = c.picture_at(s).unwrap();
+            let a = s / r;
+            // Depth down the picture, at 0.1 mm a row; the column from the middle (x = 20).
+            let (z, x) = (r * a.sin(), r * a.cos());
+            assert!((row as f64 * 0.1 - z).abs() < 0.1, "{s}: row {row} for {z}");
+            let col_x = 20.0 + (col as f64 - 25.5) * c.pixel_mm as f64;
+            assert!(
+                (col_x - x).abs() < 0.1,
+                "{s}: column {col} at {col_x} for {x}"
+            );
+        }
     }
 
     #[test]

@@ -334,6 +334,18 @@ pub struct RenderArgs {
     /// PNG, or DICOM as the picture (RGB, Burned In Annotation YES).
     #[arg(long, value_name = "HU", requires_all = ["path", "slices"], allow_negative_numbers = true)]
     pub draw_lumen: Option<f32>,
+    /// With --path FILE (not --slices): marks these points of the path, mm along it from its
+    /// first point (as `measure` gives a lesion's and its references' arc lengths), each a
+    /// line across the CPR, yellow ringed in black; PNG, or DICOM as the picture.
+    #[arg(
+        long,
+        value_name = "MM[,MM...]",
+        value_delimiter = ',',
+        requires = "path",
+        conflicts_with = "slices",
+        allow_negative_numbers = true
+    )]
+    pub mark_at: Vec<f64>,
     /// With --path FILE --slices N: the cross-sections lie about this point of the path, mm
     /// along it from its first point (default: its middle), as `measure` gives a section's
     /// arc length: `--slices 1 --path-at MM` is the cross-section there.

@@ -46,11 +46,27 @@ pub fn project(cam: &Camera, p: DVec3, width: u32, height: u32) -> Option<(f32, 
 /// Draws the polyline `dense` (LPS mm, the spline's samples) seen by `cam` into the 8-bit RGB
 /// `rgb`: about a pixel per 256 rows wide (at least one), ringed by a pixel of black.
 pub fn draw_path(rgb: &mut [u8], width: u32, height: u32, cam: &Camera, dense: &[DVec3]) {
-    let half = (height / 512) as i64;
     let pts: Vec<Option<(f32, f32)>> = dense
         .iter()
         .map(|&p| project(cam, p, width, height))
         .collect();
+    draw_polyline(rgb, width, height, &pts);
+}
+
+/// Marks `rows` (fractional, as [`raystream_cpu::cpr::CurvedPlane::picture_at`] gives them)
+/// of a `width`×`height` curved reformation: a line across the picture at each, as
+/// [`draw_path`] draws a line.
+pub fn draw_row_marks(rgb: &mut [u8], width: u32, height: u32, rows: &[f32]) {
+    for &y in rows {
+        let ends = [Some((0.0, y)), Some((width as f32 - 0.5, y))];
+        draw_polyline(rgb, width, height, &ends);
+    }
+}
+
+/// Draws the polyline through `pts` (pixel coordinates; a `None` breaks it) into the 8-bit
+/// RGB `rgb`: about a pixel per 256 rows wide (at least one), ringed by a pixel of black.
+fn draw_polyline(rgb: &mut [u8], width: u32, height: u32, pts: &[Option<(f32, f32)>]) {
+    let half = (height / 512) as i64;
     // The ring first, under the whole line, then the line.
     for (colour, grow) in [(RING, 1), (LINE, 0)] {
         let r = half + grow;

@@ -156,15 +156,29 @@ fn volume_dicom(
             plane: image_plane(opt, volume, cam),
             ..label(a, picture, cam, true, overlay)
         },
-        Seen::Curved(_) => DicomOut {
+        Seen::Curved(plane) => DicomOut {
             orientation: None,
-            annotated: false,
+            annotated: mark_path(a, picture, plane),
             description: crate::common::options_in_words(a.input.as_deref(), &a.output),
             series: None,
             window,
             plane: None,
         },
     }
+}
+
+/// `--mark-at MM,…`: a line across a curved reformation's picture where the path is at each
+/// arc length; whether any was drawn.
+fn mark_path(a: &RenderArgs, picture: &mut Picture, plane: &CurvedPlane) -> bool {
+    let rows: Vec<f32> = a
+        .mark_at
+        .iter()
+        .filter_map(|&s| plane.picture_at(s).map(|(y, _)| y))
+        .collect();
+    if let Picture::Srgb8 { rgb, width, height } = picture {
+        crate::overlay::draw_row_marks(rgb, *width, *height, &rows);
+    }
+    !rows.is_empty()
 }
 
 /// `--path FILE`: the curved plane along the path for `opt`'s image, straightened (its cut
@@ -177,6 +191,7 @@ fn curved_plane(
     volume: &raystream_io::Volume,
     opt: &DvrOptions,
     (view, turn, kind): (View, f32, CprArg),
+    marks: &[f64],
 ) -> Result<CurvedPlane> {
     let plane = match kind {
         CprArg::Straightened => {
@@ -192,6 +207,15 @@ fn curved_plane(
     }
     .map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?;
     inside(file, &plane, volume)?;
+    for &s in marks {
+        if plane.picture_at(s).is_none() {
+            bail!(
+                "--mark-at {s}: not on the path of {} (0 to {:.1} mm along it)",
+                file.display(),
+                plane.length_mm
+            );
+        }
+    }
     Ok(plane)
 }
 
@@ -376,6 +400,9 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     if a.draw_lumen.is_some() && format == ImageFormat::Exr {
         bail!("--draw-lumen draws on a PNG; an EXR holds the values themselves");
     }
+    if !a.mark_at.is_empty() && format == ImageFormat::Exr {
+        bail!("--mark-at draws on a PNG; an EXR holds the values themselves");
+    }
     // A cine reads its phases one by one, the first here (no warning that it chose one).
     let mut select = a.pick.select();
     if a.cine {
@@ -391,7 +418,8 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         crate::common::is_dicom(&a.output)
     };
     // Letters or a path drawn need the picture as seen.
-    let drawn = a.labels || a.draw_path.is_some() || a.draw_lumen.is_some();
+    let drawn =
+        a.labels || a.draw_path.is_some() || a.draw_lumen.is_some() || !a.mark_at.is_empty();
     opt.hu_values = format == ImageFormat::Exr || (dicom_out && mode.is_windowed() && !drawn);
     let aspect = opt.width as f32 / opt.height as f32;
     let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
@@ -694,6 +722,7 @@ fn seen_from(
             volume,
             opt,
             (view, az, a.cpr),
+            &a.mark_at,
         )?)),
         None => Seen::Camera(volume_camera_from(
             volume,

@@ -298,6 +298,98 @@ fn rotational_cpr_turns_about_the_path() {
     }
 }
 
+/// `--mark-at MM,…` draws a line across the CPR where the path is at each arc length: on the
+/// straightened CPR at row s / p (p = 154.2 mm over 180 rows), on the stretched one where
+/// its rows' arc lengths hold s; only those rows and their rings change, each pixel yellow or
+/// black. Off the path, on an EXR or with --slices it is refused.
+#[test]
+fn marks_lie_across_the_cpr_at_their_arc_lengths() {
+    let (vol, path) = (chest(), aorta());
+    let (w, h) = (40usize, 180usize);
+    let size = format!("{w}x{h}");
+    let png = |name: &str, extra: &[&str]| {
+        let base = [
+            &vol[..],
+            "--mode",
+            "slice",
+            "--path",
+            &path,
+            "--size",
+            &size,
+        ];
+        let out = render_to(name, "cpu", &[&base[..], extra].concat());
+        image::open(out).unwrap().to_rgb8().into_raw()
+    };
+    for cpr in ["straightened", "stretched"] {
+        let plain = png(&format!("cpr-plain-{cpr}.png"), &["--cpr", cpr]);
+        let marks = [30.0, 100.5];
+        let marked = png(
+            &format!("cpr-marked-{cpr}.png"),
+            &["--cpr", cpr, "--mark-at", "30,100.5"],
+        );
+        // Where the library's plane puts them.
+        let points = raystream_io::read_curve(Path::new(&path)).unwrap();
+        let plane = match cpr {
+            "straightened" => {
+                raystream_cpu::cpr::CurvedPlane::new(&points, DVec3::X, 0.0, w as u32, h as u32)
+            }
+            _ => raystream_cpu::cpr::CurvedPlane::stretched(&points, DVec3::X, w as u32, h as u32),
+        }
+        .unwrap();
+        let rows: Vec<i64> = marks
+            .iter()
+            .map(|&s| plane.picture_at(s).unwrap().0.floor() as i64)
+            .collect();
+        if cpr == "straightened" {
+            let p = 154.2 / h as f64;
+            for (r, s) in rows.iter().zip(marks) {
+                assert!((*r as f64 - s / p).abs() <= 1.0, "{r} for {s}");
+            }
+        }
+        for y in 0..h {
+            let near = rows.iter().any(|&r| (y as i64 - r).abs() <= 1);
+            let line = |v: &[u8]| v[3 * w * y..3 * w * (y + 1)].to_vec();
+            if near {
+                let l = line(&marked);
+                assert!(
+                    l.chunks(3).all(|c| c == [255, 214, 0] || c == [0, 0, 0]),
+                    "{cpr} row {y}"
+                );
+            } else {
+                assert_eq!(line(&marked), line(&plain), "{cpr} row {y}");
+            }
+        }
+    }
+    let dir = tmp("cpr-marks-bad");
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("x.png");
+    let exr = dir.join("x.exr");
+    let base = ["render", &vol[..], "--mode", "slice", "--path", &path];
+    for (extra, want) in [
+        (
+            vec!["--mark-at", "200", "-o", out.to_str().unwrap()],
+            "--mark-at 200: not on the path",
+        ),
+        (
+            vec!["--mark-at", "20", "-o", exr.to_str().unwrap()],
+            "--mark-at draws on a PNG",
+        ),
+        (
+            vec![
+                "--mark-at",
+                "20",
+                "--slices",
+                "3",
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            "cannot be used with",
+        ),
+    ] {
+        refused(&[&base[..], &extra[..]].concat(), want);
+    }
+}
+
 /// A CPR written as DICOM holds its HU as a Secondary Capture (its rows follow the path: no
 /// plane, no patient orientation), the window as its VOI LUT.
 #[test]
