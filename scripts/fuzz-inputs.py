@@ -12,7 +12,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary; an OBJ with normals
         and `raystream render --aov prim` (meshes also shaded; volumes also `--mode` mip, minip, average, slice or
         dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
-        curved planar reformation (--path) through an intact volume, measured along
+        curved planar reformation (--path, straightened or stretched) through an intact volume, measured along
         (`raystream measure`, sometimes grading a stenosis) and tracked through (`raystream
         centreline`).
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
@@ -244,9 +244,10 @@ def fuzz_files(work, n, device):
             mode = random.choice([["slice"], ["mip", "--slab", "2"], ["average", "--slab", "5"]])
             out = (["--turntable", "2", "--format", "exr", "-o", os.path.join(d, "frames")]
                    if random.random() < 0.25 else ["-o", os.path.join(d, "o.exr")])
+            layout = random.choice([[], ["--cpr", "stretched"]])
             why = os.path.exists(vol) and run(
                 ["render", vol, "--path", p, "--mode"] + mode + ["--size", "8x16", "-q",
-                 "--device", device, "--orbit", str(random.choice([0, 45, 90]))] + out, s)
+                 "--device", device, "--orbit", str(random.choice([0, 45, 90]))] + layout + out, s)
             # And the lumen measured along it (`measure`), with some valid options.
             count = random.choice([[], ["--sections", random.choice(["1", "3", "50"])]])
             # Sometimes a stenosis graded too, its lesion and references placed at random.
