@@ -212,7 +212,6 @@ impl CurvedPlane {
             let step = w[1] - w[0];
             down.push(down.last().unwrap() + step.reject_from_normalized(v).length());
         }
-        let along: Vec<f64> = d.iter().map(|&q| v.dot(q - d[0])).collect();
         let total = *down.last().unwrap();
         let length = spline.length();
         if total.is_nan() || total <= 1e-3 * length {
@@ -222,10 +221,14 @@ impl CurvedPlane {
             ));
         }
         let pixel = total / height as f64;
-        let (lo, hi) = along
+        // The middle of the path's run along `v`.
+        let (lo, hi) = d
             .iter()
-            .fold((f64::MAX, f64::MIN), |(lo, hi), &a| (lo.min(a), hi.max(a)));
+            .map(|&q| v.dot(q - d[0]))
+            .fold((f64::MAX, f64::MIN), |(lo, hi), a| (lo.min(a), hi.max(a)));
         let middle = 0.5 * (lo + hi);
+        // Tangents are chords a row's height long, as straightened.
+        let e = 0.5 * pixel;
         let mut rows = Vec::with_capacity(height as usize);
         let mut shift_mm = Vec::with_capacity(height as usize);
         let mut arc_mm = Vec::with_capacity(height as usize);
@@ -242,7 +245,6 @@ impl CurvedPlane {
             };
             let point = d[k - 1].lerp(d[k], f);
             let arc = spline.arc[k - 1] + f * (spline.arc[k] - spline.arc[k - 1]);
-            let e = 0.5 * pixel;
             let tangent = spline.at((arc + e).min(length)) - spline.at((arc - e).max(0.0));
             // Where the path runs along `v` here, the last row's normal.
             let normal = v.cross(tangent).normalize_or(last_normal);

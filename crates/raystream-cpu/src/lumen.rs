@@ -731,14 +731,7 @@ mod tests {
             .filter(|s| (s.arc_mm + 1.0 - 31.5).abs() >= 8.0)
             .map(|s| (s.arc_mm, s.lumen.as_ref().unwrap().equivalent_diameter_mm))
             .collect();
-        let n = healthy.len() as f64;
-        let (ms, md) = (
-            healthy.iter().map(|p| p.0).sum::<f64>() / n,
-            healthy.iter().map(|p| p.1).sum::<f64>() / n,
-        );
-        let slope = healthy.iter().map(|p| (p.0 - ms) * (p.1 - md)).sum::<f64>()
-            / healthy.iter().map(|p| (p.0 - ms).powi(2)).sum::<f64>();
-        let line = md + slope * (st.lesion_mm - ms);
+        let (line, slope) = crate::stenosis::fit(&healthy, st.lesion_mm, true);
         assert!(
             (st.at_lesion_mm - line).abs() < 0.01 * line,
             "{st:?} for {line}"

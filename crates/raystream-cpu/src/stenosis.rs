@@ -149,7 +149,7 @@ fn nearest(sections: &[Section], s: f64, length_mm: f64, what: &str) -> Result<u
 
 /// The least-squares line `d = a + b (s − s0)` through `(s, d)` pairs; flat (their mean) when
 /// `sloped` is false.
-fn fit(points: &[(f64, f64)], s0: f64, sloped: bool) -> (f64, f64) {
+pub(crate) fn fit(points: &[(f64, f64)], s0: f64, sloped: bool) -> (f64, f64) {
     let n = points.len() as f64;
     let ms = points.iter().map(|p| p.0 - s0).sum::<f64>() / n;
     let md = points.iter().map(|p| p.1).sum::<f64>() / n;

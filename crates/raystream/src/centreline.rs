@@ -55,16 +55,13 @@ pub fn run(a: &CentrelineArgs) -> Result<()> {
             .zip(&line.anchors)
             .map(|(p, (q, _))| format!("{:.1}", p.distance(*q)))
             .collect();
-        let winding = match raystream_cpu::cpr::tortuosity(&line.points) {
-            Ok(w) => match w.distance_metric {
-                Some(m) => format!(
-                    " (distance metric {m:.3}, turning {:.1} deg a cm)",
-                    w.turning_deg_per_cm
-                ),
-                None => String::new(),
-            },
-            Err(_) => String::new(),
-        };
+        // The path just written has two distinct points; a closed one has no metric.
+        let winding = raystream_cpu::cpr::tortuosity(&line.points)
+            .ok()
+            .and_then(|w| w.distance_metric.map(|m| (m, w.turning_deg_per_cm)))
+            .map_or(String::new(), |(m, t)| {
+                format!(" (distance metric {m:.3}, turning {t:.1} deg a cm)")
+            });
         eprintln!(
             "raystream: wrote {}: a centreline {:.1} mm long{winding}, {} control points {} mm apart, through the {} points of {file} (moved onto the lumen's centre by {} mm); {} voxels searched, {} of them lumen, in {:.0} ms",
             a.output.display(),
