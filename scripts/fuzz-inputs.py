@@ -13,7 +13,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary; an OBJ with normals
         dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
         curved planar reformation (--path, straightened or stretched) through an intact volume, measured along
-        (`raystream measure`, sometimes grading a stenosis) and tracked through (`raystream
+        (`raystream measure`, sometimes grading a stenosis and plotting the profile) and tracked through (`raystream
         centreline`).
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
         absurd ones (0, -1, ±inf, nan, 1e30 ...), rendered on the CPU and the GPU: either both
@@ -257,7 +257,8 @@ def fuzz_files(work, n, device):
             why = why or (os.path.exists(vol) and run(
                 ["measure", vol, "--path", p, "-q", "--json", "-o", os.path.join(d, "m.csv"),
                  "--lumen", random.choice(["-500", "0", "150"]),
-                 "--open", random.choice(["0", "2"])] + count + grade, s))
+                 "--open", random.choice(["0", "2"])] + count + grade
+                + (["--plot", os.path.join(d, "p.svg")] if random.random() < 0.5 else []), s))
             # And a centreline tracked through its points.
             why = why or (os.path.exists(vol) and run(
                 ["centreline", vol, "--path", p, "-q", "-o", os.path.join(d, "cl.mrk.json"),

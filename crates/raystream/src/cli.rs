@@ -726,6 +726,10 @@ pub struct MeasureArgs {
     /// Write the table as CSV to FILE.
     #[arg(short, long, value_name = "FILE.csv")]
     pub output: Option<PathBuf>,
+    /// Draw the diameters against arc length to FILE (SVG): D eq, D max and D min, open
+    /// sections, and with --stenosis the reference, the lesion and the narrowed segment.
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<PathBuf>,
     #[command(flatten)]
     pub pick: VolumePick,
     /// Print JSON instead of the table.

@@ -10,6 +10,7 @@ mod iso;
 mod labels;
 mod measure;
 mod overlay;
+mod profile;
 mod render;
 mod trace;
 

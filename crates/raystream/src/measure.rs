@@ -26,6 +26,14 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
             a.every
         );
     }
+    if let Some(p) = &a.plot
+        && !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg"))
+    {
+        bail!(
+            "--plot {}: the profile is drawn as SVG; name the file .svg",
+            p.display()
+        );
+    }
     let points = raystream_io::read_curve(&a.path)?;
     let (volume, _) = read_volume(&a.input, &a.pick.select(), a.quiet, None)?;
     let opt = LumenOptions {
@@ -87,6 +95,16 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     if let Some(out) = &a.output {
         std::fs::write(out, csv(&sections, graded))
             .with_context(|| format!("cannot write {}", out.display()))?;
+    }
+    if let Some(out) = &a.plot
+        && found
+    {
+        let title = format!(
+            "{}: the lumen along {}",
+            file_name(&a.input),
+            file_name(&a.path)
+        );
+        crate::profile::write(out, &title, &sections, length, graded)?;
     }
     if a.json {
         print_line(report_json(a, &opt, &winding, &sections, graded));

@@ -1,7 +1,7 @@
 //! `raystream measure`: the lumen on cross-sections along a path, on the chest CT of
 //! `../shared` (its stented descending aorta, `examples/chest_aorta.mrk.json`), checked against
 //! the cross-sections `render --path --slices N` shows of the same planes; the text table and
-//! the CSV, bad input, and `render --draw-lumen`; and `raystream centreline`, tracked from the
+//! the CSV and the plot, bad input, and `render --draw-lumen`; and `raystream centreline`, tracked from the
 //! path's two ends.
 
 mod common;
@@ -421,9 +421,39 @@ fn a_stenosis_is_graded_from_the_table() {
     let two = placed(&format!("{},{}", at(p), at(q)));
     assert!((two - line).abs() < 2e-3, "{two} for {line}");
 
-    // The text report and the CSV.
+    // The text report, the CSV and the plot.
     let csv = tmp("measure-stenosis.csv");
-    let text = measure_text(&vol, &path, &["--every", "2", "--stenosis"], &csv);
+    let plot = tmp("measure-stenosis.svg");
+    let text = measure_text(
+        &vol,
+        &path,
+        &[
+            "--every",
+            "2",
+            "--stenosis",
+            "--plot",
+            plot.to_str().unwrap(),
+        ],
+        &csv,
+    );
+    // The plot's points are checked against the figures in `profile.rs`; here that the
+    // command writes it, with the grade and the reference it reports.
+    let svg = std::fs::read_to_string(&plot).unwrap();
+    assert!(svg.starts_with("<svg"));
+    for want in [
+        format!(
+            "lesion at {:.1} mm (its D min ringed): {:.0} % by diameter, {:.0} % by area",
+            num(st, "lesion_arc_mm"),
+            num(st, "diameter_stenosis_pct"),
+            num(st, "area_stenosis_pct")
+        ),
+        format!(
+            "reference (fitted): {:.2} mm at the lesion",
+            num(&st["reference"], "diameter_mm")
+        ),
+    ] {
+        assert!(svg.contains(&want), "{want}");
+    }
     let want = format!(
         "grade: {:.1} % by diameter (D min against the reference), {:.1} % by area",
         num(st, "diameter_stenosis_pct"),
@@ -485,6 +515,21 @@ fn bad_measurements_are_refused() {
         (
             vec!["--path", &path, "--every", "10", "--reference", "x"],
             "invalid value 'x'",
+        ),
+        (
+            vec!["--path", &path, "--plot", "profile.png"],
+            "--plot profile.png: the profile is drawn as SVG; name the file .svg",
+        ),
+        (
+            vec![
+                "--path",
+                &path,
+                "--every",
+                "10",
+                "--plot",
+                "/nonexistent/p.svg",
+            ],
+            "cannot write /nonexistent/p.svg",
         ),
     ];
     for (args, want) in cases {

@@ -1,0 +1,561 @@
+//! `measure --plot FILE.svg`: the lumen's diameters against arc length along the path, the
+//! diameter graph a vessel-analysis workstation shows beside its curved reformation: the
+//! equivalent diameter (of a circle of the section's area) as a line, broken where a section's
+//! lumen is not closed, the largest and smallest calliper diameters about it, open sections as
+//! crosses (their figures are of the part in the field, so they bound the lumen from below),
+//! and with a graded stenosis the reference line, the lesion and the narrowed segment.
+//!
+//! Drawn with plotters' SVG back-end. Each series has its own colour, and the legend shows
+//! colour swatches (rectangles), so every polyline of a series' colour is data: the tests read
+//! the plot back through that.
+
+use std::path::Path;
+
+use anyhow::{Context, Result, anyhow};
+use plotters::prelude::*;
+use raystream_cpu::lumen::{Lumen, Section};
+use raystream_cpu::stenosis::{self, ReferenceSource, Stenosis};
+
+/// The picture's size, px.
+pub const SIZE: (u32, u32) = (1000, 560);
+/// Equivalent diameter (tab:blue).
+pub const EQ: RGBColor = RGBColor(0x1f, 0x77, 0xb4);
+/// Largest calliper diameter (tab:orange).
+pub const MAX: RGBColor = RGBColor(0xff, 0x7f, 0x0e);
+/// Smallest calliper diameter (tab:green).
+pub const MIN: RGBColor = RGBColor(0x2c, 0xa0, 0x2c);
+/// Open sections (tab:grey).
+pub const OPEN: RGBColor = RGBColor(0x7f, 0x7f, 0x7f);
+/// The stenosis's reference, and (faint) its narrowed segment (tab:red).
+pub const REFERENCE: RGBColor = RGBColor(0xd6, 0x27, 0x28);
+/// The lesion (tab:purple).
+pub const LESION: RGBColor = RGBColor(0x94, 0x67, 0xbd);
+
+/// A diameter drawn as a line: its colour, width (px), legend and figure.
+struct Quantity {
+    colour: RGBColor,
+    width: u32,
+    label: &'static str,
+    value: fn(&Lumen) -> f64,
+}
+
+/// The lines, in drawing order: D eq last, on top.
+const QUANTITIES: [Quantity; 3] = [
+    Quantity {
+        colour: MAX,
+        width: 1,
+        label: "D max (largest calliper)",
+        value: |l| l.max_diameter_mm,
+    },
+    Quantity {
+        colour: MIN,
+        width: 1,
+        label: "D min (smallest calliper)",
+        value: |l| l.min_diameter_mm,
+    },
+    Quantity {
+        colour: EQ,
+        width: 2,
+        label: "D eq (circle of the area)",
+        value: |l| l.equivalent_diameter_mm,
+    },
+];
+
+/// Consecutive closed sections, as runs of (arc mm, lumen).
+fn closed_runs(sections: &[Section]) -> Vec<Vec<(f64, &Lumen)>> {
+    let mut runs: Vec<Vec<(f64, &Lumen)>> = Vec::new();
+    let mut open_run = false;
+    for s in sections {
+        match s.lumen.as_ref().filter(|l| !l.open) {
+            Some(l) => {
+                if !open_run {
+                    runs.push(Vec::new());
+                }
+                runs.last_mut().unwrap().push((s.arc_mm, l));
+                open_run = true;
+            }
+            None => open_run = false,
+        }
+    }
+    runs
+}
+
+/// A legend's colour swatch at (x, y).
+fn swatch(c: RGBColor, alpha: f64) -> impl Fn((i32, i32)) -> Rectangle<(i32, i32)> {
+    move |(x, y)| Rectangle::new([(x, y - 5), (x + 18, y + 5)], c.mix(alpha).filled())
+}
+
+/// The profile as SVG text; `title` heads it, `length_mm` is the path's length.
+pub fn svg(
+    title: &str,
+    sections: &[Section],
+    length_mm: f64,
+    graded: Option<&Stenosis>,
+) -> Result<String> {
+    let runs = closed_runs(sections);
+    let lumens = sections.iter().filter_map(|s| s.lumen.as_ref());
+    let reference: Vec<f64> = graded.map_or(vec![], |g| {
+        g.domain_mm
+            .iter()
+            .filter_map(|&s| g.reference_at(s))
+            .collect()
+    });
+    let top = lumens
+        .map(|l| l.max_diameter_mm)
+        .chain(reference.iter().copied())
+        .fold(0.0, f64::max);
+    // Room above the widest section for the legend; below zero only for a reference line
+    // that runs there (a steep one between placed sections), so that all of it is drawn.
+    let ymax = (top * 1.3).max(1.0);
+    let ymin = reference.iter().copied().fold(0.0, f64::min);
+    let mut out = String::new();
+    {
+        let root = SVGBackend::with_string(&mut out, SIZE).into_drawing_area();
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(14)
+            .x_label_area_size(44)
+            .y_label_area_size(56)
+            .build_cartesian_2d(0.0..length_mm.max(1e-3), ymin..ymax)?;
+        chart
+            .configure_mesh()
+            .x_desc("arc length along the path (mm)")
+            .y_desc("diameter (mm)")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0}"))
+            .light_line_style(BLACK.mix(0.05))
+            .bold_line_style(BLACK.mix(0.15))
+            .draw()?;
+
+        if let Some(n) = graded.and_then(|g| g.narrowed.as_ref()) {
+            let pct = 100.0 * stenosis::NARROWED;
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(n.mm[0], ymin), (n.mm[1], ymax)],
+                    REFERENCE.mix(0.12).filled(),
+                )))?
+                .label(format!(
+                    "narrowed: D eq below {pct:.0} % of the reference, {:.1} mm",
+                    n.mm[1] - n.mm[0]
+                ))
+                .legend(swatch(REFERENCE, 0.12));
+        }
+        // Each quantity over every run, the first run carrying the legend's entry.
+        for q in &QUANTITIES {
+            for (k, run) in runs.iter().enumerate() {
+                let series = if run.len() == 1 {
+                    // A lone closed section: a dot, since a line needs two.
+                    chart.draw_series(std::iter::once(Circle::new(
+                        (run[0].0, (q.value)(run[0].1)),
+                        2 + q.width,
+                        q.colour.filled(),
+                    )))?
+                } else {
+                    chart.draw_series(LineSeries::new(
+                        run.iter().map(|&(s, l)| (s, (q.value)(l))),
+                        q.colour.stroke_width(q.width),
+                    ))?
+                };
+                if k == 0 {
+                    series.label(q.label).legend(swatch(q.colour, 1.0));
+                }
+            }
+        }
+        let open: Vec<(f64, f64)> = sections
+            .iter()
+            .filter_map(|s| {
+                let l = s.lumen.as_ref().filter(|l| l.open)?;
+                Some((s.arc_mm, l.equivalent_diameter_mm))
+            })
+            .collect();
+        if !open.is_empty() {
+            chart
+                .draw_series(open.iter().map(|&p| Cross::new(p, 4, OPEN.stroke_width(1))))?
+                .label("open: D eq of the part in the field (a lower bound)")
+                .legend(swatch(OPEN, 1.0));
+        }
+        if let Some(g) = graded {
+            let ends = g.domain_mm.map(|s| (s, g.reference_at(s).unwrap_or(0.0)));
+            let how = match g.source {
+                ReferenceSource::Fitted { .. } => "fitted",
+                ReferenceSource::Placed(_) => "placed",
+            };
+            chart
+                .draw_series(DashedLineSeries::new(ends, 8, 5, REFERENCE.stroke_width(2)))?
+                .label(format!(
+                    "reference ({how}): {:.2} mm at the lesion",
+                    g.at_lesion_mm
+                ))
+                .legend(swatch(REFERENCE, 1.0));
+            chart
+                .draw_series(LineSeries::new(
+                    [(g.lesion_mm, ymin), (g.lesion_mm, ymax)],
+                    LESION.stroke_width(1),
+                ))?
+                .label(format!(
+                    "lesion at {:.1} mm (its D min ringed): {:.0} % by diameter, {:.0} % by area",
+                    g.lesion_mm, g.diameter_pct, g.area_pct
+                ))
+                .legend(swatch(LESION, 1.0));
+            if let Some(l) = &sections[g.lesion].lumen {
+                chart.draw_series(std::iter::once(Circle::new(
+                    (g.lesion_mm, l.min_diameter_mm),
+                    6,
+                    LESION.stroke_width(2),
+                )))?;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.4))
+            .label_font(("sans-serif", 14))
+            .draw()?;
+        root.present()?;
+    }
+    Ok(out)
+}
+
+/// Writes the profile to `file` (which must be named .svg).
+pub fn write(
+    file: &Path,
+    title: &str,
+    sections: &[Section],
+    length_mm: f64,
+    graded: Option<&Stenosis>,
+) -> Result<()> {
+    let text = svg(title, sections, length_mm, graded)
+        .map_err(|e| anyhow!("{}: cannot draw the profile: {e}", file.display()))?;
+    std::fs::write(file, text).with_context(|| format!("cannot write {}", file.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use raystream_cpu::cpr::CprRow;
+    use raystream_cpu::stenosis::StenosisOptions;
+    use raystream_math::{DVec3, Vec3};
+    use std::collections::HashMap;
+
+    /// A section's figure, mm.
+    type Figure = fn(&Lumen) -> f64;
+
+    /// One SVG element: its tag and attributes.
+    struct Element {
+        tag: String,
+        attr: HashMap<String, String>,
+    }
+
+    impl Element {
+        fn get(&self, k: &str) -> &str {
+            self.attr.get(k).map_or("", String::as_str)
+        }
+        fn num(&self, k: &str) -> f64 {
+            self.get(k).parse().unwrap()
+        }
+        /// A polyline's points.
+        fn points(&self) -> Vec<(f64, f64)> {
+            self.get("points")
+                .split_whitespace()
+                .map(|p| {
+                    let (x, y) = p.split_once(',').unwrap();
+                    (x.parse().unwrap(), y.parse().unwrap())
+                })
+                .collect()
+        }
+        /// Drawn in colour `c` (its stroke, or for a filled shape its fill).
+        fn is(&self, c: RGBColor) -> bool {
+            let hex = format!("#{:02X}{:02X}{:02X}", c.0, c.1, c.2);
+            self.get("stroke") == hex || self.get("fill") == hex
+        }
+    }
+
+    /// The elements of plotters' SVG, which writes one tag a line: `<tag a="v" .../>`.
+    fn elements(svg: &str) -> Vec<Element> {
+        svg.lines()
+            .filter_map(|line| {
+                let rest = line.trim().strip_prefix('<')?;
+                let (tag, mut rest) = rest.split_once(' ')?;
+                let mut attr = HashMap::new();
+                while let Some((k, v)) = rest.split_once("=\"") {
+                    let (value, after) = v.split_once('"').unwrap();
+                    attr.insert(k.trim().to_string(), value.to_string());
+                    rest = after;
+                }
+                Some(Element {
+                    tag: tag.to_string(),
+                    attr,
+                })
+            })
+            .collect()
+    }
+
+    /// `y ≈ a·x + b` by least squares over `pairs` (x, y).
+    fn fit(pairs: &[(f64, f64)]) -> (f64, f64) {
+        let n = pairs.len() as f64;
+        let (sx, sy) = pairs
+            .iter()
+            .fold((0.0, 0.0), |(a, b), &(x, y)| (a + x, b + y));
+        let (mx, my) = (sx / n, sy / n);
+        let sxy: f64 = pairs.iter().map(|&(x, y)| (x - mx) * (y - my)).sum();
+        let sxx: f64 = pairs.iter().map(|&(x, _)| (x - mx) * (x - mx)).sum();
+        let a = sxy / sxx;
+        (a, my - a * mx)
+    }
+
+    /// The points drawn for the next run of `len` sections: the next line's, or for a lone
+    /// section the next dot's centre.
+    fn drawn<'a>(
+        len: usize,
+        lines: &mut impl Iterator<Item = &'a &'a Element>,
+        dots: &mut impl Iterator<Item = &'a &'a Element>,
+    ) -> Vec<(f64, f64)> {
+        if len > 1 {
+            lines.next().expect("a line for each run").points()
+        } else {
+            let d = dots.next().expect("a dot for each lone section");
+            vec![(d.num("cx"), d.num("cy"))]
+        }
+    }
+
+    /// Reads the plot back and checks it against the figures it was drawn from: one affine
+    /// map per axis (found from the D eq line, which must follow it within plotters' rounding
+    /// to whole pixels) puts every other series' points on their figures, each run of closed
+    /// sections is a line of its own (a lone one a dot), the open sections are crosses, and
+    /// with a stenosis the reference, the lesion and the narrowed segment are where the grade
+    /// says. Returns the number of D eq lines.
+    fn check_plot(svg: &str, sections: &[Section], graded: Option<&Stenosis>) -> usize {
+        let el = elements(svg);
+        let of = |tag: &str, c: RGBColor| -> Vec<&Element> {
+            el.iter().filter(|e| e.tag == tag && e.is(c)).collect()
+        };
+        let runs = closed_runs(sections);
+        // D eq: a polyline a run of two or more, a dot a lone section, in the sections' order.
+        let lines = of("polyline", EQ);
+        let dots = of("circle", EQ);
+        assert_eq!(lines.len(), runs.iter().filter(|r| r.len() > 1).count());
+        assert_eq!(dots.len(), runs.iter().filter(|r| r.len() == 1).count());
+        let (mut li, mut di) = (lines.iter(), dots.iter());
+        let mut eq_pairs_x = Vec::new();
+        let mut eq_pairs_y = Vec::new();
+        for run in &runs {
+            let pts = drawn(run.len(), &mut li, &mut di);
+            assert_eq!(pts.len(), run.len());
+            for (&(s, l), &(x, y)) in run.iter().zip(&pts) {
+                eq_pairs_x.push((s, x));
+                eq_pairs_y.push((l.equivalent_diameter_mm, y));
+            }
+        }
+        let (ax, bx) = fit(&eq_pairs_x);
+        let (ay, by) = fit(&eq_pairs_y);
+        assert!(ax > 0.0 && ay < 0.0, "x grows right, y up: {ax} {ay}");
+        let px = |s: f64| ax * s + bx;
+        let py = |d: f64| ay * d + by;
+        let near = |got: (f64, f64), want: (f64, f64), tol: f64, what: &str| {
+            assert!(
+                (got.0 - want.0).abs() <= tol && (got.1 - want.1).abs() <= tol,
+                "{what}: drawn at {got:?}, its figures at {want:?}"
+            );
+        };
+        // The figures each colour should show, written out here (not the drawing's table).
+        let figures: [(RGBColor, &str, Figure); 3] = [
+            (MAX, "D max", |l| l.max_diameter_mm),
+            (MIN, "D min", |l| l.min_diameter_mm),
+            (EQ, "D eq", |l| l.equivalent_diameter_mm),
+        ];
+        for (colour, what, value) in figures {
+            let (lines, dots) = (of("polyline", colour), of("circle", colour));
+            let (mut li, mut di) = (lines.iter(), dots.iter());
+            for run in &runs {
+                let pts = drawn(run.len(), &mut li, &mut di);
+                for (&(s, l), &p) in run.iter().zip(&pts) {
+                    near(p, (px(s), py(value(l))), 1.0, what);
+                }
+            }
+        }
+        // Open sections: a cross (two lines) each, about its D eq.
+        let open: Vec<(f64, f64)> = sections
+            .iter()
+            .filter_map(|s| {
+                let l = s.lumen.as_ref().filter(|l| l.open)?;
+                Some((px(s.arc_mm), py(l.equivalent_diameter_mm)))
+            })
+            .collect();
+        let crosses = of("line", OPEN);
+        assert_eq!(crosses.len(), 2 * open.len());
+        for (pair, &want) in crosses.chunks(2).zip(&open) {
+            let mid = |e: &Element| {
+                (
+                    (e.num("x1") + e.num("x2")) / 2.0,
+                    (e.num("y1") + e.num("y2")) / 2.0,
+                )
+            };
+            near(mid(pair[0]), want, 1.0, "an open section's cross");
+            near(mid(pair[1]), want, 1.0, "an open section's cross");
+        }
+        let Some(g) = graded else {
+            assert!(of("polyline", REFERENCE).is_empty() && of("rect", REFERENCE).is_empty());
+            assert!(of("polyline", LESION).is_empty());
+            return lines.len();
+        };
+        // The reference: dashes on its line, from one end of its domain to the other.
+        let dashes: Vec<(f64, f64)> = of("polyline", REFERENCE)
+            .iter()
+            .flat_map(|e| e.points())
+            .collect();
+        assert!(!dashes.is_empty());
+        for &(x, y) in &dashes {
+            let s = (x - bx) / ax;
+            let d = g.at_lesion_mm + g.slope * (s - g.lesion_mm);
+            assert!((y - py(d)).abs() <= 1.5, "a dash off the reference line");
+        }
+        let (x0, x1) = dashes
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), &(x, _)| (a.min(x), b.max(x)));
+        let [from, to] = g.domain_mm.map(px);
+        assert!(x0 >= from - 1.0 && x0 <= from + 1.0, "{x0} {from}");
+        assert!(x1 <= to + 1.0 && x1 >= to - 14.0, "{x1} {to}");
+        // The lesion: a vertical line at its arc from the axis up, its D min ringed.
+        let lesion = of("polyline", LESION);
+        assert_eq!(lesion.len(), 1);
+        let lp = lesion[0].points();
+        for &(x, _) in &lp {
+            assert!((x - px(g.lesion_mm)).abs() <= 1.0);
+        }
+        assert!((lp[0].1 - py(0.0)).abs() <= 1.0);
+        let ring = of("circle", LESION);
+        assert_eq!(ring.len(), 1);
+        let l = sections[g.lesion].lumen.as_ref().unwrap();
+        near(
+            (ring[0].num("cx"), ring[0].num("cy")),
+            (px(g.lesion_mm), py(l.min_diameter_mm)),
+            1.0,
+            "the lesion's ring",
+        );
+        // The narrowed segment: a faint rectangle over its arcs (the legend's swatch is the
+        // other, 18 px wide).
+        let shade: Vec<&Element> = of("rect", REFERENCE)
+            .into_iter()
+            .filter(|e| e.get("opacity") == "0.12")
+            .collect();
+        match &g.narrowed {
+            Some(n) => {
+                let r = shade
+                    .iter()
+                    .find(|e| e.num("width") != 18.0)
+                    .expect("the narrowed segment's rectangle");
+                assert!((r.num("x") - px(n.mm[0])).abs() <= 1.0);
+                assert!((r.num("x") + r.num("width") - px(n.mm[1])).abs() <= 1.0);
+            }
+            None => assert!(shade.is_empty()),
+        }
+        // The legend says the grade.
+        assert!(svg.contains(&format!(
+            "{:.0} % by diameter, {:.0} % by area",
+            g.diameter_pct, g.area_pct
+        )));
+        lines.len()
+    }
+
+    /// A section at arc `s` with D eq `d` (D max 3 mm more, D min 2 mm less), or no lumen.
+    fn section(s: f64, d: Option<f64>, open: bool) -> Section {
+        let row = CprRow {
+            centre: Vec3::new(0.0, 0.0, s as f32),
+            lateral: Vec3::X,
+            normal: Vec3::Y,
+        };
+        let lumen = d.map(|d| Lumen {
+            area_mm2: std::f64::consts::PI * d * d / 4.0,
+            equivalent_diameter_mm: d,
+            max_diameter_mm: d + 3.0,
+            max_ends: [DVec3::ZERO; 2],
+            min_diameter_mm: d - 2.0,
+            min_direction: DVec3::X,
+            cross_diameter_mm: d,
+            centroid: DVec3::new(0.0, 0.0, s),
+            offset_mm: 0.0,
+            open,
+        });
+        Section {
+            arc_mm: s,
+            row,
+            lumen,
+        }
+    }
+
+    /// Made-up sections a mm apart: closed runs broken by a section with no lumen, a lone
+    /// closed section between it and two open ones, a narrowing; drawn without and with a
+    /// stenosis placed on them, each point where its figures put it.
+    #[test]
+    fn the_profile_draws_each_figure_where_it_is() {
+        let sections: Vec<Section> = (0..60)
+            .map(|i| {
+                let s = i as f64 + 0.5;
+                let d = 12.0 - 0.05 * s - 6.0 * (-((s - 40.0) / 4.0).powi(2)).exp();
+                match i {
+                    20 | 22 => section(s, None, false),
+                    23 | 24 => section(s, Some(d + 5.0), true),
+                    _ => section(s, Some(d), false),
+                }
+            })
+            .collect();
+        let plain = svg("made up", &sections, 60.0, None).unwrap();
+        // Runs: 0–19, 21 (lone), 25–59.
+        assert_eq!(check_plot(&plain, &sections, None), 2);
+        let opts = StenosisOptions {
+            lesion_mm: None,
+            reference_mm: vec![],
+            span_mm: 20.0,
+        };
+        let g = stenosis::grade(&sections, 60.0, &opts).unwrap();
+        assert_eq!(g.lesion, 40);
+        assert!(g.narrowed.is_some());
+        let graded = svg("made up", &sections, 60.0, Some(&g)).unwrap();
+        check_plot(&graded, &sections, Some(&g));
+        // A placed reference and no narrowed segment (the grade's own figures, changed).
+        let placed = Stenosis {
+            source: ReferenceSource::Placed(vec![30]),
+            domain_mm: [30.5, 40.5],
+            narrowed: None,
+            ..g.clone()
+        };
+        let placed_svg = svg("made up", &sections, 60.0, Some(&placed)).unwrap();
+        check_plot(&placed_svg, &sections, Some(&placed));
+        assert!(placed_svg.contains("reference (placed)"));
+    }
+
+    /// The chest CT's aorta, a section every 2 mm, as `measure --lesion 100 --span 30 --plot`
+    /// draws it: its closed runs, open sections at the arch, the fitted reference and the
+    /// narrowed segment where the grade puts them.
+    #[test]
+    fn the_aortas_profile_is_its_table() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let vol = raystream_io::load_volume(
+            &root.join("../shared/data/volumes/nifti/chest_ct_stents_totalseg.nii.gz"),
+            &Default::default(),
+        )
+        .unwrap();
+        let points = raystream_io::read_curve(&root.join("examples/chest_aorta.mrk.json")).unwrap();
+        let length = raystream_cpu::cpr::tortuosity(&points).unwrap().length_mm;
+        let n = (length / 2.0).round() as u32;
+        let opt = raystream_cpu::lumen::LumenOptions::for_volume(&vol);
+        let sections =
+            raystream_cpu::lumen::measure_path(&vol, &points, n, DVec3::X, &opt).unwrap();
+        assert!(
+            sections
+                .iter()
+                .any(|s| s.lumen.as_ref().is_some_and(|l| l.open))
+        );
+        let opts = StenosisOptions {
+            lesion_mm: Some(100.0),
+            reference_mm: vec![],
+            span_mm: 30.0,
+        };
+        let g = stenosis::grade(&sections, length, &opts).unwrap();
+        assert!(g.narrowed.is_some());
+        let text = svg("aorta", &sections, length, Some(&g)).unwrap();
+        assert!(check_plot(&text, &sections, Some(&g)) >= 1);
+    }
+}
