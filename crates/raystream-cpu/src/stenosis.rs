@@ -10,9 +10,11 @@
 //!   two sections' (proximal and distal, the lesion between them). Otherwise it is the
 //!   *interpolated reference* of quantitative angiography: a straight line fitted to the
 //!   equivalent diameters against arc length over the closed sections within a span either
-//!   side of the lesion that lie at or above [`NARROWED`] of it (fitted to all, then to those
-//!   at or above the last line, until the set no longer changes), so that the lesion does
-//!   not pull it down while a vessel's gentle taper is followed. With sections on one side of
+//!   side of the lesion that lie between [`NARROWED`] and [`DILATED`] of it (fitted to all,
+//!   then to those in that band about the last line, until the set no longer changes), so
+//!   that neither the lesion pulls it down nor a post-stenotic dilatation (or an aneurysmal
+//!   bulge, a bifurcation's bulb) pushes it up, while a vessel's gentle taper is followed.
+//!   With sections on one side of
 //!   the lesion only, the line is flat (their mean): a slope from one side would be
 //!   extrapolated across the lesion. The lesion's shoulders, narrowed by less than
 //!   [`NARROWED`], stay in the fit and draw it down a little (under 1 % for a smooth lesion
@@ -24,14 +26,21 @@
 //! - The narrowed segment: the closed sections on either side of the lesion, in a row, whose
 //!   equivalent diameter is below [`NARROWED`] of the reference there.
 //!
-//! A reference fitted by the vessel's own figures cannot tell a post-stenotic dilatation or a
-//! diffusely diseased vessel from health: placed references are the reader's answer to both.
+//! A reference fitted by the vessel's own figures cannot tell a diffusely diseased vessel, or a
+//! dilatation of less than [`DILATED`], from health, nor follow a step in the vessel's width
+//! (a stent graft's end): placed references are the reader's answer.
 
 use crate::lumen::{Lumen, Section};
 
 /// Below this fraction of the reference diameter a section is narrowed: left out of the
 /// fitted reference, and counted in the narrowed segment.
 pub const NARROWED: f64 = 0.9;
+
+/// Above this fraction of the fitted reference a section is dilated (a post-stenotic
+/// dilatation, an aneurysmal bulge, a bifurcation's bulb): left out of the fit as well. An
+/// ectasia or aneurysm is 1.5 times the normal diameter; 1.2 leaves the fit the sections
+/// within a fifth of it, well beyond a healthy vessel's taper over a span.
+pub const DILATED: f64 = 1.2;
 
 /// Fits of the reference before it must have settled, or be refused.
 const MAX_ROUNDS: usize = 64;
@@ -62,12 +71,13 @@ impl Default for StenosisOptions {
 /// Where the reference came from.
 #[derive(Clone, Debug, PartialEq)]
 pub enum ReferenceSource {
-    /// Fitted to these sections (indices), those at or above [`NARROWED`] of the line; the
-    /// `dropped` others within the span lie below it; `sloped`: a line through sections on
-    /// both sides of the lesion, else flat.
+    /// Fitted to these sections (indices), those between [`NARROWED`] and [`DILATED`] of
+    /// the line; of the others within the span, `dropped` lie below it and `dilated` above;
+    /// `sloped`: a line through sections on both sides of the lesion, else flat.
     Fitted {
         used: Vec<usize>,
         dropped: usize,
+        dilated: usize,
         sloped: bool,
     },
     /// The reader's sections (indices).
@@ -177,8 +187,8 @@ fn equivalent(sections: &[Section], i: usize) -> Option<f64> {
 }
 
 /// The interpolated reference: the line fitted to the closed sections within `span` mm of the
-/// lesion that lie at or above [`NARROWED`] of it (a fixed point: fitted to all of them, then
-/// to those at or above the last line, until that set stops changing).
+/// lesion that lie between [`NARROWED`] and [`DILATED`] of it (a fixed point: fitted to all of
+/// them, then to those in that band about the last line, until that set stops changing).
 fn fitted(sections: &[Section], lesion: usize, length_mm: f64, span: f64) -> Result<Line, String> {
     let s0 = sections[lesion].arc_mm;
     let eq = |i: usize| equivalent(sections, i).expect("closed sections only");
@@ -197,13 +207,18 @@ fn fitted(sections: &[Section], lesion: usize, length_mm: f64, span: f64) -> Res
         let sloped = used.iter().any(|&i| i < lesion) && used.iter().any(|&i| i > lesion);
         let pts: Vec<(f64, f64)> = used.iter().map(|&i| (sections[i].arc_mm, eq(i))).collect();
         let (a, b) = fit(&pts, s0, sloped);
+        let line = |i: usize| a + b * (sections[i].arc_mm - s0);
         let next: Vec<usize> = candidates
             .iter()
             .copied()
-            .filter(|&i| eq(i) >= NARROWED * (a + b * (sections[i].arc_mm - s0)))
+            .filter(|&i| (NARROWED * line(i)..=DILATED * line(i)).contains(&eq(i)))
             .collect();
         if next == used {
-            let dropped = candidates.len() - used.len();
+            let dilated = candidates
+                .iter()
+                .filter(|&&i| eq(i) > DILATED * line(i))
+                .count();
+            let dropped = candidates.len() - used.len() - dilated;
             return Ok(Line {
                 at_lesion: a,
                 slope: b,
@@ -211,6 +226,7 @@ fn fitted(sections: &[Section], lesion: usize, length_mm: f64, span: f64) -> Res
                 source: ReferenceSource::Fitted {
                     used,
                     dropped,
+                    dilated,
                     sloped,
                 },
             });
@@ -424,12 +440,14 @@ mod tests {
         let ReferenceSource::Fitted {
             used,
             dropped,
+            dilated,
             sloped,
         } = &st.source
         else {
             panic!("{st:?}")
         };
         assert!(sloped);
+        assert_eq!(*dilated, 0);
         // 41 sections within 20 mm of it, the lesion's own apart; what was dropped is the
         // narrowed segment, whose width below 90 % of the taper runs |u| < acos(−0.6)/π.
         assert_eq!(used.len() + dropped, 40);
@@ -447,6 +465,62 @@ mod tests {
         }
         // Defined over the span alone.
         assert!(st.reference_at(5.0).is_none() && st.reference_at(50.5).is_some());
+    }
+
+    /// A post-stenotic dilatation: 6 mm past the lesion the vessel widens to 1.45 times its
+    /// taper (a raised cosine 5 mm either side). The sections above 1.2 times the line are
+    /// left out of the fit, which then follows the taper within 2 % (the bulge's shoulders stay
+    /// in), and the grade is within a point; fitted with them, the line would be pulled up by
+    /// more than 3 %.
+    #[test]
+    fn a_post_stenotic_dilatation_is_left_out_of_the_reference() {
+        let mut v = vessel(30.5, 6.0, 0.5, 1.0);
+        for sec in &mut v {
+            let u = (sec.arc_mm - 42.5) / 5.0;
+            if u.abs() < 1.0 {
+                let d = healthy(sec.arc_mm) * (1.0 + 0.225 * (1.0 + (PI * u).cos()));
+                *sec = section(sec.arc_mm, d, d);
+            }
+        }
+        let st = grade(&v, 60.0, &StenosisOptions::default()).unwrap();
+        assert_eq!(st.lesion, 30);
+        let want = healthy(30.5);
+        // The bulge's shoulders (under 1.2 times) stay in, and push it up a little.
+        assert!((st.at_lesion_mm - want).abs() < 0.02 * want, "{st:?}");
+        assert!((st.diameter_pct - 50.0).abs() < 1.0, "{st:?}");
+        let ReferenceSource::Fitted {
+            used,
+            dropped,
+            dilated,
+            sloped,
+        } = &st.source
+        else {
+            panic!("{st:?}")
+        };
+        assert!(sloped);
+        // Each section within the span is used, narrowed or dilated as the final line says.
+        let d = |i: usize| v[i].lumen.as_ref().unwrap().equivalent_diameter_mm;
+        let (mut below, mut above) = (0, vec![]);
+        for i in (0..60).filter(|&i| i != 30 && (v[i].arc_mm - 30.5).abs() <= 20.0) {
+            let r = st.reference_at(v[i].arc_mm).unwrap();
+            let band = d(i) >= NARROWED * r && d(i) <= DILATED * r;
+            assert_eq!(used.contains(&i), band, "section {i}");
+            below += usize::from(d(i) < NARROWED * r);
+            if d(i) > DILATED * r {
+                above.push(i);
+            }
+        }
+        assert_eq!((*dropped, *dilated), (below, above.len()));
+        // The bulge is above 1.2 × the taper where 1 + 0.225 (1 + cos πu) > 1.2: |u| < 0.63,
+        // 6.3 mm of it.
+        assert!((5..=7).contains(dilated), "{dilated}");
+        let with: Vec<(f64, f64)> = used
+            .iter()
+            .chain(&above)
+            .map(|&i| (v[i].arc_mm, d(i)))
+            .collect();
+        let (pulled, _) = fit(&with, 30.5, true);
+        assert!(pulled > 1.03 * want, "{pulled} against {want}");
     }
 
     #[test]

@@ -324,9 +324,10 @@ fn reference_words(sections: &[Section], g: &Stenosis) -> String {
         ReferenceSource::Fitted {
             used,
             dropped,
+            dilated,
             sloped,
         } => format!(
-            "{} {} sections within {:.1} to {:.1} mm ({dropped} narrowed left out){}",
+            "{} {} sections within {:.1} to {:.1} mm ({dropped} narrowed{} left out){}",
             if *sloped {
                 "a line fitted to"
             } else {
@@ -335,6 +336,11 @@ fn reference_words(sections: &[Section], g: &Stenosis) -> String {
             used.len(),
             g.domain_mm[0],
             g.domain_mm[1],
+            if *dilated > 0 {
+                format!(" and {dilated} dilated")
+            } else {
+                String::new()
+            },
             if *sloped {
                 format!(", {:+.3} mm a mm", g.slope)
             } else {
@@ -394,13 +400,20 @@ fn stenosis_json(sections: &[Section], g: &Stenosis) -> serde_json::Value {
         .lumen
         .as_ref()
         .expect("a graded lesion has a lumen");
-    let (method, used, dropped, sloped) = match &g.source {
+    let (method, used, dropped, dilated, sloped) = match &g.source {
         ReferenceSource::Fitted {
             used,
             dropped,
+            dilated,
             sloped,
-        } => ("fitted", used, json!(dropped), json!(sloped)),
-        ReferenceSource::Placed(r) => ("placed", r, json!(null), json!(r.len() == 2)),
+        } => (
+            "fitted",
+            used,
+            json!(dropped),
+            json!(dilated),
+            json!(sloped),
+        ),
+        ReferenceSource::Placed(r) => ("placed", r, json!(null), json!(null), json!(r.len() == 2)),
     };
     json!({
         "lesion_section": g.lesion + 1,
@@ -412,6 +425,7 @@ fn stenosis_json(sections: &[Section], g: &Stenosis) -> serde_json::Value {
             "method": method,
             "sections": used.iter().map(|i| i + 1).collect::<Vec<_>>(),
             "dropped": dropped,
+            "dilated": dilated,
             "sloped": sloped,
             "diameter_mm": round3(g.at_lesion_mm),
             "area_mm2": round3(g.reference_area_mm2),
@@ -422,6 +436,7 @@ fn stenosis_json(sections: &[Section], g: &Stenosis) -> serde_json::Value {
         "diameter_stenosis_pct": round3(g.diameter_pct),
         "area_stenosis_pct": round3(g.area_pct),
         "narrowed_below": stenosis::NARROWED,
+        "dilated_above": stenosis::DILATED,
         "narrowed": g.narrowed.as_ref().map(|n| json!({
             "from_section": n.sections[0] + 1,
             "to_section": n.sections[1] + 1,
@@ -508,4 +523,72 @@ fn report_json(
             .insert("stenosis".into(), stenosis_json(sections, g));
     }
     report
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use raystream_cpu::cpr::CprRow;
+    use raystream_cpu::lumen::Lumen;
+    use raystream_math::Vec3;
+
+    /// The report says how many sections a fitted reference left out as narrowed, and how
+    /// many as dilated, in words and in the JSON.
+    #[test]
+    fn a_fitted_reference_reports_what_it_left_out() {
+        let lumen = Lumen {
+            area_mm2: 50.0,
+            equivalent_diameter_mm: 7.98,
+            max_diameter_mm: 9.0,
+            max_ends: [DVec3::ZERO; 2],
+            min_diameter_mm: 7.0,
+            min_direction: DVec3::X,
+            cross_diameter_mm: 7.0,
+            centroid: DVec3::ZERO,
+            offset_mm: 0.0,
+            open: false,
+        };
+        let sections = vec![Section {
+            arc_mm: 10.0,
+            row: CprRow {
+                centre: Vec3::ZERO,
+                lateral: Vec3::X,
+                normal: Vec3::Y,
+            },
+            lumen: Some(lumen),
+        }];
+        let mut g = Stenosis {
+            lesion: 0,
+            lesion_mm: 10.0,
+            at_lesion_mm: 12.0,
+            slope: -0.05,
+            domain_mm: [0.0, 30.0],
+            source: ReferenceSource::Fitted {
+                used: vec![],
+                dropped: 3,
+                dilated: 2,
+                sloped: true,
+            },
+            reference_area_mm2: 113.1,
+            diameter_pct: 41.7,
+            area_pct: 55.8,
+            narrowed: None,
+        };
+        let words = reference_words(&sections, &g);
+        assert!(
+            words.contains("(3 narrowed and 2 dilated left out)"),
+            "{words}"
+        );
+        let j = stenosis_json(&sections, &g);
+        assert_eq!(j["reference"]["dropped"], 3);
+        assert_eq!(j["reference"]["dilated"], 2);
+        assert_eq!(j["dilated_above"], stenosis::DILATED);
+        g.source = ReferenceSource::Fitted {
+            used: vec![],
+            dropped: 3,
+            dilated: 0,
+            sloped: true,
+        };
+        assert!(reference_words(&sections, &g).contains("(3 narrowed left out)"));
+    }
 }

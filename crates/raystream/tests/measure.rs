@@ -283,8 +283,9 @@ fn the_table_as_text_and_csv() {
 
 /// A graded stenosis's figures against its table: the lesion's are its section's; the grades
 /// follow from its smallest diameter and area and the reference there; a fitted reference
-/// covers `span` mm either side, every closed section there but the lesion either used (at or
-/// above 90 % of the line) or left out (below it); the narrowed segment is the run of closed
+/// covers `span` mm either side, every closed section there but the lesion either used
+/// (between 90 % and 120 % of the line) or left out (narrowed below it, or dilated above);
+/// the narrowed segment is the run of closed
 /// sections below 90 % of it about the lesion, as long as its sections' shares of the path.
 fn check_grade(m: &serde_json::Value, span: f64) {
     let rows = m["sections"].as_array().unwrap();
@@ -316,7 +317,7 @@ fn check_grade(m: &serde_json::Value, span: f64) {
             .iter()
             .map(|v| v.as_u64().unwrap() as usize - 1)
             .collect();
-        let mut left_out = 0;
+        let (mut left_out, mut widened) = (0, 0);
         for (i, row) in rows.iter().enumerate() {
             let far = (num(row, "arc_mm") - num(l, "arc_mm")).abs();
             assert_eq!(
@@ -327,10 +328,19 @@ fn check_grade(m: &serde_json::Value, span: f64) {
                 assert!(!used.contains(&i));
                 continue;
             }
-            assert_eq!(used.contains(&i), !narrowed(i), "section {}", i + 1);
+            let dilated = num(&rows[i], "equivalent_diameter_mm")
+                > 1.2 * num(&rows[i], "reference_diameter_mm");
+            assert_eq!(
+                used.contains(&i),
+                !narrowed(i) && !dilated,
+                "section {}",
+                i + 1
+            );
             left_out += usize::from(narrowed(i));
+            widened += usize::from(dilated);
         }
         assert_eq!(left_out as u64, r["dropped"].as_u64().unwrap());
+        assert_eq!(widened as u64, r["dilated"].as_u64().unwrap());
         let sides = [
             used.iter().any(|&i| i < lesion),
             used.iter().any(|&i| i > lesion),
