@@ -372,7 +372,8 @@ fn exact_sweep(refs: &[Ref], b: &Aabb, axis: usize, kt: f32) -> Option<Split> {
     // An event is one u64 whose order is (position, kind): the position's bits mapped so that
     // unsigned order is `f32::total_cmp` order, above the kind. Integer keys sort fastest.
     let key = |x: f32, kind: u8| {
-        let bits = x.to_bits();
+        // −0 as +0, so that one position has one key.
+        let bits = (x + 0.0).to_bits();
         let ordered = if bits & 0x8000_0000 != 0 {
             !bits
         } else {
@@ -408,18 +409,19 @@ fn exact_sweep(refs: &[Ref], b: &Aabb, axis: usize, kt: f32) -> Option<Split> {
     let mut best: Option<Split> = None;
     let mut i = 0;
     while i < events.len() {
+        // The events at one position, counted by kind (sorted: ends, planar, starts).
+        let at = events[i] >> 8;
         let pos = pos_of(events[i]);
-        let count = |i: &mut usize, kind: u8| {
-            let mut c = 0;
-            while *i < events.len() && pos_of(events[*i]) == pos && events[*i] as u8 == kind {
-                c += 1;
-                *i += 1;
-            }
-            c
-        };
-        let ends = count(&mut i, END);
-        let planar = count(&mut i, PLANAR);
-        let starts = count(&mut i, START);
+        let mut kinds = [0usize; 3];
+        while i < events.len() && events[i] >> 8 == at {
+            kinds[(events[i] & 0xff) as usize] += 1;
+            i += 1;
+        }
+        let [ends, planar, starts] = [
+            kinds[END as usize],
+            kinds[PLANAR as usize],
+            kinds[START as usize],
+        ];
         // Closed children: everything touching the plane counts on both sides.
         if pos > b.min[axis] && pos < b.max[axis] {
             let cost = sah_cost(b, inv_area, axis, pos, nl + planar + starts, nr, kt);
