@@ -248,6 +248,11 @@ def fuzz_files(work, n, device):
             why = os.path.exists(vol) and run(
                 ["render", vol, "--path", p, "--mode"] + mode + ["--size", "8x16", "-q",
                  "--device", device, "--orbit", str(random.choice([0, 45, 90]))] + layout + out, s)
+            # Sometimes the lumen's edges drawn on it, into a PNG.
+            if not why and os.path.exists(vol) and random.random() < 0.3:
+                why = run(["render", vol, "--path", p, "--mode", "slice", "--size", "8x16", "-q",
+                           "--draw-lumen", random.choice(["-500", "150"]), "--device", device]
+                          + layout + ["-o", os.path.join(d, "l.png")], s)
             # And the lumen measured along it (`measure`), with some valid options.
             count = random.choice([[], ["--sections", random.choice(["1", "3", "50"])]])
             # Sometimes a stenosis graded too, its lesion and references placed at random.

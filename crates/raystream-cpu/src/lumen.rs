@@ -174,6 +174,92 @@ pub fn measure_path(
         .collect())
 }
 
+/// A section's samples and the lumen segmented on them: an `n`×`n` grid of `p` mm about the
+/// path's point (pixel (i, j) at [`Segmented::offset`]), its HU (NaN outside the volume), the
+/// lumen's pixels, and the seed they grew from.
+struct Segmented {
+    n: usize,
+    p: f64,
+    values: Vec<f32>,
+    mask: Vec<bool>,
+    seed: usize,
+    threshold: f32,
+}
+
+impl Segmented {
+    /// Pixel (i, j)'s offset from the path's point, mm, right (lateral) and down (normal).
+    fn offset(&self, i: usize, j: usize) -> DVec2 {
+        let half = 0.5 * self.n as f64;
+        DVec2::new(
+            (i as f64 + 0.5 - half) * self.p,
+            (j as f64 + 0.5 - half) * self.p,
+        )
+    }
+
+    /// Where the lumen's edge lies between lumen pixel `k` and its neighbour `o` outside it,
+    /// as a fraction of the way from `k`: where the HU falls through the threshold; where the
+    /// region was cut (the neighbour is lumen, off beyond a neck) or leaves the volume,
+    /// halfway.
+    fn crossing(&self, k: usize, o: usize) -> f64 {
+        let (vi, vo, t) = (self.values[k], self.values[o], self.threshold);
+        if vi.is_finite() && vo.is_finite() && vi >= t && vo < t {
+            ((vi - t) / (vi - vo)).clamp(0.0, 1.0) as f64
+        } else {
+            0.5
+        }
+    }
+}
+
+/// Samples the plane of `row` and segments the lumen on it: the pixels at or above the
+/// threshold 4-connected to the one nearest the path's point within `seed_mm`, holes filled,
+/// opened; none when no lumen pixel lies that near.
+fn segment(vol: &Volume, m: &Marcher, row: &CprRow, opt: &LumenOptions) -> Option<Segmented> {
+    let n = opt.side();
+    let mut g = Segmented {
+        n,
+        p: opt.pixel_mm,
+        values: Vec::new(),
+        mask: Vec::new(),
+        seed: 0,
+        threshold: opt.threshold_hu,
+    };
+    let (c, l, d) = (
+        row.centre.as_dvec3(),
+        row.lateral.as_dvec3(),
+        row.normal.as_dvec3(),
+    );
+    let world = |q: DVec2| c + q.x * l + q.y * d;
+    let hi = vol.dims.map(|k| k.max(1) as f32 - 1.0);
+    g.values = (0..n * n)
+        .map(|k| {
+            let q = m.index_of(world(g.offset(k % n, k / n)).as_vec3());
+            let inside = (0..3).all(|a| (-1e-3..=hi[a] + 1e-3).contains(&q[a]));
+            if inside { m.sample(q) } else { f32::NAN }
+        })
+        .collect();
+    let lumen = |k: usize| g.values[k] >= opt.threshold_hu;
+    // The seed: the lumen pixel nearest the path's point, within seed_mm.
+    let p = g.p;
+    g.seed = (0..n * n)
+        .filter(|&k| lumen(k))
+        .map(|k| (g.offset(k % n, k / n).length(), k))
+        .filter(|&(r, _)| r <= opt.seed_mm.max(0.5 * p * std::f64::consts::SQRT_2))
+        .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))?
+        .1;
+    // The region: 4-connected lumen pixels from the seed, its holes filled.
+    let mut region = vec![false; n * n];
+    flood(n, g.seed, &mut region, lumen, false);
+    g.mask = fill_holes(n, &region);
+    // Opened: the parts a disc of `open_mm` cannot reach from the seed's side of the lumen
+    // are cut off where they run on beyond the disc's reach (a side branch, a neighbour joined
+    // by a neck narrower than the disc); a tip or corner too sharp for the disc stays.
+    let r = opt.open_mm / p;
+    if r > 0.0 {
+        g.mask = opened(n, &g.mask, r, g.seed);
+    }
+    Some(g)
+}
+
 /// The lumen on the plane through `row.centre` spanned by `row.lateral` and `row.normal`, and
 /// its edge points in the section's own coordinates (mm from the path's point along the
 /// lateral direction and the normal: as the cross-section's image has them, right and down).
@@ -183,45 +269,14 @@ pub fn measure_section(
     row: &CprRow,
     opt: &LumenOptions,
 ) -> Option<(Lumen, Vec<DVec2>)> {
-    let n = opt.side();
-    let p = opt.pixel_mm;
-    let half = 0.5 * n as f64;
+    let g = segment(vol, m, row, opt)?;
+    let (n, p, mask) = (g.n, g.p, &g.mask);
     let (c, l, d) = (
         row.centre.as_dvec3(),
         row.lateral.as_dvec3(),
         row.normal.as_dvec3(),
     );
-    // The pixel's offset from the path's point, mm, right and down.
-    let offset =
-        |i: usize, j: usize| DVec2::new((i as f64 + 0.5 - half) * p, (j as f64 + 0.5 - half) * p);
     let world = |q: DVec2| c + q.x * l + q.y * d;
-    let hi = vol.dims.map(|k| k.max(1) as f32 - 1.0);
-    let values: Vec<f32> = (0..n * n)
-        .map(|k| {
-            let q = m.index_of(world(offset(k % n, k / n)).as_vec3());
-            let inside = (0..3).all(|a| (-1e-3..=hi[a] + 1e-3).contains(&q[a]));
-            if inside { m.sample(q) } else { f32::NAN }
-        })
-        .collect();
-    let lumen = |k: usize| values[k] >= opt.threshold_hu;
-    // The seed: the lumen pixel nearest the path's point, within seed_mm.
-    let seed = (0..n * n)
-        .filter(|&k| lumen(k))
-        .map(|k| (offset(k % n, k / n).length(), k))
-        .filter(|&(r, _)| r <= opt.seed_mm.max(0.5 * p * std::f64::consts::SQRT_2))
-        .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))?
-        .1;
-    // The region: 4-connected lumen pixels from the seed, its holes filled.
-    let mut region = vec![false; n * n];
-    flood(n, seed, &mut region, lumen, false);
-    let mut mask = fill_holes(n, &region);
-    // Opened: the parts a disc of `open_mm` cannot reach from the seed's side of the lumen
-    // are cut off where they run on beyond the disc's reach (a side branch, a neighbour joined
-    // by a neck narrower than the disc); a tip or corner too sharp for the disc stays.
-    let r = opt.open_mm / p;
-    if r > 0.0 {
-        mask = opened(n, &mask, r, seed);
-    }
     let mut count = 0usize;
     let mut sum = DVec2::ZERO;
     let mut open = false;
@@ -233,10 +288,10 @@ pub fn measure_section(
                 continue;
             }
             count += 1;
-            let q = offset(i, j);
+            let q = g.offset(i, j);
             sum += q;
             open |= i == 0 || j == 0 || i == n - 1 || j == n - 1;
-            // Edge points: where the HU crosses the threshold towards each neighbour outside.
+            // Edge points: where the lumen ends towards each neighbour outside it.
             for (di, dj) in [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)] {
                 let (a, b) = (i as i64 + di, j as i64 + dj);
                 if a < 0 || b < 0 || a >= n as i64 || b >= n as i64 {
@@ -246,19 +301,8 @@ pub fn measure_section(
                 if mask[o] {
                     continue;
                 }
-                // Where the HU falls through the threshold, there; where the region was cut
-                // (the neighbour is lumen, off beyond a neck) or leaves the volume, halfway.
-                let (vi, vo) = (values[k], values[o]);
-                let t = if vi.is_finite()
-                    && vo.is_finite()
-                    && vi >= opt.threshold_hu
-                    && vo < opt.threshold_hu
-                {
-                    ((vi - opt.threshold_hu) / (vi - vo)).clamp(0.0, 1.0) as f64
-                } else {
-                    0.5
-                };
-                edge.push(q + t * (offset(a as usize, b as usize) - q));
+                let t = g.crossing(k, o);
+                edge.push(q + t * (g.offset(a as usize, b as usize) - q));
             }
         }
     }
@@ -288,6 +332,47 @@ pub fn measure_section(
         open,
     };
     Some((lumen, edge))
+}
+
+/// Where the lumen that [`measure_section`] finds on `row`'s plane meets the line through
+/// `row.centre` along `row.lateral`: its two edges on that line, mm along it from the path's
+/// point (left negative), the lumen's run along the line through the pixel nearest the point
+/// (or, where the point is not lumen, the lumen pixel nearest it on the line). The line is the
+/// grid's middle row (with an even number of rows, the one half a sample below it). None
+/// where no lumen is found, or none lies on the line.
+pub fn lumen_across(
+    vol: &Volume,
+    m: &Marcher,
+    row: &CprRow,
+    opt: &LumenOptions,
+) -> Option<[f64; 2]> {
+    let g = segment(vol, m, row, opt)?;
+    let n = g.n;
+    let j = n / 2;
+    let on_line = |i: usize| g.mask[j * n + i];
+    let centre = n / 2;
+    let start = (0..n)
+        .filter(|&i| on_line(i))
+        .min_by_key(|&i| (i.abs_diff(centre), i))?;
+    let (mut lo, mut hi) = (start, start);
+    while lo > 0 && on_line(lo - 1) {
+        lo -= 1;
+    }
+    while hi + 1 < n && on_line(hi + 1) {
+        hi += 1;
+    }
+    // Each end: the crossing towards the neighbour beyond it, or the grid's edge.
+    let end = |i: usize, beyond: Option<usize>| {
+        let q = g.offset(i, j).x;
+        match beyond {
+            Some(o) => q + g.crossing(j * n + i, j * n + o) * (g.offset(o, j).x - q),
+            None => q + (if i == 0 { -0.5 } else { 0.5 }) * g.p,
+        }
+    };
+    Some([
+        end(lo, lo.checked_sub(1)),
+        end(hi, (hi + 1 < n).then_some(hi + 1)),
+    ])
 }
 
 /// Marks in `mark` the pixels of an `n`×`n` grid reached from `seed` through pixels that are
@@ -546,6 +631,46 @@ mod tests {
                 assert!(((w.truncate() - axis).length() - r).abs() < 0.03, "{w}");
             }
         }
+    }
+
+    /// `lumen_across` on a round tube: the chord of the circle along the row's lateral line
+    /// (the grid's middle row, half a sample off the path's point when the grid's side is
+    /// even), within 0.03 mm, from a path on the axis, off it, and outside the tube within the
+    /// seed radius (the run is then the lumen's on the line, wholly to one side); none when
+    /// the line misses the tube.
+    #[test]
+    fn the_lumen_across_a_row_is_the_chord_of_the_tube() {
+        let (r, axis) = (7.3, DVec2::new(31.6, 32.2));
+        let vol = phantom(24, |p| r - (p.truncate() - axis).length());
+        let m = Marcher::new(&vol, None);
+        let o = opt(&vol);
+        let n = (o.field_mm / o.pixel_mm).ceil() as usize;
+        let v0 = if n.is_multiple_of(2) { 0.5 * o.pixel_mm } else { 0.0 };
+        for (x, y) in [(31.6, 32.2), (33.0, 36.0), (40.9, 32.5)] {
+            let path = [DVec3::new(x, y, 2.0), DVec3::new(x, y, 21.0)];
+            let row = measure_path(&vol, &path, 1, DVec3::X, &o).unwrap()[0].row;
+            let (c, l, d) = (
+                row.centre.as_dvec3().truncate(),
+                row.lateral.as_dvec3().truncate(),
+                row.normal.as_dvec3().truncate(),
+            );
+            // |c + u l + v0 d − axis| = r, l a unit vector: u = −b ± √(b² − k).
+            let q = c + v0 * d - axis;
+            let (b, k) = (q.dot(l), q.length_squared() - r * r);
+            let root = (b * b - k).sqrt();
+            let got = lumen_across(&vol, &m, &row, &o).expect("the tube on the line");
+            for (g, want) in got.iter().zip([-b - root, -b + root]) {
+                assert!((g - want).abs() < 0.03, "{got:?} for {want} at ({x}, {y})");
+            }
+        }
+        // 4 mm above the tube (the line along x misses it), its wall within the seed radius.
+        let path = [
+            DVec3::new(31.6, 32.2 - r - 4.0, 2.0),
+            DVec3::new(31.6, 32.2 - r - 4.0, 21.0),
+        ];
+        let row = measure_path(&vol, &path, 1, DVec3::X, &o).unwrap()[0].row;
+        assert!(measure_section(&vol, &m, &row, &o).is_some());
+        assert_eq!(lumen_across(&vol, &m, &row, &o), None);
     }
 
     #[test]

@@ -329,10 +329,17 @@ pub struct RenderArgs {
     /// Annotation YES).
     #[arg(long, value_name = "FILE", conflicts_with = "path")]
     pub draw_path: Option<PathBuf>,
-    /// With --path FILE --slices N: draws on each cross-section the lumen `measure` finds
-    /// there at HU (its edge in cyan, its largest diameter as a yellow line ringed in black);
-    /// PNG, or DICOM as the picture (RGB, Burned In Annotation YES).
-    #[arg(long, value_name = "HU", requires_all = ["path", "slices"], allow_negative_numbers = true)]
+    /// With --path FILE: draws the lumen `measure` finds at HU. On each cross-section
+    /// (--slices N): its edge in cyan, its largest diameter as a yellow line ringed in black.
+    /// On the CPR: where it meets each row (measured on the plane through the path's point
+    /// along the row and its rays), a cyan pixel at either edge. PNG, or DICOM as the picture
+    /// (RGB, Burned In Annotation YES).
+    #[arg(
+        long,
+        value_name = "HU",
+        requires = "path",
+        allow_negative_numbers = true
+    )]
     pub draw_lumen: Option<f32>,
     /// With --path FILE (not --slices): marks these points of the path, mm along it from its
     /// first point (as `measure` gives a lesion's and its references' arc lengths), each a

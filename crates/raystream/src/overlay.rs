@@ -128,6 +128,29 @@ pub fn draw_lumen(
     draw_path(rgb, width, height, cam, &lumen.max_ends);
 }
 
+/// Draws the lumen's edges on each row of a `width`×`height` curved reformation of pixels
+/// `pixel_mm` square: `edges[y]`, mm along row y from its middle (right positive), a cyan
+/// pixel each; whether any was drawn.
+pub fn draw_row_edges(
+    rgb: &mut [u8],
+    (width, height): (u32, u32),
+    pixel_mm: f64,
+    edges: &[Option<[f64; 2]>],
+) -> bool {
+    let mut drawn = false;
+    for (y, e) in edges.iter().enumerate().take(height as usize) {
+        for u in e.iter().flatten() {
+            let x = (0.5 * width as f64 + u / pixel_mm).floor();
+            if (0.0..width as f64).contains(&x) {
+                let i = 3 * (y * width as usize + x as usize);
+                rgb[i..i + 3].copy_from_slice(&EDGE);
+                drawn = true;
+            }
+        }
+    }
+    drawn
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,5 +1,6 @@
 //! `raystream render`: a mesh, a scene file or the built-in scene to PNG.
 
+use rayon::prelude::*;
 use std::path::Path;
 use std::time::Instant;
 
@@ -158,13 +159,62 @@ fn volume_dicom(
         },
         Seen::Curved(plane) => DicomOut {
             orientation: None,
-            annotated: mark_path(a, picture, plane),
+            // The lumen's edges first, the marks over them.
+            annotated: draw_cpr_lumen(a, picture, plane, volume) | mark_path(a, picture, plane),
             description: crate::common::options_in_words(a.input.as_deref(), &a.output),
             series: None,
             window,
             plane: None,
         },
     }
+}
+
+/// `--draw-lumen HU`'s lumen options for `volume` (`measure`'s defaults at that threshold).
+fn lumen_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option<LumenOptions>> {
+    let Some(hu) = a.draw_lumen else {
+        return Ok(None);
+    };
+    let o = LumenOptions {
+        threshold_hu: hu,
+        ..LumenOptions::for_volume(volume)
+    };
+    o.check()
+        .map_err(|e| anyhow::anyhow!("--draw-lumen {hu}: {e}"))?;
+    Ok(Some(o))
+}
+
+/// `--draw-lumen HU` on a curved reformation: on each row, where the lumen that `measure`
+/// finds on the row's plane (through the path's point, along the row and its rays) meets the
+/// row, a cyan pixel at each edge; whether any was drawn.
+fn draw_cpr_lumen(
+    a: &RenderArgs,
+    picture: &mut Picture,
+    plane: &CurvedPlane,
+    volume: &raystream_io::Volume,
+) -> bool {
+    let (Ok(Some(o)), Picture::Srgb8 { rgb, width, height }) = (lumen_options(a, volume), picture)
+    else {
+        return false;
+    };
+    let m = raystream_cpu::dvr::Marcher::new(volume, None);
+    let pb = spinner(
+        a.quiet,
+        &format!("finding the lumen on the CPR's {} rows", plane.height),
+    );
+    let edges: Vec<Option<[f64; 2]>> = (0..plane.height)
+        .into_par_iter()
+        .map(|y| {
+            let r = &plane.rows[y as usize];
+            let row = raystream_cpu::cpr::CprRow {
+                centre: plane.path_point(y),
+                ..*r
+            };
+            raystream_cpu::lumen::lumen_across(volume, &m, &row, &o)
+                .map(|e| e.map(|u| u + plane.shift_mm[y as usize] as f64))
+        })
+        .collect();
+    pb.finish_and_clear();
+    crate::overlay::draw_row_edges(rgb, (*width, *height), plane.pixel_mm as f64, &edges)
 }
 
 /// `--mark-at MM,…`: a line across a curved reformation's picture where the path is at each
@@ -409,6 +459,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         select.phase = Some(1);
     }
     let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
+    lumen_options(a, &volume)?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     // An EXR keeps what the projections found, in HU; the window is for display. So does a
     // DICOM picture, with the window as its VOI LUT, unless letters are drawn into it.
@@ -666,18 +717,8 @@ fn path_sections(
         .map(|i| (extent[i] * volume.spacing[i]).powi(2))
         .sum::<f64>()
         .sqrt() as f32;
-    let lumen = match a.draw_lumen {
-        Some(hu) => {
-            let o = LumenOptions {
-                threshold_hu: hu,
-                ..LumenOptions::for_volume(volume)
-            };
-            o.check()
-                .map_err(|e| anyhow::anyhow!("--draw-lumen {hu}: {e}"))?;
-            Some((o, raystream_cpu::dvr::Marcher::new(volume, None)))
-        }
-        None => None,
-    };
+    let lumen =
+        lumen_options(a, volume)?.map(|o| (o, raystream_cpu::dvr::Marcher::new(volume, None)));
     frame_series(a, (volume, None), n, format, "slices", |i| {
         let cam = stations.section_camera(i, 0.5 * pixel * opt.height as f32, reach);
         let row = &stations.rows[i as usize];
