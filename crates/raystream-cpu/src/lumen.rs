@@ -645,7 +645,11 @@ mod tests {
         let m = Marcher::new(&vol, None);
         let o = opt(&vol);
         let n = (o.field_mm / o.pixel_mm).ceil() as usize;
-        let v0 = if n.is_multiple_of(2) { 0.5 * o.pixel_mm } else { 0.0 };
+        let v0 = if n.is_multiple_of(2) {
+            0.5 * o.pixel_mm
+        } else {
+            0.0
+        };
         for (x, y) in [(31.6, 32.2), (33.0, 36.0), (40.9, 32.5)] {
             let path = [DVec3::new(x, y, 2.0), DVec3::new(x, y, 21.0)];
             let row = measure_path(&vol, &path, 1, DVec3::X, &o).unwrap()[0].row;

@@ -399,6 +399,19 @@ mod tests {
         }
     }
 
+    /// A fitted reference's sections used, narrowed and dilated counts, and whether sloped.
+    fn fitted(st: &Stenosis) -> (&[usize], usize, usize, bool) {
+        match &st.source {
+            ReferenceSource::Fitted {
+                used,
+                dropped,
+                dilated,
+                sloped,
+            } => (used, *dropped, *dilated, *sloped),
+            other => panic!("not fitted: {other:?}"),
+        }
+    }
+
     /// The healthy vessel: 10 mm across at the path's start, tapering by 0.05 mm a mm.
     fn healthy(s: f64) -> f64 {
         10.0 - 0.05 * s
@@ -437,17 +450,9 @@ mod tests {
         assert!((st.slope + 0.05).abs() < 0.005, "{st:?}");
         assert!((st.diameter_pct - 50.0).abs() < 0.5, "{st:?}");
         assert!((st.area_pct - 75.0).abs() < 0.5, "{st:?}");
-        let ReferenceSource::Fitted {
-            used,
-            dropped,
-            dilated,
-            sloped,
-        } = &st.source
-        else {
-            panic!("{st:?}")
-        };
+        let (used, dropped, dilated, sloped) = fitted(&st);
         assert!(sloped);
-        assert_eq!(*dilated, 0);
+        assert_eq!(dilated, 0);
         // 41 sections within 20 mm of it, the lesion's own apart; what was dropped is the
         // narrowed segment, whose width below 90 % of the taper runs |u| < acos(−0.6)/π.
         assert_eq!(used.len() + dropped, 40);
@@ -458,7 +463,7 @@ mod tests {
             (a - (30.5 - half)).abs() <= 1.0 && (b - (30.5 + half)).abs() <= 1.0,
             "{a} {b}"
         );
-        assert_eq!(n.sections[1] - n.sections[0] + 1, *dropped + 1);
+        assert_eq!(n.sections[1] - n.sections[0] + 1, dropped + 1);
         for &i in used {
             let d = v[i].lumen.as_ref().unwrap().equivalent_diameter_mm;
             assert!(d >= NARROWED * st.reference_at(v[i].arc_mm).unwrap());
@@ -488,15 +493,7 @@ mod tests {
         // The bulge's shoulders (under 1.2 times) stay in, and push it up a little.
         assert!((st.at_lesion_mm - want).abs() < 0.02 * want, "{st:?}");
         assert!((st.diameter_pct - 50.0).abs() < 1.0, "{st:?}");
-        let ReferenceSource::Fitted {
-            used,
-            dropped,
-            dilated,
-            sloped,
-        } = &st.source
-        else {
-            panic!("{st:?}")
-        };
+        let (used, dropped, dilated, sloped) = fitted(&st);
         assert!(sloped);
         // Each section within the span is used, narrowed or dilated as the final line says.
         let d = |i: usize| v[i].lumen.as_ref().unwrap().equivalent_diameter_mm;
@@ -510,10 +507,10 @@ mod tests {
                 above.push(i);
             }
         }
-        assert_eq!((*dropped, *dilated), (below, above.len()));
+        assert_eq!((dropped, dilated), (below, above.len()));
         // The bulge is above 1.2 × the taper where 1 + 0.225 (1 + cos πu) > 1.2: |u| < 0.63,
         // 6.3 mm of it.
-        assert!((5..=7).contains(dilated), "{dilated}");
+        assert!((5..=7).contains(&dilated), "{dilated}");
         let with: Vec<(f64, f64)> = used
             .iter()
             .chain(&above)
@@ -583,9 +580,7 @@ mod tests {
         let v = vessel(58.5, 6.0, 0.5, 1.0);
         let st = grade(&v, 60.0, &StenosisOptions::default()).unwrap();
         assert_eq!(st.lesion, 58);
-        let ReferenceSource::Fitted { used, sloped, .. } = &st.source else {
-            panic!()
-        };
+        let (used, _, _, sloped) = fitted(&st);
         assert!(!sloped && used.iter().all(|&i| i < 58));
         let d = |i: usize| v[i].lumen.as_ref().unwrap().equivalent_diameter_mm;
         let mean = used.iter().map(|&i| d(i)).sum::<f64>() / used.len() as f64;
