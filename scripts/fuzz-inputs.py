@@ -263,6 +263,8 @@ def fuzz_files(work, n, device):
                 ["measure", vol, "--path", p, "-q", "--json", "-o", os.path.join(d, "m.csv"),
                  "--lumen", random.choice(["-500", "0", "150"]),
                  "--open", random.choice(["0", "2"])] + count + grade
+                + (["--angle", random.choice(["0,1,2", "5,1,9", "1,2,1e9", "-1,0,1"])]
+                   if random.random() < 0.3 else [])
                 + (["--plot", os.path.join(d, "p.svg")] if random.random() < 0.5 else []), s))
             # And a centreline tracked through its points.
             why = why or (os.path.exists(vol) and run(

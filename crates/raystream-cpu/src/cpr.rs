@@ -387,6 +387,55 @@ pub fn tortuosity(points: &[DVec3]) -> Result<Tortuosity, String> {
     })
 }
 
+/// The angle a path turns through at a point, measured on chords (as a stent-graft plan
+/// measures an aortic neck's angulation on the centreline: the neck's axis against the
+/// aneurysm's): the chord from the path's point at `arc_mm[0]` to that at `arc_mm[1]`
+/// against the chord from there to `arc_mm[2]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathAngle {
+    pub arc_mm: [f64; 3],
+    /// The path's points there (LPS mm).
+    pub points: [DVec3; 3],
+    /// The angle between the chords' directions: 0° where the path runs straight on, 90° at
+    /// a right-angled bend, 180° where it turns back.
+    pub deviation_deg: f64,
+}
+
+/// The angle the spline through `points` (LPS mm, as a curved plane follows it) turns through
+/// between its points at arc lengths `arc_mm` (increasing, on the path, each point apart from
+/// the next).
+pub fn path_angle(points: &[DVec3], arc_mm: [f64; 3]) -> Result<PathAngle, String> {
+    let spline = Spline::new(points)?;
+    let length = spline.length();
+    for s in arc_mm {
+        if !(s.is_finite() && (0.0..=length).contains(&s)) {
+            return Err(format!(
+                "an angle's point at {s} mm: not on the path (0 to {length:.1} mm along it)"
+            ));
+        }
+    }
+    if !(arc_mm[0] < arc_mm[1] && arc_mm[1] < arc_mm[2]) {
+        return Err(format!(
+            "an angle's points at {}, {} and {} mm: give them in order along the path, the vertex in the middle",
+            arc_mm[0], arc_mm[1], arc_mm[2]
+        ));
+    }
+    let p = arc_mm.map(|s| spline.at(s));
+    let (u, v) = (p[1] - p[0], p[2] - p[1]);
+    let tiny = 1e-6 * length;
+    if u.length() < tiny || v.length() < tiny {
+        return Err(format!(
+            "an angle's points at {}, {} and {} mm: two of them coincide (the path returns on itself)",
+            arc_mm[0], arc_mm[1], arc_mm[2]
+        ));
+    }
+    Ok(PathAngle {
+        arc_mm,
+        points: p,
+        deviation_deg: u.angle_between(v).to_degrees(),
+    })
+}
+
 /// A path's spline, sampled densely by arc length: where its frames are taken.
 #[derive(Clone, Debug)]
 struct Spline {
@@ -813,6 +862,48 @@ mod tests {
             })
             .collect();
         assert_eq!(tortuosity(&closed).unwrap().distance_metric, None);
+    }
+
+    /// A path's angle on chords: 0° on a line; on a quarter circle of 40 mm through points 5°
+    /// apart, its two halves' chords are 45° apart (within 0.5°: the spline is not quite the
+    /// circle), and the points are the circle's; a right-angled corner turns 90° exactly (the
+    /// spline passes through its control points); what cannot be measured is refused.
+    #[test]
+    fn the_angle_a_path_turns_through() {
+        let line = [
+            DVec3::ZERO,
+            DVec3::new(3.0, 4.0, 0.0),
+            DVec3::new(6.0, 8.0, 0.0),
+        ];
+        let a = path_angle(&line, [1.0, 5.0, 9.0]).unwrap();
+        assert!(a.deviation_deg.abs() < 1e-3, "{a:?}");
+        assert!((a.points[1] - DVec3::new(3.0, 4.0, 0.0)).length() < 1e-6);
+        let q = arc(40.0, 5.0);
+        let length = tortuosity(&q).unwrap().length_mm;
+        let a = path_angle(&q, [0.0, length / 2.0, length]).unwrap();
+        assert!((a.deviation_deg - 45.0).abs() < 0.5, "{a:?}");
+        for p in a.points {
+            assert!((p.length() - 40.0).abs() < 0.05, "{p} off the circle");
+        }
+        let corner = [
+            DVec3::ZERO,
+            DVec3::new(10.0, 0.0, 0.0),
+            DVec3::new(20.0, 0.0, 0.0),
+            DVec3::new(20.0, 10.0, 0.0),
+            DVec3::new(20.0, 20.0, 0.0),
+        ];
+        let l = tortuosity(&corner).unwrap().length_mm;
+        let a = path_angle(&corner, [0.0, l / 2.0, l]).unwrap();
+        assert!(
+            (a.points[1] - DVec3::new(20.0, 0.0, 0.0)).length() < 1e-3,
+            "{a:?}"
+        );
+        assert!((a.deviation_deg - 90.0).abs() < 1e-3, "{a:?}");
+        let err = |arcs| path_angle(&line, arcs).unwrap_err();
+        assert!(err([1.0, 5.0, 11.0]).contains("not on the path (0 to 10.0 mm"));
+        assert!(err([1.0, f64::NAN, 9.0]).contains("not on the path"));
+        assert!(err([5.0, 1.0, 9.0]).contains("in order"));
+        assert!(err([1.0, 1.0, 9.0]).contains("in order"));
     }
 
     #[test]

@@ -733,6 +733,16 @@ pub struct MeasureArgs {
     /// Write the table as CSV to FILE.
     #[arg(short, long, value_name = "FILE.csv")]
     pub output: Option<PathBuf>,
+    /// The angle the path turns through at B: the chord from its point at arc length A to
+    /// B's against the chord from B's to C's, mm along the path (A < B < C), as a stent-graft
+    /// plan measures a neck's angulation on the centreline; 0 deg runs straight on.
+    #[arg(
+        long,
+        value_name = "A,B,C",
+        value_delimiter = ',',
+        allow_negative_numbers = true
+    )]
+    pub angle: Vec<f64>,
     /// Draw the diameters against arc length to FILE (SVG): D eq, D max and D min, open
     /// sections, and with --stenosis the reference, the lesion and the narrowed segment.
     #[arg(long, value_name = "FILE.svg")]

@@ -6,7 +6,7 @@
 use std::fmt::Write as _;
 
 use anyhow::{Context, Result, bail};
-use raystream_cpu::cpr::{CurvedPlane, Tortuosity};
+use raystream_cpu::cpr::{CurvedPlane, PathAngle, Tortuosity};
 use raystream_cpu::lumen::{self, LumenOptions, Section};
 use raystream_cpu::stenosis::{self, ReferenceSource, Stenosis};
 use raystream_math::DVec3;
@@ -32,6 +32,12 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         bail!(
             "--plot {}: the profile is drawn as SVG; name the file .svg",
             p.display()
+        );
+    }
+    if !a.angle.is_empty() && a.angle.len() != 3 {
+        bail!(
+            "--angle: {} arc lengths; give three, A,B,C (mm along the path, the vertex B between)",
+            a.angle.len()
         );
     }
     let points = raystream_io::read_curve(&a.path)?;
@@ -92,6 +98,13 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     let graded = graded.as_ref();
     let winding =
         raystream_cpu::cpr::tortuosity(&points).map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
+    let angle = match *a.angle {
+        [p, q, r] => Some(
+            raystream_cpu::cpr::path_angle(&points, [p, q, r])
+                .map_err(|e| anyhow::anyhow!("{file}: --angle: {e}"))?,
+        ),
+        _ => None,
+    };
     if let Some(out) = &a.output {
         std::fs::write(out, csv(&sections, graded))
             .with_context(|| format!("cannot write {}", out.display()))?;
@@ -107,9 +120,20 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         crate::profile::write(out, &title, &sections, length, graded)?;
     }
     if a.json {
-        print_line(report_json(a, &opt, &winding, &sections, graded));
+        let mut j = report_json(a, &opt, &winding, &sections, graded);
+        if let Some(g) = &angle {
+            j.as_object_mut()
+                .unwrap()
+                .insert("angle".into(), angle_json(g));
+        }
+        print_line(j);
     } else {
-        print_line(report_text(a, &opt, &winding, &sections, graded));
+        let mut t = report_text(a, &opt, &winding, &sections, graded);
+        if let Some(g) = &angle {
+            t.push('\n');
+            t += &angle_text(g);
+        }
+        print_line(t);
     }
     if !found {
         bail!(
@@ -201,6 +225,27 @@ fn extremes(sections: &[Section]) -> Option<(usize, usize)> {
             .total_cmp(&b.1.equivalent_diameter_mm)
     })?;
     Some((widest.0, narrowest.0))
+}
+
+/// The path's angle at a point, in words.
+fn angle_text(g: &PathAngle) -> String {
+    let [a, b, c] = g.arc_mm;
+    let p = g
+        .points
+        .map(|p| format!("({:.1}, {:.1}, {:.1})", p.x, p.y, p.z));
+    format!(
+        "angle: {:.1} deg at {b:.1} mm, between the chords from {a:.1} to {b:.1} mm and from {b:.1} to {c:.1} mm ({}, {} and {} mm LPS)",
+        g.deviation_deg, p[0], p[1], p[2]
+    )
+}
+
+/// The path's angle at a point as JSON.
+fn angle_json(g: &PathAngle) -> serde_json::Value {
+    json!({
+        "arc_mm": g.arc_mm.map(round3),
+        "points": g.points.map(|p| [round3(p.x), round3(p.y), round3(p.z)]),
+        "deviation_deg": round3(g.deviation_deg),
+    })
 }
 
 /// The path's tortuosity in words.

@@ -281,6 +281,66 @@ fn the_table_as_text_and_csv() {
     );
 }
 
+/// `measure --angle A,B,C` at three sections' arc lengths: its points are those sections'
+/// points on the path, its angle the one between the chords through them (worked out here
+/// from the points), in the JSON and the text; three arc lengths, in order, on the path, or
+/// an error.
+#[test]
+fn the_angle_at_a_point_of_the_path() {
+    let (vol, path) = (chest(), aorta());
+    let table = measure(&vol, &path, &["--every", "2"]);
+    let rows = table["sections"].as_array().unwrap();
+    let picked = [5, 40, 70].map(|i| &rows[i]);
+    let arcs = picked.map(|r| format!("{}", num(r, "arc_mm")));
+    let angle = format!("{},{},{}", arcs[0], arcs[1], arcs[2]);
+    let m = measure(&vol, &path, &["--every", "2", "--angle", &angle]);
+    let a = &m["angle"];
+    let pts: Vec<DVec3> = a["points"].as_array().unwrap().iter().map(point).collect();
+    for (p, r) in pts.iter().zip(picked) {
+        assert!(
+            p.distance(point(&r["point"])) < 0.01,
+            "{p} for {}",
+            r["point"]
+        );
+    }
+    let (u, v) = (pts[1] - pts[0], pts[2] - pts[1]);
+    let want = (u.dot(v) / (u.length() * v.length())).acos().to_degrees();
+    assert!(
+        (num(a, "deviation_deg") - want).abs() < 1e-2,
+        "{a} for {want}"
+    );
+    assert!(want > 5.0, "the aorta bends: {want}");
+    let csv = tmp("measure-angle.csv");
+    let text = measure_text(&vol, &path, &["--every", "2", "--angle", &angle], &csv);
+    let line = format!(
+        "angle: {:.1} deg at {:.1} mm, between the chords from {:.1} to",
+        num(a, "deviation_deg"),
+        num(picked[1], "arc_mm"),
+        num(picked[0], "arc_mm")
+    );
+    assert!(text.contains(&line), "{text}");
+    for (bad, want) in [
+        ("10,80", "--angle: 2 arc lengths; give three"),
+        ("80,10,150", "in order along the path"),
+        ("1,2,1e4", "not on the path (0 to 154.2 mm along it)"),
+    ] {
+        refused(
+            &[
+                "measure",
+                "-q",
+                &vol[..],
+                "--path",
+                &path,
+                "--every",
+                "10",
+                "--angle",
+                bad,
+            ],
+            want,
+        );
+    }
+}
+
 /// A graded stenosis's figures against its table: the lesion's are its section's; the grades
 /// follow from its smallest diameter and area and the reference there; a fitted reference
 /// covers `span` mm either side, every closed section there but the lesion either used
