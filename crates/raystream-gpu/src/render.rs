@@ -25,7 +25,7 @@ use raystream_accel::{KdTree, Traversal};
 use raystream_cpu::medium::Medium;
 use raystream_cpu::{DepthStats, Image, RenderOptions, strata};
 use raystream_math::Vec3;
-use raystream_scene::Scene;
+use raystream_scene::{Camera, Light, Scene};
 
 use crate::layout::{
     GpuLight, GpuMaterial, MediumParams, NO_TEXTURE, RayWork, RenderParams, ShadeTri, ShadowWork,
@@ -162,10 +162,21 @@ pub struct GpuRenderer<'a> {
     /// The last frame's work buffers and their (pixels, wave, lights), kept for the next frame:
     /// allocating them per frame cost most of a 1920x1080 frame on an H100.
     frame: std::sync::Mutex<Option<(FrameShape, Queues)>>,
+    /// The camera of the next frames where [`GpuRenderer::set_view`] set one (a turntable's);
+    /// else the scene's.
+    camera: std::sync::Mutex<Option<Camera>>,
 }
 
 fn v3(v: Vec3) -> [f32; 3] {
     v.to_array()
+}
+
+/// A light as the shading kernels read it.
+fn gpu_light(l: &Light) -> GpuLight {
+    GpuLight {
+        position: l.position.extend(1.0).to_array(),
+        color: l.color.extend(0.0).to_array(),
+    }
 }
 
 /// What a frame's work buffers were made for: pixels, samples per wave, lights, and the
@@ -389,20 +400,17 @@ impl<'a> GpuRenderer<'a> {
                 pad: 0,
             })
             .collect();
-        let lights: Vec<GpuLight> = scene
-            .lights
-            .iter()
-            .map(|l| GpuLight {
-                position: l.position.extend(1.0).to_array(),
-                color: l.color.extend(0.0).to_array(),
-            })
-            .collect();
+        let lights: Vec<GpuLight> = scene.lights.iter().map(gpu_light).collect();
         let none = wgpu::BufferUsages::empty();
         let vertices = ctx.storage("vertices", bytemuck::cast_slice(&vertices), none)?;
         let shade_tris =
             ctx.storage("shading triangles", bytemuck::cast_slice(&shade_tris), none)?;
         let materials = ctx.storage("materials", bytemuck::cast_slice(&materials), none)?;
-        let lights = ctx.storage("lights", bytemuck::cast_slice(&lights), none)?;
+        let lights = ctx.storage(
+            "lights",
+            bytemuck::cast_slice(&lights),
+            wgpu::BufferUsages::COPY_DST,
+        )?;
         let tri_uvs: Vec<TriUv> = scene
             .uvs
             .iter()
@@ -553,6 +561,7 @@ impl<'a> GpuRenderer<'a> {
             film_pipeline,
             srgb8_pipeline,
             frame: std::sync::Mutex::new(None),
+            camera: std::sync::Mutex::new(None),
         })
     }
 
@@ -663,6 +672,33 @@ impl<'a> GpuRenderer<'a> {
         self
     }
 
+    /// Renders the next frames from `camera`, lit by `lights` (the scene's, moved: as many, in
+    /// its order), as a turntable turns the camera and its studio lights about the scene. A
+    /// scene with a volume is refused: its light grids were made for the scene's lights.
+    pub fn set_view(&self, camera: Camera, lights: &[Light]) -> Result<(), GpuError> {
+        let ctx = self.tracer.ctx;
+        if lights.len() != self.scene.lights.len() {
+            return Err(ctx.err(format!(
+                "a view with {} lights for a scene of {}",
+                lights.len(),
+                self.scene.lights.len()
+            )));
+        }
+        if self.medium.is_some() && lights != self.scene.lights.as_slice() {
+            return Err(ctx.err(
+                "a scene with a volume keeps its lights (its light grids were made for them)"
+                    .to_string(),
+            ));
+        }
+        let gpu: Vec<GpuLight> = lights.iter().map(gpu_light).collect();
+        if !gpu.is_empty() {
+            ctx.queue
+                .write_buffer(&self.lights, 0, bytemuck::cast_slice(&gpu));
+        }
+        *self.camera.lock().unwrap() = Some(camera);
+        Ok(())
+    }
+
     /// Renders the scene with `opt` (its `traversal` is the CPU's; the GPU always uses ropes);
     /// `progress` is told after each depth of each wave.
     pub fn render(
@@ -756,7 +792,11 @@ impl<'a> GpuRenderer<'a> {
             }
             _ => self.queues(&shape)?,
         };
-        let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
+        let cam = self
+            .camera
+            .lock()
+            .unwrap()
+            .unwrap_or_else(|| scene.camera_for(opt.width as f32 / opt.height as f32));
         let mut params = RenderParams {
             eye: v3(cam.eye),
             tan_y: cam.tan_y,

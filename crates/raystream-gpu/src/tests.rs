@@ -1352,3 +1352,45 @@ fn queues_past_a_binding_render_again_in_smaller_waves() {
     let (want, _) = small.render(&opt, |_| {}).unwrap();
     assert!(image == want, "the frame rendered again differs");
 }
+
+/// `GpuRenderer::set_view`: the frame after it is, bit for bit, the frame of a renderer over
+/// the scene with that view and those lights; a view with another number of lights is refused.
+#[test]
+fn a_view_set_renders_as_a_scene_with_it() {
+    let Some(ctx) = gpu() else { return };
+    let mut scene =
+        raystream_scene::Scene::for_mesh(TriMesh::icosphere(2), Path::new("ball.obj")).unwrap();
+    let opt = raystream_cpu::RenderOptions {
+        width: 48,
+        height: 32,
+        spp: 1,
+        max_depth: 2,
+        traversal: Traversal::Ropes,
+    };
+    let tree = KdTree::build(&scene.mesh, Builder::Sah);
+    let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+    let view = scene.frame_view.orbit(100.0, 20.0);
+    let cam = scene.framing_camera(view, 1.5);
+    let lights: Vec<raystream_scene::Light> = scene
+        .lights
+        .iter()
+        .map(|l| raystream_scene::Light {
+            position: l.position + Vec3::new(3.0, -1.0, 2.0),
+            ..*l
+        })
+        .collect();
+    let (front, turned) = {
+        let renderer = GpuRenderer::new(&tracer, &scene, &tree).unwrap();
+        let (front, _) = renderer.render(&opt, |_| {}).unwrap();
+        assert!(renderer.set_view(cam, &lights[..lights.len() - 1]).is_err());
+        renderer.set_view(cam, &lights).unwrap();
+        let (turned, _) = renderer.render(&opt, |_| {}).unwrap();
+        (front, turned)
+    };
+    scene.frame_view = view;
+    scene.lights = lights;
+    let renderer = GpuRenderer::new(&tracer, &scene, &tree).unwrap();
+    let (want, _) = renderer.render(&opt, |_| {}).unwrap();
+    assert!(turned == want, "the view set differs from the scene's");
+    assert!(turned != front, "the view did not change the frame");
+}

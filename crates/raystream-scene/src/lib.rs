@@ -731,14 +731,19 @@ impl Scene {
 
     /// The camera to render with: the scene's, or one framing the objects (see [`Camera::frame`]).
     pub fn camera_for(&self, aspect: f32) -> Camera {
-        self.camera.unwrap_or_else(|| {
-            Camera::framing(
-                &self.mesh_points_for_framing(),
-                aspect,
-                self.frame_view,
-                self.frame_projection,
-            )
-        })
+        self.camera
+            .unwrap_or_else(|| self.framing_camera(self.frame_view, aspect))
+    }
+
+    /// The framing camera from `view` (the scene's projection), whatever camera the scene
+    /// sets: a turntable's frames, one view each.
+    pub fn framing_camera(&self, view: View, aspect: f32) -> Camera {
+        Camera::framing(
+            &self.mesh_points_for_framing(),
+            aspect,
+            view,
+            self.frame_projection,
+        )
     }
 
     fn mesh_points_for_framing(&self) -> Vec<Vec3> {

@@ -289,10 +289,13 @@ pub struct RenderArgs {
     /// one, PNG output.
     #[arg(long)]
     pub labels: bool,
-    /// With --mode: a turntable of N frames, one every 360/N degrees about the image's up axis
-    /// (the patient's superior axis unless --view superior/inferior), starting from --view and
-    /// --orbit, written as OUTPUT/frame_000.png … (-o names the folder; --format exr for EXRs).
-    #[arg(long, requires = "mode", value_parser = clap::value_parser!(u32).range(1..=3600))]
+    /// A turntable of N frames, one every 360/N degrees about the image's up axis (the
+    /// patient's superior axis unless --view superior/inferior), starting from --view and
+    /// --orbit, written as OUTPUT/frame_000.png … (-o names the folder; --format exr for EXRs,
+    /// dcm for one DICOM series): with --mode, of the volume; else of the mesh, the scene or
+    /// the bones through the stream renderer, a mesh's or the bones' lights turning with the
+    /// camera.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=3600))]
     pub turntable: Option<u32>,
     /// With --mode slice (or a --slab): N parallel planes facing the camera, --slice-step
     /// apart, centred on --slice-at, written as OUTPUT/frame_000.png … (-o names the folder):

@@ -946,6 +946,122 @@ struct Loaded {
     bones: Option<Bones>,
     load_ms: f64,
     tree: KdTree,
+    /// The scene's own framing view and lights, before --view and --orbit moved them.
+    view0: View,
+    lights0: Vec<raystream_scene::Light>,
+}
+
+/// What a turntable of the stream renderer turns: the scene (its kd-tree, the CPU's volume
+/// light grids or the GPU's renderer) and its own framing view and lights.
+struct Turn<'a> {
+    scene: &'a Scene,
+    tree: &'a KdTree,
+    medium: Option<&'a raystream_cpu::medium::Medium<'a>>,
+    renderer: Option<&'a GpuRenderer<'a>>,
+    view0: View,
+    lights0: &'a [raystream_scene::Light],
+}
+
+/// `render [INPUT] --turntable N -o DIR` of a mesh, a scene file or the bones (the stream
+/// renderer): N frames, one every 360/N degrees about the framing view's up axis from --view
+/// and --orbit, each the picture `--orbit` at its angle renders (a mesh's or the bones'
+/// studio lights turning with the camera, a scene file's staying put), written as
+/// DIR/frame_000.png … (or .exr, or .dcm: one series).
+fn scene_turntable(
+    a: &RenderArgs,
+    n: u32,
+    t: Turn,
+    opt: &RenderOptions,
+    (patient, overlay, units): (bool, Overlay, &str),
+    format: ImageFormat,
+) -> Result<()> {
+    let dir = &a.output;
+    let ext = match (format, a.format) {
+        (_, FrameFormat::Dcm) => "dcm",
+        (ImageFormat::Png, _) => "png",
+        (ImageFormat::Exr, _) => "exr",
+    };
+    if crate::common::image_format(dir).is_ok() {
+        bail!(
+            "{}: --turntable writes frame_000.{ext} … into a folder; name the folder with -o",
+            dir.display()
+        );
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let [az, el] = orbit_angles(a);
+    let base = base_view(a, t.view0, patient)?;
+    let aspect = opt.width as f32 / opt.height as f32;
+    let series = raystream_io::new_uid();
+    let digits = ((n - 1).max(1).ilog10() as usize + 1).max(3);
+    let pb = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(n as u64).with_style(
+            ProgressStyle::with_template("turntable {bar:30} {pos}/{len} frames")
+                .expect("valid template"),
+        )
+    };
+    let mut frame_ms = Vec::new();
+    let mut rays = 0usize;
+    for i in 0..n {
+        let view = base.orbit(az + 360.0 * i as f32 / n as f32, el);
+        let lights = studio_lights(a, t.scene, t.view0, t.lights0, view);
+        let cam = t.scene.framing_camera(view, aspect);
+        let count = |s: DepthStats| rays += s.rays + s.shadow_rays;
+        let t1 = Instant::now();
+        let mut picture = match t.renderer {
+            Some(r) => {
+                r.set_view(cam, &lights)?;
+                match format {
+                    ImageFormat::Png => {
+                        let (rgb, _) = r.render_srgb8(opt, count)?;
+                        let (width, height) = (opt.width, opt.height);
+                        Picture::Srgb8 { rgb, width, height }
+                    }
+                    ImageFormat::Exr => Picture::Film(r.render(opt, count)?.0),
+                }
+            }
+            None => {
+                let mut s = t.scene.clone();
+                s.frame_view = view;
+                s.lights = lights;
+                let film = render_prepared(&s, t.tree, t.medium, opt, count);
+                Picture::of_film(film, format)
+            }
+        };
+        frame_ms.push(ms(t1.elapsed()));
+        let dicom = DicomOut {
+            series: Some((series.clone(), i + 1)),
+            ..label(a, &mut picture, &cam, patient, overlay)
+        };
+        let path = dir.join(format!("frame_{i:0digits$}.{ext}"));
+        picture.save(
+            &path,
+            &format!(
+                "linear RGB, {} spp, depth {}{}",
+                opt.spp,
+                opt.max_depth,
+                pixel_size(&cam, opt.height, units)
+            ),
+            &dicom,
+        )?;
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    if !a.quiet {
+        let median = median_of(&mut frame_ms);
+        eprintln!(
+            "raystream: wrote {n} frames to {} ({}x{}, {} spp, depth {}, {ext}): median render {median:.1} ms ({:.2} frames/s, {:.2} Mrays/s; file writing apart)",
+            dir.display(),
+            opt.width,
+            opt.height,
+            opt.spp,
+            opt.max_depth,
+            1e3 / median,
+            rays as f64 / n as f64 / (median * 1e3),
+        );
+    }
+    Ok(())
 }
 
 /// Opens the device (refusing the stack traversal on a GPU), loads INPUT's scene and builds its
@@ -958,6 +1074,13 @@ fn load(a: &RenderArgs) -> Result<Loaded> {
     }
     let t0 = Instant::now();
     let (mut scene, bones) = load_scene(a)?;
+    let (view0, lights0) = (scene.frame_view, scene.lights.clone());
+    if a.turntable.is_some() && scene.camera.is_some() {
+        bail!(
+            "{}: the scene sets its camera; --turntable turns the framing camera of scenes without one",
+            input_name(a).display()
+        );
+    }
     if a.view.is_some() || a.orbit.is_some() || a.parallel {
         if scene.camera.is_some() {
             bail!(
@@ -968,17 +1091,8 @@ fn load(a: &RenderArgs) -> Result<Loaded> {
         scene.frame_projection = projection(a);
         let [az, el] = orbit_angles(a);
         let patient = bones.is_some() || scene.volume.is_some();
-        let default = scene.frame_view;
-        scene.frame_view = base_view(a, default, patient)?.orbit(az, el);
-        if !is_scene_file(a) && scene.frame_view != default {
-            // A mesh's or the bones' lights are a studio's: they keep their place beside the
-            // camera. A scene file's lights stay where the file puts them.
-            let turn = scene.frame_view.turn_from(default);
-            let c = scene.object_box.center();
-            for l in &mut scene.lights {
-                l.position = c + turn * (l.position - c);
-            }
-        }
+        scene.frame_view = base_view(a, view0, patient)?.orbit(az, el);
+        scene.lights = studio_lights(a, &scene, view0, &lights0, scene.frame_view);
         if scene.frame_view.back.y < 0.0 && scene.ground_triangles > 0 {
             scene.leave_out_ground();
             if !a.quiet {
@@ -999,7 +1113,30 @@ fn load(a: &RenderArgs) -> Result<Loaded> {
         bones,
         load_ms,
         tree,
+        view0,
+        lights0,
     })
+}
+
+/// The lights of `scene` seen from `view`: a mesh's or the bones' lights are a studio's, and
+/// keep their place beside the camera (`lights0` turned as `view` is turned from `view0`); a
+/// scene file's stay where the file puts them.
+fn studio_lights(
+    a: &RenderArgs,
+    scene: &Scene,
+    view0: View,
+    lights0: &[raystream_scene::Light],
+    view: View,
+) -> Vec<raystream_scene::Light> {
+    let mut lights = lights0.to_vec();
+    if !is_scene_file(a) && view != view0 {
+        let turn = view.turn_from(view0);
+        let c = scene.object_box.center();
+        for l in &mut lights {
+            l.position = c + turn * (l.position - c);
+        }
+    }
+    lights
 }
 
 /// `render --aov …`: one ray through each pixel's centre, traced on the chosen device, and the
@@ -1012,6 +1149,7 @@ fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
         bones,
         load_ms,
         tree,
+        ..
     } = load(a)?;
     check_labels(a, bones.is_some() || scene.volume.is_some(), format)?;
     let traversal = Traversal::from(a.accel.traversal);
@@ -1090,6 +1228,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         );
     }
     if let Some(aov) = a.aov {
+        if a.turntable.is_some() {
+            bail!("--turntable renders pictures; an AOV is one picture's hits");
+        }
         if a.labels || a.draw_path.is_some() {
             bail!("--labels and --draw-path mark a rendered picture, not an AOV's values");
         }
@@ -1101,13 +1242,20 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
         return render_aov(a, aov.into());
     }
-    let format = image_format(&a.output)?;
+    // A turntable's frames are files in a folder, in --format.
+    let format = match (a.turntable, a.format) {
+        (Some(_), FrameFormat::Png | FrameFormat::Dcm) => ImageFormat::Png,
+        (Some(_), FrameFormat::Exr) => ImageFormat::Exr,
+        (None, _) => image_format(&a.output)?,
+    };
     let Loaded {
         backend,
         scene,
         bones,
         load_ms,
         tree,
+        view0,
+        lights0,
     } = load(a)?;
     let patient = bones.is_some() || scene.volume.is_some();
     check_labels(a, patient, format)?;
@@ -1144,6 +1292,18 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         None => prepare_volume(&scene, &tree, opt.traversal),
     };
     let setup_ms = ms(t_setup.elapsed());
+    if let Some(n) = a.turntable {
+        let turn = Turn {
+            scene: &scene,
+            tree: &tree,
+            medium: medium.as_ref(),
+            renderer: renderer.as_ref(),
+            view0,
+            lights0: &lights0,
+        };
+        let marks = (patient, overlay.as_deref(), units(&bones));
+        return scene_turntable(a, n, turn, &opt, marks, format);
+    }
     // The progress bar counts depths (of every wave, on the GPU) over all repeats.
     let waves = match &renderer {
         Some(r) => r.waves(&opt),

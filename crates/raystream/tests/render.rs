@@ -435,7 +435,6 @@ fn gpu_matches_cpu(name: &str, args: &[&str], volume: bool) {
     if !gpu_available() {
         return;
     }
-    let Some(py) = python() else { return };
     let path = |dev: &str| tmp(&format!("gpu-vs-cpu-{name}-{dev}.png"));
     for dev in ["cpu", "gpu"] {
         let out = path(dev);
@@ -445,30 +444,7 @@ fn gpu_matches_cpu(name: &str, args: &[&str], volume: bool) {
         let o = run(&all);
         assert!(o.status.success(), "{name} on {dev}: {}", stderr(&o));
     }
-    let d = rays_py(
-        &py,
-        &[
-            "imgdiff",
-            path("cpu").to_str().unwrap(),
-            path("gpu").to_str().unwrap(),
-            "--json",
-        ],
-    );
-    assert!(d.status.success(), "imgdiff: {}", stderr(&d));
-    let r: serde_json::Value = serde_json::from_str(&stdout(&d)).unwrap();
-    let mean = r["mean_abs_diff"].as_f64().unwrap();
-    let over = r["frac_gt_2"].as_f64().unwrap();
-    let p99 = r["p99_max_channel_diff"].as_f64().unwrap();
-    let ok = if volume {
-        mean < 1.0 && p99 <= 8.0
-    } else {
-        mean < 0.5 && over <= 0.001
-    };
-    assert!(
-        ok,
-        "{name}: GPU vs CPU mean {mean}/255, p99 {p99}/255, {over} of pixels > 2/255"
-    );
-    assert!(r["std_a"].as_f64().unwrap() > 5.0, "{name}: a blank image");
+    gpu_frames_match(&path("cpu"), &path("gpu"), name, volume);
 }
 
 #[test]
@@ -1013,6 +989,151 @@ fn turntable_writes_frames() {
         assert_eq!(o.status.code(), Some(2));
         assert!(stderr(&o).contains("folder"), "{}", stderr(&o));
     }
+}
+
+/// `render MESH|SCENE|(the bones) --turntable N -o DIR` through the stream renderer: on each
+/// device, frame i is, byte for byte, the picture `--orbit` at i·360/N degrees (from `--orbit`'s
+/// start) renders: for a mesh (its lights turning with the camera), for a scene file with a CT
+/// volume among its meshes (its lights staying put) and for the bones as one DICOM series in
+/// the patient's directions; the GPU's frames match the CPU's; a scene that sets its camera, an
+/// AOV and a folder named like an image are refused.
+#[test]
+fn a_turntable_of_the_stream_renderer_is_its_orbits() {
+    let spot = mesh("spot.obj");
+    let rods = {
+        // The example scene without its camera, its volume's path made absolute.
+        let text = std::fs::read_to_string(spine_rods()).unwrap();
+        let start = text.find("[camera]").unwrap();
+        let end = start + text[start..].find("\n\n").unwrap() + 2;
+        let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets");
+        let text = format!("{}{}", &text[..start], &text[end..])
+            .replace("../crates/raystream/assets", assets.to_str().unwrap());
+        assert!(!text.contains("[camera]"));
+        let file = tmp("turntable-rods.toml");
+        std::fs::write(&file, text).unwrap();
+        file.to_str().unwrap().to_string()
+    };
+    let size = ["--size", "40x32", "--spp", "1"];
+    for dev in devices() {
+        for (name, input, start) in [("spot", &spot[..], 30.0), ("rods", &rods[..], 0.0)] {
+            let dir = tmp(&format!("turntable-{name}-{dev}"));
+            let _ = std::fs::remove_dir_all(&dir);
+            let orbit = format!("{start},10");
+            let mut all = vec!["render", "-q", input, "--device", dev, "--orbit", &orbit];
+            all.extend(size);
+            all.extend(["--turntable", "3", "-o", dir.to_str().unwrap()]);
+            let o = run(&all);
+            assert!(o.status.success(), "{all:?}: {}", stderr(&o));
+            for i in 0..3 {
+                let az = format!("{},10", start + 120.0 * i as f64);
+                let one = render_to(
+                    &format!("turntable-{name}-{dev}-{i}.png"),
+                    dev,
+                    &[&[input, "--orbit", &az][..], &size[..]].concat(),
+                );
+                let frame = image::open(dir.join(format!("frame_{i:03}.png"))).unwrap();
+                assert_eq!(
+                    frame.to_rgb8(),
+                    image::open(&one).unwrap().to_rgb8(),
+                    "{name} on {dev}: frame {i} against --orbit {az}"
+                );
+            }
+            if *dev == "gpu" {
+                let cpu = tmp(&format!("turntable-{name}-cpu"));
+                let frame = "frame_002.png";
+                gpu_frames_match(&cpu.join(frame), &dir.join(frame), name, name == "rods");
+            }
+        }
+    }
+    // The bones, as one DICOM series: frame 0 from the front, frame 1 from behind.
+    use dicom_dictionary_std::tags;
+    let dir = tmp("turntable-bones-dcm");
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut all = vec![
+        "render",
+        "-q",
+        "--device",
+        "cpu",
+        "--turntable",
+        "2",
+        "--format",
+        "dcm",
+    ];
+    all.extend(size);
+    all.extend(["-o", dir.to_str().unwrap()]);
+    let o = run(&all);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let frames: Vec<_> = (0..2)
+        .map(|i| dicom_object::open_file(dir.join(format!("frame_{i:03}.dcm"))).unwrap())
+        .collect();
+    assert_eq!(
+        dicom_text(&frames[0], tags::SERIES_INSTANCE_UID),
+        dicom_text(&frames[1], tags::SERIES_INSTANCE_UID)
+    );
+    for (i, f) in frames.iter().enumerate() {
+        assert_eq!(dicom_text(f, tags::INSTANCE_NUMBER), format!("{}", i + 1));
+    }
+    // Anterior: the patient's left on the image's right; from behind, on its left.
+    assert_eq!(dicom_text(&frames[0], tags::PATIENT_ORIENTATION), "L\\F");
+    assert_eq!(dicom_text(&frames[1], tags::PATIENT_ORIENTATION), "R\\F");
+    let out = tmp("turntable-refused");
+    let out = out.to_str().unwrap();
+    for (args, want) in [
+        (
+            vec!["render", &spine_rods()[..], "--turntable", "2", "-o", out],
+            "the scene sets its camera",
+        ),
+        (
+            vec![
+                "render",
+                &spot[..],
+                "--turntable",
+                "2",
+                "--aov",
+                "depth",
+                "-o",
+                out,
+            ],
+            "an AOV is one picture's hits",
+        ),
+        (
+            vec!["render", &spot[..], "--turntable", "2", "-o", "x.png"],
+            "into a folder",
+        ),
+    ] {
+        refused(&args, want);
+    }
+}
+
+/// The GPU's picture `gpu` against the CPU's `cpu` by `rays.py imgdiff` (where Python with
+/// its requirements is found): mean < 0.5/255 and ≤ 0.1 % of pixels over 2/255; with a CT
+/// `volume` in the scene, mean < 1/255 and p99 ≤ 8/255; and not blank.
+fn gpu_frames_match(cpu: &Path, gpu: &Path, name: &str, volume: bool) {
+    let Some(py) = python() else { return };
+    let d = rays_py(
+        &py,
+        &[
+            "imgdiff",
+            cpu.to_str().unwrap(),
+            gpu.to_str().unwrap(),
+            "--json",
+        ],
+    );
+    assert!(d.status.success(), "imgdiff: {}", stderr(&d));
+    let r: serde_json::Value = serde_json::from_str(&stdout(&d)).unwrap();
+    let mean = r["mean_abs_diff"].as_f64().unwrap();
+    let over = r["frac_gt_2"].as_f64().unwrap();
+    let p99 = r["p99_max_channel_diff"].as_f64().unwrap();
+    let ok = if volume {
+        mean < 1.0 && p99 <= 8.0
+    } else {
+        mean < 0.5 && over <= 0.001
+    };
+    assert!(
+        ok,
+        "{name}: GPU vs CPU mean {mean}/255, p99 {p99}/255, {over} of pixels > 2/255"
+    );
+    assert!(r["std_a"].as_f64().unwrap() > 5.0, "{name}: a blank image");
 }
 
 /// `--view` and `--orbit`: the CT from the patient's left is the front view turned a quarter
