@@ -111,6 +111,10 @@ ct=$d/ct/abdomen_pelvis_ct_totalseg.nii.gz
 has "$parts" render && {
 $bin render --device gpu --size "$size" --max-depth 4 --repeat 20 -o "$out/default-gpu.png" 2>&1 | tee -a "$out/render.log"
 $bin render --device cpu --size "$size" --max-depth 4 --repeat 3 -o "$out/default-cpu.png" 2>&1 | tee -a "$out/render.log"
+# A turntable of it (36 frames, the camera and lights set per frame, the scene uploaded once):
+# frames/s over an orbit rather than one view repeated.
+$bin render --device gpu --size "$size" --max-depth 4 --turntable 36 -o "$tmp/turntable" 2>&1 \
+  | sed "s/^/[turntable] /" | tee -a "$out/render.log"
 # The host's submissions: a wave's depths in one submission (--submit wave, the default) against
 # one per depth with the counts read back after each, alternated twice, at 4 spp and 1 spp.
 for spp in 4 1; do for round in 1 2; do for submit in depth wave; do
