@@ -42,6 +42,20 @@ pub const NARROWED: f64 = 0.9;
 /// within a fifth of it, well beyond a healthy vessel's taper over a span.
 pub const DILATED: f64 = 1.2;
 
+/// A diameter stenosis in words, on the scale the SCCT grades CT angiography by (Cury et al.
+/// 2016, CAD-RADS; the words, not the coronary report): none (under 1 %, or wider than the
+/// reference), minimal (1–24 %), mild (25–49 %), moderate (50–69 %), severe (70–99 %). A
+/// lesion graded here has a contrast-filled lumen, so never an occlusion (100 %).
+pub fn severity(diameter_pct: f64) -> &'static str {
+    match diameter_pct {
+        p if p < 1.0 => "none",
+        p if p < 25.0 => "minimal",
+        p if p < 50.0 => "mild",
+        p if p < 70.0 => "moderate",
+        _ => "severe",
+    }
+}
+
 /// Fits of the reference before it must have settled, or be refused.
 const MAX_ROUNDS: usize = 64;
 
@@ -518,6 +532,24 @@ mod tests {
             .collect();
         let (pulled, _) = fit(&with, 30.5, true);
         assert!(pulled > 1.03 * want, "{pulled} against {want}");
+    }
+
+    #[test]
+    fn severity_in_the_scct_words() {
+        for (pct, want) in [
+            (-12.0, "none"),
+            (0.5, "none"),
+            (1.0, "minimal"),
+            (24.9, "minimal"),
+            (25.0, "mild"),
+            (49.9, "mild"),
+            (50.0, "moderate"),
+            (69.9, "moderate"),
+            (70.0, "severe"),
+            (99.0, "severe"),
+        ] {
+            assert_eq!(severity(pct), want, "{pct}");
+        }
     }
 
     #[test]

@@ -421,7 +421,7 @@ fn stenosis_text(sections: &[Section], g: &Stenosis) -> String {
     format!(
         "stenosis: section {} at {:.1} mm, ({:.1}, {:.1}, {:.1}) mm LPS: {:.1} mm2, D min {:.2} mm, D eq {:.2} mm\n\
          reference: {:.2} mm ({:.1} mm2) at the lesion, {}\n\
-         grade: {:.1} % by diameter (D min against the reference), {:.1} % by area\n\
+         grade: {:.1} % by diameter (D min against the reference), {:.1} % by area: {} (SCCT's words for {} by diameter)\n\
          narrowed: {narrowed}\n",
         g.lesion + 1,
         s.arc_mm,
@@ -436,7 +436,20 @@ fn stenosis_text(sections: &[Section], g: &Stenosis) -> String {
         reference_words(sections, g),
         g.diameter_pct,
         g.area_pct,
+        stenosis::severity(g.diameter_pct),
+        severity_band(g.diameter_pct),
     )
+}
+
+/// The band of diameter stenosis that [`stenosis::severity`] names for `pct`.
+fn severity_band(pct: f64) -> &'static str {
+    match stenosis::severity(pct) {
+        "none" => "under 1 %",
+        "minimal" => "1-24 %",
+        "mild" => "25-49 %",
+        "moderate" => "50-69 %",
+        _ => "70-99 %",
+    }
 }
 
 /// The graded stenosis as JSON (sections numbered from 1, as in the table).
@@ -480,6 +493,7 @@ fn stenosis_json(sections: &[Section], g: &Stenosis) -> serde_json::Value {
         },
         "diameter_stenosis_pct": round3(g.diameter_pct),
         "area_stenosis_pct": round3(g.area_pct),
+        "severity": stenosis::severity(g.diameter_pct),
         "narrowed_below": stenosis::NARROWED,
         "dilated_above": stenosis::DILATED,
         "narrowed": g.narrowed.as_ref().map(|n| json!({

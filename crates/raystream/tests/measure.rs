@@ -364,6 +364,19 @@ fn check_grade(m: &serde_json::Value, span: f64) {
         (num(st, "diameter_stenosis_pct") - grade).abs() < 0.01,
         "{st}"
     );
+    // SCCT's words for the diameter grade, written out here.
+    let pct = num(st, "diameter_stenosis_pct");
+    let words = [
+        (1.0, "none"),
+        (25.0, "minimal"),
+        (50.0, "mild"),
+        (70.0, "moderate"),
+    ];
+    let want = words
+        .iter()
+        .find(|(below, _)| pct < *below)
+        .map_or("severe", |w| w.1);
+    assert_eq!(st["severity"], want, "{st}");
     let ref_area = std::f64::consts::PI * d_ref * d_ref / 4.0;
     let grade = 100.0 * (1.0 - num(l, "area_mm2") / ref_area);
     assert!((num(st, "area_stenosis_pct") - grade).abs() < 0.01, "{st}");
