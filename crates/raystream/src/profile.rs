@@ -194,8 +194,11 @@ pub fn svg(
                     LESION.stroke_width(1),
                 ))?
                 .label(format!(
-                    "lesion at {:.1} mm (its D min ringed): {:.0} % by diameter, {:.0} % by area",
-                    g.lesion_mm, g.diameter_pct, g.area_pct
+                    "lesion at {:.1} mm (its D min ringed): {:.0} % by diameter ({}), {:.0} % by area",
+                    g.lesion_mm,
+                    g.diameter_pct,
+                    stenosis::severity(g.diameter_pct),
+                    g.area_pct
                 ))
                 .legend(swatch(LESION, 1.0));
             if let Some(l) = &sections[g.lesion].lumen {
@@ -453,8 +456,10 @@ mod tests {
         }
         // The legend says the grade.
         assert!(svg.contains(&format!(
-            "{:.0} % by diameter, {:.0} % by area",
-            g.diameter_pct, g.area_pct
+            "{:.0} % by diameter ({}), {:.0} % by area",
+            g.diameter_pct,
+            stenosis::severity(g.diameter_pct),
+            g.area_pct
         )));
         lines.len()
     }

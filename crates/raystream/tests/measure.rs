@@ -525,9 +525,10 @@ fn a_stenosis_is_graded_from_the_table() {
     assert!(svg.starts_with("<svg"));
     for want in [
         format!(
-            "lesion at {:.1} mm (its D min ringed): {:.0} % by diameter, {:.0} % by area",
+            "lesion at {:.1} mm (its D min ringed): {:.0} % by diameter ({}), {:.0} % by area",
             num(st, "lesion_arc_mm"),
             num(st, "diameter_stenosis_pct"),
+            st["severity"].as_str().unwrap(),
             num(st, "area_stenosis_pct")
         ),
         format!(
