@@ -871,6 +871,59 @@ fn cine(
     Ok(())
 }
 
+/// Where a series of frames goes: the folder `-o` names, the frames' extension, the width of
+/// their numbers, the DICOM series they make (.dcm frames) and the progress bar.
+struct FrameFolder<'a> {
+    dir: &'a Path,
+    ext: &'static str,
+    digits: usize,
+    series: String,
+    pb: ProgressBar,
+}
+
+impl<'a> FrameFolder<'a> {
+    /// The folder for `n` frames of `--what` in `format` (`--format dcm`: DICOM), created; a
+    /// name like an image's is refused.
+    fn new(a: &'a RenderArgs, n: u32, format: ImageFormat, what: &str) -> Result<Self> {
+        let dir = a.output.as_path();
+        let ext = match (format, a.format) {
+            (_, FrameFormat::Dcm) => "dcm",
+            (ImageFormat::Png, _) => "png",
+            (ImageFormat::Exr, _) => "exr",
+        };
+        if crate::common::image_format(dir).is_ok() {
+            bail!(
+                "{}: --{what} writes frame_000.{ext} … into a folder; name the folder with -o",
+                dir.display()
+            );
+        }
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        let pb = if a.quiet {
+            ProgressBar::hidden()
+        } else {
+            ProgressBar::new(n as u64).with_style(
+                ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} frames")
+                    .expect("valid template"),
+            )
+        };
+        pb.set_message(what.to_string());
+        Ok(FrameFolder {
+            dir,
+            ext,
+            digits: ((n - 1).max(1).ilog10() as usize + 1).max(3),
+            series: raystream_io::new_uid(),
+            pb,
+        })
+    }
+
+    /// Frame `i`'s file.
+    fn path(&self, i: u32) -> std::path::PathBuf {
+        self.dir
+            .join(format!("frame_{i:0w$}.{}", self.ext, w = self.digits))
+    }
+}
+
 /// Writes `n` frames, the i-th `frame(i)`'s, rendered with the sight and options it returns
 /// too, into the folder `-o` names (frame_000.png …, or .exr, or .dcm: then one series,
 /// numbered from 1); `volume` is where the frames' DICOM descriptions come from.
@@ -882,57 +935,33 @@ fn frame_series(
     what: &str,
     mut frame: impl FnMut(u32) -> Result<(dvr::Frame, Seen, DvrOptions)>,
 ) -> Result<()> {
-    let dir = &a.output;
-    let ext = match (format, a.format) {
-        (_, FrameFormat::Dcm) => "dcm",
-        (ImageFormat::Png, _) => "png",
-        (ImageFormat::Exr, _) => "exr",
-    };
-    // DICOM frames make one series.
-    let series = raystream_io::new_uid();
-    if crate::common::image_format(dir).is_ok() {
-        bail!(
-            "{}: --{what} writes frame_000.{ext} … into a folder; name the folder with -o",
-            dir.display()
-        );
-    }
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    let pb = if a.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(n as u64).with_style(
-            ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} frames")
-                .expect("valid template"),
-        )
-    };
-    pb.set_message(what.to_string());
-    let digits = (n - 1).max(1).ilog10() as usize + 1;
+    let out = FrameFolder::new(a, n, format, what)?;
     let mut frame_ms = Vec::new();
     let mut base = None;
     for i in 0..n {
         let (mut f, seen, opt) = frame(i)?;
         base.get_or_insert(opt);
         frame_ms.push(f.frame_ms);
-        let path = dir.join(format!("frame_{i:0digits$}.{ext}", digits = digits.max(3)));
         let dicom = DicomOut {
-            series: Some((series.clone(), i + 1)),
+            series: Some((out.series.clone(), i + 1)),
             ..volume_dicom(a, &mut f.picture, &seen, &opt, (volume, overlay))
         };
         f.picture
-            .save(&path, &exr_comment(a, &opt, volume, &seen), &dicom)?;
-        pb.inc(1);
+            .save(&out.path(i), &exr_comment(a, &opt, volume, &seen), &dicom)?;
+        out.pb.inc(1);
     }
-    pb.finish_and_clear();
+    out.pb.finish_and_clear();
     if !a.quiet {
         // The frames differ in their camera, plane or phase only.
         let base = base.expect("at least one frame");
         let median = median_of(&mut frame_ms);
         eprintln!(
-            "raystream: wrote {n} frames to {} ({}x{}, --mode {}, {ext}): median render {median:.1} ms ({:.2} frames/s, file writing apart)",
-            dir.display(),
+            "raystream: wrote {n} frames to {} ({}x{}, --mode {}, {}): median render {median:.1} ms ({:.2} frames/s, file writing apart)",
+            out.dir.display(),
             base.width,
             base.height,
             base.mode.name(),
+            out.ext,
             1e3 / median
         );
     }
@@ -975,32 +1004,10 @@ fn scene_turntable(
     (patient, overlay, units): (bool, Overlay, &str),
     format: ImageFormat,
 ) -> Result<()> {
-    let dir = &a.output;
-    let ext = match (format, a.format) {
-        (_, FrameFormat::Dcm) => "dcm",
-        (ImageFormat::Png, _) => "png",
-        (ImageFormat::Exr, _) => "exr",
-    };
-    if crate::common::image_format(dir).is_ok() {
-        bail!(
-            "{}: --turntable writes frame_000.{ext} … into a folder; name the folder with -o",
-            dir.display()
-        );
-    }
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let out = FrameFolder::new(a, n, format, "turntable")?;
     let [az, el] = orbit_angles(a);
     let base = base_view(a, t.view0, patient)?;
     let aspect = opt.width as f32 / opt.height as f32;
-    let series = raystream_io::new_uid();
-    let digits = ((n - 1).max(1).ilog10() as usize + 1).max(3);
-    let pb = if a.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(n as u64).with_style(
-            ProgressStyle::with_template("turntable {bar:30} {pos}/{len} frames")
-                .expect("valid template"),
-        )
-    };
     let mut frame_ms = Vec::new();
     let mut rays = 0usize;
     for i in 0..n {
@@ -1031,12 +1038,11 @@ fn scene_turntable(
         };
         frame_ms.push(ms(t1.elapsed()));
         let dicom = DicomOut {
-            series: Some((series.clone(), i + 1)),
+            series: Some((out.series.clone(), i + 1)),
             ..label(a, &mut picture, &cam, patient, overlay)
         };
-        let path = dir.join(format!("frame_{i:0digits$}.{ext}"));
         picture.save(
-            &path,
+            &out.path(i),
             &format!(
                 "linear RGB, {} spp, depth {}{}",
                 opt.spp,
@@ -1045,18 +1051,19 @@ fn scene_turntable(
             ),
             &dicom,
         )?;
-        pb.inc(1);
+        out.pb.inc(1);
     }
-    pb.finish_and_clear();
+    out.pb.finish_and_clear();
     if !a.quiet {
         let median = median_of(&mut frame_ms);
         eprintln!(
-            "raystream: wrote {n} frames to {} ({}x{}, {} spp, depth {}, {ext}): median render {median:.1} ms ({:.2} frames/s, {:.2} Mrays/s; file writing apart)",
-            dir.display(),
+            "raystream: wrote {n} frames to {} ({}x{}, {} spp, depth {}, {}): median render {median:.1} ms ({:.2} frames/s, {:.2} Mrays/s; file writing apart)",
+            out.dir.display(),
             opt.width,
             opt.height,
             opt.spp,
             opt.max_depth,
+            out.ext,
             1e3 / median,
             rays as f64 / n as f64 / (median * 1e3),
         );
