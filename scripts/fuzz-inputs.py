@@ -258,7 +258,8 @@ def fuzz_files(work, n, device):
             # Sometimes a stenosis graded too, its lesion and references placed at random.
             grade = random.choice([[], ["--stenosis"], ["--lesion", random.choice(["0", "5", "1e9"])],
                                    ["--reference", random.choice(["3", "2,30", "1,2,3", "-1"])],
-                                   ["--span", random.choice(["0.1", "5", "1e9"])]])
+                                   ["--span", random.choice(["0.1", "5", "1e9"])],
+                                   ["--lesions", random.choice(["1", "3", "100"])]])
             why = why or (os.path.exists(vol) and run(
                 ["measure", vol, "--path", p, "-q", "--json", "-o", os.path.join(d, "m.csv"),
                  "--lumen", random.choice(["-500", "0", "150"]),

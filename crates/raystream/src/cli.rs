@@ -729,6 +729,16 @@ pub struct MeasureArgs {
         allow_negative_numbers = true
     )]
     pub reference: Vec<f64>,
+    /// Grade up to N lesions (tandem stenoses): the closed section of least area, then by
+    /// increasing area each section outside the lesions found that is narrowed against its
+    /// own fitted reference, its narrowed segment apart from theirs. Implies --stenosis.
+    #[arg(
+        long,
+        value_name = "N",
+        value_parser = clap::value_parser!(u32).range(1..=100),
+        conflicts_with_all = ["lesion", "reference"]
+    )]
+    pub lesions: Option<u32>,
     /// The fitted reference uses the sections within this many mm of the lesion, either side
     /// [default: 20]. Implies --stenosis.
     #[arg(long, value_name = "MM", allow_negative_numbers = true)]
@@ -763,6 +773,7 @@ impl MeasureArgs {
     /// How to grade a stenosis, if one is asked for.
     pub fn stenosis(&self) -> Option<raystream_cpu::stenosis::StenosisOptions> {
         let asked = self.stenosis
+            || self.lesions.is_some()
             || self.lesion.is_some()
             || !self.reference.is_empty()
             || self.span.is_some();

@@ -88,14 +88,15 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     pb.finish_and_clear();
     let found = sections.iter().any(|s| s.lumen.is_some());
     // Graded before anything is written: a grade asked for and not given is an error.
-    let graded = match a.stenosis() {
-        Some(o) if found => Some(
-            stenosis::grade(&sections, length, &o)
-                .map_err(|e| anyhow::anyhow!("{file}: stenosis: {e}"))?,
-        ),
-        _ => None,
+    let lesions: Vec<Stenosis> = match a.stenosis() {
+        Some(o) if found => match a.lesions {
+            Some(n) => stenosis::grade_lesions(&sections, length, &o, n as usize),
+            None => stenosis::grade(&sections, length, &o).map(|g| vec![g]),
+        }
+        .map_err(|e| anyhow::anyhow!("{file}: stenosis: {e}"))?,
+        _ => Vec::new(),
     };
-    let graded = graded.as_ref();
+    let graded = lesions.first();
     let winding =
         raystream_cpu::cpr::tortuosity(&points).map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     let angle = match *a.angle {
@@ -117,18 +118,39 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
             file_name(&a.input),
             file_name(&a.path)
         );
-        crate::profile::write(out, &title, &sections, length, graded)?;
+        crate::profile::write(out, &title, &sections, length, &lesions)?;
     }
     if a.json {
         let mut j = report_json(a, &opt, &winding, &sections, graded);
+        let m = j.as_object_mut().unwrap();
         if let Some(g) = &angle {
-            j.as_object_mut()
-                .unwrap()
-                .insert("angle".into(), angle_json(g));
+            m.insert("angle".into(), angle_json(g));
+        }
+        if a.lesions.is_some() && found {
+            let all: Vec<_> = lesions
+                .iter()
+                .map(|g| stenosis_json(&sections, g))
+                .collect();
+            m.insert("stenoses".into(), json!(all));
         }
         print_line(j);
     } else {
         let mut t = report_text(a, &opt, &winding, &sections, graded);
+        if let (Some(n), [_, more @ ..]) = (a.lesions, &lesions[..]) {
+            t += &format!(
+                "\nlesions: {} found (at most {n}), by least area: {}",
+                lesions.len(),
+                lesions
+                    .iter()
+                    .map(|g| format!("{:.1} mm ({:.1} %)", g.lesion_mm, g.diameter_pct))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+            for g in more {
+                t.push('\n');
+                t += stenosis_text(&sections, g).trim_end();
+            }
+        }
         if let Some(g) = &angle {
             t.push('\n');
             t += &angle_text(g);

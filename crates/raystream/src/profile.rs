@@ -90,16 +90,14 @@ pub fn svg(
     title: &str,
     sections: &[Section],
     length_mm: f64,
-    graded: Option<&Stenosis>,
+    graded: &[Stenosis],
 ) -> Result<String> {
     let runs = closed_runs(sections);
     let lumens = sections.iter().filter_map(|s| s.lumen.as_ref());
-    let reference: Vec<f64> = graded.map_or(vec![], |g| {
-        g.domain_mm
-            .iter()
-            .filter_map(|&s| g.reference_at(s))
-            .collect()
-    });
+    let reference: Vec<f64> = graded
+        .iter()
+        .flat_map(|g| g.domain_mm.iter().filter_map(|&s| g.reference_at(s)))
+        .collect();
     let top = lumens
         .map(|l| l.max_diameter_mm)
         .chain(reference.iter().copied())
@@ -128,18 +126,25 @@ pub fn svg(
             .bold_line_style(BLACK.mix(0.15))
             .draw()?;
 
-        if let Some(n) = graded.and_then(|g| g.narrowed.as_ref()) {
+        // The narrowed segments first, under the lines; the first lesion's in the legend.
+        for (k, n) in graded
+            .iter()
+            .filter_map(|g| g.narrowed.as_ref())
+            .enumerate()
+        {
             let pct = 100.0 * stenosis::NARROWED;
-            chart
-                .draw_series(std::iter::once(Rectangle::new(
-                    [(n.mm[0], ymin), (n.mm[1], ymax)],
-                    REFERENCE.mix(0.12).filled(),
-                )))?
-                .label(format!(
-                    "narrowed: D eq below {pct:.0} % of the reference, {:.1} mm",
-                    n.mm[1] - n.mm[0]
-                ))
-                .legend(swatch(REFERENCE, 0.12));
+            let shade = chart.draw_series(std::iter::once(Rectangle::new(
+                [(n.mm[0], ymin), (n.mm[1], ymax)],
+                REFERENCE.mix(0.12).filled(),
+            )))?;
+            if k == 0 {
+                shade
+                    .label(format!(
+                        "narrowed: D eq below {pct:.0} % of the reference, {:.1} mm",
+                        n.mm[1] - n.mm[0]
+                    ))
+                    .legend(swatch(REFERENCE, 0.12));
+            }
         }
         // Each quantity over every run, the first run carrying the legend's entry.
         for q in &QUANTITIES {
@@ -175,26 +180,36 @@ pub fn svg(
                 .label("open: D eq of the part in the field (a lower bound)")
                 .legend(swatch(OPEN, 1.0));
         }
-        if let Some(g) = graded {
+        // Each lesion: its reference, then its line and ring; the first's reference and each
+        // lesion's grade in the legend.
+        for (k, g) in graded.iter().enumerate() {
             let ends = g.domain_mm.map(|s| (s, g.reference_at(s).unwrap_or(0.0)));
             let how = match g.source {
                 ReferenceSource::Fitted { .. } => "fitted",
                 ReferenceSource::Placed(_) => "placed",
             };
-            chart
-                .draw_series(DashedLineSeries::new(ends, 8, 5, REFERENCE.stroke_width(2)))?
-                .label(format!(
-                    "reference ({how}): {:.2} mm at the lesion",
-                    g.at_lesion_mm
-                ))
-                .legend(swatch(REFERENCE, 1.0));
+            let dashes =
+                chart.draw_series(DashedLineSeries::new(ends, 8, 5, REFERENCE.stroke_width(2)))?;
+            if k == 0 {
+                dashes
+                    .label(format!(
+                        "reference ({how}): {:.2} mm at the lesion",
+                        g.at_lesion_mm
+                    ))
+                    .legend(swatch(REFERENCE, 1.0));
+            }
+            let which = if graded.len() > 1 {
+                format!("lesion {}", k + 1)
+            } else {
+                "lesion".to_string()
+            };
             chart
                 .draw_series(LineSeries::new(
                     [(g.lesion_mm, ymin), (g.lesion_mm, ymax)],
                     LESION.stroke_width(1),
                 ))?
                 .label(format!(
-                    "lesion at {:.1} mm (its D min ringed): {:.0} % by diameter ({}), {:.0} % by area",
+                    "{which} at {:.1} mm (its D min ringed): {:.0} % by diameter ({}), {:.0} % by area",
                     g.lesion_mm,
                     g.diameter_pct,
                     stenosis::severity(g.diameter_pct),
@@ -227,7 +242,7 @@ pub fn write(
     title: &str,
     sections: &[Section],
     length_mm: f64,
-    graded: Option<&Stenosis>,
+    graded: &[Stenosis],
 ) -> Result<()> {
     let text = svg(title, sections, length_mm, graded)
         .map_err(|e| anyhow!("{}: cannot draw the profile: {e}", file.display()))?;
@@ -329,7 +344,7 @@ mod tests {
     /// sections is a line of its own (a lone one a dot), the open sections are crosses, and
     /// with a stenosis the reference, the lesion and the narrowed segment are where the grade
     /// says. Returns the number of D eq lines.
-    fn check_plot(svg: &str, sections: &[Section], graded: Option<&Stenosis>) -> usize {
+    fn check_plot(svg: &str, sections: &[Section], graded: &[Stenosis]) -> usize {
         let el = elements(svg);
         let of = |tag: &str, c: RGBColor| -> Vec<&Element> {
             el.iter().filter(|e| e.tag == tag && e.is(c)).collect()
@@ -398,69 +413,78 @@ mod tests {
             near(mid(pair[0]), want, 1.0, "an open section's cross");
             near(mid(pair[1]), want, 1.0, "an open section's cross");
         }
-        let Some(g) = graded else {
+        if graded.is_empty() {
             assert!(of("polyline", REFERENCE).is_empty() && of("rect", REFERENCE).is_empty());
             assert!(of("polyline", LESION).is_empty());
             return lines.len();
-        };
-        // The reference: dashes on its line, from one end of its domain to the other.
-        let dashes: Vec<(f64, f64)> = of("polyline", REFERENCE)
-            .iter()
-            .flat_map(|e| e.points())
-            .collect();
-        assert!(!dashes.is_empty());
-        for &(x, y) in &dashes {
-            let s = (x - bx) / ax;
-            let d = g.at_lesion_mm + g.slope * (s - g.lesion_mm);
-            assert!((y - py(d)).abs() <= 1.5, "a dash off the reference line");
         }
-        let (x0, x1) = dashes
-            .iter()
-            .fold((f64::MAX, f64::MIN), |(a, b), &(x, _)| (a.min(x), b.max(x)));
-        let [from, to] = g.domain_mm.map(px);
-        assert!(x0 >= from - 1.0 && x0 <= from + 1.0, "{x0} {from}");
-        assert!(x1 <= to + 1.0 && x1 >= to - 14.0, "{x1} {to}");
-        // The lesion: a vertical line at its arc from the axis up, its D min ringed.
-        let lesion = of("polyline", LESION);
-        assert_eq!(lesion.len(), 1);
-        let lp = lesion[0].points();
-        for &(x, _) in &lp {
-            assert!((x - px(g.lesion_mm)).abs() <= 1.0);
+        // Each lesion's reference dashes come before its line: group them so, in order.
+        let mut groups: Vec<Vec<(f64, f64)>> = Vec::new();
+        let mut dashes = Vec::new();
+        let mut lesion_lines = Vec::new();
+        for e in el.iter().filter(|e| e.tag == "polyline") {
+            if e.is(REFERENCE) {
+                dashes.extend(e.points());
+            } else if e.is(LESION) {
+                groups.push(std::mem::take(&mut dashes));
+                lesion_lines.push(e.points());
+            }
         }
-        assert!((lp[0].1 - py(0.0)).abs() <= 1.0);
-        let ring = of("circle", LESION);
-        assert_eq!(ring.len(), 1);
-        let l = sections[g.lesion].lumen.as_ref().unwrap();
-        near(
-            (ring[0].num("cx"), ring[0].num("cy")),
-            (px(g.lesion_mm), py(l.min_diameter_mm)),
-            1.0,
-            "the lesion's ring",
-        );
-        // The narrowed segment: a faint rectangle over its arcs (the legend's swatch is the
-        // other, 18 px wide).
-        let shade: Vec<&Element> = of("rect", REFERENCE)
+        assert_eq!(lesion_lines.len(), graded.len());
+        let rings = of("circle", LESION);
+        assert_eq!(rings.len(), graded.len());
+        // The narrowed segments: faint rectangles over their arcs (the legend's swatch is the
+        // one 18 px wide).
+        let shades: Vec<&Element> = of("rect", REFERENCE)
             .into_iter()
-            .filter(|e| e.get("opacity") == "0.12")
+            .filter(|e| e.get("opacity") == "0.12" && e.num("width") != 18.0)
             .collect();
-        match &g.narrowed {
-            Some(n) => {
-                let r = shade
-                    .iter()
-                    .find(|e| e.num("width") != 18.0)
-                    .expect("the narrowed segment's rectangle");
+        let mut shades = shades.iter();
+        for (k, g) in graded.iter().enumerate() {
+            // The reference: dashes on its line, from one end of its domain to the other.
+            let dashes = &groups[k];
+            assert!(!dashes.is_empty());
+            for &(x, y) in dashes {
+                let s = (x - bx) / ax;
+                let d = g.at_lesion_mm + g.slope * (s - g.lesion_mm);
+                assert!(
+                    (y - py(d)).abs() <= 1.5,
+                    "lesion {k}: a dash off its reference"
+                );
+            }
+            let (x0, x1) = dashes
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(a, b), &(x, _)| (a.min(x), b.max(x)));
+            let [from, to] = g.domain_mm.map(px);
+            assert!(x0 >= from - 1.0 && x0 <= from + 1.0, "{x0} {from}");
+            assert!(x1 <= to + 1.0 && x1 >= to - 14.0, "{x1} {to}");
+            // The lesion: a vertical line at its arc from the axis up, its D min ringed.
+            let lp = &lesion_lines[k];
+            for &(x, _) in lp {
+                assert!((x - px(g.lesion_mm)).abs() <= 1.0);
+            }
+            assert!((lp[0].1 - py(0.0)).abs() <= 1.0);
+            let l = sections[g.lesion].lumen.as_ref().unwrap();
+            near(
+                (rings[k].num("cx"), rings[k].num("cy")),
+                (px(g.lesion_mm), py(l.min_diameter_mm)),
+                1.0,
+                "the lesion's ring",
+            );
+            if let Some(n) = &g.narrowed {
+                let r = shades.next().expect("the narrowed segment's rectangle");
                 assert!((r.num("x") - px(n.mm[0])).abs() <= 1.0);
                 assert!((r.num("x") + r.num("width") - px(n.mm[1])).abs() <= 1.0);
             }
-            None => assert!(shade.is_empty()),
+            // The legend says the grade.
+            assert!(svg.contains(&format!(
+                "{:.0} % by diameter ({}), {:.0} % by area",
+                g.diameter_pct,
+                stenosis::severity(g.diameter_pct),
+                g.area_pct
+            )));
         }
-        // The legend says the grade.
-        assert!(svg.contains(&format!(
-            "{:.0} % by diameter ({}), {:.0} % by area",
-            g.diameter_pct,
-            stenosis::severity(g.diameter_pct),
-            g.area_pct
-        )));
+        assert!(shades.next().is_none(), "a shaded segment of no lesion");
         lines.len()
     }
 
@@ -506,9 +530,9 @@ mod tests {
                 }
             })
             .collect();
-        let plain = svg("made up", &sections, 60.0, None).unwrap();
+        let plain = svg("made up", &sections, 60.0, &[]).unwrap();
         // Runs: 0–19, 21 (lone), 25–59.
-        assert_eq!(check_plot(&plain, &sections, None), 2);
+        assert_eq!(check_plot(&plain, &sections, &[]), 2);
         let opts = StenosisOptions {
             lesion_mm: None,
             reference_mm: vec![],
@@ -517,8 +541,8 @@ mod tests {
         let g = stenosis::grade(&sections, 60.0, &opts).unwrap();
         assert_eq!(g.lesion, 40);
         assert!(g.narrowed.is_some());
-        let graded = svg("made up", &sections, 60.0, Some(&g)).unwrap();
-        check_plot(&graded, &sections, Some(&g));
+        let graded = svg("made up", &sections, 60.0, std::slice::from_ref(&g)).unwrap();
+        check_plot(&graded, &sections, std::slice::from_ref(&g));
         // A placed reference and no narrowed segment (the grade's own figures, changed).
         let placed = Stenosis {
             source: ReferenceSource::Placed(vec![30]),
@@ -526,9 +550,27 @@ mod tests {
             narrowed: None,
             ..g.clone()
         };
-        let placed_svg = svg("made up", &sections, 60.0, Some(&placed)).unwrap();
-        check_plot(&placed_svg, &sections, Some(&placed));
+        let placed_svg = svg("made up", &sections, 60.0, std::slice::from_ref(&placed)).unwrap();
+        check_plot(&placed_svg, &sections, std::slice::from_ref(&placed));
         assert!(placed_svg.contains("reference (placed)"));
+        // Tandem lesions: a second, milder narrowing at 8 mm; both drawn, each where its
+        // grade puts it.
+        let tandem: Vec<Section> = sections
+            .iter()
+            .map(|sec| {
+                let dip = 1.0 - 0.35 * (-((sec.arc_mm - 8.0) / 3.0).powi(2)).exp();
+                match &sec.lumen {
+                    Some(l) => section(sec.arc_mm, Some(l.equivalent_diameter_mm * dip), l.open),
+                    None => section(sec.arc_mm, None, false),
+                }
+            })
+            .collect();
+        let both = stenosis::grade_lesions(&tandem, 60.0, &opts, 3).unwrap();
+        assert_eq!(both.len(), 2, "{both:?}");
+        assert_eq!((both[0].lesion, both[1].lesion), (40, 8));
+        let tandem_svg = svg("made up", &tandem, 60.0, &both).unwrap();
+        check_plot(&tandem_svg, &tandem, &both);
+        assert!(tandem_svg.contains("lesion 2 at 8.5 mm"));
     }
 
     /// The chest CT's aorta, a section every 2 mm, as `measure --lesion 100 --span 30 --plot`
@@ -560,7 +602,7 @@ mod tests {
         };
         let g = stenosis::grade(&sections, length, &opts).unwrap();
         assert!(g.narrowed.is_some());
-        let text = svg("aorta", &sections, length, Some(&g)).unwrap();
-        assert!(check_plot(&text, &sections, Some(&g)) >= 1);
+        let text = svg("aorta", &sections, length, std::slice::from_ref(&g)).unwrap();
+        assert!(check_plot(&text, &sections, std::slice::from_ref(&g)) >= 1);
     }
 }

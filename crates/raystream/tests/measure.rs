@@ -560,6 +560,92 @@ fn a_stenosis_is_graded_from_the_table() {
     }
 }
 
+/// `measure --lesions N` on the chest CT's aorta: the first lesion is `--stenosis`'s; each
+/// lesion is a closed section outside the others' narrowed segments, narrowed itself, its
+/// grades following from its own figures and reference; the segments are apart; the text
+/// lists them; a placed lesion or reference, or N = 0, is refused.
+#[test]
+fn tandem_lesions_on_the_aorta() {
+    let (vol, path) = (chest(), aorta());
+    let one = measure(&vol, &path, &["--every", "2", "--stenosis"]);
+    let m = measure(&vol, &path, &["--every", "2", "--lesions", "4"]);
+    let rows = m["sections"].as_array().unwrap();
+    let all = m["stenoses"].as_array().unwrap();
+    assert!(!all.is_empty() && all.len() <= 4);
+    assert_eq!(all[0], one["stenosis"]);
+    assert_eq!(m["stenosis"], one["stenosis"]);
+    let segment = |g: &serde_json::Value| {
+        let n = &g["narrowed"];
+        let at = g["lesion_section"].as_u64().unwrap();
+        if n.is_null() {
+            (at, at)
+        } else {
+            (
+                n["from_section"].as_u64().unwrap(),
+                n["to_section"].as_u64().unwrap(),
+            )
+        }
+    };
+    for (k, g) in all.iter().enumerate() {
+        let i = g["lesion_section"].as_u64().unwrap() as usize - 1;
+        assert_eq!(rows[i]["lumen"], "closed");
+        for k in ["area_mm2", "min_diameter_mm", "equivalent_diameter_mm"] {
+            assert_eq!(num(g, k), num(&rows[i], k), "{k}");
+        }
+        let d_ref = num(&g["reference"], "diameter_mm");
+        let grade = 100.0 * (1.0 - num(g, "min_diameter_mm") / d_ref);
+        assert!(
+            (num(g, "diameter_stenosis_pct") - grade).abs() < 0.01,
+            "{g}"
+        );
+        if k > 0 {
+            assert!(
+                !g["narrowed"].is_null(),
+                "a further lesion is narrowed: {g}"
+            );
+        }
+        let (a, b) = segment(g);
+        for other in &all[..k] {
+            let (c, d) = segment(other);
+            assert!(b < c || a > d, "lesions {k} and {other}: segments overlap");
+        }
+    }
+    let csv = tmp("measure-lesions.csv");
+    let text = measure_text(&vol, &path, &["--every", "2", "--lesions", "4"], &csv);
+    assert!(
+        text.contains(&format!("lesions: {} found (at most 4)", all.len())),
+        "{text}"
+    );
+    assert_eq!(
+        text.matches("\nstenosis: section").count(),
+        all.len(),
+        "{text}"
+    );
+    for (bad, want) in [
+        (
+            vec!["--lesions", "2", "--lesion", "50"],
+            "cannot be used with",
+        ),
+        (
+            vec!["--lesions", "2", "--reference", "50"],
+            "cannot be used with",
+        ),
+        (vec!["--lesions", "0"], "0 is not in 1..=100"),
+    ] {
+        let mut args = vec![
+            "measure",
+            "-q",
+            &vol[..],
+            "--path",
+            &path[..],
+            "--every",
+            "10",
+        ];
+        args.extend(bad);
+        refused(&args, want);
+    }
+}
+
 /// Bad input: clear errors naming what is wrong, a non-zero exit, no panic.
 #[test]
 fn bad_measurements_are_refused() {
