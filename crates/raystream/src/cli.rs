@@ -308,8 +308,9 @@ pub struct RenderArgs {
     )]
     pub slices: Option<u32>,
     /// With --mode, of a 4-D CT (cardiac phases, perfusion): a cine, one frame per temporal
-    /// position in order, all from the same camera with the same window or transfer function,
-    /// written as OUTPUT/frame_000.png … (-o names the folder); with --format dcm, one series.
+    /// position in order, all from the same camera (with --path, the same curved plane: a CPR
+    /// of each phase) with the same window or transfer function, written as
+    /// OUTPUT/frame_000.png … (-o names the folder); with --format dcm, one series.
     #[arg(long, requires = "mode", conflicts_with_all = ["turntable", "slices", "phase"])]
     pub cine: bool,
     /// With --mode slice, or --mode mip/minip/average and a --slab: a curved planar
@@ -318,7 +319,12 @@ pub struct RenderArgs {
     /// the top, square pixels (the path's length over the height), the cut facing --view and
     /// turned about the path by --orbit AZ (--turntable N: a rotational CPR; --slices N: N
     /// cross-sections perpendicular to the path, evenly along it).
-    #[arg(long, value_name = "FILE", requires = "mode", conflicts_with_all = ["cine", "slice_at"])]
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "mode",
+        conflicts_with = "slice_at"
+    )]
     pub path: Option<PathBuf>,
     /// With --path: the CPR straightened (the path down the middle column, rows at its arc
     /// length) or stretched (Kanitsar 2002: the surface swept through the path along the

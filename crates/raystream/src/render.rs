@@ -126,6 +126,7 @@ fn label(
 
 /// What a frame of a direct volume rendering was seen by: a camera, or the curved plane of a
 /// curved planar reformation.
+#[derive(Clone)]
 enum Seen {
     Camera(Camera),
     Curved(Box<CurvedPlane>),
@@ -494,12 +495,19 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         return slice_series(a, (&renderer, &volume, overlay), &opt, &cam, n, format);
     }
     if a.cine {
+        if a.draw_lumen.is_some() {
+            bail!(
+                "--draw-lumen with --cine: the lumen would be the first phase's on every frame; draw it on one (--phase K)"
+            );
+        }
+        // A CPR of each phase, along the one path, or the one camera's view.
+        let seen = seen_from(a, &volume, &opt, (view, curve.as_ref()), az)?;
         return cine(
             a,
             (path, &volume, renderer),
             (&backend, &tf, overlay),
             &opt,
-            &cam,
+            &seen,
             format,
         );
     }
@@ -811,15 +819,16 @@ fn slice_series(
 }
 
 /// `render --mode … --cine -o DIR`: a frame of each temporal position of a 4-D CT (`first` is
-/// phase 1, read already, with its renderer), in order, all seen by `cam` with `opt`: the
-/// heart's or the lungs' motion as a loop. Each later phase is read, uploaded and rendered in
+/// phase 1, read already, with its renderer), in order, all seen by `seen` with `opt` (the
+/// camera, or with `--path` the one curved plane along it: a CPR of each phase): the heart's or
+/// the lungs' motion as a loop. Each later phase is read, uploaded and rendered in
 /// turn, one volume in memory at a time; all must share phase 1's grid.
 fn cine(
     a: &RenderArgs,
     (path, first, renderer): (&Path, &raystream_io::Volume, dvr::Renderer),
     (backend, tf, overlay): (&Backend, &raystream_volume::TransferFunction, Overlay),
     opt: &DvrOptions,
-    cam: &Camera,
+    seen: &Seen,
     format: ImageFormat,
 ) -> Result<()> {
     let n = first.phase.count;
@@ -832,7 +841,11 @@ fn cine(
     let mut warnings = Vec::new();
     frame_series(a, (first, overlay), n as u32, format, "cine", |i| {
         if i == 0 {
-            return Ok((renderer.frame(opt, cam, format)?, Seen::Camera(*cam), *opt));
+            return Ok((
+                renderer.frame(opt, seen.sight(), format)?,
+                seen.clone(),
+                *opt,
+            ));
         }
         let select = raystream_io::VolumeSelect {
             phase: Some(i as usize + 1),
@@ -860,8 +873,8 @@ fn cine(
         {
             warnings.push(format!("phase {}: {w}", i + 1));
         }
-        let frame = dvr::Renderer::new(backend, &volume, tf)?.frame(opt, cam, format)?;
-        Ok((frame, Seen::Camera(*cam), *opt))
+        let frame = dvr::Renderer::new(backend, &volume, tf)?.frame(opt, seen.sight(), format)?;
+        Ok((frame, seen.clone(), *opt))
     })?;
     if !a.quiet {
         for w in warnings {

@@ -825,6 +825,117 @@ fn phase_picks_the_temporal_position_of_a_4d_ct() {
         );
     }
     assert!(!cine.join("frame_003.exr").exists());
+    // --cine --path: a CPR of each phase along the one path, each the very picture --phase K
+    // with that path renders, and phase K's HU are phase 1's + 100 (K − 1) wherever sampled.
+    let centre = {
+        let [d, sp, o] = ["dims", "spacing", "origin"].map(|k| {
+            first[k]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect::<Vec<f64>>()
+        });
+        let m: Vec<f64> = first["direction"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let half: Vec<f64> = (0..3).map(|a| 0.5 * (d[a] - 1.0) * sp[a]).collect();
+        (0..3)
+            .map(|r| o[r] + (0..3).map(|c| m[3 * r + c] * half[c]).sum::<f64>())
+            .collect::<Vec<f64>>()
+    };
+    let curve = tmp("phases-path.txt");
+    std::fs::write(
+        &curve,
+        format!(
+            "{x} {y} {}\n{x} {} {}\n{x} {y} {}\n",
+            centre[2] - 60.0,
+            centre[1] + 10.0,
+            centre[2],
+            centre[2] + 60.0,
+            x = centre[0],
+            y = centre[1]
+        ),
+    )
+    .unwrap();
+    let curve = curve.to_str().unwrap();
+    let cpr_cine = tmp("phases-cpr-cine");
+    let _ = std::fs::remove_dir_all(&cpr_cine);
+    let cpr = [
+        "--mode", "slice", "--path", curve, "--size", "24x48", "--format", "exr",
+    ];
+    let o = run(&[
+        &[
+            "render",
+            "-q",
+            path,
+            "--cine",
+            "-o",
+            cpr_cine.to_str().unwrap(),
+        ][..],
+        &cpr,
+    ]
+    .concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let frame = |k: usize| {
+        let f = raystream_cpu::load_exr(&cpr_cine.join(format!("frame_00{k}.exr"))).unwrap();
+        f.channels["Y"].as_f32().unwrap().to_vec()
+    };
+    let base = frame(0);
+    assert!(base.iter().filter(|v| v.is_finite()).count() > base.len() / 2);
+    for k in 0..3 {
+        let single = tmp(&format!("phases-cpr-{k}.exr"));
+        let phase = format!("{}", k + 1);
+        let o = run(&[
+            &[
+                "render",
+                "-q",
+                path,
+                "--phase",
+                &phase,
+                "-o",
+                single.to_str().unwrap(),
+            ][..],
+            &cpr[..6],
+        ]
+        .concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        let want = raystream_cpu::load_exr(&single).unwrap();
+        let want = want.channels["Y"].as_f32().unwrap();
+        let got = frame(k);
+        assert!(
+            got.iter()
+                .zip(want)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "CPR cine frame {k} is not phase {}'s CPR",
+            k + 1
+        );
+        for (a, b) in got.iter().zip(&base) {
+            if a.is_finite() {
+                assert!((a - b - 100.0 * k as f32).abs() < 1e-2, "{a} against {b}");
+            }
+        }
+    }
+    let o = run(&[
+        &["render", "-q", path, "--cine", "--draw-lumen", "150", "-o"][..],
+        &[
+            cpr_cine.to_str().unwrap(),
+            "--mode",
+            "slice",
+            "--path",
+            curve,
+        ][..],
+    ]
+    .concat());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("--draw-lumen with --cine"),
+        "{}",
+        stderr(&o)
+    );
     let src_path = volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz");
     for (args, want) in [
         (
