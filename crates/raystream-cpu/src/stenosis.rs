@@ -331,6 +331,16 @@ pub fn grade(
             .map(|(i, _)| i)
             .ok_or("no section has a closed lumen: nothing to grade")?,
     };
+    grade_at(sections, length_mm, lesion, opt)
+}
+
+/// [`grade`] at the closed section `lesion` (an index; `opt`'s lesion is not read).
+fn grade_at(
+    sections: &[Section],
+    length_mm: f64,
+    lesion: usize,
+    opt: &StenosisOptions,
+) -> Result<Stenosis, String> {
     let line = if opt.reference_mm.is_empty() {
         fitted(sections, lesion, length_mm, opt.span_mm)?
     } else {
@@ -415,11 +425,7 @@ pub fn grade_lesions(
         if found.iter().any(|g| (span(g)[0]..=span(g)[1]).contains(&i)) {
             continue;
         }
-        let at = StenosisOptions {
-            lesion_mm: Some(sections[i].arc_mm),
-            ..opt.clone()
-        };
-        let Ok(g) = grade(sections, length_mm, &at) else {
+        let Ok(g) = grade_at(sections, length_mm, i, opt) else {
             continue;
         };
         let Some(seg) = g.narrowed.as_ref().map(|n| n.sections) else {
