@@ -175,25 +175,27 @@ pub fn measure_path(
 }
 
 /// A section's samples and the lumen segmented on them: an `n`×`n` grid of `p` mm about the
-/// path's point (pixel (i, j) at [`Segmented::offset`]), its HU (NaN outside the volume), the
-/// lumen's pixels, and the seed they grew from.
+/// path's point (pixel (i, j) at [`Segmented::offset`]), its HU (NaN outside the volume) and
+/// the lumen's pixels.
 struct Segmented {
     n: usize,
     p: f64,
     values: Vec<f32>,
     mask: Vec<bool>,
-    seed: usize,
     threshold: f32,
 }
 
+/// Pixel (i, j)'s offset from the path's point on an `n`×`n` grid of `p` mm, mm, right
+/// (lateral) and down (normal).
+fn grid_offset(n: usize, p: f64, i: usize, j: usize) -> DVec2 {
+    let half = 0.5 * n as f64;
+    DVec2::new((i as f64 + 0.5 - half) * p, (j as f64 + 0.5 - half) * p)
+}
+
 impl Segmented {
-    /// Pixel (i, j)'s offset from the path's point, mm, right (lateral) and down (normal).
+    /// Pixel (i, j)'s offset from the path's point, mm.
     fn offset(&self, i: usize, j: usize) -> DVec2 {
-        let half = 0.5 * self.n as f64;
-        DVec2::new(
-            (i as f64 + 0.5 - half) * self.p,
-            (j as f64 + 0.5 - half) * self.p,
-        )
+        grid_offset(self.n, self.p, i, j)
     }
 
     /// Where the lumen's edge lies between lumen pixel `k` and its neighbour `o` outside it,
@@ -214,15 +216,8 @@ impl Segmented {
 /// threshold 4-connected to the one nearest the path's point within `seed_mm`, holes filled,
 /// opened; none when no lumen pixel lies that near.
 fn segment(vol: &Volume, m: &Marcher, row: &CprRow, opt: &LumenOptions) -> Option<Segmented> {
-    let n = opt.side();
-    let mut g = Segmented {
-        n,
-        p: opt.pixel_mm,
-        values: Vec::new(),
-        mask: Vec::new(),
-        seed: 0,
-        threshold: opt.threshold_hu,
-    };
+    let (n, p) = (opt.side(), opt.pixel_mm);
+    let offset = |k: usize| grid_offset(n, p, k % n, k / n);
     let (c, l, d) = (
         row.centre.as_dvec3(),
         row.lateral.as_dvec3(),
@@ -230,34 +225,39 @@ fn segment(vol: &Volume, m: &Marcher, row: &CprRow, opt: &LumenOptions) -> Optio
     );
     let world = |q: DVec2| c + q.x * l + q.y * d;
     let hi = vol.dims.map(|k| k.max(1) as f32 - 1.0);
-    g.values = (0..n * n)
+    let values: Vec<f32> = (0..n * n)
         .map(|k| {
-            let q = m.index_of(world(g.offset(k % n, k / n)).as_vec3());
+            let q = m.index_of(world(offset(k)).as_vec3());
             let inside = (0..3).all(|a| (-1e-3..=hi[a] + 1e-3).contains(&q[a]));
             if inside { m.sample(q) } else { f32::NAN }
         })
         .collect();
-    let lumen = |k: usize| g.values[k] >= opt.threshold_hu;
+    let lumen = |k: usize| values[k] >= opt.threshold_hu;
     // The seed: the lumen pixel nearest the path's point, within seed_mm.
-    let p = g.p;
-    g.seed = (0..n * n)
+    let seed = (0..n * n)
         .filter(|&k| lumen(k))
-        .map(|k| (g.offset(k % n, k / n).length(), k))
+        .map(|k| (offset(k).length(), k))
         .filter(|&(r, _)| r <= opt.seed_mm.max(0.5 * p * std::f64::consts::SQRT_2))
         .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))?
         .1;
     // The region: 4-connected lumen pixels from the seed, its holes filled.
     let mut region = vec![false; n * n];
-    flood(n, g.seed, &mut region, lumen, false);
-    g.mask = fill_holes(n, &region);
+    flood(n, seed, &mut region, lumen, false);
+    let mut mask = fill_holes(n, &region);
     // Opened: the parts a disc of `open_mm` cannot reach from the seed's side of the lumen
     // are cut off where they run on beyond the disc's reach (a side branch, a neighbour joined
     // by a neck narrower than the disc); a tip or corner too sharp for the disc stays.
     let r = opt.open_mm / p;
     if r > 0.0 {
-        g.mask = opened(n, &g.mask, r, g.seed);
+        mask = opened(n, &mask, r, seed);
     }
-    Some(g)
+    Some(Segmented {
+        n,
+        p,
+        values,
+        mask,
+        threshold: opt.threshold_hu,
+    })
 }
 
 /// The lumen on the plane through `row.centre` spanned by `row.lateral` and `row.normal`, and
@@ -348,12 +348,12 @@ pub fn lumen_across(
 ) -> Option<[f64; 2]> {
     let g = segment(vol, m, row, opt)?;
     let n = g.n;
+    // The middle row, and the column nearest the path's point.
     let j = n / 2;
     let on_line = |i: usize| g.mask[j * n + i];
-    let centre = n / 2;
     let start = (0..n)
         .filter(|&i| on_line(i))
-        .min_by_key(|&i| (i.abs_diff(centre), i))?;
+        .min_by_key(|&i| (i.abs_diff(j), i))?;
     let (mut lo, mut hi) = (start, start);
     while lo > 0 && on_line(lo - 1) {
         lo -= 1;
