@@ -96,7 +96,6 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("{file}: stenosis: {e}"))?,
         _ => Vec::new(),
     };
-    let graded = lesions.first();
     let winding =
         raystream_cpu::cpr::tortuosity(&points).map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     let angle = match *a.angle {
@@ -107,7 +106,7 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         _ => None,
     };
     if let Some(out) = &a.output {
-        std::fs::write(out, csv(&sections, graded))
+        std::fs::write(out, csv(&sections, lesions.first()))
             .with_context(|| format!("cannot write {}", out.display()))?;
     }
     if let Some(out) = &a.plot
@@ -120,42 +119,15 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         );
         crate::profile::write(out, &title, &sections, length, &lesions)?;
     }
+    let findings = Findings {
+        winding: &winding,
+        lesions: &lesions,
+        angle: angle.as_ref(),
+    };
     if a.json {
-        let mut j = report_json(a, &opt, &winding, &sections, graded);
-        let m = j.as_object_mut().unwrap();
-        if let Some(g) = &angle {
-            m.insert("angle".into(), angle_json(g));
-        }
-        if a.lesions.is_some() && found {
-            let all: Vec<_> = lesions
-                .iter()
-                .map(|g| stenosis_json(&sections, g))
-                .collect();
-            m.insert("stenoses".into(), json!(all));
-        }
-        print_line(j);
+        print_line(report_json(a, &opt, &sections, &findings));
     } else {
-        let mut t = report_text(a, &opt, &winding, &sections, graded);
-        if let (Some(n), [_, more @ ..]) = (a.lesions, &lesions[..]) {
-            t += &format!(
-                "\nlesions: {} found (at most {n}), by least area: {}",
-                lesions.len(),
-                lesions
-                    .iter()
-                    .map(|g| format!("{:.1} mm ({:.1} %)", g.lesion_mm, g.diameter_pct))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
-            for g in more {
-                t.push('\n');
-                t += stenosis_text(&sections, g).trim_end();
-            }
-        }
-        if let Some(g) = &angle {
-            t.push('\n');
-            t += &angle_text(g);
-        }
-        print_line(t);
+        print_line(report_text(a, &opt, &sections, &findings));
     }
     if !found {
         bail!(
@@ -284,13 +256,21 @@ fn winding_words(w: &Tortuosity) -> String {
     )
 }
 
+/// What the report says beyond the table: the path's tortuosity, the lesions graded (the
+/// first `--stenosis`'s, the others `--lesions`') and `--angle`'s angle.
+struct Findings<'a> {
+    winding: &'a Tortuosity,
+    lesions: &'a [Stenosis],
+    angle: Option<&'a PathAngle>,
+}
+
 fn report_text(
     a: &MeasureArgs,
     opt: &LumenOptions,
-    winding: &Tortuosity,
     sections: &[Section],
-    graded: Option<&Stenosis>,
+    findings: &Findings,
 ) -> String {
+    let winding = findings.winding;
     let length = winding.length_mm;
     let n = sections.len();
     let mut t = format!(
@@ -378,8 +358,27 @@ fn report_text(
     }
     t += &winding_words(winding);
     t.push('\n');
-    if let Some(g) = graded {
+    if let Some(g) = findings.lesions.first() {
         t += &stenosis_text(sections, g);
+    }
+    if let (Some(n), [_, more @ ..]) = (a.lesions, findings.lesions) {
+        let _ = writeln!(
+            t,
+            "lesions: {} found (at most {n}), by least area: {}",
+            findings.lesions.len(),
+            findings
+                .lesions
+                .iter()
+                .map(|g| format!("{:.1} mm ({:.1} %)", g.lesion_mm, g.diameter_pct))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        for g in more {
+            t += &stenosis_text(sections, g);
+        }
+    }
+    if let Some(g) = findings.angle {
+        t += &angle_text(g);
     }
     t.trim_end().to_string()
 }
@@ -531,10 +530,10 @@ fn stenosis_json(sections: &[Section], g: &Stenosis) -> serde_json::Value {
 fn report_json(
     a: &MeasureArgs,
     opt: &LumenOptions,
-    winding: &Tortuosity,
     sections: &[Section],
-    graded: Option<&Stenosis>,
+    findings: &Findings,
 ) -> serde_json::Value {
+    let (winding, graded) = (findings.winding, findings.lesions.first());
     let v3 = |v: DVec3| [round3(v.x), round3(v.y), round3(v.z)];
     let rows: Vec<serde_json::Value> = sections
         .iter()
@@ -597,11 +596,20 @@ fn report_json(
         "narrowest_section": narrowest,
         "sections": rows,
     });
+    let m = report.as_object_mut().unwrap();
     if let Some(g) = graded {
-        report
-            .as_object_mut()
-            .unwrap()
-            .insert("stenosis".into(), stenosis_json(sections, g));
+        m.insert("stenosis".into(), stenosis_json(sections, g));
+    }
+    if a.lesions.is_some() && !findings.lesions.is_empty() {
+        let all: Vec<_> = findings
+            .lesions
+            .iter()
+            .map(|g| stenosis_json(sections, g))
+            .collect();
+        m.insert("stenoses".into(), json!(all));
+    }
+    if let Some(g) = findings.angle {
+        m.insert("angle".into(), angle_json(g));
     }
     report
 }
