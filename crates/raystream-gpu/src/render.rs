@@ -674,7 +674,8 @@ impl<'a> GpuRenderer<'a> {
 
     /// Renders the next frames from `camera`, lit by `lights` (the scene's, moved: as many, in
     /// its order), as a turntable turns the camera and its studio lights about the scene. A
-    /// scene with a volume is refused: its light grids were made for the scene's lights.
+    /// scene with a volume must keep its lights (its light grids were made for them): other
+    /// lights are refused.
     pub fn set_view(&self, camera: Camera, lights: &[Light]) -> Result<(), GpuError> {
         let ctx = self.tracer.ctx;
         if lights.len() != self.scene.lights.len() {

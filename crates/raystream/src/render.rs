@@ -423,13 +423,8 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             mode.name()
         ),
     };
-    // A turntable's, a slice series' or a cine's frames are files in a folder, in --format.
     let frames = a.turntable.is_some() || a.slices.is_some() || a.cine;
-    let format = match (frames, a.format) {
-        (true, FrameFormat::Png | FrameFormat::Dcm) => ImageFormat::Png,
-        (true, FrameFormat::Exr) => ImageFormat::Exr,
-        (false, _) => image_format(&a.output)?,
-    };
+    let format = picture_format(a, frames)?;
     check_labels(a, true, format)?;
     check_path(a, mode)?;
     // A curved reformation's path, read before the volume: a bad one fails at once.
@@ -884,6 +879,17 @@ fn cine(
     Ok(())
 }
 
+/// The pictures' format: a series of `frames` (a turntable's, a slice series', a cine's) are
+/// files in a folder, in --format (DICOM frames are the PNGs' pictures); one picture, as `-o`
+/// names it.
+fn picture_format(a: &RenderArgs, frames: bool) -> Result<ImageFormat> {
+    Ok(match (frames, a.format) {
+        (true, FrameFormat::Png | FrameFormat::Dcm) => ImageFormat::Png,
+        (true, FrameFormat::Exr) => ImageFormat::Exr,
+        (false, _) => image_format(&a.output)?,
+    })
+}
+
 /// Where a series of frames goes: the folder `-o` names, the frames' extension, the width of
 /// their numbers, the DICOM series they make (.dcm frames) and the progress bar.
 struct FrameFolder<'a> {
@@ -1021,6 +1027,9 @@ fn scene_turntable(
     let [az, el] = orbit_angles(a);
     let base = base_view(a, t.view0, patient)?;
     let aspect = opt.width as f32 / opt.height as f32;
+    // The CPU renders from the scene's framing view and lights: a copy of the scene, made
+    // once and turned frame by frame (the GPU's renderer takes the camera and lights).
+    let mut cpu_scene: Option<Scene> = None;
     let mut frame_ms = Vec::new();
     let mut rays = 0usize;
     for i in 0..n {
@@ -1029,25 +1038,14 @@ fn scene_turntable(
         let cam = t.scene.framing_camera(view, aspect);
         let count = |s: DepthStats| rays += s.rays + s.shadow_rays;
         let t1 = Instant::now();
-        let mut picture = match t.renderer {
-            Some(r) => {
-                r.set_view(cam, &lights)?;
-                match format {
-                    ImageFormat::Png => {
-                        let (rgb, _) = r.render_srgb8(opt, count)?;
-                        let (width, height) = (opt.width, opt.height);
-                        Picture::Srgb8 { rgb, width, height }
-                    }
-                    ImageFormat::Exr => Picture::Film(r.render(opt, count)?.0),
-                }
-            }
-            None => {
-                let mut s = t.scene.clone();
-                s.frame_view = view;
-                s.lights = lights;
-                let film = render_prepared(&s, t.tree, t.medium, opt, count);
-                Picture::of_film(film, format)
-            }
+        let mut picture = if let Some(r) = t.renderer {
+            r.set_view(cam, &lights)?;
+            gpu_picture(r, opt, format, count)?.0
+        } else {
+            let s = cpu_scene.get_or_insert_with(|| t.scene.clone());
+            s.frame_view = view;
+            s.lights = lights;
+            Picture::of_film(render_prepared(s, t.tree, t.medium, opt, count), format)
         };
         frame_ms.push(ms(t1.elapsed()));
         let dicom = DicomOut {
@@ -1082,6 +1080,27 @@ fn scene_turntable(
         );
     }
     Ok(())
+}
+
+/// A frame of the GPU's stream renderer as `format` keeps it (a PNG's 8-bit sRGB, converted on
+/// the GPU; an EXR's film), and its figures.
+fn gpu_picture(
+    r: &GpuRenderer,
+    opt: &RenderOptions,
+    format: ImageFormat,
+    progress: impl FnMut(DepthStats),
+) -> Result<(Picture, raystream_gpu::GpuRenderStats)> {
+    Ok(match format {
+        ImageFormat::Png => {
+            let (rgb, stats) = r.render_srgb8(opt, progress)?;
+            let (width, height) = (opt.width, opt.height);
+            (Picture::Srgb8 { rgb, width, height }, stats)
+        }
+        ImageFormat::Exr => {
+            let (film, stats) = r.render(opt, progress)?;
+            (Picture::Film(film), stats)
+        }
+    })
 }
 
 /// Opens the device (refusing the stack traversal on a GPU), loads INPUT's scene and builds its
@@ -1262,12 +1281,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
         return render_aov(a, aov.into());
     }
-    // A turntable's frames are files in a folder, in --format.
-    let format = match (a.turntable, a.format) {
-        (Some(_), FrameFormat::Png | FrameFormat::Dcm) => ImageFormat::Png,
-        (Some(_), FrameFormat::Exr) => ImageFormat::Exr,
-        (None, _) => image_format(&a.output)?,
-    };
+    let format = picture_format(a, a.turntable.is_some())?;
     let Loaded {
         backend,
         scene,
@@ -1359,17 +1373,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         // converts its film itself); for an EXR the film.
         let img = match &renderer {
             Some(r) => {
-                let (picture, stats) = match format {
-                    ImageFormat::Png => {
-                        let (rgb, stats) = r.render_srgb8(&opt, &mut on_depth)?;
-                        let (width, height) = (opt.width, opt.height);
-                        (Picture::Srgb8 { rgb, width, height }, stats)
-                    }
-                    ImageFormat::Exr => {
-                        let (film, stats) = r.render(&opt, &mut on_depth)?;
-                        (Picture::Film(film), stats)
-                    }
-                };
+                let (picture, stats) = gpu_picture(r, &opt, format, &mut on_depth)?;
                 kernel_ms = stats.kernel_gpu_ms;
                 split = Some((
                     stats.render_ms,
