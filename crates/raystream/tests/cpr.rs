@@ -240,17 +240,7 @@ fn a_stretched_cpr_keeps_the_aortas_bend() {
 fn rotational_cpr_turns_about_the_path() {
     let (vol, path) = (chest(), aorta());
     for cpr in ["straightened", "stretched"] {
-        let base = [
-            &vol[..],
-            "--mode",
-            "slice",
-            "--path",
-            &path,
-            "--size",
-            "31x90",
-            "--cpr",
-            cpr,
-        ];
+        let base = cpr_args(&vol, &path, &["--size", "31x90", "--cpr", cpr]);
         let dir = tmp(&format!("cpr-turntable-{cpr}"));
         std::fs::remove_dir_all(&dir).ok();
         let args = [&base[..], &["--turntable", "4", "--format", "exr"]].concat();
@@ -308,15 +298,7 @@ fn marks_lie_across_the_cpr_at_their_arc_lengths() {
     let (w, h) = (40usize, 180usize);
     let size = format!("{w}x{h}");
     let png = |name: &str, extra: &[&str]| {
-        let base = [
-            &vol[..],
-            "--mode",
-            "slice",
-            "--path",
-            &path,
-            "--size",
-            &size,
-        ];
+        let base = cpr_args(&vol, &path, &["--size", &size]);
         let out = render_to(name, "cpu", &[&base[..], extra].concat());
         image::open(out).unwrap().to_rgb8().into_raw()
     };
@@ -397,17 +379,7 @@ fn a_dicom_cpr_is_a_secondary_capture_of_hounsfield_units() {
     use dicom_dictionary_std::tags;
     use dicom_pixeldata::PixelDecoder;
     let (vol, path) = (chest(), aorta());
-    let args = [
-        &vol[..],
-        "--mode",
-        "slice",
-        "--path",
-        &path,
-        "--size",
-        "32x96",
-        "--window",
-        "mediastinum",
-    ];
+    let args = cpr_args(&vol, &path, &["--size", "32x96", "--window", "mediastinum"]);
     let (values, _) = hu(&render_to("cpr-dcm.exr", "cpu", &args));
     let obj = dicom_object::open_file(render_to("cpr.dcm", "cpu", &args)).unwrap();
     let text = |tag| dicom_text(&obj, tag);
@@ -685,15 +657,7 @@ fn cross_sections_cut_the_path_square() {
         assert!(o.status.success(), "{}", stderr(&o));
     }
     let size = format!("7x{n}");
-    let cpr = [
-        &vol[..],
-        "--mode",
-        "slice",
-        "--path",
-        &path,
-        "--size",
-        &size,
-    ];
+    let cpr = cpr_args(&vol, &path, &["--size", &size]);
     let (cpr, _) = hu(&render_to("cpr-stations.exr", "cpu", &cpr));
     let mut centres = Vec::new();
     let mut normals = Vec::new();

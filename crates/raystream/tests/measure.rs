@@ -716,17 +716,7 @@ fn bad_measurements_are_refused() {
 fn draw_lumen_marks_the_cross_sections() {
     use dicom_dictionary_std::tags;
     let (vol, path) = (chest(), aorta());
-    let base = [
-        &vol[..],
-        "--mode",
-        "slice",
-        "--path",
-        &path,
-        "--slices",
-        "4",
-        "--size",
-        "64x64",
-    ];
+    let base = cpr_args(&vol, &path, &["--slices", "4", "--size", "64x64"]);
     let frames = |name: &str, extra: &[&str]| {
         let dir = tmp(name);
         std::fs::remove_dir_all(&dir).ok();
@@ -817,19 +807,7 @@ fn draw_lumen_marks_the_lumen_on_the_cpr() {
         ("left", &["--view", "left"][..]),
         ("stretched", &["--cpr", "stretched"][..]),
     ] {
-        let base = [
-            &[
-                &vol[..],
-                "--mode",
-                "slice",
-                "--path",
-                &path,
-                "--size",
-                &size,
-            ][..],
-            extra,
-        ]
-        .concat();
+        let base = cpr_args(&vol, &path, &[&["--size", &size][..], extra].concat());
         let shot = |suffix: &str, more: &[&str]| {
             render_to(
                 &format!("cpr-lumen-{name}{suffix}"),

@@ -33,6 +33,12 @@ pub fn chest() -> String {
         .into_owned()
 }
 
+/// `render`'s arguments for the HU on the curved plane along `path` through `vol` (a CPR,
+/// `--mode slice --path`), then `more`.
+pub fn cpr_args<'a>(vol: &'a str, path: &'a str, more: &[&'a str]) -> Vec<&'a str> {
+    [&[vol, "--mode", "slice", "--path", path][..], more].concat()
+}
+
 /// The hand-made path down that aorta (the contrast lumen's centroids, smoothed).
 pub fn aorta() -> String {
     repo()
