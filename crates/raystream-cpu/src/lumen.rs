@@ -100,9 +100,10 @@ impl LumenOptions {
     }
 }
 
-/// The most samples across a section's field: 2048² samples, about 170 MiB of working grids
-/// (values, masks, three distance transforms in f64) for each section measured at once, one
-/// per core.
+/// The most samples across a section's field: 2048² samples. A section is segmented on the
+/// window about its lumen, but a lumen that fills the field needs all of it: about 200 MiB of
+/// working grids (values, masks, three distance transforms in f64) for each section measured
+/// at once, one per core.
 pub const MAX_SIDE: usize = 2048;
 
 /// The lumen found on one cross-section.
@@ -174,12 +175,48 @@ pub fn measure_path(
         .collect())
 }
 
-/// A section's samples and the lumen segmented on them: an `n`×`n` grid of `p` mm about the
-/// path's point (pixel (i, j) at [`Segmented::offset`]), its HU (NaN outside the volume) and
-/// the lumen's pixels.
+/// A rectangle of a section's `n`×`n` grid: columns `i0..i0 + w`, rows `j0..j0 + h`. The
+/// lumen is segmented on the smallest one that holds it with a sample to spare on each side
+/// (or that reaches the grid's edge), not on the whole field: a 25 mm aorta in the 100 mm field
+/// takes a tenth of its samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Window {
+    i0: usize,
+    j0: usize,
+    w: usize,
+    h: usize,
+}
+
+impl Window {
+    fn dims(&self) -> [usize; 2] {
+        [self.w, self.h]
+    }
+
+    fn len(&self) -> usize {
+        self.w * self.h
+    }
+
+    /// The grid pixel (i, j) of the window's pixel `k` (row by row).
+    fn pixel(&self, k: usize) -> (usize, usize) {
+        (self.i0 + k % self.w, self.j0 + k / self.w)
+    }
+
+    /// The window's index of grid pixel (i, j), if it lies in the window.
+    fn index(&self, i: usize, j: usize) -> Option<usize> {
+        let inside =
+            (self.i0..self.i0 + self.w).contains(&i) && (self.j0..self.j0 + self.h).contains(&j);
+        inside.then(|| (j - self.j0) * self.w + (i - self.i0))
+    }
+}
+
+/// A section's samples and the lumen segmented on them: on a window of an `n`×`n` grid of
+/// `p` mm about the path's point (grid pixel (i, j) at [`Segmented::offset`]), its HU (NaN
+/// outside the volume) and the lumen's pixels, row by row; the lumen lies within the window
+/// and every grid pixel beside it too.
 struct Segmented {
     n: usize,
     p: f64,
+    win: Window,
     values: Vec<f32>,
     mask: Vec<bool>,
     threshold: f32,
@@ -193,15 +230,22 @@ fn grid_offset(n: usize, p: f64, i: usize, j: usize) -> DVec2 {
 }
 
 impl Segmented {
-    /// Pixel (i, j)'s offset from the path's point, mm.
+    /// Grid pixel (i, j)'s offset from the path's point, mm.
     fn offset(&self, i: usize, j: usize) -> DVec2 {
         grid_offset(self.n, self.p, i, j)
     }
 
-    /// Where the lumen's edge lies between lumen pixel `k` and its neighbour `o` outside it,
-    /// as a fraction of the way from `k`: where the HU falls through the threshold; where the
-    /// region was cut (the neighbour is lumen, off beyond a neck) or leaves the volume,
-    /// halfway.
+    /// The window's index of grid pixel (i, j), which lies beside the lumen or in it.
+    fn near(&self, i: usize, j: usize) -> usize {
+        self.win
+            .index(i, j)
+            .expect("the window holds the lumen and the pixels beside it")
+    }
+
+    /// Where the lumen's edge lies between lumen pixel `k` and its neighbour `o` outside it
+    /// (window indices), as a fraction of the way from `k`: where the HU falls through the
+    /// threshold; where the region was cut (the neighbour is lumen, off beyond a neck) or
+    /// leaves the volume, halfway.
     fn crossing(&self, k: usize, o: usize) -> f64 {
         let (vi, vo, t) = (self.values[k], self.values[o], self.threshold);
         if vi.is_finite() && vo.is_finite() && vi >= t && vo < t {
@@ -212,10 +256,42 @@ impl Segmented {
     }
 }
 
+/// Where a section is segmented.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Fit {
+    /// On the window about the lumen, sampling only what the seed's search, the region's
+    /// flood and that window need (what `measure` and `render` use).
+    Lumen,
+    /// On the whole field, every sample taken first: the simple way, which the tests hold
+    /// [`Fit::Lumen`] to, pixel for pixel.
+    Field,
+}
+
 /// Samples the plane of `row` and segments the lumen on it: the pixels at or above the
 /// threshold 4-connected to the one nearest the path's point within `seed_mm`, holes filled,
 /// opened; none when no lumen pixel lies that near.
 fn segment(vol: &Volume, m: &Marcher, row: &CprRow, opt: &LumenOptions) -> Option<Segmented> {
+    segment_on(vol, m, row, opt, Fit::Lumen)
+}
+
+/// [`segment`], on the window `fit` says.
+///
+/// Why a window gives the field's lumen exactly: its pixels are the field's (the same grid
+/// points), the seed's search covers every pixel within `seed_mm`, and the flood ends where it
+/// ends on the field. The window is the region's bounds grown by a pixel, so the pixels on its
+/// border that are not on the field's are outside the region and joined, outside it, to the
+/// field's border: the holes filled on the window are the field's. The opening's distances
+/// are too: from a pixel of the window, the nearest pixel outside the filled region is never
+/// beyond the window (moving one beyond it onto the window's border only brings it closer,
+/// and that border pixel is outside the region), and its other distances are to pixels of the
+/// region. Every tie is broken by the pixels' order row by row, which the window keeps.
+fn segment_on(
+    vol: &Volume,
+    m: &Marcher,
+    row: &CprRow,
+    opt: &LumenOptions,
+    fit: Fit,
+) -> Option<Segmented> {
     let (n, p) = (opt.side(), opt.pixel_mm);
     let offset = |k: usize| grid_offset(n, p, k % n, k / n);
     let (c, l, d) = (
@@ -225,38 +301,96 @@ fn segment(vol: &Volume, m: &Marcher, row: &CprRow, opt: &LumenOptions) -> Optio
     );
     let world = |q: DVec2| c + q.x * l + q.y * d;
     let hi = vol.dims.map(|k| k.max(1) as f32 - 1.0);
-    let values: Vec<f32> = (0..n * n)
-        .map(|k| {
-            let q = m.index_of(world(offset(k)).as_vec3());
-            let inside = (0..3).all(|a| (-1e-3..=hi[a] + 1e-3).contains(&q[a]));
-            if inside { m.sample(q) } else { f32::NAN }
-        })
-        .collect();
-    let lumen = |k: usize| values[k] >= opt.threshold_hu;
-    // The seed: the lumen pixel nearest the path's point, within seed_mm.
-    let seed = (0..n * n)
-        .filter(|&k| lumen(k))
+    let sample = |k: usize| {
+        let q = m.index_of(world(offset(k)).as_vec3());
+        let inside = (0..3).all(|a| (-1e-3..=hi[a] + 1e-3).contains(&q[a]));
+        if inside { m.sample(q) } else { f32::NAN }
+    };
+    // The grid's samples, each taken when first needed.
+    let mut values = vec![0f32; n * n];
+    let mut taken = vec![false; n * n];
+    let mut value = |k: usize| {
+        if !taken[k] {
+            values[k] = sample(k);
+            taken[k] = true;
+        }
+        values[k]
+    };
+    let threshold = opt.threshold_hu;
+    // The seed: the lumen pixel nearest the path's point, within seed_mm (with Fit::Lumen
+    // only the square about the grid's middle that holds that disc is searched).
+    let reach = opt.seed_mm.max(0.5 * p * std::f64::consts::SQRT_2);
+    let (lo, hi) = match fit {
+        Fit::Field => (0, n - 1),
+        Fit::Lumen => {
+            let middle = 0.5 * n as f64 - 0.5;
+            let lo = (middle - reach / p).floor() - 1.0;
+            let hi = (middle + reach / p).ceil() + 1.0;
+            (lo.max(0.0) as usize, (hi.max(0.0) as usize).min(n - 1))
+        }
+    };
+    let seed = (lo..=hi)
+        .flat_map(|j| (lo..=hi).map(move |i| j * n + i))
         .map(|k| (offset(k).length(), k))
-        .filter(|&(r, _)| r <= opt.seed_mm.max(0.5 * p * std::f64::consts::SQRT_2))
+        .filter(|&(r, k)| r <= reach && value(k) >= threshold)
         .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))?
         .1;
-    // The region: 4-connected lumen pixels from the seed, its holes filled.
+    if fit == Fit::Field {
+        for k in 0..n * n {
+            value(k);
+        }
+    }
+    // The region: 4-connected lumen pixels from the seed.
     let mut region = vec![false; n * n];
-    flood(n, seed, &mut region, lumen, false);
-    let mut mask = fill_holes(n, &region);
-    // Opened: the parts a disc of `open_mm` cannot reach from the seed's side of the lumen
-    // are cut off where they run on beyond the disc's reach (a side branch, a neighbour joined
-    // by a neck narrower than the disc); a tip or corner too sharp for the disc stays.
+    let reached = flood([n, n], seed, &mut region, |k| value(k) >= threshold, false);
+    let win = match fit {
+        Fit::Field => Window {
+            i0: 0,
+            j0: 0,
+            w: n,
+            h: n,
+        },
+        Fit::Lumen => {
+            let (mut i0, mut j0, mut i1, mut j1) = (n, n, 0, 0);
+            for &k in &reached {
+                let (i, j) = (k % n, k / n);
+                (i0, i1, j0, j1) = (i0.min(i), i1.max(i), j0.min(j), j1.max(j));
+            }
+            let (i0, j0) = (i0.saturating_sub(1), j0.saturating_sub(1));
+            let (i1, j1) = ((i1 + 1).min(n - 1), (j1 + 1).min(n - 1));
+            Window {
+                i0,
+                j0,
+                w: i1 + 1 - i0,
+                h: j1 + 1 - j0,
+            }
+        }
+    };
+    let at = |k: usize| {
+        let (i, j) = win.pixel(k);
+        j * n + i
+    };
+    let values: Vec<f32> = (0..win.len()).map(|k| value(at(k))).collect();
+    let region: Vec<bool> = (0..win.len()).map(|k| region[at(k)]).collect();
+    let seed = win
+        .index(seed % n, seed / n)
+        .expect("the seed is in the region");
+    // Its holes filled, and opened: the parts a disc of `open_mm` cannot reach from the seed's
+    // side of the lumen are cut off where they run on beyond the disc's reach (a side branch,
+    // a neighbour joined by a neck narrower than the disc); a tip or corner too sharp for the
+    // disc stays.
+    let mut mask = fill_holes(win.dims(), &region);
     let r = opt.open_mm / p;
     if r > 0.0 {
-        mask = opened(n, &mask, r, seed);
+        mask = opened(win.dims(), &mask, r, seed);
     }
     Some(Segmented {
         n,
         p,
+        win,
         values,
         mask,
-        threshold: opt.threshold_hu,
+        threshold,
     })
 }
 
@@ -269,8 +403,12 @@ pub fn measure_section(
     row: &CprRow,
     opt: &LumenOptions,
 ) -> Option<(Lumen, Vec<DVec2>)> {
-    let g = segment(vol, m, row, opt)?;
-    let (n, p, mask) = (g.n, g.p, &g.mask);
+    Some(measure_segmented(&segment(vol, m, row, opt)?, row))
+}
+
+/// [`measure_section`]'s figures of a segmented section.
+fn measure_segmented(g: &Segmented, row: &CprRow) -> (Lumen, Vec<DVec2>) {
+    let (n, p) = (g.n, g.p);
     let (c, l, d) = (
         row.centre.as_dvec3(),
         row.lateral.as_dvec3(),
@@ -281,29 +419,28 @@ pub fn measure_section(
     let mut sum = DVec2::ZERO;
     let mut open = false;
     let mut edge = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            let k = j * n + i;
-            if !mask[k] {
+    for k in 0..g.win.len() {
+        if !g.mask[k] {
+            continue;
+        }
+        let (i, j) = g.win.pixel(k);
+        count += 1;
+        let q = g.offset(i, j);
+        sum += q;
+        open |= i == 0 || j == 0 || i == n - 1 || j == n - 1;
+        // Edge points: where the lumen ends towards each neighbour outside it.
+        for (di, dj) in [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)] {
+            let (a, b) = (i as i64 + di, j as i64 + dj);
+            if a < 0 || b < 0 || a >= n as i64 || b >= n as i64 {
                 continue;
             }
-            count += 1;
-            let q = g.offset(i, j);
-            sum += q;
-            open |= i == 0 || j == 0 || i == n - 1 || j == n - 1;
-            // Edge points: where the lumen ends towards each neighbour outside it.
-            for (di, dj) in [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)] {
-                let (a, b) = (i as i64 + di, j as i64 + dj);
-                if a < 0 || b < 0 || a >= n as i64 || b >= n as i64 {
-                    continue;
-                }
-                let o = b as usize * n + a as usize;
-                if mask[o] {
-                    continue;
-                }
-                let t = g.crossing(k, o);
-                edge.push(q + t * (g.offset(a as usize, b as usize) - q));
+            let (a, b) = (a as usize, b as usize);
+            let o = g.near(a, b);
+            if g.mask[o] {
+                continue;
             }
+            let t = g.crossing(k, o);
+            edge.push(q + t * (g.offset(a, b) - q));
         }
     }
     let area = count as f64 * p * p;
@@ -331,7 +468,7 @@ pub fn measure_section(
         offset_mm: centre.length(),
         open,
     };
-    Some((lumen, edge))
+    (lumen, edge)
 }
 
 /// Where the lumen that [`measure_section`] finds on `row`'s plane meets the line through
@@ -346,12 +483,16 @@ pub fn lumen_across(
     row: &CprRow,
     opt: &LumenOptions,
 ) -> Option<[f64; 2]> {
-    let g = segment(vol, m, row, opt)?;
+    across_segmented(&segment(vol, m, row, opt)?)
+}
+
+/// [`lumen_across`] on a segmented section.
+fn across_segmented(g: &Segmented) -> Option<[f64; 2]> {
     let n = g.n;
     // The middle row, and the column nearest the path's point.
     let j = n / 2;
-    let on_line = |i: usize| g.mask[j * n + i];
-    let start = (0..n)
+    let on_line = |i: usize| g.win.index(i, j).is_some_and(|k| g.mask[k]);
+    let start = (g.win.i0..g.win.i0 + g.win.w)
         .filter(|&i| on_line(i))
         .min_by_key(|&i| (i.abs_diff(j), i))?;
     let (mut lo, mut hi) = (start, start);
@@ -365,7 +506,7 @@ pub fn lumen_across(
     let end = |i: usize, beyond: Option<usize>| {
         let q = g.offset(i, j).x;
         match beyond {
-            Some(o) => q + g.crossing(j * n + i, j * n + o) * (g.offset(o, j).x - q),
+            Some(o) => q + g.crossing(g.near(i, j), g.near(o, j)) * (g.offset(o, j).x - q),
             None => q + (if i == 0 { -0.5 } else { 0.5 }) * g.p,
         }
     };
@@ -375,16 +516,17 @@ pub fn lumen_across(
     ])
 }
 
-/// Marks in `mark` the pixels of an `n`×`n` grid reached from `seed` through pixels that are
-/// `passable` (4-connected, or 8-connected with `diagonal`), and returns them. A stack, not
-/// recursion.
+/// Marks in `mark` the pixels of a grid of `dims` (row by row) reached from `seed` through
+/// pixels that are `passable` (4-connected, or 8-connected with `diagonal`), and returns them.
+/// A stack, not recursion.
 fn flood(
-    n: usize,
+    dims: [usize; 2],
     seed: usize,
     mark: &mut [bool],
-    passable: impl Fn(usize) -> bool,
+    mut passable: impl FnMut(usize) -> bool,
     diagonal: bool,
 ) -> Vec<usize> {
+    let [w, h] = dims;
     let steps: &[(i64, i64)] = if diagonal {
         &[
             (1, 0),
@@ -403,13 +545,13 @@ fn flood(
     let mut reached = vec![seed];
     let mut stack = vec![seed];
     while let Some(k) = stack.pop() {
-        let (i, j) = ((k % n) as i64, (k / n) as i64);
+        let (i, j) = ((k % w) as i64, (k / w) as i64);
         for &(di, dj) in steps {
             let (a, b) = (i + di, j + dj);
-            if a < 0 || b < 0 || a >= n as i64 || b >= n as i64 {
+            if a < 0 || b < 0 || a >= w as i64 || b >= h as i64 {
                 continue;
             }
-            let q = b as usize * n + a as usize;
+            let q = b as usize * w + a as usize;
             if !mark[q] && passable(q) {
                 mark[q] = true;
                 reached.push(q);
@@ -420,59 +562,62 @@ fn flood(
     reached
 }
 
-/// `mask` (an `n`×`n` grid) opened about `seed` with a disc of radius `r` pixels: its core
-/// (the pixels deeper than `r` inside it) has parts; the one nearest the seed, grown back by
-/// `r` and a pixel, is the body. What is left of `mask` is cut off where a part of it reaches
-/// further than `r` from the body, and kept where it does not (a tip too sharp for the disc).
-/// A mask with no core (narrower than the disc everywhere) comes back as it is.
-fn opened(n: usize, mask: &[bool], r: f64, seed: usize) -> Vec<bool> {
-    let depth = distance_to(n, |k| !mask[k]);
+/// `mask` (a grid of `dims`, row by row) opened about `seed` with a disc of radius `r`
+/// pixels: its core (the pixels deeper than `r` inside it) has parts; the one nearest the
+/// seed, grown back by `r` and a pixel, is the body. What is left of `mask` is cut off where a
+/// part of it reaches further than `r` from the body, and kept where it does not (a tip too
+/// sharp for the disc). A mask with no core (narrower than the disc everywhere) comes back as
+/// it is.
+fn opened(dims: [usize; 2], mask: &[bool], r: f64, seed: usize) -> Vec<bool> {
+    let (w, len) = (dims[0], mask.len());
+    let depth = distance_to(dims, |k| !mask[k]);
     let core: Vec<bool> = depth.iter().map(|&d2| d2 > r * r).collect();
-    let (si, sj) = ((seed % n) as f64, (seed / n) as f64);
-    let gap = |k: usize| ((k % n) as f64 - si).powi(2) + ((k / n) as f64 - sj).powi(2);
-    let Some(start) = (0..n * n)
+    let (si, sj) = ((seed % w) as f64, (seed / w) as f64);
+    let gap = |k: usize| ((k % w) as f64 - si).powi(2) + ((k / w) as f64 - sj).powi(2);
+    let Some(start) = (0..len)
         .filter(|&k| core[k])
         .min_by(|&a, &b| gap(a).total_cmp(&gap(b)).then(a.cmp(&b)))
     else {
         return mask.to_vec();
     };
-    let mut part = vec![false; n * n];
-    flood(n, start, &mut part, |k| core[k], true);
-    let reach = distance_to(n, |k| part[k]);
+    let mut part = vec![false; len];
+    flood(dims, start, &mut part, |k| core[k], true);
+    let reach = distance_to(dims, |k| part[k]);
     let grown = (r + 1.0) * (r + 1.0);
-    let body: Vec<bool> = (0..n * n).map(|k| mask[k] && reach[k] <= grown).collect();
-    let beyond = distance_to(n, |k| body[k]);
+    let body: Vec<bool> = (0..len).map(|k| mask[k] && reach[k] <= grown).collect();
+    let beyond = distance_to(dims, |k| body[k]);
     let mut out = body.clone();
-    let mut seen = vec![false; n * n];
-    for k in 0..n * n {
+    let mut seen = vec![false; len];
+    for k in 0..len {
         if mask[k] && !body[k] && !seen[k] {
-            let piece = flood(n, k, &mut seen, |q| mask[q] && !body[q], false);
+            let piece = flood(dims, k, &mut seen, |q| mask[q] && !body[q], false);
             let far = piece.iter().map(|&q| beyond[q]).fold(0.0, f64::max);
             for q in piece {
                 out[q] = far <= r * r;
             }
         }
     }
-    fill_holes(n, &out)
+    fill_holes(dims, &out)
 }
 
-/// `region` with its holes filled: all but what the outside reaches from the grid's border
-/// (8-connected, as the complement of a 4-connected region is).
-fn fill_holes(n: usize, region: &[bool]) -> Vec<bool> {
-    let mut outside = vec![false; n * n];
-    for k in 0..n * n {
-        let (i, j) = (k % n, k / n);
-        if (i == 0 || j == 0 || i == n - 1 || j == n - 1) && !region[k] && !outside[k] {
-            flood(n, k, &mut outside, |q| !region[q], true);
+/// `region` (a grid of `dims`, row by row) with its holes filled: all but what the outside
+/// reaches from the grid's border (8-connected, as the complement of a 4-connected region is).
+fn fill_holes(dims: [usize; 2], region: &[bool]) -> Vec<bool> {
+    let [w, h] = dims;
+    let mut outside = vec![false; region.len()];
+    for k in 0..region.len() {
+        let (i, j) = (k % w, k / w);
+        if (i == 0 || j == 0 || i == w - 1 || j == h - 1) && !region[k] && !outside[k] {
+            flood(dims, k, &mut outside, |q| !region[q], true);
         }
     }
     outside.iter().map(|&o| !o).collect()
 }
 
-/// Per pixel of an `n`×`n` grid, the squared distance (pixels²) to the nearest pixel that is
-/// `target` (+∞ where there is none).
-fn distance_to(n: usize, target: impl Fn(usize) -> bool) -> Vec<f64> {
-    raystream_volume::distance::squared_distance([n, n], [1.0, 1.0], target)
+/// Per pixel of a grid of `dims` (row by row), the squared distance (pixels²) to the nearest
+/// pixel that is `target` (+∞ where there is none).
+fn distance_to(dims: [usize; 2], target: impl Fn(usize) -> bool) -> Vec<f64> {
+    raystream_volume::distance::squared_distance(dims, [1.0, 1.0], target)
 }
 
 /// The convex hull of `pts`, counter-clockwise, without collinear points (Andrew's monotone
@@ -884,6 +1029,216 @@ mod tests {
         let want = 16.0 * (-0.6f64).acos() / PI;
         assert!((length - want).abs() <= 1.0, "{length} for {want}");
         assert!((0.5 * (a + b) + 1.0 - 31.5).abs() <= 0.5);
+    }
+
+    /// Segments `row`'s plane on the lumen's window and on the whole field, and checks that
+    /// they agree: the window's samples are the field's, the field's lumen lies in the window
+    /// and is the window's, and the figures and the run across the middle row are the same,
+    /// bit for bit; the window is smaller than the field unless the lumen is open. Returns
+    /// the lumen's figures, if one was found.
+    fn same_on_the_window(vol: &Volume, row: &CprRow, o: &LumenOptions) -> Option<Lumen> {
+        let m = Marcher::new(vol, None);
+        let (a, b) = (
+            segment_on(vol, &m, row, o, Fit::Lumen),
+            segment_on(vol, &m, row, o, Fit::Field),
+        );
+        let (a, b) = match (a, b) {
+            (None, None) => return None,
+            (Some(a), Some(b)) => (a, b),
+            (a, b) => panic!("a lumen on one: {} {}", a.is_some(), b.is_some()),
+        };
+        assert_eq!(b.win.len(), b.n * b.n);
+        let mut inside = 0;
+        for k in 0..b.win.len() {
+            let (i, j) = b.win.pixel(k);
+            match a.win.index(i, j) {
+                Some(q) => {
+                    inside += 1;
+                    assert_eq!(a.mask[q], b.mask[k], "pixel ({i}, {j})");
+                    assert_eq!(a.values[q].to_bits(), b.values[k].to_bits());
+                }
+                None => assert!(
+                    !b.mask[k],
+                    "the field's lumen at ({i}, {j}) is off the window"
+                ),
+            }
+        }
+        assert_eq!(inside, a.win.len());
+        let (la, ea) = measure_segmented(&a, row);
+        let (lb, eb) = measure_segmented(&b, row);
+        assert_eq!(la, lb);
+        assert_eq!(ea, eb);
+        assert_eq!(across_segmented(&a), across_segmented(&b));
+        assert!(la.open || a.win.len() < b.win.len(), "{:?}", a.win);
+        Some(la)
+    }
+
+    /// The window gives the field's lumen on every kind of section: a tube from on its axis,
+    /// off it, from outside it and from too far; a ring's hole; a side branch cut off and not;
+    /// a lumen wider than the field; a neighbour joined by a neck; a tube running off the
+    /// volume's edge; slanted sections; and tubes of many sizes and places.
+    #[test]
+    fn the_lumen_on_its_window_is_the_lumen_on_the_field() {
+        let row_at = |vol: &Volume, a: DVec3, b: DVec3, o: &LumenOptions| {
+            measure_path(vol, &[a, b], 1, DVec3::X, o).unwrap()[0].row
+        };
+        let (r, axis) = (7.3, DVec2::new(31.6, 32.2));
+        let tube = phantom(24, |p| r - (p.truncate() - axis).length());
+        let o = opt(&tube);
+        let mut found = 0;
+        for (x, y) in [
+            (31.6, 32.2),
+            (33.0, 36.0),
+            (40.9, 32.5),
+            (31.6, 32.2 - r - 4.0),
+        ] {
+            let row = row_at(&tube, DVec3::new(x, y, 2.0), DVec3::new(x, y, 21.0), &o);
+            found += same_on_the_window(&tube, &row, &o).is_some() as usize;
+        }
+        assert_eq!(found, 4);
+        let far = row_at(
+            &tube,
+            DVec3::new(50.0, 50.0, 2.0),
+            DVec3::new(50.0, 50.0, 21.0),
+            &o,
+        );
+        assert!(same_on_the_window(&tube, &far, &o).is_none());
+        // Slanted through the tube: elliptic sections.
+        for tilt in [3.0, 9.0] {
+            let row = row_at(
+                &tube,
+                DVec3::new(31.6 - tilt, 32.2, 2.0),
+                DVec3::new(31.6 + tilt, 32.0, 21.0),
+                &o,
+            );
+            assert!(same_on_the_window(&tube, &row, &o).is_some());
+        }
+        // A ring: the path in its dark core, the hole filled.
+        let centre = DVec2::new(30.0, 30.0);
+        let ring = phantom(8, |p| {
+            let d = (p.truncate() - centre).length();
+            (6.0 - d).min(d - 2.0)
+        });
+        let row = row_at(
+            &ring,
+            DVec3::new(30.0, 30.0, 1.0),
+            DVec3::new(30.0, 30.0, 6.0),
+            &o,
+        );
+        let l = same_on_the_window(&ring, &row, &o).unwrap();
+        assert!(l.area_mm2 > std::f64::consts::PI * 30.0);
+        // A side branch to the field's edge, cut off (closed) and not (open).
+        let c = DVec2::new(28.0, 32.0);
+        let branch = phantom_at(0.5, 16, |p| {
+            let q = p.truncate() - c;
+            let branch = if q.x > 0.0 { 1.2 - q.y.abs() } else { -10.0 };
+            (8.0 - q.length()).max(branch)
+        });
+        let ob = opt(&branch);
+        let row = row_at(
+            &branch,
+            DVec3::new(c.x, c.y, 1.0),
+            DVec3::new(c.x, c.y, 6.0),
+            &ob,
+        );
+        for (open_mm, open) in [(2.0, false), (0.0, true)] {
+            let o = LumenOptions { open_mm, ..ob };
+            assert_eq!(same_on_the_window(&branch, &row, &o).unwrap().open, open);
+        }
+        // Wider than the field.
+        let wide = phantom(8, |p| 25.0 - (p.truncate() - DVec2::splat(32.0)).length());
+        let o30 = LumenOptions {
+            field_mm: 30.0,
+            ..opt(&wide)
+        };
+        let row = row_at(
+            &wide,
+            DVec3::new(32.0, 32.0, 1.0),
+            DVec3::new(32.0, 32.0, 6.0),
+            &o30,
+        );
+        assert!(same_on_the_window(&wide, &row, &o30).unwrap().open);
+        // Two tubes joined by a neck 1.6 mm wide: the opening cuts the neighbour off.
+        let (a, b) = (DVec2::new(24.0, 32.0), DVec2::new(42.0, 32.0));
+        let pair = phantom_at(0.5, 12, |p| {
+            let q = p.truncate();
+            let neck = if (a.x..b.x).contains(&q.x) {
+                0.8 - (q.y - 32.0).abs()
+            } else {
+                -10.0
+            };
+            (6.0 - (q - a).length())
+                .max(5.0 - (q - b).length())
+                .max(neck)
+        });
+        let op = opt(&pair);
+        let row = row_at(
+            &pair,
+            DVec3::new(a.x, a.y, 1.0),
+            DVec3::new(a.x, a.y, 5.0),
+            &op,
+        );
+        let l = same_on_the_window(&pair, &row, &op).unwrap();
+        assert!(!l.open && l.max_diameter_mm < 13.0, "{l:?}");
+        // A tube running off the volume's edge (samples beyond it are NaN).
+        let edge = phantom(8, |p| 6.0 - (p.truncate() - DVec2::new(2.0, 30.0)).length());
+        let row = row_at(
+            &edge,
+            DVec3::new(3.0, 30.0, 1.0),
+            DVec3::new(3.0, 30.0, 6.0),
+            &o,
+        );
+        assert!(same_on_the_window(&edge, &row, &o).is_some());
+        // Tubes of many sizes and places, paths near and off their axes.
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..12 {
+            let (r, cx, cy) = (
+                1.5 + 12.0 * next(),
+                20.0 + 24.0 * next(),
+                20.0 + 24.0 * next(),
+            );
+            let vol = phantom(6, |p| r - (p.truncate() - DVec2::new(cx, cy)).length());
+            let o = LumenOptions {
+                open_mm: 3.0 * next(),
+                ..opt(&vol)
+            };
+            let (x, y) = (cx + 8.0 * (next() - 0.5), cy + 8.0 * (next() - 0.5));
+            let row = row_at(
+                &vol,
+                DVec3::new(x, y, 1.0),
+                DVec3::new(x + 4.0 * next(), y, 4.0),
+                &o,
+            );
+            same_on_the_window(&vol, &row, &o);
+        }
+    }
+
+    /// On the chest CT's aorta, a section every 5 mm (the arch's open sections among them):
+    /// the window gives the field's lumen on each.
+    #[test]
+    fn the_aortas_sections_on_their_windows_are_those_on_the_field() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let vol = raystream_io::load_volume(
+            &root.join("../shared/data/volumes/nifti/chest_ct_stents_totalseg.nii.gz"),
+            &Default::default(),
+        )
+        .unwrap();
+        let points = raystream_io::read_curve(&root.join("examples/chest_aorta.mrk.json")).unwrap();
+        let o = LumenOptions::for_volume(&vol);
+        let plane = CurvedPlane::sections(&points, DVec3::X, 0.0, 31).unwrap();
+        let found: Vec<Lumen> = plane
+            .rows
+            .par_iter()
+            .filter_map(|row| same_on_the_window(&vol, row, &o))
+            .collect();
+        assert!(found.len() >= 28, "{} of 31", found.len());
+        assert!(found.iter().any(|l| l.open) && found.iter().any(|l| !l.open));
     }
 
     #[test]

@@ -359,7 +359,7 @@ pub struct RenderArgs {
         value_delimiter = ',',
         requires = "path",
         conflicts_with = "slices",
-        allow_negative_numbers = true
+        allow_hyphen_values = true
     )]
     pub mark_at: Vec<f64>,
     /// With --path FILE --slices N: the cross-sections lie about this point of the path, mm
@@ -732,7 +732,7 @@ pub struct MeasureArgs {
         long,
         value_name = "MM[,MM]",
         value_delimiter = ',',
-        allow_negative_numbers = true
+        allow_hyphen_values = true
     )]
     pub reference: Vec<f64>,
     /// Grade up to N lesions (tandem stenoses): the closed section of least area, then by
@@ -759,7 +759,7 @@ pub struct MeasureArgs {
         long,
         value_name = "A,B,C",
         value_delimiter = ',',
-        allow_negative_numbers = true
+        allow_hyphen_values = true
     )]
     pub angle: Vec<f64>,
     /// Draw the diameters against arc length to FILE (SVG): D eq, D max and D min, open

@@ -353,6 +353,10 @@ fn marks_lie_across_the_cpr_at_their_arc_lengths() {
             "--mark-at 200: not on the path",
         ),
         (
+            vec!["--mark-at", "-5,20", "-o", out.to_str().unwrap()],
+            "--mark-at -5: not on the path",
+        ),
+        (
             vec!["--mark-at", "20", "-o", exr.to_str().unwrap()],
             "--mark-at draws on a PNG",
         ),

@@ -323,6 +323,11 @@ fn the_angle_at_a_point_of_the_path() {
         ("10,80", "--angle: 2 arc lengths; give three"),
         ("80,10,150", "in order along the path"),
         ("1,2,1e4", "not on the path (0 to 154.2 mm along it)"),
+        // A leading minus is a value, not an option (clap took it for a flag before).
+        (
+            "-1,0,1",
+            "point at -1 mm: not on the path (0 to 154.2 mm along it)",
+        ),
     ] {
         refused(
             &[
@@ -677,6 +682,10 @@ fn bad_measurements_are_refused() {
         (
             vec!["--path", &path, "--every", "10", "--reference", "1,2,3"],
             "3 references",
+        ),
+        (
+            vec!["--path", &path, "--every", "10", "--reference", "-5,20"],
+            "at -5 mm: not on the path",
         ),
         (
             vec!["--path", &path, "--every", "10", "--span", "0"],
