@@ -762,9 +762,10 @@ pub struct MeasureArgs {
         allow_hyphen_values = true
     )]
     pub angle: Vec<f64>,
-    /// Draw the diameters against arc length to FILE (SVG): D eq, D max and D min, open
+    /// Draw the diameters against arc length to FILE (.svg, .png, or .dcm: the PNG's pixels
+    /// as a DICOM Secondary Capture of the input's study): D eq, D max and D min, open
     /// sections, and with --stenosis the reference, the lesion and the narrowed segment.
-    #[arg(long, value_name = "FILE.svg")]
+    #[arg(long, value_name = "FILE.svg|png|dcm")]
     pub plot: Option<PathBuf>,
     #[command(flatten)]
     pub pick: VolumePick,

@@ -270,21 +270,47 @@ impl DicomOut {
 /// This run's options as words, for a DICOM picture's description: `raystream render --mode
 /// mip …`, without the paths of the input and the output (they may name the patient).
 pub fn options_in_words(input: Option<&Path>, output: &Path) -> String {
-    let paths: Vec<std::ffi::OsString> = input
-        .into_iter()
-        .chain([output])
-        .map(|p| p.as_os_str().to_owned())
+    let args: Vec<String> = std::env::args_os()
+        .skip(1)
+        .map(|a| a.to_string_lossy().into_owned())
         .collect();
+    words_without_paths(&args, input, output)
+}
+
+/// `raystream` and `args`, without the input, the output and the option that names the output
+/// (`-o OUT`, `--plot OUT`, `--plot=OUT`) or any `-o`/`--output`, and with every other file or
+/// folder named (a path, a transfer function) as `FILE`.
+fn words_without_paths(args: &[String], input: Option<&Path>, output: &Path) -> String {
+    let names = |a: &str, p: &Path| Path::new(a) == p;
     let mut words = vec!["raystream".to_string()];
-    let mut skip_next = false;
-    for arg in std::env::args_os().skip(1) {
-        if std::mem::take(&mut skip_next) || paths.contains(&arg) {
+    let mut k = 0;
+    while k < args.len() {
+        let a = &args[k];
+        let (option, value) = match a.split_once('=') {
+            Some((o, v)) if o.starts_with("--") => (Some(o), Some(v)),
+            _ => (None, None),
+        };
+        let names_output = |next: Option<&String>| {
+            a.starts_with('-') && next.is_some_and(|n| names(n, output))
+                || matches!(a.as_str(), "-o" | "--output")
+        };
+        if option.is_none() && names_output(args.get(k + 1)) {
+            k += 2;
             continue;
         }
-        match arg.to_string_lossy().as_ref() {
-            "-o" | "--output" => skip_next = true,
-            a if a.starts_with("--output=") => {}
-            a => words.push(a.to_string()),
+        k += 1;
+        if let (Some(o), Some(v)) = (option, value) {
+            if names(v, output) || o == "--output" {
+                continue;
+            }
+            let v = if Path::new(v).exists() { "FILE" } else { v };
+            words.push(format!("{o}={v}"));
+        } else if names(a, output) || input.is_some_and(|p| names(a, p)) {
+            continue;
+        } else if !a.starts_with('-') && Path::new(a).exists() {
+            words.push("FILE".to_string());
+        } else {
+            words.push(a.clone());
         }
     }
     words.join(" ")
@@ -361,5 +387,77 @@ pub fn print_line(line: impl std::fmt::Display) {
         && e.kind() != std::io::ErrorKind::BrokenPipe
     {
         eprintln!("raystream: cannot write to stdout: {e}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A DICOM picture's description names the options, not the files: the input, the output
+    /// and the option naming it are left out, other files and folders become FILE.
+    #[test]
+    fn descriptions_leave_the_files_out() {
+        let here = env!("CARGO_MANIFEST_DIR");
+        let words = |args: &[&str], output: &str| {
+            let args: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+            words_without_paths(&args, Some(Path::new("ct/Doe^John")), Path::new(output))
+        };
+        assert_eq!(
+            words(
+                &[
+                    "render",
+                    "ct/Doe^John",
+                    "--mode",
+                    "mip",
+                    "-o",
+                    "out.dcm",
+                    "--size",
+                    "8x8"
+                ],
+                "out.dcm"
+            ),
+            "raystream render --mode mip --size 8x8"
+        );
+        assert_eq!(
+            words(
+                &[
+                    "measure",
+                    "ct/Doe^John",
+                    "--path",
+                    here,
+                    "--every",
+                    "2",
+                    "-o",
+                    "table.csv",
+                    "--plot",
+                    "p.dcm",
+                    "--stenosis"
+                ],
+                "p.dcm"
+            ),
+            "raystream measure --path FILE --every 2 --stenosis"
+        );
+        assert_eq!(
+            words(
+                &[
+                    "measure",
+                    "ct/Doe^John",
+                    &format!("--path={here}"),
+                    "--plot=p.dcm",
+                    "--output=t.csv"
+                ],
+                "p.dcm"
+            ),
+            "raystream measure --path=FILE"
+        );
+        // Not a file: a value stays.
+        assert_eq!(
+            words(
+                &["render", "--tf", "no/such/tf.json", "-o", "x.dcm"],
+                "x.dcm"
+            ),
+            "raystream render --tf no/such/tf.json"
+        );
     }
 }

@@ -26,13 +26,8 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
             a.every
         );
     }
-    if let Some(p) = &a.plot
-        && !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg"))
-    {
-        bail!(
-            "--plot {}: the profile is drawn as SVG; name the file .svg",
-            p.display()
-        );
+    if let Some(p) = &a.plot {
+        crate::profile::PlotFormat::of(p)?;
     }
     if !a.angle.is_empty() && a.angle.len() != 3 {
         bail!(
@@ -112,12 +107,22 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     if let Some(out) = &a.plot
         && found
     {
-        let title = format!(
-            "{}: the lumen along {}",
-            file_name(&a.input),
-            file_name(&a.path)
-        );
-        crate::profile::write(out, &title, &sections, length, &lesions)?;
+        // A DICOM picture's burnt-in title names no files (they may name the patient).
+        let title = if crate::common::is_dicom(out) {
+            "The lumen along the path".to_string()
+        } else {
+            format!(
+                "{}: the lumen along {}",
+                file_name(&a.input),
+                file_name(&a.path)
+            )
+        };
+        let dicom = crate::common::DicomOut {
+            annotated: true,
+            description: crate::common::options_in_words(Some(&a.input), out),
+            ..Default::default()
+        };
+        crate::profile::write(out, &title, &sections, length, &lesions, &dicom)?;
     }
     let findings = Findings {
         winding: &winding,

@@ -5,16 +5,22 @@
 //! crosses (their figures are of the part in the field, so they bound the lumen from below),
 //! and with a graded stenosis the reference line, the lesion and the narrowed segment.
 //!
-//! Drawn with plotters' SVG back-end. Each series has its own colour, and the legend shows
-//! colour swatches (rectangles), so every polyline of a series' colour is data: the tests read
-//! the plot back through that.
+//! Drawn with plotters, as SVG (`.svg`) or as pixels: a PNG (`.png`), or a DICOM Secondary
+//! Capture image (`.dcm`) that joins the input's study, so that the graph can go to a PACS
+//! beside the CPR. Text is laid out and, in pixels, drawn with DejaVu Sans, embedded: the
+//! same layout in both, and no system fonts needed. Each series has its own colour, and the
+//! legend shows colour swatches (rectangles), so every polyline of a series' colour is data:
+//! the tests read the plot back through that, and hold the pixels to the SVG.
 
 use std::path::Path;
 
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Context, Result, anyhow, bail};
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use raystream_cpu::lumen::{Lumen, Section};
 use raystream_cpu::stenosis::{self, ReferenceSource, Stenosis};
+
+use crate::common::{DicomOut, Picture};
 
 /// The picture's size, px.
 pub const SIZE: (u32, u32) = (1000, 560);
@@ -85,6 +91,19 @@ fn swatch(c: RGBColor, alpha: f64) -> impl Fn((i32, i32)) -> Rectangle<(i32, i32
     move |(x, y)| Rectangle::new([(x, y - 5), (x + 18, y + 5)], c.mix(alpha).filled())
 }
 
+/// The font every text of the plot is laid out in (registered once, before any plot).
+fn register_font() -> Result<()> {
+    static FONT: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let ok = *FONT.get_or_init(|| {
+        plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
+            .is_ok()
+    });
+    if !ok {
+        bail!("the embedded font DejaVu Sans does not load");
+    }
+    Ok(())
+}
+
 /// The profile as SVG text; `title` heads it, `length_mm` is the path's length.
 pub fn svg(
     title: &str,
@@ -92,6 +111,39 @@ pub fn svg(
     length_mm: f64,
     graded: &[Stenosis],
 ) -> Result<String> {
+    register_font()?;
+    let mut out = String::new();
+    {
+        let root = SVGBackend::with_string(&mut out, SIZE).into_drawing_area();
+        draw(&root, title, sections, length_mm, graded).map_err(|e| anyhow!("{e}"))?;
+    }
+    Ok(out)
+}
+
+/// The profile as pixels: [`SIZE`], 8-bit RGB, row by row from the top left.
+pub fn rgb(
+    title: &str,
+    sections: &[Section],
+    length_mm: f64,
+    graded: &[Stenosis],
+) -> Result<Vec<u8>> {
+    register_font()?;
+    let mut out = vec![0u8; 3 * SIZE.0 as usize * SIZE.1 as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut out, SIZE).into_drawing_area();
+        draw(&root, title, sections, length_mm, graded).map_err(|e| anyhow!("{e}"))?;
+    }
+    Ok(out)
+}
+
+/// Draws the profile on `root`.
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    title: &str,
+    sections: &[Section],
+    length_mm: f64,
+    graded: &[Stenosis],
+) -> std::result::Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let runs = closed_runs(sections);
     let lumens = sections.iter().filter_map(|s| s.lumen.as_ref());
     let reference: Vec<f64> = graded
@@ -106,11 +158,9 @@ pub fn svg(
     // that runs there (a steep one between placed sections), so that all of it is drawn.
     let ymax = (top * 1.3).max(1.0);
     let ymin = reference.iter().copied().fold(0.0, f64::min);
-    let mut out = String::new();
     {
-        let root = SVGBackend::with_string(&mut out, SIZE).into_drawing_area();
         root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 20))
             .margin(14)
             .x_label_area_size(44)
@@ -233,20 +283,60 @@ pub fn svg(
             .draw()?;
         root.present()?;
     }
-    Ok(out)
+    Ok(())
 }
 
-/// Writes the profile to `file` (which must be named .svg).
+/// How a profile is written, by its file's name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlotFormat {
+    Svg,
+    Png,
+    /// The PNG's pixels as a DICOM Secondary Capture image of the input's study.
+    Dicom,
+}
+
+impl PlotFormat {
+    /// The format `file` names (`.svg`, `.png` or `.dcm`, any case), checked before any work.
+    pub fn of(file: &Path) -> Result<PlotFormat> {
+        let ext = file.extension().and_then(|e| e.to_str()).unwrap_or("");
+        Ok(match ext.to_ascii_lowercase().as_str() {
+            "svg" => PlotFormat::Svg,
+            "png" => PlotFormat::Png,
+            "dcm" => PlotFormat::Dicom,
+            _ => bail!(
+                "--plot {}: the profile is drawn as SVG, PNG or DICOM; name the file .svg, .png or .dcm",
+                file.display()
+            ),
+        })
+    }
+}
+
+/// Writes the profile to `file`, as its name says ([`PlotFormat::of`]); a DICOM file as
+/// `dicom` describes it.
 pub fn write(
     file: &Path,
     title: &str,
     sections: &[Section],
     length_mm: f64,
     graded: &[Stenosis],
+    dicom: &DicomOut,
 ) -> Result<()> {
-    let text = svg(title, sections, length_mm, graded)
-        .map_err(|e| anyhow!("{}: cannot draw the profile: {e}", file.display()))?;
-    std::fs::write(file, text).with_context(|| format!("cannot write {}", file.display()))
+    let cannot = |e: anyhow::Error| anyhow!("{}: cannot draw the profile: {e}", file.display());
+    match PlotFormat::of(file)? {
+        PlotFormat::Svg => {
+            let text = svg(title, sections, length_mm, graded).map_err(cannot)?;
+            std::fs::write(file, text).with_context(|| format!("cannot write {}", file.display()))
+        }
+        PlotFormat::Png | PlotFormat::Dicom => {
+            let rgb = rgb(title, sections, length_mm, graded).map_err(cannot)?;
+            let picture = Picture::Srgb8 {
+                rgb,
+                width: SIZE.0,
+                height: SIZE.1,
+            };
+            picture.save(file, "", dicom)
+        }
+    }
 }
 
 #[cfg(test)]
@@ -486,6 +576,161 @@ mod tests {
         }
         assert!(shades.next().is_none(), "a shaded segment of no lesion");
         lines.len()
+    }
+
+    /// Holds the profile in pixels to its SVG (the same layout, the same font): every pixel
+    /// of the D eq colour lies within 1.5 px of one of the SVG's D eq lines or dots or its
+    /// legend swatch, and nearly every vertex of those lines (all but a few under the legend
+    /// box or later marks) has such a pixel within 1.5 px; each lesion's line is a column of
+    /// its colour where the SVG draws it; and text is drawn: dark pixels in the title's band
+    /// and in the legend's box. Returns the number of D eq pixels.
+    fn check_pixels(rgb: &[u8], svg: &str) -> usize {
+        let (w, h) = (SIZE.0 as usize, SIZE.1 as usize);
+        assert_eq!(rgb.len(), 3 * w * h);
+        let px = |x: usize, y: usize| {
+            let k = 3 * (y * w + x);
+            RGBColor(rgb[k], rgb[k + 1], rgb[k + 2])
+        };
+        let el = elements(svg);
+        let of = |tag: &str, c: RGBColor| -> Vec<&Element> {
+            el.iter().filter(|e| e.tag == tag && e.is(c)).collect()
+        };
+        // The D eq marks as segments (a dot: its centre twice), and its swatch.
+        let mut segments: Vec<((f64, f64), (f64, f64))> = Vec::new();
+        for line in of("polyline", EQ) {
+            let p = line.points();
+            segments.extend(p.windows(2).map(|q| (q[0], q[1])));
+        }
+        for dot in of("circle", EQ) {
+            let c = (dot.num("cx"), dot.num("cy"));
+            segments.push((c, c));
+        }
+        let swatch: Vec<[f64; 4]> = of("rect", EQ)
+            .iter()
+            .map(|r| {
+                let (x, y) = (r.num("x"), r.num("y"));
+                [x, y, x + r.num("width"), y + r.num("height")]
+            })
+            .collect();
+        assert_eq!(swatch.len(), 1);
+        let off_segment = |p: (f64, f64), (a, b): ((f64, f64), (f64, f64))| {
+            let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+            let len2 = dx * dx + dy * dy;
+            let t = if len2 > 0.0 {
+                (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            ((p.0 - a.0 - t * dx).powi(2) + (p.1 - a.1 - t * dy).powi(2)).sqrt()
+        };
+        let is_eq = |c: RGBColor| c == EQ;
+        let mut count = 0;
+        for y in 0..h {
+            for x in 0..w {
+                if !is_eq(px(x, y)) {
+                    continue;
+                }
+                count += 1;
+                let p = (x as f64, y as f64);
+                let in_swatch = swatch.iter().any(|r| {
+                    (r[0] - 1.0..=r[2] + 1.0).contains(&p.0)
+                        && (r[1] - 1.0..=r[3] + 1.0).contains(&p.1)
+                });
+                // A dot is a disc of radius 4 about its centre.
+                let on_mark = segments.iter().any(|&s| {
+                    let r = if s.0 == s.1 { 4.0 } else { 0.0 };
+                    off_segment(p, s) <= r + 1.5
+                });
+                assert!(
+                    in_swatch || on_mark,
+                    "a D eq pixel at ({x}, {y}) off every D eq mark"
+                );
+            }
+        }
+        // Nearly every vertex of the lines has its colour within 1.5 px.
+        let vertices: Vec<(f64, f64)> =
+            of("polyline", EQ).iter().flat_map(|l| l.points()).collect();
+        let shown = vertices
+            .iter()
+            .filter(|&&(vx, vy)| {
+                let (x0, y0) = (
+                    (vx - 1.5).max(0.0).ceil() as usize,
+                    (vy - 1.5).max(0.0).ceil() as usize,
+                );
+                (y0..=((vy + 1.5) as usize).min(h - 1))
+                    .any(|y| (x0..=((vx + 1.5) as usize).min(w - 1)).any(|x| is_eq(px(x, y))))
+            })
+            .count();
+        assert!(
+            shown * 100 >= vertices.len() * 95,
+            "{shown} of {} D eq vertices drawn",
+            vertices.len()
+        );
+        // Each lesion's line: its colour in its column over most of its height.
+        for line in of("polyline", LESION) {
+            let p = line.points();
+            let x = p[0].0.round() as usize;
+            let (y0, y1) = (p[0].1.min(p[1].1) as usize, p[0].1.max(p[1].1) as usize);
+            let coloured = (y0..=y1.min(h - 1))
+                .filter(|&y| (x.saturating_sub(1)..=x + 1).any(|x| px(x, y) == LESION))
+                .count();
+            assert!(
+                coloured * 10 >= (y1 - y0) * 7,
+                "{coloured} of {} px",
+                y1 - y0
+            );
+        }
+        // Text: dark pixels in the title's band and in the legend's box (its border is the
+        // one rectangle drawn with a 0.4 black stroke).
+        let dark = |x: usize, y: usize| {
+            let c = px(x, y);
+            c.0 < 90 && c.1 < 90 && c.2 < 90
+        };
+        let title = (0..30)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| dark(x, y))
+            .count();
+        assert!(title > 100, "{title} dark pixels in the title's band");
+        let legend = el
+            .iter()
+            .find(|e| e.tag == "rect" && e.get("stroke") == "#000000" && e.get("opacity") == "0.4")
+            .expect("the legend's box");
+        let (lx, ly) = (legend.num("x") as usize, legend.num("y") as usize);
+        let (lw, lh) = (legend.num("width") as usize, legend.num("height") as usize);
+        let text = (ly + 2..ly + lh - 2)
+            .flat_map(|y| (lx + 30..lx + lw - 2).map(move |x| (x, y)))
+            .filter(|&(x, y)| dark(x, y))
+            .count();
+        assert!(text > 300, "{text} dark pixels in the legend");
+        count
+    }
+
+    /// The profile in pixels is its SVG drawn: on the made-up sections with one lesion and
+    /// with two, and without a grade.
+    #[test]
+    fn the_profile_in_pixels_is_its_svg() {
+        let sections: Vec<Section> = (0..60)
+            .map(|i| {
+                let s = i as f64 + 0.5;
+                let d = 12.0 - 0.05 * s - 6.0 * (-((s - 40.0) / 4.0).powi(2)).exp();
+                match i {
+                    20 | 22 => section(s, None, false),
+                    23 | 24 => section(s, Some(d + 5.0), true),
+                    _ => section(s, Some(d), false),
+                }
+            })
+            .collect();
+        let opts = StenosisOptions {
+            lesion_mm: None,
+            reference_mm: vec![],
+            span_mm: 20.0,
+        };
+        let g = stenosis::grade(&sections, 60.0, &opts).unwrap();
+        for graded in [vec![], vec![g]] {
+            let text = svg("made up", &sections, 60.0, &graded).unwrap();
+            let pixels = rgb("made up", &sections, 60.0, &graded).unwrap();
+            assert!(check_pixels(&pixels, &text) > 500);
+        }
     }
 
     /// A section at arc `s` with D eq `d` (D max 3 mm more, D min 2 mm less), or no lumen.

@@ -696,8 +696,8 @@ fn bad_measurements_are_refused() {
             "invalid value 'x'",
         ),
         (
-            vec!["--path", &path, "--plot", "profile.png"],
-            "--plot profile.png: the profile is drawn as SVG; name the file .svg",
+            vec!["--path", &path, "--plot", "profile.jpg"],
+            "--plot profile.jpg: the profile is drawn as SVG, PNG or DICOM; name the file .svg, .png or .dcm",
         ),
         (
             vec![
@@ -1064,4 +1064,53 @@ fn draw_path_over_the_bones_of_a_volume() {
         all.extend(args);
         refused(&all, want);
     }
+}
+
+/// `measure --plot` as pixels: a PNG of the plot, and a DICOM Secondary Capture of the same
+/// pixels (but for the title, which in DICOM names no files) whose description gives the
+/// options without the files' names, with the text marked as burnt in. That the pixels are
+/// the SVG's plot is `profile.rs`'s test.
+#[test]
+fn the_profile_as_png_and_dicom() {
+    use dicom_dictionary_std::tags;
+    use dicom_pixeldata::PixelDecoder;
+    let (vol, path) = (chest(), aorta());
+    let plot = |name: &str| {
+        let out = tmp(name);
+        let o = run(&[
+            "measure",
+            "-q",
+            &vol,
+            "--path",
+            &path,
+            "--every",
+            "4",
+            "--stenosis",
+            "--plot",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        out
+    };
+    let png = image::open(plot("profile-pixels.png")).unwrap().to_rgb8();
+    assert_eq!(png.dimensions(), (1000, 560));
+    let obj = dicom_object::open_file(plot("profile-pixels.dcm")).unwrap();
+    let text = |tag| dicom_text(&obj, tag);
+    assert_eq!(text(tags::SOP_CLASS_UID), "1.2.840.10008.5.1.4.1.1.7");
+    assert_eq!(text(tags::BURNED_IN_ANNOTATION), "YES");
+    assert_eq!(
+        text(tags::SERIES_DESCRIPTION),
+        "raystream measure -q --path FILE --every 4 --stenosis"
+    );
+    assert_eq!(
+        (text(tags::ROWS), text(tags::COLUMNS)),
+        ("560".into(), "1000".into())
+    );
+    let got: Vec<u8> = obj.decode_pixel_data().unwrap().to_vec().unwrap();
+    let want = png.as_raw();
+    assert_eq!(got.len(), want.len());
+    let row = 3 * 1000;
+    // The title's band differs (the PNG's names the files), the rest is the same.
+    assert_ne!(got[..40 * row], want[..40 * row]);
+    assert_eq!(got[40 * row..], want[40 * row..]);
 }
