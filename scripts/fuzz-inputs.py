@@ -4,7 +4,7 @@
   .venv/bin/python scripts/fuzz-inputs.py files [--runs N] [--seed S] [--device cpu|gpu]
   .venv/bin/python scripts/fuzz-inputs.py scenes [--runs N] [--seed S]
 
-files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary; an OBJ with normals and an MTL
+files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb and as .gltf; an OBJ with normals and an MTL
         library and a PNG texture, any of them mutated; a PLY with normals), tiny volumes
         (NIfTI, NRRD and MetaImage, attached and detached, via SimpleITK; 4-D ones, and
         3D Slicer's interleaved 4-D NRRD, read at a --phase or as a --cine) and real DICOM slices from
@@ -28,6 +28,7 @@ far-off secondary-ray offset, the hidden cause of DICOM gaps (all fixed); see BE
 README for the limits that stay.
 """
 import argparse
+import base64
 import json
 import os
 import random
@@ -95,6 +96,32 @@ def seeds(d):
     for t in f:
         b += struct.pack("<12fH", 0, 0, 0, *v[t[0]], *v[t[1]], *v[t[2]], 0)
     w("t_bin.stl", b)
+    # glTF: the tetrahedron as a GLB (positions, normals, u16 indices, a material, a node that
+    # moves and scales it under a parent) and as a .gltf with its buffer as a data URI.
+    pos = b"".join(struct.pack("<3f", *p) for p in v)
+    nrm = b"".join(struct.pack("<3f", x, y, z - 0.5) for x, y, z in v)
+    idx = b"".join(struct.pack("<3H", *t) for t in f)
+    buf = pos + nrm + idx
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+           "nodes": [{"translation": [1, 0, 0], "children": [1]}, {"scale": [2, 2, 2], "mesh": 0}],
+           "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.2, 0.1, 1]}}],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 2,
+                                       "material": 0}]}],
+           "buffers": [{"byteLength": len(buf)}],
+           "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                           {"buffer": 0, "byteOffset": 48, "byteLength": 48},
+                           {"buffer": 0, "byteOffset": 96, "byteLength": 24}],
+           "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                          "min": [0, 0, 0], "max": [1, 1, 1]},
+                         {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"},
+                         {"bufferView": 2, "componentType": 5123, "count": 12, "type": "SCALAR"}]}
+    j = json.dumps(doc).encode()
+    j += b" " * (-len(j) % 4)
+    glb = (b"glTF" + struct.pack("<II", 2, 12 + 8 + len(j) + 8 + len(buf)) + struct.pack("<I", len(j))
+           + b"JSON" + j + struct.pack("<I", len(buf)) + b"BIN\0" + buf)
+    w("t.glb", glb)
+    doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(buf).decode()
+    w("t.gltf", json.dumps(doc, indent=1).encode())
     try:
         import numpy as np
         import SimpleITK as sitk
@@ -218,7 +245,7 @@ def fuzz_files(work, n, device):
         d = os.path.join(work, f"case{i}")
         os.makedirs(d)
         p = os.path.join(d, s)
-        text = s.endswith((".obj", ".stl", ".ply", ".mha", ".mhd", ".nhdr", ".nrrd", ".txt", ".json"))
+        text = s.endswith((".obj", ".stl", ".ply", ".mha", ".mhd", ".nhdr", ".nrrd", ".txt", ".json", ".gltf"))
         data = open(os.path.join(sd, s), "rb").read()
         if s == "tm.obj":
             # The OBJ, its material library or its texture, mutated; the others as they are.
@@ -266,7 +293,8 @@ def fuzz_files(work, n, device):
                  "--open", random.choice(["0", "2"])] + count + grade
                 + (["--angle", random.choice(["0,1,2", "5,1,9", "1,2,1e9", "-1,0,1"])]
                    if random.random() < 0.3 else [])
-                + (["--plot", os.path.join(d, "p.svg")] if random.random() < 0.5 else []), s))
+                + (["--plot", os.path.join(d, "p." + random.choice(["svg", "png", "dcm"]))]
+                   if random.random() < 0.5 else []), s))
             # And a centreline tracked through its points.
             why = why or (os.path.exists(vol) and run(
                 ["centreline", vol, "--path", p, "-q", "-o", os.path.join(d, "cl.mrk.json"),
@@ -283,11 +311,11 @@ def fuzz_files(work, n, device):
         why = run(["info", p, "--json"] + phase, s) or run(
             ["render", p, "--aov", "prim", "--size", "8x8", "-q", "--device", device,
              "-o", os.path.join(d, "o.png")], s)
-        if not why and s.endswith((".obj", ".ply")):
+        if not why and s.endswith((".obj", ".ply", ".glb", ".gltf")):
             # Shaded, so that normals and materials are used.
             why = run(["render", p, "--size", "8x8", "--spp", "1", "-q", "--device", device,
                        "-o", os.path.join(d, "s.png")], s)
-        if not why and not s.endswith((".obj", ".stl", ".ply")):
+        if not why and not s.endswith((".obj", ".stl", ".ply", ".glb", ".gltf")):
             # A volume also goes straight through a windowed mode, its HU into an EXR.
             mode = random.choice(["mip", "minip", "average", "slice", "dvr"])
             extra = ["--slab", "3"] if mode != "slice" and random.random() < 0.5 else []

@@ -7,6 +7,7 @@
 //! every error names the file and the problem ([`MeshError`]).
 
 mod curve;
+mod gltf;
 mod ply;
 mod secondary_capture;
 mod shapes;
@@ -66,6 +67,8 @@ pub enum MeshFormat {
     Obj,
     Ply,
     Stl,
+    /// glTF 2.0, `.gltf` or `.glb`.
+    Gltf,
 }
 
 impl MeshFormat {
@@ -77,6 +80,7 @@ impl MeshFormat {
             "obj" => Some(Self::Obj),
             "ply" => Some(Self::Ply),
             "stl" => Some(Self::Stl),
+            "gltf" | "glb" => Some(Self::Gltf),
             _ => None,
         }
     }
@@ -90,7 +94,7 @@ pub fn is_mesh_path(path: &Path) -> bool {
 /// Reads a mesh file, choosing the reader by extension.
 pub fn load_mesh(path: &Path) -> Result<TriMesh, MeshError> {
     let (format, bytes) = read_mesh_file(path)?;
-    parse_mesh(&bytes, format, path)
+    parse_mesh_in(&bytes, format, path, path.parent())
 }
 
 /// Reads a mesh file with what it gives its surface besides the triangles: vertex normals (OBJ
@@ -114,6 +118,16 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
             MeshShading::default(),
             Vec::new(),
         ),
+        MeshFormat::Gltf => {
+            let g = gltf::parse(&bytes, path, path.parent())?;
+            let shading = MeshShading {
+                materials: g.materials,
+                material_of: g.material_of,
+                warnings: g.warnings,
+                ..Default::default()
+            };
+            (g.mesh, shading, g.normals)
+        }
     };
     mesh.check(path)?;
     shading.normals = file_normals(&mesh, normals, &mut shading.warnings);
@@ -245,7 +259,7 @@ fn read_mesh_file(path: &Path) -> Result<(MeshFormat, Vec<u8>), MeshError> {
     let format = MeshFormat::from_path(path).ok_or_else(|| {
         MeshError::invalid(
             path,
-            "unsupported mesh format (expected .obj, .ply or .stl, optionally .gz)",
+            "unsupported mesh format (expected .obj, .ply, .stl, optionally .gz, or .gltf, .glb)",
         )
     })?;
     let bytes = std::fs::read(path).map_err(|error| MeshError::Io {
@@ -300,11 +314,22 @@ pub struct MeshShading {
 /// Parses mesh bytes of a known format; `path` is only used in error messages and to notice
 /// gzip compression (a `.gz` name or the gzip magic number). Materials are not read.
 pub fn parse_mesh(bytes: &[u8], format: MeshFormat, path: &Path) -> Result<TriMesh, MeshError> {
+    parse_mesh_in(bytes, format, path, None)
+}
+
+/// [`parse_mesh`], a glTF file's external buffers read from `dir` (none: only embedded ones).
+fn parse_mesh_in(
+    bytes: &[u8],
+    format: MeshFormat,
+    path: &Path,
+    dir: Option<&Path>,
+) -> Result<TriMesh, MeshError> {
     let bytes = gunzip(bytes, path)?;
     let mesh = match format {
         MeshFormat::Obj => parse_obj(&bytes, path, None)?.0,
         MeshFormat::Ply => ply::parse(&bytes, path)?.0,
         MeshFormat::Stl => stl::parse(&bytes, path)?,
+        MeshFormat::Gltf => gltf::parse(&bytes, path, dir)?.mesh,
     };
     mesh.check(path)?;
     Ok(mesh)

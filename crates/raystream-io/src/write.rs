@@ -11,7 +11,7 @@ use crate::{MeshError, MeshFormat, TriMesh, Vec3};
 /// Writes `mesh` (with optional per-vertex `normals`) in the format named by `path`'s extension.
 pub fn write_mesh(path: &Path, mesh: &TriMesh, normals: Option<&[Vec3]>) -> Result<(), MeshError> {
     let format = MeshFormat::from_path(path)
-        .filter(|_| !path.to_string_lossy().ends_with(".gz"))
+        .filter(|f| *f != MeshFormat::Gltf && !path.to_string_lossy().ends_with(".gz"))
         .ok_or_else(|| MeshError::invalid(path, "output must end in .ply, .obj or .stl"))?;
     let normals = normals.filter(|n| n.len() == mesh.positions.len());
     let file = std::fs::File::create(path).map_err(|error| MeshError::Io {
@@ -23,6 +23,7 @@ pub fn write_mesh(path: &Path, mesh: &TriMesh, normals: Option<&[Vec3]>) -> Resu
         MeshFormat::Ply => write_ply(&mut w, mesh, normals),
         MeshFormat::Obj => write_obj(&mut w, mesh, normals),
         MeshFormat::Stl => write_stl(&mut w, mesh),
+        MeshFormat::Gltf => unreachable!("refused above"),
     };
     r.and_then(|()| w.flush()).map_err(|error| MeshError::Io {
         path: path.to_path_buf(),

@@ -1,7 +1,9 @@
 //! Geometry shared by every raystream crate: glam's vectors, a [`Ray`] with its valid t-range,
 //! and an axis-aligned box [`Aabb`]. No I/O and no GPU here.
 
-pub use glam::{DAffine3, DMat3, DVec2, DVec3, Mat3, Mat4, Quat, UVec3, Vec2, Vec3, Vec3A, Vec4};
+pub use glam::{
+    DAffine3, DMat3, DMat4, DVec2, DVec3, Mat3, Mat4, Quat, UVec3, Vec2, Vec3, Vec3A, Vec4,
+};
 
 /// The largest coordinate a mesh, scene or volume may hold, in scene units (millimetres for
 /// CT). The watertight triangle test (Woop et al. 2013) multiplies three coordinate differences

@@ -221,7 +221,7 @@ impl VolumePick {
 #[derive(Args)]
 #[command(group(clap::ArgGroup::new("frames").args(["turntable", "slices", "cine"])))]
 pub struct RenderArgs {
-    /// Mesh (.obj, .ply, .stl, optionally .gz), scene (.toml) or CT volume (DICOM folder,
+    /// Mesh (.obj, .ply, .stl, optionally .gz; .gltf, .glb), scene (.toml) or CT volume (DICOM folder,
     /// .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd); none: the built-in abdomen CT.
     pub input: Option<PathBuf>,
     #[command(flatten)]

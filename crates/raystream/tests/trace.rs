@@ -385,3 +385,59 @@ fn device_bench_summary() {
         "{out}"
     );
 }
+
+/// glTF scenes from an independent writer (trimesh): the bunny placed twice by two nodes'
+/// transforms (one turned, scaled and moved), as a `.glb` and as a `.gltf` with its buffers in
+/// files beside it. The reference is the bunny placed with numpy in f64 by the file's f32
+/// matrices, in the nodes' order, written as a PLY: on primary and diffuse rays, the hits of
+/// both glTF files are the PLY's byte for byte, and pass Embree's check against it.
+#[test]
+fn gltf_scenes_trace_as_their_placed_triangles() {
+    let Some(py) = python() else { return };
+    let dir = tmp("gltf-bunnies");
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = r#"
+import sys, numpy as np, trimesh
+src, out = sys.argv[1], sys.argv[2]
+m = trimesh.load(src, process=False)
+T = [trimesh.transformations.compose_matrix(scale=[2, 2, 2], angles=[0.3, 0.5, 0.1], translate=[0.1, -0.2, 0.3]),
+     trimesh.transformations.translation_matrix([0.5, 0, 0])]
+s = trimesh.Scene()
+for k, t in enumerate(T):
+    s.add_geometry(m, node_name=f"n{k}", geom_name=f"g{k}", transform=t)
+s.export(out + "/two.glb")
+for name, data in s.export(file_type="gltf").items():
+    open(out + "/" + name, "wb").write(data)
+V, F = np.asarray(m.vertices, np.float64), np.asarray(m.faces)
+placed = [(np.c_[V, np.ones(len(V))] @ t.astype(np.float32).astype(np.float64).T)[:, :3] for t in T]
+ref = trimesh.Trimesh(np.vstack(placed).astype(np.float32), np.vstack([F, F + len(V)]), process=False)
+ref.export(out + "/ref.ply")
+"#;
+    let o = std::process::Command::new(&py)
+        .args([
+            "-c",
+            script,
+            &mesh("stanford_bunny.ply"),
+            dir.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let file = |name: &str| dir.join(name).to_string_lossy().into_owned();
+    let reference = file("ref.ply");
+    for kind in ["primary", "diffuse"] {
+        let rays = dir.join(format!("{kind}.rays"));
+        gen_rays(&py, &reference, kind, "64x64", &rays);
+        let want = dir.join(format!("{kind}-ref.hits"));
+        trace_to(&reference, &rays, &want, false, &[]);
+        for name in ["two.glb", "model.gltf"] {
+            let hits = dir.join(format!("{kind}-{name}.hits"));
+            trace_to(&file(name), &rays, &hits, false, &[]);
+            assert!(
+                std::fs::read(&hits).unwrap() == std::fs::read(&want).unwrap(),
+                "{name}, {kind} rays: not the reference's hits"
+            );
+            embree_check(&py, &reference, &rays, &hits, false, name);
+        }
+    }
+}

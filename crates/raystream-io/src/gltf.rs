@@ -1,0 +1,535 @@
+//! glTF 2.0 meshes (`.gltf`, its buffers embedded as data URIs or in files beside it, and
+//! `.glb`), through the `gltf` crate: the triangles of every mesh instance in the default
+//! scene (or the first; with no scene, every mesh once), placed by their nodes' transforms,
+//! in f64 and rounded once, with their normals (turned as the transforms turn them) and each primitive's base colour
+//! as its material.
+//!
+//! The crate validates the document and checks that every buffer holds the bytes it claims;
+//! each accessor read is checked here too (its type, and its reach within its buffer view and
+//! buffer, in checked arithmetic), so that a corrupt file is an error naming it, never a
+//! panic or an allocation its bytes do not back. Points and lines are left out with a warning;
+//! triangle strips and fans become triangles.
+
+use std::path::Path;
+
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::Mode;
+use raystream_math::{DMat3, DMat4, Vec3};
+
+use crate::{MeshError, MtlMaterial, TriMesh};
+
+/// The most triangles a glTF file may place, counting every instance of its meshes: a small
+/// file whose nodes instance a mesh many times over could otherwise ask for any amount of
+/// memory.
+pub const MAX_TRIANGLES: usize = 100_000_000;
+/// The deepest node hierarchy read (the document forbids cycles, and the crate's validation
+/// does not look for them).
+const MAX_NODE_DEPTH: usize = 256;
+
+/// A glTF file's triangles and what it gives their surface.
+pub(crate) struct Parsed {
+    pub mesh: TriMesh,
+    /// Per vertex, the file's normal, where its primitive has them.
+    pub normals: Vec<Option<Vec3>>,
+    /// The document's materials, in its order; per triangle, its primitive's material.
+    pub materials: Vec<MtlMaterial>,
+    pub material_of: Vec<Option<u32>>,
+    pub warnings: Vec<String>,
+}
+
+/// Parses a glTF document (JSON or GLB) read from `path`; external buffers are read from `dir`
+/// (none: only embedded buffers are allowed).
+pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Parsed, MeshError> {
+    let bad = |problem: String| MeshError::invalid(path, problem);
+    let not_gltf = |e: gltf::Error| bad(format!("not valid glTF 2.0 ({e})"));
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(not_gltf)?;
+    // gltf-json 1.4's validation looks up each primitive's POSITION accessor without checking
+    // that it exists (a panic on such a file): checked here, before it validates.
+    let root = document.into_json();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            if let Some(a) = prim
+                .attributes
+                .values()
+                .find(|a| a.value() >= root.accessors.len())
+            {
+                return Err(bad(format!(
+                    "mesh {m} primitive {p} names accessor {}, but the file has {}",
+                    a.value(),
+                    root.accessors.len()
+                )));
+            }
+        }
+    }
+    let document = gltf::Document::from_json(root).map_err(not_gltf)?;
+    let buffers = gltf::import_buffers(&document, dir, blob)
+        .map_err(|e| bad(format!("its buffers cannot be read ({e})")))?;
+    let mut out = Parsed {
+        mesh: TriMesh::default(),
+        normals: Vec::new(),
+        materials: document.materials().map(material).collect(),
+        material_of: Vec::new(),
+        warnings: Vec::new(),
+    };
+    // The mesh instances, each with its world transform, in the scene's order (depth first).
+    let mut instances: Vec<(gltf::Mesh, DMat4)> = Vec::new();
+    match document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+    {
+        Some(scene) => {
+            let mut stack: Vec<(gltf::Node, DMat4, usize)> =
+                scene.nodes().map(|n| (n, DMat4::IDENTITY, 0)).collect();
+            stack.reverse();
+            let mut visits = 0usize;
+            while let Some((node, parent, depth)) = stack.pop() {
+                visits += 1;
+                if visits > MAX_TRIANGLES {
+                    return Err(bad(format!(
+                        "its scene visits over {MAX_TRIANGLES} nodes (nodes listed as children many times over?)"
+                    )));
+                }
+                if depth >= MAX_NODE_DEPTH {
+                    return Err(bad(format!(
+                        "its node hierarchy is deeper than {MAX_NODE_DEPTH} (a cycle?)"
+                    )));
+                }
+                let local = node.transform().matrix().map(|c| c.map(f64::from));
+                let world = parent * DMat4::from_cols_array_2d(&local);
+                if let Some(mesh) = node.mesh() {
+                    instances.push((mesh, world));
+                }
+                let first = stack.len();
+                stack.extend(node.children().map(|c| (c, world, depth + 1)));
+                stack[first..].reverse();
+            }
+        }
+        None => instances.extend(document.meshes().map(|m| (m, DMat4::IDENTITY))),
+    }
+    let mut lines = std::collections::BTreeSet::new();
+    for (mesh, world) in &instances {
+        if !world.is_finite() {
+            return Err(bad(format!(
+                "mesh {} is placed by a transform that is not finite",
+                mesh.index()
+            )));
+        }
+        // Normals turn by the inverse transpose (a mirroring transform keeps them outward).
+        let turn = DMat3::from_mat4(*world).inverse().transpose();
+        for prim in mesh.primitives() {
+            let what = format!("mesh {} primitive {}", mesh.index(), prim.index());
+            if !matches!(
+                prim.mode(),
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+            ) {
+                lines.insert((mesh.index(), prim.index()));
+                continue;
+            }
+            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+            let positions = prim
+                .get(&gltf::Semantic::Positions)
+                .ok_or_else(|| bad(format!("{what} has no POSITION")))?;
+            check(&positions, &[DataType::F32], Dimensions::Vec3, &buffers)
+                .map_err(|e| bad(format!("{what}: POSITION {e}")))?;
+            let base = out.mesh.positions.len();
+            let count = positions.count();
+            if base + count > u32::MAX as usize {
+                return Err(bad(format!("over {} vertices", u32::MAX)));
+            }
+            let read = reader
+                .read_positions()
+                .ok_or_else(|| bad(format!("{what}: POSITION cannot be read")))?;
+            out.mesh.positions.extend(read.map(|p| {
+                world
+                    .transform_point3(Vec3::from_array(p).as_dvec3())
+                    .as_vec3()
+            }));
+            match prim.get(&gltf::Semantic::Normals) {
+                Some(n) => {
+                    check(&n, &[DataType::F32], Dimensions::Vec3, &buffers)
+                        .map_err(|e| bad(format!("{what}: NORMAL {e}")))?;
+                    if n.count() != count {
+                        return Err(bad(format!(
+                            "{what}: {} normals for {count} positions",
+                            n.count()
+                        )));
+                    }
+                    let read = reader
+                        .read_normals()
+                        .ok_or_else(|| bad(format!("{what}: NORMAL cannot be read")))?;
+                    out.normals.extend(
+                        read.map(|n| Some((turn * Vec3::from_array(n).as_dvec3()).as_vec3())),
+                    );
+                }
+                None => out.normals.resize(out.mesh.positions.len(), None),
+            }
+            // The corners, as the primitive lists them.
+            let corners: Vec<u32> = match prim.indices() {
+                Some(idx) => {
+                    check(
+                        &idx,
+                        &[DataType::U8, DataType::U16, DataType::U32],
+                        Dimensions::Scalar,
+                        &buffers,
+                    )
+                    .map_err(|e| bad(format!("{what}: its indices {e}")))?;
+                    let read = reader
+                        .read_indices()
+                        .ok_or_else(|| bad(format!("{what}: its indices cannot be read")))?;
+                    let corners: Vec<u32> = read.into_u32().collect();
+                    if let Some(&i) = corners.iter().find(|&&i| i as usize >= count) {
+                        return Err(bad(format!(
+                            "{what}: index {i}, but it has {count} vertices"
+                        )));
+                    }
+                    corners
+                }
+                None => (0..count as u32).collect(),
+            };
+            let triangles = assemble(prim.mode(), &corners);
+            if out.mesh.triangles.len() + triangles.len() > MAX_TRIANGLES {
+                return Err(bad(format!(
+                    "over {MAX_TRIANGLES} triangles once its meshes' instances are counted"
+                )));
+            }
+            let material = prim.material().index().map(|m| m as u32);
+            out.material_of
+                .extend(std::iter::repeat_n(material, triangles.len()));
+            out.mesh
+                .triangles
+                .extend(triangles.iter().map(|t| t.map(|i| i + base as u32)));
+        }
+    }
+    if !lines.is_empty() {
+        out.warnings.push(format!(
+            "{} primitive{} of points or lines left out",
+            lines.len(),
+            if lines.len() == 1 { "" } else { "s" }
+        ));
+    }
+    if out.material_of.iter().all(Option::is_none) {
+        out.material_of.clear();
+    }
+    let textured = document
+        .materials()
+        .filter(|m| m.pbr_metallic_roughness().base_color_texture().is_some())
+        .count();
+    if textured > 0 {
+        out.warnings.push(format!(
+            "{textured} material{} a base colour texture, which is not read from glTF: the base colour factor stands in",
+            if textured == 1 { " has" } else { "s have" }
+        ));
+    }
+    Ok(out)
+}
+
+/// A glTF material as the Phong materials take it: the base colour's RGB (linear, as glTF
+/// gives it) as the diffuse colour, its alpha as the dissolve where the material blends.
+fn material(m: gltf::Material) -> MtlMaterial {
+    let pbr = m.pbr_metallic_roughness();
+    let [r, g, b, a] = pbr.base_color_factor();
+    MtlMaterial {
+        name: m.name().map_or_else(
+            || format!("material {}", m.index().unwrap_or(0)),
+            str::to_string,
+        ),
+        diffuse: Some([r, g, b]),
+        dissolve: (m.alpha_mode() == gltf::material::AlphaMode::Blend && a < 1.0).then_some(a),
+        ..Default::default()
+    }
+}
+
+/// Checks that `a` is of one of `types` and of `dims`, is not sparse, and lies within its
+/// buffer view and its buffer: the reach the readers take for granted.
+fn check(
+    a: &gltf::Accessor,
+    types: &[DataType],
+    dims: Dimensions,
+    buffers: &[gltf::buffer::Data],
+) -> Result<(), String> {
+    if !types.contains(&a.data_type()) || a.dimensions() != dims {
+        return Err(format!(
+            "is {:?} {:?}, not {dims:?} of {types:?}",
+            a.dimensions(),
+            a.data_type()
+        ));
+    }
+    if a.sparse().is_some() {
+        return Err("is sparse, which is not read".into());
+    }
+    let view = a.view().ok_or("has no buffer view")?;
+    let size = a.size();
+    let stride = view.stride().unwrap_or(size);
+    let reach = match a.count() {
+        0 => return Err("is empty".into()),
+        n => (n - 1)
+            .checked_mul(stride)
+            .and_then(|x| x.checked_add(size))
+            .and_then(|x| x.checked_add(a.offset())),
+    };
+    let buffer = buffers.get(view.buffer().index()).map_or(0, |d| d.0.len());
+    let fits = reach.is_some_and(|r| r <= view.length())
+        && view
+            .offset()
+            .checked_add(view.length())
+            .is_some_and(|end| end <= buffer);
+    if !fits {
+        return Err(format!(
+            "({} items of {size} bytes, {stride} apart, from byte {}) runs past its buffer view ({} bytes from byte {} of a buffer of {buffer})",
+            a.count(),
+            a.offset(),
+            view.length(),
+            view.offset()
+        ));
+    }
+    Ok(())
+}
+
+/// The triangles of `corners` drawn as `mode` (a list, a strip or a fan), degenerate ones of
+/// a strip's or fan's joins included as the file gives them.
+fn assemble(mode: Mode, corners: &[u32]) -> Vec<[u32; 3]> {
+    match mode {
+        Mode::TriangleStrip => (2..corners.len())
+            .map(|k| {
+                let (a, b, c) = (corners[k - 2], corners[k - 1], corners[k]);
+                // Every other triangle of a strip is wound the other way: the specification's
+                // order turns it back.
+                if k % 2 == 0 { [a, b, c] } else { [a, c, b] }
+            })
+            .collect(),
+        Mode::TriangleFan => (2..corners.len())
+            .map(|k| [corners[k - 1], corners[k], corners[0]])
+            .collect(),
+        _ => corners
+            .chunks_exact(3)
+            .map(|t| [t[0], t[1], t[2]])
+            .collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{MeshFormat, load_mesh_with_shading, parse_mesh};
+
+    /// A GLB container of `json` and the binary chunk `bin`.
+    fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
+        let pad = |mut v: Vec<u8>, with: u8| {
+            while !v.len().is_multiple_of(4) {
+                v.push(with);
+            }
+            v
+        };
+        let (j, b) = (pad(json.as_bytes().to_vec(), b' '), pad(bin.to_vec(), 0));
+        let total = 12 + 8 + j.len() + 8 + b.len();
+        let mut out = b"glTF".to_vec();
+        for x in [2u32, total as u32, j.len() as u32] {
+            out.extend(x.to_le_bytes());
+        }
+        out.extend(b"JSON");
+        out.extend(&j);
+        out.extend((b.len() as u32).to_le_bytes());
+        out.extend(b"BIN\0");
+        out.extend(&b);
+        out
+    }
+
+    /// A unit quad's four corners (z = 0), its normals (+z), list indices (u16) and strip
+    /// indices (u8), as one buffer: bytes 0–47, 48–95, 96–107, 108–111.
+    fn quad_bin() -> Vec<u8> {
+        let mut b = Vec::new();
+        for p in [[0f32, 0., 0.], [1., 0., 0.], [0., 1., 0.], [1., 1., 0.]] {
+            b.extend(p.iter().flat_map(|x| x.to_le_bytes()));
+        }
+        for _ in 0..4 {
+            b.extend([0f32, 0., 1.].iter().flat_map(|x| x.to_le_bytes()));
+        }
+        b.extend([0u16, 1, 2, 2, 1, 3].iter().flat_map(|x| x.to_le_bytes()));
+        b.extend([0u8, 1, 2, 3]);
+        b
+    }
+
+    /// The quad's document: mesh 0 draws it as a list (material 0), as a strip (no
+    /// material) and as lines; node 1 (scaled by 2) under node 0 (moved 10 along x) and
+    /// node 2 (turned a quarter about z) place it. `position` replaces the positions'
+    /// accessor, `nodes` the nodes.
+    fn quad_json(position: &str, nodes: &str) -> String {
+        format!(
+            r#"{{"asset": {{"version": "2.0"}},
+            "buffers": [{{"byteLength": 112}}],
+            "bufferViews": [{{"buffer": 0, "byteOffset": 0, "byteLength": 48}},
+                            {{"buffer": 0, "byteOffset": 48, "byteLength": 48}},
+                            {{"buffer": 0, "byteOffset": 96, "byteLength": 12}},
+                            {{"buffer": 0, "byteOffset": 108, "byteLength": 4}}],
+            "accessors": [{position},
+                          {{"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"}},
+                          {{"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}},
+                          {{"bufferView": 3, "componentType": 5121, "count": 4, "type": "SCALAR"}}],
+            "materials": [{{"name": "brick", "pbrMetallicRoughness": {{"baseColorFactor": [0.8, 0.2, 0.1, 1.0]}}}}],
+            "meshes": [{{"primitives": [
+                {{"attributes": {{"POSITION": 0, "NORMAL": 1}}, "indices": 2, "material": 0}},
+                {{"attributes": {{"POSITION": 0}}, "indices": 3, "mode": 5}},
+                {{"attributes": {{"POSITION": 0}}, "mode": 1}}]}}],
+            "nodes": {nodes},
+            "scenes": [{{"nodes": [0, 2]}}], "scene": 0}}"#
+        )
+    }
+
+    const POSITION: &str = r#"{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#;
+    const NODES: &str = r#"[{"translation": [10, 0, 0], "children": [1]},
+                            {"scale": [2, 2, 2], "mesh": 0},
+                            {"rotation": [0, 0, 0.70710677, 0.70710677], "mesh": 0}]"#;
+
+    fn write(name: &str, bytes: &[u8]) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join("raystream-io-gltf-tests");
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    }
+
+    /// The quad placed twice: every instance's triangles in the scene's order, list then
+    /// strip (wound as the list is), the lines left out with a warning, the corners where the
+    /// nodes' transforms put them, the normals turned (a scale leaves them as they are), and
+    /// the list's material its base colour.
+    #[test]
+    fn a_scene_places_each_instance_of_its_meshes() {
+        let path = write("quad.glb", &glb(&quad_json(POSITION, NODES), &quad_bin()));
+        let (mesh, shading) = load_mesh_with_shading(&path).unwrap();
+        assert_eq!(mesh.triangles.len(), 8);
+        assert_eq!(mesh.positions.len(), 16);
+        // Each instance: the list's corners are its vertices 0–3, the strip's 4–7.
+        let want: Vec<[u32; 3]> = [0u32, 8]
+            .iter()
+            .flat_map(|&b| [[0, 1, 2], [2, 1, 3], [4, 5, 6], [5, 7, 6]].map(|t| t.map(|i| i + b)))
+            .collect();
+        assert_eq!(mesh.triangles, want);
+        let quad = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(1.0, 1.0, 0.0)];
+        for (k, p) in mesh.positions.iter().enumerate() {
+            let q = quad[k % 4];
+            let want = if k < 8 {
+                Vec3::new(10.0, 0.0, 0.0) + 2.0 * q
+            } else {
+                Vec3::new(-q.y, q.x, 0.0)
+            };
+            assert!((*p - want).length() < 1e-6, "vertex {k}: {p} for {want}");
+        }
+        // Every triangle faces +z, as the quad does.
+        for t in &mesh.triangles {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+            assert!((b - a).cross(c - a).z > 0.0, "{t:?}");
+        }
+        // The list's vertices have the file's normals, the strip's the faces' (+z too).
+        assert_eq!(shading.normals.len(), 16);
+        for n in &shading.normals {
+            assert!((*n - Vec3::Z).length() < 1e-6, "{n}");
+        }
+        assert_eq!(shading.materials.len(), 1);
+        assert_eq!(shading.materials[0].name, "brick");
+        assert_eq!(shading.materials[0].diffuse, Some([0.8, 0.2, 0.1]));
+        let some = Some(0);
+        assert_eq!(
+            shading.material_of,
+            [some, some, None, None, some, some, None, None]
+        );
+        assert_eq!(
+            shading.warnings,
+            ["1 primitive of points or lines left out"]
+        );
+        // The same triangles without the shading, and from a .gltf beside its .bin.
+        assert_eq!(crate::load_mesh(&path).unwrap(), mesh);
+        write("quad.bin", &quad_bin());
+        let json = quad_json(POSITION, NODES).replace(
+            r#""buffers": [{"byteLength": 112}]"#,
+            r#""buffers": [{"byteLength": 112, "uri": "quad.bin"}]"#,
+        );
+        let text = write("quad.gltf", json.as_bytes());
+        assert_eq!(crate::load_mesh(&text).unwrap(), mesh);
+        // A base colour texture is not read: a warning, and the factor stands in.
+        let textured = quad_json(POSITION, NODES)
+            .replace(
+                r#""baseColorFactor": [0.8, 0.2, 0.1, 1.0]}"#,
+                r#""baseColorFactor": [0.8, 0.2, 0.1, 1.0], "baseColorTexture": {"index": 0}}"#,
+            )
+            .replace(
+                r#""meshes""#,
+                r#""textures": [{"source": 0}], "images": [{"uri": "brick.png"}], "meshes""#,
+            );
+        let path = write("textured.glb", &glb(&textured, &quad_bin()));
+        let (again, shading) = load_mesh_with_shading(&path).unwrap();
+        assert_eq!(again, mesh);
+        assert_eq!(shading.materials[0].diffuse, Some([0.8, 0.2, 0.1]));
+        assert!(
+            shading
+                .warnings
+                .iter()
+                .any(|w| w.contains("1 material has a base colour texture")),
+            "{:?}",
+            shading.warnings
+        );
+        // Parsed from bytes alone, an external buffer cannot be found.
+        let err = parse_mesh(json.as_bytes(), MeshFormat::Gltf, &text).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("quad.gltf: its buffers cannot be read"),
+            "{err}"
+        );
+    }
+
+    /// A corrupt file is an error naming it and the problem, never a panic.
+    #[test]
+    fn corrupt_gltf_is_a_clear_error() {
+        let bin = quad_bin();
+        let good = glb(&quad_json(POSITION, NODES), &bin);
+        let problem = |bytes: &[u8]| {
+            let e = parse_mesh(bytes, MeshFormat::Gltf, Path::new("bad.glb")).unwrap_err();
+            let s = e.to_string();
+            assert!(s.starts_with("bad.glb: "), "{s}");
+            s
+        };
+        assert!(problem(&good[..good.len() / 2]).contains("not valid glTF"));
+        assert!(problem(b"{\"asset\": ").contains("not valid glTF"));
+        let position = |p: &str| glb(&quad_json(p, NODES), &bin);
+        let far = POSITION.replace("\"count\": 4", "\"count\": 1000000000");
+        assert!(
+            problem(&position(&far)).contains("runs past its buffer view"),
+            "{far}"
+        );
+        let shifted = POSITION.replace(
+            "\"bufferView\": 0,",
+            "\"bufferView\": 0, \"byteOffset\": 40,",
+        );
+        assert!(problem(&position(&shifted)).contains("runs past its buffer view"));
+        let wrong = POSITION.replace("5126", "5123");
+        assert!(problem(&position(&wrong)).contains("POSITION is Vec3 U16"));
+        // An index beyond the vertices.
+        let mut big = bin.clone();
+        big[96..98].copy_from_slice(&9u16.to_le_bytes());
+        assert!(
+            problem(&glb(&quad_json(POSITION, NODES), &big))
+                .contains("index 9, but it has 4 vertices")
+        );
+        // A NaN corner.
+        let mut nan = bin.clone();
+        nan[0..4].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert!(problem(&glb(&quad_json(POSITION, NODES), &nan)).contains("NaN"));
+        // Nodes that are each other's children.
+        let cycle = r#"[{"children": [1]}, {"children": [0], "mesh": 0}, {"mesh": 0}]"#;
+        let s = problem(&glb(&quad_json(POSITION, cycle), &bin));
+        assert!(
+            s.contains("not valid glTF") || s.contains("deeper than"),
+            "{s}"
+        );
+        // A primitive naming an accessor the file lacks (which gltf-json's validation would
+        // look up unchecked).
+        let missing = quad_json(POSITION, NODES).replace(
+            r#""POSITION": 0, "NORMAL": 1"#,
+            r#""POSITION": 7, "NORMAL": 1"#,
+        );
+        assert!(problem(&glb(&missing, &bin)).contains("names accessor 7, but the file has 4"));
+        // A buffer shorter than it claims.
+        let short = glb(&quad_json(POSITION, NODES), &bin[..64]);
+        assert!(problem(&short).contains("its buffers cannot be read"));
+    }
+}
