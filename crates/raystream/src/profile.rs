@@ -709,17 +709,7 @@ mod tests {
     /// with two, and without a grade.
     #[test]
     fn the_profile_in_pixels_is_its_svg() {
-        let sections: Vec<Section> = (0..60)
-            .map(|i| {
-                let s = i as f64 + 0.5;
-                let d = 12.0 - 0.05 * s - 6.0 * (-((s - 40.0) / 4.0).powi(2)).exp();
-                match i {
-                    20 | 22 => section(s, None, false),
-                    23 | 24 => section(s, Some(d + 5.0), true),
-                    _ => section(s, Some(d), false),
-                }
-            })
-            .collect();
+        let sections = made_up();
         let opts = StenosisOptions {
             lesion_mm: None,
             reference_mm: vec![],
@@ -731,6 +721,22 @@ mod tests {
             let pixels = rgb("made up", &sections, 60.0, &graded).unwrap();
             assert!(check_pixels(&pixels, &text) > 500);
         }
+    }
+
+    /// Made-up sections a mm apart: closed runs broken by a section with no lumen, a lone
+    /// closed section between it and two open ones, and a narrowing at 40 mm.
+    fn made_up() -> Vec<Section> {
+        (0..60)
+            .map(|i| {
+                let s = i as f64 + 0.5;
+                let d = 12.0 - 0.05 * s - 6.0 * (-((s - 40.0) / 4.0).powi(2)).exp();
+                match i {
+                    20 | 22 => section(s, None, false),
+                    23 | 24 => section(s, Some(d + 5.0), true),
+                    _ => section(s, Some(d), false),
+                }
+            })
+            .collect()
     }
 
     /// A section at arc `s` with D eq `d` (D max 3 mm more, D min 2 mm less), or no lumen.
@@ -764,17 +770,7 @@ mod tests {
     /// stenosis placed on them, each point where its figures put it.
     #[test]
     fn the_profile_draws_each_figure_where_it_is() {
-        let sections: Vec<Section> = (0..60)
-            .map(|i| {
-                let s = i as f64 + 0.5;
-                let d = 12.0 - 0.05 * s - 6.0 * (-((s - 40.0) / 4.0).powi(2)).exp();
-                match i {
-                    20 | 22 => section(s, None, false),
-                    23 | 24 => section(s, Some(d + 5.0), true),
-                    _ => section(s, Some(d), false),
-                }
-            })
-            .collect();
+        let sections = made_up();
         let plain = svg("made up", &sections, 60.0, &[]).unwrap();
         // Runs: 0–19, 21 (lone), 25–59.
         assert_eq!(check_plot(&plain, &sections, &[]), 2);
