@@ -120,6 +120,24 @@ def seeds(d):
     glb = (b"glTF" + struct.pack("<II", 2, 12 + 8 + len(j) + 8 + len(buf)) + struct.pack("<I", len(j))
            + b"JSON" + j + struct.pack("<I", len(buf)) + b"BIN\0" + buf)
     w("t.glb", glb)
+    # And textured: texture coordinates and a PNG in the binary chunk.
+    uv = b"".join(struct.pack("<2f", x, y) for x, y, _ in v)
+    tex = png(3, 2, bytes(range(0, 240, 10)))
+    tbuf = buf + uv + tex + b"\0" * (-len(tex) % 4)
+    tdoc = json.loads(json.dumps(doc))
+    tdoc["buffers"] = [{"byteLength": len(tbuf)}]
+    tdoc["bufferViews"] += [{"buffer": 0, "byteOffset": len(buf), "byteLength": len(uv)},
+                            {"buffer": 0, "byteOffset": len(buf) + len(uv), "byteLength": len(tex)}]
+    tdoc["accessors"].append({"bufferView": 3, "componentType": 5126, "count": 4, "type": "VEC2"})
+    tdoc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = 3
+    tdoc["images"] = [{"bufferView": 4, "mimeType": "image/png"}]
+    tdoc["samplers"] = [{"wrapS": 33071, "wrapT": 10497}]
+    tdoc["textures"] = [{"source": 0, "sampler": 0}]
+    tdoc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
+    tj = json.dumps(tdoc).encode()
+    tj += b" " * (-len(tj) % 4)
+    w("tt.glb", b"glTF" + struct.pack("<II", 2, 12 + 8 + len(tj) + 8 + len(tbuf)) + struct.pack("<I", len(tj))
+      + b"JSON" + tj + struct.pack("<I", len(tbuf)) + b"BIN\0" + tbuf)
     doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(buf).decode()
     w("t.gltf", json.dumps(doc, indent=1).encode())
     try:

@@ -14,9 +14,9 @@ use std::path::Path;
 
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
-use raystream_math::{DMat3, DMat4, Vec3};
+use raystream_math::{DMat3, DMat4, Vec2, Vec3};
 
-use crate::{MeshError, MtlMaterial, TriMesh};
+use crate::{MeshError, MtlMaterial, Texture, TextureMapping, TriMesh};
 
 /// The most triangles a glTF file may place, counting every instance of its meshes: a small
 /// file whose nodes instance a mesh many times over could otherwise ask for any amount of
@@ -34,6 +34,9 @@ pub(crate) struct Parsed {
     /// The document's materials, in its order; per triangle, its primitive's material.
     pub materials: Vec<MtlMaterial>,
     pub material_of: Vec<Option<u32>>,
+    /// Per triangle, its corners' texture coordinates (v up, as OBJ's), where its material
+    /// has a base colour texture and its primitive those coordinates; empty when none has.
+    pub uvs: Vec<[Vec2; 3]>,
     pub warnings: Vec<String>,
 }
 
@@ -70,8 +73,11 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
         normals: Vec::new(),
         materials: document.materials().map(material).collect(),
         material_of: Vec::new(),
+        uvs: Vec::new(),
         warnings: Vec::new(),
     };
+    // The materials whose texture some triangle has coordinates for.
+    let mut textured = std::collections::BTreeSet::new();
     // The mesh instances, each with its world transform, in the scene's order (depth first).
     let mut instances: Vec<(gltf::Mesh, DMat4)> = Vec::new();
     match document
@@ -196,6 +202,46 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
             let material = prim.material().index().map(|m| m as u32);
             out.material_of
                 .extend(std::iter::repeat_n(material, triangles.len()));
+            // The texture's coordinates, where the material has a texture: glTF's v runs down
+            // the image, OBJ's (and the renderers') up.
+            let set = prim
+                .material()
+                .pbr_metallic_roughness()
+                .base_color_texture()
+                .map(|t| t.tex_coord());
+            let uv = match set.and_then(|k| prim.get(&gltf::Semantic::TexCoords(k)).map(|a| (k, a)))
+            {
+                Some((k, a)) => {
+                    check(
+                        &a,
+                        &[DataType::F32, DataType::U8, DataType::U16],
+                        Dimensions::Vec2,
+                        &buffers,
+                    )
+                    .map_err(|e| bad(format!("{what}: TEXCOORD_{k} {e}")))?;
+                    if a.count() != count {
+                        return Err(bad(format!(
+                            "{what}: {} texture coordinates for {count} positions",
+                            a.count()
+                        )));
+                    }
+                    let read = reader
+                        .read_tex_coords(k)
+                        .ok_or_else(|| bad(format!("{what}: TEXCOORD_{k} cannot be read")))?;
+                    read.into_f32()
+                        .map(|[u, v]| Vec2::new(u, 1.0 - v))
+                        .collect()
+                }
+                None => Vec::new(),
+            };
+            if let (Some(m), false) = (material, uv.is_empty()) {
+                textured.insert(m as usize);
+            }
+            out.uvs.extend(
+                triangles
+                    .iter()
+                    .map(|t| t.map(|i| uv.get(i as usize).copied().unwrap_or(Vec2::ZERO))),
+            );
             out.mesh
                 .triangles
                 .extend(triangles.iter().map(|t| t.map(|i| i + base as u32)));
@@ -211,17 +257,85 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
     if out.material_of.iter().all(Option::is_none) {
         out.material_of.clear();
     }
-    let textured = document
-        .materials()
-        .filter(|m| m.pbr_metallic_roughness().base_color_texture().is_some())
-        .count();
-    if textured > 0 {
-        out.warnings.push(format!(
-            "{textured} material{} a base colour texture, which is not read from glTF: the base colour factor stands in",
-            if textured == 1 { " has" } else { "s have" }
-        ));
+    if textured.is_empty() {
+        out.uvs.clear();
+    }
+    // The textures of the materials that some triangle has coordinates for.
+    for (k, m) in document.materials().enumerate() {
+        let Some(info) = m.pbr_metallic_roughness().base_color_texture() else {
+            continue;
+        };
+        let name = out.materials[k].name.clone();
+        if !textured.contains(&k) {
+            out.warnings.push(format!(
+                "material '{name}': its base colour texture is not applied: its faces give no texture coordinates (TEXCOORD_{}); its base colour stands in",
+                info.tex_coord()
+            ));
+            continue;
+        }
+        let texture = info.texture();
+        match image(&texture.source(), &buffers, dir) {
+            Ok(t) => {
+                let (mapping, warning) = wrapping(&texture.sampler());
+                if let Some(w) = warning {
+                    out.warnings.push(format!("material '{name}': {w}"));
+                }
+                out.materials[k].texture = Some(format!("image {}", texture.source().index()));
+                out.materials[k].image = Some(Texture { mapping, ..t });
+            }
+            Err(e) => out.warnings.push(format!(
+                "material '{name}': image {}: {e}; its base colour stands in",
+                texture.source().index()
+            )),
+        }
     }
     Ok(out)
+}
+
+/// An image's texture: from a buffer view (a GLB's), or a file beside the document. Its
+/// texels multiply the base colour factor, as glTF's base colour texture does.
+fn image(
+    image: &gltf::Image,
+    buffers: &[gltf::buffer::Data],
+    dir: Option<&Path>,
+) -> Result<Texture, String> {
+    match image.source() {
+        gltf::image::Source::View { view, .. } => {
+            let data = buffers
+                .get(view.buffer().index())
+                .map_or(&[][..], |d| &d.0[..]);
+            let bytes = view
+                .offset()
+                .checked_add(view.length())
+                .and_then(|end| data.get(view.offset()..end))
+                .ok_or("its buffer view runs past its buffer")?;
+            Texture::decode(bytes)
+        }
+        gltf::image::Source::Uri { uri, .. } => {
+            if uri.starts_with("data:") {
+                return Err("an image in a data URI is not read".into());
+            }
+            let dir = dir.ok_or("an image in a file, and no folder to look in")?;
+            Texture::load(&dir.join(uri)).map_err(|e| format!("{uri}: {e}"))
+        }
+    }
+}
+
+/// How a sampler wraps: both ways clamped to the edge, or else repeating; a mirrored repeat,
+/// or clamping one way only, repeats with a warning (the renderers have one wrap for both).
+fn wrapping(sampler: &gltf::texture::Sampler) -> (TextureMapping, Option<String>) {
+    use gltf::texture::WrappingMode::{ClampToEdge, Repeat};
+    let (s, t) = (sampler.wrap_s(), sampler.wrap_t());
+    let clamp = s == ClampToEdge && t == ClampToEdge;
+    let warning = (!clamp && (s != Repeat || t != Repeat))
+        .then(|| format!("its texture wraps {s:?} and {t:?}, which is read as repeating"));
+    (
+        TextureMapping {
+            clamp,
+            ..TextureMapping::default()
+        },
+        warning,
+    )
 }
 
 /// A glTF material as the Phong materials take it: the base colour's RGB (linear, as glTF
@@ -446,7 +560,8 @@ mod tests {
         );
         let text = write("quad.gltf", json.as_bytes());
         assert_eq!(crate::load_mesh(&text).unwrap(), mesh);
-        // A base colour texture is not read: a warning, and the factor stands in.
+        // A base colour texture without texture coordinates is not applied: a warning, and
+        // the factor stands in.
         let textured = quad_json(POSITION, NODES)
             .replace(
                 r#""baseColorFactor": [0.8, 0.2, 0.1, 1.0]}"#,
@@ -461,10 +576,8 @@ mod tests {
         assert_eq!(again, mesh);
         assert_eq!(shading.materials[0].diffuse, Some([0.8, 0.2, 0.1]));
         assert!(
-            shading
-                .warnings
-                .iter()
-                .any(|w| w.contains("1 material has a base colour texture")),
+            shading.warnings.iter().any(|w| w
+                .contains("material 'brick': its base colour texture is not applied: its faces give no texture coordinates (TEXCOORD_0)")),
             "{:?}",
             shading.warnings
         );
@@ -475,6 +588,93 @@ mod tests {
                 .contains("quad.gltf: its buffers cannot be read"),
             "{err}"
         );
+    }
+
+    /// A base colour texture: its image from the binary chunk, its coordinates with v turned
+    /// up (1 − glTF's), its sampler's wrap; an image that cannot be had (a data URI, a file
+    /// that is missing) is a warning and the base colour stands in.
+    #[test]
+    fn base_colour_textures_are_read() {
+        let mut png = Vec::new();
+        image::RgbaImage::from_fn(2, 2, |x, y| {
+            image::Rgba([100 * x as u8, 100 * y as u8, 7, 255])
+        })
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+        let mut bin = quad_bin();
+        let uv_at = bin.len();
+        for [u, v] in [[0f32, 0.25], [1., 0.], [0., 1.], [1., 0.75]] {
+            bin.extend([u, v].iter().flat_map(|x| x.to_le_bytes()));
+        }
+        let png_at = bin.len();
+        bin.extend(&png);
+        let doc = |image: &str, wrap: u32| {
+            format!(
+                r#"{{"asset": {{"version": "2.0"}},
+                "buffers": [{{"byteLength": {}}}],
+                "bufferViews": [{{"buffer": 0, "byteOffset": 0, "byteLength": 48}},
+                                {{"buffer": 0, "byteOffset": 96, "byteLength": 12}},
+                                {{"buffer": 0, "byteOffset": {uv_at}, "byteLength": 32}},
+                                {{"buffer": 0, "byteOffset": {png_at}, "byteLength": {}}}],
+                "accessors": [{POSITION},
+                              {{"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}},
+                              {{"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC2"}}],
+                "samplers": [{{"wrapS": {wrap}, "wrapT": {wrap}}}],
+                "textures": [{{"source": 0, "sampler": 0}}],
+                "images": [{image}],
+                "materials": [{{"name": "paint", "pbrMetallicRoughness": {{"baseColorTexture": {{"index": 0}}}}}}],
+                "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0, "TEXCOORD_0": 2}}, "indices": 1, "material": 0}}]}}],
+                "nodes": [{{"mesh": 0}}], "scenes": [{{"nodes": [0]}}]}}"#,
+                bin.len(),
+                png.len()
+            )
+        };
+        let in_bin = r#"{"bufferView": 3, "mimeType": "image/png"}"#;
+        let (clamp, mirror) = (33071, 33648);
+        let path = write("textured-quad.glb", &glb(&doc(in_bin, clamp), &bin));
+        let (_, shading) = load_mesh_with_shading(&path).unwrap();
+        assert!(shading.warnings.is_empty(), "{:?}", shading.warnings);
+        let t = shading.materials[0].image.as_ref().expect("the texture");
+        assert_eq!((t.width, t.height), (2, 2));
+        assert_eq!(t.texels[3], [100, 100, 7, 255]);
+        assert!(t.mapping.clamp);
+        let uv = |u: f32, v: f32| Vec2::new(u, v);
+        assert_eq!(
+            shading.uvs,
+            [
+                [uv(0.0, 0.75), uv(1.0, 1.0), uv(0.0, 0.0)],
+                [uv(0.0, 0.0), uv(1.0, 1.0), uv(1.0, 0.25)]
+            ]
+        );
+        // A mirrored repeat repeats, with a warning.
+        let path = write("mirrored-quad.glb", &glb(&doc(in_bin, mirror), &bin));
+        let (_, shading) = load_mesh_with_shading(&path).unwrap();
+        assert!(!shading.materials[0].image.as_ref().unwrap().mapping.clamp);
+        assert!(
+            shading.warnings[0].contains("MirroredRepeat"),
+            "{:?}",
+            shading.warnings
+        );
+        // Images that cannot be had.
+        for (image, want) in [
+            (
+                r#"{"uri": "data:image/png;base64,AAAA"}"#,
+                "an image in a data URI is not read",
+            ),
+            (r#"{"uri": "missing.png"}"#, "image 0: missing.png: "),
+        ] {
+            let path = write("lost-image.glb", &glb(&doc(image, clamp), &bin));
+            let (_, shading) = load_mesh_with_shading(&path).unwrap();
+            assert!(shading.materials[0].image.is_none());
+            assert!(
+                shading
+                    .warnings
+                    .iter()
+                    .any(|w| w.contains(want) && w.contains("its base colour stands in")),
+                "{:?}",
+                shading.warnings
+            );
+        }
     }
 
     /// A corrupt file is an error naming it and the problem, never a panic.

@@ -123,6 +123,7 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
             let shading = MeshShading {
                 materials: g.materials,
                 material_of: g.material_of,
+                uvs: g.uvs,
                 warnings: g.warnings,
                 ..Default::default()
             };
@@ -131,7 +132,10 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
     };
     mesh.check(path)?;
     shading.normals = file_normals(&mesh, normals, &mut shading.warnings);
-    load_textures(&mut shading, path.parent().unwrap_or(Path::new(".")));
+    if format == MeshFormat::Obj {
+        // An OBJ's textures are named by its libraries; a glTF file's come with it.
+        load_textures(&mut shading, path.parent().unwrap_or(Path::new(".")));
+    }
     Ok((mesh, shading))
 }
 

@@ -1,4 +1,4 @@
-//! Colour textures of OBJ materials (`map_Kd`): an image file's texels, and the one lookup both
+//! Colour textures of OBJ materials (`map_Kd`) and glTF ones (`baseColorTexture`): an image's texels, and the one lookup both
 //! renderers make. The GPU's `texture_colour` (raystream-gpu's render.wgsl) is
 //! [`Texture::sample`] step for step, with the same sRGB table ([`SRGB_TO_LINEAR`]), so that the
 //! two back-ends shade a textured surface alike.
@@ -63,9 +63,14 @@ impl Texture {
     /// Reads a PNG or JPEG file (by its content); an error says what is wrong, the caller names
     /// the file. Images over [`MAX_TEXELS`] are refused from their header, before decoding.
     pub fn load(path: &Path) -> Result<Texture, String> {
+        Texture::decode(&std::fs::read(path).map_err(|e| e.to_string())?)
+    }
+
+    /// [`Texture::load`] of a PNG or JPEG image's bytes (a glTF file's embedded images).
+    pub fn decode(bytes: &[u8]) -> Result<Texture, String> {
         let open = || {
-            image::ImageReader::open(path)
-                .and_then(|r| r.with_guessed_format())
+            image::ImageReader::new(std::io::Cursor::new(bytes))
+                .with_guessed_format()
                 .map_err(|e| e.to_string())
         };
         let (w, h) = open()?

@@ -19,6 +19,14 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    // Rust ignores SIGPIPE, so a report printed into a pipe that has closed (`raystream info
+    // MESH | head -3`) panicked at its next line. With the signal's default action the process
+    // ends quietly there, as Unix tools do.
+    #[cfg(unix)]
+    // SAFETY: called first thing, on the only thread; SIG_DFL is a valid handler for SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let args = cli::Cli::parse();
     let result = match args.command {
         cli::Command::Render(a) => render::run(&a),

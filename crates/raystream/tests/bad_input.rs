@@ -278,3 +278,25 @@ fn direct_volume_rendering_errors_are_clear() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--mode"), "{}", stderr(&o));
 }
+
+/// A report printed into a pipe that has closed (`raystream info MESH | head -1`) ends the
+/// process quietly, as Unix tools do: no panic (Rust's std ignores SIGPIPE, and `println!`
+/// panicked on the broken pipe).
+#[cfg(unix)]
+#[test]
+fn a_closed_pipe_ends_the_report_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let mut child = bin()
+        .args(["info", &mesh("stanford_bunny.ply")])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Closed before the mesh is read and its report printed.
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    let err = stderr(&o);
+    assert!(!err.contains("panicked"), "{err}");
+    // Ended by SIGPIPE (13 on Linux, the BSDs and macOS).
+    assert_eq!(o.status.signal(), Some(13), "{:?}", o.status);
+}

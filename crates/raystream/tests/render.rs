@@ -1689,3 +1689,103 @@ fn gpu_matches_cpu_on_a_textured_mesh() {
         false,
     );
 }
+
+/// A glTF base colour texture paints as the same texture through an OBJ's `map_Kd`: the
+/// textured square as a GLB (its PNG in the binary chunk, glTF's texture coordinates, whose v
+/// runs down the image: 1 − the OBJ's) renders byte for byte as the OBJ with `Kd 1 1 1` and
+/// `map_Kd`, on both devices.
+#[test]
+fn gltf_textures_paint_as_obj_textures() {
+    for dev in devices() {
+        let scene = textured_square(&format!("gltf-{dev}"), Some("quads.png"));
+        let dir = scene.parent().unwrap();
+        std::fs::write(
+            dir.join("square.mtl"),
+            "newmtl paint\nKd 1 1 1\nmap_Kd quads.png\n",
+        )
+        .unwrap();
+        let png = std::fs::read(dir.join("quads.png")).unwrap();
+        let mut bin: Vec<u8> = Vec::new();
+        for p in [[-1f32, -1., 0.], [1., -1., 0.], [1., 1., 0.], [-1., 1., 0.]] {
+            bin.extend(p.iter().flat_map(|x| x.to_le_bytes()));
+        }
+        for [u, v] in [[0f32, 0.], [1., 0.], [1., 1.], [0., 1.]] {
+            bin.extend([u, 1.0 - v].iter().flat_map(|x| x.to_le_bytes()));
+        }
+        bin.extend([0u16, 1, 2, 0, 2, 3].iter().flat_map(|x| x.to_le_bytes()));
+        let image_at = bin.len();
+        bin.extend(&png);
+        while !bin.len().is_multiple_of(4) {
+            bin.push(0);
+        }
+        let mut json = format!(
+            r#"{{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [0]}}],
+            "nodes": [{{"mesh": 0}}],
+            "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0, "TEXCOORD_0": 1}}, "indices": 2, "material": 0}}]}}],
+            "materials": [{{"name": "paint", "pbrMetallicRoughness": {{"baseColorFactor": [1, 1, 1, 1], "baseColorTexture": {{"index": 0}}}}}}],
+            "textures": [{{"source": 0}}],
+            "images": [{{"bufferView": 3, "mimeType": "image/png"}}],
+            "buffers": [{{"byteLength": {}}}],
+            "bufferViews": [{{"buffer": 0, "byteOffset": 0, "byteLength": 48}},
+                            {{"buffer": 0, "byteOffset": 48, "byteLength": 32}},
+                            {{"buffer": 0, "byteOffset": 80, "byteLength": 12}},
+                            {{"buffer": 0, "byteOffset": {image_at}, "byteLength": {}}}],
+            "accessors": [{{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-1, -1, 0], "max": [1, 1, 0]}},
+                          {{"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"}},
+                          {{"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}}]}}"#,
+            bin.len(),
+            png.len()
+        )
+        .into_bytes();
+        while !json.len().is_multiple_of(4) {
+            json.push(b' ');
+        }
+        let mut glb = b"glTF".to_vec();
+        for x in [2, 28 + json.len() + bin.len(), json.len()] {
+            glb.extend((x as u32).to_le_bytes());
+        }
+        glb.extend(b"JSON");
+        glb.extend(&json);
+        glb.extend((bin.len() as u32).to_le_bytes());
+        glb.extend(b"BIN\0");
+        glb.extend(&bin);
+        std::fs::write(dir.join("square.glb"), glb).unwrap();
+        let text = std::fs::read_to_string(&scene).unwrap();
+        let gltf_scene = dir.join("square-gltf.toml");
+        std::fs::write(&gltf_scene, text.replace("square.obj", "square.glb")).unwrap();
+        let pictures: Vec<Vec<u8>> = [&scene, &gltf_scene]
+            .iter()
+            .map(|s| {
+                let out = s.with_extension("png");
+                let o = run(&[
+                    "render",
+                    s.to_str().unwrap(),
+                    "--size",
+                    "96x96",
+                    "--spp",
+                    "1",
+                    "--quiet",
+                    "--device",
+                    dev,
+                    "-o",
+                    out.to_str().unwrap(),
+                ]);
+                assert!(o.status.success(), "{}", stderr(&o));
+                assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
+                std::fs::read(&out).unwrap()
+            })
+            .collect();
+        assert!(
+            pictures[0] == pictures[1],
+            "{dev}: the GLB's picture is not the OBJ's"
+        );
+        // And the texture is there (under the white highlight): red at the top left, green
+        // at the top right.
+        let img = image::load_from_memory(&pictures[1]).unwrap().to_rgb8();
+        let (red, green) = (img.get_pixel(28, 28).0, img.get_pixel(68, 28).0);
+        assert!(
+            red[0] > red[1] + 80 && green[1] > green[0] + 80,
+            "{red:?} {green:?}"
+        );
+    }
+}
