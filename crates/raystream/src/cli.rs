@@ -638,7 +638,9 @@ impl From<ModeArg> for raystream_cpu::dvr::DvrMode {
 pub struct IsoArgs {
     /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd).
     pub input: PathBuf,
-    /// Output mesh in LPS millimetres: .ply (with normals), .obj (with normals) or .stl.
+    /// Output mesh in LPS millimetres: .ply (with normals), .obj (with normals), .stl, or
+    /// .glb (binary glTF with normals, under a node that turns it to glTF's metres, +Y
+    /// superior, +Z anterior).
     #[arg(short, long)]
     pub output: PathBuf,
     #[command(flatten)]

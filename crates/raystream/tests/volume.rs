@@ -981,3 +981,67 @@ fn phase_picks_the_temporal_position_of_a_4d_ct() {
         }
     }
 }
+
+/// `iso -o BONES.glb`: the surface `-o BONES.ply` writes, under a node that turns LPS
+/// millimetres into glTF's metres (+X left, +Y superior, +Z anterior). Read back here, its
+/// triangles are the PLY's and each vertex the PLY's (x, z, −y) / 1000 with its normal turned
+/// alike; trimesh (an independent reader) places the same vertices.
+#[test]
+fn iso_writes_glb_in_gltfs_metres_and_axes() {
+    let vol = volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz");
+    let out = |name: &str| {
+        let p = tmp(name);
+        let o = run(&[
+            "iso",
+            &vol,
+            "--hu",
+            "300",
+            "-o",
+            p.to_str().unwrap(),
+            "--quiet",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        p
+    };
+    let (ply, glb) = (out("bones-glb.ply"), out("bones.glb"));
+    let (lps, lps_shading) = raystream_io::load_mesh_with_shading(&ply).unwrap();
+    let (gl, gl_shading) = raystream_io::load_mesh_with_shading(&glb).unwrap();
+    assert_eq!(gl.triangles, lps.triangles);
+    let turn = |p: raystream_math::Vec3| raystream_math::Vec3::new(p.x, p.z, -p.y);
+    for (a, b) in gl.positions.iter().zip(&lps.positions) {
+        let want = turn(*b) / 1000.0;
+        assert!(
+            (*a - want).length() <= 1e-6 * want.length().max(1e-3),
+            "{a} for {want}"
+        );
+    }
+    assert_eq!(gl_shading.materials[0].name, "bone");
+    for (a, b) in gl_shading.normals.iter().zip(&lps_shading.normals) {
+        assert!((*a - turn(*b)).length() < 1e-5, "{a} for {b}");
+    }
+    let Some(py) = python() else { return };
+    let o = std::process::Command::new(&py)
+        .args([
+            "-c",
+            "import sys, trimesh, numpy as np\n\
+             g = trimesh.load(sys.argv[1]).to_geometry()\n\
+             sys.stdout.write(f'{len(g.faces)} {np.asarray(g.vertices).min(0).tolist()} {np.asarray(g.vertices).max(0).tolist()}')",
+            glb.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let b = gl.bounds();
+    let nums: Vec<f64> = stdout(&o)
+        .replace(['[', ']', ','], " ")
+        .split_whitespace()
+        .map(|x| x.parse().unwrap())
+        .collect();
+    assert_eq!(nums[0] as usize, gl.triangles.len());
+    for (got, want) in nums[1..]
+        .iter()
+        .zip(b.min.to_array().iter().chain(&b.max.to_array()))
+    {
+        assert!((got - *want as f64).abs() < 1e-6, "{got} for {want}");
+    }
+}
