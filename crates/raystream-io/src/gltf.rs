@@ -66,6 +66,19 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
         }
     }
     let document = gltf::Document::from_json(root).map_err(not_gltf)?;
+    // gltf 1.4 unwraps the percent-decoding of a buffer's relative URI (a panic on one that
+    // decodes to bytes that are not UTF-8): checked here, before it reads the buffers.
+    for b in document.buffers() {
+        if let gltf::buffer::Source::Uri(uri) = b.source()
+            && !uri.contains(':')
+            && urlencoding::decode(uri).is_err()
+        {
+            return Err(bad(format!(
+                "buffer {}: its URI '{uri}' is not a file name (its %-escapes are not UTF-8)",
+                b.index()
+            )));
+        }
+    }
     let buffers = gltf::import_buffers(&document, dir, blob)
         .map_err(|e| bad(format!("its buffers cannot be read ({e})")))?;
     let mut out = Parsed {
@@ -312,11 +325,25 @@ fn image(
             Texture::decode(bytes)
         }
         gltf::image::Source::Uri { uri, .. } => {
-            if uri.starts_with("data:") {
-                return Err("an image in a data URI is not read".into());
+            use base64::Engine;
+            if let Some(data) = uri.strip_prefix("data:") {
+                let (_, encoded) = data
+                    .split_once(";base64,")
+                    .ok_or("a data URI that is not base64")?;
+                let bytes = base64::engine::general_purpose::STANDARD
+                    .decode(encoded)
+                    .map_err(|e| format!("a data URI that is not base64 ({e})"))?;
+                return Texture::decode(&bytes);
             }
+            if uri.contains(':') {
+                return Err(format!(
+                    "{uri}: only file names beside the document are read"
+                ));
+            }
+            let name = urlencoding::decode(uri)
+                .map_err(|_| format!("{uri}: its %-escapes are not UTF-8"))?;
             let dir = dir.ok_or("an image in a file, and no folder to look in")?;
-            Texture::load(&dir.join(uri)).map_err(|e| format!("{uri}: {e}"))
+            Texture::load(&dir.join(&*name)).map_err(|e| format!("{name}: {e}"))
         }
     }
 }
@@ -635,6 +662,7 @@ mod tests {
         let (_, shading) = load_mesh_with_shading(&path).unwrap();
         assert!(shading.warnings.is_empty(), "{:?}", shading.warnings);
         let t = shading.materials[0].image.as_ref().expect("the texture");
+        let texels = t.texels.clone();
         assert_eq!((t.width, t.height), (2, 2));
         assert_eq!(t.texels[3], [100, 100, 7, 255]);
         assert!(t.mapping.clamp);
@@ -656,12 +684,42 @@ mod tests {
             shading.warnings
         );
         // Images that cannot be had.
+        // An image in a data URI is read as it is from the binary chunk; a file name's
+        // %-escapes are decoded.
+        use base64::Engine;
+        let data = format!(
+            r#"{{"uri": "data:image/png;base64,{}"}}"#,
+            base64::engine::general_purpose::STANDARD.encode(&png)
+        );
+        std::fs::write(
+            std::env::temp_dir().join("raystream-io-gltf-tests/my paint.png"),
+            &png,
+        )
+        .unwrap();
+        for image in [data.as_str(), r#"{"uri": "my%20paint.png"}"#] {
+            let path = write("uri-image.glb", &glb(&doc(image, clamp), &bin));
+            let (_, shading) = load_mesh_with_shading(&path).unwrap();
+            assert!(shading.warnings.is_empty(), "{:?}", shading.warnings);
+            assert_eq!(shading.materials[0].image.as_ref().unwrap().texels, texels);
+        }
         for (image, want) in [
             (
                 r#"{"uri": "data:image/png;base64,AAAA"}"#,
-                "an image in a data URI is not read",
+                "image 0: not a readable PNG or JPEG",
+            ),
+            (
+                r#"{"uri": "data:image/png,AAAA"}"#,
+                "a data URI that is not base64",
             ),
             (r#"{"uri": "missing.png"}"#, "image 0: missing.png: "),
+            (
+                r#"{"uri": "%FF.png"}"#,
+                "%FF.png: its %-escapes are not UTF-8",
+            ),
+            (
+                r#"{"uri": "https://example.com/x.png"}"#,
+                "only file names beside the document",
+            ),
         ] {
             let path = write("lost-image.glb", &glb(&doc(image, clamp), &bin));
             let (_, shading) = load_mesh_with_shading(&path).unwrap();
@@ -728,6 +786,12 @@ mod tests {
             r#""POSITION": 7, "NORMAL": 1"#,
         );
         assert!(problem(&glb(&missing, &bin)).contains("names accessor 7, but the file has 4"));
+        // A buffer's file name whose %-escapes are not UTF-8 (the gltf crate unwraps them).
+        let escaped = quad_json(POSITION, NODES).replace(
+            r#""buffers": [{"byteLength": 112}]"#,
+            r#""buffers": [{"byteLength": 112, "uri": "%FF.bin"}]"#,
+        );
+        assert!(problem(escaped.as_bytes()).contains("its URI '%FF.bin' is not a file name"));
         // A buffer shorter than it claims.
         let short = glb(&quad_json(POSITION, NODES), &bin[..64]);
         assert!(problem(&short).contains("its buffers cannot be read"));
