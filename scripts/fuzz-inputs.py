@@ -4,7 +4,7 @@
   .venv/bin/python scripts/fuzz-inputs.py files [--runs N] [--seed S] [--device cpu|gpu]
   .venv/bin/python scripts/fuzz-inputs.py scenes [--runs N] [--seed S]
 
-files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb and as .gltf; an OBJ with normals and an MTL
+files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a textured one too; their JSON also mutated as a document) and as .gltf; an OBJ with normals and an MTL
         library and a PNG texture, any of them mutated; a PLY with normals), tiny volumes
         (NIfTI, NRRD and MetaImage, attached and detached, via SimpleITK; 4-D ones, and
         3D Slicer's interleaved 4-D NRRD, read at a --phase or as a --cine) and real DICOM slices from
@@ -237,6 +237,37 @@ def mutate(b, text):
     return bytes(b)
 
 
+def mutate_glb(b):
+    """A GLB's JSON changed as a document, not as bytes: one to three keys deleted, array
+    entries repeated, or values replaced by absurd ones (a missing MIME type, an index out of
+    range, a wrong enum), the binary chunk kept."""
+    n = struct.unpack("<I", b[12:16])[0]
+    doc, rest = json.loads(b[20:20 + n]), b[20 + n:]
+
+    def paths(o, at=()):
+        yield at
+        items = o.items() if isinstance(o, dict) else enumerate(o) if isinstance(o, list) else ()
+        for k, v in items:
+            yield from paths(v, at + (k,))
+    for _ in range(random.randint(1, 3)):
+        at = random.choice([q for q in paths(doc) if q])
+        parent = doc
+        for k in at[:-1]:
+            parent = parent[k]
+        k, r = at[-1], random.random()
+        if r < 0.35 and isinstance(parent, dict):
+            del parent[k]
+        elif r < 0.5 and isinstance(parent, list):
+            parent.append(json.loads(json.dumps(parent[k])))
+        else:
+            parent[k] = random.choice([-1, 0, 1, 2, 7, 1e9, 4294967295, "x", None, [], {}, 0.5,
+                                       33648, 5125, "VEC4", "data:,"])
+    j = json.dumps(doc).encode()
+    j += b" " * (-len(j) % 4)
+    return (b"glTF" + struct.pack("<II", 2, 20 + len(j) + len(rest)) + struct.pack("<I", len(j))
+            + b"JSON" + j + rest)
+
+
 def run(args, name):
     """None if the run behaved, else what went wrong."""
     try:
@@ -280,7 +311,8 @@ def fuzz_files(work, n, device):
             open(os.path.join(d, "tm.png"), "wb").write(tex)
             open(p, "wb").write(data)
         else:
-            open(p, "wb").write(mutate(data, text))
+            glb = s.endswith(".glb") and random.random() < 0.5
+            open(p, "wb").write(mutate_glb(data) if glb else mutate(data, text))
         if s in ("v.mhd", "v.nhdr"):
             shutil.copy(os.path.join(sd, "v.raw"), d)
         if s.startswith("c."):

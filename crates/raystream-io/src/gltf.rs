@@ -287,7 +287,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
             continue;
         }
         let texture = info.texture();
-        match image(&texture.source(), &buffers, dir) {
+        match image(&document, texture.source().index(), &buffers, dir) {
             Ok(t) => {
                 let (mapping, warning) = wrapping(&texture.sampler());
                 if let Some(w) = warning {
@@ -307,13 +307,26 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
 
 /// An image's texture: from a buffer view (a GLB's), or a file beside the document. Its
 /// texels multiply the base colour factor, as glTF's base colour texture does.
+///
+/// Read from the document's JSON, not through `gltf::Image::source`, which unwraps a missing
+/// MIME type, and a missing URI (a panic on such a file; the crate's validation lets both by).
 fn image(
-    image: &gltf::Image,
+    document: &gltf::Document,
+    index: usize,
     buffers: &[gltf::buffer::Data],
     dir: Option<&Path>,
 ) -> Result<Texture, String> {
-    match image.source() {
-        gltf::image::Source::View { view, .. } => {
+    let json = document
+        .as_json()
+        .images
+        .get(index)
+        .ok_or("no such image")?;
+    match (&json.buffer_view, &json.uri) {
+        (Some(v), _) => {
+            let view = document
+                .views()
+                .nth(v.value())
+                .ok_or("no such buffer view")?;
             let data = buffers
                 .get(view.buffer().index())
                 .map_or(&[][..], |d| &d.0[..]);
@@ -324,7 +337,8 @@ fn image(
                 .ok_or("its buffer view runs past its buffer")?;
             Texture::decode(bytes)
         }
-        gltf::image::Source::Uri { uri, .. } => {
+        (None, None) => Err("neither a buffer view nor a URI".into()),
+        (None, Some(uri)) => {
             use base64::Engine;
             if let Some(data) = uri.strip_prefix("data:") {
                 let (_, encoded) = data
@@ -696,7 +710,9 @@ mod tests {
             &png,
         )
         .unwrap();
-        for image in [data.as_str(), r#"{"uri": "my%20paint.png"}"#] {
+        // (The MIME type a view's image must name is not needed: the bytes say what they are.)
+        let unnamed = r#"{"bufferView": 3}"#;
+        for image in [data.as_str(), r#"{"uri": "my%20paint.png"}"#, unnamed] {
             let path = write("uri-image.glb", &glb(&doc(image, clamp), &bin));
             let (_, shading) = load_mesh_with_shading(&path).unwrap();
             assert!(shading.warnings.is_empty(), "{:?}", shading.warnings);
@@ -720,6 +736,7 @@ mod tests {
                 r#"{"uri": "https://example.com/x.png"}"#,
                 "only file names beside the document",
             ),
+            (r#"{"name": "nowhere"}"#, "neither a buffer view nor a URI"),
         ] {
             let path = write("lost-image.glb", &glb(&doc(image, clamp), &bin));
             let (_, shading) = load_mesh_with_shading(&path).unwrap();
