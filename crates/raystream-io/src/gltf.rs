@@ -25,6 +25,10 @@ pub const MAX_TRIANGLES: usize = 100_000_000;
 /// The deepest node hierarchy read (the document forbids cycles, and the crate's validation
 /// does not look for them).
 const MAX_NODE_DEPTH: usize = 256;
+/// The most nodes waiting to be visited at once (each with its transform, 150 bytes): a node
+/// that lists itself, or another, as a child thousands of times over would otherwise fill
+/// the memory before the depth limit is reached.
+const MAX_PENDING_NODES: usize = 1 << 20;
 
 /// A glTF file's triangles and what it gives their surface.
 pub(crate) struct Parsed {
@@ -122,6 +126,11 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
                 let first = stack.len();
                 stack.extend(node.children().map(|c| (c, world, depth + 1)));
                 stack[first..].reverse();
+                if stack.len() > MAX_PENDING_NODES {
+                    return Err(bad(format!(
+                        "its scene has over {MAX_PENDING_NODES} nodes waiting to be visited (nodes listed as children many times over?)"
+                    )));
+                }
             }
         }
         None => instances.extend(document.meshes().map(|m| (m, DMat4::IDENTITY))),
@@ -794,6 +803,16 @@ mod tests {
         let s = problem(&glb(&quad_json(POSITION, cycle), &bin));
         assert!(
             s.contains("not valid glTF") || s.contains("deeper than"),
+            "{s}"
+        );
+        // A node that lists itself as a child 8,192 times: refused before the nodes waiting
+        // to be visited fill the memory.
+        let zeros = vec!["0"; 8192].join(",");
+        let fan =
+            format!(r#"[{{"children": [{zeros}], "mesh": 0}}, {{"mesh": 0}}, {{"mesh": 0}}]"#);
+        let s = problem(&glb(&quad_json(POSITION, &fan), &bin));
+        assert!(
+            s.contains("over 1048576 nodes waiting to be visited"),
             "{s}"
         );
         // A primitive naming an accessor the file lacks (which gltf-json's validation would
