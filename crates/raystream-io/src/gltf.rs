@@ -282,6 +282,15 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
     if textured.is_empty() {
         out.uvs.clear();
     }
+    // Extensions the file uses (and does not require: the crate's validation refuses those it
+    // does not know) are not read; what is drawn is the file without them.
+    let unread: Vec<&str> = document.extensions_used().collect();
+    if !unread.is_empty() {
+        out.warnings.push(format!(
+            "it uses {}, which raystream does not read: drawn without",
+            unread.join(", ")
+        ));
+    }
     // The textures of the materials that some triangle has coordinates for.
     for (k, m) in document.materials().enumerate() {
         let Some(info) = m.pbr_metallic_roughness().base_color_texture() else {
@@ -628,6 +637,22 @@ mod tests {
         assert!(
             shading.warnings.iter().any(|w| w
                 .contains("material 'brick': its base colour texture is not applied: its faces give no texture coordinates (TEXCOORD_0)")),
+            "{:?}",
+            shading.warnings
+        );
+        // An extension used is not read: a warning names it.
+        let extended = quad_json(POSITION, NODES).replace(
+            r#""asset""#,
+            r#""extensionsUsed": ["KHR_texture_transform"], "asset""#,
+        );
+        let path = write("extended.glb", &glb(&extended, &quad_bin()));
+        let (again, shading) = load_mesh_with_shading(&path).unwrap();
+        assert_eq!(again, mesh);
+        assert!(
+            shading.warnings.contains(
+                &"it uses KHR_texture_transform, which raystream does not read: drawn without"
+                    .to_string()
+            ),
             "{:?}",
             shading.warnings
         );
