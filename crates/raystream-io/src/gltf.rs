@@ -230,7 +230,10 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
                 .material()
                 .pbr_metallic_roughness()
                 .base_color_texture()
-                .map(|t| t.tex_coord());
+                .map(|t| {
+                    let transform = t.texture_transform().and_then(|x| x.tex_coord());
+                    transform.unwrap_or(t.tex_coord())
+                });
             let uv = match set.and_then(|k| prim.get(&gltf::Semantic::TexCoords(k)).map(|a| (k, a)))
             {
                 Some((k, a)) => {
@@ -284,7 +287,10 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
     }
     // Extensions the file uses (and does not require: the crate's validation refuses those it
     // does not know) are not read; what is drawn is the file without them.
-    let unread: Vec<&str> = document.extensions_used().collect();
+    let unread: Vec<&str> = document
+        .extensions_used()
+        .filter(|e| *e != "KHR_texture_transform")
+        .collect();
     if !unread.is_empty() {
         out.warnings.push(format!(
             "it uses {}, which raystream does not read: drawn without",
@@ -307,9 +313,23 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
         let texture = info.texture();
         match image(&document, texture.source().index(), &buffers, dir) {
             Ok(t) => {
-                let (mapping, warning) = wrapping(&texture.sampler());
+                let (mut mapping, warning) = wrapping(&texture.sampler());
                 if let Some(w) = warning {
                     out.warnings.push(format!("material '{name}': {w}"));
+                }
+                // KHR_texture_transform: glTF's coordinates scaled, then offset (in the
+                // image's top-down v); on the renderers' v-up coordinates (1 − v) the same
+                // lookup is a scale of s and an offset of (o_u, 1 − s_v − o_v).
+                if let Some(t) = info.texture_transform() {
+                    let ([su, sv], [ou, ov]) = (t.scale(), t.offset());
+                    if t.rotation() != 0.0 {
+                        out.warnings.push(format!(
+                            "material '{name}': its texture transform turns the coordinates, which is not applied"
+                        ));
+                    } else {
+                        mapping.scale = Vec2::new(su, sv);
+                        mapping.offset = Vec2::new(ou, 1.0 - sv - ov);
+                    }
                 }
                 out.materials[k].texture = Some(format!("image {}", texture.source().index()));
                 out.materials[k].image = Some(Texture { mapping, ..t });
@@ -643,14 +663,14 @@ mod tests {
         // An extension used is not read: a warning names it.
         let extended = quad_json(POSITION, NODES).replace(
             r#""asset""#,
-            r#""extensionsUsed": ["KHR_texture_transform"], "asset""#,
+            r#""extensionsUsed": ["KHR_materials_emissive_strength"], "asset""#,
         );
         let path = write("extended.glb", &glb(&extended, &quad_bin()));
         let (again, shading) = load_mesh_with_shading(&path).unwrap();
         assert_eq!(again, mesh);
         assert!(
             shading.warnings.contains(
-                &"it uses KHR_texture_transform, which raystream does not read: drawn without"
+                &"it uses KHR_materials_emissive_strength, which raystream does not read: drawn without"
                     .to_string()
             ),
             "{:?}",
@@ -721,6 +741,28 @@ mod tests {
                 [uv(0.0, 0.75), uv(1.0, 1.0), uv(0.0, 0.0)],
                 [uv(0.0, 0.0), uv(1.0, 1.0), uv(1.0, 0.25)]
             ]
+        );
+        // KHR_texture_transform: scaled by (2, 0.5) and moved by (0.5, 0.1) in glTF's
+        // coordinates (repeating), the lookup at glTF's (0.125, 1.3) lands on (0.75, 0.75):
+        // the centre of the bottom row's second texel.
+        let repeat = 10497;
+        let transformed = doc(in_bin, repeat)
+            .replace(
+                r#""baseColorTexture": {"index": 0}"#,
+                r#""baseColorTexture": {"index": 0, "extensions": {"KHR_texture_transform": {"offset": [0.5, 0.1], "scale": [2, 0.5]}}}"#,
+            )
+            .replace(r#""asset""#, r#""extensionsUsed": ["KHR_texture_transform"], "asset""#);
+        let path = write("transformed-quad.glb", &glb(&transformed, &bin));
+        let (_, shading) = load_mesh_with_shading(&path).unwrap();
+        assert!(shading.warnings.is_empty(), "{:?}", shading.warnings);
+        let moved = shading.materials[0].image.as_ref().unwrap();
+        assert_eq!(moved.mapping.scale, Vec2::new(2.0, 0.5));
+        let lut = &*crate::SRGB_TO_LINEAR;
+        let want = t.texels[3].map(|c| lut[c as usize]);
+        let got = moved.sample(Vec2::new(0.125, 1.0 - 1.3));
+        assert!(
+            (got - Vec3::new(want[0], want[1], want[2])).length() < 1e-5,
+            "{got} for {want:?}"
         );
         // A mirrored repeat repeats, with a warning.
         let path = write("mirrored-quad.glb", &glb(&doc(in_bin, mirror), &bin));
