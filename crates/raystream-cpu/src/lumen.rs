@@ -300,10 +300,10 @@ fn segment_on(
         row.normal.as_dvec3(),
     );
     let world = |q: DVec2| c + q.x * l + q.y * d;
-    let hi = vol.dims.map(|k| k.max(1) as f32 - 1.0);
+    let last = vol.dims.map(|k| k.max(1) as f32 - 1.0);
     let sample = |k: usize| {
         let q = m.index_of(world(offset(k)).as_vec3());
-        let inside = (0..3).all(|a| (-1e-3..=hi[a] + 1e-3).contains(&q[a]));
+        let inside = (0..3).all(|a| (-1e-3..=last[a] + 1e-3).contains(&q[a]));
         if inside { m.sample(q) } else { f32::NAN }
     };
     // The grid's samples, each taken when first needed.

@@ -10,6 +10,8 @@
 //! panic or an allocation its bytes do not back. Points and lines are left out with a warning;
 //! triangle strips and fans become triangles.
 
+use std::collections::HashMap;
+use std::collections::hash_map::Entry;
 use std::path::Path;
 
 use gltf::accessor::{DataType, Dimensions};
@@ -136,6 +138,8 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
         None => instances.extend(document.meshes().map(|m| (m, DMat4::IDENTITY))),
     }
     let mut lines = std::collections::BTreeSet::new();
+    // Each primitive is read once, however many nodes place its mesh.
+    let mut primitives: HashMap<(usize, usize), Primitive> = HashMap::new();
     for (mesh, world) in &instances {
         if !world.is_finite() {
             return Err(bad(format!(
@@ -146,130 +150,59 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
         // Normals turn by the inverse transpose (a mirroring transform keeps them outward).
         let turn = DMat3::from_mat4(*world).inverse().transpose();
         for prim in mesh.primitives() {
-            let what = format!("mesh {} primitive {}", mesh.index(), prim.index());
+            let key = (mesh.index(), prim.index());
             if !matches!(
                 prim.mode(),
                 Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
             ) {
-                lines.insert((mesh.index(), prim.index()));
+                lines.insert(key);
                 continue;
             }
-            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let positions = prim
-                .get(&gltf::Semantic::Positions)
-                .ok_or_else(|| bad(format!("{what} has no POSITION")))?;
-            check(&positions, &[DataType::F32], Dimensions::Vec3, &buffers)
-                .map_err(|e| bad(format!("{what}: POSITION {e}")))?;
+            let local = match primitives.entry(key) {
+                Entry::Occupied(e) => e.into_mut(),
+                Entry::Vacant(e) => {
+                    let what = format!("mesh {} primitive {}", key.0, key.1);
+                    e.insert(read_primitive(&prim, &buffers, &what).map_err(bad)?)
+                }
+            };
+            let local = &*local;
             let base = out.mesh.positions.len();
-            let count = positions.count();
-            if base + count > u32::MAX as usize {
+            if base + local.positions.len() > u32::MAX as usize {
                 return Err(bad(format!("over {} vertices", u32::MAX)));
             }
-            let read = reader
-                .read_positions()
-                .ok_or_else(|| bad(format!("{what}: POSITION cannot be read")))?;
-            out.mesh.positions.extend(read.map(|p| {
-                world
-                    .transform_point3(Vec3::from_array(p).as_dvec3())
-                    .as_vec3()
-            }));
-            match prim.get(&gltf::Semantic::Normals) {
-                Some(n) => {
-                    check(&n, &[DataType::F32], Dimensions::Vec3, &buffers)
-                        .map_err(|e| bad(format!("{what}: NORMAL {e}")))?;
-                    if n.count() != count {
-                        return Err(bad(format!(
-                            "{what}: {} normals for {count} positions",
-                            n.count()
-                        )));
-                    }
-                    let read = reader
-                        .read_normals()
-                        .ok_or_else(|| bad(format!("{what}: NORMAL cannot be read")))?;
-                    out.normals.extend(
-                        read.map(|n| Some((turn * Vec3::from_array(n).as_dvec3()).as_vec3())),
-                    );
-                }
-                None => out.normals.resize(out.mesh.positions.len(), None),
-            }
-            // The corners, as the primitive lists them.
-            let corners: Vec<u32> = match prim.indices() {
-                Some(idx) => {
-                    check(
-                        &idx,
-                        &[DataType::U8, DataType::U16, DataType::U32],
-                        Dimensions::Scalar,
-                        &buffers,
-                    )
-                    .map_err(|e| bad(format!("{what}: its indices {e}")))?;
-                    let read = reader
-                        .read_indices()
-                        .ok_or_else(|| bad(format!("{what}: its indices cannot be read")))?;
-                    let corners: Vec<u32> = read.into_u32().collect();
-                    if let Some(&i) = corners.iter().find(|&&i| i as usize >= count) {
-                        return Err(bad(format!(
-                            "{what}: index {i}, but it has {count} vertices"
-                        )));
-                    }
-                    corners
-                }
-                None => (0..count as u32).collect(),
-            };
-            let triangles = assemble(prim.mode(), &corners);
-            if out.mesh.triangles.len() + triangles.len() > MAX_TRIANGLES {
+            if out.mesh.triangles.len() + local.triangles.len() > MAX_TRIANGLES {
                 return Err(bad(format!(
                     "over {MAX_TRIANGLES} triangles once its meshes' instances are counted"
                 )));
             }
-            let material = prim.material().index().map(|m| m as u32);
+            out.mesh.positions.extend(
+                local
+                    .positions
+                    .iter()
+                    .map(|p| world.transform_point3(p.as_dvec3()).as_vec3()),
+            );
+            match &local.normals {
+                Some(normals) => out.normals.extend(
+                    normals
+                        .iter()
+                        .map(|n| Some((turn * n.as_dvec3()).as_vec3())),
+                ),
+                None => out.normals.resize(out.mesh.positions.len(), None),
+            }
             out.material_of
-                .extend(std::iter::repeat_n(material, triangles.len()));
-            // The texture's coordinates, where the material has a texture: glTF's v runs down
-            // the image, OBJ's (and the renderers') up.
-            let set = prim
-                .material()
-                .pbr_metallic_roughness()
-                .base_color_texture()
-                .map(|t| {
-                    let transform = t.texture_transform().and_then(|x| x.tex_coord());
-                    transform.unwrap_or(t.tex_coord())
-                });
-            let uv = match set.and_then(|k| prim.get(&gltf::Semantic::TexCoords(k)).map(|a| (k, a)))
-            {
-                Some((k, a)) => {
-                    check(
-                        &a,
-                        &[DataType::F32, DataType::U8, DataType::U16],
-                        Dimensions::Vec2,
-                        &buffers,
-                    )
-                    .map_err(|e| bad(format!("{what}: TEXCOORD_{k} {e}")))?;
-                    if a.count() != count {
-                        return Err(bad(format!(
-                            "{what}: {} texture coordinates for {count} positions",
-                            a.count()
-                        )));
-                    }
-                    let read = reader
-                        .read_tex_coords(k)
-                        .ok_or_else(|| bad(format!("{what}: TEXCOORD_{k} cannot be read")))?;
-                    read.into_f32()
-                        .map(|[u, v]| Vec2::new(u, 1.0 - v))
-                        .collect()
-                }
-                None => Vec::new(),
-            };
-            if let (Some(m), false) = (material, uv.is_empty()) {
+                .extend(std::iter::repeat_n(local.material, local.triangles.len()));
+            if let (Some(m), false) = (local.material, local.uvs.is_empty()) {
                 textured.insert(m as usize);
             }
             out.uvs.extend(
-                triangles
+                local
+                    .triangles
                     .iter()
-                    .map(|t| t.map(|i| uv.get(i as usize).copied().unwrap_or(Vec2::ZERO))),
+                    .map(|t| t.map(|i| local.uvs.get(i as usize).copied().unwrap_or(Vec2::ZERO))),
             );
             out.mesh
                 .triangles
-                .extend(triangles.iter().map(|t| t.map(|i| i + base as u32)));
+                .extend(local.triangles.iter().map(|t| t.map(|i| i + base as u32)));
         }
     }
     if !lines.is_empty() {
@@ -431,6 +364,104 @@ fn material(m: gltf::Material) -> MtlMaterial {
         dissolve: (m.alpha_mode() == gltf::material::AlphaMode::Blend && a < 1.0).then_some(a),
         ..Default::default()
     }
+}
+
+/// A primitive's triangles as the file gives them, before a node places them.
+struct Primitive {
+    positions: Vec<Vec3>,
+    normals: Option<Vec<Vec3>>,
+    /// Indices into `positions`.
+    triangles: Vec<[u32; 3]>,
+    /// Per vertex, the base colour texture's coordinates (v up); empty where the material
+    /// has no texture or the primitive no coordinates for it.
+    uvs: Vec<Vec2>,
+    material: Option<u32>,
+}
+
+/// Reads a primitive of triangles (a list, a strip or a fan); errors begin with `what`.
+fn read_primitive(
+    prim: &gltf::Primitive,
+    buffers: &[gltf::buffer::Data],
+    what: &str,
+) -> Result<Primitive, String> {
+    let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+    let positions = prim
+        .get(&gltf::Semantic::Positions)
+        .ok_or_else(|| format!("{what} has no POSITION"))?;
+    check(&positions, &[DataType::F32], Dimensions::Vec3, buffers)
+        .map_err(|e| format!("{what}: POSITION {e}"))?;
+    let count = positions.count();
+    let unreadable = |name: &str| format!("{what}: {name} cannot be read");
+    let read = reader
+        .read_positions()
+        .ok_or_else(|| unreadable("POSITION"))?;
+    let positions: Vec<Vec3> = read.map(Vec3::from_array).collect();
+    // A per-vertex attribute: as `check` has it, and one item a position.
+    let per_vertex = |a: &gltf::Accessor, types: &[DataType], dims, name: &str, items: &str| {
+        check(a, types, dims, buffers).map_err(|e| format!("{what}: {name} {e}"))?;
+        match a.count() {
+            n if n == count => Ok(()),
+            n => Err(format!("{what}: {n} {items} for {count} positions")),
+        }
+    };
+    let normals = match prim.get(&gltf::Semantic::Normals) {
+        Some(n) => {
+            per_vertex(&n, &[DataType::F32], Dimensions::Vec3, "NORMAL", "normals")?;
+            let read = reader.read_normals().ok_or_else(|| unreadable("NORMAL"))?;
+            Some(read.map(Vec3::from_array).collect())
+        }
+        None => None,
+    };
+    // The corners, as the primitive lists them.
+    let corners: Vec<u32> = match prim.indices() {
+        Some(idx) => {
+            check(
+                &idx,
+                &[DataType::U8, DataType::U16, DataType::U32],
+                Dimensions::Scalar,
+                buffers,
+            )
+            .map_err(|e| format!("{what}: its indices {e}"))?;
+            let read = reader
+                .read_indices()
+                .ok_or_else(|| unreadable("its indices"))?;
+            let corners: Vec<u32> = read.into_u32().collect();
+            if let Some(&i) = corners.iter().find(|&&i| i as usize >= count) {
+                return Err(format!("{what}: index {i}, but it has {count} vertices"));
+            }
+            corners
+        }
+        None => (0..count as u32).collect(),
+    };
+    // The texture's coordinates, where the material has a texture: glTF's v runs down the
+    // image, OBJ's (and the renderers') up.
+    let set = prim
+        .material()
+        .pbr_metallic_roughness()
+        .base_color_texture()
+        .map(|t| {
+            let transform = t.texture_transform().and_then(|x| x.tex_coord());
+            transform.unwrap_or(t.tex_coord())
+        });
+    let uvs = match set.and_then(|k| prim.get(&gltf::Semantic::TexCoords(k)).map(|a| (k, a))) {
+        Some((k, a)) => {
+            let name = format!("TEXCOORD_{k}");
+            let types = [DataType::F32, DataType::U8, DataType::U16];
+            per_vertex(&a, &types, Dimensions::Vec2, &name, "texture coordinates")?;
+            let read = reader.read_tex_coords(k).ok_or_else(|| unreadable(&name))?;
+            read.into_f32()
+                .map(|[u, v]| Vec2::new(u, 1.0 - v))
+                .collect()
+        }
+        None => Vec::new(),
+    };
+    Ok(Primitive {
+        positions,
+        normals,
+        triangles: assemble(prim.mode(), &corners),
+        uvs,
+        material: prim.material().index().map(|m| m as u32),
+    })
 }
 
 /// Checks that `a` is of one of `types` and of `dims`, is not sparse, and lies within its

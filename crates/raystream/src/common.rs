@@ -290,11 +290,10 @@ fn words_without_paths(args: &[String], input: Option<&Path>, output: &Path) -> 
             Some((o, v)) if o.starts_with("--") => (Some(o), Some(v)),
             _ => (None, None),
         };
-        let names_output = |next: Option<&String>| {
-            a.starts_with('-') && next.is_some_and(|n| names(n, output))
-                || matches!(a.as_str(), "-o" | "--output")
-        };
-        if option.is_none() && names_output(args.get(k + 1)) {
+        // `-o X`, or an option whose value is the output (`--plot OUT`): both words go.
+        let drops_next = matches!(a.as_str(), "-o" | "--output")
+            || a.starts_with('-') && args.get(k + 1).is_some_and(|n| names(n, output));
+        if option.is_none() && drops_next {
             k += 2;
             continue;
         }

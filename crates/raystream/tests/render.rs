@@ -1591,6 +1591,30 @@ fn textured_square(name: &str, map: Option<&str>) -> std::path::PathBuf {
     scene
 }
 
+/// Renders a textured square's scene (`textured_square`) at 96 × 96, 1 spp, on `dev`, to
+/// `out`; it must succeed.
+fn render_square(
+    scene: &std::path::Path,
+    dev: &str,
+    out: &std::path::Path,
+) -> std::process::Output {
+    let o = run(&[
+        "render",
+        scene.to_str().unwrap(),
+        "--size",
+        "96x96",
+        "--spp",
+        "1",
+        "--quiet",
+        "--device",
+        dev,
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    o
+}
+
 /// `map_Kd` paints the square: each quarter of the picture shows its texel, u to the right and
 /// v up (the image's first row at the top), blended bilinearly only across the middle; the
 /// same square without the texture is white. Offset by half the image (`-o`), each quarter
@@ -1615,20 +1639,7 @@ fn obj_textures_are_applied_u_right_and_v_up() {
         {
             let scene = textured_square(&format!("{dev}-{k}"), map);
             let out = scene.with_file_name("square.png");
-            let o = run(&[
-                "render",
-                scene.to_str().unwrap(),
-                "--size",
-                "96x96",
-                "--spp",
-                "1",
-                "--quiet",
-                "--device",
-                dev,
-                "-o",
-                out.to_str().unwrap(),
-            ]);
-            assert!(o.status.success(), "{}", stderr(&o));
+            render_square(&scene, dev, &out);
             let img = image::open(&out).unwrap().to_rgb8();
             // The square spans 80 of the 96 pixels; each quarter's middle lies near its
             // texel's centre, where a neighbour's bilinear weight is a few per cent.
@@ -1757,20 +1768,7 @@ fn gltf_textures_paint_as_obj_textures() {
             .iter()
             .map(|s| {
                 let out = s.with_extension("png");
-                let o = run(&[
-                    "render",
-                    s.to_str().unwrap(),
-                    "--size",
-                    "96x96",
-                    "--spp",
-                    "1",
-                    "--quiet",
-                    "--device",
-                    dev,
-                    "-o",
-                    out.to_str().unwrap(),
-                ]);
-                assert!(o.status.success(), "{}", stderr(&o));
+                let o = render_square(s, dev, &out);
                 assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
                 std::fs::read(&out).unwrap()
             })
