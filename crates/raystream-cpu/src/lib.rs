@@ -24,6 +24,7 @@ mod image_out;
 pub mod lumen;
 pub mod medium;
 pub mod stenosis;
+pub mod wall;
 
 use rayon::prelude::*;
 use raystream_accel::{Hit, KdTree, Traversal};

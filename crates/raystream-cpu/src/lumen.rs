@@ -19,6 +19,7 @@ use raystream_math::{DVec2, DVec3, Vec3};
 
 use crate::cpr::{CprRow, CurvedPlane};
 use crate::dvr::Marcher;
+use crate::wall::{Outline, Wall, WallOptions, wall_about};
 
 /// How the lumen is found on a section.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -141,6 +142,8 @@ pub struct Section {
     pub row: CprRow,
     /// The lumen, or none within `seed_mm` of the path's point.
     pub lumen: Option<Lumen>,
+    /// The outer wall about it, when asked for and found.
+    pub wall: Option<Wall>,
 }
 
 impl Section {
@@ -159,6 +162,7 @@ pub fn measure_path(
     n: u32,
     image_right: DVec3,
     opt: &LumenOptions,
+    wall: Option<&WallOptions>,
 ) -> Result<Vec<Section>, String> {
     let plane = CurvedPlane::sections(points, image_right, 0.0, n)?;
     let m = Marcher::new(vol, None);
@@ -167,12 +171,42 @@ pub fn measure_path(
         .rows
         .into_par_iter()
         .enumerate()
-        .map(|(i, row)| Section {
-            arc_mm: (i as f64 + 0.5) * step,
-            row,
-            lumen: measure_section(vol, &m, &row, opt).map(|(l, _)| l),
+        .map(|(i, row)| {
+            let found = measure_with_wall(vol, &m, &row, opt, wall);
+            Section {
+                arc_mm: (i as f64 + 0.5) * step,
+                row,
+                wall: found
+                    .as_ref()
+                    .and_then(|f| f.wall.as_ref().map(|w| w.0.clone())),
+                lumen: found.map(|f| f.lumen),
+            }
         })
         .collect())
+}
+
+/// What [`measure_with_wall`] finds on a section: the lumen, its edge points, and the outer
+/// wall with its outline (when asked for and found), in the section's own coordinates (mm
+/// from the path's point, right and down).
+pub struct Found {
+    pub lumen: Lumen,
+    pub edge: Vec<DVec2>,
+    pub wall: Option<(Wall, Outline)>,
+}
+
+/// [`measure_section`], and with `wall`, the outer wall about the lumen
+/// ([`crate::wall`]).
+pub fn measure_with_wall(
+    vol: &Volume,
+    m: &Marcher,
+    row: &CprRow,
+    opt: &LumenOptions,
+    wall: Option<&WallOptions>,
+) -> Option<Found> {
+    let g = segment(vol, m, row, opt)?;
+    let (lumen, edge) = measure_segmented(&g, row);
+    let wall = wall.and_then(|w| wall_about(vol, m, row, opt, w, &g, (&lumen, &edge)));
+    Some(Found { lumen, edge, wall })
 }
 
 /// A rectangle of a section's `n`×`n` grid: columns `i0..i0 + w`, rows `j0..j0 + h`. The
@@ -213,7 +247,7 @@ impl Window {
 /// `p` mm about the path's point (grid pixel (i, j) at [`Segmented::offset`]), its HU (NaN
 /// outside the volume) and the lumen's pixels, row by row; the lumen lies within the window
 /// and every grid pixel beside it too.
-struct Segmented {
+pub(crate) struct Segmented {
     n: usize,
     p: f64,
     win: Window,
@@ -230,6 +264,18 @@ fn grid_offset(n: usize, p: f64, i: usize, j: usize) -> DVec2 {
 }
 
 impl Segmented {
+    /// Whether the grid pixel that holds the offset `q` from the path's point (mm) is lumen.
+    pub(crate) fn lumen_at(&self, q: DVec2) -> bool {
+        let half = 0.5 * self.n as f64;
+        let (i, j) = ((q.x / self.p + half).floor(), (q.y / self.p + half).floor());
+        i >= 0.0
+            && j >= 0.0
+            && self
+                .win
+                .index(i as usize, j as usize)
+                .is_some_and(|k| self.mask[k])
+    }
+
     /// Grid pixel (i, j)'s offset from the path's point, mm.
     fn offset(&self, i: usize, j: usize) -> DVec2 {
         grid_offset(self.n, self.p, i, j)
@@ -256,6 +302,27 @@ impl Segmented {
     }
 }
 
+/// The HU of the plane of `row` at an offset `q` from the path's point (mm, right and down:
+/// along `row.lateral` and `row.normal`), trilinear as `--mode slice` samples it; NaN outside
+/// the volume.
+pub(crate) fn sampler<'a>(
+    vol: &Volume,
+    m: &'a Marcher,
+    row: &CprRow,
+) -> impl Fn(DVec2) -> f32 + 'a {
+    let (c, l, d) = (
+        row.centre.as_dvec3(),
+        row.lateral.as_dvec3(),
+        row.normal.as_dvec3(),
+    );
+    let last = vol.dims.map(|k| k.max(1) as f32 - 1.0);
+    move |q: DVec2| {
+        let i = m.index_of((c + q.x * l + q.y * d).as_vec3());
+        let inside = (0..3).all(|a| (-1e-3..=last[a] + 1e-3).contains(&i[a]));
+        if inside { m.sample(i) } else { f32::NAN }
+    }
+}
+
 /// Where a section is segmented.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Fit {
@@ -270,7 +337,12 @@ enum Fit {
 /// Samples the plane of `row` and segments the lumen on it: the pixels at or above the
 /// threshold 4-connected to the one nearest the path's point within `seed_mm`, holes filled,
 /// opened; none when no lumen pixel lies that near.
-fn segment(vol: &Volume, m: &Marcher, row: &CprRow, opt: &LumenOptions) -> Option<Segmented> {
+pub(crate) fn segment(
+    vol: &Volume,
+    m: &Marcher,
+    row: &CprRow,
+    opt: &LumenOptions,
+) -> Option<Segmented> {
     segment_on(vol, m, row, opt, Fit::Lumen)
 }
 
@@ -294,18 +366,8 @@ fn segment_on(
 ) -> Option<Segmented> {
     let (n, p) = (opt.side(), opt.pixel_mm);
     let offset = |k: usize| grid_offset(n, p, k % n, k / n);
-    let (c, l, d) = (
-        row.centre.as_dvec3(),
-        row.lateral.as_dvec3(),
-        row.normal.as_dvec3(),
-    );
-    let world = |q: DVec2| c + q.x * l + q.y * d;
-    let last = vol.dims.map(|k| k.max(1) as f32 - 1.0);
-    let sample = |k: usize| {
-        let q = m.index_of(world(offset(k)).as_vec3());
-        let inside = (0..3).all(|a| (-1e-3..=last[a] + 1e-3).contains(&q[a]));
-        if inside { m.sample(q) } else { f32::NAN }
-    };
+    let at = sampler(vol, m, row);
+    let sample = |k: usize| at(offset(k));
     // The grid's samples, each taken when first needed.
     let mut values = vec![0f32; n * n];
     let mut taken = vec![false; n * n];
@@ -407,7 +469,7 @@ pub fn measure_section(
 }
 
 /// [`measure_section`]'s figures of a segmented section.
-fn measure_segmented(g: &Segmented, row: &CprRow) -> (Lumen, Vec<DVec2>) {
+pub(crate) fn measure_segmented(g: &Segmented, row: &CprRow) -> (Lumen, Vec<DVec2>) {
     let (n, p) = (g.n, g.p);
     let (c, l, d) = (
         row.centre.as_dvec3(),
@@ -445,30 +507,59 @@ fn measure_segmented(g: &Segmented, row: &CprRow) -> (Lumen, Vec<DVec2>) {
     }
     let area = count as f64 * p * p;
     let centre = sum / count as f64;
-    let hull = convex_hull(&edge);
-    let (max_d, ends) = max_chord(&hull);
-    let (min_d, across) = min_width(&hull);
-    let perp = (ends[1] - ends[0]).normalize_or_zero().perp();
-    let (lo, hi) = hull
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), q| {
-            let t = q.dot(perp);
-            (lo.min(t), hi.max(t))
-        });
-    let cross = if hull.is_empty() { 0.0 } else { hi - lo };
+    let k = Callipers::of(&edge);
     let lumen = Lumen {
         area_mm2: area,
-        equivalent_diameter_mm: 2.0 * (area / std::f64::consts::PI).sqrt(),
-        max_diameter_mm: max_d,
-        max_ends: ends.map(world),
-        min_diameter_mm: min_d,
-        min_direction: (across.x * l + across.y * d).normalize_or_zero(),
-        cross_diameter_mm: cross,
+        equivalent_diameter_mm: equivalent_diameter(area),
+        max_diameter_mm: k.max_mm,
+        max_ends: k.max_ends.map(world),
+        min_diameter_mm: k.min_mm,
+        min_direction: (k.min_across.x * l + k.min_across.y * d).normalize_or_zero(),
+        cross_diameter_mm: k.cross_mm,
         centroid: world(centre),
         offset_mm: centre.length(),
         open,
     };
     (lumen, edge)
+}
+
+/// The diameter of a circle of `area_mm2`, mm.
+pub(crate) fn equivalent_diameter(area_mm2: f64) -> f64 {
+    2.0 * (area_mm2 / std::f64::consts::PI).sqrt()
+}
+
+/// The calliper (Feret) figures of a set of points on a section (mm, in its own coordinates).
+pub(crate) struct Callipers {
+    /// The longest chord, and its ends.
+    pub max_mm: f64,
+    pub max_ends: [DVec2; 2],
+    /// The narrowest width, and the unit direction across it.
+    pub min_mm: f64,
+    pub min_across: DVec2,
+    /// The width across the longest chord.
+    pub cross_mm: f64,
+}
+
+impl Callipers {
+    pub fn of(pts: &[DVec2]) -> Callipers {
+        let hull = convex_hull(pts);
+        let (max_mm, max_ends) = max_chord(&hull);
+        let (min_mm, min_across) = min_width(&hull);
+        let perp = (max_ends[1] - max_ends[0]).normalize_or_zero().perp();
+        let (lo, hi) = hull
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), q| {
+                let t = q.dot(perp);
+                (lo.min(t), hi.max(t))
+            });
+        Callipers {
+            max_mm,
+            max_ends,
+            min_mm,
+            min_across,
+            cross_mm: if hull.is_empty() { 0.0 } else { hi - lo },
+        }
+    }
 }
 
 /// Where the lumen that [`measure_section`] finds on `row`'s plane meets the line through
@@ -737,7 +828,7 @@ mod tests {
         let (r, axis) = (7.3, DVec2::new(31.6, 32.2));
         let vol = phantom(24, |p| r - (p.truncate() - axis).length());
         let path = [DVec3::new(31.0, 33.0, 2.0), DVec3::new(31.0, 33.0, 21.0)];
-        let sections = measure_path(&vol, &path, 5, DVec3::X, &opt(&vol)).unwrap();
+        let sections = measure_path(&vol, &path, 5, DVec3::X, &opt(&vol), None).unwrap();
         assert_eq!(sections.len(), 5);
         for s in &sections {
             let l = s.lumen.as_ref().expect("the tube");
@@ -797,7 +888,7 @@ mod tests {
         };
         for (x, y) in [(31.6, 32.2), (33.0, 36.0), (40.9, 32.5)] {
             let path = [DVec3::new(x, y, 2.0), DVec3::new(x, y, 21.0)];
-            let row = measure_path(&vol, &path, 1, DVec3::X, &o).unwrap()[0].row;
+            let row = measure_path(&vol, &path, 1, DVec3::X, &o, None).unwrap()[0].row;
             let (c, l, d) = (
                 row.centre.as_dvec3().truncate(),
                 row.lateral.as_dvec3().truncate(),
@@ -817,7 +908,7 @@ mod tests {
             DVec3::new(31.6, 32.2 - r - 4.0, 2.0),
             DVec3::new(31.6, 32.2 - r - 4.0, 21.0),
         ];
-        let row = measure_path(&vol, &path, 1, DVec3::X, &o).unwrap()[0].row;
+        let row = measure_path(&vol, &path, 1, DVec3::X, &o, None).unwrap()[0].row;
         assert!(measure_section(&vol, &m, &row, &o).is_some());
         assert_eq!(lumen_across(&vol, &m, &row, &o), None);
     }
@@ -837,7 +928,7 @@ mod tests {
             4.0 * (1.0 - ((u / a).powi(2) + (v / b).powi(2)).sqrt())
         });
         let path = [DVec3::new(32.0, 32.0, 1.0), DVec3::new(32.0, 32.0, 10.0)];
-        let sections = measure_path(&vol, &path, 1, DVec3::X, &opt(&vol)).unwrap();
+        let sections = measure_path(&vol, &path, 1, DVec3::X, &opt(&vol), None).unwrap();
         let l = sections[0].lumen.as_ref().unwrap();
         assert!(
             (l.max_diameter_mm - 2.0 * a).abs() < 0.1,
@@ -872,7 +963,7 @@ mod tests {
         };
         let at = |x: f64| {
             let path = [DVec3::new(x, 30.0, 1.0), DVec3::new(x, 30.0, 6.0)];
-            measure_path(&vol, &path, 1, DVec3::X, &o)
+            measure_path(&vol, &path, 1, DVec3::X, &o, None)
                 .unwrap()
                 .remove(0)
         };
@@ -892,7 +983,7 @@ mod tests {
             ..opt(&vol)
         };
         let path = [DVec3::new(32.0, 32.0, 1.0), DVec3::new(32.0, 32.0, 6.0)];
-        let s = measure_path(&vol, &path, 1, DVec3::X, &o).unwrap();
+        let s = measure_path(&vol, &path, 1, DVec3::X, &o, None).unwrap();
         let l = s[0].lumen.as_ref().unwrap();
         assert!(l.open);
         // All of the field, which the lumen fills.
@@ -909,7 +1000,7 @@ mod tests {
             })
             .collect();
         let vol = phantom(8, |_| -1.0);
-        let s = measure_path(&vol, &pts, 7, DVec3::X, &opt(&vol)).unwrap();
+        let s = measure_path(&vol, &pts, 7, DVec3::X, &opt(&vol), None).unwrap();
         let c = CurvedPlane::sections(&pts, DVec3::X, 0.0, 7).unwrap();
         assert_eq!(s.len(), 7);
         for (a, b) in s.iter().zip(&c.rows) {
@@ -936,7 +1027,7 @@ mod tests {
                 open_mm,
                 ..opt(&vol)
             };
-            measure_path(&vol, &path, 1, DVec3::X, &o)
+            measure_path(&vol, &path, 1, DVec3::X, &o, None)
                 .unwrap()
                 .remove(0)
                 .lumen
@@ -989,7 +1080,7 @@ mod tests {
         };
         let vol = phantom(64, |p| radius(p.z) - (p.truncate() - axis).length());
         let path = [DVec3::new(32.0, 31.5, 1.0), DVec3::new(32.0, 31.5, 61.0)];
-        let sections = measure_path(&vol, &path, 60, DVec3::X, &opt(&vol)).unwrap();
+        let sections = measure_path(&vol, &path, 60, DVec3::X, &opt(&vol), None).unwrap();
         let st = grade(&sections, 60.0, &StenosisOptions::default()).unwrap();
         // The lesion's section: arc 30.5 mm, z = 31.5.
         assert_eq!(st.lesion, 30, "{st:?}");
@@ -1080,7 +1171,7 @@ mod tests {
     #[test]
     fn the_lumen_on_its_window_is_the_lumen_on_the_field() {
         let row_at = |vol: &Volume, a: DVec3, b: DVec3, o: &LumenOptions| {
-            measure_path(vol, &[a, b], 1, DVec3::X, o).unwrap()[0].row
+            measure_path(vol, &[a, b], 1, DVec3::X, o, None).unwrap()[0].row
         };
         let (r, axis) = (7.3, DVec2::new(31.6, 32.2));
         let tube = phantom(24, |p| r - (p.truncate() - axis).length());

@@ -471,6 +471,7 @@ mod tests {
                 normal: Vec3::Y,
             },
             lumen,
+            wall: None,
         }
     }
 

@@ -350,6 +350,18 @@ pub struct RenderArgs {
         allow_negative_numbers = true
     )]
     pub draw_lumen: Option<f32>,
+    /// With --draw-lumen and --slices N: also the vessel's outer wall that `measure --wall`
+    /// finds (fat or lung below HU [default: -30] about it), its outline in magenta, solid
+    /// where its edge was seen and dotted where the fitted circle stands in for it.
+    #[arg(
+        long,
+        value_name = "HU",
+        num_args = 0..=1,
+        default_missing_value = "-30",
+        requires = "draw_lumen",
+        allow_negative_numbers = true
+    )]
+    pub draw_wall: Option<f32>,
     /// With --path FILE (not --slices): marks these points of the path, mm along it from its
     /// first point (as `measure` gives a lesion's and its references' arc lengths), each a
     /// line across the CPR, yellow ringed in black; PNG, or DICOM as the picture.
@@ -718,6 +730,18 @@ pub struct MeasureArgs {
         allow_negative_numbers = true
     )]
     pub open: f64,
+    /// Also find the vessel's outer wall about the lumen ("outer wall to outer wall", as an
+    /// aneurysm or a dissection is followed): rays from its centre out to the fat or lung
+    /// about it, below HU [default: -30], a circle fitted to the edges they find, the outline
+    /// where seen and the circle where a neighbour hides it.
+    #[arg(
+        long,
+        value_name = "HU",
+        num_args = 0..=1,
+        default_missing_value = "-30",
+        allow_negative_numbers = true
+    )]
+    pub wall: Option<f32>,
     /// Grade a stenosis: the lesion's area and smallest diameter against the reference, the
     /// vessel's diameter there without it (fitted to the sections about it, or --reference),
     /// and the narrowed segment's length.

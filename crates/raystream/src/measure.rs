@@ -9,6 +9,7 @@ use anyhow::{Context, Result, bail};
 use raystream_cpu::cpr::{CurvedPlane, PathAngle, Tortuosity};
 use raystream_cpu::lumen::{self, LumenOptions, Section};
 use raystream_cpu::stenosis::{self, ReferenceSource, Stenosis};
+use raystream_cpu::wall::{Wall, WallOptions};
 use raystream_math::DVec3;
 use serde_json::json;
 
@@ -46,6 +47,13 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     };
     opt.check()
         .map_err(|e| anyhow::anyhow!("--lumen/--field/--seed/--open: {e}"))?;
+    let wall = a.wall.map(|hu| WallOptions {
+        threshold_hu: hu,
+        ..WallOptions::default()
+    });
+    if let Some(w) = &wall {
+        w.check(&opt).map_err(|e| anyhow::anyhow!("--wall: {e}"))?;
+    }
     let file = a.path.display();
     // The check `render --path` makes: some of the path lies in the grid.
     let rows = CurvedPlane::new(&points, DVec3::X, 0.0, 1, 256)
@@ -78,7 +86,7 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     );
     // Sections framed as `render --path --slices N` frames them from its default view (the
     // anterior one: the patient's left to the image's right).
-    let sections = lumen::measure_path(&volume, &points, n as u32, DVec3::X, &opt)
+    let sections = lumen::measure_path(&volume, &points, n as u32, DVec3::X, &opt, wall.as_ref())
         .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     pb.finish_and_clear();
     let found = sections.iter().any(|s| s.lumen.is_some());
@@ -101,7 +109,7 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         _ => None,
     };
     if let Some(out) = &a.output {
-        std::fs::write(out, csv(&sections, lesions.first()))
+        std::fs::write(out, csv(&sections, lesions.first(), wall.is_some()))
             .with_context(|| format!("cannot write {}", out.display()))?;
     }
     if let Some(out) = &a.plot
@@ -155,10 +163,13 @@ fn status(s: &Section) -> &'static str {
 
 /// The table as CSV, a section a row (LPS mm; empty fields where no lumen was found); with a
 /// graded stenosis, the reference diameter where it is defined in a last column.
-fn csv(sections: &[Section], graded: Option<&Stenosis>) -> String {
+fn csv(sections: &[Section], graded: Option<&Stenosis>, walls: bool) -> String {
     let mut t = String::from(
         "section,arc_mm,x,y,z,tangent_x,tangent_y,tangent_z,status,area_mm2,equivalent_diameter_mm,max_diameter_mm,cross_diameter_mm,min_diameter_mm,centroid_x,centroid_y,centroid_z,offset_mm",
     );
+    if walls {
+        t += ",wall_area_mm2,wall_equivalent_diameter_mm,wall_max_diameter_mm,wall_cross_diameter_mm,wall_min_diameter_mm,wall_seen";
+    }
     t += if graded.is_some() {
         ",reference_diameter_mm\n"
     } else {
@@ -198,6 +209,22 @@ fn csv(sections: &[Section], graded: Option<&Stenosis>) -> String {
             }
             None => t.push_str(",,,,,,,,,"),
         }
+        match (&s.wall, walls) {
+            (Some(w), _) => {
+                let _ = write!(
+                    t,
+                    ",{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
+                    w.area_mm2,
+                    w.equivalent_diameter_mm,
+                    w.max_diameter_mm,
+                    w.cross_diameter_mm,
+                    w.min_diameter_mm,
+                    w.seen
+                );
+            }
+            (None, true) => t.push_str(",,,,,,"),
+            (None, false) => {}
+        }
         if let Some(g) = graded {
             t.push(',');
             if let Some(d) = g.reference_at(s.arc_mm) {
@@ -224,6 +251,54 @@ fn extremes(sections: &[Section]) -> Option<(usize, usize)> {
             .total_cmp(&b.1.equivalent_diameter_mm)
     })?;
     Some((widest.0, narrowest.0))
+}
+
+/// The section whose outer wall is widest (by its largest diameter, as an aneurysm's size
+/// is reported), and its wall.
+fn widest_wall(sections: &[Section]) -> Option<(usize, &Wall)> {
+    sections
+        .iter()
+        .enumerate()
+        .filter_map(|(i, s)| s.wall.as_ref().map(|w| (i, w)))
+        .max_by(|a, b| a.1.max_diameter_mm.total_cmp(&b.1.max_diameter_mm))
+}
+
+/// The outer wall's lines of the text report: the widest section, and on how many sections
+/// a wall was found.
+fn wall_text(sections: &[Section], hu: f32) -> String {
+    let closed = sections
+        .iter()
+        .filter(|s| s.lumen.as_ref().is_some_and(|l| !l.open))
+        .count();
+    let found = sections.iter().filter(|s| s.wall.is_some()).count();
+    let mut t = String::new();
+    if let Some((i, w)) = widest_wall(sections) {
+        let s = &sections[i];
+        let c = w.centre;
+        let _ = writeln!(
+            t,
+            "widest wall: section {} at {:.1} mm, ({:.1}, {:.1}, {:.1}) mm LPS: D max {:.2} mm (across it {:.2} mm), D min {:.2} mm, D eq {:.2} mm, {:.1} mm2, its edge seen on {:.0} % of the outline; the lumen there D eq {:.2} mm",
+            i + 1,
+            s.arc_mm,
+            c.x,
+            c.y,
+            c.z,
+            w.max_diameter_mm,
+            w.cross_diameter_mm,
+            w.min_diameter_mm,
+            w.equivalent_diameter_mm,
+            w.area_mm2,
+            100.0 * w.seen,
+            s.lumen
+                .as_ref()
+                .map_or(f64::NAN, |l| l.equivalent_diameter_mm),
+        );
+    }
+    let _ = writeln!(
+        t,
+        "wall: found on {found} of the {closed} sections with a closed lumen (its edge: fat or lung below {hu} HU about it; none where too little of it is seen)"
+    );
+    t
 }
 
 /// The path's angle at a point, in words.
@@ -289,7 +364,12 @@ fn report_text(
         opt.pixel_mm,
         opt.field_mm,
     );
-    t += "section   arc mm         x         y         z   area mm2   D eq mm  D max mm  D cross mm  D min mm  offset mm  lumen\n";
+    t += "section   arc mm         x         y         z   area mm2   D eq mm  D max mm  D cross mm  D min mm  offset mm  lumen";
+    t += if a.wall.is_some() {
+        "  wall mm2  wall D eq  wall D max  wall D cross  wall D min  seen %\n"
+    } else {
+        "\n"
+    };
     for (i, s) in sections.iter().enumerate() {
         let c = s.row.centre;
         let _ = write!(
@@ -303,9 +383,9 @@ fn report_text(
         );
         match &s.lumen {
             Some(l) => {
-                let _ = writeln!(
+                let _ = write!(
                     t,
-                    " {:>10.1} {:>9.2} {:>9.2} {:>11.2} {:>9.2} {:>10.2}  {}",
+                    " {:>10.1} {:>9.2} {:>9.2} {:>11.2} {:>9.2} {:>10.2}  {:<6}",
                     l.area_mm2,
                     l.equivalent_diameter_mm,
                     l.max_diameter_mm,
@@ -316,12 +396,29 @@ fn report_text(
                 );
             }
             None => {
-                let _ = writeln!(
-                    t,
-                    "          -         -         -           -         -          -  none"
-                );
+                t += "          -         -         -           -         -          -  none  ";
             }
         }
+        match (&s.wall, a.wall.is_some()) {
+            (Some(w), _) => {
+                let _ = write!(
+                    t,
+                    "{:>10.1} {:>10.2} {:>11.2} {:>13.2} {:>11.2} {:>7.0}",
+                    w.area_mm2,
+                    w.equivalent_diameter_mm,
+                    w.max_diameter_mm,
+                    w.cross_diameter_mm,
+                    w.min_diameter_mm,
+                    100.0 * w.seen
+                );
+            }
+            (None, true) => {
+                t += "         -          -           -             -           -       -";
+            }
+            (None, false) => {}
+        }
+        t = t.trim_end().to_string();
+        t.push('\n');
     }
     if let Some((w, nw)) = extremes(sections) {
         let line = |what: &str, i: usize| {
@@ -360,6 +457,9 @@ fn report_text(
             "none: {none} of {n} sections with no lumen at or above {} HU within {} mm of the path",
             opt.threshold_hu, opt.seed_mm
         );
+    }
+    if let Some(hu) = a.wall {
+        t += &wall_text(sections, hu);
     }
     t += &winding_words(winding);
     t.push('\n');
@@ -573,6 +673,12 @@ fn report_json(
                 m.insert("centroid".into(), json!(v3(l.centroid)));
                 m.insert("offset_mm".into(), json!(round3(l.offset_mm)));
             }
+            if a.wall.is_some() {
+                o.as_object_mut().unwrap().insert(
+                    "wall".into(),
+                    s.wall.as_ref().map_or(json!(null), wall_json),
+                );
+            }
             if let Some(d) = graded.and_then(|g| g.reference_at(s.arc_mm)) {
                 o.as_object_mut()
                     .unwrap()
@@ -616,7 +722,31 @@ fn report_json(
     if let Some(g) = findings.angle {
         m.insert("angle".into(), angle_json(g));
     }
+    if let Some(hu) = a.wall {
+        m.insert("wall_threshold_hu".into(), json!(hu));
+        m.insert(
+            "widest_wall_section".into(),
+            json!(widest_wall(sections).map(|(i, _)| i + 1)),
+        );
+    }
     report
+}
+
+/// A section's outer wall as JSON.
+fn wall_json(w: &Wall) -> serde_json::Value {
+    let v3 = |v: DVec3| [round3(v.x), round3(v.y), round3(v.z)];
+    json!({
+        "area_mm2": round3(w.area_mm2),
+        "equivalent_diameter_mm": round3(w.equivalent_diameter_mm),
+        "max_diameter_mm": round3(w.max_diameter_mm),
+        "max_diameter_ends": [v3(w.max_ends[0]), v3(w.max_ends[1])],
+        "cross_diameter_mm": round3(w.cross_diameter_mm),
+        "min_diameter_mm": round3(w.min_diameter_mm),
+        "min_diameter_direction": w.min_direction.to_array(),
+        "centre": v3(w.centre),
+        "circle_diameter_mm": round3(w.circle_diameter_mm),
+        "seen": round3(w.seen),
+    })
 }
 
 #[cfg(test)]
@@ -650,6 +780,7 @@ mod tests {
                 normal: Vec3::Y,
             },
             lumen: Some(lumen),
+            wall: None,
         }];
         let mut g = Stenosis {
             lesion: 0,

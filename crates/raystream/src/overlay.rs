@@ -9,6 +9,7 @@
 use raystream_cpu::cpr::CprRow;
 use raystream_cpu::dvr::lps_to_scene;
 use raystream_cpu::lumen::Lumen;
+use raystream_cpu::wall::Outline;
 use raystream_math::{DVec2, DVec3, Vec3};
 use raystream_scene::Camera;
 
@@ -17,6 +18,8 @@ const LINE: [u8; 3] = [255, 214, 0];
 const RING: [u8; 3] = [0, 0, 0];
 /// A lumen's edge.
 const EDGE: [u8; 3] = [0, 230, 255];
+/// A vessel's outer wall.
+const WALL: [u8; 3] = [255, 64, 220];
 
 /// Where the LPS point `p` falls in a `width`×`height` frame of `cam` (scene frame), in pixel
 /// coordinates (the top-left corner at 0, 0), as `Camera::ray` casts pixels; `None` behind a
@@ -126,6 +129,54 @@ pub fn draw_lumen(
         }
     }
     draw_path(rgb, width, height, cam, &lumen.max_ends);
+}
+
+/// Draws a cross-section's outer wall (`measure --wall`'s outline on the plane of `row` seen by
+/// `cam`) into the 8-bit RGB `rgb`: a magenta line a pixel wide between its points, solid where
+/// the wall's edge was seen and dotted (every other pixel) where the fitted circle stands in
+/// for it.
+pub fn draw_wall(
+    rgb: &mut [u8],
+    (width, height): (u32, u32),
+    cam: &Camera,
+    row: &CprRow,
+    outline: &Outline,
+) {
+    let (c, l, d) = (
+        row.centre.as_dvec3(),
+        row.lateral.as_dvec3(),
+        row.normal.as_dvec3(),
+    );
+    let at: Vec<Option<(f32, f32)>> = outline
+        .points
+        .iter()
+        .map(|q| project(cam, c + q.x * l + q.y * d, width, height))
+        .collect();
+    let n = at.len();
+    let mut dot = 0u32;
+    for k in 0..n {
+        let (Some(a), Some(b)) = (at[k], at[(k + 1) % n]) else {
+            continue;
+        };
+        let seen = outline.seen[k] && outline.seen[(k + 1) % n];
+        let steps =
+            ((b.0 - a.0).abs().max((b.1 - a.1).abs()).ceil() as u32).clamp(1, 4 * (width + height));
+        for s in 0..steps {
+            let t = s as f32 / steps as f32;
+            let (x, y) = (a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1));
+            let (px, py) = (x.floor() as i64, y.floor() as i64);
+            dot += 1;
+            if (seen || dot.is_multiple_of(2))
+                && px >= 0
+                && py >= 0
+                && px < width as i64
+                && py < height as i64
+            {
+                let i = 3 * (py as usize * width as usize + px as usize);
+                rgb[i..i + 3].copy_from_slice(&WALL);
+            }
+        }
+    }
 }
 
 /// Draws the lumen's edges on each row of a `width`×`height` curved reformation of pixels

@@ -36,6 +36,8 @@ pub const OPEN: RGBColor = RGBColor(0x7f, 0x7f, 0x7f);
 pub const REFERENCE: RGBColor = RGBColor(0xd6, 0x27, 0x28);
 /// The lesion (tab:purple).
 pub const LESION: RGBColor = RGBColor(0x94, 0x67, 0xbd);
+/// The outer wall's largest diameter (tab:pink).
+pub const WALL: RGBColor = RGBColor(0xe3, 0x77, 0xc2);
 
 /// A diameter drawn as a line: its colour, width (px), legend and figure.
 struct Quantity {
@@ -69,10 +71,18 @@ const QUANTITIES: [Quantity; 3] = [
 
 /// Consecutive closed sections, as runs of (arc mm, lumen).
 fn closed_runs(sections: &[Section]) -> Vec<Vec<(f64, &Lumen)>> {
-    let mut runs: Vec<Vec<(f64, &Lumen)>> = Vec::new();
+    runs_of(sections, |s| s.lumen.as_ref().filter(|l| !l.open))
+}
+
+/// Consecutive sections of which `pick` takes something, as runs of (arc mm, it).
+fn runs_of<'a, T>(
+    sections: &'a [Section],
+    pick: impl Fn(&'a Section) -> Option<T>,
+) -> Vec<Vec<(f64, T)>> {
+    let mut runs: Vec<Vec<(f64, T)>> = Vec::new();
     let mut open_run = false;
     for s in sections {
-        match s.lumen.as_ref().filter(|l| !l.open) {
+        match pick(s) {
             Some(l) => {
                 if !open_run {
                     runs.push(Vec::new());
@@ -150,8 +160,10 @@ fn draw<DB: DrawingBackend>(
         .iter()
         .flat_map(|g| g.domain_mm.iter().filter_map(|&s| g.reference_at(s)))
         .collect();
+    let walls = runs_of(sections, |s| s.wall.as_ref().map(|w| w.max_diameter_mm));
     let top = lumens
         .map(|l| l.max_diameter_mm)
+        .chain(walls.iter().flatten().map(|w| w.1))
         .chain(reference.iter().copied())
         .fold(0.0, f64::max);
     // Room above the widest section for the legend; below zero only for a reference line
@@ -215,6 +227,19 @@ fn draw<DB: DrawingBackend>(
                 if k == 0 {
                     series.label(q.label).legend(swatch(q.colour, 1.0));
                 }
+            }
+        }
+        // The outer wall's largest diameter, where one was found.
+        for (k, run) in walls.iter().enumerate() {
+            let series = if run.len() == 1 {
+                chart.draw_series(std::iter::once(Circle::new(run[0], 4, WALL.filled())))?
+            } else {
+                chart.draw_series(LineSeries::new(run.iter().copied(), WALL.stroke_width(2)))?
+            };
+            if k == 0 {
+                series
+                    .label("outer wall D max (outer wall to outer wall)")
+                    .legend(swatch(WALL, 1.0));
             }
         }
         let open: Vec<(f64, f64)> = sections
@@ -762,6 +787,7 @@ mod tests {
             arc_mm: s,
             row,
             lumen,
+            wall: None,
         }
     }
 
@@ -830,7 +856,7 @@ mod tests {
         let n = (length / 2.0).round() as u32;
         let opt = raystream_cpu::lumen::LumenOptions::for_volume(&vol);
         let sections =
-            raystream_cpu::lumen::measure_path(&vol, &points, n, DVec3::X, &opt).unwrap();
+            raystream_cpu::lumen::measure_path(&vol, &points, n, DVec3::X, &opt, None).unwrap();
         assert!(
             sections
                 .iter()

@@ -18,6 +18,7 @@ use raystream_scene::{Camera, PatientView, Projection, Scene, VOLUME_VIEW, View}
 use raystream_cpu::cpr::CurvedPlane;
 use raystream_cpu::dvr::{DvrMode, DvrOptions, Sight, volume_camera_from};
 use raystream_cpu::lumen::LumenOptions;
+use raystream_cpu::wall::WallOptions;
 
 use crate::cli::{CprArg, FrameFormat, RenderArgs};
 use crate::common::{
@@ -182,6 +183,21 @@ fn lumen_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option
     o.check()
         .map_err(|e| anyhow::anyhow!("--draw-lumen {hu}: {e}"))?;
     Ok(Some(o))
+}
+
+/// `--draw-wall HU`'s wall options (`measure --wall`'s at that threshold), checked against
+/// `--draw-lumen`'s.
+fn wall_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option<WallOptions>> {
+    let (Some(hu), Some(lumen)) = (a.draw_wall, lumen_options(a, volume)?) else {
+        return Ok(None);
+    };
+    let w = WallOptions {
+        threshold_hu: hu,
+        ..WallOptions::default()
+    };
+    w.check(&lumen)
+        .map_err(|e| anyhow::anyhow!("--draw-wall {hu}: {e}"))?;
+    Ok(Some(w))
 }
 
 /// `--draw-lumen HU` on a curved reformation: on each row, where the lumen that `measure`
@@ -456,6 +472,12 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     }
     let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
     lumen_options(a, &volume)?;
+    wall_options(a, &volume)?;
+    if a.draw_wall.is_some() && a.slices.is_none() {
+        bail!(
+            "--draw-wall draws the outer wall on cross-sections (--path FILE --slices N); on a CPR, --draw-lumen draws the lumen's edges"
+        );
+    }
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     // An EXR keeps what the projections found, in HU; the window is for display. So does a
     // DICOM picture, with the window as its VOI LUT, unless letters are drawn into it.
@@ -722,6 +744,7 @@ fn path_sections(
         .sqrt() as f32;
     let lumen =
         lumen_options(a, volume)?.map(|o| (o, raystream_cpu::dvr::Marcher::new(volume, None)));
+    let wall = wall_options(a, volume)?;
     frame_series(a, (volume, None), n, format, "slices", |i| {
         let cam = stations.section_camera(i, 0.5 * pixel * opt.height as f32, reach);
         let row = &stations.rows[i as usize];
@@ -732,9 +755,14 @@ fn path_sections(
         let mut f = renderer.frame(&opt, &cam, format)?;
         if let (Some((o, m)), crate::common::Picture::Srgb8 { rgb, width, height }) =
             (&lumen, &mut f.picture)
-            && let Some((l, edge)) = raystream_cpu::lumen::measure_section(volume, m, row, o)
+            && let Some(found) =
+                raystream_cpu::lumen::measure_with_wall(volume, m, row, o, wall.as_ref())
         {
-            crate::overlay::draw_lumen(rgb, (*width, *height), &cam, row, (&l, &edge));
+            let size = (*width, *height);
+            if let Some((_, outline)) = &found.wall {
+                crate::overlay::draw_wall(rgb, size, &cam, row, outline);
+            }
+            crate::overlay::draw_lumen(rgb, size, &cam, row, (&found.lumen, &found.edge));
         }
         Ok((f, Seen::Camera(cam), opt))
     })

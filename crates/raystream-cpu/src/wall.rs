@@ -1,0 +1,760 @@
+//! A vessel's outer wall on a cross-section, about the lumen that `lumen` finds: the aorta's
+//! whole width, which an aneurysm's or a dissection's surveillance reports ("outer wall to
+//! outer wall") and which the contrast-filled lumen understates wherever thrombus, an
+//! unenhanced false lumen or a thick wall lines it.
+//!
+//! The wall and what lines it (30–60 HU) differ from the contrast (≥ the lumen's threshold)
+//! but not from the vessel's neighbours (the oesophagus, the crura, bowel, the heart's wall):
+//! a region grown from the lumen runs into them. What does show the wall's edge is the fat or
+//! lung about it (−100 HU and less). So rays are cast from the vessel's centre: each leaves the
+//! lumen and is followed outwards to the first sample below the wall's threshold (default
+//! −30 HU, halfway between soft tissue and fat), where the edge is placed between the two
+//! samples. A ray that meets something as bright as the lumen first (bone, calcium, another
+//! vessel), leaves the volume or reaches the field's edge finds no edge. A ray that runs
+//! from the wall into a neighbour with no fat between them finds the neighbour's far edge,
+//! always further out than the wall's; a fat edge is never found inside the vessel.
+//!
+//! A circle is fitted to the edges robustly (RANSAC over deterministic triples, then least
+//! squares on the edges it agrees with): circles that hold the lumen are scored by the edges
+//! on them (within 10 % of the radius, at least 1.5 mm) less thrice those inside them (fat
+//! within the vessel: evidence against), and since every edge bounds the vessel from outside,
+//! the smallest circle with at least 60 % of the best score is taken. The rays are cast again
+//! from its centre and the circle fitted again. From the rays that agree with it, the wall's
+//! edge is followed round to each neighbouring ray whose edge lies within 1 mm (a wall that is
+//! not round: an elliptic or lobed sac); a neighbour's far edge jumps out by its width and is
+//! not followed. The outline is each such ray's edge, and the circle where a ray's edge is not
+//! seen (hidden by a neighbour), never inside the lumen; the figures (area, calliper
+//! diameters) are the outline's, as the lumen's are of its edge. A section is left without a
+//! wall when fewer than 8 rays, or edges over less than a quarter of the circle, agree on one.
+//!
+//! Written here: the geometry is a few dozen lines of 2-D fitting, and no crate does the
+//! vessel-specific part (which rays to trust).
+
+use raystream_io::Volume;
+use raystream_math::{DVec2, DVec3};
+
+use crate::cpr::CprRow;
+use crate::dvr::Marcher;
+use crate::lumen::{self, Callipers, Lumen, LumenOptions, Segmented};
+
+/// How the outer wall is found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WallOptions {
+    /// Samples below this, HU, are the fat or lung about the vessel.
+    pub threshold_hu: f32,
+    /// How many rays are cast from the vessel's centre, evenly about it.
+    pub rays: usize,
+}
+
+impl Default for WallOptions {
+    /// −30 HU (halfway between the wall's 30–60 HU and fat's −100), 180 rays (2° apart).
+    fn default() -> WallOptions {
+        WallOptions {
+            threshold_hu: -30.0,
+            rays: 180,
+        }
+    }
+}
+
+impl WallOptions {
+    pub fn check(&self, lumen: &LumenOptions) -> Result<(), String> {
+        if !(self.threshold_hu.is_finite() && self.threshold_hu < lumen.threshold_hu) {
+            return Err(format!(
+                "a wall threshold of {} HU: it must be a number below the lumen's {} HU",
+                self.threshold_hu, lumen.threshold_hu
+            ));
+        }
+        if !(16..=4096).contains(&self.rays) {
+            return Err(format!("{} rays: between 16 and 4096", self.rays));
+        }
+        Ok(())
+    }
+}
+
+/// Edges that must agree on a circle, at least.
+const MIN_EDGES: usize = 8;
+/// The largest gap between them about the circle, radians: they cover a quarter of it.
+const MAX_GAP: f64 = 1.5 * std::f64::consts::PI;
+/// An edge agrees with a circle of radius r within this fraction of r ...
+const TOLERANCE: f64 = 0.1;
+/// ... or this, mm, whichever is more.
+const TOLERANCE_MM: f64 = 1.5;
+/// A ray's edge is followed from its neighbour's when they lie within this, mm.
+const CONTINUITY_MM: f64 = 1.0;
+/// A circle is taken over a larger one with at least this fraction of its support.
+const SUPPORT: f64 = 0.6;
+/// What an edge inside a circle (fat within the vessel) counts against it, in edges on it.
+const INSIDE_WEIGHT: i64 = 3;
+
+/// The outer wall found on one cross-section.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Wall {
+    /// The outline's area, mm² (the lumen's included).
+    pub area_mm2: f64,
+    /// The diameter of a circle of the same area, mm.
+    pub equivalent_diameter_mm: f64,
+    /// The outline's longest chord, mm, and its ends (LPS mm).
+    pub max_diameter_mm: f64,
+    pub max_ends: [DVec3; 2],
+    /// Its narrowest calliper width, mm, and the unit direction across it (LPS).
+    pub min_diameter_mm: f64,
+    pub min_direction: DVec3,
+    /// The calliper width across the longest chord, mm.
+    pub cross_diameter_mm: f64,
+    /// The fitted circle's centre (LPS mm) and diameter, mm.
+    pub centre: DVec3,
+    pub circle_diameter_mm: f64,
+    /// The fraction of the rays whose edge was seen (on the circle, or followed along the
+    /// wall from there): the outline there is the edges', and elsewhere the circle's.
+    pub seen: f64,
+}
+
+/// A wall's outline on its section (mm from the path's point, right and down), a point a
+/// ray in order about the centre, and whether each was seen (the ray's edge) or is the
+/// fitted circle's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Outline {
+    pub points: Vec<DVec2>,
+    pub seen: Vec<bool>,
+}
+
+/// What one ray from the centre finds, mm from the centre.
+#[derive(Clone, Copy, Debug)]
+struct Ray {
+    dir: DVec2,
+    /// The lumen's last grid pixel along it (0 where it meets none).
+    lumen: f64,
+    /// Where the fat begins, if the ray finds it before anything bright.
+    edge: Option<f64>,
+}
+
+/// A circle on the section, mm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Circle {
+    o: DVec2,
+    r: f64,
+}
+
+impl Circle {
+    fn tolerance(&self) -> f64 {
+        (TOLERANCE * self.r).max(TOLERANCE_MM)
+    }
+
+    /// Through three points; none where they are (nearly) collinear.
+    fn through(a: DVec2, b: DVec2, c: DVec2) -> Option<Circle> {
+        let (u, v) = (b - a, c - a);
+        let det = 2.0 * u.perp_dot(v);
+        if det.abs() < 1e-9 * u.length_squared().max(v.length_squared()) {
+            return None;
+        }
+        // The centre's offset from a: x with 2 u·x = |u|², 2 v·x = |v|².
+        let (su, sv) = (u.length_squared(), v.length_squared());
+        let x = DVec2::new(su * v.y - sv * u.y, sv * u.x - su * v.x) / det;
+        Some(Circle {
+            o: a + x,
+            r: x.length(),
+        })
+    }
+
+    /// The least-squares (Kåsa) circle through `pts`: x² + y² + a x + b y + c = 0 solved for
+    /// a, b, c, about the points' mean (for conditioning).
+    fn fitted(pts: &[DVec2]) -> Option<Circle> {
+        let mean = pts.iter().copied().sum::<DVec2>() / pts.len() as f64;
+        let mut m = [[0.0f64; 4]; 3];
+        for &p in pts {
+            let q = p - mean;
+            let row = [q.x, q.y, 1.0];
+            let rhs = -q.length_squared();
+            for i in 0..3 {
+                for j in 0..3 {
+                    m[i][j] += row[i] * row[j];
+                }
+                m[i][3] += row[i] * rhs;
+            }
+        }
+        let [a, b, c] = solve3(m)?;
+        let o = DVec2::new(-0.5 * a, -0.5 * b);
+        let r2 = o.length_squared() - c;
+        (r2 > 0.0).then(|| Circle {
+            o: o + mean,
+            r: r2.sqrt(),
+        })
+    }
+
+    /// Where the ray from `from` along the unit `dir` leaves the circle, mm from `from`
+    /// (`from` inside it).
+    fn exit(&self, from: DVec2, dir: DVec2) -> f64 {
+        let w = from - self.o;
+        let b = w.dot(dir);
+        let c = w.length_squared() - self.r * self.r;
+        -b + (b * b - c).max(0.0).sqrt()
+    }
+}
+
+/// Gaussian elimination with partial pivoting on an augmented 3×4 matrix.
+fn solve3(mut m: [[f64; 4]; 3]) -> Option<[f64; 3]> {
+    for c in 0..3 {
+        let p = (c..3).max_by(|&a, &b| m[a][c].abs().total_cmp(&m[b][c].abs()))?;
+        if m[p][c].abs() < 1e-12 {
+            return None;
+        }
+        m.swap(c, p);
+        let pivot = m[c];
+        for (r, row) in m.iter_mut().enumerate() {
+            if r != c {
+                let f = row[c] / pivot[c];
+                for (x, p) in row.iter_mut().zip(pivot).skip(c) {
+                    *x -= f * p;
+                }
+            }
+        }
+    }
+    Some([m[0][3] / m[0][0], m[1][3] / m[1][1], m[2][3] / m[2][2]])
+}
+
+/// Follows the ray from `centre` along `dir` (mm on the section) in steps of `step` up to
+/// `reach`: past the lumen (its last grid pixel on the ray, then on while the HU stay at or
+/// above the lumen's threshold, two steps at most), then out to the first sample below the
+/// wall's threshold.
+fn cast(
+    sample: &impl Fn(DVec2) -> f32,
+    g: &Segmented,
+    centre: DVec2,
+    dir: DVec2,
+    step: f64,
+    reach: f64,
+    hu: [f32; 2],
+) -> Ray {
+    let [lumen_hu, wall_hu] = hu;
+    let n = (reach / step).floor() as usize;
+    let at = |k: usize| centre + dir * (k as f64 * step);
+    let last = (0..=n).rev().find(|&k| g.lumen_at(at(k)));
+    let mut ray = Ray {
+        dir,
+        lumen: last.map_or(0.0, |k| k as f64 * step),
+        edge: None,
+    };
+    let mut k = last.map_or(0, |k| k + 1);
+    let mut prev = if k > 0 { sample(at(k - 1)) } else { f32::NAN };
+    // The lumen's edge as the ray's samples see it, a step or two on; brighter beyond that is
+    // a neighbour the lumen's opening cut off.
+    let mut bright = 0;
+    while k <= n {
+        let v = sample(at(k));
+        if v.is_nan() || v < lumen_hu {
+            break;
+        }
+        bright += 1;
+        if bright > 2 {
+            return ray;
+        }
+        (prev, k) = (v, k + 1);
+    }
+    while k <= n {
+        let v = sample(at(k));
+        if v.is_nan() || v >= lumen_hu {
+            break;
+        }
+        if v < wall_hu {
+            if k > 0 && prev.is_finite() {
+                let t = ((prev - wall_hu) / (prev - v)).clamp(0.0, 1.0) as f64;
+                ray.edge = Some((k as f64 - 1.0 + t) * step);
+            }
+            break;
+        }
+        (prev, k) = (v, k + 1);
+    }
+    ray
+}
+
+/// The rays from `centre`, evenly about it, the first along the section's right.
+fn cast_all(
+    sample: &impl Fn(DVec2) -> f32,
+    g: &Segmented,
+    centre: DVec2,
+    step: f64,
+    reach: f64,
+    hu: [f32; 2],
+    count: usize,
+) -> Vec<Ray> {
+    (0..count)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / count as f64;
+            let dir = DVec2::new(a.cos(), a.sin());
+            cast(sample, g, centre, dir, step, reach, hu)
+        })
+        .collect()
+}
+
+/// The circle most edges agree on (see the module's comment), its edges' indices; none when
+/// too few agree or they bunch on too little of it. `hull`: the lumen's convex hull, which the
+/// circle must hold.
+fn fit(edges: &[DVec2], hull: &[DVec2], max_r: f64) -> Option<(Circle, Vec<usize>)> {
+    let m = edges.len();
+    if m < MIN_EDGES {
+        return None;
+    }
+    let holds_lumen = |c: &Circle| {
+        let reach = c.r + c.tolerance();
+        hull.iter()
+            .all(|q| q.distance_squared(c.o) <= reach * reach)
+    };
+    let agreeing = |c: &Circle| -> Vec<usize> {
+        let t = c.tolerance();
+        (0..m)
+            .filter(|&i| (edges[i].distance(c.o) - c.r).abs() <= t)
+            .collect()
+    };
+    let score = |c: &Circle| {
+        let t = c.tolerance();
+        edges.iter().fold(0i64, |s, q| {
+            let d = q.distance(c.o) - c.r;
+            s + if d.abs() <= t {
+                1
+            } else if d < -t {
+                -INSIDE_WEIGHT
+            } else {
+                0
+            }
+        })
+    };
+    let plausible = |c: &Circle| c.r <= max_r && holds_lumen(c);
+    // Triples a third, a quarter, a sixth and an eighth of the edges apart, from every edge.
+    let mut candidates: Vec<(i64, Circle)> = Vec::new();
+    for f in [3, 4, 6, 8] {
+        let s = (m / f).max(1);
+        for a in 0..m {
+            let Some(c) = Circle::through(edges[a], edges[(a + s) % m], edges[(a + 2 * s) % m])
+            else {
+                continue;
+            };
+            if plausible(&c) {
+                candidates.push((score(&c), c));
+            }
+        }
+    }
+    // Every edge bounds the vessel from outside (a neighbour's far edge lies beyond the wall,
+    // never inside it): of the circles nearly as well supported as the best, the smallest.
+    let top = candidates.iter().map(|c| c.0).max()?;
+    let mut c = candidates
+        .iter()
+        .filter(|(sc, _)| *sc > 0 && *sc as f64 >= SUPPORT * top as f64)
+        .min_by(|a, b| a.1.r.total_cmp(&b.1.r).then(b.0.cmp(&a.0)))?
+        .1;
+    let mut on = agreeing(&c);
+    // Refined by least squares on the edges it agrees with, while that changes them.
+    for _ in 0..4 {
+        let pts: Vec<DVec2> = on.iter().map(|&i| edges[i]).collect();
+        let Some(next) = Circle::fitted(&pts).filter(plausible) else {
+            break;
+        };
+        let next_on = agreeing(&next);
+        if next_on.len() < MIN_EDGES {
+            break;
+        }
+        let same = next_on == on;
+        (c, on) = (next, next_on);
+        if same {
+            break;
+        }
+    }
+    if on.len() < MIN_EDGES {
+        return None;
+    }
+    let mut angles: Vec<f64> = on
+        .iter()
+        .map(|&i| {
+            let v = edges[i] - c.o;
+            v.y.atan2(v.x)
+        })
+        .collect();
+    angles.sort_by(f64::total_cmp);
+    let gap = angles.windows(2).map(|w| w[1] - w[0]).fold(
+        angles[0] + std::f64::consts::TAU - angles[angles.len() - 1],
+        f64::max,
+    );
+    (gap <= MAX_GAP).then_some((c, on))
+}
+
+/// The circle fitted to the rays' edges, and which rays agree with it.
+fn fit_rays(
+    rays: &[Ray],
+    centre: DVec2,
+    hull: &[DVec2],
+    max_r: f64,
+) -> Option<(Circle, Vec<bool>)> {
+    let (idx, edges): (Vec<usize>, Vec<DVec2>) = rays
+        .iter()
+        .enumerate()
+        .filter_map(|(k, r)| r.edge.map(|e| (k, centre + r.dir * e)))
+        .unzip();
+    let (c, on) = fit(&edges, hull, max_r)?;
+    let mut agrees = vec![false; rays.len()];
+    for i in on {
+        agrees[idx[i]] = true;
+    }
+    Some((c, agrees))
+}
+
+/// Grows the rays that agree with the circle along the wall's edge: a ray beside one taken
+/// whose edge lies within [`CONTINUITY_MM`] of that one's is taken too, so that a wall that
+/// is not round (an elliptic or lobed sac) is followed where it is seen. A neighbour's far
+/// edge is not: where a neighbour meets the wall the edge jumps out by its width.
+fn follow_edges(rays: &[Ray], taken: &mut [bool]) {
+    let n = rays.len();
+    loop {
+        let mut grew = false;
+        for k in 0..n {
+            let Some(e) = rays[k].edge.filter(|_| !taken[k]) else {
+                continue;
+            };
+            let near = [(k + 1) % n, (k + n - 1) % n]
+                .into_iter()
+                .any(|j| taken[j] && rays[j].edge.is_some_and(|f| (e - f).abs() <= CONTINUITY_MM));
+            if near {
+                taken[k] = true;
+                grew = true;
+            }
+        }
+        if !grew {
+            break;
+        }
+    }
+}
+
+/// The outer wall about the lumen segmented in `g` (measured as `lumen`, with `edge` its edge
+/// points), and its outline. None where the lumen is open or too few rays agree on a wall.
+pub(crate) fn wall_about(
+    vol: &Volume,
+    m: &Marcher,
+    row: &CprRow,
+    opt: &LumenOptions,
+    wall: &WallOptions,
+    g: &Segmented,
+    (lumen, edge): (&Lumen, &[DVec2]),
+) -> Option<(Wall, Outline)> {
+    if lumen.open {
+        return None;
+    }
+    let sample = lumen::sampler(vol, m, row);
+    let (c, l, d) = (
+        row.centre.as_dvec3(),
+        row.lateral.as_dvec3(),
+        row.normal.as_dvec3(),
+    );
+    let world = |q: DVec2| c + q.x * l + q.y * d;
+    let on_plane = |p: DVec3| DVec2::new((p - c).dot(l), (p - c).dot(d));
+    let hull = lumen::convex_hull(edge);
+    let reach = 0.5 * opt.field_mm;
+    let hu = [opt.threshold_hu, wall.threshold_hu];
+    let step = opt.pixel_mm;
+    // From the lumen's centroid, then again from the circle's centre.
+    let first = on_plane(lumen.centroid);
+    let rays = cast_all(&sample, g, first, step, reach, hu, wall.rays);
+    let (circle, _) = fit_rays(&rays, first, &hull, reach)?;
+    let o = circle.o;
+    let rays = cast_all(&sample, g, o, step, reach, hu, wall.rays);
+    let (circle, mut agrees) = fit_rays(&rays, o, &hull, reach)?;
+    if circle.o.distance(o) >= circle.r {
+        return None;
+    }
+    follow_edges(&rays, &mut agrees);
+    let outline: Vec<DVec2> = rays
+        .iter()
+        .zip(&agrees)
+        .map(|(ray, &on)| {
+            let r = match ray.edge {
+                Some(e) if on => e,
+                _ => circle.exit(o, ray.dir),
+            };
+            o + ray.dir * r.max(ray.lumen)
+        })
+        .collect();
+    let area = 0.5
+        * outline
+            .iter()
+            .zip(outline.iter().cycle().skip(1))
+            .map(|(a, b)| a.perp_dot(*b))
+            .sum::<f64>()
+            .abs();
+    let k = Callipers::of(&outline);
+    let seen = agrees.iter().filter(|&&a| a).count() as f64 / rays.len() as f64;
+    Some((
+        Wall {
+            area_mm2: area,
+            equivalent_diameter_mm: lumen::equivalent_diameter(area),
+            max_diameter_mm: k.max_mm,
+            max_ends: k.max_ends.map(world),
+            min_diameter_mm: k.min_mm,
+            min_direction: (k.min_across.x * l + k.min_across.y * d).normalize_or_zero(),
+            cross_diameter_mm: k.cross_mm,
+            centre: world(circle.o),
+            circle_diameter_mm: 2.0 * circle.r,
+            seen,
+        },
+        Outline {
+            points: outline,
+            seen: agrees,
+        },
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lumen::{measure_path, measure_with_wall};
+    use rayon::prelude::*;
+
+    /// HU `lo` on the negative side of a boundary and `hi` on its positive, rising linearly
+    /// across 2 mm about it (`sd`: a signed distance, or anything with the same zero set), so
+    /// that the midway value lies on the boundary.
+    fn ramp(sd: f64, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * (0.5 + 0.5 * sd).clamp(0.0, 1.0)
+    }
+
+    /// A CT 96 mm square and 8 mm deep on a 1 mm grid (LPS = index) whose HU at each (x, y)
+    /// are `f`'s, the same on every slice.
+    fn slab(f: impl Fn(DVec2) -> f64 + Sync) -> Volume {
+        let (n, nz) = (96, 8);
+        let data: Vec<f32> = (0..n * n * nz)
+            .into_par_iter()
+            .map(|k| f(DVec2::new((k % n) as f64, (k / n % n) as f64)) as f32)
+            .collect();
+        Volume::hounsfield([n, n, nz], [1.0; 3], data)
+    }
+
+    const FAT: f64 = -100.0;
+    const SAC: f64 = 40.0;
+    const BLOOD: f64 = 300.0;
+
+    /// A lumen of radius 9 mm about `lumen` in a sac (thrombus, 40 HU) whose boundary is the
+    /// zero set of `sac` (positive inside), in fat.
+    fn vessel(lumen: DVec2, sac: impl Fn(DVec2) -> f64 + Sync) -> impl Fn(DVec2) -> f64 + Sync {
+        move |p| ramp(9.0 - p.distance(lumen), ramp(sac(p), FAT, SAC), BLOOD)
+    }
+
+    /// The lumen and wall on the section through `at`, with the lumen's and the wall's
+    /// default thresholds and a 90 mm field, and the outline's points in LPS (x, y).
+    fn measured(vol: &Volume, at: DVec2) -> (crate::lumen::Found, Vec<DVec2>) {
+        let path = [at.extend(1.0), at.extend(6.0)];
+        let opt = LumenOptions {
+            field_mm: 90.0,
+            ..LumenOptions::for_volume(vol)
+        };
+        let row = measure_path(vol, &path, 1, DVec3::X, &opt, None).unwrap()[0].row;
+        let m = Marcher::new(vol, None);
+        let found = measure_with_wall(vol, &m, &row, &opt, Some(&WallOptions::default())).unwrap();
+        let (c, l, d) = (
+            row.centre.as_dvec3(),
+            row.lateral.as_dvec3(),
+            row.normal.as_dvec3(),
+        );
+        let points = found.wall.as_ref().map_or(Vec::new(), |(_, o)| {
+            o.points
+                .iter()
+                .map(|q| (c + q.x * l + q.y * d).truncate())
+                .collect()
+        });
+        (found, points)
+    }
+
+    /// The lumen's equivalent diameter: a disc of 9 mm whose HU rise from the thrombus's 40
+    /// to 300 across 2 mm, so that 150 HU lies 0.154 mm outside it.
+    const LUMEN_D: f64 = 2.0 * (9.0 + 2.0 * (0.5 - (150.0 - SAC) / (BLOOD - SAC)));
+
+    /// A round sac lined with thrombus about an eccentric lumen: the wall is the sac's circle,
+    /// seen all round, though the path runs down the lumen 7 mm off the sac's centre.
+    #[test]
+    fn a_thrombus_lined_sac_measures_its_outer_wall() {
+        let (centre, r) = (DVec2::new(47.3, 48.6), 24.0);
+        let lumen = DVec2::new(53.5, 44.9);
+        let vol = slab(vessel(lumen, |p| r - p.distance(centre)));
+        let (found, outline) = measured(&vol, lumen);
+        assert!((found.lumen.equivalent_diameter_mm - LUMEN_D).abs() < 0.05);
+        let w = found.wall.expect("a wall").0;
+        assert!(w.seen > 0.97, "{w:?}");
+        assert!((w.circle_diameter_mm - 2.0 * r).abs() < 0.1, "{w:?}");
+        assert!(w.centre.truncate().distance(centre) < 0.1, "{w:?}");
+        let area = std::f64::consts::PI * r * r;
+        assert!((w.area_mm2 - area).abs() < 0.005 * area, "{w:?}");
+        for d in [
+            w.equivalent_diameter_mm,
+            w.max_diameter_mm,
+            w.min_diameter_mm,
+            w.cross_diameter_mm,
+        ] {
+            assert!((d - 2.0 * r).abs() < 0.15, "{d} for {}: {w:?}", 2.0 * r);
+        }
+        // Every point of the outline on the circle.
+        for p in &outline {
+            assert!((p.distance(centre) - r).abs() < 0.05, "{p}");
+        }
+    }
+
+    /// A neighbour of soft tissue pressed against the wall (no fat between them) and a
+    /// vertebra touching it: the rays that run into them are not taken for the wall's edge,
+    /// and the circle stands in for the wall there.
+    #[test]
+    fn neighbours_touching_the_wall_are_not_taken_for_it() {
+        let (centre, r) = (DVec2::new(48.0, 48.0), 15.0);
+        let lumen = DVec2::new(50.0, 47.0);
+        let oesophagus = (DVec2::new(48.0 - 22.0, 46.0), 8.5);
+        let bone = (DVec2::new(48.0, 48.0 + 25.5), 11.0);
+        let vol = slab(move |p| {
+            let soft = (r - p.distance(centre)).max(oesophagus.1 - p.distance(oesophagus.0));
+            let v = vessel(lumen, |_| soft)(p);
+            ramp(bone.1 - p.distance(bone.0), v, 700.0).max(v)
+        });
+        let (found, outline) = measured(&vol, lumen);
+        let w = found.wall.expect("a wall").0;
+        assert!((0.5..0.9).contains(&w.seen), "{w:?}");
+        assert!((w.circle_diameter_mm - 2.0 * r).abs() < 0.3, "{w:?}");
+        assert!(w.centre.truncate().distance(centre) < 0.3, "{w:?}");
+        assert!((w.equivalent_diameter_mm - 2.0 * r).abs() < 0.3, "{w:?}");
+        assert!((w.max_diameter_mm - 2.0 * r).abs() < 0.5, "{w:?}");
+        // Nothing of the outline in the neighbours.
+        for p in &outline {
+            assert!((p.distance(centre) - r).abs() < 0.3, "{p}");
+        }
+    }
+
+    /// A band 6 mm thick wrapped round part of the wall with no fat between: its far edge is
+    /// as round as the wall's and further out, so the rays that run through it agree on a
+    /// larger circle, off the wall's centre.
+    /// - Soft tissue round 160° of it: where the fat is seen round the other 200°, the wall is
+    ///   the smaller circle those edges agree on (every edge bounds the vessel from outside;
+    ///   round more of it, the band would be read as thrombus, which looks the same).
+    /// - Bone round 200° of it: rays that meet something as bright as the lumen find no edge,
+    ///   so the band's far edge is not seen at all and the wall is the fat side's circle.
+    #[test]
+    fn a_band_wrapped_round_the_wall_is_not_taken_for_it() {
+        let (centre, r) = (DVec2::new(48.0, 48.0), 15.0);
+        let lumen = DVec2::new(47.0, 48.5);
+        for (band, half_angle) in [(SAC, 80f64), (700.0, 100.0)] {
+            let cos = half_angle.to_radians().cos();
+            let vol = slab(move |p| {
+                let q = p - centre;
+                let d = q.length();
+                let v = vessel(lumen, |_| r - d)(p);
+                // The band: 15 to 21 mm from the centre, within half_angle of the right,
+                // ending abruptly.
+                let inside = ((d - r) * (r + 6.0 - d)).min(100.0 * (q.x / d - cos));
+                ramp(inside, v, band).max(v.min(band))
+            });
+            let (found, outline) = measured(&vol, lumen);
+            let w = found.wall.expect("a wall").0;
+            assert!(
+                (w.circle_diameter_mm - 2.0 * r).abs() < 0.3,
+                "{band} HU: {w:?}"
+            );
+            assert!(
+                w.centre.truncate().distance(centre) < 0.3,
+                "{band} HU: {w:?}"
+            );
+            let fat = 1.0 - half_angle / 180.0;
+            assert!((w.seen - fat).abs() < 0.1, "{band} HU: {w:?}");
+            // Nothing of the outline in the band (blurred by a voxel where it ends).
+            for p in &outline {
+                assert!((p.distance(centre) - r).abs() < 0.5, "{band} HU: {p}");
+            }
+        }
+    }
+
+    /// An elliptic sac (56 × 40 mm): its edge, off the best circle by up to 8 mm, is followed
+    /// round from where it agrees with the circle, and its axes are its calliper diameters.
+    #[test]
+    fn an_elliptic_sac_has_its_axes_as_diameters() {
+        let (centre, a, b) = (DVec2::new(48.0, 48.0), 28.0, 20.0);
+        let lumen = DVec2::new(44.0, 50.0);
+        let vol = slab(vessel(lumen, move |p| {
+            let q = p - centre;
+            // Zero on the ellipse; about a mm a unit near it.
+            b * (1.0 - ((q.x / a).powi(2) + (q.y / b).powi(2)).sqrt())
+        }));
+        let w = measured(&vol, lumen).0.wall.expect("a wall").0;
+        assert!(w.seen > 0.97, "{w:?}");
+        assert!((w.max_diameter_mm - 2.0 * a).abs() < 0.3, "{w:?}");
+        assert!((w.min_diameter_mm - 2.0 * b).abs() < 0.3, "{w:?}");
+        let area = std::f64::consts::PI * a * b;
+        assert!((w.area_mm2 - area).abs() < 0.01 * area, "{w:?}");
+    }
+
+    /// A vessel in soft tissue with no fat about it shows no wall: none is reported, rather
+    /// than a guess.
+    #[test]
+    fn no_fat_about_the_vessel_no_wall() {
+        let lumen = DVec2::new(48.0, 48.0);
+        let vol = slab(vessel(lumen, |_| 1.0));
+        let found = measured(&vol, lumen).0;
+        assert!((found.lumen.equivalent_diameter_mm - LUMEN_D).abs() < 0.05);
+        assert!(found.wall.is_none());
+    }
+
+    #[test]
+    fn circles_through_three_points_and_fitted_to_many() {
+        let c = Circle::through(
+            DVec2::new(3.0, 1.0),
+            DVec2::new(-1.0, 5.0),
+            DVec2::new(-5.0, 1.0),
+        )
+        .unwrap();
+        assert!(c.o.distance(DVec2::new(-1.0, 1.0)) < 1e-12 && (c.r - 4.0).abs() < 1e-12);
+        assert!(Circle::through(DVec2::ZERO, DVec2::X, DVec2::X * 2.0).is_none());
+        // Points on an arc of a third of a circle far from the origin.
+        let pts: Vec<DVec2> = (0..20)
+            .map(|k| {
+                let a = 0.1 * k as f64;
+                DVec2::new(1000.0, -500.0) + 12.5 * DVec2::new(a.cos(), a.sin())
+            })
+            .collect();
+        let f = Circle::fitted(&pts).unwrap();
+        assert!(f.o.distance(DVec2::new(1000.0, -500.0)) < 1e-6, "{f:?}");
+        assert!((f.r - 12.5).abs() < 1e-6);
+        // A ray from inside leaves it where the circle is.
+        let from = DVec2::new(1003.0, -501.0);
+        let dir = DVec2::new(0.6, 0.8);
+        let t = f.exit(from, dir);
+        assert!(((from + t * dir).distance(f.o) - 12.5).abs() < 1e-6);
+    }
+
+    /// Outliers that lie outside the circle (a neighbour's far edge) do not move it; edges
+    /// inside it (fat within) count against a circle too large.
+    #[test]
+    fn the_fit_ignores_edges_beyond_the_wall() {
+        let truth = Circle {
+            o: DVec2::new(2.0, -3.0),
+            r: 15.0,
+        };
+        let edges: Vec<DVec2> = (0..90)
+            .map(|k| {
+                let a = std::f64::consts::TAU * k as f64 / 90.0;
+                let dir = DVec2::new(a.cos(), a.sin());
+                // Half the rays run on into neighbours, 5 to 30 mm beyond the wall.
+                let beyond = if (20..65).contains(&k) {
+                    5.0 + (k * 7 % 25) as f64
+                } else {
+                    0.0
+                };
+                truth.o + dir * (truth.r + beyond)
+            })
+            .collect();
+        let hull = [DVec2::new(2.0, 2.0), DVec2::new(-3.0, -3.0)];
+        let (c, on) = fit(&edges, &hull, 50.0).unwrap();
+        assert!(
+            c.o.distance(truth.o) < 1e-6 && (c.r - truth.r).abs() < 1e-6,
+            "{c:?}"
+        );
+        assert_eq!(on.len(), 45);
+        // Too few edges, or all on a tenth of the circle: no wall.
+        assert!(fit(&edges[..7], &hull, 50.0).is_none());
+        let arc: Vec<DVec2> = (0..30)
+            .map(|k| {
+                let a = 0.02 * k as f64;
+                truth.o + truth.r * DVec2::new(a.cos(), a.sin())
+            })
+            .collect();
+        assert!(fit(&arc, &hull, 50.0).is_none());
+        // A circle that would leave the lumen out is not taken.
+        assert!(fit(&edges, &[DVec2::new(40.0, 0.0)], 50.0).is_none());
+    }
+}
