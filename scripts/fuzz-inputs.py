@@ -330,6 +330,11 @@ def fuzz_files(work, n, device):
                 why = run(["render", vol, "--path", p, "--mode", "slice", "--size", "8x16", "-q",
                            "--draw-lumen", random.choice(["-500", "150"]), "--device", device]
                           + layout + ["-o", os.path.join(d, "l.png")], s)
+            # Sometimes cross-sections with the lumen and the outer wall drawn.
+            if not why and os.path.exists(vol) and random.random() < 0.2:
+                why = run(["render", vol, "--path", p, "--mode", "slice", "--size", "16x16", "-q",
+                           "--slices", random.choice(["1", "3"]), "--draw-lumen", "150",
+                           "--draw-wall", "--device", device, "-o", os.path.join(d, "w")], s)
             # And the lumen measured along it (`measure`), with some valid options.
             count = random.choice([[], ["--sections", random.choice(["1", "3", "50"])]])
             # Sometimes a stenosis graded too, its lesion and references placed at random.
@@ -337,10 +342,12 @@ def fuzz_files(work, n, device):
                                    ["--reference", random.choice(["3", "2,30", "1,2,3", "-1"])],
                                    ["--span", random.choice(["0.1", "5", "1e9"])],
                                    ["--lesions", random.choice(["1", "3", "100"])]])
+            # Sometimes the outer wall too, below the lumen's threshold.
+            lumen = random.choice(["-500", "0", "150"])
+            wall = random.choice([[], ["--wall", str(float(lumen) - random.choice([1, 180]))]])
             why = why or (os.path.exists(vol) and run(
                 ["measure", vol, "--path", p, "-q", "--json", "-o", os.path.join(d, "m.csv"),
-                 "--lumen", random.choice(["-500", "0", "150"]),
-                 "--open", random.choice(["0", "2"])] + count + grade
+                 "--lumen", lumen, "--open", random.choice(["0", "2"])] + count + grade + wall
                 + (["--angle", random.choice(["0,1,2", "5,1,9", "1,2,1e9", "-1,0,1"])]
                    if random.random() < 0.3 else [])
                 + (["--plot", os.path.join(d, "p." + random.choice(["svg", "png", "dcm"]))]
