@@ -118,6 +118,35 @@ pub struct Outline {
     pub seen: Vec<bool>,
 }
 
+/// The volumes that the walls found along a path hold, from sections `step_mm` apart (each
+/// section's area times the step: by Pappus's theorem the volume of a tube about a curved
+/// path, as long as it is narrower than the path's bends are tight).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WallVolumes {
+    /// The sections with a wall, and the length of path they stand for, mm.
+    pub sections: usize,
+    pub length_mm: f64,
+    /// What their walls hold, and their lumens, mm³.
+    pub wall_mm3: f64,
+    pub lumen_mm3: f64,
+}
+
+impl WallVolumes {
+    /// Over the sections of `sections` with a wall (`step_mm` apart); none where none has.
+    pub fn of(sections: &[crate::lumen::Section], step_mm: f64) -> Option<WallVolumes> {
+        let with: Vec<(&Wall, &Lumen)> = sections
+            .iter()
+            .filter_map(|s| Some((s.wall.as_ref()?, s.lumen.as_ref()?)))
+            .collect();
+        (!with.is_empty()).then(|| WallVolumes {
+            sections: with.len(),
+            length_mm: with.len() as f64 * step_mm,
+            wall_mm3: with.iter().map(|(w, _)| w.area_mm2).sum::<f64>() * step_mm,
+            lumen_mm3: with.iter().map(|(_, l)| l.area_mm2).sum::<f64>() * step_mm,
+        })
+    }
+}
+
 /// What one ray from the centre finds, mm from the centre.
 #[derive(Clone, Copy, Debug)]
 struct Ray {
@@ -658,6 +687,32 @@ mod tests {
                 assert!((p.distance(centre) - r).abs() < 0.5, "{band} HU: {p}");
             }
         }
+    }
+
+    /// The volume a thrombus-lined sac holds, from its sections along a path: the cylinder's
+    /// π r² L, and its lumen's.
+    #[test]
+    fn the_volumes_of_a_sac_and_its_lumen() {
+        let (centre, r) = (DVec2::new(47.3, 48.6), 24.0);
+        let lumen = DVec2::new(53.5, 44.9);
+        let vol = slab(vessel(lumen, |p| r - p.distance(centre)));
+        let path = [lumen.extend(1.0), lumen.extend(6.0)];
+        let opt = LumenOptions {
+            field_mm: 90.0,
+            ..LumenOptions::for_volume(&vol)
+        };
+        let wall = WallOptions::default();
+        let sections = measure_path(&vol, &path, 4, DVec3::X, &opt, Some(&wall)).unwrap();
+        let v = WallVolumes::of(&sections, 5.0 / 4.0).unwrap();
+        assert_eq!((v.sections, v.length_mm), (4, 5.0));
+        let pi = std::f64::consts::PI;
+        let sac = pi * r * r * 5.0;
+        assert!((v.wall_mm3 - sac).abs() < 0.005 * sac, "{v:?}");
+        let inner = pi * (0.5 * LUMEN_D).powi(2) * 5.0;
+        assert!((v.lumen_mm3 - inner).abs() < 0.01 * inner, "{v:?}");
+        // No walls, no volumes.
+        let none = measure_path(&vol, &path, 4, DVec3::X, &opt, None).unwrap();
+        assert!(WallVolumes::of(&none, 1.25).is_none());
     }
 
     /// An elliptic sac (56 × 40 mm): its edge, off the best circle by up to 8 mm, is followed

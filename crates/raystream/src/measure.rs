@@ -9,7 +9,7 @@ use anyhow::{Context, Result, bail};
 use raystream_cpu::cpr::{CurvedPlane, PathAngle, Tortuosity};
 use raystream_cpu::lumen::{self, LumenOptions, Section};
 use raystream_cpu::stenosis::{self, ReferenceSource, Stenosis};
-use raystream_cpu::wall::{Wall, WallOptions};
+use raystream_cpu::wall::{Wall, WallOptions, WallVolumes};
 use raystream_math::DVec3;
 use serde_json::json;
 
@@ -265,7 +265,7 @@ fn widest_wall(sections: &[Section]) -> Option<(usize, &Wall)> {
 
 /// The outer wall's lines of the text report: the widest section, and on how many sections
 /// a wall was found.
-fn wall_text(sections: &[Section], hu: f32) -> String {
+fn wall_text(sections: &[Section], hu: f32, step_mm: f64) -> String {
     let closed = sections
         .iter()
         .filter(|s| s.lumen.as_ref().is_some_and(|l| !l.open))
@@ -298,6 +298,17 @@ fn wall_text(sections: &[Section], hu: f32) -> String {
         t,
         "wall: found on {found} of the {closed} sections with a closed lumen (its edge: fat or lung below {hu} HU about it; none where too little of it is seen)"
     );
+    if let Some(v) = WallVolumes::of(sections, step_mm) {
+        let _ = writeln!(
+            t,
+            "volume: the walls hold {:.1} ml over the {} sections with one ({:.1} mm of the path), their lumens {:.1} ml: {:.1} ml of wall, thrombus and unenhanced lumen",
+            v.wall_mm3 / 1000.0,
+            v.sections,
+            v.length_mm,
+            v.lumen_mm3 / 1000.0,
+            (v.wall_mm3 - v.lumen_mm3) / 1000.0
+        );
+    }
     t
 }
 
@@ -459,7 +470,7 @@ fn report_text(
         );
     }
     if let Some(hu) = a.wall {
-        t += &wall_text(sections, hu);
+        t += &wall_text(sections, hu, length / n as f64);
     }
     t += &winding_words(winding);
     t.push('\n');
@@ -727,6 +738,16 @@ fn report_json(
         m.insert(
             "widest_wall_section".into(),
             json!(widest_wall(sections).map(|(i, _)| i + 1)),
+        );
+        let step = winding.length_mm / sections.len() as f64;
+        m.insert(
+            "wall_volume".into(),
+            json!(WallVolumes::of(sections, step).map(|v| json!({
+                "sections": v.sections,
+                "length_mm": round3(v.length_mm),
+                "wall_ml": round3(v.wall_mm3 / 1000.0),
+                "lumen_ml": round3(v.lumen_mm3 / 1000.0),
+            }))),
         );
     }
     report

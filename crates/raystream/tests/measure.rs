@@ -1218,6 +1218,20 @@ fn the_outer_wall_of_the_aorta() {
         found * 10 >= closed * 8,
         "walls on {found} of {closed} closed sections"
     );
+    // The volumes: each section with a wall stands for its share of the path.
+    let v = &m["wall_volume"];
+    let step = num(&m, "length_mm") / n as f64;
+    let (mut wall_ml, mut lumen_ml) = (0.0, 0.0);
+    for s in sections.iter().filter(|s| !s["wall"].is_null()) {
+        wall_ml += num(&s["wall"], "area_mm2") * step / 1000.0;
+        lumen_ml += num(s, "area_mm2") * step / 1000.0;
+    }
+    assert_eq!(v["sections"], found);
+    assert!(
+        (num(v, "wall_ml") - wall_ml).abs() < 0.01 && (num(v, "lumen_ml") - lumen_ml).abs() < 0.01,
+        "{v}"
+    );
+    assert!(num(v, "wall_ml") > num(v, "lumen_ml") + 10.0, "{v}");
     // From section to section (6.4 mm apart) the wall's width changes by under 4 mm, but where the
     // graft ends.
     let steps: Vec<f64> = widths.windows(2).map(|p| (p[1] - p[0]).abs()).collect();
@@ -1233,6 +1247,13 @@ fn the_outer_wall_of_the_aorta() {
     assert!(t.contains("widest wall: section "), "{t}");
     assert!(
         t.contains(&format!("wall: found on {found} of the {closed} sections")),
+        "{t}"
+    );
+    assert!(
+        t.contains(&format!(
+            "volume: the walls hold {:.1} ml over the {found} sections with one",
+            num(v, "wall_ml")
+        )),
         "{t}"
     );
     let csv = std::fs::read_to_string(dir.join("t.csv")).unwrap();
