@@ -147,11 +147,31 @@ impl WallVolumes {
     }
 }
 
+impl Outline {
+    /// Where the outline meets the section's middle line (through the path's point along its
+    /// right): its leftmost and rightmost crossings, mm along the line (left negative); none
+    /// where it does not reach the line.
+    pub fn across(&self) -> Option<[f64; 2]> {
+        let n = self.points.len();
+        let mut out: Option<[f64; 2]> = None;
+        for k in 0..n {
+            let (a, b) = (self.points[k], self.points[(k + 1) % n]);
+            if (a.y < 0.0) == (b.y < 0.0) {
+                continue;
+            }
+            let x = a.x + (b.x - a.x) * (a.y / (a.y - b.y));
+            out = Some(out.map_or([x, x], |[lo, hi]| [lo.min(x), hi.max(x)]));
+        }
+        out
+    }
+}
+
 /// What one ray from the centre finds, mm from the centre.
 #[derive(Clone, Copy, Debug)]
 struct Ray {
     dir: DVec2,
-    /// The lumen's last grid pixel along it (0 where it meets none).
+    /// Where the lumen ends along it: its last grid pixel on the ray, or beyond it where the
+    /// HU fall through the lumen's threshold (0 where it meets none).
     lumen: f64,
     /// Where the fat begins, if the ray finds it before anything bright.
     edge: Option<f64>,
@@ -278,6 +298,14 @@ fn cast(
             return ray;
         }
         (prev, k) = (v, k + 1);
+    }
+    // The lumen's edge on the ray: where its HU fall through the lumen's threshold.
+    if k > 0 && k <= n && prev >= lumen_hu {
+        let v = sample(at(k));
+        if v.is_finite() {
+            let t = ((prev - lumen_hu) / (prev - v)).clamp(0.0, 1.0) as f64;
+            ray.lumen = ray.lumen.max((k as f64 - 1.0 + t) * step);
+        }
     }
     while k <= n {
         let v = sample(at(k));
@@ -687,6 +715,30 @@ mod tests {
                 assert!((p.distance(centre) - r).abs() < 0.5, "{band} HU: {p}");
             }
         }
+    }
+
+    /// The outline meets the middle line where its edges cross it.
+    #[test]
+    fn an_outline_across_the_middle_line() {
+        let square = Outline {
+            points: vec![
+                DVec2::new(2.0, -1.0),
+                DVec2::new(3.0, 1.0),
+                DVec2::new(-4.0, 1.0),
+                DVec2::new(-4.0, -1.0),
+            ],
+            seen: vec![true; 4],
+        };
+        assert_eq!(square.across(), Some([-4.0, 2.5]));
+        let above = Outline {
+            points: vec![
+                DVec2::new(0.0, 1.0),
+                DVec2::new(1.0, 2.0),
+                DVec2::new(0.0, 2.0),
+            ],
+            seen: vec![false; 3],
+        };
+        assert_eq!(above.across(), None);
     }
 
     /// The volume a thrombus-lined sac holds, from its sections along a path: the cylinder's

@@ -350,9 +350,10 @@ pub struct RenderArgs {
         allow_negative_numbers = true
     )]
     pub draw_lumen: Option<f32>,
-    /// With --draw-lumen and --slices N: also the vessel's outer wall that `measure --wall`
-    /// finds (fat or lung below HU [default: -30] about it), its outline in magenta, solid
-    /// where its edge was seen and dotted where the fitted circle stands in for it.
+    /// With --draw-lumen: also the vessel's outer wall that `measure --wall` finds (fat or
+    /// lung below HU [default: -30] about it), in magenta. On cross-sections (--slices N) its
+    /// outline, solid where its edge was seen and dotted where the fitted circle stands in for
+    /// it; on a CPR, where it meets each row, a pixel at either edge.
     #[arg(
         long,
         value_name = "HU",

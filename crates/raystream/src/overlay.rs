@@ -17,9 +17,9 @@ use raystream_scene::Camera;
 const LINE: [u8; 3] = [255, 214, 0];
 const RING: [u8; 3] = [0, 0, 0];
 /// A lumen's edge.
-const EDGE: [u8; 3] = [0, 230, 255];
+pub const EDGE: [u8; 3] = [0, 230, 255];
 /// A vessel's outer wall.
-const WALL: [u8; 3] = [255, 64, 220];
+pub const WALL: [u8; 3] = [255, 64, 220];
 
 /// Where the LPS point `p` falls in a `width`×`height` frame of `cam` (scene frame), in pixel
 /// coordinates (the top-left corner at 0, 0), as `Camera::ray` casts pixels; `None` behind a
@@ -179,14 +179,15 @@ pub fn draw_wall(
     }
 }
 
-/// Draws the lumen's edges on each row of a `width`×`height` curved reformation of pixels
-/// `pixel_mm` square: `edges[y]`, mm along row y from its middle (right positive), a cyan
-/// pixel each; whether any was drawn.
+/// Draws edges on each row of a `width`×`height` curved reformation of pixels `pixel_mm`
+/// square: `edges[y]`, mm along row y from its middle (right positive), a pixel of `colour`
+/// each (the lumen's [`EDGE`], the outer wall's [`WALL`]); whether any was drawn.
 pub fn draw_row_edges(
     rgb: &mut [u8],
     (width, height): (u32, u32),
     pixel_mm: f64,
     edges: &[Option<[f64; 2]>],
+    colour: [u8; 3],
 ) -> bool {
     let mut drawn = false;
     for (y, e) in edges.iter().enumerate().take(height as usize) {
@@ -194,7 +195,7 @@ pub fn draw_row_edges(
             let x = (0.5 * width as f64 + u / pixel_mm).floor();
             if (0.0..width as f64).contains(&x) {
                 let i = 3 * (y * width as usize + x as usize);
-                rgb[i..i + 3].copy_from_slice(&EDGE);
+                rgb[i..i + 3].copy_from_slice(&colour);
                 drawn = true;
             }
         }

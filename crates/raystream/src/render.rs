@@ -214,11 +214,13 @@ fn draw_cpr_lumen(
         return false;
     };
     let m = raystream_cpu::dvr::Marcher::new(volume, None);
+    let wall = wall_options(a, volume).ok().flatten();
     let pb = spinner(
         a.quiet,
         &format!("finding the lumen on the CPR's {} rows", plane.height),
     );
-    let edges: Vec<Option<[f64; 2]>> = (0..plane.height)
+    // Each row's lumen edges, and with --draw-wall the outer wall's.
+    let edges: Vec<[Option<[f64; 2]>; 2]> = (0..plane.height)
         .into_par_iter()
         .map(|y| {
             let r = &plane.rows[y as usize];
@@ -226,12 +228,23 @@ fn draw_cpr_lumen(
                 centre: plane.path_point(y),
                 ..*r
             };
-            raystream_cpu::lumen::lumen_across(volume, &m, &row, &o)
-                .map(|e| e.map(|u| u + plane.shift_mm[y as usize] as f64))
+            let shift = |e: [f64; 2]| e.map(|u| u + plane.shift_mm[y as usize] as f64);
+            let lumen = raystream_cpu::lumen::lumen_across(volume, &m, &row, &o).map(shift);
+            let outer = wall.as_ref().and_then(|w| {
+                let found = raystream_cpu::lumen::measure_with_wall(volume, &m, &row, &o, Some(w))?;
+                found.wall?.1.across().map(shift)
+            });
+            [lumen, outer]
         })
         .collect();
     pb.finish_and_clear();
-    crate::overlay::draw_row_edges(rgb, (*width, *height), plane.pixel_mm as f64, &edges)
+    let size = (*width, *height);
+    let pixel = plane.pixel_mm as f64;
+    let outer: Vec<Option<[f64; 2]>> = edges.iter().map(|e| e[1]).collect();
+    let lumen: Vec<Option<[f64; 2]>> = edges.iter().map(|e| e[0]).collect();
+    // The wall first, the lumen over it.
+    let drawn = crate::overlay::draw_row_edges(rgb, size, pixel, &outer, crate::overlay::WALL);
+    crate::overlay::draw_row_edges(rgb, size, pixel, &lumen, crate::overlay::EDGE) | drawn
 }
 
 /// `--mark-at MM,…`: a line across a curved reformation's picture where the path is at each
@@ -473,11 +486,6 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
     lumen_options(a, &volume)?;
     wall_options(a, &volume)?;
-    if a.draw_wall.is_some() && a.slices.is_none() {
-        bail!(
-            "--draw-wall draws the outer wall on cross-sections (--path FILE --slices N); on a CPR, --draw-lumen draws the lumen's edges"
-        );
-    }
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     // An EXR keeps what the projections found, in HU; the window is for display. So does a
     // DICOM picture, with the window as its VOI LUT, unless letters are drawn into it.

@@ -1327,16 +1327,51 @@ fn draw_wall_outlines_the_outer_wall() {
         );
     }
     assert!(with_wall >= 4, "{with_wall} walls drawn");
-    // Not on a CPR, not at or above the lumen's threshold, not without the lumen.
-    let (cpr_out, high_out) = (tmp("measure-wall-cpr.png"), tmp("measure-wall-high"));
-    let cpr = cpr_args(&vol, &path, &["--size", "32x96", "--draw-lumen", "150"]);
-    let cpr = [
-        &["render", "--quiet"][..],
-        &cpr,
-        &["--draw-wall", "-o", cpr_out.to_str().unwrap()],
-    ]
-    .concat();
-    refused(&cpr, "--draw-wall draws the outer wall on cross-sections");
+    // On a CPR, the wall's two edges on each row, outside the lumen's.
+    for view in [&[][..], &["--orbit", "90"], &["--cpr", "stretched"]] {
+        let cpr = cpr_args(
+            &vol,
+            &path,
+            &[&["--size", "96x288", "--draw-lumen", "150"][..], view].concat(),
+        );
+        let a = image::open(render_to("measure-wall-cpr-lumen.png", "cpu", &cpr))
+            .unwrap()
+            .to_rgb8();
+        let drawn = [&cpr[..], &["--draw-wall"]].concat();
+        let b = image::open(render_to("measure-wall-cpr.png", "cpu", &drawn))
+            .unwrap()
+            .to_rgb8();
+        let (mut rows, mut outside) = (0, 0);
+        for y in 0..288 {
+            let xs = |c: [u8; 3]| {
+                (0..96)
+                    .filter(|&x| b.get_pixel(x, y).0 == c)
+                    .collect::<Vec<u32>>()
+            };
+            for x in 0..96 {
+                let (p, q) = (a.get_pixel(x, y), b.get_pixel(x, y));
+                assert!(
+                    p == q || q.0 == [255, 64, 220],
+                    "{view:?} ({x}, {y}): {q:?}"
+                );
+            }
+            let (wall, lumen) = (xs([255, 64, 220]), xs([0, 230, 255]));
+            assert!(wall.len() <= 2, "{view:?} row {y}: {wall:?}");
+            if let ([l, .., r], [ll, .., lr]) = (&wall[..], &lumen[..]) {
+                rows += 1;
+                if l <= ll && r >= lr {
+                    outside += 1;
+                }
+            }
+        }
+        // (A wall's edge on the lumen's pixel is drawn under it.)
+        assert!(
+            rows >= 100 && outside * 100 >= rows * 95,
+            "{view:?}: {outside} of {rows} rows"
+        );
+    }
+    // Not at or above the lumen's threshold, not without the lumen.
+    let high_out = tmp("measure-wall-high");
     let high = [
         &["render", "--quiet"][..],
         &base,
