@@ -528,6 +528,18 @@ mod tests {
             near(mid(pair[0]), want, 1.0, "an open section's cross");
             near(mid(pair[1]), want, 1.0, "an open section's cross");
         }
+        // The outer wall's D max: a line a run of sections with a wall, a dot a lone one.
+        let walls = runs_of(sections, |s| s.wall.as_ref().map(|w| w.max_diameter_mm));
+        let (wall_lines, wall_dots) = (of("polyline", WALL), of("circle", WALL));
+        assert_eq!(wall_lines.len(), walls.iter().filter(|r| r.len() > 1).count());
+        assert_eq!(wall_dots.len(), walls.iter().filter(|r| r.len() == 1).count());
+        let (mut li, mut di) = (wall_lines.iter(), wall_dots.iter());
+        for run in &walls {
+            let pts = drawn(run.len(), &mut li, &mut di);
+            for (&(s, d), &p) in run.iter().zip(&pts) {
+                near(p, (px(s), py(d)), 1.0, "the wall's D max");
+            }
+        }
         if graded.is_empty() {
             assert!(of("polyline", REFERENCE).is_empty() && of("rect", REFERENCE).is_empty());
             assert!(of("polyline", LESION).is_empty());
@@ -840,9 +852,9 @@ mod tests {
         assert!(tandem_svg.contains("lesion 2 at 8.5 mm"));
     }
 
-    /// The chest CT's aorta, a section every 2 mm, as `measure --lesion 100 --span 30 --plot`
-    /// draws it: its closed runs, open sections at the arch, the fitted reference and the
-    /// narrowed segment where the grade puts them.
+    /// The chest CT's aorta, a section every 2 mm, as `measure --lesion 100 --span 30 --wall
+    /// --plot` draws it: its closed runs, open sections at the arch, the outer wall's runs,
+    /// the fitted reference and the narrowed segment where the grade puts them.
     #[test]
     fn the_aortas_profile_is_its_table() {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
@@ -855,13 +867,18 @@ mod tests {
         let length = raystream_cpu::cpr::tortuosity(&points).unwrap().length_mm;
         let n = (length / 2.0).round() as u32;
         let opt = raystream_cpu::lumen::LumenOptions::for_volume(&vol);
+        let wall = raystream_cpu::wall::WallOptions::default();
         let sections =
-            raystream_cpu::lumen::measure_path(&vol, &points, n, DVec3::X, &opt, None).unwrap();
+            raystream_cpu::lumen::measure_path(&vol, &points, n, DVec3::X, &opt, Some(&wall))
+                .unwrap();
         assert!(
             sections
                 .iter()
                 .any(|s| s.lumen.as_ref().is_some_and(|l| l.open))
         );
+        // Walls on most sections, in runs broken where none was found.
+        assert!(sections.iter().filter(|s| s.wall.is_some()).count() * 10 >= sections.len() * 7);
+        assert!(runs_of(&sections, |s| s.wall.as_ref()).len() >= 2);
         let opts = StenosisOptions {
             lesion_mm: Some(100.0),
             reference_mm: vec![],
