@@ -575,7 +575,31 @@ fn stenosis_text(sections: &[Section], g: &Stenosis) -> String {
         g.area_pct,
         stenosis::severity(g.diameter_pct),
         severity_band(g.diameter_pct),
-    )
+    ) + &against_wall_text(s)
+}
+
+/// A lesion graded against the outer wall at its own section (when `--wall` found one there):
+/// its D min against the wall's D eq, as ECST grades a stenosis against the vessel's estimated
+/// width at the lesion, and the share of the wall's area that is not lumen (plaque or
+/// thrombus burden). None without a wall there.
+fn against_wall(s: &Section) -> Option<(f64, f64, &Wall)> {
+    let (l, w) = (s.lumen.as_ref()?, s.wall.as_ref()?);
+    Some((
+        100.0 * (1.0 - l.min_diameter_mm / w.equivalent_diameter_mm),
+        100.0 * (1.0 - l.area_mm2 / w.area_mm2),
+        w,
+    ))
+}
+
+/// [`against_wall`] as a line of the text report (empty without a wall at the lesion).
+fn against_wall_text(s: &Section) -> String {
+    match against_wall(s) {
+        Some((d, a, w)) => format!(
+            "against the wall: {d:.1} % by diameter (D min against the outer wall's D eq there, {:.2} mm, as ECST grades), {a:.1} % of the wall's {:.1} mm2 not lumen (plaque or thrombus burden)\n",
+            w.equivalent_diameter_mm, w.area_mm2
+        ),
+        None => String::new(),
+    }
 }
 
 /// The band of diameter stenosis that [`stenosis::severity`] names for `pct`.
@@ -633,6 +657,12 @@ fn stenosis_json(sections: &[Section], g: &Stenosis) -> serde_json::Value {
         "severity": stenosis::severity(g.diameter_pct),
         "narrowed_below": stenosis::NARROWED,
         "dilated_above": stenosis::DILATED,
+        "against_wall": against_wall(&sections[g.lesion]).map(|(d, a, w)| json!({
+            "diameter_pct": round3(d),
+            "area_pct": round3(a),
+            "wall_equivalent_diameter_mm": round3(w.equivalent_diameter_mm),
+            "wall_area_mm2": round3(w.area_mm2),
+        })),
         "narrowed": g.narrowed.as_ref().map(|n| json!({
             "from_section": n.sections[0] + 1,
             "to_section": n.sections[1] + 1,

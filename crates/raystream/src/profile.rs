@@ -531,8 +531,14 @@ mod tests {
         // The outer wall's D max: a line a run of sections with a wall, a dot a lone one.
         let walls = runs_of(sections, |s| s.wall.as_ref().map(|w| w.max_diameter_mm));
         let (wall_lines, wall_dots) = (of("polyline", WALL), of("circle", WALL));
-        assert_eq!(wall_lines.len(), walls.iter().filter(|r| r.len() > 1).count());
-        assert_eq!(wall_dots.len(), walls.iter().filter(|r| r.len() == 1).count());
+        assert_eq!(
+            wall_lines.len(),
+            walls.iter().filter(|r| r.len() > 1).count()
+        );
+        assert_eq!(
+            wall_dots.len(),
+            walls.iter().filter(|r| r.len() == 1).count()
+        );
         let (mut li, mut di) = (wall_lines.iter(), wall_dots.iter());
         for run in &walls {
             let pts = drawn(run.len(), &mut li, &mut di);

@@ -1256,6 +1256,35 @@ fn the_outer_wall_of_the_aorta() {
         )),
         "{t}"
     );
+    // A lesion graded against the wall at its own section too (ECST's way), from its figures.
+    let g = measure(&vol, &path, &["--every", "2", "--stenosis", "--wall"]);
+    let st = &g["stenosis"];
+    let row = &g["sections"][st["lesion_section"].as_u64().unwrap() as usize - 1];
+    let (w, aw) = (&row["wall"], &st["against_wall"]);
+    let ecst = 100.0 * (1.0 - num(row, "min_diameter_mm") / num(w, "equivalent_diameter_mm"));
+    let burden = 100.0 * (1.0 - num(row, "area_mm2") / num(w, "area_mm2"));
+    assert!((num(aw, "diameter_pct") - ecst).abs() < 0.01, "{aw} {row}");
+    assert!((num(aw, "area_pct") - burden).abs() < 0.01, "{aw} {row}");
+    // The lumen's D min is below the wall's width: graded worse than against its reference.
+    assert!(
+        num(aw, "diameter_pct") > num(st, "diameter_stenosis_pct"),
+        "{st}"
+    );
+    let plain = measure(&vol, &path, &["--every", "2", "--stenosis"]);
+    assert!(plain["stenosis"]["against_wall"].is_null());
+    let t = measure_text(
+        &vol,
+        &path,
+        &["--every", "2", "--stenosis", "--wall"],
+        &dir.join("g.csv"),
+    );
+    assert!(
+        t.contains(&format!(
+            "against the wall: {:.1} % by diameter",
+            num(aw, "diameter_pct")
+        )),
+        "{t}"
+    );
     let csv = std::fs::read_to_string(dir.join("t.csv")).unwrap();
     assert!(
         csv.lines()
