@@ -1,7 +1,9 @@
 //! `raystream measure`: a vessel's lumen on cross-sections along a path through a CT volume, as
 //! a vascular workstation tabulates an aorta for stent-graft sizing or a stenosis: per section
 //! its area, the diameter of a circle of that area, its largest and smallest calliper
-//! diameters and how far its centroid lies from the path (see `raystream_cpu::lumen`).
+//! diameters and how far its centroid lies from the path (see `raystream_cpu::lumen`); with
+//! `--wall`, the vessel's outer wall about it, the volumes the walls hold, and each lesion
+//! graded against the wall at its section (see `raystream_cpu::wall`).
 
 use std::fmt::Write as _;
 
@@ -428,7 +430,8 @@ fn report_text(
             }
             (None, false) => {}
         }
-        t = t.trim_end().to_string();
+        // (In place: a copy of the table a row would make a long table quadratic.)
+        t.truncate(t.trim_end().len());
         t.push('\n');
     }
     if let Some((w, nw)) = extremes(sections) {
