@@ -101,6 +101,9 @@ pub struct Wall {
     pub min_direction: DVec3,
     /// The calliper width across the longest chord, mm.
     pub cross_diameter_mm: f64,
+    /// The outline's greatest distance from the lumen's edge, mm: the thickest the wall and
+    /// what lines it (thrombus, an unenhanced false lumen) are.
+    pub max_thickness_mm: f64,
     /// The fitted circle's centre (LPS mm) and diameter, mm.
     pub centre: DVec3,
     pub circle_diameter_mm: f64,
@@ -536,6 +539,16 @@ pub(crate) fn wall_about(
             .abs();
     let k = Callipers::of(&outline);
     let seen = agrees.iter().filter(|&&a| a).count() as f64 / rays.len() as f64;
+    // Every outline point against every lumen edge point: a few hundred of each.
+    let max_thickness_mm = outline
+        .iter()
+        .map(|p| {
+            edge.iter()
+                .map(|q| p.distance_squared(*q))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max)
+        .sqrt();
     Some((
         Wall {
             area_mm2: area,
@@ -545,6 +558,7 @@ pub(crate) fn wall_about(
             min_diameter_mm: k.min_mm,
             min_direction: (k.min_across.x * l + k.min_across.y * d).normalize_or_zero(),
             cross_diameter_mm: k.cross_mm,
+            max_thickness_mm,
             centre: world(circle.o),
             circle_diameter_mm: 2.0 * circle.r,
             seen,
@@ -646,6 +660,13 @@ mod tests {
         for p in &outline {
             assert!((p.distance(centre) - r).abs() < 0.05, "{p}");
         }
+        // Thickest opposite the lumen: the sac's radius and the lumen's offset, less the
+        // lumen's radius (its edge at 150 HU).
+        let thickest = r + lumen.distance(centre) - 0.5 * LUMEN_D;
+        assert!(
+            (w.max_thickness_mm - thickest).abs() < 0.1,
+            "{thickest}: {w:?}"
+        );
     }
 
     /// A neighbour of soft tissue pressed against the wall (no fat between them) and a

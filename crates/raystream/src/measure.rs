@@ -170,7 +170,7 @@ fn csv(sections: &[Section], graded: Option<&Stenosis>, walls: bool) -> String {
         "section,arc_mm,x,y,z,tangent_x,tangent_y,tangent_z,status,area_mm2,equivalent_diameter_mm,max_diameter_mm,cross_diameter_mm,min_diameter_mm,centroid_x,centroid_y,centroid_z,offset_mm",
     );
     if walls {
-        t += ",wall_area_mm2,wall_equivalent_diameter_mm,wall_max_diameter_mm,wall_cross_diameter_mm,wall_min_diameter_mm,wall_seen";
+        t += ",wall_area_mm2,wall_equivalent_diameter_mm,wall_max_diameter_mm,wall_cross_diameter_mm,wall_min_diameter_mm,wall_max_thickness_mm,wall_seen";
     }
     t += if graded.is_some() {
         ",reference_diameter_mm\n"
@@ -215,16 +215,17 @@ fn csv(sections: &[Section], graded: Option<&Stenosis>, walls: bool) -> String {
             (Some(w), _) => {
                 let _ = write!(
                     t,
-                    ",{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
+                    ",{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
                     w.area_mm2,
                     w.equivalent_diameter_mm,
                     w.max_diameter_mm,
                     w.cross_diameter_mm,
                     w.min_diameter_mm,
+                    w.max_thickness_mm,
                     w.seen
                 );
             }
-            (None, true) => t.push_str(",,,,,,"),
+            (None, true) => t.push_str(",,,,,,,"),
             (None, false) => {}
         }
         if let Some(g) = graded {
@@ -294,6 +295,20 @@ fn wall_text(sections: &[Section], hu: f32, step_mm: f64) -> String {
             s.lumen
                 .as_ref()
                 .map_or(f64::NAN, |l| l.equivalent_diameter_mm),
+        );
+    }
+    let thickest = sections
+        .iter()
+        .enumerate()
+        .filter_map(|(i, s)| s.wall.as_ref().map(|w| (i, w)))
+        .max_by(|a, b| a.1.max_thickness_mm.total_cmp(&b.1.max_thickness_mm));
+    if let Some((i, w)) = thickest {
+        let _ = writeln!(
+            t,
+            "thickest wall: section {} at {:.1} mm: {:.2} mm from the lumen's edge to the outer wall (wall, thrombus or unenhanced lumen)",
+            i + 1,
+            sections[i].arc_mm,
+            w.max_thickness_mm
         );
     }
     let _ = writeln!(
@@ -797,6 +812,7 @@ fn wall_json(w: &Wall) -> serde_json::Value {
         "cross_diameter_mm": round3(w.cross_diameter_mm),
         "min_diameter_mm": round3(w.min_diameter_mm),
         "min_diameter_direction": w.min_direction.to_array(),
+        "max_thickness_mm": round3(w.max_thickness_mm),
         "centre": v3(w.centre),
         "circle_diameter_mm": round3(w.circle_diameter_mm),
         "seen": round3(w.seen),

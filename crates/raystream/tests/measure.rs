@@ -1168,6 +1168,14 @@ fn the_outer_wall_of_the_aorta() {
             "{s}"
         );
         assert!((0.1..=1.0).contains(&seen), "{s}");
+        // The thickest the wall is: no more than its width less the lumen's narrowest, and
+        // where the lumen is well off the wall's middle, more than half their difference.
+        let thick = num(w, "max_thickness_mm");
+        assert!(
+            thick > 0.0 && thick <= max - num(s, "min_diameter_mm") + 0.5,
+            "{s}"
+        );
+        assert!(thick >= 0.5 * (eq - lumen_eq) - 0.5, "{s}");
         if (20.0..80.0).contains(&arc) {
             // About the stent graft: its wall (and what is left of the sac) a few mm wide.
             assert!((1.0..7.0).contains(&(eq - lumen_eq)), "{s}");
@@ -1245,6 +1253,7 @@ fn the_outer_wall_of_the_aorta() {
         &dir.join("t.csv"),
     );
     assert!(t.contains("widest wall: section "), "{t}");
+    assert!(t.contains("thickest wall: section "), "{t}");
     assert!(
         t.contains(&format!("wall: found on {found} of the {closed} sections")),
         "{t}"
@@ -1290,7 +1299,7 @@ fn the_outer_wall_of_the_aorta() {
         csv.lines()
             .next()
             .unwrap()
-            .ends_with(",wall_min_diameter_mm,wall_seen")
+            .ends_with(",wall_min_diameter_mm,wall_max_thickness_mm,wall_seen")
     );
 }
 
