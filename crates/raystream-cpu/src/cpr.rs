@@ -21,7 +21,7 @@
 //! spaced by the path's run across it, its run along it shifting the row, so the path is a
 //! curve in the picture as long as itself and what lies about it keeps its shape.
 
-use raystream_math::{DVec3, Vec3};
+use raystream_math::{DVec2, DVec3, Vec3};
 use raystream_scene::Camera;
 
 /// One image row of a curved plane (LPS, f32 as the renderers read it): the path's point, the
@@ -31,6 +31,29 @@ pub struct CprRow {
     pub centre: Vec3,
     pub lateral: Vec3,
     pub normal: Vec3,
+}
+
+impl CprRow {
+    /// The point of the row's plane at offset `q` from its centre (mm along the lateral
+    /// direction and the normal: right and down on a cross-section), LPS, in f64.
+    pub fn point(&self, q: DVec2) -> DVec3 {
+        self.centre.as_dvec3() + q.x * self.lateral.as_dvec3() + q.y * self.normal.as_dvec3()
+    }
+
+    /// The plane's vector `q` (lateral and normal parts) in LPS.
+    pub fn direction(&self, q: DVec2) -> DVec3 {
+        q.x * self.lateral.as_dvec3() + q.y * self.normal.as_dvec3()
+    }
+
+    /// The offset from the centre of `p`'s projection on the plane: [`CprRow::point`]'s
+    /// inverse on it.
+    pub fn offset_of(&self, p: DVec3) -> DVec2 {
+        let v = p - self.centre.as_dvec3();
+        DVec2::new(
+            v.dot(self.lateral.as_dvec3()),
+            v.dot(self.normal.as_dvec3()),
+        )
+    }
 }
 
 /// A curved plane through a volume, straightened or stretched, ready to be sampled row by

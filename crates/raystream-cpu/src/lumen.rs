@@ -172,14 +172,15 @@ pub fn measure_path(
         .into_par_iter()
         .enumerate()
         .map(|(i, row)| {
-            let found = measure_with_wall(vol, &m, &row, opt, wall);
+            let (lumen, wall) = match measure_with_wall(vol, &m, &row, opt, wall) {
+                Some(f) => (Some(f.lumen), f.wall.map(|(w, _)| w)),
+                None => (None, None),
+            };
             Section {
                 arc_mm: (i as f64 + 0.5) * step,
                 row,
-                wall: found
-                    .as_ref()
-                    .and_then(|f| f.wall.as_ref().map(|w| w.0.clone())),
-                lumen: found.map(|f| f.lumen),
+                lumen,
+                wall,
             }
         })
         .collect())
@@ -310,14 +311,9 @@ pub(crate) fn sampler<'a>(
     m: &'a Marcher,
     row: &CprRow,
 ) -> impl Fn(DVec2) -> f32 + 'a {
-    let (c, l, d) = (
-        row.centre.as_dvec3(),
-        row.lateral.as_dvec3(),
-        row.normal.as_dvec3(),
-    );
-    let last = vol.dims.map(|k| k.max(1) as f32 - 1.0);
+    let (row, last) = (*row, vol.dims.map(|k| k.max(1) as f32 - 1.0));
     move |q: DVec2| {
-        let i = m.index_of((c + q.x * l + q.y * d).as_vec3());
+        let i = m.index_of(row.point(q).as_vec3());
         let inside = (0..3).all(|a| (-1e-3..=last[a] + 1e-3).contains(&i[a]));
         if inside { m.sample(i) } else { f32::NAN }
     }
@@ -465,18 +461,12 @@ pub fn measure_section(
     row: &CprRow,
     opt: &LumenOptions,
 ) -> Option<(Lumen, Vec<DVec2>)> {
-    Some(measure_segmented(&segment(vol, m, row, opt)?, row))
+    measure_with_wall(vol, m, row, opt, None).map(|f| (f.lumen, f.edge))
 }
 
 /// [`measure_section`]'s figures of a segmented section.
 pub(crate) fn measure_segmented(g: &Segmented, row: &CprRow) -> (Lumen, Vec<DVec2>) {
     let (n, p) = (g.n, g.p);
-    let (c, l, d) = (
-        row.centre.as_dvec3(),
-        row.lateral.as_dvec3(),
-        row.normal.as_dvec3(),
-    );
-    let world = |q: DVec2| c + q.x * l + q.y * d;
     let mut count = 0usize;
     let mut sum = DVec2::ZERO;
     let mut open = false;
@@ -512,11 +502,11 @@ pub(crate) fn measure_segmented(g: &Segmented, row: &CprRow) -> (Lumen, Vec<DVec
         area_mm2: area,
         equivalent_diameter_mm: equivalent_diameter(area),
         max_diameter_mm: k.max_mm,
-        max_ends: k.max_ends.map(world),
+        max_ends: k.max_ends.map(|q| row.point(q)),
         min_diameter_mm: k.min_mm,
-        min_direction: (k.min_across.x * l + k.min_across.y * d).normalize_or_zero(),
+        min_direction: row.direction(k.min_across).normalize_or_zero(),
         cross_diameter_mm: k.cross_mm,
-        centroid: world(centre),
+        centroid: row.point(centre),
         offset_mm: centre.length(),
         open,
     };
@@ -574,7 +564,28 @@ pub fn lumen_across(
     row: &CprRow,
     opt: &LumenOptions,
 ) -> Option<[f64; 2]> {
-    across_segmented(&segment(vol, m, row, opt)?)
+    across_with_wall(vol, m, row, opt, None)[0]
+}
+
+/// [`lumen_across`], and with `wall`, where the outer wall's outline meets the line through
+/// `row.centre` along `row.lateral` ([`Outline::across`]): the lumen segmented once for both.
+pub fn across_with_wall(
+    vol: &Volume,
+    m: &Marcher,
+    row: &CprRow,
+    opt: &LumenOptions,
+    wall: Option<&WallOptions>,
+) -> [Option<[f64; 2]>; 2] {
+    let Some(g) = segment(vol, m, row, opt) else {
+        return [None, None];
+    };
+    let outer = wall.and_then(|w| {
+        let (lumen, edge) = measure_segmented(&g, row);
+        wall_about(vol, m, row, opt, w, &g, (&lumen, &edge))?
+            .1
+            .across()
+    });
+    [across_segmented(&g), outer]
 }
 
 /// [`lumen_across`] on a segmented section.
@@ -860,10 +871,8 @@ mod tests {
             let m = Marcher::new(&vol, None);
             let (again, edge) = measure_section(&vol, &m, &s.row, &opt(&vol)).unwrap();
             assert_eq!(&again, l);
-            for q in &edge {
-                let w = s.row.centre.as_dvec3()
-                    + q.x * s.row.lateral.as_dvec3()
-                    + q.y * s.row.normal.as_dvec3();
+            for &q in &edge {
+                let w = s.row.point(q);
                 assert!(((w.truncate() - axis).length() - r).abs() < 0.03, "{w}");
             }
         }

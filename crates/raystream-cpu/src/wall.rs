@@ -497,19 +497,12 @@ pub(crate) fn wall_about(
         return None;
     }
     let sample = lumen::sampler(vol, m, row);
-    let (c, l, d) = (
-        row.centre.as_dvec3(),
-        row.lateral.as_dvec3(),
-        row.normal.as_dvec3(),
-    );
-    let world = |q: DVec2| c + q.x * l + q.y * d;
-    let on_plane = |p: DVec3| DVec2::new((p - c).dot(l), (p - c).dot(d));
     let hull = lumen::convex_hull(edge);
     let reach = 0.5 * opt.field_mm;
     let hu = [opt.threshold_hu, wall.threshold_hu];
     let step = opt.pixel_mm;
     // From the lumen's centroid, then again from the circle's centre.
-    let first = on_plane(lumen.centroid);
+    let first = row.offset_of(lumen.centroid);
     let rays = cast_all(&sample, g, first, step, reach, hu, wall.rays);
     let (circle, _) = fit_rays(&rays, first, &hull, reach)?;
     let o = circle.o;
@@ -554,12 +547,12 @@ pub(crate) fn wall_about(
             area_mm2: area,
             equivalent_diameter_mm: lumen::equivalent_diameter(area),
             max_diameter_mm: k.max_mm,
-            max_ends: k.max_ends.map(world),
+            max_ends: k.max_ends.map(|q| row.point(q)),
             min_diameter_mm: k.min_mm,
-            min_direction: (k.min_across.x * l + k.min_across.y * d).normalize_or_zero(),
+            min_direction: row.direction(k.min_across).normalize_or_zero(),
             cross_diameter_mm: k.cross_mm,
             max_thickness_mm,
-            centre: world(circle.o),
+            centre: row.point(circle.o),
             circle_diameter_mm: 2.0 * circle.r,
             seen,
         },
@@ -615,16 +608,8 @@ mod tests {
         let row = measure_path(vol, &path, 1, DVec3::X, &opt, None).unwrap()[0].row;
         let m = Marcher::new(vol, None);
         let found = measure_with_wall(vol, &m, &row, &opt, Some(&WallOptions::default())).unwrap();
-        let (c, l, d) = (
-            row.centre.as_dvec3(),
-            row.lateral.as_dvec3(),
-            row.normal.as_dvec3(),
-        );
         let points = found.wall.as_ref().map_or(Vec::new(), |(_, o)| {
-            o.points
-                .iter()
-                .map(|q| (c + q.x * l + q.y * d).truncate())
-                .collect()
+            o.points.iter().map(|&q| row.point(q).truncate()).collect()
         });
         (found, points)
     }

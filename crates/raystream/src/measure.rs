@@ -256,23 +256,25 @@ fn extremes(sections: &[Section]) -> Option<(usize, usize)> {
     Some((widest.0, narrowest.0))
 }
 
-/// The section whose outer wall is widest (by its largest diameter, as an aneurysm's size
-/// is reported), and its wall.
-fn widest_wall(sections: &[Section]) -> Option<(usize, &Wall)> {
+/// The section whose outer wall has the most of `figure`, and its wall.
+fn wall_with_most(sections: &[Section], figure: fn(&Wall) -> f64) -> Option<(usize, &Wall)> {
     sections
         .iter()
         .enumerate()
         .filter_map(|(i, s)| s.wall.as_ref().map(|w| (i, w)))
-        .max_by(|a, b| a.1.max_diameter_mm.total_cmp(&b.1.max_diameter_mm))
+        .max_by(|a, b| figure(a.1).total_cmp(&figure(b.1)))
+}
+
+/// The section whose outer wall is widest (by its largest diameter, as an aneurysm's size
+/// is reported), and its wall.
+fn widest_wall(sections: &[Section]) -> Option<(usize, &Wall)> {
+    wall_with_most(sections, |w| w.max_diameter_mm)
 }
 
 /// The outer wall's lines of the text report: the widest section, and on how many sections
 /// a wall was found.
 fn wall_text(sections: &[Section], hu: f32, step_mm: f64) -> String {
-    let closed = sections
-        .iter()
-        .filter(|s| s.lumen.as_ref().is_some_and(|l| !l.open))
-        .count();
+    let closed = sections.iter().filter(|s| status(s) == "closed").count();
     let found = sections.iter().filter(|s| s.wall.is_some()).count();
     let mut t = String::new();
     if let Some((i, w)) = widest_wall(sections) {
@@ -297,12 +299,7 @@ fn wall_text(sections: &[Section], hu: f32, step_mm: f64) -> String {
                 .map_or(f64::NAN, |l| l.equivalent_diameter_mm),
         );
     }
-    let thickest = sections
-        .iter()
-        .enumerate()
-        .filter_map(|(i, s)| s.wall.as_ref().map(|w| (i, w)))
-        .max_by(|a, b| a.1.max_thickness_mm.total_cmp(&b.1.max_thickness_mm));
-    if let Some((i, w)) = thickest {
+    if let Some((i, w)) = wall_with_most(sections, |w| w.max_thickness_mm) {
         let _ = writeln!(
             t,
             "thickest wall: section {} at {:.1} mm: {:.2} mm from the lumen's edge to the outer wall (wall, thrombus or unenhanced lumen)",

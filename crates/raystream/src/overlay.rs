@@ -113,13 +113,8 @@ pub fn draw_lumen(
     row: &CprRow,
     (lumen, edge): (&Lumen, &[DVec2]),
 ) {
-    let (c, l, d) = (
-        row.centre.as_dvec3(),
-        row.lateral.as_dvec3(),
-        row.normal.as_dvec3(),
-    );
-    for q in edge {
-        let Some((x, y)) = project(cam, c + q.x * l + q.y * d, width, height) else {
+    for &q in edge {
+        let Some((x, y)) = project(cam, row.point(q), width, height) else {
             continue;
         };
         let (px, py) = (x.floor() as i64, y.floor() as i64);
@@ -142,15 +137,10 @@ pub fn draw_wall(
     row: &CprRow,
     outline: &Outline,
 ) {
-    let (c, l, d) = (
-        row.centre.as_dvec3(),
-        row.lateral.as_dvec3(),
-        row.normal.as_dvec3(),
-    );
     let at: Vec<Option<(f32, f32)>> = outline
         .points
         .iter()
-        .map(|q| project(cam, c + q.x * l + q.y * d, width, height))
+        .map(|&q| project(cam, row.point(q), width, height))
         .collect();
     let n = at.len();
     let mut dot = 0u32;

@@ -229,12 +229,8 @@ fn draw_cpr_lumen(
                 ..*r
             };
             let shift = |e: [f64; 2]| e.map(|u| u + plane.shift_mm[y as usize] as f64);
-            let lumen = raystream_cpu::lumen::lumen_across(volume, &m, &row, &o).map(shift);
-            let outer = wall.as_ref().and_then(|w| {
-                let found = raystream_cpu::lumen::measure_with_wall(volume, &m, &row, &o, Some(w))?;
-                found.wall?.1.across().map(shift)
-            });
-            [lumen, outer]
+            raystream_cpu::lumen::across_with_wall(volume, &m, &row, &o, wall.as_ref())
+                .map(|e| e.map(shift))
         })
         .collect();
     pb.finish_and_clear();
