@@ -47,8 +47,14 @@ pub(crate) struct Parsed {
 }
 
 /// Parses a glTF document (JSON or GLB) read from `path`; external buffers are read from `dir`
-/// (none: only embedded buffers are allowed).
-pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Parsed, MeshError> {
+/// (none: only embedded buffers are allowed). The base colour textures are decoded only
+/// `with_textures` (a caller that wants the triangles alone reads no images).
+pub(crate) fn parse(
+    bytes: &[u8],
+    path: &Path,
+    dir: Option<&Path>,
+    with_textures: bool,
+) -> Result<Parsed, MeshError> {
     let bad = |problem: String| MeshError::invalid(path, problem);
     let not_gltf = |e: gltf::Error| bad(format!("not valid glTF 2.0 ({e})"));
     let gltf::Gltf { document, blob } =
@@ -231,7 +237,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path, dir: Option<&Path>) -> Result<Par
         ));
     }
     // The textures of the materials that some triangle has coordinates for.
-    for (k, m) in document.materials().enumerate() {
+    for (k, m) in document.materials().enumerate().filter(|_| with_textures) {
         let Some(info) = m.pbr_metallic_roughness().base_color_texture() else {
             continue;
         };

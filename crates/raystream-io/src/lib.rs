@@ -119,7 +119,7 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
             Vec::new(),
         ),
         MeshFormat::Gltf => {
-            let g = gltf::parse(&bytes, path, path.parent())?;
+            let g = gltf::parse(&bytes, path, path.parent(), true)?;
             let shading = MeshShading {
                 materials: g.materials,
                 material_of: g.material_of,
@@ -333,7 +333,7 @@ fn parse_mesh_in(
         MeshFormat::Obj => parse_obj(&bytes, path, None)?.0,
         MeshFormat::Ply => ply::parse(&bytes, path)?.0,
         MeshFormat::Stl => stl::parse(&bytes, path)?,
-        MeshFormat::Gltf => gltf::parse(&bytes, path, dir)?.mesh,
+        MeshFormat::Gltf => gltf::parse(&bytes, path, dir, false)?.mesh,
     };
     mesh.check(path)?;
     Ok(mesh)

@@ -102,20 +102,16 @@ pub const LPS_MM_TO_GLTF: [f32; 16] = [
 /// bone-coloured material.
 fn write_glb(w: &mut impl Write, mesh: &TriMesh, normals: Option<&[Vec3]>) -> std::io::Result<()> {
     let too_big = || std::io::Error::other("over the 4 GiB a GLB file can hold");
-    let mut bin: Vec<u8> = Vec::new();
-    bin.extend(
-        mesh.positions
-            .iter()
+    let vec3s = |v: &[Vec3]| -> Vec<u8> {
+        v.iter()
             .flat_map(|p| p.to_array())
-            .flat_map(f32::to_le_bytes),
-    );
+            .flat_map(f32::to_le_bytes)
+            .collect()
+    };
+    let mut bin = vec3s(&mesh.positions);
     let normals_at = bin.len();
     if let Some(n) = normals {
-        bin.extend(
-            n.iter()
-                .flat_map(|p| p.to_array())
-                .flat_map(f32::to_le_bytes),
-        );
+        bin.extend(vec3s(n));
     }
     let indices_at = bin.len();
     bin.extend(
