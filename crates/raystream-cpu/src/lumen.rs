@@ -19,7 +19,7 @@ use raystream_math::{DVec2, DVec3, Vec3};
 
 use crate::cpr::{CprRow, CurvedPlane};
 use crate::dvr::Marcher;
-use crate::wall::{Outline, Wall, WallOptions, wall_about};
+use crate::wall::{Outline, Prior, Track, Wall, WallOptions, wall_about};
 
 /// How the lumen is found on a section.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -167,17 +167,23 @@ pub fn measure_path(
     let plane = CurvedPlane::sections(points, image_right, 0.0, n)?;
     let m = Marcher::new(vol, None);
     let step = plane.length_mm / n as f64;
+    let track = match wall {
+        Some(w) => Some(Track::along(vol, &m, points, opt, w)?),
+        None => None,
+    };
     Ok(plane
         .rows
         .into_par_iter()
         .enumerate()
         .map(|(i, row)| {
-            let (lumen, wall) = match measure_with_wall(vol, &m, &row, opt, wall) {
+            let arc_mm = (i as f64 + 0.5) * step;
+            let prior = track.as_ref().and_then(|t| t.prior(arc_mm, &row));
+            let (lumen, wall) = match measure_with_wall(vol, &m, &row, opt, wall, prior.as_ref()) {
                 Some(f) => (Some(f.lumen), f.wall.map(|(w, _)| w)),
                 None => (None, None),
             };
             Section {
-                arc_mm: (i as f64 + 0.5) * step,
+                arc_mm,
                 row,
                 lumen,
                 wall,
@@ -195,18 +201,19 @@ pub struct Found {
     pub wall: Option<(Wall, Outline)>,
 }
 
-/// [`measure_section`], and with `wall`, the outer wall about the lumen
-/// ([`crate::wall`]).
+/// [`measure_section`], and with `wall`, the outer wall about the lumen ([`crate::wall`]),
+/// with what its neighbours along the path agree on where known ([`Track::prior`]).
 pub fn measure_with_wall(
     vol: &Volume,
     m: &Marcher,
     row: &CprRow,
     opt: &LumenOptions,
     wall: Option<&WallOptions>,
+    prior: Option<&Prior>,
 ) -> Option<Found> {
     let g = segment(vol, m, row, opt)?;
     let (lumen, edge) = measure_segmented(&g, row);
-    let wall = wall.and_then(|w| wall_about(vol, m, row, opt, w, &g, (&lumen, &edge)));
+    let wall = wall.and_then(|w| wall_about(vol, m, row, opt, (w, prior), &g, (&lumen, &edge)));
     Some(Found { lumen, edge, wall })
 }
 
@@ -461,7 +468,7 @@ pub fn measure_section(
     row: &CprRow,
     opt: &LumenOptions,
 ) -> Option<(Lumen, Vec<DVec2>)> {
-    measure_with_wall(vol, m, row, opt, None).map(|f| (f.lumen, f.edge))
+    measure_with_wall(vol, m, row, opt, None, None).map(|f| (f.lumen, f.edge))
 }
 
 /// [`measure_section`]'s figures of a segmented section.
@@ -564,24 +571,26 @@ pub fn lumen_across(
     row: &CprRow,
     opt: &LumenOptions,
 ) -> Option<[f64; 2]> {
-    across_with_wall(vol, m, row, opt, None)[0]
+    across_with_wall(vol, m, row, opt, None, None)[0]
 }
 
 /// [`lumen_across`], and with `wall`, where the outer wall's outline meets the line through
-/// `row.centre` along `row.lateral` ([`Outline::across`]): the lumen segmented once for both.
+/// `row.centre` along `row.lateral` ([`Outline::across`]), with what its neighbours along the
+/// path agree on where known: the lumen segmented once for both.
 pub fn across_with_wall(
     vol: &Volume,
     m: &Marcher,
     row: &CprRow,
     opt: &LumenOptions,
     wall: Option<&WallOptions>,
+    prior: Option<&Prior>,
 ) -> [Option<[f64; 2]>; 2] {
     let Some(g) = segment(vol, m, row, opt) else {
         return [None, None];
     };
     let outer = wall.and_then(|w| {
         let (lumen, edge) = measure_segmented(&g, row);
-        wall_about(vol, m, row, opt, w, &g, (&lumen, &edge))?
+        wall_about(vol, m, row, opt, (w, prior), &g, (&lumen, &edge))?
             .1
             .across()
     });

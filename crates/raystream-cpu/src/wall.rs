@@ -18,14 +18,25 @@
 //! squares on the edges it agrees with): circles that hold the lumen are scored by the edges
 //! on them (within 10 % of the radius, at least 1.5 mm) less thrice those inside them (fat
 //! within the vessel: evidence against), and since every edge bounds the vessel from outside,
-//! the smallest circle with at least 60 % of the best score is taken. The rays are cast again
-//! from its centre and the circle fitted again. From the rays that agree with it, the wall's
-//! edge is followed round to each neighbouring ray whose edge lies within 1 mm (a wall that is
-//! not round: an elliptic or lobed sac); a neighbour's far edge jumps out by its width and is
-//! not followed. The outline is each such ray's edge, and the circle where a ray's edge is not
-//! seen (hidden by a neighbour), never inside the lumen; the figures (area, calliper
-//! diameters) are the outline's, as the lumen's are of its edge. A section is left without a
-//! wall when fewer than 8 rays, or edges over less than a quarter of the circle, agree on one.
+//! the smallest circle with at least 60 % of the best score is taken; it is refined by least
+//! squares on the edges within half the tolerance of it, while that scores no worse (edges
+//! just beyond the wall would otherwise pull it outwards). The rays are cast again from its
+//! centre and the circle fitted again.
+//!
+//! Along a path the wall runs on from section to section, while what hides it on a few (a
+//! neighbour pressed against it, a band of soft tissue wrapped round it) need not: the
+//! sections' circles are first found each by itself a millimetre apart ([`Track`]), and a
+//! section whose neighbours within 5 mm either way agree on a circle (their median; at least 4
+//! with a wall) takes the circle nearest theirs, within an edge's tolerance, when it has at
+//! least 30 % of the best score ([`Prior`]); else its own, as above.
+//!
+//! From the rays that agree with the circle, the wall's edge is followed round to each neighbouring
+//! ray whose edge lies within 1 mm (a wall that is not round: an elliptic or lobed sac); a
+//! neighbour's far edge jumps out by its width and is not followed. The outline is each such ray's
+//! edge, and the circle where a ray's edge is not seen (hidden by a neighbour), never inside the
+//! lumen; the figures (area, calliper diameters) are the outline's, as the lumen's are of its edge.
+//! A section is left without a wall when fewer than 8 rays, or edges over less than a quarter of
+//! the circle, agree on one.
 //!
 //! Written here: the geometry is a few dozen lines of 2-D fitting, and no crate does the
 //! vessel-specific part (which rays to trust).
@@ -33,7 +44,9 @@
 use raystream_io::Volume;
 use raystream_math::{DVec2, DVec3};
 
-use crate::cpr::CprRow;
+use rayon::prelude::*;
+
+use crate::cpr::{CprRow, CurvedPlane};
 use crate::dvr::Marcher;
 use crate::lumen::{self, Callipers, Lumen, LumenOptions, Segmented};
 
@@ -85,6 +98,17 @@ const CONTINUITY_MM: f64 = 1.0;
 const SUPPORT: f64 = 0.6;
 /// What an edge inside a circle (fat within the vessel) counts against it, in edges on it.
 const INSIDE_WEIGHT: i64 = 3;
+/// A section's neighbours along the path are the track's sections this far from it, mm, either
+/// way ([`Track`]) ...
+const PRIOR_REACH_MM: f64 = 5.0;
+/// ... at least this many of them with a wall; and the circle nearest the one they agree on
+/// needs only this fraction of the best circle's support.
+const PRIOR_MIN: usize = 4;
+const PRIOR_SUPPORT: f64 = 0.3;
+/// A circle is refined by least squares on the edges within this fraction of its tolerance.
+const REFINE_BAND: f64 = 0.5;
+/// The track's sections lie this far apart along the path, mm.
+const TRACK_STEP_MM: f64 = 1.0;
 
 /// The outer wall found on one cross-section.
 #[derive(Clone, Debug, PartialEq)]
@@ -110,6 +134,85 @@ pub struct Wall {
     /// The fraction of the rays whose edge was seen (on the circle, or followed along the
     /// wall from there): the outline there is the edges', and elsewhere the circle's.
     pub seen: f64,
+    /// The circle is the one the section's neighbours along the path agree on ([`Prior`]),
+    /// where the section by itself would have taken another.
+    pub from_neighbours: bool,
+}
+
+/// What a section's neighbours along the path agree its wall's circle is: the median of the
+/// circles found on their own on the [`Track`]'s sections within 5 mm of it, either way (not
+/// the section itself), where at least 4 of them have one; their centres projected on the
+/// section's plane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prior {
+    /// The centre, LPS mm (on the section's plane), and the radius, mm.
+    pub centre: DVec3,
+    pub radius_mm: f64,
+}
+
+/// The walls found along a path, each section by itself, a millimetre apart: what any section's
+/// neighbours found, whatever the sections measured or drawn, so that a section's wall is the
+/// same in `measure` and on every picture.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Track {
+    /// Arc length (mm), circle centre (LPS mm) and radius (mm) of each section with a wall.
+    found: Vec<(f64, DVec3, f64)>,
+}
+
+impl Track {
+    /// The walls on sections [`TRACK_STEP_MM`] apart along the spline through `points` (the
+    /// middles of equal parts of it, as `measure --every 1` places them), found with `opt` and
+    /// `wall` and no prior.
+    pub fn along(
+        vol: &Volume,
+        m: &Marcher,
+        points: &[DVec3],
+        opt: &LumenOptions,
+        wall: &WallOptions,
+    ) -> Result<Track, String> {
+        let length = crate::cpr::tortuosity(points)?.length_mm;
+        let n = (length / TRACK_STEP_MM).round().clamp(1.0, 1e6) as u32;
+        let plane = CurvedPlane::sections(points, DVec3::X, 0.0, n)?;
+        let found = plane
+            .rows
+            .par_iter()
+            .zip(&plane.arc_mm)
+            .filter_map(|(row, &arc)| {
+                let (w, _) = lumen::measure_with_wall(vol, m, row, opt, Some(wall), None)?.wall?;
+                Some((arc, w.centre, 0.5 * w.circle_diameter_mm))
+            })
+            .collect();
+        Ok(Track { found })
+    }
+
+    /// What the neighbours of the section at `arc_mm` along the path (framed by `row`) agree
+    /// on; none where fewer than [`PRIOR_MIN`] of them have a wall.
+    pub fn prior(&self, arc_mm: f64, row: &CprRow) -> Option<Prior> {
+        let near: Vec<&(f64, DVec3, f64)> = self
+            .found
+            .iter()
+            .filter(|(a, _, _)| {
+                (0.5 * TRACK_STEP_MM..=PRIOR_REACH_MM).contains(&(a - arc_mm).abs())
+            })
+            .collect();
+        if near.len() < PRIOR_MIN {
+            return None;
+        }
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            let k = v.len();
+            0.5 * (v[(k - 1) / 2] + v[k / 2])
+        };
+        let offsets: Vec<DVec2> = near.iter().map(|(_, c, _)| row.offset_of(*c)).collect();
+        let centre = DVec2::new(
+            median(offsets.iter().map(|q| q.x).collect()),
+            median(offsets.iter().map(|q| q.y).collect()),
+        );
+        Some(Prior {
+            centre: row.point(centre),
+            radius_mm: median(near.iter().map(|(_, _, r)| *r).collect()),
+        })
+    }
 }
 
 /// A wall's outline on its section (mm from the path's point, right and down), a point a
@@ -346,10 +449,15 @@ fn cast_all(
         .collect()
 }
 
-/// The circle most edges agree on (see the module's comment), its edges' indices; none when
-/// too few agree or they bunch on too little of it. `hull`: the lumen's convex hull, which the
-/// circle must hold.
-fn fit(edges: &[DVec2], hull: &[DVec2], max_r: f64) -> Option<(Circle, Vec<usize>)> {
+/// The circle most edges agree on (see the module's comment), its edges' indices, and whether
+/// it is `prior`'s choice over the section's own; none when too few agree or they bunch on too
+/// little of it. `hull`: the lumen's convex hull, which the circle must hold.
+fn fit(
+    edges: &[DVec2],
+    hull: &[DVec2],
+    max_r: f64,
+    prior: Option<Circle>,
+) -> Option<(Circle, Vec<usize>, bool)> {
     let m = edges.len();
     if m < MIN_EDGES {
         return None;
@@ -379,7 +487,8 @@ fn fit(edges: &[DVec2], hull: &[DVec2], max_r: f64) -> Option<(Circle, Vec<usize
         })
     };
     let plausible = |c: &Circle| c.r <= max_r && holds_lumen(c);
-    // Triples a third, a quarter, a sixth and an eighth of the edges apart, from every edge.
+    // Triples a third, a quarter, a sixth and an eighth of the edges apart, from every edge;
+    // and the neighbours' circle itself.
     let mut candidates: Vec<(i64, Circle)> = Vec::new();
     for f in [3, 4, 6, 8] {
         let s = (m / f).max(1);
@@ -395,29 +504,69 @@ fn fit(edges: &[DVec2], hull: &[DVec2], max_r: f64) -> Option<(Circle, Vec<usize
     }
     // Every edge bounds the vessel from outside (a neighbour's far edge lies beyond the wall,
     // never inside it): of the circles nearly as well supported as the best, the smallest.
-    let top = candidates.iter().map(|c| c.0).max()?;
-    let mut c = candidates
-        .iter()
-        .filter(|(sc, _)| *sc > 0 && *sc as f64 >= SUPPORT * top as f64)
-        .min_by(|a, b| a.1.r.total_cmp(&b.1.r).then(b.0.cmp(&a.0)))?
-        .1;
-    let mut on = agreeing(&c);
-    // Refined by least squares on the edges it agrees with, while that changes them.
-    for _ in 0..4 {
-        let pts: Vec<DVec2> = on.iter().map(|&i| edges[i]).collect();
-        let Some(next) = Circle::fitted(&pts).filter(plausible) else {
-            break;
-        };
-        let next_on = agreeing(&next);
-        if next_on.len() < MIN_EDGES {
-            break;
+    let smallest = |candidates: &[(i64, Circle)]| {
+        let top = candidates.iter().map(|c| c.0).max()?;
+        candidates
+            .iter()
+            .filter(|(sc, _)| *sc > 0 && *sc as f64 >= SUPPORT * top as f64)
+            .min_by(|a, b| a.1.r.total_cmp(&b.1.r).then(b.0.cmp(&a.0)))
+            .map(|c| c.1)
+    };
+    let own = smallest(&candidates);
+    // Where the neighbours along the path agree on a circle, it is a candidate too, and the
+    // one nearest theirs (within an edge's tolerance) is taken with half the support: the
+    // wall runs on from section to section, while what hides it on a few (a neighbour pressed
+    // against it, whose far edge makes a larger circle look better) need not.
+    let apart = |a: &Circle, b: &Circle| a.o.distance(b.o) + (a.r - b.r).abs();
+    let chosen = prior.and_then(|p| {
+        if plausible(&p) {
+            candidates.push((score(&p), p));
         }
-        let same = next_on == on;
-        (c, on) = (next, next_on);
-        if same {
-            break;
+        let top = candidates.iter().map(|c| c.0).max()?;
+        candidates
+            .iter()
+            .filter(|(sc, c)| {
+                *sc > 0 && *sc as f64 >= PRIOR_SUPPORT * top as f64 && apart(c, &p) <= p.tolerance()
+            })
+            .min_by(|a, b| apart(&a.1, &p).total_cmp(&apart(&b.1, &p)))
+            .map(|c| c.1)
+    });
+    // Refined by least squares on the edges it agrees with most closely, while that changes
+    // them and scores no worse (the edges beyond a circle are a neighbour's as often as the
+    // wall's: fitted to all it agrees with, it would creep outwards).
+    let refined = |mut c: Circle| {
+        let mut on = agreeing(&c);
+        for _ in 0..4 {
+            let t = REFINE_BAND * c.tolerance();
+            let pts: Vec<DVec2> = on
+                .iter()
+                .map(|&i| edges[i])
+                .filter(|q| (q.distance(c.o) - c.r).abs() <= t)
+                .collect();
+            let Some(next) = Circle::fitted(&pts)
+                .filter(|n| pts.len() >= 3 && plausible(n) && score(n) >= score(&c))
+            else {
+                break;
+            };
+            let next_on = agreeing(&next);
+            if next_on.len() < MIN_EDGES {
+                break;
+            }
+            let same = next_on == on;
+            (c, on) = (next, next_on);
+            if same {
+                break;
+            }
         }
-    }
+        (c, on)
+    };
+    let (c, on) = refined(chosen.or(own)?);
+    // The neighbours' choice, where the section's own, refined, is another circle.
+    let from_prior = chosen.is_some()
+        && own.is_none_or(|o| {
+            let o = refined(o).0;
+            apart(&c, &o) > c.tolerance()
+        });
     if on.len() < MIN_EDGES {
         return None;
     }
@@ -433,27 +582,29 @@ fn fit(edges: &[DVec2], hull: &[DVec2], max_r: f64) -> Option<(Circle, Vec<usize
         angles[0] + std::f64::consts::TAU - angles[angles.len() - 1],
         f64::max,
     );
-    (gap <= MAX_GAP).then_some((c, on))
+    (gap <= MAX_GAP).then_some((c, on, from_prior))
 }
 
-/// The circle fitted to the rays' edges, and which rays agree with it.
+/// The circle fitted to the rays' edges, which rays agree with it, and whether it is the
+/// `prior`'s choice ([`fit`]).
 fn fit_rays(
     rays: &[Ray],
     centre: DVec2,
     hull: &[DVec2],
     max_r: f64,
-) -> Option<(Circle, Vec<bool>)> {
+    prior: Option<Circle>,
+) -> Option<(Circle, Vec<bool>, bool)> {
     let (idx, edges): (Vec<usize>, Vec<DVec2>) = rays
         .iter()
         .enumerate()
         .filter_map(|(k, r)| r.edge.map(|e| (k, centre + r.dir * e)))
         .unzip();
-    let (c, on) = fit(&edges, hull, max_r)?;
+    let (c, on, from_prior) = fit(&edges, hull, max_r, prior)?;
     let mut agrees = vec![false; rays.len()];
     for i in on {
         agrees[idx[i]] = true;
     }
-    Some((c, agrees))
+    Some((c, agrees, from_prior))
 }
 
 /// Grows the rays that agree with the circle along the wall's edge: a ray beside one taken
@@ -483,13 +634,14 @@ fn follow_edges(rays: &[Ray], taken: &mut [bool]) {
 }
 
 /// The outer wall about the lumen segmented in `g` (measured as `lumen`, with `edge` its edge
-/// points), and its outline. None where the lumen is open or too few rays agree on a wall.
+/// points), and its outline, with what the section's neighbours agree on where known. None
+/// where the lumen is open or too few rays agree on a wall.
 pub(crate) fn wall_about(
     vol: &Volume,
     m: &Marcher,
     row: &CprRow,
     opt: &LumenOptions,
-    wall: &WallOptions,
+    (wall, prior): (&WallOptions, Option<&Prior>),
     g: &Segmented,
     (lumen, edge): (&Lumen, &[DVec2]),
 ) -> Option<(Wall, Outline)> {
@@ -503,11 +655,15 @@ pub(crate) fn wall_about(
     let step = opt.pixel_mm;
     // From the lumen's centroid, then again from the circle's centre.
     let first = row.offset_of(lumen.centroid);
+    let prior = prior.map(|p| Circle {
+        o: row.offset_of(p.centre),
+        r: p.radius_mm,
+    });
     let rays = cast_all(&sample, g, first, step, reach, hu, wall.rays);
-    let (circle, _) = fit_rays(&rays, first, &hull, reach)?;
+    let (circle, _, was_prior) = fit_rays(&rays, first, &hull, reach, prior)?;
     let o = circle.o;
     let rays = cast_all(&sample, g, o, step, reach, hu, wall.rays);
-    let (circle, mut agrees) = fit_rays(&rays, o, &hull, reach)?;
+    let (circle, mut agrees, is_prior) = fit_rays(&rays, o, &hull, reach, prior)?;
     if circle.o.distance(o) >= circle.r {
         return None;
     }
@@ -555,6 +711,7 @@ pub(crate) fn wall_about(
             centre: row.point(circle.o),
             circle_diameter_mm: 2.0 * circle.r,
             seen,
+            from_neighbours: was_prior || is_prior,
         },
         Outline {
             points: outline,
@@ -567,7 +724,6 @@ pub(crate) fn wall_about(
 mod tests {
     use super::*;
     use crate::lumen::{measure_path, measure_with_wall};
-    use rayon::prelude::*;
 
     /// HU `lo` on the negative side of a boundary and `hi` on its positive, rising linearly
     /// across 2 mm about it (`sd`: a signed distance, or anything with the same zero set), so
@@ -579,10 +735,21 @@ mod tests {
     /// A CT 96 mm square and 8 mm deep on a 1 mm grid (LPS = index) whose HU at each (x, y)
     /// are `f`'s, the same on every slice.
     fn slab(f: impl Fn(DVec2) -> f64 + Sync) -> Volume {
-        let (n, nz) = (96, 8);
+        block(8, move |p| f(p.truncate()))
+    }
+
+    /// A CT 96 mm square and `nz` mm deep on a 1 mm grid (LPS = index), its HU `f`'s.
+    fn block(nz: usize, f: impl Fn(DVec3) -> f64 + Sync) -> Volume {
+        let n = 96;
         let data: Vec<f32> = (0..n * n * nz)
             .into_par_iter()
-            .map(|k| f(DVec2::new((k % n) as f64, (k / n % n) as f64)) as f32)
+            .map(|k| {
+                f(DVec3::new(
+                    (k % n) as f64,
+                    (k / n % n) as f64,
+                    (k / (n * n)) as f64,
+                )) as f32
+            })
             .collect();
         Volume::hounsfield([n, n, nz], [1.0; 3], data)
     }
@@ -607,7 +774,8 @@ mod tests {
         };
         let row = measure_path(vol, &path, 1, DVec3::X, &opt, None).unwrap()[0].row;
         let m = Marcher::new(vol, None);
-        let found = measure_with_wall(vol, &m, &row, &opt, Some(&WallOptions::default())).unwrap();
+        let found =
+            measure_with_wall(vol, &m, &row, &opt, Some(&WallOptions::default()), None).unwrap();
         let points = found.wall.as_ref().map_or(Vec::new(), |(_, o)| {
             o.points.iter().map(|&q| row.point(q).truncate()).collect()
         });
@@ -719,6 +887,70 @@ mod tests {
             // Nothing of the outline in the band (blurred by a voxel where it ends).
             for p in &outline {
                 assert!((p.distance(centre) - r).abs() < 0.5, "{band} HU: {p}");
+            }
+        }
+    }
+
+    /// A band of soft tissue wrapped round 240° of a 30 mm wall, 6 mm thick, for 4 mm of the
+    /// vessel's length: a section through it, alone, takes the band for thrombus within the
+    /// wall (a wider wall), but along the path the sections either side agree on the wall,
+    /// and so does the section.
+    #[test]
+    fn a_band_round_the_wall_for_a_few_mm_is_not_taken_for_it() {
+        let (centre, r) = (DVec2::new(48.0, 48.0), 15.0);
+        let lumen = DVec2::new(47.0, 48.5);
+        let cos = 120f64.to_radians().cos();
+        let vol = block(24, move |p| {
+            let q = p.truncate() - centre;
+            let d = q.length();
+            let v = vessel(lumen, |_| r - d)(p.truncate());
+            // The band: 15 to 21 mm from the centre, within 120° of the right, from 10 to 14
+            // mm along the vessel.
+            let inside = ((d - r) * (r + 6.0 - d))
+                .min(100.0 * (q.x / d - cos))
+                .min(2.0 * (p.z - 10.0).min(14.0 - p.z));
+            ramp(inside, v, SAC).max(v.min(SAC))
+        });
+        let opt = LumenOptions {
+            field_mm: 90.0,
+            ..LumenOptions::for_volume(&vol)
+        };
+        let path = [lumen.extend(1.0), lumen.extend(22.0)];
+        let wall = WallOptions::default();
+        let sections = measure_path(&vol, &path, 21, DVec3::X, &opt, Some(&wall)).unwrap();
+        let m = Marcher::new(&vol, None);
+        for s in &sections {
+            let z = s.row.centre.z as f64;
+            let w = s.wall.as_ref().expect("a wall");
+            // A section half a millimetre from the band's end samples a quarter of it.
+            assert!(
+                (w.circle_diameter_mm - 2.0 * r).abs() < 0.5,
+                "at {z} mm: {w:?}"
+            );
+            assert!(
+                w.centre.truncate().distance(centre) < 0.3,
+                "at {z} mm: {w:?}"
+            );
+            let banded = (10.5..=13.5).contains(&z);
+            assert_eq!(w.from_neighbours, banded, "at {z} mm: {w:?}");
+            // Alone, a section through the band takes its far edge.
+            let alone = measure_with_wall(&vol, &m, &s.row, &opt, Some(&wall), None)
+                .and_then(|f| f.wall)
+                .expect("a wall")
+                .0;
+            if banded {
+                assert!(
+                    alone.equivalent_diameter_mm > 2.0 * r + 5.0,
+                    "at {z} mm: {alone:?}"
+                );
+                // Seen where the fat is: a third of the way round.
+                assert!((w.seen - 1.0 / 3.0).abs() < 0.05, "at {z} mm: {w:?}");
+            } else {
+                assert!(
+                    (alone.circle_diameter_mm - w.circle_diameter_mm).abs() < 0.05
+                        && alone.centre.distance(w.centre) < 0.05,
+                    "at {z} mm: {alone:?} alone, {w:?}"
+                );
             }
         }
     }
@@ -852,22 +1084,47 @@ mod tests {
             })
             .collect();
         let hull = [DVec2::new(2.0, 2.0), DVec2::new(-3.0, -3.0)];
-        let (c, on) = fit(&edges, &hull, 50.0).unwrap();
+        let (c, on, _) = fit(&edges, &hull, 50.0, None).unwrap();
         assert!(
             c.o.distance(truth.o) < 1e-6 && (c.r - truth.r).abs() < 1e-6,
             "{c:?}"
         );
         assert_eq!(on.len(), 45);
         // Too few edges, or all on a tenth of the circle: no wall.
-        assert!(fit(&edges[..7], &hull, 50.0).is_none());
+        assert!(fit(&edges[..7], &hull, 50.0, None).is_none());
         let arc: Vec<DVec2> = (0..30)
             .map(|k| {
                 let a = 0.02 * k as f64;
                 truth.o + truth.r * DVec2::new(a.cos(), a.sin())
             })
             .collect();
-        assert!(fit(&arc, &hull, 50.0).is_none());
+        assert!(fit(&arc, &hull, 50.0, None).is_none());
         // A circle that would leave the lumen out is not taken.
-        assert!(fit(&edges, &[DVec2::new(40.0, 0.0)], 50.0).is_none());
+        assert!(fit(&edges, &[DVec2::new(40.0, 0.0)], 50.0, None).is_none());
+    }
+
+    /// Edges just beyond the wall, within its tolerance (a neighbour's far edge a millimetre
+    /// out, over 40 % of the way round), do not pull the circle out as it is refined.
+    #[test]
+    fn edges_just_beyond_the_wall_do_not_pull_it_out() {
+        let truth = Circle {
+            o: DVec2::new(-4.0, 7.0),
+            r: 15.0,
+        };
+        let edges: Vec<DVec2> = (0..90)
+            .map(|k| {
+                let a = std::f64::consts::TAU * k as f64 / 90.0;
+                let beyond = if k < 36 { 1.2 } else { 0.0 };
+                truth.o + DVec2::new(a.cos(), a.sin()) * (truth.r + beyond)
+            })
+            .collect();
+        let hull = [DVec2::new(-6.0, 5.0), DVec2::new(-1.0, 9.0)];
+        let (c, on, from_prior) = fit(&edges, &hull, 50.0, None).unwrap();
+        assert!(
+            c.o.distance(truth.o) < 1e-6 && (c.r - truth.r).abs() < 1e-6,
+            "{c:?}"
+        );
+        assert_eq!(on.len(), 90);
+        assert!(!from_prior);
     }
 }

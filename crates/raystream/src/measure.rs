@@ -310,7 +310,11 @@ fn wall_text(sections: &[Section], hu: f32, step_mm: f64) -> String {
     }
     let _ = writeln!(
         t,
-        "wall: found on {found} of the {closed} sections with a closed lumen (its edge: fat or lung below {hu} HU about it; none where too little of it is seen)"
+        "wall: found on {found} of the {closed} sections with a closed lumen (its edge: fat or lung below {hu} HU about it; none where too little of it is seen); on {by} its circle is the one the sections within 5 mm agree on, where the section alone would take another",
+        by = sections
+            .iter()
+            .filter(|s| s.wall.as_ref().is_some_and(|w| w.from_neighbours))
+            .count()
     );
     if let Some(v) = WallVolumes::of(sections, step_mm) {
         let _ = writeln!(
@@ -813,6 +817,7 @@ fn wall_json(w: &Wall) -> serde_json::Value {
         "centre": v3(w.centre),
         "circle_diameter_mm": round3(w.circle_diameter_mm),
         "seen": round3(w.seen),
+        "from_neighbours": w.from_neighbours,
     })
 }
 

@@ -219,6 +219,12 @@ fn draw_cpr_lumen(
         a.quiet,
         &format!("finding the lumen on the CPR's {} rows", plane.height),
     );
+    // The path was read before the volume; read again here, it is the same.
+    let points = a
+        .path
+        .as_deref()
+        .and_then(|f| raystream_io::read_curve(f).ok());
+    let track = wall_track(volume, &m, points.as_deref(), &o, wall.as_ref());
     // Each row's lumen edges, and with --draw-wall the outer wall's.
     let edges: Vec<[Option<[f64; 2]>; 2]> = (0..plane.height)
         .into_par_iter()
@@ -229,8 +235,18 @@ fn draw_cpr_lumen(
                 ..*r
             };
             let shift = |e: [f64; 2]| e.map(|u| u + plane.shift_mm[y as usize] as f64);
-            raystream_cpu::lumen::across_with_wall(volume, &m, &row, &o, wall.as_ref())
-                .map(|e| e.map(shift))
+            let prior = track
+                .as_ref()
+                .and_then(|t| t.prior(plane.arc_mm[y as usize], &row));
+            raystream_cpu::lumen::across_with_wall(
+                volume,
+                &m,
+                &row,
+                &o,
+                wall.as_ref(),
+                prior.as_ref(),
+            )
+            .map(|e| e.map(shift))
         })
         .collect();
     pb.finish_and_clear();
@@ -241,6 +257,19 @@ fn draw_cpr_lumen(
     // The wall first, the lumen over it.
     let drawn = crate::overlay::draw_row_edges(rgb, size, pixel, &outer, crate::overlay::WALL);
     crate::overlay::draw_row_edges(rgb, size, pixel, &lumen, crate::overlay::EDGE) | drawn
+}
+
+/// `--draw-wall`'s walls along the path through `points`, each section's by itself
+/// ([`raystream_cpu::wall::Track`]): what a drawn section's neighbours found, as `measure
+/// --wall` uses them. None without `--draw-wall`.
+fn wall_track(
+    volume: &raystream_io::Volume,
+    m: &raystream_cpu::dvr::Marcher,
+    points: Option<&[raystream_math::DVec3]>,
+    o: &LumenOptions,
+    wall: Option<&WallOptions>,
+) -> Option<raystream_cpu::wall::Track> {
+    raystream_cpu::wall::Track::along(volume, m, points?, o, wall?).ok()
 }
 
 /// `--mark-at MM,…`: a line across a curved reformation's picture where the path is at each
@@ -749,6 +778,9 @@ fn path_sections(
     let lumen =
         lumen_options(a, volume)?.map(|o| (o, raystream_cpu::dvr::Marcher::new(volume, None)));
     let wall = wall_options(a, volume)?;
+    let track = lumen
+        .as_ref()
+        .and_then(|(o, m)| wall_track(volume, m, Some(&curve.points), o, wall.as_ref()));
     frame_series(a, (volume, None), n, format, "slices", |i| {
         let cam = stations.section_camera(i, 0.5 * pixel * opt.height as f32, reach);
         let row = &stations.rows[i as usize];
@@ -759,8 +791,17 @@ fn path_sections(
         let mut f = renderer.frame(&opt, &cam, format)?;
         if let (Some((o, m)), crate::common::Picture::Srgb8 { rgb, width, height }) =
             (&lumen, &mut f.picture)
-            && let Some(found) =
-                raystream_cpu::lumen::measure_with_wall(volume, m, row, o, wall.as_ref())
+            && let Some(found) = raystream_cpu::lumen::measure_with_wall(
+                volume,
+                m,
+                row,
+                o,
+                wall.as_ref(),
+                track
+                    .as_ref()
+                    .and_then(|t| t.prior(stations.arc_mm[i as usize], row))
+                    .as_ref(),
+            )
         {
             let size = (*width, *height);
             if let Some((_, outline)) = &found.wall {
