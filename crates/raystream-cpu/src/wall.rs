@@ -560,29 +560,36 @@ fn fit(
         }
         (c, on)
     };
-    let (c, on) = refined(chosen.or(own)?);
-    // The neighbours' choice, where the section's own, refined, is another circle.
-    let from_prior = chosen.is_some()
-        && own.is_none_or(|o| {
-            let o = refined(o).0;
-            apart(&c, &o) > c.tolerance()
-        });
-    if on.len() < MIN_EDGES {
-        return None;
+    // Refined, with enough edges on it, spread far enough round it.
+    let found = |c: Circle| {
+        let (c, on) = refined(c);
+        if on.len() < MIN_EDGES {
+            return None;
+        }
+        let mut angles: Vec<f64> = on
+            .iter()
+            .map(|&i| {
+                let v = edges[i] - c.o;
+                v.y.atan2(v.x)
+            })
+            .collect();
+        angles.sort_by(f64::total_cmp);
+        let gap = angles.windows(2).map(|w| w[1] - w[0]).fold(
+            angles[0] + std::f64::consts::TAU - angles[angles.len() - 1],
+            f64::max,
+        );
+        (gap <= MAX_GAP).then_some((c, on))
+    };
+    // The neighbours' choice where it holds, and whether the section's own is another circle;
+    // else the section's own.
+    let own_found = || own.and_then(found);
+    match chosen.and_then(found) {
+        Some((c, on)) => {
+            let other = own_found().is_none_or(|(o, _)| apart(&c, &o) > c.tolerance());
+            Some((c, on, other))
+        }
+        None => own_found().map(|(c, on)| (c, on, false)),
     }
-    let mut angles: Vec<f64> = on
-        .iter()
-        .map(|&i| {
-            let v = edges[i] - c.o;
-            v.y.atan2(v.x)
-        })
-        .collect();
-    angles.sort_by(f64::total_cmp);
-    let gap = angles.windows(2).map(|w| w[1] - w[0]).fold(
-        angles[0] + std::f64::consts::TAU - angles[angles.len() - 1],
-        f64::max,
-    );
-    (gap <= MAX_GAP).then_some((c, on, from_prior))
 }
 
 /// The circle fitted to the rays' edges, which rays agree with it, and whether it is the

@@ -733,8 +733,9 @@ pub struct MeasureArgs {
     pub open: f64,
     /// Also find the vessel's outer wall about the lumen ("outer wall to outer wall", as an
     /// aneurysm or a dissection is followed): rays from its centre out to the fat or lung
-    /// about it, below HU [default: -30], a circle fitted to the edges they find, the outline
-    /// where seen and the circle where a neighbour hides it.
+    /// about it, below HU [default: -30], a circle fitted to the edges they find (the one its
+    /// neighbours along the path agree on, where they do), the outline where seen and the
+    /// circle where a neighbour hides it.
     #[arg(
         long,
         value_name = "HU",
