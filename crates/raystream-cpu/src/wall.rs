@@ -160,7 +160,7 @@ pub struct Track {
 }
 
 impl Track {
-    /// The walls on sections [`TRACK_STEP_MM`] apart along the spline through `points` (the
+    /// The walls on sections a millimetre apart along the spline through `points` (the
     /// middles of equal parts of it, as `measure --every 1` places them), found with `opt` and
     /// `wall` and no prior.
     pub fn along(
@@ -186,7 +186,7 @@ impl Track {
     }
 
     /// What the neighbours of the section at `arc_mm` along the path (framed by `row`) agree
-    /// on; none where fewer than [`PRIOR_MIN`] of them have a wall.
+    /// on; none where fewer than 4 of them have a wall.
     pub fn prior(&self, arc_mm: f64, row: &CprRow) -> Option<Prior> {
         let near: Vec<&(f64, DVec3, f64)> = self
             .found
