@@ -22,6 +22,7 @@ pub mod cpr;
 pub mod dvr;
 mod image_out;
 pub mod lumen;
+pub mod mask;
 pub mod medium;
 pub mod stenosis;
 pub mod wall;

@@ -272,6 +272,14 @@ fn grid_offset(n: usize, p: f64, i: usize, j: usize) -> DVec2 {
 }
 
 impl Segmented {
+    /// The lumen alone, its samples dropped (to be kept for many sections at once).
+    pub(crate) fn without_values(self) -> Segmented {
+        Segmented {
+            values: Vec::new(),
+            ..self
+        }
+    }
+
     /// Whether the grid pixel that holds the offset `q` from the path's point (mm) is lumen.
     pub(crate) fn lumen_at(&self, q: DVec2) -> bool {
         let half = 0.5 * self.n as f64;

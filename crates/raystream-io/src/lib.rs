@@ -8,6 +8,7 @@
 
 mod curve;
 mod gltf;
+mod label_map;
 mod ply;
 mod secondary_capture;
 mod shapes;
@@ -21,6 +22,7 @@ use std::io::{BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};
 
 pub use curve::{MAX_CURVE_POINTS, read_curve, write_curve};
+pub use label_map::{is_label_map_path, write_label_map};
 pub use raystream_math::{Aabb, Vec2, Vec3};
 pub use secondary_capture::{
     CaptureInfo, CapturePixels, HU_PADDING, ImagePlane, new_uid, write_secondary_capture,

@@ -790,6 +790,12 @@ pub struct MeasureArgs {
         allow_hyphen_values = true
     )]
     pub angle: Vec<f64>,
+    /// Write the lumen (label 1) and, with --wall, what the outer wall holds beyond it (label
+    /// 2) as a label map on the CT's own grid, NIfTI (.nii or .nii.gz), for a viewer (3D
+    /// Slicer, ITK-SNAP) to lay over the CT: from sections as far apart as its finest voxel
+    /// spacing, each voxel labelled by the nearest section's plane.
+    #[arg(long, value_name = "FILE.nii.gz")]
+    pub mask: Option<PathBuf>,
     /// Draw the diameters against arc length to FILE (.svg, .png, or .dcm: the PNG's pixels
     /// as a DICOM Secondary Capture of the input's study): D eq, D max and D min, open
     /// sections, and with --stenosis the reference, the lesion and the narrowed segment.

@@ -32,6 +32,14 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     if let Some(p) = &a.plot {
         crate::profile::PlotFormat::of(p)?;
     }
+    if let Some(m) = &a.mask
+        && !raystream_io::is_label_map_path(m)
+    {
+        bail!(
+            "{}: --mask writes a NIfTI label map: name it .nii or .nii.gz",
+            m.display()
+        );
+    }
     if !a.angle.is_empty() && a.angle.len() != 3 {
         bail!(
             "--angle: {} arc lengths; give three, A,B,C (mm along the path, the vertex B between)",
@@ -134,10 +142,15 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         };
         crate::profile::write(out, &title, &sections, length, &lesions, &dicom)?;
     }
+    let mask = match &a.mask {
+        Some(out) if found => Some(write_mask(a, out, (&volume, &points), &opt, wall.as_ref())?),
+        _ => None,
+    };
     let findings = Findings {
         winding: &winding,
         lesions: &lesions,
         angle: angle.as_ref(),
+        mask: mask.as_ref(),
     };
     if a.json {
         print_line(report_json(a, &opt, &sections, &findings));
@@ -371,6 +384,88 @@ struct Findings<'a> {
     winding: &'a Tortuosity,
     lesions: &'a [Stenosis],
     angle: Option<&'a PathAngle>,
+    mask: Option<&'a MaskWritten>,
+}
+
+/// What `--mask` wrote: the file, its labels' voxels and volumes, and the sections they came
+/// from.
+struct MaskWritten {
+    file: String,
+    lumen: (usize, f64),
+    wall: Option<(usize, f64)>,
+    sections: usize,
+    closed: usize,
+    step_mm: f64,
+}
+
+/// `--mask FILE`: the lumen and the outer wall labelled on the CT's grid
+/// ([`raystream_cpu::mask`]), written as NIfTI.
+fn write_mask(
+    a: &MeasureArgs,
+    out: &std::path::Path,
+    (volume, points): (&raystream_io::Volume, &[DVec3]),
+    opt: &LumenOptions,
+    wall: Option<&WallOptions>,
+) -> Result<MaskWritten> {
+    use raystream_cpu::mask::{LUMEN, WALL, label_path};
+    let pb = spinner(
+        a.quiet,
+        &format!(
+            "labelling the lumen{} on the CT's grid",
+            if wall.is_some() { " and the wall" } else { "" }
+        ),
+    );
+    let labels = label_path(volume, points, opt, wall)
+        .map_err(|e| anyhow::anyhow!("{}: --mask: {e}", a.path.display()))?;
+    pb.finish_and_clear();
+    let what = if wall.is_some() {
+        "raystream measure: 1 lumen, 2 outer wall beyond the lumen"
+    } else {
+        "raystream measure: 1 lumen"
+    };
+    raystream_io::write_label_map(out, volume, &labels.data, what)?;
+    let voxel_ml = volume.index_to_world_affine().matrix3.determinant().abs() / 1000.0;
+    let of = |l: u8| {
+        let n = labels.count(l);
+        (n, n as f64 * voxel_ml)
+    };
+    let length = raystream_cpu::cpr::tortuosity(points)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", a.path.display()))?
+        .length_mm;
+    Ok(MaskWritten {
+        file: out.display().to_string(),
+        lumen: of(LUMEN),
+        wall: wall.map(|_| of(WALL)),
+        sections: labels.sections,
+        closed: labels.closed,
+        step_mm: length / labels.sections as f64,
+    })
+}
+
+/// What `--mask` wrote, in words.
+fn mask_text(m: &MaskWritten) -> String {
+    let wall = match m.wall {
+        Some((n, ml)) => format!(", 2 the outer wall beyond it on {n} voxels ({ml:.1} ml)"),
+        None => String::new(),
+    };
+    format!(
+        "mask: {}: label 1 the lumen on {} voxels ({:.1} ml){wall}, from {} sections {:.2} mm apart ({} with a closed lumen)\n",
+        m.file, m.lumen.0, m.lumen.1, m.sections, m.step_mm, m.closed
+    )
+}
+
+/// What `--mask` wrote, as JSON.
+fn mask_json(m: &MaskWritten) -> serde_json::Value {
+    json!({
+        "file": m.file,
+        "lumen_voxels": m.lumen.0,
+        "lumen_ml": round3(m.lumen.1),
+        "wall_voxels": m.wall.map(|w| w.0),
+        "wall_ml": m.wall.map(|w| round3(w.1)),
+        "sections": m.sections,
+        "closed_sections": m.closed,
+        "step_mm": round3(m.step_mm),
+    })
 }
 
 fn report_text(
@@ -511,6 +606,9 @@ fn report_text(
         for g in more {
             t += &stenosis_text(sections, g);
         }
+    }
+    if let Some(m) = findings.mask {
+        t += &mask_text(m);
     }
     if let Some(g) = findings.angle {
         t += &angle_text(g);
@@ -778,6 +876,9 @@ fn report_json(
             .map(|g| stenosis_json(sections, g))
             .collect();
         m.insert("stenoses".into(), json!(all));
+    }
+    if let Some(k) = findings.mask {
+        m.insert("mask".into(), mask_json(k));
     }
     if let Some(g) = findings.angle {
         m.insert("angle".into(), angle_json(g));

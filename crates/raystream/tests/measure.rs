@@ -1121,6 +1121,128 @@ fn the_profile_as_png_and_dicom() {
 /// cross-sections `render --path --slices N --format dcm` writes of the same planes, read
 /// back with their geometry: inside each wall's circle there is no fat, and beyond it there
 /// is where its edge was seen.
+/// `measure --mask`: the lumen (1) and the wall beyond it (2) labelled on the chest CT's own
+/// grid, as NIfTI that both raystream and SimpleITK read on that grid; the labels' volumes
+/// agree with the sections' (area × spacing), the lumen's voxels are contrast and the wall's
+/// are soft tissue.
+#[test]
+fn the_mask_on_the_ct_grid() {
+    let (vol, path) = (chest(), aorta());
+    let out = tmp("measure-mask.nii.gz");
+    std::fs::remove_file(&out).ok();
+    let file = out.to_str().unwrap();
+    let m = measure(&vol, &path, &["--wall", "--mask", file]);
+    let k = &m["mask"];
+    assert_eq!(k["file"], file);
+    let select = raystream_io::VolumeSelect::default();
+    let ct = raystream_io::load_volume(std::path::Path::new(&vol), &select).unwrap();
+    let labels = raystream_io::load_volume(&out, &select).unwrap();
+    assert_eq!(labels.dims, ct.dims);
+    for i in 0..3 {
+        assert!((labels.spacing[i] - ct.spacing[i]).abs() < 1e-5);
+        assert!((labels.origin[i] - ct.origin[i]).abs() < 1e-3);
+        for j in 0..3 {
+            assert!((labels.direction[i][j] - ct.direction[i][j]).abs() < 1e-5);
+        }
+    }
+    // The voxels of each label: as the JSON counts them, and their HU.
+    let of = |l: f32| -> Vec<f32> {
+        let mut hu: Vec<f32> = (0..ct.data.len())
+            .filter(|&v| labels.data[v] == l)
+            .map(|v| ct.data[v])
+            .collect();
+        hu.sort_by(f32::total_cmp);
+        hu
+    };
+    let (lumen, wall) = (of(1.0), of(2.0));
+    assert_eq!(lumen.len() as f64, num(k, "lumen_voxels"));
+    assert_eq!(wall.len() as f64, num(k, "wall_voxels"));
+    assert!(
+        labels
+            .data
+            .iter()
+            .all(|&l| l == 0.0 || l == 1.0 || l == 2.0)
+    );
+    let pct = |v: &[f32], p: f64| v[((v.len() - 1) as f64 * p) as usize];
+    // Contrast in the lumen (its edge voxels part fat or wall); the wall's soft tissue and
+    // unenhanced blood, a little contrast and fat where it meets them.
+    assert!(
+        pct(&lumen, 0.05) > 100.0 && pct(&lumen, 0.5) > 250.0,
+        "{}",
+        pct(&lumen, 0.05)
+    );
+    assert!(
+        (-30.0..150.0).contains(&pct(&wall, 0.5)),
+        "{}",
+        pct(&wall, 0.5)
+    );
+    assert!(pct(&wall, 0.05) > -60.0, "{}", pct(&wall, 0.05));
+    // Their volumes against the sections': the closed lumens', and the walls' beyond them.
+    let sections = m["sections"].as_array().unwrap();
+    let step = num(&m, "length_mm") / sections.len() as f64;
+    let lumen_ml: f64 = sections
+        .iter()
+        .filter(|s| s["lumen"] == "closed")
+        .map(|s| num(s, "area_mm2") * step / 1000.0)
+        .sum();
+    let wall_ml: f64 = sections
+        .iter()
+        .filter(|s| !s["wall"].is_null())
+        .map(|s| (num(&s["wall"], "area_mm2") - num(s, "area_mm2")) * step / 1000.0)
+        .sum();
+    let voxel_ml = ct.spacing.iter().product::<f64>() / 1000.0;
+    assert!((num(k, "lumen_ml") - lumen.len() as f64 * voxel_ml).abs() < 1e-3);
+    assert!(
+        (num(k, "lumen_ml") - lumen_ml).abs() < 0.04 * lumen_ml,
+        "{k}: the sections' lumens {lumen_ml} ml"
+    );
+    assert!(
+        (num(k, "wall_ml") - wall_ml).abs() < 0.04 * wall_ml,
+        "{k}: the sections' walls {wall_ml} ml"
+    );
+    // SimpleITK reads it on the CT's grid, with the same labels.
+    if let Some(py) = python() {
+        let script = "import sys, json, SimpleITK as s, numpy as n\n\
+            a, b = s.ReadImage(sys.argv[1]), s.ReadImage(sys.argv[2])\n\
+            m = s.GetArrayViewFromImage(b)\n\
+            print(json.dumps([a.GetSize() == b.GetSize(),\
+            bool(n.allclose(a.GetOrigin(), b.GetOrigin(), atol=1e-3)),\
+            bool(n.allclose(a.GetSpacing(), b.GetSpacing(), atol=1e-5)),\
+            bool(n.allclose(a.GetDirection(), b.GetDirection(), atol=1e-5)),\
+            int((m == 1).sum()), int((m == 2).sum())]))";
+        let o = std::process::Command::new(py)
+            .args(["-c", script, &vol, file])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        let got: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        assert_eq!(
+            got,
+            serde_json::json!([true, true, true, true, lumen.len(), wall.len()])
+        );
+    }
+    // The text says what was written; without --wall, the lumen alone, the same voxels.
+    let t = measure_text(&vol, &path, &["--mask", file], &tmp("measure-mask.csv"));
+    assert!(
+        t.contains(&format!(
+            "mask: {file}: label 1 the lumen on {} voxels",
+            lumen.len()
+        )) && !t.contains("2 the outer wall"),
+        "{t}"
+    );
+    let plain = raystream_io::load_volume(&out, &select).unwrap();
+    assert!(plain.data.iter().all(|&l| l != 2.0));
+    assert_eq!(
+        plain.data.iter().filter(|&&l| l == 1.0).count(),
+        lumen.len()
+    );
+    // Only NIfTI.
+    refused(
+        &["measure", &vol, "--path", &path, "--mask", "m.nrrd"],
+        "m.nrrd: --mask writes a NIfTI label map",
+    );
+}
+
 /// The outer wall a millimetre at a time down the chest CT's aorta: each section's circle
 /// is chosen with what its neighbours found, so its width runs on from section to section.
 /// Without the neighbours (or with a refinement that creeps outwards) sections 41 and 42

@@ -1,0 +1,142 @@
+//! A label volume (one byte a voxel) written as NIfTI-1 on another volume's grid, so that a
+//! viewer (3D Slicer, ITK-SNAP) lays it over that volume voxel for voxel: the same dimensions
+//! and spacing, and the index → patient transform as the sform (scanner coordinates, RAS as
+//! NIfTI has them: LPS with x and y negated), with intent "label". Written through the `nifti`
+//! crate.
+
+use std::path::Path;
+
+use nifti::{NiftiHeader, NiftiType, writer::WriterOptions};
+
+use crate::volume::{Volume, VolumeError};
+
+/// NIFTI_INTENT_LABEL: the values are labels, not measurements.
+const INTENT_LABEL: i16 = 1002;
+/// NIFTI_UNITS_MM.
+const UNITS_MM: u8 = 2;
+/// NIFTI_XFORM_SCANNER_ANAT.
+const XFORM_SCANNER: i16 = 1;
+
+/// Whether `path` names a file [`write_label_map`] writes: `.nii` or `.nii.gz`.
+pub fn is_label_map_path(path: &Path) -> bool {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    name.ends_with(".nii") || name.ends_with(".nii.gz")
+}
+
+/// Writes `labels` (one a voxel of `like`, i fastest, as [`Volume::data`]) to `path` (`.nii`,
+/// or `.nii.gz` compressed) on `like`'s grid, `description` in its header (at most 79 bytes
+/// kept).
+pub fn write_label_map(
+    path: &Path,
+    like: &Volume,
+    labels: &[u8],
+    description: &str,
+) -> Result<(), VolumeError> {
+    if !is_label_map_path(path) {
+        return Err(VolumeError::invalid(
+            path,
+            "a label map is written as NIfTI: name it .nii or .nii.gz",
+        ));
+    }
+    let [nx, ny, nz] = like.dims;
+    if labels.len() != nx * ny * nz {
+        return Err(VolumeError::invalid(
+            path,
+            format!("{} labels for a {nx}×{ny}×{nz} grid", labels.len()),
+        ));
+    }
+    let m = like.index_to_world_affine();
+    let (a, t) = (m.matrix3, m.translation);
+    // LPS → RAS: x and y negated.
+    let row = |r: usize, sign: f64| {
+        [
+            (sign * a.col(0)[r]) as f32,
+            (sign * a.col(1)[r]) as f32,
+            (sign * a.col(2)[r]) as f32,
+            (sign * t[r]) as f32,
+        ]
+    };
+    let mut descrip: Vec<u8> = description.bytes().take(79).collect();
+    descrip.resize(80, 0);
+    let header = NiftiHeader {
+        pixdim: [
+            1.0,
+            like.spacing[0] as f32,
+            like.spacing[1] as f32,
+            like.spacing[2] as f32,
+            1.0,
+            1.0,
+            1.0,
+            1.0,
+        ],
+        xyzt_units: UNITS_MM,
+        intent_code: INTENT_LABEL,
+        descrip,
+        qform_code: 0,
+        sform_code: XFORM_SCANNER,
+        srow_x: row(0, -1.0),
+        srow_y: row(1, -1.0),
+        srow_z: row(2, 1.0),
+        ..NiftiHeader::default()
+    };
+    // The array is indexed [k][j][i] (i fastest in memory); the writer takes it [i][j][k]
+    // and writes it transposed, i fastest, as NIfTI lays voxels out.
+    let data = ndarray::Array3::from_shape_vec((nz, ny, nx), labels.to_vec())
+        .map_err(|e| VolumeError::invalid(path, e.to_string()))?
+        .reversed_axes();
+    WriterOptions::new(path)
+        .reference_header(&header)
+        .write_nifti_with_type(&data, NiftiType::Uint8)
+        .map_err(|e| VolumeError::invalid(path, format!("cannot write it: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::volume::{VolumeSelect, load_volume};
+
+    /// Written on an oblique, anisotropic grid and read back: the same grid, the same labels.
+    #[test]
+    fn a_label_map_reads_back_on_its_grid() {
+        let dir = std::env::temp_dir().join(format!("raystream-labels-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (c, s) = (0.6f64.cos(), 0.6f64.sin());
+        let like = Volume {
+            origin: [-120.5, 33.25, 710.0],
+            spacing: [0.7, 0.8, 1.5],
+            direction: [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
+            ..Volume::hounsfield([5, 4, 3], [1.0; 3], vec![0.0; 60])
+        };
+        let labels: Vec<u8> = (0..60).map(|k| (k * 7 % 3) as u8).collect();
+        for name in ["m.nii", "m.nii.gz"] {
+            let path = dir.join(name);
+            write_label_map(&path, &like, &labels, "raystream test").unwrap();
+            let v = load_volume(&path, &VolumeSelect::default()).unwrap();
+            assert_eq!(v.dims, like.dims, "{name}");
+            for i in 0..3 {
+                assert!(
+                    (v.spacing[i] - like.spacing[i]).abs() < 1e-5,
+                    "{name}: {v:?}"
+                );
+                assert!((v.origin[i] - like.origin[i]).abs() < 1e-4, "{name}: {v:?}");
+                for j in 0..3 {
+                    assert!(
+                        (v.direction[i][j] - like.direction[i][j]).abs() < 1e-5,
+                        "{name}: {v:?}"
+                    );
+                }
+            }
+            let back: Vec<u8> = v.data.iter().map(|&x| x as u8).collect();
+            assert_eq!(back, labels, "{name}");
+        }
+        let bad = dir.join("m.nrrd");
+        let e = write_label_map(&bad, &like, &labels, "").unwrap_err();
+        assert!(e.to_string().contains("m.nrrd"), "{e}");
+        let e = write_label_map(&dir.join("n.nii"), &like, &labels[1..], "").unwrap_err();
+        assert!(e.to_string().contains("59 labels"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
