@@ -13,7 +13,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a tex
         dvr, some with --slab, to an EXR or a turntable of EXRs). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
         curved planar reformation (--path, straightened or stretched) through an intact volume, measured along
-        (`raystream measure`, sometimes grading a stenosis and plotting the profile) and tracked through (`raystream
+        (`raystream measure`, sometimes grading a stenosis, plotting the profile or writing a label map) and tracked through (`raystream
         centreline`).
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
         absurd ones (0, -1, ±inf, nan, 1e30 ...), rendered on the CPU and the GPU: either both
@@ -351,7 +351,9 @@ def fuzz_files(work, n, device):
                 + (["--angle", random.choice(["0,1,2", "5,1,9", "1,2,1e9", "-1,0,1"])]
                    if random.random() < 0.3 else [])
                 + (["--plot", os.path.join(d, "p." + random.choice(["svg", "png", "dcm"]))]
-                   if random.random() < 0.5 else []), s))
+                   if random.random() < 0.5 else [])
+                + (["--mask", os.path.join(d, "m." + random.choice(["nii", "nii.gz", "nrrd"]))]
+                   if random.random() < 0.3 else []), s))
             # And a centreline tracked through its points.
             why = why or (os.path.exists(vol) and run(
                 ["centreline", vol, "--path", p, "-q", "-o", os.path.join(d, "cl.mrk.json"),
