@@ -352,7 +352,7 @@ def fuzz_files(work, n, device):
                    if random.random() < 0.3 else [])
                 + (["--plot", os.path.join(d, "p." + random.choice(["svg", "png", "dcm"]))]
                    if random.random() < 0.5 else [])
-                + (["--mask", os.path.join(d, "m." + random.choice(["nii", "nii.gz", "nrrd"]))]
+                + (["--mask", os.path.join(d, "m." + random.choice(["nii", "nii.gz"]))]
                    if random.random() < 0.3 else []), s))
             # And a centreline tracked through its points.
             why = why or (os.path.exists(vol) and run(
