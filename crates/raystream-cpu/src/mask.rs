@@ -160,10 +160,11 @@ pub fn label_path(
 /// comment): every cut proposes the voxels of its slab, the nearest plane's proposal stands.
 fn label_voxels(vol: &Volume, cuts: &[Cut], step: f64, reach: f64) -> Vec<u8> {
     let [nx, ny, nz] = vol.dims;
-    // (voxel, distance from the plane, label), from each cut's slab.
-    let mut proposals: Vec<(usize, f64, u8)> = cuts
+    // (voxel, distance from the plane, cut, label), from each cut's slab.
+    let mut proposals: Vec<(usize, f64, usize, u8)> = cuts
         .par_iter()
-        .flat_map_iter(|cut| {
+        .enumerate()
+        .flat_map_iter(|(n, cut)| {
             let c = cut.row.centre.as_dvec3();
             // The index box of the ball of `reach` about the path's point.
             let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
@@ -199,17 +200,19 @@ fn label_voxels(vol: &Volume, cuts: &[Cut], step: f64, reach: f64) -> Vec<u8> {
                         if q.length() > reach {
                             continue;
                         }
-                        out.push((i + nx * (j + ny * k), d.abs(), cut.label(q)));
+                        out.push((i + nx * (j + ny * k), d.abs(), n, cut.label(q)));
                     }
                 }
             }
             out
         })
         .collect();
-    proposals.par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    // A voxel midway between two planes (a path along the grid) takes the first's labels.
+    proposals
+        .par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
     let mut data = vec![0u8; nx * ny * nz];
     let mut last = usize::MAX;
-    for (v, _, label) in proposals {
+    for (v, _, _, label) in proposals {
         if v != last {
             data[v] = label;
             last = v;
