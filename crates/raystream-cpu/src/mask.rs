@@ -56,6 +56,8 @@ struct Cut {
     /// The outline (section coordinates), its centre, and the nearest and farthest of its
     /// points from that centre.
     outline: Option<(Vec<DVec2>, DVec2, f64, f64)>,
+    /// How far from the path's point anything it labels lies, mm.
+    reach: f64,
 }
 
 impl Cut {
@@ -137,18 +139,27 @@ pub fn label_path(
                     let hi = d.iter().copied().fold(0.0, f64::max);
                     (o.points, c, lo, hi)
                 });
+            // The lumen's edge and the outline, and a grid pixel beyond (the lumen's pixels
+            // reach half a pixel past their edge points).
+            let reach = edge
+                .iter()
+                .chain(outline.iter().flat_map(|o| o.0.iter()))
+                .map(|p| p.length())
+                .fold(0.0, f64::max)
+                + opt.pixel_mm;
             Some(Cut {
                 tangent: row.normal.cross(row.lateral).normalize().as_dvec3(),
                 row: *row,
                 lumen: g.without_values(),
                 outline,
+                reach,
             })
         })
         .collect();
     let closed = cuts.len();
-    // The section's field, corner to corner: whatever it finds lies within.
-    let reach = opt.field_mm * std::f64::consts::FRAC_1_SQRT_2;
-    let data = label_voxels(vol, &cuts, step, reach);
+    // A plane holds a voxel within its section's field, corner to corner.
+    let field = opt.field_mm * std::f64::consts::FRAC_1_SQRT_2;
+    let data = label_voxels(vol, &cuts, step, field);
     Ok(Labels {
         data,
         sections: n as usize,
@@ -156,15 +167,20 @@ pub fn label_path(
     })
 }
 
-/// Each voxel's label from the nearest section's plane that reaches it (see the module's
-/// comment): every cut proposes the voxels of its slab, the nearest plane's proposal stands.
-fn label_voxels(vol: &Volume, cuts: &[Cut], step: f64, reach: f64) -> Vec<u8> {
+/// Each voxel's label from the nearest section's plane whose field holds it (see the module's
+/// comment). Only the voxels some cut labels can be labelled: each cut lists those of its slab
+/// (within a section's spacing of its plane, `step`), then each of them is given the labels
+/// of the nearest plane among all the cuts' that hold it within `field` of the path (ties: the
+/// earlier section), which may be none. The work is the labelled voxels', not the fields'.
+fn label_voxels(vol: &Volume, cuts: &[Cut], step: f64, field: f64) -> Vec<u8> {
     let [nx, ny, nz] = vol.dims;
-    // (voxel, distance from the plane, cut, label), from each cut's slab.
-    let mut proposals: Vec<(usize, f64, usize, u8)> = cuts
+    let world =
+        |i: usize, j: usize, k: usize| vol.index_to_world(DVec3::new(i as f64, j as f64, k as f64));
+    // One step along i, in LPS mm.
+    let di = world(1, 0, 0) - world(0, 0, 0);
+    let mut candidates: Vec<usize> = cuts
         .par_iter()
-        .enumerate()
-        .flat_map_iter(|(n, cut)| {
+        .flat_map_iter(|cut| {
             let c = cut.row.centre.as_dvec3();
             // The index box of the ball of `reach` about the path's point.
             let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
@@ -174,49 +190,70 @@ fn label_voxels(vol: &Volume, cuts: &[Cut], step: f64, reach: f64) -> Vec<u8> {
                     if corner & 2 == 0 { -1.0 } else { 1.0 },
                     if corner & 4 == 0 { -1.0 } else { 1.0 },
                 );
-                let q = vol.world_to_index(c + s * reach);
+                let q = vol.world_to_index(c + s * cut.reach);
                 (lo, hi) = (lo.min(q), hi.max(q));
             }
-            let span = |a: f64, b: f64, n: usize| {
-                let a = a.floor().max(0.0) as usize;
-                let b = (b.ceil().max(-1.0) as i64).min(n as i64 - 1);
-                a..(b + 1).max(a as i64) as usize
+            let span = |a: f64, b: f64, n: usize| -> (usize, usize) {
+                let a = a.floor().max(0.0);
+                let b = b.ceil().min(n as f64 - 1.0);
+                if a > b {
+                    (0, 0)
+                } else {
+                    (a as usize, b as usize + 1)
+                }
             };
             let (ri, rj, rk) = (
                 span(lo.x, hi.x, nx),
                 span(lo.y, hi.y, ny),
                 span(lo.z, hi.z, nz),
             );
+            let slope = di.dot(cut.tangent);
             let mut out = Vec::new();
-            for k in rk {
-                for j in rj.clone() {
-                    for i in ri.clone() {
-                        let p = vol.index_to_world(DVec3::new(i as f64, j as f64, k as f64));
-                        let d = (p - c).dot(cut.tangent);
-                        if d.abs() > step {
-                            continue;
+            for k in rk.0..rk.1 {
+                for j in rj.0..rj.1 {
+                    // The run of i whose distance from the plane, d0 + i·slope, is at most
+                    // `step`.
+                    let d0 = (world(0, j, k) - c).dot(cut.tangent);
+                    let (mut i0, mut i1) = ri;
+                    if slope.abs() > 1e-12 {
+                        let (a, b) = ((-step - d0) / slope, (step - d0) / slope);
+                        let (a, b) = (a.min(b), a.max(b));
+                        i0 = i0.max(a.ceil().max(0.0) as usize);
+                        i1 = i1.min((b.floor() + 1.0).max(0.0) as usize);
+                    } else if d0.abs() > step {
+                        continue;
+                    }
+                    for i in i0..i1 {
+                        let q = cut.row.offset_of(world(i, j, k));
+                        if q.length() <= cut.reach && cut.label(q) != 0 {
+                            out.push(i + nx * (j + ny * k));
                         }
-                        let q = cut.row.offset_of(p);
-                        if q.length() > reach {
-                            continue;
-                        }
-                        out.push((i + nx * (j + ny * k), d.abs(), n, cut.label(q)));
                     }
                 }
             }
             out
         })
         .collect();
-    // A voxel midway between two planes (a path along the grid) takes the first's labels.
-    proposals
-        .par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
+    candidates.par_sort_unstable();
+    candidates.dedup();
+    let labels: Vec<(usize, u8)> = candidates
+        .par_iter()
+        .map(|&v| {
+            let p = world(v % nx, v / nx % ny, v / (nx * ny));
+            let nearest = cuts
+                .iter()
+                .filter_map(|cut| {
+                    let d = (p - cut.row.centre.as_dvec3()).dot(cut.tangent).abs();
+                    let q = cut.row.offset_of(p);
+                    (d <= step && q.length() <= field).then_some((d, cut, q))
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            (v, nearest.map_or(0, |(_, cut, q)| cut.label(q)))
+        })
+        .collect();
     let mut data = vec![0u8; nx * ny * nz];
-    let mut last = usize::MAX;
-    for (v, _, _, label) in proposals {
-        if v != last {
-            data[v] = label;
-            last = v;
-        }
+    for (v, label) in labels {
+        data[v] = label;
     }
     data
 }
