@@ -87,10 +87,27 @@ pub fn write_label_map(
     let data = ndarray::Array3::from_shape_vec((nz, ny, nx), labels.to_vec())
         .map_err(|e| VolumeError::invalid(path, e.to_string()))?
         .reversed_axes();
-    WriterOptions::new(path)
+    // The writer names its file itself, from the name's stem (`a.b.nii` would become `a.nii`,
+    // `M.NII.GZ` an uncompressed `M.nii`): so it writes a name of its own beside the one asked
+    // for, renamed to it once written.
+    let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
+    let own = path.with_file_name(format!(
+        "raystream-labels-{}.{}",
+        std::process::id(),
+        if gz { "nii.gz" } else { "nii" }
+    ));
+    let written = WriterOptions::new(&own)
         .reference_header(&header)
         .write_nifti_with_type(&data, NiftiType::Uint8)
-        .map_err(|e| VolumeError::invalid(path, format!("cannot write it: {e}")))
+        .map_err(|e| match e {
+            nifti::NiftiError::Io(e) => VolumeError::io(path, e),
+            e => VolumeError::invalid(path, format!("cannot write it: {e}")),
+        })
+        .and_then(|()| std::fs::rename(&own, path).map_err(|e| VolumeError::io(path, e)));
+    if written.is_err() {
+        std::fs::remove_file(&own).ok();
+    }
+    written
 }
 
 #[cfg(test)]
@@ -101,7 +118,8 @@ mod tests {
     /// Written on an oblique, anisotropic grid and read back: the same grid, the same labels.
     #[test]
     fn a_label_map_reads_back_on_its_grid() {
-        let dir = std::env::temp_dir().join(format!("raystream-labels-{}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!("raystream-label-test-{}", std::process::id()));
+        std::fs::remove_dir_all(&dir).ok();
         std::fs::create_dir_all(&dir).unwrap();
         let (c, s) = (0.6f64.cos(), 0.6f64.sin());
         let like = Volume {
@@ -111,9 +129,13 @@ mod tests {
             ..Volume::hounsfield([5, 4, 3], [1.0; 3], vec![0.0; 60])
         };
         let labels: Vec<u8> = (0..60).map(|k| (k * 7 % 3) as u8).collect();
-        for name in ["m.nii", "m.nii.gz"] {
+        // Written to the name asked for, compressed as it says, whatever its case and dots.
+        for name in ["m.nii", "m.nii.gz", "M.NII.GZ", "a.b.nii", "a.b.nii.gz"] {
             let path = dir.join(name);
             write_label_map(&path, &like, &labels, "raystream test").unwrap();
+            let bytes = std::fs::read(&path).unwrap();
+            let gz = name.to_ascii_lowercase().ends_with(".gz");
+            assert_eq!(bytes[..2] == [0x1f, 0x8b], gz, "{name}");
             let v = load_volume(&path, &VolumeSelect::default()).unwrap();
             assert_eq!(v.dims, like.dims, "{name}");
             for i in 0..3 {
@@ -132,6 +154,16 @@ mod tests {
             let back: Vec<u8> = v.data.iter().map(|&x| x as u8).collect();
             assert_eq!(back, labels, "{name}");
         }
+        // Nothing else was written beside them.
+        let mut names: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(
+            names,
+            ["M.NII.GZ", "a.b.nii", "a.b.nii.gz", "m.nii", "m.nii.gz"]
+        );
         let bad = dir.join("m.nrrd");
         let e = write_label_map(&bad, &like, &labels, "").unwrap_err();
         assert!(e.to_string().contains("m.nrrd"), "{e}");

@@ -1236,10 +1236,18 @@ fn the_mask_on_the_ct_grid() {
         plain.data.iter().filter(|&&l| l == 1.0).count(),
         lumen.len()
     );
-    // Only NIfTI.
+    // Only NIfTI, and where it can be written.
     refused(
         &["measure", &vol, "--path", &path, "--mask", "m.nrrd"],
         "m.nrrd: --mask writes a NIfTI label map",
+    );
+    let nowhere = tmp("no-such-folder/m.nii.gz");
+    let nowhere = nowhere.to_str().unwrap();
+    refused(
+        &[
+            "measure", "--quiet", &vol, "--path", &path, "--mask", nowhere,
+        ],
+        &format!("{nowhere}: No such file or directory"),
     );
 }
 
