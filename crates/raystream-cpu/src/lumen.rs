@@ -155,7 +155,8 @@ impl Section {
 
 /// The lumen on `n` cross-sections of the path through `points`, at the middle of `n` equal
 /// parts of it, framed from `image_right` ([`CurvedPlane::sections`]: the planes `render
-/// --path --slices N` shows).
+/// --path --slices N` shows); with `wall`, the outer wall too, chosen with its neighbours
+/// along the path ([`Track`]).
 pub fn measure_path(
     vol: &Volume,
     points: &[DVec3],
@@ -164,20 +165,33 @@ pub fn measure_path(
     opt: &LumenOptions,
     wall: Option<&WallOptions>,
 ) -> Result<Vec<Section>, String> {
+    let track = match wall {
+        Some(w) => Some(Track::along(vol, &Marcher::new(vol, None), points, opt, w)?),
+        None => None,
+    };
+    measure_along(vol, points, (n, image_right), opt, wall.zip(track.as_ref()))
+}
+
+/// [`measure_path`] with the track along the path already found (for the same path, `opt`
+/// and wall options), as `measure --mask` shares it.
+pub fn measure_along(
+    vol: &Volume,
+    points: &[DVec3],
+    (n, image_right): (u32, DVec3),
+    opt: &LumenOptions,
+    wall: Option<(&WallOptions, &Track)>,
+) -> Result<Vec<Section>, String> {
     let plane = CurvedPlane::sections(points, image_right, 0.0, n)?;
     let m = Marcher::new(vol, None);
     let step = plane.length_mm / n as f64;
-    let track = match wall {
-        Some(w) => Some(Track::along(vol, &m, points, opt, w)?),
-        None => None,
-    };
+    let (wall, track) = (wall.map(|w| w.0), wall.map(|w| w.1));
     Ok(plane
         .rows
         .into_par_iter()
         .enumerate()
         .map(|(i, row)| {
             let arc_mm = (i as f64 + 0.5) * step;
-            let prior = track.as_ref().and_then(|t| t.prior(arc_mm, &row));
+            let prior = track.and_then(|t| t.prior(arc_mm, &row));
             let (lumen, wall) = match measure_with_wall(vol, &m, &row, opt, wall, prior.as_ref()) {
                 Some(f) => (Some(f.lumen), f.wall.map(|(w, _)| w)),
                 None => (None, None),

@@ -36,9 +36,11 @@ pub const MAX_MASK_SECTIONS: usize = 20_000;
 pub struct Labels {
     /// One a voxel, i fastest (as [`Volume::data`]).
     pub data: Vec<u8>,
-    /// The sections they come from, and how many of them had a closed lumen.
+    /// The sections they come from, how many of them had a closed lumen, and how far apart
+    /// they lie, mm.
     pub sections: usize,
     pub closed: usize,
+    pub step_mm: f64,
 }
 
 impl Labels {
@@ -94,13 +96,14 @@ fn inside(pts: &[DVec2], q: DVec2) -> bool {
     inside
 }
 
-/// The lumen (and with `wall`, the outer wall) along the spline through `points`, labelled on
-/// `vol`'s grid (see the module's comment).
+/// The lumen (and with `wall`, the outer wall, chosen with `track`'s neighbours: the track
+/// along the same path, for `opt` and those wall options) along the spline through `points`,
+/// labelled on `vol`'s grid (see the module's comment).
 pub fn label_path(
     vol: &Volume,
     points: &[DVec3],
     opt: &LumenOptions,
-    wall: Option<&WallOptions>,
+    wall: Option<(&WallOptions, &Track)>,
 ) -> Result<Labels, String> {
     let step = crate::dvr::min_spacing(vol) as f64;
     let length = crate::cpr::tortuosity(points)?.length_mm;
@@ -113,10 +116,7 @@ pub fn label_path(
     let plane = CurvedPlane::sections(points, DVec3::X, 0.0, n as u32)?;
     let step = plane.length_mm / n;
     let m = Marcher::new(vol, None);
-    let track = match wall {
-        Some(w) => Some(Track::along(vol, &m, points, opt, w)?),
-        None => None,
-    };
+    let (wall, track) = (wall.map(|w| w.0), wall.map(|w| w.1));
     let cuts: Vec<Cut> = plane
         .rows
         .par_iter()
@@ -127,7 +127,7 @@ pub fn label_path(
             if lumen.open {
                 return None;
             }
-            let prior = track.as_ref().and_then(|t| t.prior(arc, row));
+            let prior = track.and_then(|t| t.prior(arc, row));
             let outline = wall
                 .and_then(|w| {
                     wall_about(vol, &m, row, opt, (w, prior.as_ref()), &g, (&lumen, &edge))
@@ -164,6 +164,7 @@ pub fn label_path(
         data,
         sections: n as usize,
         closed,
+        step_mm: step,
     })
 }
 
@@ -283,7 +284,9 @@ mod tests {
             ..LumenOptions::for_volume(&vol)
         };
         let path = [centre.extend(5.0), centre.extend(24.0)];
-        let labels = label_path(&vol, &path, &opt, Some(&WallOptions::default())).unwrap();
+        let wall = WallOptions::default();
+        let track = Track::along(&vol, &Marcher::new(&vol, None), &path, &opt, &wall).unwrap();
+        let labels = label_path(&vol, &path, &opt, Some((&wall, &track))).unwrap();
         assert_eq!((labels.sections, labels.closed), (19, 19));
         // The lumen's edge at 150 HU lies 0.154 mm beyond 9 mm (the ramp), the sac's at −30
         // HU right on 15 mm.

@@ -504,15 +504,13 @@ fn fit(
     }
     // Every edge bounds the vessel from outside (a neighbour's far edge lies beyond the wall,
     // never inside it): of the circles nearly as well supported as the best, the smallest.
-    let smallest = |candidates: &[(i64, Circle)]| {
-        let top = candidates.iter().map(|c| c.0).max()?;
+    let own = candidates.iter().map(|c| c.0).max().and_then(|top| {
         candidates
             .iter()
             .filter(|(sc, _)| *sc > 0 && *sc as f64 >= SUPPORT * top as f64)
             .min_by(|a, b| a.1.r.total_cmp(&b.1.r).then(b.0.cmp(&a.0)))
             .map(|c| c.1)
-    };
-    let own = smallest(&candidates);
+    });
     // Where the neighbours along the path agree on a circle, it is a candidate too, and the
     // one nearest theirs (within an edge's tolerance) is taken with half the support: the
     // wall runs on from section to section, while what hides it on a few (a neighbour pressed

@@ -9,9 +9,10 @@ use std::fmt::Write as _;
 
 use anyhow::{Context, Result, bail};
 use raystream_cpu::cpr::{CurvedPlane, PathAngle, Tortuosity};
+use raystream_cpu::dvr::Marcher;
 use raystream_cpu::lumen::{self, LumenOptions, Section};
 use raystream_cpu::stenosis::{self, ReferenceSource, Stenosis};
-use raystream_cpu::wall::{Wall, WallOptions, WallVolumes};
+use raystream_cpu::wall::{Track, Wall, WallOptions, WallVolumes};
 use raystream_math::DVec3;
 use serde_json::json;
 
@@ -96,7 +97,17 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     );
     // Sections framed as `render --path --slices N` frames them from its default view (the
     // anterior one: the patient's left to the image's right).
-    let sections = lumen::measure_path(&volume, &points, n as u32, DVec3::X, &opt, wall.as_ref())
+    // The walls along the path, each section's by itself: what each section's neighbours
+    // found, for the table and the mask alike.
+    let track = match &wall {
+        Some(w) => Some(
+            Track::along(&volume, &Marcher::new(&volume, None), &points, &opt, w)
+                .map_err(|e| anyhow::anyhow!("{file}: {e}"))?,
+        ),
+        None => None,
+    };
+    let wall = wall.as_ref().zip(track.as_ref());
+    let sections = lumen::measure_along(&volume, &points, (n as u32, DVec3::X), &opt, wall)
         .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     pb.finish_and_clear();
     let found = sections.iter().any(|s| s.lumen.is_some());
@@ -143,7 +154,7 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         crate::profile::write(out, &title, &sections, length, &lesions, &dicom)?;
     }
     let mask = match &a.mask {
-        Some(out) if found => Some(write_mask(a, out, (&volume, &points), &opt, wall.as_ref())?),
+        Some(out) if found => Some(write_mask(a, out, (&volume, &points), &opt, wall)?),
         _ => None,
     };
     let findings = Findings {
@@ -405,7 +416,7 @@ fn write_mask(
     out: &std::path::Path,
     (volume, points): (&raystream_io::Volume, &[DVec3]),
     opt: &LumenOptions,
-    wall: Option<&WallOptions>,
+    wall: Option<(&WallOptions, &Track)>,
 ) -> Result<MaskWritten> {
     use raystream_cpu::mask::{LUMEN, WALL, label_path};
     let pb = spinner(
@@ -429,16 +440,13 @@ fn write_mask(
         let n = labels.count(l);
         (n, n as f64 * voxel_ml)
     };
-    let length = raystream_cpu::cpr::tortuosity(points)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", a.path.display()))?
-        .length_mm;
     Ok(MaskWritten {
         file: out.display().to_string(),
         lumen: of(LUMEN),
         wall: wall.map(|_| of(WALL)),
         sections: labels.sections,
         closed: labels.closed,
-        step_mm: length / labels.sections as f64,
+        step_mm: labels.step_mm,
     })
 }
 

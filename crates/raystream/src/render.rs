@@ -18,7 +18,7 @@ use raystream_scene::{Camera, PatientView, Projection, Scene, VOLUME_VIEW, View}
 use raystream_cpu::cpr::CurvedPlane;
 use raystream_cpu::dvr::{DvrMode, DvrOptions, Sight, volume_camera_from};
 use raystream_cpu::lumen::LumenOptions;
-use raystream_cpu::wall::WallOptions;
+use raystream_cpu::wall::{Track, WallOptions};
 
 use crate::cli::{CprArg, FrameFormat, RenderArgs};
 use crate::common::{
@@ -150,7 +150,7 @@ fn volume_dicom(
     picture: &mut Picture,
     seen: &Seen,
     opt: &DvrOptions,
-    (volume, overlay): (&raystream_io::Volume, Overlay),
+    (volume, overlay, track): (&raystream_io::Volume, Overlay, Option<&Track>),
 ) -> DicomOut {
     let window = Some(opt.shown_window());
     match seen {
@@ -162,7 +162,8 @@ fn volume_dicom(
         Seen::Curved(plane) => DicomOut {
             orientation: None,
             // The lumen's edges first, the marks over them.
-            annotated: draw_cpr_lumen(a, picture, plane, volume) | mark_path(a, picture, plane),
+            annotated: draw_cpr_lumen(a, picture, plane, (volume, track))
+                | mark_path(a, picture, plane),
             description: crate::common::options_in_words(a.input.as_deref(), &a.output),
             series: None,
             window,
@@ -202,12 +203,13 @@ fn wall_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option<
 
 /// `--draw-lumen HU` on a curved reformation: on each row, where the lumen that `measure`
 /// finds on the row's plane (through the path's point, along the row and its rays) meets the
-/// row, a cyan pixel at each edge; whether any was drawn.
+/// row, a cyan pixel at each edge; with `--draw-wall`, the outer wall's too, chosen with
+/// `track`'s neighbours; whether any was drawn.
 fn draw_cpr_lumen(
     a: &RenderArgs,
     picture: &mut Picture,
     plane: &CurvedPlane,
-    volume: &raystream_io::Volume,
+    (volume, track): (&raystream_io::Volume, Option<&Track>),
 ) -> bool {
     let (Ok(Some(o)), Picture::Srgb8 { rgb, width, height }) = (lumen_options(a, volume), picture)
     else {
@@ -219,12 +221,6 @@ fn draw_cpr_lumen(
         a.quiet,
         &format!("finding the lumen on the CPR's {} rows", plane.height),
     );
-    // The path was read before the volume; read again here, it is the same.
-    let points = a
-        .path
-        .as_deref()
-        .and_then(|f| raystream_io::read_curve(f).ok());
-    let track = wall_track(volume, &m, points.as_deref(), &o, wall.as_ref());
     // Each row's lumen edges, and with --draw-wall the outer wall's.
     let edges: Vec<[Option<[f64; 2]>; 2]> = (0..plane.height)
         .into_par_iter()
@@ -235,9 +231,7 @@ fn draw_cpr_lumen(
                 ..*r
             };
             let shift = |e: [f64; 2]| e.map(|u| u + plane.shift_mm[y as usize] as f64);
-            let prior = track
-                .as_ref()
-                .and_then(|t| t.prior(plane.arc_mm[y as usize], &row));
+            let prior = track.and_then(|t| t.prior(plane.arc_mm[y as usize], &row));
             raystream_cpu::lumen::across_with_wall(
                 volume,
                 &m,
@@ -259,17 +253,23 @@ fn draw_cpr_lumen(
     crate::overlay::draw_row_edges(rgb, size, pixel, &lumen, crate::overlay::EDGE) | drawn
 }
 
-/// `--draw-wall`'s walls along the path through `points`, each section's by itself
-/// ([`raystream_cpu::wall::Track`]): what a drawn section's neighbours found, as `measure
-/// --wall` uses them. None without `--draw-wall`.
+/// `--draw-wall`'s walls along `--path`, each section's by itself ([`Track`]): what a drawn
+/// section's neighbours found, as `measure --wall` uses them; found once a command. None
+/// without `--path` and `--draw-wall`.
 fn wall_track(
+    a: &RenderArgs,
     volume: &raystream_io::Volume,
-    m: &raystream_cpu::dvr::Marcher,
-    points: Option<&[raystream_math::DVec3]>,
-    o: &LumenOptions,
-    wall: Option<&WallOptions>,
-) -> Option<raystream_cpu::wall::Track> {
-    raystream_cpu::wall::Track::along(volume, m, points?, o, wall?).ok()
+    curve: Option<&Curve>,
+) -> Result<Option<Track>> {
+    let (Some(curve), Some(o), Some(w)) =
+        (curve, lumen_options(a, volume)?, wall_options(a, volume)?)
+    else {
+        return Ok(None);
+    };
+    let m = raystream_cpu::dvr::Marcher::new(volume, None);
+    Track::along(volume, &m, &curve.points, &o, &w)
+        .map(Some)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", curve.file.display()))
 }
 
 /// `--mark-at MM,…`: a line across a curved reformation's picture where the path is at each
@@ -509,8 +509,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         select.phase = Some(1);
     }
     let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
-    lumen_options(a, &volume)?;
-    wall_options(a, &volume)?;
+    let track = wall_track(a, &volume, curve.as_ref())?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     // An EXR keeps what the projections found, in HU; the window is for display. So does a
     // DICOM picture, with the window as its VOI LUT, unless letters are drawn into it.
@@ -529,7 +528,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     if let Some(n) = a.turntable {
         return turntable(
             a,
-            (&renderer, &volume, overlay),
+            (&renderer, &volume, overlay, track.as_ref()),
             &opt,
             (view, curve.as_ref()),
             n,
@@ -539,7 +538,14 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let [az, el] = orbit_angles(a);
     let cam = volume_camera_from(&volume, aspect, view.orbit(az, el), projection(a));
     if let (Some(n), Some(curve)) = (a.slices, &curve) {
-        return path_sections(a, (&renderer, &volume), &opt, (view, curve), n, format);
+        return path_sections(
+            a,
+            (&renderer, &volume, track.as_ref()),
+            &opt,
+            (view, curve),
+            n,
+            format,
+        );
     }
     if let Some(n) = a.slices {
         return slice_series(a, (&renderer, &volume, overlay), &opt, &cam, n, format);
@@ -587,7 +593,13 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         (Seen::Curved(plane), Some(file)) => curved_words(file, plane, &opt),
         _ => slab_words(&opt, &volume),
     };
-    let dicom = volume_dicom(a, &mut frame.picture, &seen, &opt, (&volume, overlay));
+    let dicom = volume_dicom(
+        a,
+        &mut frame.picture,
+        &seen,
+        &opt,
+        (&volume, overlay, track.as_ref()),
+    );
     frame
         .picture
         .save(&a.output, &exr_comment(a, &opt, &volume, &seen), &dicom)?;
@@ -734,14 +746,19 @@ fn exr_comment(
 /// superior axis unless the view is from above or below), from `--orbit`'s angles on.
 fn turntable(
     a: &RenderArgs,
-    (renderer, volume, overlay): (&dvr::Renderer, &raystream_io::Volume, Overlay),
+    (renderer, volume, overlay, track): (
+        &dvr::Renderer,
+        &raystream_io::Volume,
+        Overlay,
+        Option<&Track>,
+    ),
     opt: &DvrOptions,
     look: (View, Option<&Curve>),
     n: u32,
     format: ImageFormat,
 ) -> Result<()> {
     let [az, _] = orbit_angles(a);
-    frame_series(a, (volume, overlay), n, format, "turntable", |i| {
+    frame_series(a, (volume, overlay, track), n, format, "turntable", |i| {
         let seen = seen_from(a, volume, opt, look, az + 360.0 * i as f32 / n as f32)?;
         Ok((renderer.frame(opt, seen.sight(), format)?, seen, *opt))
     })
@@ -754,7 +771,7 @@ fn turntable(
 /// measured on, as reformatted CT images with their planes.
 fn path_sections(
     a: &RenderArgs,
-    (renderer, volume): (&dvr::Renderer, &raystream_io::Volume),
+    (renderer, volume, track): (&dvr::Renderer, &raystream_io::Volume, Option<&Track>),
     opt: &DvrOptions,
     (view, curve): (View, &Curve),
     n: u32,
@@ -778,10 +795,7 @@ fn path_sections(
     let lumen =
         lumen_options(a, volume)?.map(|o| (o, raystream_cpu::dvr::Marcher::new(volume, None)));
     let wall = wall_options(a, volume)?;
-    let track = lumen
-        .as_ref()
-        .and_then(|(o, m)| wall_track(volume, m, Some(&curve.points), o, wall.as_ref()));
-    frame_series(a, (volume, None), n, format, "slices", |i| {
+    frame_series(a, (volume, None, None), n, format, "slices", |i| {
         let cam = stations.section_camera(i, 0.5 * pixel * opt.height as f32, reach);
         let row = &stations.rows[i as usize];
         let opt = DvrOptions {
@@ -798,7 +812,6 @@ fn path_sections(
                 o,
                 wall.as_ref(),
                 track
-                    .as_ref()
                     .and_then(|t| t.prior(stations.arc_mm[i as usize], row))
                     .as_ref(),
             )
@@ -876,7 +889,7 @@ fn slice_series(
     };
     let normal = raystream_cpu::dvr::scene_to_lps(cam.fwd).normalize();
     let centre = opt.slice_point(volume);
-    frame_series(a, (volume, overlay), n, format, "slices", |i| {
+    frame_series(a, (volume, overlay, None), n, format, "slices", |i| {
         let offset = (i as f32 - (n - 1) as f32 / 2.0) * step;
         let opt = DvrOptions {
             slice_at: Some(centre + normal * offset),
@@ -907,7 +920,7 @@ fn cine(
         );
     }
     let mut warnings = Vec::new();
-    frame_series(a, (first, overlay), n as u32, format, "cine", |i| {
+    frame_series(a, (first, overlay, None), n as u32, format, "cine", |i| {
         if i == 0 {
             return Ok((
                 renderer.frame(opt, seen.sight(), format)?,
@@ -1018,10 +1031,11 @@ impl<'a> FrameFolder<'a> {
 
 /// Writes `n` frames, the i-th `frame(i)`'s, rendered with the sight and options it returns
 /// too, into the folder `-o` names (frame_000.png …, or .exr, or .dcm: then one series,
-/// numbered from 1); `volume` is where the frames' DICOM descriptions come from.
+/// numbered from 1); `volume` is where the frames' DICOM descriptions come from, `track`
+/// what `--draw-wall` draws a CPR's walls with.
 fn frame_series(
     a: &RenderArgs,
-    (volume, overlay): (&raystream_io::Volume, Overlay),
+    (volume, overlay, track): (&raystream_io::Volume, Overlay, Option<&Track>),
     n: u32,
     format: ImageFormat,
     what: &str,
@@ -1036,7 +1050,7 @@ fn frame_series(
         frame_ms.push(f.frame_ms);
         let dicom = DicomOut {
             series: Some((out.series.clone(), i + 1)),
-            ..volume_dicom(a, &mut f.picture, &seen, &opt, (volume, overlay))
+            ..volume_dicom(a, &mut f.picture, &seen, &opt, (volume, overlay, track))
         };
         f.picture
             .save(&out.path(i), &exr_comment(a, &opt, volume, &seen), &dicom)?;
