@@ -11,6 +11,7 @@ mod gltf;
 mod label_map;
 mod ply;
 mod secondary_capture;
+mod segmentation;
 mod shapes;
 mod stl;
 mod texture;
@@ -27,10 +28,14 @@ pub use raystream_math::{Aabb, Vec2, Vec3};
 pub use secondary_capture::{
     CaptureInfo, CapturePixels, HU_PADDING, ImagePlane, new_uid, write_secondary_capture,
 };
+pub use segmentation::{
+    Code, SEGMENTATION, Segment, SegmentationInfo, SegmentationWritten, cielab,
+    is_segmentation_path, segmentation_source, write_segmentation,
+};
 pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping};
 pub use volume::{
-    DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, ValueUnit, Volume, VolumeError, VolumeFormat,
-    VolumeSelect, is_volume_path, list_dicom_series, load_volume,
+    DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, SourceImage, ValueUnit, Volume, VolumeError,
+    VolumeFormat, VolumeSelect, is_volume_path, list_dicom_series, load_volume,
 };
 
 /// A triangle mesh: shared vertex positions and triangles as vertex-index triples.

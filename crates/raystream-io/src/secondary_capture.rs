@@ -139,6 +139,8 @@ pub fn write_secondary_capture(
     let sop_uid = new_uid();
     let mut obj = InMemDicomObject::new_empty();
     let o = &mut obj;
+    // Text as UTF-8, declared: a patient's name beyond ASCII is written as read.
+    put(o, tags::SPECIFIC_CHARACTER_SET, VR::CS, "ISO_IR 192");
     put(o, tags::SOP_CLASS_UID, VR::UI, sop_class);
     put(o, tags::SOP_INSTANCE_UID, VR::UI, &sop_uid);
     match plane {
@@ -165,6 +167,8 @@ pub fn write_secondary_capture(
             put(o, tags::SLICE_THICKNESS, VR::DS, &thickness);
             put(o, tags::KVP, VR::DS, "");
             put(o, tags::ACQUISITION_NUMBER, VR::IS, "");
+            // General Series' type 2C: unknown here, so present and empty.
+            put(o, tags::PATIENT_POSITION, VR::CS, "");
         }
         None => {
             put(o, tags::IMAGE_TYPE, VR::CS, "DERIVED\\SECONDARY");
@@ -198,6 +202,8 @@ pub fn write_secondary_capture(
     };
     put(o, tags::SERIES_INSTANCE_UID, VR::UI, &series_uid);
     put(o, tags::SERIES_NUMBER, VR::IS, "9001");
+    // General Series' type 2C, for a paired body part: unknown here, so present and empty.
+    put(o, tags::LATERALITY, VR::CS, "");
     put(
         o,
         tags::SERIES_DESCRIPTION,
@@ -304,12 +310,12 @@ pub fn write_secondary_capture(
     file.write_to_file(path).map_err(|e| fail(&e))
 }
 
-fn put(obj: &mut InMemDicomObject, tag: dicom_core::Tag, vr: VR, value: &str) {
+pub(crate) fn put(obj: &mut InMemDicomObject, tag: dicom_core::Tag, vr: VR, value: &str) {
     obj.put(DataElement::new(tag, vr, PrimitiveValue::from(value)));
 }
 
 /// `v` as a DS value: at most 16 characters, as many significant digits as fit.
-fn decimal(v: f64) -> String {
+pub(crate) fn decimal(v: f64) -> String {
     let s = format!("{v}");
     if s.len() <= 16 {
         return s;
@@ -326,7 +332,7 @@ fn decimal(v: f64) -> String {
 }
 
 /// `s` cut to at most `n` characters (a VR's length limit).
-fn truncate(s: &str, n: usize) -> String {
+pub(crate) fn truncate(s: &str, n: usize) -> String {
     s.chars().take(n).collect()
 }
 

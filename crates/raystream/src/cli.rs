@@ -791,10 +791,11 @@ pub struct MeasureArgs {
     )]
     pub angle: Vec<f64>,
     /// Write the lumen (label 1) and, with --wall, what the outer wall holds beyond it (label
-    /// 2) as a label map on the CT's own grid, NIfTI (.nii or .nii.gz), for a viewer (3D
-    /// Slicer, ITK-SNAP) to lay over the CT: from sections as far apart as its finest voxel
-    /// spacing, each voxel labelled by the nearest section's plane.
-    #[arg(long, value_name = "FILE.nii.gz")]
+    /// 2) as a label map on the CT's own grid, for a viewer to lay over the CT: NIfTI (.nii
+    /// or .nii.gz; 3D Slicer, ITK-SNAP), or, from a DICOM series, a DICOM Segmentation of it
+    /// (.dcm; PACS viewers) that files with its study. From sections as far apart as the CT's
+    /// finest voxel spacing, each voxel labelled by the nearest section's plane.
+    #[arg(long, value_name = "FILE.nii.gz|FILE.dcm")]
     pub mask: Option<PathBuf>,
     /// Draw the diameters against arc length to FILE (.svg, .png, or .dcm: the PNG's pixels
     /// as a DICOM Secondary Capture of the input's study): D eq, D max and D min, open

@@ -35,9 +35,10 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     }
     if let Some(m) = &a.mask
         && !raystream_io::is_label_map_path(m)
+        && !raystream_io::is_segmentation_path(m)
     {
         bail!(
-            "{}: --mask writes a NIfTI label map: name it .nii or .nii.gz",
+            "{}: --mask writes a NIfTI label map (.nii or .nii.gz) or a DICOM Segmentation (.dcm): name it so",
             m.display()
         );
     }
@@ -49,6 +50,13 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     }
     let points = raystream_io::read_curve(&a.path)?;
     let (volume, _) = read_volume(&a.input, &a.pick.select(), a.quiet, None)?;
+    // A Segmentation references the CT's series: one that cannot be is refused before any work.
+    if let Some(m) = &a.mask
+        && raystream_io::is_segmentation_path(m)
+    {
+        raystream_io::segmentation_source(&volume)
+            .map_err(|e| anyhow::anyhow!("{}: --mask: {e}", m.display()))?;
+    }
     let opt = LumenOptions {
         threshold_hu: a.vessel.lumen,
         field_mm: a.field,
@@ -402,6 +410,8 @@ struct Findings<'a> {
 /// from.
 struct MaskWritten {
     file: String,
+    /// The DICOM Segmentation's frames, where it is one (else a NIfTI label map).
+    frames: Option<usize>,
     lumen: (usize, f64),
     wall: Option<(usize, f64)>,
     sections: usize,
@@ -409,8 +419,49 @@ struct MaskWritten {
     step_mm: f64,
 }
 
+/// The segments of a DICOM Segmentation `--mask`, as its labels: the lumen, and what the outer
+/// wall holds beyond it (the vessel's wall, and any thrombus lining it).
+fn mask_segments(wall: bool) -> Vec<raystream_io::Segment<'static>> {
+    use raystream_cpu::mask::{LUMEN, WALL};
+    use raystream_io::{Code, Segment};
+    // DICOM CID 7150 (Segmentation Property Category), 7156 (Vascular Segmentation Type), 7166.
+    let anatomy = Code {
+        value: "123037004",
+        scheme: "SCT",
+        meaning: "Anatomical Structure",
+    };
+    let mut segments = vec![Segment {
+        value: LUMEN,
+        label: "Lumen",
+        description: "The vessel's lumen along the path",
+        category: anatomy,
+        kind: Code {
+            value: "91747007",
+            scheme: "SCT",
+            meaning: "Lumen",
+        },
+        // As scripts/label-overlay.py tints them.
+        colour: [0, 255, 255],
+    }];
+    if wall {
+        segments.push(Segment {
+            value: WALL,
+            label: "Wall and thrombus",
+            description: "Within the outer wall, beyond the lumen",
+            category: anatomy,
+            kind: Code {
+                value: "59820001",
+                scheme: "SCT",
+                meaning: "Blood vessel",
+            },
+            colour: [255, 0, 255],
+        });
+    }
+    segments
+}
+
 /// `--mask FILE`: the lumen and the outer wall labelled on the CT's grid
-/// ([`raystream_cpu::mask`]), written as NIfTI.
+/// ([`raystream_cpu::mask`]), written as NIfTI or as a DICOM Segmentation of the CT's series.
 fn write_mask(
     a: &MeasureArgs,
     out: &std::path::Path,
@@ -434,7 +485,24 @@ fn write_mask(
     } else {
         "raystream measure: 1 lumen"
     };
-    raystream_io::write_label_map(out, volume, &labels.data, what)?;
+    let frames = if raystream_io::is_segmentation_path(out) {
+        let info = raystream_io::SegmentationInfo {
+            description: if wall.is_some() {
+                "raystream measure: lumen, outer wall beyond it"
+            } else {
+                "raystream measure: lumen"
+            },
+            algorithm: "raystream measure",
+            version: env!("CARGO_PKG_VERSION"),
+        };
+        let segments = mask_segments(wall.is_some());
+        let written =
+            raystream_io::write_segmentation(out, volume, &labels.data, &segments, &info)?;
+        Some(written.frames)
+    } else {
+        raystream_io::write_label_map(out, volume, &labels.data, what)?;
+        None
+    };
     let voxel_ml = volume.index_to_world_affine().matrix3.determinant().abs() / 1000.0;
     let of = |l: u8| {
         let n = labels.count(l);
@@ -442,6 +510,7 @@ fn write_mask(
     };
     Ok(MaskWritten {
         file: out.display().to_string(),
+        frames,
         lumen: of(LUMEN),
         wall: wall.map(|_| of(WALL)),
         sections: labels.sections,
@@ -456,8 +525,12 @@ fn mask_text(m: &MaskWritten) -> String {
         Some((n, ml)) => format!(", 2 the outer wall beyond it on {n} voxels ({ml:.1} ml)"),
         None => String::new(),
     };
+    let kind = match m.frames {
+        Some(n) => format!("a DICOM Segmentation of the CT's series, {n} frames"),
+        None => "a NIfTI label map".to_string(),
+    };
     format!(
-        "mask: {}: label 1 the lumen on {} voxels ({:.1} ml){wall}, from {} sections {:.2} mm apart ({} with a closed lumen)\n",
+        "mask: {} ({kind}): label 1 the lumen on {} voxels ({:.1} ml){wall}, from {} sections {:.2} mm apart ({} with a closed lumen)\n",
         m.file, m.lumen.0, m.lumen.1, m.sections, m.step_mm, m.closed
     )
 }
@@ -466,6 +539,8 @@ fn mask_text(m: &MaskWritten) -> String {
 fn mask_json(m: &MaskWritten) -> serde_json::Value {
     json!({
         "file": m.file,
+        "format": if m.frames.is_some() { "dicom-seg" } else { "nifti" },
+        "frames": m.frames,
         "lumen_voxels": m.lumen.0,
         "lumen_ml": round3(m.lumen.1),
         "wall_voxels": m.wall.map(|w| w.0),

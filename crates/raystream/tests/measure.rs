@@ -1095,6 +1095,7 @@ fn the_profile_as_png_and_dicom() {
     let png = image::open(plot("profile-pixels.png")).unwrap().to_rgb8();
     assert_eq!(png.dimensions(), (1000, 560));
     let obj = dicom_object::open_file(plot("profile-pixels.dcm")).unwrap();
+    assert_eq!(iod_errors(&tmp("profile-pixels.dcm")), Vec::<String>::new());
     let text = |tag| dicom_text(&obj, tag);
     assert_eq!(text(tags::SOP_CLASS_UID), "1.2.840.10008.5.1.4.1.1.7");
     assert_eq!(text(tags::BURNED_IN_ANNOTATION), "YES");
@@ -1225,7 +1226,7 @@ fn the_mask_on_the_ct_grid() {
     let t = measure_text(&vol, &path, &["--mask", file], &tmp("measure-mask.csv"));
     assert!(
         t.contains(&format!(
-            "mask: {file}: label 1 the lumen on {} voxels",
+            "mask: {file} (a NIfTI label map): label 1 the lumen on {} voxels",
             lumen.len()
         )) && !t.contains("2 the outer wall"),
         "{t}"
@@ -1248,6 +1249,226 @@ fn the_mask_on_the_ct_grid() {
             "measure", "--quiet", &vol, "--path", &path, "--mask", nowhere,
         ],
         &format!("{nowhere}: No such file or directory"),
+    );
+}
+
+/// `--mask FILE.dcm` on a DICOM series: a DICOM Segmentation of that series, with the same
+/// labels as the NIfTI label map of the same CT. The chest CT is written as a DICOM series
+/// first; the Segmentation is read back with dicom-rs frame by frame (each frame placed by its
+/// position and referencing the series' image at that position), by highdicom, and checked by
+/// dicom3tools' `dciodvfy` against the standard's IOD (each where installed; under CI all).
+/// A CT that a Segmentation cannot reference is refused before any work.
+#[test]
+fn the_mask_as_a_dicom_segmentation_of_the_series() {
+    use dicom_dictionary_std::tags;
+    let dir = tmp("chest-series");
+    let study = chest_series(&dir);
+    let series = dir.to_str().unwrap().to_string();
+    let path = aorta();
+    let (seg, nii) = (tmp("measure-seg.dcm"), tmp("measure-seg.nii.gz"));
+    let seg_file = seg.to_str().unwrap();
+    let m = measure(&series, &path, &["--wall", "--mask", seg_file]);
+    let n = measure(
+        &chest(),
+        &path,
+        &["--wall", "--mask", nii.to_str().unwrap()],
+    );
+    let (k, want) = (&m["mask"], &n["mask"]);
+    assert_eq!(k["format"], "dicom-seg");
+    assert_eq!(want["format"], "nifti");
+    for key in ["lumen_voxels", "wall_voxels", "sections", "closed_sections"] {
+        assert_eq!(k[key], want[key], "{key}");
+    }
+    // The labels the NIfTI map holds, and each series file's SOP instance by slice.
+    let select = raystream_io::VolumeSelect::default();
+    let labels = raystream_io::load_volume(&nii, &select).unwrap();
+    let [nx, ny, nz] = labels.dims;
+    let mut instance = vec![String::new(); nz];
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let obj = dicom_object::open_file(e.unwrap().path()).unwrap();
+        let z: Vec<f64> = obj
+            .element(tags::IMAGE_POSITION_PATIENT)
+            .unwrap()
+            .to_multi_float64()
+            .unwrap();
+        let slice = ((z[2] - labels.origin[2]) / labels.spacing[2]).round() as usize;
+        instance[slice] = dicom_text(&obj, tags::SOP_INSTANCE_UID);
+    }
+    // The Segmentation, frame by frame, back onto the grid.
+    let obj = dicom_object::open_file(&seg).unwrap();
+    let text = |tag| dicom_text(&obj, tag);
+    assert_eq!(text(tags::SOP_CLASS_UID), raystream_io::SEGMENTATION);
+    assert_eq!(text(tags::MODALITY), "SEG");
+    assert_eq!(text(tags::STUDY_INSTANCE_UID), study.study_uid);
+    assert_eq!(
+        text(tags::FRAME_OF_REFERENCE_UID),
+        study.frame_of_reference_uid
+    );
+    assert_eq!(text(tags::PATIENT_NAME), "MÜLLER^JÖRG");
+    assert_eq!(text(tags::ACCESSION_NUMBER), "ACC42");
+    assert_eq!(text(tags::SEGMENTATION_TYPE), "BINARY");
+    let segments = obj
+        .element(tags::SEGMENT_SEQUENCE)
+        .unwrap()
+        .items()
+        .unwrap();
+    let kinds: Vec<(String, String)> = segments
+        .iter()
+        .map(|s| {
+            let t = |tag| s.element(tag).unwrap().to_str().unwrap().trim().to_string();
+            let code = s
+                .element(tags::SEGMENTED_PROPERTY_TYPE_CODE_SEQUENCE)
+                .unwrap()
+                .items()
+                .unwrap()[0]
+                .element(tags::CODE_VALUE)
+                .unwrap()
+                .to_str()
+                .unwrap()
+                .trim()
+                .to_string();
+            (t(tags::SEGMENT_LABEL), code)
+        })
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            ("Lumen".to_string(), "91747007".to_string()),
+            ("Wall and thrombus".to_string(), "59820001".to_string())
+        ]
+    );
+    let frames = obj
+        .element(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+        .unwrap()
+        .items()
+        .unwrap();
+    assert_eq!(frames.len() as f64, num(k, "frames"));
+    assert_eq!(
+        obj.element(tags::NUMBER_OF_FRAMES)
+            .unwrap()
+            .to_int::<usize>()
+            .unwrap(),
+        frames.len()
+    );
+    let (rows, cols) = (
+        obj.element(tags::ROWS).unwrap().to_int::<usize>().unwrap(),
+        obj.element(tags::COLUMNS)
+            .unwrap()
+            .to_int::<usize>()
+            .unwrap(),
+    );
+    assert_eq!((rows, cols), (ny, nx));
+    let bits = obj.element(tags::PIXEL_DATA).unwrap().to_bytes().unwrap();
+    assert_eq!(
+        bits.len(),
+        (frames.len() * nx * ny).div_ceil(8).next_multiple_of(2)
+    );
+    let first = |item: &dicom_object::InMemDicomObject, group, tag| {
+        item.element(group).unwrap().items().unwrap()[0]
+            .element(tag)
+            .unwrap()
+            .clone()
+    };
+    let mut got = vec![0u8; nx * ny * nz];
+    for (f, item) in frames.iter().enumerate() {
+        let segment = first(
+            item,
+            tags::SEGMENT_IDENTIFICATION_SEQUENCE,
+            tags::REFERENCED_SEGMENT_NUMBER,
+        )
+        .to_int::<u8>()
+        .unwrap();
+        let p = first(
+            item,
+            tags::PLANE_POSITION_SEQUENCE,
+            tags::IMAGE_POSITION_PATIENT,
+        )
+        .to_multi_float64()
+        .unwrap();
+        let z = (p[2] - labels.origin[2]) / labels.spacing[2];
+        assert!((z - z.round()).abs() < 1e-3 && (p[0] - labels.origin[0]).abs() < 1e-3);
+        let slice = z.round() as usize;
+        let source = first(
+            item,
+            tags::DERIVATION_IMAGE_SEQUENCE,
+            tags::SOURCE_IMAGE_SEQUENCE,
+        );
+        let source = &source.items().unwrap()[0];
+        let uid = source
+            .element(tags::REFERENCED_SOP_INSTANCE_UID)
+            .unwrap()
+            .to_str()
+            .unwrap();
+        assert_eq!(
+            uid.trim_end_matches('\0'),
+            instance[slice],
+            "frame {}",
+            f + 1
+        );
+        for p in 0..nx * ny {
+            let b = f * nx * ny + p;
+            if bits[b / 8] >> (b % 8) & 1 == 1 {
+                let v = &mut got[slice * nx * ny + p];
+                assert_eq!(*v, 0, "two segments on one voxel");
+                *v = segment;
+            }
+        }
+    }
+    let want: Vec<u8> = labels.data.iter().map(|&l| l as u8).collect();
+    let differ = got.iter().zip(&want).filter(|(a, b)| a != b).count();
+    assert_eq!(differ, 0, "voxels labelled otherwise than the NIfTI map");
+    // highdicom parses it as a Segmentation of the series, with the same voxels a segment.
+    if let Some(py) = python_with("highdicom") {
+        let script = "import sys, json, highdicom as hd, numpy as n\n\
+            s = hd.seg.segread(sys.argv[1])\n\
+            ids = [int(f.SegmentIdentificationSequence[0].ReferencedSegmentNumber) for f in s.PerFrameFunctionalGroupsSequence]\n\
+            a = s.pixel_array.reshape(len(ids), -1).sum(axis=1)\n\
+            refs = s.get_source_image_uids()\n\
+            print(json.dumps([[int(a[[i == g for i in ids]].sum()) for g in (1, 2)], len(refs), str(s.segmentation_type.value)]))";
+        let o = std::process::Command::new(py)
+            .args(["-c", script, seg_file])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "highdicom: {}", stderr(&o));
+        let got: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        assert_eq!(
+            got,
+            serde_json::json!([[k["lumen_voxels"], k["wall_voxels"]], nz, "BINARY"])
+        );
+    }
+    // The standard's IOD checker finds no error, nor in the series' CT images (written with a
+    // patient's name beyond ASCII).
+    assert_eq!(iod_errors(&seg), Vec::<String>::new());
+    assert_eq!(iod_errors(&dir.join("0001.dcm")), Vec::<String>::new());
+    // The text says what was written.
+    let t = measure_text(
+        &series,
+        &path,
+        &["--mask", seg_file],
+        &tmp("measure-seg.csv"),
+    );
+    assert!(
+        t.contains(&format!(
+            "mask: {seg_file} (a DICOM Segmentation of the CT's series, "
+        )),
+        "{t}"
+    );
+    // Refused before any work: a CT not read from DICOM, a series anonymised of its UIDs.
+    refused(
+        &["measure", &chest(), "--path", &path, "--mask", seg_file],
+        &format!("{seg_file}: --mask: the CT was not read from a DICOM series"),
+    );
+    let abdomen = shared().join("data/volumes/dicom/abdomen_ct_j2k_totalseg");
+    refused(
+        &[
+            "measure",
+            abdomen.to_str().unwrap(),
+            "--path",
+            &path,
+            "--mask",
+            seg_file,
+        ],
+        "has no Study Instance UID (anonymised?)",
     );
 }
 

@@ -62,24 +62,6 @@ fn python_with_simpleitk() -> Option<std::path::PathBuf> {
     python_with("SimpleITK")
 }
 
-/// A Python that imports `module`, or `None` (a skip, except under CI, where it fails).
-fn python_with(module: &str) -> Option<std::path::PathBuf> {
-    let py = python()?;
-    let has = std::process::Command::new(&py)
-        .args(["-c", &format!("import {module}")])
-        .status()
-        .unwrap()
-        .success();
-    if !has {
-        if in_ci() {
-            panic!("CI=true but {module} is not installed in {}", py.display());
-        }
-        eprintln!("skipping: {module} is not installed in {}", py.display());
-        return None;
-    }
-    Some(py)
-}
-
 #[test]
 fn every_format_matches_simpleitk_on_an_oblique_grid() {
     let Some(py) = python_with_simpleitk() else {
@@ -328,6 +310,7 @@ print(json.dumps({"src": src, "out": out, "pixels": pixels, "frames": frames, "f
         "Secondary Capture"
     );
     assert_eq!(out["0008|0060"], "OT");
+    assert_eq!(iod_errors(&dcm), Vec::<String>::new());
     for k in ["0010|0010", "0010|0020", "0020|000d"] {
         assert!(!src[k].as_str().unwrap().is_empty(), "{k}");
         assert_eq!(out[k], src[k], "{k}: the source's patient and study");
@@ -392,6 +375,7 @@ fn slices_save_as_reformatted_ct_where_their_pixels_lie() {
         assert!(o.status.success(), "{}", stderr(&o));
         let v = info(out.to_str().unwrap());
         assert_eq!(v["series"]["modality"], "CT", "{name}");
+        assert_eq!(iod_errors(&out), Vec::<String>::new(), "{name}");
         let img = raystream_io::load_volume(&out, &Default::default()).unwrap();
         assert_eq!(img.dims, [64, 56, 1], "{name}");
         let (matching, compared) = voxels_where_they_lie(&img, &src);

@@ -49,6 +49,20 @@ pub struct DicomSeriesInfo {
     pub all: Vec<(String, usize, String)>,
     /// The patient and study the series belongs to (its first slice's).
     pub study: DicomStudy,
+    /// The acquired image each of the volume's slices is, in the grid's order (k): what an
+    /// object derived slice by slice (a segmentation) references. Empty where the grid's
+    /// slices were interpolated between the acquired ones (uneven spacing).
+    pub sources: Vec<SourceImage>,
+}
+
+/// One acquired image of a series: a file's SOP instance, and its frame in a multi-frame one.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SourceImage {
+    pub sop_class_uid: String,
+    pub sop_instance_uid: String,
+    /// The frame, numbered from 1 as DICOM's Referenced Frame Number; `None` in a single-frame
+    /// image.
+    pub frame: Option<u32>,
 }
 
 /// The patient and study of a DICOM series: what an image derived from it (a rendering saved
@@ -104,6 +118,10 @@ pub(crate) struct Slice {
     description: String,
     modality: String,
     ts_uid: String,
+    /// The instance it is in (SOP Class and Instance UIDs; the file meta's where the data set's
+    /// are blank).
+    sop_class: String,
+    sop_instance: String,
     pub(crate) rows: u32,
     pub(crate) cols: u32,
     /// The frame of a multi-frame file this slice is, numbered from 0 (`None`: a single-frame
@@ -311,9 +329,18 @@ fn read_folder(path: &Path) -> Result<(Vec<Slice>, Vec<String>), VolumeError> {
     Ok((slices, warnings))
 }
 
-/// Reads the file meta group by hand (see the module docs) and returns the transfer syntax UID
-/// and the offset of the data set.
-fn read_meta(bytes: &[u8], file: &Path) -> Result<(String, usize), VolumeError> {
+/// What the file meta group says: the transfer syntax, and the instance it stores (Media Storage
+/// SOP Class and Instance UIDs, empty where absent), which an anonymised data set may have
+/// blanked in its own SOP Common module.
+struct FileMeta {
+    ts_uid: String,
+    sop_class: String,
+    sop_instance: String,
+}
+
+/// Reads the file meta group by hand (see the module docs) and returns what it says and the
+/// offset of the data set.
+fn read_meta(bytes: &[u8], file: &Path) -> Result<(FileMeta, usize), VolumeError> {
     let mut pos = if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
         132
     } else if bytes.starts_with(&[0x02, 0x00]) {
@@ -324,7 +351,7 @@ fn read_meta(bytes: &[u8], file: &Path) -> Result<(String, usize), VolumeError> 
             "not a DICOM file (no DICM marker at byte 128 and no file meta group)",
         ));
     };
-    let mut ts = None;
+    let (mut ts, mut sop_class, mut sop_instance) = (None, String::new(), String::new());
     while pos + 8 <= bytes.len() && bytes[pos] == 0x02 && bytes[pos + 1] == 0x00 {
         let elem = u16::from_le_bytes([bytes[pos + 2], bytes[pos + 3]]);
         let vr = &bytes[pos + 4..pos + 6];
@@ -346,9 +373,15 @@ fn read_meta(bytes: &[u8], file: &Path) -> Result<(String, usize), VolumeError> 
             .checked_add(len)
             .filter(|&e| e <= bytes.len())
             .ok_or_else(|| VolumeError::invalid(file, "the DICOM file meta group is truncated"))?;
-        if elem == 0x0010 {
+        let value = || {
             let s = String::from_utf8_lossy(&bytes[start..end]);
-            ts = Some(s.trim_end_matches(['\0', ' ']).trim().to_string());
+            s.trim_end_matches(['\0', ' ']).trim().to_string()
+        };
+        match elem {
+            0x0002 => sop_class = value(),
+            0x0003 => sop_instance = value(),
+            0x0010 => ts = Some(value()),
+            _ => {}
         }
         pos = end;
     }
@@ -358,7 +391,12 @@ fn read_meta(bytes: &[u8], file: &Path) -> Result<(String, usize), VolumeError> 
             "the DICOM file meta group has no transfer syntax (0002,0010)",
         )
     })?;
-    Ok((ts, pos))
+    let meta = FileMeta {
+        ts_uid: ts,
+        sop_class,
+        sop_instance,
+    };
+    Ok((meta, pos))
 }
 
 fn read_file(file: &Path) -> Result<Vec<Slice>, VolumeError> {
@@ -371,7 +409,8 @@ fn read_file(file: &Path) -> Result<Vec<Slice>, VolumeError> {
 /// A DICOM file's slices: one for a single-frame image, one a frame for a multi-frame
 /// (enhanced) one.
 pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, VolumeError> {
-    let (ts_uid, start) = read_meta(bytes, file)?;
+    let (meta, start) = read_meta(bytes, file)?;
+    let ts_uid = meta.ts_uid.clone();
     let ts = TransferSyntaxRegistry.get(&ts_uid).ok_or_else(|| {
         VolumeError::invalid(
             file,
@@ -434,6 +473,14 @@ pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, Volume
         text(tags::SERIES_DESCRIPTION).unwrap_or_default(),
         text(tags::MODALITY).unwrap_or_default(),
     );
+    let uid_or = |tag, meta: &str| {
+        text(tag)
+            .map(|s| s.trim_end_matches('\0').to_string())
+            .filter(|s| !s.is_empty())
+            .unwrap_or_else(|| meta.to_string())
+    };
+    let sop_class = uid_or(tags::SOP_CLASS_UID, &meta.sop_class);
+    let sop_instance = uid_or(tags::SOP_INSTANCE_UID, &meta.sop_instance);
     let enhanced = obj
         .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
         .is_some();
@@ -457,6 +504,8 @@ pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, Volume
                 description: description.clone(),
                 modality: modality.clone(),
                 ts_uid: ts_uid.clone(),
+                sop_class: sop_class.clone(),
+                sop_instance: sop_instance.clone(),
                 rows,
                 cols,
                 frame: g.frame,
@@ -822,6 +871,18 @@ fn assemble(
         .find_map(|s| s.obj.as_ref())
         .map(DicomStudy::of)
         .unwrap_or_default();
+    let sources = if stack.resampled {
+        Vec::new()
+    } else {
+        slices
+            .iter()
+            .map(|s| SourceImage {
+                sop_class_uid: s.sop_class.clone(),
+                sop_instance_uid: s.sop_instance.clone(),
+                frame: s.frame.map(|f| f + 1),
+            })
+            .collect()
+    };
     let decoded = decode_all(slices, dims[0] * dims[1])?;
     let data = stack.regular(&decoded);
     let ts_name = TransferSyntaxRegistry
@@ -851,6 +912,7 @@ fn assemble(
             transfer_syntax_name: ts_name,
             all,
             study,
+            sources,
         }),
         phase: Phase::default(),
         warnings,

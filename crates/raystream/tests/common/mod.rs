@@ -114,6 +114,24 @@ pub fn python() -> Option<PathBuf> {
     None
 }
 
+/// A Python that imports `module`, or `None` (a skip, except under CI, where it fails).
+pub fn python_with(module: &str) -> Option<PathBuf> {
+    let py = python()?;
+    let has = Command::new(&py)
+        .args(["-c", &format!("import {module}")])
+        .status()
+        .unwrap()
+        .success();
+    if !has {
+        if in_ci() {
+            panic!("CI=true but {module} is not installed in {}", py.display());
+        }
+        eprintln!("skipping: {module} is not installed in {}", py.display());
+        return None;
+    }
+    Some(py)
+}
+
 pub fn rays_py(python: &Path, args: &[&str]) -> Output {
     Command::new(python)
         .arg(shared().join("tools/rays.py"))
@@ -252,4 +270,69 @@ pub fn dicom_text(obj: &dicom_object::DefaultDicomObject, tag: dicom_object::Tag
         .unwrap()
         .trim()
         .to_string()
+}
+
+/// The chest CT written as a DICOM series (CT Image Storage, one file a slice, through
+/// raystream-io's writer) into the empty folder `dir`: its HU, its geometry, and a study of a
+/// patient with a name beyond ASCII. The series' study.
+pub fn chest_series(dir: &Path) -> raystream_io::DicomStudy {
+    use raystream_io::{CaptureInfo, CapturePixels, ImagePlane, write_secondary_capture};
+    std::fs::remove_dir_all(dir).ok();
+    std::fs::create_dir_all(dir).unwrap();
+    let select = raystream_io::VolumeSelect::default();
+    let ct = raystream_io::load_volume(Path::new(&chest()), &select).unwrap();
+    let study = raystream_io::DicomStudy {
+        patient_name: "MÜLLER^JÖRG".into(),
+        patient_id: "RS-0042".into(),
+        study_uid: raystream_io::new_uid(),
+        study_date: "20261202".into(),
+        accession_number: "ACC42".into(),
+        frame_of_reference_uid: raystream_io::new_uid(),
+        ..Default::default()
+    };
+    let series = raystream_io::new_uid();
+    let [nx, ny, nz] = ct.dims;
+    let d = ct.direction;
+    assert_eq!(ct.spacing[0], ct.spacing[1], "square pixels");
+    for k in 0..nz {
+        let p = ct.index_to_world(raystream_math::DVec3::new(0.0, 0.0, k as f64));
+        let info = CaptureInfo {
+            study: Some(&study),
+            series: Some((&series, k as u32 + 1)),
+            description: "chest CT",
+            plane: Some(ImagePlane {
+                position: p.to_array(),
+                row: [d[0][0], d[1][0], d[2][0]],
+                column: [d[0][1], d[1][1], d[2][1]],
+                spacing: ct.spacing[0],
+                thickness: Some(ct.spacing[2]),
+            }),
+            ..Default::default()
+        };
+        let pixels = CapturePixels::Hu {
+            values: &ct.data[k * nx * ny..(k + 1) * nx * ny],
+            window: (400.0, 40.0),
+        };
+        let file = dir.join(format!("{:04}.dcm", k + 1));
+        write_secondary_capture(&file, pixels, (nx as u32, ny as u32), &info).unwrap();
+    }
+    study
+}
+
+/// dicom3tools' `dciodvfy` on `file`: the errors it finds against the standard's IOD for the
+/// file's SOP class (its warnings aside). Where it is not installed, none, and a note; under
+/// CI (`CI=true`) that fails.
+pub fn iod_errors(file: &Path) -> Vec<String> {
+    match Command::new("dciodvfy").arg(file).output() {
+        Ok(o) => format!("{}{}", stdout(&o), stderr(&o))
+            .lines()
+            .filter(|l| l.starts_with("Error"))
+            .map(str::to_string)
+            .collect(),
+        Err(_) if in_ci() => panic!("CI=true but no dciodvfy (Debian's dicom3tools)"),
+        Err(_) => {
+            eprintln!("skipping dciodvfy: not installed (Debian's dicom3tools)");
+            Vec::new()
+        }
+    }
 }
