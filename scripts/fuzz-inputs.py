@@ -166,8 +166,10 @@ def seeds(d):
                                              "controlPoints": [{"position": p} for p in path]}]}).encode())
     try:
         w("mf.dcm", enhanced_ct())
+        w("sg.dcm", segmentation())
     except ImportError:
-        print("no pydicom: the enhanced (multi-frame) CT seed left out", file=sys.stderr)
+        print("no pydicom: the enhanced (multi-frame) CT and Segmentation seeds left out",
+              file=sys.stderr)
     ts = os.path.join(SHARED, "data/volumes/dicom/ct_slice_transfer_syntaxes")
     names = sorted(os.listdir(ts))
     for n in names[:4] + [n for n in names if re.search(r"\.4\.(51|80|81)_", n)]:
@@ -202,6 +204,44 @@ def enhanced_ct():
             RescaleIntercept=-1024 - k, RescaleSlope=1, RescaleType="HU")]))
         for k in (2, 0, 1)])
     ds.PixelData = struct.pack("<144H", *[(i * 37) % 3000 for i in range(144)])
+    ds.file_meta = FileMetaDataset()
+    ds.file_meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    ds.file_meta.MediaStorageSOPClassUID = ds.SOPClassUID
+    ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
+    out = io.BytesIO()
+    ds.save_as(out, enforce_file_format=True)
+    return out.getvalue()
+
+
+def segmentation():
+    """A DICOM Segmentation of two binary segments: 3 frames of 7x5 (the bits run on across
+    bytes), two on one plane, shared orientation and spacing."""
+    import io
+    from pydicom.dataset import Dataset, FileMetaDataset
+    from pydicom.sequence import Sequence
+    from pydicom.uid import ExplicitVRLittleEndian
+
+    def item(**kw):
+        d = Dataset()
+        for k, v in kw.items():
+            setattr(d, k, v)
+        return d
+    ds = Dataset()
+    ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.66.4", "2.25.9"
+    ds.Modality, ds.SeriesInstanceUID, ds.NumberOfFrames = "SEG", "2.25.10", 3
+    ds.Rows, ds.Columns, ds.SamplesPerPixel = 5, 7, 1
+    ds.PhotometricInterpretation = "MONOCHROME2"
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 1, 1, 0, 0
+    ds.SegmentationType = "BINARY"
+    ds.SegmentSequence = Sequence([item(SegmentNumber=n, SegmentLabel=f"s{n}") for n in (1, 2)])
+    ds.SharedFunctionalGroupsSequence = Sequence([item(
+        PixelMeasuresSequence=Sequence([item(PixelSpacing=[0.7, 0.8], SpacingBetweenSlices=2)]),
+        PlaneOrientationSequence=Sequence([item(ImageOrientationPatient=[1, 0, 0, 0, 1, 0])]))])
+    ds.PerFrameFunctionalGroupsSequence = Sequence([item(
+        PlanePositionSequence=Sequence([item(ImagePositionPatient=[-10, 20, 30 + 2 * k])]),
+        SegmentIdentificationSequence=Sequence([item(ReferencedSegmentNumber=n)]))
+        for k, n in ((0, 1), (2, 1), (2, 2))])
+    ds.PixelData = bytes((i * 37) % 256 for i in range(14))
     ds.file_meta = FileMetaDataset()
     ds.file_meta.TransferSyntaxUID = ExplicitVRLittleEndian
     ds.file_meta.MediaStorageSOPClassUID = ds.SOPClassUID

@@ -731,6 +731,70 @@ mod tests {
                 .len(),
             1
         );
+        // Read back as a label volume on the frames' grid: slices 0 to 3, the labels where
+        // they were.
+        let back = crate::load_volume(&path, &Default::default()).unwrap();
+        assert_eq!(back.dims, [3, 3, 4]);
+        assert_eq!(back.origin, v.origin);
+        assert_eq!(back.spacing, v.spacing);
+        let want: Vec<f32> = labels.iter().map(|&l| l as f32).collect();
+        assert_eq!(back.data, want);
+        assert_eq!(
+            back.series.as_ref().unwrap().segments,
+            [(1, "one".to_string()), (2, "two".to_string())]
+        );
+        // Damaged: a header claiming a million frames, pixel data short of its frames, a frame
+        // naming no segment, the file cut short; each an error naming the file.
+        let damaged = |name: &str, change: &dyn Fn(&mut dicom_object::DefaultDicomObject)| {
+            let mut o = dicom_object::open_file(&path).unwrap();
+            change(&mut o);
+            let p = path.with_extension(format!("{name}.dcm"));
+            o.write_to_file(&p).unwrap();
+            let e = crate::load_volume(&p, &Default::default())
+                .unwrap_err()
+                .to_string();
+            std::fs::remove_file(&p).ok();
+            assert!(e.starts_with(&p.display().to_string()), "{e}");
+            e
+        };
+        let e = damaged("frames", &|o| {
+            o.put(DataElement::new(
+                tags::NUMBER_OF_FRAMES,
+                VR::IS,
+                PrimitiveValue::from("1000000"),
+            ));
+        });
+        assert!(
+            e.contains("need 1125000 bytes of pixel data; it holds 4"),
+            "{e}"
+        );
+        let e = damaged("short", &|o| {
+            o.put(DataElement::new(
+                tags::PIXEL_DATA,
+                VR::OB,
+                PrimitiveValue::U8(vec![0u8; 2].into()),
+            ));
+        });
+        assert!(e.contains("it holds 2"), "{e}");
+        let e = damaged("nosegment", &|o| {
+            let mut frames = o
+                .element(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+                .unwrap()
+                .items()
+                .unwrap()
+                .to_vec();
+            frames[1].remove_element(tags::SEGMENT_IDENTIFICATION_SEQUENCE);
+            o.put(seq(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE, frames));
+        });
+        assert!(e.contains("frame 2 names no segment"), "{e}");
+        let bytes = std::fs::read(&path).unwrap();
+        let cut = path.with_extension("cut.dcm");
+        std::fs::write(&cut, &bytes[..bytes.len() - 3]).unwrap();
+        let e = crate::load_volume(&cut, &Default::default())
+            .unwrap_err()
+            .to_string();
+        std::fs::remove_file(&cut).ok();
+        assert!(e.starts_with(&cut.display().to_string()), "{e}");
         // Nothing labelled: an error naming the file, and nothing written.
         std::fs::remove_file(&path).ok();
         let e = write_segmentation(&path, &v, &[0; 36], &segments(), &info).unwrap_err();

@@ -234,6 +234,7 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             "transfer_syntax": s.transfer_syntax,
             "transfer_syntax_name": s.transfer_syntax_name,
             "all": s.all.iter().map(|(u, n, d)| json!({"uid": u, "count": n, "description": d})).collect::<Vec<_>>(),
+            "segments": s.segments.iter().map(|(n, l)| json!({"number": n, "label": l})).collect::<Vec<_>>(),
         })
     });
     if a.json {
@@ -293,14 +294,23 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                     u.to_string()
                 }
             };
+            // A Segmentation's count is its frames (a segment and slice each).
+            let what = if s.segments.is_empty() {
+                "slices"
+            } else {
+                "frames"
+            };
             println!(
-                "  series     {} ({} slices, {}, {} {})",
+                "  series     {} ({} {what}, {}, {} {})",
                 uid(&s.uid),
                 s.count,
                 s.modality,
                 s.transfer_syntax,
                 s.transfer_syntax_name
             );
+            for (n, label) in &s.segments {
+                println!("  segment    {n}: {label} (the voxels of value {n})");
+            }
             for (u, n, d) in s.all.iter().filter(|(u, _, _)| *u != s.uid) {
                 println!("  also       {} ({n} slices) {d}", uid(u));
             }

@@ -1417,6 +1417,45 @@ fn the_mask_as_a_dicom_segmentation_of_the_series() {
     let want: Vec<u8> = labels.data.iter().map(|&l| l as u8).collect();
     let differ = got.iter().zip(&want).filter(|(a, b)| a != b).count();
     assert_eq!(differ, 0, "voxels labelled otherwise than the NIfTI map");
+    // raystream reads a Segmentation back as a label volume on its frames' grid: the NIfTI
+    // map's labels where they lie. `written_by`: who wrote it.
+    let reads_as_the_map = |file: &std::path::Path, written_by: &str| {
+        let v = raystream_io::load_volume(file, &select).unwrap();
+        let s = v.series.as_ref().unwrap();
+        assert_eq!(s.modality, "SEG", "{written_by}");
+        assert_eq!(s.segments.len(), 2, "{written_by}");
+        assert_eq!(v.direction, labels.direction, "{written_by}");
+        assert_eq!(v.spacing, labels.spacing, "{written_by}");
+        let dz = (v.origin[2] - labels.origin[2]) / labels.spacing[2];
+        assert!((dz - dz.round()).abs() < 1e-3 && v.origin[..2] == labels.origin[..2]);
+        let per = nx * ny;
+        let at = dz.round() as usize * per;
+        assert_eq!(v.dims[..2], labels.dims[..2]);
+        let differ = (0..v.data.len())
+            .filter(|&q| v.data[q] != labels.data[at + q])
+            .count();
+        assert_eq!(differ, 0, "{written_by}");
+        let held = |d: &[f32]| d.iter().filter(|&&l| l != 0.0).count();
+        assert_eq!(
+            held(&v.data),
+            held(&labels.data),
+            "{written_by}: labels beyond its grid"
+        );
+    };
+    reads_as_the_map(&seg, "raystream");
+    // Beside the series' images it is skipped, named, and the CT read as before.
+    std::fs::copy(&seg, dir.join("seg.dcm")).unwrap();
+    let beside = raystream_io::load_volume(&dir, &select).unwrap();
+    assert_eq!(beside.dims, labels.dims);
+    assert!(
+        beside
+            .warnings
+            .iter()
+            .any(|w| w.contains("seg.dcm") && w.contains("a DICOM Segmentation, not an image")),
+        "{:?}",
+        beside.warnings
+    );
+    std::fs::remove_file(dir.join("seg.dcm")).unwrap();
     // highdicom parses it as a Segmentation of the series, with the same voxels a segment.
     if let Some(py) = python_with("highdicom") {
         let script = "import sys, json, highdicom as hd, numpy as n\n\
@@ -1425,7 +1464,7 @@ fn the_mask_as_a_dicom_segmentation_of_the_series() {
             a = s.pixel_array.reshape(len(ids), -1).sum(axis=1)\n\
             refs = s.get_source_image_uids()\n\
             print(json.dumps([[int(a[[i == g for i in ids]].sum()) for g in (1, 2)], len(refs), str(s.segmentation_type.value)]))";
-        let o = std::process::Command::new(py)
+        let o = std::process::Command::new(&py)
             .args(["-c", script, seg_file])
             .output()
             .unwrap();
@@ -1435,6 +1474,15 @@ fn the_mask_as_a_dicom_segmentation_of_the_series() {
             got,
             serde_json::json!([[k["lumen_voxels"], k["wall_voxels"]], nz, "BINARY"])
         );
+        // And highdicom writes one of the NIfTI map on the series, which raystream reads.
+        let theirs = tmp("highdicom-seg.dcm");
+        let o = std::process::Command::new(&py)
+            .arg(repo().join("crates/raystream/tests/highdicom_seg.py"))
+            .args([&series, nii.to_str().unwrap(), theirs.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "highdicom: {}", stderr(&o));
+        reads_as_the_map(&theirs, "highdicom");
     }
     // The standard's IOD checker finds no error, nor in the series' CT images (written with a
     // patient's name beyond ASCII).

@@ -53,6 +53,9 @@ pub struct DicomSeriesInfo {
     /// object derived slice by slice (a segmentation) references. Empty where the grid's
     /// slices were interpolated between the acquired ones (uneven spacing).
     pub sources: Vec<SourceImage>,
+    /// A DICOM Segmentation's segments (read as a label volume, each segment's voxels its
+    /// number): number and label. Empty for an image series.
+    pub segments: Vec<(u16, String)>,
 }
 
 /// One acquired image of a series: a file's SOP instance, and its frame in a multi-frame one.
@@ -87,7 +90,7 @@ pub struct DicomStudy {
 }
 
 impl DicomStudy {
-    fn of(obj: &InMemDicomObject) -> DicomStudy {
+    pub(crate) fn of(obj: &InMemDicomObject) -> DicomStudy {
         let text = |tag| {
             obj.get(tag)
                 .and_then(|e| e.to_str().ok())
@@ -149,6 +152,13 @@ pub fn list_dicom_series(path: &Path) -> Result<Vec<(String, usize, String)>, Vo
 }
 
 pub(crate) fn load(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeError> {
+    if path.is_file() {
+        let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
+        let (meta, obj) = parse_dataset(&bytes, path)?;
+        if super::segmentation::is_segmentation(&meta, &obj) {
+            return super::segmentation::read(path, &meta, &obj);
+        }
+    }
     let (slices, mut warnings) = read_folder(path)?;
     // So far the warnings are the files skipped as unreadable; a problem with the series (a
     // gap, above all) is often one of them, so its error names them.
@@ -332,9 +342,9 @@ fn read_folder(path: &Path) -> Result<(Vec<Slice>, Vec<String>), VolumeError> {
 /// What the file meta group says: the transfer syntax, and the instance it stores (Media Storage
 /// SOP Class and Instance UIDs, empty where absent), which an anonymised data set may have
 /// blanked in its own SOP Common module.
-struct FileMeta {
-    ts_uid: String,
-    sop_class: String,
+pub(crate) struct FileMeta {
+    pub(crate) ts_uid: String,
+    pub(crate) sop_class: String,
     sop_instance: String,
 }
 
@@ -406,9 +416,11 @@ fn read_file(file: &Path) -> Result<Vec<Slice>, VolumeError> {
     )
 }
 
-/// A DICOM file's slices: one for a single-frame image, one a frame for a multi-frame
-/// (enhanced) one.
-pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, VolumeError> {
+/// A DICOM file's file meta and data set, its lengths checked against the file's.
+pub(crate) fn parse_dataset(
+    bytes: &[u8],
+    file: &Path,
+) -> Result<(FileMeta, InMemDicomObject), VolumeError> {
     let (meta, start) = read_meta(bytes, file)?;
     let ts_uid = meta.ts_uid.clone();
     let ts = TransferSyntaxRegistry.get(&ts_uid).ok_or_else(|| {
@@ -443,6 +455,20 @@ pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, Volume
     check_lengths(&bytes[start..], &ts_uid).map_err(|p| VolumeError::invalid(file, p))?;
     let obj = InMemDicomObject::read_dataset_with_ts(&bytes[start..], ts)
         .map_err(|e| VolumeError::invalid(file, format!("cannot parse the DICOM data set: {e}")))?;
+    Ok((meta, obj))
+}
+
+/// A DICOM file's slices: one for a single-frame image, one a frame for a multi-frame
+/// (enhanced) one.
+pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, VolumeError> {
+    let (meta, obj) = parse_dataset(bytes, file)?;
+    let ts_uid = meta.ts_uid.clone();
+    if super::segmentation::is_segmentation(&meta, &obj) {
+        return Err(VolumeError::invalid(
+            file,
+            "a DICOM Segmentation, not an image of a series (read it by its own name)",
+        ));
+    }
     let text = |tag| {
         obj.get(tag)
             .and_then(|e| e.to_str().ok())
@@ -533,22 +559,25 @@ pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, Volume
 /// several data sets that has each (a frame's functional groups, the shared ones, the top
 /// level).
 #[derive(Default)]
-struct FrameGeometry {
+pub(crate) struct FrameGeometry {
     /// The frame (from 0) of a multi-frame image; `None` for a single-frame one.
     frame: Option<u32>,
     /// Its temporal position (see [`Slice::temporal`]).
     temporal: Option<u32>,
-    position: Option<[f64; 3]>,
-    orientation: Option<[f64; 6]>,
-    pixel_spacing: Option<[f64; 2]>,
-    between_slices: Option<f64>,
-    thickness: Option<f64>,
+    pub(crate) position: Option<[f64; 3]>,
+    pub(crate) orientation: Option<[f64; 6]>,
+    pub(crate) pixel_spacing: Option<[f64; 2]>,
+    pub(crate) between_slices: Option<f64>,
+    pub(crate) thickness: Option<f64>,
 }
 
 impl FrameGeometry {
     /// From the first of `groups` (functional group items, holding the attributes in the
     /// standard's macros) that has each attribute, else from the top level of `top`.
-    fn of(groups: &[&InMemDicomObject], top: Option<&InMemDicomObject>) -> FrameGeometry {
+    pub(crate) fn of(
+        groups: &[&InMemDicomObject],
+        top: Option<&InMemDicomObject>,
+    ) -> FrameGeometry {
         let find = |tag, macro_tag| {
             groups
                 .iter()
@@ -773,17 +802,17 @@ fn has_long_length(vr: &[u8]) -> bool {
     )
 }
 
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],
         a[0] * b[1] - a[1] * b[0],
     ]
 }
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
@@ -913,6 +942,7 @@ fn assemble(
             all,
             study,
             sources,
+            segments: Vec::new(),
         }),
         phase: Phase::default(),
         warnings,

@@ -15,6 +15,7 @@ mod mha;
 mod nifti;
 mod nrrd;
 mod raw;
+mod segmentation;
 
 use std::path::{Path, PathBuf};
 

@@ -1,0 +1,261 @@
+//! A DICOM Segmentation (SOP class 1.2.840.10008.5.1.4.1.1.66.4, as `measure --mask FILE.dcm`
+//! writes it, or another tool) read as a label volume: each voxel the number of the segment
+//! that holds it, 0 where none does, on the grid its frames lie on (the frames' common
+//! orientation and pixel spacing; slices from the first frame's plane to the last's, as far
+//! apart as the Segmentation says, or as its frames' nearest planes lie). BINARY segments
+//! (one bit a pixel) and FRACTIONAL ones (8 bits; a voxel held where the fraction reaches half
+//! the maximum), native (uncompressed) pixel data.
+
+use std::path::Path;
+
+use dicom_dictionary_std::tags;
+use dicom_object::InMemDicomObject;
+
+use super::dicom::{DicomStudy, FileMeta, FrameGeometry, cross, dot, sub};
+use super::{DicomSeriesInfo, Phase, ValueUnit, Volume, VolumeError, VolumeFormat};
+use super::{check_geometry, voxel_count};
+
+const SEGMENTATION: &str = "1.2.840.10008.5.1.4.1.1.66.4";
+
+/// Whether the data set is a DICOM Segmentation.
+pub(crate) fn is_segmentation(meta: &FileMeta, obj: &InMemDicomObject) -> bool {
+    let class = obj
+        .get(tags::SOP_CLASS_UID)
+        .and_then(|e| e.to_str().ok())
+        .map(|s| s.trim_end_matches(['\0', ' ']).to_string())
+        .filter(|s| !s.is_empty())
+        .unwrap_or_else(|| meta.sop_class.clone());
+    class == SEGMENTATION
+}
+
+/// The Segmentation in `obj` (read from `file`) as a label volume.
+pub(crate) fn read(
+    file: &Path,
+    meta: &FileMeta,
+    obj: &InMemDicomObject,
+) -> Result<Volume, VolumeError> {
+    let bad =
+        |problem: String| VolumeError::invalid(file, format!("DICOM Segmentation: {problem}"));
+    let text = |o: &InMemDicomObject, tag| {
+        o.get(tag)
+            .and_then(|e| e.to_str().ok())
+            .map(|s| s.trim_end_matches(['\0', ' ']).trim().to_string())
+            .unwrap_or_default()
+    };
+    let int = |o: &InMemDicomObject, tag| o.get(tag).and_then(|e| e.to_int::<u32>().ok());
+    let need = |tag, what: &str| int(obj, tag).ok_or_else(|| bad(format!("no {what}")));
+    let rows = need(tags::ROWS, "Rows")? as usize;
+    let cols = need(tags::COLUMNS, "Columns")? as usize;
+    let frames = need(tags::NUMBER_OF_FRAMES, "Number of Frames")? as usize;
+    let bits = need(tags::BITS_ALLOCATED, "Bits Allocated")?;
+    let kind = text(obj, tags::SEGMENTATION_TYPE);
+    let half = match (kind.as_str(), bits) {
+        ("BINARY", 1) => None,
+        ("FRACTIONAL", 8) => {
+            let max = int(obj, tags::MAXIMUM_FRACTIONAL_VALUE)
+                .unwrap_or(255)
+                .clamp(1, 255);
+            Some(max.div_ceil(2) as u8)
+        }
+        _ => {
+            return Err(bad(format!(
+                "segmentation type {kind:?} with {bits} bits a pixel (BINARY with 1, FRACTIONAL with 8 are read)"
+            )));
+        }
+    };
+    if meta.ts_uid != "1.2.840.10008.1.2.1" && meta.ts_uid != "1.2.840.10008.1.2" {
+        return Err(bad(format!(
+            "pixel data in transfer syntax {}: only native (uncompressed) Segmentations are read",
+            meta.ts_uid
+        )));
+    }
+    if rows == 0 || cols == 0 || frames == 0 {
+        return Err(bad(format!("{cols}×{rows} pixels, {frames} frames")));
+    }
+    // The pixel data holds what the header says before anything is sized by it.
+    let pixels = obj
+        .get(tags::PIXEL_DATA)
+        .ok_or_else(|| bad("no pixel data (7FE0,0010)".into()))?
+        .to_bytes()
+        .map_err(|e| bad(format!("pixel data: {e}")))?;
+    let per = rows
+        .checked_mul(cols)
+        .ok_or_else(|| bad("a frame too large".into()))?;
+    let want = per
+        .checked_mul(frames)
+        .map(|n| if half.is_some() { n } else { n.div_ceil(8) })
+        .ok_or_else(|| bad("too many pixels".into()))?;
+    if pixels.len() < want {
+        return Err(bad(format!(
+            "{frames} frames of {cols}×{rows} need {want} bytes of pixel data; it holds {}",
+            pixels.len()
+        )));
+    }
+    let per_frame = obj
+        .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+        .and_then(|e| e.items())
+        .ok_or_else(|| bad("no per-frame functional groups (5200,9230)".into()))?;
+    if per_frame.len() != frames {
+        return Err(bad(format!(
+            "Number of Frames is {frames} but the per-frame functional groups hold {}",
+            per_frame.len()
+        )));
+    }
+    let shared = obj
+        .get(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE)
+        .and_then(|e| e.items())
+        .and_then(|items| items.first());
+    let segments: Vec<(u16, String)> = obj
+        .get(tags::SEGMENT_SEQUENCE)
+        .and_then(|e| e.items())
+        .map(|items| {
+            items
+                .iter()
+                .filter_map(|s| {
+                    let n = int(s, tags::SEGMENT_NUMBER)?;
+                    Some((n as u16, text(s, tags::SEGMENT_LABEL)))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    // Each frame's plane and segment.
+    let mut planes = Vec::with_capacity(frames);
+    for (f, item) in per_frame.iter().enumerate() {
+        let groups: Vec<&InMemDicomObject> = [Some(item), shared].into_iter().flatten().collect();
+        let g = FrameGeometry::of(&groups, Some(obj));
+        let segment = groups
+            .iter()
+            .find_map(|g| {
+                let id = g
+                    .get(tags::SEGMENT_IDENTIFICATION_SEQUENCE)?
+                    .items()?
+                    .first()?;
+                int(id, tags::REFERENCED_SEGMENT_NUMBER)
+            })
+            .ok_or_else(|| bad(format!("frame {} names no segment", f + 1)))?;
+        if segment == 0 || segment > 65535 {
+            return Err(bad(format!("frame {} names segment {segment}", f + 1)));
+        }
+        let missing = |what: &str| bad(format!("frame {} has no {what}", f + 1));
+        planes.push((
+            g.position
+                .ok_or_else(|| missing("Image Position (Patient)"))?,
+            g.orientation
+                .ok_or_else(|| missing("Image Orientation (Patient)"))?,
+            g.pixel_spacing.ok_or_else(|| missing("Pixel Spacing"))?,
+            segment as u16,
+            g.between_slices.or(g.thickness),
+        ));
+    }
+    let (p0, o, pixel, _, between) = planes[0];
+    for (f, &(_, of, ps, _, _)) in planes.iter().enumerate() {
+        if (0..6).any(|i| (of[i] - o[i]).abs() > 1e-4)
+            || (0..2).any(|i| (ps[i] - pixel[i]).abs() > 1e-4)
+        {
+            return Err(bad(format!(
+                "frame {} is turned or sized otherwise than frame 1: its frames are not one stack",
+                f + 1
+            )));
+        }
+    }
+    let (row, col) = ([o[0], o[1], o[2]], [o[3], o[4], o[5]]);
+    let normal = cross(row, col);
+    let len = dot(normal, normal).sqrt();
+    if !(0.99..=1.01).contains(&len) || dot(row, col).abs() > 1e-3 {
+        return Err(bad(format!(
+            "Image Orientation (Patient) {o:?} is not two orthogonal unit vectors"
+        )));
+    }
+    let normal = normal.map(|v| v / len);
+    // The frames' distances along the normal, and the slices' spacing.
+    let along: Vec<f64> = planes.iter().map(|p| dot(sub(p.0, p0), normal)).collect();
+    let mut distinct: Vec<f64> = along.clone();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup_by(|a, b| (*a - *b).abs() < 1e-3);
+    let gap = distinct
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .fold(f64::INFINITY, f64::min);
+    let spacing = between
+        .filter(|&s| s > 1e-3)
+        .or(gap.is_finite().then_some(gap))
+        .unwrap_or(1.0);
+    let first = distinct[0];
+    let span = distinct[distinct.len() - 1] - first;
+    let nz = (span / spacing).round() as usize + 1;
+    let dims = [cols, rows, nz];
+    voxel_count(file, dims)?;
+    let origin = [0, 1, 2].map(|a| p0[a] + normal[a] * first);
+    // Every frame on a slice of that grid, in its plane's place.
+    let mut slice_of = Vec::with_capacity(frames);
+    for (f, (&d, p)) in along.iter().zip(&planes).enumerate() {
+        let k = (d - first) / spacing;
+        let off = sub(sub(p.0, origin), normal.map(|v| v * (d - first)));
+        let (across, down) = (dot(off, row), dot(off, col));
+        let tol = 0.1 * pixel[0].min(pixel[1]);
+        if (k - k.round()).abs() > 0.1 || across.abs() > tol || down.abs() > tol {
+            return Err(bad(format!(
+                "frame {} lies off the grid of its frames ({spacing:.3} mm apart along their normal)",
+                f + 1
+            )));
+        }
+        slice_of.push(k.round() as usize);
+    }
+    let mut data = vec![0f32; cols * rows * nz];
+    let mut overlap = 0usize;
+    for (f, (&k, plane)) in slice_of.iter().zip(&planes).enumerate() {
+        let label = plane.3 as f32;
+        let out = &mut data[k * per..(k + 1) * per];
+        for (p, v) in out.iter_mut().enumerate() {
+            let b = f * per + p;
+            let held = match half {
+                None => pixels[b / 8] >> (b % 8) & 1 == 1,
+                Some(h) => pixels[b] >= h,
+            };
+            if held {
+                if *v != 0.0 && *v != label {
+                    overlap += 1;
+                }
+                *v = label;
+            }
+        }
+    }
+    let spacing3 = [pixel[1], pixel[0], spacing];
+    let direction = std::array::from_fn(|r| [row[r], col[r], normal[r]]);
+    check_geometry(file, dims, spacing3, origin, &direction)?;
+    let mut warnings = Vec::new();
+    if overlap > 0 {
+        warnings.push(format!(
+            "{overlap} voxels are held by more than one segment; each takes the last frame's"
+        ));
+    }
+    Ok(Volume {
+        dims,
+        spacing: spacing3,
+        origin,
+        direction,
+        data,
+        unit: ValueUnit::Unknown,
+        format: VolumeFormat::Dicom,
+        series: Some(DicomSeriesInfo {
+            uid: text(obj, tags::SERIES_INSTANCE_UID),
+            description: text(obj, tags::SERIES_DESCRIPTION),
+            modality: text(obj, tags::MODALITY),
+            count: frames,
+            transfer_syntax: meta.ts_uid.clone(),
+            transfer_syntax_name: {
+                use dicom_transfer_syntax_registry::{TransferSyntaxIndex, TransferSyntaxRegistry};
+                TransferSyntaxRegistry
+                    .get(&meta.ts_uid)
+                    .map(|t| t.name().to_string())
+                    .unwrap_or_default()
+            },
+            all: Vec::new(),
+            study: DicomStudy::of(obj),
+            sources: Vec::new(),
+            segments,
+        }),
+        phase: Phase::default(),
+        warnings,
+    })
+}
