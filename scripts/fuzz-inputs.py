@@ -177,6 +177,15 @@ def seeds(d):
         os.chmod(os.path.join(d, n), 0o644)
 
 
+def item(**kw):
+    """A pydicom data set (a sequence item) holding `kw`."""
+    from pydicom.dataset import Dataset
+    d = Dataset()
+    for k, v in kw.items():
+        setattr(d, k, v)
+    return d
+
+
 def enhanced_ct():
     """A 3-frame 8x6 enhanced CT: per-frame positions and rescales, shared plane and spacing."""
     import io
@@ -184,11 +193,6 @@ def enhanced_ct():
     from pydicom.sequence import Sequence
     from pydicom.uid import ExplicitVRLittleEndian
 
-    def item(**kw):
-        d = Dataset()
-        for k, v in kw.items():
-            setattr(d, k, v)
-        return d
     ds = Dataset()
     ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.2.1", "2.25.7"
     ds.Modality, ds.SeriesInstanceUID, ds.NumberOfFrames = "CT", "2.25.8", 3
@@ -221,11 +225,6 @@ def segmentation():
     from pydicom.sequence import Sequence
     from pydicom.uid import ExplicitVRLittleEndian
 
-    def item(**kw):
-        d = Dataset()
-        for k, v in kw.items():
-            setattr(d, k, v)
-        return d
     ds = Dataset()
     ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.66.4", "2.25.9"
     ds.Modality, ds.SeriesInstanceUID, ds.NumberOfFrames = "SEG", "2.25.10", 3

@@ -177,25 +177,7 @@ pub fn write_secondary_capture(
         }
     }
     // The patient and the study it files with.
-    for (tag, vr, value) in [
-        (tags::PATIENT_NAME, VR::PN, &study.patient_name),
-        (tags::PATIENT_ID, VR::LO, &study.patient_id),
-        (tags::PATIENT_BIRTH_DATE, VR::DA, &study.patient_birth_date),
-        (tags::PATIENT_SEX, VR::CS, &study.patient_sex),
-        (tags::STUDY_INSTANCE_UID, VR::UI, &study.study_uid),
-        (tags::STUDY_DATE, VR::DA, &study.study_date),
-        (tags::STUDY_TIME, VR::TM, &study.study_time),
-        (tags::STUDY_ID, VR::SH, &study.study_id),
-        (tags::ACCESSION_NUMBER, VR::SH, &study.accession_number),
-        (
-            tags::REFERRING_PHYSICIAN_NAME,
-            VR::PN,
-            &study.referring_physician,
-        ),
-        (tags::STUDY_DESCRIPTION, VR::LO, &study.study_description),
-    ] {
-        put(o, tag, vr, value);
-    }
+    put_patient_study(o, study);
     let (series_uid, instance) = match series {
         Some((uid, n)) => (uid.to_string(), n),
         None => (new_uid(), 1),
@@ -308,6 +290,30 @@ pub fn write_secondary_capture(
         )
         .map_err(|e| fail(&e))?;
     file.write_to_file(path).map_err(|e| fail(&e))
+}
+
+/// The Patient and General Study modules of an object derived from `study`'s series, which
+/// files it with that study.
+pub(crate) fn put_patient_study(o: &mut InMemDicomObject, study: &DicomStudy) {
+    for (tag, vr, value) in [
+        (tags::PATIENT_NAME, VR::PN, &study.patient_name),
+        (tags::PATIENT_ID, VR::LO, &study.patient_id),
+        (tags::PATIENT_BIRTH_DATE, VR::DA, &study.patient_birth_date),
+        (tags::PATIENT_SEX, VR::CS, &study.patient_sex),
+        (tags::STUDY_INSTANCE_UID, VR::UI, &study.study_uid),
+        (tags::STUDY_DATE, VR::DA, &study.study_date),
+        (tags::STUDY_TIME, VR::TM, &study.study_time),
+        (tags::STUDY_ID, VR::SH, &study.study_id),
+        (tags::ACCESSION_NUMBER, VR::SH, &study.accession_number),
+        (
+            tags::REFERRING_PHYSICIAN_NAME,
+            VR::PN,
+            &study.referring_physician,
+        ),
+        (tags::STUDY_DESCRIPTION, VR::LO, &study.study_description),
+    ] {
+        put(o, tag, vr, value);
+    }
 }
 
 pub(crate) fn put(obj: &mut InMemDicomObject, tag: dicom_core::Tag, vr: VR, value: &str) {

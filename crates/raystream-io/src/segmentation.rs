@@ -15,7 +15,7 @@ use dicom_dictionary_std::tags;
 use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
 
 use crate::new_uid;
-use crate::secondary_capture::{decimal, put, truncate};
+use crate::secondary_capture::{decimal, put, put_patient_study, truncate};
 use crate::volume::{SourceImage, Volume, VolumeError};
 
 /// Segmentation Storage.
@@ -193,25 +193,7 @@ pub fn write_segmentation(
     put(o, tags::SOP_INSTANCE_UID, VR::UI, &sop_uid);
     put(o, tags::TIMEZONE_OFFSET_FROM_UTC, VR::SH, "+0000");
     // Patient and General Study: the series'.
-    for (tag, vr, value) in [
-        (tags::PATIENT_NAME, VR::PN, &study.patient_name),
-        (tags::PATIENT_ID, VR::LO, &study.patient_id),
-        (tags::PATIENT_BIRTH_DATE, VR::DA, &study.patient_birth_date),
-        (tags::PATIENT_SEX, VR::CS, &study.patient_sex),
-        (tags::STUDY_INSTANCE_UID, VR::UI, &study.study_uid),
-        (tags::STUDY_DATE, VR::DA, &study.study_date),
-        (tags::STUDY_TIME, VR::TM, &study.study_time),
-        (tags::STUDY_ID, VR::SH, &study.study_id),
-        (tags::ACCESSION_NUMBER, VR::SH, &study.accession_number),
-        (
-            tags::REFERRING_PHYSICIAN_NAME,
-            VR::PN,
-            &study.referring_physician,
-        ),
-        (tags::STUDY_DESCRIPTION, VR::LO, &study.study_description),
-    ] {
-        put(o, tag, vr, value);
-    }
+    put_patient_study(o, study);
     // Segmentation Series, Frame of Reference, General and Enhanced General Equipment.
     put(o, tags::MODALITY, VR::CS, "SEG");
     put(o, tags::SERIES_INSTANCE_UID, VR::UI, &new_uid());
