@@ -363,6 +363,13 @@ pub struct RenderArgs {
         allow_negative_numbers = true
     )]
     pub draw_wall: Option<f32>,
+    /// With --mode slice (a slice, or a CPR with --path; one picture): tints each pixel by the
+    /// label of a label map or DICOM Segmentation (FILE: NIfTI, NRRD, MetaImage, DICOM SEG;
+    /// `measure --mask` writes them) at the pixel's point in the patient, as a viewer lays a
+    /// segmentation over the CT: label 1 cyan, 2 magenta, then yellow, green, orange, blue;
+    /// PNG, or DICOM as the picture.
+    #[arg(long, value_name = "FILE")]
+    pub segmentation: Option<PathBuf>,
     /// With --path FILE (not --slices): marks these points of the path, mm along it from its
     /// first point (as `measure` gives a lesion's and its references' arc lengths), each a
     /// line across the CPR, yellow ringed in black; PNG, or DICOM as the picture.

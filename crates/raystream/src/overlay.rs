@@ -193,6 +193,60 @@ pub fn draw_row_edges(
     drawn
 }
 
+/// The colours `--segmentation` tints labels 1, 2, … with (then round again).
+pub const LABEL_COLOURS: [[u8; 3]; 6] = [
+    EDGE,
+    WALL,
+    LINE,
+    [80, 220, 80],
+    [255, 140, 0],
+    [60, 120, 255],
+];
+/// How much of a tinted pixel is its label's colour.
+pub const LABEL_ALPHA: f32 = 0.45;
+
+/// A label's colour over the pixel `base`: [`LABEL_ALPHA`] of it, rounded.
+pub fn tint(base: [u8; 3], label: u32) -> [u8; 3] {
+    let c = LABEL_COLOURS[(label as usize - 1) % LABEL_COLOURS.len()];
+    std::array::from_fn(|i| {
+        (base[i] as f32 * (1.0 - LABEL_ALPHA) + c[i] as f32 * LABEL_ALPHA).round() as u8
+    })
+}
+
+/// Tints each pixel of the picture, `width` pixels a row, by the label of `labels` (a label volume:
+/// whole numbers, 0 none) at the voxel nearest its point in the patient (`point(x, y)`, LPS
+/// mm); the pixels tinted.
+pub fn tint_labels(
+    rgb: &mut [u8],
+    width: u32,
+    labels: &raystream_io::Volume,
+    point: impl Fn(u32, u32) -> DVec3 + Sync,
+) -> usize {
+    use rayon::prelude::*;
+    let to_index = labels.index_to_world_affine().inverse();
+    let [nx, ny, nz] = labels.dims;
+    rgb.par_chunks_mut(3 * width as usize)
+        .enumerate()
+        .map(|(y, row)| {
+            let mut n = 0;
+            for (x, px) in row.chunks_mut(3).enumerate() {
+                let q = to_index.transform_point3(point(x as u32, y as u32)).round();
+                if q.min_element() < 0.0 || q.x >= nx as f64 || q.y >= ny as f64 || q.z >= nz as f64
+                {
+                    continue;
+                }
+                let v = labels.at(q.x as usize, q.y as usize, q.z as usize);
+                if v >= 0.5 {
+                    let t = tint([px[0], px[1], px[2]], v.round() as u32);
+                    px.copy_from_slice(&t);
+                    n += 1;
+                }
+            }
+            n
+        })
+        .sum()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

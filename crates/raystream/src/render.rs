@@ -172,6 +172,73 @@ fn volume_dicom(
     }
 }
 
+/// `--segmentation FILE`: the label volume, read and checked (whole numbers, none below 0).
+fn segmentation(
+    a: &RenderArgs,
+    frames: bool,
+    format: ImageFormat,
+) -> Result<Option<raystream_io::Volume>> {
+    let Some(file) = &a.segmentation else {
+        return Ok(None);
+    };
+    let name = file.display();
+    if a.mode != Some(crate::cli::ModeArg::Slice) || a.look.slab.is_some() {
+        bail!(
+            "--segmentation {name}: tints a slice or a CPR, each pixel a point: give --mode slice (no --slab)"
+        );
+    }
+    if frames {
+        bail!(
+            "--segmentation {name}: tints one picture, not --turntable, --slices or --cine frames"
+        );
+    }
+    if format == ImageFormat::Exr {
+        bail!("--segmentation draws on a PNG; an EXR holds the values themselves");
+    }
+    let labels = raystream_io::load_volume(file, &raystream_io::VolumeSelect::default())?;
+    if let Some(v) = labels
+        .data
+        .iter()
+        .find(|v| !(v.is_finite() && **v >= 0.0 && v.fract() == 0.0))
+    {
+        bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
+    }
+    Ok(Some(labels))
+}
+
+/// Tints the picture by `labels` at each pixel's point ([`crate::overlay::tint_labels`]): a
+/// slice's plane or a CPR's curved surface. Whether any pixel was.
+fn tint_segmentation(
+    picture: &mut Picture,
+    seen: &Seen,
+    opt: &DvrOptions,
+    (volume, labels): (&raystream_io::Volume, &raystream_io::Volume),
+) -> bool {
+    let Picture::Srgb8 { rgb, width, .. } = picture else {
+        return false;
+    };
+    let n = match seen {
+        Seen::Camera(cam) => {
+            let Some(p) = pixel_plane(opt, volume, cam) else {
+                return false;
+            };
+            use raystream_math::DVec3;
+            let (o, r, c) = (
+                DVec3::from(p.position),
+                DVec3::from(p.row),
+                DVec3::from(p.column),
+            );
+            crate::overlay::tint_labels(rgb, *width, labels, |x, y| {
+                o + (r * x as f64 + c * y as f64) * p.spacing
+            })
+        }
+        Seen::Curved(plane) => {
+            crate::overlay::tint_labels(rgb, *width, labels, |x, y| plane.point(x, y).0.as_dvec3())
+        }
+    };
+    n > 0
+}
+
 /// `--draw-lumen HU`'s lumen options for `volume` (`measure`'s defaults at that threshold).
 fn lumen_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option<LumenOptions>> {
     let Some(hu) = a.draw_lumen else {
@@ -412,8 +479,20 @@ fn image_plane(
     volume: &raystream_io::Volume,
     cam: &Camera,
 ) -> Option<raystream_io::ImagePlane> {
+    opt.hu_values
+        .then(|| pixel_plane(opt, volume, cam))
+        .flatten()
+}
+
+/// Where the pixels of a slice, or of a slab's projection, lie in the patient ([`image_plane`],
+/// whatever the picture holds).
+fn pixel_plane(
+    opt: &DvrOptions,
+    volume: &raystream_io::Volume,
+    cam: &Camera,
+) -> Option<raystream_io::ImagePlane> {
     let planar = opt.mode == DvrMode::Slice || (opt.mode.is_windowed() && opt.slab.is_some());
-    if !opt.hu_values || !planar || cam.parallel <= 0.0 {
+    if !planar || cam.parallel <= 0.0 {
         return None;
     }
     let lps = |v| raystream_cpu::dvr::scene_to_lps(v).as_dvec3();
@@ -508,6 +587,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     if a.cine {
         select.phase = Some(1);
     }
+    let labels = segmentation(a, frames, format)?;
     let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
     let track = wall_track(a, &volume, curve.as_ref())?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
@@ -519,8 +599,11 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         crate::common::is_dicom(&a.output)
     };
     // Letters or a path drawn need the picture as seen.
-    let drawn =
-        a.labels || a.draw_path.is_some() || a.draw_lumen.is_some() || !a.mark_at.is_empty();
+    let drawn = a.labels
+        || a.draw_path.is_some()
+        || a.draw_lumen.is_some()
+        || !a.mark_at.is_empty()
+        || labels.is_some();
     opt.hu_values = format == ImageFormat::Exr || (dicom_out && mode.is_windowed() && !drawn);
     let aspect = opt.width as f32 / opt.height as f32;
     let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
@@ -589,6 +672,10 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     }
     pb.finish_and_clear();
     let mut frame = last.expect("at least one frame");
+    // The segmentation first, the lines drawn over it.
+    if let Some(l) = &labels {
+        tint_segmentation(&mut frame.picture, &seen, &opt, (&volume, l));
+    }
     let slab = match (&seen, &a.path) {
         (Seen::Curved(plane), Some(file)) => curved_words(file, plane, &opt),
         _ => slab_words(&opt, &volume),
@@ -1337,6 +1424,12 @@ fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
 pub fn run(a: &RenderArgs) -> Result<()> {
     if let Some(mode) = a.mode {
         return render_direct(a, mode.into());
+    }
+    if let Some(f) = &a.segmentation {
+        bail!(
+            "--segmentation {}: tints a slice or a CPR of a CT: give --mode slice",
+            f.display()
+        );
     }
     let l = &a.look;
     if l.tf.is_some()

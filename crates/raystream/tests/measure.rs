@@ -1520,6 +1520,124 @@ fn the_mask_as_a_dicom_segmentation_of_the_series() {
     );
 }
 
+/// `render --mode slice --segmentation LABELS`: each pixel tinted by the label at its point,
+/// checked pixel by pixel on an axial slice through the aorta (each pixel's point from the
+/// plane the same slice's DICOM names), and on a CPR along the path (lumen down its middle).
+#[test]
+fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
+    use dicom_dictionary_std::tags;
+    let (vol, path) = (chest(), aorta());
+    let mask = tmp("tint-mask.nii.gz");
+    measure(&vol, &path, &["--wall", "--mask", mask.to_str().unwrap()]);
+    let labels = raystream_io::load_volume(&mask, &Default::default()).unwrap();
+    let tint = |base: &[u8], label: u32| -> [u8; 3] {
+        let c = [[0, 230, 255], [255, 64, 220]][label as usize - 1];
+        std::array::from_fn(|i| (base[i] as f32 * 0.55 + c[i] as f32 * 0.45).round() as u8)
+    };
+    let axial = [
+        vol.as_str(),
+        "--mode",
+        "slice",
+        "--view",
+        "superior",
+        "--slice-at",
+        "22,-112,716",
+        "--size",
+        "96x80",
+    ];
+    let plain = image::open(render_to("tint-plain.png", "cpu", &axial))
+        .unwrap()
+        .to_rgb8();
+    let seg = [&axial[..], &["--segmentation", mask.to_str().unwrap()]].concat();
+    let tinted = image::open(render_to("tint-axial.png", "cpu", &seg))
+        .unwrap()
+        .to_rgb8();
+    let obj = dicom_object::open_file(render_to("tint-plain.dcm", "cpu", &axial)).unwrap();
+    let floats = |tag| obj.element(tag).unwrap().to_multi_float64().unwrap();
+    let (o, turn, spacing) = (
+        DVec3::from_slice(&floats(tags::IMAGE_POSITION_PATIENT)),
+        floats(tags::IMAGE_ORIENTATION_PATIENT),
+        floats(tags::PIXEL_SPACING)[0],
+    );
+    let (r, c) = (DVec3::from_slice(&turn[..3]), DVec3::from_slice(&turn[3..]));
+    let mut held = [0; 3];
+    for (x, y, px) in tinted.enumerate_pixels() {
+        let p = o + (r * x as f64 + c * y as f64) * spacing;
+        let q = labels.world_to_index(p).round();
+        let label = if q.min_element() < 0.0 || q.x >= 120.0 || q.y >= 126.0 || q.z >= 164.0 {
+            0
+        } else {
+            labels.at(q.x as usize, q.y as usize, q.z as usize) as u32
+        };
+        held[label as usize] += 1;
+        let base = plain.get_pixel(x, y).0;
+        let want = if label == 0 { base } else { tint(&base, label) };
+        assert_eq!(px.0, want, "pixel ({x}, {y}), label {label}");
+    }
+    assert!(held[1] > 100 && held[2] > 10, "{held:?}");
+    // A CPR down the path: every pixel plain or tinted as a label; the lumen down its middle.
+    let cpr = cpr_args(&vol, &path, &["--size", "64x160"]);
+    let plain = image::open(render_to("tint-cpr-plain.png", "cpu", &cpr))
+        .unwrap()
+        .to_rgb8();
+    let seg = [&cpr[..], &["--segmentation", mask.to_str().unwrap()]].concat();
+    let tinted = image::open(render_to("tint-cpr.png", "cpu", &seg))
+        .unwrap()
+        .to_rgb8();
+    let mut held = [0; 3];
+    for (x, y, px) in tinted.enumerate_pixels() {
+        let base = plain.get_pixel(x, y).0;
+        let label = (0..3u32)
+            .find(|&l| px.0 == if l == 0 { base } else { tint(&base, l) })
+            .unwrap_or_else(|| panic!("pixel ({x}, {y}): {:?} over {base:?}", px.0));
+        held[label as usize] += 1;
+    }
+    let middle = (0..160)
+        .filter(|&y| tinted.get_pixel(32, y).0 != plain.get_pixel(32, y).0)
+        .count();
+    assert!(
+        held[1] > 2000 && held[2] > 100 && middle > 100,
+        "{held:?}, {middle} rows"
+    );
+    // Only a slice or a CPR, one picture, of a label map.
+    refused(
+        &[
+            "render",
+            &vol,
+            "--mode",
+            "mip",
+            "--segmentation",
+            mask.to_str().unwrap(),
+            "-o",
+            "x.png",
+        ],
+        "tints a slice or a CPR, each pixel a point: give --mode slice",
+    );
+    refused(
+        &[
+            "render",
+            "--segmentation",
+            mask.to_str().unwrap(),
+            "-o",
+            "x.png",
+        ],
+        "tints a slice or a CPR of a CT: give --mode slice",
+    );
+    refused(
+        &[
+            "render",
+            &vol,
+            "--mode",
+            "slice",
+            "--segmentation",
+            &vol,
+            "-o",
+            "x.png",
+        ],
+        "--segmentation takes a label map (whole numbers from 0); it holds -",
+    );
+}
+
 /// The outer wall a millimetre at a time down the chest CT's aorta: each section's circle
 /// is chosen with what its neighbours found, so its width runs on from section to section.
 /// Without the neighbours (or with a refinement that creeps outwards) sections 41 and 42
