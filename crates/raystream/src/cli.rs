@@ -363,7 +363,7 @@ pub struct RenderArgs {
         allow_negative_numbers = true
     )]
     pub draw_wall: Option<f32>,
-    /// With --mode slice (a slice, or a CPR with --path; one picture): tints each pixel by the
+    /// With --mode slice (a slice, or a CPR with --path, and their frames): tints each pixel by the
     /// label of a label map or DICOM Segmentation (FILE: NIfTI, NRRD, MetaImage, DICOM SEG;
     /// `measure --mask` writes them) at the pixel's point in the patient, as a viewer lays a
     /// segmentation over the CT: label 1 cyan, 2 magenta, then yellow, green, orange, blue;

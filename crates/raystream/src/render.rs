@@ -173,11 +173,7 @@ fn volume_dicom(
 }
 
 /// `--segmentation FILE`: the label volume, read and checked (whole numbers, none below 0).
-fn segmentation(
-    a: &RenderArgs,
-    frames: bool,
-    format: ImageFormat,
-) -> Result<Option<raystream_io::Volume>> {
+fn segmentation(a: &RenderArgs, format: ImageFormat) -> Result<Option<raystream_io::Volume>> {
     let Some(file) = &a.segmentation else {
         return Ok(None);
     };
@@ -185,11 +181,6 @@ fn segmentation(
     if a.mode != Some(crate::cli::ModeArg::Slice) || a.look.slab.is_some() {
         bail!(
             "--segmentation {name}: tints a slice or a CPR, each pixel a point: give --mode slice (no --slab)"
-        );
-    }
-    if frames {
-        bail!(
-            "--segmentation {name}: tints one picture, not --turntable, --slices or --cine frames"
         );
     }
     if format == ImageFormat::Exr {
@@ -587,7 +578,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     if a.cine {
         select.phase = Some(1);
     }
-    let labels = segmentation(a, frames, format)?;
+    let labels = segmentation(a, format)?;
     let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
     let track = wall_track(a, &volume, curve.as_ref())?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
@@ -612,6 +603,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         return turntable(
             a,
             (&renderer, &volume, overlay, track.as_ref()),
+            labels.as_ref(),
             &opt,
             (view, curve.as_ref()),
             n,
@@ -624,6 +616,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         return path_sections(
             a,
             (&renderer, &volume, track.as_ref()),
+            labels.as_ref(),
             &opt,
             (view, curve),
             n,
@@ -631,7 +624,14 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         );
     }
     if let Some(n) = a.slices {
-        return slice_series(a, (&renderer, &volume, overlay), &opt, &cam, n, format);
+        return slice_series(
+            a,
+            (&renderer, &volume, overlay, labels.as_ref()),
+            &opt,
+            &cam,
+            n,
+            format,
+        );
     }
     if a.cine {
         if a.draw_lumen.is_some() {
@@ -644,7 +644,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         return cine(
             a,
             (path, &volume, renderer),
-            (&backend, &tf, overlay),
+            (&backend, &tf, overlay, labels.as_ref()),
             &opt,
             &seen,
             format,
@@ -839,13 +839,15 @@ fn turntable(
         Overlay,
         Option<&Track>,
     ),
+    labels: Labels,
     opt: &DvrOptions,
     look: (View, Option<&Curve>),
     n: u32,
     format: ImageFormat,
 ) -> Result<()> {
     let [az, _] = orbit_angles(a);
-    frame_series(a, (volume, overlay, track), n, format, "turntable", |i| {
+    let drawn = (volume, overlay, track, labels);
+    frame_series(a, drawn, n, format, "turntable", |i| {
         let seen = seen_from(a, volume, opt, look, az + 360.0 * i as f32 / n as f32)?;
         Ok((renderer.frame(opt, seen.sight(), format)?, seen, *opt))
     })
@@ -859,6 +861,7 @@ fn turntable(
 fn path_sections(
     a: &RenderArgs,
     (renderer, volume, track): (&dvr::Renderer, &raystream_io::Volume, Option<&Track>),
+    labels: Labels,
     opt: &DvrOptions,
     (view, curve): (View, &Curve),
     n: u32,
@@ -882,7 +885,8 @@ fn path_sections(
     let lumen =
         lumen_options(a, volume)?.map(|o| (o, raystream_cpu::dvr::Marcher::new(volume, None)));
     let wall = wall_options(a, volume)?;
-    frame_series(a, (volume, None, None), n, format, "slices", |i| {
+    // Each section tinted here, under its lumen and wall.
+    frame_series(a, (volume, None, None, None), n, format, "slices", |i| {
         let cam = stations.section_camera(i, 0.5 * pixel * opt.height as f32, reach);
         let row = &stations.rows[i as usize];
         let opt = DvrOptions {
@@ -890,6 +894,9 @@ fn path_sections(
             ..*opt
         };
         let mut f = renderer.frame(&opt, &cam, format)?;
+        if let Some(l) = labels {
+            tint_segmentation(&mut f.picture, &Seen::Camera(cam), &opt, (volume, l));
+        }
         if let (Some((o, m)), crate::common::Picture::Srgb8 { rgb, width, height }) =
             (&lumen, &mut f.picture)
             && let Some(found) = raystream_cpu::lumen::measure_with_wall(
@@ -915,6 +922,9 @@ fn path_sections(
 
 /// `--draw-path FILE`'s spline, sampled densely (LPS mm), drawn over every frame of a camera.
 type Overlay<'a> = Option<&'a [raystream_math::DVec3]>;
+
+/// `--segmentation FILE`'s label volume, tinted over every frame of a slice or CPR.
+type Labels<'a> = Option<&'a raystream_io::Volume>;
 
 /// `--path FILE`'s points, read once.
 struct Curve<'a> {
@@ -956,7 +966,7 @@ fn seen_from(
 /// camera: a reformatted series (coronal, sagittal, oblique; thin slices or slabs).
 fn slice_series(
     a: &RenderArgs,
-    (renderer, volume, overlay): (&dvr::Renderer, &raystream_io::Volume, Overlay),
+    (renderer, volume, overlay, labels): (&dvr::Renderer, &raystream_io::Volume, Overlay, Labels),
     opt: &DvrOptions,
     cam: &Camera,
     n: u32,
@@ -976,14 +986,21 @@ fn slice_series(
     };
     let normal = raystream_cpu::dvr::scene_to_lps(cam.fwd).normalize();
     let centre = opt.slice_point(volume);
-    frame_series(a, (volume, overlay, None), n, format, "slices", |i| {
-        let offset = (i as f32 - (n - 1) as f32 / 2.0) * step;
-        let opt = DvrOptions {
-            slice_at: Some(centre + normal * offset),
-            ..*opt
-        };
-        Ok((renderer.frame(&opt, cam, format)?, Seen::Camera(*cam), opt))
-    })
+    frame_series(
+        a,
+        (volume, overlay, None, labels),
+        n,
+        format,
+        "slices",
+        |i| {
+            let offset = (i as f32 - (n - 1) as f32 / 2.0) * step;
+            let opt = DvrOptions {
+                slice_at: Some(centre + normal * offset),
+                ..*opt
+            };
+            Ok((renderer.frame(&opt, cam, format)?, Seen::Camera(*cam), opt))
+        },
+    )
 }
 
 /// `render --mode … --cine -o DIR`: a frame of each temporal position of a 4-D CT (`first` is
@@ -994,7 +1011,12 @@ fn slice_series(
 fn cine(
     a: &RenderArgs,
     (path, first, renderer): (&Path, &raystream_io::Volume, dvr::Renderer),
-    (backend, tf, overlay): (&Backend, &raystream_volume::TransferFunction, Overlay),
+    (backend, tf, overlay, labels): (
+        &Backend,
+        &raystream_volume::TransferFunction,
+        Overlay,
+        Labels,
+    ),
     opt: &DvrOptions,
     seen: &Seen,
     format: ImageFormat,
@@ -1007,43 +1029,51 @@ fn cine(
         );
     }
     let mut warnings = Vec::new();
-    frame_series(a, (first, overlay, None), n as u32, format, "cine", |i| {
-        if i == 0 {
-            return Ok((
-                renderer.frame(opt, seen.sight(), format)?,
-                seen.clone(),
-                *opt,
-            ));
-        }
-        let select = raystream_io::VolumeSelect {
-            phase: Some(i as usize + 1),
-            ..a.pick.select()
-        };
-        let volume = raystream_io::load_volume(path, &select)?;
-        let grid = |v: &raystream_io::Volume| (v.dims, v.spacing, v.origin, v.direction);
-        if grid(&volume) != grid(first) {
-            bail!(
-                "{}: phase {} lies on another grid than phase 1 ({:?} voxels of {:?} mm at {:?} against {:?} of {:?} at {:?}): a cine needs one",
-                path.display(),
-                i + 1,
-                volume.dims,
-                volume.spacing,
-                volume.origin,
-                first.dims,
-                first.spacing,
-                first.origin
-            );
-        }
-        for w in volume
-            .warnings
-            .iter()
-            .filter(|w| !first.warnings.contains(w))
-        {
-            warnings.push(format!("phase {}: {w}", i + 1));
-        }
-        let frame = dvr::Renderer::new(backend, &volume, tf)?.frame(opt, seen.sight(), format)?;
-        Ok((frame, seen.clone(), *opt))
-    })?;
+    frame_series(
+        a,
+        (first, overlay, None, labels),
+        n as u32,
+        format,
+        "cine",
+        |i| {
+            if i == 0 {
+                return Ok((
+                    renderer.frame(opt, seen.sight(), format)?,
+                    seen.clone(),
+                    *opt,
+                ));
+            }
+            let select = raystream_io::VolumeSelect {
+                phase: Some(i as usize + 1),
+                ..a.pick.select()
+            };
+            let volume = raystream_io::load_volume(path, &select)?;
+            let grid = |v: &raystream_io::Volume| (v.dims, v.spacing, v.origin, v.direction);
+            if grid(&volume) != grid(first) {
+                bail!(
+                    "{}: phase {} lies on another grid than phase 1 ({:?} voxels of {:?} mm at {:?} against {:?} of {:?} at {:?}): a cine needs one",
+                    path.display(),
+                    i + 1,
+                    volume.dims,
+                    volume.spacing,
+                    volume.origin,
+                    first.dims,
+                    first.spacing,
+                    first.origin
+                );
+            }
+            for w in volume
+                .warnings
+                .iter()
+                .filter(|w| !first.warnings.contains(w))
+            {
+                warnings.push(format!("phase {}: {w}", i + 1));
+            }
+            let frame =
+                dvr::Renderer::new(backend, &volume, tf)?.frame(opt, seen.sight(), format)?;
+            Ok((frame, seen.clone(), *opt))
+        },
+    )?;
     if !a.quiet {
         for w in warnings {
             eprintln!("raystream: {}: {w}", path.display());
@@ -1122,7 +1152,7 @@ impl<'a> FrameFolder<'a> {
 /// what `--draw-wall` draws a CPR's walls with.
 fn frame_series(
     a: &RenderArgs,
-    (volume, overlay, track): (&raystream_io::Volume, Overlay, Option<&Track>),
+    (volume, overlay, track, labels): (&raystream_io::Volume, Overlay, Option<&Track>, Labels),
     n: u32,
     format: ImageFormat,
     what: &str,
@@ -1135,6 +1165,10 @@ fn frame_series(
         let (mut f, seen, opt) = frame(i)?;
         base.get_or_insert(opt);
         frame_ms.push(f.frame_ms);
+        // The segmentation first, the lines drawn over it.
+        if let Some(l) = labels {
+            tint_segmentation(&mut f.picture, &seen, &opt, (volume, l));
+        }
         let dicom = DicomOut {
             series: Some((out.series.clone(), i + 1)),
             ..volume_dicom(a, &mut f.picture, &seen, &opt, (volume, overlay, track))

@@ -1545,36 +1545,73 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
         "--size",
         "96x80",
     ];
-    let plain = image::open(render_to("tint-plain.png", "cpu", &axial))
-        .unwrap()
-        .to_rgb8();
+    // Each pixel of a tinted slice (PNG) is the plain one's, or its tint by the label at the
+    // point the plain slice's DICOM plane puts it at, exactly; the pixels of each label.
+    let check = |plain: &std::path::Path, tinted: &std::path::Path, dcm: &std::path::Path| {
+        let (plain, tinted) = (
+            image::open(plain).unwrap().to_rgb8(),
+            image::open(tinted).unwrap().to_rgb8(),
+        );
+        let obj = dicom_object::open_file(dcm).unwrap();
+        let floats = |tag| obj.element(tag).unwrap().to_multi_float64().unwrap();
+        let (o, turn, spacing) = (
+            DVec3::from_slice(&floats(tags::IMAGE_POSITION_PATIENT)),
+            floats(tags::IMAGE_ORIENTATION_PATIENT),
+            floats(tags::PIXEL_SPACING)[0],
+        );
+        let (r, c) = (DVec3::from_slice(&turn[..3]), DVec3::from_slice(&turn[3..]));
+        let mut held = [0; 3];
+        for (x, y, px) in tinted.enumerate_pixels() {
+            let p = o + (r * x as f64 + c * y as f64) * spacing;
+            let q = labels.world_to_index(p).round();
+            let inside = q.min_element() >= 0.0 && q.x < 120.0 && q.y < 126.0 && q.z < 164.0;
+            let label = if inside {
+                labels.at(q.x as usize, q.y as usize, q.z as usize) as u32
+            } else {
+                0
+            };
+            held[label as usize] += 1;
+            let base = plain.get_pixel(x, y).0;
+            let want = if label == 0 { base } else { tint(&base, label) };
+            assert_eq!(
+                px.0,
+                want,
+                "{}: pixel ({x}, {y}), label {label}",
+                dcm.display()
+            );
+        }
+        held
+    };
     let seg = [&axial[..], &["--segmentation", mask.to_str().unwrap()]].concat();
-    let tinted = image::open(render_to("tint-axial.png", "cpu", &seg))
-        .unwrap()
-        .to_rgb8();
-    let obj = dicom_object::open_file(render_to("tint-plain.dcm", "cpu", &axial)).unwrap();
-    let floats = |tag| obj.element(tag).unwrap().to_multi_float64().unwrap();
-    let (o, turn, spacing) = (
-        DVec3::from_slice(&floats(tags::IMAGE_POSITION_PATIENT)),
-        floats(tags::IMAGE_ORIENTATION_PATIENT),
-        floats(tags::PIXEL_SPACING)[0],
+    let held = check(
+        &render_to("tint-plain.png", "cpu", &axial),
+        &render_to("tint-axial.png", "cpu", &seg),
+        &render_to("tint-plain.dcm", "cpu", &axial),
     );
-    let (r, c) = (DVec3::from_slice(&turn[..3]), DVec3::from_slice(&turn[3..]));
-    let mut held = [0; 3];
-    for (x, y, px) in tinted.enumerate_pixels() {
-        let p = o + (r * x as f64 + c * y as f64) * spacing;
-        let q = labels.world_to_index(p).round();
-        let label = if q.min_element() < 0.0 || q.x >= 120.0 || q.y >= 126.0 || q.z >= 164.0 {
-            0
-        } else {
-            labels.at(q.x as usize, q.y as usize, q.z as usize) as u32
-        };
-        held[label as usize] += 1;
-        let base = plain.get_pixel(x, y).0;
-        let want = if label == 0 { base } else { tint(&base, label) };
-        assert_eq!(px.0, want, "pixel ({x}, {y}), label {label}");
-    }
     assert!(held[1] > 100 && held[2] > 10, "{held:?}");
+    // Cross-sections down the path (frames, each tinted under what is drawn on it).
+    let sections = cpr_args(&vol, &path, &["--size", "48x48", "--slices", "3"]);
+    let out = |name: &str, more: &[&str]| {
+        let dir = tmp(name);
+        std::fs::remove_dir_all(&dir).ok();
+        let mut all = vec!["render", "--quiet", "--device", "cpu"];
+        all.extend_from_slice(&sections);
+        all.extend_from_slice(more);
+        all.extend_from_slice(&["-o", dir.to_str().unwrap()]);
+        let o = run(&all);
+        assert!(o.status.success(), "{all:?}: {}", stderr(&o));
+        dir
+    };
+    let (plain, tinted, dcm) = (
+        out("tint-sections-plain", &[]),
+        out("tint-sections", &["--segmentation", mask.to_str().unwrap()]),
+        out("tint-sections-dcm", &["--format", "dcm"]),
+    );
+    for i in 0..3 {
+        let f = |d: &std::path::Path, ext: &str| d.join(format!("frame_{i:03}.{ext}"));
+        let held = check(&f(&plain, "png"), &f(&tinted, "png"), &f(&dcm, "dcm"));
+        assert!(held[1] > 100 && held[2] > 10, "section {i}: {held:?}");
+    }
     // A CPR down the path: every pixel plain or tinted as a label; the lumen down its middle.
     let cpr = cpr_args(&vol, &path, &["--size", "64x160"]);
     let plain = image::open(render_to("tint-cpr-plain.png", "cpu", &cpr))
@@ -1599,7 +1636,7 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
         held[1] > 2000 && held[2] > 100 && middle > 100,
         "{held:?}, {middle} rows"
     );
-    // Only a slice or a CPR, one picture, of a label map.
+    // Only a slice or a CPR, of a label map.
     refused(
         &[
             "render",
