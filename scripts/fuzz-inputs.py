@@ -423,6 +423,11 @@ def fuzz_files(work, n, device):
                    if random.random() < 0.25 else ["-o", os.path.join(d, "o.exr")] + phase)
             why = run(["render", p, "--mode", mode, "--size", "8x8", "-q", "--device", device,
                        "--view", random.choice(["inferior", "left", "anterior"])] + extra + out, s)
+            # Sometimes a slice of it tinted by itself as a label map (a Segmentation is one;
+            # a CT is refused as none).
+            if not why and random.random() < 0.2:
+                why = run(["render", p, "--mode", "slice", "--size", "8x8", "-q", "--device",
+                           device, "--segmentation", p] + phase + ["-o", os.path.join(d, "t.png")], s)
         if why:
             bad += 1
             print(f"FAIL {p}: {why}")
