@@ -218,9 +218,48 @@ fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     Ok(())
 }
 
+/// A label map holds at most this many labels (besides 0) for `info` to list them.
+const MAX_LABELS: usize = 64;
+
+/// A label map's labels, each with its voxels: none where the volume is not one (Hounsfield
+/// units, a value that is not a whole number from 0, or over [`MAX_LABELS`] labels).
+fn label_counts(v: &raystream_io::Volume) -> Option<Vec<(u32, usize)>> {
+    if v.unit == raystream_io::ValueUnit::Hounsfield {
+        return None;
+    }
+    let mut counts = std::collections::BTreeMap::new();
+    for &x in &v.data {
+        if !(x.is_finite() && x >= 0.0 && x.fract() == 0.0) {
+            return None;
+        }
+        if x > 0.0 {
+            *counts.entry(x as u32).or_insert(0usize) += 1;
+            if counts.len() > MAX_LABELS {
+                return None;
+            }
+        }
+    }
+    Some(counts.into_iter().collect())
+}
+
 fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     let v = raystream_io::load_volume(input, &a.pick.select())?;
     let range = v.value_range();
+    // A label map's labels, their voxels and volumes, and a Segmentation's names for them.
+    let voxel_ml = v.index_to_world_affine().matrix3.determinant().abs() / 1000.0;
+    let labels: Vec<(u32, usize, f64, String)> = label_counts(&v)
+        .unwrap_or_default()
+        .into_iter()
+        .map(|(l, n)| {
+            let name = v
+                .series
+                .as_ref()
+                .and_then(|s| s.segments.iter().find(|(k, _)| *k as u32 == l))
+                .map(|(_, name)| name.clone())
+                .unwrap_or_default();
+            (l, n, n as f64 * voxel_ml, name)
+        })
+        .collect();
     let unit = match v.unit {
         raystream_io::ValueUnit::Hounsfield => "HU",
         raystream_io::ValueUnit::Unknown => "unknown",
@@ -250,6 +289,14 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             "phase": {"index": v.phase.index, "count": v.phase.count},
             "warnings": v.warnings,
         });
+        if label_counts(&v).is_some() {
+            out["labels"] = labels
+                .iter()
+                .map(|(l, n, ml, name)| {
+                    json!({"value": l, "voxels": n, "ml": (ml * 1e3).round() / 1e3, "name": name})
+                })
+                .collect();
+        }
         out["hu_range"] = match (v.unit, range) {
             (raystream_io::ValueUnit::Hounsfield, Some((lo, hi))) => json!([lo, hi]),
             _ => serde_json::Value::Null,
@@ -277,6 +324,14 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
         match range {
             Some((lo, hi)) => println!("  values     {lo} .. {hi} ({unit})"),
             None => println!("  values     all NaN"),
+        }
+        for (l, n, ml, name) in &labels {
+            let name = if name.is_empty() {
+                String::new()
+            } else {
+                format!(" ({name})")
+            };
+            println!("  label      {l}{name}: {n} voxels, {ml:.1} ml");
         }
         if v.phase.count > 1 {
             println!(

@@ -1443,6 +1443,25 @@ fn the_mask_as_a_dicom_segmentation_of_the_series() {
         );
     };
     reads_as_the_map(&seg, "raystream");
+    // `info` lists each label's voxels and volume, with the Segmentation's names for them;
+    // a CT has no labels.
+    let info = |file: &str| -> serde_json::Value {
+        let o = run(&["info", file, "--json"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_str(&stdout(&o)).unwrap()
+    };
+    for (file, names) in [
+        (seg_file, ["Lumen", "Wall and thrombus"]),
+        (nii.to_str().unwrap(), ["", ""]),
+    ] {
+        let got = info(file)["labels"].clone();
+        let want = serde_json::json!([
+            {"value": 1, "voxels": k["lumen_voxels"], "ml": k["lumen_ml"], "name": names[0]},
+            {"value": 2, "voxels": k["wall_voxels"], "ml": k["wall_ml"], "name": names[1]},
+        ]);
+        assert_eq!(got, want, "{file}");
+    }
+    assert!(info(&chest())["labels"].is_null());
     // Beside the series' images it is skipped, named, and the CT read as before.
     std::fs::copy(&seg, dir.join("seg.dcm")).unwrap();
     let beside = raystream_io::load_volume(&dir, &select).unwrap();
