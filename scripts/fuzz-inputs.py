@@ -186,12 +186,24 @@ def item(**kw):
     return d
 
 
+def file_bytes(ds):
+    """The data set `ds` as a DICOM file's bytes: its file meta, Explicit VR Little Endian."""
+    import io
+    from pydicom.dataset import FileMetaDataset
+    from pydicom.uid import ExplicitVRLittleEndian
+    ds.file_meta = FileMetaDataset()
+    ds.file_meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    ds.file_meta.MediaStorageSOPClassUID = ds.SOPClassUID
+    ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
+    out = io.BytesIO()
+    ds.save_as(out, enforce_file_format=True)
+    return out.getvalue()
+
+
 def enhanced_ct():
     """A 3-frame 8x6 enhanced CT: per-frame positions and rescales, shared plane and spacing."""
-    import io
-    from pydicom.dataset import Dataset, FileMetaDataset
+    from pydicom.dataset import Dataset
     from pydicom.sequence import Sequence
-    from pydicom.uid import ExplicitVRLittleEndian
 
     ds = Dataset()
     ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.2.1", "2.25.7"
@@ -208,22 +220,14 @@ def enhanced_ct():
             RescaleIntercept=-1024 - k, RescaleSlope=1, RescaleType="HU")]))
         for k in (2, 0, 1)])
     ds.PixelData = struct.pack("<144H", *[(i * 37) % 3000 for i in range(144)])
-    ds.file_meta = FileMetaDataset()
-    ds.file_meta.TransferSyntaxUID = ExplicitVRLittleEndian
-    ds.file_meta.MediaStorageSOPClassUID = ds.SOPClassUID
-    ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
-    out = io.BytesIO()
-    ds.save_as(out, enforce_file_format=True)
-    return out.getvalue()
+    return file_bytes(ds)
 
 
 def segmentation():
     """A DICOM Segmentation of two binary segments: 3 frames of 7x5 (the bits run on across
     bytes), two on one plane, shared orientation and spacing."""
-    import io
-    from pydicom.dataset import Dataset, FileMetaDataset
+    from pydicom.dataset import Dataset
     from pydicom.sequence import Sequence
-    from pydicom.uid import ExplicitVRLittleEndian
 
     ds = Dataset()
     ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.66.4", "2.25.9"
@@ -241,13 +245,7 @@ def segmentation():
         SegmentIdentificationSequence=Sequence([item(ReferencedSegmentNumber=n)]))
         for k, n in ((0, 1), (2, 1), (2, 2))])
     ds.PixelData = bytes((i * 37) % 256 for i in range(14))
-    ds.file_meta = FileMetaDataset()
-    ds.file_meta.TransferSyntaxUID = ExplicitVRLittleEndian
-    ds.file_meta.MediaStorageSOPClassUID = ds.SOPClassUID
-    ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
-    out = io.BytesIO()
-    ds.save_as(out, enforce_file_format=True)
-    return out.getvalue()
+    return file_bytes(ds)
 
 
 def mutate(b, text):
