@@ -2,7 +2,8 @@
 //! writes it, or another tool) read as a label volume: each voxel the number of the segment
 //! that holds it, 0 where none does, on the grid its frames lie on (the frames' common
 //! orientation and pixel spacing; slices from the first frame's plane to the last's, as far
-//! apart as the Segmentation says, or as its frames' nearest planes lie). BINARY segments
+//! apart as the Segmentation says, or as its frames' nearest planes lie, stacked along the
+//! line through them: a gantry-tilted CT's Segmentation on its sheared grid). BINARY segments
 //! (one bit a pixel) and FRACTIONAL ones (8 bits; a voxel held where the fraction reaches half
 //! the maximum), native (uncompressed) pixel data.
 
@@ -185,15 +186,36 @@ pub(crate) fn read(
     let nz = (span / spacing).round() as usize + 1;
     let dims = [cols, rows, nz];
     voxel_count(file, dims)?;
-    let origin = [0, 1, 2].map(|a| p0[a] + normal[a] * first);
+    // The line the frames are stacked on, from the nearest to the farthest along the normal:
+    // the normal, or the table's path of a gantry-tilted series (a sheared grid, as its CT's).
+    let by = |key: fn(f64, f64) -> bool| {
+        (0..frames)
+            .reduce(|a, b| if key(along[b], along[a]) { b } else { a })
+            .expect("a frame or more")
+    };
+    let (near, far) = (by(|x, y| x < y), by(|x, y| x > y));
+    let origin = planes[near].0;
+    let axis = if span > 1e-3 {
+        let line = sub(planes[far].0, origin);
+        let line = line.map(|v| v / dot(line, line).sqrt());
+        let tilt = dot(line, normal).clamp(-1.0, 1.0).acos().to_degrees();
+        if tilt > 45.0 {
+            return Err(bad(format!(
+                "its frames are stacked {tilt:.1}° off their normal: not one stack"
+            )));
+        }
+        if tilt > 0.05 { line } else { normal }
+    } else {
+        normal
+    };
+    let step = spacing / dot(axis, normal);
     // Every frame on a slice of that grid, in its plane's place.
     let mut slice_of = Vec::with_capacity(frames);
     for (f, (&d, p)) in along.iter().zip(&planes).enumerate() {
         let k = (d - first) / spacing;
-        let off = sub(sub(p.0, origin), normal.map(|v| v * (d - first)));
-        let (across, down) = (dot(off, row), dot(off, col));
+        let off = sub(sub(p.0, origin), axis.map(|v| v * k.round() * step));
         let tol = 0.1 * pixel[0].min(pixel[1]);
-        if (k - k.round()).abs() > 0.1 || across.abs() > tol || down.abs() > tol {
+        if (k - k.round()).abs() > 0.1 || dot(off, off).sqrt() > tol {
             return Err(bad(format!(
                 "frame {} lies off the grid of its frames ({spacing:.3} mm apart along their normal)",
                 f + 1
@@ -220,8 +242,8 @@ pub(crate) fn read(
             }
         }
     }
-    let spacing3 = [pixel[1], pixel[0], spacing];
-    let direction = std::array::from_fn(|r| [row[r], col[r], normal[r]]);
+    let spacing3 = [pixel[1], pixel[0], step];
+    let direction = std::array::from_fn(|r| [row[r], col[r], axis[r]]);
     check_geometry(file, dims, spacing3, origin, &direction)?;
     let mut warnings = Vec::new();
     if overlap > 0 {
