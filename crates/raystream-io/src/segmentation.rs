@@ -452,6 +452,8 @@ fn segment_item(number: usize, seg: &Segment, algorithm: &str) -> InMemDicomObje
 /// A frame's Derivation Image functional group: `source`, the image it segments.
 fn derivation(source: &SourceImage) -> DataElement<InMemDicomObject> {
     let mut image = reference(source, true);
+    // The frame's pixels lie where the source image's do.
+    image.push(text(tags::SPATIAL_LOCATIONS_PRESERVED, VR::CS, "YES"));
     image.push(code(
         tags::PURPOSE_OF_REFERENCE_CODE_SEQUENCE,
         Code {

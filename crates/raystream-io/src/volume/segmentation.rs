@@ -5,7 +5,8 @@
 //! apart as the Segmentation says, or as its frames' nearest planes lie, stacked along the
 //! line through them: a gantry-tilted CT's Segmentation on its sheared grid). BINARY segments
 //! (one bit a pixel) and FRACTIONAL ones (8 bits; a voxel held where the fraction reaches half
-//! the maximum), native (uncompressed) pixel data.
+//! the maximum), and DICOM 2024's LABELMAP Segmentations (SOP class …66.7: a frame a slice,
+//! each pixel its segment's number, 8 or 16 bits); native (uncompressed) pixel data.
 
 use std::path::Path;
 
@@ -17,6 +18,19 @@ use super::{DicomSeriesInfo, Phase, ValueUnit, Volume, VolumeError, VolumeFormat
 use super::{check_geometry, voxel_count};
 
 const SEGMENTATION: &str = "1.2.840.10008.5.1.4.1.1.66.4";
+/// Label Map Segmentation Storage (DICOM 2024): a frame a slice, each pixel its segment.
+const LABEL_MAP_SEGMENTATION: &str = "1.2.840.10008.5.1.4.1.1.66.7";
+
+/// How a Segmentation's pixels say which segment holds them.
+#[derive(Clone, Copy)]
+enum Pixels {
+    /// One bit a pixel: its frame's segment, or none.
+    Binary,
+    /// 8 bits: its frame's segment from this fraction (half the maximum) on.
+    Fractional(u8),
+    /// 8 or 16 bits (this many bytes): the segment's number itself, 0 none.
+    LabelMap(usize),
+}
 
 /// Whether the data set is a DICOM Segmentation.
 pub(crate) fn is_segmentation(meta: &FileMeta, obj: &InMemDicomObject) -> bool {
@@ -26,7 +40,7 @@ pub(crate) fn is_segmentation(meta: &FileMeta, obj: &InMemDicomObject) -> bool {
         .map(|s| s.trim_end_matches(['\0', ' ']).to_string())
         .filter(|s| !s.is_empty())
         .unwrap_or_else(|| meta.sop_class.clone());
-    class == SEGMENTATION
+    class == SEGMENTATION || class == LABEL_MAP_SEGMENTATION
 }
 
 /// The Segmentation in `obj` (read from `file`) as a label volume.
@@ -50,17 +64,18 @@ pub(crate) fn read(
     let frames = need(tags::NUMBER_OF_FRAMES, "Number of Frames")? as usize;
     let bits = need(tags::BITS_ALLOCATED, "Bits Allocated")?;
     let kind = text(obj, tags::SEGMENTATION_TYPE);
-    let half = match (kind.as_str(), bits) {
-        ("BINARY", 1) => None,
+    let kind = match (kind.as_str(), bits) {
+        ("BINARY", 1) => Pixels::Binary,
         ("FRACTIONAL", 8) => {
             let max = int(obj, tags::MAXIMUM_FRACTIONAL_VALUE)
                 .unwrap_or(255)
                 .clamp(1, 255);
-            Some(max.div_ceil(2) as u8)
+            Pixels::Fractional(max.div_ceil(2) as u8)
         }
+        ("LABELMAP", 8 | 16) => Pixels::LabelMap(bits as usize / 8),
         _ => {
             return Err(bad(format!(
-                "segmentation type {kind:?} with {bits} bits a pixel (BINARY with 1, FRACTIONAL with 8 are read)"
+                "segmentation type {kind:?} with {bits} bits a pixel (BINARY with 1, FRACTIONAL with 8, LABELMAP with 8 or 16 are read)"
             )));
         }
     };
@@ -84,7 +99,11 @@ pub(crate) fn read(
         .ok_or_else(|| bad("a frame too large".into()))?;
     let want = per
         .checked_mul(frames)
-        .map(|n| if half.is_some() { n } else { n.div_ceil(8) })
+        .and_then(|n| match kind {
+            Pixels::Binary => Some(n.div_ceil(8)),
+            Pixels::Fractional(_) => Some(n),
+            Pixels::LabelMap(bytes) => n.checked_mul(bytes),
+        })
         .ok_or_else(|| bad("too many pixels".into()))?;
     if pixels.len() < want {
         return Err(bad(format!(
@@ -124,17 +143,21 @@ pub(crate) fn read(
     for (f, item) in per_frame.iter().enumerate() {
         let groups: Vec<&InMemDicomObject> = [Some(item), shared].into_iter().flatten().collect();
         let g = FrameGeometry::of(&groups, Some(obj));
-        let segment = groups
-            .iter()
-            .find_map(|g| {
-                let id = g
-                    .get(tags::SEGMENT_IDENTIFICATION_SEQUENCE)?
-                    .items()?
-                    .first()?;
-                int(id, tags::REFERENCED_SEGMENT_NUMBER)
-            })
-            .ok_or_else(|| bad(format!("frame {} names no segment", f + 1)))?;
-        if segment == 0 || segment > 65535 {
+        // A label map's pixels name their segments; a binary or fractional frame is one's.
+        let segment = match kind {
+            Pixels::LabelMap(_) => 0,
+            _ => groups
+                .iter()
+                .find_map(|g| {
+                    let id = g
+                        .get(tags::SEGMENT_IDENTIFICATION_SEQUENCE)?
+                        .items()?
+                        .first()?;
+                    int(id, tags::REFERENCED_SEGMENT_NUMBER)
+                })
+                .ok_or_else(|| bad(format!("frame {} names no segment", f + 1)))?,
+        };
+        if !matches!(kind, Pixels::LabelMap(_)) && !(1..=65535).contains(&segment) {
             return Err(bad(format!("frame {} names segment {segment}", f + 1)));
         }
         let missing = |what: &str| bad(format!("frame {} has no {what}", f + 1));
@@ -230,9 +253,14 @@ pub(crate) fn read(
         let out = &mut data[k * per..(k + 1) * per];
         for (p, v) in out.iter_mut().enumerate() {
             let b = f * per + p;
-            let held = match half {
-                None => pixels[b / 8] >> (b % 8) & 1 == 1,
-                Some(h) => pixels[b] >= h,
+            let (held, label) = match kind {
+                Pixels::Binary => (pixels[b / 8] >> (b % 8) & 1 == 1, label),
+                Pixels::Fractional(h) => (pixels[b] >= h, label),
+                Pixels::LabelMap(1) => (pixels[b] > 0, pixels[b] as f32),
+                Pixels::LabelMap(_) => {
+                    let l = u16::from_le_bytes([pixels[2 * b], pixels[2 * b + 1]]);
+                    (l > 0, l as f32)
+                }
             };
             if held {
                 if *v != 0.0 && *v != label {
