@@ -145,16 +145,25 @@ pub fn write_segmentation(
         .expect("checked by segmentation_source");
     let study = &series.study;
 
-    // The frames: each segment's slices that hold it, in segment then slice order.
+    // The frames: each segment's slices that hold it, in segment then slice order, one bit a
+    // pixel, the first pixel in the lowest bit, frames packed on without padding (PS3.5
+    // 8.1.1).
     let per = nx * ny;
     let mut frames: Vec<(usize, usize)> = Vec::new();
     let mut voxels = vec![0usize; segments.len()];
+    let mut bits: Vec<u8> = Vec::new();
     for (s, seg) in segments.iter().enumerate() {
         for k in 0..nz {
-            let n = labels[k * per..(k + 1) * per]
-                .iter()
-                .filter(|&&l| l == seg.value)
-                .count();
+            let start = frames.len() * per;
+            let mut n = 0;
+            for (p, &l) in labels[k * per..(k + 1) * per].iter().enumerate() {
+                if l == seg.value {
+                    let b = start + p;
+                    bits.resize(bits.len().max(b / 8 + 1), 0);
+                    bits[b / 8] |= 1 << (b % 8);
+                    n += 1;
+                }
+            }
             if n > 0 {
                 frames.push((s, k));
                 voxels[s] += n;
@@ -164,21 +173,8 @@ pub fn write_segmentation(
     if frames.is_empty() {
         return Err(fail(&"no voxel holds any of the segments' labels"));
     }
-    // One bit a pixel, the first pixel in the lowest bit, frames packed on without padding
-    // (PS3.5 8.1.1).
-    let mut bits = vec![0u8; (frames.len() * per).div_ceil(8)];
-    for (f, &(s, k)) in frames.iter().enumerate() {
-        let value = segments[s].value;
-        for (p, &l) in labels[k * per..(k + 1) * per].iter().enumerate() {
-            if l == value {
-                let b = f * per + p;
-                bits[b / 8] |= 1 << (b % 8);
-            }
-        }
-    }
-    if bits.len() % 2 == 1 {
-        bits.push(0);
-    }
+    // The last frame's bits, and a pad byte to an even length.
+    bits.resize((frames.len() * per).div_ceil(8).next_multiple_of(2), 0);
 
     let sop_uid = new_uid();
     let now = dicom_core::chrono::Utc::now();
@@ -507,15 +503,18 @@ fn code(tag: Tag, c: Code) -> DataElement<InMemDicomObject> {
     )
 }
 
-fn item(elements: Vec<DataElement<InMemDicomObject>>) -> InMemDicomObject {
+/// A sequence item holding `elements`.
+pub(crate) fn item(elements: Vec<DataElement<InMemDicomObject>>) -> InMemDicomObject {
     InMemDicomObject::from_element_iter(elements)
 }
 
-fn seq(tag: Tag, items: Vec<InMemDicomObject>) -> DataElement<InMemDicomObject> {
+/// A sequence of `items`.
+pub(crate) fn seq(tag: Tag, items: Vec<InMemDicomObject>) -> DataElement<InMemDicomObject> {
     DataElement::new(tag, VR::SQ, DataSetSequence::from(items))
 }
 
-fn text(tag: Tag, vr: VR, s: &str) -> DataElement<InMemDicomObject> {
+/// A text element.
+pub(crate) fn text(tag: Tag, vr: VR, s: &str) -> DataElement<InMemDicomObject> {
     DataElement::new(tag, vr, PrimitiveValue::from(s))
 }
 

@@ -246,20 +246,21 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     let v = raystream_io::load_volume(input, &a.pick.select())?;
     let range = v.value_range();
     // A label map's labels, their voxels and volumes, and a Segmentation's names for them.
-    let voxel_ml = v.index_to_world_affine().matrix3.determinant().abs() / 1000.0;
-    let labels: Vec<(u32, usize, f64, String)> = label_counts(&v)
-        .unwrap_or_default()
-        .into_iter()
-        .map(|(l, n)| {
-            let name = v
-                .series
-                .as_ref()
-                .and_then(|s| s.segments.iter().find(|(k, _)| *k as u32 == l))
-                .map(|(_, name)| name.clone())
-                .unwrap_or_default();
-            (l, n, n as f64 * voxel_ml, name)
-        })
-        .collect();
+    let voxel_ml = v.voxel_ml();
+    let labels: Option<Vec<(u32, usize, f64, String)>> = label_counts(&v).map(|counts| {
+        counts
+            .into_iter()
+            .map(|(l, n)| {
+                let name = v
+                    .series
+                    .as_ref()
+                    .and_then(|s| s.segments.iter().find(|(k, _)| *k as u32 == l))
+                    .map(|(_, name)| name.clone())
+                    .unwrap_or_default();
+                (l, n, n as f64 * voxel_ml, name)
+            })
+            .collect()
+    });
     let unit = match v.unit {
         raystream_io::ValueUnit::Hounsfield => "HU",
         raystream_io::ValueUnit::Unknown => "unknown",
@@ -289,7 +290,7 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             "phase": {"index": v.phase.index, "count": v.phase.count},
             "warnings": v.warnings,
         });
-        if label_counts(&v).is_some() {
+        if let Some(labels) = &labels {
             out["labels"] = labels
                 .iter()
                 .map(|(l, n, ml, name)| {
@@ -325,7 +326,7 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             Some((lo, hi)) => println!("  values     {lo} .. {hi} ({unit})"),
             None => println!("  values     all NaN"),
         }
-        for (l, n, ml, name) in &labels {
+        for (l, n, ml, name) in labels.iter().flatten() {
             let name = if name.is_empty() {
                 String::new()
             } else {

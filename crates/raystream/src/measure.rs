@@ -480,11 +480,6 @@ fn write_mask(
     let labels = label_path(volume, points, opt, wall)
         .map_err(|e| anyhow::anyhow!("{}: --mask: {e}", a.path.display()))?;
     pb.finish_and_clear();
-    let what = if wall.is_some() {
-        "raystream measure: 1 lumen, 2 outer wall beyond the lumen"
-    } else {
-        "raystream measure: 1 lumen"
-    };
     let frames = if raystream_io::is_segmentation_path(out) {
         let info = raystream_io::SegmentationInfo {
             description: if wall.is_some() {
@@ -500,10 +495,15 @@ fn write_mask(
             raystream_io::write_segmentation(out, volume, &labels.data, &segments, &info)?;
         Some(written.frames)
     } else {
+        let what = if wall.is_some() {
+            "raystream measure: 1 lumen, 2 outer wall beyond the lumen"
+        } else {
+            "raystream measure: 1 lumen"
+        };
         raystream_io::write_label_map(out, volume, &labels.data, what)?;
         None
     };
-    let voxel_ml = volume.index_to_world_affine().matrix3.determinant().abs() / 1000.0;
+    let voxel_ml = volume.voxel_ml();
     let of = |l: u8| {
         let n = labels.count(l);
         (n, n as f64 * voxel_ml)

@@ -215,20 +215,19 @@ pub fn tint(base: [u8; 3], label: u32) -> [u8; 3] {
 
 /// Tints each pixel of the picture, `width` pixels a row, by the label of `labels` (a label volume:
 /// whole numbers, 0 none) at the voxel nearest its point in the patient (`point(x, y)`, LPS
-/// mm); the pixels tinted.
+/// mm).
 pub fn tint_labels(
     rgb: &mut [u8],
     width: u32,
     labels: &raystream_io::Volume,
     point: impl Fn(u32, u32) -> DVec3 + Sync,
-) -> usize {
+) {
     use rayon::prelude::*;
     let to_index = labels.index_to_world_affine().inverse();
     let [nx, ny, nz] = labels.dims;
     rgb.par_chunks_mut(3 * width as usize)
         .enumerate()
-        .map(|(y, row)| {
-            let mut n = 0;
+        .for_each(|(y, row)| {
             for (x, px) in row.chunks_mut(3).enumerate() {
                 let q = to_index.transform_point3(point(x as u32, y as u32)).round();
                 if q.min_element() < 0.0 || q.x >= nx as f64 || q.y >= ny as f64 || q.z >= nz as f64
@@ -237,14 +236,10 @@ pub fn tint_labels(
                 }
                 let v = labels.at(q.x as usize, q.y as usize, q.z as usize);
                 if v >= 0.5 {
-                    let t = tint([px[0], px[1], px[2]], v.round() as u32);
-                    px.copy_from_slice(&t);
-                    n += 1;
+                    px.copy_from_slice(&tint([px[0], px[1], px[2]], v.round() as u32));
                 }
             }
-            n
-        })
-        .sum()
+        });
 }
 
 #[cfg(test)]

@@ -150,8 +150,12 @@ fn volume_dicom(
     picture: &mut Picture,
     seen: &Seen,
     opt: &DvrOptions,
-    (volume, overlay, track): (&raystream_io::Volume, Overlay, Option<&Track>),
+    (volume, overlay, track, labels): (&raystream_io::Volume, Overlay, Option<&Track>, Labels),
 ) -> DicomOut {
+    // The segmentation first, the lines drawn over it.
+    if let Some(l) = labels {
+        tint_segmentation(picture, seen, opt, (volume, l));
+    }
     let window = Some(opt.shown_window());
     match seen {
         Seen::Camera(cam) => DicomOut {
@@ -198,20 +202,20 @@ fn segmentation(a: &RenderArgs, format: ImageFormat) -> Result<Option<raystream_
 }
 
 /// Tints the picture by `labels` at each pixel's point ([`crate::overlay::tint_labels`]): a
-/// slice's plane or a CPR's curved surface. Whether any pixel was.
+/// slice's plane or a CPR's curved surface.
 fn tint_segmentation(
     picture: &mut Picture,
     seen: &Seen,
     opt: &DvrOptions,
     (volume, labels): (&raystream_io::Volume, &raystream_io::Volume),
-) -> bool {
+) {
     let Picture::Srgb8 { rgb, width, .. } = picture else {
-        return false;
+        return;
     };
-    let n = match seen {
+    match seen {
         Seen::Camera(cam) => {
             let Some(p) = pixel_plane(opt, volume, cam) else {
-                return false;
+                return;
             };
             use raystream_math::DVec3;
             let (o, r, c) = (
@@ -226,8 +230,7 @@ fn tint_segmentation(
         Seen::Curved(plane) => {
             crate::overlay::tint_labels(rgb, *width, labels, |x, y| plane.point(x, y).0.as_dvec3())
         }
-    };
-    n > 0
+    }
 }
 
 /// `--draw-lumen HU`'s lumen options for `volume` (`measure`'s defaults at that threshold).
@@ -672,10 +675,6 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     }
     pb.finish_and_clear();
     let mut frame = last.expect("at least one frame");
-    // The segmentation first, the lines drawn over it.
-    if let Some(l) = &labels {
-        tint_segmentation(&mut frame.picture, &seen, &opt, (&volume, l));
-    }
     let slab = match (&seen, &a.path) {
         (Seen::Curved(plane), Some(file)) => curved_words(file, plane, &opt),
         _ => slab_words(&opt, &volume),
@@ -685,7 +684,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         &mut frame.picture,
         &seen,
         &opt,
-        (&volume, overlay, track.as_ref()),
+        (&volume, overlay, track.as_ref(), labels.as_ref()),
     );
     frame
         .picture
@@ -1165,13 +1164,15 @@ fn frame_series(
         let (mut f, seen, opt) = frame(i)?;
         base.get_or_insert(opt);
         frame_ms.push(f.frame_ms);
-        // The segmentation first, the lines drawn over it.
-        if let Some(l) = labels {
-            tint_segmentation(&mut f.picture, &seen, &opt, (volume, l));
-        }
         let dicom = DicomOut {
             series: Some((out.series.clone(), i + 1)),
-            ..volume_dicom(a, &mut f.picture, &seen, &opt, (volume, overlay, track))
+            ..volume_dicom(
+                a,
+                &mut f.picture,
+                &seen,
+                &opt,
+                (volume, overlay, track, labels),
+            )
         };
         f.picture
             .save(&out.path(i), &exr_comment(a, &opt, volume, &seen), &dicom)?;

@@ -152,14 +152,17 @@ pub fn list_dicom_series(path: &Path) -> Result<Vec<(String, usize, String)>, Vo
 }
 
 pub(crate) fn load(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeError> {
-    if path.is_file() {
+    // A file is read and parsed once: a Segmentation, or an image's slices.
+    let (slices, mut warnings) = if path.is_file() {
         let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
         let (meta, obj) = parse_dataset(&bytes, path)?;
         if super::segmentation::is_segmentation(&meta, &obj) {
             return super::segmentation::read(path, &meta, &obj);
         }
-    }
-    let (slices, mut warnings) = read_folder(path)?;
+        (slices_of(&meta, obj, path)?, Vec::new())
+    } else {
+        read_folder(path)?
+    };
     // So far the warnings are the files skipped as unreadable; a problem with the series (a
     // gap, above all) is often one of them, so its error names them.
     let skipped = warnings.clone();
@@ -462,8 +465,17 @@ pub(crate) fn parse_dataset(
 /// (enhanced) one.
 pub(crate) fn parse_file(bytes: &[u8], file: &Path) -> Result<Vec<Slice>, VolumeError> {
     let (meta, obj) = parse_dataset(bytes, file)?;
+    slices_of(&meta, obj, file)
+}
+
+/// The slices of the parsed data set `obj` (with its file meta `meta`) of `file`.
+fn slices_of(
+    meta: &FileMeta,
+    obj: InMemDicomObject,
+    file: &Path,
+) -> Result<Vec<Slice>, VolumeError> {
     let ts_uid = meta.ts_uid.clone();
-    if super::segmentation::is_segmentation(&meta, &obj) {
+    if super::segmentation::is_segmentation(meta, &obj) {
         return Err(VolumeError::invalid(
             file,
             "a DICOM Segmentation, not an image of a series (read it by its own name)",
@@ -613,15 +625,12 @@ impl FrameGeometry {
     }
 }
 
-/// The frames of a multi-frame (enhanced) image as planes, from its per-frame and shared
-/// functional groups (PS3.3 C.7.6.16: Plane Position, Plane Orientation, Pixel Measures), with
-/// the top level as the last resort (legacy multi-frame), each with its temporal position (Frame
-/// Content), which [`keep_phase`] chooses among. A file holding several stacks gives the frames
-/// of the first one only, and a warning.
-fn multi_frame_geometry(
+/// A multi-frame image's functional groups: an item a frame (there must be `frames`), and the
+/// shared item where there is one.
+pub(crate) fn functional_groups(
     obj: &InMemDicomObject,
-    frames: u32,
-) -> Result<(Vec<FrameGeometry>, Option<String>), String> {
+    frames: usize,
+) -> Result<(&[InMemDicomObject], Option<&InMemDicomObject>), String> {
     let per_frame = obj
         .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
         .and_then(|e| e.items())
@@ -631,7 +640,7 @@ fn multi_frame_geometry(
                  (5200,9230): where each frame lies is unknown"
             )
         })?;
-    if per_frame.len() != frames as usize {
+    if per_frame.len() != frames {
         return Err(format!(
             "NumberOfFrames is {frames} but the per-frame functional groups sequence has {} items",
             per_frame.len()
@@ -641,6 +650,19 @@ fn multi_frame_geometry(
         .get(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE)
         .and_then(|e| e.items())
         .and_then(|items| items.first());
+    Ok((per_frame, shared))
+}
+
+/// The frames of a multi-frame (enhanced) image as planes, from its per-frame and shared
+/// functional groups (PS3.3 C.7.6.16: Plane Position, Plane Orientation, Pixel Measures), with
+/// the top level as the last resort (legacy multi-frame), each with its temporal position (Frame
+/// Content), which [`keep_phase`] chooses among. A file holding several stacks gives the frames
+/// of the first one only, and a warning.
+fn multi_frame_geometry(
+    obj: &InMemDicomObject,
+    frames: u32,
+) -> Result<(Vec<FrameGeometry>, Option<String>), String> {
+    let (per_frame, shared) = functional_groups(obj, frames as usize)?;
     // Which stack and temporal position each frame belongs to (Frame Content macro).
     let content = |item: &InMemDicomObject| {
         let fc = item

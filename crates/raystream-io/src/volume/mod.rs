@@ -228,6 +228,11 @@ impl Volume {
         self.dims[0] * self.dims[1] * self.dims[2]
     }
 
+    /// A voxel's volume, millilitres (the grid's cell, sheared or not).
+    pub fn voxel_ml(&self) -> f64 {
+        self.index_to_world_affine().matrix3.determinant().abs() / 1000.0
+    }
+
     /// The value at voxel `(i, j, k)`; indices must be in range.
     #[inline]
     pub fn at(&self, i: usize, j: usize, k: usize) -> f32 {

@@ -6,12 +6,13 @@
 
 use std::path::{Path, PathBuf};
 
-use dicom_core::value::{DataSetSequence, PixelFragmentSequence};
+use dicom_core::value::PixelFragmentSequence;
 use dicom_core::{DataElement, PrimitiveValue, VR};
 use dicom_dictionary_std::tags;
 use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
 
 use super::*;
+use crate::segmentation::{item, seq, text};
 
 fn series() -> Volume {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -38,18 +39,6 @@ struct Layout {
     wrong_count: bool,
     /// Frame 3 (in file order) without its Plane Position.
     no_position: bool,
-}
-
-fn item(elements: Vec<DataElement<InMemDicomObject>>) -> InMemDicomObject {
-    InMemDicomObject::from_element_iter(elements)
-}
-
-fn seq(tag: dicom_core::Tag, items: Vec<InMemDicomObject>) -> DataElement<InMemDicomObject> {
-    DataElement::new(tag, VR::SQ, DataSetSequence::from(items))
-}
-
-fn text(tag: dicom_core::Tag, vr: VR, s: &str) -> DataElement<InMemDicomObject> {
-    DataElement::new(tag, vr, PrimitiveValue::from(s))
 }
 
 fn decimals(tag: dicom_core::Tag, v: &[f64]) -> DataElement<InMemDicomObject> {

@@ -13,7 +13,7 @@ use std::path::Path;
 use dicom_dictionary_std::tags;
 use dicom_object::InMemDicomObject;
 
-use super::dicom::{DicomStudy, FileMeta, FrameGeometry, cross, dot, sub};
+use super::dicom::{DicomStudy, FileMeta, FrameGeometry, cross, dot, functional_groups, sub};
 use super::{DicomSeriesInfo, Phase, ValueUnit, Volume, VolumeError, VolumeFormat};
 use super::{check_geometry, voxel_count};
 
@@ -111,20 +111,7 @@ pub(crate) fn read(
             pixels.len()
         )));
     }
-    let per_frame = obj
-        .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
-        .and_then(|e| e.items())
-        .ok_or_else(|| bad("no per-frame functional groups (5200,9230)".into()))?;
-    if per_frame.len() != frames {
-        return Err(bad(format!(
-            "Number of Frames is {frames} but the per-frame functional groups hold {}",
-            per_frame.len()
-        )));
-    }
-    let shared = obj
-        .get(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE)
-        .and_then(|e| e.items())
-        .and_then(|items| items.first());
+    let (per_frame, shared) = functional_groups(obj, frames).map_err(bad)?;
     let segments: Vec<(u16, String)> = obj
         .get(tags::SEGMENT_SEQUENCE)
         .and_then(|e| e.items())
