@@ -167,8 +167,9 @@ def seeds(d):
     try:
         w("mf.dcm", enhanced_ct())
         w("sg.dcm", segmentation())
+        w("sr.dcm", report())
     except ImportError:
-        print("no pydicom: the enhanced (multi-frame) CT and Segmentation seeds left out",
+        print("no pydicom: the enhanced (multi-frame) CT, Segmentation and report seeds left out",
               file=sys.stderr)
     ts = os.path.join(SHARED, "data/volumes/dicom/ct_slice_transfer_syntaxes")
     names = sorted(os.listdir(ts))
@@ -245,6 +246,55 @@ def segmentation():
         SegmentIdentificationSequence=Sequence([item(ReferencedSegmentNumber=n)]))
         for k, n in ((0, 1), (2, 1), (2, 2))])
     ds.PixelData = bytes((i * 37) % 256 for i in range(14))
+    return file_bytes(ds)
+
+
+def report():
+    """A DICOM Imaging Measurement Report (TID 1500): a measurement group with a tracking
+    identifier, a finding, a diameter with its derivation and its line (SCOORD3D), and a
+    segment's volume."""
+    from pydicom.dataset import Dataset
+    from pydicom.sequence import Sequence
+
+    def code(v, s, m):
+        return Sequence([item(CodeValue=v, CodingSchemeDesignator=s, CodeMeaning=m)])
+
+    def node(rel, kind, concept, **kw):
+        return item(RelationshipType=rel, ValueType=kind, ConceptNameCodeSequence=code(*concept), **kw)
+
+    mm = code("mm", "UCUM", "millimeter")
+    diameter = node("CONTAINS", "NUM", ("81827009", "SCT", "Diameter"),
+                    MeasuredValueSequence=Sequence([item(NumericValue="7.25", MeasurementUnitsCodeSequence=mm)]),
+                    ContentSequence=Sequence([
+                        node("HAS CONCEPT MOD", "CODE", ("121401", "DCM", "Derivation"),
+                             ConceptCodeSequence=code("56851009", "SCT", "Maximum")),
+                        node("INFERRED FROM", "SCOORD3D", ("260753009", "SCT", "Source"),
+                             ReferencedFrameOfReferenceUID="2.25.3", GraphicType="POLYLINE",
+                             GraphicData=[0.0, 1.0, 2.0, 3.0, 4.0, 5.0])]))
+    volume = node("CONTAINS", "NUM", ("118565006", "SCT", "Volume"),
+                  MeasuredValueSequence=Sequence([item(NumericValue="1.5",
+                                                       MeasurementUnitsCodeSequence=code("ml", "UCUM", "ml"))]))
+    group = node("CONTAINS", "CONTAINER", ("125007", "DCM", "Measurement Group"),
+                 ContinuityOfContent="SEPARATE", ContentSequence=Sequence([
+                     node("HAS OBS CONTEXT", "TEXT", ("112039", "DCM", "Tracking Identifier"), TextValue="g1"),
+                     node("CONTAINS", "CODE", ("121071", "DCM", "Finding"),
+                          ConceptCodeSequence=code("59820001", "SCT", "Blood vessel")),
+                     node("CONTAINS", "IMAGE", ("121191", "DCM", "Referenced Segment"),
+                          ReferencedSOPSequence=Sequence([item(
+                              ReferencedSOPClassUID="1.2.840.10008.5.1.4.1.1.66.4",
+                              ReferencedSOPInstanceUID="2.25.9", ReferencedSegmentNumber=1)])),
+                     diameter, volume]))
+    ds = Dataset()
+    ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.88.34", "2.25.11"
+    ds.Modality, ds.SeriesInstanceUID = "SR", "2.25.12"
+    ds.CompletionFlag, ds.VerificationFlag = "COMPLETE", "UNVERIFIED"
+    ds.ValueType, ds.ContinuityOfContent = "CONTAINER", "SEPARATE"
+    ds.ConceptNameCodeSequence = code("126000", "DCM", "Imaging Measurement Report")
+    ds.ContentTemplateSequence = Sequence([item(MappingResource="DCMR", TemplateIdentifier="1500")])
+    ds.ContentSequence = Sequence([
+        node("HAS OBS CONTEXT", "TEXT", ("121013", "DCM", "Device Observer Name"), TextValue="fuzz"),
+        node("CONTAINS", "CONTAINER", ("126010", "DCM", "Imaging Measurements"),
+             ContinuityOfContent="SEPARATE", ContentSequence=Sequence([group]))])
     return file_bytes(ds)
 
 

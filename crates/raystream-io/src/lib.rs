@@ -9,6 +9,7 @@
 mod curve;
 mod gltf;
 mod label_map;
+mod measurement_report;
 mod ply;
 mod secondary_capture;
 mod segmentation;
@@ -24,6 +25,12 @@ use std::path::{Path, PathBuf};
 
 pub use curve::{MAX_CURVE_POINTS, read_curve, write_curve};
 pub use label_map::{is_label_map_path, write_label_map};
+pub use measurement_report::{
+    COMPREHENSIVE_3D_SR, Measurement, MeasurementGroup, RAYSTREAM_SCHEME, ReadCode, ReadGroup,
+    ReadMeasurement, ReadReport, Region, ReportInfo, ReportWritten, SegmentationReference,
+    is_structured_report, measurement_report_source, read_measurement_report,
+    write_measurement_report,
+};
 pub use raystream_math::{Aabb, Vec2, Vec3};
 pub use secondary_capture::{
     CaptureInfo, CapturePixels, HU_PADDING, ImagePlane, new_uid, write_secondary_capture,

@@ -55,11 +55,14 @@ pub struct SegmentationInfo<'a> {
     pub version: &'a str,
 }
 
-/// What was written: the frames, and each segment's voxels.
+/// What was written: the frames, each segment's voxels, and the instance and its series (for
+/// a report that references its segments).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SegmentationWritten {
     pub frames: usize,
     pub voxels: Vec<usize>,
+    pub sop_instance_uid: String,
+    pub series_uid: String,
 }
 
 /// Whether `path` names a DICOM file (`.dcm`), which `--mask` writes as a Segmentation.
@@ -74,23 +77,7 @@ pub fn is_segmentation_path(path: &Path) -> bool {
 /// references them all and a viewer places it by them.
 pub fn segmentation_source(like: &Volume) -> Result<(), String> {
     let nifti = "write a NIfTI label map, .nii.gz, instead";
-    let series = like.series.as_ref().ok_or_else(|| {
-        format!("the CT was not read from a DICOM series, so there is no series for a DICOM Segmentation to reference ({nifti})")
-    })?;
-    for (what, uid) in [
-        ("Study Instance UID", &series.study.study_uid),
-        ("Series Instance UID", &series.uid),
-        (
-            "Frame of Reference UID",
-            &series.study.frame_of_reference_uid,
-        ),
-    ] {
-        if uid.is_empty() {
-            return Err(format!(
-                "the CT series has no {what} (anonymised?), which a DICOM Segmentation references ({nifti})"
-            ));
-        }
-    }
+    let series = series_to_reference(like, "DICOM Segmentation", nifti)?;
     if series.sources.len() != like.dims[2] {
         return Err(format!(
             "the CT's {} slices were interpolated from {} acquired ones (uneven spacing), so a slice is not an image of the series for a DICOM Segmentation to reference ({nifti})",
@@ -108,6 +95,34 @@ pub fn segmentation_source(like: &Volume) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// `like`'s DICOM series, if it has the Study, Series and Frame of Reference UIDs that an
+/// object derived from it (`what`: a Segmentation, a report) references; else why not, ending
+/// with `instead`, the way out.
+pub(crate) fn series_to_reference<'a>(
+    like: &'a Volume,
+    what: &str,
+    instead: &str,
+) -> Result<&'a crate::DicomSeriesInfo, String> {
+    let series = like.series.as_ref().ok_or_else(|| {
+        format!("the CT was not read from a DICOM series, so there is no series for a {what} to reference ({instead})")
+    })?;
+    for (name, uid) in [
+        ("Study Instance UID", &series.study.study_uid),
+        ("Series Instance UID", &series.uid),
+        (
+            "Frame of Reference UID",
+            &series.study.frame_of_reference_uid,
+        ),
+    ] {
+        if uid.is_empty() {
+            return Err(format!(
+                "the CT series has no {name} (anonymised?), which a {what} references ({instead})"
+            ));
+        }
+    }
+    Ok(series)
 }
 
 /// Writes `labels` (one a voxel of `like`, i fastest, as [`Volume::data`]) to `path` as a
@@ -192,7 +207,8 @@ pub fn write_segmentation(
     put_patient_study(o, study);
     // Segmentation Series, Frame of Reference, General and Enhanced General Equipment.
     put(o, tags::MODALITY, VR::CS, "SEG");
-    put(o, tags::SERIES_INSTANCE_UID, VR::UI, &new_uid());
+    let series_uid = new_uid();
+    put(o, tags::SERIES_INSTANCE_UID, VR::UI, &series_uid);
     put(o, tags::SERIES_NUMBER, VR::IS, "9002");
     put(o, tags::SERIES_DATE, VR::DA, &date);
     put(o, tags::SERIES_TIME, VR::TM, &time);
@@ -409,6 +425,8 @@ pub fn write_segmentation(
     Ok(SegmentationWritten {
         frames: frames.len(),
         voxels,
+        sop_instance_uid: sop_uid,
+        series_uid,
     })
 }
 
@@ -492,7 +510,7 @@ fn reference(s: &SourceImage, frame: bool) -> Vec<DataElement<InMemDicomObject>>
 }
 
 /// A code sequence of one item.
-fn code(tag: Tag, c: Code) -> DataElement<InMemDicomObject> {
+pub(crate) fn code(tag: Tag, c: Code) -> DataElement<InMemDicomObject> {
     seq(
         tag,
         vec![item(vec![
@@ -557,12 +575,12 @@ pub fn cielab(rgb: [u8; 3]) -> [u16; 3] {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::{DicomSeriesInfo, DicomStudy};
 
     /// A 3×3×4 grid read from a multi-frame image (one instance, frames 1–4), its UIDs.
-    fn grid() -> Volume {
+    pub(crate) fn grid() -> Volume {
         let mut v = Volume::hounsfield([3, 3, 4], [0.5, 0.7, 2.0], vec![0.0; 36]);
         v.origin = [10.0, -20.0, 30.0];
         v.series = Some(DicomSeriesInfo {
@@ -621,14 +639,11 @@ mod tests {
             version: "0",
         };
         let w = write_segmentation(&path, &v, &labels, &segments(), &info).unwrap();
-        assert_eq!(
-            w,
-            SegmentationWritten {
-                frames: 3,
-                voxels: vec![2, 2]
-            }
-        );
+        assert_eq!((w.frames, &w.voxels[..]), (3, &[2, 2][..]));
         let obj = dicom_object::open_file(&path).unwrap();
+        let uid = |tag| obj.element(tag).unwrap().to_str().unwrap().to_string();
+        assert_eq!(w.sop_instance_uid, uid(tags::SOP_INSTANCE_UID));
+        assert_eq!(w.series_uid, uid(tags::SERIES_INSTANCE_UID));
         let bits = obj.element(tags::PIXEL_DATA).unwrap().to_bytes().unwrap();
         let set: Vec<usize> = (0..27)
             .filter(|&b| bits[b / 8] >> (b % 8) & 1 == 1)

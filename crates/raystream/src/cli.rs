@@ -809,6 +809,13 @@ pub struct MeasureArgs {
     /// sections, and with --stenosis the reference, the lesion and the narrowed segment.
     #[arg(long, value_name = "FILE.svg|png|dcm")]
     pub plot: Option<PathBuf>,
+    /// From a DICOM series, write the findings as a DICOM Structured Report that files with
+    /// its study (Imaging Measurement Report, TID 1500, in a Comprehensive 3D SR: PACS,
+    /// OHIF, 3D Slicer): the vessel's path length, widest and narrowest lumen and outer wall
+    /// with where each was taken, each graded lesion, the angle, and with a DICOM
+    /// Segmentation --mask, each segment's volume, referencing it.
+    #[arg(long, value_name = "FILE.dcm")]
+    pub report: Option<PathBuf>,
     #[command(flatten)]
     pub pick: VolumePick,
     /// Print JSON instead of the table.

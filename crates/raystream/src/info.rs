@@ -29,6 +29,9 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         gpu_info(a.json);
         return Ok(());
     };
+    if input.is_file() && raystream_io::is_structured_report(input) {
+        return report_info(a, input);
+    }
     if raystream_io::is_volume_path(input) {
         return volume_info(a, input);
     }
@@ -430,4 +433,114 @@ fn gpu_info(json: bool) {
         );
     }
     println!("(* the adapter --device gpu opens; --adapter SUBSTRING picks another)");
+}
+
+/// A DICOM Structured Report's measurement groups (`measure --report`'s, or another tool's
+/// TID 1500 report), each with its finding and measurements.
+fn report_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
+    use raystream_io::ReadCode;
+    let r = raystream_io::read_measurement_report(input)?;
+    let code = |c: &Option<ReadCode>| {
+        c.as_ref()
+            .map(|c| json!({"value": c.value, "scheme": c.scheme, "meaning": c.meaning}))
+    };
+    let value = |c: &Option<ReadCode>| c.as_ref().map(|c| c.value.clone());
+    if a.json {
+        let groups: Vec<serde_json::Value> = r
+            .groups
+            .iter()
+            .map(|g| {
+                json!({
+                    "template": g.template,
+                    "tracking_id": g.tracking_id,
+                    "finding": code(&g.finding),
+                    "finding_site": code(&g.finding_site),
+                    "region": g.region.as_ref().map(|(t, n)| json!({"type": t, "points": n})),
+                    "segment": g.segment,
+                    "measurements": g.measurements.iter().map(|m| json!({
+                        "concept": m.concept.value,
+                        "name": m.concept.meaning,
+                        "value": m.value,
+                        "unit": m.unit.value,
+                        "derivation": value(&m.derivation),
+                        "method": value(&m.method),
+                        "region": m.region.as_ref().map(|(t, n)| json!({"type": t, "points": n})),
+                    })).collect::<Vec<_>>(),
+                    "evaluations": g.evaluations.iter().map(|(n, v)| json!({
+                        "name": n.meaning, "value": v.meaning,
+                    })).collect::<Vec<_>>(),
+                })
+            })
+            .collect();
+        print_line(json!({
+            "kind": "report",
+            "file": file_name(input),
+            "sop_class": r.sop_class,
+            "title": r.title.meaning,
+            "template": r.template,
+            "completion": r.completion,
+            "verification": r.verification,
+            "observers": r.observers,
+            "groups": groups,
+        }));
+        return Ok(());
+    }
+    let template = |t: &Option<String>| t.as_ref().map_or(String::new(), |t| format!(" (TID {t})"));
+    let mut t = format!(
+        "{}: DICOM Structured Report, {}{}, {}, {}\n",
+        file_name(input),
+        r.title.meaning,
+        template(&r.template),
+        r.completion,
+        r.verification
+    );
+    for o in &r.observers {
+        t += &format!("  observer   {o}\n");
+    }
+    for (k, g) in r.groups.iter().enumerate() {
+        let name = g
+            .tracking_id
+            .as_deref()
+            .unwrap_or("(no tracking identifier)");
+        let mut what: Vec<String> = g.finding.iter().map(|c| c.meaning.clone()).collect();
+        what.extend(g.finding_site.iter().map(|c| format!("in {}", c.meaning)));
+        what.extend(g.segment.map(|s| format!("segment {s}")));
+        what.extend(
+            g.region
+                .as_ref()
+                .map(|(t, n)| format!("a {t} of {n} points")),
+        );
+        t += &format!(
+            "  group {:<4} {name}{}: {}\n",
+            k + 1,
+            template(&g.template),
+            what.join(", ")
+        );
+        for m in &g.measurements {
+            let unit = match m.unit.value.as_str() {
+                "1" | "" => String::new(),
+                u => format!(" {u}"),
+            };
+            let derivation = m
+                .derivation
+                .as_ref()
+                .map_or(String::new(), |d| format!(" ({})", d.meaning));
+            let method = m
+                .method
+                .as_ref()
+                .map_or(String::new(), |d| format!(" [{}]", d.meaning));
+            t += &format!(
+                "             {}{derivation}: {}{unit}{method}\n",
+                m.concept.meaning, m.value
+            );
+        }
+        for (n, v) in &g.evaluations {
+            t += &format!("             {}: {}\n", n.meaning, v.meaning);
+        }
+    }
+    if r.groups.is_empty() {
+        t += "  no measurement groups\n";
+    }
+    print_line(t.trim_end());
+    Ok(())
 }

@@ -12,6 +12,7 @@ mod measure;
 mod overlay;
 mod profile;
 mod render;
+mod structured_report;
 mod trace;
 
 use std::process::ExitCode;

@@ -42,6 +42,14 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
             m.display()
         );
     }
+    if let Some(r) = &a.report
+        && !raystream_io::is_segmentation_path(r)
+    {
+        bail!(
+            "{}: --report writes a DICOM Structured Report (.dcm): name it so",
+            r.display()
+        );
+    }
     if !a.angle.is_empty() && a.angle.len() != 3 {
         bail!(
             "--angle: {} arc lengths; give three, A,B,C (mm along the path, the vertex B between)",
@@ -56,6 +64,10 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     {
         raystream_io::segmentation_source(&volume)
             .map_err(|e| anyhow::anyhow!("{}: --mask: {e}", m.display()))?;
+    }
+    if let Some(r) = &a.report {
+        raystream_io::measurement_report_source(&volume)
+            .map_err(|e| anyhow::anyhow!("{}: --report: {e}", r.display()))?;
     }
     let opt = LumenOptions {
         threshold_hu: a.vessel.lumen,
@@ -165,12 +177,20 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         Some(out) if found => Some(write_mask(a, out, (&volume, &points), &opt, wall)?),
         _ => None,
     };
-    let findings = Findings {
+    let report;
+    let mut findings = Findings {
         winding: &winding,
         lesions: &lesions,
         angle: angle.as_ref(),
         mask: mask.as_ref(),
+        report: None,
     };
+    if let Some(out) = &a.report
+        && found
+    {
+        report = crate::structured_report::write(out, &volume, &sections, &findings)?;
+        findings.report = Some(&report);
+    }
     if a.json {
         print_line(report_json(a, &opt, &sections, &findings));
     } else {
@@ -273,7 +293,7 @@ fn csv(sections: &[Section], graded: Option<&Stenosis>, walls: bool) -> String {
 
 /// The sections with the largest and the smallest lumen (by its largest diameter, and by its
 /// equivalent one), closed lumens only.
-fn extremes(sections: &[Section]) -> Option<(usize, usize)> {
+pub(crate) fn extremes(sections: &[Section]) -> Option<(usize, usize)> {
     let closed = || {
         sections
             .iter()
@@ -299,7 +319,7 @@ fn wall_with_most(sections: &[Section], figure: fn(&Wall) -> f64) -> Option<(usi
 
 /// The section whose outer wall is widest (by its largest diameter, as an aneurysm's size
 /// is reported), and its wall.
-fn widest_wall(sections: &[Section]) -> Option<(usize, &Wall)> {
+pub(crate) fn widest_wall(sections: &[Section]) -> Option<(usize, &Wall)> {
     wall_with_most(sections, |w| w.max_diameter_mm)
 }
 
@@ -369,7 +389,7 @@ fn angle_text(g: &PathAngle) -> String {
         .points
         .map(|p| format!("({:.1}, {:.1}, {:.1})", p.x, p.y, p.z));
     format!(
-        "angle: {:.1} deg at {b:.1} mm, between the chords from {a:.1} to {b:.1} mm and from {b:.1} to {c:.1} mm ({}, {} and {} mm LPS)",
+        "angle: {:.1} deg at {b:.1} mm, between the chords from {a:.1} to {b:.1} mm and from {b:.1} to {c:.1} mm ({}, {} and {} mm LPS)\n",
         g.deviation_deg, p[0], p[1], p[2]
     )
 }
@@ -399,21 +419,25 @@ fn winding_words(w: &Tortuosity) -> String {
 
 /// What the report says beyond the table: the path's tortuosity, the lesions graded (the
 /// first `--stenosis`'s, the others `--lesions`') and `--angle`'s angle.
-struct Findings<'a> {
-    winding: &'a Tortuosity,
-    lesions: &'a [Stenosis],
-    angle: Option<&'a PathAngle>,
-    mask: Option<&'a MaskWritten>,
+pub(crate) struct Findings<'a> {
+    pub winding: &'a Tortuosity,
+    pub lesions: &'a [Stenosis],
+    pub angle: Option<&'a PathAngle>,
+    pub mask: Option<&'a MaskWritten>,
+    pub report: Option<&'a crate::structured_report::ReportOut>,
 }
 
 /// What `--mask` wrote: the file, its labels' voxels and volumes, and the sections they came
 /// from.
-struct MaskWritten {
+pub(crate) struct MaskWritten {
     file: String,
-    /// The DICOM Segmentation's frames, where it is one (else a NIfTI label map).
+    /// The DICOM Segmentation's frames and instance, where it is one (else a NIfTI label
+    /// map).
     frames: Option<usize>,
-    lumen: (usize, f64),
-    wall: Option<(usize, f64)>,
+    pub segmentation: Option<raystream_io::SegmentationReference>,
+    /// Voxels and millilitres of each label.
+    pub lumen: (usize, f64),
+    pub wall: Option<(usize, f64)>,
     sections: usize,
     closed: usize,
     step_mm: f64,
@@ -421,7 +445,7 @@ struct MaskWritten {
 
 /// The segments of a DICOM Segmentation `--mask`, as its labels: the lumen, and what the outer
 /// wall holds beyond it (the vessel's wall, and any thrombus lining it).
-fn mask_segments(wall: bool) -> Vec<raystream_io::Segment<'static>> {
+pub(crate) fn mask_segments(wall: bool) -> Vec<raystream_io::Segment<'static>> {
     use raystream_cpu::mask::{LUMEN, WALL};
     use raystream_io::{Code, Segment};
     // DICOM CID 7150 (Segmentation Property Category), 7156 (Vascular Segmentation Type), 7166.
@@ -480,7 +504,7 @@ fn write_mask(
     let labels = label_path(volume, points, opt, wall)
         .map_err(|e| anyhow::anyhow!("{}: --mask: {e}", a.path.display()))?;
     pb.finish_and_clear();
-    let frames = if raystream_io::is_segmentation_path(out) {
+    let (frames, segmentation) = if raystream_io::is_segmentation_path(out) {
         let info = raystream_io::SegmentationInfo {
             description: if wall.is_some() {
                 "raystream measure: lumen, outer wall beyond it"
@@ -493,7 +517,13 @@ fn write_mask(
         let segments = mask_segments(wall.is_some());
         let written =
             raystream_io::write_segmentation(out, volume, &labels.data, &segments, &info)?;
-        Some(written.frames)
+        (
+            Some(written.frames),
+            Some(raystream_io::SegmentationReference {
+                sop_instance_uid: written.sop_instance_uid,
+                series_uid: written.series_uid,
+            }),
+        )
     } else {
         let what = if wall.is_some() {
             "raystream measure: 1 lumen, 2 outer wall beyond the lumen"
@@ -501,7 +531,7 @@ fn write_mask(
             "raystream measure: 1 lumen"
         };
         raystream_io::write_label_map(out, volume, &labels.data, what)?;
-        None
+        (None, None)
     };
     let voxel_ml = volume.voxel_ml();
     let of = |l: u8| {
@@ -511,6 +541,7 @@ fn write_mask(
     Ok(MaskWritten {
         file: out.display().to_string(),
         frames,
+        segmentation,
         lumen: of(LUMEN),
         wall: wall.map(|_| of(WALL)),
         sections: labels.sections,
@@ -690,11 +721,14 @@ fn report_text(
             t += &stenosis_text(sections, g);
         }
     }
+    if let Some(g) = findings.angle {
+        t += &angle_text(g);
+    }
     if let Some(m) = findings.mask {
         t += &mask_text(m);
     }
-    if let Some(g) = findings.angle {
-        t += &angle_text(g);
+    if let Some(r) = findings.report {
+        t += &r.text();
     }
     t.trim_end().to_string()
 }
@@ -782,7 +816,7 @@ fn stenosis_text(sections: &[Section], g: &Stenosis) -> String {
 /// its D min against the wall's D eq, as ECST grades a stenosis against the vessel's estimated
 /// width at the lesion, and the share of the wall's area that is not lumen (plaque or
 /// thrombus burden). None without a wall there.
-fn against_wall(s: &Section) -> Option<(f64, f64, &Wall)> {
+pub(crate) fn against_wall(s: &Section) -> Option<(f64, f64, &Wall)> {
     let (l, w) = (s.lumen.as_ref()?, s.wall.as_ref()?);
     Some((
         100.0 * (1.0 - l.min_diameter_mm / w.equivalent_diameter_mm),
@@ -962,6 +996,9 @@ fn report_json(
     }
     if let Some(k) = findings.mask {
         m.insert("mask".into(), mask_json(k));
+    }
+    if let Some(r) = findings.report {
+        m.insert("report".into(), r.json());
     }
     if let Some(g) = findings.angle {
         m.insert("angle".into(), angle_json(g));

@@ -2068,3 +2068,346 @@ fn draw_wall_outlines_the_outer_wall() {
     .concat();
     refused(&bare, "--draw-lumen");
 }
+
+/// `measure --report FILE.dcm`: the findings as a DICOM Imaging Measurement Report (TID 1500)
+/// of the CT's study. Each group's measurements are the JSON report's of the same run, read
+/// back by highdicom (an independent reader); where each was taken (its SCOORD3D) lies in the
+/// series' Frame of Reference at the JSON's points; the segments' groups reference the
+/// Segmentation written with it; the image library lists the series' images. dciodvfy
+/// finds no error in the IOD, nor DCMTK's dsrdump in the content tree. A CT the report
+/// cannot file with is refused before any work.
+#[test]
+fn the_findings_as_a_dicom_structured_report() {
+    use dicom_dictionary_std::tags;
+    use dicom_object::InMemDicomObject;
+    use serde_json::json;
+    let dir = tmp("chest-series-report");
+    let study = chest_series(&dir);
+    let series = dir.to_str().unwrap().to_string();
+    let path = aorta();
+    let (seg, sr) = (tmp("report-seg.dcm"), tmp("report.dcm"));
+    let (seg_file, sr_file) = (seg.to_str().unwrap(), sr.to_str().unwrap());
+    let m = measure(
+        &series,
+        &path,
+        &[
+            "--wall",
+            "--lesions",
+            "2",
+            "--angle",
+            "20,60,100",
+            "--mask",
+            seg_file,
+            "--report",
+            sr_file,
+        ],
+    );
+    // What the report must hold: the JSON report's figures, coded.
+    let sections = m["sections"].as_array().unwrap();
+    let section = |key: &str| &sections[m[key].as_u64().unwrap() as usize - 1];
+    let (widest, narrowest) = (section("widest_section"), section("narrowest_section"));
+    let wall = &section("widest_wall_section")["wall"];
+    let value = |concept: &str,
+                 v: f64,
+                 unit: &str,
+                 derivation: Option<&str>,
+                 method: Option<&str>| {
+        json!({"concept": concept, "value": v, "unit": unit, "derivation": derivation, "method": method})
+    };
+    let (maximum, minimum) = (Some("56851009"), Some("255605001"));
+    let mut want = vec![json!({
+    "template": "1501", "tracking_id": "Vessel along the path", "finding": "59820001",
+    "sites": [], "measurements": [
+        value("410668003", num(&m, "length_mm"), "mm", None, None),
+        value("15690004", num(&m, "distance_metric"), "1", None, Some("RS-DISTMETRIC")),
+        value("397413000", num(widest, "max_diameter_mm"), "mm", maximum, None),
+        value("397413000", num(narrowest, "min_diameter_mm"), "mm", minimum, None),
+        value("397415007", num(narrowest, "area_mm2"), "mm2", minimum, None),
+        value("397414006", num(wall, "max_diameter_mm"), "mm", maximum, None),
+        value("1483009", num(&m["angle"], "deviation_deg"), "deg", None, Some("RS-CHORDANGLE")),
+    ]})];
+    let lesions = m["stenoses"].as_array().unwrap();
+    assert_eq!(lesions.len(), 2);
+    for (k, g) in lesions.iter().enumerate() {
+        let (w, reference) = (&g["against_wall"], Some("RS-REFERENCE"));
+        want.push(json!({
+        "template": "1501", "tracking_id": format!("Stenosis {}", k + 1),
+        "finding": "415582006", "sites": ["59820001"], "measurements": [
+            value("408715008", num(g, "diameter_stenosis_pct"), "%", None, reference),
+            value("408714007", num(g, "area_stenosis_pct"), "%", None, reference),
+            value("397413000", num(g, "min_diameter_mm"), "mm", minimum, None),
+            value("397415007", num(g, "area_mm2"), "mm2", None, None),
+            value("RS-REFDIAM", num(&g["reference"], "diameter_mm"), "mm", None, None),
+            value("408716009", num(&g["narrowed"], "length_mm"), "mm", None, None),
+            value("408715008", num(w, "diameter_pct"), "%", None, Some("RS-OUTERWALL")),
+            value("122354", num(w, "area_pct"), "%", None, None),
+        ]}));
+    }
+    let seg_uid = dicom_text(
+        &dicom_object::open_file(&seg).unwrap(),
+        tags::SOP_INSTANCE_UID,
+    );
+    let ct = dicom_object::open_file(dir.join("0001.dcm")).unwrap();
+    let ct_series = dicom_text(&ct, tags::SERIES_INSTANCE_UID);
+    for (n, label, finding, ml) in [
+        (1, "Lumen", "91747007", "lumen_ml"),
+        (2, "Wall and thrombus", "59820001", "wall_ml"),
+    ] {
+        want.push(json!({
+            "template": "1411", "tracking_id": label, "finding": finding,
+            "segmentation": seg_uid, "segment": [n], "source_series": ct_series,
+            "measurements": [value("118565006", num(&m["mask"], ml), "ml", None, None)]}));
+    }
+    let count: usize = want
+        .iter()
+        .map(|g| g["measurements"].as_array().unwrap().len())
+        .sum();
+    assert_eq!(
+        m["report"],
+        json!({"file": sr_file, "format": "dicom-sr", "groups": want.len(), "measurements": count})
+    );
+    // highdicom reads the same groups and figures.
+    if let Some(py) = python_with("highdicom") {
+        let o = std::process::Command::new(&py)
+            .arg(repo().join("crates/raystream/tests/highdicom_sr.py"))
+            .arg("read")
+            .arg(&sr)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "highdicom: {}", stderr(&o));
+        let got: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        assert_eq!(got["sop_class"], raystream_io::COMPREHENSIVE_3D_SR);
+        assert_eq!(got["study"], study.study_uid.as_str());
+        assert_eq!(got["devices"], json!(["raystream measure"]));
+        let got = got["groups"].as_array().unwrap();
+        assert_eq!(got.len(), want.len());
+        for (g, w) in got.iter().zip(&want) {
+            assert_eq!(g, w);
+        }
+    }
+    // raystream reads it back: `info` lists the same groups and figures.
+    let o = run(&["info", sr_file, "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(info["kind"], "report");
+    assert_eq!(info["template"], "1500");
+    assert_eq!(info["observers"], json!(["raystream measure"]));
+    let got = info["groups"].as_array().unwrap();
+    assert_eq!(got.len(), want.len());
+    for (g, w) in got.iter().zip(&want) {
+        assert_eq!(g["template"], w["template"]);
+        assert_eq!(g["tracking_id"], w["tracking_id"]);
+        assert_eq!(g["finding"]["value"], w["finding"]);
+        let segment = w["segment"].get(0).cloned().unwrap_or(json!(null));
+        assert_eq!(g["segment"], segment);
+        let measured: Vec<serde_json::Value> = g["measurements"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|m| {
+                let keys = ["concept", "value", "unit", "derivation", "method"];
+                json!(
+                    keys.iter()
+                        .map(|&k| (k.to_string(), m[k].clone()))
+                        .collect::<serde_json::Map<_, _>>()
+                )
+            })
+            .collect();
+        assert_eq!(json!(measured), w["measurements"], "{}", w["tracking_id"]);
+    }
+    // The file itself: filed with the study, its points in the series' Frame of Reference.
+    let obj = dicom_object::open_file(&sr).unwrap();
+    let text = |tag| dicom_text(&obj, tag);
+    assert_eq!(text(tags::MODALITY), "SR");
+    assert_eq!(text(tags::STUDY_INSTANCE_UID), study.study_uid);
+    assert_eq!(text(tags::PATIENT_NAME), "MÜLLER^JÖRG");
+    assert_eq!(text(tags::VERIFICATION_FLAG), "UNVERIFIED");
+    let items = |o: &InMemDicomObject, tag| -> Vec<InMemDicomObject> {
+        o.element(tag)
+            .map_or(Vec::new(), |e| e.items().unwrap().to_vec())
+    };
+    let code_of = |o: &InMemDicomObject, tag| {
+        items(o, tag).first().map(|c| {
+            c.element(tags::CODE_VALUE)
+                .unwrap()
+                .to_str()
+                .unwrap()
+                .trim()
+                .to_string()
+        })
+    };
+    let concept = |o: &InMemDicomObject| code_of(o, tags::CONCEPT_NAME_CODE_SEQUENCE).unwrap();
+    let child = |o: &InMemDicomObject, code: &str| -> Vec<InMemDicomObject> {
+        items(o, tags::CONTENT_SEQUENCE)
+            .into_iter()
+            .filter(|c| concept(c) == code)
+            .collect()
+    };
+    let root: &InMemDicomObject = &obj;
+    assert_eq!(concept(root), "126000");
+    let groups = child(&child(root, "126010")[0], "125007");
+    assert_eq!(groups.len(), want.len());
+    let coordinates = |n: &InMemDicomObject| {
+        let s = &child(n, "260753009")[0];
+        let uid = s.element(tags::REFERENCED_FRAME_OF_REFERENCE_UID).unwrap();
+        assert_eq!(
+            uid.to_str().unwrap().trim_end_matches('\0'),
+            study.frame_of_reference_uid
+        );
+        let kind = s.element(tags::GRAPHIC_TYPE).unwrap().to_str().unwrap();
+        let data = s
+            .element(tags::GRAPHIC_DATA)
+            .unwrap()
+            .to_multi_float64()
+            .unwrap();
+        let points: Vec<DVec3> = data
+            .chunks(3)
+            .map(|p| DVec3::new(p[0], p[1], p[2]))
+            .collect();
+        (kind.trim().to_string(), points)
+    };
+    let close = |a: &[DVec3], b: &[DVec3]| {
+        a.len() == b.len() && a.iter().zip(b).all(|(p, q)| p.distance(*q) < 2e-3)
+    };
+    let vessel = child(&groups[0], "397413000");
+    let (kind, ends) = coordinates(&vessel[0]);
+    assert_eq!(kind, "POLYLINE");
+    let want_ends: Vec<DVec3> = widest["max_diameter_ends"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(point)
+        .collect();
+    assert!(close(&ends, &want_ends), "{ends:?} {want_ends:?}");
+    let (kind, at) = coordinates(&vessel[1]);
+    assert_eq!(kind, "POINT");
+    assert!(close(&at, &[point(&narrowest["centroid"])]));
+    let (_, line) = coordinates(&child(&groups[0], "410668003")[0]);
+    let centres: Vec<DVec3> = sections.iter().map(|s| point(&s["point"])).collect();
+    assert!(close(&line, &centres), "the path, section by section");
+    let (_, angle) = coordinates(&child(&groups[0], "1483009")[0]);
+    let want_angle: Vec<DVec3> = m["angle"]["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(point)
+        .collect();
+    assert!(close(&angle, &want_angle));
+    // The image library: the series' 164 images, each once.
+    let library = child(&child(root, "111028")[0], "126200");
+    let mut listed: Vec<String> = child(&library[0], "260753009")
+        .iter()
+        .map(|i| {
+            let r = &items(i, tags::REFERENCED_SOP_SEQUENCE)[0];
+            r.element(tags::REFERENCED_SOP_INSTANCE_UID)
+                .unwrap()
+                .to_str()
+                .unwrap()
+                .trim_end_matches('\0')
+                .to_string()
+        })
+        .collect();
+    let mut files: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| {
+            dicom_text(
+                &dicom_object::open_file(e.unwrap().path()).unwrap(),
+                tags::SOP_INSTANCE_UID,
+            )
+        })
+        .collect();
+    listed.sort();
+    files.sort();
+    assert_eq!(listed.len(), 164);
+    assert_eq!(listed, files);
+    // The standard's IOD checker and DCMTK's content-tree checks find nothing wrong.
+    assert_eq!(iod_errors(&sr), Vec::<String>::new());
+    assert_eq!(sr_errors(&sr), Vec::<String>::new());
+    // The text says what was written.
+    let t = measure_text(&series, &path, &["--report", sr_file], &tmp("report.csv"));
+    assert!(
+        t.contains(&format!("report: {sr_file} (a DICOM Structured Report of the CT's study, TID 1500): 1 measurement group, 5 measurements")),
+        "{t}"
+    );
+    // A report another tool wrote (highdicom: a planar ROI and an image's measurements) is
+    // read as it was written; a report is no image, and beside a series' images it is skipped,
+    // named.
+    if let Some(py) = python_with("highdicom") {
+        let theirs = tmp("highdicom-report.dcm");
+        let o = std::process::Command::new(&py)
+            .arg(repo().join("crates/raystream/tests/highdicom_sr.py"))
+            .args(["write", &series, theirs.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "highdicom: {}", stderr(&o));
+        let o = run(&["info", theirs.to_str().unwrap(), "--json"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let got: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        assert_eq!(got["observers"], json!(["highdicom test"]));
+        let groups = &got["groups"];
+        assert_eq!(groups[0]["template"], "1410");
+        assert_eq!(groups[0]["tracking_id"], "plaque 1");
+        assert_eq!(groups[0]["finding"]["value"], "1522000");
+        assert_eq!(groups[0]["finding_site"]["value"], "15825003");
+        assert_eq!(
+            groups[0]["region"],
+            json!({"type": "POLYLINE", "points": 4})
+        );
+        assert_eq!(groups[0]["measurements"][0]["concept"], "42798000");
+        assert_eq!(groups[0]["measurements"][0]["value"], 42.5);
+        assert_eq!(groups[0]["measurements"][0]["unit"], "mm2");
+        assert_eq!(
+            groups[0]["evaluations"],
+            json!([{"name": "Severity", "value": "Moderate"}])
+        );
+        assert_eq!(groups[1]["template"], "1501");
+        assert_eq!(groups[1]["measurements"][0]["value"], 7.25);
+        assert_eq!(groups[1]["measurements"][0]["derivation"], "56851009");
+        assert_eq!(groups.as_array().unwrap().len(), 2);
+    }
+    std::fs::copy(&sr, dir.join("report.dcm")).unwrap();
+    let beside = raystream_io::load_volume(&dir, &Default::default()).unwrap();
+    std::fs::remove_file(dir.join("report.dcm")).unwrap();
+    assert_eq!(beside.dims, [120, 126, 164]);
+    assert!(
+        beside
+            .warnings
+            .iter()
+            .any(|w| w.contains("report.dcm") && w.contains("a DICOM Structured Report")),
+        "{:?}",
+        beside.warnings
+    );
+    refused(
+        &["render", sr_file, "-o", tmp("report.png").to_str().unwrap()],
+        "a DICOM Structured Report (measurements), not an image",
+    );
+    // Refused before any work: a name that is not .dcm, a CT not read from DICOM, a series
+    // anonymised of its UIDs.
+    refused(
+        &[
+            "measure",
+            &series,
+            "--path",
+            &path,
+            "--report",
+            "findings.txt",
+        ],
+        "findings.txt: --report writes a DICOM Structured Report (.dcm)",
+    );
+    refused(
+        &["measure", &chest(), "--path", &path, "--report", sr_file],
+        &format!("{sr_file}: --report: the CT was not read from a DICOM series"),
+    );
+    let abdomen = shared().join("data/volumes/dicom/abdomen_ct_j2k_totalseg");
+    refused(
+        &[
+            "measure",
+            abdomen.to_str().unwrap(),
+            "--path",
+            &path,
+            "--report",
+            sr_file,
+        ],
+        "has no Study Instance UID (anonymised?)",
+    );
+}

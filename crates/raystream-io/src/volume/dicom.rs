@@ -353,7 +353,7 @@ pub(crate) struct FileMeta {
 
 /// Reads the file meta group by hand (see the module docs) and returns what it says and the
 /// offset of the data set.
-fn read_meta(bytes: &[u8], file: &Path) -> Result<(FileMeta, usize), VolumeError> {
+pub(crate) fn read_meta(bytes: &[u8], file: &Path) -> Result<(FileMeta, usize), VolumeError> {
     let mut pos = if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
         132
     } else if bytes.starts_with(&[0x02, 0x00]) {
@@ -479,6 +479,17 @@ fn slices_of(
         return Err(VolumeError::invalid(
             file,
             "a DICOM Segmentation, not an image of a series (read it by its own name)",
+        ));
+    }
+    let class = obj
+        .get(tags::SOP_CLASS_UID)
+        .and_then(|e| e.to_str().ok())
+        .map(|s| s.trim_end_matches(['\0', ' ']).to_string())
+        .unwrap_or_else(|| meta.sop_class.clone());
+    if crate::measurement_report::is_report_class(&class) {
+        return Err(VolumeError::invalid(
+            file,
+            "a DICOM Structured Report (measurements), not an image (`raystream info` lists what it holds)",
         ));
     }
     let text = |tag| {

@@ -10,7 +10,7 @@
 //! the voxel count at [`MAX_VOXELS`], reads at most the bytes the header implies, and names the
 //! file in every error ([`VolumeError`]).
 
-mod dicom;
+pub(crate) mod dicom;
 mod mha;
 mod nifti;
 mod nrrd;

@@ -1,0 +1,285 @@
+//! `measure --report FILE.dcm`: the findings as a DICOM Imaging Measurement Report (TID 1500)
+//! of the CT's study, coded from DICOM's vascular context groups (CID 12119 Vascular
+//! Ultrasound Property, CID 3481–3483 IVUS and stenosis measurements, SNOMED CT), so that a
+//! PACS keeps them with the images and a reporting tool reads them without parsing a table:
+//! - "Vessel along the path": its length (the path as a polyline), tortuosity, the widest
+//!   lumen's largest diameter (its ends), the narrowest lumen's smallest diameter and area
+//!   (its centroid), the widest outer wall's largest diameter (its ends), `--angle`'s angle;
+//! - "Stenosis N" for each graded lesion: diameter and area stenosis against the reference,
+//!   the lesion's smallest diameter and area, the reference diameter, the narrowed length,
+//!   and against the outer wall, its diameter stenosis and plaque burden;
+//! - with a DICOM Segmentation `--mask`, each segment's volume, the segment referenced.
+
+use std::path::Path;
+
+use anyhow::Result;
+use raystream_cpu::lumen::Section;
+use raystream_io::{Code, Measurement, MeasurementGroup, RAYSTREAM_SCHEME, Region};
+use raystream_math::DVec3;
+use serde_json::json;
+
+use crate::measure::{Findings, against_wall, extremes, widest_wall};
+
+/// What `--report` wrote.
+pub(crate) struct ReportOut {
+    file: String,
+    groups: usize,
+    measurements: usize,
+}
+
+impl ReportOut {
+    pub fn text(&self) -> String {
+        let plural = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
+        format!(
+            "report: {} (a DICOM Structured Report of the CT's study, TID 1500): {}, {}\n",
+            self.file,
+            plural(self.groups, "measurement group"),
+            plural(self.measurements, "measurement")
+        )
+    }
+
+    pub fn json(&self) -> serde_json::Value {
+        json!({
+            "file": self.file,
+            "format": "dicom-sr",
+            "groups": self.groups,
+            "measurements": self.measurements,
+        })
+    }
+}
+
+const fn sct(value: &'static str, meaning: &'static str) -> Code {
+    Code {
+        value,
+        scheme: "SCT",
+        meaning,
+    }
+}
+
+const fn ucum(value: &'static str, meaning: &'static str) -> Code {
+    Code {
+        value,
+        scheme: "UCUM",
+        meaning,
+    }
+}
+
+const fn own(value: &'static str, meaning: &'static str) -> Code {
+    Code {
+        value,
+        scheme: RAYSTREAM_SCHEME,
+        meaning,
+    }
+}
+
+const MM: Code = ucum("mm", "millimeter");
+const MM2: Code = ucum("mm2", "square millimeter");
+const ML: Code = ucum("ml", "milliliter");
+const PERCENT: Code = ucum("%", "percent");
+const DEGREE: Code = ucum("deg", "degree");
+const RATIO: Code = ucum("1", "no units");
+
+const MAXIMUM: Code = sct("56851009", "Maximum");
+const MINIMUM: Code = sct("255605001", "Minimum");
+
+const BLOOD_VESSEL: Code = sct("59820001", "Blood vessel");
+const STENOSIS: Code = sct("415582006", "Stenosis");
+const LENGTH: Code = sct("410668003", "Length");
+const TORTUOSITY: Code = sct("15690004", "Tortuosity");
+const ANGLE: Code = sct("1483009", "Angle");
+const LUMEN_DIAMETER: Code = sct("397413000", "Vessel lumen diameter");
+const LUMEN_AREA: Code = sct("397415007", "Vessel lumen cross-sectional area");
+const OUTSIDE_DIAMETER: Code = sct("397414006", "Vessel outside diameter");
+const DIAMETER_STENOSIS: Code = sct("408715008", "Lumen Diameter Stenosis");
+const AREA_STENOSIS: Code = sct("408714007", "Lumen Area Stenosis");
+const LESION_LENGTH: Code = sct("408716009", "Stenotic Lesion Length");
+const VOLUME: Code = sct("118565006", "Volume");
+const PLAQUE_BURDEN: Code = Code {
+    value: "122354",
+    scheme: "DCM",
+    meaning: "Plaque Burden",
+};
+
+// raystream's own concepts and methods, where DICOM's groups have none.
+const REFERENCE_DIAMETER: Code = own("RS-REFDIAM", "Reference vessel diameter");
+const AGAINST_REFERENCE: Code = own(
+    "RS-REFERENCE",
+    "D min against the reference diameter at the lesion",
+);
+const AGAINST_WALL: Code = own(
+    "RS-OUTERWALL",
+    "D min against the outer wall's equivalent diameter (as ECST)",
+);
+const DISTANCE_METRIC: Code = own(
+    "RS-DISTMETRIC",
+    "Distance metric: path length over its ends' distance",
+);
+const CHORD_ANGLE: Code = own(
+    "RS-CHORDANGLE",
+    "Between the chords' directions: 0 deg runs straight on",
+);
+
+/// A measurement of `value` (rounded to the thousandth, as the JSON report gives it).
+fn measure(concept: Code, value: f64, unit: Code) -> Measurement {
+    Measurement {
+        concept,
+        value: crate::common::round3(value),
+        unit,
+        derivation: None,
+        method: None,
+        region: None,
+    }
+}
+
+/// The measurement groups of the findings on `sections`, in the report's order.
+pub(crate) fn groups(sections: &[Section], findings: &Findings) -> Vec<MeasurementGroup> {
+    let mut vessel = vec![Measurement {
+        region: Some(Region::Polyline(
+            sections.iter().map(|s| s.row.centre.as_dvec3()).collect(),
+        )),
+        ..measure(LENGTH, findings.winding.length_mm, MM)
+    }];
+    if let Some(d) = findings.winding.distance_metric {
+        vessel.push(Measurement {
+            method: Some(DISTANCE_METRIC),
+            ..measure(TORTUOSITY, d, RATIO)
+        });
+    }
+    if let Some((w, n)) = extremes(sections) {
+        let lumen = |i: usize| sections[i].lumen.as_ref().expect("a closed lumen");
+        let (w, n) = (lumen(w), lumen(n));
+        vessel.push(Measurement {
+            derivation: Some(MAXIMUM),
+            region: Some(Region::Polyline(w.max_ends.to_vec())),
+            ..measure(LUMEN_DIAMETER, w.max_diameter_mm, MM)
+        });
+        vessel.push(Measurement {
+            derivation: Some(MINIMUM),
+            region: Some(Region::Point(n.centroid)),
+            ..measure(LUMEN_DIAMETER, n.min_diameter_mm, MM)
+        });
+        vessel.push(Measurement {
+            derivation: Some(MINIMUM),
+            region: Some(Region::Point(n.centroid)),
+            ..measure(LUMEN_AREA, n.area_mm2, MM2)
+        });
+    }
+    if let Some((_, w)) = widest_wall(sections) {
+        vessel.push(Measurement {
+            derivation: Some(MAXIMUM),
+            region: Some(Region::Polyline(w.max_ends.to_vec())),
+            ..measure(OUTSIDE_DIAMETER, w.max_diameter_mm, MM)
+        });
+    }
+    if let Some(g) = findings.angle {
+        vessel.push(Measurement {
+            method: Some(CHORD_ANGLE),
+            region: Some(Region::Polyline(g.points.to_vec())),
+            ..measure(ANGLE, g.deviation_deg, DEGREE)
+        });
+    }
+    let mut groups = vec![MeasurementGroup {
+        tracking_id: "Vessel along the path".into(),
+        finding: BLOOD_VESSEL,
+        finding_site: None,
+        segment: None,
+        measurements: vessel,
+    }];
+
+    for (k, g) in findings.lesions.iter().enumerate() {
+        let s = &sections[g.lesion];
+        let l = s.lumen.as_ref().expect("a graded lesion has a lumen");
+        let at = || Some(Region::Point(l.centroid));
+        let mut m = vec![
+            Measurement {
+                method: Some(AGAINST_REFERENCE),
+                region: at(),
+                ..measure(DIAMETER_STENOSIS, g.diameter_pct, PERCENT)
+            },
+            Measurement {
+                method: Some(AGAINST_REFERENCE),
+                region: at(),
+                ..measure(AREA_STENOSIS, g.area_pct, PERCENT)
+            },
+            Measurement {
+                derivation: Some(MINIMUM),
+                region: at(),
+                ..measure(LUMEN_DIAMETER, l.min_diameter_mm, MM)
+            },
+            Measurement {
+                region: at(),
+                ..measure(LUMEN_AREA, l.area_mm2, MM2)
+            },
+            Measurement {
+                region: Some(Region::Point(s.row.centre.as_dvec3())),
+                ..measure(REFERENCE_DIAMETER, g.at_lesion_mm, MM)
+            },
+        ];
+        if let Some(n) = &g.narrowed {
+            m.push(Measurement {
+                region: Some(Region::Polyline(
+                    sections[n.sections[0]..=n.sections[1]]
+                        .iter()
+                        .map(|s| s.row.centre.as_dvec3())
+                        .collect::<Vec<DVec3>>(),
+                )),
+                ..measure(LESION_LENGTH, n.mm[1] - n.mm[0], MM)
+            });
+        }
+        if let Some((d, a, _)) = against_wall(s) {
+            m.push(Measurement {
+                method: Some(AGAINST_WALL),
+                region: at(),
+                ..measure(DIAMETER_STENOSIS, d, PERCENT)
+            });
+            m.push(Measurement {
+                region: at(),
+                ..measure(PLAQUE_BURDEN, a, PERCENT)
+            });
+        }
+        groups.push(MeasurementGroup {
+            tracking_id: format!("Stenosis {}", k + 1),
+            finding: STENOSIS,
+            finding_site: Some(BLOOD_VESSEL),
+            segment: None,
+            measurements: m,
+        });
+    }
+
+    if let Some(mask) = findings.mask.filter(|m| m.segmentation.is_some()) {
+        let segments = crate::measure::mask_segments(mask.wall.is_some());
+        let volumes = std::iter::once(mask.lumen).chain(mask.wall);
+        for (number, (seg, (_, ml))) in segments.iter().zip(volumes).enumerate() {
+            groups.push(MeasurementGroup {
+                tracking_id: seg.label.to_string(),
+                finding: seg.kind,
+                finding_site: None,
+                segment: Some(number as u16 + 1),
+                measurements: vec![measure(VOLUME, ml, ML)],
+            });
+        }
+    }
+    groups
+}
+
+/// Writes the report of the findings on `sections` of `volume` to `out`.
+pub(crate) fn write(
+    out: &Path,
+    volume: &raystream_io::Volume,
+    sections: &[Section],
+    findings: &Findings,
+) -> Result<ReportOut> {
+    let groups = groups(sections, findings);
+    let info = raystream_io::ReportInfo {
+        description: "raystream measure: the vessel along the path",
+        device: "raystream measure",
+        version: env!("CARGO_PKG_VERSION"),
+        segmentation: findings.mask.and_then(|m| m.segmentation.clone()),
+    };
+    let written = raystream_io::write_measurement_report(out, volume, &groups, &info)?;
+    Ok(ReportOut {
+        file: out.display().to_string(),
+        groups: written.groups,
+        measurements: written.measurements,
+    })
+}
