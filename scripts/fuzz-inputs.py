@@ -168,12 +168,14 @@ def seeds(d):
         w("mf.dcm", enhanced_ct())
         w("sg.dcm", segmentation())
         w("sr.dcm", report())
+        w("sgr.dcm", label_map_rle())
     except ImportError:
         print("no pydicom: the enhanced (multi-frame) CT, Segmentation and report seeds left out",
               file=sys.stderr)
     ts = os.path.join(SHARED, "data/volumes/dicom/ct_slice_transfer_syntaxes")
     names = sorted(os.listdir(ts))
-    for n in names[:4] + [n for n in names if re.search(r"\.4\.(51|80|81)_", n)]:
+    # The codecs the reader runs itself (JPEG-LS, 12-bit JPEG) and the one it checks first (RLE).
+    for n in names[:4] + [n for n in names if re.search(r"\.4\.(51|80|81)_|\.1\.2\.5_", n)]:
         shutil.copy(os.path.join(ts, n), os.path.join(d, n))
         os.chmod(os.path.join(d, n), 0o644)
 
@@ -247,6 +249,40 @@ def segmentation():
         for k, n in ((0, 1), (2, 1), (2, 2))])
     ds.PixelData = bytes((i * 37) % 256 for i in range(14))
     return file_bytes(ds)
+
+
+def label_map_rle():
+    """A DICOM 2024 Label Map Segmentation, 8 bits, its 3 frames of 7x5 RLE Lossless
+    compressed (a fragment a frame)."""
+    import io
+    import pydicom
+    from pydicom.dataset import Dataset
+    from pydicom.sequence import Sequence
+    from pydicom.uid import RLELossless
+
+    ds = Dataset()
+    ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.66.7", "2.25.13"
+    ds.Modality, ds.SeriesInstanceUID, ds.NumberOfFrames = "SEG", "2.25.14", 3
+    ds.Rows, ds.Columns, ds.SamplesPerPixel = 5, 7, 1
+    ds.PhotometricInterpretation = "MONOCHROME2"
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 8, 8, 7, 0
+    ds.SegmentationType = "LABELMAP"
+    ds.SegmentSequence = Sequence([item(SegmentNumber=n, SegmentLabel=f"s{n}") for n in (1, 2)])
+    ds.SharedFunctionalGroupsSequence = Sequence([item(
+        PixelMeasuresSequence=Sequence([item(PixelSpacing=[0.7, 0.8], SpacingBetweenSlices=2)]),
+        PlaneOrientationSequence=Sequence([item(ImageOrientationPatient=[1, 0, 0, 0, 1, 0])]))])
+    ds.PerFrameFunctionalGroupsSequence = Sequence([item(
+        PlanePositionSequence=Sequence([item(ImagePositionPatient=[-10, 20, 30 + 2 * k])]))
+        for k in range(3)])
+    ds.PixelData = bytes((i * 7) % 3 for i in range(105))
+    ds.file_meta = pydicom.dataset.FileMetaDataset()
+    ds.file_meta.TransferSyntaxUID = pydicom.uid.ExplicitVRLittleEndian
+    ds.compress(RLELossless)
+    ds.file_meta.MediaStorageSOPClassUID = ds.SOPClassUID
+    ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
+    out = io.BytesIO()
+    ds.save_as(out, enforce_file_format=True)
+    return out.getvalue()
 
 
 def report():

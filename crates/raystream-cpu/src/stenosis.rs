@@ -393,13 +393,15 @@ fn grade_at(
 /// The most candidate sections [`grade_lesions`] grades in its search for further lesions.
 pub const MAX_CANDIDATES: usize = 10_000;
 
-/// Up to `n` lesions on `sections`, each graded as [`grade`] grades one with a fitted
-/// reference (`opt` must place neither lesion nor reference): first the closed section of
-/// least area; then, by increasing area, each closed section outside the lesions found so far
-/// (their sections and narrowed segments) that is narrowed against its own reference, with a
-/// narrowed segment apart from theirs (tandem lesions). The search ends at `n` lesions, or
-/// after [`MAX_CANDIDATES`] candidates; a candidate that cannot be graded (no reference free
-/// of narrowing about it) is passed over.
+/// The `n` most severe lesions on `sections` (by diameter stenosis, the most severe first),
+/// each graded as [`grade`] grades one with a fitted reference (`opt` must place neither
+/// lesion nor reference). The lesions are found as tandem lesions are read: first the closed
+/// section of least area; then, by increasing area, each closed section outside the lesions
+/// found so far (their sections and narrowed segments) that is narrowed against its own
+/// reference, with a narrowed segment apart from theirs. The search looks at up to
+/// [`MAX_CANDIDATES`] candidates; one that cannot be graded (no reference free of narrowing
+/// about it) is passed over. Ranked by severity, a focal stenosis comes before the least
+/// area where the vessel merely tapers.
 pub fn grade_lesions(
     sections: &[Section],
     length_mm: f64,
@@ -419,9 +421,6 @@ pub fn grade_lesions(
     // The sections a lesion takes: its narrowed segment, or the lesion alone.
     let span = |g: &Stenosis| g.narrowed.as_ref().map_or([g.lesion; 2], |n| n.sections);
     for &(i, _) in order.iter().take(MAX_CANDIDATES) {
-        if found.len() >= n {
-            break;
-        }
         if found.iter().any(|g| (span(g)[0]..=span(g)[1]).contains(&i)) {
             continue;
         }
@@ -438,6 +437,9 @@ pub fn grade_lesions(
             found.push(g);
         }
     }
+    // The most severe first; of equal grades, the one found first (the smaller area).
+    found.sort_by(|a, b| b.diameter_pct.total_cmp(&a.diameter_pct));
+    found.truncate(n);
     Ok(found)
 }
 
@@ -596,23 +598,43 @@ mod tests {
         assert!(pulled > 1.03 * want, "{pulled} against {want}");
     }
 
-    /// Two lesions 30 mm apart on the tapering vessel, narrowing it by half and by 30 %: both
-    /// are found, the deeper first (least area), each graded against the taper as a lesion
-    /// alone is (within a point), their narrowed segments apart; asked for more, no third is
-    /// made up; placed lesions or references are refused.
-    #[test]
-    fn tandem_lesions_are_found_and_graded_each() {
-        let deep = vessel(20.5, 6.0, 0.5, 1.0);
-        let mild = vessel(45.5, 6.0, 0.3, 1.0);
-        // Both lesions: the narrower of the two vessels at each section.
-        let both: Vec<Section> = deep
-            .iter()
-            .zip(&mild)
+    /// The narrower of two vessels at each section: both lesions.
+    fn both(a: &[Section], b: &[Section]) -> Vec<Section> {
+        a.iter()
+            .zip(b)
             .map(|(a, b)| {
                 let d = |s: &Section| s.lumen.as_ref().unwrap().equivalent_diameter_mm;
                 if d(a) <= d(b) { a.clone() } else { b.clone() }
             })
-            .collect();
+            .collect()
+    }
+
+    /// A 40 % lesion where the vessel is wide and a 30 % one of less area where it has
+    /// tapered: the severe one first, though the milder is the section of least area (which
+    /// `grade` takes); asked for one, the severe one.
+    #[test]
+    fn tandem_lesions_come_the_most_severe_first() {
+        let v = both(&vessel(15.5, 6.0, 0.4, 1.0), &vessel(45.5, 6.0, 0.3, 1.0));
+        let opt = StenosisOptions::default();
+        assert_eq!(grade(&v, 60.0, &opt).unwrap().lesion, 45, "least area");
+        let found = grade_lesions(&v, 60.0, &opt, 5).unwrap();
+        assert_eq!(found.len(), 2, "{found:?}");
+        assert_eq!((found[0].lesion, found[1].lesion), (15, 45));
+        assert!((found[0].diameter_pct - 40.0).abs() < 1.0, "{:?}", found[0]);
+        assert!((found[1].diameter_pct - 30.0).abs() < 1.0, "{:?}", found[1]);
+        let one = grade_lesions(&v, 60.0, &opt, 1).unwrap();
+        assert_eq!(one, vec![found[0].clone()]);
+    }
+
+    /// Two lesions 30 mm apart on the tapering vessel, narrowing it by half and by 30 %: both
+    /// are found, the deeper first, each graded against the taper as a lesion alone is
+    /// (within a point), their narrowed segments apart; asked for more, no third is made up;
+    /// placed lesions or references are refused.
+    #[test]
+    fn tandem_lesions_are_found_and_graded_each() {
+        let deep = vessel(20.5, 6.0, 0.5, 1.0);
+        let mild = vessel(45.5, 6.0, 0.3, 1.0);
+        let both = both(&deep, &mild);
         let opt = StenosisOptions::default();
         let found = grade_lesions(&both, 60.0, &opt, 5).unwrap();
         assert_eq!(found.len(), 2, "{found:?}");

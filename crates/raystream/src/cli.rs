@@ -770,9 +770,10 @@ pub struct MeasureArgs {
         allow_hyphen_values = true
     )]
     pub reference: Vec<f64>,
-    /// Grade up to N lesions (tandem stenoses): the closed section of least area, then by
-    /// increasing area each section outside the lesions found that is narrowed against its
-    /// own fitted reference, its narrowed segment apart from theirs. Implies --stenosis.
+    /// Grade the N most severe lesions (tandem stenoses), by diameter stenosis, the most
+    /// severe first: of the closed section of least area and, by increasing area, each section
+    /// outside the lesions found that is narrowed against its own fitted reference, its
+    /// narrowed segment apart from theirs. Implies --stenosis.
     #[arg(
         long,
         value_name = "N",

@@ -417,8 +417,8 @@ fn winding_words(w: &Tortuosity) -> String {
     )
 }
 
-/// What the report says beyond the table: the path's tortuosity, the lesions graded (the
-/// first `--stenosis`'s, the others `--lesions`') and `--angle`'s angle.
+/// What the report says beyond the table: the path's tortuosity, the lesions graded
+/// (`--stenosis`'s, or `--lesions`', the most severe first) and `--angle`'s angle.
 pub(crate) struct Findings<'a> {
     pub winding: &'a Tortuosity,
     pub lesions: &'a [Stenosis],
@@ -708,7 +708,7 @@ fn report_text(
     if let (Some(n), [_, more @ ..]) = (a.lesions, findings.lesions) {
         let _ = writeln!(
             t,
-            "lesions: {} found (at most {n}), by least area: {}",
+            "lesions: {} (at most {n}), the most severe first by diameter stenosis: {}",
             findings.lesions.len(),
             findings
                 .lesions

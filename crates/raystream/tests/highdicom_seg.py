@@ -1,7 +1,10 @@
 """Writes a DICOM Segmentation of a CT series with highdicom (an independent writer), from a
-label map on the series' grid: `highdicom_seg.py SERIES_DIR LABELS.nii.gz OUT.dcm [TYPE]`,
-segment n the voxels labelled n (1 and 2); TYPE BINARY (the default) or LABELMAP (DICOM
-2024's Label Map Segmentation, a frame a slice)."""
+label map on the series' grid: `highdicom_seg.py SERIES_DIR LABELS.nii.gz OUT.dcm [TYPE [TS]]`,
+segment n the voxels labelled n (1 and 2); TYPE BINARY (the default), FRACTIONAL (each
+segment's fraction, 0 or the maximum) or LABELMAP (DICOM 2024's Label Map Segmentation, a
+frame a slice); TS the transfer syntax: native (the default, Explicit VR Little Endian), rle
+(RLE Lossless), jpegls (JPEG-LS Lossless), j2k (JPEG 2000 Lossless) or deflated (native, the
+data set deflated by pydicom)."""
 import glob, sys
 
 import highdicom as hd
@@ -11,6 +14,10 @@ import SimpleITK as sitk
 
 series, labels_path, out = sys.argv[1:4]
 kind = sys.argv[4] if len(sys.argv) > 4 else "BINARY"
+ts_name = sys.argv[5] if len(sys.argv) > 5 else "native"
+ts = {"native": pydicom.uid.ExplicitVRLittleEndian, "deflated": pydicom.uid.ExplicitVRLittleEndian,
+      "rle": pydicom.uid.RLELossless, "jpegls": pydicom.uid.JPEGLSLossless,
+      "j2k": pydicom.uid.JPEG2000Lossless}[ts_name]
 src = sorted((pydicom.dcmread(f) for f in glob.glob(series + "/*.dcm")),
              key=lambda d: float(d.ImagePositionPatient[2]))
 labels = sitk.GetArrayFromImage(sitk.ReadImage(labels_path)).astype(np.uint8)  # [k][j][i]
@@ -25,12 +32,17 @@ def segment(n, label, code, meaning):
         algorithm_type=hd.seg.SegmentAlgorithmTypeValues.MANUAL)
 
 
+if kind == "FRACTIONAL":
+    # One fraction a segment, along a last axis.
+    labels = np.stack([labels == 1, labels == 2], axis=-1).astype(np.float32)
 seg = hd.seg.Segmentation(
-    source_images=src, pixel_array=labels,
+    source_images=src, pixel_array=labels, transfer_syntax_uid=ts,
     segmentation_type=hd.seg.SegmentationTypeValues[kind],
     segment_descriptions=[segment(1, "lumen", "91747007", "Lumen"),
                           segment(2, "wall", "59820001", "Blood vessel")],
     series_instance_uid=hd.UID(), series_number=7, sop_instance_uid=hd.UID(), instance_number=1,
     manufacturer="test", manufacturer_model_name="test", software_versions="0",
     device_serial_number="0")
-seg.save_as(out)
+if ts_name == "deflated":
+    seg.file_meta.TransferSyntaxUID = pydicom.uid.DeflatedExplicitVRLittleEndian
+seg.save_as(out, enforce_file_format=True)

@@ -1271,6 +1271,50 @@ fn decode_all(slices: &mut [Slice], per_slice: usize) -> Result<Vec<Vec<f32>>, V
         .collect()
 }
 
+/// Decodes the encapsulated (compressed) pixel data of `obj`, a multi-frame object of `file`
+/// in transfer syntax `ts_uid` of `frames` frames of `cols`×`rows`, frame by frame to its
+/// stored values, as the image reader decodes a CT's (a Segmentation's label map or fractions).
+/// The frames must each have a fragment of their own before any is decoded, so a header
+/// claiming more frames than the file holds sizes nothing.
+pub(crate) fn decode_encapsulated(
+    file: &Path,
+    ts_uid: &str,
+    obj: InMemDicomObject,
+    (cols, rows, frames): (u32, u32, usize),
+) -> Result<Vec<Vec<f32>>, VolumeError> {
+    let fragments = obj
+        .get(tags::PIXEL_DATA)
+        .and_then(|e| e.value().fragments())
+        .map_or(0, |f| f.len());
+    if fragments < frames {
+        return Err(VolumeError::invalid(
+            file,
+            format!("{frames} frames claimed, {fragments} compressed fragments held"),
+        ));
+    }
+    let mut s = Slice {
+        file: file.to_path_buf(),
+        series_uid: String::new(),
+        description: String::new(),
+        modality: String::new(),
+        ts_uid: ts_uid.to_string(),
+        sop_class: String::new(),
+        sop_instance: String::new(),
+        rows,
+        cols,
+        frame: None,
+        position: [0.0; 3],
+        temporal: None,
+        orientation: [0.0; 6],
+        pixel_spacing: [0.0; 2],
+        between_slices: None,
+        thickness: None,
+        note: None,
+        obj: Some(obj),
+    };
+    decode_frames(&mut s, rows as usize * cols as usize, None)
+}
+
 /// Decodes a file's frames to modality values (RescaleSlope/Intercept applied, a frame's own
 /// in an enhanced image: HU for CT): the `wanted` ones (from 0; `None`: all), the others empty.
 pub(crate) fn decode_frames(
@@ -1295,6 +1339,10 @@ pub(crate) fn decode_frames(
                 ts.name(),
             ),
         ));
+    }
+    if s.ts_uid == RLE_LOSSLESS {
+        check_rle(&obj, s.rows as usize * s.cols as usize)
+            .map_err(|e| VolumeError::invalid(&s.file, format!("RLE Lossless pixel data: {e}")))?;
     }
     let obj = obj
         .with_meta(
@@ -1337,6 +1385,82 @@ pub(crate) fn decode_frames(
             Ok(values)
         })
         .collect()
+}
+
+/// RLE Lossless (PS3.5 Annex G).
+const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
+
+/// Checks that each frame of `obj`'s RLE Lossless pixel data (a fragment a frame) holds the
+/// segments its samples need (one a byte of a sample, PS3.5 G.2), each inside the fragment and
+/// decoding to at least `per_frame` bytes, before dicom-pixeldata decodes them: its decoder
+/// indexes past a short segment's end (a panic). Written here because no RLE crate is used
+/// otherwise; it only counts the PackBits runs (G.3.1), it decodes nothing.
+fn check_rle(obj: &InMemDicomObject, per_frame: usize) -> Result<(), String> {
+    let int = |tag| obj.get(tag).and_then(|e| e.to_int::<usize>().ok());
+    let samples = int(tags::SAMPLES_PER_PIXEL).unwrap_or(1);
+    let bytes = int(tags::BITS_ALLOCATED).unwrap_or(8).div_ceil(8);
+    let frames = int(tags::NUMBER_OF_FRAMES).unwrap_or(1).max(1);
+    let fragments = obj
+        .get(tags::PIXEL_DATA)
+        .and_then(|e| e.value().fragments())
+        .ok_or("not encapsulated in fragments")?;
+    if fragments.len() < frames {
+        return Err(format!(
+            "{frames} frames, {} fragments (one a frame)",
+            fragments.len()
+        ));
+    }
+    let needed = samples * bytes;
+    for (k, f) in fragments.iter().take(frames).enumerate() {
+        let frame = k + 1;
+        if f.len() < 64 {
+            return Err(format!(
+                "frame {frame}: {} bytes, shorter than its header",
+                f.len()
+            ));
+        }
+        let word = |i: usize| u32::from_le_bytes(f[4 * i..4 * i + 4].try_into().unwrap()) as usize;
+        let count = word(0);
+        if !(needed..=15).contains(&count) {
+            return Err(format!(
+                "frame {frame}: {count} segments, {needed} needed (of at most 15)"
+            ));
+        }
+        for i in 1..=needed {
+            let (start, end) = (word(i), if i < count { word(i + 1) } else { f.len() });
+            if start < 64 || start > end || end > f.len() {
+                return Err(format!(
+                    "frame {frame}: segment {i} at bytes {start} to {end} of {}",
+                    f.len()
+                ));
+            }
+            // PackBits: a header byte n then n + 1 literal bytes (n < 128), or one byte
+            // repeated 257 − n times (n > 128); 128 does nothing.
+            let (seg, mut at, mut out) = (&f[start..end], 0usize, 0usize);
+            while at < seg.len() && out < per_frame {
+                let n = seg[at] as usize;
+                at += 1;
+                match n {
+                    0..=127 => {
+                        at += n + 1;
+                        out += n + 1;
+                    }
+                    128 => {}
+                    _ => {
+                        at += 1;
+                        out += 257 - n;
+                    }
+                }
+            }
+            if out < per_frame || at > seg.len() {
+                return Err(format!(
+                    "frame {frame}: segment {i} decodes to {} of its {per_frame} bytes",
+                    out.min(per_frame)
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Replaces a slice's encapsulated pixel data with the samples `codec` decodes, as native
@@ -1500,4 +1624,59 @@ fn decode_own(codec: OwnCodec, stream: &[u8], s: &Slice, frame: &str) -> Result<
             im.data.iter().map(|&v| v as u16).collect()
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dicom_core::value::PixelFragmentSequence;
+
+    /// An 8-bit RLE frame's object: one fragment of a 64-byte header naming `count` segments
+    /// at `offsets`, then `data`.
+    fn rle(count: u32, offsets: &[u32], data: &[u8]) -> InMemDicomObject {
+        let mut f: Vec<u8> = Vec::new();
+        f.extend(count.to_le_bytes());
+        for i in 0..15 {
+            f.extend(offsets.get(i).copied().unwrap_or(0).to_le_bytes());
+        }
+        f.extend(data);
+        let mut obj = InMemDicomObject::new_empty();
+        obj.put(DataElement::new(
+            tags::BITS_ALLOCATED,
+            VR::US,
+            PrimitiveValue::from(8u16),
+        ));
+        obj.put(DataElement::new(
+            tags::PIXEL_DATA,
+            VR::OB,
+            PixelFragmentSequence::new(Vec::new(), vec![f]),
+        ));
+        obj
+    }
+
+    /// PackBits runs counted against the frame's bytes: literals (n + 1 bytes), repeats
+    /// (257 − n), the no-op; and each way a frame can be short or misplaced, refused.
+    #[test]
+    fn rle_frames_are_checked_before_decoding() {
+        // 3 literal bytes, then a byte repeated 4 times, a no-op: 7 bytes.
+        let good = [2, 10, 11, 12, 253, 9, 128];
+        assert_eq!(check_rle(&rle(1, &[64], &good), 7), Ok(()));
+        let short = check_rle(&rle(1, &[64], &good), 8).unwrap_err();
+        assert!(
+            short.contains("segment 1 decodes to 7 of its 8 bytes"),
+            "{short}"
+        );
+        // A literal run past the segment's end.
+        let cut = check_rle(&rle(1, &[64], &[5, 1, 2]), 6).unwrap_err();
+        assert!(cut.contains("decodes to"), "{cut}");
+        let none = check_rle(&rle(0, &[], &good), 7).unwrap_err();
+        assert!(none.contains("0 segments, 1 needed"), "{none}");
+        let outside = check_rle(&rle(1, &[9999], &good), 7).unwrap_err();
+        assert!(outside.contains("segment 1 at bytes 9999"), "{outside}");
+        let inside_header = check_rle(&rle(1, &[8], &good), 7).unwrap_err();
+        assert!(
+            inside_header.contains("segment 1 at bytes 8"),
+            "{inside_header}"
+        );
+    }
 }

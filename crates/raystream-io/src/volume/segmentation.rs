@@ -6,7 +6,8 @@
 //! line through them: a gantry-tilted CT's Segmentation on its sheared grid). BINARY segments
 //! (one bit a pixel) and FRACTIONAL ones (8 bits; a voxel held where the fraction reaches half
 //! the maximum), and DICOM 2024's LABELMAP Segmentations (SOP class …66.7: a frame a slice,
-//! each pixel its segment's number, 8 or 16 bits); native (uncompressed) pixel data.
+//! each pixel its segment's number, 8 or 16 bits). Native pixel data, and for FRACTIONAL and
+//! LABELMAP ones compressed frames too (RLE, JPEG-LS, JPEG 2000: the CT reader's decoders).
 
 use std::path::Path;
 
@@ -64,7 +65,7 @@ pub(crate) fn read(
     let frames = need(tags::NUMBER_OF_FRAMES, "Number of Frames")? as usize;
     let bits = need(tags::BITS_ALLOCATED, "Bits Allocated")?;
     let kind = text(obj, tags::SEGMENTATION_TYPE);
-    let kind = match (kind.as_str(), bits) {
+    let mut kind = match (kind.as_str(), bits) {
         ("BINARY", 1) => Pixels::Binary,
         ("FRACTIONAL", 8) => {
             let max = int(obj, tags::MAXIMUM_FRACTIONAL_VALUE)
@@ -79,24 +80,59 @@ pub(crate) fn read(
             )));
         }
     };
-    if meta.ts_uid != "1.2.840.10008.1.2.1" && meta.ts_uid != "1.2.840.10008.1.2" {
-        return Err(bad(format!(
-            "pixel data in transfer syntax {}: only native (uncompressed) Segmentations are read",
-            meta.ts_uid
-        )));
-    }
     if rows == 0 || cols == 0 || frames == 0 {
         return Err(bad(format!("{cols}×{rows} pixels, {frames} frames")));
     }
-    // The pixel data holds what the header says before anything is sized by it.
-    let pixels = obj
-        .get(tags::PIXEL_DATA)
-        .ok_or_else(|| bad("no pixel data (7FE0,0010)".into()))?
-        .to_bytes()
-        .map_err(|e| bad(format!("pixel data: {e}")))?;
     let per = rows
         .checked_mul(cols)
         .ok_or_else(|| bad("a frame too large".into()))?;
+    // Native pixel data (the data set deflated or not), or compressed frames decoded to it.
+    let native = matches!(
+        meta.ts_uid.as_str(),
+        "1.2.840.10008.1.2" | "1.2.840.10008.1.2.1" | "1.2.840.10008.1.2.1.99"
+    );
+    let pixels = if native {
+        obj.get(tags::PIXEL_DATA)
+            .ok_or_else(|| bad("no pixel data (7FE0,0010)".into()))?
+            .to_bytes()
+            .map_err(|e| bad(format!("pixel data: {e}")))?
+    } else {
+        if (per as u64).saturating_mul(frames as u64) > super::MAX_VOXELS {
+            return Err(bad(format!(
+                "{frames} frames of {cols}×{rows}: over {} pixels",
+                super::MAX_VOXELS
+            )));
+        }
+        let mut encoded = obj.clone();
+        if matches!(kind, Pixels::Binary) {
+            // A BINARY frame is compressed as one 1-bit sample a pixel: decoded into bytes.
+            encoded.put(dicom_core::DataElement::new(
+                tags::BITS_ALLOCATED,
+                dicom_core::VR::US,
+                dicom_core::PrimitiveValue::from(8u16),
+            ));
+        }
+        let decoded = super::dicom::decode_encapsulated(
+            file,
+            &meta.ts_uid,
+            encoded,
+            (cols as u32, rows as u32, frames),
+        )?;
+        let wide = matches!(kind, Pixels::LabelMap(2));
+        let mut bytes = Vec::with_capacity(per * frames * if wide { 2 } else { 1 });
+        for v in decoded.iter().flatten() {
+            if wide {
+                bytes.extend_from_slice(&(*v as u16).to_le_bytes());
+            } else {
+                bytes.push(*v as u8);
+            }
+        }
+        // A compressed BINARY frame decodes to a sample a pixel, 0 or 1, not to packed bits.
+        if matches!(kind, Pixels::Binary) {
+            kind = Pixels::Fractional(1);
+        }
+        std::borrow::Cow::Owned(bytes)
+    };
     let want = per
         .checked_mul(frames)
         .and_then(|n| match kind {
