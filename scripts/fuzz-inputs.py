@@ -226,27 +226,38 @@ def enhanced_ct():
     return file_bytes(ds)
 
 
-def segmentation():
-    """A DICOM Segmentation of two binary segments: 3 frames of 7x5 (the bits run on across
-    bytes), two on one plane, shared orientation and spacing."""
+def seg_frames(kind, bits, sop_class, uid, frames):
+    """A DICOM Segmentation's header: two segments, 7x5 frames of `bits` bits at the planes
+    `frames` gives (their z index, and their segment where a frame is one's), shared
+    orientation and spacing."""
     from pydicom.dataset import Dataset
     from pydicom.sequence import Sequence
 
     ds = Dataset()
-    ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.66.4", "2.25.9"
-    ds.Modality, ds.SeriesInstanceUID, ds.NumberOfFrames = "SEG", "2.25.10", 3
+    ds.SOPClassUID, ds.SOPInstanceUID = sop_class, f"2.25.{uid}"
+    ds.Modality, ds.SeriesInstanceUID, ds.NumberOfFrames = "SEG", f"2.25.{uid + 1}", len(frames)
     ds.Rows, ds.Columns, ds.SamplesPerPixel = 5, 7, 1
     ds.PhotometricInterpretation = "MONOCHROME2"
-    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 1, 1, 0, 0
-    ds.SegmentationType = "BINARY"
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = bits, bits, bits - 1, 0
+    ds.SegmentationType = kind
     ds.SegmentSequence = Sequence([item(SegmentNumber=n, SegmentLabel=f"s{n}") for n in (1, 2)])
     ds.SharedFunctionalGroupsSequence = Sequence([item(
         PixelMeasuresSequence=Sequence([item(PixelSpacing=[0.7, 0.8], SpacingBetweenSlices=2)]),
         PlaneOrientationSequence=Sequence([item(ImageOrientationPatient=[1, 0, 0, 0, 1, 0])]))])
-    ds.PerFrameFunctionalGroupsSequence = Sequence([item(
-        PlanePositionSequence=Sequence([item(ImagePositionPatient=[-10, 20, 30 + 2 * k])]),
-        SegmentIdentificationSequence=Sequence([item(ReferencedSegmentNumber=n)]))
-        for k, n in ((0, 1), (2, 1), (2, 2))])
+
+    def frame(k, n):
+        f = item(PlanePositionSequence=Sequence([item(ImagePositionPatient=[-10, 20, 30 + 2 * k])]))
+        if n:
+            f.SegmentIdentificationSequence = Sequence([item(ReferencedSegmentNumber=n)])
+        return f
+    ds.PerFrameFunctionalGroupsSequence = Sequence([frame(k, n) for k, n in frames])
+    return ds
+
+
+def segmentation():
+    """A DICOM Segmentation of two binary segments: 3 frames of 7x5 (the bits run on across
+    bytes), two on one plane."""
+    ds = seg_frames("BINARY", 1, "1.2.840.10008.5.1.4.1.1.66.4", 9, ((0, 1), (2, 1), (2, 2)))
     ds.PixelData = bytes((i * 37) % 256 for i in range(14))
     return file_bytes(ds)
 
@@ -256,28 +267,13 @@ def label_map_rle():
     compressed (a fragment a frame)."""
     import io
     import pydicom
-    from pydicom.dataset import Dataset
-    from pydicom.sequence import Sequence
     from pydicom.uid import RLELossless
 
-    ds = Dataset()
-    ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.66.7", "2.25.13"
-    ds.Modality, ds.SeriesInstanceUID, ds.NumberOfFrames = "SEG", "2.25.14", 3
-    ds.Rows, ds.Columns, ds.SamplesPerPixel = 5, 7, 1
-    ds.PhotometricInterpretation = "MONOCHROME2"
-    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 8, 8, 7, 0
-    ds.SegmentationType = "LABELMAP"
-    ds.SegmentSequence = Sequence([item(SegmentNumber=n, SegmentLabel=f"s{n}") for n in (1, 2)])
-    ds.SharedFunctionalGroupsSequence = Sequence([item(
-        PixelMeasuresSequence=Sequence([item(PixelSpacing=[0.7, 0.8], SpacingBetweenSlices=2)]),
-        PlaneOrientationSequence=Sequence([item(ImageOrientationPatient=[1, 0, 0, 0, 1, 0])]))])
-    ds.PerFrameFunctionalGroupsSequence = Sequence([item(
-        PlanePositionSequence=Sequence([item(ImagePositionPatient=[-10, 20, 30 + 2 * k])]))
-        for k in range(3)])
+    ds = seg_frames("LABELMAP", 8, "1.2.840.10008.5.1.4.1.1.66.7", 13, ((0, 0), (1, 0), (2, 0)))
     ds.PixelData = bytes((i * 7) % 3 for i in range(105))
     ds.file_meta = pydicom.dataset.FileMetaDataset()
     ds.file_meta.TransferSyntaxUID = pydicom.uid.ExplicitVRLittleEndian
-    ds.compress(RLELossless)
+    ds.compress(RLELossless, generate_instance_uid=False)
     ds.file_meta.MediaStorageSOPClassUID = ds.SOPClassUID
     ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
     out = io.BytesIO()
