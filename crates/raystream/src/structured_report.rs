@@ -4,7 +4,8 @@
 //! PACS keeps them with the images and a reporting tool reads them without parsing a table:
 //! - "Vessel along the path": its length (the path as a polyline), tortuosity, the widest
 //!   lumen's largest diameter (its ends), the narrowest lumen's smallest diameter and area
-//!   (its centroid), the widest outer wall's largest diameter (its ends), `--angle`'s angle;
+//!   (its centroid), the widest outer wall's largest diameter (its ends), what the walls and
+//!   their lumens hold, `--angle`'s angle;
 //! - "Stenosis N" for each graded lesion: diameter and area stenosis against the reference,
 //!   the lesion's smallest diameter and area, the reference diameter, the narrowed length,
 //!   and against the outer wall, its diameter stenosis and plaque burden;
@@ -14,6 +15,7 @@ use std::path::Path;
 
 use anyhow::Result;
 use raystream_cpu::lumen::Section;
+use raystream_cpu::wall::WallVolumes;
 use raystream_io::{Code, Measurement, MeasurementGroup, RAYSTREAM_SCHEME, Region};
 use raystream_math::DVec3;
 use serde_json::json;
@@ -94,6 +96,18 @@ const DIAMETER_STENOSIS: Code = sct("408715008", "Lumen Diameter Stenosis");
 const AREA_STENOSIS: Code = sct("408714007", "Lumen Area Stenosis");
 const LESION_LENGTH: Code = sct("408716009", "Stenotic Lesion Length");
 const VOLUME: Code = sct("118565006", "Volume");
+// CID 3485's volumes: within the outer wall (as IVUS's external elastic membrane), and the
+// lumen's.
+const WALL_VOLUME: Code = Code {
+    value: "122371",
+    scheme: "DCM",
+    meaning: "EEM Volume",
+};
+const LUMEN_VOLUME: Code = Code {
+    value: "122372",
+    scheme: "DCM",
+    meaning: "Lumen Volume",
+};
 const PLAQUE_BURDEN: Code = Code {
     value: "122354",
     scheme: "DCM",
@@ -170,6 +184,13 @@ pub(crate) fn groups(sections: &[Section], findings: &Findings) -> Vec<Measureme
             region: Some(Region::Polyline(w.max_ends.to_vec())),
             ..measure(OUTSIDE_DIAMETER, w.max_diameter_mm, MM)
         });
+    }
+    // What the walls hold and their lumens, over the sections with a wall (the text's
+    // `volume:` line).
+    let step = findings.winding.length_mm / sections.len().max(1) as f64;
+    if let Some(v) = WallVolumes::of(sections, step) {
+        vessel.push(measure(WALL_VOLUME, v.wall_mm3 / 1000.0, ML));
+        vessel.push(measure(LUMEN_VOLUME, v.lumen_mm3 / 1000.0, ML));
     }
     if let Some(g) = findings.angle {
         vessel.push(Measurement {

@@ -2175,6 +2175,8 @@ fn the_findings_as_a_dicom_structured_report() {
         value("397413000", num(narrowest, "min_diameter_mm"), "mm", minimum, None),
         value("397415007", num(narrowest, "area_mm2"), "mm2", minimum, None),
         value("397414006", num(wall, "max_diameter_mm"), "mm", maximum, None),
+        value("122371", num(&m["wall_volume"], "wall_ml"), "ml", None, None),
+        value("122372", num(&m["wall_volume"], "lumen_ml"), "ml", None, None),
         value("1483009", num(&m["angle"], "deviation_deg"), "deg", None, Some("RS-CHORDANGLE")),
     ]})];
     let lesions = m["stenoses"].as_array().unwrap();
