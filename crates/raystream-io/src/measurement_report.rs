@@ -223,7 +223,7 @@ impl Node {
     }
 }
 
-/// DICOM's own concepts of the report's structure (PS3.16 Annex D, SNOMED CT).
+/// A concept of DICOM's own coding scheme (PS3.16 Annex D).
 const fn dcm(value: &'static str, meaning: &'static str) -> Code {
     Code {
         value,
@@ -422,8 +422,15 @@ pub fn write_measurement_report(
                 if let Some(d) = m.derivation {
                     about.push(modifier(dcm("121401", "Derivation"), Value::Code(d)));
                 }
-                if let Some(r) = &m.region {
-                    about.push(inferred(SOURCE, Value::Scoord3d(r.clone())));
+                // A line needs two points: a path of one section is a point, of none nothing.
+                let region = match &m.region {
+                    Some(Region::Polyline(p)) if p.len() < 2 => {
+                        p.first().map(|&q| Region::Point(q))
+                    }
+                    r => r.clone(),
+                };
+                if let Some(r) = region {
+                    about.push(inferred(SOURCE, Value::Scoord3d(r)));
                 }
                 items.push(contains(m.concept, Value::Num(m.value, m.unit)).with(about));
                 count += 1;
@@ -936,6 +943,39 @@ mod tests {
             let series = items(&evidence[0], tags::REFERENCED_SERIES_SEQUENCE);
             assert_eq!(items(&series[0], tags::REFERENCED_SOP_SEQUENCE).len(), 1);
         }
+    }
+
+    /// A line of one point is written as the point (a POLYLINE needs two).
+    #[test]
+    fn a_line_of_one_point_is_a_point() {
+        let p = path("point");
+        let mut m = length(1.0, dcm("2", "plain"));
+        m.region = Some(Region::Polyline(vec![DVec3::new(4.0, 5.0, 6.0)]));
+        write_measurement_report(&p, &grid(), &[group(vec![m], None)], &info()).unwrap();
+        let obj = open_file(&p).unwrap();
+        std::fs::remove_file(&p).ok();
+        let last = |o: &InMemDicomObject| {
+            o.element(tags::CONTENT_SEQUENCE)
+                .unwrap()
+                .items()
+                .unwrap()
+                .last()
+                .unwrap()
+                .clone()
+        };
+        let scoord = last(&last(&last(&last(&obj))));
+        let kind = scoord
+            .element(tags::GRAPHIC_TYPE)
+            .unwrap()
+            .to_str()
+            .unwrap();
+        assert_eq!(kind.trim(), "POINT");
+        let at = scoord
+            .element(tags::GRAPHIC_DATA)
+            .unwrap()
+            .to_multi_float32()
+            .unwrap();
+        assert_eq!(at, [4.0, 5.0, 6.0]);
     }
 
     /// Refused, naming the file and the problem: a value that is not a number, a segment's
