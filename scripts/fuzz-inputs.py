@@ -174,8 +174,9 @@ def seeds(d):
               file=sys.stderr)
     ts = os.path.join(SHARED, "data/volumes/dicom/ct_slice_transfer_syntaxes")
     names = sorted(os.listdir(ts))
-    # The codecs the reader runs itself (JPEG-LS, 12-bit JPEG) and the one it checks first (RLE).
-    for n in names[:4] + [n for n in names if re.search(r"\.4\.(51|80|81)_|\.1\.2\.5_", n)]:
+    # Every codec the reader decodes: its own (JPEG-LS, 12-bit JPEG), the one it checks first
+    # (RLE), and dicom-pixeldata's lossless JPEG and JPEG 2000.
+    for n in names[:4] + [n for n in names if re.search(r"\.4\.(51|57|70|80|81|90|91)_|\.1\.2\.5_", n)]:
         shutil.copy(os.path.join(ts, n), os.path.join(d, n))
         os.chmod(os.path.join(d, n), 0o644)
 
