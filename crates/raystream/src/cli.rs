@@ -757,7 +757,8 @@ pub struct MeasureArgs {
     #[arg(long)]
     pub stenosis: bool,
     /// The lesion's arc length along the path, mm (the section nearest it); by default the
-    /// closed section of least area. Implies --stenosis.
+    /// most severe lesion by diameter stenosis (as --lesions 1; with --reference placed, the
+    /// closed section of least area). Implies --stenosis.
     #[arg(long, value_name = "MM", allow_negative_numbers = true)]
     pub lesion: Option<f64>,
     /// The reference: one section's diameter (distal, as NASCET), or the line through two

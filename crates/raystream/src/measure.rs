@@ -135,6 +135,10 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     let lesions: Vec<Stenosis> = match a.stenosis() {
         Some(o) if found => match a.lesions {
             Some(n) => stenosis::grade_lesions(&sections, length, &o, n as usize),
+            // Neither lesion nor reference placed: the most severe lesion, as `--lesions 1`.
+            None if o.lesion_mm.is_none() && o.reference_mm.is_empty() => {
+                stenosis::grade_lesions(&sections, length, &o, 1)
+            }
             None => stenosis::grade(&sections, length, &o).map(|g| vec![g]),
         }
         .map_err(|e| anyhow::anyhow!("{file}: stenosis: {e}"))?,
