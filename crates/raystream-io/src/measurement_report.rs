@@ -17,7 +17,7 @@ use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
 use raystream_math::DVec3;
 
 use crate::new_uid;
-use crate::secondary_capture::{decimal, put, put_patient_study, truncate};
+use crate::secondary_capture::{Derived, decimal, derived_object, put, truncate};
 use crate::segmentation::{Code, SEGMENTATION, code, item, seq, series_to_reference, text};
 use crate::volume::{Volume, VolumeError};
 
@@ -461,31 +461,16 @@ pub fn write_measurement_report(
     )
     .with(content);
 
-    let sop_uid = new_uid();
-    let now = dicom_core::chrono::Utc::now();
-    let (date, time) = (
-        now.format("%Y%m%d").to_string(),
-        now.format("%H%M%S").to_string(),
-    );
-    let mut obj = InMemDicomObject::new_empty();
+    // Patient and General Study (the series'), SR Document Series.
+    let Derived {
+        mut obj,
+        sop_uid,
+        date,
+        time,
+        ..
+    } = derived_object(study, COMPREHENSIVE_3D_SR, ("SR", "9003"), info.description);
     let o = &mut obj;
-    put(o, tags::SPECIFIC_CHARACTER_SET, VR::CS, "ISO_IR 192");
-    put(o, tags::SOP_CLASS_UID, VR::UI, COMPREHENSIVE_3D_SR);
-    put(o, tags::SOP_INSTANCE_UID, VR::UI, &sop_uid);
-    put(o, tags::TIMEZONE_OFFSET_FROM_UTC, VR::SH, "+0000");
-    put_patient_study(o, study);
-    // SR Document Series, General Equipment.
-    put(o, tags::MODALITY, VR::CS, "SR");
-    put(o, tags::SERIES_INSTANCE_UID, VR::UI, &new_uid());
-    put(o, tags::SERIES_NUMBER, VR::IS, "9003");
-    put(o, tags::SERIES_DATE, VR::DA, &date);
-    put(o, tags::SERIES_TIME, VR::TM, &time);
-    put(
-        o,
-        tags::SERIES_DESCRIPTION,
-        VR::LO,
-        &truncate(info.description, 64),
-    );
+    // General Equipment.
     o.put(seq(
         tags::REFERENCED_PERFORMED_PROCEDURE_STEP_SEQUENCE,
         vec![],

@@ -316,6 +316,58 @@ pub(crate) fn put_patient_study(o: &mut InMemDicomObject, study: &DicomStudy) {
     }
 }
 
+/// The start of a new object derived from `study`'s series (a Segmentation, a report): UTF-8
+/// text, SOP class `sop_class` and a new instance, the Patient and General Study modules (so
+/// that it files with that study), and a new series of `modality`, numbered `number`,
+/// described as `description`, dated now (UTC).
+pub(crate) struct Derived {
+    pub obj: InMemDicomObject,
+    pub sop_uid: String,
+    pub series_uid: String,
+    /// Now, as DA and TM.
+    pub date: String,
+    pub time: String,
+}
+
+pub(crate) fn derived_object(
+    study: &DicomStudy,
+    sop_class: &str,
+    (modality, number): (&str, &str),
+    description: &str,
+) -> Derived {
+    let now = dicom_core::chrono::Utc::now();
+    let (date, time) = (
+        now.format("%Y%m%d").to_string(),
+        now.format("%H%M%S").to_string(),
+    );
+    let (sop_uid, series_uid) = (crate::new_uid(), crate::new_uid());
+    let mut obj = InMemDicomObject::new_empty();
+    let o = &mut obj;
+    put(o, tags::SPECIFIC_CHARACTER_SET, VR::CS, "ISO_IR 192");
+    put(o, tags::SOP_CLASS_UID, VR::UI, sop_class);
+    put(o, tags::SOP_INSTANCE_UID, VR::UI, &sop_uid);
+    put(o, tags::TIMEZONE_OFFSET_FROM_UTC, VR::SH, "+0000");
+    put_patient_study(o, study);
+    put(o, tags::MODALITY, VR::CS, modality);
+    put(o, tags::SERIES_INSTANCE_UID, VR::UI, &series_uid);
+    put(o, tags::SERIES_NUMBER, VR::IS, number);
+    put(o, tags::SERIES_DATE, VR::DA, &date);
+    put(o, tags::SERIES_TIME, VR::TM, &time);
+    put(
+        o,
+        tags::SERIES_DESCRIPTION,
+        VR::LO,
+        &truncate(description, 64),
+    );
+    Derived {
+        obj,
+        sop_uid,
+        series_uid,
+        date,
+        time,
+    }
+}
+
 pub(crate) fn put(obj: &mut InMemDicomObject, tag: dicom_core::Tag, vr: VR, value: &str) {
     obj.put(DataElement::new(tag, vr, PrimitiveValue::from(value)));
 }

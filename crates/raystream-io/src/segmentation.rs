@@ -15,7 +15,7 @@ use dicom_dictionary_std::tags;
 use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
 
 use crate::new_uid;
-use crate::secondary_capture::{decimal, put, put_patient_study, truncate};
+use crate::secondary_capture::{Derived, decimal, derived_object, put, truncate};
 use crate::volume::{SourceImage, Volume, VolumeError};
 
 /// Segmentation Storage.
@@ -191,33 +191,16 @@ pub fn write_segmentation(
     // The last frame's bits, and a pad byte to an even length.
     bits.resize((frames.len() * per).div_ceil(8).next_multiple_of(2), 0);
 
-    let sop_uid = new_uid();
-    let now = dicom_core::chrono::Utc::now();
-    let (date, time) = (
-        now.format("%Y%m%d").to_string(),
-        now.format("%H%M%S").to_string(),
-    );
-    let mut obj = InMemDicomObject::new_empty();
+    // Patient and General Study (the series'), Segmentation Series.
+    let Derived {
+        mut obj,
+        sop_uid,
+        series_uid,
+        date,
+        time,
+    } = derived_object(study, SEGMENTATION, ("SEG", "9002"), info.description);
     let o = &mut obj;
-    put(o, tags::SPECIFIC_CHARACTER_SET, VR::CS, "ISO_IR 192");
-    put(o, tags::SOP_CLASS_UID, VR::UI, SEGMENTATION);
-    put(o, tags::SOP_INSTANCE_UID, VR::UI, &sop_uid);
-    put(o, tags::TIMEZONE_OFFSET_FROM_UTC, VR::SH, "+0000");
-    // Patient and General Study: the series'.
-    put_patient_study(o, study);
-    // Segmentation Series, Frame of Reference, General and Enhanced General Equipment.
-    put(o, tags::MODALITY, VR::CS, "SEG");
-    let series_uid = new_uid();
-    put(o, tags::SERIES_INSTANCE_UID, VR::UI, &series_uid);
-    put(o, tags::SERIES_NUMBER, VR::IS, "9002");
-    put(o, tags::SERIES_DATE, VR::DA, &date);
-    put(o, tags::SERIES_TIME, VR::TM, &time);
-    put(
-        o,
-        tags::SERIES_DESCRIPTION,
-        VR::LO,
-        &truncate(info.description, 64),
-    );
+    // Frame of Reference, General and Enhanced General Equipment.
     put(
         o,
         tags::FRAME_OF_REFERENCE_UID,
