@@ -13,11 +13,11 @@ use std::path::Path;
 
 use dicom_core::{DataElement, PrimitiveValue, VR};
 use dicom_dictionary_std::tags;
-use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
+use dicom_object::InMemDicomObject;
 use raystream_math::DVec3;
 
 use crate::new_uid;
-use crate::secondary_capture::{Derived, decimal, derived_object, put, truncate};
+use crate::secondary_capture::{Derived, decimal, derived_object, put, truncate, write_dicom};
 use crate::segmentation::{Code, SEGMENTATION, code, item, seq, series_to_reference, text};
 use crate::volume::{Volume, VolumeError};
 
@@ -93,8 +93,13 @@ pub struct ReportWritten {
 /// read from a DICOM series with its Study, Series and Frame of Reference UIDs, for the report
 /// files with that study and places its coordinates in that frame.
 pub fn measurement_report_source(like: &Volume) -> Result<(), String> {
+    report_series(like).map(|_| ())
+}
+
+/// `like`'s series, which a report on it files with (see [`measurement_report_source`]).
+fn report_series(like: &Volume) -> Result<&crate::DicomSeriesInfo, String> {
     let instead = "write the measurements as CSV (-o) or JSON (--json) instead";
-    series_to_reference(like, "DICOM report", instead).map(|_| ())
+    series_to_reference(like, "DICOM report", instead)
 }
 
 /// An SR content item: its relationship to its parent, concept name, value and children.
@@ -250,7 +255,7 @@ pub fn write_measurement_report(
     let fail = |e: &dyn std::fmt::Display| {
         VolumeError::invalid(path, format!("cannot write a DICOM report: {e}"))
     };
-    measurement_report_source(like).map_err(|e| fail(&e))?;
+    let series = report_series(like).map_err(|e| fail(&e))?;
     if let Some(g) = groups
         .iter()
         .find(|g| g.segment.is_some() && info.segmentation.is_none())
@@ -267,10 +272,6 @@ pub fn write_measurement_report(
     {
         return Err(fail(&format!("{} is {}", m.concept.meaning, m.value)));
     }
-    let series = like
-        .series
-        .as_ref()
-        .expect("checked by measurement_report_source");
     let study = &series.study;
     let has = |r: &'static str| move |c: Code, v: Value| Node::new(r, c, v);
     let (contains, obs, modifier, inferred) = (
@@ -468,21 +469,18 @@ pub fn write_measurement_report(
         date,
         time,
         ..
-    } = derived_object(study, COMPREHENSIVE_3D_SR, ("SR", "9003"), info.description);
+    } = derived_object(
+        study,
+        COMPREHENSIVE_3D_SR,
+        ("SR", "9003"),
+        info.description,
+        info.version,
+    );
     let o = &mut obj;
-    // General Equipment.
     o.put(seq(
         tags::REFERENCED_PERFORMED_PROCEDURE_STEP_SEQUENCE,
         vec![],
     ));
-    put(o, tags::MANUFACTURER, VR::LO, "raystream");
-    put(o, tags::MANUFACTURER_MODEL_NAME, VR::LO, "raystream");
-    put(
-        o,
-        tags::SOFTWARE_VERSIONS,
-        VR::LO,
-        &truncate(info.version, 64),
-    );
     // SR Document General: made by a program, not verified by a reader.
     put(o, tags::INSTANCE_NUMBER, VR::IS, "1");
     put(o, tags::COMPLETION_FLAG, VR::CS, "COMPLETE");
@@ -536,15 +534,7 @@ pub fn write_measurement_report(
     for e in top.into_iter() {
         o.put(e);
     }
-    let file = obj
-        .with_meta(
-            FileMetaTableBuilder::new()
-                .transfer_syntax("1.2.840.10008.1.2.1")
-                .media_storage_sop_class_uid(COMPREHENSIVE_3D_SR)
-                .media_storage_sop_instance_uid(sop_uid.as_str()),
-        )
-        .map_err(|e| fail(&e))?;
-    file.write_to_file(path).map_err(|e| fail(&e))?;
+    write_dicom(obj, path, COMPREHENSIVE_3D_SR, &sop_uid).map_err(|e| fail(&e))?;
     Ok(ReportWritten {
         sop_instance_uid: sop_uid,
         groups: groups.len(),
@@ -651,7 +641,7 @@ const MAX_DEPTH: usize = 32;
 pub fn read_measurement_report(path: &Path) -> Result<ReadReport, VolumeError> {
     let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
     let (meta, obj) = crate::volume::dicom::parse_dataset(&bytes, path)?;
-    let class = text_of(&obj, tags::SOP_CLASS_UID).unwrap_or(meta.sop_class);
+    let class = meta.sop_class_of(&obj);
     if !is_report_class(&class) {
         return Err(VolumeError::invalid(
             path,

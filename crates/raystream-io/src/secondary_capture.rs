@@ -281,15 +281,26 @@ pub fn write_secondary_capture(
             ));
         }
     }
-    let file = obj
-        .with_meta(
-            FileMetaTableBuilder::new()
-                .transfer_syntax("1.2.840.10008.1.2.1")
-                .media_storage_sop_class_uid(sop_class)
-                .media_storage_sop_instance_uid(sop_uid.as_str()),
-        )
-        .map_err(|e| fail(&e))?;
-    file.write_to_file(path).map_err(|e| fail(&e))
+    write_dicom(obj, path, sop_class, &sop_uid).map_err(|e| fail(&e))
+}
+
+/// Writes `obj` to `path` as a DICOM file storing instance `sop_uid` of `sop_class`, Explicit
+/// VR Little Endian.
+pub(crate) fn write_dicom(
+    obj: InMemDicomObject,
+    path: &Path,
+    sop_class: &str,
+    sop_uid: &str,
+) -> Result<(), String> {
+    obj.with_meta(
+        FileMetaTableBuilder::new()
+            .transfer_syntax("1.2.840.10008.1.2.1")
+            .media_storage_sop_class_uid(sop_class)
+            .media_storage_sop_instance_uid(sop_uid),
+    )
+    .map_err(|e| e.to_string())?
+    .write_to_file(path)
+    .map_err(|e| e.to_string())
 }
 
 /// The Patient and General Study modules of an object derived from `study`'s series, which
@@ -318,8 +329,8 @@ pub(crate) fn put_patient_study(o: &mut InMemDicomObject, study: &DicomStudy) {
 
 /// The start of a new object derived from `study`'s series (a Segmentation, a report): UTF-8
 /// text, SOP class `sop_class` and a new instance, the Patient and General Study modules (so
-/// that it files with that study), and a new series of `modality`, numbered `number`,
-/// described as `description`, dated now (UTC).
+/// that it files with that study), a new series of `modality`, numbered `number`, described
+/// as `description`, dated now (UTC), and raystream `version` as the equipment.
 pub(crate) struct Derived {
     pub obj: InMemDicomObject,
     pub sop_uid: String,
@@ -334,6 +345,7 @@ pub(crate) fn derived_object(
     sop_class: &str,
     (modality, number): (&str, &str),
     description: &str,
+    version: &str,
 ) -> Derived {
     let now = dicom_core::chrono::Utc::now();
     let (date, time) = (
@@ -359,6 +371,9 @@ pub(crate) fn derived_object(
         VR::LO,
         &truncate(description, 64),
     );
+    put(o, tags::MANUFACTURER, VR::LO, "raystream");
+    put(o, tags::MANUFACTURER_MODEL_NAME, VR::LO, "raystream");
+    put(o, tags::SOFTWARE_VERSIONS, VR::LO, &truncate(version, 64));
     Derived {
         obj,
         sop_uid,

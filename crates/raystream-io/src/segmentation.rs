@@ -12,10 +12,10 @@ use std::path::Path;
 use dicom_core::value::DataSetSequence;
 use dicom_core::{DataElement, PrimitiveValue, Tag, VR};
 use dicom_dictionary_std::tags;
-use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
+use dicom_object::InMemDicomObject;
 
 use crate::new_uid;
-use crate::secondary_capture::{Derived, decimal, derived_object, put, truncate};
+use crate::secondary_capture::{Derived, decimal, derived_object, put, truncate, write_dicom};
 use crate::volume::{SourceImage, Volume, VolumeError};
 
 /// Segmentation Storage.
@@ -198,7 +198,13 @@ pub fn write_segmentation(
         series_uid,
         date,
         time,
-    } = derived_object(study, SEGMENTATION, ("SEG", "9002"), info.description);
+    } = derived_object(
+        study,
+        SEGMENTATION,
+        ("SEG", "9002"),
+        info.description,
+        info.version,
+    );
     let o = &mut obj;
     // Frame of Reference, General and Enhanced General Equipment.
     put(
@@ -208,15 +214,7 @@ pub fn write_segmentation(
         &study.frame_of_reference_uid,
     );
     put(o, tags::POSITION_REFERENCE_INDICATOR, VR::LO, "");
-    put(o, tags::MANUFACTURER, VR::LO, "raystream");
-    put(o, tags::MANUFACTURER_MODEL_NAME, VR::LO, "raystream");
     put(o, tags::DEVICE_SERIAL_NUMBER, VR::LO, "1");
-    put(
-        o,
-        tags::SOFTWARE_VERSIONS,
-        VR::LO,
-        &truncate(info.version, 64),
-    );
     // General Image, Segmentation Image, Multi-frame Functional Groups.
     put(o, tags::INSTANCE_NUMBER, VR::IS, "1");
     put(o, tags::CONTENT_DATE, VR::DA, &date);
@@ -396,15 +394,7 @@ pub fn write_segmentation(
         VR::OB,
         PrimitiveValue::U8(bits.into()),
     ));
-    let file = obj
-        .with_meta(
-            FileMetaTableBuilder::new()
-                .transfer_syntax("1.2.840.10008.1.2.1")
-                .media_storage_sop_class_uid(SEGMENTATION)
-                .media_storage_sop_instance_uid(sop_uid.as_str()),
-        )
-        .map_err(|e| fail(&e))?;
-    file.write_to_file(path).map_err(|e| fail(&e))?;
+    write_dicom(obj, path, SEGMENTATION, &sop_uid).map_err(|e| fail(&e))?;
     Ok(SegmentationWritten {
         frames: frames.len(),
         voxels,

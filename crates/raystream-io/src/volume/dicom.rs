@@ -115,6 +115,7 @@ impl DicomStudy {
 }
 
 /// One parsed slice: its header fields and the object to decode pixels from.
+#[derive(Default)]
 pub(crate) struct Slice {
     file: PathBuf,
     series_uid: String,
@@ -351,6 +352,18 @@ pub(crate) struct FileMeta {
     sop_instance: String,
 }
 
+impl FileMeta {
+    /// The SOP Class UID of `obj`, the data set this file meta heads: the data set's own, else
+    /// (blank or absent, as anonymised) the file meta's.
+    pub(crate) fn sop_class_of(&self, obj: &InMemDicomObject) -> String {
+        obj.get(tags::SOP_CLASS_UID)
+            .and_then(|e| e.to_str().ok())
+            .map(|s| s.trim_end_matches(['\0', ' ']).trim().to_string())
+            .filter(|s| !s.is_empty())
+            .unwrap_or_else(|| self.sop_class.clone())
+    }
+}
+
 /// Reads the file meta group by hand (see the module docs) and returns what it says and the
 /// offset of the data set.
 pub(crate) fn read_meta(bytes: &[u8], file: &Path) -> Result<(FileMeta, usize), VolumeError> {
@@ -481,12 +494,8 @@ fn slices_of(
             "a DICOM Segmentation, not an image of a series (read it by its own name)",
         ));
     }
-    let class = obj
-        .get(tags::SOP_CLASS_UID)
-        .and_then(|e| e.to_str().ok())
-        .map(|s| s.trim_end_matches(['\0', ' ']).to_string())
-        .unwrap_or_else(|| meta.sop_class.clone());
-    if crate::measurement_report::is_report_class(&class) {
+    let sop_class = meta.sop_class_of(&obj);
+    if crate::measurement_report::is_report_class(&sop_class) {
         return Err(VolumeError::invalid(
             file,
             "a DICOM Structured Report (measurements), not an image (`raystream info` lists what it holds)",
@@ -528,7 +537,6 @@ fn slices_of(
             .filter(|s| !s.is_empty())
             .unwrap_or_else(|| meta.to_string())
     };
-    let sop_class = uid_or(tags::SOP_CLASS_UID, &meta.sop_class);
     let sop_instance = uid_or(tags::SOP_INSTANCE_UID, &meta.sop_instance);
     let enhanced = obj
         .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
@@ -1294,23 +1302,11 @@ pub(crate) fn decode_encapsulated(
     }
     let mut s = Slice {
         file: file.to_path_buf(),
-        series_uid: String::new(),
-        description: String::new(),
-        modality: String::new(),
         ts_uid: ts_uid.to_string(),
-        sop_class: String::new(),
-        sop_instance: String::new(),
         rows,
         cols,
-        frame: None,
-        position: [0.0; 3],
-        temporal: None,
-        orientation: [0.0; 6],
-        pixel_spacing: [0.0; 2],
-        between_slices: None,
-        thickness: None,
-        note: None,
         obj: Some(obj),
+        ..Default::default()
     };
     decode_frames(&mut s, rows as usize * cols as usize, None)
 }

@@ -35,12 +35,7 @@ enum Pixels {
 
 /// Whether the data set is a DICOM Segmentation.
 pub(crate) fn is_segmentation(meta: &FileMeta, obj: &InMemDicomObject) -> bool {
-    let class = obj
-        .get(tags::SOP_CLASS_UID)
-        .and_then(|e| e.to_str().ok())
-        .map(|s| s.trim_end_matches(['\0', ' ']).to_string())
-        .filter(|s| !s.is_empty())
-        .unwrap_or_else(|| meta.sop_class.clone());
+    let class = meta.sop_class_of(obj);
     class == SEGMENTATION || class == LABEL_MAP_SEGMENTATION
 }
 
