@@ -18,7 +18,7 @@ mod stl;
 mod texture;
 pub mod volume;
 mod write;
-pub use write::write_mesh;
+pub use write::{BONE, MeshPart, write_mesh, write_mesh_parts};
 
 use std::io::{BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};
@@ -37,12 +37,12 @@ pub use secondary_capture::{
 };
 pub use segmentation::{
     Code, SEGMENTATION, Segment, SegmentationInfo, SegmentationWritten, cielab,
-    is_segmentation_path, segmentation_source, write_segmentation,
+    is_segmentation_path, segmentation_source, srgb_from_cielab, write_segmentation,
 };
 pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping};
 pub use volume::{
-    DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, SourceImage, ValueUnit, Volume, VolumeError,
-    VolumeFormat, VolumeSelect, is_volume_path, list_dicom_series, load_volume,
+    DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, SegmentLabel, SourceImage, ValueUnit, Volume,
+    VolumeError, VolumeFormat, VolumeSelect, is_volume_path, list_dicom_series, load_volume,
 };
 
 /// A triangle mesh: shared vertex positions and triangles as vertex-index triples.

@@ -547,6 +547,49 @@ pub fn cielab(rgb: [u8; 3]) -> [u16; 3] {
     ]
 }
 
+/// DICOM's scaled CIELab (as [`cielab`] writes it) as the nearest sRGB colour: the inverse of
+/// [`cielab`], colours outside sRGB's gamut clamped to it.
+pub fn srgb_from_cielab(lab: [u16; 3]) -> [u8; 3] {
+    let unscale = |v: u16, lo: f64, hi: f64| lo + v as f64 / 65535.0 * (hi - lo);
+    let (l, a, b) = (
+        unscale(lab[0], 0.0, 100.0),
+        unscale(lab[1], -128.0, 127.0),
+        unscale(lab[2], -128.0, 127.0),
+    );
+    let fy = (l + 16.0) / 116.0;
+    let (fx, fz) = (fy + a / 500.0, fy - b / 200.0);
+    let finv = |f: f64| {
+        let d: f64 = 6.0 / 29.0;
+        if f > d {
+            f * f * f
+        } else {
+            3.0 * d * d * (f - 4.0 / 29.0)
+        }
+    };
+    let white = [0.964_2, 1.0, 0.824_9];
+    let xyz = [
+        finv(fx) * white[0],
+        finv(fy) * white[1],
+        finv(fz) * white[2],
+    ];
+    // The inverse of `cielab`'s matrix (sRGB's D50-adapted primaries).
+    let lin = [
+        [3.133_856_1, -1.616_866_7, -0.490_614_6],
+        [-0.978_768_4, 1.916_141_5, 0.033_454_0],
+        [0.071_945_3, -0.228_991_4, 1.405_242_7],
+    ]
+    .map(|r| r[0] * xyz[0] + r[1] * xyz[1] + r[2] * xyz[2]);
+    lin.map(|c| {
+        let c = c.clamp(0.0, 1.0);
+        let s = if c <= 0.003_130_8 {
+            12.92 * c
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        };
+        (s * 255.0).round() as u8
+    })
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
@@ -712,7 +755,11 @@ pub(crate) mod tests {
         assert_eq!(back.data, want);
         assert_eq!(
             back.series.as_ref().unwrap().segments,
-            [(1, "one".to_string()), (2, "two".to_string())]
+            segments().map(|s| crate::SegmentLabel {
+                number: s.value as u16,
+                label: s.label.to_string(),
+                colour: Some(s.colour),
+            })
         );
         // Damaged: a header claiming a million frames, pixel data short of its frames, a frame
         // naming no segment, the file cut short; each an error naming the file.
@@ -877,5 +924,28 @@ pub(crate) mod tests {
         near(lab([0, 0, 0]), [0.0, 0.0, 0.0]);
         near(lab([255, 0, 0]), [54.3, 80.8, 69.9]);
         near(lab([0, 0, 255]), [29.6, 68.3, -112.0]);
+    }
+
+    /// Every colour of a 16-level grid of sRGB comes back from its CIELab as itself, within
+    /// one level (the matrices are each other's inverses to 7 digits; CIELab is rounded to
+    /// 16 bits); a colour beyond sRGB's gamut comes back clamped, not wrapped.
+    #[test]
+    fn srgb_from_cielab_inverts_cielab() {
+        let levels: Vec<u8> = (0..=255).step_by(17).collect();
+        for &r in &levels {
+            for &g in &levels {
+                for &b in &levels {
+                    let back = srgb_from_cielab(cielab([r, g, b]));
+                    assert!(
+                        back.iter().zip([r, g, b]).all(|(x, y)| x.abs_diff(y) <= 1),
+                        "{:?} came back as {back:?}",
+                        [r, g, b]
+                    );
+                }
+            }
+        }
+        // L* 50, a* 127 (a green-magenta axis sRGB cannot reach): red and blue saturate.
+        let outside = srgb_from_cielab([32768, 65535, 32896]);
+        assert_eq!(outside[0], 255, "{outside:?}");
     }
 }

@@ -235,6 +235,104 @@ fn written_meshes_read_back_identically() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Several surfaces in one file: each a glTF node and material (named, in its colour), an OBJ
+/// object with its material in the library beside it, a PLY's vertices in its sRGB colour;
+/// read back, each part's triangles are its own, in order. An STL refuses two.
+#[test]
+fn mesh_parts_keep_their_names_and_colours() {
+    let dir = scratch("parts");
+    let a = TriMesh::icosphere(1);
+    let mut b = TriMesh::icosphere(2);
+    b.positions
+        .iter_mut()
+        .for_each(|p| *p += Vec3::new(3.0, 0.0, 0.0));
+    let (na, nb) = (a.vertex_normals(), b.vertex_normals());
+    let parts = [
+        crate::MeshPart {
+            name: "left lung",
+            mesh: &a,
+            normals: Some(&na),
+            colour: [1.0, 0.5, 0.0],
+        },
+        crate::MeshPart {
+            name: "heart",
+            mesh: &b,
+            normals: Some(&nb),
+            colour: [0.2, 0.0, 1.0],
+        },
+    ];
+    for name in ["m.glb", "m.obj"] {
+        let path = dir.join(name);
+        crate::write_mesh_parts(&path, &parts).unwrap();
+        let (mesh, shading) = load_mesh_with_shading(&path).unwrap();
+        let names: Vec<&str> = shading.materials.iter().map(|m| m.name.as_str()).collect();
+        let want = if name == "m.obj" {
+            ["left_lung", "heart"]
+        } else {
+            ["left lung", "heart"]
+        };
+        assert_eq!(names, want, "{name}");
+        assert_eq!(
+            shading.materials[0].diffuse,
+            Some([1.0, 0.5, 0.0]),
+            "{name}"
+        );
+        assert_eq!(
+            shading.materials[1].diffuse,
+            Some([0.2, 0.0, 1.0]),
+            "{name}"
+        );
+        assert_eq!(mesh.len(), a.len() + b.len(), "{name}");
+        // glTF's nodes turn LPS millimetres into metres, +Y superior, +Z anterior.
+        let back = |p: Vec3| {
+            if name == "m.glb" {
+                Vec3::new(p.x, -p.z, p.y) * 1000.0
+            } else {
+                p
+            }
+        };
+        for (i, part) in [&a, &b].iter().enumerate() {
+            let mine: Vec<usize> = (0..mesh.len())
+                .filter(|&t| shading.material_of[t] == Some(i as u32))
+                .collect();
+            assert_eq!(mine.len(), part.len(), "{name} part {i}");
+            for (k, &t) in mine.iter().enumerate() {
+                for (g, w) in mesh.corners(t).iter().zip(part.corners(k)) {
+                    assert!(
+                        (back(*g) - w).length() < 1e-5,
+                        "{name} part {i}: {g} for {w}"
+                    );
+                }
+            }
+        }
+    }
+    // PLY: the header names the parts, each vertex carries its part's sRGB colour.
+    let path = dir.join("m.ply");
+    crate::write_mesh_parts(&path, &parts).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let text = String::from_utf8_lossy(&bytes);
+    assert!(
+        text.contains("comment surface left_lung colour 255 188 0"),
+        "{text:.400}"
+    );
+    assert!(text.contains("property uchar red"));
+    let back = load_mesh(&path).unwrap();
+    assert_eq!(back.len(), a.len() + b.len());
+    assert_eq!(back.corners(a.len()), b.corners(0));
+    // One part: the plain formats, as `write_mesh` writes them.
+    crate::write_mesh_parts(&path, &parts[..1]).unwrap();
+    let text = String::from_utf8_lossy(&std::fs::read(&path).unwrap()).into_owned();
+    assert!(!text.contains("uchar red"));
+    let e = crate::write_mesh_parts(&dir.join("m.stl"), &parts)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("m.stl: an STL file holds one surface, not 2"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// A folder of its own under the system's temporary one, emptied.
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("raystream-io-{name}-{}", std::process::id()));

@@ -9,80 +9,225 @@ use std::path::Path;
 
 use crate::{MeshError, MeshFormat, TriMesh, Vec3};
 
+/// One named surface of a mesh file that holds several (`iso --segment`'s segments).
+#[derive(Clone, Copy, Debug)]
+pub struct MeshPart<'a> {
+    /// Its name: a glTF node, mesh and material's, an OBJ object and material's.
+    pub name: &'a str,
+    pub mesh: &'a TriMesh,
+    /// Per-vertex unit normals (ignored unless one a vertex).
+    pub normals: Option<&'a [Vec3]>,
+    /// Linear RGB, 0–1: glTF's base colour and OBJ's `Kd`; a PLY's 8-bit vertex colours are
+    /// its sRGB encoding.
+    pub colour: [f32; 3],
+}
+
+/// The colour an isosurface of bone is written in (linear RGB).
+pub const BONE: [f32; 3] = [0.89, 0.85, 0.79];
+
 /// Writes `mesh` (with optional per-vertex `normals`) in the format named by `path`'s extension.
 pub fn write_mesh(path: &Path, mesh: &TriMesh, normals: Option<&[Vec3]>) -> Result<(), MeshError> {
+    let part = MeshPart {
+        name: "bone",
+        mesh,
+        normals,
+        colour: BONE,
+    };
+    write_mesh_parts(path, &[part])
+}
+
+/// Writes the surfaces `parts` into one file, in the format named by `path`'s extension: one
+/// part as [`write_mesh`] writes a mesh; several as a glTF node each (named, with its colour
+/// as its material), an OBJ object each (its colour in a material library beside it, `path`
+/// with the extension `.mtl`), or a PLY whose vertices carry their part's colour. An STL holds
+/// one surface, so several are refused.
+pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError> {
     let glb = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
     let format = MeshFormat::from_path(path)
         .filter(|f| (*f != MeshFormat::Gltf || glb) && !path.to_string_lossy().ends_with(".gz"))
         .ok_or_else(|| MeshError::invalid(path, "output must end in .ply, .obj, .stl or .glb"))?;
-    let normals = normals.filter(|n| n.len() == mesh.positions.len());
-    let file = std::fs::File::create(path).map_err(|error| MeshError::Io {
+    if parts.is_empty() {
+        return Err(MeshError::invalid(path, "no surface to write"));
+    }
+    if format == MeshFormat::Stl && parts.len() > 1 {
+        return Err(MeshError::invalid(
+            path,
+            format!(
+                "an STL file holds one surface, not {}: write .glb, .obj or .ply, or one at a time",
+                parts.len()
+            ),
+        ));
+    }
+    let vertices: usize = parts.iter().map(|p| p.mesh.positions.len()).sum();
+    if vertices > u32::MAX as usize {
+        return Err(MeshError::invalid(
+            path,
+            format!("{vertices} vertices: over the 2³² a file's indices reach"),
+        ));
+    }
+    let parts: Vec<MeshPart> = parts
+        .iter()
+        .map(|p| MeshPart {
+            normals: p.normals.filter(|n| n.len() == p.mesh.positions.len()),
+            ..*p
+        })
+        .collect();
+    let io = |error| MeshError::Io {
         path: path.to_path_buf(),
         error,
-    })?;
-    let mut w = BufWriter::new(file);
-    let r = match format {
-        MeshFormat::Ply => write_ply(&mut w, mesh, normals),
-        MeshFormat::Obj => write_obj(&mut w, mesh, normals),
-        MeshFormat::Stl => write_stl(&mut w, mesh),
-        MeshFormat::Gltf => write_glb(&mut w, mesh, normals),
     };
-    r.and_then(|()| w.flush()).map_err(|error| MeshError::Io {
-        path: path.to_path_buf(),
-        error,
+    let create = |path: &Path| std::fs::File::create(path).map(BufWriter::new);
+    let mut w = create(path).map_err(io)?;
+    let r = match format {
+        MeshFormat::Ply => write_ply(&mut w, &parts),
+        MeshFormat::Obj if parts.len() > 1 => {
+            let library = path.with_extension("mtl");
+            let name = library
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let mut m = create(&library).map_err(|error| MeshError::Io {
+                path: library.clone(),
+                error,
+            })?;
+            write_mtl(&mut m, &parts)
+                .and_then(|()| m.flush())
+                .map_err(|error| MeshError::Io {
+                    path: library.clone(),
+                    error,
+                })?;
+            write_obj(&mut w, &parts, Some(&name))
+        }
+        MeshFormat::Obj => write_obj(&mut w, &parts, None),
+        MeshFormat::Stl => write_stl(&mut w, parts[0].mesh),
+        MeshFormat::Gltf => write_glb(&mut w, &parts),
+    };
+    r.and_then(|()| w.flush()).map_err(io)
+}
+
+/// A name as one OBJ/MTL token: its whitespace as underscores (tobj, as most readers, splits
+/// `usemtl` and `newmtl` lines at whitespace).
+fn token(name: &str) -> String {
+    let t: String = name
+        .trim()
+        .chars()
+        .map(|c| if c.is_whitespace() { '_' } else { c })
+        .collect();
+    if t.is_empty() { "surface".into() } else { t }
+}
+
+/// Linear RGB (0–1) as 8-bit sRGB.
+fn srgb8(linear: [f32; 3]) -> [u8; 3] {
+    linear.map(|c| {
+        let c = c.clamp(0.0, 1.0);
+        let s = if c <= 0.003_130_8 {
+            12.92 * c
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        };
+        (s * 255.0).round() as u8
     })
 }
 
-fn write_ply(w: &mut impl Write, mesh: &TriMesh, normals: Option<&[Vec3]>) -> std::io::Result<()> {
+fn write_ply(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
+    let coloured = parts.len() > 1;
+    let normals = parts.iter().all(|p| p.normals.is_some());
     writeln!(
         w,
         "ply\nformat binary_little_endian 1.0\ncomment raystream isosurface, LPS millimetres"
     )?;
-    writeln!(w, "element vertex {}", mesh.positions.len())?;
+    if coloured {
+        for p in parts {
+            let [r, g, b] = srgb8(p.colour);
+            writeln!(w, "comment surface {} colour {r} {g} {b}", token(p.name))?;
+        }
+    }
+    let count = |f: fn(&TriMesh) -> usize| parts.iter().map(|p| f(p.mesh)).sum::<usize>();
+    writeln!(w, "element vertex {}", count(|m| m.positions.len()))?;
     writeln!(w, "property float x\nproperty float y\nproperty float z")?;
-    if normals.is_some() {
+    if normals {
         writeln!(w, "property float nx\nproperty float ny\nproperty float nz")?;
     }
-    writeln!(w, "element face {}", mesh.triangles.len())?;
+    if coloured {
+        writeln!(
+            w,
+            "property uchar red\nproperty uchar green\nproperty uchar blue"
+        )?;
+    }
+    writeln!(w, "element face {}", count(TriMesh::len))?;
     writeln!(w, "property list uchar int vertex_indices\nend_header")?;
-    for (i, p) in mesh.positions.iter().enumerate() {
-        for c in p.to_array() {
-            w.write_all(&c.to_le_bytes())?;
-        }
-        if let Some(n) = normals {
-            for c in n[i].to_array() {
+    for p in parts {
+        let rgb = srgb8(p.colour);
+        for (i, x) in p.mesh.positions.iter().enumerate() {
+            for c in x.to_array() {
                 w.write_all(&c.to_le_bytes())?;
+            }
+            if let Some(n) = p.normals.filter(|_| normals) {
+                for c in n[i].to_array() {
+                    w.write_all(&c.to_le_bytes())?;
+                }
+            }
+            if coloured {
+                w.write_all(&rgb)?;
             }
         }
     }
-    for t in &mesh.triangles {
-        w.write_all(&[3])?;
-        for &v in t {
-            w.write_all(&(v as i32).to_le_bytes())?;
+    let mut base = 0u32;
+    for p in parts {
+        for t in &p.mesh.triangles {
+            w.write_all(&[3])?;
+            for &v in t {
+                w.write_all(&((base + v) as i32).to_le_bytes())?;
+            }
         }
+        base += p.mesh.positions.len() as u32;
     }
     Ok(())
 }
 
-fn write_obj(w: &mut impl Write, mesh: &TriMesh, normals: Option<&[Vec3]>) -> std::io::Result<()> {
+/// A material library: a material a part, its colour as `Kd`.
+fn write_mtl(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
+    writeln!(w, "# raystream surfaces' colours")?;
+    for p in parts {
+        let [r, g, b] = p.colour;
+        writeln!(w, "newmtl {}\nKd {r} {g} {b}", token(p.name))?;
+    }
+    Ok(())
+}
+
+/// OBJ, with the material library `library` (and an object and material a part) when given.
+fn write_obj(w: &mut impl Write, parts: &[MeshPart], library: Option<&str>) -> std::io::Result<()> {
     writeln!(w, "# raystream isosurface, LPS millimetres")?;
-    for p in &mesh.positions {
-        writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
+    if let Some(l) = library {
+        writeln!(w, "mtllib {l}")?;
     }
-    if let Some(n) = normals {
-        for n in n {
-            writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
+    let all_normals = parts.iter().all(|p| p.normals.is_some());
+    let mut base = 1u32;
+    for p in parts {
+        let normals = p.normals.filter(|_| all_normals);
+        if library.is_some() {
+            let name = token(p.name);
+            writeln!(w, "o {name}\nusemtl {name}")?;
         }
-    }
-    for t in &mesh.triangles {
-        let [a, b, c] = t.map(|v| v + 1);
-        if normals.is_some() {
-            writeln!(w, "f {a}//{a} {b}//{b} {c}//{c}")?;
-        } else {
-            writeln!(w, "f {a} {b} {c}")?;
+        for x in &p.mesh.positions {
+            writeln!(w, "v {} {} {}", x.x, x.y, x.z)?;
         }
+        if let Some(n) = normals {
+            for n in n {
+                writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
+            }
+        }
+        for t in &p.mesh.triangles {
+            let [a, b, c] = t.map(|v| v + base);
+            if normals.is_some() {
+                writeln!(w, "f {a}//{a} {b}//{b} {c}//{c}")?;
+            } else {
+                writeln!(w, "f {a} {b} {c}")?;
+            }
+        }
+        base += p.mesh.positions.len() as u32;
     }
     Ok(())
 }
@@ -97,69 +242,86 @@ pub const LPS_MM_TO_GLTF: [f32; 16] = [
     0.0, 0.0, 0.0, 1.0,
 ];
 
-/// Binary glTF: the surface's positions (LPS mm, as the other formats hold them), normals and
-/// u32 indices in one buffer, under a node whose matrix is [`LPS_MM_TO_GLTF`], with a
-/// bone-coloured material.
-fn write_glb(w: &mut impl Write, mesh: &TriMesh, normals: Option<&[Vec3]>) -> std::io::Result<()> {
+/// Binary glTF: each part's positions (LPS mm, as the other formats hold them), normals and
+/// u32 indices in one buffer, a mesh and a node each (named, with its colour as its material),
+/// under one node whose matrix is [`LPS_MM_TO_GLTF`].
+fn write_glb(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
+    use serde_json::{Value, json};
     let too_big = || std::io::Error::other("over the 4 GiB a GLB file can hold");
+    let mut bin: Vec<u8> = Vec::new();
+    let (mut views, mut accessors, mut meshes, mut nodes, mut materials) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    // Appends `bytes` as a buffer view, returning its index.
+    let mut push = |bin: &mut Vec<u8>, bytes: &mut dyn Iterator<Item = u8>| -> usize {
+        let offset = bin.len();
+        bin.extend(bytes);
+        views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": bin.len() - offset}));
+        views.len() - 1
+    };
     let vec3s = |v: &[Vec3]| -> Vec<u8> {
         v.iter()
             .flat_map(|p| p.to_array())
             .flat_map(f32::to_le_bytes)
             .collect()
     };
-    let mut bin = vec3s(&mesh.positions);
-    let normals_at = bin.len();
-    if let Some(n) = normals {
-        bin.extend(vec3s(n));
-    }
-    let indices_at = bin.len();
-    bin.extend(
-        mesh.triangles
-            .iter()
-            .flatten()
-            .flat_map(|i| i.to_le_bytes()),
-    );
-    if bin.len() > u32::MAX as usize - 4096 {
-        return Err(too_big());
-    }
-    let b = mesh.bounds();
-    let n = mesh.positions.len();
-    let view = |offset: usize, length: usize| serde_json::json!({"buffer": 0, "byteOffset": offset, "byteLength": length});
-    let mut views = vec![view(0, normals_at)];
-    let mut accessors = vec![serde_json::json!({
-        "bufferView": 0, "componentType": 5126, "count": n, "type": "VEC3",
-        "min": b.min.to_array(), "max": b.max.to_array()
-    })];
-    let mut attributes = serde_json::json!({"POSITION": 0});
-    if normals.is_some() {
-        views.push(view(normals_at, indices_at - normals_at));
-        accessors.push(serde_json::json!({
-            "bufferView": 1, "componentType": 5126, "count": n, "type": "VEC3"
+    for (k, p) in parts.iter().enumerate() {
+        let n = p.mesh.positions.len();
+        let b = p.mesh.bounds();
+        let view = push(&mut bin, &mut vec3s(&p.mesh.positions).into_iter());
+        accessors.push(json!({
+            "bufferView": view, "componentType": 5126, "count": n, "type": "VEC3",
+            "min": b.min.to_array(), "max": b.max.to_array()
         }));
-        attributes["NORMAL"] = 1.into();
+        let mut attributes = json!({"POSITION": accessors.len() - 1});
+        if let Some(normals) = p.normals {
+            let view = push(&mut bin, &mut vec3s(normals).into_iter());
+            accessors.push(json!({
+                "bufferView": view, "componentType": 5126, "count": n, "type": "VEC3"
+            }));
+            attributes["NORMAL"] = (accessors.len() - 1).into();
+        }
+        let view = push(
+            &mut bin,
+            &mut p
+                .mesh
+                .triangles
+                .iter()
+                .flatten()
+                .flat_map(|i| i.to_le_bytes()),
+        );
+        accessors.push(json!({
+            "bufferView": view, "componentType": 5125,
+            "count": 3 * p.mesh.triangles.len(), "type": "SCALAR"
+        }));
+        let [r, g, b] = p.colour;
+        materials.push(json!({
+            "name": p.name,
+            "pbrMetallicRoughness": {"baseColorFactor": [r, g, b, 1.0], "metallicFactor": 0.0}
+        }));
+        meshes.push(json!({"name": p.name, "primitives": [{
+            "attributes": attributes, "indices": accessors.len() - 1, "material": k
+        }]}));
+        nodes.push(json!({"name": p.name, "mesh": k}));
+        if bin.len() > u32::MAX as usize - 4096 {
+            return Err(too_big());
+        }
     }
-    views.push(view(indices_at, bin.len() - indices_at));
-    accessors.push(serde_json::json!({
-        "bufferView": views.len() - 1, "componentType": 5125,
-        "count": 3 * mesh.triangles.len(), "type": "SCALAR"
-    }));
-    let doc = serde_json::json!({
+    let children: Vec<usize> = (1..=parts.len()).collect();
+    nodes.insert(
+        0,
+        json!({
+            "name": "LPS millimetres (this node turns them to glTF's metres, +Y superior, +Z anterior)",
+            "matrix": LPS_MM_TO_GLTF,
+            "children": children
+        }),
+    );
+    let doc: Value = json!({
         "asset": {"version": "2.0", "generator": "raystream"},
         "scene": 0,
         "scenes": [{"nodes": [0]}],
-        "nodes": [{
-            "name": "isosurface (LPS mm; this node turns it to metres, +Y superior, +Z anterior)",
-            "mesh": 0,
-            "matrix": LPS_MM_TO_GLTF
-        }],
-        "meshes": [{"primitives": [{
-            "attributes": attributes, "indices": accessors.len() - 1, "material": 0
-        }]}],
-        "materials": [{
-            "name": "bone",
-            "pbrMetallicRoughness": {"baseColorFactor": [0.89, 0.85, 0.79, 1.0], "metallicFactor": 0.0}
-        }],
+        "nodes": nodes,
+        "meshes": meshes,
+        "materials": materials,
         "buffers": [{"byteLength": bin.len()}],
         "bufferViews": views,
         "accessors": accessors,

@@ -667,9 +667,16 @@ pub struct IsoArgs {
     pub threshold: Threshold,
     #[command(flatten)]
     pub pick: VolumePick,
-    /// Taubin smoothing iterations (0: the raw marching-cubes surface, gradient normals).
-    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=100))]
-    pub smooth: u32,
+    /// Instead of a threshold, the surfaces of a label map's or DICOM Segmentation's segments:
+    /// their numbers or (a Segmentation's) labels, comma-separated, or `all` (the default for
+    /// a DICOM Segmentation). Several go to one file: a glTF node each (named, in its colour),
+    /// an OBJ object each (colours in a .mtl beside it), or a PLY's vertex colours.
+    #[arg(long, value_name = "LIST", conflicts_with_all = ["iso", "preset"])]
+    pub segment: Option<String>,
+    /// Taubin smoothing iterations (0: the raw marching-cubes surface, gradient normals;
+    /// default 0 for a threshold, 10 for segments, whose voxel stair-steps are a voxel high).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=100))]
+    pub smooth: Option<u32>,
     #[arg(short, long)]
     pub quiet: bool,
 }

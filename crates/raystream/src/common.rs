@@ -334,6 +334,14 @@ pub fn file_name(path: &Path) -> String {
 }
 
 /// A spinner with a message, hidden with `--quiet`.
+/// The first value of `v` that a label map cannot hold (a whole number from 0), if any.
+pub fn not_a_label(v: &raystream_io::Volume) -> Option<f32> {
+    v.data
+        .iter()
+        .copied()
+        .find(|v| !(v.is_finite() && *v >= 0.0 && v.fract() == 0.0))
+}
+
 pub fn spinner(quiet: bool, msg: &str) -> ProgressBar {
     if quiet {
         return ProgressBar::hidden();

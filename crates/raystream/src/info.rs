@@ -257,8 +257,8 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 let name = v
                     .series
                     .as_ref()
-                    .and_then(|s| s.segments.iter().find(|(k, _)| *k as u32 == l))
-                    .map(|(_, name)| name.clone())
+                    .and_then(|s| s.segments.iter().find(|k| k.number as u32 == l))
+                    .map(|k| k.label.clone())
                     .unwrap_or_default();
                 (l, n, n as f64 * voxel_ml, name)
             })
@@ -277,7 +277,7 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             "transfer_syntax": s.transfer_syntax,
             "transfer_syntax_name": s.transfer_syntax_name,
             "all": s.all.iter().map(|(u, n, d)| json!({"uid": u, "count": n, "description": d})).collect::<Vec<_>>(),
-            "segments": s.segments.iter().map(|(n, l)| json!({"number": n, "label": l})).collect::<Vec<_>>(),
+            "segments": s.segments.iter().map(|k| json!({"number": k.number, "label": k.label, "colour": k.colour})).collect::<Vec<_>>(),
         })
     });
     if a.json {
@@ -367,8 +367,16 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 s.transfer_syntax,
                 s.transfer_syntax_name
             );
-            for (n, label) in &s.segments {
-                println!("  segment    {n}: {label} (the voxels of value {n})");
+            for k in &s.segments {
+                let colour = k
+                    .colour
+                    .map(|[r, g, b]| format!(", shown in #{r:02x}{g:02x}{b:02x}"))
+                    .unwrap_or_default();
+                println!(
+                    "  segment    {n}: {} (the voxels of value {n}{colour})",
+                    k.label,
+                    n = k.number
+                );
             }
             for (u, n, d) in s.all.iter().filter(|(u, _, _)| *u != s.uid) {
                 println!("  also       {} ({n} slices) {d}", uid(u));

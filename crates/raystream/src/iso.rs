@@ -31,6 +31,18 @@ pub fn bones(
     embedded: Option<&[u8]>,
 ) -> Result<Bones> {
     let (volume, load_ms) = read_volume(path, select, quiet, embedded)?;
+    bones_of(&volume, path, hu, smoothing, quiet, load_ms)
+}
+
+/// The surface at `hu` of `volume`, read from `path` in `load_ms`.
+fn bones_of(
+    volume: &Volume,
+    path: &Path,
+    hu: f32,
+    smoothing: u32,
+    quiet: bool,
+    load_ms: f64,
+) -> Result<Bones> {
     if !quiet && volume.unit != ValueUnit::Hounsfield {
         eprintln!(
             "raystream: {}: values are not known to be Hounsfield units; the threshold {hu} applies to the raw values",
@@ -45,15 +57,20 @@ pub fn bones(
             volume.dims[0], volume.dims[1], volume.dims[2]
         ),
     );
-    let mut surface = extract_isosurface(&volume, hu);
+    let mut surface = extract_isosurface(volume, hu);
     raystream_volume::smooth(&mut surface, smoothing);
     pb.finish_and_clear();
     if surface.mesh.is_empty() {
         let range = volume
             .value_range()
             .map_or("all NaN".to_string(), |(lo, hi)| format!("{lo} .. {hi}"));
+        let hint = if crate::common::not_a_label(volume).is_none() {
+            " (whole numbers from 0, as a label map's: give --segment)"
+        } else {
+            ""
+        };
         bail!(
-            "{}: no surface at {hu}: the values range over {range}",
+            "{}: no surface at {hu}: the values range over {range}{hint}",
             path.display()
         );
     }
@@ -93,8 +110,24 @@ pub fn read_volume(
 }
 
 pub fn run(a: &IsoArgs) -> Result<()> {
+    let thresholded = a.threshold.iso.is_some() || a.threshold.preset.is_some();
     let hu = a.threshold.hu()?;
-    let b = bones(&a.input, &a.pick.select(), hu, a.smooth, a.quiet, None)?;
+    let (volume, load_ms) = read_volume(&a.input, &a.pick.select(), a.quiet, None)?;
+    let segmentation = volume
+        .series
+        .as_ref()
+        .is_some_and(|s| !s.segments.is_empty());
+    if a.segment.is_some() || (segmentation && !thresholded) {
+        return run_segments(a, &volume, load_ms);
+    }
+    let b = bones_of(
+        &volume,
+        &a.input,
+        hu,
+        a.smooth.unwrap_or(0),
+        a.quiet,
+        load_ms,
+    )?;
     let t = Instant::now();
     raystream_io::write_mesh(&a.output, &b.surface.mesh, Some(&b.surface.normals))?;
     if !a.quiet {
@@ -110,4 +143,300 @@ pub fn run(a: &IsoArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The smoothing iterations segments get unless `--smooth` says otherwise.
+pub const SEGMENT_SMOOTHING: u32 = 10;
+
+/// One segment's surface.
+pub struct SegmentSurface {
+    /// Its label value.
+    pub label: u32,
+    /// Its name: a Segmentation's Segment Label, else "label N".
+    pub name: String,
+    /// sRGB: a Segmentation's recommended colour, else `--segmentation`'s tint for the label.
+    pub colour: [u8; 3],
+    pub voxels: usize,
+    pub surface: IsoSurface,
+}
+
+/// `iso --segment`: the surfaces of the segments `list` names (see [`IsoArgs::segment`]) in
+/// `labels`, written to one file.
+fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
+    let t0 = Instant::now();
+    let surfaces = segment_surfaces(
+        labels,
+        &a.input,
+        a.segment.as_deref().unwrap_or("all"),
+        a.smooth.unwrap_or(SEGMENT_SMOOTHING),
+        a.quiet,
+    )?;
+    let iso_ms = ms(t0.elapsed());
+    let t = Instant::now();
+    let parts: Vec<raystream_io::MeshPart> = surfaces
+        .iter()
+        .map(|s| raystream_io::MeshPart {
+            name: &s.name,
+            mesh: &s.surface.mesh,
+            normals: Some(&s.surface.normals),
+            colour: s.colour.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize]),
+        })
+        .collect();
+    raystream_io::write_mesh_parts(&a.output, &parts)?;
+    if !a.quiet {
+        let voxel_ml = labels.voxel_ml();
+        for s in &surfaces {
+            eprintln!(
+                "raystream: segment {} ({}): {} voxels, {:.1} ml; its surface {} triangles, enclosing {:.1} ml",
+                s.label,
+                s.name,
+                s.voxels,
+                s.voxels as f64 * voxel_ml,
+                s.surface.mesh.len(),
+                enclosed_ml(&s.surface.mesh)
+            );
+        }
+        eprintln!(
+            "raystream: wrote {} ({} surfaces): load {load_ms:.0} ms, surfaces {iso_ms:.0} ms, write {:.0} ms",
+            a.output.display(),
+            surfaces.len(),
+            ms(t.elapsed())
+        );
+    }
+    Ok(())
+}
+
+/// The volume a closed, outward-facing mesh in millimetres encloses, ml (the divergence
+/// theorem over its triangles, in f64).
+pub fn enclosed_ml(mesh: &raystream_io::TriMesh) -> f64 {
+    (0..mesh.len())
+        .map(|i| {
+            let [a, b, c] = mesh.corners(i).map(|p| p.as_dvec3());
+            a.dot(b.cross(c))
+        })
+        .sum::<f64>()
+        / 6.0
+        / 1000.0
+}
+
+/// The surfaces of the segments `list` names in the label volume `labels` (read from `path`):
+/// each segment's voxels as an inside region, cut out of the grid with its bounding box and a
+/// voxel around it, its surface at the half-way value between inside and outside (halfway
+/// between the centres of a voxel of the segment and its neighbour not of it, the grid's
+/// edge included), smoothed `smoothing` times.
+pub fn segment_surfaces(
+    labels: &Volume,
+    path: &Path,
+    list: &str,
+    smoothing: u32,
+    quiet: bool,
+) -> Result<Vec<SegmentSurface>> {
+    let name = path.display();
+    if let Some(v) = crate::common::not_a_label(labels) {
+        bail!("{name}: --segment takes a label map (whole numbers from 0); it holds {v}");
+    }
+    let known = labels
+        .series
+        .as_ref()
+        .map(|s| s.segments.clone())
+        .unwrap_or_default();
+    // Each label's voxels and bounding box, in one pass.
+    let [nx, ny, _] = labels.dims;
+    let mut boxes: std::collections::BTreeMap<u32, ([usize; 3], [usize; 3], usize)> =
+        Default::default();
+    for (n, &v) in labels.data.iter().enumerate() {
+        if v > 0.0 {
+            let ijk = [n % nx, (n / nx) % ny, n / (nx * ny)];
+            let e = boxes.entry(v as u32).or_insert((ijk, ijk, 0));
+            e.0 = std::array::from_fn(|a| e.0[a].min(ijk[a]));
+            e.1 = std::array::from_fn(|a| e.1[a].max(ijk[a]));
+            e.2 += 1;
+        }
+    }
+    let named = |l: u32| known.iter().find(|k| k.number as u32 == l);
+    let present = || {
+        let list: Vec<String> = boxes
+            .keys()
+            .map(|&l| match named(l) {
+                Some(k) if !k.label.is_empty() => format!("{l} ({})", k.label),
+                _ => l.to_string(),
+            })
+            .collect();
+        if list.is_empty() {
+            "none".to_string()
+        } else {
+            list.join(", ")
+        }
+    };
+    let mut wanted: Vec<u32> = Vec::new();
+    for item in list.split(',').map(str::trim) {
+        let found: Vec<u32> = if item.eq_ignore_ascii_case("all") {
+            boxes.keys().copied().collect()
+        } else if let Ok(l) = item.parse::<u32>() {
+            if !boxes.contains_key(&l) {
+                bail!(
+                    "{name}: --segment {item}: no voxel holds label {l}; the labels present are {}",
+                    present()
+                );
+            }
+            vec![l]
+        } else {
+            let by_name: Vec<u32> = known
+                .iter()
+                .filter(|k| k.label.eq_ignore_ascii_case(item))
+                .map(|k| k.number as u32)
+                .collect();
+            match by_name.as_slice() {
+                [] => bail!(
+                    "{name}: --segment {item:?}: no segment is named so (nor is it a number); the labels present are {}",
+                    present()
+                ),
+                [l] if !boxes.contains_key(l) => bail!(
+                    "{name}: --segment {item:?}: segment {l} holds no voxel; the labels present are {}",
+                    present()
+                ),
+                _ => by_name,
+            }
+        };
+        for l in found {
+            if !wanted.contains(&l) {
+                wanted.push(l);
+            }
+        }
+    }
+    if wanted.is_empty() {
+        bail!("{name}: no voxel holds a label (every voxel is 0)");
+    }
+    let pb = if quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(wanted.len() as u64).with_style(
+            indicatif::ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} segments")
+                .expect("a valid template"),
+        )
+    };
+    pb.set_message("marching cubes");
+    let mut out = Vec::with_capacity(wanted.len());
+    for &l in &wanted {
+        // A voxel of margin all round, beyond the grid too (no segment holds a voxel outside
+        // it), so that the surface crosses between a voxel of the segment and its neighbour
+        // halfway everywhere: the marching cubes would close a region at the grid's edge on
+        // the edge voxels' centres, and a Segmentation's grid ends at its last frame.
+        let (lo, hi, voxels) = boxes[&l];
+        let dims = [0, 1, 2].map(|a| hi[a] - lo[a] + 3);
+        let mut data = vec![0.0f32; dims[0] * dims[1] * dims[2]];
+        for k in lo[2]..=hi[2] {
+            for j in lo[1]..=hi[1] {
+                let row = nx * (j + ny * k);
+                let at = 1 + dims[0] * (j + 1 - lo[1] + dims[1] * (k + 1 - lo[2]));
+                for (d, &v) in data[at..]
+                    .iter_mut()
+                    .zip(&labels.data[row + lo[0]..=row + hi[0]])
+                {
+                    *d = if v as u32 == l && v > 0.0 { 1.0 } else { 0.0 };
+                }
+            }
+        }
+        let mut cut = Volume::hounsfield(dims, labels.spacing, data);
+        cut.unit = ValueUnit::Unknown;
+        cut.direction = labels.direction;
+        cut.origin = labels
+            .index_to_world(raystream_math::DVec3::from_array(
+                lo.map(|x| x as f64 - 1.0),
+            ))
+            .to_array();
+        let mut surface = extract_isosurface(&cut, 0.5);
+        raystream_volume::smooth(&mut surface, smoothing);
+        let segment = named(l);
+        let name = segment
+            .map(|k| k.label.clone())
+            .filter(|n| !n.is_empty())
+            .unwrap_or_else(|| format!("label {l}"));
+        let colour = segment.and_then(|k| k.colour).unwrap_or(
+            crate::overlay::LABEL_COLOURS[(l as usize - 1) % crate::overlay::LABEL_COLOURS.len()],
+        );
+        out.push(SegmentSurface {
+            label: l,
+            name,
+            colour,
+            voxels,
+            surface,
+        });
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    // Names are glTF nodes' and OBJ objects': two segments of one label get their numbers.
+    let shared: Vec<bool> = out
+        .iter()
+        .map(|s| out.iter().filter(|o| o.name == s.name).count() > 1)
+        .collect();
+    for (s, shared) in out.iter_mut().zip(shared) {
+        if shared {
+            s.name = format!("{} ({})", s.name, s.label);
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use raystream_math::{DVec3, Vec3};
+
+    /// A 3×3×4 label map on a turned, unevenly spaced grid: label 2 everywhere but voxel
+    /// (0, 0, 0), which is label 1.
+    fn labels() -> Volume {
+        let mut data = vec![2.0; 36];
+        data[0] = 1.0;
+        let mut v = Volume::hounsfield([3, 3, 4], [0.5, 0.7, 2.0], data);
+        v.unit = ValueUnit::Unknown;
+        v.origin = [10.0, -20.0, 30.0];
+        // 30° about z.
+        let (s, c) = (0.5, 0.75f64.sqrt());
+        v.direction = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+        v
+    }
+
+    /// A segment that fills the grid is closed half a voxel beyond its edge voxels' centres,
+    /// as inside it; a single voxel becomes the octahedron through its faces' centres (a sixth
+    /// of the voxel); the segments come in the order asked, each once, and raw surfaces are
+    /// closed.
+    #[test]
+    fn segments_are_closed_halfway_to_their_neighbours_the_grid_edge_too() {
+        let v = labels();
+        let path = Path::new("labels.nii");
+        let s = segment_surfaces(&v, path, "2, 1,2", 0, true).unwrap();
+        assert_eq!(s.iter().map(|s| s.label).collect::<Vec<_>>(), [2, 1]);
+        assert_eq!(s[0].name, "label 2");
+        assert_eq!(s[1].voxels, 1);
+        let index = |p: Vec3| v.world_to_index(p.as_dvec3());
+        let (mut lo, mut hi) = (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN));
+        for &p in &s[0].surface.mesh.positions {
+            lo = lo.min(index(p));
+            hi = hi.max(index(p));
+        }
+        assert!((lo - DVec3::splat(-0.5)).abs().max_element() < 1e-5, "{lo}");
+        assert!(
+            (hi - DVec3::new(2.5, 2.5, 3.5)).abs().max_element() < 1e-5,
+            "{hi}"
+        );
+        for &p in &s[1].surface.mesh.positions {
+            let q = index(p);
+            assert!((q.abs().element_sum() - 0.5).abs() < 1e-5, "{q}");
+        }
+        let voxel_ml = v.voxel_ml();
+        assert!((enclosed_ml(&s[1].surface.mesh) - voxel_ml / 6.0).abs() < 1e-6 * voxel_ml);
+        assert!(enclosed_ml(&s[0].surface.mesh) > 0.0);
+        let all = segment_surfaces(&v, path, "all", 3, true).unwrap();
+        assert_eq!(all.iter().map(|s| s.label).collect::<Vec<_>>(), [1, 2]);
+        let e = segment_surfaces(&v, path, "3", 0, true).err().unwrap();
+        assert_eq!(
+            e.to_string(),
+            "labels.nii: --segment 3: no voxel holds label 3; the labels present are 1, 2"
+        );
+        let mut ct = v.clone();
+        ct.data[5] = -1000.0;
+        let e = segment_surfaces(&ct, path, "all", 0, true).err().unwrap();
+        assert!(e.to_string().contains("it holds -1000"), "{e}");
+    }
 }

@@ -191,11 +191,7 @@ fn segmentation(a: &RenderArgs, format: ImageFormat) -> Result<Option<raystream_
         bail!("--segmentation draws on a PNG; an EXR holds the values themselves");
     }
     let labels = raystream_io::load_volume(file, &raystream_io::VolumeSelect::default())?;
-    if let Some(v) = labels
-        .data
-        .iter()
-        .find(|v| !(v.is_finite() && **v >= 0.0 && v.fract() == 0.0))
-    {
+    if let Some(v) = crate::common::not_a_label(&labels) {
         bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
     }
     Ok(Some(labels))

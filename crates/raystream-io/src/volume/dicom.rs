@@ -54,8 +54,18 @@ pub struct DicomSeriesInfo {
     /// slices were interpolated between the acquired ones (uneven spacing).
     pub sources: Vec<SourceImage>,
     /// A DICOM Segmentation's segments (read as a label volume, each segment's voxels its
-    /// number): number and label. Empty for an image series.
-    pub segments: Vec<(u16, String)>,
+    /// number). Empty for an image series.
+    pub segments: Vec<SegmentLabel>,
+}
+
+/// A segment of a DICOM Segmentation as read: its number (its voxels' value in the label
+/// volume), its Segment Label, and the colour it recommends showing it in (sRGB, from the
+/// Recommended Display CIELab Value; `None` where it gives none).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SegmentLabel {
+    pub number: u16,
+    pub label: String,
+    pub colour: Option<[u8; 3]>,
 }
 
 /// One acquired image of a series: a file's SOP instance, and its frame in a multi-frame one.

@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 
 use raystream_math::DVec3;
 
-pub use dicom::{DicomSeriesInfo, DicomStudy, SourceImage, list_dicom_series};
+pub use dicom::{DicomSeriesInfo, DicomStudy, SegmentLabel, SourceImage, list_dicom_series};
 
 /// The largest volume raystream loads: 2³⁰ voxels (4 GiB of `f32`), e.g. 1024³ or 2048×2048×256.
 pub const MAX_VOXELS: u64 = 1 << 30;

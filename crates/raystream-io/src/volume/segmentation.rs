@@ -15,7 +15,7 @@ use dicom_dictionary_std::tags;
 use dicom_object::InMemDicomObject;
 
 use super::dicom::{DicomStudy, FileMeta, FrameGeometry, cross, dot, functional_groups, sub};
-use super::{DicomSeriesInfo, Phase, ValueUnit, Volume, VolumeError, VolumeFormat};
+use super::{DicomSeriesInfo, Phase, SegmentLabel, ValueUnit, Volume, VolumeError, VolumeFormat};
 use super::{check_geometry, voxel_count};
 
 const SEGMENTATION: &str = "1.2.840.10008.5.1.4.1.1.66.4";
@@ -143,15 +143,24 @@ pub(crate) fn read(
         )));
     }
     let (per_frame, shared) = functional_groups(obj, frames).map_err(bad)?;
-    let segments: Vec<(u16, String)> = obj
+    let segments: Vec<SegmentLabel> = obj
         .get(tags::SEGMENT_SEQUENCE)
         .and_then(|e| e.items())
         .map(|items| {
             items
                 .iter()
                 .filter_map(|s| {
-                    let n = int(s, tags::SEGMENT_NUMBER)?;
-                    Some((n as u16, text(s, tags::SEGMENT_LABEL)))
+                    let number = int(s, tags::SEGMENT_NUMBER)? as u16;
+                    let colour = s
+                        .get(tags::RECOMMENDED_DISPLAY_CIE_LAB_VALUE)
+                        .and_then(|e| e.to_multi_int::<u16>().ok())
+                        .and_then(|v| <[u16; 3]>::try_from(v).ok())
+                        .map(crate::srgb_from_cielab);
+                    Some(SegmentLabel {
+                        number,
+                        label: text(s, tags::SEGMENT_LABEL),
+                        colour,
+                    })
                 })
                 .collect()
         })
