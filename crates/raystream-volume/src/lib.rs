@@ -7,7 +7,10 @@ pub mod distance;
 mod marching;
 mod tf;
 
-pub use marching::{IsoSurface, extract_isosurface, smooth};
+pub use marching::{
+    IsoSurface, Simplified, departure, distances, extract_isosurface, point_triangle_distance,
+    simplify, smooth,
+};
 pub use tf::{Shading, TfPreset, TransferFunction};
 
 /// Bone thresholds in Hounsfield units.

@@ -196,6 +196,14 @@ fn parse_traversal_cost(s: &str) -> Result<f32, String> {
     }
 }
 
+/// A distance in mm above 0 (and at most a metre).
+fn parse_tolerance(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(mm) if mm > 0.0 && mm <= 1000.0 => Ok(mm),
+        _ => Err(format!("'{s}': a distance in mm, above 0 and at most 1000")),
+    }
+}
+
 /// Which image of a CT folder or file to read.
 #[derive(Args, Clone, Debug, Default)]
 pub struct VolumePick {
@@ -677,6 +685,10 @@ pub struct IsoArgs {
     /// default 0 for a threshold, 10 for segments, whose voxel stair-steps are a voxel high).
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=100))]
     pub smooth: Option<u32>,
+    /// Simplify each surface, as far as every vertex of the full one stays within MM of it
+    /// (measured): far fewer triangles, for printing, the web and meshing for simulation.
+    #[arg(long, value_name = "MM", value_parser = parse_tolerance)]
+    pub simplify: Option<f64>,
     #[arg(short, long)]
     pub quiet: bool,
 }

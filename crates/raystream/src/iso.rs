@@ -120,7 +120,7 @@ pub fn run(a: &IsoArgs) -> Result<()> {
     if a.segment.is_some() || (segmentation && !thresholded) {
         return run_segments(a, &volume, load_ms);
     }
-    let b = bones_of(
+    let mut b = bones_of(
         &volume,
         &a.input,
         hu,
@@ -128,6 +128,7 @@ pub fn run(a: &IsoArgs) -> Result<()> {
         a.quiet,
         load_ms,
     )?;
+    simplify(&mut b.surface, a.simplify, "the surface", a.quiet);
     let t = Instant::now();
     raystream_io::write_mesh(&a.output, &b.surface.mesh, Some(&b.surface.normals))?;
     if !a.quiet {
@@ -143,6 +144,24 @@ pub fn run(a: &IsoArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// `--simplify MM`: simplifies `surface` (named `what` in the report) within `mm`, if given.
+fn simplify(surface: &mut IsoSurface, mm: Option<f64>, what: &str, quiet: bool) {
+    let Some(mm) = mm else { return };
+    let pb = spinner(quiet, &format!("simplifying {what} within {mm} mm"));
+    let t = Instant::now();
+    let s = raystream_volume::simplify(surface, mm);
+    pb.finish_and_clear();
+    if !quiet {
+        eprintln!(
+            "raystream: {what} simplified within {mm} mm: {} → {} triangles (the full surface's vertices lie at most {:.3} mm from it), {:.0} ms",
+            s.triangles_before,
+            s.triangles_after,
+            s.departure,
+            ms(t.elapsed())
+        );
+    }
 }
 
 /// The smoothing iterations segments get unless `--smooth` says otherwise.
@@ -164,13 +183,17 @@ pub struct SegmentSurface {
 /// `labels`, written to one file.
 fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
     let t0 = Instant::now();
-    let surfaces = segment_surfaces(
+    let mut surfaces = segment_surfaces(
         labels,
         &a.input,
         a.segment.as_deref().unwrap_or("all"),
         a.smooth.unwrap_or(SEGMENT_SMOOTHING),
         a.quiet,
     )?;
+    for s in &mut surfaces {
+        let what = format!("segment {} ({})", s.label, s.name);
+        simplify(&mut s.surface, a.simplify, &what, a.quiet);
+    }
     let iso_ms = ms(t0.elapsed());
     let t = Instant::now();
     let parts: Vec<raystream_io::MeshPart> = surfaces

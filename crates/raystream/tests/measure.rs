@@ -2510,6 +2510,8 @@ fn enclosed_ml(mesh: &raystream_io::TriMesh) -> f64 {
 /// - The Segmentation gives the NIfTI's surfaces, named and coloured as its segments; a GLB
 ///   holds one node each, an OBJ an object each with its colour in a material library, a PLY
 ///   its vertices' colours.
+/// - Simplified (`--simplify 0.3`), a surface keeps within 0.3 mm of the full one, closed,
+///   with a third of its triangles or fewer.
 /// - A segment not there, a name no segment has, a CT, or two segments to one STL are refused.
 #[test]
 fn segments_become_closed_surfaces() {
@@ -2585,6 +2587,56 @@ fn segments_become_closed_surfaces() {
         )
     };
     near(enclosed_ml(&raw), lumen_ml, 0.015, "the raw lumen");
+
+    // Simplified within 0.3 mm: a third of the triangles or fewer, each vertex one of the full
+    // (smoothed) surface's, every vertex of which lies within 0.3 mm of it; still closed.
+    let full =
+        raystream_io::load_mesh(&iso(nii_file, &["--segment", "1"], "segsurf-full.ply")).unwrap();
+    let simple = raystream_io::load_mesh(&iso(
+        nii_file,
+        &["--segment", "1", "--simplify", "0.3"],
+        "segsurf-simple.ply",
+    ))
+    .unwrap();
+    assert!(
+        simple.len() * 3 < full.len(),
+        "{} of {}",
+        simple.len(),
+        full.len()
+    );
+    let vertices: std::collections::HashSet<[u32; 3]> = full
+        .positions
+        .iter()
+        .map(|p| p.to_array().map(f32::to_bits))
+        .collect();
+    assert!(
+        simple
+            .positions
+            .iter()
+            .all(|p| vertices.contains(&p.to_array().map(f32::to_bits)))
+    );
+    let d = raystream_volume::departure(&full.positions, &simple, 0.3);
+    assert!(d <= 0.3, "departs {d} mm");
+    assert!(closed_and_oriented(&simple));
+    near(
+        enclosed_ml(&simple),
+        enclosed_ml(&full),
+        0.02,
+        "the simplified lumen",
+    );
+    refused(
+        &[
+            "iso",
+            nii_file,
+            "--segment",
+            "1",
+            "--simplify",
+            "0",
+            "-o",
+            "x.ply",
+        ],
+        "'0': a distance in mm, above 0 and at most 1000",
+    );
 
     // Both segments, smoothed (the default), one surface each: closed, outward, their volume.
     let both = iso(nii_file, &["--segment", "1,2"], "segsurf-nifti.glb");
