@@ -39,7 +39,7 @@ pub use segmentation::{
     Code, SEGMENTATION, Segment, SegmentationInfo, SegmentationWritten, cielab,
     is_segmentation_path, segmentation_source, srgb_from_cielab, write_segmentation,
 };
-pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping};
+pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping, linear_to_srgb8};
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, SegmentLabel, SourceImage, ValueUnit, Volume,
     VolumeError, VolumeFormat, VolumeSelect, is_volume_path, list_dicom_series, load_volume,

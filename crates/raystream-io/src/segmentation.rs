@@ -579,15 +579,7 @@ pub fn srgb_from_cielab(lab: [u16; 3]) -> [u8; 3] {
         [0.071_945_3, -0.228_991_4, 1.405_242_7],
     ]
     .map(|r| r[0] * xyz[0] + r[1] * xyz[1] + r[2] * xyz[2]);
-    lin.map(|c| {
-        let c = c.clamp(0.0, 1.0);
-        let s = if c <= 0.003_130_8 {
-            12.92 * c
-        } else {
-            1.055 * c.powf(1.0 / 2.4) - 0.055
-        };
-        (s * 255.0).round() as u8
-    })
+    lin.map(crate::texture::linear_to_srgb8)
 }
 
 #[cfg(test)]

@@ -117,6 +117,19 @@ impl TriMesh {
         }
     }
 
+    /// The volume the mesh encloses, in its units cubed: the divergence theorem over its
+    /// triangles, in f64; for a closed, outward-facing surface its volume (inward-facing:
+    /// negative).
+    pub fn enclosed_volume(&self) -> f64 {
+        (0..self.len())
+            .map(|i| {
+                let [a, b, c] = self.corners(i).map(|p| p.as_dvec3());
+                a.dot(b.cross(c))
+            })
+            .sum::<f64>()
+            / 6.0
+    }
+
     /// Area-weighted vertex normals (unit length; zero for vertices of degenerate triangles only).
     pub fn vertex_normals(&self) -> Vec<Vec3> {
         let mut n = vec![Vec3::ZERO; self.positions.len()];

@@ -235,6 +235,23 @@ fn written_meshes_read_back_identically() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// The volume a closed mesh encloses: an icosphere's, a little under the unit ball's (its
+/// flat faces cut inside the sphere), the same wherever it is moved, and negative turned
+/// inside out.
+#[test]
+fn enclosed_volume_of_a_closed_mesh() {
+    let mut m = TriMesh::icosphere(3);
+    let ball = 4.0 / 3.0 * std::f64::consts::PI;
+    let v = m.enclosed_volume();
+    assert!(v < ball && v > 0.98 * ball, "{v} for {ball}");
+    m.positions
+        .iter_mut()
+        .for_each(|p| *p += Vec3::new(100.0, -50.0, 20.0));
+    assert!((m.enclosed_volume() - v).abs() < 1e-3 * v);
+    m.triangles.iter_mut().for_each(|t| t.swap(1, 2));
+    assert!((m.enclosed_volume() + v).abs() < 1e-3 * v);
+}
+
 /// Several surfaces in one file: each a glTF node and material (named, in its colour), an OBJ
 /// object with its material in the library beside it, a PLY's vertices in its sRGB colour;
 /// read back, each part's triangles are its own, in order. An STL refuses two.

@@ -59,6 +59,18 @@ pub static SRGB_TO_LINEAR: std::sync::LazyLock<[f32; 256]> = std::sync::LazyLock
     })
 });
 
+/// Linear light (0–1, clamped) as an sRGB-encoded 8-bit value (IEC 61966-2-1): the inverse of
+/// [`SRGB_TO_LINEAR`], rounded.
+pub fn linear_to_srgb8(c: f64) -> u8 {
+    let c = c.clamp(0.0, 1.0);
+    let s = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0).round() as u8
+}
+
 impl Texture {
     /// Reads a PNG or JPEG file (by its content); an error says what is wrong, the caller names
     /// the file. Images over [`MAX_TEXELS`] are refused from their header, before decoding.

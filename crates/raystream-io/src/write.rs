@@ -120,15 +120,7 @@ fn token(name: &str) -> String {
 
 /// Linear RGB (0–1) as 8-bit sRGB.
 fn srgb8(linear: [f32; 3]) -> [u8; 3] {
-    linear.map(|c| {
-        let c = c.clamp(0.0, 1.0);
-        let s = if c <= 0.003_130_8 {
-            12.92 * c
-        } else {
-            1.055 * c.powf(1.0 / 2.4) - 0.055
-        };
-        (s * 255.0).round() as u8
-    })
+    linear.map(|c| crate::texture::linear_to_srgb8(c as f64))
 }
 
 fn write_ply(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {

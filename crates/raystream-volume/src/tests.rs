@@ -294,16 +294,6 @@ fn departure_brute(full: &raystream_io::TriMesh, simple: &raystream_io::TriMesh)
         .reduce(|| 0.0, f64::max)
 }
 
-fn volume_of(mesh: &raystream_io::TriMesh) -> f64 {
-    (0..mesh.len())
-        .map(|i| {
-            let [a, b, c] = mesh.corners(i).map(|p| p.as_dvec3());
-            a.dot(b.cross(c))
-        })
-        .sum::<f64>()
-        / 6.0
-}
-
 /// The smoothed sphere of radius 20 (voxels of 1 mm) simplified within 0.2 and 0.5 mm: a
 /// sixth of the triangles or fewer, still closed and oriented, its vertices original ones, every vertex of the full
 /// surface within the bound of the simplified one (the departure `simplify` measures through its
@@ -356,7 +346,7 @@ fn simplifying_keeps_the_surface_within_its_bound() {
             "the full surface departs {d} mm from the simplified one"
         );
         assert!((d - s.departure).abs() < 1e-12, "{d} measured, {s:?}");
-        let (v0, v1) = (volume_of(&full.mesh), volume_of(&simple.mesh));
+        let (v0, v1) = (full.mesh.enclosed_volume(), simple.mesh.enclosed_volume());
         // Within the bound of a sphere of radius 20: the volume within 3 bound / radius.
         assert!(
             (v1 - v0).abs() < 3.0 * bound / 20.0 * v0,

@@ -229,17 +229,9 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
     Ok(())
 }
 
-/// The volume a closed, outward-facing mesh in millimetres encloses, ml (the divergence
-/// theorem over its triangles, in f64).
+/// The volume a closed, outward-facing mesh in millimetres encloses, ml.
 pub fn enclosed_ml(mesh: &raystream_io::TriMesh) -> f64 {
-    (0..mesh.len())
-        .map(|i| {
-            let [a, b, c] = mesh.corners(i).map(|p| p.as_dvec3());
-            a.dot(b.cross(c))
-        })
-        .sum::<f64>()
-        / 6.0
-        / 1000.0
+    mesh.enclosed_volume() / 1000.0
 }
 
 /// The surfaces of the segments `list` names in the label volume `labels` (read from `path`):

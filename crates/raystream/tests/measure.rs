@@ -2489,13 +2489,7 @@ fn closed_and_oriented(mesh: &raystream_io::TriMesh) -> bool {
 
 /// The volume a closed, outward-facing mesh in millimetres encloses, ml.
 fn enclosed_ml(mesh: &raystream_io::TriMesh) -> f64 {
-    (0..mesh.len())
-        .map(|i| {
-            let [a, b, c] = mesh.corners(i).map(|p| p.as_dvec3());
-            a.dot(b.cross(c))
-        })
-        .sum::<f64>()
-        / 6000.0
+    mesh.enclosed_volume() / 1000.0
 }
 
 /// `iso LABELS --segment`: the lumen and the wall that `measure --mask` labels on the chest CT,
