@@ -106,6 +106,19 @@ impl Default for Material {
     }
 }
 
+/// A surface for [`Scene::for_surfaces`]: its triangles and per-vertex normals in LPS
+/// millimetres (normals ignored unless one a vertex), and its colour (linear RGB, the
+/// material's diffuse).
+#[derive(Clone, Debug, Default)]
+pub struct Surface {
+    pub mesh: TriMesh,
+    pub normals: Vec<Vec3>,
+    pub colour: [f32; 3],
+}
+
+/// The diffuse colour of bone (linear RGB).
+pub const BONE: [f32; 3] = [0.88, 0.84, 0.74];
+
 /// A scene ready to render.
 #[derive(Clone, Debug)]
 pub struct Scene {
@@ -642,24 +655,53 @@ impl Scene {
     /// the patient stands upright facing the camera (scene x = patient's left, y = superior,
     /// z = anterior: the anterior view, patient's right on the image's left), in an ivory bone
     /// material on a dark, slightly reflective floor, with a key light above-front and a fill.
-    pub fn for_bones(mut mesh: TriMesh, normals: &[Vec3], name: &Path) -> Scene {
+    pub fn for_bones(mesh: TriMesh, normals: &[Vec3], name: &Path) -> Scene {
+        let bone = Surface {
+            mesh,
+            normals: normals.to_vec(),
+            colour: BONE,
+        };
+        Self::for_surfaces(vec![bone], name)
+    }
+
+    /// Surfaces in LPS millimetres (a CT's bones, a segmentation's segments), each an object in
+    /// a material of its colour (the first, alone, named `bone`), staged as
+    /// [`Scene::for_bones`] stages the bones: the anterior view, a dark, slightly reflective
+    /// floor, a key light and a fill. Each surface's own normals shade it where it has one a
+    /// vertex.
+    pub fn for_surfaces(mut surfaces: Vec<Surface>, name: &Path) -> Scene {
         let lps_to_scene = |p: Vec3| Frame::Lps.to_scene(p);
-        for p in &mut mesh.positions {
-            *p = lps_to_scene(*p);
+        let mut all = TriMesh::default();
+        for s in &mut surfaces {
+            for p in &mut s.mesh.positions {
+                *p = lps_to_scene(*p);
+            }
+            all.append(&s.mesh, |p| p);
         }
-        let b = mesh.bounds();
+        let b = all.bounds();
         let (c, r) = (b.center(), b.radius());
         let mut desc = SceneDesc::default();
-        desc.materials.insert(
-            "bone".into(),
-            MaterialDesc {
-                diffuse: Some([0.88, 0.84, 0.74]),
-                specular: Some([0.25, 0.25, 0.22]),
-                shininess: Some(24.0),
-                reflectivity: Some(0.04),
+        for (k, s) in surfaces.iter().enumerate() {
+            let name = if k == 0 {
+                "bone".to_string()
+            } else {
+                format!("surface {k}")
+            };
+            desc.materials.insert(
+                name.clone(),
+                MaterialDesc {
+                    diffuse: Some(s.colour),
+                    specular: Some([0.25, 0.25, 0.22]),
+                    shininess: Some(24.0),
+                    reflectivity: Some(0.04),
+                    ..Default::default()
+                },
+            );
+            desc.objects.push(ObjectDesc {
+                material: Some(name),
                 ..Default::default()
-            },
-        );
+            });
+        }
         desc.materials.insert(
             "floor".into(),
             MaterialDesc {
@@ -685,22 +727,27 @@ impl Scene {
         ];
         desc.ambient = Some([0.35, 0.35, 0.38]);
         desc.background = Some([0.02, 0.025, 0.035]);
-        desc.objects.push(ObjectDesc {
-            material: Some("bone".into()),
-            ..Default::default()
-        });
-        let n = mesh.positions.len();
-        let mut mesh = Some(mesh);
-        // A CT grid lies within ±1e6 mm, so its bones' lights and floor are far inside ±1e10.
-        let mut scene = Self::compile(&desc, name, None, |_, _| {
-            Ok((mesh.take().expect("one object"), MeshShading::default()))
+        let normals: Vec<(usize, Vec<Vec3>)> = surfaces
+            .iter_mut()
+            .map(|s| (s.mesh.positions.len(), std::mem::take(&mut s.normals)))
+            .collect();
+        let mut meshes: Vec<Option<TriMesh>> = surfaces.into_iter().map(|s| Some(s.mesh)).collect();
+        // A CT grid lies within ±1e6 mm, so its surfaces' lights and floor are far inside ±1e10.
+        let mut scene = Self::compile(&desc, name, None, |i, _| {
+            let mesh = meshes[i].take().expect("each object once");
+            Ok((mesh, MeshShading::default()))
         })
-        .expect("bones of a checked CT make a valid scene");
-        // The volume's gradient normals shade an isosurface better than face-averaged ones.
-        if normals.len() == n {
-            for (dst, &src) in scene.normals[..n].iter_mut().zip(normals) {
-                *dst = lps_to_scene(src);
+        .expect("surfaces of a checked CT make a valid scene");
+        // The volume's gradient normals shade an isosurface better than face-averaged ones;
+        // the objects' vertices come first, in order.
+        let mut at = 0;
+        for (count, n) in &normals {
+            if n.len() == *count {
+                for (dst, &src) in scene.normals[at..at + count].iter_mut().zip(n) {
+                    *dst = lps_to_scene(src);
+                }
             }
+            at += count;
         }
         scene.frame_view = VOLUME_VIEW;
         scene

@@ -237,9 +237,14 @@ pub struct RenderArgs {
     #[command(flatten)]
     pub pick: VolumePick,
     /// Volumes: Taubin smoothing iterations of the bone surface (0: raw marching cubes with
-    /// gradient normals).
-    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=100))]
-    pub smooth: u32,
+    /// gradient normals; default 0, and 10 for `--segment`'s surfaces).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=100))]
+    pub smooth: Option<u32>,
+    /// A label map or DICOM Segmentation: the surfaces of its segments, each in its colour,
+    /// instead of bones (numbers or a Segmentation's labels, comma-separated, or `all`, the
+    /// default for a Segmentation; as `iso --segment`).
+    #[arg(long, value_name = "LIST", conflicts_with_all = ["iso", "mode"])]
+    pub segment: Option<String>,
     /// Output image: .png (8-bit sRGB as a viewer shows it; 16-bit grey for --aov depth) or
     /// .exr (32-bit float: the linear film; --aov depth Z, normal N.X/N.Y/N.Z, prim as 32-bit
     /// integers; --mode mip/minip/average/slice the HU values themselves, no window; dvr and

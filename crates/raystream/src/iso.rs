@@ -14,28 +14,15 @@ use crate::common::{ms, spinner};
 /// The bone surface of a volume, with the time each step took.
 pub struct Bones {
     pub surface: IsoSurface,
-    /// The threshold, HU.
-    pub hu: f32,
+    /// What the surface is, for a report: "at 300 HU", or the segments'.
+    pub what: String,
     pub voxels: usize,
     pub load_ms: f64,
     pub iso_ms: f64,
 }
 
-/// Loads `path` (or takes `embedded` bytes as NIfTI) and extracts the surface at `hu`.
-pub fn bones(
-    path: &Path,
-    select: &VolumeSelect,
-    hu: f32,
-    smoothing: u32,
-    quiet: bool,
-    embedded: Option<&[u8]>,
-) -> Result<Bones> {
-    let (volume, load_ms) = read_volume(path, select, quiet, embedded)?;
-    bones_of(&volume, path, hu, smoothing, quiet, load_ms)
-}
-
 /// The surface at `hu` of `volume`, read from `path` in `load_ms`.
-fn bones_of(
+pub fn bones_of(
     volume: &Volume,
     path: &Path,
     hu: f32,
@@ -76,7 +63,7 @@ fn bones_of(
     }
     Ok(Bones {
         surface,
-        hu,
+        what: format!("at {hu} HU"),
         voxels: volume.voxel_count(),
         load_ms,
         iso_ms: ms(t1.elapsed()),

@@ -26,7 +26,7 @@ use crate::common::{
     spinner,
 };
 use crate::dvr;
-use crate::iso::{Bones, bones, read_volume};
+use crate::iso::{Bones, read_volume};
 
 /// The built-in default: the abdomen/pelvis CT of TotalSegmentator's tests (see
 /// `assets/README.md` for source and license), whose bones `render` shows without an input.
@@ -53,7 +53,17 @@ fn is_scene_file(a: &RenderArgs) -> bool {
 fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
     let hu = a.threshold.hu()?;
     let volume_scene = |path: &Path, embedded: Option<&[u8]>| -> Result<(Scene, Option<Bones>)> {
-        let mut b = bones(path, &a.pick.select(), hu, a.smooth, a.quiet, embedded)?;
+        let (volume, load_ms) = read_volume(path, &a.pick.select(), a.quiet, embedded)?;
+        let segmentation = volume
+            .series
+            .as_ref()
+            .is_some_and(|s| !s.segments.is_empty());
+        let thresholded = a.threshold.iso.is_some() || a.threshold.preset.is_some();
+        if a.segment.is_some() || (segmentation && !thresholded) {
+            return segments_scene(a, path, &volume, load_ms);
+        }
+        let smoothing = a.smooth.unwrap_or(0);
+        let mut b = crate::iso::bones_of(&volume, path, hu, smoothing, a.quiet, load_ms)?;
         let mesh = std::mem::take(&mut b.surface.mesh);
         let scene = Scene::for_bones(mesh, &b.surface.normals, path);
         Ok((scene, Some(b)))
@@ -73,6 +83,46 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
         }
     }
     Ok(loaded)
+}
+
+/// `--segment LIST` (or a DICOM Segmentation alone): the segments' surfaces
+/// ([`crate::iso::segment_surfaces`]), each in its colour, staged as the bones are.
+fn segments_scene(
+    a: &RenderArgs,
+    path: &Path,
+    labels: &raystream_io::Volume,
+    load_ms: f64,
+) -> Result<(Scene, Option<Bones>)> {
+    let t = std::time::Instant::now();
+    let surfaces = crate::iso::segment_surfaces(
+        labels,
+        path,
+        a.segment.as_deref().unwrap_or("all"),
+        a.smooth.unwrap_or(crate::iso::SEGMENT_SMOOTHING),
+        a.quiet,
+    )?;
+    let what = surfaces
+        .iter()
+        .map(|s| format!("{} ({})", s.label, s.name))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let parts = surfaces
+        .into_iter()
+        .map(|s| raystream_scene::Surface {
+            mesh: s.surface.mesh,
+            normals: s.surface.normals,
+            colour: s.colour.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize]),
+        })
+        .collect();
+    let scene = Scene::for_surfaces(parts, path);
+    let b = Bones {
+        surface: Default::default(),
+        what: format!("segments {what}"),
+        voxels: labels.voxel_count(),
+        load_ms,
+        iso_ms: ms(t.elapsed()),
+    };
+    Ok((scene, Some(b)))
 }
 
 /// The view `--view` starts from (`default` without it), before `--orbit`; `patient`: the
@@ -1702,8 +1752,8 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
         if let Some(b) = bones {
             eprintln!(
-                "raystream: of the load: volume {:.0} ms, isosurface {:.0} ms ({} voxels at {} HU)",
-                b.load_ms, b.iso_ms, b.voxels, b.hu
+                "raystream: of the load: volume {:.0} ms, isosurface {:.0} ms ({} voxels, {})",
+                b.load_ms, b.iso_ms, b.voxels, b.what
             );
         }
     }

@@ -1787,3 +1787,80 @@ fn gltf_textures_paint_as_obj_textures() {
         );
     }
 }
+
+/// `render LABELS --segment LIST`: a label map's segments as surfaces, each in its colour
+/// (label 1 cyan, 2 magenta, as `--segmentation` tints them), staged as the bones are: on
+/// `measure --wall --mask`'s map of the chest CT's aorta, the lumen alone is cyan with no
+/// magenta, both show both, seen from the patient's left too; the GPU's picture is the CPU's.
+/// A direct volume rendering's `--mode` is refused with it.
+#[test]
+fn render_draws_a_label_maps_segments() {
+    let mask = tmp("render-segments-mask.nii.gz");
+    let mask = mask.to_str().unwrap();
+    let o = run(&[
+        "measure",
+        "--quiet",
+        &chest(),
+        "--path",
+        &aorta(),
+        "--wall",
+        "--mask",
+        mask,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Pixels clearly cyan (green and blue over red) and clearly magenta (red and blue over
+    // green).
+    let hues = |png: &Path| {
+        let img = image::open(png).unwrap().to_rgb8();
+        let (mut cyan, mut magenta) = (0, 0);
+        for p in img.pixels() {
+            let [r, g, b] = p.0.map(i32::from);
+            cyan += (g > r + 40 && b > r + 40) as usize;
+            magenta += (r > g + 40 && b > g + 40) as usize;
+        }
+        (cyan, magenta)
+    };
+    for dev in devices() {
+        let size = ["--size", "64x96", "--spp", "1"];
+        let lumen = render_to(
+            &format!("segments-lumen-{dev}.png"),
+            dev,
+            &[&[mask, "--segment", "1"][..], &size].concat(),
+        );
+        let (cyan, magenta) = hues(&lumen);
+        assert!(
+            cyan > 100 && magenta == 0,
+            "{dev}: {cyan} cyan, {magenta} magenta"
+        );
+        for view in ["anterior", "left"] {
+            let both = render_to(
+                &format!("segments-both-{view}-{dev}.png"),
+                dev,
+                &[&[mask, "--segment", "all", "--view", view][..], &size].concat(),
+            );
+            let (cyan, magenta) = hues(&both);
+            assert!(
+                cyan > 20 && magenta > 20,
+                "{dev} {view}: {cyan} cyan, {magenta} magenta"
+            );
+        }
+    }
+    gpu_matches_cpu(
+        "segments",
+        &[mask, "--segment", "1,2", "--size", "64x96", "--spp", "1"],
+        false,
+    );
+    refused(
+        &[
+            "render",
+            mask,
+            "--segment",
+            "1",
+            "--mode",
+            "mip",
+            "-o",
+            "x.png",
+        ],
+        "'--segment <LIST>' cannot be used with '--mode <MODE>'",
+    );
+}
