@@ -11,7 +11,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a tex
         ../shared (JPEG-LS and 12-bit JPEG among them) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (meshes also shaded; volumes also `--mode` mip, minip, average, slice or
         dvr, some with --slab, to an EXR or a turntable of EXRs; some tinted by themselves as a label map,
-        or their segments made surfaces with `raystream iso --segment`). Each run must exit 0 or 2, never panic, and an error
+        or their segments made surfaces with `raystream iso --segment` (some simplified) or rendered). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
         curved planar reformation (--path, straightened or stretched) through an intact volume, measured along
         (`raystream measure`, sometimes grading a stenosis, plotting the profile or writing a label map) and tracked through (`raystream
@@ -510,11 +510,18 @@ def fuzz_files(work, n, device):
             if not why and random.random() < 0.2:
                 why = run(["render", p, "--mode", "slice", "--size", "8x8", "-q", "--device",
                            device, "--segmentation", p] + phase + ["-o", os.path.join(d, "t.png")], s)
-            # Sometimes its segments as surfaces (a CT is refused as no label map).
+            # Sometimes its segments as surfaces, written (some simplified) or rendered (a CT is
+            # refused as no label map).
             if not why and random.random() < 0.3:
-                why = run(["iso", p, "-q", "--segment", random.choice(["all", "1", "2,1", "Lumen"]),
-                           "--smooth", random.choice(["0", "3"])] + phase
-                          + ["-o", os.path.join(d, "s." + random.choice(["glb", "obj", "ply", "stl"]))], s)
+                segments = ["--segment", random.choice(["all", "1", "2,1", "Lumen"]),
+                            "--smooth", random.choice(["0", "3"])] + phase
+                if random.random() < 0.5:
+                    simplify = ["--simplify", random.choice(["0.1", "1"])] if random.random() < 0.5 else []
+                    why = run(["iso", p, "-q"] + segments + simplify + ["-o", os.path.join(
+                        d, "s." + random.choice(["glb", "obj", "ply", "stl"]))], s)
+                else:
+                    why = run(["render", p, "-q", "--size", "8x8", "--spp", "1", "--device", device]
+                              + segments + ["-o", os.path.join(d, "s.png")], s)
         if why:
             bad += 1
             print(f"FAIL {p}: {why}")
