@@ -6,6 +6,7 @@
 //! Bad input never panics and never allocates in proportion to a size a header merely claims:
 //! every error names the file and the problem ([`MeshError`]).
 
+mod colour_table;
 mod curve;
 mod gltf;
 mod label_map;
@@ -18,6 +19,7 @@ mod stl;
 mod texture;
 pub mod volume;
 mod write;
+pub use colour_table::read_colour_table;
 pub use write::{BONE, MeshPart, write_mesh, write_mesh_parts};
 
 use std::io::{BufReader, Cursor, Read};

@@ -20,7 +20,7 @@ pub struct Cli {
 pub enum Command {
     /// Render a mesh, a scene file (TOML), a CT volume's bones or, without INPUT, the built-in
     /// default (the bones of an abdomen/pelvis CT) to PNG.
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
     /// Trace a stream of rays (RAYS.bin) against a mesh and write the hits (HITS.bin).
     Trace(TraceArgs),
     /// Extract a bone isosurface from a CT volume and write it as a mesh (PLY, OBJ or STL).
@@ -245,6 +245,10 @@ pub struct RenderArgs {
     /// default for a Segmentation; as `iso --segment`).
     #[arg(long, value_name = "LIST", conflicts_with_all = ["iso", "mode"])]
     pub segment: Option<String>,
+    /// The label map's segments' names and colours, for `--segment` (which it implies): a 3D
+    /// Slicer colour table or an ITK-SNAP label description (as `iso --colour-table`).
+    #[arg(long, alias = "color-table", value_name = "FILE", conflicts_with_all = ["iso", "mode"])]
+    pub colour_table: Option<PathBuf>,
     /// Output image: .png (8-bit sRGB as a viewer shows it; 16-bit grey for --aov depth) or
     /// .exr (32-bit float: the linear film; --aov depth Z, normal N.X/N.Y/N.Z, prim as 32-bit
     /// integers; --mode mip/minip/average/slice the HU values themselves, no window; dvr and
@@ -686,6 +690,11 @@ pub struct IsoArgs {
     /// an OBJ object each (colours in a .mtl beside it), or a PLY's vertex colours.
     #[arg(long, value_name = "LIST", conflicts_with_all = ["iso", "preset"])]
     pub segment: Option<String>,
+    /// The label map's segments' names and colours, for `--segment` (which it implies): a 3D
+    /// Slicer colour table (`index name R G B A` a line) or an ITK-SNAP label description;
+    /// over a DICOM Segmentation's own.
+    #[arg(long, alias = "color-table", value_name = "FILE", conflicts_with_all = ["iso", "preset"])]
+    pub colour_table: Option<PathBuf>,
     /// Taubin smoothing iterations (0: the raw marching-cubes surface, gradient normals;
     /// default 0 for a threshold, 10 for segments, whose voxel stair-steps are a voxel high).
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=100))]

@@ -104,7 +104,7 @@ pub fn run(a: &IsoArgs) -> Result<()> {
         .series
         .as_ref()
         .is_some_and(|s| !s.segments.is_empty());
-    if a.segment.is_some() || (segmentation && !thresholded) {
+    if a.segment.is_some() || a.colour_table.is_some() || (segmentation && !thresholded) {
         return run_segments(a, &volume, load_ms);
     }
     let mut b = bones_of(
@@ -170,10 +170,11 @@ pub struct SegmentSurface {
 /// `labels`, written to one file.
 fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
     let t0 = Instant::now();
+    let known = segment_names(labels, a.colour_table.as_deref())?;
     let mut surfaces = segment_surfaces(
         labels,
         &a.input,
-        a.segment.as_deref().unwrap_or("all"),
+        (a.segment.as_deref().unwrap_or("all"), &known),
         a.smooth.unwrap_or(SEGMENT_SMOOTHING),
         a.quiet,
     )?;
@@ -221,7 +222,28 @@ pub fn enclosed_ml(mesh: &raystream_io::TriMesh) -> f64 {
     mesh.enclosed_volume() / 1000.0
 }
 
-/// The surfaces of the segments `list` names in the label volume `labels` (read from `path`):
+/// The segments' names and colours: a DICOM Segmentation's own, each label that
+/// `--colour-table FILE` names taking the table's.
+pub fn segment_names(
+    labels: &Volume,
+    table: Option<&Path>,
+) -> Result<Vec<raystream_io::SegmentLabel>> {
+    let mut known = labels
+        .series
+        .as_ref()
+        .map(|s| s.segments.clone())
+        .unwrap_or_default();
+    if let Some(t) = table {
+        for l in raystream_io::read_colour_table(t)? {
+            known.retain(|k| k.number != l.number);
+            known.push(l);
+        }
+    }
+    Ok(known)
+}
+
+/// The surfaces of the segments `list` names in the label volume `labels` (read from `path`),
+/// named and coloured by `known` (else "label N" in `--segmentation`'s tints):
 /// each segment's voxels as an inside region, cut out of the grid with its bounding box and a
 /// voxel around it, its surface at the half-way value between inside and outside (halfway
 /// between the centres of a voxel of the segment and its neighbour not of it, the grid's
@@ -229,7 +251,7 @@ pub fn enclosed_ml(mesh: &raystream_io::TriMesh) -> f64 {
 pub fn segment_surfaces(
     labels: &Volume,
     path: &Path,
-    list: &str,
+    (list, known): (&str, &[raystream_io::SegmentLabel]),
     smoothing: u32,
     quiet: bool,
 ) -> Result<Vec<SegmentSurface>> {
@@ -237,11 +259,6 @@ pub fn segment_surfaces(
     if let Some(v) = crate::common::not_a_label(labels) {
         bail!("{name}: --segment takes a label map (whole numbers from 0); it holds {v}");
     }
-    let known = labels
-        .series
-        .as_ref()
-        .map(|s| s.segments.clone())
-        .unwrap_or_default();
     // Each label's voxels and bounding box, in one pass.
     let [nx, ny, _] = labels.dims;
     let mut boxes: std::collections::BTreeMap<u32, ([usize; 3], [usize; 3], usize)> =
@@ -407,7 +424,7 @@ mod tests {
     fn segments_are_closed_halfway_to_their_neighbours_the_grid_edge_too() {
         let v = labels();
         let path = Path::new("labels.nii");
-        let s = segment_surfaces(&v, path, "2, 1,2", 0, true).unwrap();
+        let s = segment_surfaces(&v, path, ("2, 1,2", &[]), 0, true).unwrap();
         assert_eq!(s.iter().map(|s| s.label).collect::<Vec<_>>(), [2, 1]);
         assert_eq!(s[0].name, "label 2");
         assert_eq!(s[1].voxels, 1);
@@ -429,16 +446,20 @@ mod tests {
         let voxel_ml = v.voxel_ml();
         assert!((enclosed_ml(&s[1].surface.mesh) - voxel_ml / 6.0).abs() < 1e-6 * voxel_ml);
         assert!(enclosed_ml(&s[0].surface.mesh) > 0.0);
-        let all = segment_surfaces(&v, path, "all", 3, true).unwrap();
+        let all = segment_surfaces(&v, path, ("all", &[]), 3, true).unwrap();
         assert_eq!(all.iter().map(|s| s.label).collect::<Vec<_>>(), [1, 2]);
-        let e = segment_surfaces(&v, path, "3", 0, true).err().unwrap();
+        let e = segment_surfaces(&v, path, ("3", &[]), 0, true)
+            .err()
+            .unwrap();
         assert_eq!(
             e.to_string(),
             "labels.nii: --segment 3: no voxel holds label 3; the labels present are 1, 2"
         );
         let mut ct = v.clone();
         ct.data[5] = -1000.0;
-        let e = segment_surfaces(&ct, path, "all", 0, true).err().unwrap();
+        let e = segment_surfaces(&ct, path, ("all", &[]), 0, true)
+            .err()
+            .unwrap();
         assert!(e.to_string().contains("it holds -1000"), "{e}");
     }
 }

@@ -59,7 +59,7 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
             .as_ref()
             .is_some_and(|s| !s.segments.is_empty());
         let thresholded = a.threshold.iso.is_some() || a.threshold.preset.is_some();
-        if a.segment.is_some() || (segmentation && !thresholded) {
+        if a.segment.is_some() || a.colour_table.is_some() || (segmentation && !thresholded) {
             return segments_scene(a, path, &volume, load_ms);
         }
         let smoothing = a.smooth.unwrap_or(0);
@@ -94,10 +94,11 @@ fn segments_scene(
     load_ms: f64,
 ) -> Result<(Scene, Option<Bones>)> {
     let t = std::time::Instant::now();
+    let known = crate::iso::segment_names(labels, a.colour_table.as_deref())?;
     let surfaces = crate::iso::segment_surfaces(
         labels,
         path,
-        a.segment.as_deref().unwrap_or("all"),
+        (a.segment.as_deref().unwrap_or("all"), &known),
         a.smooth.unwrap_or(crate::iso::SEGMENT_SMOOTHING),
         a.quiet,
     )?;

@@ -2506,6 +2506,8 @@ fn enclosed_ml(mesh: &raystream_io::TriMesh) -> f64 {
 ///   its vertices' colours.
 /// - Simplified (`--simplify 0.3`), a surface keeps within 0.3 mm of the full one, closed,
 ///   with a third of its triangles or fewer.
+/// - A colour table (3D Slicer's, ITK-SNAP's) names and colours the segments it lists, over a
+///   Segmentation's own; `--segment` takes its names.
 /// - A segment not there, a name no segment has, a CT, or two segments to one STL are refused.
 #[test]
 fn segments_become_closed_surfaces() {
@@ -2735,6 +2737,67 @@ fn segments_become_closed_surfaces() {
             "Lumen True True True\nWall and thrombus True True True\n[(0, 255, 255), (255, 0, 255)]\n"
         );
     }
+
+    // Names and colours from a colour table: 3D Slicer's over the NIfTI map, ITK-SNAP's over
+    // the Segmentation's own; a segment named by it; a bad line refused, naming it.
+    let slicer = tmp("segsurf.ctbl");
+    std::fs::write(
+        &slicer,
+        "# Color table file\n0 Background 0 0 0 0\n1 aortic lumen 200 40 40 255\n2 aortic_wall 40 200 40 255\n",
+    )
+    .unwrap();
+    let snap = tmp("segsurf-labels.txt");
+    std::fs::write(
+        &snap,
+        "# ITK-SnAP Label Description File\n0 0 0 0 0 0 0 \"Clear Label\"\n2 10 20 30 1 1 1 \"wall\"\n",
+    )
+    .unwrap();
+    let named = |input: &str, table: &std::path::Path, list: &str, name: &str| {
+        let glb = iso(
+            input,
+            &["--colour-table", table.to_str().unwrap(), "--segment", list],
+            name,
+        );
+        let (_, shading) = raystream_io::load_mesh_with_shading(&glb).unwrap();
+        shading
+            .materials
+            .iter()
+            .map(|m| (m.name.clone(), m.diffuse.unwrap()))
+            .collect::<Vec<_>>()
+    };
+    let lin = |c: [u8; 3]| c.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize]);
+    assert_eq!(
+        named(nii_file, &slicer, "all", "segsurf-slicer.glb"),
+        [
+            ("aortic lumen".to_string(), lin([200, 40, 40])),
+            ("aortic_wall".to_string(), lin([40, 200, 40]))
+        ]
+    );
+    assert_eq!(
+        named(nii_file, &slicer, "Aortic_Wall", "segsurf-slicer-wall.glb"),
+        [("aortic_wall".to_string(), lin([40, 200, 40]))]
+    );
+    // ITK-SNAP's table names label 2 only: label 1 keeps the Segmentation's name and colour.
+    assert_eq!(
+        named(seg_file, &snap, "all", "segsurf-snap.glb"),
+        [
+            ("Lumen".to_string(), [0.0, 1.0, 1.0]),
+            ("wall".to_string(), lin([10, 20, 30]))
+        ]
+    );
+    let bad = tmp("segsurf-bad.ctbl");
+    std::fs::write(&bad, "1 lumen 1 2 3 255\n2 wall 1 2\n").unwrap();
+    refused(
+        &[
+            "iso",
+            nii_file,
+            "--colour-table",
+            bad.to_str().unwrap(),
+            "-o",
+            "x.glb",
+        ],
+        "segsurf-bad.ctbl: line 2: 4 fields",
+    );
 
     // Refused, naming the file and what is there.
     let out = tmp("segsurf-refused.ply");
