@@ -23,7 +23,8 @@ pub enum Command {
     Render(Box<RenderArgs>),
     /// Trace a stream of rays (RAYS.bin) against a mesh and write the hits (HITS.bin).
     Trace(TraceArgs),
-    /// Extract a bone isosurface from a CT volume and write it as a mesh (PLY, OBJ or STL).
+    /// Extract a bone isosurface from a CT volume, or a label map's or DICOM Segmentation's
+    /// segments as closed surfaces, and write them as a mesh (PLY, OBJ, STL or GLB).
     Iso(IsoArgs),
     /// Measure a vessel's lumen on cross-sections along a path through a CT volume: area,
     /// equivalent, largest and smallest diameters, centroid.
@@ -673,7 +674,8 @@ impl From<ModeArg> for raystream_cpu::dvr::DvrMode {
 
 #[derive(Args)]
 pub struct IsoArgs {
-    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd).
+    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd), or a label map
+    /// or DICOM Segmentation (with `--segment`).
     pub input: PathBuf,
     /// Output mesh in LPS millimetres: .ply (with normals), .obj (with normals), .stl, or
     /// .glb (binary glTF with normals, under a node that turns it to glTF's metres, +Y
@@ -685,8 +687,8 @@ pub struct IsoArgs {
     #[command(flatten)]
     pub pick: VolumePick,
     /// Instead of a threshold, the surfaces of a label map's or DICOM Segmentation's segments:
-    /// their numbers or (a Segmentation's) labels, comma-separated, or `all` (the default for
-    /// a DICOM Segmentation). Several go to one file: a glTF node each (named, in its colour),
+    /// their numbers or names (a Segmentation's labels, or `--colour-table`'s),
+    /// comma-separated, or `all` (the default for a DICOM Segmentation). Several go to one file: a glTF node each (named, in its colour),
     /// an OBJ object each (colours in a .mtl beside it), or a PLY's vertex colours.
     #[arg(long, value_name = "LIST", conflicts_with_all = ["iso", "preset"])]
     pub segment: Option<String>,
