@@ -983,6 +983,10 @@ pub struct InfoArgs {
     pub pick: VolumePick,
     #[command(flatten)]
     pub tree: TreeArgs,
+    /// A label map's labels named from a colour table (3D Slicer's or ITK-SNAP's, as
+    /// `iso --colour-table`), over a DICOM Segmentation's own.
+    #[arg(long, alias = "color-table", value_name = "FILE")]
+    pub colour_table: Option<PathBuf>,
     #[arg(long)]
     pub json: bool,
 }

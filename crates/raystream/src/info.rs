@@ -248,16 +248,17 @@ fn label_counts(v: &raystream_io::Volume) -> Option<Vec<(u32, usize)>> {
 fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     let v = raystream_io::load_volume(input, &a.pick.select())?;
     let range = v.value_range();
-    // A label map's labels, their voxels and volumes, and a Segmentation's names for them.
+    // A label map's labels, their voxels and volumes, and their names: a Segmentation's, or
+    // `--colour-table`'s.
     let voxel_ml = v.voxel_ml();
+    let known = crate::iso::segment_names(&v, a.colour_table.as_deref())?;
     let labels: Option<Vec<(u32, usize, f64, String)>> = label_counts(&v).map(|counts| {
         counts
             .into_iter()
             .map(|(l, n)| {
-                let name = v
-                    .series
-                    .as_ref()
-                    .and_then(|s| s.segments.iter().find(|k| k.number as u32 == l))
+                let name = known
+                    .iter()
+                    .find(|k| k.number as u32 == l)
                     .map(|k| k.label.clone())
                     .unwrap_or_default();
                 (l, n, n as f64 * voxel_ml, name)

@@ -2785,6 +2785,21 @@ fn segments_become_closed_surfaces() {
             ("wall".to_string(), lin([10, 20, 30]))
         ]
     );
+    // `info` names the labels from the table too.
+    let text = stdout(&run(&[
+        "info",
+        nii_file,
+        "--colour-table",
+        slicer.to_str().unwrap(),
+    ]));
+    assert!(
+        text.contains("label      1 (aortic lumen): 26544 voxels")
+            || text.contains(&format!(
+                "label      1 (aortic lumen): {} voxels",
+                voxels(1.0)
+            )),
+        "{text}"
+    );
     let bad = tmp("segsurf-bad.ctbl");
     std::fs::write(&bad, "1 lumen 1 2 3 255\n2 wall 1 2\n").unwrap();
     refused(
