@@ -11,7 +11,8 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a tex
         ../shared (JPEG-LS and 12-bit JPEG among them) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (meshes also shaded; volumes also `--mode` mip, minip, average, slice or
         dvr, some with --slab, to an EXR or a turntable of EXRs; some tinted by themselves as a label map,
-        or their segments made surfaces with `raystream iso --segment` (some simplified) or rendered). Each run must exit 0 or 2, never panic, and an error
+        or their segments made surfaces with `raystream iso --segment` (some simplified, some named
+        by a mutated colour table) or rendered). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
         curved planar reformation (--path, straightened or stretched) through an intact volume, measured along
         (`raystream measure`, sometimes grading a stenosis, plotting the profile or writing a label map) and tracked through (`raystream
@@ -390,7 +391,8 @@ def mutate_glb(b):
 
 
 def run(args, name):
-    """None if the run behaved, else what went wrong."""
+    """None if the run behaved, else what went wrong. An error must name `name` (or one of
+    them, a tuple: an input and the colour table or output an error may be about)."""
     try:
         r = subprocess.run(["bash", "-c", "ulimit -v 8000000; exec \"$@\"", "_", BIN] + args,
                            capture_output=True, timeout=120)
@@ -399,7 +401,8 @@ def run(args, name):
     err = r.stderr.decode(errors="replace")
     if r.returncode not in (0, 2) or "panicked" in err:
         return f"exit {r.returncode}: {err[-400:]}"
-    if r.returncode == 2 and name not in err:
+    names = name if isinstance(name, tuple) else (name,)
+    if r.returncode == 2 and not any(n in err for n in names):
         return f"error without the file's name: {err[-400:]}"
     return None
 
@@ -515,13 +518,22 @@ def fuzz_files(work, n, device):
             if not why and random.random() < 0.3:
                 segments = ["--segment", random.choice(["all", "1", "2,1", "Lumen"]),
                             "--smooth", random.choice(["0", "3"])] + phase
+                if random.random() < 0.3:
+                    # Names and colours from a mutated colour table (3D Slicer's or ITK-SNAP's).
+                    table = random.choice([
+                        b"# Color table\n0 Background 0 0 0 0\n1 lumen 0 255 255 255\n2 wall 255 0 255 255\n",
+                        b'0 0 0 0 0 0 0 "Clear Label"\n1 0 255 255 1 1 1 "lumen"\n2 255 0 255 1 1 1 "wall"\n'])
+                    ctbl = os.path.join(d, "t.ctbl")
+                    with open(ctbl, "wb") as f:
+                        f.write(mutate(table, True))
+                    segments += ["--colour-table", ctbl]
                 if random.random() < 0.5:
                     simplify = ["--simplify", random.choice(["0.1", "1"])] if random.random() < 0.5 else []
                     why = run(["iso", p, "-q"] + segments + simplify + ["-o", os.path.join(
-                        d, "s." + random.choice(["glb", "obj", "ply", "stl"]))], s)
+                        d, "s." + random.choice(["glb", "obj", "ply", "stl"]))], (s, "t.ctbl", "s.stl"))
                 else:
                     why = run(["render", p, "-q", "--size", "8x8", "--spp", "1", "--device", device]
-                              + segments + ["-o", os.path.join(d, "s.png")], s)
+                              + segments + ["-o", os.path.join(d, "s.png")], (s, "t.ctbl"))
         if why:
             bad += 1
             print(f"FAIL {p}: {why}")
