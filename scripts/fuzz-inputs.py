@@ -192,13 +192,17 @@ def item(**kw):
     return d
 
 
-def file_bytes(ds):
-    """The data set `ds` as a DICOM file's bytes: its file meta, Explicit VR Little Endian."""
+def file_bytes(ds, compress=None):
+    """The data set `ds` as a DICOM file's bytes: its file meta, Explicit VR Little Endian, or
+    its pixel data `compress`ed in that transfer syntax (its instance UID kept, so that runs
+    reproduce)."""
     import io
     from pydicom.dataset import FileMetaDataset
     from pydicom.uid import ExplicitVRLittleEndian
     ds.file_meta = FileMetaDataset()
     ds.file_meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    if compress:
+        ds.compress(compress, generate_instance_uid=False)
     ds.file_meta.MediaStorageSOPClassUID = ds.SOPClassUID
     ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
     out = io.BytesIO()
@@ -268,20 +272,11 @@ def segmentation():
 def label_map_rle():
     """A DICOM 2024 Label Map Segmentation, 8 bits, its 3 frames of 7x5 RLE Lossless
     compressed (a fragment a frame)."""
-    import io
-    import pydicom
     from pydicom.uid import RLELossless
 
     ds = seg_frames("LABELMAP", 8, "1.2.840.10008.5.1.4.1.1.66.7", 13, ((0, 0), (1, 0), (2, 0)))
     ds.PixelData = bytes((i * 7) % 3 for i in range(105))
-    ds.file_meta = pydicom.dataset.FileMetaDataset()
-    ds.file_meta.TransferSyntaxUID = pydicom.uid.ExplicitVRLittleEndian
-    ds.compress(RLELossless, generate_instance_uid=False)
-    ds.file_meta.MediaStorageSOPClassUID = ds.SOPClassUID
-    ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
-    out = io.BytesIO()
-    ds.save_as(out, enforce_file_format=True)
-    return out.getvalue()
+    return file_bytes(ds, RLELossless)
 
 
 def report():

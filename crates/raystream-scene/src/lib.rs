@@ -671,14 +671,13 @@ impl Scene {
     /// vertex.
     pub fn for_surfaces(mut surfaces: Vec<Surface>, name: &Path) -> Scene {
         let lps_to_scene = |p: Vec3| Frame::Lps.to_scene(p);
-        let mut all = TriMesh::default();
+        let mut b = Aabb::EMPTY;
         for s in &mut surfaces {
             for p in &mut s.mesh.positions {
                 *p = lps_to_scene(*p);
             }
-            all.append(&s.mesh, |p| p);
+            b = b.union(s.mesh.bounds());
         }
-        let b = all.bounds();
         let (c, r) = (b.center(), b.radius());
         let mut desc = SceneDesc::default();
         for (k, s) in surfaces.iter().enumerate() {

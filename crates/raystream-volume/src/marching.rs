@@ -334,11 +334,8 @@ pub fn simplify(surface: &mut IsoSurface, max_error: f64) -> Simplified {
             }
         }
     }
-    let points: Vec<Vec3> = (0..measured.len())
-        .filter(|&v| measured[v])
-        .map(|v| full.positions[v])
-        .collect();
     let index: Vec<usize> = (0..measured.len()).filter(|&v| measured[v]).collect();
+    let points: Vec<Vec3> = index.iter().map(|&v| full.positions[v]).collect();
     let mut held = vec![false; full.positions.len()];
     let mut ring: Option<Vec<Vec<u32>>> = None;
     let mut allowance = max_error as f32;

@@ -333,7 +333,6 @@ pub fn file_name(path: &Path) -> String {
         .unwrap_or_else(|| path.display().to_string())
 }
 
-/// A spinner with a message, hidden with `--quiet`.
 /// The first value of `v` that a label map cannot hold (a whole number from 0), if any.
 pub fn not_a_label(v: &raystream_io::Volume) -> Option<f32> {
     v.data
@@ -342,6 +341,7 @@ pub fn not_a_label(v: &raystream_io::Volume) -> Option<f32> {
         .find(|v| !(v.is_finite() && *v >= 0.0 && v.fract() == 0.0))
 }
 
+/// A spinner with a message, hidden with `--quiet`.
 pub fn spinner(quiet: bool, msg: &str) -> ProgressBar {
     if quiet {
         return ProgressBar::hidden();

@@ -96,15 +96,28 @@ pub fn read_volume(
     Ok((volume, ms(t0.elapsed())))
 }
 
-pub fn run(a: &IsoArgs) -> Result<()> {
-    let thresholded = a.threshold.iso.is_some() || a.threshold.preset.is_some();
-    let hu = a.threshold.hu()?;
-    let (volume, load_ms) = read_volume(&a.input, &a.pick.select(), a.quiet, None)?;
+/// Whether `iso` or `render` of `volume` makes its segments' surfaces rather than a
+/// threshold's: asked for by `--segment` or `--colour-table`, or a DICOM Segmentation given
+/// without `--iso` or `--preset`.
+pub fn wants_segments(
+    volume: &Volume,
+    threshold: &crate::cli::Threshold,
+    segment: Option<&str>,
+    colour_table: Option<&Path>,
+) -> bool {
     let segmentation = volume
         .series
         .as_ref()
         .is_some_and(|s| !s.segments.is_empty());
-    if a.segment.is_some() || a.colour_table.is_some() || (segmentation && !thresholded) {
+    let thresholded = threshold.iso.is_some() || threshold.preset.is_some();
+    segment.is_some() || colour_table.is_some() || (segmentation && !thresholded)
+}
+
+pub fn run(a: &IsoArgs) -> Result<()> {
+    let hu = a.threshold.hu()?;
+    let (volume, load_ms) = read_volume(&a.input, &a.pick.select(), a.quiet, None)?;
+    let segment = a.segment.as_deref();
+    if wants_segments(&volume, &a.threshold, segment, a.colour_table.as_deref()) {
         return run_segments(a, &volume, load_ms);
     }
     let mut b = bones_of(
@@ -166,6 +179,14 @@ pub struct SegmentSurface {
     pub surface: IsoSurface,
 }
 
+impl SegmentSurface {
+    /// Its colour as linear RGB, as materials take it.
+    pub fn linear_colour(&self) -> [f32; 3] {
+        self.colour
+            .map(|c| raystream_io::SRGB_TO_LINEAR[c as usize])
+    }
+}
+
 /// `iso --segment`: the surfaces of the segments `list` names (see [`IsoArgs::segment`]) in
 /// `labels`, written to one file.
 fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
@@ -190,7 +211,7 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
             name: &s.name,
             mesh: &s.surface.mesh,
             normals: Some(&s.surface.normals),
-            colour: s.colour.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize]),
+            colour: s.linear_colour(),
         })
         .collect();
     raystream_io::write_mesh_parts(&a.output, &parts)?;
@@ -352,7 +373,7 @@ pub fn segment_surfaces(
                     .iter_mut()
                     .zip(&labels.data[row + lo[0]..=row + hi[0]])
                 {
-                    *d = if v as u32 == l && v > 0.0 { 1.0 } else { 0.0 };
+                    *d = if v as u32 == l { 1.0 } else { 0.0 };
                 }
             }
         }

@@ -54,12 +54,8 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
     let hu = a.threshold.hu()?;
     let volume_scene = |path: &Path, embedded: Option<&[u8]>| -> Result<(Scene, Option<Bones>)> {
         let (volume, load_ms) = read_volume(path, &a.pick.select(), a.quiet, embedded)?;
-        let segmentation = volume
-            .series
-            .as_ref()
-            .is_some_and(|s| !s.segments.is_empty());
-        let thresholded = a.threshold.iso.is_some() || a.threshold.preset.is_some();
-        if a.segment.is_some() || a.colour_table.is_some() || (segmentation && !thresholded) {
+        let (segment, table) = (a.segment.as_deref(), a.colour_table.as_deref());
+        if crate::iso::wants_segments(&volume, &a.threshold, segment, table) {
             return segments_scene(a, path, &volume, load_ms);
         }
         let smoothing = a.smooth.unwrap_or(0);
@@ -110,9 +106,9 @@ fn segments_scene(
     let parts = surfaces
         .into_iter()
         .map(|s| raystream_scene::Surface {
+            colour: s.linear_colour(),
             mesh: s.surface.mesh,
             normals: s.surface.normals,
-            colour: s.colour.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize]),
         })
         .collect();
     let scene = Scene::for_surfaces(parts, path);

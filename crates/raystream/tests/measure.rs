@@ -1589,9 +1589,17 @@ fn the_mask_as_a_dicom_segmentation_of_the_series() {
         "{t}"
     );
     // Refused before any work: a CT not read from DICOM, a series anonymised of its UIDs.
+    refuses_a_ct_it_cannot_reference("--mask", seg_file);
+}
+
+/// `measure OPTION FILE`, an object of the CT's study (a DICOM Segmentation, a report), is
+/// refused before any work, naming FILE, for a CT not read from a DICOM series and for a series
+/// anonymised of its Study Instance UID.
+fn refuses_a_ct_it_cannot_reference(option: &str, file: &str) {
+    let path = aorta();
     refused(
-        &["measure", &chest(), "--path", &path, "--mask", seg_file],
-        &format!("{seg_file}: --mask: the CT was not read from a DICOM series"),
+        &["measure", &chest(), "--path", &path, option, file],
+        &format!("{file}: {option}: the CT was not read from a DICOM series"),
     );
     let abdomen = shared().join("data/volumes/dicom/abdomen_ct_j2k_totalseg");
     refused(
@@ -1600,8 +1608,8 @@ fn the_mask_as_a_dicom_segmentation_of_the_series() {
             abdomen.to_str().unwrap(),
             "--path",
             &path,
-            "--mask",
-            seg_file,
+            option,
+            file,
         ],
         "has no Study Instance UID (anonymised?)",
     );
@@ -2455,22 +2463,7 @@ fn the_findings_as_a_dicom_structured_report() {
         ],
         "findings.txt: --report writes a DICOM Structured Report (.dcm)",
     );
-    refused(
-        &["measure", &chest(), "--path", &path, "--report", sr_file],
-        &format!("{sr_file}: --report: the CT was not read from a DICOM series"),
-    );
-    let abdomen = shared().join("data/volumes/dicom/abdomen_ct_j2k_totalseg");
-    refused(
-        &[
-            "measure",
-            abdomen.to_str().unwrap(),
-            "--path",
-            &path,
-            "--report",
-            sr_file,
-        ],
-        "has no Study Instance UID (anonymised?)",
-    );
+    refuses_a_ct_it_cannot_reference("--report", sr_file);
 }
 
 /// Whether every directed edge of `mesh` is matched by as many running the other way: the
