@@ -252,19 +252,30 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     // `--colour-table`'s.
     let voxel_ml = v.voxel_ml();
     let known = crate::iso::segment_names(&v, a.colour_table.as_deref())?;
-    let labels: Option<Vec<(u32, usize, f64, String)>> = label_counts(&v).map(|counts| {
-        counts
-            .into_iter()
-            .map(|(l, n)| {
-                let name = known
-                    .iter()
-                    .find(|k| k.number as u32 == l)
-                    .map(|k| k.label.clone())
-                    .unwrap_or_default();
-                (l, n, n as f64 * voxel_ml, name)
-            })
+    // A structure set's structures are counted whole, overlaps and all.
+    let structures = crate::iso::structures_of(&v, input)?;
+    let whole = structures.as_ref().map(|set| {
+        set.rois
+            .iter()
+            .zip(set.regions(&v).0)
+            .filter(|(_, r)| r.voxels > 0)
+            .map(|(roi, r)| (roi.number as u32, r.voxels))
             .collect()
     });
+    let labels: Option<Vec<(u32, usize, f64, String)>> =
+        whole.or_else(|| label_counts(&v)).map(|counts| {
+            counts
+                .into_iter()
+                .map(|(l, n)| {
+                    let name = known
+                        .iter()
+                        .find(|k| k.number as u32 == l)
+                        .map(|k| k.label.clone())
+                        .unwrap_or_default();
+                    (l, n, n as f64 * voxel_ml, name)
+                })
+                .collect()
+        });
     let unit = match v.unit {
         raystream_io::ValueUnit::Hounsfield => "HU",
         raystream_io::ValueUnit::Unknown => "unknown",
@@ -313,6 +324,21 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
         if let Some(s) = series {
             out["series"] = s;
         }
+        if let Some(set) = &structures {
+            out["structure_set"] = json!({
+                "label": set.label,
+                "frame_of_reference_uid": set.frame_of_reference_uid,
+                "referenced_series": set.referenced_series,
+                "structures": set.rois.iter().map(|r| json!({
+                    "number": r.number,
+                    "name": r.name,
+                    "kind": r.kind,
+                    "colour": r.colour,
+                    "contours": r.contours.len(),
+                    "other_contours": r.other_contours,
+                })).collect::<Vec<_>>(),
+            });
+        }
         print_line(out);
     } else {
         println!("{}: {} volume", input.display(), v.format.name());
@@ -357,6 +383,8 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             // A Segmentation's count is its frames (a segment and slice each).
             let what = if s.segments.is_empty() {
                 "slices"
+            } else if structures.is_some() {
+                "file"
             } else {
                 "frames"
             };
@@ -373,11 +401,27 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                     .colour
                     .map(|[r, g, b]| format!(", shown in #{r:02x}{g:02x}{b:02x}"))
                     .unwrap_or_default();
-                println!(
-                    "  segment    {n}: {} (the voxels of value {n}{colour})",
-                    k.label,
-                    n = k.number
-                );
+                let roi = structures
+                    .as_ref()
+                    .and_then(|set| set.rois.iter().find(|r| r.number == k.number));
+                match roi {
+                    Some(r) => println!(
+                        "  structure  {n}: {} ({}{} closed contours{colour})",
+                        k.label,
+                        if r.kind.is_empty() {
+                            String::new()
+                        } else {
+                            format!("{}, ", r.kind)
+                        },
+                        r.contours.len(),
+                        n = k.number
+                    ),
+                    None => println!(
+                        "  segment    {n}: {} (the voxels of value {n}{colour})",
+                        k.label,
+                        n = k.number
+                    ),
+                }
             }
             for (u, n, d) in s.all.iter().filter(|(u, _, _)| *u != s.uid) {
                 println!("  also       {} ({n} slices) {d}", uid(u));

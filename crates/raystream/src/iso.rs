@@ -5,7 +5,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use raystream_io::{ValueUnit, Volume, VolumeSelect};
+use raystream_io::{StructureSet, StructureVoxels, ValueUnit, Volume, VolumeSelect};
 use raystream_volume::{IsoSurface, extract_isosurface};
 
 use crate::cli::IsoArgs;
@@ -192,8 +192,10 @@ impl SegmentSurface {
 fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
     let t0 = Instant::now();
     let known = segment_names(labels, a.colour_table.as_deref())?;
+    let structures = structures_of(labels, &a.input)?;
     let mut surfaces = segment_surfaces(
         labels,
+        structures.as_ref(),
         &a.input,
         (a.segment.as_deref().unwrap_or("all"), &known),
         a.smooth.unwrap_or(SEGMENT_SMOOTHING),
@@ -263,7 +265,17 @@ pub fn segment_names(
     Ok(known)
 }
 
-/// The surfaces of the segments `list` names in the label volume `labels` (read from `path`),
+/// The structure set `path` holds when `labels` was read from one: its structures whole, which
+/// the label volume cannot hold where they overlap.
+pub fn structures_of(labels: &Volume, path: &Path) -> Result<Option<StructureSet>> {
+    if !raystream_io::is_structure_set_volume(labels) {
+        return Ok(None);
+    }
+    Ok(Some(StructureSet::read(path)?))
+}
+
+/// The surfaces of the segments `list` names in the label volume `labels` (read from `path`;
+/// with `structures`, the structure set it was laid from, each structure whole),
 /// named and coloured by `known` (else "label N" in `--segmentation`'s tints):
 /// each segment's voxels as an inside region, cut out of the grid with its bounding box and a
 /// voxel around it, its surface at the half-way value between inside and outside (halfway
@@ -271,6 +283,7 @@ pub fn segment_names(
 /// edge included), smoothed `smoothing` times.
 pub fn segment_surfaces(
     labels: &Volume,
+    structures: Option<&StructureSet>,
     path: &Path,
     (list, known): (&str, &[raystream_io::SegmentLabel]),
     smoothing: u32,
@@ -280,17 +293,30 @@ pub fn segment_surfaces(
     if let Some(v) = crate::common::not_a_label(labels) {
         bail!("{name}: --segment takes a label map (whole numbers from 0); it holds {v}");
     }
-    // Each label's voxels and bounding box, in one pass.
+    // Each segment's voxels: a structure set's structures whole (they may overlap, which the
+    // label volume cannot hold), else each label's bounding box, found in one pass and cut out
+    // when wanted.
     let [nx, ny, _] = labels.dims;
+    let mut whole: std::collections::BTreeMap<u32, StructureVoxels> = Default::default();
     let mut boxes: std::collections::BTreeMap<u32, ([usize; 3], [usize; 3], usize)> =
         Default::default();
-    for (n, &v) in labels.data.iter().enumerate() {
-        if v > 0.0 {
-            let ijk = [n % nx, (n / nx) % ny, n / (nx * ny)];
-            let e = boxes.entry(v as u32).or_insert((ijk, ijk, 0));
-            e.0 = std::array::from_fn(|a| e.0[a].min(ijk[a]));
-            e.1 = std::array::from_fn(|a| e.1[a].max(ijk[a]));
-            e.2 += 1;
+    if let Some(set) = structures {
+        for (roi, v) in set.rois.iter().zip(set.regions(labels).0) {
+            if v.voxels > 0 {
+                let hi = std::array::from_fn(|a| v.lo[a] + v.dims[a] - 1);
+                boxes.insert(roi.number as u32, (v.lo, hi, v.voxels));
+                whole.insert(roi.number as u32, v);
+            }
+        }
+    } else {
+        for (n, &v) in labels.data.iter().enumerate() {
+            if v > 0.0 {
+                let ijk = [n % nx, (n / nx) % ny, n / (nx * ny)];
+                let e = boxes.entry(v as u32).or_insert((ijk, ijk, 0));
+                e.0 = std::array::from_fn(|a| e.0[a].min(ijk[a]));
+                e.1 = std::array::from_fn(|a| e.1[a].max(ijk[a]));
+                e.2 += 1;
+            }
         }
     }
     let named = |l: u32| known.iter().find(|k| k.number as u32 == l);
@@ -365,15 +391,21 @@ pub fn segment_surfaces(
         let (lo, hi, voxels) = boxes[&l];
         let dims = [0, 1, 2].map(|a| hi[a] - lo[a] + 3);
         let mut data = vec![0.0f32; dims[0] * dims[1] * dims[2]];
+        let held = whole.remove(&l);
         for k in lo[2]..=hi[2] {
             for j in lo[1]..=hi[1] {
-                let row = nx * (j + ny * k);
                 let at = 1 + dims[0] * (j + 1 - lo[1] + dims[1] * (k + 1 - lo[2]));
-                for (d, &v) in data[at..]
-                    .iter_mut()
-                    .zip(&labels.data[row + lo[0]..=row + hi[0]])
-                {
-                    *d = if v as u32 == l { 1.0 } else { 0.0 };
+                let out = &mut data[at..at + hi[0] + 1 - lo[0]];
+                if let Some(v) = &held {
+                    let from = v.dims[0] * (j - lo[1] + v.dims[1] * (k - lo[2]));
+                    for (d, &b) in out.iter_mut().zip(&v.inside[from..]) {
+                        *d = if b { 1.0 } else { 0.0 };
+                    }
+                } else {
+                    let row = nx * (j + ny * k);
+                    for (d, &v) in out.iter_mut().zip(&labels.data[row + lo[0]..]) {
+                        *d = if v as u32 == l { 1.0 } else { 0.0 };
+                    }
                 }
             }
         }
@@ -445,7 +477,7 @@ mod tests {
     fn segments_are_closed_halfway_to_their_neighbours_the_grid_edge_too() {
         let v = labels();
         let path = Path::new("labels.nii");
-        let s = segment_surfaces(&v, path, ("2, 1,2", &[]), 0, true).unwrap();
+        let s = segment_surfaces(&v, None, path, ("2, 1,2", &[]), 0, true).unwrap();
         assert_eq!(s.iter().map(|s| s.label).collect::<Vec<_>>(), [2, 1]);
         assert_eq!(s[0].name, "label 2");
         assert_eq!(s[1].voxels, 1);
@@ -467,9 +499,9 @@ mod tests {
         let voxel_ml = v.voxel_ml();
         assert!((enclosed_ml(&s[1].surface.mesh) - voxel_ml / 6.0).abs() < 1e-6 * voxel_ml);
         assert!(enclosed_ml(&s[0].surface.mesh) > 0.0);
-        let all = segment_surfaces(&v, path, ("all", &[]), 3, true).unwrap();
+        let all = segment_surfaces(&v, None, path, ("all", &[]), 3, true).unwrap();
         assert_eq!(all.iter().map(|s| s.label).collect::<Vec<_>>(), [1, 2]);
-        let e = segment_surfaces(&v, path, ("3", &[]), 0, true)
+        let e = segment_surfaces(&v, None, path, ("3", &[]), 0, true)
             .err()
             .unwrap();
         assert_eq!(
@@ -478,7 +510,7 @@ mod tests {
         );
         let mut ct = v.clone();
         ct.data[5] = -1000.0;
-        let e = segment_surfaces(&ct, path, ("all", &[]), 0, true)
+        let e = segment_surfaces(&ct, None, path, ("all", &[]), 0, true)
             .err()
             .unwrap();
         assert!(e.to_string().contains("it holds -1000"), "{e}");

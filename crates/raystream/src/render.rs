@@ -91,8 +91,10 @@ fn segments_scene(
 ) -> Result<(Scene, Option<Bones>)> {
     let t = std::time::Instant::now();
     let known = crate::iso::segment_names(labels, a.colour_table.as_deref())?;
+    let structures = crate::iso::structures_of(labels, path)?;
     let surfaces = crate::iso::segment_surfaces(
         labels,
+        structures.as_ref(),
         path,
         (a.segment.as_deref().unwrap_or("all"), &known),
         a.smooth.unwrap_or(crate::iso::SEGMENT_SMOOTHING),

@@ -2825,3 +2825,198 @@ fn segments_become_closed_surfaces() {
         "no surface at 300: the values range over 0 .. 2 (whole numbers from 0, as a label map's: give --segment)",
     );
 }
+
+/// An RT Structure Set written by rt-utils (each slice's boundary traced through its boundary
+/// voxels' centres) from the lumen and wall label map, beside the CT series it was drawn on:
+/// read back voxel for voxel, overlapping structures each whole; `info`, `iso` and `render`.
+#[test]
+fn structure_sets_are_laid_on_their_ct() {
+    let Some(py) = python_with("rt_utils") else {
+        return;
+    };
+    let root = tmp("rtstruct");
+    std::fs::remove_dir_all(&root).ok();
+    let ct = root.join("ct");
+    chest_series(&ct);
+    let nii = root.join("labels.nii.gz");
+    measure(
+        &chest(),
+        &aorta(),
+        &["--wall", "--mask", nii.to_str().unwrap()],
+    );
+    std::fs::create_dir_all(root.join("rt")).unwrap();
+    let rt = root.join("rt/structures.dcm");
+    let o = std::process::Command::new(&py)
+        .arg(repo().join("crates/raystream/tests/rtutils_struct.py"))
+        .args([&ct, &nii, &rt])
+        .args(["Lumen=1:255,0,0", "Wall=2:0,0,255", "Aorta=1+2:200,200,0"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "rt-utils: {}", stderr(&o));
+    let rt_file = rt.to_str().unwrap();
+
+    // Each structure is exactly the voxels it was traced from: the wall's holes, and the
+    // pieces one voxel wide, included.
+    let labels = raystream_io::load_volume(&nii, &Default::default()).unwrap();
+    let grid = raystream_io::load_volume(&ct, &Default::default()).unwrap();
+    let set = raystream_io::StructureSet::read(&rt).unwrap();
+    let (regions, warnings) = set.regions(&grid);
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let [nx, ny, _] = grid.dims;
+    let count = |l: &[f32]| labels.data.iter().filter(|v| l.contains(v)).count();
+    for (roi, (region, held)) in
+        set.rois
+            .iter()
+            .zip(regions.iter().zip([&[1.0][..], &[2.0], &[1.0, 2.0]]))
+    {
+        assert_eq!(region.voxels, count(held), "{}", roi.name);
+        let [dx, dy, dz] = region.dims;
+        for k in 0..dz {
+            for j in 0..dy {
+                for i in 0..dx {
+                    let [a, b, c] = [i + region.lo[0], j + region.lo[1], k + region.lo[2]];
+                    let want = held.contains(&labels.data[a + nx * (b + ny * c)]);
+                    assert_eq!(
+                        region.inside[i + dx * (j + dy * k)],
+                        want,
+                        "{} at {a} {b} {c}",
+                        roi.name
+                    );
+                }
+            }
+        }
+    }
+    // As a label volume on the CT's grid: the aorta (the largest) painted first, the lumen and
+    // the wall over it, which gives back the label map itself.
+    let v = raystream_io::load_volume(&rt, &Default::default()).unwrap();
+    assert_eq!(
+        (v.dims, v.spacing, v.origin),
+        (grid.dims, grid.spacing, grid.origin)
+    );
+    assert!(
+        v.data == labels.data,
+        "the label volume differs from the label map"
+    );
+    let both = count(&[1.0, 2.0]);
+    assert!(
+        v.warnings
+            .iter()
+            .any(|w| w.contains(&format!("{both} voxels lie in more than one structure"))),
+        "{:?}",
+        v.warnings
+    );
+
+    // `info`: each structure whole, named, in its colour.
+    let o = run(&["info", "--json", rt_file]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let listed: Vec<(u64, u64, &str)> = info["labels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| {
+            (
+                l["value"].as_u64().unwrap(),
+                l["voxels"].as_u64().unwrap(),
+                l["name"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    let (lumen, wall) = (count(&[1.0]) as u64, count(&[2.0]) as u64);
+    assert_eq!(
+        listed,
+        [
+            (1, lumen, "Lumen"),
+            (2, wall, "Wall"),
+            (3, lumen + wall, "Aorta")
+        ]
+    );
+    let structures = &info["structure_set"]["structures"];
+    assert_eq!(structures[2]["colour"], serde_json::json!([200, 200, 0]));
+    assert_eq!(info["series"]["modality"], "RTSTRUCT");
+
+    // `iso`: the aorta's surface encloses the lumen and the wall, though the label volume shows
+    // none of its own voxels; each surface closed, in its structure's colour.
+    let obj = root.join("structures.obj");
+    let o = run(&[
+        "iso",
+        "--quiet",
+        rt_file,
+        "--smooth",
+        "0",
+        "-o",
+        obj.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (mesh, shading) = raystream_io::load_mesh_with_shading(&obj).unwrap();
+    let names: Vec<&str> = shading.materials.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["Lumen", "Wall", "Aorta"]);
+    for (m, srgb) in shading
+        .materials
+        .iter()
+        .zip([[255, 0, 0], [0, 0, 255], [200, 200, 0]])
+    {
+        let linear = srgb.map(|c: usize| raystream_io::SRGB_TO_LINEAR[c]);
+        let d = m.diffuse.unwrap();
+        assert!(
+            (0..3).all(|c| (d[c] - linear[c]).abs() < 1e-4),
+            "{}: {d:?}",
+            m.name
+        );
+    }
+    let aorta_part = raystream_io::TriMesh {
+        positions: mesh.positions.clone(),
+        triangles: mesh
+            .triangles
+            .iter()
+            .zip(&shading.material_of)
+            .filter(|(_, m)| **m == Some(2))
+            .map(|(t, _)| *t)
+            .collect(),
+    };
+    assert!(closed_and_oriented(&aorta_part));
+    let want = (lumen + wall) as f64 * grid.voxel_ml();
+    let got = enclosed_ml(&aorta_part);
+    assert!(
+        (got - want).abs() < 0.015 * want,
+        "{got:.2} ml for {want:.2}"
+    );
+
+    // `render --segment`: the aorta alone, in its colour.
+    let png = root.join("aorta.png");
+    let o = run(&[
+        "render",
+        "--quiet",
+        "--device",
+        "cpu",
+        rt_file,
+        "--segment",
+        "aorta",
+        "--size",
+        "96x96",
+        "--spp",
+        "1",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = image::open(&png).unwrap().to_rgb8();
+    let yellow = img
+        .pixels()
+        .filter(|p| p[0] > 60 && (p[0] as i32 - p[1] as i32).abs() < 8 && p[2] < p[0] / 3)
+        .count();
+    assert!(yellow > 300, "{yellow} yellow pixels");
+
+    // Without its CT beside it, it is refused, saying where it looked.
+    let alone = tmp("rtstruct-alone/rt/structures.dcm");
+    std::fs::create_dir_all(alone.parent().unwrap()).unwrap();
+    std::fs::copy(&rt, &alone).unwrap();
+    let o = run(&["info", alone.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("structures.dcm")
+            && stderr(&o).contains("neither in its folder nor in a folder beside it"),
+        "{}",
+        stderr(&o)
+    );
+}

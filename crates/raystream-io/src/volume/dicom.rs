@@ -170,6 +170,9 @@ pub(crate) fn load(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeE
         if super::segmentation::is_segmentation(&meta, &obj) {
             return super::segmentation::read(path, &meta, &obj);
         }
+        if super::structure_set::is_structure_set(&meta, &obj) {
+            return super::structure_set::read_labels(path, &meta, &obj);
+        }
         (slices_of(&meta, obj, path)?, Vec::new())
     } else {
         read_folder(path)?
@@ -502,6 +505,12 @@ fn slices_of(
         return Err(VolumeError::invalid(
             file,
             "a DICOM Segmentation, not an image of a series (read it by its own name)",
+        ));
+    }
+    if super::structure_set::is_structure_set(meta, &obj) {
+        return Err(VolumeError::invalid(
+            file,
+            "a DICOM RT Structure Set, not an image of a series (read it by its own name)",
         ));
     }
     let sop_class = meta.sop_class_of(&obj);

@@ -16,12 +16,16 @@ mod nifti;
 mod nrrd;
 mod raw;
 mod segmentation;
+mod structure_set;
 
 use std::path::{Path, PathBuf};
 
 use raystream_math::DVec3;
 
 pub use dicom::{DicomSeriesInfo, DicomStudy, SegmentLabel, SourceImage, list_dicom_series};
+pub use structure_set::{
+    RT_STRUCTURE_SET, RasterNotes, Roi, StructureSet, StructureVoxels, is_structure_set_volume,
+};
 
 /// The largest volume raystream loads: 2³⁰ voxels (4 GiB of `f32`), e.g. 1024³ or 2048×2048×256.
 pub const MAX_VOXELS: u64 = 1 << 30;
