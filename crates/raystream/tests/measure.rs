@@ -3007,6 +3007,23 @@ fn structure_sets_are_laid_on_their_ct() {
         .count();
     assert!(yellow > 300, "{yellow} yellow pixels");
 
+    // Its series' UID blanked (as some anonymisers do): found by its Frame of Reference.
+    let blank = root.join("rt/blank.dcm");
+    let o = std::process::Command::new(&py)
+        .arg(repo().join("crates/raystream/tests/rtutils_struct.py"))
+        .args([&ct, &nii, &blank])
+        .args(["--blank-series", "Lumen=1:255,0,0"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "rt-utils: {}", stderr(&o));
+    let v = raystream_io::load_volume(&blank, &Default::default()).unwrap();
+    assert_eq!(v.data.iter().filter(|&&x| x == 1.0).count(), lumen as usize);
+    assert!(
+        v.warnings[0].contains("found by its Frame of Reference: it names no series"),
+        "{:?}",
+        v.warnings
+    );
+
     // Without its CT beside it, it is refused, saying where it looked.
     let alone = tmp("rtstruct-alone/rt/structures.dcm");
     std::fs::create_dir_all(alone.parent().unwrap()).unwrap();

@@ -131,6 +131,8 @@ pub(crate) struct Slice {
     series_uid: String,
     description: String,
     modality: String,
+    /// The Frame of Reference its positions are in.
+    frame_of_reference: String,
     ts_uid: String,
     /// The instance it is in (SOP Class and Instance UIDs; the file meta's where the data set's
     /// are blank).
@@ -160,6 +162,23 @@ pub(crate) struct Slice {
 pub fn list_dicom_series(path: &Path) -> Result<Vec<(String, usize, String)>, VolumeError> {
     let (slices, _) = read_folder(path)?;
     Ok(group(&slices))
+}
+
+/// The series in a DICOM folder with their Frames of Reference: (UID, slice count, Frame of
+/// Reference UID), largest first.
+pub(crate) fn series_and_frames(path: &Path) -> Result<Vec<(String, usize, String)>, VolumeError> {
+    let (slices, _) = read_folder(path)?;
+    Ok(group(&slices)
+        .into_iter()
+        .map(|(uid, n, _)| {
+            let frame = slices
+                .iter()
+                .find(|s| s.series_uid == uid)
+                .map(|s| s.frame_of_reference.clone())
+                .unwrap_or_default();
+            (uid, n, frame)
+        })
+        .collect())
 }
 
 pub(crate) fn load(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeError> {
@@ -550,6 +569,9 @@ fn slices_of(
         text(tags::SERIES_DESCRIPTION).unwrap_or_default(),
         text(tags::MODALITY).unwrap_or_default(),
     );
+    let frame_of_reference = text(tags::FRAME_OF_REFERENCE_UID)
+        .map(|s| s.trim_end_matches('\0').to_string())
+        .unwrap_or_default();
     let uid_or = |tag, meta: &str| {
         text(tag)
             .map(|s| s.trim_end_matches('\0').to_string())
@@ -579,6 +601,7 @@ fn slices_of(
                 series_uid: series_uid.clone(),
                 description: description.clone(),
                 modality: modality.clone(),
+                frame_of_reference: frame_of_reference.clone(),
                 ts_uid: ts_uid.clone(),
                 sop_class: sop_class.clone(),
                 sop_instance: sop_instance.clone(),

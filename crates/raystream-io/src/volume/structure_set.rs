@@ -130,25 +130,20 @@ impl StructureSet {
 
     /// The folder holding the image series the contours were drawn on, and that series' UID:
     /// the structure set's own folder, else a folder beside it (the usual layout of an export:
-    /// a folder a series).
+    /// a folder a series). The series it references by UID, else (an anonymised export may
+    /// blank the UIDs it references) the largest series in its Frame of Reference.
     pub fn find_images(&self) -> Result<(PathBuf, String), VolumeError> {
         let file = &self.file;
-        if self.referenced_series.is_empty() {
+        if self.referenced_series.is_empty() && self.frame_of_reference_uid.is_empty() {
             return Err(VolumeError::invalid(
                 file,
-                "DICOM RT Structure Set: it names no image series (RT Referenced Series Sequence), so there is no grid to lay its contours on",
+                "DICOM RT Structure Set: it names no image series (RT Referenced Series Sequence) and no Frame of Reference, so there is no grid to lay its contours on",
             ));
         }
-        let own = file
-            .parent()
-            .map(|p| {
-                if p.as_os_str().is_empty() {
-                    Path::new(".")
-                } else {
-                    p
-                }
-            })
-            .unwrap_or(Path::new("."));
+        let own = match file.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
         let mut folders = vec![own.to_path_buf()];
         if let Some(Ok(entries)) = own.parent().map(std::fs::read_dir) {
             let mut beside: Vec<PathBuf> = entries
@@ -158,23 +153,36 @@ impl StructureSet {
             beside.sort();
             folders.extend(beside);
         }
+        let mut same_frame: Option<(PathBuf, String, usize)> = None;
         for folder in &folders {
             // A folder of anything but DICOM images is passed over.
-            let Ok(series) = super::dicom::list_dicom_series(folder) else {
+            let Ok(series) = super::dicom::series_and_frames(folder) else {
                 continue;
             };
-            if let Some((uid, _, _)) = series
-                .iter()
-                .find(|(uid, _, _)| self.referenced_series.contains(uid))
-            {
-                return Ok((folder.clone(), uid.clone()));
+            for (uid, n, frame) in series {
+                if self.referenced_series.contains(&uid) {
+                    return Ok((folder.clone(), uid));
+                }
+                if !frame.is_empty()
+                    && frame == self.frame_of_reference_uid
+                    && same_frame.as_ref().is_none_or(|s| s.2 < n)
+                {
+                    same_frame = Some((folder.clone(), uid, n));
+                }
             }
         }
+        if let Some((folder, uid, _)) = same_frame {
+            return Ok((folder, uid));
+        }
+        let wanted = if self.referenced_series.is_empty() {
+            format!("in its Frame of Reference {}", self.frame_of_reference_uid)
+        } else {
+            format!("({})", self.referenced_series.join(", "))
+        };
         Err(VolumeError::invalid(
             file,
             format!(
-                "DICOM RT Structure Set: the image series its contours were drawn on ({}) is neither in its folder nor in a folder beside it ({} folders looked in); put the structure set beside its CT series",
-                self.referenced_series.join(", "),
+                "DICOM RT Structure Set: the image series its contours were drawn on {wanted} is neither in its folder nor in a folder beside it ({} folders looked in); put the structure set beside its CT series",
                 folders.len()
             ),
         ))
@@ -324,20 +332,9 @@ impl StructureSet {
 
     /// The structures as a label volume on `grid` (the series they were drawn on), each voxel
     /// the number of the structure holding it, the largest painted first (see the module docs).
-    pub fn label_volume(&self, grid: &Volume, folder: &Path) -> Volume {
+    pub fn label_volume(&self, grid: &Volume) -> Volume {
         let [nx, ny, _] = grid.dims;
         let (regions, mut warnings) = self.regions(grid);
-        warnings.insert(
-            0,
-            format!(
-                "its contours laid on the CT series {} ({}×{}×{} voxels) in {}",
-                grid.series.as_ref().map(|s| s.uid.as_str()).unwrap_or(""),
-                grid.dims[0],
-                grid.dims[1],
-                grid.dims[2],
-                folder.display()
-            ),
-        );
         let mut order: Vec<usize> = (0..regions.len()).collect();
         order.sort_by_key(|&r| std::cmp::Reverse(regions[r].voxels));
         let mut data = vec![0f32; grid.voxel_count()];
@@ -438,7 +435,28 @@ pub(crate) fn read_labels(
     let set = parse(file, meta, obj)?;
     let (folder, uid) = set.find_images()?;
     let grid = super::dicom::load(&folder, &super::VolumeSelect::series(Some(&uid)))?;
-    Ok(set.label_volume(&grid, &folder))
+    let mut labels = set.label_volume(&grid);
+    let [nx, ny, nz] = grid.dims;
+    let by = if set.referenced_series.contains(&uid) {
+        ""
+    } else if set.referenced_series.is_empty() {
+        " (found by its Frame of Reference: it names no series)"
+    } else {
+        " (found by its Frame of Reference: the series it names is not there)"
+    };
+    let uid = if uid.is_empty() {
+        "without a Series Instance UID"
+    } else {
+        uid.as_str()
+    };
+    labels.warnings.insert(
+        0,
+        format!(
+            "its contours laid on the series {uid} ({nx}×{ny}×{nz} voxels) in {}{by}",
+            folder.display()
+        ),
+    );
+    Ok(labels)
 }
 
 /// The structure set in `obj` (read from `file`).
@@ -854,7 +872,7 @@ mod tests {
         }
 
         // As a label volume: the largest painted first, so the squares and the ring keep theirs.
-        let labels = set.label_volume(&g, Path::new("here"));
+        let labels = set.label_volume(&g);
         let held = |l: f32| labels.data.iter().filter(|&&v| v == l).count();
         assert_eq!(held(7.0), 60);
         assert_eq!(held(1.0), set.rasterise(&set.rois[0], &g).0.voxels);
@@ -882,7 +900,7 @@ mod tests {
         let (regions, _) = set.regions(&g);
         assert_eq!(regions[0].voxels, 29 * 19);
         assert_eq!(regions[1].voxels, 25);
-        let labels = set.label_volume(&g, Path::new("here"));
+        let labels = set.label_volume(&g);
         let held = |l: f32| labels.data.iter().filter(|&&v| v == l).count();
         assert_eq!((held(1.0), held(2.0)), (29 * 19 - 25, 25));
         assert!(
