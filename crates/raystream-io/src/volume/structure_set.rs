@@ -224,9 +224,10 @@ impl StructureSet {
                 .or_default()
                 .push(idx.iter().map(|p| [p.x, p.y]).collect());
         }
-        // Each slice's spans of voxels: (k, j, first i, past the last i).
+        // Each slice's spans of voxels: (k, j, first i, past the last i). The edges are put
+        // in the rows they cross (an edge table), so that a slice costs its edges and the rows
+        // they cross, not every edge on every row.
         let mut spans: Vec<(usize, usize, usize, usize)> = Vec::new();
-        let mut crossings: Vec<f64> = Vec::new();
         for (&k, polygons) in &slices {
             let (ylo, yhi) = polygons
                 .iter()
@@ -236,21 +237,41 @@ impl StructureSet {
                 });
             let j0 = (ylo - ON_EDGE).ceil().max(0.0);
             let j1 = (yhi + ON_EDGE).floor().min(ny as f64 - 1.0);
-            if j0 > j1 {
+            if j0.is_nan() || j1.is_nan() || j0 > j1 {
                 continue;
             }
-            for j in j0 as usize..=j1 as usize {
-                let y = j as f64;
-                crossings.clear();
-                for polygon in polygons {
-                    for (n, a) in polygon.iter().enumerate() {
-                        let b = polygon[(n + 1) % polygon.len()];
+            let (j0, j1) = (j0 as usize, j1 as usize);
+            // The rows from `lo` to `hi`, as indices from j0.
+            let rows = |lo: f64, hi: f64| -> std::ops::Range<usize> {
+                let (a, b) = (lo.ceil().max(j0 as f64), hi.floor().min(j1 as f64));
+                if a <= b {
+                    a as usize - j0..b as usize - j0 + 1
+                } else {
+                    0..0
+                }
+            };
+            let mut crossings: Vec<Vec<f64>> = vec![Vec::new(); j1 - j0 + 1];
+            let mut edges: Vec<Vec<(f64, f64)>> = vec![Vec::new(); j1 - j0 + 1];
+            for polygon in polygons {
+                for (n, &a) in polygon.iter().enumerate() {
+                    let b = polygon[(n + 1) % polygon.len()];
+                    let (ymin, ymax) = (a[1].min(b[1]), a[1].max(b[1]));
+                    for r in rows(ymin, ymax) {
+                        let y = (j0 + r) as f64;
                         if (a[1] <= y) != (b[1] <= y) {
-                            crossings.push(a[0] + (y - a[1]) * (b[0] - a[0]) / (b[1] - a[1]));
+                            crossings[r].push(a[0] + (y - a[1]) * (b[0] - a[0]) / (b[1] - a[1]));
+                        }
+                    }
+                    // Centres on the edge: the stretch of each row within ON_EDGE of it.
+                    for r in rows(ymin - ON_EDGE, ymax + ON_EDGE) {
+                        if let Some(stretch) = on_edge(a, b, (j0 + r) as f64) {
+                            edges[r].push(stretch);
                         }
                     }
                 }
-                crossings.sort_by(f64::total_cmp);
+            }
+            for (r, (row, on)) in crossings.iter_mut().zip(&edges).enumerate() {
+                let j = j0 + r;
                 let mut span = |x0: f64, x1: f64| {
                     // Voxels whose centre x lies in [x0, x1).
                     let (i0, i1) = (x0.ceil().max(0.0), x1.ceil().min(nx as f64));
@@ -258,16 +279,12 @@ impl StructureSet {
                         spans.push((k, j, i0 as usize, i1 as usize));
                     }
                 };
-                for pair in crossings.chunks_exact(2) {
+                row.sort_by(f64::total_cmp);
+                for pair in row.chunks_exact(2) {
                     span(pair[0], pair[1]);
                 }
-                // Centres on an edge: the stretch of the row within ON_EDGE of each edge.
-                for polygon in polygons {
-                    for (n, a) in polygon.iter().enumerate() {
-                        if let Some((x0, x1)) = on_edge(*a, polygon[(n + 1) % polygon.len()], y) {
-                            span(x0, x1.floor() + 1.0);
-                        }
-                    }
+                for &(x0, x1) in on {
+                    span(x0, x1.floor() + 1.0);
                 }
             }
         }
