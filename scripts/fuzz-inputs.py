@@ -9,7 +9,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a tex
         (NIfTI, NRRD and MetaImage, attached and detached, via SimpleITK; 4-D ones, and
         3D Slicer's interleaved 4-D NRRD, read at a --phase or as a --cine) and real DICOM slices from
         ../shared (JPEG-LS and 12-bit JPEG among them) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
-        and `raystream render --aov prim` (meshes also shaded; volumes also `--mode` mip, minip, average, slice or
+        and `raystream render --aov prim` (meshes also shaded; volumes, and an RT Structure Set laid on its CT, also `--mode` mip, minip, average, slice or
         dvr, some with --slab, to an EXR or a turntable of EXRs; some tinted by themselves as a label map,
         or their segments made surfaces with `raystream iso --segment` (some simplified, some named
         by a mutated colour table) or rendered). Each run must exit 0 or 2, never panic, and an error
@@ -171,6 +171,11 @@ def seeds(d):
         w("sg.dcm", segmentation())
         w("sr.dcm", report())
         w("sgr.dcm", label_map_rle())
+        # An RT Structure Set and the CT series it was drawn on (copied beside it each run).
+        os.makedirs(os.path.join(d, "rsct"))
+        for k, b in enumerate(structure_set_ct()):
+            w(os.path.join("rsct", f"ct{k}.dcm"), b)
+        w("rs.dcm", structure_set())
     except ImportError:
         print("no pydicom: the enhanced (multi-frame) CT, Segmentation and report seeds left out",
               file=sys.stderr)
@@ -277,6 +282,58 @@ def label_map_rle():
     ds = seg_frames("LABELMAP", 8, "1.2.840.10008.5.1.4.1.1.66.7", 13, ((0, 0), (1, 0), (2, 0)))
     ds.PixelData = bytes((i * 7) % 3 for i in range(105))
     return file_bytes(ds, RLELossless)
+
+
+def structure_set_ct():
+    """A 3-slice 8x6 CT series (its files' bytes) for the structure set to lie on."""
+    from pydicom.dataset import Dataset
+
+    out = []
+    for k in range(3):
+        ds = Dataset()
+        ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.2", f"2.25.4{k}"
+        ds.Modality, ds.SeriesInstanceUID, ds.FrameOfReferenceUID = "CT", "2.25.30", "2.25.31"
+        ds.Rows, ds.Columns, ds.SamplesPerPixel = 6, 8, 1
+        ds.PhotometricInterpretation = "MONOCHROME2"
+        ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 1
+        ds.RescaleIntercept, ds.RescaleSlope = 0, 1
+        ds.ImagePositionPatient = [-10, 20, 30 + 2 * k]
+        ds.ImageOrientationPatient = [1, 0, 0, 0, 1, 0]
+        ds.PixelSpacing = [0.8, 0.7]
+        ds.PixelData = struct.pack("<48h", *[(i * 53 + k * 11) % 2000 - 1000 for i in range(48)])
+        out.append(file_bytes(ds))
+    return out
+
+
+def structure_set():
+    """An RT Structure Set on structure_set_ct's series: a body outline over every slice, and
+    a ring (a polygon and its hole) inside it on one slice, with a colour and kind each."""
+    from pydicom.dataset import Dataset
+    from pydicom.sequence import Sequence
+
+    def polygon(points, k):
+        return item(ContourGeometricType="CLOSED_PLANAR", NumberOfContourPoints=len(points),
+                    ContourData=[c for x, y in points for c in (-10 + 0.7 * x, 20 + 0.8 * y, 30 + 2 * k)])
+    ds = Dataset()
+    ds.SOPClassUID, ds.SOPInstanceUID = "1.2.840.10008.5.1.4.1.1.481.3", "2.25.32"
+    ds.Modality, ds.SeriesInstanceUID = "RTSTRUCT", "2.25.33"
+    ds.StructureSetLabel = "fuzz"
+    ds.ReferencedFrameOfReferenceSequence = Sequence([item(
+        FrameOfReferenceUID="2.25.31", RTReferencedStudySequence=Sequence([item(
+            RTReferencedSeriesSequence=Sequence([item(SeriesInstanceUID="2.25.30")]))]))])
+    ds.StructureSetROISequence = Sequence([
+        item(ROINumber=1, ROIName="Body", ReferencedFrameOfReferenceUID="2.25.31"),
+        item(ROINumber=2, ROIName="Lumen", ReferencedFrameOfReferenceUID="2.25.31")])
+    body = [(0.5, 0.5), (6.5, 0.5), (6.5, 4.5), (0.5, 4.5)]
+    ds.ROIContourSequence = Sequence([
+        item(ReferencedROINumber=1, ROIDisplayColor=[255, 200, 150],
+             ContourSequence=Sequence([polygon(body, k) for k in range(3)])),
+        item(ReferencedROINumber=2, ROIDisplayColor=[0, 255, 255], ContourSequence=Sequence([
+            polygon([(1, 1), (5, 1), (5, 4), (1, 4)], 1), polygon([(2, 2), (4, 2), (3, 3)], 1)]))])
+    ds.RTROIObservationsSequence = Sequence([
+        item(ObservationNumber=n, ReferencedROINumber=n, RTROIInterpretedType=t)
+        for n, t in ((1, "EXTERNAL"), (2, "ORGAN"))])
+    return file_bytes(ds)
 
 
 def report():
@@ -406,7 +463,7 @@ def fuzz_files(work, n, device):
     sd = os.path.join(work, "seeds")
     os.makedirs(sd)
     seeds(sd)
-    names = [s for s in sorted(os.listdir(sd)) if s not in ("v.raw", "tm.mtl", "tm.png")]
+    names = [s for s in sorted(os.listdir(sd)) if s not in ("v.raw", "tm.mtl", "tm.png", "rsct")]
     bad = 0
     for i in range(n):
         s = random.choice(names)
@@ -434,6 +491,10 @@ def fuzz_files(work, n, device):
             open(p, "wb").write(mutate_glb(data) if glb else mutate(data, text))
         if s in ("v.mhd", "v.nhdr"):
             shutil.copy(os.path.join(sd, "v.raw"), d)
+        if s == "rs.dcm":
+            # The structure set's CT beside it, in its folder.
+            for f in os.listdir(os.path.join(sd, "rsct")):
+                shutil.copy(os.path.join(sd, "rsct", f), d)
         if s.startswith("c."):
             # A curved reformation along the mutated path, through the intact volume.
             vol = os.path.join(sd, "v.nii")
@@ -511,7 +572,7 @@ def fuzz_files(work, n, device):
             # Sometimes its segments as surfaces, written (some simplified) or rendered (a CT is
             # refused as no label map).
             if not why and random.random() < 0.3:
-                segments = ["--segment", random.choice(["all", "1", "2,1", "Lumen"]),
+                segments = ["--segment", random.choice(["all", "1", "2,1", "Lumen", "body"]),
                             "--smooth", random.choice(["0", "3"])] + phase
                 if random.random() < 0.3:
                     # Names and colours from a mutated colour table (3D Slicer's or ITK-SNAP's).

@@ -5,12 +5,14 @@ mod cases;
 pub mod centreline;
 pub mod distance;
 mod marching;
+mod stats;
 mod tf;
 
 pub use marching::{
     IsoSurface, Simplified, departure, distances, extract_isosurface, point_triangle_distance,
     simplify, smooth,
 };
+pub use stats::{RegionStats, region_stats};
 pub use tf::{Shading, TfPreset, TransferFunction};
 
 /// Bone thresholds in Hounsfield units.

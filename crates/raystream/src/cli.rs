@@ -987,6 +987,11 @@ pub struct InfoArgs {
     /// `iso --colour-table`), over a DICOM Segmentation's own.
     #[arg(long, alias = "color-table", value_name = "FILE")]
     pub colour_table: Option<PathBuf>,
+    /// A CT volume: its values within each segment of LABELS (a label map, a DICOM
+    /// Segmentation or an RT Structure Set, on any grid: each CT voxel takes the label at its
+    /// centre): voxels, volume, mean, standard deviation, minimum, median, maximum, centroid.
+    #[arg(long, value_name = "LABELS")]
+    pub segmentation: Option<PathBuf>,
     #[arg(long)]
     pub json: bool,
 }

@@ -2,7 +2,7 @@
 //! (dims, spacing in mm, LPS origin and direction), value range and, for DICOM, its series, or
 //! a scene file as `render` would draw it.
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use raystream_accel::TreeStats;
 use serde_json::json;
 
@@ -34,6 +34,13 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     }
     if raystream_io::is_volume_path(input) {
         return volume_info(a, input);
+    }
+    if let Some(labels) = &a.segmentation {
+        bail!(
+            "--segmentation {}: gives the values of a CT volume within its segments; {} is not a volume",
+            labels.display(),
+            input.display()
+        );
     }
     if input
         .extension()
@@ -245,8 +252,107 @@ fn label_counts(v: &raystream_io::Volume) -> Option<Vec<(u32, usize)>> {
     Some(counts.into_iter().collect())
 }
 
+/// One segment's statistics: its label, its name, and the CT's values in it.
+type SegmentStats = (u32, String, raystream_volume::RegionStats);
+
+/// `--segmentation LABELS`: the CT `ct`'s values within each segment of LABELS, and how its
+/// voxels were matched to the CT's (the same grid, the nearest label voxel, or a structure
+/// set's contours laid on the CT's grid).
+fn segment_stats(
+    a: &InfoArgs,
+    ct: &raystream_io::Volume,
+    input: &std::path::Path,
+) -> Result<Option<(Vec<SegmentStats>, &'static str)>> {
+    let Some(file) = &a.segmentation else {
+        return Ok(None);
+    };
+    let name = file.display();
+    let labels = raystream_io::load_volume(file, &raystream_io::VolumeSelect::default())?;
+    if let Some(v) = crate::common::not_a_label(&labels) {
+        bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
+    }
+    let known = crate::iso::segment_names(&labels, a.colour_table.as_deref())?;
+    let [nx, ny, nz] = ct.dims;
+    let mut members: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
+    let how = if let Some(set) = crate::iso::structures_of(&labels, file)? {
+        // Each structure whole, laid on this CT's grid.
+        for roi in &set.rois {
+            let (r, _) = set.rasterise(roi, ct);
+            let [dx, dy, _] = r.dims;
+            let list = members.entry(roi.number as u32).or_default();
+            for (n, _) in r.inside.iter().enumerate().filter(|(_, held)| **held) {
+                let (i, j, k) = (n % dx, (n / dx) % dy, n / (dx * dy));
+                list.push(r.lo[0] + i + nx * (r.lo[1] + j + ny * (r.lo[2] + k)));
+            }
+        }
+        members.retain(|_, v| !v.is_empty());
+        "structures laid on the CT's grid"
+    } else if labels.dims == ct.dims
+        && (0..3).all(|a| {
+            (labels.origin[a] - ct.origin[a]).abs() < 1e-3
+                && (labels.spacing[a] - ct.spacing[a]).abs() < 1e-6 * ct.spacing[a]
+                && (0..3).all(|b| (labels.direction[a][b] - ct.direction[a][b]).abs() < 1e-6)
+        })
+    {
+        for (n, &l) in labels.data.iter().enumerate() {
+            if l > 0.0 {
+                members.entry(l as u32).or_default().push(n);
+            }
+        }
+        "the CT's grid"
+    } else {
+        // Each CT voxel takes the label voxel nearest its centre.
+        let to_labels = labels.index_to_world_affine().inverse() * ct.index_to_world_affine();
+        let [lx, ly, lz] = labels.dims;
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let q = to_labels
+                        .transform_point3(raystream_math::DVec3::new(i as f64, j as f64, k as f64))
+                        .round();
+                    if q.min_element() < 0.0
+                        || q.x >= lx as f64
+                        || q.y >= ly as f64
+                        || q.z >= lz as f64
+                    {
+                        continue;
+                    }
+                    let l = labels.at(q.x as usize, q.y as usize, q.z as usize);
+                    if l > 0.0 {
+                        members
+                            .entry(l as u32)
+                            .or_default()
+                            .push(i + nx * (j + ny * k));
+                    }
+                }
+            }
+        }
+        "the nearest label voxel to each CT voxel's centre"
+    };
+    if members.is_empty() {
+        bail!(
+            "{name}: no segment holds a voxel of {} (is it this CT's segmentation?)",
+            input.display()
+        );
+    }
+    let stats = members
+        .into_iter()
+        .filter_map(|(l, list)| {
+            let s = raystream_volume::region_stats(ct, &list)?;
+            let name = known
+                .iter()
+                .find(|k| k.number as u32 == l)
+                .map(|k| k.label.clone())
+                .unwrap_or_default();
+            Some((l, name, s))
+        })
+        .collect();
+    Ok(Some((stats, how)))
+}
+
 fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     let v = raystream_io::load_volume(input, &a.pick.select())?;
+    let stats = segment_stats(a, &v, input)?;
     let range = v.value_range();
     // A label map's labels, their voxels and volumes, and their names: a Segmentation's, or
     // `--colour-table`'s.
@@ -323,6 +429,24 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
         };
         if let Some(s) = series {
             out["series"] = s;
+        }
+        if let Some((stats, how)) = &stats {
+            out["segmentation"] = json!({
+                "file": a.segmentation.as_deref().map(file_name),
+                "matched_on": how,
+                "segments": stats.iter().map(|(l, name, s)| json!({
+                    "value": l,
+                    "name": name,
+                    "voxels": s.voxels,
+                    "ml": s.ml,
+                    "mean": s.mean,
+                    "sd": s.sd,
+                    "min": s.min,
+                    "median": s.median,
+                    "max": s.max,
+                    "centroid": s.centroid,
+                })).collect::<Vec<_>>(),
+            });
         }
         if let Some(set) = &structures {
             out["structure_set"] = json!({
@@ -425,6 +549,24 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             }
             for (u, n, d) in s.all.iter().filter(|(u, _, _)| *u != s.uid) {
                 println!("  also       {} ({n} slices) {d}", uid(u));
+            }
+        }
+        if let Some((stats, how)) = &stats {
+            println!(
+                "  within     {} (matched on {how}):",
+                a.segmentation.as_deref().unwrap_or(input).display()
+            );
+            for (l, name, s) in stats {
+                let name = if name.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({name})")
+                };
+                let [x, y, z] = s.centroid;
+                println!(
+                    "  segment    {l}{name}: {} voxels, {:.1} ml; {unit} mean {:.1}, sd {:.1}, min {}, median {}, max {}; centroid ({x:.1}, {y:.1}, {z:.1}) mm LPS",
+                    s.voxels, s.ml, s.mean, s.sd, s.min, s.median, s.max
+                );
             }
         }
         for w in &v.warnings {

@@ -300,3 +300,31 @@ fn a_closed_pipe_ends_the_report_quietly() {
     // Ended by SIGPIPE (13 on Linux, the BSDs and macOS).
     assert_eq!(o.status.signal(), Some(13), "{:?}", o.status);
 }
+
+#[test]
+fn segment_statistics_refuse_what_is_no_segmentation() {
+    let ct = shared()
+        .join("data/volumes/nifti/abdomen_pelvis_ct_totalseg.nii.gz")
+        .to_string_lossy()
+        .into_owned();
+    let bunny = shared()
+        .join("data/meshes/stanford_bunny.ply")
+        .to_string_lossy()
+        .into_owned();
+    // A CT is no label map.
+    refused(
+        &["info", &ct, "--segmentation", &ct],
+        "--segmentation takes a label map (whole numbers from 0); it holds",
+    );
+    // A mesh has no values to take.
+    refused(&["info", &bunny, "--segmentation", &ct], "is not a volume");
+    // A label map far from the CT: no segment holds a voxel of it.
+    let far = tmp("far-labels.nii");
+    let mut v = raystream_io::Volume::hounsfield([3, 3, 3], [1.0; 3], vec![0.0; 27]);
+    v.origin = [1e4, 0.0, 0.0];
+    raystream_io::write_label_map(&far, &v, &[1; 27], "far away").unwrap();
+    refused(
+        &["info", &ct, "--segmentation", far.to_str().unwrap()],
+        "far-labels.nii: no segment holds a voxel of",
+    );
+}

@@ -3007,6 +3007,87 @@ fn structure_sets_are_laid_on_their_ct() {
         .count();
     assert!(yellow > 300, "{yellow} yellow pixels");
 
+    // `info CT --segmentation`: the CT's values in each segment. On the NIfTI CT and its map
+    // (one grid) they are SimpleITK's label statistics, with numpy's median; through the
+    // structure set laid on the CT's series they are the same, the aorta's those of the lumen
+    // and the wall together; through the series' DICOM Segmentation (its own grid, cut to the
+    // slices it holds: each CT voxel takes the nearest label voxel) too.
+    let stats = |ct: &str, labels: &str| -> (Vec<serde_json::Value>, String) {
+        let o = run(&["info", "--json", ct, "--segmentation", labels]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        let s = &v["segmentation"];
+        (
+            s["segments"].as_array().unwrap().clone(),
+            s["matched_on"].as_str().unwrap().to_string(),
+        )
+    };
+    let (from_map, how) = stats(&chest(), nii.to_str().unwrap());
+    assert_eq!(how, "the CT's grid");
+    let (from_rt, how) = stats(ct.to_str().unwrap(), rt_file);
+    assert_eq!(how, "structures laid on the CT's grid");
+    let seg = root.join("labels.dcm");
+    measure(
+        ct.to_str().unwrap(),
+        &aorta(),
+        &["--wall", "--mask", seg.to_str().unwrap()],
+    );
+    let (from_series, how) = stats(ct.to_str().unwrap(), seg.to_str().unwrap());
+    assert!(how.starts_with("the nearest label voxel"), "{how}");
+    let close = |a: &serde_json::Value, b: &serde_json::Value, what: &str| {
+        for k in ["voxels", "mean", "sd", "min", "median", "max"] {
+            let (x, y) = (a[k].as_f64().unwrap(), b[k].as_f64().unwrap());
+            assert!(
+                (x - y).abs() <= 1e-9 * y.abs().max(1.0),
+                "{what} {k}: {x} vs {y}"
+            );
+        }
+        for c in 0..3 {
+            let (x, y) = (
+                a["centroid"][c].as_f64().unwrap(),
+                b["centroid"][c].as_f64().unwrap(),
+            );
+            assert!((x - y).abs() < 1e-6, "{what} centroid: {x} vs {y}");
+        }
+    };
+    assert_eq!(
+        (from_map.len(), from_rt.len(), from_series.len()),
+        (2, 3, 2)
+    );
+    for l in 0..2 {
+        close(&from_rt[l], &from_map[l], "structure set");
+        close(&from_series[l], &from_map[l], "Segmentation");
+    }
+    if let Some(sitk) = python_with("SimpleITK") {
+        let o = std::process::Command::new(&sitk)
+            .args([
+                "-c",
+                "import sys, json, numpy as np, SimpleITK as sitk\n\
+                 ct = sitk.ReadImage(sys.argv[1])\n\
+                 lab = sitk.Cast(sitk.ReadImage(sys.argv[2]), sitk.sitkUInt8)\n\
+                 union = sitk.Cast(lab > 0, sitk.sitkUInt8) * 3\n\
+                 hu = sitk.GetArrayFromImage(ct).astype(float)\n\
+                 out = []\n\
+                 for img, l in [(lab, 1), (lab, 2), (union, 3)]:\n\
+                 \x20   st = sitk.LabelStatisticsImageFilter(); st.Execute(ct, img)\n\
+                 \x20   sh = sitk.LabelShapeStatisticsImageFilter(); sh.Execute(img)\n\
+                 \x20   m = sitk.GetArrayFromImage(img) == l\n\
+                 \x20   out.append(dict(voxels=st.GetCount(l), mean=st.GetMean(l), sd=st.GetSigma(l),\n\
+                 \x20       min=st.GetMinimum(l), max=st.GetMaximum(l), median=float(np.median(hu[m])),\n\
+                 \x20       centroid=list(sh.GetCentroid(l))))\n\
+                 print(json.dumps(out))",
+                &chest(),
+                nii.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        let want: Vec<serde_json::Value> = serde_json::from_str(&stdout(&o)).unwrap();
+        close(&from_map[0], &want[0], "SimpleITK lumen");
+        close(&from_map[1], &want[1], "SimpleITK wall");
+        close(&from_rt[2], &want[2], "SimpleITK aorta");
+    }
+
     // Its series' UID blanked (as some anonymisers do): found by its Frame of Reference.
     let blank = root.join("rt/blank.dcm");
     let o = std::process::Command::new(&py)
