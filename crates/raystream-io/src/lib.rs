@@ -45,8 +45,8 @@ pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping, linear_to
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, RT_STRUCTURE_SET, RasterNotes, Roi,
     SegmentLabel, SourceImage, StructureSet, StructureVoxels, ValueUnit, Volume, VolumeError,
-    VolumeFormat, VolumeSelect, is_structure_set_volume, is_volume_path, list_dicom_series,
-    load_volume,
+    VolumeFormat, VolumeSelect, is_structure_set_file, is_structure_set_volume, is_volume_path,
+    list_dicom_series, load_volume,
 };
 
 /// A triangle mesh: shared vertex positions and triangles as vertex-index triples.

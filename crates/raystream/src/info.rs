@@ -267,15 +267,27 @@ fn segment_stats(
         return Ok(None);
     };
     let name = file.display();
-    let labels = raystream_io::load_volume(file, &raystream_io::VolumeSelect::default())?;
-    if let Some(v) = crate::common::not_a_label(&labels) {
-        bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
-    }
-    let known = crate::iso::segment_names(&labels, a.colour_table.as_deref())?;
-    let [nx, ny, nz] = ct.dims;
+    let [nx, ny, _] = ct.dims;
     let mut members: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
-    let how = if let Some(set) = crate::iso::structures_of(&labels, file)? {
-        // Each structure whole, laid on this CT's grid.
+    let (how, known) = if raystream_io::is_structure_set_file(file) {
+        // Each structure whole, laid on this CT's grid (not the series it names).
+        let set = raystream_io::StructureSet::read(file)?;
+        let ct_frame = ct
+            .series
+            .as_ref()
+            .map(|s| s.study.frame_of_reference_uid.as_str())
+            .unwrap_or("");
+        if !ct_frame.is_empty()
+            && !set.frame_of_reference_uid.is_empty()
+            && ct_frame != set.frame_of_reference_uid
+        {
+            bail!(
+                "{name}: its contours are in the Frame of Reference {}, and {} in {ct_frame}: they were drawn on another scan",
+                set.frame_of_reference_uid,
+                input.display()
+            );
+        }
+        let known = crate::iso::with_colour_table(set.segments(), a.colour_table.as_deref())?;
         for roi in &set.rois {
             let (r, _) = set.rasterise(roi, ct);
             let [dx, dy, _] = r.dims;
@@ -286,8 +298,46 @@ fn segment_stats(
             }
         }
         members.retain(|_, v| !v.is_empty());
-        "structures laid on the CT's grid"
-    } else if labels.dims == ct.dims
+        ("structures laid on the CT's grid", known)
+    } else {
+        let labels = raystream_io::load_volume(file, &raystream_io::VolumeSelect::default())?;
+        if let Some(v) = crate::common::not_a_label(&labels) {
+            bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
+        }
+        let known = crate::iso::segment_names(&labels, a.colour_table.as_deref())?;
+        (labels_on_ct(ct, &labels, &mut members), known)
+    };
+    if members.is_empty() {
+        bail!(
+            "{name}: no segment holds a voxel of {} (is it this CT's segmentation?)",
+            input.display()
+        );
+    }
+    let stats = members
+        .into_iter()
+        .filter_map(|(l, list)| {
+            let s = raystream_volume::region_stats(ct, &list)?;
+            let name = known
+                .iter()
+                .find(|k| k.number as u32 == l)
+                .map(|k| k.label.clone())
+                .unwrap_or_default();
+            Some((l, name, s))
+        })
+        .collect();
+    Ok(Some((stats, how)))
+}
+
+/// Each CT voxel's label in `labels` (a label volume), gathered as the CT voxels of each label
+/// into `members`; how they were matched: voxel for voxel on the CT's own grid, else the label
+/// voxel nearest each CT voxel's centre.
+fn labels_on_ct(
+    ct: &raystream_io::Volume,
+    labels: &raystream_io::Volume,
+    members: &mut std::collections::BTreeMap<u32, Vec<usize>>,
+) -> &'static str {
+    let [nx, ny, nz] = ct.dims;
+    if labels.dims == ct.dims
         && (0..3).all(|a| {
             (labels.origin[a] - ct.origin[a]).abs() < 1e-3
                 && (labels.spacing[a] - ct.spacing[a]).abs() < 1e-6 * ct.spacing[a]
@@ -328,26 +378,7 @@ fn segment_stats(
             }
         }
         "the nearest label voxel to each CT voxel's centre"
-    };
-    if members.is_empty() {
-        bail!(
-            "{name}: no segment holds a voxel of {} (is it this CT's segmentation?)",
-            input.display()
-        );
     }
-    let stats = members
-        .into_iter()
-        .filter_map(|(l, list)| {
-            let s = raystream_volume::region_stats(ct, &list)?;
-            let name = known
-                .iter()
-                .find(|k| k.number as u32 == l)
-                .map(|k| k.label.clone())
-                .unwrap_or_default();
-            Some((l, name, s))
-        })
-        .collect();
-    Ok(Some((stats, how)))
 }
 
 fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {

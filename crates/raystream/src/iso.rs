@@ -251,11 +251,20 @@ pub fn segment_names(
     labels: &Volume,
     table: Option<&Path>,
 ) -> Result<Vec<raystream_io::SegmentLabel>> {
-    let mut known = labels
+    let known = labels
         .series
         .as_ref()
         .map(|s| s.segments.clone())
         .unwrap_or_default();
+    with_colour_table(known, table)
+}
+
+/// Segment names and colours `known`, each label that `--colour-table FILE` names taking the
+/// table's.
+pub fn with_colour_table(
+    mut known: Vec<raystream_io::SegmentLabel>,
+    table: Option<&Path>,
+) -> Result<Vec<raystream_io::SegmentLabel>> {
     if let Some(t) = table {
         for l in raystream_io::read_colour_table(t)? {
             known.retain(|k| k.number != l.number);

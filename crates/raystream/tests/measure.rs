@@ -3088,6 +3088,13 @@ fn structure_sets_are_laid_on_their_ct() {
         close(&from_rt[2], &want[2], "SimpleITK aorta");
     }
 
+    // Laid on a scan of another Frame of Reference: refused.
+    let other = shared().join("data/volumes/dicom/abdomen_ct_j2k_totalseg");
+    refused(
+        &["info", other.to_str().unwrap(), "--segmentation", rt_file],
+        "they were drawn on another scan",
+    );
+
     // Its series' UID blanked (as some anonymisers do): found by its Frame of Reference.
     let blank = root.join("rt/blank.dcm");
     let o = std::process::Command::new(&py)

@@ -438,6 +438,17 @@ fn on_edge(a: [f64; 2], b: [f64; 2], y: f64) -> Option<(f64, f64)> {
     (x0 <= x1).then_some((x0, x1))
 }
 
+/// Whether `path` is a DICOM file holding an RT Structure Set (read and parsed to tell).
+pub fn is_structure_set_file(path: &Path) -> bool {
+    if super::VolumeFormat::from_path(path) != Some(VolumeFormat::Dicom) || !path.is_file() {
+        return false;
+    }
+    let Ok(bytes) = std::fs::read(path) else {
+        return false;
+    };
+    super::dicom::parse_dataset(&bytes, path).is_ok_and(|(meta, obj)| is_structure_set(&meta, &obj))
+}
+
 /// Whether a label volume was read from an RT Structure Set (whose structures may overlap).
 pub fn is_structure_set_volume(v: &Volume) -> bool {
     v.series.as_ref().is_some_and(|s| s.modality == "RTSTRUCT")
