@@ -246,9 +246,15 @@ pub struct RenderArgs {
     /// default for a Segmentation; as `iso --segment`).
     #[arg(long, value_name = "LIST", conflicts_with_all = ["iso", "mode"])]
     pub segment: Option<String>,
-    /// The label map's segments' names and colours, for `--segment` (which it implies): a 3D
-    /// Slicer colour table or an ITK-SNAP label description (as `iso --colour-table`).
-    #[arg(long, alias = "color-table", value_name = "FILE", conflicts_with_all = ["iso", "mode"])]
+    /// The label map's segments' names and colours, for `--segment` (which it implies) or
+    /// `--segmentation`: a 3D Slicer colour table or an ITK-SNAP label description (as
+    /// `iso --colour-table`).
+    #[arg(
+        long,
+        alias = "color-table",
+        value_name = "FILE",
+        conflicts_with = "iso"
+    )]
     pub colour_table: Option<PathBuf>,
     /// Output image: .png (8-bit sRGB as a viewer shows it; 16-bit grey for --aov depth) or
     /// .exr (32-bit float: the linear film; --aov depth Z, normal N.X/N.Y/N.Z, prim as 32-bit
@@ -382,12 +388,17 @@ pub struct RenderArgs {
     )]
     pub draw_wall: Option<f32>,
     /// With --mode slice (a slice, or a CPR with --path, and their frames): tints each pixel by the
-    /// label of a label map or DICOM Segmentation (FILE: NIfTI, NRRD, MetaImage, DICOM SEG;
-    /// `measure --mask` writes them) at the pixel's point in the patient, as a viewer lays a
-    /// segmentation over the CT: label 1 cyan, 2 magenta, then yellow, green, orange, blue;
-    /// PNG, or DICOM as the picture.
+    /// label of a label map, DICOM Segmentation or RT Structure Set (FILE: NIfTI, NRRD,
+    /// MetaImage, DICOM SEG or RTSTRUCT; `measure --mask` writes the first and the SEG) at the
+    /// pixel's point in the patient, as a viewer lays a segmentation over the CT, each segment
+    /// in its own colour (a Segmentation's, a structure set's, `--colour-table`'s), else label
+    /// 1 cyan, 2 magenta, then yellow, green, orange, blue; PNG, or DICOM as the picture.
     #[arg(long, value_name = "FILE")]
     pub segmentation: Option<PathBuf>,
+    /// With --segmentation: each segment's edge drawn in its colour, as planning systems show
+    /// structures, rather than its inside tinted (a structure set's structures each whole).
+    #[arg(long, requires = "segmentation")]
+    pub outline: bool,
     /// With --path FILE (not --slices): marks these points of the path, mm along it from its
     /// first point (as `measure` gives a lesion's and its references' arc lengths), each a
     /// line across the CPR, yellow ringed in black; PNG, or DICOM as the picture.

@@ -433,9 +433,9 @@ pub fn segment_surfaces(
             .map(|k| k.label.clone())
             .filter(|n| !n.is_empty())
             .unwrap_or_else(|| format!("label {l}"));
-        let colour = segment.and_then(|k| k.colour).unwrap_or(
-            crate::overlay::LABEL_COLOURS[(l as usize - 1) % crate::overlay::LABEL_COLOURS.len()],
-        );
+        let colour = segment
+            .and_then(|k| k.colour)
+            .unwrap_or(crate::overlay::label_colour(l));
         out.push(SegmentSurface {
             label: l,
             name,

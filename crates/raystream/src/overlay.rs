@@ -205,41 +205,128 @@ pub const LABEL_COLOURS: [[u8; 3]; 6] = [
 /// How much of a tinted pixel is its label's colour.
 pub const LABEL_ALPHA: f32 = 0.45;
 
-/// A label's colour over the pixel `base`: [`LABEL_ALPHA`] of it, rounded.
-pub fn tint(base: [u8; 3], label: u32) -> [u8; 3] {
-    let c = LABEL_COLOURS[(label as usize - 1) % LABEL_COLOURS.len()];
+/// `colour` over the pixel `base`: [`LABEL_ALPHA`] of it, rounded.
+pub fn tint(base: [u8; 3], colour: [u8; 3]) -> [u8; 3] {
     std::array::from_fn(|i| {
-        (base[i] as f32 * (1.0 - LABEL_ALPHA) + c[i] as f32 * LABEL_ALPHA).round() as u8
+        (base[i] as f32 * (1.0 - LABEL_ALPHA) + colour[i] as f32 * LABEL_ALPHA).round() as u8
     })
 }
 
-/// Tints each pixel of the picture, `width` pixels a row, by the label of `labels` (a label volume:
-/// whole numbers, 0 none) at the voxel nearest its point in the patient (`point(x, y)`, LPS
-/// mm).
+/// The colour `--segmentation` shows label `label` in when its segmentation gives none.
+pub fn label_colour(label: u32) -> [u8; 3] {
+    LABEL_COLOURS[(label as usize).saturating_sub(1) % LABEL_COLOURS.len()]
+}
+
+/// A segmentation laid over pictures (`render --segmentation`): its label volume, the colour
+/// of each label that has one of its own (a Segmentation's, a structure set's, a colour
+/// table's), and a structure set's structures each whole (they overlap, and the label volume
+/// holds the smallest where they do), the largest first.
+pub struct SegmentOverlay {
+    pub labels: raystream_io::Volume,
+    pub colours: std::collections::BTreeMap<u32, [u8; 3]>,
+    pub structures: Vec<(u32, raystream_io::StructureVoxels)>,
+    /// Each segment's edge drawn in its colour, not its inside tinted.
+    pub outline: bool,
+}
+
+impl SegmentOverlay {
+    /// Label `l`'s colour: its own, else [`label_colour`]'s.
+    pub fn colour(&self, l: u32) -> [u8; 3] {
+        self.colours
+            .get(&l)
+            .copied()
+            .unwrap_or_else(|| label_colour(l))
+    }
+}
+
+/// Lays `overlay` over the picture, `width` pixels a row, each pixel taking the segment of the
+/// voxel nearest its point in the patient (`point(x, y)`, LPS mm; the label volume's grid):
+/// - tinted: a pixel in a segment is [`LABEL_ALPHA`] its colour (the label volume's label,
+///   the smallest structure where a structure set's overlap);
+/// - outlined: a pixel of a segment beside one that is not of it (of the four beside it, or
+///   the picture's edge) is its colour, each segment on its own, the larger first.
 pub fn tint_labels(
     rgb: &mut [u8],
     width: u32,
-    labels: &raystream_io::Volume,
+    overlay: &SegmentOverlay,
     point: impl Fn(u32, u32) -> DVec3 + Sync,
 ) {
     use rayon::prelude::*;
+    let labels = &overlay.labels;
     let to_index = labels.index_to_world_affine().inverse();
     let [nx, ny, nz] = labels.dims;
-    rgb.par_chunks_mut(3 * width as usize)
-        .enumerate()
-        .for_each(|(y, row)| {
-            for (x, px) in row.chunks_mut(3).enumerate() {
-                let q = to_index.transform_point3(point(x as u32, y as u32)).round();
-                if q.min_element() < 0.0 || q.x >= nx as f64 || q.y >= ny as f64 || q.z >= nz as f64
-                {
-                    continue;
-                }
-                let v = labels.at(q.x as usize, q.y as usize, q.z as usize);
-                if v >= 0.5 {
-                    px.copy_from_slice(&tint([px[0], px[1], px[2]], v.round() as u32));
-                }
+    let (w, h) = (width as usize, rgb.len() / (3 * width as usize).max(1));
+    let voxel: Vec<Option<[usize; 3]>> = (0..w * h)
+        .into_par_iter()
+        .map(|n| {
+            let q = to_index
+                .transform_point3(point((n % w) as u32, (n / w) as u32))
+                .round();
+            let inside =
+                q.min_element() >= 0.0 && q.x < nx as f64 && q.y < ny as f64 && q.z < nz as f64;
+            inside.then_some([q.x as usize, q.y as usize, q.z as usize])
+        })
+        .collect();
+    let label_at = |q: &Option<[usize; 3]>| {
+        q.map(|[i, j, k]| labels.at(i, j, k))
+            .filter(|&v| v >= 0.5)
+            .map(|v| v.round() as u32)
+    };
+    if !overlay.outline {
+        rgb.par_chunks_mut(3).zip(&voxel).for_each(|(px, q)| {
+            if let Some(l) = label_at(q) {
+                px.copy_from_slice(&tint([px[0], px[1], px[2]], overlay.colour(l)));
             }
         });
+        return;
+    }
+    // Each segment's pixels: a structure set's structures whole, else each label's.
+    let segments: Vec<(u32, Vec<bool>)> = if overlay.structures.is_empty() {
+        let seen: Vec<Option<u32>> = voxel.iter().map(label_at).collect();
+        let mut present: Vec<(u32, usize)> = Vec::new();
+        for &l in seen.iter().flatten() {
+            match present.iter_mut().find(|(p, _)| *p == l) {
+                Some(e) => e.1 += 1,
+                None => present.push((l, 1)),
+            }
+        }
+        present.sort_by_key(|&(l, n)| (std::cmp::Reverse(n), l));
+        present
+            .into_iter()
+            .map(|(l, _)| (l, seen.iter().map(|&s| s == Some(l)).collect()))
+            .collect()
+    } else {
+        overlay
+            .structures
+            .iter()
+            .map(|(l, r)| {
+                (
+                    *l,
+                    voxel
+                        .iter()
+                        .map(|q| q.is_some_and(|q| r.holds(q)))
+                        .collect(),
+                )
+            })
+            .collect()
+    };
+    for (l, held) in segments {
+        let colour = overlay.colour(l);
+        for (n, _) in held.iter().enumerate().filter(|(_, h)| **h) {
+            let (x, y) = (n % w, n / w);
+            let edge = x == 0
+                || y == 0
+                || x + 1 == w
+                || y + 1 == h
+                || !held[n - 1]
+                || !held[n + 1]
+                || !held[n - w]
+                || !held[n + w];
+            if edge {
+                rgb[3 * n..3 * n + 3].copy_from_slice(&colour);
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -225,9 +225,20 @@ fn volume_dicom(
     }
 }
 
-/// `--segmentation FILE`: the label volume, read and checked (whole numbers, none below 0).
-fn segmentation(a: &RenderArgs, format: ImageFormat) -> Result<Option<raystream_io::Volume>> {
+/// `--segmentation FILE`: its label volume, read and checked (whole numbers, none below 0),
+/// the labels' colours (its own, or `--colour-table`'s), and a structure set's structures
+/// each whole, for `--outline`.
+fn segmentation(
+    a: &RenderArgs,
+    format: ImageFormat,
+) -> Result<Option<crate::overlay::SegmentOverlay>> {
     let Some(file) = &a.segmentation else {
+        if let Some(t) = &a.colour_table {
+            bail!(
+                "--colour-table {}: names the labels of --segment or --segmentation; give one",
+                t.display()
+            );
+        }
         return Ok(None);
     };
     let name = file.display();
@@ -243,7 +254,30 @@ fn segmentation(a: &RenderArgs, format: ImageFormat) -> Result<Option<raystream_
     if let Some(v) = crate::common::not_a_label(&labels) {
         bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
     }
-    Ok(Some(labels))
+    let colours = crate::iso::segment_names(&labels, a.colour_table.as_deref())?
+        .into_iter()
+        .filter_map(|k| Some((k.number as u32, k.colour?)))
+        .collect();
+    let mut structures = Vec::new();
+    if a.outline
+        && let Some(set) = crate::iso::structures_of(&labels, file)?
+    {
+        let (voxels, _) = set.regions(&labels);
+        structures = set
+            .rois
+            .iter()
+            .map(|r| r.number as u32)
+            .zip(voxels)
+            .filter(|(_, v)| v.voxels > 0)
+            .collect();
+        structures.sort_by_key(|(_, v)| std::cmp::Reverse(v.voxels));
+    }
+    Ok(Some(crate::overlay::SegmentOverlay {
+        labels,
+        colours,
+        structures,
+        outline: a.outline,
+    }))
 }
 
 /// Tints the picture by `labels` at each pixel's point ([`crate::overlay::tint_labels`]): a
@@ -252,7 +286,7 @@ fn tint_segmentation(
     picture: &mut Picture,
     seen: &Seen,
     opt: &DvrOptions,
-    (volume, labels): (&raystream_io::Volume, &raystream_io::Volume),
+    (volume, labels): (&raystream_io::Volume, &crate::overlay::SegmentOverlay),
 ) {
     let Picture::Srgb8 { rgb, width, .. } = picture else {
         return;
@@ -967,8 +1001,8 @@ fn path_sections(
 /// `--draw-path FILE`'s spline, sampled densely (LPS mm), drawn over every frame of a camera.
 type Overlay<'a> = Option<&'a [raystream_math::DVec3]>;
 
-/// `--segmentation FILE`'s label volume, tinted over every frame of a slice or CPR.
-type Labels<'a> = Option<&'a raystream_io::Volume>;
+/// `--segmentation FILE`'s segments, laid over every frame of a slice or CPR.
+type Labels<'a> = Option<&'a crate::overlay::SegmentOverlay>;
 
 /// `--path FILE`'s points, read once.
 struct Curve<'a> {

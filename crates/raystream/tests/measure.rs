@@ -3088,6 +3088,116 @@ fn structure_sets_are_laid_on_their_ct() {
         close(&from_rt[2], &want[2], "SimpleITK aorta");
     }
 
+    // Laid over a slice of the CT (`render --segmentation`), each structure in its own
+    // colour where the NIfTI map's labels tint it in the default ones; `--outline`: each
+    // structure's edge in its colour, the pixels within unchanged.
+    let slice = [
+        ct.to_str().unwrap(),
+        "--mode",
+        "slice",
+        "--view",
+        "anterior",
+        "--slice-at",
+        "26,-113,700",
+        "--size",
+        "96x128",
+    ];
+    let picture = |name: &str, more: &[&str]| {
+        image::open(render_to(name, "cpu", &[&slice[..], more].concat()))
+            .unwrap()
+            .to_rgb8()
+    };
+    let plain = picture("rt-slice.png", &[]);
+    let by_map = picture(
+        "rt-slice-map.png",
+        &["--segmentation", nii.to_str().unwrap()],
+    );
+    let filled = picture("rt-slice-fill.png", &["--segmentation", rt_file]);
+    let outlined = picture(
+        "rt-slice-outline.png",
+        &["--segmentation", rt_file, "--outline"],
+    );
+    let own = [[255, 0, 0], [0, 0, 255]];
+    let (w, h) = plain.dimensions();
+    // Each pixel's label, read off the map's tint.
+    let label: Vec<u32> = plain
+        .pixels()
+        .zip(by_map.pixels())
+        .map(|(b, t)| {
+            (0..3u32)
+                .find(|&l| {
+                    t.0 == match l {
+                        0 => b.0,
+                        l => blend(b.0, [[0, 230, 255], [255, 64, 220]][l as usize - 1]),
+                    }
+                })
+                .unwrap_or_else(|| panic!("{:?} over {:?}", t.0, b.0))
+        })
+        .collect();
+    let (mut inside, mut edges) = (0, 0);
+    for n in 0..(w * h) as usize {
+        let (x, y) = (n as u32 % w, n as u32 / w);
+        let (b, l) = (plain.get_pixel(x, y).0, label[n]);
+        let want = if l == 0 {
+            b
+        } else {
+            blend(b, own[l as usize - 1])
+        };
+        assert_eq!(
+            filled.get_pixel(x, y).0,
+            want,
+            "filled ({x}, {y}), label {l}"
+        );
+        let beside = [(-1, 0), (1, 0), (0, -1), (0, 1)].map(|(dx, dy)| {
+            let (a, b) = (x as i64 + dx, y as i64 + dy);
+            ((0..w as i64).contains(&a) && (0..h as i64).contains(&b))
+                .then(|| label[(a + b * w as i64) as usize])
+        });
+        let edge = l > 0 && beside.iter().any(|&m| m != Some(l));
+        let want = if edge { own[l as usize - 1] } else { b };
+        assert_eq!(
+            outlined.get_pixel(x, y).0,
+            want,
+            "outlined ({x}, {y}), label {l}"
+        );
+        inside += usize::from(l > 0 && !edge);
+        edges += usize::from(edge);
+    }
+    assert!(
+        inside > 300 && edges > 100,
+        "{inside} inside, {edges} on edges"
+    );
+    // A colour table's colours over the map's defaults (label 2 it leaves alone); without a
+    // segmentation to name, refused.
+    let table = root.join("colours.ctbl");
+    std::fs::write(&table, "1 lumen 40 200 40 255\n").unwrap();
+    let tabled = picture(
+        "rt-slice-table.png",
+        &[
+            "--segmentation",
+            nii.to_str().unwrap(),
+            "--colour-table",
+            table.to_str().unwrap(),
+        ],
+    );
+    for (n, (px, b)) in tabled.pixels().zip(plain.pixels()).enumerate() {
+        let want = match label[n] {
+            0 => b.0,
+            1 => blend(b.0, [40, 200, 40]),
+            _ => blend(b.0, [255, 64, 220]),
+        };
+        assert_eq!(px.0, want, "pixel {n} with the table's colours");
+    }
+    refused(
+        &[
+            &["render"][..],
+            &slice,
+            &["--colour-table", table.to_str().unwrap(), "-o", "x.png"],
+        ]
+        .concat(),
+        "names the labels of --segment or --segmentation",
+    );
+
     // Laid on a scan of another Frame of Reference: refused.
     let other = shared().join("data/volumes/dicom/abdomen_ct_j2k_totalseg");
     refused(
@@ -3124,4 +3234,9 @@ fn structure_sets_are_laid_on_their_ct() {
         "{}",
         stderr(&o)
     );
+}
+
+/// `colour` over `base` as `render --segmentation` tints a pixel: 45 % of it, rounded.
+fn blend(base: [u8; 3], colour: [u8; 3]) -> [u8; 3] {
+    std::array::from_fn(|i| (base[i] as f32 * 0.55 + colour[i] as f32 * 0.45).round() as u8)
 }

@@ -87,6 +87,18 @@ pub struct StructureVoxels {
     pub voxels: usize,
 }
 
+impl StructureVoxels {
+    /// Whether it holds the grid's voxel `ijk`.
+    pub fn holds(&self, ijk: [usize; 3]) -> bool {
+        let at: [Option<usize>; 3] =
+            std::array::from_fn(|a| ijk[a].checked_sub(self.lo[a]).filter(|&d| d < self.dims[a]));
+        match at {
+            [Some(i), Some(j), Some(k)] => self.inside[i + self.dims[0] * (j + self.dims[1] * k)],
+            _ => false,
+        }
+    }
+}
+
 /// How a structure's contours met the grid, for the warnings.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RasterNotes {
