@@ -567,8 +567,9 @@ def fuzz_files(work, n, device):
             # Sometimes a slice of it tinted by itself as a label map (a Segmentation is one;
             # a CT is refused as none).
             if not why and random.random() < 0.2:
+                outline = ["--outline"] if random.random() < 0.5 else []
                 why = run(["render", p, "--mode", "slice", "--size", "8x8", "-q", "--device",
-                           device, "--segmentation", p] + phase + ["-o", os.path.join(d, "t.png")], s)
+                           device, "--segmentation", p] + outline + phase + ["-o", os.path.join(d, "t.png")], s)
             # Sometimes its segments as surfaces, written (some simplified) or rendered (a CT is
             # refused as no label map).
             if not why and random.random() < 0.3:

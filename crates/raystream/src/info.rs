@@ -305,7 +305,11 @@ fn segment_stats(
             bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
         }
         let known = crate::iso::segment_names(&labels, a.colour_table.as_deref())?;
-        (labels_on_ct(ct, &labels, &mut members), known)
+        let whole = crate::iso::whole_of(&labels, file)?;
+        (
+            labels_on_ct(ct, (&labels, whole.as_ref()), &mut members),
+            known,
+        )
     };
     if members.is_empty() {
         bail!(
@@ -328,35 +332,30 @@ fn segment_stats(
     Ok(Some((stats, how)))
 }
 
-/// Each CT voxel's label in `labels` (a label volume), gathered as the CT voxels of each label
-/// into `members`; how they were matched: voxel for voxel on the CT's own grid, else the label
-/// voxel nearest each CT voxel's centre.
+/// Each CT voxel's segments in `labels` (a label volume; with `whole`, its segments each
+/// whole, overlaps and all), gathered as the CT voxels of each label into `members`; how they
+/// were matched: voxel for voxel on the CT's own grid, else the label voxel nearest each CT
+/// voxel's centre.
 fn labels_on_ct(
     ct: &raystream_io::Volume,
-    labels: &raystream_io::Volume,
+    (labels, whole): (&raystream_io::Volume, Option<&crate::iso::Whole>),
     members: &mut std::collections::BTreeMap<u32, Vec<usize>>,
 ) -> &'static str {
     let [nx, ny, nz] = ct.dims;
-    if labels.dims == ct.dims
+    let same = labels.dims == ct.dims
         && (0..3).all(|a| {
             (labels.origin[a] - ct.origin[a]).abs() < 1e-3
                 && (labels.spacing[a] - ct.spacing[a]).abs() < 1e-6 * ct.spacing[a]
                 && (0..3).all(|b| (labels.direction[a][b] - ct.direction[a][b]).abs() < 1e-6)
-        })
-    {
-        for (n, &l) in labels.data.iter().enumerate() {
-            if l > 0.0 {
-                members.entry(l as u32).or_default().push(n);
-            }
-        }
-        "the CT's grid"
-    } else {
-        // Each CT voxel takes the label voxel nearest its centre.
-        let to_labels = labels.index_to_world_affine().inverse() * ct.index_to_world_affine();
-        let [lx, ly, lz] = labels.dims;
-        for k in 0..nz {
-            for j in 0..ny {
-                for i in 0..nx {
+        });
+    let to_labels = labels.index_to_world_affine().inverse() * ct.index_to_world_affine();
+    let [lx, ly, lz] = labels.dims;
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let q = if same {
+                    [i, j, k]
+                } else {
                     let q = to_labels
                         .transform_point3(raystream_math::DVec3::new(i as f64, j as f64, k as f64))
                         .round();
@@ -367,16 +366,30 @@ fn labels_on_ct(
                     {
                         continue;
                     }
-                    let l = labels.at(q.x as usize, q.y as usize, q.z as usize);
-                    if l > 0.0 {
-                        members
-                            .entry(l as u32)
-                            .or_default()
-                            .push(i + nx * (j + ny * k));
+                    [q.x as usize, q.y as usize, q.z as usize]
+                };
+                let n = i + nx * (j + ny * k);
+                match whole {
+                    Some(segments) => {
+                        for (l, v) in segments {
+                            if v.holds(q) {
+                                members.entry(*l as u32).or_default().push(n);
+                            }
+                        }
+                    }
+                    None => {
+                        let l = labels.at(q[0], q[1], q[2]);
+                        if l > 0.0 {
+                            members.entry(l as u32).or_default().push(n);
+                        }
                     }
                 }
             }
         }
+    }
+    if same {
+        "the CT's grid"
+    } else {
         "the nearest label voxel to each CT voxel's centre"
     }
 }
@@ -389,14 +402,17 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     // `--colour-table`'s.
     let voxel_ml = v.voxel_ml();
     let known = crate::iso::segment_names(&v, a.colour_table.as_deref())?;
-    // A structure set's structures are counted whole, overlaps and all.
-    let structures = crate::iso::structures_of(&v, input)?;
-    let whole = structures.as_ref().map(|set| {
-        set.rois
-            .iter()
-            .zip(set.regions(&v).0)
+    // A structure set's structures and a Segmentation's segments are counted whole,
+    // overlaps and all.
+    let structures = if raystream_io::is_structure_set_volume(&v) {
+        Some(raystream_io::StructureSet::read(input)?)
+    } else {
+        None
+    };
+    let whole = crate::iso::whole_of(&v, input)?.map(|w| {
+        w.into_iter()
             .filter(|(_, r)| r.voxels > 0)
-            .map(|(roi, r)| (roi.number as u32, r.voxels))
+            .map(|(l, r)| (l as u32, r.voxels))
             .collect()
     });
     let labels: Option<Vec<(u32, usize, f64, String)>> =

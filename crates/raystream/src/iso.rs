@@ -5,7 +5,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use raystream_io::{StructureSet, StructureVoxels, ValueUnit, Volume, VolumeSelect};
+use raystream_io::{SegmentVoxels, ValueUnit, Volume, VolumeSelect};
 use raystream_volume::{IsoSurface, extract_isosurface};
 
 use crate::cli::IsoArgs;
@@ -192,10 +192,10 @@ impl SegmentSurface {
 fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
     let t0 = Instant::now();
     let known = segment_names(labels, a.colour_table.as_deref())?;
-    let structures = structures_of(labels, &a.input)?;
+    let whole = whole_of(labels, &a.input)?;
     let mut surfaces = segment_surfaces(
         labels,
-        structures.as_ref(),
+        whole.as_ref(),
         &a.input,
         (a.segment.as_deref().unwrap_or("all"), &known),
         a.smooth.unwrap_or(SEGMENT_SMOOTHING),
@@ -274,17 +274,18 @@ pub fn with_colour_table(
     Ok(known)
 }
 
-/// The structure set `path` holds when `labels` was read from one: its structures whole, which
-/// the label volume cannot hold where they overlap.
-pub fn structures_of(labels: &Volume, path: &Path) -> Result<Option<StructureSet>> {
-    if !raystream_io::is_structure_set_volume(labels) {
-        return Ok(None);
-    }
-    Ok(Some(StructureSet::read(path)?))
+/// The segments of `labels` (read from `path`) each whole where they may overlap, which the
+/// label volume cannot hold: an RT Structure Set's structures, a DICOM Segmentation's
+/// segments ([`raystream_io::whole_segments`]).
+pub fn whole_of(labels: &Volume, path: &Path) -> Result<Option<Whole>> {
+    Ok(raystream_io::whole_segments(labels, path)?)
 }
 
+/// Segments each whole: each one's label and voxels, in increasing order of label.
+pub type Whole = Vec<(u16, SegmentVoxels)>;
+
 /// The surfaces of the segments `list` names in the label volume `labels` (read from `path`;
-/// with `structures`, the structure set it was laid from, each structure whole),
+/// with `whole`, its segments each whole, overlaps and all: [`whole_of`]),
 /// named and coloured by `known` (else "label N" in `--segmentation`'s tints):
 /// each segment's voxels as an inside region, cut out of the grid with its bounding box and a
 /// voxel around it, its surface at the half-way value between inside and outside (halfway
@@ -292,7 +293,7 @@ pub fn structures_of(labels: &Volume, path: &Path) -> Result<Option<StructureSet
 /// edge included), smoothed `smoothing` times.
 pub fn segment_surfaces(
     labels: &Volume,
-    structures: Option<&StructureSet>,
+    whole_segments: Option<&Whole>,
     path: &Path,
     (list, known): (&str, &[raystream_io::SegmentLabel]),
     smoothing: u32,
@@ -302,20 +303,17 @@ pub fn segment_surfaces(
     if let Some(v) = crate::common::not_a_label(labels) {
         bail!("{name}: --segment takes a label map (whole numbers from 0); it holds {v}");
     }
-    // Each segment's voxels: a structure set's structures whole (they may overlap, which the
-    // label volume cannot hold), else each label's bounding box, found in one pass and cut out
-    // when wanted.
+    // Each segment's voxels: whole where they may overlap (which the label volume cannot
+    // hold), else each label's bounding box, found in one pass and cut out when wanted.
     let [nx, ny, _] = labels.dims;
-    let mut whole: std::collections::BTreeMap<u32, StructureVoxels> = Default::default();
+    let mut whole: std::collections::BTreeMap<u32, &SegmentVoxels> = Default::default();
     let mut boxes: std::collections::BTreeMap<u32, ([usize; 3], [usize; 3], usize)> =
         Default::default();
-    if let Some(set) = structures {
-        for (roi, v) in set.rois.iter().zip(set.regions(labels).0) {
-            if v.voxels > 0 {
-                let hi = std::array::from_fn(|a| v.lo[a] + v.dims[a] - 1);
-                boxes.insert(roi.number as u32, (v.lo, hi, v.voxels));
-                whole.insert(roi.number as u32, v);
-            }
+    if let Some(segments) = whole_segments {
+        for (l, v) in segments.iter().filter(|(_, v)| v.voxels > 0) {
+            let hi = std::array::from_fn(|a| v.lo[a] + v.dims[a] - 1);
+            boxes.insert(*l as u32, (v.lo, hi, v.voxels));
+            whole.insert(*l as u32, v);
         }
     } else {
         for (n, &v) in labels.data.iter().enumerate() {

@@ -224,7 +224,7 @@ pub fn label_colour(label: u32) -> [u8; 3] {
 pub struct SegmentOverlay {
     pub labels: raystream_io::Volume,
     pub colours: std::collections::BTreeMap<u32, [u8; 3]>,
-    pub structures: Vec<(u32, raystream_io::StructureVoxels)>,
+    pub structures: Vec<(u32, raystream_io::SegmentVoxels)>,
     /// Each segment's edge drawn in its colour, not its inside tinted.
     pub outline: bool,
 }

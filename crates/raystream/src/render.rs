@@ -91,10 +91,10 @@ fn segments_scene(
 ) -> Result<(Scene, Option<Bones>)> {
     let t = std::time::Instant::now();
     let known = crate::iso::segment_names(labels, a.colour_table.as_deref())?;
-    let structures = crate::iso::structures_of(labels, path)?;
+    let whole = crate::iso::whole_of(labels, path)?;
     let surfaces = crate::iso::segment_surfaces(
         labels,
-        structures.as_ref(),
+        whole.as_ref(),
         path,
         (a.segment.as_deref().unwrap_or("all"), &known),
         a.smooth.unwrap_or(crate::iso::SEGMENT_SMOOTHING),
@@ -260,15 +260,12 @@ fn segmentation(
         .collect();
     let mut structures = Vec::new();
     if a.outline
-        && let Some(set) = crate::iso::structures_of(&labels, file)?
+        && let Some(whole) = crate::iso::whole_of(&labels, file)?
     {
-        let (voxels, _) = set.regions(&labels);
-        structures = set
-            .rois
-            .iter()
-            .map(|r| r.number as u32)
-            .zip(voxels)
+        structures = whole
+            .into_iter()
             .filter(|(_, v)| v.voxels > 0)
+            .map(|(l, v)| (l as u32, v))
             .collect();
         structures.sort_by_key(|(_, v)| std::cmp::Reverse(v.voxels));
     }

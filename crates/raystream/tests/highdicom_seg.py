@@ -1,8 +1,8 @@
 """Writes a DICOM Segmentation of a CT series with highdicom (an independent writer), from a
 label map on the series' grid: `highdicom_seg.py SERIES_DIR LABELS.nii.gz OUT.dcm [TYPE [TS]]`,
 segment n the voxels labelled n (1 and 2); TYPE BINARY (the default), FRACTIONAL (each
-segment's fraction, 0 or the maximum) or LABELMAP (DICOM 2024's Label Map Segmentation, a
-frame a slice); TS the transfer syntax: native (the default, Explicit VR Little Endian), rle
+segment's fraction, 0 or the maximum), OVERLAP (BINARY, and a third segment over both) or
+LABELMAP (DICOM 2024's Label Map Segmentation, a frame a slice); TS the transfer syntax: native (the default, Explicit VR Little Endian), rle
 (RLE Lossless), jpegls (JPEG-LS Lossless), j2k (JPEG 2000 Lossless) or deflated (native, the
 data set deflated by pydicom)."""
 import glob, sys
@@ -32,14 +32,20 @@ def segment(n, label, code, meaning):
         algorithm_type=hd.seg.SegmentAlgorithmTypeValues.MANUAL)
 
 
+segments = [segment(1, "lumen", "91747007", "Lumen"),
+            segment(2, "wall", "59820001", "Blood vessel")]
 if kind == "FRACTIONAL":
     # One fraction a segment, along a last axis.
     labels = np.stack([labels == 1, labels == 2], axis=-1).astype(np.float32)
+elif kind == "OVERLAP":
+    # BINARY, with a third segment over both: the vessel, lumen and wall together.
+    kind = "BINARY"
+    labels = np.stack([labels == 1, labels == 2, labels > 0], axis=-1).astype(np.uint8)
+    segments.append(segment(3, "vessel", "59820001", "Blood vessel"))
 seg = hd.seg.Segmentation(
     source_images=src, pixel_array=labels, transfer_syntax_uid=ts,
     segmentation_type=hd.seg.SegmentationTypeValues[kind],
-    segment_descriptions=[segment(1, "lumen", "91747007", "Lumen"),
-                          segment(2, "wall", "59820001", "Blood vessel")],
+    segment_descriptions=segments,
     series_instance_uid=hd.UID(), series_number=7, sop_instance_uid=hd.UID(), instance_number=1,
     manufacturer="test", manufacturer_model_name="test", software_versions="0",
     device_serial_number="0")

@@ -3198,6 +3198,63 @@ fn structure_sets_are_laid_on_their_ct() {
         "names the labels of --segment or --segmentation",
     );
 
+    // A DICOM Segmentation whose segments overlap (highdicom's: lumen, wall, and the vessel
+    // over both) is taken whole as the structure set is: `info` counts, `info --segmentation`
+    // statistics, `iso` surfaces.
+    if let Some(hd) = python_with("highdicom") {
+        let seg = root.join("overlap.dcm");
+        let o = std::process::Command::new(&hd)
+            .arg(repo().join("crates/raystream/tests/highdicom_seg.py"))
+            .args([&ct, &nii, &seg])
+            .arg("OVERLAP")
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "highdicom: {}", stderr(&o));
+        let seg_file = seg.to_str().unwrap();
+        let o = run(&["info", "--json", seg_file]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let info: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        let counts: Vec<u64> = info["labels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|l| l["voxels"].as_u64().unwrap())
+            .collect();
+        assert_eq!(counts, [lumen, wall, lumen + wall]);
+        assert!(
+            info["warnings"][0]
+                .as_str()
+                .unwrap()
+                .contains("held by more than one segment"),
+            "{}",
+            info["warnings"]
+        );
+        let (from_seg, _) = stats(ct.to_str().unwrap(), seg_file);
+        for l in 0..3 {
+            close(&from_seg[l], &from_rt[l], "overlapping Segmentation");
+        }
+        let vessel = root.join("vessel.obj");
+        let o = run(&[
+            "iso",
+            "--quiet",
+            seg_file,
+            "--segment",
+            "vessel",
+            "--smooth",
+            "0",
+            "-o",
+            vessel.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let mesh = raystream_io::load_mesh(&vessel).unwrap();
+        assert!(closed_and_oriented(&mesh));
+        let got = enclosed_ml(&mesh);
+        assert!(
+            (got - want).abs() < 0.015 * want,
+            "{got:.2} ml for {want:.2}"
+        );
+    }
+
     // Laid on a scan of another Frame of Reference: refused.
     let other = shared().join("data/volumes/dicom/abdomen_ct_j2k_totalseg");
     refused(

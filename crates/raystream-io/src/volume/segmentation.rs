@@ -15,7 +15,10 @@ use dicom_dictionary_std::tags;
 use dicom_object::InMemDicomObject;
 
 use super::dicom::{DicomStudy, FileMeta, FrameGeometry, cross, dot, functional_groups, sub};
-use super::{DicomSeriesInfo, Phase, SegmentLabel, ValueUnit, Volume, VolumeError, VolumeFormat};
+use super::{
+    DicomSeriesInfo, Phase, SegmentLabel, SegmentVoxels, ValueUnit, Volume, VolumeError,
+    VolumeFormat,
+};
 use super::{check_geometry, voxel_count};
 
 const SEGMENTATION: &str = "1.2.840.10008.5.1.4.1.1.66.4";
@@ -45,6 +48,18 @@ pub(crate) fn read(
     meta: &FileMeta,
     obj: &InMemDicomObject,
 ) -> Result<Volume, VolumeError> {
+    read_segments(file, meta, obj, false).map(|(v, _)| v)
+}
+
+/// The Segmentation in `obj` (read from `file`) as a label volume, and with `whole` each
+/// segment's voxels whole too (BINARY and FRACTIONAL segments may overlap, which the label
+/// volume cannot hold: there each voxel takes the last frame's segment).
+pub(crate) fn read_segments(
+    file: &Path,
+    meta: &FileMeta,
+    obj: &InMemDicomObject,
+    whole: bool,
+) -> Result<(Volume, Vec<(u16, SegmentVoxels)>), VolumeError> {
     let bad =
         |problem: String| VolumeError::invalid(file, format!("DICOM Segmentation: {problem}"));
     let text = |o: &InMemDicomObject, tag| {
@@ -273,27 +288,66 @@ pub(crate) fn read(
         }
         slice_of.push(k.round() as usize);
     }
+    // The segment that holds pixel `p` of frame `f`, if any.
+    let held = |f: usize, p: usize| -> Option<u16> {
+        let b = f * per + p;
+        let (held, label) = match kind {
+            Pixels::Binary => (pixels[b / 8] >> (b % 8) & 1 == 1, planes[f].3),
+            Pixels::Fractional(h) => (pixels[b] >= h, planes[f].3),
+            Pixels::LabelMap(1) => (pixels[b] > 0, pixels[b] as u16),
+            Pixels::LabelMap(_) => {
+                let l = u16::from_le_bytes([pixels[2 * b], pixels[2 * b + 1]]);
+                (l > 0, l)
+            }
+        };
+        held.then_some(label)
+    };
     let mut data = vec![0f32; cols * rows * nz];
     let mut overlap = 0usize;
-    for (f, (&k, plane)) in slice_of.iter().zip(&planes).enumerate() {
-        let label = plane.3 as f32;
+    // Each segment's box (lowest and highest i, j, k), for `whole`.
+    let mut boxes: std::collections::BTreeMap<u16, ([usize; 3], [usize; 3])> = Default::default();
+    for (f, &k) in slice_of.iter().enumerate() {
         let out = &mut data[k * per..(k + 1) * per];
         for (p, v) in out.iter_mut().enumerate() {
-            let b = f * per + p;
-            let (held, label) = match kind {
-                Pixels::Binary => (pixels[b / 8] >> (b % 8) & 1 == 1, label),
-                Pixels::Fractional(h) => (pixels[b] >= h, label),
-                Pixels::LabelMap(1) => (pixels[b] > 0, pixels[b] as f32),
-                Pixels::LabelMap(_) => {
-                    let l = u16::from_le_bytes([pixels[2 * b], pixels[2 * b + 1]]);
-                    (l > 0, l as f32)
-                }
+            let Some(label) = held(f, p) else { continue };
+            if whole {
+                let ijk = [p % cols, p / cols, k];
+                let e = boxes.entry(label).or_insert((ijk, ijk));
+                e.0 = std::array::from_fn(|a| e.0[a].min(ijk[a]));
+                e.1 = std::array::from_fn(|a| e.1[a].max(ijk[a]));
+            }
+            let label = label as f32;
+            if *v != 0.0 && *v != label {
+                overlap += 1;
+            }
+            *v = label;
+        }
+    }
+    let mut whole_segments: Vec<(u16, SegmentVoxels)> = boxes
+        .iter()
+        .map(|(&l, &(lo, hi))| {
+            let dims = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
+            let v = SegmentVoxels {
+                lo,
+                dims,
+                inside: vec![false; dims[0] * dims[1] * dims[2]],
+                voxels: 0,
             };
-            if held {
-                if *v != 0.0 && *v != label {
-                    overlap += 1;
-                }
-                *v = label;
+            (l, v)
+        })
+        .collect();
+    if whole {
+        for (f, &k) in slice_of.iter().enumerate() {
+            for p in 0..per {
+                let Some(label) = held(f, p) else { continue };
+                let Ok(s) = whole_segments.binary_search_by_key(&label, |(l, _)| *l) else {
+                    continue;
+                };
+                let v = &mut whole_segments[s].1;
+                let (i, j) = (p % cols - v.lo[0], p / cols - v.lo[1]);
+                let at = i + v.dims[0] * (j + v.dims[1] * (k - v.lo[2]));
+                v.voxels += usize::from(!v.inside[at]);
+                v.inside[at] = true;
             }
         }
     }
@@ -303,10 +357,10 @@ pub(crate) fn read(
     let mut warnings = Vec::new();
     if overlap > 0 {
         warnings.push(format!(
-            "{overlap} voxels are held by more than one segment; each takes the last frame's"
+            "{overlap} voxels are held by more than one segment; the label volume holds the last frame's there (iso --segment, render --outline and info take each segment whole)"
         ));
     }
-    Ok(Volume {
+    let volume = Volume {
         dims,
         spacing: spacing3,
         origin,
@@ -334,5 +388,6 @@ pub(crate) fn read(
         }),
         phase: Phase::default(),
         warnings,
-    })
+    };
+    Ok((volume, whole_segments))
 }

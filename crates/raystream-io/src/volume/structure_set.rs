@@ -79,7 +79,7 @@ pub struct Roi {
 /// The voxels of a structure on a grid: a box of the grid (its lowest voxel `lo` and its size
 /// `dims`) and which of the box's voxels it holds, i fastest.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct StructureVoxels {
+pub struct SegmentVoxels {
     pub lo: [usize; 3],
     pub dims: [usize; 3],
     pub inside: Vec<bool>,
@@ -87,7 +87,7 @@ pub struct StructureVoxels {
     pub voxels: usize,
 }
 
-impl StructureVoxels {
+impl SegmentVoxels {
     /// Whether it holds the grid's voxel `ijk`.
     pub fn holds(&self, ijk: [usize; 3]) -> bool {
         let at: [Option<usize>; 3] =
@@ -202,7 +202,7 @@ impl StructureSet {
 
     /// The voxels of `roi` on `grid`'s slices (see the module docs), and how its contours met
     /// the grid.
-    pub fn rasterise(&self, roi: &Roi, grid: &Volume) -> (StructureVoxels, RasterNotes) {
+    pub fn rasterise(&self, roi: &Roi, grid: &Volume) -> (SegmentVoxels, RasterNotes) {
         let [nx, ny, nz] = grid.dims;
         let to_index = grid.index_to_world_affine().inverse();
         let mut notes = RasterNotes::default();
@@ -300,7 +300,7 @@ impl StructureSet {
                 }
             }
         }
-        let mut region = StructureVoxels::default();
+        let mut region = SegmentVoxels::default();
         if spans.is_empty() {
             return (region, notes);
         }
@@ -327,7 +327,7 @@ impl StructureSet {
 
     /// Every structure's voxels on `grid`, in the order of [`StructureSet::rois`], with the
     /// warnings their contours call for.
-    pub fn regions(&self, grid: &Volume) -> (Vec<StructureVoxels>, Vec<String>) {
+    pub fn regions(&self, grid: &Volume) -> (Vec<SegmentVoxels>, Vec<String>) {
         let mut warnings = Vec::new();
         let regions = self
             .rois
@@ -459,6 +459,40 @@ pub fn is_structure_set_file(path: &Path) -> bool {
         return false;
     };
     super::dicom::parse_dataset(&bytes, path).is_ok_and(|(meta, obj)| is_structure_set(&meta, &obj))
+}
+
+/// Each segment of the label volume `labels` (read from `path`) whole, where its segments may
+/// overlap, which a label volume cannot hold: an RT Structure Set's structures laid on
+/// `labels`' grid, a DICOM Segmentation's segments (read again); `None` for other label
+/// volumes, whose voxels each hold one label. Each with its label, in increasing order.
+pub fn whole_segments(
+    labels: &Volume,
+    path: &Path,
+) -> Result<Option<Vec<(u16, SegmentVoxels)>>, VolumeError> {
+    let modality = labels.series.as_ref().map(|s| s.modality.as_str());
+    if modality == Some("RTSTRUCT") {
+        let set = StructureSet::read(path)?;
+        let (voxels, _) = set.regions(labels);
+        let mut whole: Vec<(u16, SegmentVoxels)> = set
+            .rois
+            .iter()
+            .map(|r| r.number)
+            .zip(voxels)
+            .filter(|(_, v)| v.voxels > 0)
+            .collect();
+        whole.sort_by_key(|(l, _)| *l);
+        return Ok(Some(whole));
+    }
+    if modality != Some("SEG") || !path.is_file() {
+        return Ok(None);
+    }
+    let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
+    let (meta, obj) = super::dicom::parse_dataset(&bytes, path)?;
+    if !super::segmentation::is_segmentation(&meta, &obj) {
+        return Ok(None);
+    }
+    let (_, whole) = super::segmentation::read_segments(path, &meta, &obj, true)?;
+    Ok(Some(whole))
 }
 
 /// Whether a label volume was read from an RT Structure Set (whose structures may overlap).
