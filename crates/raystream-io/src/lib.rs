@@ -16,10 +16,12 @@ mod secondary_capture;
 mod segmentation;
 mod shapes;
 mod stl;
+mod structure_set_write;
 mod texture;
 pub mod volume;
 mod write;
 pub use colour_table::read_colour_table;
+pub use structure_set_write::{StructureSetWritten, pixel_loops, write_structure_set};
 pub use write::{BONE, MeshPart, write_mesh, write_mesh_parts};
 
 use std::io::{BufReader, Cursor, Read};

@@ -42,6 +42,14 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
             m.display()
         );
     }
+    if let Some(r) = &a.structures
+        && !raystream_io::is_segmentation_path(r)
+    {
+        bail!(
+            "{}: --structures writes a DICOM RT Structure Set (.dcm): name it so",
+            r.display()
+        );
+    }
     if let Some(r) = &a.report
         && !raystream_io::is_segmentation_path(r)
     {
@@ -64,6 +72,15 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     {
         raystream_io::segmentation_source(&volume)
             .map_err(|e| anyhow::anyhow!("{}: --mask: {e}", m.display()))?;
+    }
+    if let Some(r) = &a.structures {
+        raystream_io::segmentation_source(&volume).map_err(|e| {
+            anyhow::anyhow!(
+                "{}: --structures: {}",
+                r.display(),
+                e.replace("DICOM Segmentation", "RT Structure Set")
+            )
+        })?;
     }
     if let Some(r) = &a.report {
         raystream_io::measurement_report_source(&volume)
@@ -439,6 +456,8 @@ pub(crate) struct MaskWritten {
     /// map).
     frames: Option<usize>,
     pub segmentation: Option<raystream_io::SegmentationReference>,
+    /// `--structures`: the RT Structure Set written, and each structure's contours.
+    structures: Option<(String, Vec<usize>)>,
     /// Voxels and millilitres of each label.
     pub lumen: (usize, f64),
     pub wall: Option<(usize, f64)>,
@@ -537,6 +556,28 @@ fn write_mask(
         raystream_io::write_label_map(out, volume, &labels.data, what)?;
         (None, None)
     };
+    let structures = match &a.structures {
+        Some(file) => {
+            let info = raystream_io::SegmentationInfo {
+                description: if wall.is_some() {
+                    "raystream measure: lumen, outer wall beyond it"
+                } else {
+                    "raystream measure: lumen"
+                },
+                algorithm: "raystream",
+                version: env!("CARGO_PKG_VERSION"),
+            };
+            let written = raystream_io::write_structure_set(
+                file,
+                volume,
+                &labels.data,
+                &mask_segments(wall.is_some()),
+                &info,
+            )?;
+            Some((file.display().to_string(), written.contours))
+        }
+        None => None,
+    };
     let voxel_ml = volume.voxel_ml();
     let of = |l: u8| {
         let n = labels.count(l);
@@ -546,6 +587,7 @@ fn write_mask(
         file: out.display().to_string(),
         frames,
         segmentation,
+        structures,
         lumen: of(LUMEN),
         wall: wall.map(|_| of(WALL)),
         sections: labels.sections,
@@ -564,10 +606,18 @@ fn mask_text(m: &MaskWritten) -> String {
         Some(n) => format!("a DICOM Segmentation of the CT's series, {n} frames"),
         None => "a NIfTI label map".to_string(),
     };
-    format!(
+    let mut t = format!(
         "mask: {} ({kind}): label 1 the lumen on {} voxels ({:.1} ml){wall}, from {} sections {:.2} mm apart ({} with a closed lumen)\n",
         m.file, m.lumen.0, m.lumen.1, m.sections, m.step_mm, m.closed
-    )
+    );
+    if let Some((file, contours)) = &m.structures {
+        let list: Vec<String> = contours.iter().map(|c| c.to_string()).collect();
+        t += &format!(
+            "structures: {file} (a DICOM RT Structure Set of the CT's series: the same labels as {} closed contours)\n",
+            list.join(" and ")
+        );
+    }
+    t
 }
 
 /// What `--mask` wrote, as JSON.
@@ -583,6 +633,10 @@ fn mask_json(m: &MaskWritten) -> serde_json::Value {
         "sections": m.sections,
         "closed_sections": m.closed,
         "step_mm": round3(m.step_mm),
+        "structures": m.structures.as_ref().map(|(file, contours)| json!({
+            "file": file,
+            "contours": contours,
+        })),
     })
 }
 

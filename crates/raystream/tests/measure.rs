@@ -3027,11 +3027,81 @@ fn structure_sets_are_laid_on_their_ct() {
     let (from_rt, how) = stats(ct.to_str().unwrap(), rt_file);
     assert_eq!(how, "structures laid on the CT's grid");
     let seg = root.join("labels.dcm");
-    measure(
+    let written = root.join("rt/written.dcm");
+    let m = measure(
         ct.to_str().unwrap(),
         &aorta(),
-        &["--wall", "--mask", seg.to_str().unwrap()],
+        &[
+            "--wall",
+            "--mask",
+            seg.to_str().unwrap(),
+            "--structures",
+            written.to_str().unwrap(),
+        ],
     );
+    // `--structures`: raystream's own structure set of the lumen and the wall. Read back, each
+    // structure is its label's voxels exactly; each slice's contours (holes turning the other
+    // way) enclose its voxels' area; it passes dciodvfy, and rt-utils reads its names.
+    let set = raystream_io::StructureSet::read(&written).unwrap();
+    let contours = &m["mask"]["structures"]["contours"];
+    let (regions, notes) = set.regions(&grid);
+    assert!(notes.is_empty(), "{notes:?}");
+    let pixel_mm2 = grid.spacing[0] * grid.spacing[1];
+    for (r, (roi, v)) in set.rois.iter().zip(&regions).enumerate() {
+        let value = r as f32 + 1.0;
+        assert_eq!(roi.contours.len() as u64, contours[r].as_u64().unwrap());
+        assert_eq!(v.voxels, count(&[value]), "{}", roi.name);
+        let [dx, dy, dz] = v.dims;
+        for n in 0..dx * dy * dz {
+            let (i, j, k) = (
+                n % dx + v.lo[0],
+                (n / dx) % dy + v.lo[1],
+                n / (dx * dy) + v.lo[2],
+            );
+            assert_eq!(
+                v.inside[n],
+                labels.at(i, j, k) == value,
+                "{} at {i} {j} {k}",
+                roi.name
+            );
+        }
+        let mut by_slice: std::collections::BTreeMap<i64, f64> = Default::default();
+        for c in &roi.contours {
+            let idx: Vec<DVec3> = c.iter().map(|&p| grid.world_to_index(p)).collect();
+            let signed: f64 = (0..idx.len())
+                .map(|n| {
+                    let (a, b) = (idx[n], idx[(n + 1) % idx.len()]);
+                    a.x * b.y - b.x * a.y
+                })
+                .sum();
+            *by_slice.entry(idx[0].z.round() as i64).or_default() += 0.5 * signed * pixel_mm2;
+        }
+        for (k, area) in by_slice {
+            let held = (0..grid.dims[1])
+                .flat_map(|j| (0..grid.dims[0]).map(move |i| (i, j)))
+                .filter(|&(i, j)| labels.at(i, j, k as usize) == value)
+                .count();
+            assert!(
+                (area - held as f64 * pixel_mm2).abs() < 1e-6 * area.abs().max(1.0),
+                "{} slice {k}: {area} mm² for {held} voxels",
+                roi.name
+            );
+        }
+    }
+    let problems = iod_errors(&written);
+    assert!(problems.is_empty(), "dciodvfy: {problems:?}");
+    let o = std::process::Command::new(&py)
+        .args([
+            "-c",
+            "import sys; from rt_utils import RTStructBuilder\n\
+             rt = RTStructBuilder.create_from(dicom_series_path=sys.argv[1], rt_struct_path=sys.argv[2])\n\
+             print(rt.get_roi_names())",
+        ])
+        .args([&ct, &written])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "rt-utils: {}", stderr(&o));
+    assert_eq!(stdout(&o).trim(), "['Lumen', 'Wall and thrombus']");
     let (from_series, how) = stats(ct.to_str().unwrap(), seg.to_str().unwrap());
     assert!(how.starts_with("the nearest label voxel"), "{how}");
     let close = |a: &serde_json::Value, b: &serde_json::Value, what: &str| {
