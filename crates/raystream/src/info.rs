@@ -272,20 +272,8 @@ fn segment_stats(
     let (how, known) = if raystream_io::is_structure_set_file(file) {
         // Each structure whole, laid on this CT's grid (not the series it names).
         let set = raystream_io::StructureSet::read(file)?;
-        let ct_frame = ct
-            .series
-            .as_ref()
-            .map(|s| s.study.frame_of_reference_uid.as_str())
-            .unwrap_or("");
-        if !ct_frame.is_empty()
-            && !set.frame_of_reference_uid.is_empty()
-            && ct_frame != set.frame_of_reference_uid
-        {
-            bail!(
-                "{name}: its contours are in the Frame of Reference {}, and {} in {ct_frame}: they were drawn on another scan",
-                set.frame_of_reference_uid,
-                input.display()
-            );
+        if let Some(why) = set.frame_mismatch(ct) {
+            bail!("{name}: {why} ({})", input.display());
         }
         let known = crate::iso::with_colour_table(set.segments(), a.colour_table.as_deref())?;
         for roi in &set.rois {

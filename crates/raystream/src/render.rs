@@ -226,11 +226,12 @@ fn volume_dicom(
 }
 
 /// `--segmentation FILE`: its label volume, read and checked (whole numbers, none below 0),
-/// the labels' colours (its own, or `--colour-table`'s), and a structure set's structures
-/// each whole, for `--outline`.
+/// the labels' colours (its own, or `--colour-table`'s), and its segments each whole where
+/// they may overlap, for `--outline`. A structure set is laid on `ct`, the CT rendered.
 fn segmentation(
     a: &RenderArgs,
     format: ImageFormat,
+    ct: &raystream_io::Volume,
 ) -> Result<Option<crate::overlay::SegmentOverlay>> {
     let Some(file) = &a.segmentation else {
         if let Some(t) = &a.colour_table {
@@ -250,9 +251,31 @@ fn segmentation(
     if format == ImageFormat::Exr {
         bail!("--segmentation draws on a PNG; an EXR holds the values themselves");
     }
-    let labels = raystream_io::load_volume(file, &raystream_io::VolumeSelect::default())?;
+    let (labels, whole) = if raystream_io::is_structure_set_file(file) {
+        let set = raystream_io::StructureSet::read(file)?;
+        if let Some(why) = set.frame_mismatch(ct) {
+            bail!("{name}: {why}");
+        }
+        let labels = set.label_volume(ct);
+        let (voxels, _) = set.regions(ct);
+        let whole: crate::iso::Whole = set.rois.iter().map(|r| r.number).zip(voxels).collect();
+        (labels, Some(whole))
+    } else {
+        let labels = raystream_io::load_volume(file, &raystream_io::VolumeSelect::default())?;
+        let whole = if a.outline {
+            crate::iso::whole_of(&labels, file)?
+        } else {
+            None
+        };
+        (labels, whole)
+    };
     if let Some(v) = crate::common::not_a_label(&labels) {
         bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
+    }
+    if !a.quiet {
+        for w in &labels.warnings {
+            eprintln!("raystream: {name}: {w}");
+        }
     }
     let colours = crate::iso::segment_names(&labels, a.colour_table.as_deref())?
         .into_iter()
@@ -260,7 +283,7 @@ fn segmentation(
         .collect();
     let mut structures = Vec::new();
     if a.outline
-        && let Some(whole) = crate::iso::whole_of(&labels, file)?
+        && let Some(whole) = whole
     {
         structures = whole
             .into_iter()
@@ -657,8 +680,8 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     if a.cine {
         select.phase = Some(1);
     }
-    let labels = segmentation(a, format)?;
     let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
+    let labels = segmentation(a, format, &volume)?;
     let track = wall_track(a, &volume, curve.as_ref())?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     // An EXR keeps what the projections found, in HU; the window is for display. So does a

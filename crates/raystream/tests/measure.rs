@@ -3349,7 +3349,9 @@ fn structure_sets_are_laid_on_their_ct() {
         v.warnings
     );
 
-    // Without its CT beside it, it is refused, saying where it looked.
+    // Without its CT beside it, it is refused, saying where it looked; over a CT given, it is
+    // laid on that CT (the same picture), and refused over a scan of another Frame of
+    // Reference.
     let alone = tmp("rtstruct-alone/rt/structures.dcm");
     std::fs::create_dir_all(alone.parent().unwrap()).unwrap();
     std::fs::copy(&rt, &alone).unwrap();
@@ -3360,6 +3362,26 @@ fn structure_sets_are_laid_on_their_ct() {
             && stderr(&o).contains("neither in its folder nor in a folder beside it"),
         "{}",
         stderr(&o)
+    );
+    let over_given = picture(
+        "rt-slice-alone.png",
+        &["--segmentation", alone.to_str().unwrap()],
+    );
+    assert!(
+        over_given == filled,
+        "laid on the CT given, the picture differs"
+    );
+    let mut abdomen = slice.to_vec();
+    let other = shared().join("data/volumes/dicom/abdomen_ct_j2k_totalseg");
+    abdomen[0] = other.to_str().unwrap();
+    refused(
+        &[
+            &["render"][..],
+            &abdomen,
+            &["--segmentation", alone.to_str().unwrap(), "-o", "x.png"],
+        ]
+        .concat(),
+        "they were drawn on another scan",
     );
 }
 

@@ -128,6 +128,22 @@ impl StructureSet {
         parse(file, &meta, &obj)
     }
 
+    /// Why its contours cannot be laid on `ct`, if they cannot: the CT names a Frame of
+    /// Reference (a DICOM series does) and it is not theirs, so it is another scan.
+    pub fn frame_mismatch(&self, ct: &Volume) -> Option<String> {
+        let theirs = &self.frame_of_reference_uid;
+        let ct_frame = ct
+            .series
+            .as_ref()
+            .map(|s| s.study.frame_of_reference_uid.as_str())
+            .unwrap_or("");
+        (!ct_frame.is_empty() && !theirs.is_empty() && ct_frame != theirs).then(|| {
+            format!(
+                "its contours are in the Frame of Reference {theirs}, and the CT in {ct_frame}: they were drawn on another scan"
+            )
+        })
+    }
+
     /// The structures as a label volume's segments: number, name and colour.
     pub fn segments(&self) -> Vec<SegmentLabel> {
         self.rois
