@@ -213,12 +213,13 @@ pub fn write_structure_set(
     put(o, tags::POSITION_REFERENCE_INDICATOR, VR::LO, "");
     // Structure Set: what it was drawn on, every image of the series.
     put(o, tags::INSTANCE_NUMBER, VR::IS, "1");
-    put(
-        o,
-        tags::STRUCTURE_SET_LABEL,
-        VR::SH,
-        &truncate(info.algorithm, 16),
-    );
+    // A short label (16 characters): the algorithm's name, or its first word.
+    let label = if info.algorithm.chars().count() <= 16 {
+        info.algorithm
+    } else {
+        info.algorithm.split_whitespace().next().unwrap_or("")
+    };
+    put(o, tags::STRUCTURE_SET_LABEL, VR::SH, &truncate(label, 16));
     put(
         o,
         tags::STRUCTURE_SET_NAME,
@@ -333,6 +334,16 @@ mod tests {
         odd
     }
 
+    /// Twice the loop's signed area (positive for a pixel's own turning, A → B → C → D).
+    fn twice_area(l: &[[i64; 2]]) -> i64 {
+        (0..l.len())
+            .map(|n| {
+                let (a, b) = (l[n], l[(n + 1) % l.len()]);
+                a[0] * b[1] - b[0] * a[1]
+            })
+            .sum()
+    }
+
     #[test]
     fn loops_hold_exactly_their_pixels() {
         // A ring with a hole, two pixels touching at a corner, a lone pixel at the edge, and
@@ -370,18 +381,7 @@ mod tests {
         }
         for (w, h, cells) in fields {
             let loops = pixel_loops(w, h, |x, y| cells[x + w * y]);
-            let area: i64 = loops
-                .iter()
-                .map(|l| {
-                    (0..l.len())
-                        .map(|n| {
-                            let (a, b) = (l[n], l[(n + 1) % l.len()]);
-                            a[0] * b[1] - b[0] * a[1]
-                        })
-                        .sum::<i64>()
-                })
-                .map(i64::abs)
-                .sum();
+            let area: i64 = loops.iter().map(|l| twice_area(l).abs()).sum();
             for y in 0..h {
                 for x in 0..w {
                     assert_eq!(
@@ -396,17 +396,7 @@ mod tests {
             for l in &loops {
                 assert!(l.len() >= 4, "{l:?}");
             }
-            let signed: i64 = loops
-                .iter()
-                .map(|l| {
-                    (0..l.len())
-                        .map(|n| {
-                            let (a, b) = (l[n], l[(n + 1) % l.len()]);
-                            a[0] * b[1] - b[0] * a[1]
-                        })
-                        .sum::<i64>()
-                })
-                .sum();
+            let signed: i64 = loops.iter().map(|l| twice_area(l)).sum();
             let count = cells.iter().filter(|&&c| c).count() as i64;
             assert_eq!(signed, 2 * count, "{w}×{h} {cells:?}: {loops:?}");
             assert!(area >= 2 * count);

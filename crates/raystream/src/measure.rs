@@ -527,17 +527,18 @@ fn write_mask(
     let labels = label_path(volume, points, opt, wall)
         .map_err(|e| anyhow::anyhow!("{}: --mask: {e}", a.path.display()))?;
     pb.finish_and_clear();
+    // What a DICOM Segmentation or RT Structure Set of them says made them, and their segments.
+    let info = raystream_io::SegmentationInfo {
+        description: if wall.is_some() {
+            "raystream measure: lumen, outer wall beyond it"
+        } else {
+            "raystream measure: lumen"
+        },
+        algorithm: "raystream measure",
+        version: env!("CARGO_PKG_VERSION"),
+    };
+    let segments = mask_segments(wall.is_some());
     let (frames, segmentation) = if raystream_io::is_segmentation_path(out) {
-        let info = raystream_io::SegmentationInfo {
-            description: if wall.is_some() {
-                "raystream measure: lumen, outer wall beyond it"
-            } else {
-                "raystream measure: lumen"
-            },
-            algorithm: "raystream measure",
-            version: env!("CARGO_PKG_VERSION"),
-        };
-        let segments = mask_segments(wall.is_some());
         let written =
             raystream_io::write_segmentation(out, volume, &labels.data, &segments, &info)?;
         (
@@ -558,22 +559,8 @@ fn write_mask(
     };
     let structures = match &a.structures {
         Some(file) => {
-            let info = raystream_io::SegmentationInfo {
-                description: if wall.is_some() {
-                    "raystream measure: lumen, outer wall beyond it"
-                } else {
-                    "raystream measure: lumen"
-                },
-                algorithm: "raystream",
-                version: env!("CARGO_PKG_VERSION"),
-            };
-            let written = raystream_io::write_structure_set(
-                file,
-                volume,
-                &labels.data,
-                &mask_segments(wall.is_some()),
-                &info,
-            )?;
+            let written =
+                raystream_io::write_structure_set(file, volume, &labels.data, &segments, &info)?;
             Some((file.display().to_string(), written.contours))
         }
         None => None,
