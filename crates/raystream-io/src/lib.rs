@@ -21,7 +21,9 @@ mod texture;
 pub mod volume;
 mod write;
 pub use colour_table::read_colour_table;
-pub use structure_set_write::{StructureSetWritten, pixel_loops, write_structure_set};
+pub use structure_set_write::{
+    StructureSetWritten, pixel_loops, structure_set_source, write_structure_set,
+};
 pub use write::{BONE, MeshPart, write_mesh, write_mesh_parts};
 
 use std::io::{BufReader, Cursor, Read};

@@ -95,9 +95,22 @@ pub fn pixel_loops(
     loops
 }
 
+/// Why an RT Structure Set of `like` cannot be written, if it cannot: as for a Segmentation
+/// ([`segmentation_source`]), it references the series' images, so `like` must be a DICOM
+/// series whose slices are its acquired images, with its UIDs.
+pub fn structure_set_source(like: &Volume) -> Result<(), String> {
+    segmentation_source(like).map_err(|e| {
+        e.replace("a DICOM Segmentation", "an RT Structure Set")
+            .replace(
+                "write a NIfTI label map, .nii.gz, instead",
+                "a NIfTI label map, .nii.gz, can hold the labels instead",
+            )
+    })
+}
+
 /// Writes `labels` (one a voxel of `like`, i fastest, as [`Volume::data`]) to `path` as an RT
 /// Structure Set of `like`'s series, a structure each of `segments` (its value, label and
-/// colour), if the series can be referenced ([`segmentation_source`]).
+/// colour), if the series can be referenced ([`structure_set_source`]).
 pub fn write_structure_set(
     path: &Path,
     like: &Volume,
@@ -118,8 +131,7 @@ pub fn write_structure_set(
     if segments.is_empty() {
         return Err(fail(&"no structure to write"));
     }
-    segmentation_source(like)
-        .map_err(|e| fail(&e.replace("DICOM Segmentation", "RT Structure Set")))?;
+    structure_set_source(like).map_err(|e| fail(&e))?;
     let series = like
         .series
         .as_ref()

@@ -852,10 +852,11 @@ pub struct MeasureArgs {
     /// finest voxel spacing, each voxel labelled by the nearest section's plane.
     #[arg(long, value_name = "FILE.nii.gz|FILE.dcm")]
     pub mask: Option<PathBuf>,
-    /// With --mask, from a DICOM series: the same lumen and wall also as a DICOM RT Structure
-    /// Set of it (.dcm), for a radiotherapy planning system: each slice's regions as closed
-    /// contours along their voxels' edges, which give back the mask voxel for voxel.
-    #[arg(long, value_name = "FILE.dcm", requires = "mask")]
+    /// From a DICOM series: the lumen and, with --wall, the wall beyond it (the labels --mask
+    /// writes, with it or without) as a DICOM RT Structure Set of it (.dcm), for a
+    /// radiotherapy planning system: each slice's regions as closed contours along their
+    /// voxels' edges, which give back the labels voxel for voxel.
+    #[arg(long, value_name = "FILE.dcm")]
     pub structures: Option<PathBuf>,
     /// Draw the diameters against arc length to FILE (.svg, .png, or .dcm: the PNG's pixels
     /// as a DICOM Secondary Capture of the input's study): D eq, D max and D min, open

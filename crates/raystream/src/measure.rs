@@ -74,13 +74,8 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
             .map_err(|e| anyhow::anyhow!("{}: --mask: {e}", m.display()))?;
     }
     if let Some(r) = &a.structures {
-        raystream_io::segmentation_source(&volume).map_err(|e| {
-            anyhow::anyhow!(
-                "{}: --structures: {}",
-                r.display(),
-                e.replace("DICOM Segmentation", "RT Structure Set")
-            )
-        })?;
+        raystream_io::structure_set_source(&volume)
+            .map_err(|e| anyhow::anyhow!("{}: --structures: {e}", r.display()))?;
     }
     if let Some(r) = &a.report {
         raystream_io::measurement_report_source(&volume)
@@ -194,9 +189,16 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         };
         crate::profile::write(out, &title, &sections, length, &lesions, &dicom)?;
     }
-    let mask = match &a.mask {
-        Some(out) if found => Some(write_mask(a, out, (&volume, &points), &opt, wall)?),
-        _ => None,
+    let mask = if found && (a.mask.is_some() || a.structures.is_some()) {
+        Some(write_mask(
+            a,
+            a.mask.as_deref(),
+            (&volume, &points),
+            &opt,
+            wall,
+        )?)
+    } else {
+        None
     };
     let report;
     let mut findings = Findings {
@@ -451,7 +453,8 @@ pub(crate) struct Findings<'a> {
 /// What `--mask` wrote: the file, its labels' voxels and volumes, and the sections they came
 /// from.
 pub(crate) struct MaskWritten {
-    file: String,
+    /// `--mask`'s file (none where only `--structures` was asked for).
+    file: Option<String>,
     /// The DICOM Segmentation's frames and instance, where it is one (else a NIfTI label
     /// map).
     frames: Option<usize>,
@@ -507,11 +510,12 @@ pub(crate) fn mask_segments(wall: bool) -> Vec<raystream_io::Segment<'static>> {
     segments
 }
 
-/// `--mask FILE`: the lumen and the outer wall labelled on the CT's grid
-/// ([`raystream_cpu::mask`]), written as NIfTI or as a DICOM Segmentation of the CT's series.
+/// `--mask FILE` (`out`) and `--structures FILE`: the lumen and the outer wall labelled on
+/// the CT's grid ([`raystream_cpu::mask`]), written as NIfTI or as a DICOM Segmentation of the
+/// CT's series, and as an RT Structure Set of it.
 fn write_mask(
     a: &MeasureArgs,
-    out: &std::path::Path,
+    out: Option<&std::path::Path>,
     (volume, points): (&raystream_io::Volume, &[DVec3]),
     opt: &LumenOptions,
     wall: Option<(&WallOptions, &Track)>,
@@ -538,7 +542,9 @@ fn write_mask(
         version: env!("CARGO_PKG_VERSION"),
     };
     let segments = mask_segments(wall.is_some());
-    let (frames, segmentation) = if raystream_io::is_segmentation_path(out) {
+    let (frames, segmentation) = if let Some(out) = out
+        && raystream_io::is_segmentation_path(out)
+    {
         let written =
             raystream_io::write_segmentation(out, volume, &labels.data, &segments, &info)?;
         (
@@ -548,13 +554,15 @@ fn write_mask(
                 series_uid: written.series_uid,
             }),
         )
-    } else {
+    } else if let Some(out) = out {
         let what = if wall.is_some() {
             "raystream measure: 1 lumen, 2 outer wall beyond the lumen"
         } else {
             "raystream measure: 1 lumen"
         };
         raystream_io::write_label_map(out, volume, &labels.data, what)?;
+        (None, None)
+    } else {
         (None, None)
     };
     let structures = match &a.structures {
@@ -571,7 +579,7 @@ fn write_mask(
         (n, n as f64 * voxel_ml)
     };
     Ok(MaskWritten {
-        file: out.display().to_string(),
+        file: out.map(|o| o.display().to_string()),
         frames,
         segmentation,
         structures,
@@ -593,9 +601,13 @@ fn mask_text(m: &MaskWritten) -> String {
         Some(n) => format!("a DICOM Segmentation of the CT's series, {n} frames"),
         None => "a NIfTI label map".to_string(),
     };
+    let (file, kind) = match &m.file {
+        Some(f) => (f.as_str(), kind),
+        None => ("(none written)", "labels for --structures".to_string()),
+    };
     let mut t = format!(
-        "mask: {} ({kind}): label 1 the lumen on {} voxels ({:.1} ml){wall}, from {} sections {:.2} mm apart ({} with a closed lumen)\n",
-        m.file, m.lumen.0, m.lumen.1, m.sections, m.step_mm, m.closed
+        "mask: {file} ({kind}): label 1 the lumen on {} voxels ({:.1} ml){wall}, from {} sections {:.2} mm apart ({} with a closed lumen)\n",
+        m.lumen.0, m.lumen.1, m.sections, m.step_mm, m.closed
     );
     if let Some((file, contours)) = &m.structures {
         let list: Vec<String> = contours.iter().map(|c| c.to_string()).collect();
@@ -611,7 +623,11 @@ fn mask_text(m: &MaskWritten) -> String {
 fn mask_json(m: &MaskWritten) -> serde_json::Value {
     json!({
         "file": m.file,
-        "format": if m.frames.is_some() { "dicom-seg" } else { "nifti" },
+        "format": match (&m.file, m.frames) {
+            (None, _) => json!(null),
+            (_, Some(_)) => json!("dicom-seg"),
+            (_, None) => json!("nifti"),
+        },
         "frames": m.frames,
         "lumen_voxels": m.lumen.0,
         "lumen_ml": round3(m.lumen.1),

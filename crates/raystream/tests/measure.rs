@@ -3102,6 +3102,31 @@ fn structure_sets_are_laid_on_their_ct() {
         .unwrap();
     assert!(o.status.success(), "rt-utils: {}", stderr(&o));
     assert_eq!(stdout(&o).trim(), "['Lumen', 'Wall and thrombus']");
+    // Without --mask, the same structures; from a NIfTI CT (no series to reference), refused.
+    let alone_written = root.join("rt/written-alone.dcm");
+    let m2 = measure(
+        ct.to_str().unwrap(),
+        &aorta(),
+        &["--wall", "--structures", alone_written.to_str().unwrap()],
+    );
+    assert!(m2["mask"]["file"].is_null());
+    assert_eq!(m2["mask"]["structures"]["contours"], *contours);
+    let again = raystream_io::StructureSet::read(&alone_written).unwrap();
+    assert!(
+        again.regions(&grid).0 == regions,
+        "the structures differ without --mask"
+    );
+    refused(
+        &[
+            "measure",
+            &chest(),
+            "--path",
+            &aorta(),
+            "--structures",
+            alone_written.to_str().unwrap(),
+        ],
+        "no series for an RT Structure Set to reference",
+    );
     let (from_series, how) = stats(ct.to_str().unwrap(), seg.to_str().unwrap());
     assert!(how.starts_with("the nearest label voxel"), "{how}");
     let close = |a: &serde_json::Value, b: &serde_json::Value, what: &str| {
