@@ -49,8 +49,8 @@ pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping, linear_to
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, RT_STRUCTURE_SET, RasterNotes, Roi,
     SegmentLabel, SegmentVoxels, SourceImage, StructureSet, ValueUnit, Volume, VolumeError,
-    VolumeFormat, VolumeSelect, is_structure_set_file, is_structure_set_volume, is_volume_path,
-    list_dicom_series, load_volume, whole_segments,
+    VolumeFormat, VolumeSelect, WholeSegments, is_structure_set_file, is_structure_set_volume,
+    is_volume_path, list_dicom_series, load_volume, whole_segments,
 };
 
 /// A triangle mesh: shared vertex positions and triangles as vertex-index triples.

@@ -139,12 +139,7 @@ pub fn write_segmentation(
         VolumeError::invalid(path, format!("cannot write a DICOM Segmentation: {e}"))
     };
     let [nx, ny, nz] = like.dims;
-    if labels.len() != nx * ny * nz {
-        return Err(fail(&format!(
-            "{} labels for a {nx}×{ny}×{nz} grid",
-            labels.len()
-        )));
-    }
+    labels_fit(like, labels).map_err(|e| fail(&e))?;
     if nx > 65535 || ny > 65535 {
         return Err(fail(&format!(
             "{nx}×{ny} pixels a slice: at most 65535 a side"
@@ -401,6 +396,16 @@ pub fn write_segmentation(
         sop_instance_uid: sop_uid,
         series_uid,
     })
+}
+
+/// Why `labels` are not one a voxel of `like`, if they are not.
+pub(crate) fn labels_fit(like: &Volume, labels: &[u8]) -> Result<(), String> {
+    let [nx, ny, nz] = like.dims;
+    if labels.len() == nx * ny * nz {
+        Ok(())
+    } else {
+        Err(format!("{} labels for a {nx}×{ny}×{nz} grid", labels.len()))
+    }
 }
 
 /// A Segment Sequence item: segment `number` (from 1), made automatically by `algorithm`.

@@ -18,7 +18,9 @@ use dicom_core::{DataElement, PrimitiveValue, VR};
 use dicom_dictionary_std::tags;
 
 use crate::secondary_capture::{Derived, decimal, derived_object, put, truncate, write_dicom};
-use crate::segmentation::{Segment, SegmentationInfo, item, segmentation_source, seq, text};
+use crate::segmentation::{
+    Segment, SegmentationInfo, item, labels_fit, segmentation_source, seq, text,
+};
 use crate::volume::{RT_STRUCTURE_SET, SourceImage, Volume, VolumeError};
 
 /// What was written: each structure's contours and voxels.
@@ -122,12 +124,7 @@ pub fn write_structure_set(
         VolumeError::invalid(path, format!("cannot write a DICOM RT Structure Set: {e}"))
     };
     let [nx, ny, nz] = like.dims;
-    if labels.len() != nx * ny * nz {
-        return Err(fail(&format!(
-            "{} labels for a {nx}×{ny}×{nz} grid",
-            labels.len()
-        )));
-    }
+    labels_fit(like, labels).map_err(|e| fail(&e))?;
     if segments.is_empty() {
         return Err(fail(&"no structure to write"));
     }

@@ -293,7 +293,7 @@ fn segment_stats(
             bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
         }
         let known = crate::iso::segment_names(&labels, a.colour_table.as_deref())?;
-        let whole = crate::iso::whole_of(&labels, file)?;
+        let whole = raystream_io::whole_segments(&labels, file)?;
         (
             labels_on_ct(ct, (&labels, whole.as_ref()), &mut members),
             known,
@@ -326,7 +326,7 @@ fn segment_stats(
 /// voxel's centre.
 fn labels_on_ct(
     ct: &raystream_io::Volume,
-    (labels, whole): (&raystream_io::Volume, Option<&crate::iso::Whole>),
+    (labels, whole): (&raystream_io::Volume, Option<&raystream_io::WholeSegments>),
     members: &mut std::collections::BTreeMap<u32, Vec<usize>>,
 ) -> &'static str {
     let [nx, ny, nz] = ct.dims;
@@ -397,7 +397,12 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     } else {
         None
     };
-    let whole = crate::iso::whole_of(&v, input)?.map(|w| {
+    // The structure set already read is laid on its CT here, not read again.
+    let whole = match &structures {
+        Some(set) => Some(set.whole(set.regions(&v).0)),
+        None => raystream_io::whole_segments(&v, input)?,
+    };
+    let whole = whole.map(|w| {
         w.into_iter()
             .filter(|(_, r)| r.voxels > 0)
             .map(|(l, r)| (l as u32, r.voxels))

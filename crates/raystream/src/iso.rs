@@ -192,7 +192,7 @@ impl SegmentSurface {
 fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
     let t0 = Instant::now();
     let known = segment_names(labels, a.colour_table.as_deref())?;
-    let whole = whole_of(labels, &a.input)?;
+    let whole = raystream_io::whole_segments(labels, &a.input)?;
     let mut surfaces = segment_surfaces(
         labels,
         whole.as_ref(),
@@ -274,18 +274,8 @@ pub fn with_colour_table(
     Ok(known)
 }
 
-/// The segments of `labels` (read from `path`) each whole where they may overlap, which the
-/// label volume cannot hold: an RT Structure Set's structures, a DICOM Segmentation's
-/// segments ([`raystream_io::whole_segments`]).
-pub fn whole_of(labels: &Volume, path: &Path) -> Result<Option<Whole>> {
-    Ok(raystream_io::whole_segments(labels, path)?)
-}
-
-/// Segments each whole: each one's label and voxels, in increasing order of label.
-pub type Whole = Vec<(u16, SegmentVoxels)>;
-
 /// The surfaces of the segments `list` names in the label volume `labels` (read from `path`;
-/// with `whole`, its segments each whole, overlaps and all: [`whole_of`]),
+/// with `whole`, its segments each whole, overlaps and all: [`raystream_io::whole_segments`]),
 /// named and coloured by `known` (else "label N" in `--segmentation`'s tints):
 /// each segment's voxels as an inside region, cut out of the grid with its bounding box and a
 /// voxel around it, its surface at the half-way value between inside and outside (halfway
@@ -293,7 +283,7 @@ pub type Whole = Vec<(u16, SegmentVoxels)>;
 /// edge included), smoothed `smoothing` times.
 pub fn segment_surfaces(
     labels: &Volume,
-    whole_segments: Option<&Whole>,
+    whole_segments: Option<&raystream_io::WholeSegments>,
     path: &Path,
     (list, known): (&str, &[raystream_io::SegmentLabel]),
     smoothing: u32,

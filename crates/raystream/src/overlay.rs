@@ -283,13 +283,11 @@ pub fn tint_labels(
     // Each segment's pixels: a structure set's structures whole, else each label's.
     let segments: Vec<(u32, Vec<bool>)> = if overlay.structures.is_empty() {
         let seen: Vec<Option<u32>> = voxel.iter().map(label_at).collect();
-        let mut present: Vec<(u32, usize)> = Vec::new();
+        let mut counts: std::collections::BTreeMap<u32, usize> = Default::default();
         for &l in seen.iter().flatten() {
-            match present.iter_mut().find(|(p, _)| *p == l) {
-                Some(e) => e.1 += 1,
-                None => present.push((l, 1)),
-            }
+            *counts.entry(l).or_default() += 1;
         }
+        let mut present: Vec<(u32, usize)> = counts.into_iter().collect();
         present.sort_by_key(|&(l, n)| (std::cmp::Reverse(n), l));
         present
             .into_iter()

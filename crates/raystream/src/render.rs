@@ -91,7 +91,7 @@ fn segments_scene(
 ) -> Result<(Scene, Option<Bones>)> {
     let t = std::time::Instant::now();
     let known = crate::iso::segment_names(labels, a.colour_table.as_deref())?;
-    let whole = crate::iso::whole_of(labels, path)?;
+    let whole = raystream_io::whole_segments(labels, path)?;
     let surfaces = crate::iso::segment_surfaces(
         labels,
         whole.as_ref(),
@@ -256,14 +256,15 @@ fn segmentation(
         if let Some(why) = set.frame_mismatch(ct) {
             bail!("{name}: {why}");
         }
-        let labels = set.label_volume(ct);
-        let (voxels, _) = set.regions(ct);
-        let whole: crate::iso::Whole = set.rois.iter().map(|r| r.number).zip(voxels).collect();
-        (labels, Some(whole))
+        // Its structures laid on the CT once: painted into the label volume, and whole for
+        // --outline.
+        let (regions, warnings) = set.regions(ct);
+        let labels = set.paint(ct, &regions, warnings);
+        (labels, a.outline.then(|| set.whole(regions)))
     } else {
         let labels = raystream_io::load_volume(file, &raystream_io::VolumeSelect::default())?;
         let whole = if a.outline {
-            crate::iso::whole_of(&labels, file)?
+            raystream_io::whole_segments(&labels, file)?
         } else {
             None
         };

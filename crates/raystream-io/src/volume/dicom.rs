@@ -396,6 +396,22 @@ impl FileMeta {
     }
 }
 
+/// The text of `tag` in `o`, trimmed of padding (spaces, NULs); empty where it is absent.
+pub(crate) fn text_of(o: &InMemDicomObject, tag: dicom_core::Tag) -> String {
+    o.get(tag)
+        .and_then(|e| e.to_str().ok())
+        .map(|s| s.trim_end_matches(['\0', ' ']).trim().to_string())
+        .unwrap_or_default()
+}
+
+/// The name of the transfer syntax `uid` (empty for one the registry does not know).
+pub(crate) fn transfer_syntax_name(uid: &str) -> String {
+    TransferSyntaxRegistry
+        .get(uid)
+        .map(|t| t.name().to_string())
+        .unwrap_or_default()
+}
+
 /// Reads the file meta group by hand (see the module docs) and returns what it says and the
 /// offset of the data set.
 pub(crate) fn read_meta(bytes: &[u8], file: &Path) -> Result<(FileMeta, usize), VolumeError> {
@@ -997,10 +1013,7 @@ fn assemble(
     };
     let decoded = decode_all(slices, dims[0] * dims[1])?;
     let data = stack.regular(&decoded);
-    let ts_name = TransferSyntaxRegistry
-        .get(&slices[0].ts_uid)
-        .map(|t| t.name().to_string())
-        .unwrap_or_default();
+    let ts_name = transfer_syntax_name(&slices[0].ts_uid);
     let first = &slices[0];
     let unit = if first.modality == "CT" {
         ValueUnit::Hounsfield

@@ -24,8 +24,8 @@ use raystream_math::DVec3;
 
 pub use dicom::{DicomSeriesInfo, DicomStudy, SegmentLabel, SourceImage, list_dicom_series};
 pub use structure_set::{
-    RT_STRUCTURE_SET, RasterNotes, Roi, SegmentVoxels, StructureSet, is_structure_set_file,
-    is_structure_set_volume, whole_segments,
+    RT_STRUCTURE_SET, RasterNotes, Roi, SegmentVoxels, StructureSet, WholeSegments,
+    is_structure_set_file, is_structure_set_volume, whole_segments,
 };
 
 /// The largest volume raystream loads: 2³⁰ voxels (4 GiB of `f32`), e.g. 1024³ or 2048×2048×256.

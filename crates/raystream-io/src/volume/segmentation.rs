@@ -14,7 +14,10 @@ use std::path::Path;
 use dicom_dictionary_std::tags;
 use dicom_object::InMemDicomObject;
 
-use super::dicom::{DicomStudy, FileMeta, FrameGeometry, cross, dot, functional_groups, sub};
+use super::dicom::{
+    DicomStudy, FileMeta, FrameGeometry, cross, dot, functional_groups, sub, text_of,
+    transfer_syntax_name,
+};
 use super::{
     DicomSeriesInfo, Phase, SegmentLabel, SegmentVoxels, ValueUnit, Volume, VolumeError,
     VolumeFormat,
@@ -62,12 +65,7 @@ pub(crate) fn read_segments(
 ) -> Result<(Volume, Vec<(u16, SegmentVoxels)>), VolumeError> {
     let bad =
         |problem: String| VolumeError::invalid(file, format!("DICOM Segmentation: {problem}"));
-    let text = |o: &InMemDicomObject, tag| {
-        o.get(tag)
-            .and_then(|e| e.to_str().ok())
-            .map(|s| s.trim_end_matches(['\0', ' ']).trim().to_string())
-            .unwrap_or_default()
-    };
+    let text = text_of;
     let int = |o: &InMemDicomObject, tag| o.get(tag).and_then(|e| e.to_int::<u32>().ok());
     let need = |tag, what: &str| int(obj, tag).ok_or_else(|| bad(format!("no {what}")));
     let rows = need(tags::ROWS, "Rows")? as usize;
@@ -374,13 +372,7 @@ pub(crate) fn read_segments(
             modality: text(obj, tags::MODALITY),
             count: frames,
             transfer_syntax: meta.ts_uid.clone(),
-            transfer_syntax_name: {
-                use dicom_transfer_syntax_registry::{TransferSyntaxIndex, TransferSyntaxRegistry};
-                TransferSyntaxRegistry
-                    .get(&meta.ts_uid)
-                    .map(|t| t.name().to_string())
-                    .unwrap_or_default()
-            },
+            transfer_syntax_name: transfer_syntax_name(&meta.ts_uid),
             all: Vec::new(),
             study: DicomStudy::of(obj),
             sources: Vec::new(),

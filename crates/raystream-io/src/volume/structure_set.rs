@@ -27,7 +27,7 @@ use dicom_dictionary_std::tags;
 use dicom_object::InMemDicomObject;
 use raystream_math::DVec3;
 
-use super::dicom::{DicomStudy, FileMeta};
+use super::dicom::{DicomStudy, FileMeta, text_of, transfer_syntax_name};
 use super::{DicomSeriesInfo, Phase, SegmentLabel, ValueUnit, Volume, VolumeError, VolumeFormat};
 
 /// RT Structure Set Storage.
@@ -375,11 +375,36 @@ impl StructureSet {
         (regions, warnings)
     }
 
+    /// `regions` (its structures' voxels, as [`StructureSet::regions`] gives them) labelled
+    /// with their structures' numbers, the empty ones left out, in increasing order.
+    pub fn whole(&self, regions: Vec<SegmentVoxels>) -> WholeSegments {
+        let mut whole: WholeSegments = self
+            .rois
+            .iter()
+            .map(|r| r.number)
+            .zip(regions)
+            .filter(|(_, v)| v.voxels > 0)
+            .collect();
+        whole.sort_by_key(|(l, _)| *l);
+        whole
+    }
+
     /// The structures as a label volume on `grid` (the series they were drawn on), each voxel
     /// the number of the structure holding it, the largest painted first (see the module docs).
     pub fn label_volume(&self, grid: &Volume) -> Volume {
+        let (regions, warnings) = self.regions(grid);
+        self.paint(grid, &regions, warnings)
+    }
+
+    /// Its structures' voxels on `grid` ([`StructureSet::regions`]) as a label volume, the
+    /// largest painted first, with `warnings`.
+    pub fn paint(
+        &self,
+        grid: &Volume,
+        regions: &[SegmentVoxels],
+        mut warnings: Vec<String>,
+    ) -> Volume {
         let [nx, ny, _] = grid.dims;
-        let (regions, mut warnings) = self.regions(grid);
         let mut order: Vec<usize> = (0..regions.len()).collect();
         order.sort_by_key(|&r| std::cmp::Reverse(regions[r].voxels));
         let mut data = vec![0f32; grid.voxel_count()];
@@ -422,15 +447,7 @@ impl StructureSet {
                 modality: "RTSTRUCT".into(),
                 count: 1,
                 transfer_syntax: self.transfer_syntax.clone(),
-                transfer_syntax_name: {
-                    use dicom_transfer_syntax_registry::{
-                        TransferSyntaxIndex, TransferSyntaxRegistry,
-                    };
-                    TransferSyntaxRegistry
-                        .get(&self.transfer_syntax)
-                        .map(|t| t.name().to_string())
-                        .unwrap_or_default()
-                },
+                transfer_syntax_name: transfer_syntax_name(&self.transfer_syntax),
                 all: Vec::new(),
                 study: self.study.clone(),
                 sources: Vec::new(),
@@ -441,6 +458,9 @@ impl StructureSet {
         }
     }
 }
+
+/// Segments each whole: each one's label and voxels, in increasing order of label.
+pub type WholeSegments = Vec<(u16, SegmentVoxels)>;
 
 /// How near an edge, in voxels, a voxel's centre counts as on it.
 pub const ON_EDGE: f64 = 1e-3;
@@ -481,24 +501,12 @@ pub fn is_structure_set_file(path: &Path) -> bool {
 /// overlap, which a label volume cannot hold: an RT Structure Set's structures laid on
 /// `labels`' grid, a DICOM Segmentation's segments (read again); `None` for other label
 /// volumes, whose voxels each hold one label. Each with its label, in increasing order.
-pub fn whole_segments(
-    labels: &Volume,
-    path: &Path,
-) -> Result<Option<Vec<(u16, SegmentVoxels)>>, VolumeError> {
-    let modality = labels.series.as_ref().map(|s| s.modality.as_str());
-    if modality == Some("RTSTRUCT") {
+pub fn whole_segments(labels: &Volume, path: &Path) -> Result<Option<WholeSegments>, VolumeError> {
+    if is_structure_set_volume(labels) {
         let set = StructureSet::read(path)?;
-        let (voxels, _) = set.regions(labels);
-        let mut whole: Vec<(u16, SegmentVoxels)> = set
-            .rois
-            .iter()
-            .map(|r| r.number)
-            .zip(voxels)
-            .filter(|(_, v)| v.voxels > 0)
-            .collect();
-        whole.sort_by_key(|(l, _)| *l);
-        return Ok(Some(whole));
+        return Ok(Some(set.whole(set.regions(labels).0)));
     }
+    let modality = labels.series.as_ref().map(|s| s.modality.as_str());
     if modality != Some("SEG") || !path.is_file() {
         return Ok(None);
     }
@@ -557,12 +565,7 @@ fn parse(
 ) -> Result<StructureSet, VolumeError> {
     let bad =
         |problem: String| VolumeError::invalid(file, format!("DICOM RT Structure Set: {problem}"));
-    let text = |o: &InMemDicomObject, tag| {
-        o.get(tag)
-            .and_then(|e| e.to_str().ok())
-            .map(|s| s.trim_end_matches(['\0', ' ']).trim().to_string())
-            .unwrap_or_default()
-    };
+    let text = text_of;
     let items = |o: &InMemDicomObject, tag| -> Vec<InMemDicomObject> {
         o.get(tag)
             .and_then(|e| e.items())
