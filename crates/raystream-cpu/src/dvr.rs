@@ -37,6 +37,9 @@ pub enum DvrMode {
     /// Multiplanar reformation: the volume's HU on one plane, through `slice_at`, facing the
     /// camera (with a parallel camera, an axial, coronal, sagittal or oblique slice).
     Slice,
+    /// Monte Carlo path tracing of the volume as a participating medium (cinematic rendering,
+    /// [`crate::cinematic`]).
+    Cinematic,
 }
 
 impl DvrMode {
@@ -48,6 +51,7 @@ impl DvrMode {
             DvrMode::Average => "average",
             DvrMode::Iso => "iso",
             DvrMode::Slice => "slice",
+            DvrMode::Cinematic => "cinematic",
         }
     }
 
@@ -102,6 +106,10 @@ pub struct DvrOptions {
     /// Keep only a slab this many mm thick about the plane through `slice_at` facing the
     /// camera (a slab MIP, say), in place of `clip_planes` ([`Self::planes_for`]).
     pub slab: Option<f32>,
+    /// cinematic: paths per pixel.
+    pub spp: u32,
+    /// cinematic: scatterings a path may take.
+    pub bounces: u32,
 }
 
 impl Default for DvrOptions {
@@ -121,6 +129,8 @@ impl Default for DvrOptions {
             hu_values: false,
             slice_at: None,
             slab: None,
+            spp: 64,
+            bounces: 4,
         }
     }
 }
@@ -219,6 +229,9 @@ pub struct Marcher<'a> {
     bricks: [usize; 3],
     /// Per brick: whether anything in it is visible (dvr mode) — empty-space skipping.
     visible: Vec<bool>,
+    /// Per brick: the largest extinction coefficient (per mm) the transfer function gives
+    /// over its HU range, the majorant of cinematic mode's tracking (empty without one).
+    majorant: Vec<f32>,
 }
 
 impl<'a> Marcher<'a> {
@@ -235,26 +248,33 @@ impl<'a> Marcher<'a> {
         let [nx, ny, nz] = vol.dims;
         let bricks = [nx, ny, nz].map(|n| n.saturating_sub(1).div_ceil(BRICK).max(1));
         let mut visible = vec![true; bricks[0] * bricks[1] * bricks[2]];
+        let mut majorant = vec![0.0; if tf.is_some() { visible.len() } else { 0 }];
         if let Some(tf) = tf {
-            visible.par_iter_mut().enumerate().for_each(|(b, vis)| {
-                let (bx, by, bz) = (
-                    b % bricks[0],
-                    b / bricks[0] % bricks[1],
-                    b / (bricks[0] * bricks[1]),
-                );
-                let range = |bi: usize, n: usize| bi * BRICK..=((bi + 1) * BRICK).min(n - 1);
-                let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-                for k in range(bz, nz) {
-                    for j in range(by, ny) {
-                        for i in range(bx, nx) {
-                            let v = vol.at(i, j, k);
-                            lo = lo.min(v);
-                            hi = hi.max(v);
+            visible
+                .par_iter_mut()
+                .zip(&mut majorant)
+                .enumerate()
+                .for_each(|(b, (vis, maj))| {
+                    let (bx, by, bz) = (
+                        b % bricks[0],
+                        b / bricks[0] % bricks[1],
+                        b / (bricks[0] * bricks[1]),
+                    );
+                    let range = |bi: usize, n: usize| bi * BRICK..=((bi + 1) * BRICK).min(n - 1);
+                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                    for k in range(bz, nz) {
+                        for j in range(by, ny) {
+                            for i in range(bx, nx) {
+                                let v = vol.at(i, j, k);
+                                lo = lo.min(v);
+                                hi = hi.max(v);
+                            }
                         }
                     }
-                }
-                *vis = tf.max_opacity_in(lo, hi) > 0.0;
-            });
+                    let alpha = tf.max_opacity_in(lo, hi);
+                    *vis = alpha > 0.0;
+                    *maj = crate::cinematic::sigma_of(alpha);
+                });
         }
         Marcher {
             vol,
@@ -263,7 +283,14 @@ impl<'a> Marcher<'a> {
             grad_to_world,
             bricks,
             visible,
+            majorant,
         }
+    }
+
+    /// Per brick (x fastest), the majorant extinction per mm of cinematic mode's tracking
+    /// (empty when the marcher was made without a transfer function).
+    pub fn majorants(&self) -> &[f32] {
+        &self.majorant
     }
 
     /// World (LPS mm) → continuous index as rows of the linear part, and the world origin:
@@ -467,7 +494,7 @@ impl<'a> Marcher<'a> {
     }
 
     /// The brick holding index `p`, and the ray parameter where the ray leaves it.
-    fn brick_exit(&self, p: Vec3, t: f32, d_idx: Vec3) -> (usize, f32) {
+    pub(crate) fn brick_exit(&self, p: Vec3, t: f32, d_idx: Vec3) -> (usize, f32) {
         let b = [0, 1, 2].map(|a| ((p[a].max(0.0) as usize) / BRICK).min(self.bricks[a] - 1));
         let mut t_exit = f32::INFINITY;
         for a in 0..3 {
@@ -848,8 +875,34 @@ fn march_frame(
     };
     let marcher = Marcher::new(
         vol,
-        (opt.skip_empty && opt.mode == DvrMode::Dvr).then_some(tf),
+        (opt.mode == DvrMode::Cinematic || (opt.skip_empty && opt.mode == DvrMode::Dvr))
+            .then_some(tf),
     );
+    if opt.mode == DvrMode::Cinematic {
+        let Sight::Camera(cam) = sight else {
+            panic!("cinematic rendering is seen by a camera, not a curved plane");
+        };
+        let lighting = crate::cinematic::Lighting::studio(cam);
+        let rays: Vec<Marched> = (0..opt.width * opt.height)
+            .into_par_iter()
+            .map(|pixel| {
+                let (color, transmit, taken) =
+                    crate::cinematic::pixel(&marcher, tf, opt, cam, &lighting, pixel);
+                Marched {
+                    color,
+                    transmit,
+                    taken,
+                    skipped: 0,
+                }
+            })
+            .collect();
+        let stats = DvrStats {
+            samples: rays.iter().map(|c| c.taken).sum(),
+            step_mm: 0.0,
+            ..Default::default()
+        };
+        return (rays, stats);
+    }
     let step = opt.step_for(vol);
     let win = opt.shown_window();
     let light = match sight {
@@ -1002,7 +1055,7 @@ fn phong(tf: &TransferFunction, n: Vec3, d: Vec3, l: Vec3) -> (f32, f32) {
 }
 
 /// Gradient magnitude (HU/mm) at which shading is fully on.
-const FULL_SHADING_GRADIENT: f32 = 100.0;
+pub(crate) const FULL_SHADING_GRADIENT: f32 = 100.0;
 
 /// The plane of a slice: a point and its normal (LPS), and how far along its ray a sample may
 /// lie (mm; a curved plane's slab, else unbounded).
@@ -1141,6 +1194,7 @@ fn march(
                 prev = Some((t, v));
             }
         }
+        DvrMode::Cinematic => unreachable!("march_frame traces cinematic paths"),
     }
 }
 

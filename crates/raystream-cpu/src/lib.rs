@@ -18,6 +18,7 @@
 //! depend on them.
 
 mod aov;
+pub mod cinematic;
 pub mod cpr;
 pub mod dvr;
 mod image_out;

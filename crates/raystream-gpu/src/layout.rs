@@ -269,7 +269,7 @@ pub struct MediumParams {
     pub grid_points: u32,
 }
 
-/// `DvrParams` in dvr.wgsl (uniform), 320 bytes: camera in LPS, the world → index transform,
+/// `DvrParams` in dvr.wgsl (uniform), 336 bytes: camera in LPS, the world → index transform,
 /// the mode and its parameters, the shadow light, crop box and clip planes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -335,6 +335,12 @@ pub struct DvrParams {
     pub slice_at: [f32; 3],
     /// A curved plane's slab: half its thickness, mm, 0 for the thin plane (byte 316).
     pub slab_half: f32,
+    /// cinematic: paths per pixel (byte 320).
+    pub spp: u32,
+    /// cinematic: scatterings a path may take (byte 324).
+    pub bounces: u32,
+    /// Padding to 336 bytes (byte 328).
+    pub pad: [u32; 2],
 }
 
 /// `CprRow` in dvr.wgsl, 48 bytes: one image row of a curved planar reformation
@@ -365,6 +371,6 @@ const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
 const _: () = assert!(std::mem::size_of::<TriUv>() == 24);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
-const _: () = assert!(std::mem::size_of::<DvrParams>() == 320);
+const _: () = assert!(std::mem::size_of::<DvrParams>() == 336);
 const _: () = assert!(std::mem::size_of::<GpuCprRow>() == 48);
 const _: () = assert!(std::mem::size_of::<MediumParams>() == 128);

@@ -7,6 +7,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use raystream_cpu::Image;
+use raystream_cpu::cinematic::{ALPHA_MAX, KEY_IRRADIANCE, SKY_RADIANCE};
 use raystream_cpu::dvr::{
     BRICK, DvrMode, DvrOptions, LightGrid, Marcher, Sight, key_light, scene_to_lps,
 };
@@ -21,16 +22,22 @@ use crate::{GpuContext, GpuError, Pixels, Timer, read_elapsed_ms, read_words};
 
 const DVR_WGSL: &str = include_str!("kernels/dvr.wgsl");
 const VOLUME_WGSL: &str = include_str!("kernels/volume.wgsl");
+const CINEMATIC_WGSL: &str = include_str!("kernels/cinematic.wgsl");
 
 /// The volume core (`kernels/volume.wgsl`) that the volume kernels and the render kernels'
-/// volume stages share, with its constants.
+/// volume stages share, with its constants (cinematic mode's from `raystream_cpu::cinematic`).
 pub(crate) fn volume_core_wgsl() -> String {
-    format!("const BRICK_SIZE: u32 = {BRICK}u;\n\n{VOLUME_WGSL}")
+    format!(
+        "const BRICK_SIZE: u32 = {BRICK}u;\nconst ALPHA_MAX: f32 = {ALPHA_MAX:?};\nconst KEY_IRRADIANCE: f32 = {KEY_IRRADIANCE:?};\nconst SKY_RADIANCE: f32 = {SKY_RADIANCE:?};\n\n{VOLUME_WGSL}"
+    )
 }
 
 /// The WGSL source of the volume kernel.
 pub fn dvr_wgsl() -> String {
-    format!("{}\n{COMMON_WGSL}\n{DVR_WGSL}", volume_core_wgsl())
+    format!(
+        "{}\n{COMMON_WGSL}\n{DVR_WGSL}\n{CINEMATIC_WGSL}",
+        volume_core_wgsl()
+    )
 }
 
 /// A volume and its transfer function on the GPU: the HU texture with its trilinear sampler,
@@ -42,6 +49,8 @@ pub(crate) struct GpuVolume {
     pub opacity: wgpu::Buffer,
     pub color: wgpu::Buffer,
     pub bricks: wgpu::Buffer,
+    /// Per brick, the majorant extinction of cinematic mode's tracking.
+    pub majorants: wgpu::Buffer,
     pub brick_dims: [u32; 3],
     /// World → continuous index (rows and origin), from the marcher.
     pub to_index: ([Vec3; 3], Vec3),
@@ -107,12 +116,18 @@ impl GpuVolume {
         let none = wgpu::BufferUsages::empty();
         let (brick_dims, visible) = marcher.brick_table();
         let visible: Vec<u32> = visible.iter().map(|&v| v as u32).collect();
+        // A marcher made without a transfer function has no majorants: one placeholder.
+        let majorants = match marcher.majorants() {
+            [] => &[0.0f32][..],
+            m => m,
+        };
         Ok(GpuVolume {
             view: texture.create_view(&Default::default()),
             sampler,
             opacity: ctx.storage("opacity points", bytemuck::cast_slice(&opacity), none)?,
             color: ctx.storage("color points", bytemuck::cast_slice(&color), none)?,
             bricks: ctx.storage("brick table", bytemuck::cast_slice(&visible), none)?,
+            majorants: ctx.storage("brick majorants", bytemuck::cast_slice(majorants), none)?,
             brick_dims: brick_dims.map(|b| b as u32),
             to_index: marcher.world_to_index(),
         })
@@ -135,6 +150,8 @@ pub struct GpuVolumeRenderer<'a> {
     tf: &'a TransferFunction,
     gpu: GpuVolume,
     pipeline: wgpu::ComputePipeline,
+    /// `--mode cinematic`: the path tracer's kernel.
+    path_pipeline: wgpu::ComputePipeline,
     /// `--shadows`: the light grid's kernel and values.
     light_pipeline: wgpu::ComputePipeline,
     /// Float pixels → 8-bit sRGB and the summed sample count, for [`Self::render_srgb8`].
@@ -187,6 +204,7 @@ impl<'a> GpuVolumeRenderer<'a> {
                 source: wgpu::ShaderSource::Wgsl(dvr_wgsl().into()),
             });
         let pipeline = ctx.auto_pipeline(&module, "render_volume");
+        let path_pipeline = ctx.auto_pipeline(&module, "path_trace_volume");
         let light_pipeline = ctx.auto_pipeline(&module, "light_grid");
         let pack_pipeline = ctx.auto_pipeline(&module, "pack_srgb8");
         let light_dims = LightGrid::dims_for(vol.dims);
@@ -210,6 +228,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             tf,
             gpu,
             pipeline,
+            path_pipeline,
             light_pipeline,
             pack_pipeline,
             light_values,
@@ -323,6 +342,10 @@ impl<'a> GpuVolumeRenderer<'a> {
                 DvrMode::Average => 3,
                 DvrMode::Iso => 4,
                 DvrMode::Slice => 5,
+                DvrMode::Cinematic => {
+                    assert!(!curved, "cinematic rendering is seen by a camera");
+                    6
+                }
             },
             to_index0: v3(r0),
             step: opt.step_for(self.vol),
@@ -358,6 +381,9 @@ impl<'a> GpuVolumeRenderer<'a> {
             } else {
                 0.0
             },
+            spp: opt.spp,
+            bounces: opt.bounces,
+            pad: [0; 2],
         };
         let row_buf = row_buf.as_ref().unwrap_or(&self.no_rows);
         let param_buf = ctx
@@ -426,7 +452,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             7 => self.light_values.as_entire_binding(),
             8 => packed.as_entire_binding(),
             9 => sum.as_entire_binding(),
-            _ => row_buf.as_entire_binding(),
+            10 => row_buf.as_entire_binding(),
+            _ => self.gpu.majorants.as_entire_binding(),
         };
         let group = |label, pipeline: &wgpu::ComputePipeline, bindings: &[u32]| {
             let entries: Vec<_> = bindings
@@ -442,7 +469,14 @@ impl<'a> GpuVolumeRenderer<'a> {
                 entries: &entries,
             })
         };
-        let bind = group("dvr", &self.pipeline, &[0, 1, 2, 3, 4, 5, 6, 7, 10]);
+        let cinematic = opt.mode == DvrMode::Cinematic;
+        let (pipeline, bind) = if cinematic {
+            let p = &self.path_pipeline;
+            (p, group("path trace", p, &[0, 1, 2, 3, 4, 6, 11]))
+        } else {
+            let p = &self.pipeline;
+            (p, group("dvr", p, &[0, 1, 2, 3, 4, 5, 6, 7, 10]))
+        };
         let light_bind =
             shadows.then(|| group("light grid", &self.light_pipeline, &[0, 1, 2, 3, 5, 7]));
         let mut enc = ctx
@@ -471,7 +505,7 @@ impl<'a> GpuVolumeRenderer<'a> {
                     .as_ref()
                     .map(|t| t.writes((!shadows).then_some(0), Some(1))),
             });
-            pass.set_pipeline(&self.pipeline);
+            pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &bind, &[]);
             pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
         }

@@ -13,7 +13,9 @@ use indicatif::ProgressBar;
 use rayon::prelude::*;
 use raystream_accel::{Counters, KdTree, Traversal, brute};
 use raystream_cpu::ImageFormat;
-use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera, volume_camera_from};
+use raystream_cpu::dvr::{
+    DvrMode, DvrOptions, DvrStats, render_volume, volume_camera, volume_camera_from,
+};
 use raystream_io::TriMesh;
 use raystream_math::{Ray, Vec3};
 use raystream_scene::{Camera, Projection, VOLUME_VIEW};
@@ -481,8 +483,15 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
             }
             pb.finish_and_clear();
             let estimated = stats.is_none();
-            let stats = stats
-                .unwrap_or_else(|| crate::dvr::estimate_stats(&volume, &tf, &opt, (&cam0).into()));
+            // A GPU frame counts its samples; the CPU's estimate of what it skipped would path
+            // trace a frame (cinematic mode skips whole bricks, it does not count them).
+            let stats = stats.unwrap_or_else(|| {
+                if mode == DvrMode::Cinematic {
+                    DvrStats::default()
+                } else {
+                    crate::dvr::estimate_stats(&volume, &tf, &opt, (&cam0).into())
+                }
+            });
             let frame_min = frame_ms.iter().cloned().fold(f64::INFINITY, f64::min);
             let frame = median(&mut frame_ms);
             let kernel = (!kernel_ms.is_empty()).then(|| median(&mut kernel_ms));
@@ -492,6 +501,8 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                 "kind": "volume",
                 "mode": mode.name(),
                 "shadows": shadows,
+                "spp": (mode == DvrMode::Cinematic).then_some(opt.spp),
+                "bounces": (mode == DvrMode::Cinematic).then_some(opt.bounces),
                 "transfer_function": a.look.tf.as_ref().map(|p| p.display().to_string())
                     .unwrap_or_else(|| a.threshold.preset.map_or("ct-bone".into(), |p| p.name())),
                 "commit": commit,
@@ -516,7 +527,7 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                 "msamples_per_s_kernel": kernel.map(|k| round3(per_frame / k / 1e3)),
                 "skipped_fraction": round3(stats.skipped as f64 / (stats.samples + stats.skipped).max(1) as f64),
                 "shadow_samples_per_frame": stats.shadow_samples,
-                "counts_estimated_on_cpu": estimated,
+                "counts_estimated_on_cpu": estimated && mode != DvrMode::Cinematic,
             });
             if a.json {
                 print_line(v);
@@ -525,7 +536,12 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                     "{} {}{} on {} ({}), {}x{}x{} voxels, {}x{}, {} frames: {:.2} ms/frame = {:.1} frames/s{}; {:.0} M samples/s ({:.1} M samples/frame){}",
                     file_name(&a.input),
                     mode.name(),
-                    if shadows { " --shadows" } else { "" },
+                    match mode {
+                        _ if shadows => " --shadows".to_string(),
+                        DvrMode::Cinematic =>
+                            format!(" ({} paths a pixel, {} scatterings)", opt.spp, opt.bounces),
+                        _ => String::new(),
+                    },
                     backend.name(),
                     backend.adapter(),
                     volume.dims[0],

@@ -266,10 +266,11 @@ pub struct RenderArgs {
     /// Image size, WIDTHxHEIGHT.
     #[arg(long, default_value = "800x600", value_parser = parse_size)]
     pub size: (u32, u32),
-    /// Samples per pixel.
-    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=1024))]
-    pub spp: u32,
-    /// Deepest reflection/refraction level (0: primary rays only).
+    /// Samples per pixel (default 4; --mode cinematic: paths per pixel, default 64).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub spp: Option<u32>,
+    /// Deepest reflection/refraction level (0: primary rays only); --mode cinematic: the
+    /// scatterings a path may take.
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(0..=64))]
     pub max_depth: u32,
     #[command(flatten)]
@@ -278,7 +279,9 @@ pub struct RenderArgs {
     /// --preset ct-bone… or --tf FILE), mip, minip, average (--window/--level), iso (the first
     /// crossing of --iso HU), slice (the HU on the plane through --slice-at facing the camera,
     /// in parallel projection: axial with --view superior/inferior, coronal with anterior,
-    /// sagittal with left/right, oblique with --orbit).
+    /// sagittal with left/right, oblique with --orbit), cinematic (Monte Carlo path tracing
+    /// of the transfer function's medium under a key light and a sky: --spp paths a pixel,
+    /// --max-depth scatterings a path).
     #[arg(long, value_enum)]
     pub mode: Option<ModeArg>,
     #[command(flatten)]
@@ -667,6 +670,7 @@ pub enum ModeArg {
     Average,
     Iso,
     Slice,
+    Cinematic,
 }
 
 impl From<ModeArg> for raystream_cpu::dvr::DvrMode {
@@ -679,6 +683,7 @@ impl From<ModeArg> for raystream_cpu::dvr::DvrMode {
             ModeArg::Average => DvrMode::Average,
             ModeArg::Iso => DvrMode::Iso,
             ModeArg::Slice => DvrMode::Slice,
+            ModeArg::Cinematic => DvrMode::Cinematic,
         }
     }
 }

@@ -57,6 +57,18 @@ pub fn options(
         }
         (Some(WindowArg::Width(w)), Some(l)) => Some((w, l)),
     };
+    if mode == DvrMode::Cinematic {
+        if look.shadows {
+            bail!(
+                "--shadows: --mode cinematic always casts shadows (every scattering samples the key light through the volume)"
+            );
+        }
+        if look.step.is_some() || look.no_skip {
+            bail!(
+                "--step and --no-skip set dvr's sample lattice; --mode cinematic has none (its free flights are exact, brick by brick)"
+            );
+        }
+    }
     if look.shadows && mode != DvrMode::Dvr {
         bail!(
             "--shadows goes with --mode dvr (--mode {} has no lighting to shadow)",

@@ -32,6 +32,8 @@ use crate::iso::{Bones, read_volume};
 /// `assets/README.md` for source and license), whose bones `render` shows without an input.
 const DEFAULT_CT: &[u8] = include_bytes!("../assets/abdomen_pelvis_ct_totalseg.nii.gz");
 const DEFAULT_CT_NAME: &str = "<built-in abdomen_pelvis_ct_totalseg.nii.gz>";
+/// Samples per pixel of meshes and scenes when `--spp` is not given.
+const DEFAULT_SPP: u32 = 4;
 
 /// INPUT, or the built-in CT's name.
 fn input_name(a: &RenderArgs) -> std::path::PathBuf {
@@ -685,6 +687,15 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let labels = segmentation(a, format, &volume)?;
     let track = wall_track(a, &volume, curve.as_ref())?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
+    if mode == DvrMode::Cinematic {
+        opt.spp = a.spp.unwrap_or(opt.spp);
+        opt.bounces = a.max_depth;
+    } else if a.spp.is_some() {
+        bail!(
+            "--spp with --mode {}: one ray a pixel (--spp is for meshes, scenes and --mode cinematic)",
+            mode.name()
+        );
+    }
     // An EXR keeps what the projections found, in HU; the window is for display. So does a
     // DICOM picture, with the window as its VOI LUT, unless letters are drawn into it.
     let dicom_out = if frames {
@@ -789,7 +800,38 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     frame
         .picture
         .save(&a.output, &exr_comment(a, &opt, &volume, &seen), &dicom)?;
-    if !a.quiet {
+    if !a.quiet && mode == DvrMode::Cinematic {
+        let median = median_of(&mut frame_ms);
+        eprintln!(
+            "raystream: wrote {} ({}x{}, --mode cinematic, {} paths a pixel, up to {} scatterings{}) on {} ({}): load {:.0} ms, render {:.1} ms{}{}, {} samples, {:.1} M samples/s",
+            a.output.display(),
+            opt.width,
+            opt.height,
+            opt.spp,
+            opt.bounces,
+            if format == ImageFormat::Exr {
+                ", premultiplied float RGBA"
+            } else {
+                ""
+            },
+            backend.name(),
+            backend.adapter(),
+            load_ms,
+            median,
+            if a.repeat > 1 {
+                format!(", median of {}", a.repeat)
+            } else {
+                String::new()
+            },
+            if kernel_ms.is_empty() {
+                String::new()
+            } else {
+                format!(", kernel {:.2} ms", median_of(&mut kernel_ms))
+            },
+            frame.samples,
+            frame.samples as f64 / median / 1e3
+        );
+    } else if !a.quiet {
         let gpu = frame.stats.is_none();
         let stats = frame
             .stats
@@ -857,7 +899,7 @@ fn check_path(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             "--path {file} with --mode {}: give the slab's thickness about the curved plane with --slab MM (or --mode slice for the plane itself)",
             mode.name()
         ),
-        DvrMode::Dvr | DvrMode::Iso => bail!(
+        DvrMode::Dvr | DvrMode::Iso | DvrMode::Cinematic => bail!(
             "--path {file}: a curved reformation is --mode slice, or mip, minip, average with --slab (not --mode {})",
             mode.name()
         ),
@@ -1624,7 +1666,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     let opt = RenderOptions {
         width: a.size.0,
         height: a.size.1,
-        spp: a.spp,
+        spp: a.spp.unwrap_or(DEFAULT_SPP),
         max_depth: a.max_depth,
         traversal: a.accel.traversal.into(),
     };

@@ -1864,3 +1864,82 @@ fn render_draws_a_label_maps_segments() {
         "'--segment <LIST>' cannot be used with '--mode <MODE>'",
     );
 }
+
+/// `render --mode cinematic` (path-traced volume rendering) through the CLI: on each device a
+/// picture of bones over the background, the same PNG every run; the GPU's the CPU's but where
+/// paths part (the crate's tests hold the two together in detail); a turntable's first frame
+/// is the plain picture; the options it has no use for are refused.
+#[test]
+fn cinematic_rendering_through_the_cli() {
+    let args = [
+        "--mode",
+        "cinematic",
+        "--preset",
+        "ct-bones",
+        "--size",
+        "48x36",
+        "--spp",
+        "4",
+        "--max-depth",
+        "2",
+    ];
+    let mut pictures = Vec::new();
+    for dev in devices() {
+        let png = |n: u32| {
+            let out = render_to(&format!("cinematic-{dev}-{n}.png"), dev, &args);
+            image::open(out).unwrap().to_rgb8()
+        };
+        let first = png(1);
+        assert_eq!(first, png(2), "{dev}: the same picture every run");
+        // The default background (0.02, 0.025, 0.035) is about (39, 44, 53) in sRGB.
+        let bone = first
+            .pixels()
+            .filter(|p| {
+                p.0.iter()
+                    .zip([39u8, 44, 53])
+                    .any(|(&a, b)| a.abs_diff(b) > 20)
+            })
+            .count();
+        let n = first.pixels().len();
+        assert!(
+            bone * 20 > n && bone * 2 < n,
+            "{dev}: {bone} of {n} pixels show bone"
+        );
+        pictures.push(first);
+    }
+    if let [cpu, gpu] = &pictures[..] {
+        let diff: u64 = cpu
+            .as_raw()
+            .iter()
+            .zip(gpu.as_raw())
+            .map(|(&a, &b)| a.abs_diff(b) as u64)
+            .sum();
+        let mean = diff as f64 / cpu.as_raw().len() as f64;
+        assert!(mean < 1.5, "GPU vs CPU: mean |diff| {mean}/255");
+    }
+    let dir = tmp("cinematic-turntable");
+    let _ = std::fs::remove_dir_all(&dir);
+    render_to(
+        "cinematic-turntable",
+        "cpu",
+        &[&args[..], &["--turntable", "2"]].concat(),
+    );
+    assert_eq!(
+        image::open(dir.join("frame_000.png")).unwrap().to_rgb8(),
+        image::open(tmp("cinematic-cpu-1.png")).unwrap().to_rgb8()
+    );
+    fn render<'a>(more: &[&'a str]) -> Vec<&'a str> {
+        [&["render", "--mode", "cinematic"][..], more].concat()
+    }
+    refused(&render(&["--shadows"]), "always casts shadows");
+    refused(&render(&["--step", "0.5"]), "has none");
+    refused(&render(&["--no-skip"]), "has none");
+    refused(
+        &render(&["--path", &aorta(), "--size", "32x24"]),
+        "not --mode cinematic",
+    );
+    refused(
+        &["render", "--mode", "dvr", "--spp", "4", "--size", "32x24"],
+        "--spp with --mode dvr",
+    );
+}

@@ -1,0 +1,259 @@
+// Cinematic rendering (`--mode cinematic`): Monte Carlo path tracing of the CT volume as a
+// participating medium, as raystream-cpu's cinematic.rs (the reference), which says why each
+// step is what it is. One thread per pixel runs its `spp` paths; the random numbers are the
+// CPU's (the same PCG stream per pixel and sample), so both devices follow the same paths but
+// where the f16 texture's values tip a decision. Follows dvr.wgsl (store, Marched, clip_world)
+// and volume.wgsl (sample_at, gradient_at, opacity_at, color_at, clip_grid, to_index).
+
+// Per brick, the largest extinction (per mm) the transfer function gives over its HU range.
+@group(0) @binding(11) var<storage, read> brick_majorant: array<f32>;
+
+const ROULETTE_BELOW: f32 = 0.1;
+const INV_PI: f32 = 0.31830988618;
+const TAU: f32 = 6.28318530718;
+
+var<private> rng_state: u32;
+// Volume samples this thread took.
+var<private> path_taken: u32;
+
+// As the CPU's PathRng::new.
+fn rng_seed(pixel: u32, sample: u32) {
+    var x = (pixel * 0x9E3779B9u) ^ (sample * 0x85EBCA6Bu) ^ 0x2545F491u;
+    x ^= x >> 16u;
+    x *= 0x7FEB352Du;
+    x ^= x >> 15u;
+    x *= 0x846CA68Bu;
+    x ^= x >> 16u;
+    rng_state = x;
+}
+
+// As the CPU's PathRng::uniform: PCG's RXS-M-XS output of a 32-bit LCG, in [0, 1).
+fn rng_next() -> f32 {
+    rng_state = rng_state * 747796405u + 2891336453u;
+    let s = rng_state;
+    let word = ((s >> ((s >> 28u) + 4u)) ^ s) * 277803737u;
+    let x = (word >> 22u) ^ word;
+    return f32(x >> 8u) / 16777216.0;
+}
+
+fn sigma_of(alpha: f32) -> f32 {
+    return -log(1.0 - clamp(alpha, 0.0, ALPHA_MAX));
+}
+
+fn uniform_sphere() -> vec3<f32> {
+    let z = 1.0 - 2.0 * rng_next();
+    let r = sqrt(max(1.0 - z * z, 0.0));
+    let phi = TAU * rng_next();
+    return vec3<f32>(r * cos(phi), r * sin(phi), z);
+}
+
+fn cosine_hemisphere(n: vec3<f32>) -> vec3<f32> {
+    var sign = -1.0;
+    if n.z >= 0.0 {
+        sign = 1.0;
+    }
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    let t = vec3<f32>(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    let bt = vec3<f32>(b, sign + n.y * n.y * a, -n.y);
+    let u = rng_next();
+    let r = sqrt(u);
+    let phi = TAU * rng_next();
+    return normalize(t * (r * cos(phi)) + bt * (r * sin(phi)) + n * sqrt(max(1.0 - u, 0.0)));
+}
+
+// The part of the world ray o + t d inside the grid, the crop box and the clip planes,
+// restarted where it enters (as the CPU's inside): index origin and direction, length, entry.
+struct Inside {
+    o_idx: vec3<f32>,
+    len: f32,
+    d_idx: vec3<f32>,
+    t0: f32,
+    ok: bool,
+}
+
+fn inside(o: vec3<f32>, d: vec3<f32>) -> Inside {
+    let o_idx = to_index(o - dp.origin);
+    let d_idx = to_index(d);
+    var r = Inside(o_idx, 0.0, d_idx, 0.0, false);
+    let g = clip_grid(o_idx, d_idx);
+    if !(g.x <= g.y) {
+        return r;
+    }
+    let tt = clip_world(o, d, g);
+    if !(tt.x <= tt.y) {
+        return r;
+    }
+    r.o_idx = o_idx + d_idx * tt.x;
+    r.len = tt.y - tt.x;
+    r.t0 = tt.x;
+    r.ok = true;
+    return r;
+}
+
+// What a walk found: where it stopped (t, HU) if it did, and ratio tracking's transmittance.
+struct Tracked {
+    stopped: bool,
+    t: f32,
+    hu: f32,
+    tr: f32,
+}
+
+// The brick holding index p and where the ray leaves it, as the CPU's Marcher::brick_exit.
+fn brick_exit(p: vec3<f32>, t: f32, d_idx: vec3<f32>) -> vec2<f32> {
+    let b = min(vec3<u32>(max(p, vec3<f32>(0.0))) / BRICK, dp.bricks - 1u);
+    var t_exit = bitcast<f32>(0x7f800000u);
+    for (var a = 0u; a < 3u; a++) {
+        if d_idx[a] == 0.0 {
+            continue;
+        }
+        var bound = f32(b[a] * BRICK);
+        if d_idx[a] > 0.0 {
+            bound = f32((b[a] + 1u) * BRICK);
+        }
+        t_exit = min(t_exit, t + (bound - p[a]) / d_idx[a]);
+    }
+    return vec2<f32>(bitcast<f32>(b.x + dp.bricks.x * (b.y + dp.bricks.y * b.z)), t_exit);
+}
+
+// As the CPU's Marcher::track with free_flight's rule (ratio = false: stop at a real
+// collision) or transmittance_estimate's (ratio = true: ratio tracking with roulette).
+fn track(r: Inside, ratio_tracking: bool) -> Tracked {
+    var t = 0.0;
+    var tr = 1.0;
+    loop {
+        if !(t < r.len) {
+            break;
+        }
+        let be = brick_exit(r.o_idx + r.d_idx * t, t, r.d_idx);
+        let end = max(min(be.y, r.len), t + 1e-4);
+        let majorant = brick_majorant[bitcast<u32>(be.x)];
+        if majorant <= 0.0 {
+            t = end;
+            continue;
+        }
+        let tc = t - log(1.0 - rng_next()) / majorant;
+        if tc >= end {
+            t = end;
+            continue;
+        }
+        t = tc;
+        let hu = sample_at(r.o_idx + r.d_idx * t);
+        path_taken += 1u;
+        let ratio = min(sigma_of(opacity_at(hu)) / majorant, 1.0);
+        if ratio_tracking {
+            tr *= 1.0 - ratio;
+            if tr <= 0.0 {
+                return Tracked(true, t, hu, 0.0);
+            }
+            if tr < ROULETTE_BELOW {
+                if rng_next() < 0.5 {
+                    return Tracked(true, t, hu, 0.0);
+                }
+                tr *= 2.0;
+            }
+        } else if rng_next() < ratio {
+            return Tracked(true, t, hu, tr);
+        }
+    }
+    return Tracked(false, t, 0.0, tr);
+}
+
+struct PathSample {
+    light: vec3<f32>,
+    escaped: bool,
+}
+
+// One path, as the CPU's cinematic::path.
+fn trace_path(o_in: vec3<f32>, d_in: vec3<f32>, key: vec3<f32>) -> PathSample {
+    var o = o_in;
+    var d = d_in;
+    var throughput = vec3<f32>(1.0);
+    var light = vec3<f32>(0.0);
+    var depth = 0u;
+    loop {
+        let r = inside(o, d);
+        var hit = Tracked(false, 0.0, 0.0, 1.0);
+        if r.ok {
+            hit = track(r, false);
+        }
+        if !hit.stopped {
+            if depth > 0u {
+                light += throughput * SKY_RADIANCE;
+            }
+            return PathSample(light, depth == 0u);
+        }
+        let p_idx = r.o_idx + r.d_idx * hit.t;
+        let x = o + d * (r.t0 + hit.t);
+        let albedo = color_at(hit.hu);
+        let g = gradient_at(p_idx);
+        let gm = length(g);
+        let surface = rng_next() < min(gm / FULL_SHADING_GRADIENT, 1.0);
+        var n = vec3<f32>(0.0);
+        var f = 0.25 * INV_PI;
+        if surface {
+            n = -g / gm;
+            if dot(n, d) > 0.0 {
+                n = -n;
+            }
+            f = max(dot(n, key), 0.0) * INV_PI;
+        }
+        if f > 0.0 {
+            let s = inside(x, key);
+            var tr = 1.0;
+            if s.ok {
+                tr = track(s, true).tr;
+            }
+            light += throughput * albedo * (f * KEY_IRRADIANCE * tr);
+        }
+        throughput *= albedo;
+        if depth == dp.bounces {
+            return PathSample(light, false);
+        }
+        depth += 1u;
+        if surface {
+            d = cosine_hemisphere(n);
+        } else {
+            d = uniform_sphere();
+        }
+        o = x;
+    }
+    return PathSample(light, false);
+}
+
+@compute @workgroup_size(8, 8)
+fn path_trace_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= dp.width || gid.y >= dp.height {
+        return;
+    }
+    let pixel = gid.x + gid.y * dp.width;
+    let w = f32(dp.width);
+    let h = f32(dp.height);
+    path_taken = 0u;
+    var sum = vec3<f32>(0.0);
+    var escaped = 0u;
+    for (var s = 0u; s < dp.spp; s++) {
+        rng_seed(pixel, s);
+        let x = f32(gid.x) + rng_next();
+        let y = f32(gid.y) + rng_next();
+        // As raystream_scene::Camera::ray.
+        var o = dp.eye;
+        var d = dp.fwd;
+        if dp.parallel > 0.0 {
+            let sx = (x / w * 2.0 - 1.0) * (w / h);
+            let sy = 1.0 - y / h * 2.0;
+            o = dp.eye + (sx * dp.right + sy * dp.up) * dp.parallel;
+        } else {
+            let px = (x / w * 2.0 - 1.0) * dp.tan_y * (w / h);
+            let py = (1.0 - y / h * 2.0) * dp.tan_y;
+            d = normalize(dp.fwd + px * dp.right + py * dp.up);
+        }
+        let p = trace_path(o, d, dp.light);
+        sum += p.light;
+        if p.escaped {
+            escaped += 1u;
+        }
+    }
+    let n = f32(max(dp.spp, 1u));
+    store(pixel, Marched(sum / n, f32(escaped) / n, f32(path_taken)));
+}
