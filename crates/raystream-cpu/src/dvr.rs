@@ -229,9 +229,65 @@ pub struct Marcher<'a> {
     bricks: [usize; 3],
     /// Per brick: whether anything in it is visible (dvr mode) — empty-space skipping.
     visible: Vec<bool>,
-    /// Per brick: the largest extinction coefficient (per mm) the transfer function gives
-    /// over its HU range, the majorant of cinematic mode's tracking (empty without one).
-    majorant: Vec<f32>,
+}
+
+/// Cells of `cell`³ voxel spacings over the grid of `dims` voxel centres: cells per axis.
+pub(crate) fn cell_dims(dims: [usize; 3], cell: usize) -> [usize; 3] {
+    dims.map(|n| n.saturating_sub(1).div_ceil(cell).max(1))
+}
+
+/// Per cell of `cell`³ (x fastest; [`cell_dims`]), the HU range (lo, hi) of the voxels its
+/// trilinear samples read: its own and one more layer on the far sides.
+pub(crate) fn cell_ranges(vol: &Volume, cell: usize) -> Vec<(f32, f32)> {
+    let [nx, ny, nz] = vol.dims;
+    let cells = cell_dims(vol.dims, cell);
+    (0..cells[0] * cells[1] * cells[2])
+        .into_par_iter()
+        .map(|b| {
+            let (bx, by, bz) = (
+                b % cells[0],
+                b / cells[0] % cells[1],
+                b / (cells[0] * cells[1]),
+            );
+            let range = |bi: usize, n: usize| bi * cell..=((bi + 1) * cell).min(n - 1);
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for k in range(bz, nz) {
+                for j in range(by, ny) {
+                    for i in range(bx, nx) {
+                        let v = vol.at(i, j, k);
+                        lo = lo.min(v);
+                        hi = hi.max(v);
+                    }
+                }
+            }
+            (lo, hi)
+        })
+        .collect()
+}
+
+/// The cell of `cell`³ (of `cells` per axis) holding index `p`, and the ray parameter where
+/// the ray p + (s − t)·d_idx leaves it.
+pub(crate) fn cell_exit(
+    p: Vec3,
+    t: f32,
+    d_idx: Vec3,
+    cell: usize,
+    cells: [usize; 3],
+) -> (usize, f32) {
+    let b = [0, 1, 2].map(|a| ((p[a].max(0.0) as usize) / cell).min(cells[a] - 1));
+    let mut t_exit = f32::INFINITY;
+    for a in 0..3 {
+        if d_idx[a] == 0.0 {
+            continue;
+        }
+        let bound = if d_idx[a] > 0.0 {
+            (b[a] + 1) * cell
+        } else {
+            b[a] * cell
+        } as f32;
+        t_exit = t_exit.min(t + (bound - p[a]) / d_idx[a]);
+    }
+    (b[0] + cells[0] * (b[1] + cells[1] * b[2]), t_exit)
 }
 
 impl<'a> Marcher<'a> {
@@ -245,37 +301,14 @@ impl<'a> Marcher<'a> {
         let to_index = rows(inv.matrix3);
         // ∂f/∂world = (M⁻¹)ᵀ ∂f/∂index: the columns of (M⁻¹)ᵀ are the rows of M⁻¹.
         let grad_to_world = to_index;
-        let [nx, ny, nz] = vol.dims;
-        let bricks = [nx, ny, nz].map(|n| n.saturating_sub(1).div_ceil(BRICK).max(1));
-        let mut visible = vec![true; bricks[0] * bricks[1] * bricks[2]];
-        let mut majorant = vec![0.0; if tf.is_some() { visible.len() } else { 0 }];
-        if let Some(tf) = tf {
-            visible
-                .par_iter_mut()
-                .zip(&mut majorant)
-                .enumerate()
-                .for_each(|(b, (vis, maj))| {
-                    let (bx, by, bz) = (
-                        b % bricks[0],
-                        b / bricks[0] % bricks[1],
-                        b / (bricks[0] * bricks[1]),
-                    );
-                    let range = |bi: usize, n: usize| bi * BRICK..=((bi + 1) * BRICK).min(n - 1);
-                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-                    for k in range(bz, nz) {
-                        for j in range(by, ny) {
-                            for i in range(bx, nx) {
-                                let v = vol.at(i, j, k);
-                                lo = lo.min(v);
-                                hi = hi.max(v);
-                            }
-                        }
-                    }
-                    let alpha = tf.max_opacity_in(lo, hi);
-                    *vis = alpha > 0.0;
-                    *maj = crate::cinematic::sigma_of(alpha);
-                });
-        }
+        let bricks = cell_dims(vol.dims, BRICK);
+        let visible = match tf {
+            Some(tf) => cell_ranges(vol, BRICK)
+                .into_iter()
+                .map(|(lo, hi)| tf.max_opacity_in(lo, hi) > 0.0)
+                .collect(),
+            None => vec![true; bricks[0] * bricks[1] * bricks[2]],
+        };
         Marcher {
             vol,
             to_index,
@@ -283,14 +316,7 @@ impl<'a> Marcher<'a> {
             grad_to_world,
             bricks,
             visible,
-            majorant,
         }
-    }
-
-    /// Per brick (x fastest), the majorant extinction per mm of cinematic mode's tracking
-    /// (empty when the marcher was made without a transfer function).
-    pub fn majorants(&self) -> &[f32] {
-        &self.majorant
     }
 
     /// World (LPS mm) → continuous index as rows of the linear part, and the world origin:
@@ -494,24 +520,8 @@ impl<'a> Marcher<'a> {
     }
 
     /// The brick holding index `p`, and the ray parameter where the ray leaves it.
-    pub(crate) fn brick_exit(&self, p: Vec3, t: f32, d_idx: Vec3) -> (usize, f32) {
-        let b = [0, 1, 2].map(|a| ((p[a].max(0.0) as usize) / BRICK).min(self.bricks[a] - 1));
-        let mut t_exit = f32::INFINITY;
-        for a in 0..3 {
-            if d_idx[a] == 0.0 {
-                continue;
-            }
-            let bound = if d_idx[a] > 0.0 {
-                (b[a] + 1) * BRICK
-            } else {
-                b[a] * BRICK
-            } as f32;
-            t_exit = t_exit.min(t + (bound - p[a]) / d_idx[a]);
-        }
-        (
-            b[0] + self.bricks[0] * (b[1] + self.bricks[1] * b[2]),
-            t_exit,
-        )
+    fn brick_exit(&self, p: Vec3, t: f32, d_idx: Vec3) -> (usize, f32) {
+        cell_exit(p, t, d_idx, BRICK, self.bricks)
     }
 }
 
@@ -875,19 +885,24 @@ fn march_frame(
     };
     let marcher = Marcher::new(
         vol,
-        (opt.mode == DvrMode::Cinematic || (opt.skip_empty && opt.mode == DvrMode::Dvr))
-            .then_some(tf),
+        (opt.skip_empty && opt.mode == DvrMode::Dvr).then_some(tf),
     );
     if opt.mode == DvrMode::Cinematic {
         let Sight::Camera(cam) = sight else {
             panic!("cinematic rendering is seen by a camera, not a curved plane");
         };
         let lighting = crate::cinematic::Lighting::studio(cam);
+        let majorants = crate::cinematic::Majorants::new(vol, tf);
+        let tracker = crate::cinematic::Tracker {
+            m: &marcher,
+            tf,
+            majorants: &majorants,
+        };
         let rays: Vec<Marched> = (0..opt.width * opt.height)
             .into_par_iter()
             .map(|pixel| {
                 let (color, transmit, taken) =
-                    crate::cinematic::pixel(&marcher, tf, opt, cam, &lighting, pixel);
+                    crate::cinematic::pixel(&tracker, opt, cam, &lighting, pixel);
                 Marched {
                     color,
                     transmit,

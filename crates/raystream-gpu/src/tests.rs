@@ -1099,8 +1099,27 @@ fn dvr_wgsl_params_match_rust() {
     check_struct(&module, "CprRow", size_of::<GpuCprRow>(), &names);
 }
 
+/// The built-in abdomen CT.
+fn abdomen_ct() -> raystream_io::Volume {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
+    raystream_io::load_volume(&path, &Default::default()).unwrap()
+}
+
+/// `base` cropped to the pelvis's left half, its front cut off by a plane (LPS mm).
+fn pelvis_left_half(base: raystream_cpu::dvr::DvrOptions) -> raystream_cpu::dvr::DvrOptions {
+    raystream_cpu::dvr::DvrOptions {
+        crop: Some([
+            Vec3::new(-250.0, -400.0, -400.0),
+            Vec3::new(60.0, 400.0, 400.0),
+        ]),
+        clip_planes: [Some((Vec3::new(0.0, 1.0, 0.2).normalize(), -60.0)), None],
+        ..base
+    }
+}
+
 /// Cinematic rendering on the GPU against the CPU reference on the abdomen CT (ct-bones and
-/// ct-muscle, whole and cropped, 64×48, 16 paths a pixel). Both draw the same random numbers,
+/// ct-muscle, whole and cropped, 64×48, 32 paths a pixel). Both draw the same random numbers,
 /// so most paths are the same path; where the f16 texture's values tip a decision they part,
 /// and the pixel differs by that path's noise: the sample counts, the mean difference, the
 /// pixels within 2/255 and every 8×8 block's mean light agree. The same picture every run,
@@ -1110,25 +1129,16 @@ fn gpu_cinematic_rendering_matches_cpu() {
     use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera};
     use raystream_volume::TfPreset;
     let Some(ctx) = gpu() else { return };
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
-    let vol = raystream_io::load_volume(&path, &Default::default()).unwrap();
+    let vol = abdomen_ct();
     let plain = DvrOptions {
         width: 64,
         height: 48,
         mode: DvrMode::Cinematic,
-        spp: 16,
+        spp: 32,
         bounces: 3,
         ..Default::default()
     };
-    let cropped = DvrOptions {
-        crop: Some([
-            Vec3::new(-250.0, -400.0, -400.0),
-            Vec3::new(60.0, 400.0, 400.0),
-        ]),
-        clip_planes: [Some((Vec3::new(0.0, 1.0, 0.2).normalize(), -60.0)), None],
-        ..plain
-    };
+    let cropped = pelvis_left_half(plain);
     let cam = volume_camera(&vol, 64.0 / 48.0);
     for (preset, opt, what) in [
         (TfPreset::CtBones, plain, ""),
@@ -1179,9 +1189,9 @@ fn gpu_cinematic_rendering_matches_cpu() {
             lg / lc - 1.0,
             100.0 * close
         );
-        // Measured on lavapipe: samples within 0.3 %, the frame's light within 0.11 %, mean
-        // 0.04–0.36/255, 92–99 % within 2/255, blocks within 0.003. (An isotropic phase
-        // function 8 % too bright on the GPU put the light 0.5–1.1 % off.)
+        // Measured on lavapipe: samples within 0.2 %, the frame's light within 0.13 %, mean
+        // 0.04–0.29/255, 92–99 % within 2/255, blocks within 0.003. (An isotropic phase
+        // function 8 % too bright on the GPU put the light 0.5–1.2 % off.)
         assert!(
             (lg / lc - 1.0).abs() < 0.004,
             "{name}: light CPU {lc} GPU {lg}"
@@ -1215,23 +1225,13 @@ fn gpu_volume_rendering_matches_cpu() {
     use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera};
     use raystream_volume::TfPreset;
     let Some(ctx) = gpu() else { return };
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
-    let vol = raystream_io::load_volume(&path, &Default::default()).unwrap();
+    let vol = abdomen_ct();
     let plain = DvrOptions {
         width: 64,
         height: 48,
         ..Default::default()
     };
-    // Crop to the pelvis's left half and cut off the front with a plane (LPS mm).
-    let clipped = DvrOptions {
-        crop: Some([
-            Vec3::new(-250.0, -400.0, -400.0),
-            Vec3::new(60.0, 400.0, 400.0),
-        ]),
-        clip_planes: [Some((Vec3::new(0.0, 1.0, 0.2).normalize(), -60.0)), None],
-        ..plain
-    };
+    let clipped = pelvis_left_half(plain);
     for (mode, preset, base, what) in [
         (DvrMode::Dvr, TfPreset::CtBones, plain, ""),
         (DvrMode::Dvr, TfPreset::CtMuscle, plain, ""),

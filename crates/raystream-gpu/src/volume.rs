@@ -7,7 +7,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use raystream_cpu::Image;
-use raystream_cpu::cinematic::{ALPHA_MAX, KEY_IRRADIANCE, SKY_RADIANCE};
+use raystream_cpu::cinematic::{ALPHA_MAX, KEY_IRRADIANCE, MAJORANT_CELL, Majorants, SKY_RADIANCE};
 use raystream_cpu::dvr::{
     BRICK, DvrMode, DvrOptions, LightGrid, Marcher, Sight, key_light, scene_to_lps,
 };
@@ -28,7 +28,7 @@ const CINEMATIC_WGSL: &str = include_str!("kernels/cinematic.wgsl");
 /// volume stages share, with its constants (cinematic mode's from `raystream_cpu::cinematic`).
 pub(crate) fn volume_core_wgsl() -> String {
     format!(
-        "const BRICK_SIZE: u32 = {BRICK}u;\nconst ALPHA_MAX: f32 = {ALPHA_MAX:?};\nconst KEY_IRRADIANCE: f32 = {KEY_IRRADIANCE:?};\nconst SKY_RADIANCE: f32 = {SKY_RADIANCE:?};\n\n{VOLUME_WGSL}"
+        "const BRICK_SIZE: u32 = {BRICK}u;\nconst MAJORANT_CELL: u32 = {MAJORANT_CELL}u;\nconst ALPHA_MAX: f32 = {ALPHA_MAX:?};\nconst KEY_IRRADIANCE: f32 = {KEY_IRRADIANCE:?};\nconst SKY_RADIANCE: f32 = {SKY_RADIANCE:?};\n\n{VOLUME_WGSL}"
     )
 }
 
@@ -49,8 +49,6 @@ pub(crate) struct GpuVolume {
     pub opacity: wgpu::Buffer,
     pub color: wgpu::Buffer,
     pub bricks: wgpu::Buffer,
-    /// Per brick, the majorant extinction of cinematic mode's tracking.
-    pub majorants: wgpu::Buffer,
     pub brick_dims: [u32; 3],
     /// World → continuous index (rows and origin), from the marcher.
     pub to_index: ([Vec3; 3], Vec3),
@@ -116,18 +114,12 @@ impl GpuVolume {
         let none = wgpu::BufferUsages::empty();
         let (brick_dims, visible) = marcher.brick_table();
         let visible: Vec<u32> = visible.iter().map(|&v| v as u32).collect();
-        // A marcher made without a transfer function has no majorants: one placeholder.
-        let majorants = match marcher.majorants() {
-            [] => &[0.0f32][..],
-            m => m,
-        };
         Ok(GpuVolume {
             view: texture.create_view(&Default::default()),
             sampler,
             opacity: ctx.storage("opacity points", bytemuck::cast_slice(&opacity), none)?,
             color: ctx.storage("color points", bytemuck::cast_slice(&color), none)?,
             bricks: ctx.storage("brick table", bytemuck::cast_slice(&visible), none)?,
-            majorants: ctx.storage("brick majorants", bytemuck::cast_slice(majorants), none)?,
             brick_dims: brick_dims.map(|b| b as u32),
             to_index: marcher.world_to_index(),
         })
@@ -150,8 +142,10 @@ pub struct GpuVolumeRenderer<'a> {
     tf: &'a TransferFunction,
     gpu: GpuVolume,
     pipeline: wgpu::ComputePipeline,
-    /// `--mode cinematic`: the path tracer's kernel.
+    /// `--mode cinematic`: the path tracer's kernel, and its majorant grid (made by the first
+    /// cinematic frame).
     path_pipeline: wgpu::ComputePipeline,
+    majorants: std::sync::OnceLock<wgpu::Buffer>,
     /// `--shadows`: the light grid's kernel and values.
     light_pipeline: wgpu::ComputePipeline,
     /// Float pixels → 8-bit sRGB and the summed sample count, for [`Self::render_srgb8`].
@@ -229,6 +223,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             gpu,
             pipeline,
             path_pipeline,
+            majorants: std::sync::OnceLock::new(),
             light_pipeline,
             pack_pipeline,
             light_values,
@@ -441,6 +436,23 @@ impl<'a> GpuVolumeRenderer<'a> {
         let shadows = params.shadows != 0;
         // Bindings by number; the light grid's kernel uses no colour points (4) and no pixels
         // (6), and each pipeline's layout holds exactly the bindings its entry point uses.
+        let cinematic = opt.mode == DvrMode::Cinematic;
+        let majorants = if cinematic {
+            Some(match self.majorants.get() {
+                Some(b) => b,
+                None => {
+                    let m = Majorants::new(self.vol, self.tf);
+                    let b = ctx.storage(
+                        "majorants",
+                        bytemuck::cast_slice(&m.values),
+                        wgpu::BufferUsages::empty(),
+                    )?;
+                    self.majorants.get_or_init(|| b)
+                }
+            })
+        } else {
+            None
+        };
         let resource = |b: u32| match b {
             0 => param_buf.as_entire_binding(),
             1 => wgpu::BindingResource::TextureView(&self.gpu.view),
@@ -453,7 +465,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             8 => packed.as_entire_binding(),
             9 => sum.as_entire_binding(),
             10 => row_buf.as_entire_binding(),
-            _ => self.gpu.majorants.as_entire_binding(),
+            _ => majorants.expect("a cinematic frame").as_entire_binding(),
         };
         let group = |label, pipeline: &wgpu::ComputePipeline, bindings: &[u32]| {
             let entries: Vec<_> = bindings
@@ -469,7 +481,6 @@ impl<'a> GpuVolumeRenderer<'a> {
                 entries: &entries,
             })
         };
-        let cinematic = opt.mode == DvrMode::Cinematic;
         let (pipeline, bind) = if cinematic {
             let p = &self.path_pipeline;
             (p, group("path trace", p, &[0, 1, 2, 3, 4, 6, 11]))

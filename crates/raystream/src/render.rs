@@ -800,89 +800,84 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     frame
         .picture
         .save(&a.output, &exr_comment(a, &opt, &volume, &seen), &dicom)?;
-    if !a.quiet && mode == DvrMode::Cinematic {
+    if !a.quiet {
         let median = median_of(&mut frame_ms);
+        let format_words = match format {
+            _ if opt.hu_values && dicom_out => ", HU values with the window as VOI LUT",
+            ImageFormat::Exr if mode.is_windowed() => ", HU values, no window",
+            ImageFormat::Exr => ", premultiplied float RGBA",
+            ImageFormat::Png => "",
+        };
+        // What was rendered, and what the samples were beyond their count.
+        let (what, counts) = if mode == DvrMode::Cinematic {
+            let what = format!(
+                ", {} paths a pixel, up to {} scatterings{format_words}",
+                opt.spp, opt.bounces
+            );
+            (what, String::new())
+        } else {
+            let gpu = frame.stats.is_none();
+            let stats = frame
+                .stats
+                .unwrap_or_else(|| dvr::estimate_stats(&volume, &tf, &opt, seen.sight()));
+            let what = format!(
+                "{}{format_words}{slab}, step {:.3} mm",
+                if opt.shadows { " --shadows" } else { "" },
+                stats.step_mm
+            );
+            let counts = format!(
+                ", {} skipped as empty ({:.0} %{}){}",
+                stats.skipped,
+                100.0 * stats.skipped as f64 / (stats.samples + stats.skipped).max(1) as f64,
+                if gpu { ", estimated on the CPU" } else { "" },
+                if opt.shadows {
+                    format!(
+                        ", {} shadow-ray samples{}",
+                        stats.shadow_samples,
+                        if gpu { " (estimated on the CPU)" } else { "" }
+                    )
+                } else {
+                    String::new()
+                }
+            );
+            (what, counts)
+        };
         eprintln!(
-            "raystream: wrote {} ({}x{}, --mode cinematic, {} paths a pixel, up to {} scatterings{}) on {} ({}): load {:.0} ms, render {:.1} ms{}{}, {} samples, {:.1} M samples/s",
-            a.output.display(),
-            opt.width,
-            opt.height,
-            opt.spp,
-            opt.bounces,
-            if format == ImageFormat::Exr {
-                ", premultiplied float RGBA"
-            } else {
-                ""
-            },
-            backend.name(),
-            backend.adapter(),
-            load_ms,
-            median,
-            if a.repeat > 1 {
-                format!(", median of {}", a.repeat)
-            } else {
-                String::new()
-            },
-            if kernel_ms.is_empty() {
-                String::new()
-            } else {
-                format!(", kernel {:.2} ms", median_of(&mut kernel_ms))
-            },
-            frame.samples,
-            frame.samples as f64 / median / 1e3
-        );
-    } else if !a.quiet {
-        let gpu = frame.stats.is_none();
-        let stats = frame
-            .stats
-            .unwrap_or_else(|| dvr::estimate_stats(&volume, &tf, &opt, seen.sight()));
-        let median = median_of(&mut frame_ms);
-        eprintln!(
-            "raystream: wrote {} ({}x{}, --mode {}{}{}{slab}, step {:.3} mm) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples, {} skipped as empty ({:.0} %{}){}, {:.1} M samples/s",
+            "raystream: wrote {} ({}x{}, --mode {}{what}) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples{counts}, {:.1} M samples/s",
             a.output.display(),
             opt.width,
             opt.height,
             mode.name(),
-            if opt.shadows { " --shadows" } else { "" },
-            match format {
-                _ if opt.hu_values && dicom_out => ", HU values with the window as VOI LUT",
-                ImageFormat::Exr if mode.is_windowed() => ", HU values, no window",
-                ImageFormat::Exr => ", premultiplied float RGBA",
-                ImageFormat::Png => "",
-            },
-            stats.step_mm,
             backend.name(),
             backend.adapter(),
             load_ms,
             median,
             1e3 / median,
-            if a.repeat > 1 {
-                format!(", median of {}", a.repeat)
-            } else {
-                String::new()
-            },
-            if kernel_ms.is_empty() {
-                String::new()
-            } else {
-                format!(", kernel {:.2} ms", median_of(&mut kernel_ms))
-            },
+            median_words(a.repeat),
+            kernel_words(&mut kernel_ms),
             frame.samples,
-            stats.skipped,
-            100.0 * stats.skipped as f64 / (stats.samples + stats.skipped).max(1) as f64,
-            if gpu { ", estimated on the CPU" } else { "" },
-            if opt.shadows {
-                format!(
-                    ", {} shadow-ray samples{}",
-                    stats.shadow_samples,
-                    if gpu { " (estimated on the CPU)" } else { "" }
-                )
-            } else {
-                String::new()
-            },
             frame.samples as f64 / median / 1e3
         );
     }
     Ok(())
+}
+
+/// ", median of N" after a time of N > 1 repeats.
+fn median_words(repeat: u32) -> String {
+    if repeat > 1 {
+        format!(", median of {repeat}")
+    } else {
+        String::new()
+    }
+}
+
+/// ", kernel X ms", the median of the GPU kernel's times, if it has any.
+fn kernel_words(kernel_ms: &mut [f64]) -> String {
+    if kernel_ms.is_empty() {
+        String::new()
+    } else {
+        format!(", kernel {:.2} ms", median_of(kernel_ms))
+    }
 }
 
 /// `--path`: a curved reformation samples the curved plane (`--mode slice`) or projects a slab

@@ -2,11 +2,13 @@
 // participating medium, as raystream-cpu's cinematic.rs (the reference), which says why each
 // step is what it is. One thread per pixel runs its `spp` paths; the random numbers are the
 // CPU's (the same PCG stream per pixel and sample), so both devices follow the same paths but
-// where the f16 texture's values tip a decision. Follows dvr.wgsl (store, Marched, clip_world)
-// and volume.wgsl (sample_at, gradient_at, opacity_at, color_at, clip_grid, to_index).
+// where the f16 texture's values tip a decision. Follows dvr.wgsl (store, Marched, clip_world,
+// camera_ray) and volume.wgsl (sample_at, gradient_at, opacity_at, color_at, clip_grid,
+// to_index).
 
-// Per brick, the largest extinction (per mm) the transfer function gives over its HU range.
-@group(0) @binding(11) var<storage, read> brick_majorant: array<f32>;
+// Per cell of MAJORANT_CELL³ (x fastest), the largest extinction (per mm) the transfer function
+// gives over its HU range (raystream_cpu::cinematic::Majorants).
+@group(0) @binding(11) var<storage, read> majorants: array<f32>;
 
 const ROULETTE_BELOW: f32 = 0.1;
 const INV_PI: f32 = 0.31830988618;
@@ -99,21 +101,23 @@ struct Tracked {
     tr: f32,
 }
 
-// The brick holding index p and where the ray leaves it, as the CPU's Marcher::brick_exit.
-fn brick_exit(p: vec3<f32>, t: f32, d_idx: vec3<f32>) -> vec2<f32> {
-    let b = min(vec3<u32>(max(p, vec3<f32>(0.0))) / BRICK, dp.bricks - 1u);
+// The majorant cell holding index p (its index's bits) and where the ray leaves it, as the
+// CPU's Majorants::exit; the cells per axis as raystream_cpu::dvr::cell_dims.
+fn cell_exit(p: vec3<f32>, t: f32, d_idx: vec3<f32>) -> vec2<f32> {
+    let cells = max((dp.dims - 1u + MAJORANT_CELL - 1u) / MAJORANT_CELL, vec3<u32>(1u));
+    let b = min(vec3<u32>(max(p, vec3<f32>(0.0))) / MAJORANT_CELL, cells - 1u);
     var t_exit = bitcast<f32>(0x7f800000u);
     for (var a = 0u; a < 3u; a++) {
         if d_idx[a] == 0.0 {
             continue;
         }
-        var bound = f32(b[a] * BRICK);
+        var bound = f32(b[a] * MAJORANT_CELL);
         if d_idx[a] > 0.0 {
-            bound = f32((b[a] + 1u) * BRICK);
+            bound = f32((b[a] + 1u) * MAJORANT_CELL);
         }
         t_exit = min(t_exit, t + (bound - p[a]) / d_idx[a]);
     }
-    return vec2<f32>(bitcast<f32>(b.x + dp.bricks.x * (b.y + dp.bricks.y * b.z)), t_exit);
+    return vec2<f32>(bitcast<f32>(b.x + cells.x * (b.y + cells.y * b.z)), t_exit);
 }
 
 // As the CPU's Marcher::track with free_flight's rule (ratio = false: stop at a real
@@ -125,9 +129,9 @@ fn track(r: Inside, ratio_tracking: bool) -> Tracked {
         if !(t < r.len) {
             break;
         }
-        let be = brick_exit(r.o_idx + r.d_idx * t, t, r.d_idx);
-        let end = max(min(be.y, r.len), t + 1e-4);
-        let majorant = brick_majorant[bitcast<u32>(be.x)];
+        let ce = cell_exit(r.o_idx + r.d_idx * t, t, r.d_idx);
+        let end = max(min(ce.y, r.len), t + 1e-4);
+        let majorant = majorants[bitcast<u32>(ce.x)];
         if majorant <= 0.0 {
             t = end;
             continue;
@@ -227,8 +231,6 @@ fn path_trace_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let pixel = gid.x + gid.y * dp.width;
-    let w = f32(dp.width);
-    let h = f32(dp.height);
     path_taken = 0u;
     var sum = vec3<f32>(0.0);
     var escaped = 0u;
@@ -236,19 +238,8 @@ fn path_trace_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
         rng_seed(pixel, s);
         let x = f32(gid.x) + rng_next();
         let y = f32(gid.y) + rng_next();
-        // As raystream_scene::Camera::ray.
-        var o = dp.eye;
-        var d = dp.fwd;
-        if dp.parallel > 0.0 {
-            let sx = (x / w * 2.0 - 1.0) * (w / h);
-            let sy = 1.0 - y / h * 2.0;
-            o = dp.eye + (sx * dp.right + sy * dp.up) * dp.parallel;
-        } else {
-            let px = (x / w * 2.0 - 1.0) * dp.tan_y * (w / h);
-            let py = (1.0 - y / h * 2.0) * dp.tan_y;
-            d = normalize(dp.fwd + px * dp.right + py * dp.up);
-        }
-        let p = trace_path(o, d, dp.light);
+        let r = camera_ray(x, y);
+        let p = trace_path(r.o, r.d, dp.light);
         sum += p.light;
         if p.escaped {
             escaped += 1u;

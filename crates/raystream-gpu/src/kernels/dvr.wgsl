@@ -307,7 +307,6 @@ fn render_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let pixel = gid.x + gid.y * dp.width;
     let w = f32(dp.width);
-    let h = f32(dp.height);
     let jit = jitter(pixel, 0u, 7u);
     // No bound: the largest f32 (the compiler may assume arithmetic finite).
     let unbounded = 3.4028235e38;
@@ -319,18 +318,27 @@ fn render_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
         store(pixel, march(p - dp.slab_half * r.normal, r.normal, jit, p, r.normal, 2.0 * dp.slab_half));
         return;
     }
-    // As raystream_scene::Camera::ray.
+    let r = camera_ray(f32(gid.x) + 0.5, f32(gid.y) + 0.5);
+    store(pixel, march(r.o, r.d, jit, dp.slice_at, dp.fwd, unbounded));
+}
+
+struct CameraRay {
+    o: vec3<f32>,
+    d: vec3<f32>,
+}
+
+// The camera's ray through image point (x, y) (pixels), as raystream_scene::Camera::ray.
+fn camera_ray(x: f32, y: f32) -> CameraRay {
+    let w = f32(dp.width);
+    let h = f32(dp.height);
     if dp.parallel > 0.0 {
-        let sx = ((f32(gid.x) + 0.5) / w * 2.0 - 1.0) * (w / h);
-        let sy = 1.0 - (f32(gid.y) + 0.5) / h * 2.0;
-        let o = dp.eye + (sx * dp.right + sy * dp.up) * dp.parallel;
-        store(pixel, march(o, dp.fwd, jit, dp.slice_at, dp.fwd, unbounded));
-        return;
+        let sx = (x / w * 2.0 - 1.0) * (w / h);
+        let sy = 1.0 - y / h * 2.0;
+        return CameraRay(dp.eye + (sx * dp.right + sy * dp.up) * dp.parallel, dp.fwd);
     }
-    let px = ((f32(gid.x) + 0.5) / w * 2.0 - 1.0) * dp.tan_y * (w / h);
-    let py = (1.0 - (f32(gid.y) + 0.5) / h * 2.0) * dp.tan_y;
-    let d = normalize(dp.fwd + px * dp.right + py * dp.up);
-    store(pixel, march(dp.eye, d, jit, dp.slice_at, dp.fwd, unbounded));
+    let px = (x / w * 2.0 - 1.0) * dp.tan_y * (w / h);
+    let py = (1.0 - y / h * 2.0) * dp.tan_y;
+    return CameraRay(dp.eye, normalize(dp.fwd + px * dp.right + py * dp.up));
 }
 
 // A pixel over the background (opaque pixels keep their value, as the CPU's Marched::over),
