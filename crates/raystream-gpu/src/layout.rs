@@ -339,8 +339,11 @@ pub struct DvrParams {
     pub spp: u32,
     /// cinematic: scatterings a path may take (byte 324).
     pub bounces: u32,
-    /// Padding to 336 bytes (byte 328).
-    pub pad: [u32; 2],
+    /// cinematic: the first of the paths this dispatch traces, and how many (bytes 328,
+    /// 332): a frame's paths run in dispatches of at most
+    /// `GpuVolumeRenderer::paths_per_dispatch`.
+    pub sample_first: u32,
+    pub sample_count: u32,
 }
 
 /// `CprRow` in dvr.wgsl, 48 bytes: one image row of a curved planar reformation

@@ -1084,7 +1084,8 @@ fn dvr_wgsl_params_match_rust() {
         ("slab_half", offset_of!(DvrParams, slab_half)),
         ("spp", offset_of!(DvrParams, spp)),
         ("bounces", offset_of!(DvrParams, bounces)),
-        ("pad", offset_of!(DvrParams, pad)),
+        ("sample_first", offset_of!(DvrParams, sample_first)),
+        ("sample_count", offset_of!(DvrParams, sample_count)),
     ];
     check_struct(&module, "DvrParams", size_of::<DvrParams>(), &names);
     use layout::GpuCprRow;
@@ -1122,8 +1123,9 @@ fn pelvis_left_half(base: raystream_cpu::dvr::DvrOptions) -> raystream_cpu::dvr:
 /// ct-muscle, whole and cropped, 64×48, 32 paths a pixel). Both draw the same random numbers,
 /// so most paths are the same path; where the f16 texture's values tip a decision they part,
 /// and the pixel differs by that path's noise: the sample counts, the mean difference, the
-/// pixels within 2/255 and every 8×8 block's mean light agree. The same picture every run,
-/// and the premultiplied film over the background is the frame.
+/// pixels within 2/255 and every 8×8 block's mean light agree. The same picture every run and
+/// in dispatches of a few paths each, and the premultiplied film over the background is the
+/// frame.
 #[test]
 fn gpu_cinematic_rendering_matches_cpu() {
     use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera};
@@ -1155,6 +1157,13 @@ fn gpu_cinematic_rendering_matches_cpu() {
             img.pixels, again.pixels,
             "{name}: the same picture every run"
         );
+        // In dispatches of 5 paths a pixel (5, 5, …, 2), summed across them: the same
+        // picture bit for bit.
+        let mut split = GpuVolumeRenderer::new(&ctx, &vol, &tf).unwrap();
+        split.paths_per_dispatch = 5 * 64 * 48;
+        let (parts, parts_times) = split.render(&opt, &cam).unwrap();
+        assert_eq!(parts.pixels, img.pixels, "{name}: in dispatches of 5 paths");
+        assert_eq!(parts_times.samples, times.samples, "{name}");
         let (a, b) = (stats.samples as f64, times.samples as f64);
         let (mean, worst) = cpu.srgb8_diff(&img);
         let close = worst.iter().filter(|&&d| d <= 2).count() as f64 / worst.len() as f64;

@@ -126,6 +126,11 @@ impl GpuVolume {
     }
 }
 
+/// cinematic: paths a dispatch by default (1024² pixels, one path each): on lavapipe a 64×48
+/// test frame is one dispatch; on a GPU a dispatch of 2²⁰ paths takes milliseconds to tens
+/// of milliseconds.
+pub const PATHS_PER_DISPATCH: u64 = 1 << 20;
+
 /// What a frame reads back: 8-bit sRGB packed on the GPU, the float frame over the
 /// background, or the float frame premultiplied (no background) with each pixel's opacity.
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -146,6 +151,12 @@ pub struct GpuVolumeRenderer<'a> {
     /// cinematic frame).
     path_pipeline: wgpu::ComputePipeline,
     majorants: std::sync::OnceLock<wgpu::Buffer>,
+    /// cinematic: a frame's running sums between its dispatches.
+    accum: Mutex<Option<wgpu::Buffer>>,
+    /// cinematic: at most this many paths a dispatch (a frame's samples are split into
+    /// dispatches of whole samples of every pixel), so that no kernel runs long enough for a
+    /// display driver's watchdog (Windows' TDR: 2 s); the picture is the same bit for bit.
+    pub paths_per_dispatch: u64,
     /// `--shadows`: the light grid's kernel and values.
     light_pipeline: wgpu::ComputePipeline,
     /// Float pixels → 8-bit sRGB and the summed sample count, for [`Self::render_srgb8`].
@@ -224,6 +235,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             pipeline,
             path_pipeline,
             majorants: std::sync::OnceLock::new(),
+            accum: Mutex::new(None),
+            paths_per_dispatch: PATHS_PER_DISPATCH,
             light_pipeline,
             pack_pipeline,
             light_values,
@@ -378,7 +391,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             },
             spp: opt.spp,
             bounces: opt.bounces,
-            pad: [0; 2],
+            sample_first: 0,
+            sample_count: opt.spp,
         };
         let row_buf = row_buf.as_ref().unwrap_or(&self.no_rows);
         let param_buf = ctx
@@ -453,6 +467,42 @@ impl<'a> GpuVolumeRenderer<'a> {
         } else {
             None
         };
+        // cinematic: the dispatches' samples, [first, first + count) each, their parameters,
+        // and the running sums between them.
+        let batches: Vec<(u32, u32)> = if cinematic {
+            let per = self
+                .paths_per_dispatch
+                .div_ceil(n.max(1))
+                .clamp(1, opt.spp.max(1) as u64) as u32;
+            (0..opt.spp)
+                .step_by(per as usize)
+                .map(|f| (f, per.min(opt.spp - f)))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let batch_params: Vec<wgpu::Buffer> = batches
+            .iter()
+            .map(|&(sample_first, sample_count)| {
+                let p = DvrParams {
+                    sample_first,
+                    sample_count,
+                    ..params
+                };
+                ctx.device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("cinematic dispatch params"),
+                        contents: bytemuck::bytes_of(&p),
+                        usage: wgpu::BufferUsages::UNIFORM,
+                    })
+            })
+            .collect();
+        let mut accum = self.accum.lock().unwrap();
+        if batches.len() > 1 && accum.as_ref().is_none_or(|a| a.size() < 32 * n) {
+            *accum = Some(ctx.work_buffer("running sums", 32 * n, wgpu::BufferUsages::empty())?);
+        }
+        // A frame of one dispatch binds a placeholder.
+        let accum = accum.as_ref().unwrap_or(&self.no_rows);
         let resource = |b: u32| match b {
             0 => param_buf.as_entire_binding(),
             1 => wgpu::BindingResource::TextureView(&self.gpu.view),
@@ -465,7 +515,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             8 => packed.as_entire_binding(),
             9 => sum.as_entire_binding(),
             10 => row_buf.as_entire_binding(),
-            _ => majorants.expect("a cinematic frame").as_entire_binding(),
+            11 => majorants.expect("a cinematic frame").as_entire_binding(),
+            _ => accum.as_entire_binding(),
         };
         let group = |label, pipeline: &wgpu::ComputePipeline, bindings: &[u32]| {
             let entries: Vec<_> = bindings
@@ -481,12 +532,34 @@ impl<'a> GpuVolumeRenderer<'a> {
                 entries: &entries,
             })
         };
-        let (pipeline, bind) = if cinematic {
+        // One bind group a dispatch: the volume kernel's, or the path tracer's with its
+        // dispatch's parameters in binding 0.
+        let (pipeline, binds) = if cinematic {
             let p = &self.path_pipeline;
-            (p, group("path trace", p, &[0, 1, 2, 3, 4, 6, 11]))
+            let binds = batch_params
+                .iter()
+                .map(|params| {
+                    let entries: Vec<_> = [0, 1, 2, 3, 4, 6, 11, 12]
+                        .into_iter()
+                        .map(|binding| wgpu::BindGroupEntry {
+                            binding,
+                            resource: match binding {
+                                0 => params.as_entire_binding(),
+                                b => resource(b),
+                            },
+                        })
+                        .collect();
+                    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some("path trace"),
+                        layout: &p.get_bind_group_layout(0),
+                        entries: &entries,
+                    })
+                })
+                .collect();
+            (p, binds)
         } else {
             let p = &self.pipeline;
-            (p, group("dvr", p, &[0, 1, 2, 3, 4, 5, 6, 7, 10]))
+            (p, vec![group("dvr", p, &[0, 1, 2, 3, 4, 5, 6, 7, 10])])
         };
         let light_bind =
             shadows.then(|| group("light grid", &self.light_pipeline, &[0, 1, 2, 3, 5, 7]));
@@ -507,17 +580,20 @@ impl<'a> GpuVolumeRenderer<'a> {
             let gx = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
             pass.dispatch_workgroups(gx, groups.div_ceil(gx), 1);
         }
-        {
+        for (i, bind) in binds.iter().enumerate() {
+            let (first, last) = (i == 0, i + 1 == binds.len());
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("render_volume"),
                 // With shadows the light grid's pass wrote the first stamp: the kernel time
-                // covers both.
+                // covers both; the path tracer's dispatches are timed from the first to the
+                // last.
                 timestamp_writes: timer
                     .as_ref()
-                    .map(|t| t.writes((!shadows).then_some(0), Some(1))),
+                    .filter(|_| first || last)
+                    .map(|t| t.writes((first && !shadows).then_some(0), last.then_some(1))),
             });
             pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, &bind, &[]);
+            pass.set_bind_group(0, bind, &[]);
             pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
         }
         if srgb8 {

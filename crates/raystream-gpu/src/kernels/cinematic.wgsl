@@ -10,6 +10,10 @@
 // gives over its HU range (raystream_cpu::cinematic::Majorants).
 @group(0) @binding(11) var<storage, read> majorants: array<f32>;
 
+// A frame drawn in several dispatches keeps its running sums here: per pixel (light, escaped
+// camera rays), then (samples taken as u32 bits, 0, 0, 0).
+@group(0) @binding(12) var<storage, read_write> accum: array<vec4<f32>>;
+
 const ROULETTE_BELOW: f32 = 0.1;
 const INV_PI: f32 = 0.31830988618;
 const TAU: f32 = 6.28318530718;
@@ -231,10 +235,19 @@ fn path_trace_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let pixel = gid.x + gid.y * dp.width;
-    path_taken = 0u;
+    let n = dp.width * dp.height;
+    // The sums so far, added to in the CPU's order (the same f32 sums).
     var sum = vec3<f32>(0.0);
-    var escaped = 0u;
-    for (var s = 0u; s < dp.spp; s++) {
+    var escaped = 0.0;
+    path_taken = 0u;
+    if dp.sample_first > 0u {
+        let a = accum[pixel];
+        sum = a.xyz;
+        escaped = a.w;
+        path_taken = bitcast<u32>(accum[n + pixel].x);
+    }
+    let end = dp.sample_first + dp.sample_count;
+    for (var s = dp.sample_first; s < end; s++) {
         rng_seed(pixel, s);
         let x = f32(gid.x) + rng_next();
         let y = f32(gid.y) + rng_next();
@@ -242,9 +255,14 @@ fn path_trace_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
         let p = trace_path(r.o, r.d, dp.light);
         sum += p.light;
         if p.escaped {
-            escaped += 1u;
+            escaped += 1.0;
         }
     }
-    let n = f32(max(dp.spp, 1u));
-    store(pixel, Marched(sum / n, f32(escaped) / n, f32(path_taken)));
+    if end < dp.spp {
+        accum[pixel] = vec4<f32>(sum, escaped);
+        accum[n + pixel] = vec4<f32>(bitcast<f32>(path_taken), 0.0, 0.0, 0.0);
+        return;
+    }
+    let paths = f32(max(dp.spp, 1u));
+    store(pixel, Marched(sum / paths, escaped / paths, f32(path_taken)));
 }

@@ -57,10 +57,12 @@ struct DvrParams {
     slice_at: vec3<f32>,
     // A curved plane's slab: half its thickness, mm (0: the thin plane).
     slab_half: f32,
-    // cinematic (cinematic.wgsl): paths per pixel, scatterings a path may take.
+    // cinematic (cinematic.wgsl): paths per pixel, scatterings a path may take, and the paths
+    // [sample_first, sample_first + sample_count) this dispatch traces.
     spp: u32,
     bounces: u32,
-    pad: vec2<u32>,
+    sample_first: u32,
+    sample_count: u32,
 }
 
 // One image row of a curved plane (raystream_cpu::cpr::CprRow, LPS): the path's point, the
