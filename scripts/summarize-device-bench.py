@@ -8,7 +8,8 @@ Prints Markdown: the ray-query table against the issue's peers (Grays/s by singl
 time, kernel time and streamed queries, with the first bar -- at least half the best GPU peer --
 judged by each), the variants (spinning waits, if-if, leaf size, split, sorted sets, bench's
 own sets), divergence and occupancy (peak resident invocations over SMs x 2048), failed
-rays.py checks, and the render frame rates of each `--submit` mode. Only the standard library.
+rays.py checks, the render frame rates of each `--submit` mode, and the volume modes' orbits
+(dvr, mip, cinematic: `bench VOLUME --mode`). Only the standard library.
 """
 
 import argparse
@@ -193,6 +194,25 @@ def render_table(path, out):
     out.append("")
 
 
+def volume_table(lines, out):
+    """The volume benches (`bench VOLUME --mode … --json`, tagged "volume"): frames/s by wall
+    and kernel time, and samples/s."""
+    rows = [o for o in lines if o.get("kind") == "volume" and "frame_ms" in o]
+    if not rows:
+        return
+    out.append("| bench | mode | shadows | paths a pixel | device | dims | size | frames/s | kernel frames/s | M samples/frame | G samples/s (kernel) |")
+    out.append("|---|---|---|---|---|---|---|---|---|---|---|")
+    for o in rows:
+        dims = "×".join(str(n) for n in o.get("dims", []))
+        kernel = o.get("msamples_per_s_kernel")
+        out.append(
+            f"| {o.get('volume', '–')} | {o.get('mode')} | {'yes' if o.get('shadows') else 'no'} "
+            f"| {o.get('spp') or '–'} | {o.get('device')} | {dims} | {o.get('size')} "
+            f"| {fmt(o.get('frames_per_s'))} | {fmt(o.get('kernel_frames_per_s'))} "
+            f"| {(o.get('samples_per_frame') or 0) / 1e6:,.0f} | {fmt(kernel / 1e3 if kernel else None)} |")
+    out.append("")
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("results", help="results.jsonl from scripts/device-bench.sh")
@@ -214,6 +234,7 @@ def main():
     variants_table(by, out)
     stats_table(by, a.sms, a.threads_per_sm, out)
     checks(lines, out)
+    volume_table(lines, out)
     if a.render:
         render_table(a.render, out)
     print("\n".join(out))

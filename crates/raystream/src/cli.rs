@@ -266,7 +266,8 @@ pub struct RenderArgs {
     /// Image size, WIDTHxHEIGHT.
     #[arg(long, default_value = "800x600", value_parser = parse_size)]
     pub size: (u32, u32),
-    /// Samples per pixel (default 4; --mode cinematic: paths per pixel, default 64).
+    /// Samples per pixel (default 4, at most 1024; --mode cinematic: paths per pixel, default
+    /// 64, at most 4096).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub spp: Option<u32>,
     /// Deepest reflection/refraction level (0: primary rays only); --mode cinematic: the

@@ -34,6 +34,8 @@ const DEFAULT_CT: &[u8] = include_bytes!("../assets/abdomen_pelvis_ct_totalseg.n
 const DEFAULT_CT_NAME: &str = "<built-in abdomen_pelvis_ct_totalseg.nii.gz>";
 /// Samples per pixel of meshes and scenes when `--spp` is not given.
 const DEFAULT_SPP: u32 = 4;
+/// The most samples per pixel of meshes and scenes.
+const MAX_MESH_SPP: u32 = 1024;
 
 /// INPUT, or the built-in CT's name.
 fn input_name(a: &RenderArgs) -> std::path::PathBuf {
@@ -811,7 +813,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         // What was rendered, and what the samples were beyond their count.
         let (what, counts) = if mode == DvrMode::Cinematic {
             let what = format!(
-                ", {} paths a pixel, up to {} scatterings{format_words}",
+                ", {} paths a pixel, up to {} scatterings{format_words}{slab}",
                 opt.spp, opt.bounces
             );
             (what, String::new())
@@ -1658,6 +1660,11 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         None => None,
     };
     let mut volume_samples = 0u64;
+    if let Some(n) = a.spp.filter(|&n| n > MAX_MESH_SPP) {
+        bail!(
+            "--spp {n}: at most {MAX_MESH_SPP} samples a pixel for meshes and scenes (up to 4096 paths a pixel with --mode cinematic)"
+        );
+    }
     let opt = RenderOptions {
         width: a.size.0,
         height: a.size.1,

@@ -1942,4 +1942,8 @@ fn cinematic_rendering_through_the_cli() {
         &["render", "--mode", "dvr", "--spp", "4", "--size", "32x24"],
         "--spp with --mode dvr",
     );
+    refused(
+        &["render", "--spp", "2000", "--size", "32x24"],
+        "at most 1024 samples a pixel for meshes",
+    );
 }
