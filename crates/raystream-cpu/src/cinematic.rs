@@ -31,7 +31,7 @@ use raystream_io::Volume;
 
 use crate::dvr::{
     DvrOptions, FULL_SHADING_GRADIENT, Marcher, cell_dims, cell_exit, cell_ranges, clip_interval,
-    key_light, scene_to_lps,
+    scene_to_lps,
 };
 
 /// Opacity per mm is capped here before it becomes an extinction coefficient: σ ≤ 6.9 / mm.
@@ -53,11 +53,11 @@ pub struct Lighting {
 }
 
 impl Lighting {
-    /// The key light above left of `cam` ([`key_light`]) and the sky, at [`KEY_IRRADIANCE`] and
-    /// [`SKY_RADIANCE`] (the GPU's constants).
-    pub fn studio(cam: &Camera) -> Lighting {
+    /// The key light of `opt` seen by `cam` ([`DvrOptions::key_light`]: above left unless
+    /// placed) and the sky, at [`KEY_IRRADIANCE`] and [`SKY_RADIANCE`] (the GPU's constants).
+    pub fn studio(opt: &DvrOptions, cam: &Camera) -> Lighting {
         Lighting {
-            key: key_light(cam),
+            key: opt.key_light(cam),
             key_irradiance: KEY_IRRADIANCE,
             sky: SKY_RADIANCE,
         }
@@ -651,7 +651,7 @@ mod tests {
             ..Default::default()
         };
         let cam = crate::dvr::volume_camera(&vol, 1.0);
-        let lighting = Lighting::studio(&cam);
+        let lighting = Lighting::studio(&opt, &cam);
         for px in [0, 27, 63] {
             let a = pixel(&tracker, &opt, &cam, &lighting, px);
             assert_eq!(a, pixel(&tracker, &opt, &cam, &lighting, px));

@@ -110,6 +110,9 @@ pub struct DvrOptions {
     pub spp: u32,
     /// cinematic: scatterings a path may take.
     pub bounces: u32,
+    /// dvr with shadows, and cinematic: where the key light stands, (azimuth, elevation) in
+    /// degrees from the camera ([`key_light_from`]); `None`: above left ([`key_light`]).
+    pub light: Option<[f32; 2]>,
 }
 
 impl Default for DvrOptions {
@@ -131,6 +134,7 @@ impl Default for DvrOptions {
             slab: None,
             spp: 64,
             bounces: 4,
+            light: None,
         }
     }
 }
@@ -174,6 +178,15 @@ impl DvrOptions {
             Some((n, c - 0.5 * thickness)),
             Some((-n, -(c + 0.5 * thickness))),
         ]
+    }
+
+    /// The direction toward the key light (LPS, unit) of a picture seen by `cam`: `light`'s,
+    /// or above left of the camera.
+    pub fn key_light(&self, cam: &Camera) -> Vec3 {
+        match self.light {
+            Some([az, el]) => key_light_from(cam, az, el),
+            None => key_light(cam),
+        }
     }
 
     /// The step of the light grid's shadow rays ([`shadow_step_for`]).
@@ -698,6 +711,16 @@ pub fn key_light(cam: &Camera) -> Vec3 {
     scene_to_lps((cam.up * 0.6 - cam.right * 0.45 - cam.fwd * 0.66).normalize())
 }
 
+/// The direction toward a key light `az` degrees to the right of the camera (negative: to its
+/// left) and `el` degrees above it, as seen from the volume (LPS, unit): (0, 0) lights from
+/// the camera, (90, 0) from the image's right, (0, 90) from the image's top, (180, 0) from
+/// behind. [`key_light`] is about (−34.3, 36.9).
+pub fn key_light_from(cam: &Camera, az: f32, el: f32) -> Vec3 {
+    let (az, el) = (az.to_radians(), el.to_radians());
+    let d = cam.right * (el.cos() * az.sin()) + cam.up * el.sin() - cam.fwd * (el.cos() * az.cos());
+    scene_to_lps(d.normalize())
+}
+
 /// The part [t0, t1] of the ray o + t·d (LPS, unit d) that the crop box and the clip planes
 /// keep.
 pub fn clip_interval(opt: &DvrOptions, o: Vec3, d: Vec3, t0: f32, t1: f32) -> Option<(f32, f32)> {
@@ -891,7 +914,7 @@ fn march_frame(
         let Sight::Camera(cam) = sight else {
             panic!("cinematic rendering is seen by a camera, not a curved plane");
         };
-        let lighting = crate::cinematic::Lighting::studio(cam);
+        let lighting = crate::cinematic::Lighting::studio(opt, cam);
         let majorants = crate::cinematic::Majorants::new(vol, tf);
         let tracker = crate::cinematic::Tracker {
             m: &marcher,
@@ -921,7 +944,7 @@ fn march_frame(
     let step = opt.step_for(vol);
     let win = opt.shown_window();
     let light = match sight {
-        Sight::Camera(cam) if opt.shadows && opt.mode == DvrMode::Dvr => Some(key_light(cam)),
+        Sight::Camera(cam) if opt.shadows && opt.mode == DvrMode::Dvr => Some(opt.key_light(cam)),
         _ => None,
     };
     let grid = light.map(|l| LightGrid::new(&marcher, tf, l, opt.shadow_step_for(vol)));
@@ -1250,6 +1273,61 @@ mod tests {
             color: vec![(0.0, [0.0; 3])],
             shading: Default::default(),
         }
+    }
+
+    /// `--light AZ,EL`: (0, 0) lights from the camera, (90, 0) from the image's right, (0, 90)
+    /// from its top, (180, 0) from behind, in LPS; the default key light is about (−34.3, 36.9).
+    #[test]
+    fn key_light_directions_turn_with_the_camera() {
+        let cam = Camera::look_at(
+            Vec3::new(3.0, 1.0, 9.0),
+            Vec3::new(0.5, 0.0, -1.0),
+            Vec3::Y,
+            40.0,
+        );
+        let close = |a: Vec3, b: Vec3, what: &str| {
+            assert!((a - b).length() < 1e-5, "{what}: {a} vs {b}");
+        };
+        close(
+            key_light_from(&cam, 0.0, 0.0),
+            scene_to_lps(-cam.fwd),
+            "0,0",
+        );
+        close(
+            key_light_from(&cam, 90.0, 0.0),
+            scene_to_lps(cam.right),
+            "90,0",
+        );
+        close(
+            key_light_from(&cam, -90.0, 0.0),
+            scene_to_lps(-cam.right),
+            "-90,0",
+        );
+        close(
+            key_light_from(&cam, 0.0, 90.0),
+            scene_to_lps(cam.up),
+            "0,90",
+        );
+        close(
+            key_light_from(&cam, 180.0, 0.0),
+            scene_to_lps(cam.fwd),
+            "180,0",
+        );
+        let default = key_light(&cam);
+        assert!(
+            (key_light_from(&cam, -34.29, 36.87) - default).length() < 1e-3,
+            "{default}"
+        );
+        let opt = DvrOptions {
+            light: Some([90.0, 0.0]),
+            ..Default::default()
+        };
+        close(
+            opt.key_light(&cam),
+            scene_to_lps(cam.right),
+            "DvrOptions::key_light",
+        );
+        close(DvrOptions::default().key_light(&cam), default, "no --light");
     }
 
     /// A homogeneous slab of opacity α per mm: transmittance (1 − α)^L = exp(−σL), within 1 %,

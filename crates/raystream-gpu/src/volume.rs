@@ -8,9 +8,7 @@ use std::time::Instant;
 
 use raystream_cpu::Image;
 use raystream_cpu::cinematic::{ALPHA_MAX, KEY_IRRADIANCE, MAJORANT_CELL, Majorants, SKY_RADIANCE};
-use raystream_cpu::dvr::{
-    BRICK, DvrMode, DvrOptions, LightGrid, Marcher, Sight, key_light, scene_to_lps,
-};
+use raystream_cpu::dvr::{BRICK, DvrMode, DvrOptions, LightGrid, Marcher, Sight, scene_to_lps};
 use raystream_io::Volume;
 use raystream_math::Vec3;
 use raystream_volume::TransferFunction;
@@ -370,7 +368,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             background: v3(opt.background),
             color_count: self.tf.color.len() as u32,
             shading: [s.ambient, s.diffuse, s.specular, s.power],
-            light: v3(key_light(&cam)),
+            light: v3(opt.key_light(&cam)),
             shadows: (opt.shadows && opt.mode == DvrMode::Dvr && !curved) as u32,
             crop_min: v3(opt.crop.map_or(Vec3::ZERO, |c| c[0])),
             crop: opt.crop.is_some() as u32,

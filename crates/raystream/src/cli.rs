@@ -467,6 +467,11 @@ pub struct VolumeLook {
     /// visible sample toward it through the transfer function.
     #[arg(long)]
     pub shadows: bool,
+    /// dvr --shadows and cinematic: the key light AZ degrees to the right of the camera
+    /// (negative: left) and EL degrees above it, turning with the camera (0,0: from the camera;
+    /// 180,0: from behind). Default: above left, about -34,37.
+    #[arg(long, value_parser = parse_orbit, allow_hyphen_values = true, value_name = "AZ,EL")]
+    pub light: Option<[f32; 2]>,
     /// Keep only the box XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX (LPS mm, as `info` reports positions).
     #[arg(long, value_parser = parse_crop, allow_hyphen_values = true)]
     pub crop: Option<[f32; 6]>,

@@ -69,6 +69,12 @@ pub fn options(
             );
         }
     }
+    if look.light.is_some() && !(mode == DvrMode::Cinematic || look.shadows) {
+        bail!(
+            "--light places the key light of --mode dvr --shadows and --mode cinematic (--mode {} without it has a headlight or none)",
+            mode.name()
+        );
+    }
     if look.shadows && mode != DvrMode::Dvr {
         bail!(
             "--shadows goes with --mode dvr (--mode {} has no lighting to shadow)",
@@ -126,6 +132,7 @@ pub fn options(
         clip_planes: [plane(0), plane(1)],
         slice_at: look.slice_at.map(Vec3::from_array),
         slab: look.slab,
+        light: look.light,
         ..Default::default()
     };
     Ok((tf, opt))

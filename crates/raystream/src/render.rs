@@ -1611,13 +1611,14 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         || l.window.is_some()
         || l.no_skip
         || l.shadows
+        || l.light.is_some()
         || l.crop.is_some()
         || !l.clip_planes.is_empty()
         || l.slice_at.is_some()
         || l.slab.is_some()
     {
         bail!(
-            "--tf, --step, --window/--level, --no-skip, --shadows, --crop, --clip-plane, --slice-at and --slab go with --mode (direct volume rendering)"
+            "--tf, --step, --window/--level, --no-skip, --shadows, --light, --crop, --clip-plane, --slice-at and --slab go with --mode (direct volume rendering)"
         );
     }
     if let Some(aov) = a.aov {

@@ -687,6 +687,22 @@ fn golden_volume_shadows() {
 }
 
 #[test]
+fn gpu_volume_shadows_from_a_placed_light_match_cpu_cli() {
+    gpu_matches_cpu(
+        "dvr-shadows-light",
+        &[
+            "--mode",
+            "dvr",
+            "--shadows",
+            "--light=60,-20",
+            "--size",
+            "64x48",
+        ],
+        true,
+    );
+}
+
+#[test]
 fn gpu_volume_shadows_and_clipping_match_cpu_cli() {
     gpu_matches_cpu(
         "dvr-shadows-clipped",
@@ -1945,5 +1961,35 @@ fn cinematic_rendering_through_the_cli() {
     refused(
         &["render", "--spp", "2000", "--size", "32x24"],
         "at most 1024 samples a pixel for meshes",
+    );
+    // --light turns the key light: lit from the camera the bones are brighter than lit from
+    // behind (the sky alone then), on both sides of the default.
+    let mean = |light: &str| {
+        let png = render_to(
+            &format!("cinematic-light-{light}.png"),
+            "cpu",
+            &[&args[..], &[&format!("--light={light}")]].concat(),
+        );
+        let img = image::open(png).unwrap().to_rgb8();
+        img.as_raw().iter().map(|&v| v as f64).sum::<f64>() / img.as_raw().len() as f64
+    };
+    let (front, back) = (mean("0,0"), mean("180,0"));
+    let default = {
+        let img = image::open(tmp("cinematic-cpu-1.png")).unwrap().to_rgb8();
+        img.as_raw().iter().map(|&v| v as f64).sum::<f64>() / img.as_raw().len() as f64
+    };
+    assert!(
+        front > default && default > back,
+        "{front} {default} {back}"
+    );
+    refused(
+        &[
+            "render", "--mode", "dvr", "--light", "10,20", "--size", "32x24",
+        ],
+        "--light places the key light",
+    );
+    refused(
+        &["render", "--light", "10,20", "--size", "32x24"],
+        "go with --mode",
     );
 }
