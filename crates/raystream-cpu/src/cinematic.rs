@@ -12,9 +12,11 @@
 //!   cell by cell: a transparent cell is crossed in one step, and a tentative collision past a
 //!   cell's far side restarts there (exponential distances are memoryless), so the estimate is
 //!   exact whatever the majorants; tighter ones only take fewer samples.
-//! - **Scattering** (Kroes et al.'s hybrid): at a collision a surface-like Lambertian bounce
-//!   about the gradient's normal with probability min(|∇HU| / 100 HU/mm, 1) (the weight dvr
-//!   mode shades surfaces with), else an isotropic phase function.
+//! - **Scattering** (Kroes et al.'s hybrid): at a collision a surface-like bounce about the
+//!   gradient's normal with probability min(|∇HU| / 100 HU/mm, 1) (the weight dvr mode shades
+//!   surfaces with), else an isotropic phase function. A surface reflects the transfer
+//!   function's `specular` share by a white normalised Blinn–Phong lobe of its `specular_power`
+//!   and the rest diffusely (Lambert) in its colour.
 //! - **Light**: a directional key light above left of the camera ([`key_light`], dvr
 //!   `--shadows`' light) of irradiance [`KEY_IRRADIANCE`], sampled at every collision with a
 //!   shadow ray whose transmittance comes from ratio tracking (Russian roulette below 0.1),
@@ -114,18 +116,51 @@ fn uniform_sphere(rng: &mut PathRng) -> Vec3 {
     Vec3::new(r * phi.cos(), r * phi.sin(), z)
 }
 
-/// A direction drawn about the unit normal `n` with density cos θ / π (Malley's method on the
-/// orthonormal basis of Duff et al. 2017).
-fn cosine_hemisphere(n: Vec3, rng: &mut PathRng) -> Vec3 {
+/// Two unit vectors that make an orthonormal basis with the unit `n` (Duff et al. 2017).
+fn basis(n: Vec3) -> (Vec3, Vec3) {
     let sign = if n.z >= 0.0 { 1.0 } else { -1.0 };
     let a = -1.0 / (sign + n.z);
     let b = n.x * n.y * a;
-    let t = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
-    let bt = Vec3::new(b, sign + n.y * n.y * a, -n.y);
+    (
+        Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        Vec3::new(b, sign + n.y * n.y * a, -n.y),
+    )
+}
+
+/// The unit direction at polar angle θ (its cosine) and azimuth 2π·`u` about the unit `n`.
+fn about(n: Vec3, cos_theta: f32, u: f32) -> Vec3 {
+    let (t, bt) = basis(n);
+    let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+    let phi = std::f32::consts::TAU * u;
+    (t * (sin_theta * phi.cos()) + bt * (sin_theta * phi.sin()) + n * cos_theta).normalize()
+}
+
+/// A direction drawn about the unit normal `n` with density cos θ / π (Malley's method).
+fn cosine_hemisphere(n: Vec3, rng: &mut PathRng) -> Vec3 {
     let u = rng.uniform();
-    let r = u.sqrt();
-    let phi = std::f32::consts::TAU * rng.uniform();
-    (t * (r * phi.cos()) + bt * (r * phi.sin()) + n * (1.0 - u).max(0.0).sqrt()).normalize()
+    about(n, (1.0 - u).max(0.0).sqrt(), rng.uniform())
+}
+
+/// The glossy lobe of a surface: the normalised Blinn–Phong BRDF (p + 2)/8π · (n·h)^p toward
+/// unit `wi` seen from unit `wo` (both away from the surface), with h their half vector.
+fn blinn(n: Vec3, wo: Vec3, wi: Vec3, p: f32) -> f32 {
+    let h = (wo + wi).normalize_or_zero();
+    (p + 2.0) / (8.0 * std::f32::consts::PI) * n.dot(h).max(0.0).powf(p)
+}
+
+/// A direction drawn from [`blinn`]'s lobe (the half vector with density (p + 1)/2π ·
+/// (n·h)^p, reflected), and its weight BRDF · cos θᵢ / pdf = (p + 2)/(p + 1) · cos θᵢ · (wo·h);
+/// zero below the surface.
+fn glossy_sample(n: Vec3, wo: Vec3, p: f32, rng: &mut PathRng) -> (Vec3, f32) {
+    let cos_h = rng.uniform().powf(1.0 / (p + 1.0));
+    let h = about(n, cos_h, rng.uniform());
+    let wo_h = wo.dot(h);
+    let wi = h * (2.0 * wo_h) - wo;
+    let cos_i = n.dot(wi);
+    if cos_i <= 0.0 || wo_h <= 0.0 {
+        return (wi, 0.0);
+    }
+    (wi, (p + 2.0) / (p + 1.0) * cos_i * wo_h)
 }
 
 /// The part of the ray o + t·d (LPS, unit d) inside the volume's voxel-centre box, the crop
@@ -297,17 +332,29 @@ pub(crate) fn path(
             Vec3::ZERO
         };
         let key = lighting.key;
-        let f = if surface {
-            n.dot(key).max(0.0) * std::f32::consts::FRAC_1_PI
+        // A surface reflects a `gloss` share of the light by the glossy lobe (white, as a
+        // wet or polished surface does) and the rest diffusely in its colour.
+        let shading = tf.shading;
+        let gloss = if surface {
+            shading.specular.clamp(0.0, 1.0)
         } else {
-            0.25 * std::f32::consts::FRAC_1_PI
+            0.0
         };
-        if f > 0.0 {
+        let cos_l = n.dot(key);
+        let f = if !surface {
+            albedo * (0.25 * std::f32::consts::FRAC_1_PI)
+        } else if cos_l > 0.0 {
+            (albedo * ((1.0 - gloss) * std::f32::consts::FRAC_1_PI)
+                + Vec3::splat(gloss * blinn(n, -d, key, shading.power)))
+                * cos_l
+        } else {
+            Vec3::ZERO
+        };
+        if f.max_element() > 0.0 {
             let tr = inside(m, opt, x, key)
                 .map_or(1.0, |(r, _)| tracker.transmittance_estimate(r, rng, taken));
-            light += throughput * albedo * (f * lighting.key_irradiance * tr);
+            light += throughput * f * (lighting.key_irradiance * tr);
         }
-        throughput *= albedo;
         if depth == opt.bounces {
             return PathSample {
                 light,
@@ -315,11 +362,25 @@ pub(crate) fn path(
             };
         }
         depth += 1;
-        d = if surface {
-            cosine_hemisphere(n, rng)
+        // The next direction: a lobe chosen by its share, weighted by BRDF · cos / pdf.
+        if surface && rng.uniform() < gloss {
+            let (wi, weight) = glossy_sample(n, -d, shading.power, rng);
+            if weight <= 0.0 {
+                return PathSample {
+                    light,
+                    escaped: false,
+                };
+            }
+            throughput *= weight;
+            d = wi;
         } else {
-            uniform_sphere(rng)
-        };
+            throughput *= albedo;
+            d = if surface {
+                cosine_hemisphere(n, rng)
+            } else {
+                uniform_sphere(rng)
+            };
+        }
         o = x;
     }
 }
@@ -365,11 +426,15 @@ mod tests {
         Volume::hounsfield(dims, spacing, data)
     }
 
+    /// A transfer function of one colour and matte surfaces (no glossy lobe).
     fn tf(opacity: Vec<(f32, f32)>, albedo: f32) -> TransferFunction {
         TransferFunction {
             opacity,
             color: vec![(0.0, [albedo; 3])],
-            shading: Default::default(),
+            shading: raystream_volume::Shading {
+                specular: 0.0,
+                ..Default::default()
+            },
         }
     }
 
@@ -635,6 +700,49 @@ mod tests {
         }
         assert!((mean / n as f32).length() < 0.01, "drift {mean}");
         assert!((z2 / n as f64 - 1.0 / 3.0).abs() < 0.005);
+    }
+
+    /// The glossy lobe's sampled weights average to its directional albedo ∫ f cos θᵢ dωᵢ by
+    /// f64 quadrature (within 4 standard errors), for views from the normal to 75° and
+    /// exponents 1 to 50: what the key light's samples evaluate and what the bounces draw are
+    /// one lobe.
+    #[test]
+    fn glossy_directions_follow_their_lobe() {
+        let n = Vec3::new(0.2, -0.3, 0.93).normalize();
+        let (t, bt) = basis(n);
+        let dir = |theta: f64, phi: f64| {
+            (n * theta.cos() as f32
+                + (t * phi.cos() as f32 + bt * phi.sin() as f32) * theta.sin() as f32)
+                .normalize()
+        };
+        for p in [1.0f32, 10.0, 50.0] {
+            for view in [0.0f64, 45.0, 75.0] {
+                let wo = dir(view.to_radians(), 0.3);
+                let (nt, np) = (1000, 360);
+                let (dt, dp) = (
+                    std::f64::consts::FRAC_PI_2 / nt as f64,
+                    std::f64::consts::TAU / np as f64,
+                );
+                let mut albedo = 0.0f64;
+                for i in 0..nt {
+                    let th = (i as f64 + 0.5) * dt;
+                    for j in 0..np {
+                        let wi = dir(th, (j as f64 + 0.5) * dp);
+                        albedo += blinn(n, wo, wi, p) as f64 * th.cos() * th.sin() * dt * dp;
+                    }
+                }
+                let (mean, err) = mean_and_error(200_000, |s| {
+                    let mut rng = PathRng::new(13, s);
+                    let (wi, w) = glossy_sample(n, wo, p, &mut rng);
+                    assert!(w == 0.0 || wi.dot(n) > 0.0);
+                    w as f64
+                });
+                assert!(
+                    (mean - albedo).abs() < 4.0 * err + 1e-3,
+                    "p {p}, view {view}°: sampled {mean:.4} ± {err:.4}, quadrature {albedo:.4}"
+                );
+            }
+        }
     }
 
     /// The same pixel every run, and the picture is the mean of its paths.

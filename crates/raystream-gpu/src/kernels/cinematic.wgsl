@@ -16,6 +16,7 @@
 
 const ROULETTE_BELOW: f32 = 0.1;
 const INV_PI: f32 = 0.31830988618;
+const PI: f32 = 3.14159265359;
 const TAU: f32 = 6.28318530718;
 
 var<private> rng_state: u32;
@@ -53,7 +54,9 @@ fn uniform_sphere() -> vec3<f32> {
     return vec3<f32>(r * cos(phi), r * sin(phi), z);
 }
 
-fn cosine_hemisphere(n: vec3<f32>) -> vec3<f32> {
+// The unit direction at polar angle θ (its cosine) and azimuth 2π u about the unit n, on the
+// basis of Duff et al. 2017 (as the CPU's basis and about).
+fn about(n: vec3<f32>, cos_theta: f32, u: f32) -> vec3<f32> {
     var sign = -1.0;
     if n.z >= 0.0 {
         sign = 1.0;
@@ -62,10 +65,37 @@ fn cosine_hemisphere(n: vec3<f32>) -> vec3<f32> {
     let b = n.x * n.y * a;
     let t = vec3<f32>(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
     let bt = vec3<f32>(b, sign + n.y * n.y * a, -n.y);
+    let sin_theta = sqrt(max(1.0 - cos_theta * cos_theta, 0.0));
+    let phi = TAU * u;
+    return normalize(t * (sin_theta * cos(phi)) + bt * (sin_theta * sin(phi)) + n * cos_theta);
+}
+
+fn cosine_hemisphere(n: vec3<f32>) -> vec3<f32> {
     let u = rng_next();
-    let r = sqrt(u);
-    let phi = TAU * rng_next();
-    return normalize(t * (r * cos(phi)) + bt * (r * sin(phi)) + n * sqrt(max(1.0 - u, 0.0)));
+    return about(n, sqrt(max(1.0 - u, 0.0)), rng_next());
+}
+
+// The normalised Blinn-Phong lobe, as the CPU's blinn.
+fn blinn(n: vec3<f32>, wo: vec3<f32>, wi: vec3<f32>, p: f32) -> f32 {
+    let s = wo + wi;
+    var h = vec3<f32>(0.0);
+    if length(s) > 0.0 {
+        h = normalize(s);
+    }
+    return (p + 2.0) / (8.0 * PI) * pow(max(dot(n, h), 0.0), p);
+}
+
+// A direction from the glossy lobe and its weight (xyz, w), as the CPU's glossy_sample.
+fn glossy_sample(n: vec3<f32>, wo: vec3<f32>, p: f32) -> vec4<f32> {
+    let cos_h = pow(rng_next(), 1.0 / (p + 1.0));
+    let h = about(n, cos_h, rng_next());
+    let wo_h = dot(wo, h);
+    let wi = h * (2.0 * wo_h) - wo;
+    let cos_i = dot(n, wi);
+    if cos_i <= 0.0 || wo_h <= 0.0 {
+        return vec4<f32>(wi, 0.0);
+    }
+    return vec4<f32>(wi, (p + 2.0) / (p + 1.0) * cos_i * wo_h);
 }
 
 // The part of the world ray o + t d inside the grid, the crop box and the clip planes,
@@ -198,31 +228,46 @@ fn trace_path(o_in: vec3<f32>, d_in: vec3<f32>, key: vec3<f32>) -> PathSample {
         let gm = length(g);
         let surface = rng_next() < min(gm / FULL_SHADING_GRADIENT, 1.0);
         var n = vec3<f32>(0.0);
-        var f = 0.25 * INV_PI;
+        var gloss = 0.0;
+        var f = albedo * (0.25 * INV_PI);
         if surface {
             n = -g / gm;
             if dot(n, d) > 0.0 {
                 n = -n;
             }
-            f = max(dot(n, key), 0.0) * INV_PI;
+            gloss = clamp(dp.shading.z, 0.0, 1.0);
+            let cos_l = dot(n, key);
+            f = vec3<f32>(0.0);
+            if cos_l > 0.0 {
+                f = (albedo * ((1.0 - gloss) * INV_PI) + vec3<f32>(gloss * blinn(n, -d, key, dp.shading.w))) * cos_l;
+            }
         }
-        if f > 0.0 {
+        if max(f.x, max(f.y, f.z)) > 0.0 {
             let s = inside(x, key);
             var tr = 1.0;
             if s.ok {
                 tr = track(s, true).tr;
             }
-            light += throughput * albedo * (f * KEY_IRRADIANCE * tr);
+            light += throughput * f * (KEY_IRRADIANCE * tr);
         }
-        throughput *= albedo;
         if depth == dp.bounces {
             return PathSample(light, false);
         }
         depth += 1u;
-        if surface {
-            d = cosine_hemisphere(n);
+        if surface && rng_next() < gloss {
+            let gs = glossy_sample(n, -d, dp.shading.w);
+            if gs.w <= 0.0 {
+                return PathSample(light, false);
+            }
+            throughput *= gs.w;
+            d = gs.xyz;
         } else {
-            d = uniform_sphere();
+            throughput *= albedo;
+            if surface {
+                d = cosine_hemisphere(n);
+            } else {
+                d = uniform_sphere();
+            }
         }
         o = x;
     }
