@@ -17,11 +17,12 @@
 //!   surfaces with), else an isotropic phase function. A surface reflects the transfer
 //!   function's `specular` share by a white normalised Blinn–Phong lobe of its `specular_power`
 //!   and the rest diffusely (Lambert) in its colour.
-//! - **Light**: a directional key light above left of the camera ([`key_light`], dvr
-//!   `--shadows`' light) of irradiance [`KEY_IRRADIANCE`], sampled at every collision with a
-//!   shadow ray whose transmittance comes from ratio tracking (Russian roulette below 0.1),
-//!   and a uniform sky of radiance [`SKY_RADIANCE`] that scattered rays reach when they leave
-//!   the volume. Camera rays that leave without a collision show the background.
+//! - **Light**: a directional key light above left of the camera, or where `--light` puts it
+//!   ([`DvrOptions::key_light`], dvr `--shadows`' light), of irradiance [`KEY_IRRADIANCE`],
+//!   sampled at every collision with a shadow ray whose transmittance comes from ratio
+//!   tracking (Russian roulette below 0.1), and a uniform sky of radiance [`SKY_RADIANCE`]
+//!   that scattered rays reach when they leave the volume. Camera rays that leave without a
+//!   collision show the background.
 //! - **Paths** end after `bounces` scatterings (the last one still samples the key light);
 //!   a pixel is the mean of `spp` paths, each through a random point of its pixel.
 
