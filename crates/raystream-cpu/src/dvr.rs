@@ -1288,31 +1288,15 @@ mod tests {
         let close = |a: Vec3, b: Vec3, what: &str| {
             assert!((a - b).length() < 1e-5, "{what}: {a} vs {b}");
         };
-        close(
-            key_light_from(&cam, 0.0, 0.0),
-            scene_to_lps(-cam.fwd),
-            "0,0",
-        );
-        close(
-            key_light_from(&cam, 90.0, 0.0),
-            scene_to_lps(cam.right),
-            "90,0",
-        );
-        close(
-            key_light_from(&cam, -90.0, 0.0),
-            scene_to_lps(-cam.right),
-            "-90,0",
-        );
-        close(
-            key_light_from(&cam, 0.0, 90.0),
-            scene_to_lps(cam.up),
-            "0,90",
-        );
-        close(
-            key_light_from(&cam, 180.0, 0.0),
-            scene_to_lps(cam.fwd),
-            "180,0",
-        );
+        for (az, el, want, what) in [
+            (0.0, 0.0, -cam.fwd, "0,0"),
+            (90.0, 0.0, cam.right, "90,0"),
+            (-90.0, 0.0, -cam.right, "-90,0"),
+            (0.0, 90.0, cam.up, "0,90"),
+            (180.0, 0.0, cam.fwd, "180,0"),
+        ] {
+            close(key_light_from(&cam, az, el), scene_to_lps(want), what);
+        }
         let default = key_light(&cam);
         assert!(
             (key_light_from(&cam, -34.29, 36.87) - default).length() < 1e-3,
