@@ -152,8 +152,9 @@ pub struct GpuVolumeRenderer<'a> {
     /// cinematic: a frame's running sums between its dispatches.
     accum: Mutex<Option<wgpu::Buffer>>,
     /// cinematic: at most this many paths a dispatch (a frame's samples are split into
-    /// dispatches of whole samples of every pixel), so that no kernel runs long enough for a
-    /// display driver's watchdog (Windows' TDR: 2 s); the picture is the same bit for bit.
+    /// dispatches of whole samples of every pixel, each submitted and waited for on its own),
+    /// so that no kernel runs long enough for a display driver's watchdog (Windows' TDR: 2 s)
+    /// and no submission past the GPU timeout; the picture is the same bit for bit.
     pub paths_per_dispatch: u64,
     /// `--shadows`: the light grid's kernel and values.
     light_pipeline: wgpu::ComputePipeline,
@@ -593,6 +594,20 @@ impl<'a> GpuVolumeRenderer<'a> {
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, bind, &[]);
             pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
+            drop(pass);
+            // A path-traced frame of several dispatches submits them one by one, each waited
+            // for: a frame may take minutes, a submission no longer than the GPU timeout.
+            if !last {
+                let done = std::mem::replace(
+                    &mut enc,
+                    ctx.device
+                        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                            label: Some("render_volume"),
+                        }),
+                );
+                ctx.queue.submit([done.finish()]);
+                ctx.wait()?;
+            }
         }
         if srgb8 {
             enc.clear_buffer(sum, 0, None);
