@@ -1,8 +1,8 @@
 //! Cinematic rendering (`--mode cinematic`): Monte Carlo path tracing of the CT volume as a
 //! participating medium, the physically based volume rendering of Kroes, Post & Botha 2012
 //! ("Exposure Render") that workstations sell as *cinematic rendering*. The CPU reference; the
-//! GPU's `path_trace_volume` (dvr.wgsl) draws the same random numbers and follows the same
-//! paths.
+//! GPU's `path_trace_volume` (kernels/cinematic.wgsl in raystream-gpu) draws the same random
+//! numbers and follows the same paths.
 //!
 //! - **The medium**: the transfer function's opacity α per millimetre is an extinction
 //!   coefficient σ = −ln(1 − α) per mm (so that a straight ray's transmittance is dvr mode's
@@ -26,11 +26,10 @@
 //! - **Paths** end after `bounces` scatterings (the last one still samples the key light);
 //!   a pixel is the mean of `spp` paths, each through a random point of its pixel.
 
+use raystream_io::Volume;
 use raystream_math::Vec3;
 use raystream_scene::Camera;
 use raystream_volume::TransferFunction;
-
-use raystream_io::Volume;
 
 use crate::dvr::{
     DvrOptions, FULL_SHADING_GRADIENT, Marcher, cell_dims, cell_exit, cell_ranges, clip_interval,
@@ -44,6 +43,7 @@ pub const ALPHA_MAX: f32 = 0.999;
 pub const KEY_IRRADIANCE: f32 = 2.5;
 /// Radiance of the uniform sky that scattered rays leaving the volume see.
 pub const SKY_RADIANCE: f32 = 0.35;
+
 /// The light of a cinematic picture: a directional key light and a uniform sky.
 #[derive(Clone, Copy, Debug)]
 pub struct Lighting {
@@ -77,8 +77,8 @@ pub fn sigma_of(alpha: f32) -> f32 {
 }
 
 /// A path's random numbers: PCG's 32-bit output permutation (RXS-M-XS) over a 32-bit LCG,
-/// seeded from the pixel and the sample by a hash. The GPU's `PathRng` computes the same
-/// integers, so both devices draw the same numbers for the same path.
+/// seeded from the pixel and the sample by a hash. The GPU's `rng_seed` and `rng_next`
+/// compute the same integers, so both devices draw the same numbers for the same path.
 #[derive(Clone, Copy, Debug)]
 pub struct PathRng {
     state: u32,
