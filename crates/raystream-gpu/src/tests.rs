@@ -1216,13 +1216,24 @@ fn gpu_cinematic_rendering_matches_cpu() {
             "{name}: an 8x8 block off by {block_worst}"
         );
         let (film, alpha, _) = gpu.render_rgba(&opt, &cam).unwrap();
-        for ((c, a), want) in film.pixels.iter().zip(&alpha).zip(&img.pixels) {
-            let over = *c + (1.0 - a) * opt.background;
-            assert!(
-                (over - *want).abs().max_element() < 1e-5,
-                "{name}: {over} vs {want}"
-            );
-        }
+        assert_over_background_is(&film, &alpha, &opt, &img, &name);
+    }
+}
+
+/// The premultiplied `film` with opacity `alpha`, over `opt`'s background, is `frame`.
+fn assert_over_background_is(
+    film: &raystream_cpu::Image,
+    alpha: &[f32],
+    opt: &raystream_cpu::dvr::DvrOptions,
+    frame: &raystream_cpu::Image,
+    name: &str,
+) {
+    for ((c, a), want) in film.pixels.iter().zip(alpha).zip(&frame.pixels) {
+        let over = *c + (1.0 - a) * opt.background;
+        assert!(
+            (over - *want).abs().max_element() < 1e-5,
+            "{name}: {over} vs {want}"
+        );
     }
 }
 
@@ -1294,13 +1305,9 @@ fn gpu_volume_rendering_matches_cpu() {
         // frame above, and its opacity is the CPU's.
         let (film, alpha, rgba_times) = gpu.render_rgba(&opt, &cam).unwrap();
         assert_eq!(rgba_times.samples, times.samples, "{name}");
-        for ((c, a), want) in film.pixels.iter().zip(&alpha).zip(&img.pixels) {
-            let over = *c + (1.0 - a) * opt.background;
-            assert!(
-                (over - *want).abs().max_element() < 1e-5,
-                "{name}: {over} vs {want}"
-            );
-            if mode != DvrMode::Dvr {
+        assert_over_background_is(&film, &alpha, &opt, &img, &name);
+        if mode != DvrMode::Dvr {
+            for a in &alpha {
                 assert!(*a == 0.0 || *a == 1.0, "{name}: opaque or clear, not {a}");
             }
         }

@@ -158,11 +158,20 @@ pub fn write_secondary_capture(
             };
             put(o, tags::FRAME_OF_REFERENCE_UID, VR::UI, &frame);
             put(o, tags::POSITION_REFERENCE_INDICATOR, VR::LO, "");
-            let ds = |v: &[f64]| v.iter().map(|&x| decimal(x)).collect::<Vec<_>>().join("\\");
-            put(o, tags::IMAGE_POSITION_PATIENT, VR::DS, &ds(&p.position));
+            put(
+                o,
+                tags::IMAGE_POSITION_PATIENT,
+                VR::DS,
+                &decimals(&p.position),
+            );
             let turn: Vec<f64> = p.row.iter().chain(&p.column).copied().collect();
-            put(o, tags::IMAGE_ORIENTATION_PATIENT, VR::DS, &ds(&turn));
-            put(o, tags::PIXEL_SPACING, VR::DS, &ds(&[p.spacing, p.spacing]));
+            put(o, tags::IMAGE_ORIENTATION_PATIENT, VR::DS, &decimals(&turn));
+            put(
+                o,
+                tags::PIXEL_SPACING,
+                VR::DS,
+                &decimals(&[p.spacing, p.spacing]),
+            );
             let thickness = p.thickness.map(decimal).unwrap_or_default();
             put(o, tags::SLICE_THICKNESS, VR::DS, &thickness);
             put(o, tags::KVP, VR::DS, "");
@@ -385,6 +394,11 @@ pub(crate) fn derived_object(
 
 pub(crate) fn put(obj: &mut InMemDicomObject, tag: dicom_core::Tag, vr: VR, value: &str) {
     obj.put(DataElement::new(tag, vr, PrimitiveValue::from(value)));
+}
+
+/// Numbers as a multi-valued DS: each [`decimal`], joined by backslashes.
+pub(crate) fn decimals(v: &[f64]) -> String {
+    v.iter().map(|&x| decimal(x)).collect::<Vec<_>>().join("\\")
 }
 
 /// `v` as a DS value: at most 16 characters, as many significant digits as fit.

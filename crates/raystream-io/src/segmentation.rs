@@ -15,7 +15,9 @@ use dicom_dictionary_std::tags;
 use dicom_object::InMemDicomObject;
 
 use crate::new_uid;
-use crate::secondary_capture::{Derived, decimal, derived_object, put, truncate, write_dicom};
+use crate::secondary_capture::{
+    Derived, decimal, decimals, derived_object, put, truncate, write_dicom,
+};
 use crate::volume::{SourceImage, Volume, VolumeError};
 
 /// Segmentation Storage.
@@ -300,7 +302,6 @@ pub fn write_segmentation(
     let m = like.index_to_world_affine().matrix3;
     let (row, column, step) = (m.col(0).normalize(), m.col(1).normalize(), m.col(2));
     let between = step.dot(row.cross(column)).abs();
-    let ds = |v: &[f64]| v.iter().map(|&x| decimal(x)).collect::<Vec<_>>().join("\\");
     o.put(seq(
         tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE,
         vec![item(vec![
@@ -309,7 +310,7 @@ pub fn write_segmentation(
                 vec![item(vec![text(
                     tags::IMAGE_ORIENTATION_PATIENT,
                     VR::DS,
-                    &ds(&[row.x, row.y, row.z, column.x, column.y, column.z]),
+                    &decimals(&[row.x, row.y, row.z, column.x, column.y, column.z]),
                 )])],
             ),
             seq(
@@ -318,7 +319,7 @@ pub fn write_segmentation(
                     text(
                         tags::PIXEL_SPACING,
                         VR::DS,
-                        &ds(&[like.spacing[1], like.spacing[0]]),
+                        &decimals(&[like.spacing[1], like.spacing[0]]),
                     ),
                     text(tags::SLICE_THICKNESS, VR::DS, &decimal(between)),
                     text(tags::SPACING_BETWEEN_SLICES, VR::DS, &decimal(between)),
@@ -346,7 +347,7 @@ pub fn write_segmentation(
                     vec![item(vec![text(
                         tags::IMAGE_POSITION_PATIENT,
                         VR::DS,
-                        &ds(&[p.x, p.y, p.z]),
+                        &decimals(&[p.x, p.y, p.z]),
                     )])],
                 ),
                 seq(
@@ -472,7 +473,7 @@ fn derivation(source: &SourceImage) -> DataElement<InMemDicomObject> {
 
 /// The SOP Instance Reference macro for `s`, with its frame where `frame` is asked and it has
 /// one.
-fn reference(s: &SourceImage, frame: bool) -> Vec<DataElement<InMemDicomObject>> {
+pub(crate) fn reference(s: &SourceImage, frame: bool) -> Vec<DataElement<InMemDicomObject>> {
     let mut r = vec![
         text(tags::REFERENCED_SOP_CLASS_UID, VR::UI, &s.sop_class_uid),
         text(

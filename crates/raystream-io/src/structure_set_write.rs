@@ -17,9 +17,9 @@ use std::path::Path;
 use dicom_core::{DataElement, PrimitiveValue, VR};
 use dicom_dictionary_std::tags;
 
-use crate::secondary_capture::{Derived, decimal, derived_object, put, truncate, write_dicom};
+use crate::secondary_capture::{Derived, decimals, derived_object, put, truncate, write_dicom};
 use crate::segmentation::{
-    Segment, SegmentationInfo, item, labels_fit, segmentation_source, seq, text,
+    Segment, SegmentationInfo, item, labels_fit, reference, segmentation_source, seq, text,
 };
 use crate::volume::{RT_STRUCTURE_SET, SourceImage, Volume, VolumeError};
 
@@ -132,24 +132,10 @@ pub fn write_structure_set(
     let series = like
         .series
         .as_ref()
-        .expect("checked by segmentation_source");
+        .expect("checked by structure_set_source");
     let study = &series.study;
     let frame = &study.frame_of_reference_uid;
-    let ds = |v: &[f64]| v.iter().map(|&x| decimal(x)).collect::<Vec<_>>().join("\\");
-    let image_ref = |s: &SourceImage| {
-        let mut r = vec![
-            text(tags::REFERENCED_SOP_CLASS_UID, VR::UI, &s.sop_class_uid),
-            text(
-                tags::REFERENCED_SOP_INSTANCE_UID,
-                VR::UI,
-                &s.sop_instance_uid,
-            ),
-        ];
-        if let Some(n) = s.frame {
-            r.push(text(tags::REFERENCED_FRAME_NUMBER, VR::IS, &n.to_string()));
-        }
-        item(r)
-    };
+    let image_ref = |s: &SourceImage| item(reference(s, true));
     // Each structure's contours, slice by slice.
     let per = nx * ny;
     let mut contours = vec![0usize; segments.len()];
@@ -187,7 +173,7 @@ pub fn write_structure_set(
                         VR::IS,
                         &corners.len().to_string(),
                     ),
-                    text(tags::CONTOUR_DATA, VR::DS, &ds(&points)),
+                    text(tags::CONTOUR_DATA, VR::DS, &decimals(&points)),
                 ]));
                 contours[s] += 1;
             }
@@ -298,13 +284,12 @@ pub fn write_structure_set(
     o.put(seq(tags::ROI_CONTOUR_SEQUENCE, roi_contours));
     o.put(seq(
         tags::RTROI_OBSERVATIONS_SEQUENCE,
-        segments
-            .iter()
-            .enumerate()
-            .map(|(s, _)| {
+        (1..=segments.len())
+            .map(|number| {
+                let number = number.to_string();
                 item(vec![
-                    text(tags::OBSERVATION_NUMBER, VR::IS, &(s + 1).to_string()),
-                    text(tags::REFERENCED_ROI_NUMBER, VR::IS, &(s + 1).to_string()),
+                    text(tags::OBSERVATION_NUMBER, VR::IS, &number),
+                    text(tags::REFERENCED_ROI_NUMBER, VR::IS, &number),
                     text(tags::RTROI_INTERPRETED_TYPE, VR::CS, "ORGAN"),
                     DataElement::new(tags::ROI_INTERPRETER, VR::PN, PrimitiveValue::Empty),
                 ])

@@ -1964,20 +1964,19 @@ fn cinematic_rendering_through_the_cli() {
     );
     // --light turns the key light: lit from the camera the bones are brighter than lit from
     // behind (the sky alone then), on both sides of the default.
-    let mean = |light: &str| {
-        let png = render_to(
-            &format!("cinematic-light-{light}.png"),
-            "cpu",
-            &[&args[..], &[&format!("--light={light}")]].concat(),
-        );
+    let mean = |png: std::path::PathBuf| {
         let img = image::open(png).unwrap().to_rgb8();
         img.as_raw().iter().map(|&v| v as f64).sum::<f64>() / img.as_raw().len() as f64
     };
-    let (front, back) = (mean("0,0"), mean("180,0"));
-    let default = {
-        let img = image::open(tmp("cinematic-cpu-1.png")).unwrap().to_rgb8();
-        img.as_raw().iter().map(|&v| v as f64).sum::<f64>() / img.as_raw().len() as f64
+    let lit = |light: &str| {
+        mean(render_to(
+            &format!("cinematic-light-{light}.png"),
+            "cpu",
+            &[&args[..], &[&format!("--light={light}")]].concat(),
+        ))
     };
+    let (front, back) = (lit("0,0"), lit("180,0"));
+    let default = mean(tmp("cinematic-cpu-1.png"));
     assert!(
         front > default && default > back,
         "{front} {default} {back}"

@@ -140,17 +140,7 @@ struct Tracked {
 fn cell_exit(p: vec3<f32>, t: f32, d_idx: vec3<f32>) -> vec2<f32> {
     let cells = max((dp.dims - 1u + MAJORANT_CELL - 1u) / MAJORANT_CELL, vec3<u32>(1u));
     let b = min(vec3<u32>(max(p, vec3<f32>(0.0))) / MAJORANT_CELL, cells - 1u);
-    var t_exit = bitcast<f32>(0x7f800000u);
-    for (var a = 0u; a < 3u; a++) {
-        if d_idx[a] == 0.0 {
-            continue;
-        }
-        var bound = f32(b[a] * MAJORANT_CELL);
-        if d_idx[a] > 0.0 {
-            bound = f32((b[a] + 1u) * MAJORANT_CELL);
-        }
-        t_exit = min(t_exit, t + (bound - p[a]) / d_idx[a]);
-    }
+    let t_exit = cell_exit_t(p, t, d_idx, b, MAJORANT_CELL);
     return vec2<f32>(bitcast<f32>(b.x + cells.x * (b.y + cells.y * b.z)), t_exit);
 }
 

@@ -109,18 +109,25 @@ fn skip_brick(p: vec3<f32>, t: f32, t0: f32, d_idx: vec3<f32>, step: f32, jit: f
     if brick_visible[b.x + dp.bricks.x * (b.y + dp.bricks.y * b.z)] != 0u {
         return k;
     }
+    let t_exit = cell_exit_t(p, t, d_idx, b, BRICK);
+    return max(u32(max(ceil((t_exit - t0) / step - jit), 0.0)), k + 1u);
+}
+
+// Where the ray p + (s - t) d_idx leaves cell `b` of `cell`³ voxel spacings (as the CPU's
+// raystream_cpu::dvr::cell_exit).
+fn cell_exit_t(p: vec3<f32>, t: f32, d_idx: vec3<f32>, b: vec3<u32>, cell: u32) -> f32 {
     var t_exit = bitcast<f32>(0x7f800000u);
     for (var a = 0u; a < 3u; a++) {
         if d_idx[a] == 0.0 {
             continue;
         }
-        var bound = f32(b[a] * BRICK);
+        var bound = f32(b[a] * cell);
         if d_idx[a] > 0.0 {
-            bound = f32((b[a] + 1u) * BRICK);
+            bound = f32((b[a] + 1u) * cell);
         }
         t_exit = min(t_exit, t + (bound - p[a]) / d_idx[a]);
     }
-    return max(u32(max(ceil((t_exit - t0) / step - jit), 0.0)), k + 1u);
+    return t_exit;
 }
 
 // Transmittance over [t0, t1] (mm) of the ray o_idx + t d_idx on the lattice
