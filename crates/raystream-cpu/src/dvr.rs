@@ -113,6 +113,9 @@ pub struct DvrOptions {
     /// dvr with shadows, and cinematic: where the key light stands, (azimuth, elevation) in
     /// degrees from the camera ([`key_light_from`]); `None`: above left ([`key_light`]).
     pub light: Option<[f32; 2]>,
+    /// cinematic: filter the frame's Monte Carlo noise ([`crate::cinematic::denoised`]), on
+    /// either device.
+    pub denoise: bool,
 }
 
 impl Default for DvrOptions {
@@ -135,6 +138,7 @@ impl Default for DvrOptions {
             spp: 64,
             bounces: 4,
             light: None,
+            denoise: false,
         }
     }
 }
@@ -886,6 +890,16 @@ impl Sight<'_> {
     }
 }
 
+/// `opt` as a frame seen by `sight` is marched: cut to the clip planes its view adds, its slab
+/// (the rays' own reach by then) taken off.
+pub(crate) fn frame_options(vol: &Volume, opt: &DvrOptions, sight: Sight) -> DvrOptions {
+    DvrOptions {
+        clip_planes: sight.planes(opt, vol),
+        slab: None,
+        ..*opt
+    }
+}
+
 /// Every pixel's ray, marched.
 fn march_frame(
     vol: &Volume,
@@ -901,11 +915,7 @@ fn march_frame(
         );
     }
     let half_slab = 0.5 * opt.slab.unwrap_or(0.0);
-    let opt = &DvrOptions {
-        clip_planes: sight.planes(opt, vol),
-        slab: None,
-        ..*opt
-    };
+    let opt = &frame_options(vol, opt, sight);
     let marcher = Marcher::new(
         vol,
         (opt.skip_empty && opt.mode == DvrMode::Dvr).then_some(tf),
@@ -914,26 +924,24 @@ fn march_frame(
         let Sight::Camera(cam) = sight else {
             panic!("cinematic rendering is seen by a camera, not a curved plane");
         };
-        let lighting = crate::cinematic::Lighting::studio(opt, cam);
-        let majorants = crate::cinematic::Majorants::new(vol, tf);
-        let tracker = crate::cinematic::Tracker {
-            m: &marcher,
-            tf,
-            majorants: &majorants,
-        };
-        let rays: Vec<Marched> = (0..opt.width * opt.height)
-            .into_par_iter()
-            .map(|pixel| {
-                let (color, transmit, taken) =
-                    crate::cinematic::pixel(&tracker, opt, cam, &lighting, pixel);
-                Marched {
-                    color,
-                    transmit,
-                    taken,
-                    skipped: 0,
-                }
+        let paths = crate::cinematic::trace_frame(vol, &marcher, tf, opt, cam);
+        let mut rays: Vec<Marched> = paths
+            .iter()
+            .map(|p| Marched {
+                color: p.light,
+                transmit: p.escaped,
+                taken: p.taken,
+                skipped: 0,
             })
             .collect();
+        if opt.denoise {
+            let noisy = crate::cinematic::film_of(opt, &paths);
+            let (film, alpha) = crate::cinematic::denoised(vol, tf, opt, cam, &noisy);
+            for ((r, c), a) in rays.iter_mut().zip(film.pixels).zip(alpha) {
+                r.color = c;
+                r.transmit = 1.0 - a;
+            }
+        }
         let stats = DvrStats {
             samples: rays.iter().map(|c| c.taken).sum(),
             step_mm: 0.0,

@@ -20,6 +20,7 @@
 mod aov;
 pub mod cinematic;
 pub mod cpr;
+pub mod denoise;
 pub mod dvr;
 mod image_out;
 pub mod lumen;

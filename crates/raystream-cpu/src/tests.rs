@@ -572,3 +572,87 @@ fn a_far_camera_does_not_let_a_surface_shadow_itself() {
         "shadow rays hit the sphere itself"
     );
 }
+
+/// `--denoise` on real CT: a cinematic frame of the abdomen at 8 paths a pixel (192×144),
+/// denoised along its guides, is closer to the same frame at 256 paths than the raw frame, by
+/// a root-mean-square error under 0.7× the raw one's (measured 0.59× with ct-bones, 0.39× with
+/// ct-muscle), and closer than a plain 5×5 box blur of it (which smears edges); it keeps the
+/// frame's light (within 2 %), and the pixels' reported variances match the raw frame's actual
+/// error (within 20 %; measured 0.92–0.96).
+#[test]
+fn denoised_cinematic_frames_approach_the_converged_one() {
+    use crate::cinematic::{guides, luminance, render_film};
+    use crate::denoise::{DenoiseOptions, denoise};
+    use crate::dvr::{DvrMode, DvrOptions, volume_camera};
+    let ct = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
+    let vol = raystream_io::load_volume(&ct, &Default::default()).unwrap();
+    let (w, h) = (192u32, 144u32);
+    let cam = volume_camera(&vol, w as f32 / h as f32);
+    for preset in [
+        raystream_volume::TfPreset::CtBones,
+        raystream_volume::TfPreset::CtMuscle,
+    ] {
+        let tf = preset.function();
+        let opt = |spp| DvrOptions {
+            width: w,
+            height: h,
+            mode: DvrMode::Cinematic,
+            spp,
+            bounces: 3,
+            ..Default::default()
+        };
+        let (noisy, _) = render_film(&vol, &tf, &opt(8), &cam);
+        let (truth, _) = render_film(&vol, &tf, &opt(256), &cam);
+        let g = guides(&vol, &tf, &opt(8), &cam);
+        let (clean, alpha) = denoise(&noisy, &g, &DenoiseOptions::default());
+        let rms = |img: &[Vec3]| {
+            let s: f64 = img
+                .iter()
+                .zip(&truth.film.pixels)
+                .map(|(a, b)| (*a - *b).length_squared() as f64)
+                .sum();
+            (s / img.len() as f64).sqrt()
+        };
+        let boxed: Vec<Vec3> = (0..(w * h) as i32)
+            .map(|p| {
+                let (x, y) = (p % w as i32, p / w as i32);
+                let (mut s, mut k) = (Vec3::ZERO, 0.0);
+                for qy in (y - 2).max(0)..(y + 3).min(h as i32) {
+                    for qx in (x - 2).max(0)..(x + 3).min(w as i32) {
+                        s += noisy.film.pixels[(qx + qy * w as i32) as usize];
+                        k += 1.0;
+                    }
+                }
+                s / k
+            })
+            .collect();
+        let (raw, denoised, blurred) = (rms(&noisy.film.pixels), rms(&clean.pixels), rms(&boxed));
+        let total = |img: &[Vec3]| img.iter().map(|c| c.element_sum() as f64).sum::<f64>();
+        let kept = total(&clean.pixels) / total(&truth.film.pixels);
+        // The raw frame's squared luminance error against the reported variances (the
+        // reference's own, 128× smaller, apart).
+        let err2: f64 = noisy
+            .film
+            .pixels
+            .iter()
+            .zip(&truth.film.pixels)
+            .map(|(a, b)| ((luminance(*a) - luminance(*b)) as f64).powi(2))
+            .sum();
+        let var: f64 = noisy.variance.iter().map(|&v| v as f64).sum();
+        eprintln!(
+            "{}: rms raw {raw:.4}, denoised {denoised:.4}, 5x5 box {blurred:.4}; light kept {kept:.4}; squared error / variance {:.3}",
+            preset.name(),
+            err2 / var
+        );
+        assert!(
+            denoised < 0.7 * raw,
+            "{}: {raw} → {denoised}",
+            preset.name()
+        );
+        assert!(denoised < blurred, "{}: box blur {blurred}", preset.name());
+        assert!((kept - 1.0).abs() < 0.02, "{}: light {kept}", preset.name());
+        assert!((0.8..1.25).contains(&(err2 / var)), "{}", preset.name());
+        assert!(alpha.iter().all(|a| (-1e-6..=1.0 + 1e-6).contains(a)));
+    }
+}

@@ -8,9 +8,11 @@ use std::time::Instant;
 
 use raystream_cpu::Image;
 use raystream_cpu::cinematic::{ALPHA_MAX, KEY_IRRADIANCE, MAJORANT_CELL, Majorants, SKY_RADIANCE};
+use raystream_cpu::denoise::NoisyFilm;
 use raystream_cpu::dvr::{BRICK, DvrMode, DvrOptions, LightGrid, Marcher, Sight, scene_to_lps};
 use raystream_io::Volume;
 use raystream_math::Vec3;
+use raystream_scene::Camera;
 use raystream_volume::TransferFunction;
 use wgpu::util::DeviceExt;
 
@@ -253,7 +255,11 @@ impl<'a> GpuVolumeRenderer<'a> {
         opt: &DvrOptions,
         sight: impl Into<Sight<'s>>,
     ) -> Result<(Image, GpuDvrTimes), GpuError> {
-        let (pixels, _, times) = self.run(opt, sight.into(), Output::Linear)?;
+        let sight = sight.into();
+        if let Some((film, alpha, times)) = self.denoised(opt, sight)? {
+            return Ok((over(film, &alpha, opt.background), times));
+        }
+        let (pixels, _, _, times) = self.run(opt, sight, Output::Linear)?;
         Ok((pixels.into_linear(), times))
     }
 
@@ -265,7 +271,11 @@ impl<'a> GpuVolumeRenderer<'a> {
         opt: &DvrOptions,
         sight: impl Into<Sight<'s>>,
     ) -> Result<(Image, Vec<f32>, GpuDvrTimes), GpuError> {
-        let (pixels, alpha, times) = self.run(opt, sight.into(), Output::Premultiplied)?;
+        let sight = sight.into();
+        if let Some(denoised) = self.denoised(opt, sight)? {
+            return Ok(denoised);
+        }
+        let (pixels, alpha, _, times) = self.run(opt, sight, Output::Premultiplied)?;
         Ok((pixels.into_linear(), alpha, times))
     }
 
@@ -276,16 +286,66 @@ impl<'a> GpuVolumeRenderer<'a> {
         opt: &DvrOptions,
         sight: impl Into<Sight<'s>>,
     ) -> Result<(Vec<u8>, GpuDvrTimes), GpuError> {
-        let (pixels, _, times) = self.run(opt, sight.into(), Output::Srgb8)?;
+        let sight = sight.into();
+        if let Some((film, alpha, times)) = self.denoised(opt, sight)? {
+            return Ok((over(film, &alpha, opt.background).to_srgb8(), times));
+        }
+        let (pixels, _, _, times) = self.run(opt, sight, Output::Srgb8)?;
         Ok((pixels.into_srgb8(), times))
     }
 
+    /// A cinematic frame (`opt.mode` must be cinematic) as the denoiser takes it, as
+    /// `raystream_cpu::cinematic::render_film`: the premultiplied light, the opacity and each
+    /// pixel's variance of its luminance.
+    pub fn render_film(
+        &self,
+        opt: &DvrOptions,
+        cam: &Camera,
+    ) -> Result<(NoisyFilm, GpuDvrTimes), GpuError> {
+        assert_eq!(
+            opt.mode,
+            DvrMode::Cinematic,
+            "render_film draws cinematic frames"
+        );
+        let (pixels, alpha, variance, times) =
+            self.run(opt, Sight::Camera(cam), Output::Premultiplied)?;
+        let film = NoisyFilm {
+            film: pixels.into_linear(),
+            alpha,
+            variance,
+        };
+        Ok((film, times))
+    }
+
+    /// With `opt.denoise`, a cinematic frame denoised: traced here, its film read back and
+    /// filtered on the CPU (`raystream_cpu::cinematic::denoised`, the one filter of both
+    /// devices), the frame's time including the filter's. `None` for any other frame.
+    fn denoised(
+        &self,
+        opt: &DvrOptions,
+        sight: Sight,
+    ) -> Result<Option<(Image, Vec<f32>, GpuDvrTimes)>, GpuError> {
+        if !(opt.denoise && opt.mode == DvrMode::Cinematic) {
+            return Ok(None);
+        }
+        let Sight::Camera(cam) = sight else {
+            panic!("cinematic rendering is seen by a camera, not a curved plane");
+        };
+        let t0 = Instant::now();
+        let (noisy, mut times) = self.render_film(opt, cam)?;
+        let (film, alpha) = raystream_cpu::cinematic::denoised(self.vol, self.tf, opt, cam, &noisy);
+        times.frame_ms = t0.elapsed().as_secs_f64() * 1e3;
+        Ok(Some((film, alpha, times)))
+    }
+
+    /// One frame: its pixels, and with premultiplied output the opacities (and for a
+    /// cinematic frame the variances) of the second plane.
     fn run(
         &self,
         opt: &DvrOptions,
         sight: Sight,
         output: Output,
-    ) -> Result<(Pixels, Vec<f32>, GpuDvrTimes), GpuError> {
+    ) -> Result<(Pixels, Vec<f32>, Vec<f32>, GpuDvrTimes), GpuError> {
         let srgb8 = output == Output::Srgb8;
         let premultiplied = output == Output::Premultiplied;
         let ctx = self.ctx;
@@ -641,7 +701,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
-        let mut alpha = Vec::new();
+        let (mut alpha, mut variance) = (Vec::new(), Vec::new());
         let (out, samples) = if srgb8 {
             let at = (packed_bytes / 4) as usize;
             let samples = words[at] as u64 | (words[at + 1] as u64) << 32;
@@ -653,6 +713,9 @@ impl<'a> GpuVolumeRenderer<'a> {
             if premultiplied {
                 let a = &floats[4 * n as usize..8 * n as usize];
                 alpha = a.chunks_exact(4).map(|a| a[0]).collect();
+                if cinematic {
+                    variance = a.chunks_exact(4).map(|a| a[1]).collect();
+                }
             }
             let samples = px.chunks_exact(4).map(|p| p[3] as u64).sum();
             // A ray that took no sample has no HU value: NaN, as on the CPU (the kernel writes
@@ -680,6 +743,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         Ok((
             out,
             alpha,
+            variance,
             GpuDvrTimes {
                 frame_ms: t0.elapsed().as_secs_f64() * 1e3,
                 kernel_gpu_ms,
@@ -687,4 +751,12 @@ impl<'a> GpuVolumeRenderer<'a> {
             },
         ))
     }
+}
+
+/// Premultiplied `film` of opacity `alpha` laid over `background`.
+fn over(mut film: Image, alpha: &[f32], background: Vec3) -> Image {
+    for (c, a) in film.pixels.iter_mut().zip(alpha) {
+        *c += (1.0 - a) * background;
+    }
+    film
 }

@@ -503,6 +503,7 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                 "shadows": shadows,
                 "spp": (mode == DvrMode::Cinematic).then_some(opt.spp),
                 "bounces": (mode == DvrMode::Cinematic).then_some(opt.bounces),
+                "denoise": (mode == DvrMode::Cinematic).then_some(opt.denoise),
                 "transfer_function": a.look.tf.as_ref().map(|p| p.display().to_string())
                     .unwrap_or_else(|| a.threshold.preset.map_or("ct-bone".into(), |p| p.name())),
                 "commit": commit,

@@ -69,6 +69,12 @@ pub fn options(
             );
         }
     }
+    if look.denoise && mode != DvrMode::Cinematic {
+        bail!(
+            "--denoise filters the noise of --mode cinematic's paths (--mode {} has none to filter)",
+            mode.name()
+        );
+    }
     if look.light.is_some() && !(mode == DvrMode::Cinematic || look.shadows) {
         bail!(
             "--light places the key light of --mode dvr --shadows and --mode cinematic (--mode {} without it has a headlight or none)",
@@ -133,6 +139,7 @@ pub fn options(
         slice_at: look.slice_at.map(Vec3::from_array),
         slab: look.slab,
         light: look.light,
+        denoise: look.denoise,
         ..Default::default()
     };
     Ok((tf, opt))

@@ -692,6 +692,12 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     if mode == DvrMode::Cinematic {
         opt.spp = a.spp.unwrap_or(opt.spp);
         opt.bounces = a.max_depth;
+        if opt.denoise && opt.spp < 2 {
+            bail!(
+                "--denoise with --spp {}: the filter is steered by each pixel's variance, which takes at least 2 paths a pixel",
+                opt.spp
+            );
+        }
     } else if a.spp.is_some() {
         bail!(
             "--spp with --mode {}: one ray a pixel (--spp is for meshes, scenes and --mode cinematic)",
@@ -813,8 +819,10 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         // What was rendered, and what the samples were beyond their count.
         let (what, counts) = if mode == DvrMode::Cinematic {
             let what = format!(
-                ", {} paths a pixel, up to {} scatterings{format_words}{slab}",
-                opt.spp, opt.bounces
+                ", {} paths a pixel, up to {} scatterings{}{format_words}{slab}",
+                opt.spp,
+                opt.bounces,
+                if opt.denoise { ", denoised" } else { "" }
             );
             (what, String::new())
         } else {

@@ -11,7 +11,7 @@
 @group(0) @binding(11) var<storage, read> majorants: array<f32>;
 
 // A frame drawn in several dispatches keeps its running sums here: per pixel (light, escaped
-// camera rays), then (samples taken as u32 bits, 0, 0, 0).
+// camera rays), then (samples taken as u32 bits, the paths' squared luminances, 0, 0).
 @group(0) @binding(12) var<storage, read_write> accum: array<vec4<f32>>;
 
 const ROULETTE_BELOW: f32 = 0.1;
@@ -274,12 +274,15 @@ fn path_trace_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
     // The sums so far, added to in the CPU's order (the same f32 sums).
     var sum = vec3<f32>(0.0);
     var escaped = 0.0;
+    var sum_sq = 0.0;
     path_taken = 0u;
     if dp.sample_first > 0u {
         let a = accum[pixel];
         sum = a.xyz;
         escaped = a.w;
-        path_taken = bitcast<u32>(accum[n + pixel].x);
+        let b = accum[n + pixel];
+        path_taken = bitcast<u32>(b.x);
+        sum_sq = b.y;
     }
     let end = dp.sample_first + dp.sample_count;
     for (var s = dp.sample_first; s < end; s++) {
@@ -289,15 +292,36 @@ fn path_trace_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
         let r = camera_ray(x, y);
         let p = trace_path(r.o, r.d, dp.light);
         sum += p.light;
+        let l = luminance(p.light);
+        sum_sq += l * l;
         if p.escaped {
             escaped += 1.0;
         }
     }
     if end < dp.spp {
         accum[pixel] = vec4<f32>(sum, escaped);
-        accum[n + pixel] = vec4<f32>(bitcast<f32>(path_taken), 0.0, 0.0, 0.0);
+        accum[n + pixel] = vec4<f32>(bitcast<f32>(path_taken), sum_sq, 0.0, 0.0);
         return;
     }
     let paths = f32(max(dp.spp, 1u));
     store(pixel, Marched(sum / paths, escaped / paths, f32(path_taken)));
+    // The premultiplied output's second plane holds (opacity, variance, 0, 0): the denoiser's.
+    if dp.premultiplied != 0u {
+        pixels[n + pixel].y = variance_of_mean(luminance(sum), sum_sq, dp.spp);
+    }
+}
+
+// Luminance of linear Rec. 709 RGB (as the CPU's cinematic::luminance).
+fn luminance(c: vec3<f32>) -> f32 {
+    return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
+}
+
+// As the CPU's cinematic::variance_of_mean: the variance of the mean of n paths.
+fn variance_of_mean(sum: f32, sum_sq: f32, n: u32) -> f32 {
+    if n < 2u {
+        return 0.0;
+    }
+    let k = f32(n);
+    let mean = sum / k;
+    return max(sum_sq / k - mean * mean, 0.0) / (k - 1.0);
 }
