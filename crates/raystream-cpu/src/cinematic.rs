@@ -33,7 +33,7 @@ use raystream_scene::Camera;
 use raystream_volume::TransferFunction;
 
 use crate::Image;
-use crate::denoise::{Guides, NoisyFilm};
+use crate::denoise::{DenoiseTimes, Guides, NoisyFilm};
 use crate::dvr::{
     DvrOptions, FULL_SHADING_GRADIENT, Marcher, Sight, cell_dims, cell_exit, cell_ranges,
     clip_interval, frame_options, scene_to_lps,
@@ -501,84 +501,78 @@ pub(crate) fn film_of(opt: &DvrOptions, paths: &[PixelPaths]) -> NoisyFilm {
 }
 
 /// `noisy`, a cinematic frame of `vol` seen by `cam` (from either device), denoised along its
-/// [`guides`] with the default settings ([`crate::denoise`]): the premultiplied light and the
-/// opacity.
+/// [`guides`] with the default settings ([`crate::denoise`]): the premultiplied light, the
+/// opacity, and what the guides and the filter took.
 pub fn denoised(
     vol: &Volume,
     tf: &TransferFunction,
     opt: &DvrOptions,
     cam: &Camera,
     noisy: &NoisyFilm,
-) -> (Image, Vec<f32>) {
+) -> (Image, Vec<f32>, DenoiseTimes) {
+    let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
+    let t = std::time::Instant::now();
     let g = guides(vol, tf, opt, cam);
-    crate::denoise::denoise(noisy, &g, &crate::denoise::DenoiseOptions::default())
+    let guides_ms = ms(t);
+    let t = std::time::Instant::now();
+    let (film, alpha) =
+        crate::denoise::denoise(noisy, &g, &crate::denoise::DenoiseOptions::default());
+    let times = DenoiseTimes {
+        guides_ms,
+        filter_ms: ms(t),
+    };
+    (film, alpha, times)
 }
 
 /// Below this share of the light stopped, a pixel's guides have no depth (+∞): what little it
 /// shows lies at no distance worth comparing.
 const GUIDE_MIN_COVERAGE: f32 = 0.02;
 
+/// Guide rays a pixel, per side: the film's paths go through random points of the pixel, and
+/// guides from its centre alone alias against it on fine detail (on the chest CT at 150×200,
+/// 16 paths a pixel, 3×3 rays took the denoised error from 4.9 to 4.0/255, 4×4 no further:
+/// BENCHMARKS.md "Denoising").
+const GUIDE_SUBPIXELS: u32 = 3;
+
 /// A guide ray stops once this little light gets through.
 const GUIDE_TRANSMITTANCE_END: f32 = 0.01;
 
-/// The denoiser's guides ([`crate::denoise::Guides`]) of a cinematic frame, noise-free: each
-/// pixel's centre ray marched in steps of `opt.step_for(vol)` (cell by cell over the majorant
-/// grid, transparent cells crossed at once), composited front to back as dvr mode composites
-/// colour: every step weighted by the light it stops, w = T·(1 − e^(−σ·step)). Per pixel the
-/// weighted sum of the transfer function's colour (its albedo, premultiplied by the coverage
-/// Σw), of the gradient's normal facing the eye scaled by the surface weight min(|∇HU| / 100
-/// HU/mm, 1) the paths scatter by, and the weighted mean distance from the eye (+∞ below a
-/// coverage of 2 %). A first-surface guide would miss what semi-transparent tissue shows.
+/// The denoiser's guides ([`crate::denoise::Guides`]) of a cinematic frame, noise-free: in
+/// each pixel a grid of [`GUIDE_SUBPIXELS`]² rays marched in steps of `opt.step_for(vol)`
+/// (cell by cell over the majorant grid, transparent cells crossed at once), composited front
+/// to back as dvr mode composites colour: every step weighted by the light it stops, w =
+/// T·(1 − e^(−σ·step)). Per pixel the mean over its rays of the weighted sums of the transfer
+/// function's colour (its albedo, premultiplied by the coverage Σw) and of the gradient's
+/// normal facing the eye scaled by the surface weight min(|∇HU| / 100 HU/mm, 1) the paths
+/// scatter by, and the weighted mean distance from the eye (+∞ below a mean coverage of 2 %).
+/// A first-surface guide would miss what semi-transparent tissue shows.
 pub fn guides(vol: &Volume, tf: &TransferFunction, opt: &DvrOptions, cam: &Camera) -> Guides {
     let opt = &frame_options(vol, opt, Sight::Camera(cam));
     let m = Marcher::new(vol, None);
     let majorants = Majorants::new(vol, tf);
     let step = opt.step_for(vol);
+    let k = GUIDE_SUBPIXELS;
     let seen: Vec<(f32, Vec3, Vec3)> = (0..opt.width * opt.height)
         .into_par_iter()
         .with_min_len(64)
         .map(|px| {
             let (x, y) = (px % opt.width, px / opt.width);
-            let r = cam.ray(x as f32 + 0.5, y as f32 + 0.5, opt.width, opt.height);
-            let (o, d) = (scene_to_lps(r.origin), scene_to_lps(r.dir));
-            let (mut albedo, mut normal) = (Vec3::ZERO, Vec3::ZERO);
-            let (mut depth, mut coverage) = (0.0f32, 0.0f32);
-            if let Some(((o_idx, d_idx, len), t0)) = inside(&m, opt, o, d) {
-                let mut transmit = 1.0f32;
-                let mut t = 0.5 * step;
-                while t < len && transmit > GUIDE_TRANSMITTANCE_END {
-                    let (c, exit) = majorants.exit(o_idx + d_idx * t, t, d_idx);
-                    if majorants.values[c] <= 0.0 {
-                        // On to the first lattice point past the cell.
-                        t = (t + step).max(t + ((exit - t) / step).ceil() * step);
-                        continue;
-                    }
-                    let p = o_idx + d_idx * t;
-                    let hu = m.sample(p);
-                    let sigma = sigma_of(tf.opacity_at(hu));
-                    if sigma > 0.0 {
-                        let w = transmit * -(-sigma * step).exp_m1();
-                        let g = m.gradient(p);
-                        let gm = g.length();
-                        if gm > 0.0 {
-                            let n = -g / gm;
-                            let facing = if n.dot(d) > 0.0 { -n } else { n };
-                            normal += facing * ((gm / FULL_SHADING_GRADIENT).min(1.0) * w);
-                        }
-                        albedo += Vec3::from(tf.color_at(hu)) * w;
-                        depth += (t0 + t) * w;
-                        coverage += w;
-                        transmit -= w;
-                    }
-                    t += step;
+            let mut sum = GuideSum::default();
+            for j in 0..k {
+                for i in 0..k {
+                    let (u, v) = ((i as f32 + 0.5) / k as f32, (j as f32 + 0.5) / k as f32);
+                    let r = cam.ray(x as f32 + u, y as f32 + v, opt.width, opt.height);
+                    let (o, d) = (scene_to_lps(r.origin), scene_to_lps(r.dir));
+                    guide_ray(&m, &majorants, tf, opt, step, (o, d), &mut sum);
                 }
             }
-            let depth = if coverage >= GUIDE_MIN_COVERAGE {
-                depth / coverage
+            let n = (k * k) as f32;
+            let depth = if sum.coverage >= GUIDE_MIN_COVERAGE * n {
+                sum.depth / sum.coverage
             } else {
                 f32::INFINITY
             };
-            (depth, normal, albedo)
+            (depth, sum.normal / n, sum.albedo / n)
         })
         .collect();
     Guides {
@@ -588,6 +582,60 @@ pub fn guides(vol: &Volume, tf: &TransferFunction, opt: &DvrOptions, cam: &Camer
         normal: seen.iter().map(|f| f.1).collect(),
         albedo: seen.iter().map(|f| f.2).collect(),
         tolerance: step,
+    }
+}
+
+/// A guide ray's sums, weighted by the light each step stops.
+#[derive(Default)]
+struct GuideSum {
+    albedo: Vec3,
+    normal: Vec3,
+    /// Σ w·t.
+    depth: f32,
+    /// Σ w.
+    coverage: f32,
+}
+
+/// Marches the ray o + t·d through the medium and adds what it meets to `sum`.
+fn guide_ray(
+    m: &Marcher,
+    majorants: &Majorants,
+    tf: &TransferFunction,
+    opt: &DvrOptions,
+    step: f32,
+    (o, d): (Vec3, Vec3),
+    sum: &mut GuideSum,
+) {
+    let Some(((o_idx, d_idx, len), t0)) = inside(m, opt, o, d) else {
+        return;
+    };
+    let mut transmit = 1.0f32;
+    let mut t = 0.5 * step;
+    while t < len && transmit > GUIDE_TRANSMITTANCE_END {
+        let (c, exit) = majorants.exit(o_idx + d_idx * t, t, d_idx);
+        if majorants.values[c] <= 0.0 {
+            // On to the first lattice point past the cell.
+            t = (t + step).max(t + ((exit - t) / step).ceil() * step);
+            continue;
+        }
+        let p = o_idx + d_idx * t;
+        let hu = m.sample(p);
+        let sigma = sigma_of(tf.opacity_at(hu));
+        if sigma > 0.0 {
+            let w = transmit * -(-sigma * step).exp_m1();
+            let g = m.gradient(p);
+            let gm = g.length();
+            if gm > 0.0 {
+                let n = -g / gm;
+                let facing = if n.dot(d) > 0.0 { -n } else { n };
+                sum.normal += facing * ((gm / FULL_SHADING_GRADIENT).min(1.0) * w);
+            }
+            sum.albedo += Vec3::from(tf.color_at(hu)) * w;
+            sum.depth += (t0 + t) * w;
+            sum.coverage += w;
+            transmit -= w;
+        }
+        t += step;
     }
 }
 
@@ -947,12 +995,12 @@ mod tests {
         }
     }
 
-    /// The guides against a fine quadrature: along each pixel's centre ray through a fuzzy
-    /// ball on an anisotropic grid, the light stopped (1 − e^(−∫σ), integrated in steps of a
-    /// sixteenth of the guides' step in f64, as far as the guides march: until 1 % gets
-    /// through) gives the coverage that the guide's albedo carries (its colour 0.7 times the
-    /// coverage, within 0.01), and the mean depth of the stopped light matches the guide's
-    /// within one step. Rays that stop under 2 % have no depth. A normal is no longer than
+    /// The guides against a fine quadrature: along each of a pixel's guide rays through a
+    /// fuzzy ball on an anisotropic grid, the light stopped (1 − e^(−∫σ), integrated in steps
+    /// of a sixteenth of the guides' step in f64, as far as the guides march: until 1 % gets
+    /// through); its mean over the rays is the coverage the guide's albedo carries (its colour
+    /// 0.7 times the coverage, within 0.01), and the mean depth of all the stopped light matches
+    /// the guide's within one step. Rays that stop under 2 % have no depth. A normal is no longer than
     /// the coverage (a weighted sum of unit normals times weights up to 1).
     /// Normals face the eye, and where the ray meets the ball squarely (covered over 90 %, the
     /// radius within 60° of the ray) lie along its radius within 20°.
@@ -980,11 +1028,20 @@ mod tests {
         let (mut hits, mut misses, mut square) = (0, 0, 0);
         for px in 0..opt.width * opt.height {
             let (x, y) = (px % opt.width, px / opt.width);
-            let r = cam.ray(x as f32 + 0.5, y as f32 + 0.5, opt.width, opt.height);
-            let (o, d) = (scene_to_lps(r.origin), scene_to_lps(r.dir));
             let fine = step as f64 / 16.0;
             let (mut coverage, mut depth) = (0.0f64, 0.0f64);
-            if let Some(((o_idx, d_idx, len), t0)) = inside(&m, &opt, o, d) {
+            // The pixel's grid of rays, each integrated finely.
+            let k = GUIDE_SUBPIXELS;
+            let ray = |i: u32, j: u32| {
+                let (u, v) = ((i as f32 + 0.5) / k as f32, (j as f32 + 0.5) / k as f32);
+                let r = cam.ray(x as f32 + u, y as f32 + v, opt.width, opt.height);
+                (scene_to_lps(r.origin), scene_to_lps(r.dir))
+            };
+            for (i, j) in (0..k).flat_map(|j| (0..k).map(move |i| (i, j))) {
+                let (o, d) = ray(i, j);
+                let Some(((o_idx, d_idx, len), t0)) = inside(&m, &opt, o, d) else {
+                    continue;
+                };
                 let mut tau = 0.0f64;
                 let mut t = 0.5 * fine;
                 while t < len as f64 && tau < -(0.01f64.ln()) {
@@ -997,6 +1054,11 @@ mod tests {
                     t += fine;
                 }
             }
+            let depth = depth / coverage;
+            let coverage = coverage / (k * k) as f64;
+            // The middle ray: the pixel's centre (k is odd).
+            assert_eq!(k % 2, 1);
+            let (o, d) = ray(k / 2, k / 2);
             let px = px as usize;
             let (albedo, n, z) = (g.albedo[px], g.normal[px], g.depth[px]);
             assert!(
@@ -1016,7 +1078,7 @@ mod tests {
                 continue;
             }
             hits += 1;
-            let want = depth / coverage;
+            let want = depth;
             assert!(
                 (z as f64 - want).abs() < step as f64,
                 "pixel {px}: guide depth {z}, quadrature {want:.3} (step {step})"

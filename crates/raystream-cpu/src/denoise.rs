@@ -62,6 +62,15 @@ pub struct Guides {
     pub tolerance: f32,
 }
 
+/// What denoising a frame cost, milliseconds of wall time.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DenoiseTimes {
+    /// Marching the guides.
+    pub guides_ms: f64,
+    /// The filter's passes.
+    pub filter_ms: f64,
+}
+
 /// The filter's settings; [`Default`] is what `--denoise` uses.
 #[derive(Clone, Copy, Debug)]
 pub struct DenoiseOptions {
@@ -82,14 +91,14 @@ pub struct DenoiseOptions {
 
 impl Default for DenoiseOptions {
     fn default() -> Self {
-        // SVGF's σℓ = 4 and σz = 1; three passes (σn, σa, the albedo's offset and the
-        // passes chosen on the abdomen CT at 320×240, 8 and 32 paths a pixel, against 256:
-        // BENCHMARKS.md "Denoising").
+        // SVGF's σz = 1; σℓ, σn, σa, the albedo's offset and the passes chosen on the chest
+        // CT (150×200, 16 and 64 paths a pixel, against 1024) and the abdomen CT (320×240, 8
+        // and 32 against 256): BENCHMARKS.md "Denoising".
         DenoiseOptions {
             passes: 3,
-            sigma_luminance: 4.0,
+            sigma_luminance: 3.0,
             sigma_depth: 1.0,
-            sigma_normal: 32.0,
+            sigma_normal: 8.0,
             sigma_albedo: 0.2,
             demodulate: 0.05,
         }

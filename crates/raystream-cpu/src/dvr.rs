@@ -229,6 +229,8 @@ pub struct DvrStats {
     /// Samples taken by shadow rays (`--shadows`).
     pub shadow_samples: u64,
     pub step_mm: f32,
+    /// cinematic with `denoise`: what the denoiser took.
+    pub denoise: Option<crate::denoise::DenoiseTimes>,
 }
 
 /// Bricks of `BRICK`³ cells: a brick holds the HU range of the voxels its cells' trilinear
@@ -934,17 +936,20 @@ fn march_frame(
                 skipped: 0,
             })
             .collect();
+        let mut denoise = None;
         if opt.denoise {
             let noisy = crate::cinematic::film_of(opt, &paths);
-            let (film, alpha) = crate::cinematic::denoised(vol, tf, opt, cam, &noisy);
+            let (film, alpha, times) = crate::cinematic::denoised(vol, tf, opt, cam, &noisy);
             for ((r, c), a) in rays.iter_mut().zip(film.pixels).zip(alpha) {
                 r.color = c;
                 r.transmit = 1.0 - a;
             }
+            denoise = Some(times);
         }
         let stats = DvrStats {
             samples: rays.iter().map(|c| c.taken).sum(),
             step_mm: 0.0,
+            denoise,
             ..Default::default()
         };
         return (rays, stats);
@@ -971,6 +976,7 @@ fn march_frame(
         skipped: rays.iter().map(|c| c.skipped).sum(),
         shadow_samples: grid.as_ref().map_or(0, |g| g.samples),
         step_mm: step,
+        denoise: None,
     };
     (rays, stats)
 }

@@ -575,7 +575,7 @@ fn a_far_camera_does_not_let_a_surface_shadow_itself() {
 
 /// `--denoise` on real CT: a cinematic frame of the abdomen at 8 paths a pixel (192×144),
 /// denoised along its guides, is closer to the same frame at 256 paths than the raw frame, by
-/// a root-mean-square error under 0.7× the raw one's (measured 0.59× with ct-bones, 0.39× with
+/// a root-mean-square error under 0.7× the raw one's (measured 0.48× with ct-bones, 0.39× with
 /// ct-muscle), and closer than a plain 5×5 box blur of it (which smears edges); it keeps the
 /// frame's light (within 2 %), and the pixels' reported variances match the raw frame's actual
 /// error (within 20 %; measured 0.92–0.96).

@@ -192,6 +192,8 @@ pub struct GpuDvrTimes {
     /// Samples the rays took (counted per pixel on the GPU, as the CPU counts them; shadow
     /// rays' samples not included).
     pub samples: u64,
+    /// cinematic with `denoise`: what the denoiser took on the CPU (in `frame_ms` too).
+    pub denoise: Option<raystream_cpu::denoise::DenoiseTimes>,
 }
 
 impl<'a> GpuVolumeRenderer<'a> {
@@ -333,8 +335,10 @@ impl<'a> GpuVolumeRenderer<'a> {
         };
         let t0 = Instant::now();
         let (noisy, mut times) = self.render_film(opt, cam)?;
-        let (film, alpha) = raystream_cpu::cinematic::denoised(self.vol, self.tf, opt, cam, &noisy);
+        let (film, alpha, denoise) =
+            raystream_cpu::cinematic::denoised(self.vol, self.tf, opt, cam, &noisy);
         times.frame_ms = t0.elapsed().as_secs_f64() * 1e3;
+        times.denoise = Some(denoise);
         Ok(Some((film, alpha, times)))
     }
 
@@ -748,6 +752,7 @@ impl<'a> GpuVolumeRenderer<'a> {
                 frame_ms: t0.elapsed().as_secs_f64() * 1e3,
                 kernel_gpu_ms,
                 samples,
+                denoise: None,
             },
         ))
     }

@@ -4,6 +4,7 @@
 use std::time::Instant;
 
 use anyhow::{Result, bail};
+use raystream_cpu::denoise::DenoiseTimes;
 use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, Sight, render_volume, render_volume_rgba};
 use raystream_cpu::{Image, ImageFormat};
 use raystream_gpu::GpuVolumeRenderer;
@@ -169,6 +170,8 @@ pub struct Frame {
     pub samples: u64,
     /// The CPU path's full statistics (skipped and shadow samples too).
     pub stats: Option<DvrStats>,
+    /// cinematic `--denoise`: what the guides and the filter took (on the CPU, either device).
+    pub denoise: Option<DenoiseTimes>,
 }
 
 impl<'a> Renderer<'a> {
@@ -208,19 +211,21 @@ impl<'a> Renderer<'a> {
                 kernel_ms: times.kernel_gpu_ms,
                 samples: times.samples,
                 stats: None,
+                denoise: times.denoise,
             });
         }
         if format == ImageFormat::Exr && !opt.mode.is_windowed() {
             // dvr and iso to an EXR: premultiplied RGBA, for compositing, in one pass: each
             // pixel's light C and opacity 1 − T, so that over a background B it is C + T·B.
-            let (film, alpha, kernel_ms, samples, stats) = match self {
+            let (film, alpha, kernel_ms, samples, stats, denoise) = match self {
                 Renderer::Gpu(g) => {
                     let (film, alpha, times) = g.render_rgba(opt, sight)?;
-                    (film, alpha, times.kernel_gpu_ms, times.samples, None)
+                    let (k, n) = (times.kernel_gpu_ms, times.samples);
+                    (film, alpha, k, n, None, times.denoise)
                 }
                 Renderer::Cpu { volume, tf } => {
                     let (film, alpha, stats) = render_volume_rgba(volume, tf, opt, sight);
-                    (film, alpha, None, stats.samples, Some(stats))
+                    (film, alpha, None, stats.samples, Some(stats), stats.denoise)
                 }
             };
             return Ok(Frame {
@@ -229,9 +234,10 @@ impl<'a> Renderer<'a> {
                 kernel_ms,
                 samples,
                 stats,
+                denoise,
             });
         }
-        let (film, kernel_ms, samples, stats) = self.film(opt, sight)?;
+        let (film, kernel_ms, samples, stats, denoise) = self.film(opt, sight)?;
         let picture = if hu {
             Picture::Values(film)
         } else {
@@ -243,24 +249,32 @@ impl<'a> Renderer<'a> {
             kernel_ms,
             samples,
             stats,
+            denoise,
         })
     }
 
-    /// One frame's linear film, the kernel's time (GPU), the samples taken and the CPU's full
-    /// statistics.
+    /// One frame's linear film, the kernel's time (GPU), the samples taken, the CPU's full
+    /// statistics and what denoising took.
     fn film(
         &self,
         opt: &DvrOptions,
         sight: Sight,
-    ) -> Result<(Image, Option<f64>, u64, Option<DvrStats>)> {
+    ) -> Result<(
+        Image,
+        Option<f64>,
+        u64,
+        Option<DvrStats>,
+        Option<DenoiseTimes>,
+    )> {
         Ok(match self {
             Renderer::Gpu(g) => {
                 let (film, times) = g.render(opt, sight)?;
-                (film, times.kernel_gpu_ms, times.samples, None)
+                let (k, n) = (times.kernel_gpu_ms, times.samples);
+                (film, k, n, None, times.denoise)
             }
             Renderer::Cpu { volume, tf } => {
                 let (film, stats) = render_volume(volume, tf, opt, sight);
-                (film, None, stats.samples, Some(stats))
+                (film, None, stats.samples, Some(stats), stats.denoise)
             }
         })
     }
@@ -293,5 +307,6 @@ pub fn estimate_stats(
         // The light grid does not depend on the image size.
         shadow_samples: s.shadow_samples,
         step_mm: s.step_mm,
+        denoise: None,
     }
 }

@@ -822,7 +822,13 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
                 ", {} paths a pixel, up to {} scatterings{}{format_words}{slab}",
                 opt.spp,
                 opt.bounces,
-                if opt.denoise { ", denoised" } else { "" }
+                match frame.denoise {
+                    Some(d) => format!(
+                        ", denoised (guides {:.0} ms, filter {:.0} ms)",
+                        d.guides_ms, d.filter_ms
+                    ),
+                    None => String::new(),
+                }
             );
             (what, String::new())
         } else {
