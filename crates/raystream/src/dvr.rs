@@ -237,7 +237,7 @@ impl<'a> Renderer<'a> {
                 denoise,
             });
         }
-        let (film, kernel_ms, samples, stats, denoise) = self.film(opt, sight)?;
+        let (film, cost) = self.film(opt, sight)?;
         let picture = if hu {
             Picture::Values(film)
         } else {
@@ -246,38 +246,46 @@ impl<'a> Renderer<'a> {
         Ok(Frame {
             picture,
             frame_ms: ms(t.elapsed()),
-            kernel_ms,
-            samples,
-            stats,
-            denoise,
+            kernel_ms: cost.kernel_ms,
+            samples: cost.samples,
+            stats: cost.stats,
+            denoise: cost.denoise,
         })
     }
 
-    /// One frame's linear film, the kernel's time (GPU), the samples taken, the CPU's full
-    /// statistics and what denoising took.
-    fn film(
-        &self,
-        opt: &DvrOptions,
-        sight: Sight,
-    ) -> Result<(
-        Image,
-        Option<f64>,
-        u64,
-        Option<DvrStats>,
-        Option<DenoiseTimes>,
-    )> {
+    /// One frame's linear film and what it cost.
+    fn film(&self, opt: &DvrOptions, sight: Sight) -> Result<(Image, FilmCost)> {
         Ok(match self {
             Renderer::Gpu(g) => {
                 let (film, times) = g.render(opt, sight)?;
-                let (k, n) = (times.kernel_gpu_ms, times.samples);
-                (film, k, n, None, times.denoise)
+                let cost = FilmCost {
+                    kernel_ms: times.kernel_gpu_ms,
+                    samples: times.samples,
+                    stats: None,
+                    denoise: times.denoise,
+                };
+                (film, cost)
             }
             Renderer::Cpu { volume, tf } => {
                 let (film, stats) = render_volume(volume, tf, opt, sight);
-                (film, None, stats.samples, Some(stats), stats.denoise)
+                let cost = FilmCost {
+                    kernel_ms: None,
+                    samples: stats.samples,
+                    stats: Some(stats),
+                    denoise: stats.denoise,
+                };
+                (film, cost)
             }
         })
     }
+}
+
+/// What a frame's film cost: [`Frame`]'s figures but the wall time.
+struct FilmCost {
+    kernel_ms: Option<f64>,
+    samples: u64,
+    stats: Option<DvrStats>,
+    denoise: Option<DenoiseTimes>,
 }
 
 /// The skipped and shadow samples of a frame the GPU rendered (it counts only the samples it
