@@ -526,16 +526,16 @@ pub fn denoised(
 
 /// Below this share of the light stopped, a pixel's guides have no depth (+∞): what little it
 /// shows lies at no distance worth comparing.
-const GUIDE_MIN_COVERAGE: f32 = 0.02;
+pub const GUIDE_MIN_COVERAGE: f32 = 0.02;
 
 /// Guide rays a pixel, per side: the film's paths go through random points of the pixel, and
 /// guides from its centre alone alias against it on fine detail (on the chest CT at 150×200,
 /// 16 paths a pixel, 3×3 rays took the denoised error from 4.9 to 4.0/255, 4×4 no further:
 /// BENCHMARKS.md "Denoising").
-const GUIDE_SUBPIXELS: u32 = 3;
+pub const GUIDE_SUBPIXELS: u32 = 3;
 
 /// A guide ray stops once this little light gets through.
-const GUIDE_TRANSMITTANCE_END: f32 = 0.01;
+pub const GUIDE_TRANSMITTANCE_END: f32 = 0.01;
 
 /// The denoiser's guides ([`crate::denoise::Guides`]) of a cinematic frame, noise-free: in
 /// each pixel a grid of [`GUIDE_SUBPIXELS`]² rays marched in steps of `opt.step_for(vol)`

@@ -7,8 +7,11 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use raystream_cpu::Image;
-use raystream_cpu::cinematic::{ALPHA_MAX, KEY_IRRADIANCE, MAJORANT_CELL, Majorants, SKY_RADIANCE};
-use raystream_cpu::denoise::NoisyFilm;
+use raystream_cpu::cinematic::{
+    ALPHA_MAX, GUIDE_MIN_COVERAGE, GUIDE_SUBPIXELS, GUIDE_TRANSMITTANCE_END, KEY_IRRADIANCE,
+    MAJORANT_CELL, Majorants, SKY_RADIANCE,
+};
+use raystream_cpu::denoise::{DenoiseOptions, DenoiseTimes, Guides, NoisyFilm, denoise};
 use raystream_cpu::dvr::{BRICK, DvrMode, DvrOptions, LightGrid, Marcher, Sight, scene_to_lps};
 use raystream_io::Volume;
 use raystream_math::Vec3;
@@ -18,7 +21,7 @@ use wgpu::util::DeviceExt;
 
 use crate::layout::{DvrParams, GpuCprRow};
 use crate::render::COMMON_WGSL;
-use crate::{GpuContext, GpuError, Pixels, Timer, read_elapsed_ms, read_words};
+use crate::{GpuContext, GpuError, Pixels, Timer, read_back, read_elapsed_ms, read_words};
 
 const DVR_WGSL: &str = include_str!("kernels/dvr.wgsl");
 const VOLUME_WGSL: &str = include_str!("kernels/volume.wgsl");
@@ -28,7 +31,7 @@ const CINEMATIC_WGSL: &str = include_str!("kernels/cinematic.wgsl");
 /// volume stages share, with its constants (cinematic mode's from `raystream_cpu::cinematic`).
 pub(crate) fn volume_core_wgsl() -> String {
     format!(
-        "const BRICK_SIZE: u32 = {BRICK}u;\nconst MAJORANT_CELL: u32 = {MAJORANT_CELL}u;\nconst ALPHA_MAX: f32 = {ALPHA_MAX:?};\nconst KEY_IRRADIANCE: f32 = {KEY_IRRADIANCE:?};\nconst SKY_RADIANCE: f32 = {SKY_RADIANCE:?};\n\n{VOLUME_WGSL}"
+        "const BRICK_SIZE: u32 = {BRICK}u;\nconst MAJORANT_CELL: u32 = {MAJORANT_CELL}u;\nconst ALPHA_MAX: f32 = {ALPHA_MAX:?};\nconst KEY_IRRADIANCE: f32 = {KEY_IRRADIANCE:?};\nconst SKY_RADIANCE: f32 = {SKY_RADIANCE:?};\nconst GUIDE_SUBPIXELS: u32 = {GUIDE_SUBPIXELS}u;\nconst GUIDE_TRANSMITTANCE_END: f32 = {GUIDE_TRANSMITTANCE_END:?};\nconst GUIDE_MIN_COVERAGE: f32 = {GUIDE_MIN_COVERAGE:?};\n\n{VOLUME_WGSL}"
     )
 }
 
@@ -150,6 +153,8 @@ pub struct GpuVolumeRenderer<'a> {
     /// `--mode cinematic`: the path tracer's kernel, and its majorant grid (made by the first
     /// cinematic frame).
     path_pipeline: wgpu::ComputePipeline,
+    /// The denoiser's guides of cinematic frames.
+    guide_pipeline: wgpu::ComputePipeline,
     majorants: std::sync::OnceLock<wgpu::Buffer>,
     /// cinematic: a frame's running sums between its dispatches.
     accum: Mutex<Option<wgpu::Buffer>>,
@@ -213,6 +218,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             });
         let pipeline = ctx.auto_pipeline(&module, "render_volume");
         let path_pipeline = ctx.auto_pipeline(&module, "path_trace_volume");
+        let guide_pipeline = ctx.auto_pipeline(&module, "guide_volume");
         let light_pipeline = ctx.auto_pipeline(&module, "light_grid");
         let pack_pipeline = ctx.auto_pipeline(&module, "pack_srgb8");
         let light_dims = LightGrid::dims_for(vol.dims);
@@ -237,6 +243,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             gpu,
             pipeline,
             path_pipeline,
+            guide_pipeline,
             majorants: std::sync::OnceLock::new(),
             accum: Mutex::new(None),
             paths_per_dispatch: PATHS_PER_DISPATCH,
@@ -319,9 +326,10 @@ impl<'a> GpuVolumeRenderer<'a> {
         Ok((film, times))
     }
 
-    /// With `opt.denoise`, a cinematic frame denoised: traced here, its film read back and
-    /// filtered on the CPU (`raystream_cpu::cinematic::denoised`, the one filter of both
-    /// devices), the frame's time including the filter's. `None` for any other frame.
+    /// With `opt.denoise`, a cinematic frame denoised: traced here with its guides
+    /// ([`Self::guides`]), read back and filtered on the CPU (`raystream_cpu::denoise`, the
+    /// one filter of both devices), the frame's time including the filter's. `None` for any
+    /// other frame.
     fn denoised(
         &self,
         opt: &DvrOptions,
@@ -333,28 +341,116 @@ impl<'a> GpuVolumeRenderer<'a> {
         let Sight::Camera(cam) = sight else {
             panic!("cinematic rendering is seen by a camera, not a curved plane");
         };
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
         let t0 = Instant::now();
         let (noisy, mut times) = self.render_film(opt, cam)?;
-        let (film, alpha, denoise) =
-            raystream_cpu::cinematic::denoised(self.vol, self.tf, opt, cam, &noisy);
-        times.frame_ms = t0.elapsed().as_secs_f64() * 1e3;
-        times.denoise = Some(denoise);
+        let t = Instant::now();
+        let guides = self.guides(opt, cam)?;
+        let guides_ms = ms(t);
+        let t = Instant::now();
+        let (film, alpha) = denoise(&noisy, &guides, &DenoiseOptions::default());
+        times.denoise = Some(DenoiseTimes {
+            guides_ms,
+            filter_ms: ms(t),
+        });
+        times.frame_ms = ms(t0);
         Ok(Some((film, alpha, times)))
     }
 
-    /// One frame: its pixels, and with premultiplied output the opacities (and for a
-    /// cinematic frame the variances) of the second plane.
-    fn run(
+    /// The majorant grid of cinematic frames, made on first use.
+    fn majorant_buffer(&self) -> Result<&wgpu::Buffer, GpuError> {
+        if let Some(b) = self.majorants.get() {
+            return Ok(b);
+        }
+        let m = Majorants::new(self.vol, self.tf);
+        let b = self.ctx.storage(
+            "majorants",
+            bytemuck::cast_slice(&m.values),
+            wgpu::BufferUsages::empty(),
+        )?;
+        Ok(self.majorants.get_or_init(|| b))
+    }
+
+    /// The denoiser's guides of a cinematic frame seen by `cam`, as
+    /// `raystream_cpu::cinematic::guides` marches them, marched here.
+    pub fn guides(&self, opt: &DvrOptions, cam: &Camera) -> Result<Guides, GpuError> {
+        let ctx = self.ctx;
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let (params, _) = self.params(opt, Sight::Camera(cam), false)?;
+        let param_buf = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("guide params"),
+                contents: bytemuck::bytes_of(&params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+        let n = opt.width as u64 * opt.height as u64;
+        let out = ctx.work_buffer("guides", 32 * n, wgpu::BufferUsages::COPY_SRC)?;
+        let majorants = self.majorant_buffer()?;
+        let entries: Vec<_> = [
+            (0, param_buf.as_entire_binding()),
+            (1, wgpu::BindingResource::TextureView(&self.gpu.view)),
+            (2, wgpu::BindingResource::Sampler(&self.gpu.sampler)),
+            (3, self.gpu.opacity.as_entire_binding()),
+            (4, self.gpu.color.as_entire_binding()),
+            (11, majorants.as_entire_binding()),
+            (13, out.as_entire_binding()),
+        ]
+        .into_iter()
+        .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource })
+        .collect();
+        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("guides"),
+            layout: &self.guide_pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("guide_volume"),
+            });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("guide_volume"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.guide_pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
+        }
+        ctx.queue.submit([enc.finish()]);
+        let floats: Vec<f32> = read_back(ctx, &out)?;
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(ctx.err(e));
+        }
+        let (first, second) = floats.split_at(4 * n as usize);
+        Ok(Guides {
+            width: opt.width,
+            height: opt.height,
+            depth: first
+                .chunks_exact(4)
+                .map(|g| if g[3] < 0.0 { f32::INFINITY } else { g[3] })
+                .collect(),
+            albedo: first
+                .chunks_exact(4)
+                .map(|g| Vec3::new(g[0], g[1], g[2]))
+                .collect(),
+            normal: second
+                .chunks_exact(4)
+                .map(|g| Vec3::new(g[0], g[1], g[2]))
+                .collect(),
+            tolerance: params.step,
+        })
+    }
+
+    /// The kernels' parameters of a frame seen by `sight`, and a curved plane's rows.
+    fn params(
         &self,
         opt: &DvrOptions,
         sight: Sight,
-        output: Output,
-    ) -> Result<(Pixels, Vec<f32>, Vec<f32>, GpuDvrTimes), GpuError> {
-        let srgb8 = output == Output::Srgb8;
-        let premultiplied = output == Output::Premultiplied;
+        premultiplied: bool,
+    ) -> Result<(DvrParams, Option<wgpu::Buffer>), GpuError> {
         let ctx = self.ctx;
-        let t0 = Instant::now();
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let ([r0, r1, r2], origin) = self.gpu.to_index;
         let (w, l) = opt.shown_window();
         let s = self.tf.shading;
@@ -457,6 +553,23 @@ impl<'a> GpuVolumeRenderer<'a> {
             sample_first: 0,
             sample_count: opt.spp,
         };
+        Ok((params, row_buf))
+    }
+
+    /// One frame: its pixels, and with premultiplied output the opacities (and for a
+    /// cinematic frame the variances) of the second plane.
+    fn run(
+        &self,
+        opt: &DvrOptions,
+        sight: Sight,
+        output: Output,
+    ) -> Result<(Pixels, Vec<f32>, Vec<f32>, GpuDvrTimes), GpuError> {
+        let srgb8 = output == Output::Srgb8;
+        let premultiplied = output == Output::Premultiplied;
+        let ctx = self.ctx;
+        let t0 = Instant::now();
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let (params, row_buf) = self.params(opt, sight, premultiplied)?;
         let row_buf = row_buf.as_ref().unwrap_or(&self.no_rows);
         let param_buf = ctx
             .device
@@ -515,18 +628,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         // (6), and each pipeline's layout holds exactly the bindings its entry point uses.
         let cinematic = opt.mode == DvrMode::Cinematic;
         let majorants = if cinematic {
-            Some(match self.majorants.get() {
-                Some(b) => b,
-                None => {
-                    let m = Majorants::new(self.vol, self.tf);
-                    let b = ctx.storage(
-                        "majorants",
-                        bytemuck::cast_slice(&m.values),
-                        wgpu::BufferUsages::empty(),
-                    )?;
-                    self.majorants.get_or_init(|| b)
-                }
-            })
+            Some(self.majorant_buffer()?)
         } else {
             None
         };

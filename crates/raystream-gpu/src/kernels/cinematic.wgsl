@@ -325,3 +325,73 @@ fn variance_of_mean(sum: f32, sum_sq: f32, n: u32) -> f32 {
     let mean = sum / k;
     return max(sum_sq / k - mean * mean, 0.0) / (k - 1.0);
 }
+
+// The denoiser's guides, as the CPU's cinematic::guides (which says why): in each pixel a grid
+// of GUIDE_SUBPIXELS² rays marched in dp.step steps, cell by cell over the majorants, each step
+// weighted by the light it stops. guide_out[pixel] = (albedo, mean depth or −1 for none),
+// guide_out[n + pixel] = (normal, 0).
+@group(0) @binding(13) var<storage, read_write> guide_out: array<vec4<f32>>;
+
+@compute @workgroup_size(8, 8)
+fn guide_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= dp.width || gid.y >= dp.height {
+        return;
+    }
+    let pixel = gid.x + gid.y * dp.width;
+    let n = dp.width * dp.height;
+    let k = GUIDE_SUBPIXELS;
+    let step = dp.step;
+    var albedo = vec3<f32>(0.0);
+    var normal = vec3<f32>(0.0);
+    var depth = 0.0;
+    var coverage = 0.0;
+    for (var j = 0u; j < k; j++) {
+        for (var i = 0u; i < k; i++) {
+            let r = camera_ray(f32(gid.x) + (f32(i) + 0.5) / f32(k), f32(gid.y) + (f32(j) + 0.5) / f32(k));
+            let g = inside(r.o, r.d);
+            if !g.ok {
+                continue;
+            }
+            var transmit = 1.0;
+            var t = 0.5 * step;
+            loop {
+                if !(t < g.len && transmit > GUIDE_TRANSMITTANCE_END) {
+                    break;
+                }
+                let ce = cell_exit(g.o_idx + g.d_idx * t, t, g.d_idx);
+                if majorants[bitcast<u32>(ce.x)] <= 0.0 {
+                    // On to the first lattice point past the cell.
+                    t = max(t + step, t + ceil((ce.y - t) / step) * step);
+                    continue;
+                }
+                let p = g.o_idx + g.d_idx * t;
+                let hu = sample_at(p);
+                let sigma = sigma_of(opacity_at(hu));
+                if sigma > 0.0 {
+                    let w = transmit * (1.0 - exp(-sigma * step));
+                    let gr = gradient_at(p);
+                    let gm = length(gr);
+                    if gm > 0.0 {
+                        var facing = -gr / gm;
+                        if dot(facing, r.d) > 0.0 {
+                            facing = -facing;
+                        }
+                        normal += facing * (min(gm / FULL_SHADING_GRADIENT, 1.0) * w);
+                    }
+                    albedo += color_at(hu) * w;
+                    depth += (g.t0 + t) * w;
+                    coverage += w;
+                    transmit -= w;
+                }
+                t += step;
+            }
+        }
+    }
+    let m = f32(k * k);
+    var z = -1.0;
+    if coverage >= GUIDE_MIN_COVERAGE * m {
+        z = depth / coverage;
+    }
+    guide_out[pixel] = vec4<f32>(albedo / m, z);
+    guide_out[n + pixel] = vec4<f32>(normal / m, 0.0);
+}
