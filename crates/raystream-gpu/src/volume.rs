@@ -357,6 +357,17 @@ impl<'a> GpuVolumeRenderer<'a> {
         Ok(Some((film, alpha, times)))
     }
 
+    /// A uniform buffer holding `params`.
+    fn uniform(&self, label: &str, params: &DvrParams) -> wgpu::Buffer {
+        self.ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytemuck::bytes_of(params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+    }
+
     /// The majorant grid of cinematic frames, made on first use.
     fn majorant_buffer(&self) -> Result<&wgpu::Buffer, GpuError> {
         if let Some(b) = self.majorants.get() {
@@ -377,13 +388,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         let ctx = self.ctx;
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let (params, _) = self.params(opt, Sight::Camera(cam), false)?;
-        let param_buf = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("guide params"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            });
+        let param_buf = self.uniform("guide params", &params);
         let n = opt.width as u64 * opt.height as u64;
         let out = ctx.work_buffer("guides", 32 * n, wgpu::BufferUsages::COPY_SRC)?;
         let majorants = self.majorant_buffer()?;
@@ -571,13 +576,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let (params, row_buf) = self.params(opt, sight, premultiplied)?;
         let row_buf = row_buf.as_ref().unwrap_or(&self.no_rows);
-        let param_buf = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("dvr params"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            });
+        let param_buf = self.uniform("dvr params", &params);
         let n = opt.width as u64 * opt.height as u64;
         // 4 pixels in 3 words.
         let packed_bytes = n.div_ceil(4) * 12;
@@ -654,12 +653,7 @@ impl<'a> GpuVolumeRenderer<'a> {
                     sample_count,
                     ..params
                 };
-                ctx.device
-                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some("cinematic dispatch params"),
-                        contents: bytemuck::bytes_of(&p),
-                        usage: wgpu::BufferUsages::UNIFORM,
-                    })
+                self.uniform("cinematic dispatch params", &p)
             })
             .collect();
         let mut accum = self.accum.lock().unwrap();
