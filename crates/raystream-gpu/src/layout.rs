@@ -377,3 +377,22 @@ const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
 const _: () = assert!(std::mem::size_of::<DvrParams>() == 336);
 const _: () = assert!(std::mem::size_of::<GpuCprRow>() == 48);
 const _: () = assert!(std::mem::size_of::<MediumParams>() == 128);
+
+/// `DenoiseParams` in denoise.wgsl (uniform), 48 bytes: the frame's size, a pass's gap and the
+/// filter's settings (`raystream_cpu::denoise::DenoiseOptions`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct DenoiseParams {
+    pub width: u32,
+    pub height: u32,
+    pub gap: u32,
+    pub sigma_luminance: f32,
+    pub sigma_depth: f32,
+    pub sigma_normal: f32,
+    pub sigma_albedo: f32,
+    pub tolerance: f32,
+    pub demodulate: f32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+    pub _pad2: u32,
+}

@@ -6,6 +6,7 @@
 //! [`layout`] here for rays, hits and parameters); the constants the kernels use are emitted from
 //! Rust into a WGSL prelude, and a naga-based test checks WGSL offsets and sizes.
 
+mod denoise;
 pub mod layout;
 mod render;
 mod split;
@@ -20,6 +21,7 @@ use raystream_accel::layout::{LEAF_BIT, NO_ROPE};
 use raystream_math::Ray;
 use wgpu::util::DeviceExt;
 
+pub use denoise::{GpuDenoiser, denoise_wgsl};
 pub use render::{
     GpuRenderStats, GpuRenderer, MAX_WAVE, MAX_WAVE_DEPTHS, STAGES, Submit, render_wgsl,
 };

@@ -11,7 +11,7 @@ use raystream_cpu::cinematic::{
     ALPHA_MAX, GUIDE_MIN_COVERAGE, GUIDE_SUBPIXELS, GUIDE_TRANSMITTANCE_END, KEY_IRRADIANCE,
     MAJORANT_CELL, Majorants, SKY_RADIANCE,
 };
-use raystream_cpu::denoise::{DenoiseOptions, DenoiseTimes, Guides, NoisyFilm, denoise};
+use raystream_cpu::denoise::{DenoiseOptions, DenoiseTimes, Guides, NoisyFilm};
 use raystream_cpu::dvr::{BRICK, DvrMode, DvrOptions, LightGrid, Marcher, Sight, scene_to_lps};
 use raystream_io::Volume;
 use raystream_math::Vec3;
@@ -21,7 +21,9 @@ use wgpu::util::DeviceExt;
 
 use crate::layout::{DvrParams, GpuCprRow};
 use crate::render::COMMON_WGSL;
-use crate::{GpuContext, GpuError, Pixels, Timer, read_back, read_elapsed_ms, read_words};
+use crate::{
+    GpuContext, GpuDenoiser, GpuError, Pixels, Timer, read_back, read_elapsed_ms, read_words,
+};
 
 const DVR_WGSL: &str = include_str!("kernels/dvr.wgsl");
 const VOLUME_WGSL: &str = include_str!("kernels/volume.wgsl");
@@ -155,6 +157,8 @@ pub struct GpuVolumeRenderer<'a> {
     path_pipeline: wgpu::ComputePipeline,
     /// The denoiser's guides of cinematic frames.
     guide_pipeline: wgpu::ComputePipeline,
+    /// The denoiser, made on first use.
+    denoiser: std::sync::OnceLock<GpuDenoiser>,
     majorants: std::sync::OnceLock<wgpu::Buffer>,
     /// cinematic: a frame's running sums between its dispatches.
     accum: Mutex<Option<wgpu::Buffer>>,
@@ -244,6 +248,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             pipeline,
             path_pipeline,
             guide_pipeline,
+            denoiser: std::sync::OnceLock::new(),
             majorants: std::sync::OnceLock::new(),
             accum: Mutex::new(None),
             paths_per_dispatch: PATHS_PER_DISPATCH,
@@ -326,10 +331,9 @@ impl<'a> GpuVolumeRenderer<'a> {
         Ok((film, times))
     }
 
-    /// With `opt.denoise`, a cinematic frame denoised: traced here with its guides
-    /// ([`Self::guides`]), read back and filtered on the CPU (`raystream_cpu::denoise`, the
-    /// one filter of both devices), the frame's time including the filter's. `None` for any
-    /// other frame.
+    /// With `opt.denoise`, a cinematic frame denoised: traced here, its guides marched here
+    /// ([`Self::guides`]) and filtered here ([`GpuDenoiser`], `raystream_cpu::denoise`'s passes
+    /// in WGSL), the frame's time including the filter's. `None` for any other frame.
     fn denoised(
         &self,
         opt: &DvrOptions,
@@ -348,7 +352,9 @@ impl<'a> GpuVolumeRenderer<'a> {
         let guides = self.guides(opt, cam)?;
         let guides_ms = ms(t);
         let t = Instant::now();
-        let (film, alpha) = denoise(&noisy, &guides, &DenoiseOptions::default());
+        let denoiser = self.denoiser.get_or_init(|| GpuDenoiser::new(self.ctx));
+        let (film, alpha) =
+            denoiser.denoise(self.ctx, &noisy, &guides, &DenoiseOptions::default())?;
         times.denoise = Some(DenoiseTimes {
             guides_ms,
             filter_ms: ms(t),

@@ -1,0 +1,204 @@
+//! `--denoise` on the GPU: raystream-cpu's denoiser (`raystream_cpu::denoise`, the reference)
+//! in `kernels/denoise.wgsl`, the same passes in the same f32 arithmetic, so that a GPU frame
+//! is filtered where it was traced.
+
+use raystream_cpu::Image;
+use raystream_cpu::denoise::{DenoiseOptions, Guides, NoisyFilm};
+use raystream_math::Vec3;
+
+use crate::layout::DenoiseParams;
+use crate::{GpuContext, GpuError, read_back};
+
+const DENOISE_WGSL: &str = include_str!("kernels/denoise.wgsl");
+
+/// The filter's pipelines.
+pub struct GpuDenoiser {
+    demodulate: wgpu::ComputePipeline,
+    blur: wgpu::ComputePipeline,
+    atrous: wgpu::ComputePipeline,
+    remodulate: wgpu::ComputePipeline,
+}
+
+/// The WGSL source of the denoiser's kernels.
+pub fn denoise_wgsl() -> &'static str {
+    DENOISE_WGSL
+}
+
+impl GpuDenoiser {
+    pub fn new(ctx: &GpuContext) -> GpuDenoiser {
+        let module = ctx
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("denoise.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(DENOISE_WGSL.into()),
+            });
+        GpuDenoiser {
+            demodulate: ctx.auto_pipeline(&module, "demodulate"),
+            blur: ctx.auto_pipeline(&module, "blur_variance"),
+            atrous: ctx.auto_pipeline(&module, "atrous"),
+            remodulate: ctx.auto_pipeline(&module, "remodulate"),
+        }
+    }
+
+    /// `noisy` filtered along `guides` with `opt`, as `raystream_cpu::denoise::denoise`: the
+    /// denoised premultiplied light and opacity.
+    pub fn denoise(
+        &self,
+        ctx: &GpuContext,
+        noisy: &NoisyFilm,
+        guides: &Guides,
+        opt: &DenoiseOptions,
+    ) -> Result<(Image, Vec<f32>), GpuError> {
+        let (w, h) = (noisy.film.width, noisy.film.height);
+        assert_eq!(
+            (guides.width, guides.height),
+            (w, h),
+            "guides are made for their frame's size"
+        );
+        let n = w as usize * h as usize;
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let light: Vec<[f32; 4]> = noisy
+            .film
+            .pixels
+            .iter()
+            .zip(&noisy.alpha)
+            .map(|(c, a)| [c.x, c.y, c.z, *a])
+            .collect();
+        // (albedo, depth or −1), then (normal, 0).
+        let g: Vec<[f32; 4]> = (0..n)
+            .map(|p| {
+                let (a, z) = (guides.albedo[p], guides.depth[p]);
+                [a.x, a.y, a.z, if z.is_finite() { z } else { -1.0 }]
+            })
+            .chain(guides.normal.iter().map(|v| [v.x, v.y, v.z, 0.0]))
+            .collect();
+        let none = wgpu::BufferUsages::empty();
+        let raw_light = ctx.storage("noisy light", bytemuck::cast_slice(&light), none)?;
+        let raw_var = ctx.storage(
+            "noisy variance",
+            bytemuck::cast_slice(&noisy.variance),
+            none,
+        )?;
+        let guide_buf = ctx.storage("guides", bytemuck::cast_slice(&g), none)?;
+        let lights = [
+            ctx.work_buffer(
+                "denoised light",
+                16 * n as u64,
+                wgpu::BufferUsages::COPY_SRC,
+            )?,
+            ctx.work_buffer(
+                "denoised light",
+                16 * n as u64,
+                wgpu::BufferUsages::COPY_SRC,
+            )?,
+        ];
+        let vars = [
+            ctx.work_buffer("denoised variance", 4 * n as u64, none)?,
+            ctx.work_buffer("denoised variance", 4 * n as u64, none)?,
+        ];
+        let slopes = ctx.work_buffer("depth slopes", 8 * n as u64, none)?;
+        let blurred = ctx.work_buffer("blurred variance", 4 * n as u64, none)?;
+        let params = |gap: u32| {
+            let p = DenoiseParams {
+                width: w,
+                height: h,
+                gap,
+                sigma_luminance: opt.sigma_luminance,
+                sigma_depth: opt.sigma_depth,
+                sigma_normal: opt.sigma_normal,
+                sigma_albedo: opt.sigma_albedo,
+                tolerance: guides.tolerance,
+                demodulate: opt.demodulate,
+                ..Default::default()
+            };
+            wgpu::util::DeviceExt::create_buffer_init(
+                &ctx.device,
+                &wgpu::util::BufferInitDescriptor {
+                    label: Some("denoise params"),
+                    contents: bytemuck::bytes_of(&p),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                },
+            )
+        };
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("denoise"),
+            });
+        // One dispatch of `pipeline` over the frame with these bindings.
+        let mut dispatch = |pipeline: &wgpu::ComputePipeline, bindings: &[(u32, &wgpu::Buffer)]| {
+            let entries: Vec<_> = bindings
+                .iter()
+                .map(|&(binding, b)| wgpu::BindGroupEntry {
+                    binding,
+                    resource: b.as_entire_binding(),
+                })
+                .collect();
+            let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("denoise"),
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &entries,
+            });
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("denoise"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        };
+        let first = params(1);
+        dispatch(
+            &self.demodulate,
+            &[
+                (0, &first),
+                (1, &raw_light),
+                (2, &lights[0]),
+                (3, &raw_var),
+                (4, &vars[0]),
+                (5, &guide_buf),
+                (6, &slopes),
+            ],
+        );
+        let mut at = 0;
+        let pass_params: Vec<wgpu::Buffer> = (0..opt.passes).map(|k| params(1 << k)).collect();
+        for p in &pass_params {
+            let (i, o) = (at, 1 - at);
+            dispatch(&self.blur, &[(0, p), (3, &vars[i]), (7, &blurred)]);
+            dispatch(
+                &self.atrous,
+                &[
+                    (0, p),
+                    (1, &lights[i]),
+                    (2, &lights[o]),
+                    (3, &vars[i]),
+                    (4, &vars[o]),
+                    (5, &guide_buf),
+                    (6, &slopes),
+                    (7, &blurred),
+                ],
+            );
+            at = o;
+        }
+        dispatch(
+            &self.remodulate,
+            &[
+                (0, &first),
+                (1, &lights[at]),
+                (2, &lights[1 - at]),
+                (5, &guide_buf),
+            ],
+        );
+        ctx.queue.submit([enc.finish()]);
+        let out: Vec<[f32; 4]> = read_back(ctx, &lights[1 - at])?;
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(ctx.err(e));
+        }
+        let film = Image {
+            width: w,
+            height: h,
+            pixels: out.iter().map(|c| Vec3::new(c[0], c[1], c[2])).collect(),
+        };
+        Ok((film, out.iter().map(|c| c[3]).collect()))
+    }
+}
