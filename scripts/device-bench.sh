@@ -160,8 +160,8 @@ $bin render "$ct" --mode dvr --shadows --preset ct-bones --device gpu --size "$d
 # picture of 256 paths a pixel, and one of 16 denoised.
 $bin bench "$ct" --mode cinematic --preset ct-bones --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 4 | tag '{"volume": "cinematic ct-bones"}'
 $bin render "$ct" --mode cinematic --preset ct-aaa --spp 256 --device gpu --size "$dvr_size" -o "$out/cinematic-gpu.png" 2>&1 | tee -a "$out/render.log"
-# Denoised: 16 paths a pixel, the guides marched on the GPU, the filter on the CPU (its line
-# names what each took).
+# Denoised: 16 paths a pixel, traced, guided and filtered on the GPU (its line names what the
+# guides and the filter took).
 $bin render "$ct" --mode cinematic --preset ct-aaa --spp 16 --denoise --device gpu --size "$dvr_size" -o "$out/cinematic-denoised-gpu.png" 2>&1 | tee -a "$out/render.log"
 }
 (cd "$out" && shopt -s nullglob && f=(./*.png ./*.exr) && [ ${#f[@]} -gt 0 ] \

@@ -18,10 +18,13 @@
 //! - **normal**: exp(−σn·|np − nq|²) on the guides' normals;
 //! - **albedo**: exp(−|ap − aq|² / 2σa²) on the guides' colour.
 //!
-//! The guides ([`Guides`]) are noise-free: raystream-cpu's `cinematic::guides` marches each
-//! pixel's centre ray and composites, front to back, the colour, the normal and the depth of
-//! what it meets by the light each step stops. The film's premultiplied light and its opacity
-//! are filtered with the same weights, so the picture can still be laid over any background.
+//! The guides ([`Guides`]) are noise-free: [`crate::cinematic::guides`] marches 2×2 rays a
+//! pixel and composites, front to back, the colour, the normal and the depth of what they meet
+//! by the light each step stops. The film's premultiplied light and its opacity are filtered
+//! with the same weights, so the picture can still be laid over any background.
+//!
+//! This is the reference: raystream-gpu's `GpuDenoiser` runs the same passes in WGSL
+//! (`kernels/denoise.wgsl`) on the GPU's frames, tested against it.
 //!
 //! Written here, not taken from a crate: Intel's Open Image Denoise (the `oidn` crate) needs
 //! its C++ library, which Debian bookworm does not package, and no pure-Rust crate filters

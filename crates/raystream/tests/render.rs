@@ -1995,10 +1995,10 @@ fn cinematic_rendering_through_the_cli() {
 
 /// `--denoise` through the CLI on the built-in CT (ct-muscle, 128×96): at 8 paths a pixel the
 /// denoised picture is under 0.6× as far from a 256-path one as the raw picture is (mean sRGB
-/// difference; measured 1.8 against 4.8/255 on both devices);
-/// the same PNG every run; the GPU's within 1.5/255 of the CPU's (one filter, the same paths
-/// but where the f16 texture tips them); a premultiplied EXR over the background is the PNG;
-/// and --denoise without --mode cinematic, or with one path a pixel, is refused.
+/// difference; measured 1.8 against 4.8/255 on both devices); the same PNG every run; the
+/// GPU's within 1.5/255 of the CPU's (one filter in two languages, the same paths but where the
+/// f16 texture tips them); a premultiplied EXR over the background is the PNG; and --denoise
+/// without --mode cinematic, or with one path a pixel, is refused.
 #[test]
 fn denoised_cinematic_rendering_through_the_cli() {
     let args = [
