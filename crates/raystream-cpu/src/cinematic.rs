@@ -26,6 +26,8 @@
 //! - **Paths** end after `bounces` scatterings (the last one still samples the key light);
 //!   a pixel is the mean of `spp` paths, each through a random point of its pixel.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use rayon::prelude::*;
 use raystream_io::Volume;
 use raystream_math::Vec3;
@@ -451,13 +453,14 @@ pub(crate) fn pixel(
 }
 
 /// Every pixel's paths (`opt` as `dvr::march_frame` prepares it: the clip planes the camera's
-/// view adds, no slab).
+/// view adds, no slab), adding each pixel's to `done` as it finishes.
 pub(crate) fn trace_frame(
     vol: &Volume,
     m: &Marcher,
     tf: &TransferFunction,
     opt: &DvrOptions,
     cam: &Camera,
+    done: Option<&AtomicU64>,
 ) -> Vec<PixelPaths> {
     let lighting = Lighting::studio(opt, cam);
     let majorants = Majorants::new(vol, tf);
@@ -468,7 +471,13 @@ pub(crate) fn trace_frame(
     };
     (0..opt.width * opt.height)
         .into_par_iter()
-        .map(|px| pixel(&tracker, opt, cam, &lighting, px))
+        .map(|px| {
+            let p = pixel(&tracker, opt, cam, &lighting, px);
+            if let Some(done) = done {
+                done.fetch_add(opt.spp as u64, Ordering::Relaxed);
+            }
+            p
+        })
         .collect()
 }
 
@@ -483,7 +492,7 @@ pub fn render_film(
 ) -> (NoisyFilm, u64) {
     let opt = &frame_options(vol, opt, Sight::Camera(cam));
     let m = Marcher::new(vol, None);
-    let paths = trace_frame(vol, &m, tf, opt, cam);
+    let paths = trace_frame(vol, &m, tf, opt, cam, None);
     (film_of(opt, &paths), paths.iter().map(|p| p.taken).sum())
 }
 
@@ -1143,5 +1152,30 @@ mod tests {
             reported > 0.0 && (reported / spread - 1.0).abs() < 0.15,
             "reported variance {reported:.3e}, measured {spread:.3e}"
         );
+    }
+
+    /// A progress bar's count: rendering a cinematic frame adds each of its paths once to the
+    /// counter; the other modes add nothing.
+    #[test]
+    fn frames_count_their_paths() {
+        use std::sync::atomic::{AtomicU64, Ordering};
+        let vol = volume([12, 12, 12], [1.0; 3], |i, _, _| 100.0 * i);
+        let tf = tf(vec![(0.0, 0.0), (1100.0, 0.2)], 0.8);
+        let cam = crate::dvr::volume_camera(&vol, 1.5);
+        for (mode, spp, want) in [
+            (crate::dvr::DvrMode::Cinematic, 5, 12 * 8 * 5),
+            (crate::dvr::DvrMode::Dvr, 5, 0),
+        ] {
+            let opt = DvrOptions {
+                width: 12,
+                height: 8,
+                mode,
+                spp,
+                ..Default::default()
+            };
+            let done = AtomicU64::new(7);
+            crate::dvr::render_volume_rgba_counted(&vol, &tf, &opt, &cam, &done);
+            assert_eq!(done.load(Ordering::Relaxed), 7 + want, "{mode:?}");
+        }
     }
 }

@@ -17,6 +17,8 @@
 //! Every ray starts at a per-pixel jittered offset along the step (a fixed hash: the same
 //! picture every run) so that the sampling lattice does not show as wood-grain rings.
 
+use std::sync::atomic::AtomicU64;
+
 use rayon::prelude::*;
 use raystream_io::Volume;
 use raystream_math::Vec3;
@@ -795,7 +797,7 @@ pub fn render_volume<'a>(
     opt: &DvrOptions,
     sight: impl Into<Sight<'a>>,
 ) -> (Image, DvrStats) {
-    let (rays, stats) = march_frame(vol, tf, opt, sight.into());
+    let (rays, stats) = march_frame(vol, tf, opt, sight.into(), None);
     let background = if opt.hu_values && opt.mode.is_windowed() {
         Vec3::NAN
     } else {
@@ -821,7 +823,19 @@ pub fn render_volume_rgba<'a>(
     opt: &DvrOptions,
     sight: impl Into<Sight<'a>>,
 ) -> (Image, Vec<f32>, DvrStats) {
-    let (rays, stats) = march_frame(vol, tf, opt, sight.into());
+    render_volume_rgba_counted(vol, tf, opt, sight, &AtomicU64::new(0))
+}
+
+/// [`render_volume_rgba`], adding to `done` the paths of a cinematic frame as its pixels finish
+/// (what a progress bar counts: `width · height · spp` in all; other modes add nothing).
+pub fn render_volume_rgba_counted<'a>(
+    vol: &Volume,
+    tf: &TransferFunction,
+    opt: &DvrOptions,
+    sight: impl Into<Sight<'a>>,
+    done: &AtomicU64,
+) -> (Image, Vec<f32>, DvrStats) {
+    let (rays, stats) = march_frame(vol, tf, opt, sight.into(), Some(done));
     let film = Image {
         width: opt.width,
         height: opt.height,
@@ -908,6 +922,7 @@ fn march_frame(
     tf: &TransferFunction,
     opt: &DvrOptions,
     sight: Sight,
+    done: Option<&AtomicU64>,
 ) -> (Vec<Marched>, DvrStats) {
     if let Sight::Curved(plane) = sight {
         assert_eq!(
@@ -926,7 +941,7 @@ fn march_frame(
         let Sight::Camera(cam) = sight else {
             panic!("cinematic rendering is seen by a camera, not a curved plane");
         };
-        let paths = crate::cinematic::trace_frame(vol, &marcher, tf, opt, cam);
+        let paths = crate::cinematic::trace_frame(vol, &marcher, tf, opt, cam, done);
         let mut rays: Vec<Marched> = paths
             .iter()
             .map(|p| Marched {

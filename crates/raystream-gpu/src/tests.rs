@@ -1243,7 +1243,8 @@ fn gpu_cinematic_rendering_matches_cpu() {
 /// `--denoise`'s input from the GPU, against the CPU's: the same paths give each pixel the
 /// same variance (within 0.1 % for over 80 % of the pixels, the frame's mean within 5 %); the
 /// variances are the same bit for bit in dispatches of 5 paths; the film over the background is
-/// the plain frame; the GPU's guides are the CPU's (depth within a step, colour within 0.02,
+/// the plain frame; every path is counted once in `paths_done` (a progress bar's count),
+/// however the frame is split; the GPU's guides are the CPU's (depth within a step, colour within 0.02,
 /// normal within 0.05, on all but 2 % of the pixels; measured: all); and the one denoiser run on
 /// each device's film along its guides gives pictures within 0.5/255 of each other (mean sRGB
 /// difference).
@@ -1272,6 +1273,16 @@ fn gpu_cinematic_film_for_the_denoiser_matches_cpu() {
     split.paths_per_dispatch = 5 * 64 * 48;
     let (parts, _) = split.render_film(&opt, &cam).unwrap();
     assert_eq!(parts.variance, film.variance, "in dispatches of 5 paths");
+    // Every path counted once, dispatch by dispatch (a progress bar's count).
+    let paths = 64 * 48 * opt.spp as u64;
+    assert_eq!(
+        split.paths_done.load(std::sync::atomic::Ordering::Relaxed),
+        paths
+    );
+    assert_eq!(
+        gpu.paths_done.load(std::sync::atomic::Ordering::Relaxed),
+        paths
+    );
     assert_eq!(parts.film.pixels, film.film.pixels);
     let (plain, _) = gpu.render(&opt, &cam).unwrap();
     assert_over_background_is(&film.film, &film.alpha, &opt, &plain, "film");

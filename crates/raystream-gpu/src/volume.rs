@@ -4,6 +4,7 @@
 //! (`raystream_cpu::dvr`) is the reference; the tests hold the two together.
 
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use raystream_cpu::Image;
@@ -159,6 +160,9 @@ pub struct GpuVolumeRenderer<'a> {
     guide_pipeline: wgpu::ComputePipeline,
     /// The denoiser, made on first use.
     denoiser: std::sync::OnceLock<GpuDenoiser>,
+    /// Cinematic paths traced so far, added to as each dispatch completes (what a progress bar
+    /// counts: `width · height · spp` a frame).
+    pub paths_done: AtomicU64,
     majorants: std::sync::OnceLock<wgpu::Buffer>,
     /// cinematic: a frame's running sums between its dispatches.
     accum: Mutex<Option<wgpu::Buffer>>,
@@ -249,6 +253,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             path_pipeline,
             guide_pipeline,
             denoiser: std::sync::OnceLock::new(),
+            paths_done: AtomicU64::new(0),
             majorants: std::sync::OnceLock::new(),
             accum: Mutex::new(None),
             paths_per_dispatch: PATHS_PER_DISPATCH,
@@ -773,6 +778,8 @@ impl<'a> GpuVolumeRenderer<'a> {
                 );
                 ctx.queue.submit([done.finish()]);
                 ctx.wait()?;
+                self.paths_done
+                    .fetch_add(batches[i].1 as u64 * n, Ordering::Relaxed);
             }
         }
         if srgb8 {
@@ -800,6 +807,10 @@ impl<'a> GpuVolumeRenderer<'a> {
         }
         ctx.queue.submit([enc.finish()]);
         let words = read_words(ctx, if srgb8 { packed_read } else { readback })?;
+        if let Some(&(_, count)) = batches.last() {
+            self.paths_done
+                .fetch_add(count as u64 * n, Ordering::Relaxed);
+        }
         let kernel_gpu_ms = match timer {
             Some(t) => read_elapsed_ms(ctx, t)?,
             None => None,

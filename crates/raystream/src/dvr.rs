@@ -1,11 +1,14 @@
 //! Direct volume rendering for `render --mode` and `bench --mode`: the options from the command
 //! line, and one frame on the CPU (the reference) or the GPU behind one call.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use anyhow::{Result, bail};
 use raystream_cpu::denoise::DenoiseTimes;
-use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, Sight, render_volume, render_volume_rgba};
+use raystream_cpu::dvr::{
+    DvrMode, DvrOptions, DvrStats, Sight, render_volume, render_volume_rgba_counted,
+};
 use raystream_cpu::{Image, ImageFormat};
 use raystream_gpu::GpuVolumeRenderer;
 use raystream_io::Volume;
@@ -151,6 +154,8 @@ pub enum Renderer<'a> {
     Cpu {
         volume: &'a Volume,
         tf: &'a TransferFunction,
+        /// Cinematic paths traced so far (a progress bar's count).
+        done: AtomicU64,
     },
     Gpu(Box<GpuVolumeRenderer<'a>>),
 }
@@ -182,8 +187,20 @@ impl<'a> Renderer<'a> {
     ) -> Result<Renderer<'a>> {
         Ok(match backend {
             Backend::Gpu(ctx) => Renderer::Gpu(Box::new(GpuVolumeRenderer::new(ctx, volume, tf)?)),
-            Backend::Cpu => Renderer::Cpu { volume, tf },
+            Backend::Cpu => Renderer::Cpu {
+                volume,
+                tf,
+                done: AtomicU64::new(0),
+            },
         })
+    }
+
+    /// Cinematic paths traced so far, on either device (a progress bar's count).
+    pub fn paths_done(&self) -> u64 {
+        match self {
+            Renderer::Cpu { done, .. } => done.load(Ordering::Relaxed),
+            Renderer::Gpu(g) => g.paths_done.load(Ordering::Relaxed),
+        }
     }
 
     /// One frame seen by `sight` (a camera or a curved plane), as `format` writes it: for an
@@ -223,8 +240,9 @@ impl<'a> Renderer<'a> {
                     let (k, n) = (times.kernel_gpu_ms, times.samples);
                     (film, alpha, k, n, None, times.denoise)
                 }
-                Renderer::Cpu { volume, tf } => {
-                    let (film, alpha, stats) = render_volume_rgba(volume, tf, opt, sight);
+                Renderer::Cpu { volume, tf, done } => {
+                    let (film, alpha, stats) =
+                        render_volume_rgba_counted(volume, tf, opt, sight, done);
                     (film, alpha, None, stats.samples, Some(stats), stats.denoise)
                 }
             };
@@ -266,7 +284,22 @@ impl<'a> Renderer<'a> {
                 };
                 (film, cost)
             }
-            Renderer::Cpu { volume, tf } => {
+            Renderer::Cpu { volume, tf, done } if opt.mode == DvrMode::Cinematic => {
+                // Counted as its paths are traced, laid over the background here.
+                let (mut film, alpha, stats) =
+                    render_volume_rgba_counted(volume, tf, opt, sight, done);
+                for (c, a) in film.pixels.iter_mut().zip(alpha) {
+                    *c += (1.0 - a) * opt.background;
+                }
+                let cost = FilmCost {
+                    kernel_ms: None,
+                    samples: stats.samples,
+                    stats: Some(stats),
+                    denoise: stats.denoise,
+                };
+                (film, cost)
+            }
+            Renderer::Cpu { volume, tf, .. } => {
                 let (film, stats) = render_volume(volume, tf, opt, sight);
                 let cost = FilmCost {
                     kernel_ms: None,

@@ -773,25 +773,54 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         );
     }
     let seen = seen_from(a, &volume, &opt, (view, curve.as_ref()), az)?;
-    let pb = spinner(
-        a.quiet,
-        &format!(
-            "{} of {}x{}x{} voxels",
-            mode.name(),
-            volume.dims[0],
-            volume.dims[1],
-            volume.dims[2]
-        ),
+    let what = format!(
+        "{} of {}x{}x{} voxels",
+        mode.name(),
+        volume.dims[0],
+        volume.dims[1],
+        volume.dims[2]
     );
+    // A path-traced frame may take minutes: a bar of its paths, fed as they finish (by pixel
+    // on the CPU, by dispatch on the GPU). The other modes take seconds at most.
+    let pb = if mode == DvrMode::Cinematic && !a.quiet {
+        let total = opt.width as u64 * opt.height as u64 * opt.spp as u64 * a.repeat as u64;
+        let pb = ProgressBar::new(total).with_style(
+            ProgressStyle::with_template(
+                "{bar:30} {percent} % of the paths, {msg} [{elapsed}, {eta} left]",
+            )
+            .unwrap(),
+        );
+        pb.set_message(what);
+        pb
+    } else {
+        spinner(a.quiet, &what)
+    };
     let mut frame_ms = Vec::new();
     let mut kernel_ms = Vec::new();
     let mut last = None;
-    for _ in 0..a.repeat {
-        let f = renderer.frame(&opt, seen.sight(), format)?;
-        frame_ms.push(f.frame_ms);
-        kernel_ms.extend(f.kernel_ms);
-        last = Some(f);
-    }
+    let start = renderer.paths_done();
+    let finished = std::sync::atomic::AtomicBool::new(false);
+    std::thread::scope(|s| -> Result<()> {
+        if mode == DvrMode::Cinematic && !a.quiet {
+            s.spawn(|| {
+                while !finished.load(std::sync::atomic::Ordering::Relaxed) {
+                    pb.set_position(renderer.paths_done() - start);
+                    std::thread::sleep(std::time::Duration::from_millis(200));
+                }
+            });
+        }
+        let frames = (|| {
+            for _ in 0..a.repeat {
+                let f = renderer.frame(&opt, seen.sight(), format)?;
+                frame_ms.push(f.frame_ms);
+                kernel_ms.extend(f.kernel_ms);
+                last = Some(f);
+            }
+            Ok(())
+        })();
+        finished.store(true, std::sync::atomic::Ordering::Relaxed);
+        frames
+    })?;
     pb.finish_and_clear();
     let mut frame = last.expect("at least one frame");
     let slab = match (&seen, &a.path) {
