@@ -115,6 +115,14 @@ pub struct DvrOptions {
     /// dvr with shadows, and cinematic: where the key light stands, (azimuth, elevation) in
     /// degrees from the camera ([`key_light_from`]); `None`: above left ([`key_light`]).
     pub light: Option<[f32; 2]>,
+    /// cinematic: the anisotropy g of the medium's Henyey–Greenstein phase function, the mean
+    /// cosine of its scattering angle in (−1, 1): 0 isotropic, > 0 forward scattering (light
+    /// carried on through tissue), < 0 back toward where it came from.
+    pub anisotropy: f32,
+    /// cinematic: the key light's and the sky's strength is 2^`exposure` times the default
+    /// ([`crate::cinematic::KEY_IRRADIANCE`], [`crate::cinematic::SKY_RADIANCE`]); the
+    /// background is not lit and keeps its colour.
+    pub exposure: f32,
     /// cinematic: filter the frame's Monte Carlo noise ([`crate::cinematic::denoised`]), on
     /// either device.
     pub denoise: bool,
@@ -141,11 +149,18 @@ impl Default for DvrOptions {
             bounces: 4,
             light: None,
             denoise: false,
+            anisotropy: 0.0,
+            exposure: 0.0,
         }
     }
 }
 
 impl DvrOptions {
+    /// The factor 2^`exposure` the lights of a cinematic frame are scaled by.
+    pub fn exposure_scale(&self) -> f32 {
+        self.exposure.exp2()
+    }
+
     /// The step in mm: `step_mm`, or half the smallest voxel spacing (never below 1/1000 of it).
     pub fn step_for(&self, vol: &Volume) -> f32 {
         step_for(self.step_mm, vol)

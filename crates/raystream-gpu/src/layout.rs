@@ -269,7 +269,7 @@ pub struct MediumParams {
     pub grid_points: u32,
 }
 
-/// `DvrParams` in dvr.wgsl (uniform), 336 bytes: camera in LPS, the world → index transform,
+/// `DvrParams` in dvr.wgsl (uniform), 352 bytes: camera in LPS, the world → index transform,
 /// the mode and its parameters, the shadow light, crop box and clip planes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -344,6 +344,12 @@ pub struct DvrParams {
     /// `GpuVolumeRenderer::paths_per_dispatch`.
     pub sample_first: u32,
     pub sample_count: u32,
+    /// cinematic: the Henyey–Greenstein anisotropy g (byte 336) and the lights' scale
+    /// 2^exposure (byte 340).
+    pub anisotropy: f32,
+    pub light_scale: f32,
+    pub pad2: u32,
+    pub pad3: u32,
 }
 
 /// `CprRow` in dvr.wgsl, 48 bytes: one image row of a curved planar reformation
@@ -374,7 +380,7 @@ const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
 const _: () = assert!(std::mem::size_of::<TriUv>() == 24);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
-const _: () = assert!(std::mem::size_of::<DvrParams>() == 336);
+const _: () = assert!(std::mem::size_of::<DvrParams>() == 352);
 const _: () = assert!(std::mem::size_of::<GpuCprRow>() == 48);
 const _: () = assert!(std::mem::size_of::<MediumParams>() == 128);
 

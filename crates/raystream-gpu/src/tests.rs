@@ -1086,6 +1086,10 @@ fn dvr_wgsl_params_match_rust() {
         ("bounces", offset_of!(DvrParams, bounces)),
         ("sample_first", offset_of!(DvrParams, sample_first)),
         ("sample_count", offset_of!(DvrParams, sample_count)),
+        ("anisotropy", offset_of!(DvrParams, anisotropy)),
+        ("light_scale", offset_of!(DvrParams, light_scale)),
+        ("pad2", offset_of!(DvrParams, pad2)),
+        ("pad3", offset_of!(DvrParams, pad3)),
     ];
     check_struct(&module, "DvrParams", size_of::<DvrParams>(), &names);
     use layout::GpuCprRow;
@@ -1140,7 +1144,8 @@ fn pelvis_left_half(base: raystream_cpu::dvr::DvrOptions) -> raystream_cpu::dvr:
 }
 
 /// Cinematic rendering on the GPU against the CPU reference on the abdomen CT (ct-bones and
-/// ct-muscle, whole and cropped, 64×48, 32 paths a pixel). Both draw the same random numbers,
+/// ct-muscle, whole and cropped, and ct-muscle in a forward-scattering medium, g 0.6, at
+/// +0.5 EV; 64×48, 32 paths a pixel). Both draw the same random numbers,
 /// so most paths are the same path; where the f16 texture's values tip a decision they part,
 /// and the pixel differs by that path's noise: the sample counts, the mean difference, the
 /// pixels within 2/255 and every 8×8 block's mean light agree. The same picture every run and
@@ -1161,11 +1166,17 @@ fn gpu_cinematic_rendering_matches_cpu() {
         ..Default::default()
     };
     let cropped = pelvis_left_half(plain);
+    let forward = DvrOptions {
+        anisotropy: 0.6,
+        exposure: 0.5,
+        ..plain
+    };
     let cam = volume_camera(&vol, 64.0 / 48.0);
     for (preset, opt, what) in [
         (TfPreset::CtBones, plain, ""),
         (TfPreset::CtMuscle, plain, ""),
         (TfPreset::CtBones, cropped, " crop+plane"),
+        (TfPreset::CtMuscle, forward, " g 0.6, +0.5 EV"),
     ] {
         let name = format!("{}{what}", preset.name());
         let tf = preset.function();

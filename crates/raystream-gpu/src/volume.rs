@@ -568,6 +568,10 @@ impl<'a> GpuVolumeRenderer<'a> {
             bounces: opt.bounces,
             sample_first: 0,
             sample_count: opt.spp,
+            anisotropy: opt.anisotropy,
+            light_scale: opt.exposure_scale(),
+            pad2: 0,
+            pad3: 0,
         };
         Ok((params, row_buf))
     }

@@ -504,6 +504,8 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                 "spp": (mode == DvrMode::Cinematic).then_some(opt.spp),
                 "bounces": (mode == DvrMode::Cinematic).then_some(opt.bounces),
                 "denoise": (mode == DvrMode::Cinematic).then_some(opt.denoise),
+                "anisotropy": (mode == DvrMode::Cinematic).then_some(opt.anisotropy),
+                "exposure": (mode == DvrMode::Cinematic).then_some(opt.exposure),
                 "transfer_function": a.look.tf.as_ref().map(|p| p.display().to_string())
                     .unwrap_or_else(|| a.threshold.preset.map_or("ct-bone".into(), |p| p.name())),
                 "commit": commit,

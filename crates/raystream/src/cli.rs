@@ -478,6 +478,15 @@ pub struct VolumeLook {
     /// picture as 32 without it.
     #[arg(long)]
     pub denoise: bool,
+    /// cinematic: the medium's Henyey–Greenstein anisotropy, the mean cosine of its scattering
+    /// angle, −0.95 to 0.95 (default 0: isotropic; above 0 light is carried on forward through
+    /// tissue, below 0 sent back).
+    #[arg(long, allow_hyphen_values = true, value_name = "G")]
+    pub anisotropy: Option<f32>,
+    /// cinematic: the lights' strength in photographic stops, −10 to 10 (+1 doubles the key
+    /// light and the sky, −1 halves them; the background keeps its colour).
+    #[arg(long, allow_hyphen_values = true, value_name = "EV")]
+    pub exposure: Option<f32>,
     /// Keep only the box XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX (LPS mm, as `info` reports positions).
     #[arg(long, value_parser = parse_crop, allow_hyphen_values = true)]
     pub crop: Option<[f32; 6]>,

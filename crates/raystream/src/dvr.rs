@@ -73,6 +73,31 @@ pub fn options(
             );
         }
     }
+    if mode != DvrMode::Cinematic {
+        for (flag, given) in [
+            ("--anisotropy", look.anisotropy.is_some()),
+            ("--exposure", look.exposure.is_some()),
+        ] {
+            if given {
+                bail!(
+                    "{flag} sets the light of --mode cinematic's paths (--mode {} has none)",
+                    mode.name()
+                );
+            }
+        }
+    }
+    if let Some(g) = look.anisotropy
+        && !(g.is_finite() && g.abs() <= 0.95)
+    {
+        bail!(
+            "--anisotropy {g}: the mean cosine of the scattering angle, from -0.95 to 0.95 (0: isotropic)"
+        );
+    }
+    if let Some(ev) = look.exposure
+        && !(ev.is_finite() && ev.abs() <= 10.0)
+    {
+        bail!("--exposure {ev}: stops from -10 to 10");
+    }
     if look.denoise && mode != DvrMode::Cinematic {
         bail!(
             "--denoise filters the noise of --mode cinematic's paths (--mode {} has none to filter)",
@@ -144,6 +169,8 @@ pub fn options(
         slab: look.slab,
         light: look.light,
         denoise: look.denoise,
+        anisotropy: look.anisotropy.unwrap_or(0.0),
+        exposure: look.exposure.unwrap_or(0.0),
         ..Default::default()
     };
     Ok((tf, opt))

@@ -848,9 +848,10 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         // What was rendered, and what the samples were beyond their count.
         let (what, counts) = if mode == DvrMode::Cinematic {
             let what = format!(
-                ", {} paths a pixel, up to {} scatterings{}{format_words}{slab}",
+                ", {} paths a pixel, up to {} scatterings{}{}{format_words}{slab}",
                 opt.spp,
                 opt.bounces,
+                cinematic_words(&opt),
                 match frame.denoise {
                     Some(d) => format!(
                         ", denoised (guides {:.0} ms, filter {:.0} ms)",
@@ -905,6 +906,18 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// ", anisotropy G, +E EV" for a cinematic frame's medium and lights other than the default.
+fn cinematic_words(opt: &DvrOptions) -> String {
+    let mut w = String::new();
+    if opt.anisotropy != 0.0 {
+        w += &format!(", anisotropy {}", opt.anisotropy);
+    }
+    if opt.exposure != 0.0 {
+        w += &format!(", {:+} EV", opt.exposure);
+    }
+    w
 }
 
 /// ", median of N" after a time of N > 1 repeats.

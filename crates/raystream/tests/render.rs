@@ -1884,7 +1884,8 @@ fn render_draws_a_label_maps_segments() {
 /// `render --mode cinematic` (path-traced volume rendering) through the CLI: on each device a
 /// picture of bones over the background, the same PNG every run; the GPU's the CPU's but where
 /// paths part (the crate's tests hold the two together in detail); a turntable's first frame
-/// is the plain picture; the options it has no use for are refused.
+/// is the plain picture; the options it has no use for are refused; `--exposure 1` doubles the
+/// light exactly, `--anisotropy` changes the picture, and both are checked.
 #[test]
 fn cinematic_rendering_through_the_cli() {
     let args = [
@@ -1990,6 +1991,56 @@ fn cinematic_rendering_through_the_cli() {
     refused(
         &["render", "--light", "10,20", "--size", "32x24"],
         "go with --mode",
+    );
+    // --exposure +1 doubles the light exactly (the same paths; premultiplied EXRs, the
+    // background apart); --anisotropy makes another picture; both refused out of range or
+    // with the other modes.
+    let film = |name: &str, more: &[&str]| {
+        let exr =
+            raystream_cpu::load_exr(&render_to(name, "cpu", &[&args[..], more].concat())).unwrap();
+        exr.channels["G"].as_f32().unwrap().to_vec()
+    };
+    let (base, brighter) = (
+        film("cinematic-ev0.exr", &[]),
+        film("cinematic-ev1.exr", &["--exposure", "1"]),
+    );
+    assert!(base.iter().any(|&v| v > 0.0));
+    for (b, e) in base.iter().zip(&brighter) {
+        assert_eq!(*e, 2.0 * b);
+    }
+    let forward = film("cinematic-g.exr", &["--anisotropy", "0.8"]);
+    assert_ne!(forward, base, "--anisotropy 0.8 changes the picture");
+    refused(
+        &[&render(&["--size", "32x24"])[..], &["--anisotropy", "0.99"]].concat(),
+        "from -0.95 to 0.95",
+    );
+    refused(
+        &[&render(&["--size", "32x24"])[..], &["--exposure", "12"]].concat(),
+        "stops from -10 to 10",
+    );
+    refused(
+        &[
+            "render",
+            "--mode",
+            "dvr",
+            "--exposure",
+            "1",
+            "--size",
+            "32x24",
+        ],
+        "--exposure sets the light of --mode cinematic",
+    );
+    refused(
+        &[
+            "render",
+            "--mode",
+            "mip",
+            "--anisotropy",
+            "0.5",
+            "--size",
+            "32x24",
+        ],
+        "--anisotropy sets the light of --mode cinematic",
     );
 }
 

@@ -54,6 +54,29 @@ fn uniform_sphere() -> vec3<f32> {
     return vec3<f32>(r * cos(phi), r * sin(phi), z);
 }
 
+// As the CPU's phase: the Henyey-Greenstein phase function of anisotropy dp.anisotropy toward
+// wi for a ray travelling along d (isotropic below |g| = 1e-3).
+fn phase(d: vec3<f32>, wi: vec3<f32>) -> f32 {
+    let g = dp.anisotropy;
+    if abs(g) < 1e-3 {
+        return 0.25 * INV_PI;
+    }
+    let denom = 1.0 + g * g - 2.0 * g * dot(d, wi);
+    return (1.0 - g * g) / (4.0 * PI * denom * sqrt(denom));
+}
+
+// As the CPU's phase_sample: a direction drawn from the phase function about d.
+fn phase_sample(d: vec3<f32>) -> vec3<f32> {
+    let g = dp.anisotropy;
+    if abs(g) < 1e-3 {
+        return uniform_sphere();
+    }
+    let u = rng_next();
+    let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u);
+    let cos_theta = clamp((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0);
+    return about(d, cos_theta, rng_next());
+}
+
 // The unit direction at polar angle θ (its cosine) and azimuth 2π u about the unit n, on the
 // basis of Duff et al. 2017 (as the CPU's basis and about).
 fn about(n: vec3<f32>, cos_theta: f32, u: f32) -> vec3<f32> {
@@ -207,7 +230,7 @@ fn trace_path(o_in: vec3<f32>, d_in: vec3<f32>, key: vec3<f32>) -> PathSample {
         }
         if !hit.stopped {
             if depth > 0u {
-                light += throughput * SKY_RADIANCE;
+                light += throughput * (SKY_RADIANCE * dp.light_scale);
             }
             return PathSample(light, depth == 0u);
         }
@@ -219,7 +242,7 @@ fn trace_path(o_in: vec3<f32>, d_in: vec3<f32>, key: vec3<f32>) -> PathSample {
         let surface = rng_next() < min(gm / FULL_SHADING_GRADIENT, 1.0);
         var n = vec3<f32>(0.0);
         var gloss = 0.0;
-        var f = albedo * (0.25 * INV_PI);
+        var f = albedo * phase(d, key);
         if surface {
             n = -g / gm;
             if dot(n, d) > 0.0 {
@@ -238,7 +261,7 @@ fn trace_path(o_in: vec3<f32>, d_in: vec3<f32>, key: vec3<f32>) -> PathSample {
             if s.ok {
                 tr = track(s, true).tr;
             }
-            light += throughput * f * (KEY_IRRADIANCE * tr);
+            light += throughput * f * (KEY_IRRADIANCE * dp.light_scale * tr);
         }
         if depth == dp.bounces {
             return PathSample(light, false);
@@ -256,7 +279,7 @@ fn trace_path(o_in: vec3<f32>, d_in: vec3<f32>, key: vec3<f32>) -> PathSample {
             if surface {
                 d = cosine_hemisphere(n);
             } else {
-                d = uniform_sphere();
+                d = phase_sample(d);
             }
         }
         o = x;

@@ -63,6 +63,11 @@ struct DvrParams {
     bounces: u32,
     sample_first: u32,
     sample_count: u32,
+    // cinematic: the Henyey-Greenstein anisotropy g, and the lights' scale 2^exposure.
+    anisotropy: f32,
+    light_scale: f32,
+    pad2: u32,
+    pad3: u32,
 }
 
 // One image row of a curved plane (raystream_cpu::cpr::CprRow, LPS): the path's point, the
