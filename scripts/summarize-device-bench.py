@@ -8,12 +8,14 @@ Prints Markdown: the ray-query table against the issue's peers (Grays/s by singl
 time, kernel time and streamed queries, with the first bar -- at least half the best GPU peer --
 judged by each), the variants (spinning waits, if-if, leaf size, split, sorted sets, bench's
 own sets), divergence and occupancy (peak resident invocations over SMs x 2048), failed
-rays.py checks, the render frame rates of each `--submit` mode, and the volume modes' orbits
-(dvr, mip, cinematic: `bench VOLUME --mode`). Only the standard library.
+rays.py checks, the render frame rates of each `--submit` mode, the volume modes' orbits
+(dvr, mip, cinematic: `bench VOLUME --mode`), and render.log's cinematic pictures (the frame's
+time, and what a denoised one's guides and filter took). Only the standard library.
 """
 
 import argparse
 import json
+import os
 import re
 import statistics
 import sys
@@ -194,6 +196,35 @@ def render_table(path, out):
     out.append("")
 
 
+CINEMATIC = re.compile(r"raystream: wrote (\S+) \((\d+x\d+), --mode cinematic, (\d+) paths a pixel")
+DENOISED = re.compile(r"denoised \(guides ([\d.]+) ms, filter ([\d.]+) ms\)")
+RENDER_MS = re.compile(r": load [\d.]+ ms, render ([\d.]+) ms")
+
+
+def cinematic_table(path, out):
+    """render.log's cinematic pictures (open questions 12 and 13): the frame's time and, when
+    denoised, what the guides and the filter took."""
+    rows = []
+    with open(path) as f:
+        for line in f:
+            m = CINEMATIC.search(line)
+            r = RENDER_MS.search(line)
+            if not (m and r):
+                continue
+            d = DENOISED.search(line)
+            rows.append((os.path.basename(m.group(1)), m.group(2), m.group(3), float(r.group(1)),
+                         d and float(d.group(1)), d and float(d.group(2))))
+    if not rows:
+        return
+    out.append("| picture | size | paths a pixel | render ms | denoised: guides ms | filter ms |")
+    out.append("|---|---|---|---|---|---|")
+    def ms_or_dash(x):
+        return "–" if x is None else f"{x:.1f}"
+    for name, size, spp, ms, guides, filt in rows:
+        out.append(f"| {name} | {size} | {spp} | {ms:.1f} | {ms_or_dash(guides)} | {ms_or_dash(filt)} |")
+    out.append("")
+
+
 def volume_table(lines, out):
     """The volume benches (`bench VOLUME --mode … --json`, tagged "volume"): frames/s by wall
     and kernel time, and samples/s."""
@@ -237,6 +268,7 @@ def main():
     volume_table(lines, out)
     if a.render:
         render_table(a.render, out)
+        cinematic_table(a.render, out)
     print("\n".join(out))
 
 

@@ -343,6 +343,9 @@ fn device_bench_summary() {
         frame("wave", 4, 30.0),
         frame("depth", 4, 38.0),
         frame("wave", 4, 31.0),
+        // device-bench.sh's two cinematic pictures, as render writes their lines.
+        "raystream: wrote out/cinematic-gpu.png (1024x1024, --mode cinematic, 256 paths a pixel, up to 4 scatterings) on gpu (H100): load 900 ms, render 4210.5 ms (0.24 frames/s), kernel 4200.00 ms, 1 samples, 1.0 M samples/s\n".to_string(),
+        "raystream: wrote out/cinematic-denoised-gpu.png (1024x1024, --mode cinematic, 16 paths a pixel, up to 4 scatterings, denoised (guides 12 ms, filter 7 ms)) on gpu (H100): load 900 ms, render 301.2 ms (3.32 frames/s), kernel 270.00 ms, 1 samples, 1.0 M samples/s\n".to_string(),
     ]
     .concat();
     std::fs::write(&log, text).unwrap();
@@ -372,6 +375,15 @@ fn device_bench_summary() {
     // The leaf-size variant beside the fused kernel: 5.5 / 4.89 of its kernel time.
     assert!(
         out.contains("| raystream-gpu-fused (K=4) | 2.5 | 5.5 | 2.25 | 4.89 | 1.11 | 1.12 | – |"),
+        "{out}"
+    );
+    // The cinematic pictures: the frame's time, and the denoiser's parts.
+    assert!(
+        out.contains("| cinematic-gpu.png | 1024x1024 | 256 | 4210.5 | – | – |"),
+        "{out}"
+    );
+    assert!(
+        out.contains("| cinematic-denoised-gpu.png | 1024x1024 | 16 | 301.2 | 12.0 | 7.0 |"),
         "{out}"
     );
     // A volume bench's orbit: 2.5 G samples a frame at 0.51 kernel frames/s.
