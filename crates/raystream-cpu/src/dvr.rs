@@ -859,6 +859,14 @@ pub fn render_volume_rgba_counted<'a>(
     (film, rays.iter().map(|c| 1.0 - c.transmit).collect(), stats)
 }
 
+/// Premultiplied `film` of opacity `alpha` laid over `background`: C + (1 − α)·B.
+pub fn over_background(mut film: Image, alpha: &[f32], background: Vec3) -> Image {
+    for (c, a) in film.pixels.iter_mut().zip(alpha) {
+        *c += (1.0 - a) * background;
+    }
+    film
+}
+
 /// Where a frame's rays come from: a camera's pixels, or a curved plane's (a CPR: each
 /// pixel's ray runs along the plane's normal through the `slab` about its point).
 #[derive(Clone, Copy)]

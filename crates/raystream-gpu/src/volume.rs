@@ -13,7 +13,9 @@ use raystream_cpu::cinematic::{
     MAJORANT_CELL, Majorants, SKY_RADIANCE,
 };
 use raystream_cpu::denoise::{DenoiseOptions, DenoiseTimes, Guides, NoisyFilm};
-use raystream_cpu::dvr::{BRICK, DvrMode, DvrOptions, LightGrid, Marcher, Sight, scene_to_lps};
+use raystream_cpu::dvr::{
+    BRICK, DvrMode, DvrOptions, LightGrid, Marcher, Sight, over_background, scene_to_lps,
+};
 use raystream_io::Volume;
 use raystream_math::Vec3;
 use raystream_scene::Camera;
@@ -276,7 +278,7 @@ impl<'a> GpuVolumeRenderer<'a> {
     ) -> Result<(Image, GpuDvrTimes), GpuError> {
         let sight = sight.into();
         if let Some((film, alpha, times)) = self.denoised(opt, sight)? {
-            return Ok((over(film, &alpha, opt.background), times));
+            return Ok((over_background(film, &alpha, opt.background), times));
         }
         let (pixels, _, _, times) = self.run(opt, sight, Output::Linear)?;
         Ok((pixels.into_linear(), times))
@@ -307,7 +309,10 @@ impl<'a> GpuVolumeRenderer<'a> {
     ) -> Result<(Vec<u8>, GpuDvrTimes), GpuError> {
         let sight = sight.into();
         if let Some((film, alpha, times)) = self.denoised(opt, sight)? {
-            return Ok((over(film, &alpha, opt.background).to_srgb8(), times));
+            return Ok((
+                over_background(film, &alpha, opt.background).to_srgb8(),
+                times,
+            ));
         }
         let (pixels, _, _, times) = self.run(opt, sight, Output::Srgb8)?;
         Ok((pixels.into_srgb8(), times))
@@ -873,12 +878,4 @@ impl<'a> GpuVolumeRenderer<'a> {
             },
         ))
     }
-}
-
-/// Premultiplied `film` of opacity `alpha` laid over `background`.
-fn over(mut film: Image, alpha: &[f32], background: Vec3) -> Image {
-    for (c, a) in film.pixels.iter_mut().zip(alpha) {
-        *c += (1.0 - a) * background;
-    }
-    film
 }

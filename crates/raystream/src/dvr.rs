@@ -7,7 +7,8 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 use raystream_cpu::denoise::DenoiseTimes;
 use raystream_cpu::dvr::{
-    DvrMode, DvrOptions, DvrStats, Sight, render_volume, render_volume_rgba_counted,
+    DvrMode, DvrOptions, DvrStats, Sight, over_background, render_volume,
+    render_volume_rgba_counted,
 };
 use raystream_cpu::{Image, ImageFormat};
 use raystream_gpu::GpuVolumeRenderer;
@@ -313,28 +314,13 @@ impl<'a> Renderer<'a> {
             }
             Renderer::Cpu { volume, tf, done } if opt.mode == DvrMode::Cinematic => {
                 // Counted as its paths are traced, laid over the background here.
-                let (mut film, alpha, stats) =
-                    render_volume_rgba_counted(volume, tf, opt, sight, done);
-                for (c, a) in film.pixels.iter_mut().zip(alpha) {
-                    *c += (1.0 - a) * opt.background;
-                }
-                let cost = FilmCost {
-                    kernel_ms: None,
-                    samples: stats.samples,
-                    stats: Some(stats),
-                    denoise: stats.denoise,
-                };
-                (film, cost)
+                let (film, alpha, stats) = render_volume_rgba_counted(volume, tf, opt, sight, done);
+                let film = over_background(film, &alpha, opt.background);
+                (film, FilmCost::of_cpu(stats))
             }
             Renderer::Cpu { volume, tf, .. } => {
                 let (film, stats) = render_volume(volume, tf, opt, sight);
-                let cost = FilmCost {
-                    kernel_ms: None,
-                    samples: stats.samples,
-                    stats: Some(stats),
-                    denoise: stats.denoise,
-                };
-                (film, cost)
+                (film, FilmCost::of_cpu(stats))
             }
         })
     }
@@ -346,6 +332,18 @@ struct FilmCost {
     samples: u64,
     stats: Option<DvrStats>,
     denoise: Option<DenoiseTimes>,
+}
+
+impl FilmCost {
+    /// The CPU's figures, from its statistics.
+    fn of_cpu(stats: DvrStats) -> FilmCost {
+        FilmCost {
+            kernel_ms: None,
+            samples: stats.samples,
+            stats: Some(stats),
+            denoise: stats.denoise,
+        }
+    }
 }
 
 /// The skipped and shadow samples of a frame the GPU rendered (it counts only the samples it
