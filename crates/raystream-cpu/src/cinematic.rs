@@ -487,16 +487,22 @@ pub(crate) fn pixel(
     }
 }
 
-/// Every pixel's paths (`opt` as `dvr::march_frame` prepares it: the clip planes the camera's
-/// view adds, no slab), adding each pixel's to `done` as it finishes.
-pub(crate) fn trace_frame(
+/// A denoised frame: the premultiplied light, the opacity, and what denoising took.
+pub(crate) type Denoised = (Image, Vec<f32>, DenoiseTimes);
+
+/// A cinematic frame (`opt` as `dvr::march_frame` prepares it: the clip planes the camera's
+/// view adds, no slab): every pixel's paths, each pixel's added to `done` as it finishes, and
+/// with `opt.denoise` the frame denoised along its [`guides`] (the premultiplied light, the
+/// opacity, and what the guides and the filter took). One majorant grid serves the paths and
+/// the guides.
+pub(crate) fn frame(
     vol: &Volume,
     m: &Marcher,
     tf: &TransferFunction,
     opt: &DvrOptions,
     cam: &Camera,
     done: Option<&AtomicU64>,
-) -> Vec<PixelPaths> {
+) -> (Vec<PixelPaths>, Option<Denoised>) {
     let lighting = Lighting::studio(opt, cam);
     let majorants = Majorants::new(vol, tf);
     let tracker = Tracker {
@@ -504,7 +510,7 @@ pub(crate) fn trace_frame(
         tf,
         majorants: &majorants,
     };
-    (0..opt.width * opt.height)
+    let paths: Vec<PixelPaths> = (0..opt.width * opt.height)
         .into_par_iter()
         .map(|px| {
             let p = pixel(&tracker, opt, cam, &lighting, px);
@@ -513,7 +519,25 @@ pub(crate) fn trace_frame(
             }
             p
         })
-        .collect()
+        .collect();
+    let denoised = opt.denoise.then(|| {
+        let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
+        let t = std::time::Instant::now();
+        let g = guides_along(&tracker, opt, cam, opt.step_for(vol));
+        let guides_ms = ms(t);
+        let t = std::time::Instant::now();
+        let (film, alpha) = crate::denoise::denoise(
+            &film_of(opt, &paths),
+            &g,
+            &crate::denoise::DenoiseOptions::default(),
+        );
+        let times = DenoiseTimes {
+            guides_ms,
+            filter_ms: ms(t),
+        };
+        (film, alpha, times)
+    });
+    (paths, denoised)
 }
 
 /// A cinematic frame as the denoiser takes it ([`crate::denoise`]): the premultiplied light,
@@ -525,9 +549,11 @@ pub fn render_film(
     opt: &DvrOptions,
     cam: &Camera,
 ) -> (NoisyFilm, u64) {
-    let opt = &frame_options(vol, opt, Sight::Camera(cam));
-    let m = Marcher::new(vol, None);
-    let paths = trace_frame(vol, &m, tf, opt, cam, None);
+    let opt = &DvrOptions {
+        denoise: false,
+        ..frame_options(vol, opt, Sight::Camera(cam))
+    };
+    let (paths, _) = frame(vol, &Marcher::new(vol, None), tf, opt, cam, None);
     (film_of(opt, &paths), paths.iter().map(|p| p.taken).sum())
 }
 
@@ -542,30 +568,6 @@ pub(crate) fn film_of(opt: &DvrOptions, paths: &[PixelPaths]) -> NoisyFilm {
         alpha: paths.iter().map(|p| 1.0 - p.escaped).collect(),
         variance: paths.iter().map(|p| p.variance).collect(),
     }
-}
-
-/// `noisy`, a cinematic frame of `vol` seen by `cam` (from either device), denoised along its
-/// [`guides`] with the default settings ([`crate::denoise`]): the premultiplied light, the
-/// opacity, and what the guides and the filter took.
-pub fn denoised(
-    vol: &Volume,
-    tf: &TransferFunction,
-    opt: &DvrOptions,
-    cam: &Camera,
-    noisy: &NoisyFilm,
-) -> (Image, Vec<f32>, DenoiseTimes) {
-    let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
-    let t = std::time::Instant::now();
-    let g = guides(vol, tf, opt, cam);
-    let guides_ms = ms(t);
-    let t = std::time::Instant::now();
-    let (film, alpha) =
-        crate::denoise::denoise(noisy, &g, &crate::denoise::DenoiseOptions::default());
-    let times = DenoiseTimes {
-        guides_ms,
-        filter_ms: ms(t),
-    };
-    (film, alpha, times)
 }
 
 /// Below this share of the light stopped, a pixel's guides have no depth (+∞): what little it
@@ -594,7 +596,18 @@ pub fn guides(vol: &Volume, tf: &TransferFunction, opt: &DvrOptions, cam: &Camer
     let opt = &frame_options(vol, opt, Sight::Camera(cam));
     let m = Marcher::new(vol, None);
     let majorants = Majorants::new(vol, tf);
-    let step = opt.step_for(vol);
+    let tracker = Tracker {
+        m: &m,
+        tf,
+        majorants: &majorants,
+    };
+    guides_along(&tracker, opt, cam, opt.step_for(vol))
+}
+
+/// [`guides`] through `tracker`'s volume and majorants (`opt` prepared as for a frame), in
+/// steps of `step` mm.
+fn guides_along(tracker: &Tracker, opt: &DvrOptions, cam: &Camera, step: f32) -> Guides {
+    let Tracker { m, tf, majorants } = *tracker;
     let k = GUIDE_SUBPIXELS;
     let seen: Vec<(f32, Vec3, Vec3)> = (0..opt.width * opt.height)
         .into_par_iter()
@@ -607,7 +620,7 @@ pub fn guides(vol: &Volume, tf: &TransferFunction, opt: &DvrOptions, cam: &Camer
                     let (u, v) = ((i as f32 + 0.5) / k as f32, (j as f32 + 0.5) / k as f32);
                     let r = cam.ray(x as f32 + u, y as f32 + v, opt.width, opt.height);
                     let (o, d) = (scene_to_lps(r.origin), scene_to_lps(r.dir));
-                    guide_ray(&m, &majorants, tf, opt, step, (o, d), &mut sum);
+                    guide_ray(m, majorants, tf, opt, step, (o, d), &mut sum);
                 }
             }
             let n = (k * k) as f32;

@@ -123,7 +123,7 @@ pub struct DvrOptions {
     /// ([`crate::cinematic::KEY_IRRADIANCE`], [`crate::cinematic::SKY_RADIANCE`]); the
     /// background is not lit and keeps its colour.
     pub exposure: f32,
-    /// cinematic: filter the frame's Monte Carlo noise ([`crate::cinematic::denoised`]), on
+    /// cinematic: filter the frame's Monte Carlo noise ([`crate::denoise`], along [`crate::cinematic::guides`]), on
     /// either device.
     pub denoise: bool,
 }
@@ -964,7 +964,7 @@ fn march_frame(
         let Sight::Camera(cam) = sight else {
             panic!("cinematic rendering is seen by a camera, not a curved plane");
         };
-        let paths = crate::cinematic::trace_frame(vol, &marcher, tf, opt, cam, done);
+        let (paths, denoised) = crate::cinematic::frame(vol, &marcher, tf, opt, cam, done);
         let mut rays: Vec<Marched> = paths
             .iter()
             .map(|p| Marched {
@@ -975,9 +975,7 @@ fn march_frame(
             })
             .collect();
         let mut denoise = None;
-        if opt.denoise {
-            let noisy = crate::cinematic::film_of(opt, &paths);
-            let (film, alpha, times) = crate::cinematic::denoised(vol, tf, opt, cam, &noisy);
+        if let Some((film, alpha, times)) = denoised {
             for ((r, c), a) in rays.iter_mut().zip(film.pixels).zip(alpha) {
                 r.color = c;
                 r.transmit = 1.0 - a;
