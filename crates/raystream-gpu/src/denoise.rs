@@ -49,12 +49,38 @@ impl GpuDenoiser {
         guides: &Guides,
         opt: &DenoiseOptions,
     ) -> Result<(Image, Vec<f32>), GpuError> {
-        let (w, h) = (noisy.film.width, noisy.film.height);
         assert_eq!(
             (guides.width, guides.height),
-            (w, h),
+            (noisy.film.width, noisy.film.height),
             "guides are made for their frame's size"
         );
+        let n = guides.depth.len();
+        // (albedo, depth or −1), then (normal, 0).
+        let g: Vec<[f32; 4]> = (0..n)
+            .map(|p| {
+                let (a, z) = (guides.albedo[p], guides.depth[p]);
+                [a.x, a.y, a.z, if z.is_finite() { z } else { -1.0 }]
+            })
+            .chain(guides.normal.iter().map(|v| [v.x, v.y, v.z, 0.0]))
+            .collect();
+        let guide_buf = ctx.storage(
+            "guides",
+            bytemuck::cast_slice(&g),
+            wgpu::BufferUsages::empty(),
+        )?;
+        self.filter(ctx, noisy, (&guide_buf, guides.tolerance), opt)
+    }
+
+    /// [`Self::denoise`] along guides already on the GPU, laid out as `guide_volume` writes
+    /// them (per pixel (albedo, depth or −1), then (normal, 0)), with their depth tolerance.
+    pub(crate) fn filter(
+        &self,
+        ctx: &GpuContext,
+        noisy: &NoisyFilm,
+        (guide_buf, tolerance): (&wgpu::Buffer, f32),
+        opt: &DenoiseOptions,
+    ) -> Result<(Image, Vec<f32>), GpuError> {
+        let (w, h) = (noisy.film.width, noisy.film.height);
         let n = w as usize * h as usize;
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let light: Vec<[f32; 4]> = noisy
@@ -64,14 +90,6 @@ impl GpuDenoiser {
             .zip(&noisy.alpha)
             .map(|(c, a)| [c.x, c.y, c.z, *a])
             .collect();
-        // (albedo, depth or −1), then (normal, 0).
-        let g: Vec<[f32; 4]> = (0..n)
-            .map(|p| {
-                let (a, z) = (guides.albedo[p], guides.depth[p]);
-                [a.x, a.y, a.z, if z.is_finite() { z } else { -1.0 }]
-            })
-            .chain(guides.normal.iter().map(|v| [v.x, v.y, v.z, 0.0]))
-            .collect();
         let none = wgpu::BufferUsages::empty();
         let raw_light = ctx.storage("noisy light", bytemuck::cast_slice(&light), none)?;
         let raw_var = ctx.storage(
@@ -79,7 +97,6 @@ impl GpuDenoiser {
             bytemuck::cast_slice(&noisy.variance),
             none,
         )?;
-        let guide_buf = ctx.storage("guides", bytemuck::cast_slice(&g), none)?;
         let lights = [
             ctx.work_buffer(
                 "denoised light",
@@ -107,7 +124,7 @@ impl GpuDenoiser {
                 sigma_depth: opt.sigma_depth,
                 sigma_normal: opt.sigma_normal,
                 sigma_albedo: opt.sigma_albedo,
-                tolerance: guides.tolerance,
+                tolerance,
                 demodulate: opt.demodulate,
                 ..Default::default()
             };
@@ -156,7 +173,7 @@ impl GpuDenoiser {
                 (2, &lights[0]),
                 (3, &raw_var),
                 (4, &vars[0]),
-                (5, &guide_buf),
+                (5, guide_buf),
                 (6, &slopes),
             ],
         );
@@ -173,7 +190,7 @@ impl GpuDenoiser {
                     (2, &lights[o]),
                     (3, &vars[i]),
                     (4, &vars[o]),
-                    (5, &guide_buf),
+                    (5, guide_buf),
                     (6, &slopes),
                     (7, &blurred),
                 ],
@@ -186,7 +203,7 @@ impl GpuDenoiser {
                 (0, &first),
                 (1, &lights[at]),
                 (2, &lights[1 - at]),
-                (5, &guide_buf),
+                (5, guide_buf),
             ],
         );
         ctx.queue.submit([enc.finish()]);

@@ -358,13 +358,18 @@ impl<'a> GpuVolumeRenderer<'a> {
         let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
         let t0 = Instant::now();
         let (noisy, mut times) = self.render_film(opt, cam)?;
+        // The guides stay on the GPU for the filter.
         let t = Instant::now();
-        let guides = self.guides(opt, cam)?;
+        let (guides, tolerance) = self.guide_buffer(opt, cam)?;
         let guides_ms = ms(t);
         let t = Instant::now();
         let denoiser = self.denoiser.get_or_init(|| GpuDenoiser::new(self.ctx));
-        let (film, alpha) =
-            denoiser.denoise(self.ctx, &noisy, &guides, &DenoiseOptions::default())?;
+        let (film, alpha) = denoiser.filter(
+            self.ctx,
+            &noisy,
+            (&guides, tolerance),
+            &DenoiseOptions::default(),
+        )?;
         times.denoise = Some(DenoiseTimes {
             guides_ms,
             filter_ms: ms(t),
@@ -399,8 +404,38 @@ impl<'a> GpuVolumeRenderer<'a> {
     }
 
     /// The denoiser's guides of a cinematic frame seen by `cam`, as
-    /// `raystream_cpu::cinematic::guides` marches them, marched here.
+    /// `raystream_cpu::cinematic::guides` marches them, marched here and read back.
     pub fn guides(&self, opt: &DvrOptions, cam: &Camera) -> Result<Guides, GpuError> {
+        let (out, tolerance) = self.guide_buffer(opt, cam)?;
+        let n = opt.width as usize * opt.height as usize;
+        let floats: Vec<f32> = read_back(self.ctx, &out)?;
+        let (first, second) = floats.split_at(4 * n);
+        Ok(Guides {
+            width: opt.width,
+            height: opt.height,
+            depth: first
+                .chunks_exact(4)
+                .map(|g| if g[3] < 0.0 { f32::INFINITY } else { g[3] })
+                .collect(),
+            albedo: first
+                .chunks_exact(4)
+                .map(|g| Vec3::new(g[0], g[1], g[2]))
+                .collect(),
+            normal: second
+                .chunks_exact(4)
+                .map(|g| Vec3::new(g[0], g[1], g[2]))
+                .collect(),
+            tolerance,
+        })
+    }
+
+    /// The guides left on the GPU, laid out as [`GpuDenoiser`] reads them (per pixel
+    /// (albedo, depth or −1), then (normal, 0)), once marched; and their depth tolerance.
+    fn guide_buffer(
+        &self,
+        opt: &DvrOptions,
+        cam: &Camera,
+    ) -> Result<(wgpu::Buffer, f32), GpuError> {
         let ctx = self.ctx;
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let (params, _) = self.params(opt, Sight::Camera(cam), false)?;
@@ -440,28 +475,11 @@ impl<'a> GpuVolumeRenderer<'a> {
             pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
         }
         ctx.queue.submit([enc.finish()]);
-        let floats: Vec<f32> = read_back(ctx, &out)?;
+        ctx.wait()?;
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
-        let (first, second) = floats.split_at(4 * n as usize);
-        Ok(Guides {
-            width: opt.width,
-            height: opt.height,
-            depth: first
-                .chunks_exact(4)
-                .map(|g| if g[3] < 0.0 { f32::INFINITY } else { g[3] })
-                .collect(),
-            albedo: first
-                .chunks_exact(4)
-                .map(|g| Vec3::new(g[0], g[1], g[2]))
-                .collect(),
-            normal: second
-                .chunks_exact(4)
-                .map(|g| Vec3::new(g[0], g[1], g[2]))
-                .collect(),
-            tolerance: params.step,
-        })
+        Ok((out, params.step))
     }
 
     /// The kernels' parameters of a frame seen by `sight`, and a curved plane's rows.
