@@ -207,7 +207,7 @@ pub struct GpuDvrTimes {
     /// Samples the rays took (counted per pixel on the GPU, as the CPU counts them; shadow
     /// rays' samples not included).
     pub samples: u64,
-    /// cinematic with `denoise`: what the denoiser took on the CPU (in `frame_ms` too).
+    /// cinematic with `denoise`: what the guides and the filter took (in `frame_ms` too).
     pub denoise: Option<raystream_cpu::denoise::DenoiseTimes>,
 }
 

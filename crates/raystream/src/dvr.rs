@@ -203,7 +203,7 @@ pub struct Frame {
     pub samples: u64,
     /// The CPU path's full statistics (skipped and shadow samples too).
     pub stats: Option<DvrStats>,
-    /// cinematic `--denoise`: what the guides and the filter took (on the CPU, either device).
+    /// cinematic `--denoise`: what the guides and the filter took, on the device that drew the frame.
     pub denoise: Option<DenoiseTimes>,
 }
 
