@@ -196,7 +196,8 @@ def render_table(path, out):
     out.append("")
 
 
-CINEMATIC = re.compile(r"raystream: wrote (\S+) \((\d+x\d+), --mode cinematic, (\d+) paths a pixel")
+# The interpolation ("trilinear", "cubic B-spline") follows the mode since 2026-12-03.
+CINEMATIC = re.compile(r"raystream: wrote (\S+) \((\d+x\d+), --mode cinematic(?:, [a-zA-Z -]+)?, (\d+) paths a pixel")
 DENOISED = re.compile(r"denoised \(guides ([\d.]+) ms, filter ([\d.]+) ms\)")
 RENDER_MS = re.compile(r": load [\d.]+ ms, render ([\d.]+) ms")
 

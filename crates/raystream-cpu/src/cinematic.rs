@@ -222,17 +222,19 @@ pub const MAJORANT_CELL: usize = 4;
 
 /// The majorant grid of cinematic mode's tracking: per cell of [`MAJORANT_CELL`]³ (x fastest),
 /// the largest extinction coefficient (per mm) the transfer function gives over the cell's HU
-/// range (the voxels its trilinear samples read). Zero where the cell is transparent.
+/// range (the voxels its samples read, as the marcher interpolates). Zero where the cell is transparent.
 pub struct Majorants {
     pub dims: [usize; 3],
     pub values: Vec<f32>,
 }
 
 impl Majorants {
-    pub fn new(vol: &Volume, tf: &TransferFunction) -> Majorants {
+    /// The majorants of `tf` over the volume `m` samples, as `m` interpolates it.
+    pub fn new(m: &Marcher, tf: &TransferFunction) -> Majorants {
+        let vol = m.volume();
         Majorants {
             dims: cell_dims(vol.dims, MAJORANT_CELL),
-            values: cell_ranges(vol, MAJORANT_CELL)
+            values: cell_ranges(vol, MAJORANT_CELL, m.interpolation())
                 .into_iter()
                 .map(|(lo, hi)| sigma_of(tf.max_opacity_in(lo, hi)))
                 .collect(),
@@ -504,7 +506,7 @@ pub(crate) fn frame(
     done: Option<&AtomicU64>,
 ) -> (Vec<PixelPaths>, Option<Denoised>) {
     let lighting = Lighting::studio(opt, cam);
-    let majorants = Majorants::new(vol, tf);
+    let majorants = Majorants::new(m, tf);
     let tracker = Tracker {
         m,
         tf,
@@ -553,7 +555,8 @@ pub fn render_film(
         denoise: false,
         ..frame_options(vol, opt, Sight::Camera(cam))
     };
-    let (paths, _) = frame(vol, &Marcher::new(vol, None), tf, opt, cam, None);
+    let m = Marcher::interpolated(vol, None, opt.interpolation);
+    let (paths, _) = frame(vol, &m, tf, opt, cam, None);
     (film_of(opt, &paths), paths.iter().map(|p| p.taken).sum())
 }
 
@@ -594,8 +597,8 @@ pub const GUIDE_TRANSMITTANCE_END: f32 = 0.01;
 /// A first-surface guide would miss what semi-transparent tissue shows.
 pub fn guides(vol: &Volume, tf: &TransferFunction, opt: &DvrOptions, cam: &Camera) -> Guides {
     let opt = &frame_options(vol, opt, Sight::Camera(cam));
-    let m = Marcher::new(vol, None);
-    let majorants = Majorants::new(vol, tf);
+    let m = Marcher::interpolated(vol, None, opt.interpolation);
+    let majorants = Majorants::new(&m, tf);
     let tracker = Tracker {
         m: &m,
         tf,
@@ -770,7 +773,8 @@ mod tests {
     }
 
     fn transmittances_agree(vol: &Volume, tf: &TransferFunction) {
-        let (m, majorants) = (Marcher::new(vol, Some(tf)), Majorants::new(vol, tf));
+        let m = Marcher::new(vol, Some(tf));
+        let majorants = Majorants::new(&m, tf);
         let tracker = tracker(&m, tf, &majorants);
         assert!(
             majorants.values.contains(&0.0),
@@ -842,7 +846,8 @@ mod tests {
             if r < 8.0 { 400.0 } else { 0.0 }
         });
         let tf = tf(vec![(-100.0, 0.02), (400.0, 0.3)], 1.0);
-        let (m, majorants) = (Marcher::new(&vol, Some(&tf)), Majorants::new(&vol, &tf));
+        let m = Marcher::new(&vol, Some(&tf));
+        let majorants = Majorants::new(&m, &tf);
         let tracker = tracker(&m, &tf, &majorants);
         let lighting = Lighting {
             key: Vec3::Z,
@@ -901,7 +906,8 @@ mod tests {
         let vol = volume([40, 30, 50], [1.0, 1.2, 0.8], |_, _, _| 100.0);
         let (alpha, albedo, irradiance) = (0.04f32, 0.8f32, 2.0f32);
         let tf = tf(vec![(0.0, alpha)], albedo);
-        let (m, majorants) = (Marcher::new(&vol, Some(&tf)), Majorants::new(&vol, &tf));
+        let m = Marcher::new(&vol, Some(&tf));
+        let majorants = Majorants::new(&m, &tf);
         let tracker = tracker(&m, &tf, &majorants);
         let opt = DvrOptions {
             bounces: 0,
@@ -1057,7 +1063,8 @@ mod tests {
     fn pictures_are_deterministic() {
         let vol = volume([16, 16, 16], [1.0; 3], |i, _, _| 100.0 * i);
         let tf = tf(vec![(0.0, 0.0), (1500.0, 0.2)], 0.9);
-        let (m, majorants) = (Marcher::new(&vol, Some(&tf)), Majorants::new(&vol, &tf));
+        let m = Marcher::new(&vol, Some(&tf));
+        let majorants = Majorants::new(&m, &tf);
         let tracker = tracker(&m, &tf, &majorants);
         let opt = DvrOptions {
             width: 8,
@@ -1185,7 +1192,8 @@ mod tests {
     fn pixel_variance_is_the_spread_of_the_mean() {
         let vol = volume([16, 16, 16], [1.0; 3], |i, j, _| 30.0 * (i + j));
         let tf = tf(vec![(0.0, 0.0), (900.0, 0.15)], 0.8);
-        let (m, majorants) = (Marcher::new(&vol, None), Majorants::new(&vol, &tf));
+        let m = Marcher::new(&vol, None);
+        let majorants = Majorants::new(&m, &tf);
         let tracker = tracker(&m, &tf, &majorants);
         let opt = DvrOptions {
             width: 16,
@@ -1294,7 +1302,8 @@ mod tests {
     fn exposure_scales_the_light() {
         let vol = volume([16, 16, 16], [1.0; 3], |i, j, _| 40.0 * (i + j));
         let tf = tf(vec![(0.0, 0.0), (1200.0, 0.2)], 0.8);
-        let (m, majorants) = (Marcher::new(&vol, None), Majorants::new(&vol, &tf));
+        let m = Marcher::new(&vol, None);
+        let majorants = Majorants::new(&m, &tf);
         let tracker = tracker(&m, &tf, &majorants);
         let cam = crate::dvr::volume_camera(&vol, 1.0);
         let at = |exposure: f32, px: u32| {

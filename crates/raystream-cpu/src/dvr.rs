@@ -1,5 +1,6 @@
 //! Direct volume rendering on the CPU, the reference for the GPU: rays marched front to back
-//! through a CT volume in world space (LPS millimetres), sampled trilinearly.
+//! through a CT volume in world space (LPS millimetres), sampled trilinearly or by the cubic
+//! B-spline ([`Interpolation`]).
 //!
 //! - `dvr`: emission–absorption with a [`TransferFunction`]; opacity is per millimetre and
 //!   corrected for the step (α_step = 1 − (1 − α)^Δs, the last step of a ray clipped to the
@@ -27,6 +28,8 @@ use raystream_volume::TransferFunction;
 
 use crate::Image;
 use crate::cpr::CurvedPlane;
+pub use crate::sampling::Interpolation;
+use crate::sampling::{tricubic, trilinear};
 
 /// What a ray computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -126,6 +129,10 @@ pub struct DvrOptions {
     /// cinematic: filter the frame's Monte Carlo noise ([`crate::denoise`], along [`crate::cinematic::guides`]), on
     /// either device.
     pub denoise: bool,
+    /// How the volume is sampled between voxel centres: trilinear, or the cubic B-spline whose
+    /// continuous gradient keeps coarse grids' surfaces free of wood-grain rings
+    /// ([`crate::sampling`]).
+    pub interpolation: Interpolation,
 }
 
 impl Default for DvrOptions {
@@ -151,6 +158,7 @@ impl Default for DvrOptions {
             denoise: false,
             anisotropy: 0.0,
             exposure: 0.0,
+            interpolation: Interpolation::Linear,
         }
     }
 }
@@ -250,8 +258,8 @@ pub struct DvrStats {
     pub denoise: Option<crate::denoise::DenoiseTimes>,
 }
 
-/// Bricks of `BRICK`³ cells: a brick holds the HU range of the voxels its cells' trilinear
-/// samples read (one more layer on the far sides).
+/// Bricks of `BRICK`³ cells: a brick holds the HU range of the voxels its cells' samples read
+/// ([`cell_ranges`]).
 pub const BRICK: usize = 8;
 
 /// The volume prepared for marching: index-space transforms in f32 and the brick table.
@@ -265,6 +273,7 @@ pub struct Marcher<'a> {
     bricks: [usize; 3],
     /// Per brick: whether anything in it is visible (dvr mode) — empty-space skipping.
     visible: Vec<bool>,
+    interpolation: Interpolation,
 }
 
 /// Cells of `cell`³ voxel spacings over the grid of `dims` voxel centres: cells per axis.
@@ -273,8 +282,14 @@ pub(crate) fn cell_dims(dims: [usize; 3], cell: usize) -> [usize; 3] {
 }
 
 /// Per cell of `cell`³ (x fastest; [`cell_dims`]), the HU range (lo, hi) of the voxels its
-/// trilinear samples read: its own and one more layer on the far sides.
-pub(crate) fn cell_ranges(vol: &Volume, cell: usize) -> Vec<(f32, f32)> {
+/// samples read, interpolated as `interpolation`: its own and one more layer on the far sides
+/// (trilinear), or one more on the near sides and two on the far ones (cubic).
+pub(crate) fn cell_ranges(
+    vol: &Volume,
+    cell: usize,
+    interpolation: Interpolation,
+) -> Vec<(f32, f32)> {
+    let reach = interpolation.reach();
     let [nx, ny, nz] = vol.dims;
     let cells = cell_dims(vol.dims, cell);
     (0..cells[0] * cells[1] * cells[2])
@@ -285,7 +300,9 @@ pub(crate) fn cell_ranges(vol: &Volume, cell: usize) -> Vec<(f32, f32)> {
                 b / cells[0] % cells[1],
                 b / (cells[0] * cells[1]),
             );
-            let range = |bi: usize, n: usize| bi * cell..=((bi + 1) * cell).min(n - 1);
+            let range = |bi: usize, n: usize| {
+                (bi * cell).saturating_sub(reach)..=((bi + 1) * cell + reach).min(n - 1)
+            };
             let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
             for k in range(bz, nz) {
                 for j in range(by, ny) {
@@ -327,7 +344,18 @@ pub(crate) fn cell_exit(
 }
 
 impl<'a> Marcher<'a> {
+    /// `vol` sampled trilinearly; with `tf`, its bricks that `tf` makes transparent known.
     pub fn new(vol: &'a Volume, tf: Option<&TransferFunction>) -> Marcher<'a> {
+        Marcher::interpolated(vol, tf, Interpolation::Linear)
+    }
+
+    /// `vol` sampled as `interpolation`; with `tf`, its bricks that `tf` makes transparent
+    /// known.
+    pub fn interpolated(
+        vol: &'a Volume,
+        tf: Option<&TransferFunction>,
+        interpolation: Interpolation,
+    ) -> Marcher<'a> {
         let m = vol.index_to_world_affine();
         let inv = m.inverse();
         let rows = |a: raystream_math::DMat3| {
@@ -339,7 +367,7 @@ impl<'a> Marcher<'a> {
         let grad_to_world = to_index;
         let bricks = cell_dims(vol.dims, BRICK);
         let visible = match tf {
-            Some(tf) => cell_ranges(vol, BRICK)
+            Some(tf) => cell_ranges(vol, BRICK, interpolation)
                 .into_iter()
                 .map(|(lo, hi)| tf.max_opacity_in(lo, hi) > 0.0)
                 .collect(),
@@ -352,7 +380,18 @@ impl<'a> Marcher<'a> {
             grad_to_world,
             bricks,
             visible,
+            interpolation,
         }
+    }
+
+    /// How the volume is sampled.
+    pub fn interpolation(&self) -> Interpolation {
+        self.interpolation
+    }
+
+    /// The volume sampled.
+    pub fn volume(&self) -> &Volume {
+        self.vol
     }
 
     /// World (LPS mm) → continuous index as rows of the linear part, and the world origin:
@@ -390,18 +429,28 @@ impl<'a> Marcher<'a> {
         )
     }
 
-    /// Trilinear value at continuous index `p` (clamped to the grid).
+    /// The value at continuous index `p` (clamped to the grid), interpolated trilinearly or
+    /// by the cubic B-spline.
     pub fn sample(&self, p: Vec3) -> f32 {
-        trilinear(self.vol.dims, p, |i, j, k| self.vol.at(i, j, k))
+        match self.interpolation {
+            Interpolation::Linear => trilinear(self.vol.dims, p, |i, j, k| self.vol.at(i, j, k)),
+            Interpolation::Cubic => tricubic(self.vol.dims, &self.vol.data, p).0,
+        }
     }
 
-    /// The HU gradient per mm in world space at index `p` (central differences of samples).
+    /// The HU gradient per mm in world space at index `p`: central differences of trilinear
+    /// samples one voxel apart, or the cubic B-spline's own gradient.
     pub fn gradient(&self, p: Vec3) -> Vec3 {
-        let g = Vec3::new(
-            self.sample(p + Vec3::X) - self.sample(p - Vec3::X),
-            self.sample(p + Vec3::Y) - self.sample(p - Vec3::Y),
-            self.sample(p + Vec3::Z) - self.sample(p - Vec3::Z),
-        ) * 0.5;
+        let g = match self.interpolation {
+            Interpolation::Linear => {
+                Vec3::new(
+                    self.sample(p + Vec3::X) - self.sample(p - Vec3::X),
+                    self.sample(p + Vec3::Y) - self.sample(p - Vec3::Y),
+                    self.sample(p + Vec3::Z) - self.sample(p - Vec3::Z),
+                ) * 0.5
+            }
+            Interpolation::Cubic => tricubic(self.vol.dims, &self.vol.data, p).1,
+        };
         // world gradient = Σ_axis g_axis · ∂index_axis/∂world
         self.grad_to_world[0] * g.x + self.grad_to_world[1] * g.y + self.grad_to_world[2] * g.z
     }
@@ -693,41 +742,6 @@ impl LightGrid {
     }
 }
 
-/// Trilinear interpolation at continuous index `p` of a grid of `dims` values read by `at`,
-/// clamped to the grid (the GPU's `sample_at` and `light_at` compute the same).
-fn trilinear(dims: [usize; 3], p: Vec3, at: impl Fn(usize, usize, usize) -> f32) -> f32 {
-    let [nx, ny, nz] = dims;
-    let c = |x: f32, n: usize| x.clamp(0.0, (n - 1) as f32);
-    let (x, y, z) = (c(p.x, nx), c(p.y, ny), c(p.z, nz));
-    let (i, j, k) = (
-        (x as usize).min(nx.saturating_sub(2)),
-        (y as usize).min(ny.saturating_sub(2)),
-        (z as usize).min(nz.saturating_sub(2)),
-    );
-    let (fx, fy, fz) = (x - i as f32, y - j as f32, z - k as f32);
-    let v = |di: usize, dj: usize, dk: usize| {
-        at(
-            (i + di).min(nx - 1),
-            (j + dj).min(ny - 1),
-            (k + dk).min(nz - 1),
-        )
-    };
-    let l = |a: f32, b: f32, w: f32| a + (b - a) * w;
-    l(
-        l(
-            l(v(0, 0, 0), v(1, 0, 0), fx),
-            l(v(0, 1, 0), v(1, 1, 0), fx),
-            fy,
-        ),
-        l(
-            l(v(0, 0, 1), v(1, 0, 1), fx),
-            l(v(0, 1, 1), v(1, 1, 1), fx),
-            fy,
-        ),
-        fz,
-    )
-}
-
 /// The direction toward the key light of `--shadows` (LPS, unit): above the camera, to its
 /// left and in front of the volume, so that shadows fall down and to the right.
 pub fn key_light(cam: &Camera) -> Vec3 {
@@ -956,9 +970,10 @@ fn march_frame(
     }
     let half_slab = 0.5 * opt.slab.unwrap_or(0.0);
     let opt = &frame_options(vol, opt, sight);
-    let marcher = Marcher::new(
+    let marcher = Marcher::interpolated(
         vol,
         (opt.skip_empty && opt.mode == DvrMode::Dvr).then_some(tf),
+        opt.interpolation,
     );
     if opt.mode == DvrMode::Cinematic {
         let Sight::Camera(cam) = sight else {
@@ -1975,23 +1990,216 @@ mod tests {
         raystream_io::load_volume(&p, &Default::default()).expect("the embedded CT loads")
     }
 
-    /// Empty-space skipping keeps the sample lattice: the same picture, fewer samples.
+    /// Empty-space skipping keeps the sample lattice: the same picture, fewer samples; with
+    /// the cubic B-spline too, whose samples reach a voxel further (bricks that held only
+    /// their trilinear reach skip visible samples: checked).
     #[test]
     fn empty_space_skipping_changes_nothing_but_the_cost() {
         let vol = abdomen();
         let tf = TfPreset::CtBones.function();
-        let mut opt = DvrOptions {
-            width: 64,
-            height: 48,
-            ..Default::default()
+        for interpolation in [Interpolation::Linear, Interpolation::Cubic] {
+            let mut opt = DvrOptions {
+                width: 64,
+                height: 48,
+                interpolation,
+                ..Default::default()
+            };
+            let cam = volume_camera(&vol, 64.0 / 48.0);
+            let (skip, s1) = render_volume(&vol, &tf, &opt, &cam);
+            opt.skip_empty = false;
+            let (full, s2) = render_volume(&vol, &tf, &opt, &cam);
+            assert_eq!(skip, full, "{interpolation:?}");
+            assert!(s1.skipped > 0 && s2.skipped == 0);
+            assert!(s1.samples < s2.samples);
+        }
+    }
+
+    /// Every sample inside a brick the table calls transparent is transparent, and every
+    /// sample's extinction is within its cell's majorant (cinematic tracking), on the abdomen
+    /// under two presets, read trilinearly and by the cubic B-spline. The points are drawn
+    /// mostly in the voxel layers along the cells' faces, where a sample reads the next
+    /// cell's voxels (cubic tables built with the trilinear reach fail: checked).
+    #[test]
+    fn cell_tables_bound_every_sample() {
+        use crate::cinematic::{MAJORANT_CELL, Majorants, sigma_of};
+        let vol = abdomen();
+        for preset in [TfPreset::CtBones, TfPreset::CtMuscle] {
+            let tf = preset.function();
+            for interpolation in [Interpolation::Linear, Interpolation::Cubic] {
+                let m = Marcher::interpolated(&vol, Some(&tf), interpolation);
+                let (bricks, visible) = m.brick_table();
+                let majorants = Majorants::new(&m, &tf);
+                let tables: [(usize, [usize; 3], Vec<f32>); 2] = [
+                    (
+                        BRICK,
+                        bricks,
+                        visible
+                            .iter()
+                            .map(|&v| if v { f32::INFINITY } else { 0.0 })
+                            .collect(),
+                    ),
+                    (MAJORANT_CELL, majorants.dims, majorants.values.clone()),
+                ];
+                let mut rng = 0x9e37_79b9_7f4a_7c15u64;
+                let mut uniform = || {
+                    rng ^= rng << 13;
+                    rng ^= rng >> 7;
+                    rng ^= rng << 17;
+                    (rng >> 40) as f32 / (1u64 << 24) as f32
+                };
+                for (cell, cells, bound) in tables {
+                    let mut tight = 0;
+                    for _ in 0..200_000 {
+                        let b = [0, 1, 2]
+                            .map(|a| ((uniform() * cells[a] as f32) as usize).min(cells[a] - 1));
+                        let limit = bound[b[0] + cells[0] * (b[1] + cells[1] * b[2])];
+                        if limit.is_infinite() {
+                            continue;
+                        }
+                        let p = Vec3::from_array([0, 1, 2].map(|a| {
+                            let u = uniform();
+                            let offset = match (uniform() * 4.0) as u32 {
+                                0 => u * cell as f32,
+                                1 => u,
+                                _ => cell as f32 - u,
+                            };
+                            ((b[a] * cell) as f32 + offset).min((vol.dims[a] - 1) as f32)
+                        }));
+                        let sigma = sigma_of(tf.opacity_at(m.sample(p)));
+                        tight += (sigma > 0.5 * limit) as u32;
+                        assert!(
+                            sigma <= limit * (1.0 + 1e-6),
+                            "{preset:?} {interpolation:?}, cells of {cell}: σ {sigma} at {p} above its cell's bound {limit}"
+                        );
+                    }
+                    // The majorants are met closely somewhere (not bounds of nothing).
+                    assert!(cell == BRICK || tight > 100, "{tight}");
+                }
+            }
+        }
+    }
+
+    /// The built-in abdomen CT (3 mm voxels) from the front under ct-muscle, whose skin
+    /// trilinear sampling draws with wood-grain rings a voxel of depth apart: the grain, as the
+    /// mean absolute Laplacian of the luminance over the body (pixels whose 3×3 neighbourhood
+    /// is opaque), falls below 0.4× with the cubic B-spline, while the body keeps its
+    /// outline (coverage) and its brightness.
+    #[test]
+    fn cubic_sampling_takes_the_wood_grain_off_the_skin() {
+        let vol = abdomen();
+        let tf = TfPreset::CtMuscle.function();
+        let (w, h) = (256usize, 192usize);
+        let cam = volume_camera(&vol, w as f32 / h as f32);
+        let picture = |interpolation| {
+            let opt = DvrOptions {
+                width: w as u32,
+                height: h as u32,
+                interpolation,
+                ..Default::default()
+            };
+            let (film, alpha, _) = render_volume_rgba(&vol, &tf, &opt, &cam);
+            let lum: Vec<f32> = film
+                .pixels
+                .iter()
+                .map(|c| crate::cinematic::luminance(*c))
+                .collect();
+            let (mut grain, mut body) = (0.0f64, 0usize);
+            for y in 1..h - 1 {
+                for x in 1..w - 1 {
+                    let at = |dx: isize, dy: isize| {
+                        (x as isize + dx) as usize + w * (y as isize + dy) as usize
+                    };
+                    let opaque = (-1..=1).all(|dy| (-1..=1).all(|dx| alpha[at(dx, dy)] > 0.99));
+                    if opaque {
+                        let l = lum[at(-1, 0)] + lum[at(1, 0)] + lum[at(0, -1)] + lum[at(0, 1)]
+                            - 4.0 * lum[at(0, 0)];
+                        grain += l.abs() as f64;
+                        body += 1;
+                    }
+                }
+            }
+            let coverage = alpha.iter().filter(|&&a| a > 0.5).count();
+            let mean = lum.iter().map(|&l| l as f64).sum::<f64>() / lum.len() as f64;
+            (grain / body as f64, coverage, mean)
         };
-        let cam = volume_camera(&vol, 64.0 / 48.0);
-        let (skip, s1) = render_volume(&vol, &tf, &opt, &cam);
-        opt.skip_empty = false;
-        let (full, s2) = render_volume(&vol, &tf, &opt, &cam);
-        assert_eq!(skip, full);
-        assert!(s1.skipped > 0 && s2.skipped == 0);
-        assert!(s1.samples < s2.samples);
+        let (linear, cubic) = (
+            picture(Interpolation::Linear),
+            picture(Interpolation::Cubic),
+        );
+        // Measured (grain, pixels covered, mean luminance): trilinear (0.040, 17947, 0.130),
+        // cubic (0.012, 17758, 0.127): a B-spline's smoothing pulls the outline in by about a
+        // pixel here.
+        assert!(
+            linear.1 > w * h / 4,
+            "the body fills the picture: {linear:?}"
+        );
+        assert!(cubic.0 < 0.4 * linear.0, "{linear:?} vs {cubic:?}");
+        assert!(
+            (cubic.1 as f64 / linear.1 as f64 - 1.0).abs() < 0.02,
+            "{linear:?} vs {cubic:?}"
+        );
+        assert!(
+            (cubic.2 / linear.2 - 1.0).abs() < 0.03,
+            "{linear:?} vs {cubic:?}"
+        );
+    }
+
+    /// A ball of soft tissue in air, its edge a smooth ramp about a voxel wide, on a coarse
+    /// (3 mm) oblique grid: the gradient's direction at points of the ball's surface against
+    /// the true radial one. Trilinear central differences tilt back and forth as the surface
+    /// crosses voxel layers (what shading draws as wood grain); the cubic B-spline's gradient
+    /// follows the ball.
+    #[test]
+    fn the_cubic_gradient_follows_a_curved_surface() {
+        let (c, s) = (0.8f64, 0.6f64);
+        let mut vol = volume([24, 24, 24], [3.0; 3], |_, _, _| 0.0);
+        vol.direction = [[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]];
+        let centre = raystream_math::DVec3::new(1.3, 2.1, -0.7);
+        // The grid's middle (index 11.5 on each axis) 0.4 voxel off the ball's centre.
+        let middle = raystream_math::DVec3::new(c - s, 1.0, s + c) * 3.0 * 11.1;
+        vol.origin = (centre - middle).to_array();
+        let radius = 22.0;
+        for k in 0..24 {
+            for j in 0..24 {
+                for i in 0..24 {
+                    let p = vol
+                        .index_to_world(raystream_math::DVec3::new(i as f64, j as f64, k as f64));
+                    let r = p.distance(centre);
+                    vol.data[i + 24 * (j + 24 * k)] =
+                        (-1000.0 + 1040.0 / (1.0 + ((r - radius) / 1.5).exp())) as f32;
+                }
+            }
+        }
+        let error_deg = |interpolation| {
+            let m = Marcher::interpolated(&vol, None, interpolation);
+            // Points of the sphere by a Fibonacci spiral.
+            let n = 2000;
+            let errors: Vec<f64> = (0..n)
+                .map(|i| {
+                    let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                    let phi = i as f64 * 2.399_963_229_728_653;
+                    let r = (1.0 - z * z).sqrt();
+                    let radial = raystream_math::DVec3::new(r * phi.cos(), r * phi.sin(), z);
+                    let p = centre + radial * radius;
+                    let g = m.gradient(m.index_of(p.as_vec3())).as_dvec3();
+                    (-g).normalize()
+                        .dot(radial)
+                        .clamp(-1.0, 1.0)
+                        .acos()
+                        .to_degrees()
+                })
+                .collect();
+            let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt();
+            let max = errors.iter().cloned().fold(0.0, f64::max);
+            (rms, max)
+        };
+        let (linear, cubic) = (
+            error_deg(Interpolation::Linear),
+            error_deg(Interpolation::Cubic),
+        );
+        // Measured (rms, max): trilinear 2.2° and 4.1°, cubic 0.37° and 0.76°.
+        assert!(cubic.0 < 0.25 * linear.0, "{linear:?} vs {cubic:?}");
+        assert!(cubic.1 < 1.0, "{linear:?} vs {cubic:?}");
     }
 
     /// Every preset and mode renders the abdomen CT to a picture with something in it.

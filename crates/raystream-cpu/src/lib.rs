@@ -26,6 +26,7 @@ mod image_out;
 pub mod lumen;
 pub mod mask;
 pub mod medium;
+pub mod sampling;
 pub mod stenosis;
 pub mod wall;
 

@@ -348,7 +348,9 @@ pub struct DvrParams {
     /// 2^exposure (byte 340).
     pub anisotropy: f32,
     pub light_scale: f32,
-    pub pad2: u32,
+    /// 1: the volume read by the cubic B-spline, 0: trilinearly
+    /// (`raystream_cpu::dvr::Interpolation`; byte 344).
+    pub interpolation: u32,
     pub pad3: u32,
 }
 

@@ -1088,7 +1088,7 @@ fn dvr_wgsl_params_match_rust() {
         ("sample_count", offset_of!(DvrParams, sample_count)),
         ("anisotropy", offset_of!(DvrParams, anisotropy)),
         ("light_scale", offset_of!(DvrParams, light_scale)),
-        ("pad2", offset_of!(DvrParams, pad2)),
+        ("interpolation", offset_of!(DvrParams, interpolation)),
         ("pad3", offset_of!(DvrParams, pad3)),
     ];
     check_struct(&module, "DvrParams", size_of::<DvrParams>(), &names);
@@ -1144,8 +1144,8 @@ fn pelvis_left_half(base: raystream_cpu::dvr::DvrOptions) -> raystream_cpu::dvr:
 }
 
 /// Cinematic rendering on the GPU against the CPU reference on the abdomen CT (ct-bones and
-/// ct-muscle, whole and cropped, and ct-muscle in a forward-scattering medium, g 0.6, at
-/// +0.5 EV; 64×48, 32 paths a pixel). Both draw the same random numbers,
+/// ct-muscle, whole and cropped, ct-muscle in a forward-scattering medium, g 0.6, at +0.5 EV,
+/// and ct-bones read by the cubic B-spline; 64×48, 32 paths a pixel). Both draw the same random numbers,
 /// so most paths are the same path; where the f16 texture's values tip a decision they part,
 /// and the pixel differs by that path's noise: the sample counts, the mean difference, the
 /// pixels within 2/255 and every 8×8 block's mean light agree. The same picture every run and
@@ -1153,7 +1153,7 @@ fn pelvis_left_half(base: raystream_cpu::dvr::DvrOptions) -> raystream_cpu::dvr:
 /// frame.
 #[test]
 fn gpu_cinematic_rendering_matches_cpu() {
-    use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera};
+    use raystream_cpu::dvr::{DvrMode, DvrOptions, Interpolation, render_volume, volume_camera};
     use raystream_volume::TfPreset;
     let Some(ctx) = gpu() else { return };
     let vol = abdomen_ct();
@@ -1171,12 +1171,17 @@ fn gpu_cinematic_rendering_matches_cpu() {
         exposure: 0.5,
         ..plain
     };
+    let cubic = DvrOptions {
+        interpolation: Interpolation::Cubic,
+        ..plain
+    };
     let cam = volume_camera(&vol, 64.0 / 48.0);
     for (preset, opt, what) in [
         (TfPreset::CtBones, plain, ""),
         (TfPreset::CtMuscle, plain, ""),
         (TfPreset::CtBones, cropped, " crop+plane"),
         (TfPreset::CtMuscle, forward, " g 0.6, +0.5 EV"),
+        (TfPreset::CtBones, cubic, " cubic"),
     ] {
         let name = format!("{}{what}", preset.name());
         let tf = preset.function();
@@ -1433,12 +1438,12 @@ fn assert_over_background_is(
     }
 }
 
-/// GPU volume rendering against the CPU reference on the abdomen CT, every mode: mean absolute
-/// difference < 1/255 and the 99th percentile within 8/255 (8-bit sRGB; the GPU samples an f16
-/// texture with hardware filtering).
+/// GPU volume rendering against the CPU reference on the abdomen CT, every mode, and dvr and
+/// iso read by the cubic B-spline: mean absolute difference < 1/255 and the 99th percentile
+/// within 8/255 (8-bit sRGB; the GPU samples an f16 texture with hardware filtering).
 #[test]
 fn gpu_volume_rendering_matches_cpu() {
-    use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera};
+    use raystream_cpu::dvr::{DvrMode, DvrOptions, Interpolation, render_volume, volume_camera};
     use raystream_volume::TfPreset;
     let Some(ctx) = gpu() else { return };
     let vol = abdomen_ct();
@@ -1448,6 +1453,12 @@ fn gpu_volume_rendering_matches_cpu() {
         ..Default::default()
     };
     let clipped = pelvis_left_half(plain);
+    // Read by the cubic B-spline: eight hardware-filtered fetches a value on the GPU, the
+    // 4³ voxels summed on the CPU.
+    let cubic = DvrOptions {
+        interpolation: Interpolation::Cubic,
+        ..plain
+    };
     for (mode, preset, base, what) in [
         (DvrMode::Dvr, TfPreset::CtBones, plain, ""),
         (DvrMode::Dvr, TfPreset::CtMuscle, plain, ""),
@@ -1467,6 +1478,23 @@ fn gpu_volume_rendering_matches_cpu() {
         ),
         (DvrMode::Dvr, TfPreset::CtBones, clipped, " crop+plane"),
         (DvrMode::Mip, TfPreset::MipBone, clipped, " crop+plane"),
+        (DvrMode::Dvr, TfPreset::CtBones, cubic, " cubic"),
+        (
+            DvrMode::Dvr,
+            TfPreset::CtMuscle,
+            DvrOptions {
+                shadows: true,
+                ..cubic
+            },
+            " cubic shadows",
+        ),
+        (DvrMode::Iso, TfPreset::CtBone, cubic, " cubic"),
+        (
+            DvrMode::Dvr,
+            TfPreset::CtBones,
+            pelvis_left_half(cubic),
+            " cubic crop+plane",
+        ),
     ] {
         let tf = preset.function();
         let opt = DvrOptions { mode, ..base };
@@ -1529,8 +1557,46 @@ fn gpu_volume_rendering_matches_cpu() {
     }
 }
 
+/// One GPU renderer draws frames read either way, in any order (each interpolation has its own
+/// brick table and majorants): dvr and cinematic frames, trilinear, cubic and trilinear
+/// again, each the same bit for bit as a fresh renderer's.
+#[test]
+fn one_gpu_renderer_draws_either_interpolation() {
+    use raystream_cpu::dvr::{DvrMode, DvrOptions, Interpolation, volume_camera};
+    use raystream_volume::TfPreset;
+    let Some(ctx) = gpu() else { return };
+    let vol = abdomen_ct();
+    let tf = TfPreset::CtBones.function();
+    let cam = volume_camera(&vol, 48.0 / 32.0);
+    let shared = GpuVolumeRenderer::new(&ctx, &vol, &tf).unwrap();
+    for mode in [DvrMode::Dvr, DvrMode::Cinematic] {
+        for interpolation in [
+            Interpolation::Linear,
+            Interpolation::Cubic,
+            Interpolation::Linear,
+        ] {
+            let opt = DvrOptions {
+                width: 48,
+                height: 32,
+                mode,
+                spp: 4,
+                interpolation,
+                ..Default::default()
+            };
+            let fresh = GpuVolumeRenderer::new(&ctx, &vol, &tf).unwrap();
+            let (want, want_times) = fresh.render(&opt, &cam).unwrap();
+            let (got, got_times) = shared.render(&opt, &cam).unwrap();
+            assert_eq!(got.pixels, want.pixels, "{mode:?} {interpolation:?}");
+            assert_eq!(
+                got_times.samples, want_times.samples,
+                "{mode:?} {interpolation:?}"
+            );
+        }
+    }
+}
+
 /// The windowed modes' HU values (`hu_values`, for EXR: the projections and a slice) on the
-/// GPU against the CPU's on the abdomen CT, whole and cropped: the same rays take no sample (NaN); the values within 4 HU
+/// GPU against the CPU's on the abdomen CT, whole, cropped and read by the cubic B-spline: the same rays take no sample (NaN); the values within 4 HU
 /// for 99 % of pixels and 16 HU for all (the GPU samples a half-float texture, exact to 1 HU
 /// below 2048 HU and 2 HU above, with hardware filter weights).
 #[test]
@@ -1557,7 +1623,12 @@ fn gpu_projections_give_the_cpus_hounsfield_units() {
         ]),
         ..plain
     };
-    for (base, what) in [(plain, ""), (cropped, " cropped")] {
+    // The cubic B-spline's values: eight filtered fetches a sample on the GPU.
+    let cubic = DvrOptions {
+        interpolation: raystream_cpu::dvr::Interpolation::Cubic,
+        ..plain
+    };
+    for (base, what) in [(plain, ""), (cropped, " cropped"), (cubic, " cubic")] {
         for mode in [
             DvrMode::Mip,
             DvrMode::MinIp,

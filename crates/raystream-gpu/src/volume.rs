@@ -14,7 +14,8 @@ use raystream_cpu::cinematic::{
 };
 use raystream_cpu::denoise::{DenoiseOptions, DenoiseTimes, Guides, NoisyFilm};
 use raystream_cpu::dvr::{
-    BRICK, DvrMode, DvrOptions, LightGrid, Marcher, Sight, over_background, scene_to_lps,
+    BRICK, DvrMode, DvrOptions, Interpolation, LightGrid, Marcher, Sight, over_background,
+    scene_to_lps,
 };
 use raystream_io::Volume;
 use raystream_math::Vec3;
@@ -120,8 +121,8 @@ impl GpuVolume {
             .map(|p| [p.0, p.1[0], p.1[1], p.1[2]])
             .collect();
         let none = wgpu::BufferUsages::empty();
-        let (brick_dims, visible) = marcher.brick_table();
-        let visible: Vec<u32> = visible.iter().map(|&v| v as u32).collect();
+        let brick_dims = marcher.brick_table().0;
+        let visible = brick_words(marcher);
         Ok(GpuVolume {
             view: texture.create_view(&Default::default()),
             sampler,
@@ -132,6 +133,11 @@ impl GpuVolume {
             to_index: marcher.world_to_index(),
         })
     }
+}
+
+/// The marcher's brick table as the kernels read it: a word a brick, 1 where it may be visible.
+fn brick_words(marcher: &Marcher) -> Vec<u32> {
+    marcher.brick_table().1.iter().map(|&v| v as u32).collect()
 }
 
 /// cinematic: paths a dispatch by default (1024² pixels, one path each): on lavapipe a 64×48
@@ -165,7 +171,11 @@ pub struct GpuVolumeRenderer<'a> {
     /// Cinematic paths traced so far, added to as each dispatch completes (what a progress bar
     /// counts: `width · height · spp` a frame).
     pub paths_done: AtomicU64,
-    majorants: std::sync::OnceLock<wgpu::Buffer>,
+    /// The majorant grids, per interpolation (`Interpolation as usize`).
+    majorants: [std::sync::OnceLock<wgpu::Buffer>; 2],
+    /// The brick table of frames read by the cubic B-spline (whose samples reach one voxel
+    /// further than trilinear ones), made on first use; `gpu.bricks` is the trilinear one.
+    cubic_bricks: std::sync::OnceLock<wgpu::Buffer>,
     /// cinematic: a frame's running sums between its dispatches.
     accum: Mutex<Option<wgpu::Buffer>>,
     /// cinematic: at most this many paths a dispatch (a frame's samples are split into
@@ -256,7 +266,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             guide_pipeline,
             denoiser: std::sync::OnceLock::new(),
             paths_done: AtomicU64::new(0),
-            majorants: std::sync::OnceLock::new(),
+            majorants: Default::default(),
+            cubic_bricks: std::sync::OnceLock::new(),
             accum: Mutex::new(None),
             paths_per_dispatch: PATHS_PER_DISPATCH,
             light_pipeline,
@@ -389,18 +400,39 @@ impl<'a> GpuVolumeRenderer<'a> {
             })
     }
 
-    /// The majorant grid of cinematic frames, made on first use.
-    fn majorant_buffer(&self) -> Result<&wgpu::Buffer, GpuError> {
-        if let Some(b) = self.majorants.get() {
+    /// The majorant grid of cinematic frames read as `interpolation`, made on first use.
+    fn majorant_buffer(&self, interpolation: Interpolation) -> Result<&wgpu::Buffer, GpuError> {
+        let cell = &self.majorants[interpolation as usize];
+        if let Some(b) = cell.get() {
             return Ok(b);
         }
-        let m = Majorants::new(self.vol, self.tf);
+        let m = Majorants::new(
+            &Marcher::interpolated(self.vol, None, interpolation),
+            self.tf,
+        );
         let b = self.ctx.storage(
             "majorants",
             bytemuck::cast_slice(&m.values),
             wgpu::BufferUsages::empty(),
         )?;
-        Ok(self.majorants.get_or_init(|| b))
+        Ok(cell.get_or_init(|| b))
+    }
+
+    /// The brick table of frames read as `interpolation` (the cubic one made on first use).
+    fn brick_buffer(&self, interpolation: Interpolation) -> Result<&wgpu::Buffer, GpuError> {
+        if interpolation == Interpolation::Linear {
+            return Ok(&self.gpu.bricks);
+        }
+        if let Some(b) = self.cubic_bricks.get() {
+            return Ok(b);
+        }
+        let m = Marcher::interpolated(self.vol, Some(self.tf), interpolation);
+        let b = self.ctx.storage(
+            "brick table (cubic)",
+            bytemuck::cast_slice(&brick_words(&m)),
+            wgpu::BufferUsages::empty(),
+        )?;
+        Ok(self.cubic_bricks.get_or_init(|| b))
     }
 
     /// The denoiser's guides of a cinematic frame seen by `cam`, as
@@ -442,7 +474,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         let param_buf = self.uniform("guide params", &params);
         let n = opt.width as u64 * opt.height as u64;
         let out = ctx.work_buffer("guides", 32 * n, wgpu::BufferUsages::COPY_SRC)?;
-        let majorants = self.majorant_buffer()?;
+        let majorants = self.majorant_buffer(opt.interpolation)?;
         let entries: Vec<_> = [
             (0, param_buf.as_entire_binding()),
             (1, wgpu::BindingResource::TextureView(&self.gpu.view)),
@@ -593,7 +625,10 @@ impl<'a> GpuVolumeRenderer<'a> {
             sample_count: opt.spp,
             anisotropy: opt.anisotropy,
             light_scale: opt.exposure_scale(),
-            pad2: 0,
+            interpolation: match opt.interpolation {
+                Interpolation::Linear => 0,
+                Interpolation::Cubic => 1,
+            },
             pad3: 0,
         };
         Ok((params, row_buf))
@@ -665,7 +700,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         // (6), and each pipeline's layout holds exactly the bindings its entry point uses.
         let cinematic = opt.mode == DvrMode::Cinematic;
         let majorants = if cinematic {
-            Some(self.majorant_buffer()?)
+            Some(self.majorant_buffer(opt.interpolation)?)
         } else {
             None
         };
@@ -698,6 +733,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         if batches.len() > 1 && accum.as_ref().is_none_or(|a| a.size() < 32 * n) {
             *accum = Some(ctx.work_buffer("running sums", 32 * n, wgpu::BufferUsages::empty())?);
         }
+        let bricks = self.brick_buffer(opt.interpolation)?;
         // A frame of one dispatch binds a placeholder.
         let accum = accum.as_ref().unwrap_or(&self.no_rows);
         let resource = |b: u32| match b {
@@ -706,7 +742,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             2 => wgpu::BindingResource::Sampler(&self.gpu.sampler),
             3 => self.gpu.opacity.as_entire_binding(),
             4 => self.gpu.color.as_entire_binding(),
-            5 => self.gpu.bricks.as_entire_binding(),
+            5 => bricks.as_entire_binding(),
             6 => pixels.as_entire_binding(),
             7 => self.light_values.as_entire_binding(),
             8 => packed.as_entire_binding(),

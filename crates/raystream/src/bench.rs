@@ -501,6 +501,7 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                 "kind": "volume",
                 "mode": mode.name(),
                 "shadows": shadows,
+                "interpolation": opt.interpolation.name(),
                 "spp": (mode == DvrMode::Cinematic).then_some(opt.spp),
                 "bounces": (mode == DvrMode::Cinematic).then_some(opt.bounces),
                 "denoise": (mode == DvrMode::Cinematic).then_some(opt.denoise),

@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 use raystream_cpu::denoise::DenoiseTimes;
 use raystream_cpu::dvr::{
-    DvrMode, DvrOptions, DvrStats, Sight, over_background, render_volume,
+    DvrMode, DvrOptions, DvrStats, Interpolation, Sight, over_background, render_volume,
     render_volume_rgba_counted,
 };
 use raystream_cpu::{Image, ImageFormat};
@@ -172,9 +172,24 @@ pub fn options(
         denoise: look.denoise,
         anisotropy: look.anisotropy.unwrap_or(0.0),
         exposure: look.exposure.unwrap_or(0.0),
+        interpolation: look
+            .interpolation
+            .map_or_else(|| default_interpolation(mode), Into::into),
         ..Default::default()
     };
     Ok((tf, opt))
+}
+
+/// How `--mode MODE` reads the volume without `--interpolation`: the shaded modes by the cubic
+/// B-spline, whose continuous gradient keeps a coarse CT's surfaces free of the wood-grain
+/// rings that trilinear shading draws a voxel apart; the modes that show values themselves
+/// (projections and slices, what a radiologist reads HU from) trilinearly, as a PACS viewer
+/// does, so that a small bright structure keeps its peak.
+pub fn default_interpolation(mode: DvrMode) -> Interpolation {
+    match mode {
+        DvrMode::Dvr | DvrMode::Iso | DvrMode::Cinematic => Interpolation::Cubic,
+        DvrMode::Mip | DvrMode::MinIp | DvrMode::Average | DvrMode::Slice => Interpolation::Linear,
+    }
 }
 
 /// Renders frames of one volume on the CPU or the GPU.

@@ -889,11 +889,12 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             (what, counts)
         };
         eprintln!(
-            "raystream: wrote {} ({}x{}, --mode {}{what}) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples{counts}, {:.1} M samples/s",
+            "raystream: wrote {} ({}x{}, --mode {}, {}{what}) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples{counts}, {:.1} M samples/s",
             a.output.display(),
             opt.width,
             opt.height,
             mode.name(),
+            interpolation_words(opt.interpolation),
             backend.name(),
             backend.adapter(),
             load_ms,
@@ -906,6 +907,14 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// How the volume was read between its voxels, as the summary line says it.
+pub fn interpolation_words(i: raystream_cpu::dvr::Interpolation) -> &'static str {
+    match i {
+        raystream_cpu::dvr::Interpolation::Linear => "trilinear",
+        raystream_cpu::dvr::Interpolation::Cubic => "cubic B-spline",
+    }
 }
 
 /// ", anisotropy G, +E EV" for a cinematic frame's medium and lights other than the default.
@@ -993,9 +1002,10 @@ fn exr_comment(
             };
             let file = a.path.as_deref().unwrap_or(Path::new("?"));
             return format!(
-                "Y: {what} (no window); NaN: outside the volume or its crop{}; pixels {} mm square",
+                "Y: {what} (no window); NaN: outside the volume or its crop{}; pixels {} mm square; interpolation {}",
                 curved_words(file, plane, opt),
-                plane.pixel_mm
+                plane.pixel_mm,
+                interpolation_words(opt.interpolation)
             );
         }
     };
@@ -1017,9 +1027,10 @@ fn exr_comment(
         )
     };
     format!(
-        "{what}{}{}",
+        "{what}{}{}; interpolation {}",
         slab_words(opt, volume),
-        pixel_size(cam, opt.height, "mm")
+        pixel_size(cam, opt.height, "mm"),
+        interpolation_words(opt.interpolation)
     )
 }
 
@@ -1379,11 +1390,12 @@ fn frame_series(
         let base = base.expect("at least one frame");
         let median = median_of(&mut frame_ms);
         eprintln!(
-            "raystream: wrote {n} frames to {} ({}x{}, --mode {}, {}): median render {median:.1} ms ({:.2} frames/s, file writing apart)",
+            "raystream: wrote {n} frames to {} ({}x{}, --mode {}, {}, {}): median render {median:.1} ms ({:.2} frames/s, file writing apart)",
             out.dir.display(),
             base.width,
             base.height,
             base.mode.name(),
+            interpolation_words(base.interpolation),
             out.ext,
             1e3 / median
         );
@@ -1662,19 +1674,30 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         );
     }
     let l = &a.look;
-    if l.tf.is_some()
-        || l.step.is_some()
-        || l.window.is_some()
-        || l.no_skip
-        || l.shadows
-        || l.light.is_some()
-        || l.crop.is_some()
-        || !l.clip_planes.is_empty()
-        || l.slice_at.is_some()
-        || l.slab.is_some()
-    {
+    let given: Vec<&str> = [
+        ("--tf", l.tf.is_some()),
+        ("--step", l.step.is_some()),
+        ("--window", l.window.is_some()),
+        ("--no-skip", l.no_skip),
+        ("--shadows", l.shadows),
+        ("--light", l.light.is_some()),
+        ("--denoise", l.denoise),
+        ("--anisotropy", l.anisotropy.is_some()),
+        ("--exposure", l.exposure.is_some()),
+        ("--interpolation", l.interpolation.is_some()),
+        ("--crop", l.crop.is_some()),
+        ("--clip-plane", !l.clip_planes.is_empty()),
+        ("--slice-at", l.slice_at.is_some()),
+        ("--slab", l.slab.is_some()),
+    ]
+    .into_iter()
+    .filter_map(|(flag, on)| on.then_some(flag))
+    .collect();
+    if !given.is_empty() {
         bail!(
-            "--tf, --step, --window/--level, --no-skip, --shadows, --light, --crop, --clip-plane, --slice-at and --slab go with --mode (direct volume rendering)"
+            "{} {} with --mode (direct volume rendering); without it a volume is rendered as its bone surface's triangles",
+            given.join(", "),
+            if given.len() == 1 { "goes" } else { "go" }
         );
     }
     if let Some(aov) = a.aov {

@@ -286,7 +286,10 @@ fn slices_show_the_plane_as_radiology_does() {
             vec![vol, "--mode", "mip", "--slice-at", "0,0,0"],
             "--mode slice",
         ),
-        (vec![vol, "--slice-at", "0,0,0"], "go with --mode"),
+        (
+            vec![vol, "--slice-at", "0,0,0"],
+            "with --mode (direct volume rendering)",
+        ),
         (vec![vol, "--mode", "slice", "--slice-at", "0,0"], "X,Y,Z"),
     ] {
         let out = tmp("refused-slice.png");
@@ -473,7 +476,7 @@ fn slabs_keep_only_their_thickness() {
             vec!["--mode", "mip", "--slab", "4", "--clip-plane", "0,1,0,3"],
             "cannot be used with",
         ),
-        (vec!["--slab", "4"], "go with --mode"),
+        (vec!["--slab", "4"], "with --mode (direct volume rendering)"),
     ] {
         let out = tmp("refused-slab.png");
         let o = run(&[&["render", vol], &args[..], &["-o", out.to_str().unwrap()]].concat());

@@ -611,10 +611,24 @@ fn gpu_render_matches_cpu_spot_scene() {
     );
 }
 
+/// dvr read trilinearly and by the cubic B-spline (its default), and a MIP.
 #[test]
 fn golden_direct_volume_rendering() {
     golden(
         "dvr_ct_bones",
+        &[
+            "--mode",
+            "dvr",
+            "--preset",
+            "ct-bones",
+            "--size",
+            "96x72",
+            "--interpolation",
+            "linear",
+        ],
+    );
+    golden(
+        "dvr_ct_bones_cubic",
         &["--mode", "dvr", "--preset", "ct-bones", "--size", "96x72"],
     );
     golden(
@@ -682,6 +696,8 @@ fn golden_volume_shadows() {
             "--shadows",
             "--size",
             "96x72",
+            "--interpolation",
+            "linear",
         ],
     );
 }
@@ -954,7 +970,11 @@ fn crop_and_clip_planes_from_the_command_line() {
     }
     let o = run(&["render", "--shadows", "--size", "8x8", "--quiet"]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("go with --mode"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("with --mode (direct volume rendering)"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 /// A turntable writes N frames; frame 0 is the plain front view, and the frames differ.
@@ -1990,7 +2010,23 @@ fn cinematic_rendering_through_the_cli() {
     );
     refused(
         &["render", "--light", "10,20", "--size", "32x24"],
-        "go with --mode",
+        "--light goes with --mode (direct volume rendering)",
+    );
+    // Every flag of the volume's look is refused without --mode, each named.
+    refused(
+        &[
+            "render",
+            "--denoise",
+            "--exposure",
+            "1",
+            "--anisotropy",
+            "0.5",
+            "--interpolation",
+            "cubic",
+            "--size",
+            "32x24",
+        ],
+        "--denoise, --anisotropy, --exposure, --interpolation go with --mode",
     );
     // --exposure +1 doubles the light exactly (the same paths; premultiplied EXRs, the
     // background apart); --anisotropy makes another picture; both refused out of range or
@@ -2144,5 +2180,108 @@ fn denoised_cinematic_rendering_through_the_cli() {
             "32x24",
         ],
         "at least 2 paths a pixel",
+    );
+}
+
+/// `--interpolation`: dvr, iso and cinematic read the volume by the cubic B-spline unless told
+/// otherwise, mip and slice trilinearly, and the summary line says which. On each device the
+/// default dvr picture is `--interpolation cubic`'s byte for byte and not the trilinear one;
+/// the devices agree on it; an EXR's comments name it; `bench` reports it; an unknown value
+/// is refused.
+#[test]
+fn interpolation_through_the_cli() {
+    let summary = |args: &[&str]| {
+        let out = tmp("interpolation-summary.png");
+        let mut all = vec!["render", "--device", "cpu", "--size", "32x24"];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["-o", out.to_str().unwrap()]);
+        let o = run(&all);
+        assert!(o.status.success(), "{all:?}: {}", stderr(&o));
+        stderr(&o)
+    };
+    for (args, want) in [
+        (&["--mode", "dvr"][..], "--mode dvr, cubic B-spline"),
+        (&["--mode", "iso"][..], "--mode iso, cubic B-spline"),
+        (
+            &["--mode", "cinematic", "--spp", "2"][..],
+            "--mode cinematic, cubic B-spline",
+        ),
+        (&["--mode", "mip"][..], "--mode mip, trilinear"),
+        (&["--mode", "slice"][..], "--mode slice, trilinear"),
+        (
+            &["--mode", "dvr", "--interpolation", "linear"][..],
+            "--mode dvr, trilinear",
+        ),
+        (
+            &["--mode", "mip", "--interpolation", "cubic"][..],
+            "--mode mip, cubic B-spline",
+        ),
+    ] {
+        let e = summary(args);
+        assert!(e.contains(want), "{args:?}: {e}");
+    }
+    let args = ["--mode", "dvr", "--preset", "ct-muscle", "--size", "96x72"];
+    let png = |name: &str, dev: &str, more: &[&str]| {
+        image::open(render_to(name, dev, &[&args[..], more].concat()))
+            .unwrap()
+            .to_rgb8()
+    };
+    let mut cubic = Vec::new();
+    for dev in devices() {
+        let default = png(&format!("interp-default-{dev}.png"), dev, &[]);
+        let asked = png(
+            &format!("interp-cubic-{dev}.png"),
+            dev,
+            &["--interpolation", "cubic"],
+        );
+        let linear = png(
+            &format!("interp-linear-{dev}.png"),
+            dev,
+            &["--interpolation", "linear"],
+        );
+        assert_eq!(default, asked, "{dev}: the default is cubic");
+        let (mean, _) = raystream_cpu::srgb8_diff(default.as_raw(), linear.as_raw());
+        assert!(mean > 0.5, "{dev}: cubic and trilinear differ: {mean}/255");
+        cubic.push(default);
+    }
+    if let [cpu, gpu] = &cubic[..] {
+        let (mean, worst) = raystream_cpu::srgb8_diff(cpu.as_raw(), gpu.as_raw());
+        let close = worst.iter().filter(|&&d| d <= 2).count() as f64 / worst.len() as f64;
+        assert!(
+            mean < 0.5 && close >= 0.999,
+            "GPU vs CPU: {mean}/255, {close}"
+        );
+    }
+    let exr = render_to("interp.exr", "cpu", &args);
+    let comments = raystream_cpu::load_exr(&exr).unwrap().comments;
+    assert!(
+        comments.contains("interpolation cubic B-spline"),
+        "{comments}"
+    );
+    let ct = repo().join("crates/raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
+    let o = run(&[
+        "bench",
+        ct.to_str().unwrap(),
+        "--mode",
+        "dvr",
+        "--device",
+        "cpu",
+        "--size",
+        "32x24",
+        "--frames",
+        "1",
+        "--interpolation",
+        "linear",
+        "--json",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for line in stdout(&o).lines() {
+        let v: serde_json::Value = serde_json::from_str(line).unwrap();
+        assert_eq!(v["interpolation"], "linear", "{line}");
+    }
+    refused(
+        &["render", "--mode", "dvr", "--interpolation", "tricubic"],
+        "invalid value 'tricubic'",
     );
 }

@@ -345,7 +345,7 @@ fn device_bench_summary() {
         frame("wave", 4, 31.0),
         // device-bench.sh's two cinematic pictures, as render writes their lines.
         "raystream: wrote out/cinematic-gpu.png (1024x1024, --mode cinematic, 256 paths a pixel, up to 4 scatterings) on gpu (H100): load 900 ms, render 4210.5 ms (0.24 frames/s), kernel 4200.00 ms, 1 samples, 1.0 M samples/s\n".to_string(),
-        "raystream: wrote out/cinematic-denoised-gpu.png (1024x1024, --mode cinematic, 16 paths a pixel, up to 4 scatterings, denoised (guides 12 ms, filter 7 ms)) on gpu (H100): load 900 ms, render 301.2 ms (3.32 frames/s), kernel 270.00 ms, 1 samples, 1.0 M samples/s\n".to_string(),
+        "raystream: wrote out/cinematic-denoised-gpu.png (1024x1024, --mode cinematic, cubic B-spline, 16 paths a pixel, up to 4 scatterings, denoised (guides 12 ms, filter 7 ms)) on gpu (H100): load 900 ms, render 301.2 ms (3.32 frames/s), kernel 270.00 ms, 1 samples, 1.0 M samples/s\n".to_string(),
     ]
     .concat();
     std::fs::write(&log, text).unwrap();

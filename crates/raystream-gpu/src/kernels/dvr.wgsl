@@ -66,7 +66,8 @@ struct DvrParams {
     // cinematic: the Henyey-Greenstein anisotropy g, and the lights' scale 2^exposure.
     anisotropy: f32,
     light_scale: f32,
-    pad2: u32,
+    // 1: the volume read by the cubic B-spline (DvrOptions::interpolation), 0: trilinearly.
+    interpolation: u32,
     pad3: u32,
 }
 
@@ -103,6 +104,11 @@ const MODE_SLICE: u32 = 5u;
 
 // The crop box and clip planes applied to [t.x, t.y] of the world ray o + t d, as the CPU's
 // clip_interval.
+// volume.wgsl's choice of reconstruction.
+fn cubic_sampling() -> bool {
+    return dp.interpolation == 1u;
+}
+
 fn clip_world(o: vec3<f32>, d: vec3<f32>, t_in: vec2<f32>) -> vec2<f32> {
     var t = t_in;
     let empty = vec2<f32>(1.0, 0.0);

@@ -40,6 +40,12 @@ struct MediumParams {
 @group(3) @binding(6) var<storage, read> brick_visible: array<u32>;
 @group(3) @binding(7) var<storage, read> light_values: array<f32>;
 
+// volume.wgsl's choice of reconstruction: a scene's volume is read trilinearly, as
+// raystream-cpu's medium.rs reads it.
+fn cubic_sampling() -> bool {
+    return false;
+}
+
 // The scene frame (x = L, y = S, z = A) → LPS.
 fn scene_to_lps(p: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(p.x, -p.z, p.y);

@@ -7,7 +7,8 @@
 // the resources `volume`, `trilinear`, `opacity_points`, `color_points`, `brick_visible`,
 // `light_values`, and the shading of a sample, `shade_sample(base, p, at, d)`: the light a
 // sample of colour `base` at index `p` (world `at`, seen along unit `d`) sends back, as the
-// CPU's shade_sample for the module's lights.
+// CPU's shade_sample for the module's lights.; and `cubic_sampling()`: whether the volume is read by the
+// cubic B-spline (raystream_cpu::sampling::Interpolation::Cubic) rather than trilinearly.
 
 const FULL_SHADING_GRADIENT: f32 = 100.0;
 const BRICK: u32 = BRICK_SIZE;
@@ -42,19 +43,111 @@ fn color_at(hu: f32) -> vec3<f32> {
     return color_points[n - 1u].yzw;
 }
 
-// HU at continuous index `p`, clamped to the grid of voxel centres.
-fn sample_at(p: vec3<f32>) -> f32 {
-    let d = vec3<f32>(dp.dims);
-    let q = clamp(p, vec3<f32>(0.0), d - 1.0);
-    return textureSampleLevel(volume, trilinear, (q + 0.5) / d, 0.0).r;
+// The texture's trilinear filter at continuous index `q` (voxel centres at integers; the
+// sampler clamps to the edge, as the CPU clamps indices).
+fn fetch(q: vec3<f32>) -> f32 {
+    return textureSampleLevel(volume, trilinear, (q + 0.5) / vec3<f32>(dp.dims), 0.0).r;
 }
 
-// The world gradient (HU per mm) at index `p`, as the CPU's Marcher::gradient.
+// The cubic B-spline at one point, as the sums of eight trilinear fetches (Sigg & Hadwiger,
+// GPU Gems 2 ch. 20): per axis, the weights of voxels i-1, i (g0 = w0 + w1) and i+1, i+2
+// (g1 = w2 + w3) and the two fetch positions h0 = i - 1 + w1/g0, h1 = i + 1 + w3/g1 at which
+// the filter's lerp gives those pairs' weighted means; and the same for the weights'
+// derivatives (dg0 = w0' + w1' = -(w2' + w3'), never 0), whose fetches give the gradient.
+struct Cubic {
+    g0: vec3<f32>,
+    h0: vec3<f32>,
+    h1: vec3<f32>,
+    dg0: vec3<f32>,
+    dh0: vec3<f32>,
+    dh1: vec3<f32>,
+}
+
+// raystream_cpu::sampling::bspline_weights, per axis, turned into fetch positions.
+fn cubic_at(p: vec3<f32>) -> Cubic {
+    let q = clamp(p, vec3<f32>(0.0), vec3<f32>(dp.dims) - 1.0);
+    let i = floor(q);
+    let t = q - i;
+    let s = 1.0 - t;
+    let t2 = t * t;
+    let t3 = t2 * t;
+    let w0 = s * s * s / 6.0;
+    let w1 = (3.0 * t3 - 6.0 * t2 + 4.0) / 6.0;
+    let w2 = (-3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0) / 6.0;
+    let w3 = t3 / 6.0;
+    let d0 = -0.5 * s * s;
+    let d1 = 0.5 * (3.0 * t2 - 4.0 * t);
+    let d2 = 0.5 * (-3.0 * t2 + 2.0 * t + 1.0);
+    let d3 = 0.5 * t2;
+    var c: Cubic;
+    c.g0 = w0 + w1;
+    c.h0 = i - 1.0 + w1 / c.g0;
+    c.h1 = i + 1.0 + w3 / (w2 + w3);
+    c.dg0 = d0 + d1;
+    c.dh0 = i - 1.0 + d1 / c.dg0;
+    c.dh1 = i + 1.0 + d3 / (d2 + d3);
+    return c;
+}
+
+// Σ over the 2×2×2 fetch positions (x.x or x.y per axis, likewise y and z) of the product of
+// their axes' weights (wx.x or wx.y, …) times the fetched value.
+fn fetch8(x: vec2<f32>, wx: vec2<f32>, y: vec2<f32>, wy: vec2<f32>, z: vec2<f32>, wz: vec2<f32>) -> f32 {
+    let p0 = wy.x * (wx.x * fetch(vec3<f32>(x.x, y.x, z.x)) + wx.y * fetch(vec3<f32>(x.y, y.x, z.x)))
+           + wy.y * (wx.x * fetch(vec3<f32>(x.x, y.y, z.x)) + wx.y * fetch(vec3<f32>(x.y, y.y, z.x)));
+    let p1 = wy.x * (wx.x * fetch(vec3<f32>(x.x, y.x, z.y)) + wx.y * fetch(vec3<f32>(x.y, y.x, z.y)))
+           + wy.y * (wx.x * fetch(vec3<f32>(x.x, y.y, z.y)) + wx.y * fetch(vec3<f32>(x.y, y.y, z.y)));
+    return wz.x * p0 + wz.y * p1;
+}
+
+// The cubic B-spline's value at continuous index `p`, clamped to the grid.
+fn cubic_value(p: vec3<f32>) -> f32 {
+    let c = cubic_at(p);
+    let g1 = 1.0 - c.g0;
+    return fetch8(vec2<f32>(c.h0.x, c.h1.x), vec2<f32>(c.g0.x, g1.x),
+                  vec2<f32>(c.h0.y, c.h1.y), vec2<f32>(c.g0.y, g1.y),
+                  vec2<f32>(c.h0.z, c.h1.z), vec2<f32>(c.g0.z, g1.z));
+}
+
+// The cubic B-spline's gradient per index unit at `p`: along each axis the derivative's pair
+// of fetch positions and weights (dg0, -dg0), along the others the value's.
+fn cubic_gradient(p: vec3<f32>) -> vec3<f32> {
+    let c = cubic_at(p);
+    let g1 = 1.0 - c.g0;
+    let vx = vec2<f32>(c.h0.x, c.h1.x);
+    let vy = vec2<f32>(c.h0.y, c.h1.y);
+    let vz = vec2<f32>(c.h0.z, c.h1.z);
+    let wx = vec2<f32>(c.g0.x, g1.x);
+    let wy = vec2<f32>(c.g0.y, g1.y);
+    let wz = vec2<f32>(c.g0.z, g1.z);
+    return vec3<f32>(
+        fetch8(vec2<f32>(c.dh0.x, c.dh1.x), vec2<f32>(c.dg0.x, -c.dg0.x), vy, wy, vz, wz),
+        fetch8(vx, wx, vec2<f32>(c.dh0.y, c.dh1.y), vec2<f32>(c.dg0.y, -c.dg0.y), vz, wz),
+        fetch8(vx, wx, vy, wy, vec2<f32>(c.dh0.z, c.dh1.z), vec2<f32>(c.dg0.z, -c.dg0.z)));
+}
+
+// HU at continuous index `p`, clamped to the grid of voxel centres: trilinear, or the cubic
+// B-spline.
+fn sample_at(p: vec3<f32>) -> f32 {
+    if cubic_sampling() {
+        return cubic_value(p);
+    }
+    let d = vec3<f32>(dp.dims);
+    let q = clamp(p, vec3<f32>(0.0), d - 1.0);
+    return fetch(q);
+}
+
+// The world gradient (HU per mm) at index `p`, as the CPU's Marcher::gradient: central
+// differences of trilinear samples, or the cubic B-spline's own.
 fn gradient_at(p: vec3<f32>) -> vec3<f32> {
-    let g = vec3<f32>(
-        sample_at(p + vec3<f32>(1.0, 0.0, 0.0)) - sample_at(p - vec3<f32>(1.0, 0.0, 0.0)),
-        sample_at(p + vec3<f32>(0.0, 1.0, 0.0)) - sample_at(p - vec3<f32>(0.0, 1.0, 0.0)),
-        sample_at(p + vec3<f32>(0.0, 0.0, 1.0)) - sample_at(p - vec3<f32>(0.0, 0.0, 1.0))) * 0.5;
+    var g: vec3<f32>;
+    if cubic_sampling() {
+        g = cubic_gradient(p);
+    } else {
+        g = vec3<f32>(
+            sample_at(p + vec3<f32>(1.0, 0.0, 0.0)) - sample_at(p - vec3<f32>(1.0, 0.0, 0.0)),
+            sample_at(p + vec3<f32>(0.0, 1.0, 0.0)) - sample_at(p - vec3<f32>(0.0, 1.0, 0.0)),
+            sample_at(p + vec3<f32>(0.0, 0.0, 1.0)) - sample_at(p - vec3<f32>(0.0, 0.0, 1.0))) * 0.5;
+    }
     return dp.to_index0 * g.x + dp.to_index1 * g.y + dp.to_index2 * g.z;
 }
 
