@@ -5,8 +5,9 @@
 //! - `dvr`: emission–absorption with a [`TransferFunction`]; opacity is per millimetre and
 //!   corrected for the step (α_step = 1 − (1 − α)^Δs, the last step of a ray clipped to the
 //!   volume), so pictures do not depend on `--step`;
-//!   gradient (central differences, per mm, through the volume's direction) Phong shading with a
-//!   headlight, blended in by gradient magnitude so that homogeneous regions stay unshaded;
+//!   gradient (per mm, through the volume's direction: central differences of trilinear
+//!   samples, or the cubic B-spline's own) Phong shading with a headlight, blended in by
+//!   gradient magnitude so that homogeneous regions stay unshaded;
 //!   early termination at 99 % opacity; empty-space skipping over 8³ bricks whose HU range the
 //!   transfer function maps to zero opacity. Skipping keeps the sample lattice, so the picture is
 //!   the same with and without it.
@@ -16,7 +17,9 @@
 //!   gradient normal (the mesh-free isosurface).
 //!
 //! Every ray starts at a per-pixel jittered offset along the step (a fixed hash: the same
-//! picture every run) so that the sampling lattice does not show as wood-grain rings.
+//! picture every run) so that the sampling lattice does not show as wood-grain rings. (The
+//! rings trilinear reconstruction draws on coarse grids, a voxel of depth apart, are another
+//! matter: [`crate::sampling`].)
 
 use std::sync::atomic::AtomicU64;
 
@@ -259,7 +262,8 @@ pub struct DvrStats {
 }
 
 /// Bricks of `BRICK`³ cells: a brick holds the HU range of the voxels its cells' samples read
-/// ([`cell_ranges`]).
+/// (one more layer on the far sides trilinearly; with the cubic B-spline one more on the near
+/// sides and two on the far ones).
 pub const BRICK: usize = 8;
 
 /// The volume prepared for marching: index-space transforms in f32 and the brick table.
