@@ -149,16 +149,23 @@ $bin render examples/spine_rods.toml --device gpu --size "$size" --spp 4 --max-d
 $py "$d/rays.py" imgdiff "$out/spine-rods-cpu.png" "$out/spine-rods-gpu.png" --json | tag '{"imgdiff": "spine_rods"}'
 }
 has "$parts" volume && {
-v=(bench "$ct" --mode dvr --resample 512 --size "$dvr_size" --json --quiet)
+# Trilinear, as every run before 2026-12-03 measured it, then the cubic B-spline (the default
+# of dvr, iso and cinematic since; open question 14): its cost on a GPU's texture units.
+v=(bench "$ct" --mode dvr --resample 512 --size "$dvr_size" --json --quiet --interpolation linear)
 $bin "${v[@]}" --device gpu --frames 36 | tag '{"volume": "ct-bone"}'
 $bin "${v[@]}" --device gpu --frames 36 --no-skip | tag '{"volume": "ct-bone no-skip"}'
 $bin "${v[@]}" --device gpu --frames 36 --preset ct-bones | tag '{"volume": "ct-bones"}'
 $bin "${v[@]}" --device cpu --frames 2 | tag '{"volume": "ct-bone"}'
+c=(bench "$ct" --mode dvr --resample 512 --size "$dvr_size" --json --quiet --interpolation cubic)
+$bin "${c[@]}" --device gpu --frames 36 | tag '{"volume": "ct-bone cubic"}'
+$bin "${c[@]}" --device gpu --frames 36 --preset ct-bones | tag '{"volume": "ct-bones cubic"}'
+$bin "${c[@]}" --device cpu --frames 2 | tag '{"volume": "ct-bone cubic"}'
 $bin bench "$ct" --mode mip --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 36 | tag '{"volume": "mip"}'
 $bin render "$ct" --mode dvr --shadows --preset ct-bones --device gpu --size "$dvr_size" -o "$out/dvr-bones-shadows-gpu.png" 2>&1 | tee -a "$out/render.log"
 # Cinematic rendering (64 paths a pixel, 4 scatterings): an orbit of 4 frames at 512³, one
 # picture of 256 paths a pixel, and one of 16 denoised.
-$bin bench "$ct" --mode cinematic --preset ct-bones --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 4 | tag '{"volume": "cinematic ct-bones"}'
+$bin bench "$ct" --mode cinematic --preset ct-bones --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 4 --interpolation linear | tag '{"volume": "cinematic ct-bones"}'
+$bin bench "$ct" --mode cinematic --preset ct-bones --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 4 --interpolation cubic | tag '{"volume": "cinematic ct-bones cubic"}'
 $bin render "$ct" --mode cinematic --preset ct-aaa --spp 256 --device gpu --size "$dvr_size" -o "$out/cinematic-gpu.png" 2>&1 | tee -a "$out/render.log"
 # Denoised: 16 paths a pixel, traced, guided and filtered on the GPU (its line names what the
 # guides and the filter took).

@@ -232,13 +232,14 @@ def volume_table(lines, out):
     rows = [o for o in lines if o.get("kind") == "volume" and "frame_ms" in o]
     if not rows:
         return
-    out.append("| bench | mode | shadows | paths a pixel | device | dims | size | frames/s | kernel frames/s | M samples/frame | G samples/s (kernel) |")
-    out.append("|---|---|---|---|---|---|---|---|---|---|---|")
+    out.append("| bench | mode | interpolation | shadows | paths a pixel | device | dims | size | frames/s | kernel frames/s | M samples/frame | G samples/s (kernel) |")
+    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for o in rows:
         dims = "×".join(str(n) for n in o.get("dims", []))
         kernel = o.get("msamples_per_s_kernel")
         out.append(
-            f"| {o.get('volume', '–')} | {o.get('mode')} | {'yes' if o.get('shadows') else 'no'} "
+            f"| {o.get('volume', '–')} | {o.get('mode')} | {o.get('interpolation', 'linear')} "
+            f"| {'yes' if o.get('shadows') else 'no'} "
             f"| {o.get('spp') or '–'} | {o.get('device')} | {dims} | {o.get('size')} "
             f"| {fmt(o.get('frames_per_s'))} | {fmt(o.get('kernel_frames_per_s'))} "
             f"| {(o.get('samples_per_frame') or 0) / 1e6:,.0f} | {fmt(kernel / 1e3 if kernel else None)} |")

@@ -32,7 +32,7 @@ use raystream_volume::TransferFunction;
 use crate::Image;
 use crate::cpr::CurvedPlane;
 pub use crate::sampling::Interpolation;
-use crate::sampling::{tricubic, trilinear};
+use crate::sampling::{CUBIC_OUTER_WEIGHT, tricubic, trilinear};
 
 /// What a ray computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -285,9 +285,13 @@ pub(crate) fn cell_dims(dims: [usize; 3], cell: usize) -> [usize; 3] {
     dims.map(|n| n.saturating_sub(1).div_ceil(cell).max(1))
 }
 
-/// Per cell of `cell`³ (x fastest; [`cell_dims`]), the HU range (lo, hi) of the voxels its
-/// samples read, interpolated as `interpolation`: its own and one more layer on the far sides
-/// (trilinear), or one more on the near sides and two on the far ones (cubic).
+/// Per cell of `cell`³ (x fastest; [`cell_dims`]), a range (lo, hi) that holds every value its
+/// samples take, interpolated as `interpolation`. Trilinear: the range of the voxels they read,
+/// the cell's own and one more layer on the far sides. Cubic: the spline also reads one more
+/// layer on the near sides and two on the far ones, but gives them at most
+/// [`CUBIC_OUTER_WEIGHT`] of its weight, so its values lie within the trilinear range widened
+/// by that share of the way out to the wider voxels' range (a bright voxel just past a cell
+/// raises its bound by 42 % of the difference, not all of it).
 pub(crate) fn cell_ranges(
     vol: &Volume,
     cell: usize,
@@ -304,20 +308,36 @@ pub(crate) fn cell_ranges(
                 b / cells[0] % cells[1],
                 b / (cells[0] * cells[1]),
             );
+            // The trilinear reach, and the interpolation's.
+            let near = |bi: usize, n: usize| bi * cell..=((bi + 1) * cell).min(n - 1);
             let range = |bi: usize, n: usize| {
                 (bi * cell).saturating_sub(reach)..=((bi + 1) * cell + reach).min(n - 1)
             };
+            let (x, y, z) = (near(bx, nx), near(by, ny), near(bz, nz));
             let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            let (mut out_lo, mut out_hi) = (f32::INFINITY, f32::NEG_INFINITY);
             for k in range(bz, nz) {
                 for j in range(by, ny) {
                     for i in range(bx, nx) {
                         let v = vol.at(i, j, k);
-                        lo = lo.min(v);
-                        hi = hi.max(v);
+                        out_lo = out_lo.min(v);
+                        out_hi = out_hi.max(v);
+                        if x.contains(&i) && y.contains(&j) && z.contains(&k) {
+                            lo = lo.min(v);
+                            hi = hi.max(v);
+                        }
                     }
                 }
             }
-            (lo, hi)
+            match interpolation {
+                Interpolation::Linear => (lo, hi),
+                // Widened by 10⁻⁵ of the values: the spline's sum rounds in f32, and where
+                // the bound is met (a voxel centre) it may round above it.
+                Interpolation::Cubic => (
+                    lo - CUBIC_OUTER_WEIGHT * (lo - out_lo) - 1e-5 * (1.0 + lo.abs()),
+                    hi + CUBIC_OUTER_WEIGHT * (out_hi - hi) + 1e-5 * (1.0 + hi.abs()),
+                ),
+            }
         })
         .collect()
 }

@@ -40,7 +40,8 @@ impl Interpolation {
         }
     }
 
-    /// Voxels a sample in cell i (index i ≤ x < i + 1) reads beyond [i, i + 1] on either side.
+    /// Voxels a sample in cell i (index i ≤ x < i + 1) reads beyond [i, i + 1] on either side
+    /// (with at most [`CUBIC_OUTER_WEIGHT`] of its weight, for the cubic).
     pub fn reach(self) -> usize {
         match self {
             Interpolation::Linear => 0,
@@ -48,6 +49,12 @@ impl Interpolation {
         }
     }
 }
+
+/// At most this share of the cubic B-spline's weight at a point falls on voxels a trilinear
+/// sample there would not read (i − 1 and i + 2 on some axis): per axis the voxels i and i + 1
+/// hold w1 + w2 = (5 + 3t − 3t²)/6 ≥ 5/6 of it, so all three axes' inner voxels together hold
+/// at least (5/6)³, and the rest is at most 1 − (5/6)³ = 91/216.
+pub(crate) const CUBIC_OUTER_WEIGHT: f32 = 91.0 / 216.0;
 
 /// Trilinear interpolation at continuous index `p` of a grid of `dims` values read by `at`,
 /// clamped to the grid (the GPU's `sample_at` and `light_at` compute the same).
@@ -254,8 +261,9 @@ mod tests {
             }
         }
 
-        /// Never outside the range of the 4³ voxels around the point (what empty-space
-        /// skipping's and the majorants' cell ranges rely on).
+        /// Never outside the range of the 4³ voxels around the point, nor further past the
+        /// range of the 2³ a trilinear sample reads than [`CUBIC_OUTER_WEIGHT`] of the way to
+        /// the 4³'s (what empty-space skipping's and the majorants' cell ranges rely on).
         #[test]
         fn tricubic_stays_within_its_voxels(
             seed in 1u64..u64::MAX,
@@ -268,16 +276,54 @@ mod tests {
             let (_, iy) = cubic_axis(y, 6);
             let (_, iz) = cubic_axis(z, 5);
             let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            for &k in &iz {
-                for &j in &iy {
-                    for &i in &ix {
+            let (mut inner_lo, mut inner_hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for (c, &k) in iz.iter().enumerate() {
+                for (b, &j) in iy.iter().enumerate() {
+                    for (a, &i) in ix.iter().enumerate() {
                         let s = data[i + 7 * (j + 6 * k)];
                         lo = lo.min(s);
                         hi = hi.max(s);
+                        if [a, b, c].iter().all(|&n| n == 1 || n == 2) {
+                            inner_lo = inner_lo.min(s);
+                            inner_hi = inner_hi.max(s);
+                        }
                     }
                 }
             }
             prop_assert!(v >= lo - 1e-3 && v <= hi + 1e-3, "{} outside [{}, {}]", v, lo, hi);
+            let w = CUBIC_OUTER_WEIGHT;
+            let (tight_lo, tight_hi) = (inner_lo - w * (inner_lo - lo), inner_hi + w * (hi - inner_hi));
+            prop_assert!(
+                v >= tight_lo - 1e-3 && v <= tight_hi + 1e-3,
+                "{} outside [{}, {}]", v, tight_lo, tight_hi
+            );
+        }
+    }
+
+    /// The bound on the weight outside the trilinear reach is reached, at a voxel centre: with
+    /// the 2³ voxels a trilinear sample there reads at 0 HU and all others at 1000, the spline
+    /// gives 1000 · (1 − (5/6)³) there. (A smaller bound would let cell ranges miss it.)
+    #[test]
+    fn the_outer_weight_bound_is_tight() {
+        let dims = [7, 7, 7];
+        let mut data = vec![1000.0f32; 343];
+        for k in 3..5 {
+            for j in 3..5 {
+                for i in 3..5 {
+                    data[i + 7 * (j + 7 * k)] = 0.0;
+                }
+            }
+        }
+        let (v, _) = tricubic(dims, &data, Vec3::splat(3.0));
+        assert!((v - 1000.0 * CUBIC_OUTER_WEIGHT).abs() < 1e-3, "{v}");
+        // Anywhere else in the cell less of the weight lies outside.
+        for p in [
+            Vec3::splat(3.5),
+            Vec3::new(3.2, 3.9, 3.0),
+            Vec3::new(3.99, 3.01, 3.5),
+        ] {
+            let (v, _) = tricubic(dims, &data, p);
+            assert!(v < 1000.0 * CUBIC_OUTER_WEIGHT + 1e-3, "{v} at {p}");
         }
     }
 

@@ -328,7 +328,7 @@ fn device_bench_summary() {
             ms(0.05)
         ),
         r#"{"mesh": "stanford_lucy_100k", "kind": "primary", "check": "gpu-fused", "pass": false, "hit_agree": 0.99, "prim_agree": 0.98}"#.to_string(),
-        r#"{"volume": "cinematic ct-bones", "kind": "volume", "mode": "cinematic", "shadows": false, "spp": 64, "bounces": 4, "device": "gpu", "dims": [512, 512, 512], "size": "1024x1024", "frame_ms": 2000.0, "frames_per_s": 0.5, "kernel_frames_per_s": 0.51, "samples_per_frame": 2500000000.0, "msamples_per_s_kernel": 1275.0}"#.to_string(),
+        r#"{"volume": "cinematic ct-bones", "kind": "volume", "mode": "cinematic", "interpolation": "cubic", "shadows": false, "spp": 64, "bounces": 4, "device": "gpu", "dims": [512, 512, 512], "size": "1024x1024", "frame_ms": 2000.0, "frames_per_s": 0.5, "kernel_frames_per_s": 0.51, "samples_per_frame": 2500000000.0, "msamples_per_s_kernel": 1275.0}"#.to_string(),
     ];
     std::fs::write(&results, lines.join("\n") + "\n").unwrap();
     let log = tmp("summary-render.log");
@@ -388,7 +388,7 @@ fn device_bench_summary() {
     );
     // A volume bench's orbit: 2.5 G samples a frame at 0.51 kernel frames/s.
     assert!(
-        out.contains("| cinematic ct-bones | cinematic | no | 64 | gpu | 512×512×512 | 1024x1024 | 0.5 | 0.51 | 2,500 | 1.27 |"),
+        out.contains("| cinematic ct-bones | cinematic | cubic | no | 64 | gpu | 512×512×512 | 1024x1024 | 0.5 | 0.51 | 2,500 | 1.27 |"),
         "{out}"
     );
     // Occupancy: 135,168 resident invocations are half of 132 SMs x 2048.
