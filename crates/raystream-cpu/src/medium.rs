@@ -45,7 +45,7 @@ impl<'a> Medium<'a> {
         tree: &KdTree,
         traversal: Traversal,
     ) -> Medium<'a> {
-        let marcher = Marcher::new(&v.volume, Some(&v.tf));
+        let marcher = Marcher::interpolated(&v.volume, Some(&v.tf), v.interpolation);
         let step = crate::dvr::step_for(v.step_mm, &v.volume);
         let shadow_step = crate::dvr::shadow_step_for(v.step_mm, &v.volume);
         let lights: Vec<(Vec3, Vec3)> = scene
@@ -194,6 +194,7 @@ mod tests {
             tf,
             step_mm: Some(0.25),
             shadows,
+            interpolation: raystream_volume::Interpolation::Cubic,
         });
         s
     }
@@ -380,6 +381,7 @@ mod tests {
             tf: uniform(0.0, 1.0, 0.1),
             step_mm: None,
             shadows: true,
+            interpolation: raystream_volume::Interpolation::Cubic,
         });
         assert_eq!(draw(&with, 40, 30), plain);
     }

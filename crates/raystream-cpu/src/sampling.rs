@@ -20,38 +20,10 @@
 
 use raystream_math::Vec3;
 
-/// How a volume is sampled between voxel centres.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum Interpolation {
-    /// Trilinear: the 2³ voxels around the point; the gradient by central differences one
-    /// voxel apart.
-    #[default]
-    Linear,
-    /// The uniform cubic B-spline over the 4³ voxels around the point, and its analytic
-    /// gradient.
-    Cubic,
-}
-
-impl Interpolation {
-    pub fn name(self) -> &'static str {
-        match self {
-            Interpolation::Linear => "linear",
-            Interpolation::Cubic => "cubic",
-        }
-    }
-
-    /// Voxels a sample in cell i (index i ≤ x < i + 1) reads beyond [i, i + 1] on either side
-    /// (with at most [`CUBIC_OUTER_WEIGHT`] of its weight, for the cubic).
-    pub fn reach(self) -> usize {
-        match self {
-            Interpolation::Linear => 0,
-            Interpolation::Cubic => 1,
-        }
-    }
-}
+pub use raystream_volume::Interpolation;
 
 /// At most this share of the cubic B-spline's weight at a point falls on voxels a trilinear
-/// sample there would not read (i − 1 and i + 2 on some axis): per axis the voxels i and i + 1
+/// sample there would not read (i − 1 and i + 2 on some axis: [`Interpolation::reach`]): per axis the voxels i and i + 1
 /// hold w1 + w2 = (5 + 3t − 3t²)/6 ≥ 5/6 of it, so all three axes' inner voxels together hold
 /// at least (5/6)³, and the rest is at most 1 − (5/6)³ = 91/216.
 pub(crate) const CUBIC_OUTER_WEIGHT: f32 = 91.0 / 216.0;

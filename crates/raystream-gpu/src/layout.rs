@@ -241,7 +241,7 @@ pub mod counter {
     pub const SLOTS: u32 = 8;
 }
 
-/// `MediumParams` in medium.wgsl (uniform), 128 bytes: a scene's volume for the render
+/// `MediumParams` in medium.wgsl (uniform), 144 bytes: a scene's volume for the render
 /// kernels' volume stages — the world → index transform, the transfer function's sizes and
 /// shading, the brick table's and light grids' sizes.
 #[repr(C)]
@@ -267,6 +267,11 @@ pub struct MediumParams {
     pub light_dims: [u32; 3],
     /// Values per light grid (byte 124).
     pub grid_points: u32,
+    /// 1: the volume read by the cubic B-spline, 0: trilinearly (byte 128).
+    pub interpolation: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
 
 /// `DvrParams` in dvr.wgsl (uniform), 352 bytes: camera in LPS, the world → index transform,
@@ -384,7 +389,7 @@ const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
 const _: () = assert!(std::mem::size_of::<DvrParams>() == 352);
 const _: () = assert!(std::mem::size_of::<GpuCprRow>() == 48);
-const _: () = assert!(std::mem::size_of::<MediumParams>() == 128);
+const _: () = assert!(std::mem::size_of::<MediumParams>() == 144);
 
 /// `DenoiseParams` in denoise.wgsl (uniform), 48 bytes: the frame's size, a pass's gap and the
 /// filter's settings (`raystream_cpu::denoise::DenoiseOptions`).

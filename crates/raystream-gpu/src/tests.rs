@@ -306,6 +306,10 @@ fn render_wgsl_structs_match_rust() {
             ("shading", offset_of!(MediumParams, shading)),
             ("light_dims", offset_of!(MediumParams, light_dims)),
             ("grid_points", offset_of!(MediumParams, grid_points)),
+            ("interpolation", offset_of!(MediumParams, interpolation)),
+            ("pad0", offset_of!(MediumParams, pad0)),
+            ("pad1", offset_of!(MediumParams, pad1)),
+            ("pad2", offset_of!(MediumParams, pad2)),
         ],
     );
     let pad = offset_of!(RenderParams, pad);
@@ -1005,12 +1009,12 @@ fn gpu_render_matches_cpu_on_the_builtin_scene() {
 
 /// Meshes and a CT volume in one scene (examples/spine_rods.toml: rods in the abdomen CT, a
 /// mirror floor, two lights with light grids): the render kernels' volume stages against the
-/// CPU's.
+/// CPU's, the volume read by the cubic B-spline (the scene's default) and trilinearly.
 #[test]
 fn gpu_render_matches_cpu_with_a_volume_in_the_scene() {
     let Some(ctx) = gpu() else { return };
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/spine_rods.toml");
-    let scene = raystream_scene::Scene::load(&path).unwrap();
+    let mut scene = raystream_scene::Scene::load(&path).unwrap();
     let opt = raystream_cpu::RenderOptions {
         width: 64,
         height: 48,
@@ -1018,7 +1022,14 @@ fn gpu_render_matches_cpu_with_a_volume_in_the_scene() {
         max_depth: 2,
         traversal: Traversal::Ropes,
     };
+    use raystream_volume::Interpolation;
+    assert_eq!(
+        scene.volume.as_ref().unwrap().interpolation,
+        Interpolation::Cubic
+    );
     gpu_render_matches_cpu(&ctx, &scene, &opt, Submit::Wave, "spine rods");
+    scene.volume.as_mut().unwrap().interpolation = Interpolation::Linear;
+    gpu_render_matches_cpu(&ctx, &scene, &opt, Submit::Wave, "spine rods, trilinear");
 }
 
 #[test]

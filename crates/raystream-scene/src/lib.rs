@@ -31,6 +31,7 @@
 //! [volume]                  # optional CT volume among the meshes (see `SceneVolume`)
 //! path = "ct.nii.gz"        # relative to this file
 //! preset = "ct-bones"       # or tf = "tf.toml"
+//! interpolation = "cubic"   # the default; or "linear"
 //! ```
 //!
 //! With a volume, the scene frame is millimetres with x = the patient's left, y = superior,
@@ -49,7 +50,7 @@ pub use desc::{
 };
 use raystream_io::{MeshError, MeshShading, MtlMaterial, Texture, TriMesh, Volume, VolumeError};
 use raystream_math::{Aabb, DVec3, MAX_COORDINATE, Vec2, Vec3, in_coordinate_range};
-use raystream_volume::{TfPreset, TransferFunction};
+use raystream_volume::{Interpolation, TfPreset, TransferFunction};
 
 /// What went wrong building a scene, naming the file.
 #[derive(Debug, thiserror::Error)]
@@ -165,6 +166,8 @@ pub struct SceneVolume {
     pub step_mm: Option<f32>,
     /// Whether volume samples are lit through shadow rays (light grids).
     pub shadows: bool,
+    /// How the volume is read between voxel centres.
+    pub interpolation: Interpolation,
 }
 
 impl SceneVolume {
@@ -194,6 +197,13 @@ impl SceneVolume {
         {
             return Err(format!("volume: step {s} must be a positive number of mm").into());
         }
+        let interpolation = match d.interpolation.as_deref() {
+            None => Interpolation::Cubic,
+            Some(name) => Interpolation::ALL
+                .into_iter()
+                .find(|i| i.name() == name)
+                .ok_or_else(|| format!("volume: unknown interpolation '{name}' (linear, cubic)"))?,
+        };
         let volume = raystream_io::load_volume(
             &base_dir.join(&d.path),
             &raystream_io::VolumeSelect {
@@ -206,6 +216,7 @@ impl SceneVolume {
             tf,
             step_mm: d.step,
             shadows: d.shadows.unwrap_or(true),
+            interpolation,
         })
     }
 
@@ -1166,6 +1177,20 @@ mod tests {
         }
     }
 
+    /// A scene's volume is read by the cubic B-spline unless it says "linear".
+    #[test]
+    fn volume_interpolation_defaults_to_cubic() {
+        let obj = "[[objects]]\nshape = \"sphere\"";
+        for (extra, want) in [
+            ("", Interpolation::Cubic),
+            ("interpolation = \"cubic\"", Interpolation::Cubic),
+            ("interpolation = \"linear\"", Interpolation::Linear),
+        ] {
+            let s = compile(&format!("{CT}{extra}\n{obj}")).unwrap();
+            assert_eq!(s.volume.unwrap().interpolation, want, "{extra}");
+        }
+    }
+
     /// Volume mistakes name the scene file and the problem.
     #[test]
     fn volume_mistakes_are_named() {
@@ -1177,6 +1202,10 @@ mod tests {
                 "'tf' or 'preset', not both",
             ),
             ("step = -1", "step -1 must be a positive number"),
+            (
+                "interpolation = \"tricubic\"",
+                "unknown interpolation 'tricubic' (linear, cubic)",
+            ),
         ] {
             let e = compile(&format!("{CT}{extra}\n{obj}"))
                 .unwrap_err()

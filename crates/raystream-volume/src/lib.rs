@@ -15,6 +15,38 @@ pub use marching::{
 pub use stats::{RegionStats, region_stats};
 pub use tf::{Shading, TfPreset, TransferFunction};
 
+/// How a volume is sampled between voxel centres (raystream-cpu's `sampling` module evaluates
+/// both, and says why the cubic one exists).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Interpolation {
+    /// Trilinear: the 2³ voxels around the point; the gradient by central differences one
+    /// voxel apart.
+    #[default]
+    Linear,
+    /// The uniform cubic B-spline over the 4³ voxels around the point, and its analytic
+    /// gradient.
+    Cubic,
+}
+
+impl Interpolation {
+    pub const ALL: [Interpolation; 2] = [Interpolation::Linear, Interpolation::Cubic];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Interpolation::Linear => "linear",
+            Interpolation::Cubic => "cubic",
+        }
+    }
+
+    /// Voxels a sample in cell i (index i ≤ x < i + 1) reads beyond [i, i + 1] on either side.
+    pub fn reach(self) -> usize {
+        match self {
+            Interpolation::Linear => 0,
+            Interpolation::Cubic => 1,
+        }
+    }
+}
+
 /// Bone thresholds in Hounsfield units.
 ///
 /// - `Bone` 300 HU: cortical and most trabecular bone while excluding contrast-free soft

@@ -29,6 +29,11 @@ struct MediumParams {
     light_dims: vec3<u32>,
     // Values per light grid.
     grid_points: u32,
+    // 1: the volume read by the cubic B-spline (SceneVolume::interpolation), 0: trilinearly.
+    interpolation: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 // Group 3 binding 0 is the dispatch arguments of render.wgsl's control kernels.
@@ -40,10 +45,9 @@ struct MediumParams {
 @group(3) @binding(6) var<storage, read> brick_visible: array<u32>;
 @group(3) @binding(7) var<storage, read> light_values: array<f32>;
 
-// volume.wgsl's choice of reconstruction: a scene's volume is read trilinearly, as
-// raystream-cpu's medium.rs reads it.
+// volume.wgsl's choice of reconstruction.
 fn cubic_sampling() -> bool {
-    return false;
+    return dp.interpolation == 1u;
 }
 
 // The scene frame (x = L, y = S, z = A) → LPS.
