@@ -1553,14 +1553,9 @@ mod tests {
             .transmittance(&tf, Vec3::new(6.0, 10.0, 14.0), l_idx, step, 0.5)
             .0;
         assert_eq!(grid.at(Vec3::new(6.0, 10.0, 14.0)), exact);
-        let mut rng = 0x2545_f491u64;
+        let mut rng = crate::tests::XorShift(0x2545_f491);
         for _ in 0..200 {
-            let mut r = || {
-                rng ^= rng << 13;
-                rng ^= rng >> 7;
-                rng ^= rng << 17;
-                (rng >> 40) as f32 / (1u64 << 24) as f32
-            };
+            let mut r = || rng.f32();
             let p = Vec3::new(r() * 40.0, r() * 32.0, r() * 24.0);
             let want = m.transmittance(&tf, p, l_idx, step, 0.5).0;
             let got = grid.at(p);
@@ -2064,13 +2059,8 @@ mod tests {
                     ),
                     (MAJORANT_CELL, majorants.dims, majorants.values.clone()),
                 ];
-                let mut rng = 0x9e37_79b9_7f4a_7c15u64;
-                let mut uniform = || {
-                    rng ^= rng << 13;
-                    rng ^= rng >> 7;
-                    rng ^= rng << 17;
-                    (rng >> 40) as f32 / (1u64 << 24) as f32
-                };
+                let mut rng = crate::tests::XorShift(0x9e37_79b9_7f4a_7c15);
+                let mut uniform = || rng.f32();
                 for (cell, cells, bound) in tables {
                     let mut tight = 0;
                     for _ in 0..200_000 {

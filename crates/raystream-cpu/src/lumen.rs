@@ -1321,13 +1321,8 @@ mod tests {
         );
         assert!(same_on_the_window(&edge, &row, &o).is_some());
         // Tubes of many sizes and places, paths near and off their axes.
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::tests::XorShift(0x2545_f491_4f6c_dd1d);
+        let mut next = || rng.f64();
         for _ in 0..12 {
             let (r, cx, cy) = (
                 1.5 + 12.0 * next(),

@@ -178,15 +178,10 @@ mod tests {
     }
 
     fn grid(dims: [usize; 3], seed: u64) -> Vec<f32> {
-        // A fixed xorshift: HU-like values, −1000 to 2000.
-        let mut s = seed | 1;
+        // HU-like values, −1000 to 2000.
+        let mut rng = crate::tests::XorShift(seed | 1);
         (0..dims.iter().product::<usize>())
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                (s % 3000) as f32 - 1000.0
-            })
+            .map(|_| (rng.next_u64() % 3000) as f32 - 1000.0)
             .collect()
     }
 

@@ -6,6 +6,28 @@ use raystream_scene::{Scene, SceneDesc};
 
 use super::*;
 
+/// The tests' random numbers: Marsaglia's xorshift64, fixed seeds, the same draws every run.
+pub(crate) struct XorShift(pub u64);
+
+impl XorShift {
+    pub(crate) fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+
+    /// Uniform in [0, 1), 24 bits.
+    pub(crate) fn f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Uniform in [0, 1), 53 bits.
+    pub(crate) fn f64(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 fn scene(toml_text: &str) -> Scene {
     let desc: SceneDesc = toml::from_str(toml_text).unwrap();
     Scene::from_desc(&desc, Path::new("."), Path::new("test.toml")).unwrap()

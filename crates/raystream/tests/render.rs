@@ -359,13 +359,8 @@ fn bench_json_lines() {
             .count();
         assert_eq!(found as u64, l["hits"].as_u64().unwrap(), "{kind}");
     }
-    let ct = repo().join("crates/raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
-    let o = run(&[
-        "bench",
-        ct.to_str().unwrap(),
-        "--save-rays",
-        dir.to_str().unwrap(),
-    ]);
+    let ct = builtin_ct();
+    let o = run(&["bench", &ct, "--save-rays", dir.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--save-rays"), "{}", stderr(&o));
 }
@@ -1376,10 +1371,10 @@ fn gpu_render_matches_cpu_from_below() {
 /// resampled grid, with samples counted.
 #[test]
 fn bench_volume_rendering() {
-    let ct = repo().join("crates/raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
+    let ct = builtin_ct();
     let o = run(&[
         "bench",
-        ct.to_str().unwrap(),
+        &ct,
         "--mode",
         "dvr",
         "--size",
@@ -2258,10 +2253,10 @@ fn interpolation_through_the_cli() {
         comments.contains("interpolation cubic B-spline"),
         "{comments}"
     );
-    let ct = repo().join("crates/raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
+    let ct = builtin_ct();
     let o = run(&[
         "bench",
-        ct.to_str().unwrap(),
+        &ct,
         "--mode",
         "dvr",
         "--device",

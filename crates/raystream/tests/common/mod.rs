@@ -55,6 +55,15 @@ pub fn mesh(name: &str) -> String {
         .into_owned()
 }
 
+/// The CT the CLI embeds as its default (the repository's copy of it).
+pub fn builtin_ct() -> String {
+    repo()
+        .join("crates/raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz")
+        .to_str()
+        .unwrap()
+        .to_string()
+}
+
 pub fn tmp(name: &str) -> PathBuf {
     let dir = repo().join("target/test-tmp");
     std::fs::create_dir_all(&dir).unwrap();
