@@ -867,8 +867,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
                 .stats
                 .unwrap_or_else(|| dvr::estimate_stats(&volume, &tf, &opt, seen.sight()));
             let what = format!(
-                "{}{format_words}{slab}, step {:.3} mm",
-                if opt.shadows { " --shadows" } else { "" },
+                "{format_words}{slab}, step {:.3} mm",
                 stats.step_mm
             );
             let counts = format!(
@@ -889,11 +888,12 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             (what, counts)
         };
         eprintln!(
-            "raystream: wrote {} ({}x{}, --mode {}, {}{what}) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples{counts}, {:.1} M samples/s",
+            "raystream: wrote {} ({}x{}, --mode {}{}, {}{what}) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples{counts}, {:.1} M samples/s",
             a.output.display(),
             opt.width,
             opt.height,
             mode.name(),
+            if opt.shadows { " --shadows" } else { "" },
             interpolation_words(opt.interpolation),
             backend.name(),
             backend.adapter(),
