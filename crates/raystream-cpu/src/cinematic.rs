@@ -501,17 +501,13 @@ pub(crate) fn frame(
     vol: &Volume,
     m: &Marcher,
     tf: &TransferFunction,
+    majorants: &Majorants,
     opt: &DvrOptions,
     cam: &Camera,
     done: Option<&AtomicU64>,
 ) -> (Vec<PixelPaths>, Option<Denoised>) {
     let lighting = Lighting::studio(opt, cam);
-    let majorants = Majorants::new(m, tf);
-    let tracker = Tracker {
-        m,
-        tf,
-        majorants: &majorants,
-    };
+    let tracker = Tracker { m, tf, majorants };
     let paths: Vec<PixelPaths> = (0..opt.width * opt.height)
         .into_par_iter()
         .map(|px| {
@@ -556,7 +552,7 @@ pub fn render_film(
         ..frame_options(vol, opt, Sight::Camera(cam))
     };
     let m = Marcher::interpolated(vol, None, opt.interpolation);
-    let (paths, _) = frame(vol, &m, tf, opt, cam, None);
+    let (paths, _) = frame(vol, &m, tf, &Majorants::new(&m, tf), opt, cam, None);
     (film_of(opt, &paths), paths.iter().map(|p| p.taken).sum())
 }
 
@@ -1251,7 +1247,7 @@ mod tests {
                 ..Default::default()
             };
             let done = AtomicU64::new(7);
-            crate::dvr::render_volume_rgba_counted(&vol, &tf, &opt, &cam, &done);
+            crate::dvr::CpuVolume::new(&vol, &tf).render_rgba_counted(&opt, &cam, &done);
             assert_eq!(done.load(Ordering::Relaxed), 7 + want, "{mode:?}");
         }
     }

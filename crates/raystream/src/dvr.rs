@@ -7,8 +7,7 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 use raystream_cpu::denoise::DenoiseTimes;
 use raystream_cpu::dvr::{
-    DvrMode, DvrOptions, DvrStats, Interpolation, Sight, over_background, render_volume,
-    render_volume_rgba_counted,
+    CpuVolume, DvrMode, DvrOptions, DvrStats, Interpolation, Sight, over_background, render_volume,
 };
 use raystream_cpu::{Image, ImageFormat};
 use raystream_gpu::GpuVolumeRenderer;
@@ -195,8 +194,8 @@ pub fn default_interpolation(mode: DvrMode) -> Interpolation {
 /// Renders frames of one volume on the CPU or the GPU.
 pub enum Renderer<'a> {
     Cpu {
-        volume: &'a Volume,
-        tf: &'a TransferFunction,
+        /// The volume, with its brick tables and majorants kept from frame to frame.
+        volume: CpuVolume<'a>,
         /// Cinematic paths traced so far (a progress bar's count).
         done: AtomicU64,
     },
@@ -231,8 +230,7 @@ impl<'a> Renderer<'a> {
         Ok(match backend {
             Backend::Gpu(ctx) => Renderer::Gpu(Box::new(GpuVolumeRenderer::new(ctx, volume, tf)?)),
             Backend::Cpu => Renderer::Cpu {
-                volume,
-                tf,
+                volume: CpuVolume::new(volume, tf),
                 done: AtomicU64::new(0),
             },
         })
@@ -283,9 +281,8 @@ impl<'a> Renderer<'a> {
                     let (k, n) = (times.kernel_gpu_ms, times.samples);
                     (film, alpha, k, n, None, times.denoise)
                 }
-                Renderer::Cpu { volume, tf, done } => {
-                    let (film, alpha, stats) =
-                        render_volume_rgba_counted(volume, tf, opt, sight, done);
+                Renderer::Cpu { volume, done } => {
+                    let (film, alpha, stats) = volume.render_rgba_counted(opt, sight, done);
                     (film, alpha, None, stats.samples, Some(stats), stats.denoise)
                 }
             };
@@ -327,14 +324,14 @@ impl<'a> Renderer<'a> {
                 };
                 (film, cost)
             }
-            Renderer::Cpu { volume, tf, done } if opt.mode == DvrMode::Cinematic => {
+            Renderer::Cpu { volume, done } if opt.mode == DvrMode::Cinematic => {
                 // Counted as its paths are traced, laid over the background here.
-                let (film, alpha, stats) = render_volume_rgba_counted(volume, tf, opt, sight, done);
+                let (film, alpha, stats) = volume.render_rgba_counted(opt, sight, done);
                 let film = over_background(film, &alpha, opt.background);
                 (film, FilmCost::of_cpu(stats))
             }
-            Renderer::Cpu { volume, tf, .. } => {
-                let (film, stats) = render_volume(volume, tf, opt, sight);
+            Renderer::Cpu { volume, .. } => {
+                let (film, stats) = volume.render(opt, sight);
                 (film, FilmCost::of_cpu(stats))
             }
         })

@@ -866,10 +866,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             let stats = frame
                 .stats
                 .unwrap_or_else(|| dvr::estimate_stats(&volume, &tf, &opt, seen.sight()));
-            let what = format!(
-                "{format_words}{slab}, step {:.3} mm",
-                stats.step_mm
-            );
+            let what = format!("{format_words}{slab}, step {:.3} mm", stats.step_mm);
             let counts = format!(
                 ", {} skipped as empty ({:.0} %{}){}",
                 stats.skipped,
