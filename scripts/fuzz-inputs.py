@@ -22,7 +22,8 @@ scenes: a scene with glass, a mirror, a mesh and a light, with one to three numb
         absurd ones (0, -1, ±inf, nan, 1e30 ...), rendered on the CPU and the GPU: either both
         refuse it (exit 2, naming the file) or rays.py imgdiff finds them within the GPU tests'
         bounds (mean < 0.5/255, at most 0.1 % of pixels over 2/255). Half of them drop the
-        file's camera for the framing one, turned by a random --orbit, some with --parallel.
+        file's camera for the framing one, turned by a random --orbit, some with --parallel; a
+        third hold the built-in CT as their [volume], read linearly or by the cubic B-spline.
 
 Prints each failure with its input (kept under the work folder) and a count at the end; exits 1
 if any failed. Run from the repository root after `cargo build --release`. The 2026-11-23
@@ -654,6 +655,11 @@ def fuzz_scenes(work, n):
             s = re.sub(r"\[camera\]\n(.*\n){3}", "", s)
             framing = [f"--orbit={random.uniform(-360, 360):.3f},{random.uniform(-90, 90):.3f}"]
             framing += ["--parallel"] if random.random() < 0.5 else []
+        if random.random() < 0.3:
+            # The built-in CT among the meshes, read either way (its numbers mutated too).
+            ct = os.path.join(ROOT, "crates/raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz")
+            s += (f'[volume]\npath = "{ct}"\npreset = "ct-bones"\nstep = 3.0\n'
+                  f'interpolation = "{random.choice(["linear", "cubic"])}"\n')
         for _ in range(random.randint(1, 3)):
             m = random.choice(list(re.finditer(r"-?\d+(\.\d+)?", s)))
             s = s[:m.start()] + random.choice(
