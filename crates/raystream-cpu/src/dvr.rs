@@ -32,7 +32,7 @@ use raystream_volume::TransferFunction;
 use crate::Image;
 use crate::cpr::CurvedPlane;
 pub use crate::sampling::Interpolation;
-use crate::sampling::{CUBIC_OUTER_WEIGHT, tricubic, trilinear};
+use crate::sampling::{CUBIC_OUTER_WEIGHT, tricubic, tricubic_value, trilinear};
 
 /// What a ray computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -482,7 +482,7 @@ impl<'a> Marcher<'a> {
     pub fn sample(&self, p: Vec3) -> f32 {
         match self.interpolation {
             Interpolation::Linear => trilinear(self.vol.dims, p, |i, j, k| self.vol.at(i, j, k)),
-            Interpolation::Cubic => tricubic(self.vol.dims, &self.vol.data, p).0,
+            Interpolation::Cubic => tricubic_value(self.vol.dims, &self.vol.data, p),
         }
     }
 
