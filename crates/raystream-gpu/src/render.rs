@@ -1144,8 +1144,8 @@ fn medium_layout(ctx: &crate::GpuContext) -> wgpu::BindGroupLayout {
         })
 }
 
-/// The volume stages' bind group: `m`'s parameters and light grids (one per light, back to
-/// back) with `gpu`'s texture, transfer function and bricks.
+/// The volume stages' bind group: `m`'s parameters, brick table and light grids (one per
+/// light, back to back) with `gpu`'s texture and transfer function.
 fn medium_group(
     ctx: &crate::GpuContext,
     layout: &wgpu::BindGroupLayout,
@@ -1162,6 +1162,7 @@ fn medium_group(
         .flat_map(|g| g.values.iter().copied())
         .collect();
     let sh = v.tf.shading;
+    let bricks = crate::volume::brick_buffer(ctx, m.marcher().brick_table().1)?;
     let params = MediumParams {
         to_index0: r0.to_array(),
         step: m.step,
@@ -1211,7 +1212,7 @@ fn medium_group(
             entry(3, wgpu::BindingResource::Sampler(&gpu.sampler)),
             entry(4, gpu.opacity.as_entire_binding()),
             entry(5, gpu.color.as_entire_binding()),
-            entry(6, gpu.bricks.as_entire_binding()),
+            entry(6, bricks.as_entire_binding()),
             entry(7, grids.as_entire_binding()),
         ],
     }))

@@ -14,8 +14,8 @@ use raystream_cpu::cinematic::{
 };
 use raystream_cpu::denoise::{DenoiseOptions, DenoiseTimes, Guides, NoisyFilm};
 use raystream_cpu::dvr::{
-    BRICK, DvrMode, DvrOptions, Interpolation, LightGrid, Marcher, Sight, over_background,
-    scene_to_lps,
+    BRICK, DvrMode, DvrOptions, Interpolation, LightGrid, Marcher, Sight, brick_table,
+    over_background, scene_to_lps,
 };
 use raystream_io::Volume;
 use raystream_math::Vec3;
@@ -49,22 +49,23 @@ pub fn dvr_wgsl() -> String {
     )
 }
 
-/// A volume and its transfer function on the GPU: the HU texture with its trilinear sampler,
-/// the transfer function's control points and the marcher's brick table. Direct volume
-/// rendering and the render kernels' volume stages bind the same.
+/// A volume and its transfer function on the GPU: the HU texture with its trilinear sampler
+/// and the transfer function's control points. Direct volume rendering and the render kernels'
+/// volume stages bind the same, each with the brick table of how it reads the volume
+/// ([`brick_buffer`]).
 pub(crate) struct GpuVolume {
     pub view: wgpu::TextureView,
     pub sampler: wgpu::Sampler,
     pub opacity: wgpu::Buffer,
     pub color: wgpu::Buffer,
-    pub bricks: wgpu::Buffer,
     pub brick_dims: [u32; 3],
     /// World → continuous index (rows and origin), from the marcher.
     pub to_index: ([Vec3; 3], Vec3),
 }
 
 impl GpuVolume {
-    /// Uploads `vol` (as R16Float), `tf`'s control points and `marcher`'s brick table.
+    /// Uploads `vol` (as R16Float) and `tf`'s control points; `marcher` gives the transforms
+    /// and the bricks' count.
     pub(crate) fn new(
         ctx: &GpuContext,
         vol: &Volume,
@@ -122,22 +123,26 @@ impl GpuVolume {
             .collect();
         let none = wgpu::BufferUsages::empty();
         let brick_dims = marcher.brick_table().0;
-        let visible = brick_words(marcher);
         Ok(GpuVolume {
             view: texture.create_view(&Default::default()),
             sampler,
             opacity: ctx.storage("opacity points", bytemuck::cast_slice(&opacity), none)?,
             color: ctx.storage("color points", bytemuck::cast_slice(&color), none)?,
-            bricks: ctx.storage("brick table", bytemuck::cast_slice(&visible), none)?,
             brick_dims: brick_dims.map(|b| b as u32),
             to_index: marcher.world_to_index(),
         })
     }
 }
 
-/// The marcher's brick table as the kernels read it: a word a brick, 1 where it may be visible.
-fn brick_words(marcher: &Marcher) -> Vec<u32> {
-    marcher.brick_table().1.iter().map(|&v| v as u32).collect()
+/// A brick table (`raystream_cpu::dvr::brick_table`) on the GPU as the kernels read it: a word
+/// a brick, 1 where it may be visible.
+pub(crate) fn brick_buffer(ctx: &GpuContext, visible: &[bool]) -> Result<wgpu::Buffer, GpuError> {
+    let words: Vec<u32> = visible.iter().map(|&v| v as u32).collect();
+    ctx.storage(
+        "brick table",
+        bytemuck::cast_slice(&words),
+        wgpu::BufferUsages::empty(),
+    )
 }
 
 /// cinematic: paths a dispatch by default (1024² pixels, one path each): on lavapipe a 64×48
@@ -173,9 +178,9 @@ pub struct GpuVolumeRenderer<'a> {
     pub paths_done: AtomicU64,
     /// The majorant grids, per interpolation (`Interpolation as usize`).
     majorants: [std::sync::OnceLock<wgpu::Buffer>; 2],
-    /// The brick table of frames read by the cubic B-spline (whose samples reach one voxel
-    /// further than trilinear ones), made on first use; `gpu.bricks` is the trilinear one.
-    cubic_bricks: std::sync::OnceLock<wgpu::Buffer>,
+    /// The brick tables of dvr frames that skip empty space, per interpolation, made on first
+    /// use (a cubic sample reaches a voxel further than a trilinear one).
+    bricks: [std::sync::OnceLock<wgpu::Buffer>; 2],
     /// cinematic: a frame's running sums between its dispatches.
     accum: Mutex<Option<wgpu::Buffer>>,
     /// cinematic: at most this many paths a dispatch (a frame's samples are split into
@@ -229,7 +234,7 @@ impl<'a> GpuVolumeRenderer<'a> {
     ) -> Result<GpuVolumeRenderer<'a>, GpuError> {
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let gpu = GpuVolume::new(ctx, vol, tf, &Marcher::new(vol, Some(tf)))?;
+        let gpu = GpuVolume::new(ctx, vol, tf, &Marcher::new(vol, None))?;
         let module = ctx
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -267,7 +272,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             denoiser: std::sync::OnceLock::new(),
             paths_done: AtomicU64::new(0),
             majorants: Default::default(),
-            cubic_bricks: std::sync::OnceLock::new(),
+            bricks: Default::default(),
             accum: Mutex::new(None),
             paths_per_dispatch: PATHS_PER_DISPATCH,
             light_pipeline,
@@ -418,21 +423,14 @@ impl<'a> GpuVolumeRenderer<'a> {
         Ok(cell.get_or_init(|| b))
     }
 
-    /// The brick table of frames read as `interpolation` (the cubic one made on first use).
+    /// The brick table of frames read as `interpolation`, made on first use.
     fn brick_buffer(&self, interpolation: Interpolation) -> Result<&wgpu::Buffer, GpuError> {
-        if interpolation == Interpolation::Linear {
-            return Ok(&self.gpu.bricks);
-        }
-        if let Some(b) = self.cubic_bricks.get() {
+        let cell = &self.bricks[interpolation as usize];
+        if let Some(b) = cell.get() {
             return Ok(b);
         }
-        let m = Marcher::interpolated(self.vol, Some(self.tf), interpolation);
-        let b = self.ctx.storage(
-            "brick table (cubic)",
-            bytemuck::cast_slice(&brick_words(&m)),
-            wgpu::BufferUsages::empty(),
-        )?;
-        Ok(self.cubic_bricks.get_or_init(|| b))
+        let b = brick_buffer(self.ctx, &brick_table(self.vol, self.tf, interpolation))?;
+        Ok(cell.get_or_init(|| b))
     }
 
     /// The denoiser's guides of a cinematic frame seen by `cam`, as
@@ -733,7 +731,12 @@ impl<'a> GpuVolumeRenderer<'a> {
         if batches.len() > 1 && accum.as_ref().is_none_or(|a| a.size() < 32 * n) {
             *accum = Some(ctx.work_buffer("running sums", 32 * n, wgpu::BufferUsages::empty())?);
         }
-        let bricks = self.brick_buffer(opt.interpolation)?;
+        // The brick table is read only where dvr skips empty space.
+        let bricks = if params.skip_empty != 0 {
+            self.brick_buffer(opt.interpolation)?
+        } else {
+            &self.no_rows
+        };
         // A frame of one dispatch binds a placeholder.
         let accum = accum.as_ref().unwrap_or(&self.no_rows);
         let resource = |b: u32| match b {
