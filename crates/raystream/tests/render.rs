@@ -1940,13 +1940,7 @@ fn cinematic_rendering_through_the_cli() {
         pictures.push(first);
     }
     if let [cpu, gpu] = &pictures[..] {
-        let diff: u64 = cpu
-            .as_raw()
-            .iter()
-            .zip(gpu.as_raw())
-            .map(|(&a, &b)| a.abs_diff(b) as u64)
-            .sum();
-        let mean = diff as f64 / cpu.as_raw().len() as f64;
+        let (mean, _) = raystream_cpu::srgb8_diff(cpu.as_raw(), gpu.as_raw());
         assert!(mean < 1.5, "GPU vs CPU: mean |diff| {mean}/255");
     }
     let dir = tmp("cinematic-turntable");
@@ -2100,13 +2094,7 @@ fn denoised_cinematic_rendering_through_the_cli() {
             .to_rgb8()
     };
     let mean_diff = |a: &image::RgbImage, b: &image::RgbImage| {
-        let d: u64 = a
-            .as_raw()
-            .iter()
-            .zip(b.as_raw())
-            .map(|(&x, &y)| x.abs_diff(y) as u64)
-            .sum();
-        d as f64 / a.as_raw().len() as f64
+        raystream_cpu::srgb8_diff(a.as_raw(), b.as_raw()).0
     };
     let truth = png("denoise-truth.png", "cpu", &["--spp", "256"]);
     let mut denoised = Vec::new();
