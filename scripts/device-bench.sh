@@ -160,6 +160,9 @@ c=(bench "$ct" --mode dvr --resample 512 --size "$dvr_size" --json --quiet --int
 $bin "${c[@]}" --device gpu --frames 36 | tag '{"volume": "ct-bone cubic"}'
 $bin "${c[@]}" --device gpu --frames 36 --preset ct-bones | tag '{"volume": "ct-bones cubic"}'
 $bin "${c[@]}" --device cpu --frames 2 | tag '{"volume": "ct-bone cubic"}'
+# The interpolating cubic B-spline: the same fetches from the coefficients' texture (the
+# same cost per sample; its brick table differs).
+$bin bench "$ct" --mode dvr --resample 512 --size "$dvr_size" --json --quiet --interpolation cubic-interpolating --device gpu --frames 36 | tag '{"volume": "ct-bone cubic-interpolating"}'
 $bin bench "$ct" --mode mip --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 36 | tag '{"volume": "mip"}'
 $bin render "$ct" --mode dvr --shadows --preset ct-bones --device gpu --size "$dvr_size" -o "$out/dvr-bones-shadows-gpu.png" 2>&1 | tee -a "$out/render.log"
 # Cinematic rendering (64 paths a pixel, 4 scatterings): an orbit of 4 frames at 512³, one

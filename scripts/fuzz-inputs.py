@@ -11,7 +11,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a tex
         ../shared (JPEG-LS and 12-bit JPEG among them) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (meshes also shaded; volumes, and an RT Structure Set laid on its CT, also `--mode` mip, minip, average, slice,
         dvr or cinematic (half of those --denoise, some with --anisotropy and --exposure), some
-        with --interpolation linear or cubic, some with --slab, to an EXR or a turntable of EXRs; some tinted by themselves as a label map,
+        with --interpolation linear, cubic or cubic-interpolating, some with --slab, to an EXR or a turntable of EXRs; some tinted by themselves as a label map,
         or their segments made surfaces with `raystream iso --segment` (some simplified, some named
         by a mutated colour table) or rendered). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
@@ -567,10 +567,10 @@ def fuzz_files(work, n, device):
                 if random.random() < 0.3:
                     extra += ["--anisotropy", random.choice(["0.5", "-0.3", "0.95"]),
                               "--exposure", random.choice(["1", "-2.5"])]
-            # Either interpolation, whatever the mode's default (a 1-voxel-thin axis has
+            # Any interpolation, whatever the mode's default (a 1-voxel-thin axis has
             # neighbours only by clamping).
             if random.random() < 0.4:
-                extra += ["--interpolation", random.choice(["linear", "cubic"])]
+                extra += ["--interpolation", random.choice(["linear", "cubic", "cubic-interpolating"])]
             # Some as a turntable of EXR frames into a folder.
             frames = ["--cine"] if four_d and not phase else ["--turntable", "2"]
             out = (frames + ["--format", "exr", "-o", os.path.join(d, "frames")]
@@ -659,7 +659,7 @@ def fuzz_scenes(work, n):
             # The built-in CT among the meshes, read either way (its numbers mutated too).
             ct = os.path.join(ROOT, "crates/raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz")
             s += (f'[volume]\npath = "{ct}"\npreset = "ct-bones"\nstep = 3.0\n'
-                  f'interpolation = "{random.choice(["linear", "cubic"])}"\n')
+                  f'interpolation = "{random.choice(["linear", "cubic", "cubic-interpolating"])}"\n')
         for _ in range(random.randint(1, 3)):
             m = random.choice(list(re.finditer(r"-?\d+(\.\d+)?", s)))
             s = s[:m.start()] + random.choice(

@@ -234,7 +234,7 @@ impl Majorants {
         let vol = m.volume();
         Majorants {
             dims: cell_dims(vol.dims, MAJORANT_CELL),
-            values: cell_ranges(vol, MAJORANT_CELL, m.interpolation())
+            values: cell_ranges(vol.dims, m.grid(), MAJORANT_CELL, m.interpolation())
                 .into_iter()
                 .map(|(lo, hi)| sigma_of(tf.max_opacity_in(lo, hi)))
                 .collect(),

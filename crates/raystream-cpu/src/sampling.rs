@@ -1,5 +1,6 @@
-//! Reconstruction of a volume's values between its voxels: trilinear, and the uniform cubic
-//! B-spline (tricubic) that `--interpolation cubic` takes.
+//! Reconstruction of a volume's values between its voxels: trilinear, the uniform cubic
+//! B-spline (tricubic) that `--interpolation cubic` takes, and the interpolating cubic
+//! B-spline of `--interpolation cubic-interpolating`.
 //!
 //! Trilinear interpolation is continuous but its gradient is not: it jumps at every voxel
 //! face. A surface that a steep transfer function draws out of a coarse grid (the skin of a
@@ -11,6 +12,15 @@
 //! are non-negative and sum to 1, so a value stays within its 4³ voxels' range, which keeps
 //! empty-space skipping and the majorants of cinematic tracking exact), and gives the gradient
 //! analytically from the same 4³ voxels.
+//!
+//! That blur is the approximating spline's price: a stent strut or a thin cortex one voxel
+//! wide keeps only part of its peak HU. The interpolating cubic B-spline
+//! ([`bspline_coefficients`]) runs the same spline over coefficients prefiltered so that it
+//! passes through every voxel's value: as smooth, as sharp as the data, and fourth-order
+//! accurate between voxels where trilinear is second-order. Its coefficients may overshoot the
+//! voxels near a sharp edge (the spline rings a little there), but the spline still never
+//! leaves the range of the 4³ *coefficients* it reads, so cell ranges taken over the
+//! coefficient grid keep empty-space skipping and the majorants exact.
 //!
 //! Written here rather than taken from a crate: the GPU (volume.wgsl) evaluates the same
 //! spline with eight hardware-filtered fetches (Sigg & Hadwiger, "Fast third-order texture
@@ -156,6 +166,103 @@ pub(crate) fn tricubic(dims: [usize; 3], data: &[f32], p: Vec3) -> (f32, Vec3) {
     (v, g)
 }
 
+/// The coefficients of the interpolating cubic B-spline of the grid `data` (`dims`, x
+/// fastest): the grid c whose cubic B-spline, read as [`tricubic`] reads it (clamped at the
+/// edges), passes through every voxel's value. Along each axis c solves
+/// (c[k − 1] + 4 c[k] + c[k + 1]) / 6 = f[k] with c[−1] = c[0] and c[n] = c[n − 1], the
+/// spline's value at voxel k under clamp-to-edge; the three axes are solved one after the
+/// other (the spline is a tensor product).
+///
+/// Solved exactly, line by line in f64 (the Thomas algorithm on a strictly diagonally dominant
+/// tridiagonal system, stable without pivoting), rather than with the usual recursive filter
+/// (Unser, "Splines: a perfect fit", 1999): that filter assumes mirror-symmetric edges and an
+/// infinite causal sum, neither of which is how the GPU's clamp-to-edge texture reads the
+/// coefficients, so it would not interpolate the outermost voxels. No crate solves this on a
+/// clamped grid, and the solve is a few lines.
+pub fn bspline_coefficients(dims: [usize; 3], data: &[f32]) -> Vec<f32> {
+    use rayon::prelude::*;
+    let [nx, ny, nz] = dims;
+    assert_eq!(data.len(), nx * ny * nz, "a grid of {dims:?} values");
+    let mut c = data.to_vec();
+    if c.is_empty() {
+        return c;
+    }
+    // x: rows are contiguous.
+    let inv = thomas_pivots(nx);
+    c.par_chunks_mut(nx).for_each_init(
+        || vec![0.0f64; nx],
+        |line, row| {
+            line.iter_mut()
+                .zip(row.iter())
+                .for_each(|(l, &v)| *l = v as f64);
+            solve_line(&inv, line);
+            row.iter_mut()
+                .zip(line.iter())
+                .for_each(|(v, &l)| *v = l as f32);
+        },
+    );
+    // y: columns within one k-plane.
+    let inv = thomas_pivots(ny);
+    c.par_chunks_mut(nx * ny).for_each(|plane| {
+        let mut line = vec![0.0f64; ny];
+        for i in 0..nx {
+            (0..ny).for_each(|j| line[j] = plane[i + nx * j] as f64);
+            solve_line(&inv, &mut line);
+            (0..ny).for_each(|j| plane[i + nx * j] = line[j] as f32);
+        }
+    });
+    // z: each task takes row j of every plane (disjoint borrows) and solves its nx columns.
+    let inv = thomas_pivots(nz);
+    let mut rows: Vec<Vec<&mut [f32]>> = (0..ny).map(|_| Vec::with_capacity(nz)).collect();
+    for plane in c.chunks_mut(nx * ny) {
+        for (j, row) in plane.chunks_mut(nx).enumerate() {
+            rows[j].push(row);
+        }
+    }
+    rows.into_par_iter().for_each(|mut planes| {
+        let mut line = vec![0.0f64; nz];
+        for i in 0..nx {
+            line.iter_mut()
+                .zip(&planes)
+                .for_each(|(l, row)| *l = row[i] as f64);
+            solve_line(&inv, &mut line);
+            line.iter()
+                .zip(planes.iter_mut())
+                .for_each(|(l, row)| row[i] = *l as f32);
+        }
+    });
+    c
+}
+
+/// The reciprocal pivots of the Thomas algorithm for the clamped system of
+/// [`bspline_coefficients`] on a line of `n`, scaled by 6: diagonal 4 (5 at either end, where
+/// the clamped neighbour is the voxel itself; 6 for a single voxel), off-diagonals 1.
+fn thomas_pivots(n: usize) -> Vec<f64> {
+    let mut inv = vec![0.0f64; n];
+    if n == 1 {
+        inv[0] = 1.0 / 6.0;
+        return inv;
+    }
+    let diag = |i: usize| if i == 0 || i == n - 1 { 5.0 } else { 4.0 };
+    inv[0] = 1.0 / diag(0);
+    for i in 1..n {
+        inv[i] = 1.0 / (diag(i) - inv[i - 1]);
+    }
+    inv
+}
+
+/// Solves the line's system in place: `line` holds the values, then the coefficients.
+fn solve_line(inv: &[f64], line: &mut [f64]) {
+    let n = line.len();
+    line[0] *= 6.0 * inv[0];
+    for i in 1..n {
+        line[i] = (6.0 * line[i] - line[i - 1]) * inv[i];
+    }
+    for i in (0..n - 1).rev() {
+        line[i] -= inv[i] * line[i + 1];
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -292,6 +399,144 @@ mod tests {
                 v >= tight_lo - 1e-3 && v <= tight_hi + 1e-3,
                 "{} outside [{}, {}]", v, tight_lo, tight_hi
             );
+        }
+    }
+
+    proptest! {
+        /// The interpolating spline passes through every voxel's value, by the f64 brute force
+        /// over the coefficients (not the fast sum that reads them): grids of one, two and
+        /// more voxels a side, where the clamped edges make every row an edge row.
+        #[test]
+        fn coefficients_interpolate_every_voxel(
+            seed in 1u64..u64::MAX,
+            nx in 1usize..7, ny in 1usize..6, nz in 1usize..5,
+        ) {
+            let dims = [nx, ny, nz];
+            let data = grid(dims, seed);
+            let c = bspline_coefficients(dims, &data);
+            for k in 0..nz {
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let (v, _) = brute(dims, &c, [i as f64, j as f64, k as f64]);
+                        let want = data[i + nx * (j + ny * k)] as f64;
+                        prop_assert!((v - want).abs() < 2e-3, "{} vs {} at {:?}", v, want, (i, j, k));
+                    }
+                }
+            }
+        }
+    }
+
+    /// A smooth field sampled on grids of spacing h and h/2, read back between the voxels:
+    /// the interpolating spline's error falls about 16× (fourth order), trilinear's and the
+    /// approximating spline's about 4× (second order), and at the finer grid the interpolating
+    /// spline is over 20× closer than either.
+    #[test]
+    fn the_interpolating_spline_is_fourth_order() {
+        let f = |x: f64, y: f64, z: f64| (0.9 * x + 0.3).sin() * (0.7 * y).cos() + (0.5 * z).sin();
+        // Max error over points between voxels, away from the clamped edges, on a grid of
+        // spacing h over [0, 12]³.
+        let errors = |h: f64| {
+            let n = (12.0 / h) as usize + 1;
+            let dims = [n; 3];
+            let mut data = vec![0.0f32; n * n * n];
+            for k in 0..n {
+                for j in 0..n {
+                    for i in 0..n {
+                        data[i + n * (j + n * k)] =
+                            f(i as f64 * h, j as f64 * h, k as f64 * h) as f32;
+                    }
+                }
+            }
+            let coefficients = bspline_coefficients(dims, &data);
+            let at = |i: usize, j: usize, k: usize| data[i + n * (j + n * k)];
+            let mut rng = crate::tests::XorShift(4242);
+            let mut worst = [0.0f64; 3];
+            for _ in 0..4000 {
+                let q = [0, 1, 2].map(|_| 4.0 + rng.f32() as f64 * 4.0);
+                let p = Vec3::new((q[0] / h) as f32, (q[1] / h) as f32, (q[2] / h) as f32);
+                let truth = f(p.x as f64 * h, p.y as f64 * h, p.z as f64 * h);
+                let got = [
+                    trilinear(dims, p, at),
+                    tricubic_value(dims, &data, p),
+                    tricubic_value(dims, &coefficients, p),
+                ];
+                for (w, g) in worst.iter_mut().zip(got) {
+                    *w = w.max((g as f64 - truth).abs());
+                }
+            }
+            worst
+        };
+        let (coarse, fine) = (errors(1.0), errors(0.5));
+        let order = |a: usize| (coarse[a] / fine[a]).log2();
+        // Measured max errors (trilinear, cubic, interpolating): 0.167, 0.230, 0.0026 at h = 1;
+        // 0.041, 0.062, 0.00015 at h/2 (orders 2.0, 1.9, 4.1).
+        let msg = format!("errors at h = 1 {coarse:?}, at h/2 {fine:?}");
+        assert!(order(0) > 1.7 && order(0) < 2.3, "trilinear: {msg}");
+        assert!(order(1) > 1.7 && order(1) < 2.3, "cubic: {msg}");
+        assert!(order(2) > 3.5, "interpolating: {msg}");
+        assert!(fine[2] * 20.0 < fine[0].min(fine[1]), "{msg}");
+    }
+
+    /// Real data: the abdomen CT (3 mm voxels) with every other voxel dropped along each axis,
+    /// and with every other slice dropped, read back from what is left at the dropped voxels,
+    /// against their true HU, over the voxels off air (truth above −900 HU). The interpolating
+    /// spline is as close as trilinear (within 4 %: the CT's noise, not the interpolant,
+    /// dominates the error, and a spline's negative lobes pass noise that trilinear's two-voxel
+    /// average damps) and closer than the approximating spline, whose blur costs it 7–15 %:
+    /// trilinear's accuracy with a continuous gradient.
+    #[test]
+    fn the_interpolating_spline_resamples_a_ct_as_well_as_trilinear() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
+        let vol = raystream_io::load_volume(&path, &Default::default()).unwrap();
+        let [nx, ny, nz] = vol.dims;
+        // Measured rms HU (trilinear, cubic, interpolating cubic): every other voxel
+        // (89.2, 96.4, 91.6) over 737 242 voxels; every other slice (57.3, 66.9, 58.7) over
+        // 421 747. The chest CT (1.5 mm) gives (120.7, 135.5, 120.2) and (101.7, 109.2,
+        // 103.0).
+        for stride in [[2, 2, 2], [1, 1, 2]] {
+            let dims = [0, 1, 2].map(|a| vol.dims[a].div_ceil(stride[a]));
+            let mut kept = Vec::with_capacity(dims.iter().product());
+            for k in 0..dims[2] {
+                for j in 0..dims[1] {
+                    for i in 0..dims[0] {
+                        kept.push(vol.at(stride[0] * i, stride[1] * j, stride[2] * k));
+                    }
+                }
+            }
+            let coefficients = bspline_coefficients(dims, &kept);
+            let at = |i: usize, j: usize, k: usize| kept[i + dims[0] * (j + dims[1] * k)];
+            let (mut sums, mut count) = ([0.0f64; 3], 0usize);
+            // Away from the edges, where the kept grid's clamping is not the data's.
+            for k in 4..nz - 4 {
+                for j in 4..ny - 4 {
+                    for i in 4..nx - 4 {
+                        let truth = vol.at(i, j, k) as f64;
+                        let kept_voxel = [i, j, k].iter().zip(stride).all(|(&n, s)| n % s == 0);
+                        if kept_voxel || truth < -900.0 {
+                            continue;
+                        }
+                        let p = Vec3::new(i as f32, j as f32, k as f32)
+                            / Vec3::from_array(stride.map(|s| s as f32));
+                        let got = [
+                            trilinear(dims, p, at),
+                            tricubic_value(dims, &kept, p),
+                            tricubic_value(dims, &coefficients, p),
+                        ];
+                        for (s, g) in sums.iter_mut().zip(got) {
+                            *s += (g as f64 - truth).powi(2);
+                        }
+                        count += 1;
+                    }
+                }
+            }
+            let rms = sums.map(|s| (s / count as f64).sqrt());
+            let msg = format!(
+                "stride {stride:?}: rms HU (trilinear, cubic, interpolating cubic) {rms:?} over {count}"
+            );
+            assert!(count > 100_000, "{msg}");
+            assert!(rms[2] < 1.04 * rms[0], "{msg}");
+            assert!(rms[2] < 0.97 * rms[1], "{msg}");
         }
     }
 

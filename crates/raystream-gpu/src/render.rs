@@ -1179,10 +1179,7 @@ fn medium_group(
         shading: [sh.ambient, sh.diffuse, sh.specular, sh.power],
         light_dims: grid_dims.map(|n| n as u32),
         grid_points: grid_dims.iter().product::<usize>() as u32,
-        interpolation: match v.interpolation {
-            raystream_volume::Interpolation::Linear => 0,
-            raystream_volume::Interpolation::Cubic => 1,
-        },
+        interpolation: v.interpolation.kernel_code(),
         pad0: 0,
         pad1: 0,
         pad2: 0,

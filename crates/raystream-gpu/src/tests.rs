@@ -1009,7 +1009,8 @@ fn gpu_render_matches_cpu_on_the_builtin_scene() {
 
 /// Meshes and a CT volume in one scene (examples/spine_rods.toml: rods in the abdomen CT, a
 /// mirror floor, two lights with light grids): the render kernels' volume stages against the
-/// CPU's, the volume read by the cubic B-spline (the scene's default) and trilinearly.
+/// CPU's, the volume read by the cubic B-spline (the scene's default), trilinearly and by the
+/// interpolating cubic B-spline.
 #[test]
 fn gpu_render_matches_cpu_with_a_volume_in_the_scene() {
     let Some(ctx) = gpu() else { return };
@@ -1030,6 +1031,14 @@ fn gpu_render_matches_cpu_with_a_volume_in_the_scene() {
     gpu_render_matches_cpu(&ctx, &scene, &opt, Submit::Wave, "spine rods");
     scene.volume.as_mut().unwrap().interpolation = Interpolation::Linear;
     gpu_render_matches_cpu(&ctx, &scene, &opt, Submit::Wave, "spine rods, trilinear");
+    scene.volume.as_mut().unwrap().interpolation = Interpolation::CubicInterpolating;
+    gpu_render_matches_cpu(
+        &ctx,
+        &scene,
+        &opt,
+        Submit::Wave,
+        "spine rods, interpolating cubic",
+    );
 }
 
 #[test]
@@ -1186,6 +1195,10 @@ fn gpu_cinematic_rendering_matches_cpu() {
         interpolation: Interpolation::Cubic,
         ..plain
     };
+    let sharp = DvrOptions {
+        interpolation: Interpolation::CubicInterpolating,
+        ..plain
+    };
     let cam = volume_camera(&vol, 64.0 / 48.0);
     for (preset, opt, what) in [
         (TfPreset::CtBones, plain, ""),
@@ -1193,6 +1206,7 @@ fn gpu_cinematic_rendering_matches_cpu() {
         (TfPreset::CtBones, cropped, " crop+plane"),
         (TfPreset::CtMuscle, forward, " g 0.6, +0.5 EV"),
         (TfPreset::CtBones, cubic, " cubic"),
+        (TfPreset::CtMuscle, sharp, " cubic-interpolating"),
     ] {
         let name = format!("{}{what}", preset.name());
         let tf = preset.function();
@@ -1470,6 +1484,11 @@ fn gpu_volume_rendering_matches_cpu() {
         interpolation: Interpolation::Cubic,
         ..plain
     };
+    // The interpolating spline: the same fetches from the coefficients' texture.
+    let sharp = DvrOptions {
+        interpolation: Interpolation::CubicInterpolating,
+        ..plain
+    };
     for (mode, preset, base, what) in [
         (DvrMode::Dvr, TfPreset::CtBones, plain, ""),
         (DvrMode::Dvr, TfPreset::CtMuscle, plain, ""),
@@ -1490,6 +1509,18 @@ fn gpu_volume_rendering_matches_cpu() {
         (DvrMode::Dvr, TfPreset::CtBones, clipped, " crop+plane"),
         (DvrMode::Mip, TfPreset::MipBone, clipped, " crop+plane"),
         (DvrMode::Dvr, TfPreset::CtBones, cubic, " cubic"),
+        (
+            DvrMode::Dvr,
+            TfPreset::CtBones,
+            sharp,
+            " cubic-interpolating",
+        ),
+        (
+            DvrMode::Iso,
+            TfPreset::CtBone,
+            sharp,
+            " cubic-interpolating",
+        ),
         (
             DvrMode::Dvr,
             TfPreset::CtMuscle,
@@ -1568,9 +1599,10 @@ fn gpu_volume_rendering_matches_cpu() {
     }
 }
 
-/// One GPU renderer draws frames read either way, in any order (each interpolation has its own
-/// brick table and majorants): dvr and cinematic frames, trilinear, cubic and trilinear
-/// again, each the same bit for bit as a fresh renderer's.
+/// One GPU renderer draws frames read any way, in any order (each interpolation has its own
+/// brick table and majorants, and the interpolating spline its coefficients' texture): dvr
+/// and cinematic frames, trilinear, cubic, interpolating cubic and trilinear again, each the
+/// same bit for bit as a fresh renderer's.
 #[test]
 fn one_gpu_renderer_draws_either_interpolation() {
     use raystream_cpu::dvr::{DvrMode, DvrOptions, Interpolation, volume_camera};
@@ -1584,6 +1616,7 @@ fn one_gpu_renderer_draws_either_interpolation() {
         for interpolation in [
             Interpolation::Linear,
             Interpolation::Cubic,
+            Interpolation::CubicInterpolating,
             Interpolation::Linear,
         ] {
             let opt = DvrOptions {
@@ -1634,12 +1667,22 @@ fn gpu_projections_give_the_cpus_hounsfield_units() {
         ]),
         ..plain
     };
-    // The cubic B-spline's values: eight filtered fetches a sample on the GPU.
+    // The cubic B-splines' values: eight filtered fetches a sample on the GPU, of the HU or
+    // of the interpolating spline's coefficients (f16 too).
     let cubic = DvrOptions {
         interpolation: raystream_cpu::dvr::Interpolation::Cubic,
         ..plain
     };
-    for (base, what) in [(plain, ""), (cropped, " cropped"), (cubic, " cubic")] {
+    let sharp = DvrOptions {
+        interpolation: raystream_cpu::dvr::Interpolation::CubicInterpolating,
+        ..plain
+    };
+    for (base, what) in [
+        (plain, ""),
+        (cropped, " cropped"),
+        (cubic, " cubic"),
+        (sharp, " cubic-interpolating"),
+    ] {
         for mode in [
             DvrMode::Mip,
             DvrMode::MinIp,

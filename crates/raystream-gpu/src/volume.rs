@@ -17,6 +17,7 @@ use raystream_cpu::dvr::{
     BRICK, DvrMode, DvrOptions, Interpolation, LightGrid, Marcher, Sight, brick_table,
     over_background, scene_to_lps,
 };
+use raystream_cpu::sampling::bspline_coefficients;
 use raystream_io::Volume;
 use raystream_math::Vec3;
 use raystream_scene::Camera;
@@ -63,52 +64,63 @@ pub(crate) struct GpuVolume {
     pub to_index: ([Vec3; 3], Vec3),
 }
 
+/// A grid of `dims` values (x fastest) as an R16Float 3D texture.
+pub(crate) fn volume_texture(
+    ctx: &GpuContext,
+    label: &str,
+    dims: [usize; 3],
+    values: &[f32],
+) -> Result<wgpu::TextureView, GpuError> {
+    let max = ctx.limits.max_texture_dimension_3d as usize;
+    if dims.iter().any(|&n| n > max) {
+        return Err(ctx.err(format!(
+            "a {}x{}x{} volume exceeds the adapter's 3D texture limit of {max} per side",
+            dims[0], dims[1], dims[2]
+        )));
+    }
+    let size = wgpu::Extent3d {
+        width: dims[0] as u32,
+        height: dims[1] as u32,
+        depth_or_array_layers: dims[2] as u32,
+    };
+    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D3,
+        format: wgpu::TextureFormat::R16Float,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    let halves: Vec<u16> = values
+        .iter()
+        .map(|&v| half::f16::from_f32(v).to_bits())
+        .collect();
+    ctx.queue.write_texture(
+        texture.as_image_copy(),
+        bytemuck::cast_slice(&halves),
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(2 * size.width),
+            rows_per_image: Some(size.height),
+        },
+        size,
+    );
+    Ok(texture.create_view(&Default::default()))
+}
+
 impl GpuVolume {
-    /// Uploads `vol` (as R16Float) and `tf`'s control points; `marcher` gives the transforms
-    /// and the bricks' count.
+    /// Uploads the grid `marcher` reads of `vol` (its HU, or the interpolating spline's
+    /// coefficients) as R16Float and `tf`'s control points; `marcher` gives the transforms and
+    /// the bricks' count too.
     pub(crate) fn new(
         ctx: &GpuContext,
         vol: &Volume,
         tf: &TransferFunction,
         marcher: &Marcher,
     ) -> Result<GpuVolume, GpuError> {
-        let max = ctx.limits.max_texture_dimension_3d as usize;
-        if vol.dims.iter().any(|&n| n > max) {
-            return Err(ctx.err(format!(
-                "a {}x{}x{} volume exceeds the adapter's 3D texture limit of {max} per side",
-                vol.dims[0], vol.dims[1], vol.dims[2]
-            )));
-        }
-        let size = wgpu::Extent3d {
-            width: vol.dims[0] as u32,
-            height: vol.dims[1] as u32,
-            depth_or_array_layers: vol.dims[2] as u32,
-        };
-        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("CT volume (HU, f16)"),
-            size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D3,
-            format: wgpu::TextureFormat::R16Float,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
-        let halves: Vec<u16> = vol
-            .data
-            .iter()
-            .map(|&v| half::f16::from_f32(v).to_bits())
-            .collect();
-        ctx.queue.write_texture(
-            texture.as_image_copy(),
-            bytemuck::cast_slice(&halves),
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(2 * size.width),
-                rows_per_image: Some(size.height),
-            },
-            size,
-        );
+        let view = volume_texture(ctx, "CT volume (HU, f16)", vol.dims, marcher.grid())?;
         let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("trilinear"),
             mag_filter: wgpu::FilterMode::Linear,
@@ -124,7 +136,7 @@ impl GpuVolume {
         let none = wgpu::BufferUsages::empty();
         let brick_dims = marcher.brick_table().0;
         Ok(GpuVolume {
-            view: texture.create_view(&Default::default()),
+            view,
             sampler,
             opacity: ctx.storage("opacity points", bytemuck::cast_slice(&opacity), none)?,
             color: ctx.storage("color points", bytemuck::cast_slice(&color), none)?,
@@ -176,11 +188,15 @@ pub struct GpuVolumeRenderer<'a> {
     /// Cinematic paths traced so far, added to as each dispatch completes (what a progress bar
     /// counts: `width · height · spp` a frame).
     pub paths_done: AtomicU64,
+    /// The interpolating cubic B-spline's coefficients and their texture, made by the first
+    /// frame that reads them.
+    coefficients: std::sync::OnceLock<Vec<f32>>,
+    coefficient_view: std::sync::OnceLock<wgpu::TextureView>,
     /// The majorant grids, per interpolation (`Interpolation as usize`).
-    majorants: [std::sync::OnceLock<wgpu::Buffer>; 2],
+    majorants: [std::sync::OnceLock<wgpu::Buffer>; 3],
     /// The brick tables of dvr frames that skip empty space, per interpolation, made on first
     /// use (a cubic sample reaches a voxel further than a trilinear one).
-    bricks: [std::sync::OnceLock<wgpu::Buffer>; 2],
+    bricks: [std::sync::OnceLock<wgpu::Buffer>; 3],
     /// cinematic: a frame's running sums between its dispatches.
     accum: Mutex<Option<wgpu::Buffer>>,
     /// cinematic: at most this many paths a dispatch (a frame's samples are split into
@@ -271,6 +287,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             guide_pipeline,
             denoiser: std::sync::OnceLock::new(),
             paths_done: AtomicU64::new(0),
+            coefficients: Default::default(),
+            coefficient_view: Default::default(),
             majorants: Default::default(),
             bricks: Default::default(),
             accum: Mutex::new(None),
@@ -411,10 +429,8 @@ impl<'a> GpuVolumeRenderer<'a> {
         if let Some(b) = cell.get() {
             return Ok(b);
         }
-        let m = Majorants::new(
-            &Marcher::interpolated(self.vol, None, interpolation),
-            self.tf,
-        );
+        let grid = std::borrow::Cow::Borrowed(self.grid(interpolation));
+        let m = Majorants::new(&Marcher::with_grid(self.vol, grid, interpolation), self.tf);
         let b = self.ctx.storage(
             "majorants",
             bytemuck::cast_slice(&m.values),
@@ -429,8 +445,39 @@ impl<'a> GpuVolumeRenderer<'a> {
         if let Some(b) = cell.get() {
             return Ok(b);
         }
-        let b = brick_buffer(self.ctx, &brick_table(self.vol, self.tf, interpolation))?;
+        let table = brick_table(
+            self.vol.dims,
+            self.grid(interpolation),
+            self.tf,
+            interpolation,
+        );
+        let b = brick_buffer(self.ctx, &table)?;
         Ok(cell.get_or_init(|| b))
+    }
+
+    /// The values frames read as `interpolation` read: the voxels, or the interpolating
+    /// spline's coefficients (computed on first use).
+    fn grid(&self, interpolation: Interpolation) -> &[f32] {
+        if interpolation.prefiltered() {
+            self.coefficients
+                .get_or_init(|| bspline_coefficients(self.vol.dims, &self.vol.data))
+        } else {
+            &self.vol.data
+        }
+    }
+
+    /// The texture frames read as `interpolation` read: the HU, or the interpolating spline's
+    /// coefficients (uploaded on first use).
+    fn texture(&self, interpolation: Interpolation) -> Result<&wgpu::TextureView, GpuError> {
+        if !interpolation.prefiltered() {
+            return Ok(&self.gpu.view);
+        }
+        if let Some(v) = self.coefficient_view.get() {
+            return Ok(v);
+        }
+        let label = "interpolating spline coefficients (f16)";
+        let v = volume_texture(self.ctx, label, self.vol.dims, self.grid(interpolation))?;
+        Ok(self.coefficient_view.get_or_init(|| v))
     }
 
     /// The denoiser's guides of a cinematic frame seen by `cam`, as
@@ -473,9 +520,10 @@ impl<'a> GpuVolumeRenderer<'a> {
         let n = opt.width as u64 * opt.height as u64;
         let out = ctx.work_buffer("guides", 32 * n, wgpu::BufferUsages::COPY_SRC)?;
         let majorants = self.majorant_buffer(opt.interpolation)?;
+        let texture = self.texture(opt.interpolation)?;
         let entries: Vec<_> = [
             (0, param_buf.as_entire_binding()),
-            (1, wgpu::BindingResource::TextureView(&self.gpu.view)),
+            (1, wgpu::BindingResource::TextureView(texture)),
             (2, wgpu::BindingResource::Sampler(&self.gpu.sampler)),
             (3, self.gpu.opacity.as_entire_binding()),
             (4, self.gpu.color.as_entire_binding()),
@@ -623,10 +671,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             sample_count: opt.spp,
             anisotropy: opt.anisotropy,
             light_scale: opt.exposure_scale(),
-            interpolation: match opt.interpolation {
-                Interpolation::Linear => 0,
-                Interpolation::Cubic => 1,
-            },
+            interpolation: opt.interpolation.kernel_code(),
             pad3: 0,
         };
         Ok((params, row_buf))
@@ -739,9 +784,10 @@ impl<'a> GpuVolumeRenderer<'a> {
         };
         // A frame of one dispatch binds a placeholder.
         let accum = accum.as_ref().unwrap_or(&self.no_rows);
+        let texture = self.texture(opt.interpolation)?;
         let resource = |b: u32| match b {
             0 => param_buf.as_entire_binding(),
-            1 => wgpu::BindingResource::TextureView(&self.gpu.view),
+            1 => wgpu::BindingResource::TextureView(texture),
             2 => wgpu::BindingResource::Sampler(&self.gpu.sampler),
             3 => self.gpu.opacity.as_entire_binding(),
             4 => self.gpu.color.as_entire_binding(),

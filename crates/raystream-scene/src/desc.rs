@@ -45,8 +45,9 @@ pub struct VolumeDesc {
     /// Whether the volume is lit through shadow rays (its own and the meshes' shadows; default
     /// true). Meshes always see the volume in their shadow rays.
     pub shadows: Option<bool>,
-    /// How the volume is read between voxel centres: "linear" (trilinear) or "cubic" (the
-    /// cubic B-spline, the default, as `render --mode dvr`'s).
+    /// How the volume is read between voxel centres: "linear" (trilinear), "cubic" (the cubic
+    /// B-spline, the default, as `render --mode dvr`'s) or "cubic-interpolating" (the cubic
+    /// B-spline through every voxel's value).
     pub interpolation: Option<String>,
 }
 

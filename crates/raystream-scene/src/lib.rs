@@ -31,7 +31,7 @@
 //! [volume]                  # optional CT volume among the meshes (see `SceneVolume`)
 //! path = "ct.nii.gz"        # relative to this file
 //! preset = "ct-bones"       # or tf = "tf.toml"
-//! interpolation = "cubic"   # the default; or "linear"
+//! interpolation = "cubic"   # the default; or "linear", "cubic-interpolating"
 //! ```
 //!
 //! With a volume, the scene frame is millimetres with x = the patient's left, y = superior,
@@ -202,7 +202,13 @@ impl SceneVolume {
             Some(name) => Interpolation::ALL
                 .into_iter()
                 .find(|i| i.name() == name)
-                .ok_or_else(|| format!("volume: unknown interpolation '{name}' (linear, cubic)"))?,
+                .ok_or_else(|| {
+                    let names: Vec<_> = Interpolation::ALL.iter().map(|i| i.name()).collect();
+                    format!(
+                        "volume: unknown interpolation '{name}' ({})",
+                        names.join(", ")
+                    )
+                })?,
         };
         let volume = raystream_io::load_volume(
             &base_dir.join(&d.path),
@@ -1185,6 +1191,10 @@ mod tests {
             ("", Interpolation::Cubic),
             ("interpolation = \"cubic\"", Interpolation::Cubic),
             ("interpolation = \"linear\"", Interpolation::Linear),
+            (
+                "interpolation = \"cubic-interpolating\"",
+                Interpolation::CubicInterpolating,
+            ),
         ] {
             let s = compile(&format!("{CT}{extra}\n{obj}")).unwrap();
             assert_eq!(s.volume.unwrap().interpolation, want, "{extra}");
@@ -1204,7 +1214,7 @@ mod tests {
             ("step = -1", "step -1 must be a positive number"),
             (
                 "interpolation = \"tricubic\"",
-                "unknown interpolation 'tricubic' (linear, cubic)",
+                "unknown interpolation 'tricubic' (linear, cubic, cubic-interpolating)",
             ),
         ] {
             let e = compile(&format!("{CT}{extra}\n{obj}"))

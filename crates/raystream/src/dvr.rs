@@ -194,8 +194,9 @@ pub fn default_interpolation(mode: DvrMode) -> Interpolation {
 /// Renders frames of one volume on the CPU or the GPU.
 pub enum Renderer<'a> {
     Cpu {
-        /// The volume, with its brick tables and majorants kept from frame to frame.
-        volume: CpuVolume<'a>,
+        /// The volume, with its spline coefficients, brick tables and majorants kept from frame
+        /// to frame.
+        volume: Box<CpuVolume<'a>>,
         /// Cinematic paths traced so far (a progress bar's count).
         done: AtomicU64,
     },
@@ -230,7 +231,7 @@ impl<'a> Renderer<'a> {
         Ok(match backend {
             Backend::Gpu(ctx) => Renderer::Gpu(Box::new(GpuVolumeRenderer::new(ctx, volume, tf)?)),
             Backend::Cpu => Renderer::Cpu {
-                volume: CpuVolume::new(volume, tf),
+                volume: Box::new(CpuVolume::new(volume, tf)),
                 done: AtomicU64::new(0),
             },
         })

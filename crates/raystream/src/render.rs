@@ -911,6 +911,7 @@ pub fn interpolation_words(i: raystream_cpu::dvr::Interpolation) -> &'static str
     match i {
         raystream_cpu::dvr::Interpolation::Linear => "trilinear",
         raystream_cpu::dvr::Interpolation::Cubic => "cubic B-spline",
+        raystream_cpu::dvr::Interpolation::CubicInterpolating => "interpolating cubic B-spline",
     }
 }
 
