@@ -32,9 +32,7 @@ use raystream_volume::TransferFunction;
 use crate::Image;
 use crate::cpr::CurvedPlane;
 pub use crate::sampling::Interpolation;
-use crate::sampling::{
-    CUBIC_OUTER_WEIGHT, bspline_coefficients, tricubic, tricubic_value, trilinear,
-};
+use crate::sampling::{bspline_coefficients, spline_hull_at, tricubic, tricubic_value, trilinear};
 
 /// What a ray computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -263,9 +261,8 @@ pub struct DvrStats {
     pub denoise: Option<crate::denoise::DenoiseTimes>,
 }
 
-/// Bricks of `BRICK`³ cells: a brick holds the HU range of the voxels its cells' samples read
-/// (one more layer on the far sides trilinearly; with the cubic B-spline one more on the near
-/// sides and two on the far ones).
+/// Bricks of `BRICK`³ cells: a brick holds a range of the values its samples take
+/// ([`cell_ranges`]).
 pub const BRICK: usize = 8;
 
 /// The volume prepared for marching: index-space transforms in f32 and the brick table.
@@ -292,19 +289,17 @@ pub(crate) fn cell_dims(dims: [usize; 3], cell: usize) -> [usize; 3] {
 
 /// Per cell of `cell`³ (x fastest; [`cell_dims`]) of the grid `grid` (`dims`, the values
 /// `interpolation` reads: [`spline_grid`]), a range (lo, hi) that holds every value its
-/// samples take, interpolated as `interpolation`. Trilinear: the range of the voxels they read,
-/// the cell's own and one more layer on the far sides. Cubic: the spline also reads one more
-/// layer on the near sides and two on the far ones, but gives them at most
-/// [`CUBIC_OUTER_WEIGHT`] of its weight, so its values lie within the trilinear range widened
-/// by that share of the way out to the wider voxels' range (a bright voxel just past a cell
-/// raises its bound by 42 % of the difference, not all of it).
+/// samples take, interpolated as `interpolation`. Trilinear: the range of the voxels they
+/// read, the cell's own corners. The cubic B-splines: the union over the same corners of the
+/// bound [`spline_hull_at`] gives there (the convex hull of the spline's Bézier control
+/// points), widened by 10⁻⁵ of the values (the spline's sum rounds in f32, and where the bound
+/// is met, a voxel centre, it may round above it).
 pub(crate) fn cell_ranges(
     dims: [usize; 3],
     grid: &[f32],
     cell: usize,
     interpolation: Interpolation,
 ) -> Vec<(f32, f32)> {
-    let reach = interpolation.reach();
     let [nx, ny, nz] = dims;
     let cells = cell_dims(dims, cell);
     (0..cells[0] * cells[1] * cells[2])
@@ -315,35 +310,30 @@ pub(crate) fn cell_ranges(
                 b / cells[0] % cells[1],
                 b / (cells[0] * cells[1]),
             );
-            // The trilinear reach, and the interpolation's.
-            let near = |bi: usize, n: usize| bi * cell..=((bi + 1) * cell).min(n - 1);
-            let range = |bi: usize, n: usize| {
-                (bi * cell).saturating_sub(reach)..=((bi + 1) * cell + reach).min(n - 1)
-            };
-            let (x, y, z) = (near(bx, nx), near(by, ny), near(bz, nz));
+            let corners = |bi: usize, n: usize| bi * cell..=((bi + 1) * cell).min(n - 1);
             let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            let (mut out_lo, mut out_hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            for k in range(bz, nz) {
-                for j in range(by, ny) {
-                    for i in range(bx, nx) {
-                        let v = grid[i + nx * (j + ny * k)];
-                        out_lo = out_lo.min(v);
-                        out_hi = out_hi.max(v);
-                        if x.contains(&i) && y.contains(&j) && z.contains(&k) {
-                            lo = lo.min(v);
-                            hi = hi.max(v);
-                        }
+            for k in corners(bz, nz) {
+                for j in corners(by, ny) {
+                    for i in corners(bx, nx) {
+                        let (l, h) = match interpolation {
+                            Interpolation::Linear => {
+                                let v = grid[i + nx * (j + ny * k)];
+                                (v, v)
+                            }
+                            Interpolation::Cubic | Interpolation::CubicInterpolating => {
+                                spline_hull_at(dims, grid, [i, j, k])
+                            }
+                        };
+                        lo = lo.min(l);
+                        hi = hi.max(h);
                     }
                 }
             }
             match interpolation {
                 Interpolation::Linear => (lo, hi),
-                // Widened by 10⁻⁵ of the values: the spline's sum rounds in f32, and where
-                // the bound is met (a voxel centre) it may round above it.
-                Interpolation::Cubic | Interpolation::CubicInterpolating => (
-                    lo - CUBIC_OUTER_WEIGHT * (lo - out_lo) - 1e-5 * (1.0 + lo.abs()),
-                    hi + CUBIC_OUTER_WEIGHT * (out_hi - hi) + 1e-5 * (1.0 + hi.abs()),
-                ),
+                Interpolation::Cubic | Interpolation::CubicInterpolating => {
+                    (lo - 1e-5 * (1.0 + lo.abs()), hi + 1e-5 * (1.0 + hi.abs()))
+                }
             }
         })
         .collect()
@@ -943,16 +933,23 @@ impl<'a> CpuVolume<'a> {
         }
     }
 
-    /// The marcher of frames `opt` describes: the brick table when dvr skips empty space.
-    fn marcher(&self, opt: &DvrOptions) -> Marcher<'_> {
-        use std::borrow::Cow;
-        let i = opt.interpolation;
-        let grid: &[f32] = if i.prefiltered() {
+    /// The values frames read as `interpolation` read: the voxels, or the interpolating
+    /// spline's coefficients, computed here the first time (what a caller that times frames
+    /// may call first, to time this apart).
+    pub fn grid(&self, interpolation: Interpolation) -> &[f32] {
+        if interpolation.prefiltered() {
             self.coefficients
                 .get_or_init(|| bspline_coefficients(self.vol.dims, &self.vol.data))
         } else {
             &self.vol.data
-        };
+        }
+    }
+
+    /// The marcher of frames `opt` describes: the brick table when dvr skips empty space.
+    fn marcher(&self, opt: &DvrOptions) -> Marcher<'_> {
+        use std::borrow::Cow;
+        let i = opt.interpolation;
+        let grid = self.grid(i);
         if opt.skip_empty && opt.mode == DvrMode::Dvr {
             let table = self.bricks[i as usize]
                 .get_or_init(|| brick_table(self.vol.dims, grid, self.tf, i));

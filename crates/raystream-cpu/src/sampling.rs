@@ -9,18 +9,22 @@
 //! "wood grain" that a finer step does not remove). The cubic B-spline is C² — its gradient is
 //! continuous — and reproduces linear ramps exactly; it smooths the data a little (a voxel's
 //! own weight is 8/27 at its centre, a kernel of σ ≈ 0.58 voxel), never overshoots (its weights
-//! are non-negative and sum to 1, so a value stays within its 4³ voxels' range, which keeps
-//! empty-space skipping and the majorants of cinematic tracking exact), and gives the gradient
-//! analytically from the same 4³ voxels.
+//! are non-negative and sum to 1, so a value stays within its 4³ voxels' range), and gives the
+//! gradient analytically from the same 4³ voxels.
 //!
 //! That blur is the approximating spline's price: a stent strut or a thin cortex one voxel
 //! wide keeps only part of its peak HU. The interpolating cubic B-spline
 //! ([`bspline_coefficients`]) runs the same spline over coefficients prefiltered so that it
 //! passes through every voxel's value: as smooth, as sharp as the data, and fourth-order
-//! accurate between voxels where trilinear is second-order. Its coefficients may overshoot the
-//! voxels near a sharp edge (the spline rings a little there), but the spline still never
-//! leaves the range of the 4³ *coefficients* it reads, so cell ranges taken over the
-//! coefficient grid keep empty-space skipping and the majorants exact.
+//! accurate between voxels where trilinear is second-order. Near a sharp edge its coefficients
+//! ring, alternately over and under the voxels, and the spline overshoots a little.
+//!
+//! Empty-space skipping and the majorants of cinematic tracking need a range of the values
+//! each cell's samples take. For either spline, [`spline_hull_at`] gives one from the convex
+//! hull of the spline's Bézier control points, which depend only on the coefficients around
+//! the cell's own corners: tighter than the range of all 4³ values a sample reads (it brought
+//! the cubic B-spline's samples back to trilinear's). Over the interpolating spline's
+//! coefficients, which carry the data's noise amplified, it is still loose (BENCHMARKS.md).
 //!
 //! Written here rather than taken from a crate: the GPU (volume.wgsl) evaluates the same
 //! spline with eight hardware-filtered fetches (Sigg & Hadwiger, "Fast third-order texture
@@ -32,11 +36,53 @@ use raystream_math::Vec3;
 
 pub use raystream_volume::Interpolation;
 
-/// At most this share of the cubic B-spline's weight at a point falls on voxels a trilinear
-/// sample there would not read (i − 1 and i + 2 on some axis: [`Interpolation::reach`]): per axis the voxels i and i + 1
-/// hold w1 + w2 = (5 + 3t − 3t²)/6 ≥ 5/6 of it, so all three axes' inner voxels together hold
-/// at least (5/6)³, and the rest is at most 1 − (5/6)³ = 91/216.
-pub(crate) const CUBIC_OUTER_WEIGHT: f32 = 91.0 / 216.0;
+/// A range (lo, hi) holding every value the cubic B-spline over `grid` (`dims`; the voxels,
+/// or the interpolating spline's coefficients) takes in the cells that have voxel `v` as a
+/// corner, as far as `v` bounds them: the cells' ranges are the union of this over their
+/// eight corners.
+///
+/// On the cell [i, i + 1] of one axis the spline with coefficients c is a cubic whose Bézier
+/// control points are (c[i − 1] + 4c[i] + c[i + 1])/6 (its value at i), (2c[i] + c[i + 1])/3,
+/// (c[i] + 2c[i + 1])/3 and its value at i + 1: the end points are the coefficients filtered by
+/// [1 4 1]/6 at the cell's own corners, the inner ones convex combinations of the unfiltered
+/// coefficients there. The tricubic piece's 4³ control points are the tensor product, so each
+/// is a convex combination, over the cell's 2³ corners, of one of the eight grids that filter
+/// the coefficients along some of the axes and not the others; a tensor-product Bézier patch
+/// lies in the convex hull of its control points. So the range of those eight grids' values
+/// at `v` (clamped at the edges, as the spline reads them) bounds the spline around `v`. It
+/// reads only the cell's corners' neighbours, not the 4³ values' whole range, which past a
+/// sharp edge, where the interpolating spline's coefficients ring, is far wider than the
+/// spline's (tested).
+pub(crate) fn spline_hull_at(dims: [usize; 3], grid: &[f32], v: [usize; 3]) -> (f32, f32) {
+    let at = |d: [isize; 3]| {
+        let idx = [0, 1, 2].map(|a| (v[a] as isize + d[a]).clamp(0, dims[a] as isize - 1) as usize);
+        grid[idx[0] + dims[0] * (idx[1] + dims[1] * idx[2])]
+    };
+    let filter = |a: f32, b: f32, c: f32| (a + 4.0 * b + c) / 6.0;
+    // Along x, for each (dy, dz): the coefficient itself and filtered.
+    let mut x = [[[0.0f32; 2]; 3]; 3];
+    for (dz, plane) in x.iter_mut().enumerate() {
+        for (dy, row) in plane.iter_mut().enumerate() {
+            let n = [-1, 0, 1].map(|dx| at([dx, dy as isize - 1, dz as isize - 1]));
+            *row = [n[1], filter(n[0], n[1], n[2])];
+        }
+    }
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for sx in [0, 1] {
+        // Along y, then z.
+        let y = [0, 1, 2].map(|dz| {
+            let r = |dy: usize| x[dz][dy][sx];
+            [r(1), filter(r(0), r(1), r(2))]
+        });
+        for sy in [0, 1] {
+            for value in [y[1][sy], filter(y[0][sy], y[1][sy], y[2][sy])] {
+                lo = lo.min(value);
+                hi = hi.max(value);
+            }
+        }
+    }
+    (lo, hi)
+}
 
 /// Trilinear interpolation at continuous index `p` of a grid of `dims` values read by `at`,
 /// clamped to the grid (the GPU's `sample_at` and `light_at` compute the same).
@@ -363,42 +409,50 @@ mod tests {
             }
         }
 
-        /// Never outside the range of the 4³ voxels around the point, nor further past the
-        /// range of the 2³ a trilinear sample reads than [`CUBIC_OUTER_WEIGHT`] of the way to
-        /// the 4³'s (what empty-space skipping's and the majorants' cell ranges rely on).
+        /// Never outside the range of the 4³ values around the point, nor outside the hull
+        /// [`spline_hull_at`] gives at its cell's corners (what empty-space skipping's and the
+        /// majorants' cell ranges rely on), over the voxels and over their interpolating
+        /// coefficients (which ring: the hull is what keeps the bound tight there).
         #[test]
-        fn tricubic_stays_within_its_voxels(
+        fn tricubic_stays_within_its_cells_hull(
             seed in 1u64..u64::MAX,
             x in 0.0f32..6.0, y in 0.0f32..5.0, z in 0.0f32..4.0,
         ) {
             let dims = [7, 6, 5];
             let data = grid(dims, seed);
-            let (v, _) = tricubic(dims, &data, Vec3::new(x, y, z));
-            let (_, ix) = cubic_axis(x, 7);
-            let (_, iy) = cubic_axis(y, 6);
-            let (_, iz) = cubic_axis(z, 5);
-            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            let (mut inner_lo, mut inner_hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            for (c, &k) in iz.iter().enumerate() {
-                for (b, &j) in iy.iter().enumerate() {
-                    for (a, &i) in ix.iter().enumerate() {
-                        let s = data[i + 7 * (j + 6 * k)];
-                        lo = lo.min(s);
-                        hi = hi.max(s);
-                        if [a, b, c].iter().all(|&n| n == 1 || n == 2) {
-                            inner_lo = inner_lo.min(s);
-                            inner_hi = inner_hi.max(s);
+            let coefficients = bspline_coefficients(dims, &data);
+            for g in [&data, &coefficients] {
+                let (v, _) = tricubic(dims, g, Vec3::new(x, y, z));
+                let (_, ix) = cubic_axis(x, 7);
+                let (_, iy) = cubic_axis(y, 6);
+                let (_, iz) = cubic_axis(z, 5);
+                let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                for &k in &iz {
+                    for &j in &iy {
+                        for &i in &ix {
+                            lo = lo.min(g[i + 7 * (j + 6 * k)]);
+                            hi = hi.max(g[i + 7 * (j + 6 * k)]);
                         }
                     }
                 }
+                prop_assert!(v >= lo - 1e-3 && v <= hi + 1e-3, "{} outside [{}, {}]", v, lo, hi);
+                let (mut hull_lo, mut hull_hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                for k in [iz[1], iz[2]] {
+                    for j in [iy[1], iy[2]] {
+                        for i in [ix[1], ix[2]] {
+                            let (l, h) = spline_hull_at(dims, g, [i, j, k]);
+                            hull_lo = hull_lo.min(l);
+                            hull_hi = hull_hi.max(h);
+                        }
+                    }
+                }
+                prop_assert!(
+                    v >= hull_lo - 1e-3 && v <= hull_hi + 1e-3,
+                    "{} outside [{}, {}]", v, hull_lo, hull_hi
+                );
+                // Never wider than the 4³ values' range.
+                prop_assert!(hull_lo >= lo - 1e-3 && hull_hi <= hi + 1e-3);
             }
-            prop_assert!(v >= lo - 1e-3 && v <= hi + 1e-3, "{} outside [{}, {}]", v, lo, hi);
-            let w = CUBIC_OUTER_WEIGHT;
-            let (tight_lo, tight_hi) = (inner_lo - w * (inner_lo - lo), inner_hi + w * (hi - inner_hi));
-            prop_assert!(
-                v >= tight_lo - 1e-3 && v <= tight_hi + 1e-3,
-                "{} outside [{}, {}]", v, tight_lo, tight_hi
-            );
         }
     }
 
@@ -540,30 +594,52 @@ mod tests {
         }
     }
 
-    /// The bound on the weight outside the trilinear reach is reached, at a voxel centre: with
-    /// the 2³ voxels a trilinear sample there reads at 0 HU and all others at 1000, the spline
-    /// gives 1000 · (1 − (5/6)³) there. (A smaller bound would let cell ranges miss it.)
+    /// The hull is met and cuts the coefficients' ringing: at a voxel centre the spline's
+    /// value is one of the eight grids' values there (the coefficients filtered along every
+    /// axis), so no smaller bound holds there; past a step of 2000 HU, where the interpolating
+    /// coefficients ring, the hull of the cells one and two voxels on stays within 12.5 % and
+    /// 3.5 % of the step, where the range of the 4³ coefficients they read spreads over 46 %
+    /// and 12 % (what empty-space skipping and the majorants would otherwise take in).
     #[test]
-    fn the_outer_weight_bound_is_tight() {
-        let dims = [7, 7, 7];
-        let mut data = vec![1000.0f32; 343];
-        for k in 3..5 {
-            for j in 3..5 {
-                for i in 3..5 {
-                    data[i + 7 * (j + 7 * k)] = 0.0;
-                }
-            }
+    fn the_hull_is_met_and_cuts_the_ringing() {
+        let dims = [12, 3, 3];
+        // −1000 HU up to voxel 5 along x, 1000 from voxel 6.
+        let data: Vec<f32> = (0..108)
+            .map(|n| if n % 12 < 6 { -1000.0 } else { 1000.0 })
+            .collect();
+        let c = bspline_coefficients(dims, &data);
+        for i in 0..12 {
+            let (v, _) = tricubic(dims, &c, Vec3::new(i as f32, 1.0, 1.0));
+            let (lo, hi) = spline_hull_at(dims, &c, [i, 1, 1]);
+            assert!((v - data[i + 12]).abs() < 1e-2, "{v} at {i}");
+            assert!(
+                (v - lo).abs() < 1e-3 || (hi - v).abs() < 1e-3,
+                "{v} within [{lo}, {hi}] at {i}, not on it"
+            );
         }
-        let (v, _) = tricubic(dims, &data, Vec3::splat(3.0));
-        assert!((v - 1000.0 * CUBIC_OUTER_WEIGHT).abs() < 1e-3, "{v}");
-        // Anywhere else in the cell less of the weight lies outside.
-        for p in [
-            Vec3::splat(3.5),
-            Vec3::new(3.2, 3.9, 3.0),
-            Vec3::new(3.99, 3.01, 3.5),
-        ] {
-            let (v, _) = tricubic(dims, &data, p);
-            assert!(v < 1000.0 * CUBIC_OUTER_WEIGHT + 1e-3, "{v} at {p}");
+        // Per cell [i, i + 1] on x: the hull's width, and the spread of the coefficients the
+        // spline reads there (i − 1 … i + 2, clamped).
+        let widths = |cell: usize| {
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for i in cell..=cell + 1 {
+                let (l, h) = spline_hull_at(dims, &c, [i, 1, 1]);
+                lo = lo.min(l);
+                hi = hi.max(h);
+            }
+            let read: Vec<f32> = (cell as isize - 1..=cell as isize + 2)
+                .map(|i| c[i.clamp(0, 11) as usize + 12 * 4])
+                .collect();
+            let spread = read.iter().cloned().fold(f32::MIN, f32::max)
+                - read.iter().cloned().fold(f32::MAX, f32::min);
+            ((hi - lo) / 2000.0, spread / 2000.0)
+        };
+        // Measured: cell 7 (0.124, 0.464), cell 8 (0.033, 0.124); the cells 3 and 2 mirror them.
+        for (cell, hull, spread) in [(7, 0.125, 0.45), (8, 0.035, 0.12), (3, 0.125, 0.45)] {
+            let (h, s) = widths(cell);
+            assert!(
+                h < hull && s > spread,
+                "cell {cell}: hull {h}, coefficients {s}"
+            );
         }
     }
 

@@ -466,6 +466,14 @@ impl<'a> GpuVolumeRenderer<'a> {
         }
     }
 
+    /// Makes what frames read as `interpolation` need before any frame does: the interpolating
+    /// spline's coefficients and their texture (a caller that times frames may call this
+    /// first, to time it apart).
+    pub fn prepare(&self, interpolation: Interpolation) -> Result<(), GpuError> {
+        self.texture(interpolation)?;
+        self.ctx.wait()
+    }
+
     /// The texture frames read as `interpolation` read: the HU, or the interpolating spline's
     /// coefficients (uploaded on first use).
     fn texture(&self, interpolation: Interpolation) -> Result<&wgpu::TextureView, GpuError> {

@@ -48,14 +48,6 @@ impl Interpolation {
         }
     }
 
-    /// Voxels a sample in cell i (index i ≤ x < i + 1) reads beyond [i, i + 1] on either side.
-    pub fn reach(self) -> usize {
-        match self {
-            Interpolation::Linear => 0,
-            Interpolation::Cubic | Interpolation::CubicInterpolating => 1,
-        }
-    }
-
     /// Whether the spline reads prefiltered coefficients rather than the voxels themselves.
     pub fn prefiltered(self) -> bool {
         self == Interpolation::CubicInterpolating

@@ -438,6 +438,10 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
         let t = Instant::now();
         let renderer = crate::dvr::Renderer::new(&backend, &volume, &tf)?;
         let upload_ms = ms(t.elapsed());
+        // The interpolating spline's coefficients, timed apart from upload and frames.
+        let t = Instant::now();
+        renderer.prepare(base.interpolation)?;
+        let coefficients_ms = base.interpolation.prefiltered().then(|| ms(t.elapsed()));
         for &shadows in shadow_cases {
             let opt = DvrOptions { shadows, ..base };
             let cam0 = volume_camera(&volume, aspect);
@@ -521,6 +525,7 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                 "load_ms": round3(load_ms),
                 "resample_ms": resample_ms.map(round3),
                 "upload_ms": round3(upload_ms),
+                "coefficients_ms": coefficients_ms.map(round3),
                 "frame_ms": round3(frame),
                 "frame_ms_min": round3(frame_min),
                 "frames_per_s": round3(1e3 / frame),

@@ -237,6 +237,18 @@ impl<'a> Renderer<'a> {
         })
     }
 
+    /// Makes what frames read as `interpolation` need before any frame does (the interpolating
+    /// spline's coefficients, and on the GPU their texture).
+    pub fn prepare(&self, interpolation: Interpolation) -> Result<()> {
+        match self {
+            Renderer::Gpu(g) => g.prepare(interpolation)?,
+            Renderer::Cpu { volume, .. } => {
+                volume.grid(interpolation);
+            }
+        }
+        Ok(())
+    }
+
     /// Cinematic paths traced so far, on either device (a progress bar's count).
     pub fn paths_done(&self) -> u64 {
         match self {
