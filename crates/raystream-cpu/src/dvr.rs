@@ -261,8 +261,9 @@ pub struct DvrStats {
     pub denoise: Option<crate::denoise::DenoiseTimes>,
 }
 
-/// Bricks of `BRICK`³ cells: a brick holds a range of the values its samples take
-/// ([`cell_ranges`]).
+/// Bricks of `BRICK`³ cells: a brick holds a range of the values its samples take (the
+/// corner voxels' trilinearly; the hull of the spline's Bézier control points with the cubic
+/// B-splines).
 pub const BRICK: usize = 8;
 
 /// The volume prepared for marching: index-space transforms in f32 and the brick table.

@@ -20,7 +20,7 @@
 //! ring, alternately over and under the voxels, and the spline overshoots a little.
 //!
 //! Empty-space skipping and the majorants of cinematic tracking need a range of the values
-//! each cell's samples take. For either spline, [`spline_hull_at`] gives one from the convex
+//! each cell's samples take. For either spline, `spline_hull_at` gives one from the convex
 //! hull of the spline's Bézier control points, which depend only on the coefficients around
 //! the cell's own corners: tighter than the range of all 4³ values a sample reads (it brought
 //! the cubic B-spline's samples back to trilinear's). Over the interpolating spline's
@@ -41,11 +41,11 @@ pub use raystream_volume::Interpolation;
 /// corner, as far as `v` bounds them: the cells' ranges are the union of this over their
 /// eight corners.
 ///
-/// On the cell [i, i + 1] of one axis the spline with coefficients c is a cubic whose Bézier
-/// control points are (c[i − 1] + 4c[i] + c[i + 1])/6 (its value at i), (2c[i] + c[i + 1])/3,
-/// (c[i] + 2c[i + 1])/3 and its value at i + 1: the end points are the coefficients filtered by
-/// [1 4 1]/6 at the cell's own corners, the inner ones convex combinations of the unfiltered
-/// coefficients there. The tricubic piece's 4³ control points are the tensor product, so each
+/// On the cell `[i, i + 1]` of one axis the spline with coefficients `c` is a cubic whose
+/// Bézier control points are `(c[i − 1] + 4c[i] + c[i + 1])/6` (its value at i),
+/// `(2c[i] + c[i + 1])/3`, `(c[i] + 2c[i + 1])/3` and its value at i + 1: the end points are
+/// the coefficients filtered by `[1 4 1]/6` at the cell's own corners, the inner ones convex
+/// combinations of the unfiltered coefficients there. The tricubic piece's 4³ control points are the tensor product, so each
 /// is a convex combination, over the cell's 2³ corners, of one of the eight grids that filter
 /// the coefficients along some of the axes and not the others; a tensor-product Bézier patch
 /// lies in the convex hull of its control points. So the range of those eight grids' values
@@ -213,9 +213,9 @@ pub(crate) fn tricubic(dims: [usize; 3], data: &[f32], p: Vec3) -> (f32, Vec3) {
 }
 
 /// The coefficients of the interpolating cubic B-spline of the grid `data` (`dims`, x
-/// fastest): the grid c whose cubic B-spline, read as [`tricubic`] reads it (clamped at the
-/// edges), passes through every voxel's value. Along each axis c solves
-/// (c[k − 1] + 4 c[k] + c[k + 1]) / 6 = f[k] with c[−1] = c[0] and c[n] = c[n − 1], the
+/// fastest): the grid `c` whose cubic B-spline, read as the samplers read it (clamped at the
+/// edges), passes through every voxel's value. Along each axis `c` solves
+/// `(c[k − 1] + 4 c[k] + c[k + 1]) / 6 = f[k]` with `c[−1] = c[0]` and `c[n] = c[n − 1]`, the
 /// spline's value at voxel k under clamp-to-edge; the three axes are solved one after the
 /// other (the spline is a tensor product).
 ///
