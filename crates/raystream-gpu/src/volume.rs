@@ -1,5 +1,6 @@
 //! Direct volume rendering on the GPU (`kernels/dvr.wgsl`): the CT volume as an R16Float 3D
-//! texture of HU with hardware trilinear filtering, the transfer function's control points and
+//! texture of HU with hardware trilinear filtering (and the interpolating cubic B-spline's
+//! coefficients as a second one, when a frame reads them), the transfer function's control points and
 //! the CPU's brick table in storage buffers, one thread per pixel. The CPU path
 //! (`raystream_cpu::dvr`) is the reference; the tests hold the two together.
 
@@ -195,7 +196,7 @@ pub struct GpuVolumeRenderer<'a> {
     /// The majorant grids, per interpolation (`Interpolation as usize`).
     majorants: [std::sync::OnceLock<wgpu::Buffer>; 3],
     /// The brick tables of dvr frames that skip empty space, per interpolation, made on first
-    /// use (a cubic sample reaches a voxel further than a trilinear one).
+    /// use (each interpolation bounds a brick's values its own way).
     bricks: [std::sync::OnceLock<wgpu::Buffer>; 3],
     /// cinematic: a frame's running sums between its dispatches.
     accum: Mutex<Option<wgpu::Buffer>>,

@@ -471,7 +471,11 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                 ProgressBar::new(a.frames as u64 + 1)
             };
             pb.set_message(format!("{} {}", backend.name(), mode.name()));
+            // The warm-up frame also builds what frames keep (brick tables, majorants, light
+            // grids): its time is the time to a first picture.
+            let t = Instant::now();
             renderer.frame(&opt, &cam0, ImageFormat::Png)?;
+            let first_frame_ms = ms(t.elapsed());
             pb.inc(1);
             let (mut frame_ms, mut kernel_ms, mut samples) = (Vec::new(), Vec::new(), 0u64);
             let mut stats = None;
@@ -526,6 +530,7 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                 "resample_ms": resample_ms.map(round3),
                 "upload_ms": round3(upload_ms),
                 "coefficients_ms": coefficients_ms.map(round3),
+                "first_frame_ms": round3(first_frame_ms),
                 "frame_ms": round3(frame),
                 "frame_ms_min": round3(frame_min),
                 "frames_per_s": round3(1e3 / frame),
