@@ -2246,26 +2246,37 @@ fn interpolation_through_the_cli() {
         "{comments}"
     );
     let ct = builtin_ct();
-    let o = run(&[
-        "bench",
-        &ct,
-        "--mode",
-        "dvr",
-        "--device",
-        "cpu",
-        "--size",
-        "32x24",
-        "--frames",
-        "1",
-        "--interpolation",
-        "linear",
-        "--json",
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    for line in stdout(&o).lines() {
-        let v: serde_json::Value = serde_json::from_str(line).unwrap();
-        assert_eq!(v["interpolation"], "linear", "{line}");
+    // bench JSON names the interpolation, times the warm-up frame that builds the tables,
+    // and the interpolating spline's coefficients apart (null for the others).
+    for interpolation in ["linear", "cubic-interpolating"] {
+        let o = run(&[
+            "bench",
+            &ct,
+            "--mode",
+            "dvr",
+            "--device",
+            "cpu",
+            "--size",
+            "32x24",
+            "--frames",
+            "1",
+            "--interpolation",
+            interpolation,
+            "--json",
+            "--quiet",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        for line in stdout(&o).lines() {
+            let v: serde_json::Value = serde_json::from_str(line).unwrap();
+            assert_eq!(v["interpolation"], interpolation, "{line}");
+            assert!(v["first_frame_ms"].as_f64().unwrap() > 0.0, "{line}");
+            let coefficients = v["coefficients_ms"].as_f64();
+            if interpolation == "linear" {
+                assert!(v["coefficients_ms"].is_null(), "{line}");
+            } else {
+                assert!(coefficients.unwrap() > 0.0, "{line}");
+            }
+        }
     }
     refused(
         &["render", "--mode", "dvr", "--interpolation", "tricubic"],
