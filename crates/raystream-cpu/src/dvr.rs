@@ -291,9 +291,8 @@ pub(crate) fn cell_dims(dims: [usize; 3], cell: usize) -> [usize; 3] {
 /// Per cell of `cell`³ (x fastest; [`cell_dims`]) of the grid `grid` (`dims`, the values
 /// `interpolation` reads: [`spline_grid`]), a range (lo, hi) that holds every value its
 /// samples take, interpolated as `interpolation`. Trilinear: the range of the voxels they
-/// read, the cell's own corners. The cubic B-splines: the union over the same corners of the
-/// bound [`spline_hull_at`] gives there (the convex hull of the spline's Bézier control
-/// points), widened by 10⁻⁵ of the values (the spline's sum rounds in f32, and where the bound
+/// read, the cell's own corners. The cubic B-splines: the convex hull of the spline's Bézier
+/// control points over the cells ([`block_hull`]), widened by 10⁻⁵ of the values (the spline's sum rounds in f32, and where the bound
 /// is met, a voxel centre, it may round above it).
 pub(crate) fn cell_ranges(
     dims: [usize; 3],
@@ -373,6 +372,32 @@ pub fn spline_grid(vol: &Volume, interpolation: Interpolation) -> std::borrow::C
         std::borrow::Cow::Owned(bspline_coefficients(vol.dims, &vol.data))
     } else {
         std::borrow::Cow::Borrowed(&vol.data)
+    }
+}
+
+/// The values each interpolation reads of a volume, kept: the voxels themselves, or the
+/// interpolating spline's coefficients, computed by the first caller that needs them (what
+/// the CPU's and the GPU's volume renderers share).
+#[derive(Default)]
+pub struct SplineGrids {
+    coefficients: std::sync::OnceLock<Vec<f32>>,
+}
+
+impl SplineGrids {
+    /// The values `interpolation` reads of `vol` (always the same volume for one
+    /// `SplineGrids`).
+    pub fn get<'v>(&'v self, vol: &'v Volume, interpolation: Interpolation) -> &'v [f32] {
+        if interpolation.prefiltered() {
+            self.coefficients
+                .get_or_init(|| bspline_coefficients(vol.dims, &vol.data))
+        } else {
+            &vol.data
+        }
+    }
+
+    /// Whether the coefficients have been computed.
+    pub fn has_coefficients(&self) -> bool {
+        self.coefficients.get().is_some()
     }
 }
 
@@ -917,8 +942,8 @@ pub fn windowed(v: f32, win: (f32, f32)) -> f32 {
 pub struct CpuVolume<'a> {
     pub vol: &'a Volume,
     pub tf: &'a TransferFunction,
-    /// The interpolating spline's coefficients, computed by the first frame that reads them.
-    coefficients: std::sync::OnceLock<Vec<f32>>,
+    /// The values each interpolation reads.
+    grids: SplineGrids,
     /// Per interpolation (`Interpolation as usize`).
     bricks: [std::sync::OnceLock<Vec<bool>>; 3],
     majorants: [std::sync::OnceLock<crate::cinematic::Majorants>; 3],
@@ -929,7 +954,7 @@ impl<'a> CpuVolume<'a> {
         CpuVolume {
             vol,
             tf,
-            coefficients: Default::default(),
+            grids: Default::default(),
             bricks: Default::default(),
             majorants: Default::default(),
         }
@@ -939,12 +964,7 @@ impl<'a> CpuVolume<'a> {
     /// spline's coefficients, computed here the first time (what a caller that times frames
     /// may call first, to time this apart).
     pub fn grid(&self, interpolation: Interpolation) -> &[f32] {
-        if interpolation.prefiltered() {
-            self.coefficients
-                .get_or_init(|| bspline_coefficients(self.vol.dims, &self.vol.data))
-        } else {
-            &self.vol.data
-        }
+        self.grids.get(self.vol, interpolation)
     }
 
     /// The marcher of frames `opt` describes: the brick table when dvr skips empty space.
@@ -2143,9 +2163,9 @@ mod tests {
     }
 
     /// Empty-space skipping keeps the sample lattice: the same picture, fewer samples; with
-    /// the cubic B-splines too, whose samples reach a voxel further (bricks that held only
-    /// their trilinear reach skip visible samples: checked), the interpolating one's tables
-    /// taken over its coefficients.
+    /// the cubic B-splines too, whose samples reach a voxel further (their tables bound the
+    /// spline's control points, not the corner voxels), the interpolating one's taken over
+    /// its coefficients.
     #[test]
     fn empty_space_skipping_changes_nothing_but_the_cost() {
         let vol = abdomen();
@@ -2178,7 +2198,7 @@ mod tests {
             (
                 [0, 1, 2].map(|i| cv.bricks[i].get().is_some()),
                 [0, 1, 2].map(|i| cv.majorants[i].get().is_some()),
-                cv.coefficients.get().is_some(),
+                cv.grids.has_coefficients(),
             )
         };
         let vol = abdomen();

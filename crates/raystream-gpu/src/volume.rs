@@ -15,10 +15,9 @@ use raystream_cpu::cinematic::{
 };
 use raystream_cpu::denoise::{DenoiseOptions, DenoiseTimes, Guides, NoisyFilm};
 use raystream_cpu::dvr::{
-    BRICK, DvrMode, DvrOptions, Interpolation, LightGrid, Marcher, Sight, brick_table,
+    BRICK, DvrMode, DvrOptions, Interpolation, LightGrid, Marcher, Sight, SplineGrids, brick_table,
     over_background, scene_to_lps,
 };
-use raystream_cpu::sampling::bspline_coefficients;
 use raystream_io::Volume;
 use raystream_math::Vec3;
 use raystream_scene::Camera;
@@ -189,9 +188,9 @@ pub struct GpuVolumeRenderer<'a> {
     /// Cinematic paths traced so far, added to as each dispatch completes (what a progress bar
     /// counts: `width · height · spp` a frame).
     pub paths_done: AtomicU64,
-    /// The interpolating cubic B-spline's coefficients and their texture, made by the first
-    /// frame that reads them.
-    coefficients: std::sync::OnceLock<Vec<f32>>,
+    /// The values each interpolation reads, and the interpolating cubic B-spline's
+    /// coefficients' texture, made by the first frame that reads them.
+    grids: SplineGrids,
     coefficient_view: std::sync::OnceLock<wgpu::TextureView>,
     /// The majorant grids, per interpolation (`Interpolation as usize`).
     majorants: [std::sync::OnceLock<wgpu::Buffer>; 3],
@@ -288,7 +287,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             guide_pipeline,
             denoiser: std::sync::OnceLock::new(),
             paths_done: AtomicU64::new(0),
-            coefficients: Default::default(),
+            grids: Default::default(),
             coefficient_view: Default::default(),
             majorants: Default::default(),
             bricks: Default::default(),
@@ -459,12 +458,7 @@ impl<'a> GpuVolumeRenderer<'a> {
     /// The values frames read as `interpolation` read: the voxels, or the interpolating
     /// spline's coefficients (computed on first use).
     fn grid(&self, interpolation: Interpolation) -> &[f32] {
-        if interpolation.prefiltered() {
-            self.coefficients
-                .get_or_init(|| bspline_coefficients(self.vol.dims, &self.vol.data))
-        } else {
-            &self.vol.data
-        }
+        self.grids.get(self.vol, interpolation)
     }
 
     /// Makes what frames read as `interpolation` need before any frame does: the interpolating
