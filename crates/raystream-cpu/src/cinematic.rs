@@ -8,7 +8,7 @@
 //!   coefficient σ = −ln(1 − α) per mm (so that a straight ray's transmittance is dvr mode's
 //!   (1 − α)^Δs), capped at α = [`ALPHA_MAX`]; its colour is the single-scattering albedo.
 //! - **Free flights** by delta tracking (Woodcock) against a grid of majorants (the largest σ
-//!   the transfer function gives over each [`MAJORANT_CELL`]³ cell's HU range, [`Majorants`]),
+//!   the transfer function gives the samples of each [`MAJORANT_CELL`]³ cell, [`Majorants`]),
 //!   cell by cell: a transparent cell is crossed in one step, and a tentative collision past a
 //!   cell's far side restarts there (exponential distances are memoryless), so the estimate is
 //!   exact whatever the majorants; tighter ones only take fewer samples.
@@ -38,7 +38,7 @@ use raystream_volume::TransferFunction;
 use crate::Image;
 use crate::denoise::{DenoiseTimes, Guides, NoisyFilm};
 use crate::dvr::{
-    DvrOptions, FULL_SHADING_GRADIENT, Marcher, Sight, cell_dims, cell_exit, cell_ranges,
+    DvrOptions, FULL_SHADING_GRADIENT, Marcher, Sight, cell_dims, cell_exit, cell_opacities,
     clip_interval, frame_options, scene_to_lps,
 };
 
@@ -221,8 +221,9 @@ fn inside(m: &Marcher, opt: &DvrOptions, o: Vec3, d: Vec3) -> Option<((Vec3, Vec
 pub const MAJORANT_CELL: usize = 4;
 
 /// The majorant grid of cinematic mode's tracking: per cell of [`MAJORANT_CELL`]³ (x fastest),
-/// the largest extinction coefficient (per mm) the transfer function gives over the cell's HU
-/// range (the voxels its samples read, as the marcher interpolates). Zero where the cell is transparent.
+/// the largest extinction coefficient (per mm) the transfer function gives any of the cell's
+/// samples, as the marcher interpolates (or a bound just above it: `cell_opacities`). Zero
+/// where the cell is transparent.
 pub struct Majorants {
     pub dims: [usize; 3],
     pub values: Vec<f32>,
@@ -234,9 +235,9 @@ impl Majorants {
         let vol = m.volume();
         Majorants {
             dims: cell_dims(vol.dims, MAJORANT_CELL),
-            values: cell_ranges(vol.dims, m.grid(), MAJORANT_CELL, m.interpolation())
+            values: cell_opacities(vol.dims, m.grid(), MAJORANT_CELL, m.interpolation(), tf)
                 .into_iter()
-                .map(|(lo, hi)| sigma_of(tf.max_opacity_in(lo, hi)))
+                .map(sigma_of)
                 .collect(),
         }
     }

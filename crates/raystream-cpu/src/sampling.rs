@@ -19,12 +19,13 @@
 //! accurate between voxels where trilinear is second-order. Near a sharp edge its coefficients
 //! ring, alternately over and under the voxels, and the spline overshoots a little.
 //!
-//! Empty-space skipping and the majorants of cinematic tracking need a range of the values
-//! each cell's samples take. For either spline, `block_hull` gives one from the convex
-//! hull of the spline's Bézier control points, which depend only on the coefficients around
-//! the cell's own corners: tighter than the range of all 4³ values a sample reads (it brought
-//! the cubic B-spline's samples back to trilinear's). Over the interpolating spline's
-//! coefficients, which carry the data's noise amplified, it is still loose (BENCHMARKS.md).
+//! Empty-space skipping and the majorants of cinematic tracking need a bound of the opacity
+//! each cell's samples take. For either spline, `block_hull` gives a range of their values from
+//! the convex hull of the spline's Bézier control points, which depend only on the coefficients
+//! around the cell's own corners: tighter than the range of all 4³ values a sample reads (it
+//! brought the cubic B-spline's samples back to trilinear's). Over the interpolating spline's
+//! coefficients, which carry the data's noise amplified, that hull is loose, and `block_bound`
+//! refines it where it matters, halving each cell's Bézier patch (BENCHMARKS.md).
 //!
 //! Written here rather than taken from a crate: the GPU (volume.wgsl) evaluates the same
 //! spline with eight hardware-filtered fetches (Sigg & Hadwiger, "Fast third-order texture
@@ -100,7 +101,7 @@ pub(crate) fn block_hull(
     grid: &[f32],
     lo: [usize; 3],
     hi: [usize; 3],
-) -> (f32, f32) {
+) -> BlockHull {
     let m = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
     // The block with a halo of one voxel, clamped to the grid: h[a] values along axis a.
     let h = m.map(|n| n + 2);
@@ -138,6 +139,8 @@ pub(crate) fn block_hull(
     // Along z: the eight variants; their range.
     let plane = m[0] * m[1];
     let (mut low, mut high) = (f32::INFINITY, f32::NEG_INFINITY);
+    let (mut met_low, mut met_high) = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut corners = Vec::with_capacity(m[0] * m[1] * m[2]);
     for k in 0..m[2] {
         for n in 0..plane {
             let (a, b, c) = (
@@ -145,15 +148,215 @@ pub(crate) fn block_hull(
                 xy[(k + 1) * plane + n],
                 xy[(k + 2) * plane + n],
             );
+            let (mut l, mut h) = (f32::INFINITY, f32::NEG_INFINITY);
             for s in 0..4 {
                 for value in [b[s], filter(a[s], b[s], c[s])] {
-                    low = low.min(value);
-                    high = high.max(value);
+                    l = l.min(value);
+                    h = h.max(value);
+                }
+            }
+            corners.push((l, h));
+            low = low.min(l);
+            high = high.max(h);
+            // Filtered along all three axes: the spline's value at the voxel.
+            let value = filter(a[3], b[3], c[3]);
+            met_low = met_low.min(value);
+            met_high = met_high.max(value);
+        }
+    }
+    BlockHull {
+        hull: (low, high),
+        met: (met_low, met_high),
+        corners,
+    }
+}
+
+/// What [`block_hull`] finds over a block of cells.
+#[derive(Clone, Debug)]
+pub(crate) struct BlockHull {
+    /// A range holding every value the spline takes in the block's cells.
+    pub hull: (f32, f32),
+    /// Per corner voxel of the block (x fastest), the range of the eight grids' values there
+    /// ([`spline_hull_at`]'s bound): a cell's hull is its eight corners' union.
+    pub corners: Vec<(f32, f32)>,
+    /// The range of the spline's values at the block's corner voxels (as f32 sums round
+    /// them). The spline is continuous, so it takes every value in this range somewhere in
+    /// the block: no bound can be tighter.
+    pub met: (f32, f32),
+}
+
+/// A range widened by 10⁻⁵ of its values: the spline's sums round in f32, and where a bound is
+/// met (a voxel centre) a sample may round just past it.
+pub(crate) fn widened((lo, hi): (f32, f32)) -> (f32, f32) {
+    (lo - 1e-5 * (1.0 + lo.abs()), hi + 1e-5 * (1.0 + hi.abs()))
+}
+
+/// How many times [`block_bound`] halves a cell's Bézier patch along each axis, at most: on
+/// the abdomen CT's interpolating coefficients under ct-bones, 0, 1, 2 and 3 halvings leave
+/// 1298, 789, 682 and 679 of its 2912 bricks visible (trilinear: 555), measured in numpy
+/// before this was written.
+pub(crate) const SUBDIVISIONS: u32 = 2;
+
+/// An upper bound of `worst(v, v)` over every value v the cubic B-spline over `grid` takes in
+/// the cells whose corners are the voxels `lo[a]..=hi[a]` of each axis, where `worst(lo, hi)`
+/// bounds `worst` over a range and never falls as the range grows (the transfer function's
+/// greatest opacity in it).
+///
+/// First `worst` of the block's hull ([`block_hull`], widened). Where that may be loose — it
+/// exceeds `worst` of the values the spline is known to take in the block, its values at the
+/// corner voxels — each cell's own Bézier patch is bounded by its 4³ control points and,
+/// while that still exceeds the bound found so far, halved along every axis by de Casteljau's
+/// algorithm (the halves' control points converge on the patch), up to [`SUBDIVISIONS`]
+/// times. A part whose hull cannot raise the bound is dropped, so the bound is never looser
+/// than the block's hull's, and every sample lies in a part whose widened hull is within it.
+///
+/// The interpolating spline's coefficients carry the CT's noise amplified (about ±200 HU
+/// around soft tissue's ±30), and over a brick's 729 corners the hull of their control points
+/// reaches a bone preset's ramp where the spline never does; halving twice brings the
+/// visible bricks from 2.3× trilinear's to 1.2× (the abdomen under ct-bones; tested).
+pub(crate) fn block_bound(
+    dims: [usize; 3],
+    grid: &[f32],
+    lo: [usize; 3],
+    hi: [usize; 3],
+    worst: &impl Fn(f32, f32) -> f32,
+) -> f32 {
+    let BlockHull { hull, met, corners } = block_hull(dims, grid, lo, hi);
+    let (l, h) = widened(hull);
+    let whole = worst(l, h);
+    let mut bound = worst(met.0, met.1);
+    if whole <= bound {
+        return whole;
+    }
+    // The cells [i, i + 1] of each axis (relative to lo); an axis of one voxel has one, the
+    // spline constant on it.
+    let m = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
+    let cells = |a: usize| 0..(m[a] - 1).max(1);
+    for k in cells(2) {
+        for j in cells(1) {
+            for i in cells(0) {
+                // First the cell's own corners' hull, then its control points.
+                let (mut l, mut h) = (f32::INFINITY, f32::NEG_INFINITY);
+                for dk in [k, (k + 1).min(m[2] - 1)] {
+                    for dj in [j, (j + 1).min(m[1] - 1)] {
+                        for di in [i, (i + 1).min(m[0] - 1)] {
+                            let (cl, ch) = corners[di + m[0] * (dj + m[1] * dk)];
+                            l = l.min(cl);
+                            h = h.max(ch);
+                        }
+                    }
+                }
+                let (l, h) = widened((l, h));
+                if worst(l, h) <= bound {
+                    continue;
+                }
+                let cell = [lo[0] + i, lo[1] + j, lo[2] + k];
+                refine(&cell_net(dims, grid, cell), 0, worst, &mut bound);
+                if bound >= whole {
+                    return whole;
                 }
             }
         }
     }
-    (low, high)
+    bound
+}
+
+/// Raises `bound` to `worst` of the Bézier patch `net`'s hull where that exceeds it, halving
+/// the patch while it does, [`SUBDIVISIONS`] times at most ([`block_bound`]).
+fn refine(net: &[f32; 64], depth: u32, worst: &impl Fn(f32, f32) -> f32, bound: &mut f32) {
+    let range = net
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
+            (l.min(v), h.max(v))
+        });
+    let (l, h) = widened(range);
+    let here = worst(l, h);
+    if here <= *bound {
+        return;
+    }
+    if depth == SUBDIVISIONS {
+        *bound = here;
+        return;
+    }
+    for part in halves(net) {
+        refine(&part, depth + 1, worst, bound);
+    }
+}
+
+/// The 4³ Bézier control points (x fastest) of the cubic B-spline over `grid` on the cell
+/// [v, v + 1] of each axis, read as the samplers read the grid (clamped at its edges). Along
+/// one axis the cubic over coefficients c₀…c₃ has control points (c₀ + 4c₁ + c₂)/6,
+/// (2c₁ + c₂)/3, (c₁ + 2c₂)/3 and (c₁ + 4c₂ + c₃)/6; the patch is their tensor product.
+pub(crate) fn cell_net(dims: [usize; 3], grid: &[f32], v: [usize; 3]) -> [f32; 64] {
+    let reads = |a: usize| {
+        [-1isize, 0, 1, 2].map(|d| (v[a] as isize + d).clamp(0, dims[a] as isize - 1) as usize)
+    };
+    let (ix, iy, iz) = (reads(0), reads(1), reads(2));
+    let mut net = [0.0f32; 64];
+    for (c, &k) in iz.iter().enumerate() {
+        for (b, &j) in iy.iter().enumerate() {
+            let row = dims[0] * (j + dims[1] * k);
+            for (a, &i) in ix.iter().enumerate() {
+                net[a + 4 * (b + 4 * c)] = grid[row + i];
+            }
+        }
+    }
+    let control = |c: [f32; 4]| {
+        [
+            (c[0] + 4.0 * c[1] + c[2]) / 6.0,
+            (2.0 * c[1] + c[2]) / 3.0,
+            (c[1] + 2.0 * c[2]) / 3.0,
+            (c[1] + 4.0 * c[2] + c[3]) / 6.0,
+        ]
+    };
+    along_each_axis(&mut net, |_, line| *line = control(*line));
+    net
+}
+
+/// Applies `f(axis, line)` to every line of four along x, then y, then z of a 4³ net (x
+/// fastest).
+fn along_each_axis(net: &mut [f32; 64], f: impl Fn(usize, &mut [f32; 4])) {
+    for (axis, stride) in [1, 4, 16].into_iter().enumerate() {
+        for n in 0..16 {
+            // The line's first point: the other two axes' digits from n, this axis's zero.
+            let start = match axis {
+                0 => 4 * n,
+                1 => n % 4 + 16 * (n / 4),
+                _ => n,
+            };
+            let mut line = [0, 1, 2, 3].map(|n| net[start + n * stride]);
+            f(axis, &mut line);
+            for (n, v) in line.into_iter().enumerate() {
+                net[start + n * stride] = v;
+            }
+        }
+    }
+}
+
+/// The eight halves of a Bézier patch's 4³ control net (x fastest), split at its middle along
+/// every axis by de Casteljau's algorithm: part `h` is the lower or upper half along axis a as
+/// bit a of h is 0 or 1.
+fn halves(net: &[f32; 64]) -> [[f32; 64]; 8] {
+    // Along one axis a cubic's points p₀…p₃ split into p₀, q₀₁, r₀, m and m, r₁, q₂₃, p₃.
+    let split = |p: [f32; 4], upper: bool| {
+        let (q01, q12, q23) = (
+            (p[0] + p[1]) / 2.0,
+            (p[1] + p[2]) / 2.0,
+            (p[2] + p[3]) / 2.0,
+        );
+        let (r0, r1) = ((q01 + q12) / 2.0, (q12 + q23) / 2.0);
+        let m = (r0 + r1) / 2.0;
+        if upper {
+            [m, r1, q23, p[3]]
+        } else {
+            [p[0], q01, r0, m]
+        }
+    };
+    std::array::from_fn(|h| {
+        let mut part = *net;
+        along_each_axis(&mut part, |a, line| *line = split(*line, h >> a & 1 == 1));
+        part
+    })
 }
 
 /// Trilinear interpolation at continuous index `p` of a grid of `dims` values read by `at`,
@@ -689,9 +892,129 @@ mod tests {
                     }
                 }
             }
-            let (got_lo, got_hi) = block_hull(dims, &data, lo, hi);
+            let (got_lo, got_hi) = block_hull(dims, &data, lo, hi).hull;
             prop_assert_eq!(got_lo.to_bits(), want_lo.to_bits());
             prop_assert_eq!(got_hi.to_bits(), want_hi.to_bits());
+        }
+    }
+
+    /// A Bézier patch's value at (u, v, w) ∈ [0, 1]³ from its 4³ control points (x fastest),
+    /// summed over the Bernstein polynomials in f64.
+    fn bezier_at(net: &[f32; 64], t: [f64; 3]) -> f64 {
+        let bernstein = |t: f64| {
+            let s = 1.0 - t;
+            [s * s * s, 3.0 * s * s * t, 3.0 * s * t * t, t * t * t]
+        };
+        let (bx, by, bz) = (bernstein(t[0]), bernstein(t[1]), bernstein(t[2]));
+        let mut sum = 0.0;
+        for c in 0..4 {
+            for b in 0..4 {
+                for a in 0..4 {
+                    sum += bx[a] * by[b] * bz[c] * net[a + 4 * (b + 4 * c)] as f64;
+                }
+            }
+        }
+        sum
+    }
+
+    /// A transfer function's stand-in for `block_bound`: opacity 1 at `centre`, falling to 0
+    /// at `width` from it, and its greatest value over a range.
+    fn tent(centre: f32, width: f32) -> (impl Fn(f32) -> f32, impl Fn(f32, f32) -> f32) {
+        let at = move |v: f32| (1.0 - (v - centre).abs() / width).max(0.0);
+        let over = move |lo: f32, hi: f32| {
+            if (lo..=hi).contains(&centre) {
+                1.0
+            } else {
+                at(lo).max(at(hi))
+            }
+        };
+        (at, over)
+    }
+
+    proptest! {
+        /// A cell's control net is its spline: the Bernstein sum over `cell_net`'s points is
+        /// the f64 brute force over the whole grid anywhere in the cell (along the edges too,
+        /// where the reads clamp), and each of the eight `halves` is its part of the patch.
+        #[test]
+        fn a_cells_net_and_its_halves_are_its_spline(
+            seed in 1u64..u64::MAX,
+            cell in prop::array::uniform3(0usize..6),
+            t in prop::array::uniform3(0.0f64..1.0),
+        ) {
+            let dims = [7, 6, 5];
+            let data = grid(dims, seed);
+            for g in [data.clone(), bspline_coefficients(dims, &data)] {
+                let v = [0, 1, 2].map(|a| cell[a].min(dims[a] - 2));
+                let net = cell_net(dims, &g, v);
+                let (want, _) = brute(dims, &g, [0, 1, 2].map(|a| v[a] as f64 + t[a]));
+                prop_assert!((bezier_at(&net, t) - want).abs() < 2e-3);
+                for (h, half) in halves(&net).iter().enumerate() {
+                    // The same point, if it lies in this half, in the half's own coordinates.
+                    let upper = [0, 1, 2].map(|a| h >> a & 1 == 1);
+                    if (0..3).all(|a| (t[a] >= 0.5) == upper[a]) {
+                        let u = [0, 1, 2].map(|a| 2.0 * t[a] - upper[a] as u8 as f64);
+                        prop_assert!((bezier_at(half, u) - want).abs() < 2e-3, "half {}", h);
+                    }
+                }
+            }
+        }
+
+        /// `block_bound` holds every sample of the block (samples read as the marcher reads
+        /// them, `tricubic_value`), under a tent of opacity placed anywhere over the values,
+        /// over the voxels and over their ringing interpolating coefficients; it is never
+        /// looser than the block's hull, never below what the spline is known to take (its
+        /// values at the corner voxels), and every block's bound is met closely somewhere
+        /// within it by the brute force over a finer lattice.
+        #[test]
+        fn the_refined_bound_holds_every_sample(
+            seed in 1u64..u64::MAX,
+            lo in prop::array::uniform3(0usize..6),
+            size in prop::array::uniform3(1usize..4),
+            nz in 1usize..6,
+            centre in -1200.0f32..2200.0,
+            width in 1.0f32..400.0,
+        ) {
+            // Blocks of whole cells, as the tables take them; a grid one voxel deep has
+            // blocks of one plane, the spline constant across it.
+            let dims = [7, 6, nz];
+            let data = grid(dims, seed);
+            let lo = [0, 1, 2].map(|a| lo[a].min(dims[a].saturating_sub(2)));
+            let hi = [0, 1, 2].map(|a| (lo[a] + size[a]).min(dims[a] - 1));
+            let (at, over) = tent(centre, width);
+            for g in [data.clone(), bspline_coefficients(dims, &data)] {
+                let bound = block_bound(dims, &g, lo, hi, &over);
+                let BlockHull { hull, met, .. } = block_hull(dims, &g, lo, hi);
+                let (l, h) = widened(hull);
+                prop_assert!(bound <= over(l, h));
+                prop_assert!(bound >= over(met.0, met.1));
+                // A lattice of 9 points a cell, its faces included.
+                let steps = [0, 1, 2].map(|a| 8 * (hi[a] - lo[a]) + 1);
+                let mut seen = (f32::INFINITY, f32::NEG_INFINITY);
+                for k in 0..steps[2] {
+                    for j in 0..steps[1] {
+                        for i in 0..steps[0] {
+                            let p = Vec3::new(
+                                lo[0] as f32 + i as f32 / 8.0,
+                                lo[1] as f32 + j as f32 / 8.0,
+                                lo[2] as f32 + k as f32 / 8.0,
+                            );
+                            let v = tricubic_value(dims, &g, p);
+                            prop_assert!(at(v) <= bound, "{} at {} above the bound {}", at(v), p, bound);
+                            seen = (seen.0.min(v), seen.1.max(v));
+                        }
+                    }
+                }
+                // Halved twice, a part is a quarter of a cell, whose control points stray
+                // little from its values: the bound is the tent's over the lattice's values
+                // widened by 2 % of the hull's width (met down to 1 % in 5000 cases; halved
+                // once, 4 % is needed, and the hull alone fails), where the hull's own bound
+                // may be far above.
+                let slack = 0.02 * (hull.1 - hull.0);
+                prop_assert!(
+                    bound <= over(seen.0 - slack, seen.1 + slack),
+                    "bound {} where the samples' values {:?} reach {}", bound, seen, over(seen.0 - slack, seen.1 + slack)
+                );
+            }
         }
     }
 
