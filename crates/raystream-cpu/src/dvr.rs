@@ -554,8 +554,12 @@ impl<'a> Marcher<'a> {
         }
     }
 
-    /// The HU gradient per mm in world space at index `p`: central differences of trilinear
-    /// samples one voxel apart, or the cubic B-spline's own gradient.
+    /// The HU gradient per mm in world space at index `p`, what shading takes: central
+    /// differences of trilinear samples one voxel apart, or the gradient of the cubic B-spline
+    /// of the voxels, for either spline. The interpolating spline's own gradient carries the
+    /// CT's noise that its prefilter amplifies (on the abdomen's skin under ct-muscle, a grain of
+    /// 0.125 against trilinear's 0.040), so it is shaded by the approximating spline's, which
+    /// turns smoothly: its values keep their peaks and its surfaces shade as `cubic`'s.
     pub fn gradient(&self, p: Vec3) -> Vec3 {
         let g = match self.interpolation {
             Interpolation::Linear => {
@@ -566,7 +570,7 @@ impl<'a> Marcher<'a> {
                 ) * 0.5
             }
             Interpolation::Cubic | Interpolation::CubicInterpolating => {
-                tricubic(self.vol.dims, &self.grid, p).1
+                tricubic(self.vol.dims, &self.vol.data, p).1
             }
         };
         // world gradient = Σ_axis g_axis · ∂index_axis/∂world
@@ -2379,8 +2383,8 @@ mod tests {
     /// trilinear sampling draws with wood-grain rings a voxel of depth apart: the grain, as the
     /// mean absolute Laplacian of the luminance over the body (pixels whose 3×3 neighbourhood
     /// is opaque), falls below 0.4× with the cubic B-spline, while the body keeps its
-    /// outline (coverage) and its brightness. The interpolating spline keeps them too, but its
-    /// shading carries the CT's noise: its grain is over twice trilinear's.
+    /// outline (coverage) and its brightness. The interpolating spline keeps them too, and
+    /// shaded by the voxels' spline's gradient its grain stays within 1.3× trilinear's.
     #[test]
     fn cubic_sampling_takes_the_wood_grain_off_the_skin() {
         let vol = abdomen();
@@ -2426,10 +2430,10 @@ mod tests {
         );
         // Measured (grain, pixels covered, mean luminance): trilinear (0.040, 17947, 0.130),
         // cubic (0.012, 17758, 0.127): a B-spline's smoothing pulls the outline in by about a
-        // pixel here. The interpolating spline (0.125, 18085, 0.133) keeps the outline and the
+        // pixel here. The interpolating spline (0.045, 18085, 0.130) keeps the outline and the
         // brightness but not the cubic's calm: it passes through every voxel, noise included,
-        // and its analytic gradient passes the noise on to the shading more than trilinear's
-        // central differences (which average two voxels) do.
+        // so its surface is as rough as the voxels. Shaded by its own analytic gradient, which
+        // carries the noise its prefilter amplifies, it measured 0.125.
         assert!(
             linear.1 > w * h / 4,
             "the body fills the picture: {linear:?}"
@@ -2448,15 +2452,14 @@ mod tests {
                 && (sharp.2 / linear.2 - 1.0).abs() < 0.03,
             "{linear:?} vs {sharp:?}"
         );
-        assert!(sharp.0 > 2.0 * linear.0, "{linear:?} vs {sharp:?}");
+        assert!(sharp.0 < 1.3 * linear.0, "{linear:?} vs {sharp:?}");
     }
 
     /// A ball of soft tissue in air, its edge a smooth ramp about a voxel wide, on a coarse
     /// (3 mm) oblique grid: the gradient's direction at points of the ball's surface against
     /// the true radial one. Trilinear central differences tilt back and forth as the surface
     /// crosses voxel layers (what shading draws as wood grain); the cubic B-spline's gradient
-    /// follows the ball, and the interpolating spline's nearly as well (it follows the
-    /// voxels of a ramp that is sharp for the grid, a little of its ringing included).
+    /// follows the ball, and the interpolating spline is shaded by the same.
     #[test]
     fn the_cubic_gradient_follows_a_curved_surface() {
         let (c, s) = (0.8f64, 0.6f64);
@@ -2506,12 +2509,12 @@ mod tests {
             error_deg(Interpolation::Cubic),
             error_deg(Interpolation::CubicInterpolating),
         );
-        // Measured (rms, max): trilinear 2.2° and 4.1°, cubic 0.37° and 0.76°, interpolating
-        // cubic 0.94° and 1.78°.
+        // Measured (rms, max): trilinear 2.2° and 4.1°, cubic 0.37° and 0.76°. The
+        // interpolating spline's own gradient measured 0.94° and 1.78°; it is shaded by the
+        // voxels' spline's, the same directions.
         assert!(cubic.0 < 0.25 * linear.0, "{linear:?} vs {cubic:?}");
         assert!(cubic.1 < 1.0, "{linear:?} vs {cubic:?}");
-        assert!(sharp.0 < 0.5 * linear.0, "{linear:?} vs {sharp:?}");
-        assert!(sharp.1 < 2.0, "{linear:?} vs {sharp:?}");
+        assert_eq!(sharp, cubic);
     }
 
     /// Every preset and mode renders the abdomen CT to a picture with something in it.

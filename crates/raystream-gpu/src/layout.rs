@@ -267,7 +267,8 @@ pub struct MediumParams {
     pub light_dims: [u32; 3],
     /// Values per light grid (byte 124).
     pub grid_points: u32,
-    /// 1: the volume read by the cubic B-spline, 0: trilinearly (byte 128).
+    /// `Interpolation::kernel_code`: 0 trilinear, 1 the cubic B-spline, 2 its interpolating
+    /// form, shaded by the voxels' spline (byte 128).
     pub interpolation: u32,
     pub pad0: u32,
     pub pad1: u32,
@@ -353,8 +354,8 @@ pub struct DvrParams {
     /// 2^exposure (byte 340).
     pub anisotropy: f32,
     pub light_scale: f32,
-    /// 1: the volume read by the cubic B-spline, 0: trilinearly
-    /// (`raystream_cpu::dvr::Interpolation`; byte 344).
+    /// `Interpolation::kernel_code`: 0 trilinear, 1 the cubic B-spline, 2 its interpolating
+    /// form, shaded by the voxels' spline (byte 344).
     pub interpolation: u32,
     pub pad3: u32,
 }

@@ -1,6 +1,6 @@
 //! Direct volume rendering on the GPU (`kernels/dvr.wgsl`): the CT volume as an R16Float 3D
 //! texture of HU with hardware trilinear filtering (and the interpolating cubic B-spline's
-//! coefficients as a second one, when a frame reads them), the transfer function's control points and
+//! coefficients beside the HU in a second, two-channel one, when a frame reads them), the transfer function's control points and
 //! the CPU's brick table in storage buffers, one thread per pixel. The CPU path
 //! (`raystream_cpu::dvr`) is the reference; the tests hold the two together.
 
@@ -64,12 +64,15 @@ pub(crate) struct GpuVolume {
     pub to_index: ([Vec3; 3], Vec3),
 }
 
-/// A grid of `dims` values (x fastest) as an R16Float 3D texture.
+/// A grid of `dims` values (x fastest) as an R16Float 3D texture; with `shading`, a second grid
+/// of the same in a second channel (Rg16Float: the interpolating spline's coefficients, and the
+/// voxels whose spline's gradient shades it).
 pub(crate) fn volume_texture(
     ctx: &GpuContext,
     label: &str,
     dims: [usize; 3],
     values: &[f32],
+    shading: Option<&[f32]>,
 ) -> Result<wgpu::TextureView, GpuError> {
     let max = ctx.limits.max_texture_dimension_3d as usize;
     if dims.iter().any(|&n| n > max) {
@@ -89,20 +92,30 @@ pub(crate) fn volume_texture(
         mip_level_count: 1,
         sample_count: 1,
         dimension: wgpu::TextureDimension::D3,
-        format: wgpu::TextureFormat::R16Float,
+        format: if shading.is_some() {
+            wgpu::TextureFormat::Rg16Float
+        } else {
+            wgpu::TextureFormat::R16Float
+        },
         usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         view_formats: &[],
     });
-    let halves: Vec<u16> = values
-        .iter()
-        .map(|&v| half::f16::from_f32(v).to_bits())
-        .collect();
+    let half = |v: f32| half::f16::from_f32(v).to_bits();
+    let halves: Vec<u16> = match shading {
+        None => values.iter().map(|&v| half(v)).collect(),
+        Some(shading) => values
+            .iter()
+            .zip(shading)
+            .flat_map(|(&v, &s)| [half(v), half(s)])
+            .collect(),
+    };
+    let channels = 1 + shading.is_some() as u32;
     ctx.queue.write_texture(
         texture.as_image_copy(),
         bytemuck::cast_slice(&halves),
         wgpu::TexelCopyBufferLayout {
             offset: 0,
-            bytes_per_row: Some(2 * size.width),
+            bytes_per_row: Some(2 * channels * size.width),
             rows_per_image: Some(size.height),
         },
         size,
@@ -111,16 +124,26 @@ pub(crate) fn volume_texture(
 }
 
 impl GpuVolume {
-    /// Uploads the grid `marcher` reads of `vol` (its HU, or the interpolating spline's
-    /// coefficients) as R16Float and `tf`'s control points; `marcher` gives the transforms and
-    /// the bricks' count too.
+    /// Uploads the grid `marcher` reads of `vol` (its HU as R16Float, or the interpolating
+    /// spline's coefficients and the HU that shade them as Rg16Float) and `tf`'s control
+    /// points; `marcher` gives the transforms and the bricks' count too.
     pub(crate) fn new(
         ctx: &GpuContext,
         vol: &Volume,
         tf: &TransferFunction,
         marcher: &Marcher,
     ) -> Result<GpuVolume, GpuError> {
-        let view = volume_texture(ctx, "CT volume (HU, f16)", vol.dims, marcher.grid())?;
+        let shading = marcher
+            .interpolation()
+            .prefiltered()
+            .then_some(&vol.data[..]);
+        let view = volume_texture(
+            ctx,
+            "CT volume (HU, f16)",
+            vol.dims,
+            marcher.grid(),
+            shading,
+        )?;
         let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("trilinear"),
             mag_filter: wgpu::FilterMode::Linear,
@@ -470,7 +493,7 @@ impl<'a> GpuVolumeRenderer<'a> {
     }
 
     /// The texture frames read as `interpolation` read: the HU, or the interpolating spline's
-    /// coefficients (uploaded on first use).
+    /// coefficients beside the HU (uploaded on first use).
     fn texture(&self, interpolation: Interpolation) -> Result<&wgpu::TextureView, GpuError> {
         if !interpolation.prefiltered() {
             return Ok(&self.gpu.view);
@@ -478,8 +501,14 @@ impl<'a> GpuVolumeRenderer<'a> {
         if let Some(v) = self.coefficient_view.get() {
             return Ok(v);
         }
-        let label = "interpolating spline coefficients (f16)";
-        let v = volume_texture(self.ctx, label, self.vol.dims, self.grid(interpolation))?;
+        let label = "interpolating spline coefficients and HU (f16)";
+        let v = volume_texture(
+            self.ctx,
+            label,
+            self.vol.dims,
+            self.grid(interpolation),
+            Some(&self.vol.data),
+        )?;
         Ok(self.coefficient_view.get_or_init(|| v))
     }
 

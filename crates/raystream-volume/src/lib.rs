@@ -53,12 +53,15 @@ impl Interpolation {
         self == Interpolation::CubicInterpolating
     }
 
-    /// The number the GPU kernels' parameters hold: 0 trilinear, 1 the cubic B-spline (of the
-    /// voxels or of their prefiltered coefficients, whichever texture is bound).
+    /// The number the GPU kernels' parameters hold: 0 trilinear, 1 the cubic B-spline of the
+    /// texture's one channel, 2 the cubic B-spline of its first channel (the interpolating
+    /// spline's coefficients), shaded by the gradient of its second (the voxels': see
+    /// `raystream_cpu::dvr::Marcher::gradient`).
     pub fn kernel_code(self) -> u32 {
         match self {
             Interpolation::Linear => 0,
-            Interpolation::Cubic | Interpolation::CubicInterpolating => 1,
+            Interpolation::Cubic => 1,
+            Interpolation::CubicInterpolating => 2,
         }
     }
 }

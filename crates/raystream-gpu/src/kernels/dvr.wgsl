@@ -66,7 +66,8 @@ struct DvrParams {
     // cinematic: the Henyey-Greenstein anisotropy g, and the lights' scale 2^exposure.
     anisotropy: f32,
     light_scale: f32,
-    // 1: the volume read by the cubic B-spline (DvrOptions::interpolation), 0: trilinearly.
+    // Interpolation::kernel_code of DvrOptions::interpolation: 0 trilinear, 1 cubic B-spline, 2 its
+    // interpolating form (coefficients in the first channel, the voxels in the second).
     interpolation: u32,
     pad3: u32,
 }
@@ -104,9 +105,13 @@ const MODE_SLICE: u32 = 5u;
 
 // The crop box and clip planes applied to [t.x, t.y] of the world ray o + t d, as the CPU's
 // clip_interval.
-// volume.wgsl's choice of reconstruction.
+// volume.wgsl's choice of reconstruction (Interpolation::kernel_code).
 fn cubic_sampling() -> bool {
-    return dp.interpolation == 1u;
+    return dp.interpolation != 0u;
+}
+
+fn smooth_shading() -> bool {
+    return dp.interpolation == 2u;
 }
 
 fn clip_world(o: vec3<f32>, d: vec3<f32>, t_in: vec2<f32>) -> vec2<f32> {

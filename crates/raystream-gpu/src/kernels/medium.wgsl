@@ -29,7 +29,8 @@ struct MediumParams {
     light_dims: vec3<u32>,
     // Values per light grid.
     grid_points: u32,
-    // 1: the volume read by the cubic B-spline (SceneVolume::interpolation), 0: trilinearly.
+    // Interpolation::kernel_code of SceneVolume::interpolation: 0 trilinear, 1 cubic B-spline, 2
+    // its interpolating form (coefficients in the first channel, the voxels in the second).
     interpolation: u32,
     pad0: u32,
     pad1: u32,
@@ -45,9 +46,13 @@ struct MediumParams {
 @group(3) @binding(6) var<storage, read> brick_visible: array<u32>;
 @group(3) @binding(7) var<storage, read> light_values: array<f32>;
 
-// volume.wgsl's choice of reconstruction.
+// volume.wgsl's choice of reconstruction (Interpolation::kernel_code).
 fn cubic_sampling() -> bool {
-    return dp.interpolation == 1u;
+    return dp.interpolation != 0u;
+}
+
+fn smooth_shading() -> bool {
+    return dp.interpolation == 2u;
 }
 
 // The scene frame (x = L, y = S, z = A) → LPS.

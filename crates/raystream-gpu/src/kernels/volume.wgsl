@@ -7,8 +7,10 @@
 // the resources `volume`, `trilinear`, `opacity_points`, `color_points`, `brick_visible`,
 // `light_values`, and the shading of a sample, `shade_sample(base, p, at, d)`: the light a
 // sample of colour `base` at index `p` (world `at`, seen along unit `d`) sends back, as the
-// CPU's shade_sample for the module's lights.; and `cubic_sampling()`: whether the volume is read by the
-// cubic B-spline (raystream_cpu::sampling::Interpolation::Cubic) rather than trilinearly.
+// CPU's shade_sample for the module's lights; `cubic_sampling()`: whether the volume is read by a
+// cubic B-spline (raystream_cpu::sampling::Interpolation::Cubic or CubicInterpolating) rather than
+// trilinearly; and `smooth_shading()`: whether the texture's second channel holds the voxels
+// whose spline's gradient shades it (CubicInterpolating).
 
 const FULL_SHADING_GRADIENT: f32 = 100.0;
 const BRICK: u32 = BRICK_SIZE;
@@ -44,9 +46,16 @@ fn color_at(hu: f32) -> vec3<f32> {
 }
 
 // The texture's trilinear filter at continuous index `q` (voxel centres at integers; the
-// sampler clamps to the edge, as the CPU clamps indices).
+// sampler clamps to the edge, as the CPU clamps indices): its first channel, the values the
+// volume is read by, or with `shading` the channel whose gradient shades it (the second, the
+// voxels, where the first holds the interpolating spline's coefficients).
+fn fetch_channel(q: vec3<f32>, shading: bool) -> f32 {
+    let t = textureSampleLevel(volume, trilinear, (q + 0.5) / vec3<f32>(dp.dims), 0.0);
+    return select(t.r, t.g, shading && smooth_shading());
+}
+
 fn fetch(q: vec3<f32>) -> f32 {
-    return textureSampleLevel(volume, trilinear, (q + 0.5) / vec3<f32>(dp.dims), 0.0).r;
+    return fetch_channel(q, false);
 }
 
 // The cubic B-spline at one point, as the sums of eight trilinear fetches (Sigg & Hadwiger,
@@ -90,12 +99,13 @@ fn cubic_at(p: vec3<f32>) -> Cubic {
 }
 
 // Σ over the 2×2×2 fetch positions (x.x or x.y per axis, likewise y and z) of the product of
-// their axes' weights (wx.x or wx.y, …) times the fetched value.
-fn fetch8(x: vec2<f32>, wx: vec2<f32>, y: vec2<f32>, wy: vec2<f32>, z: vec2<f32>, wz: vec2<f32>) -> f32 {
-    let p0 = wy.x * (wx.x * fetch(vec3<f32>(x.x, y.x, z.x)) + wx.y * fetch(vec3<f32>(x.y, y.x, z.x)))
-           + wy.y * (wx.x * fetch(vec3<f32>(x.x, y.y, z.x)) + wx.y * fetch(vec3<f32>(x.y, y.y, z.x)));
-    let p1 = wy.x * (wx.x * fetch(vec3<f32>(x.x, y.x, z.y)) + wx.y * fetch(vec3<f32>(x.y, y.x, z.y)))
-           + wy.y * (wx.x * fetch(vec3<f32>(x.x, y.y, z.y)) + wx.y * fetch(vec3<f32>(x.y, y.y, z.y)));
+// their axes' weights (wx.x or wx.y, …) times the fetched value (of the shading channel with
+// `s`: fetch_channel).
+fn fetch8(x: vec2<f32>, wx: vec2<f32>, y: vec2<f32>, wy: vec2<f32>, z: vec2<f32>, wz: vec2<f32>, s: bool) -> f32 {
+    let p0 = wy.x * (wx.x * fetch_channel(vec3<f32>(x.x, y.x, z.x), s) + wx.y * fetch_channel(vec3<f32>(x.y, y.x, z.x), s))
+           + wy.y * (wx.x * fetch_channel(vec3<f32>(x.x, y.y, z.x), s) + wx.y * fetch_channel(vec3<f32>(x.y, y.y, z.x), s));
+    let p1 = wy.x * (wx.x * fetch_channel(vec3<f32>(x.x, y.x, z.y), s) + wx.y * fetch_channel(vec3<f32>(x.y, y.x, z.y), s))
+           + wy.y * (wx.x * fetch_channel(vec3<f32>(x.x, y.y, z.y), s) + wx.y * fetch_channel(vec3<f32>(x.y, y.y, z.y), s));
     return wz.x * p0 + wz.y * p1;
 }
 
@@ -105,11 +115,12 @@ fn cubic_value(p: vec3<f32>) -> f32 {
     let g1 = 1.0 - c.g0;
     return fetch8(vec2<f32>(c.h0.x, c.h1.x), vec2<f32>(c.g0.x, g1.x),
                   vec2<f32>(c.h0.y, c.h1.y), vec2<f32>(c.g0.y, g1.y),
-                  vec2<f32>(c.h0.z, c.h1.z), vec2<f32>(c.g0.z, g1.z));
+                  vec2<f32>(c.h0.z, c.h1.z), vec2<f32>(c.g0.z, g1.z), false);
 }
 
-// The cubic B-spline's gradient per index unit at `p`: along each axis the derivative's pair
-// of fetch positions and weights (dg0, -dg0), along the others the value's.
+// The cubic B-spline's gradient per index unit at `p`, of the shading channel (the voxels'
+// spline, for either spline): along each axis the derivative's pair of fetch positions and
+// weights (dg0, -dg0), along the others the value's.
 fn cubic_gradient(p: vec3<f32>) -> vec3<f32> {
     let c = cubic_at(p);
     let g1 = 1.0 - c.g0;
@@ -120,9 +131,9 @@ fn cubic_gradient(p: vec3<f32>) -> vec3<f32> {
     let wy = vec2<f32>(c.g0.y, g1.y);
     let wz = vec2<f32>(c.g0.z, g1.z);
     return vec3<f32>(
-        fetch8(vec2<f32>(c.dh0.x, c.dh1.x), vec2<f32>(c.dg0.x, -c.dg0.x), vy, wy, vz, wz),
-        fetch8(vx, wx, vec2<f32>(c.dh0.y, c.dh1.y), vec2<f32>(c.dg0.y, -c.dg0.y), vz, wz),
-        fetch8(vx, wx, vy, wy, vec2<f32>(c.dh0.z, c.dh1.z), vec2<f32>(c.dg0.z, -c.dg0.z)));
+        fetch8(vec2<f32>(c.dh0.x, c.dh1.x), vec2<f32>(c.dg0.x, -c.dg0.x), vy, wy, vz, wz, true),
+        fetch8(vx, wx, vec2<f32>(c.dh0.y, c.dh1.y), vec2<f32>(c.dg0.y, -c.dg0.y), vz, wz, true),
+        fetch8(vx, wx, vy, wy, vec2<f32>(c.dh0.z, c.dh1.z), vec2<f32>(c.dg0.z, -c.dg0.z), true));
 }
 
 // HU at continuous index `p`, clamped to the grid of voxel centres: trilinear, or the cubic
@@ -137,7 +148,7 @@ fn sample_at(p: vec3<f32>) -> f32 {
 }
 
 // The world gradient (HU per mm) at index `p`, as the CPU's Marcher::gradient: central
-// differences of trilinear samples, or the cubic B-spline's own.
+// differences of trilinear samples, or the voxels' cubic B-spline's.
 fn gradient_at(p: vec3<f32>) -> vec3<f32> {
     var g: vec3<f32>;
     if cubic_sampling() {
