@@ -559,7 +559,8 @@ impl<'a> Marcher<'a> {
     /// of the voxels, for either spline. The interpolating spline's own gradient carries the
     /// CT's noise that its prefilter amplifies (on the abdomen's skin under ct-muscle, a grain of
     /// 0.125 against trilinear's 0.040), so it is shaded by the approximating spline's, which
-    /// turns smoothly: its values keep their peaks and its surfaces shade as `cubic`'s.
+    /// turns smoothly: its values keep their peaks, and its normals are `cubic`'s at the same
+    /// points.
     pub fn gradient(&self, p: Vec3) -> Vec3 {
         let g = match self.interpolation {
             Interpolation::Linear => {
