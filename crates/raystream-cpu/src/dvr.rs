@@ -301,45 +301,48 @@ pub(crate) fn cell_opacities(
     interpolation: Interpolation,
     tf: &TransferFunction,
 ) -> Vec<f32> {
-    let [nx, ny, nz] = dims;
+    let [nx, ny, _] = dims;
     let cells = cell_dims(dims, cell);
     let worst = |lo: f32, hi: f32| tf.max_opacity_in(lo, hi);
     (0..cells[0] * cells[1] * cells[2])
         .into_par_iter()
         .map(|b| {
-            let (bx, by, bz) = (
-                b % cells[0],
-                b / cells[0] % cells[1],
-                b / (cells[0] * cells[1]),
-            );
-            let corners = |bi: usize, n: usize| bi * cell..=((bi + 1) * cell).min(n - 1);
+            let (lo, hi) = cell_corners(dims, cell, b);
             match interpolation {
                 Interpolation::Linear => {
-                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-                    for k in corners(bz, nz) {
-                        for j in corners(by, ny) {
-                            for i in corners(bx, nx) {
+                    let (mut low, mut high) = (f32::INFINITY, f32::NEG_INFINITY);
+                    for k in lo[2]..=hi[2] {
+                        for j in lo[1]..=hi[1] {
+                            for i in lo[0]..=hi[0] {
                                 let v = grid[i + nx * (j + ny * k)];
-                                lo = lo.min(v);
-                                hi = hi.max(v);
+                                low = low.min(v);
+                                high = high.max(v);
                             }
                         }
                     }
-                    worst(lo, hi)
+                    worst(low, high)
                 }
                 Interpolation::Cubic | Interpolation::CubicInterpolating => {
-                    let (x, y, z) = (corners(bx, nx), corners(by, ny), corners(bz, nz));
-                    block_bound(
-                        dims,
-                        grid,
-                        [*x.start(), *y.start(), *z.start()],
-                        [*x.end(), *y.end(), *z.end()],
-                        &worst,
-                    )
+                    block_bound(dims, grid, lo, hi, &worst)
                 }
             }
         })
         .collect()
+}
+
+/// The corner voxels of cell `b` of `cell`³ (x fastest; [`cell_dims`]) over a grid of `dims`:
+/// `lo[a]..=hi[a]` along each axis.
+pub(crate) fn cell_corners(dims: [usize; 3], cell: usize, b: usize) -> ([usize; 3], [usize; 3]) {
+    let cells = cell_dims(dims, cell);
+    let c = [
+        b % cells[0],
+        b / cells[0] % cells[1],
+        b / (cells[0] * cells[1]),
+    ];
+    (
+        c.map(|c| c * cell),
+        [0, 1, 2].map(|a| ((c[a] + 1) * cell).min(dims[a] - 1)),
+    )
 }
 
 /// The cell of `cell`³ (of `cells` per axis) holding index `p`, and the ray parameter where
@@ -2327,16 +2330,9 @@ mod tests {
         };
         // Per cell of `cell`³: σ of the greatest opacity over the hull alone.
         let hulls = |cell: usize| -> Vec<f32> {
-            let cells = cell_dims(vol.dims, cell);
-            (0..cells.iter().product::<usize>())
+            (0..cell_dims(vol.dims, cell).iter().product::<usize>())
                 .map(|b| {
-                    let c = [
-                        b % cells[0],
-                        b / cells[0] % cells[1],
-                        b / (cells[0] * cells[1]),
-                    ];
-                    let lo = c.map(|c| c * cell);
-                    let hi = [0, 1, 2].map(|a| ((c[a] + 1) * cell).min(vol.dims[a] - 1));
+                    let (lo, hi) = cell_corners(vol.dims, cell, b);
                     let (l, h) = widened(block_hull(vol.dims, &coefficients, lo, hi).hull);
                     sigma_of(tf.max_opacity_in(l, h))
                 })

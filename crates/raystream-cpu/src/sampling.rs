@@ -37,6 +37,11 @@ use raystream_math::Vec3;
 
 pub use raystream_volume::Interpolation;
 
+/// The cubic B-spline's value at voxel b of coefficients a, b, c along one axis: [1 4 1]/6.
+fn filter(a: f32, b: f32, c: f32) -> f32 {
+    (a + 4.0 * b + c) / 6.0
+}
+
 /// A range (lo, hi) holding every value the cubic B-spline over `grid` (`dims`; the voxels,
 /// or the interpolating spline's coefficients) takes in the cells that have voxel `v` as a
 /// corner, as far as `v` bounds them: the cells' ranges are the union of this over their
@@ -64,7 +69,6 @@ pub(crate) fn spline_hull_at(dims: [usize; 3], grid: &[f32], v: [usize; 3]) -> (
     };
     let (ox, oy, oz) = (near(0, 1), near(1, dims[0]), near(2, dims[0] * dims[1]));
     let at = |d: [usize; 3]| grid[ox[d[0]] + oy[d[1]] + oz[d[2]]];
-    let filter = |a: f32, b: f32, c: f32| (a + 4.0 * b + c) / 6.0;
     // Along x, for each (dy, dz): the coefficient itself and filtered.
     let mut x = [[[0.0f32; 2]; 3]; 3];
     for (dz, plane) in x.iter_mut().enumerate() {
@@ -114,7 +118,6 @@ pub(crate) fn block_hull(
             block.extend((0..h[0]).map(|i| grid[row + index(0, i)]));
         }
     }
-    let filter = |a: f32, b: f32, c: f32| (a + 4.0 * b + c) / 6.0;
     // Along x: [itself, filtered] at the block's voxels, over the halo's y and z.
     let mut x = Vec::with_capacity(m[0] * h[1] * h[2]);
     for row in block.chunks_exact(h[0]) {
@@ -303,10 +306,10 @@ pub(crate) fn cell_net(dims: [usize; 3], grid: &[f32], v: [usize; 3]) -> [f32; 6
     }
     let control = |c: [f32; 4]| {
         [
-            (c[0] + 4.0 * c[1] + c[2]) / 6.0,
+            filter(c[0], c[1], c[2]),
             (2.0 * c[1] + c[2]) / 3.0,
             (c[1] + 2.0 * c[2]) / 3.0,
-            (c[1] + 4.0 * c[2] + c[3]) / 6.0,
+            filter(c[1], c[2], c[3]),
         ]
     };
     along_each_axis(&mut net, |_, line| *line = control(*line));

@@ -64,16 +64,18 @@ pub(crate) struct GpuVolume {
     pub to_index: ([Vec3; 3], Vec3),
 }
 
-/// A grid of `dims` values (x fastest) as an R16Float 3D texture; with `shading`, a second grid
-/// of the same in a second channel (Rg16Float: the interpolating spline's coefficients, and the
-/// voxels whose spline's gradient shades it).
+/// The texture the kernels read `vol` from as `interpolation` reads it, `grid` its values
+/// ([`Marcher::grid`]): R16Float, or for the interpolating spline (kernel code 2) Rg16Float
+/// with the voxels, whose spline's gradient shades it, in the second channel.
 pub(crate) fn volume_texture(
     ctx: &GpuContext,
     label: &str,
-    dims: [usize; 3],
-    values: &[f32],
-    shading: Option<&[f32]>,
+    vol: &Volume,
+    grid: &[f32],
+    interpolation: Interpolation,
 ) -> Result<wgpu::TextureView, GpuError> {
+    let dims = vol.dims;
+    let shading = interpolation.prefiltered().then_some(&vol.data[..]);
     let max = ctx.limits.max_texture_dimension_3d as usize;
     if dims.iter().any(|&n| n > max) {
         return Err(ctx.err(format!(
@@ -102,8 +104,8 @@ pub(crate) fn volume_texture(
     });
     let half = |v: f32| half::f16::from_f32(v).to_bits();
     let halves: Vec<u16> = match shading {
-        None => values.iter().map(|&v| half(v)).collect(),
-        Some(shading) => values
+        None => grid.iter().map(|&v| half(v)).collect(),
+        Some(shading) => grid
             .iter()
             .zip(shading)
             .flat_map(|(&v, &s)| [half(v), half(s)])
@@ -133,16 +135,12 @@ impl GpuVolume {
         tf: &TransferFunction,
         marcher: &Marcher,
     ) -> Result<GpuVolume, GpuError> {
-        let shading = marcher
-            .interpolation()
-            .prefiltered()
-            .then_some(&vol.data[..]);
         let view = volume_texture(
             ctx,
             "CT volume (HU, f16)",
-            vol.dims,
+            vol,
             marcher.grid(),
-            shading,
+            marcher.interpolation(),
         )?;
         let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("trilinear"),
@@ -505,9 +503,9 @@ impl<'a> GpuVolumeRenderer<'a> {
         let v = volume_texture(
             self.ctx,
             label,
-            self.vol.dims,
+            self.vol,
             self.grid(interpolation),
-            Some(&self.vol.data),
+            interpolation,
         )?;
         Ok(self.coefficient_view.get_or_init(|| v))
     }
