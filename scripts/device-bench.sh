@@ -164,6 +164,10 @@ $bin "${c[@]}" --device cpu --frames 2 | tag '{"volume": "ct-bone cubic"}'
 # same cost per sample; its brick table differs).
 $bin bench "$ct" --mode dvr --resample 512 --size "$dvr_size" --json --quiet --interpolation cubic-interpolating --device gpu --frames 36 | tag '{"volume": "ct-bone cubic-interpolating"}'
 $bin bench "$ct" --mode mip --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 36 | tag '{"volume": "mip"}'
+# Segment colours (open question 16): every voxel in one of two segments (the CT's halves), so
+# every visible sample reads its eight voxels' labels; against ct-bones cubic above.
+$bin info "$ct" --json | $py scripts/halves-label-map.py "$tmp/halves.mha"
+$bin "${c[@]}" --device gpu --frames 36 --preset ct-bones --segmentation "$tmp/halves.mha" | tag '{"volume": "ct-bones cubic segments"}'
 $bin render "$ct" --mode dvr --shadows --preset ct-bones --device gpu --size "$dvr_size" -o "$out/dvr-bones-shadows-gpu.png" 2>&1 | tee -a "$out/render.log"
 # Cinematic rendering (64 paths a pixel, 4 scatterings): an orbit of 4 frames at 512³, one
 # picture of 256 paths a pixel, and one of 16 denoised.

@@ -364,7 +364,7 @@ pub(crate) fn path(
         };
         let p_idx = o_idx + d_idx * t;
         let x = o + d * (t0 + t);
-        let albedo = Vec3::from(tf.color_at(hu));
+        let albedo = m.albedo(Vec3::from(tf.color_at(hu)), p_idx);
         let g = m.gradient(p_idx);
         let gm = g.length();
         let surface = rng.uniform() < (gm / FULL_SHADING_GRADIENT).min(1.0);
@@ -593,8 +593,20 @@ pub const GUIDE_TRANSMITTANCE_END: f32 = 0.01;
 /// scatter by, and the weighted mean distance from the eye (+∞ below a mean coverage of 2 %).
 /// A first-surface guide would miss what semi-transparent tissue shows.
 pub fn guides(vol: &Volume, tf: &TransferFunction, opt: &DvrOptions, cam: &Camera) -> Guides {
+    guides_painted(vol, tf, opt, cam, None)
+}
+
+/// [`guides`] with the samples coloured by `segments` where given, as a painted frame's
+/// ([`crate::dvr::CpuVolume::painted`]).
+pub fn guides_painted(
+    vol: &Volume,
+    tf: &TransferFunction,
+    opt: &DvrOptions,
+    cam: &Camera,
+    segments: Option<&crate::segments::SegmentColours>,
+) -> Guides {
     let opt = &frame_options(vol, opt, Sight::Camera(cam));
-    let m = Marcher::interpolated(vol, None, opt.interpolation);
+    let m = Marcher::interpolated(vol, None, opt.interpolation).painted(segments);
     let majorants = Majorants::new(&m, tf);
     let tracker = Tracker {
         m: &m,
@@ -687,7 +699,7 @@ fn guide_ray(
                 let facing = if n.dot(d) > 0.0 { -n } else { n };
                 sum.normal += facing * ((gm / FULL_SHADING_GRADIENT).min(1.0) * w);
             }
-            sum.albedo += Vec3::from(tf.color_at(hu)) * w;
+            sum.albedo += m.albedo(Vec3::from(tf.color_at(hu)), p) * w;
             sum.depth += (t0 + t) * w;
             sum.coverage += w;
             transmit -= w;

@@ -33,6 +33,7 @@ use crate::Image;
 use crate::cpr::CurvedPlane;
 pub use crate::sampling::Interpolation;
 use crate::sampling::{block_bound, bspline_coefficients, tricubic, tricubic_value, trilinear};
+use crate::segments::SegmentColours;
 
 /// What a ray computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -281,6 +282,8 @@ pub struct Marcher<'a> {
     /// Per brick: whether anything in it is visible (dvr mode) — empty-space skipping.
     visible: std::borrow::Cow<'a, [bool]>,
     interpolation: Interpolation,
+    /// A segmentation's colours, which the samples take in place of the transfer function's.
+    segments: Option<&'a SegmentColours>,
 }
 
 /// Cells of `cell`³ voxel spacings over the grid of `dims` voxel centres: cells per axis.
@@ -489,6 +492,30 @@ impl<'a> Marcher<'a> {
             bricks,
             visible,
             interpolation,
+            segments: None,
+        }
+    }
+
+    /// The marcher with its samples coloured by `segments` (on the volume's grid), where
+    /// given.
+    pub fn painted(mut self, segments: Option<&'a SegmentColours>) -> Marcher<'a> {
+        if let Some(s) = segments {
+            assert_eq!(
+                s.dims, self.vol.dims,
+                "segment colours on the volume's grid"
+            );
+        }
+        self.segments = segments;
+        self
+    }
+
+    /// The colour of the sample at index `p` whose transfer-function colour (or, for an
+    /// isosurface, material) is `base`: the segments' colours blended there, where the
+    /// marcher has them ([`SegmentColours::colour_at`]).
+    pub fn albedo(&self, base: Vec3, p: Vec3) -> Vec3 {
+        match self.segments {
+            Some(s) => s.colour_at(p, base),
+            None => base,
         }
     }
 
@@ -701,7 +728,7 @@ impl<'a> Marcher<'a> {
                 continue;
             }
             let a = 1.0 - (1.0 - a.min(1.0)).powf(seg);
-            let base = Vec3::from(tf.color_at(v));
+            let base = self.albedo(Vec3::from(tf.color_at(v)), p);
             let shaded = shade_sample(self, tf, base, p, ray.o + ray.d * t, ray.d, lights);
             out.color += out.transmit * a * shaded;
             out.transmit *= 1.0 - a;
@@ -957,6 +984,8 @@ pub struct CpuVolume<'a> {
     /// Per interpolation (`Interpolation as usize`).
     bricks: [std::sync::OnceLock<Vec<bool>>; 3],
     majorants: [std::sync::OnceLock<crate::cinematic::Majorants>; 3],
+    /// A segmentation's colours, which dvr, iso and cinematic samples take.
+    segments: Option<&'a SegmentColours>,
 }
 
 impl<'a> CpuVolume<'a> {
@@ -967,7 +996,15 @@ impl<'a> CpuVolume<'a> {
             grids: Default::default(),
             bricks: Default::default(),
             majorants: Default::default(),
+            segments: None,
         }
+    }
+
+    /// The volume with its dvr, iso and cinematic samples coloured by `segments` (on its
+    /// grid), where given.
+    pub fn painted(mut self, segments: Option<&'a SegmentColours>) -> CpuVolume<'a> {
+        self.segments = segments;
+        self
     }
 
     /// The values frames read as `interpolation` read: the voxels, or the interpolating
@@ -989,6 +1026,7 @@ impl<'a> CpuVolume<'a> {
         } else {
             Marcher::with_grid(self.vol, Cow::Borrowed(grid), i)
         }
+        .painted(self.segments)
     }
 
     /// The majorant grid of cinematic frames read as `m` reads the volume.
@@ -1344,6 +1382,9 @@ fn phong(tf: &TransferFunction, n: Vec3, d: Vec3, l: Vec3) -> (f32, f32) {
     )
 }
 
+/// The colour of `--mode iso`'s surface (bone), where no segment colours it.
+pub const ISO_COLOUR: Vec3 = Vec3::new(0.88, 0.84, 0.74);
+
 /// Gradient magnitude (HU/mm) at which shading is fully on.
 pub(crate) const FULL_SHADING_GRADIENT: f32 = 100.0;
 
@@ -1478,7 +1519,7 @@ fn march(
                     let g = m.gradient(o_idx + d_idx * hi);
                     let n = if g.length() > 0.0 { -g.normalize() } else { -d };
                     let (diff, spec) = phong(tf, n, d, -d);
-                    let bone = Vec3::new(0.88, 0.84, 0.74);
+                    let bone = m.albedo(ISO_COLOUR, o_idx + d_idx * hi);
                     return Marched::opaque(bone * diff + Vec3::splat(spec), taken);
                 }
                 prev = Some((t, v));
@@ -2194,6 +2235,94 @@ mod tests {
             assert_eq!(skip, full, "{interpolation:?}");
             assert!(s1.skipped > 0 && s2.skipped == 0);
             assert!(s1.samples < s2.samples);
+        }
+    }
+
+    /// A segmentation's colours change the colour and nothing else. On the abdomen with
+    /// ct-bones' opacity in white, every voxel of one segment coloured red: dvr's red channel
+    /// is the plain frame's bit for bit (iso's no less, its bone colour replaced), green and
+    /// blue are the white specular highlight alone, and the opacity is the plain frame's; with no voxel
+    /// coloured (label 0, or a label given no colour) the frame is the plain one. With the
+    /// left half of the grid red and the right half blue, the image's two halves (the
+    /// patient's right on its left, anterior view) take the two colours.
+    #[test]
+    fn segment_colours_change_the_colour_and_nothing_else() {
+        use crate::segments::SegmentColours;
+        let vol = abdomen();
+        let mut tf = TfPreset::CtBones.function();
+        tf.color = vec![(0.0, [1.0; 3])];
+        let (red, blue) = (Vec3::X, Vec3::Z);
+        let n = vol.data.len();
+        let everywhere = |l: u16| SegmentColours::new(vol.dims, vec![l; n], &[(1, red)]);
+        // The patient's right (LPS x below the grid's middle) red, the left blue.
+        let [nx, ..] = vol.dims;
+        let lps_x = |i: usize| vol.index_to_world(raystream_math::DVec3::X * i as f64).x;
+        let middle = 0.5 * (lps_x(0) + lps_x(nx - 1));
+        let halves = SegmentColours::new(
+            vol.dims,
+            (0..n)
+                .map(|i| 1 + (lps_x(i % nx) > middle) as u16)
+                .collect(),
+            &[(1, red), (2, blue)],
+        );
+        let cam = volume_camera(&vol, 64.0 / 48.0);
+        for (mode, interpolation) in [
+            (DvrMode::Dvr, Interpolation::Linear),
+            (DvrMode::Dvr, Interpolation::Cubic),
+            (DvrMode::Iso, Interpolation::Linear),
+        ] {
+            let opt = DvrOptions {
+                width: 64,
+                height: 48,
+                mode,
+                interpolation,
+                ..Default::default()
+            };
+            let frame = |s: Option<&SegmentColours>| {
+                let done = AtomicU64::new(0);
+                CpuVolume::new(&vol, &tf)
+                    .painted(s)
+                    .render_rgba_counted(&opt, &cam, &done)
+            };
+            let what = format!("{} {interpolation:?}", mode.name());
+            let (plain, plain_alpha, _) = frame(None);
+            let (painted, alpha, _) = frame(Some(&everywhere(1)));
+            assert_eq!(
+                alpha, plain_alpha,
+                "{what}: the opacity is the plain frame's"
+            );
+            let mut lit = 0;
+            for (p, q) in painted.pixels.iter().zip(&plain.pixels) {
+                if mode == DvrMode::Dvr {
+                    assert_eq!(p.x, q.x, "{what}: red is the plain frame's red");
+                } else {
+                    // Red (1, 0, 0) in place of the bone's (0.88, 0.84, 0.74).
+                    assert!(p.x >= q.x, "{what}: red in place of the bone's");
+                }
+                assert_eq!(p.y, p.z, "{what}: green and blue, the highlight");
+                assert!(p.y <= q.y, "{what}: no more green than the plain frame's");
+                lit += (p.x > 0.05) as usize;
+            }
+            assert!(lit > 200, "{what}: {lit} pixels show bone");
+            for none in [0, 2] {
+                let (same, _, _) = frame(Some(&everywhere(none)));
+                assert_eq!(same, plain, "{what}: label {none} colours nothing");
+            }
+            // The patient's right on the image's left: red there.
+            let (split, _, _) = frame(Some(&halves));
+            let side = |right: bool| {
+                split
+                    .pixels
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| if right { i % 64 >= 40 } else { i % 64 < 24 })
+                    .fold(Vec3::ZERO, |s, (_, p)| s + *p)
+            };
+            let (left, right) = (side(false), side(true));
+            assert!(
+                left.x > 2.0 * left.z && right.z > 2.0 * right.x,
+                "{what}: the image's left {left}, right {right}"
+            );
         }
     }
 

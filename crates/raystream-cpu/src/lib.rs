@@ -27,6 +27,7 @@ pub mod lumen;
 pub mod mask;
 pub mod medium;
 pub mod sampling;
+pub mod segments;
 pub mod stenosis;
 pub mod wall;
 

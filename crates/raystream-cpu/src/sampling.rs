@@ -364,7 +364,13 @@ fn halves(net: &[f32; 64]) -> [[f32; 64]; 8] {
 
 /// Trilinear interpolation at continuous index `p` of a grid of `dims` values read by `at`,
 /// clamped to the grid (the GPU's `sample_at` and `light_at` compute the same).
-pub(crate) fn trilinear(dims: [usize; 3], p: Vec3, at: impl Fn(usize, usize, usize) -> f32) -> f32 {
+pub(crate) fn trilinear<T>(dims: [usize; 3], p: Vec3, at: impl Fn(usize, usize, usize) -> T) -> T
+where
+    T: Copy
+        + std::ops::Add<Output = T>
+        + std::ops::Sub<Output = T>
+        + std::ops::Mul<f32, Output = T>,
+{
     let [nx, ny, nz] = dims;
     let c = |x: f32, n: usize| x.clamp(0.0, (n - 1) as f32);
     let (x, y, z) = (c(p.x, nx), c(p.y, ny), c(p.z, nz));
@@ -381,7 +387,7 @@ pub(crate) fn trilinear(dims: [usize; 3], p: Vec3, at: impl Fn(usize, usize, usi
             (k + dk).min(nz - 1),
         )
     };
-    let l = |a: f32, b: f32, w: f32| a + (b - a) * w;
+    let l = |a: T, b: T, w: f32| a + (b - a) * w;
     l(
         l(
             l(v(0, 0, 0), v(1, 0, 0), fx),

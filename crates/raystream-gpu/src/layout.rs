@@ -357,7 +357,9 @@ pub struct DvrParams {
     /// `Interpolation::kernel_code`: 0 trilinear, 1 the cubic B-spline, 2 its interpolating
     /// form, shaded by the voxels' spline (byte 344).
     pub interpolation: u32,
-    pub pad3: u32,
+    /// 1: dvr, iso and cinematic samples take a segmentation's colours (bindings 14 and 15;
+    /// `raystream_cpu::segments`), byte 348.
+    pub segments: u32,
 }
 
 /// `CprRow` in dvr.wgsl, 48 bytes: one image row of a curved planar reformation

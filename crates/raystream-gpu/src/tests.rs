@@ -1109,7 +1109,7 @@ fn dvr_wgsl_params_match_rust() {
         ("anisotropy", offset_of!(DvrParams, anisotropy)),
         ("light_scale", offset_of!(DvrParams, light_scale)),
         ("interpolation", offset_of!(DvrParams, interpolation)),
-        ("pad3", offset_of!(DvrParams, pad3)),
+        ("segments", offset_of!(DvrParams, segments)),
     ];
     check_struct(&module, "DvrParams", size_of::<DvrParams>(), &names);
     use layout::GpuCprRow;
@@ -1578,15 +1578,7 @@ fn gpu_volume_rendering_matches_cpu() {
             }
         }
         let (_, cpu_alpha, _) = raystream_cpu::dvr::render_volume_rgba(&vol, &tf, &opt, &cam);
-        let da = alpha
-            .iter()
-            .zip(&cpu_alpha)
-            .map(|(g, c)| (g - c).abs())
-            .sum::<f32>();
-        assert!(
-            da < 0.01 * alpha.len() as f32,
-            "{name}: opacity off by {da} in all"
-        );
+        assert_opacity_close(&alpha, &cpu_alpha, &name);
         let (mean, mut worst) = cpu.srgb8_diff(&img);
         worst.sort_unstable();
         let p99 = worst[worst.len() * 99 / 100];
@@ -1597,6 +1589,140 @@ fn gpu_volume_rendering_matches_cpu() {
             "{what}: GPU vs CPU mean {mean}/255, p99 {p99}/255"
         );
     }
+}
+
+/// The GPU's opacities `gpu` within 0.01 of the CPU's `cpu` on average.
+fn assert_opacity_close(gpu: &[f32], cpu: &[f32], name: &str) {
+    let da = gpu.iter().zip(cpu).map(|(g, c)| (g - c).abs()).sum::<f32>();
+    assert!(
+        da < 0.01 * gpu.len() as f32,
+        "{name}: opacity off by {da} in all"
+    );
+}
+
+/// A segmentation's colours on the GPU (dvr.wgsl's `painted`) against the CPU's, on the
+/// abdomen: the patient's right red, the left blue, the densest bone (over 1000 HU) of a
+/// third label given no colour (the transfer function's shows there). dvr (trilinear and
+/// cubic), iso and cinematic (32 paths) frames within the tolerances of the unpainted ones
+/// (`gpu_volume_rendering_matches_cpu`, `gpu_cinematic_rendering_matches_cpu`), their opacity
+/// the unpainted frame's on the same device, and the denoiser's guides' colour the CPU's;
+/// and the colours show: the image's left half redder than its right.
+#[test]
+fn gpu_segment_colours_match_cpu() {
+    use raystream_cpu::dvr::{CpuVolume, DvrMode, DvrOptions, Interpolation, volume_camera};
+    use raystream_cpu::segments::SegmentColours;
+    use raystream_volume::TfPreset;
+    use std::sync::atomic::AtomicU64;
+    let Some(ctx) = gpu() else { return };
+    let vol = abdomen_ct();
+    let [nx, ..] = vol.dims;
+    let lps_x = |i: usize| vol.index_to_world(raystream_math::DVec3::X * i as f64).x;
+    let middle = 0.5 * (lps_x(0) + lps_x(nx - 1));
+    let labels = vol
+        .data
+        .iter()
+        .enumerate()
+        .map(|(i, &hu)| match hu {
+            hu if hu > 1000.0 => 3,
+            _ => 1 + (lps_x(i % nx) > middle) as u16,
+        })
+        .collect();
+    let segments = SegmentColours::new(vol.dims, labels, &[(1, Vec3::X), (2, Vec3::Z)]);
+    let nothing = SegmentColours::new(vol.dims, vec![0; vol.data.len()], &[(1, Vec3::X)]);
+    let plain = DvrOptions {
+        width: 64,
+        height: 48,
+        ..Default::default()
+    };
+    let cam = volume_camera(&vol, 64.0 / 48.0);
+    for (mode, preset, interpolation) in [
+        (DvrMode::Dvr, TfPreset::CtBones, Interpolation::Linear),
+        (DvrMode::Dvr, TfPreset::CtMuscle, Interpolation::Cubic),
+        (DvrMode::Iso, TfPreset::CtBone, Interpolation::Linear),
+        (DvrMode::Cinematic, TfPreset::CtBones, Interpolation::Linear),
+    ] {
+        let opt = DvrOptions {
+            mode,
+            interpolation,
+            spp: 32,
+            bounces: 3,
+            ..plain
+        };
+        let name = format!("{} {} {interpolation:?}", mode.name(), preset.name());
+        let tf = preset.function();
+        let done = AtomicU64::new(0);
+        let cpu = CpuVolume::new(&vol, &tf).painted(Some(&segments));
+        let (film, cpu_alpha, _) = cpu.render_rgba_counted(&opt, &cam, &done);
+        let gpu = GpuVolumeRenderer::painted(&ctx, &vol, &tf, Some(&segments)).unwrap();
+        let (gpu_film, alpha, _) = gpu.render_rgba(&opt, &cam).unwrap();
+        let unpainted = GpuVolumeRenderer::new(&ctx, &vol, &tf).unwrap();
+        let (plain_film, plain_alpha, _) = unpainted.render_rgba(&opt, &cam).unwrap();
+        if mode != DvrMode::Cinematic {
+            assert_eq!(
+                alpha, plain_alpha,
+                "{name}: the opacity is the unpainted frame's"
+            );
+        }
+        // No voxel of a segment: the unpainted frame bit for bit.
+        let none = GpuVolumeRenderer::painted(&ctx, &vol, &tf, Some(&nothing)).unwrap();
+        let (same, same_alpha, _) = none.render_rgba(&opt, &cam).unwrap();
+        assert!(
+            same.pixels == plain_film.pixels && same_alpha == plain_alpha,
+            "{name}: no segment, no change"
+        );
+        assert_opacity_close(&alpha, &cpu_alpha, &name);
+        let over = |film: &raystream_cpu::Image, alpha: &[f32]| {
+            raystream_cpu::dvr::over_background(film.clone(), alpha, opt.background)
+        };
+        let (c, g) = (over(&film, &cpu_alpha), over(&gpu_film, &alpha));
+        let (mean, mut worst) = c.srgb8_diff(&g);
+        worst.sort_unstable();
+        let p99 = worst[worst.len() * 99 / 100];
+        let close = worst.iter().filter(|&&d| d <= 2).count() as f64 / worst.len() as f64;
+        eprintln!(
+            "{name}: mean {mean:.3}/255, p99 {p99}/255, {:.1} % within 2/255",
+            100.0 * close
+        );
+        if mode == DvrMode::Cinematic {
+            assert!(mean < 1.0 && close >= 0.85, "{name}: {mean}/255, {close}");
+        } else {
+            assert!(mean < 1.0 && p99 <= 8, "{name}: {mean}/255, p99 {p99}/255");
+        }
+        // Red on the image's left (the patient's right), blue on its right.
+        let side = |right: bool| {
+            g.pixels
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| (i % 64 >= 32) == right)
+                .fold(Vec3::ZERO, |s, (_, p)| s + *p)
+        };
+        let (l, r) = (side(false), side(true));
+        assert!(l.x / l.z > 1.5 * r.x / r.z, "{name}: left {l}, right {r}");
+    }
+    // The denoiser's guides carry the colours too.
+    let opt = DvrOptions {
+        mode: DvrMode::Cinematic,
+        ..plain
+    };
+    let tf = TfPreset::CtBones.function();
+    let gpu = GpuVolumeRenderer::painted(&ctx, &vol, &tf, Some(&segments)).unwrap();
+    let got = gpu.guides(&opt, &cam).unwrap();
+    let want = raystream_cpu::cinematic::guides_painted(&vol, &tf, &opt, &cam, Some(&segments));
+    let off = got
+        .albedo
+        .iter()
+        .zip(&want.albedo)
+        .filter(|(g, w)| (**g - **w).abs().max_element() > 0.02)
+        .count();
+    let red = want
+        .albedo
+        .iter()
+        .filter(|a| a.x > 2.0 * a.z + 0.01)
+        .count();
+    assert!(
+        off * 50 <= want.albedo.len() && red > 50,
+        "{off} guides off, {red} red"
+    );
 }
 
 /// One GPU renderer draws frames read any way, in any order (each interpolation has its own

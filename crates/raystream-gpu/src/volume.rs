@@ -15,9 +15,10 @@ use raystream_cpu::cinematic::{
 };
 use raystream_cpu::denoise::{DenoiseOptions, DenoiseTimes, Guides, NoisyFilm};
 use raystream_cpu::dvr::{
-    BRICK, DvrMode, DvrOptions, Interpolation, LightGrid, Marcher, Sight, SplineGrids, brick_table,
-    over_background, scene_to_lps,
+    BRICK, DvrMode, DvrOptions, ISO_COLOUR, Interpolation, LightGrid, Marcher, Sight, SplineGrids,
+    brick_table, over_background, scene_to_lps,
 };
+use raystream_cpu::segments::SegmentColours;
 use raystream_io::Volume;
 use raystream_math::Vec3;
 use raystream_scene::Camera;
@@ -44,8 +45,9 @@ pub(crate) fn volume_core_wgsl() -> String {
 
 /// The WGSL source of the volume kernel.
 pub fn dvr_wgsl() -> String {
+    let [r, g, b] = ISO_COLOUR.to_array();
     format!(
-        "{}\n{COMMON_WGSL}\n{DVR_WGSL}\n{CINEMATIC_WGSL}",
+        "{}\nconst ISO_COLOUR: vec3<f32> = vec3<f32>({r:?}, {g:?}, {b:?});\n{COMMON_WGSL}\n{DVR_WGSL}\n{CINEMATIC_WGSL}",
         volume_core_wgsl()
     )
 }
@@ -167,6 +169,50 @@ impl GpuVolume {
     }
 }
 
+/// A segmentation's colours on the GPU (`raystream_cpu::segments`, dvr.wgsl's `painted`):
+/// each voxel's label as an R16Uint texture of the volume's grid, and the colour table; one
+/// voxel of label 0 and one empty colour where there is none.
+fn segment_bindings(
+    ctx: &GpuContext,
+    segments: Option<&SegmentColours>,
+) -> Result<(wgpu::TextureView, wgpu::Buffer), GpuError> {
+    let (dims, labels, colours) = match segments {
+        Some(s) => (s.dims, &s.labels[..], &s.colours[..]),
+        None => ([1; 3], &[0u16][..], &[[0.0f32; 4]][..]),
+    };
+    let size = wgpu::Extent3d {
+        width: dims[0] as u32,
+        height: dims[1] as u32,
+        depth_or_array_layers: dims[2] as u32,
+    };
+    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("segment labels"),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D3,
+        format: wgpu::TextureFormat::R16Uint,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    ctx.queue.write_texture(
+        texture.as_image_copy(),
+        bytemuck::cast_slice(labels),
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(2 * size.width),
+            rows_per_image: Some(size.height),
+        },
+        size,
+    );
+    let table = ctx.storage(
+        "segment colours",
+        bytemuck::cast_slice(colours),
+        wgpu::BufferUsages::empty(),
+    )?;
+    Ok((texture.create_view(&Default::default()), table))
+}
+
 /// A brick table (`raystream_cpu::dvr::brick_table`) on the GPU as the kernels read it: a word
 /// a brick, 1 where it may be visible.
 pub(crate) fn brick_buffer(ctx: &GpuContext, visible: &[bool]) -> Result<wgpu::Buffer, GpuError> {
@@ -235,6 +281,11 @@ pub struct GpuVolumeRenderer<'a> {
     no_rows: wgpu::Buffer,
     /// The last frame's output buffers, kept for the next frame of the same size or smaller.
     frame: Mutex<Option<FrameBuffers>>,
+    /// A segmentation's labels and colours (bindings 14 and 15), or placeholders, and whether
+    /// there is one.
+    segment_labels: wgpu::TextureView,
+    segment_colours: wgpu::Buffer,
+    segmented: bool,
     /// Milliseconds spent uploading the volume and building the pipeline.
     pub upload_ms: f64,
 }
@@ -269,9 +320,24 @@ impl<'a> GpuVolumeRenderer<'a> {
         vol: &'a Volume,
         tf: &'a TransferFunction,
     ) -> Result<GpuVolumeRenderer<'a>, GpuError> {
+        GpuVolumeRenderer::painted(ctx, vol, tf, None)
+    }
+
+    /// [`Self::new`], with dvr, iso and cinematic samples coloured by `segments` (on the
+    /// volume's grid) where given, as `raystream_cpu::dvr::CpuVolume::painted` colours them.
+    pub fn painted(
+        ctx: &'a GpuContext,
+        vol: &'a Volume,
+        tf: &'a TransferFunction,
+        segments: Option<&SegmentColours>,
+    ) -> Result<GpuVolumeRenderer<'a>, GpuError> {
         let t0 = Instant::now();
+        if let Some(s) = segments {
+            assert_eq!(s.dims, vol.dims, "segment colours on the volume's grid");
+        }
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let gpu = GpuVolume::new(ctx, vol, tf, &Marcher::new(vol, None))?;
+        let (segment_labels, segment_colours) = segment_bindings(ctx, segments)?;
         let module = ctx
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -320,6 +386,9 @@ impl<'a> GpuVolumeRenderer<'a> {
             light_dims: light_dims.map(|n| n as u32),
             no_rows,
             frame: Mutex::new(None),
+            segment_labels,
+            segment_colours,
+            segmented: segments.is_some(),
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }
@@ -559,6 +628,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             (4, self.gpu.color.as_entire_binding()),
             (11, majorants.as_entire_binding()),
             (13, out.as_entire_binding()),
+            (14, wgpu::BindingResource::TextureView(&self.segment_labels)),
+            (15, self.segment_colours.as_entire_binding()),
         ]
         .into_iter()
         .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource })
@@ -702,7 +773,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             anisotropy: opt.anisotropy,
             light_scale: opt.exposure_scale(),
             interpolation: opt.interpolation.kernel_code(),
-            pad3: 0,
+            segments: self.segmented as u32,
         };
         Ok((params, row_buf))
     }
@@ -828,7 +899,9 @@ impl<'a> GpuVolumeRenderer<'a> {
             9 => sum.as_entire_binding(),
             10 => row_buf.as_entire_binding(),
             11 => majorants.expect("a cinematic frame").as_entire_binding(),
-            _ => accum.as_entire_binding(),
+            12 => accum.as_entire_binding(),
+            14 => wgpu::BindingResource::TextureView(&self.segment_labels),
+            _ => self.segment_colours.as_entire_binding(),
         };
         let group = |label, pipeline: &wgpu::ComputePipeline, bindings: &[u32]| {
             let entries: Vec<_> = bindings
@@ -851,7 +924,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             let binds = batch_params
                 .iter()
                 .map(|params| {
-                    let entries: Vec<_> = [0, 1, 2, 3, 4, 6, 11, 12]
+                    let entries: Vec<_> = [0, 1, 2, 3, 4, 6, 11, 12, 14, 15]
                         .into_iter()
                         .map(|binding| wgpu::BindGroupEntry {
                             binding,
@@ -871,7 +944,10 @@ impl<'a> GpuVolumeRenderer<'a> {
             (p, binds)
         } else {
             let p = &self.pipeline;
-            (p, vec![group("dvr", p, &[0, 1, 2, 3, 4, 5, 6, 7, 10])])
+            (
+                p,
+                vec![group("dvr", p, &[0, 1, 2, 3, 4, 5, 6, 7, 10, 14, 15])],
+            )
         };
         let light_bind =
             shadows.then(|| group("light grid", &self.light_pipeline, &[0, 1, 2, 3, 5, 7]));

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use raystream_accel::{Counters, KdTree, Traversal, brute};
 use raystream_cpu::ImageFormat;
 use raystream_cpu::dvr::{
-    DvrMode, DvrOptions, DvrStats, render_volume, volume_camera, volume_camera_from,
+    CpuVolume, DvrMode, DvrOptions, DvrStats, volume_camera, volume_camera_from,
 };
 use raystream_io::TriMesh;
 use raystream_math::{Ray, Vec3};
@@ -426,6 +426,16 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
         resample_ms = Some(ms(t.elapsed()));
     }
     let (tf, base) = crate::dvr::options(&a.look, &a.threshold, mode, a.size)?;
+    let asked = crate::segments::Asked {
+        segmentation: a.segmentation.as_deref(),
+        segment: a.segment.as_deref(),
+        colour_table: None,
+    };
+    let (volume, colours) = match crate::segments::paint(asked, mode, &volume, &a.input)? {
+        Some(p) => (p.kept.unwrap_or(volume), p.colours),
+        None => (volume, None),
+    };
+    let colours = colours.as_ref();
     let shadow_cases: &[bool] = if mode == DvrMode::Dvr {
         &[false, true]
     } else {
@@ -436,7 +446,7 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
     for &dev in &a.device {
         let backend = open_device(dev, a.adapter.as_deref(), quiet)?;
         let t = Instant::now();
-        let renderer = crate::dvr::Renderer::new(&backend, &volume, &tf)?;
+        let renderer = crate::dvr::Renderer::new(&backend, &volume, &tf, colours)?;
         let upload_ms = ms(t.elapsed());
         // The interpolating spline's coefficients, timed apart from upload and frames.
         let t = Instant::now();
@@ -456,7 +466,9 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                     .frame(&small, &cam, ImageFormat::Png)?
                     .picture
                     .into_srgb8();
-                let (cpu, _) = render_volume(&volume, &tf, &small, &cam);
+                let (cpu, _) = CpuVolume::new(&volume, &tf)
+                    .painted(colours)
+                    .render(&small, &cam);
                 let (mean, _) = raystream_cpu::srgb8_diff(&cpu.to_srgb8(), &gpu);
                 if mean >= 1.0 {
                     bail!(
@@ -510,6 +522,8 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                 "mode": mode.name(),
                 "shadows": shadows,
                 "interpolation": opt.interpolation.name(),
+                "segmentation": a.segmentation.as_ref().map(|f| file_name(f)),
+                "segment": a.segment,
                 "spp": (mode == DvrMode::Cinematic).then_some(opt.spp),
                 "bounces": (mode == DvrMode::Cinematic).then_some(opt.bounces),
                 "denoise": (mode == DvrMode::Cinematic).then_some(opt.denoise),

@@ -243,8 +243,9 @@ pub struct RenderArgs {
     pub smooth: Option<u32>,
     /// A label map or DICOM Segmentation: the surfaces of its segments, each in its colour,
     /// instead of bones (numbers or a Segmentation's labels, comma-separated, or `all`, the
-    /// default for a Segmentation; as `iso --segment`).
-    #[arg(long, value_name = "LIST", conflicts_with_all = ["iso", "mode"])]
+    /// default for a Segmentation; as `iso --segment`). A CT with --mode dvr, iso, cinematic
+    /// or mip and --segmentation LABELS: only these segments of LABELS are drawn.
+    #[arg(long, value_name = "LIST", conflicts_with = "iso")]
     pub segment: Option<String>,
     /// The label map's segments' names and colours, for `--segment` (which it implies) or
     /// `--segmentation`: a 3D Slicer colour table or an ITK-SNAP label description (as
@@ -396,7 +397,9 @@ pub struct RenderArgs {
     /// MetaImage, DICOM SEG or RTSTRUCT; `measure --mask` writes the first and the SEG) at the
     /// pixel's point in the patient, as a viewer lays a segmentation over the CT, each segment
     /// in its own colour (a Segmentation's, a structure set's, `--colour-table`'s), else label
-    /// 1 cyan, 2 magenta, then yellow, green, orange, blue; PNG, or DICOM as the picture.
+    /// 1 cyan, 2 magenta, then yellow, green, orange, blue; PNG, or DICOM as the picture. With
+    /// --mode dvr, iso or cinematic: each sample in its segment's colour (the transfer
+    /// function's opacity); with --segment LIST (mip too) only those segments drawn.
     #[arg(long, value_name = "FILE")]
     pub segmentation: Option<PathBuf>,
     /// With --segmentation: each segment's edge drawn in its colour, as planning systems show
@@ -1089,6 +1092,13 @@ pub struct BenchArgs {
     /// at most 1024: 4 GiB of f32 on the host).
     #[arg(long, value_parser = clap::value_parser!(u32).range(2..=1024))]
     pub resample: Option<u32>,
+    /// Volumes with --mode: frames coloured by a segmentation's segments (dvr, iso,
+    /// cinematic), as `render --segmentation` colours them (laid on the resampled grid).
+    #[arg(long, value_name = "FILE")]
+    pub segmentation: Option<PathBuf>,
+    /// With --segmentation: only these segments drawn (mip too), as `render --segment`.
+    #[arg(long, value_name = "LIST", requires = "segmentation")]
+    pub segment: Option<String>,
     /// Devices to measure, comma-separated (cpu, gpu, auto).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
     pub device: Vec<Device>,

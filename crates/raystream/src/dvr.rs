@@ -9,6 +9,7 @@ use raystream_cpu::denoise::DenoiseTimes;
 use raystream_cpu::dvr::{
     CpuVolume, DvrMode, DvrOptions, DvrStats, Interpolation, Sight, over_background, render_volume,
 };
+use raystream_cpu::segments::SegmentColours;
 use raystream_cpu::{Image, ImageFormat};
 use raystream_gpu::GpuVolumeRenderer;
 use raystream_io::Volume;
@@ -223,15 +224,20 @@ pub struct Frame {
 }
 
 impl<'a> Renderer<'a> {
+    /// The frames of `volume` through `tf` on `backend`, their dvr, iso and cinematic samples
+    /// coloured by `segments` where given.
     pub fn new(
         backend: &'a Backend,
         volume: &'a Volume,
         tf: &'a TransferFunction,
+        segments: Option<&'a SegmentColours>,
     ) -> Result<Renderer<'a>> {
         Ok(match backend {
-            Backend::Gpu(ctx) => Renderer::Gpu(Box::new(GpuVolumeRenderer::new(ctx, volume, tf)?)),
+            Backend::Gpu(ctx) => Renderer::Gpu(Box::new(GpuVolumeRenderer::painted(
+                ctx, volume, tf, segments,
+            )?)),
             Backend::Cpu => Renderer::Cpu {
-                volume: Box::new(CpuVolume::new(volume, tf)),
+                volume: Box::new(CpuVolume::new(volume, tf).painted(segments)),
                 done: AtomicU64::new(0),
             },
         })

@@ -266,50 +266,14 @@ fn segment_stats(
     let Some(file) = &a.segmentation else {
         return Ok(None);
     };
-    let name = file.display();
-    let [nx, ny, _] = ct.dims;
-    let mut members: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
-    let (how, known) = if raystream_io::is_structure_set_file(file) {
-        // Each structure whole, laid on this CT's grid (not the series it names).
-        let set = raystream_io::StructureSet::read(file)?;
-        if let Some(why) = set.frame_mismatch(ct) {
-            bail!("{name}: {why} ({})", input.display());
-        }
-        let known = crate::iso::with_colour_table(set.segments(), a.colour_table.as_deref())?;
-        for roi in &set.rois {
-            let (r, _) = set.rasterise(roi, ct);
-            let [dx, dy, _] = r.dims;
-            let list = members.entry(roi.number as u32).or_default();
-            for (n, _) in r.inside.iter().enumerate().filter(|(_, held)| **held) {
-                let (i, j, k) = (n % dx, (n / dx) % dy, n / (dx * dy));
-                list.push(r.lo[0] + i + nx * (r.lo[1] + j + ny * (r.lo[2] + k)));
-            }
-        }
-        members.retain(|_, v| !v.is_empty());
-        ("structures laid on the CT's grid", known)
-    } else {
-        let labels = raystream_io::load_volume(file, &raystream_io::VolumeSelect::default())?;
-        if let Some(v) = crate::common::not_a_label(&labels) {
-            bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
-        }
-        let known = crate::iso::segment_names(&labels, a.colour_table.as_deref())?;
-        let whole = raystream_io::whole_segments(&labels, file)?;
-        (
-            labels_on_ct(ct, (&labels, whole.as_ref()), &mut members),
-            known,
-        )
-    };
-    if members.is_empty() {
-        bail!(
-            "{name}: no segment holds a voxel of {} (is it this CT's segmentation?)",
-            input.display()
-        );
-    }
-    let stats = members
+    let on = crate::segments::on_ct(file, a.colour_table.as_deref(), ct, input)?;
+    let stats = on
+        .members
         .into_iter()
         .filter_map(|(l, list)| {
             let s = raystream_volume::region_stats(ct, &list)?;
-            let name = known
+            let name = on
+                .known
                 .iter()
                 .find(|k| k.number as u32 == l)
                 .map(|k| k.label.clone())
@@ -317,69 +281,7 @@ fn segment_stats(
             Some((l, name, s))
         })
         .collect();
-    Ok(Some((stats, how)))
-}
-
-/// Each CT voxel's segments in `labels` (a label volume; with `whole`, its segments each
-/// whole, overlaps and all), gathered as the CT voxels of each label into `members`; how they
-/// were matched: voxel for voxel on the CT's own grid, else the label voxel nearest each CT
-/// voxel's centre.
-fn labels_on_ct(
-    ct: &raystream_io::Volume,
-    (labels, whole): (&raystream_io::Volume, Option<&raystream_io::WholeSegments>),
-    members: &mut std::collections::BTreeMap<u32, Vec<usize>>,
-) -> &'static str {
-    let [nx, ny, nz] = ct.dims;
-    let same = labels.dims == ct.dims
-        && (0..3).all(|a| {
-            (labels.origin[a] - ct.origin[a]).abs() < 1e-3
-                && (labels.spacing[a] - ct.spacing[a]).abs() < 1e-6 * ct.spacing[a]
-                && (0..3).all(|b| (labels.direction[a][b] - ct.direction[a][b]).abs() < 1e-6)
-        });
-    let to_labels = labels.index_to_world_affine().inverse() * ct.index_to_world_affine();
-    let [lx, ly, lz] = labels.dims;
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let q = if same {
-                    [i, j, k]
-                } else {
-                    let q = to_labels
-                        .transform_point3(raystream_math::DVec3::new(i as f64, j as f64, k as f64))
-                        .round();
-                    if q.min_element() < 0.0
-                        || q.x >= lx as f64
-                        || q.y >= ly as f64
-                        || q.z >= lz as f64
-                    {
-                        continue;
-                    }
-                    [q.x as usize, q.y as usize, q.z as usize]
-                };
-                let n = i + nx * (j + ny * k);
-                match whole {
-                    Some(segments) => {
-                        for (l, v) in segments {
-                            if v.holds(q) {
-                                members.entry(*l as u32).or_default().push(n);
-                            }
-                        }
-                    }
-                    None => {
-                        let l = labels.at(q[0], q[1], q[2]);
-                        if l > 0.0 {
-                            members.entry(l as u32).or_default().push(n);
-                        }
-                    }
-                }
-            }
-        }
-    }
-    if same {
-        "the CT's grid"
-    } else {
-        "the nearest label voxel to each CT voxel's centre"
-    }
+    Ok(Some((stats, on.how)))
 }
 
 fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {

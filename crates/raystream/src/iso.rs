@@ -240,6 +240,70 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
     Ok(())
 }
 
+/// The labels `--segment LIST` names (numbers, a segmentation's segment labels in any case, or
+/// `all`), in the order named, among those `present` (some voxel holds each); an unknown one is
+/// refused, naming `file` and listing the labels present by number and name.
+pub fn pick_segments(
+    file: &dyn std::fmt::Display,
+    list: &str,
+    present: &[u32],
+    known: &[raystream_io::SegmentLabel],
+) -> Result<Vec<u32>> {
+    let name = file;
+    let named = |l: u32| known.iter().find(|k| k.number as u32 == l);
+    let listed = || {
+        let list: Vec<String> = present
+            .iter()
+            .map(|&l| match named(l) {
+                Some(k) if !k.label.is_empty() => format!("{l} ({})", k.label),
+                _ => l.to_string(),
+            })
+            .collect();
+        if list.is_empty() {
+            "none".to_string()
+        } else {
+            list.join(", ")
+        }
+    };
+    let mut wanted: Vec<u32> = Vec::new();
+    for item in list.split(',').map(str::trim) {
+        let found: Vec<u32> = if item.eq_ignore_ascii_case("all") {
+            present.to_vec()
+        } else if let Ok(l) = item.parse::<u32>() {
+            if !present.contains(&l) {
+                bail!(
+                    "{name}: --segment {item}: no voxel holds label {l}; the labels present are {}",
+                    listed()
+                );
+            }
+            vec![l]
+        } else {
+            let by_name: Vec<u32> = known
+                .iter()
+                .filter(|k| k.label.eq_ignore_ascii_case(item))
+                .map(|k| k.number as u32)
+                .collect();
+            match by_name.as_slice() {
+                [] => bail!(
+                    "{name}: --segment {item:?}: no segment is named so (nor is it a number); the labels present are {}",
+                    listed()
+                ),
+                [l] if !present.contains(l) => bail!(
+                    "{name}: --segment {item:?}: segment {l} holds no voxel; the labels present are {}",
+                    listed()
+                ),
+                _ => by_name,
+            }
+        };
+        for l in found {
+            if !wanted.contains(&l) {
+                wanted.push(l);
+            }
+        }
+    }
+    Ok(wanted)
+}
+
 /// The volume a closed, outward-facing mesh in millimetres encloses, ml.
 pub fn enclosed_ml(mesh: &raystream_io::TriMesh) -> f64 {
     mesh.enclosed_volume() / 1000.0
@@ -316,57 +380,12 @@ pub fn segment_surfaces(
             }
         }
     }
-    let named = |l: u32| known.iter().find(|k| k.number as u32 == l);
-    let present = || {
-        let list: Vec<String> = boxes
-            .keys()
-            .map(|&l| match named(l) {
-                Some(k) if !k.label.is_empty() => format!("{l} ({})", k.label),
-                _ => l.to_string(),
-            })
-            .collect();
-        if list.is_empty() {
-            "none".to_string()
-        } else {
-            list.join(", ")
-        }
-    };
-    let mut wanted: Vec<u32> = Vec::new();
-    for item in list.split(',').map(str::trim) {
-        let found: Vec<u32> = if item.eq_ignore_ascii_case("all") {
-            boxes.keys().copied().collect()
-        } else if let Ok(l) = item.parse::<u32>() {
-            if !boxes.contains_key(&l) {
-                bail!(
-                    "{name}: --segment {item}: no voxel holds label {l}; the labels present are {}",
-                    present()
-                );
-            }
-            vec![l]
-        } else {
-            let by_name: Vec<u32> = known
-                .iter()
-                .filter(|k| k.label.eq_ignore_ascii_case(item))
-                .map(|k| k.number as u32)
-                .collect();
-            match by_name.as_slice() {
-                [] => bail!(
-                    "{name}: --segment {item:?}: no segment is named so (nor is it a number); the labels present are {}",
-                    present()
-                ),
-                [l] if !boxes.contains_key(l) => bail!(
-                    "{name}: --segment {item:?}: segment {l} holds no voxel; the labels present are {}",
-                    present()
-                ),
-                _ => by_name,
-            }
-        };
-        for l in found {
-            if !wanted.contains(&l) {
-                wanted.push(l);
-            }
-        }
-    }
+    let wanted = pick_segments(
+        &name,
+        list,
+        &boxes.keys().copied().collect::<Vec<_>>(),
+        known,
+    )?;
     if wanted.is_empty() {
         bail!("{name}: no voxel holds a label (every voxel is 0)");
     }
@@ -416,7 +435,7 @@ pub fn segment_surfaces(
             .to_array();
         let mut surface = extract_isosurface(&cut, 0.5);
         raystream_volume::smooth(&mut surface, smoothing);
-        let segment = named(l);
+        let segment = known.iter().find(|k| k.number as u32 == l);
         let name = segment
             .map(|k| k.label.clone())
             .filter(|n| !n.is_empty())

@@ -247,7 +247,11 @@ fn segmentation(
         return Ok(None);
     };
     let name = file.display();
-    if a.mode != Some(crate::cli::ModeArg::Slice) || a.look.slab.is_some() {
+    if a.mode != Some(crate::cli::ModeArg::Slice) {
+        // The other modes colour or keep to segments: crate::segments::paint.
+        return Ok(None);
+    }
+    if a.look.slab.is_some() {
         bail!(
             "--segmentation {name}: tints a slice or a CPR, each pixel a point: give --mode slice (no --slab)"
         );
@@ -687,6 +691,30 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     }
     let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
     let labels = segmentation(a, format, &volume)?;
+    // Every other mode colours (dvr, iso, cinematic) or keeps to segments (--segment).
+    let painted = if mode == DvrMode::Slice {
+        if let Some(list) = &a.segment {
+            bail!(
+                "--segment {list} with --mode slice: a slice is tinted by every segment of --segmentation (--segment keeps segments in dvr, iso, cinematic and mip)"
+            );
+        }
+        None
+    } else {
+        if a.segmentation.is_some() && a.outline {
+            bail!("--outline draws each segment's edge over a slice: give --mode slice");
+        }
+        if let Some(f) = a.segmentation.as_ref().filter(|_| a.cine) {
+            bail!(
+                "--segmentation {} with --cine: the segmentation is laid on one phase's grid; render phases one by one (--phase K)",
+                f.display()
+            );
+        }
+        crate::segments::paint(crate::segments::Asked::of_render(a), mode, &volume, path)?
+    };
+    let (volume, segment_colours, segment_words) = match painted {
+        Some(p) => (p.kept.unwrap_or(volume), p.colours, p.words),
+        None => (volume, None, String::new()),
+    };
     let track = wall_track(a, &volume, curve.as_ref())?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     if mode == DvrMode::Cinematic {
@@ -719,7 +747,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         || labels.is_some();
     opt.hu_values = format == ImageFormat::Exr || (dicom_out && mode.is_windowed() && !drawn);
     let aspect = opt.width as f32 / opt.height as f32;
-    let renderer = dvr::Renderer::new(&backend, &volume, &tf)?;
+    let renderer = dvr::Renderer::new(&backend, &volume, &tf, segment_colours.as_ref())?;
     let view = base_view(a, VOLUME_VIEW, true)?;
     if let Some(n) = a.turntable {
         return turntable(
@@ -885,7 +913,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             (what, counts)
         };
         eprintln!(
-            "raystream: wrote {} ({}x{}, --mode {}{}, {}{what}) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples{counts}, {:.1} M samples/s",
+            "raystream: wrote {} ({}x{}, --mode {}{}, {}{what}{segment_words}) on {} ({}): load {:.0} ms, render {:.1} ms ({:.2} frames/s{}){}, {} samples{counts}, {:.1} M samples/s",
             a.output.display(),
             opt.width,
             opt.height,
@@ -1273,7 +1301,7 @@ fn cine(
                 warnings.push(format!("phase {}: {w}", i + 1));
             }
             let frame =
-                dvr::Renderer::new(backend, &volume, tf)?.frame(opt, seen.sight(), format)?;
+                dvr::Renderer::new(backend, &volume, tf, None)?.frame(opt, seen.sight(), format)?;
             Ok((frame, seen.clone(), *opt))
         },
     )?;
@@ -1667,7 +1695,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     }
     if let Some(f) = &a.segmentation {
         bail!(
-            "--segmentation {}: tints a slice or a CPR of a CT: give --mode slice",
+            "--segmentation {}: lays a segmentation on a CT rendered with --mode (slice: tinted; dvr, iso, cinematic: coloured; mip: kept to --segment's segments)",
             f.display()
         );
     }

@@ -328,3 +328,63 @@ fn segment_statistics_refuse_what_is_no_segmentation() {
         "far-labels.nii: no segment holds a voxel of",
     );
 }
+
+/// `render CT --mode dvr --segmentation LABELS`: a label the GPU's 16-bit label texture cannot
+/// hold, and a label map that lies nowhere near the CT, are refused, naming the file.
+#[test]
+fn segment_colours_refuse_what_they_cannot_draw() {
+    // A 4×4×4 CT of bone and its label map on the same grid (MetaImage, 32-bit integers).
+    let mha = |name: &str, kind: &str, bytes: Vec<u8>| {
+        let path = tmp(name);
+        let mut file = format!(
+            "ObjectType = Image\nNDims = 3\nDimSize = 4 4 4\nElementSpacing = 1 1 1\nOffset = 0 0 0\nElementType = {kind}\nElementByteOrderMSB = False\nElementDataFile = LOCAL\n"
+        )
+        .into_bytes();
+        file.extend(bytes);
+        std::fs::write(&path, file).unwrap();
+        path.to_string_lossy().into_owned()
+    };
+    let ct = mha(
+        "paint-ct.mha",
+        "MET_SHORT",
+        [1000i16; 64].iter().flat_map(|v| v.to_le_bytes()).collect(),
+    );
+    let labels = mha(
+        "paint-big.mha",
+        "MET_INT",
+        [70000i32; 64]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect(),
+    );
+    refused(
+        &[
+            "render",
+            &ct,
+            "--mode",
+            "dvr",
+            "--segmentation",
+            &labels,
+            "-o",
+            "x.png",
+        ],
+        "paint-big.mha: label 70000: labels above 65535 are not rendered in colour",
+    );
+    let far = tmp("paint-far.nii");
+    let mut v = raystream_io::Volume::hounsfield([3, 3, 3], [1.0; 3], vec![0.0; 27]);
+    v.origin = [1e4, 0.0, 0.0];
+    raystream_io::write_label_map(&far, &v, &[1; 27], "far away").unwrap();
+    refused(
+        &[
+            "render",
+            &ct,
+            "--mode",
+            "iso",
+            "--segmentation",
+            far.to_str().unwrap(),
+            "-o",
+            "x.png",
+        ],
+        "paint-far.nii: no segment holds a voxel of",
+    );
+}

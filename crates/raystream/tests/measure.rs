@@ -1731,7 +1731,8 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
         held[1] > 2000 && held[2] > 100 && middle > 100,
         "{held:?}, {middle} rows"
     );
-    // Only a slice or a CPR, of a label map.
+    // Tinted: only a slice or a CPR, of a label map; a MIP shows no colours, only fewer
+    // segments.
     refused(
         &[
             "render",
@@ -1743,7 +1744,22 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
             "-o",
             "x.png",
         ],
-        "tints a slice or a CPR, each pixel a point: give --mode slice",
+        "a MIP shows HU, not colours; give --segment LIST",
+    );
+    refused(
+        &[
+            "render",
+            &vol,
+            "--mode",
+            "slice",
+            "--slab",
+            "5",
+            "--segmentation",
+            mask.to_str().unwrap(),
+            "-o",
+            "x.png",
+        ],
+        "tints a slice or a CPR, each pixel a point: give --mode slice (no --slab)",
     );
     refused(
         &[
@@ -1753,7 +1769,7 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
             "-o",
             "x.png",
         ],
-        "tints a slice or a CPR of a CT: give --mode slice",
+        "lays a segmentation on a CT rendered with --mode",
     );
     refused(
         &[
@@ -1768,6 +1784,178 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
         ],
         "--segmentation takes a label map (whole numbers from 0); it holds -",
     );
+}
+
+/// `render CT --mode … --segmentation LABELS [--segment LIST]` on the chest CT with
+/// `measure --wall --mask`'s lumen (1) and wall (2), on each device:
+/// - a MIP kept to the lumen: every pixel at most the plain MIP's (the voxels outside it set
+///   to the CT's lowest value, and interpolation is monotone), the contrast lumen bright, and
+///   rays that pass no lumen voxel's neighbourhood at exactly that lowest value;
+/// - dvr from behind, coloured by both: the opacity (the EXR's A) is the plain frame's bit for
+///   bit, and the pixels that change turn bluer (cyan lumen, magenta wall, where ct-aaa draws
+///   contrast red); kept to the lumen, only pixels where the plain frame has some opacity
+///   remain, and far fewer;
+/// - the GPU's PNG is the CPU's (mean difference under 0.5/255);
+/// - what makes no sense is refused, naming the option.
+#[test]
+fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
+    let (vol, path) = (chest(), aorta());
+    let mask = tmp("paint-mask.nii.gz");
+    measure(&vol, &path, &["--wall", "--mask", mask.to_str().unwrap()]);
+    let m = mask.to_str().unwrap();
+    let channel = |f: &std::path::Path, c: &str| -> Vec<f32> {
+        let exr = raystream_cpu::load_exr(f).unwrap();
+        exr.channels[c].as_f32().unwrap().to_vec()
+    };
+    let lowest = raystream_io::load_volume(std::path::Path::new(&vol), &Default::default())
+        .unwrap()
+        .value_range()
+        .unwrap()
+        .0;
+    let mip = [vol.as_str(), "--mode", "mip", "--size", "60x80"];
+    let back = [
+        vol.as_str(),
+        "--mode",
+        "dvr",
+        "--preset",
+        "ct-aaa",
+        "--view",
+        "posterior",
+        "--size",
+        "60x80",
+    ];
+    let both = ["--segmentation", m];
+    let lumen = ["--segmentation", m, "--segment", "1"];
+    let mut pngs = Vec::new();
+    for dev in devices() {
+        let out = |name: &str, args: &[&[&str]]| {
+            render_to(&format!("paint-{dev}-{name}"), dev, &args.concat())
+        };
+        let plain = channel(&out("mip.exr", &[&mip]), "Y");
+        let kept = channel(&out("mip-lumen.exr", &[&mip, &lumen]), "Y");
+        let (mut air, mut lit) = (0, 0);
+        for (k, p) in kept.iter().zip(&plain) {
+            if k.is_nan() {
+                assert!(p.is_nan(), "{dev}: the same rays miss");
+                continue;
+            }
+            assert!(k <= p, "{dev}: kept {k} above the plain MIP's {p}");
+            air += (*k == lowest) as usize;
+            lit += (*k > 200.0) as usize;
+        }
+        let brightest = kept.iter().copied().fold(f32::MIN, f32::max);
+        eprintln!(
+            "{dev}: MIP of the lumen: {air} pixels of air, {lit} over 200 HU, brightest {brightest}"
+        );
+        assert!(air > 1000 && lit > 40 && brightest > 400.0, "{dev}");
+        // Coloured: the same opacity, bluer where it changes.
+        let plain = out("dvr.exr", &[&back]);
+        let painted = out("dvr-both.exr", &[&back, &both]);
+        assert_eq!(channel(&plain, "A"), channel(&painted, "A"), "{dev}");
+        let rgb = |f: &std::path::Path| {
+            let [r, g, b] = ["R", "G", "B"].map(|c| channel(f, c));
+            (0..r.len())
+                .map(move |i| [r[i], g[i], b[i]])
+                .collect::<Vec<_>>()
+        };
+        let (p, q) = (rgb(&plain), rgb(&painted));
+        let changed: Vec<usize> = (0..p.len()).filter(|&i| p[i] != q[i]).collect();
+        let bluer = changed
+            .iter()
+            .filter(|&&i| q[i][2] - q[i][0] > p[i][2] - p[i][0])
+            .count();
+        eprintln!("{dev}: {} pixels coloured, {bluer} bluer", changed.len());
+        assert!(
+            changed.len() > 30 && bluer * 10 >= changed.len() * 9,
+            "{dev}: {} changed, {bluer} bluer",
+            changed.len()
+        );
+        // Kept to the lumen: what remains had some opacity before, and far less shows.
+        let alpha = channel(&plain, "A");
+        let kept = channel(&out("dvr-lumen.exr", &[&back, &lumen]), "A");
+        let shown = |a: &[f32]| a.iter().filter(|&&a| a > 0.05).count();
+        for (k, a) in kept.iter().zip(&alpha) {
+            assert!(*k <= 0.05 || *a > 0.0, "{dev}: lumen where nothing was");
+        }
+        assert!(
+            shown(&kept) > 20 && shown(&kept) * 4 < shown(&alpha),
+            "{dev}: {} of {} pixels",
+            shown(&kept),
+            shown(&alpha)
+        );
+        pngs.push(out("dvr-both.png", &[&back, &both]));
+    }
+    if let [cpu, gpu] = &pngs[..] {
+        let (a, b) = (
+            image::open(cpu).unwrap().to_rgb8(),
+            image::open(gpu).unwrap().to_rgb8(),
+        );
+        let diff: u64 = a
+            .as_raw()
+            .iter()
+            .zip(b.as_raw())
+            .map(|(x, y)| x.abs_diff(*y) as u64)
+            .sum();
+        let mean = diff as f64 / a.as_raw().len() as f64;
+        assert!(mean < 0.5, "GPU vs CPU: {mean}/255");
+    }
+    for (args, want) in [
+        (
+            &[&mip[..], &["--segmentation", m]].concat(),
+            "a MIP shows HU, not colours; give --segment LIST",
+        ),
+        (
+            &[&mip[..], &["--segment", "1"]].concat(),
+            "--segment 1 with --mode mip: keeps only those segments of a CT's segmentation: give --segmentation LABELS",
+        ),
+        (
+            &[&back[..], &["--segmentation", m, "--segment", "7"]].concat(),
+            "--segment 7: no voxel holds label 7; the labels present are 1, 2",
+        ),
+        (
+            &[&back[..], &["--segmentation", m, "--outline"]].concat(),
+            "--outline draws each segment's edge over a slice",
+        ),
+        (
+            &[
+                vol.as_str(),
+                "--mode",
+                "minip",
+                "--segmentation",
+                m,
+                "--segment",
+                "1",
+            ][..]
+                .to_vec(),
+            "with --mode minip: colours dvr, iso and cinematic frames",
+        ),
+        (
+            &[vol.as_str(), "--mode", "average", "--segmentation", m][..].to_vec(),
+            "with --mode average",
+        ),
+        (
+            &[
+                vol.as_str(),
+                "--mode",
+                "slice",
+                "--segmentation",
+                m,
+                "--segment",
+                "1",
+            ][..]
+                .to_vec(),
+            "--segment 1 with --mode slice",
+        ),
+        (
+            &[&back[..], &["--segmentation", &vol]].concat(),
+            "--segmentation takes a label map (whole numbers from 0)",
+        ),
+    ] {
+        let mut all = vec!["render", "--device", "cpu"];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["-o", "x.png"]);
+        refused(&all, want);
+    }
 }
 
 /// The outer wall a millimetre at a time down the chest CT's aorta: each section's circle

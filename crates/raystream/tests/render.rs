@@ -1892,7 +1892,7 @@ fn render_draws_a_label_maps_segments() {
             "-o",
             "x.png",
         ],
-        "'--segment <LIST>' cannot be used with '--mode <MODE>'",
+        "--segment 1 with --mode mip: keeps only those segments of a CT's segmentation: give --segmentation LABELS",
     );
 }
 

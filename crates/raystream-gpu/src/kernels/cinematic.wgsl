@@ -236,7 +236,7 @@ fn trace_path(o_in: vec3<f32>, d_in: vec3<f32>, key: vec3<f32>) -> PathSample {
         }
         let p_idx = r.o_idx + r.d_idx * hit.t;
         let x = o + d * (r.t0 + hit.t);
-        let albedo = color_at(hit.hu);
+        let albedo = painted(color_at(hit.hu), p_idx);
         let g = gradient_at(p_idx);
         let gm = length(g);
         let surface = rng_next() < min(gm / FULL_SHADING_GRADIENT, 1.0);
@@ -401,7 +401,7 @@ fn guide_volume(@builtin(global_invocation_id) gid: vec3<u32>) {
                         }
                         normal += facing * (min(gm / FULL_SHADING_GRADIENT, 1.0) * w);
                     }
-                    albedo += color_at(hu) * w;
+                    albedo += painted(color_at(hu), p) * w;
                     depth += (g.t0 + t) * w;
                     coverage += w;
                     transmit -= w;

@@ -69,7 +69,9 @@ struct DvrParams {
     // Interpolation::kernel_code of DvrOptions::interpolation: 0 trilinear, 1 cubic B-spline, 2 its
     // interpolating form (coefficients in the first channel, the voxels in the second).
     interpolation: u32,
-    pad3: u32,
+    // 1: dvr, iso and cinematic samples take the colours of a segmentation (segment_labels,
+    // segment_colours) in place of the transfer function's.
+    segments: u32,
 }
 
 // One image row of a curved plane (raystream_cpu::cpr::CprRow, LPS): the path's point, the
@@ -95,6 +97,11 @@ struct CprRow {
 @group(0) @binding(7) var<storage, read_write> light_values: array<f32>;
 // A curved plane's rows, top first (one placeholder row when the camera casts the rays).
 @group(0) @binding(10) var<storage, read> cpr_rows: array<CprRow>;
+// A segmentation on the volume's grid (raystream_cpu::segments::SegmentColours): each voxel's
+// label, and per label its linear colour with w = 1, or w = 0 where it has none (a 1-voxel
+// placeholder when dp.segments is 0).
+@group(0) @binding(14) var segment_labels: texture_3d<u32>;
+@group(0) @binding(15) var<storage, read> segment_colours: array<vec4<f32>>;
 
 const MODE_DVR: u32 = 0u;
 const MODE_MIP: u32 = 1u;
@@ -105,6 +112,44 @@ const MODE_SLICE: u32 = 5u;
 
 // The crop box and clip planes applied to [t.x, t.y] of the world ray o + t d, as the CPU's
 // clip_interval.
+// Voxel (i, j, k)'s colour: its segment's, else base.
+fn segment_voxel(i: u32, j: u32, k: u32, base: vec3<f32>) -> vec3<f32> {
+    let c = segment_colours[textureLoad(segment_labels, vec3<u32>(i, j, k), 0).x];
+    return select(base, c.xyz, c.w > 0.0);
+}
+
+// The colour of the sample at index p whose own colour (the transfer function's, or iso's
+// material) is base: with a segmentation, the trilinear blend of its eight nearest voxels'
+// segment colours, base for voxels of none, clamped to the grid, as the CPU's
+// SegmentColours::colour_at (the same lerps in the same order).
+fn painted(base: vec3<f32>, p: vec3<f32>) -> vec3<f32> {
+    if dp.segments == 0u {
+        return base;
+    }
+    let n = dp.dims;
+    let q = clamp(p, vec3<f32>(0.0), vec3<f32>(n - 1u));
+    let i = min(vec3<u32>(q), max(n, vec3<u32>(2u)) - 2u);
+    let f = q - vec3<f32>(i);
+    let e = min(i + 1u, n - 1u);
+    let c000 = segment_voxel(i.x, i.y, i.z, base);
+    let c100 = segment_voxel(e.x, i.y, i.z, base);
+    let c010 = segment_voxel(i.x, e.y, i.z, base);
+    let c110 = segment_voxel(e.x, e.y, i.z, base);
+    let c001 = segment_voxel(i.x, i.y, e.z, base);
+    let c101 = segment_voxel(e.x, i.y, e.z, base);
+    let c011 = segment_voxel(i.x, e.y, e.z, base);
+    let c111 = segment_voxel(e.x, e.y, e.z, base);
+    let y0 = lerp3(lerp3(c000, c100, f.x), lerp3(c010, c110, f.x), f.y);
+    let y1 = lerp3(lerp3(c001, c101, f.x), lerp3(c011, c111, f.x), f.y);
+    return lerp3(y0, y1, f.z);
+}
+
+// a + (b - a) t, as the CPU's trilinear: exactly a where b is a (mix's a (1 - t) + b t is
+// not), so that voxels of no segment leave the transfer function's colour as it is.
+fn lerp3(a: vec3<f32>, b: vec3<f32>, t: f32) -> vec3<f32> {
+    return a + (b - a) * t;
+}
+
 // volume.wgsl's choice of reconstruction (Interpolation::kernel_code).
 fn cubic_sampling() -> bool {
     return dp.interpolation != 0u;
@@ -277,7 +322,8 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32, at: vec3<f32>, n: vec3<f32>, reac
                     n = -normalize(g);
                 }
                 let ph = phong(n, d, -d);
-                return Marched(vec3<f32>(0.88, 0.84, 0.74) * ph.x + vec3<f32>(ph.y), 0.0, f32(k));
+                let bone = painted(ISO_COLOUR, o_idx + d_idx * hi);
+                return Marched(bone * ph.x + vec3<f32>(ph.y), 0.0, f32(k));
             }
             t_prev = t;
             has_prev = true;

@@ -55,6 +55,12 @@ fn smooth_shading() -> bool {
     return dp.interpolation == 2u;
 }
 
+// volume.wgsl's sample colour: a scene's volume takes its transfer function's (a segmentation
+// colours only `render --mode`'s frames: dvr.wgsl's painted).
+fn painted(base: vec3<f32>, p: vec3<f32>) -> vec3<f32> {
+    return base;
+}
+
 // The scene frame (x = L, y = S, z = A) → LPS.
 fn scene_to_lps(p: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(p.x, -p.z, p.y);

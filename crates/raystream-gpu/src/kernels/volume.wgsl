@@ -332,7 +332,7 @@ fn composite(o: vec3<f32>, d: vec3<f32>, o_idx: vec3<f32>, d_idx: vec3<f32>, t0:
             continue;
         }
         a = 1.0 - pow(1.0 - min(a, 1.0), seg);
-        c += transmit * a * shade_sample(color_at(v), p, o + d * t, d);
+        c += transmit * a * shade_sample(painted(color_at(v), p), p, o + d * t, d);
         transmit *= 1.0 - a;
         if transmit < 0.01 {
             break;

@@ -1,0 +1,267 @@
+//! A segmentation laid on a CT's grid: `info CT --segmentation LABELS`' regions, and
+//! `render CT --mode dvr|iso|cinematic|mip --segmentation LABELS [--segment LIST]`'s segment
+//! colours and the CT kept to the chosen segments.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{Result, bail};
+use raystream_cpu::dvr::DvrMode;
+use raystream_cpu::segments::{MAX_LABEL, SegmentColours};
+use raystream_io::Volume;
+use raystream_math::Vec3;
+
+use crate::cli::RenderArgs;
+
+/// A segmentation's segments on a CT's grid.
+pub struct OnCt {
+    /// Per label, the CT voxels (x fastest) it holds; each segment whole where segments may
+    /// overlap (a structure set's structures, a Segmentation's segments).
+    pub members: BTreeMap<u32, Vec<usize>>,
+    /// The segments' names and colours (the segmentation's own, `--colour-table`'s over them).
+    pub known: Vec<raystream_io::SegmentLabel>,
+    /// How the CT's voxels were matched to the segmentation's.
+    pub how: &'static str,
+}
+
+/// The segments of `file` (a label map, a DICOM Segmentation or an RT Structure Set) on the
+/// grid of `ct` (read from `input`), named and coloured with `colour_table` over their own;
+/// refused when it is no label map, a structure set of another Frame of Reference, or none of
+/// its segments holds a voxel of the CT.
+pub fn on_ct(file: &Path, colour_table: Option<&Path>, ct: &Volume, input: &Path) -> Result<OnCt> {
+    let name = file.display();
+    let [nx, ny, _] = ct.dims;
+    let mut members: BTreeMap<u32, Vec<usize>> = Default::default();
+    let (how, known) = if raystream_io::is_structure_set_file(file) {
+        // Each structure whole, laid on this CT's grid (not the series it names).
+        let set = raystream_io::StructureSet::read(file)?;
+        if let Some(why) = set.frame_mismatch(ct) {
+            bail!("{name}: {why} ({})", input.display());
+        }
+        let known = crate::iso::with_colour_table(set.segments(), colour_table)?;
+        for roi in &set.rois {
+            let (r, _) = set.rasterise(roi, ct);
+            let [dx, dy, _] = r.dims;
+            let list = members.entry(roi.number as u32).or_default();
+            for (n, _) in r.inside.iter().enumerate().filter(|(_, held)| **held) {
+                let (i, j, k) = (n % dx, (n / dx) % dy, n / (dx * dy));
+                list.push(r.lo[0] + i + nx * (r.lo[1] + j + ny * (r.lo[2] + k)));
+            }
+        }
+        members.retain(|_, v| !v.is_empty());
+        ("structures laid on the CT's grid", known)
+    } else {
+        let labels = raystream_io::load_volume(file, &raystream_io::VolumeSelect::default())?;
+        if let Some(v) = crate::common::not_a_label(&labels) {
+            bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
+        }
+        let known = crate::iso::segment_names(&labels, colour_table)?;
+        let whole = raystream_io::whole_segments(&labels, file)?;
+        (
+            labels_on_ct(ct, (&labels, whole.as_ref()), &mut members),
+            known,
+        )
+    };
+    if members.is_empty() {
+        bail!(
+            "{name}: no segment holds a voxel of {} (is it this CT's segmentation?)",
+            input.display()
+        );
+    }
+    Ok(OnCt {
+        members,
+        known,
+        how,
+    })
+}
+
+/// Each CT voxel's segments in `labels` (a label volume; with `whole`, its segments each
+/// whole, overlaps and all), gathered as the CT voxels of each label into `members`; how they
+/// were matched: voxel for voxel on the CT's own grid, else the label voxel nearest each CT
+/// voxel's centre.
+fn labels_on_ct(
+    ct: &Volume,
+    (labels, whole): (&Volume, Option<&raystream_io::WholeSegments>),
+    members: &mut BTreeMap<u32, Vec<usize>>,
+) -> &'static str {
+    let [nx, ny, nz] = ct.dims;
+    let same = labels.dims == ct.dims
+        && (0..3).all(|a| {
+            (labels.origin[a] - ct.origin[a]).abs() < 1e-3
+                && (labels.spacing[a] - ct.spacing[a]).abs() < 1e-6 * ct.spacing[a]
+                && (0..3).all(|b| (labels.direction[a][b] - ct.direction[a][b]).abs() < 1e-6)
+        });
+    let to_labels = labels.index_to_world_affine().inverse() * ct.index_to_world_affine();
+    let [lx, ly, lz] = labels.dims;
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let q = if same {
+                    [i, j, k]
+                } else {
+                    let q = to_labels
+                        .transform_point3(raystream_math::DVec3::new(i as f64, j as f64, k as f64))
+                        .round();
+                    if q.min_element() < 0.0
+                        || q.x >= lx as f64
+                        || q.y >= ly as f64
+                        || q.z >= lz as f64
+                    {
+                        continue;
+                    }
+                    [q.x as usize, q.y as usize, q.z as usize]
+                };
+                let n = i + nx * (j + ny * k);
+                match whole {
+                    Some(segments) => {
+                        for (l, v) in segments {
+                            if v.holds(q) {
+                                members.entry(*l as u32).or_default().push(n);
+                            }
+                        }
+                    }
+                    None => {
+                        let l = labels.at(q[0], q[1], q[2]);
+                        if l > 0.0 {
+                            members.entry(l as u32).or_default().push(n);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if same {
+        "the CT's grid"
+    } else {
+        "the nearest label voxel to each CT voxel's centre"
+    }
+}
+
+/// What `--segmentation` (and `--segment`) make of a CT rendered directly: the segments'
+/// colours on its grid (dvr, iso, cinematic), and the CT kept to the chosen segments.
+pub struct Painted {
+    pub colours: Option<SegmentColours>,
+    /// `--segment LIST`: the CT with every voxel outside the chosen segments set to the CT's
+    /// lowest value (air), so that only they are drawn.
+    pub kept: Option<Volume>,
+    /// What the summary line says of it.
+    pub words: String,
+}
+
+/// What `--segmentation`, `--segment` and `--colour-table` ask of a CT rendered directly.
+#[derive(Clone, Copy)]
+pub struct Asked<'a> {
+    pub segmentation: Option<&'a Path>,
+    pub segment: Option<&'a str>,
+    pub colour_table: Option<&'a Path>,
+}
+
+impl<'a> Asked<'a> {
+    pub fn of_render(a: &'a RenderArgs) -> Asked<'a> {
+        Asked {
+            segmentation: a.segmentation.as_deref(),
+            segment: a.segment.as_deref(),
+            colour_table: a.colour_table.as_deref(),
+        }
+    }
+}
+
+/// `render|bench CT --mode MODE --segmentation LABELS [--segment LIST]` (every mode but
+/// slice, whose pixels `--segmentation` tints instead): with dvr, iso and cinematic each sample
+/// takes its segment's colour, blended between voxels (`raystream_cpu::segments`), and the
+/// transfer function's opacity; `--segment LIST` keeps only the segments listed (mip too:
+/// a MIP of the aorta without the bones in front of it). `None` without `--segmentation`.
+pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Option<Painted>> {
+    let Some(file) = a.segmentation else {
+        if let Some(list) = a.segment {
+            bail!(
+                "--segment {list} with --mode {}: keeps only those segments of a CT's segmentation: give --segmentation LABELS (a label map, DICOM Segmentation or RT Structure Set)",
+                mode.name()
+            );
+        }
+        return Ok(None);
+    };
+    let name = file.display();
+    match mode {
+        DvrMode::Dvr | DvrMode::Iso | DvrMode::Cinematic => {}
+        DvrMode::Mip if a.segment.is_some() => {}
+        DvrMode::Mip => bail!(
+            "--segmentation {name} with --mode mip: a MIP shows HU, not colours; give --segment LIST to project only those segments"
+        ),
+        _ => bail!(
+            "--segmentation {name} with --mode {}: colours dvr, iso and cinematic frames, keeps mip to segments (--segment), and tints slices; a {} would count the air outside the segments",
+            mode.name(),
+            if mode == DvrMode::MinIp {
+                "minimum"
+            } else {
+                "mean"
+            }
+        ),
+    }
+    let on = on_ct(file, a.colour_table, ct, input)?;
+    let present: Vec<u32> = on.members.keys().copied().collect();
+    let chosen = match a.segment {
+        Some(list) => crate::iso::pick_segments(&name, list, &present, &on.known)?,
+        None => present.clone(),
+    };
+    if let Some(&l) = chosen.iter().find(|&&l| l > MAX_LABEL) {
+        bail!("{name}: label {l}: labels above {MAX_LABEL} are not rendered in colour");
+    }
+    // The largest painted first, so that a segment inside another (a tumour in its organ)
+    // keeps its colour.
+    let mut order = chosen.clone();
+    order.sort_by_key(|l| std::cmp::Reverse(on.members[l].len()));
+    let mut labels = vec![0u16; ct.data.len()];
+    for &l in &order {
+        for &n in &on.members[&l] {
+            labels[n] = l as u16;
+        }
+    }
+    let colours: Vec<(u32, Vec3)> = chosen
+        .iter()
+        .map(|&l| {
+            let srgb = on
+                .known
+                .iter()
+                .find(|k| k.number as u32 == l)
+                .and_then(|k| k.colour)
+                .unwrap_or_else(|| crate::overlay::label_colour(l));
+            let c = srgb.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize]);
+            (l, Vec3::from(c))
+        })
+        .collect();
+    let kept = a.segment.map(|_| {
+        let air = ct.value_range().map_or(-1024.0, |r| r.0);
+        let mut kept = ct.clone();
+        for (v, &l) in kept.data.iter_mut().zip(&labels) {
+            if l == 0 {
+                *v = air;
+            }
+        }
+        kept
+    });
+    let voxels = labels.iter().filter(|&&l| l > 0).count();
+    let list: Vec<String> = chosen.iter().map(|l| l.to_string()).collect();
+    let words = format!(
+        "; {} {} of {} ({voxels} voxels, matched on {}){}",
+        if chosen.len() == 1 {
+            "segment"
+        } else {
+            "segments"
+        },
+        list.join(", "),
+        crate::common::file_name(file),
+        on.how,
+        if kept.is_some() {
+            ", the rest hidden"
+        } else {
+            ""
+        }
+    );
+    let colours = (mode != DvrMode::Mip).then(|| SegmentColours::new(ct.dims, labels, &colours));
+    Ok(Some(Painted {
+        colours,
+        kept,
+        words,
+    }))
+}
