@@ -93,42 +93,55 @@ fn labels_on_ct(
         });
     let to_labels = labels.index_to_world_affine().inverse() * ct.index_to_world_affine();
     let [lx, ly, lz] = labels.dims;
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let q = if same {
-                    [i, j, k]
-                } else {
-                    let q = to_labels
-                        .transform_point3(raystream_math::DVec3::new(i as f64, j as f64, k as f64))
-                        .round();
-                    if q.min_element() < 0.0
-                        || q.x >= lx as f64
-                        || q.y >= ly as f64
-                        || q.z >= lz as f64
-                    {
-                        continue;
-                    }
-                    [q.x as usize, q.y as usize, q.z as usize]
-                };
-                let n = i + nx * (j + ny * k);
-                match whole {
-                    Some(segments) => {
-                        for (l, v) in segments {
-                            if v.holds(q) {
-                                members.entry(*l as u32).or_default().push(n);
+    // Slice by slice in parallel (a 512³ CT on another grid took 2.9 s on one thread), each
+    // slice's (label, voxel) pairs in voxel order, gathered in slice order: the same lists.
+    use rayon::prelude::*;
+    let slices: Vec<Vec<(u32, usize)>> = (0..nz)
+        .into_par_iter()
+        .map(|k| {
+            let mut found = Vec::new();
+            for j in 0..ny {
+                for i in 0..nx {
+                    let q = if same {
+                        [i, j, k]
+                    } else {
+                        let q = to_labels
+                            .transform_point3(raystream_math::DVec3::new(
+                                i as f64, j as f64, k as f64,
+                            ))
+                            .round();
+                        if q.min_element() < 0.0
+                            || q.x >= lx as f64
+                            || q.y >= ly as f64
+                            || q.z >= lz as f64
+                        {
+                            continue;
+                        }
+                        [q.x as usize, q.y as usize, q.z as usize]
+                    };
+                    let n = i + nx * (j + ny * k);
+                    match whole {
+                        Some(segments) => {
+                            for (l, v) in segments {
+                                if v.holds(q) {
+                                    found.push((*l as u32, n));
+                                }
                             }
                         }
-                    }
-                    None => {
-                        let l = labels.at(q[0], q[1], q[2]);
-                        if l > 0.0 {
-                            members.entry(l as u32).or_default().push(n);
+                        None => {
+                            let l = labels.at(q[0], q[1], q[2]);
+                            if l > 0.0 {
+                                found.push((l as u32, n));
+                            }
                         }
                     }
                 }
             }
-        }
+            found
+        })
+        .collect();
+    for (l, n) in slices.into_iter().flatten() {
+        members.entry(l).or_default().push(n);
     }
     if same {
         "the CT's grid"
