@@ -11,7 +11,8 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a tex
         ../shared (JPEG-LS and 12-bit JPEG among them) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (meshes also shaded; volumes, and an RT Structure Set laid on its CT, also `--mode` mip, minip, average, slice,
         dvr or cinematic (half of those --denoise, some with --anisotropy and --exposure), some
-        with --interpolation linear, cubic or cubic-interpolating, some with --slab, to an EXR or a turntable of EXRs; some tinted by themselves as a label map,
+        with --interpolation linear, cubic or cubic-interpolating, some with --slab, to an EXR or a turntable of EXRs; some tinted by themselves as a label map, some
+        rendered (dvr, iso, mip, cinematic) in the colours of their own segments or kept to some,
         or their segments made surfaces with `raystream iso --segment` (some simplified, some named
         by a mutated colour table) or rendered). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
@@ -583,6 +584,16 @@ def fuzz_files(work, n, device):
                 outline = ["--outline"] if random.random() < 0.5 else []
                 why = run(["render", p, "--mode", "slice", "--size", "8x8", "-q", "--device",
                            device, "--segmentation", p] + outline + phase + ["-o", os.path.join(d, "t.png")], s)
+            # Sometimes rendered in the colours of its own segments, or kept to some of them
+            # (a CT is refused as no label map; mip takes only --segment).
+            if not why and random.random() < 0.2:
+                m = random.choice(["dvr", "iso", "mip", "cinematic"])
+                keep = (["--segment", random.choice(["all", "1", "2,1"])]
+                        if m == "mip" or random.random() < 0.5 else [])
+                more = ["--spp", "2", "--max-depth", "1"] if m == "cinematic" else []
+                why = run(["render", p, "--mode", m, "--size", "8x8", "-q", "--device", device,
+                           "--segmentation", p] + keep + more + phase
+                          + ["-o", os.path.join(d, "c.png")], s)
             # Sometimes its segments as surfaces, written (some simplified) or rendered (a CT is
             # refused as no label map).
             if not why and random.random() < 0.3:
