@@ -399,7 +399,7 @@ pub struct RenderArgs {
     /// in its own colour (a Segmentation's, a structure set's, `--colour-table`'s), else label
     /// 1 cyan, 2 magenta, then yellow, green, orange, blue; PNG, or DICOM as the picture. With
     /// --mode dvr, iso or cinematic: each sample in its segment's colour (the transfer
-    /// function's opacity); with --segment LIST (mip too) only those segments drawn.
+    /// function's opacity); with --segment LIST (mip and minip too) only those segments drawn.
     #[arg(long, value_name = "FILE")]
     pub segmentation: Option<PathBuf>,
     /// With --segmentation: each segment's edge drawn in its colour, as planning systems show
@@ -1096,7 +1096,7 @@ pub struct BenchArgs {
     /// cinematic), as `render --segmentation` colours them (laid on the resampled grid).
     #[arg(long, value_name = "FILE")]
     pub segmentation: Option<PathBuf>,
-    /// With --segmentation: only these segments drawn (mip too), as `render --segment`.
+    /// With --segmentation: only these segments drawn (mip and minip too), as `render --segment`.
     #[arg(long, value_name = "LIST", requires = "segmentation")]
     pub segment: Option<String>,
     /// Devices to measure, comma-separated (cpu, gpu, auto).

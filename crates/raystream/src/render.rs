@@ -1695,7 +1695,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     }
     if let Some(f) = &a.segmentation {
         bail!(
-            "--segmentation {}: lays a segmentation on a CT rendered with --mode (slice: tinted; dvr, iso, cinematic: coloured; mip: kept to --segment's segments)",
+            "--segmentation {}: lays a segmentation on a CT rendered with --mode (slice: tinted; dvr, iso, cinematic: coloured; mip and minip: kept to --segment's segments)",
             f.display()
         );
     }

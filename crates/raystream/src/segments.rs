@@ -155,7 +155,8 @@ fn labels_on_ct(
 pub struct Painted {
     pub colours: Option<SegmentColours>,
     /// `--segment LIST`: the CT with every voxel outside the chosen segments set to the CT's
-    /// lowest value (air), so that only they are drawn.
+    /// lowest value (air), so that only they are drawn; for a MinIP its highest, which no
+    /// minimum takes.
     pub kept: Option<Volume>,
     /// What the summary line says of it.
     pub words: String,
@@ -182,8 +183,9 @@ impl<'a> Asked<'a> {
 /// `render|bench CT --mode MODE --segmentation LABELS [--segment LIST]` (every mode but
 /// slice, whose pixels `--segmentation` tints instead): with dvr, iso and cinematic each sample
 /// takes its segment's colour, blended between voxels (`raystream_cpu::segments`), and the
-/// transfer function's opacity; `--segment LIST` keeps only the segments listed (mip too:
-/// a MIP of the aorta without the bones in front of it). `None` without `--segmentation`.
+/// transfer function's opacity; `--segment LIST` keeps only the segments listed (mip and
+/// minip too: a MIP of the aorta without the bones in front of it, a MinIP of the lungs'
+/// airways without the air around the chest). `None` without `--segmentation`.
 pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Option<Painted>> {
     let Some(file) = a.segmentation else {
         if let Some(list) = a.segment {
@@ -197,18 +199,14 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
     let name = file.display();
     match mode {
         DvrMode::Dvr | DvrMode::Iso | DvrMode::Cinematic => {}
-        DvrMode::Mip if a.segment.is_some() => {}
-        DvrMode::Mip => bail!(
-            "--segmentation {name} with --mode mip: a MIP shows HU, not colours; give --segment LIST to project only those segments"
+        DvrMode::Mip | DvrMode::MinIp if a.segment.is_some() => {}
+        DvrMode::Mip | DvrMode::MinIp => bail!(
+            "--segmentation {name} with --mode {}: a projection shows HU, not colours; give --segment LIST to project only those segments",
+            mode.name()
         ),
         _ => bail!(
-            "--segmentation {name} with --mode {}: colours dvr, iso and cinematic frames, keeps mip to segments (--segment), and tints slices; a {} would count the air outside the segments",
-            mode.name(),
-            if mode == DvrMode::MinIp {
-                "minimum"
-            } else {
-                "mean"
-            }
+            "--segmentation {name} with --mode {}: colours dvr, iso and cinematic frames, keeps mip and minip to segments (--segment), and tints slices; a mean would count what lies outside the segments",
+            mode.name()
         ),
     }
     let on = on_ct(file, a.colour_table, ct, input)?;
@@ -244,11 +242,16 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
         })
         .collect();
     let kept = a.segment.map(|_| {
-        let air = ct.value_range().map_or(-1024.0, |r| r.0);
+        let (lowest, highest) = ct.value_range().unwrap_or((-1024.0, 3071.0));
+        let fill = if mode == DvrMode::MinIp {
+            highest
+        } else {
+            lowest
+        };
         let mut kept = ct.clone();
         for (v, &l) in kept.data.iter_mut().zip(&labels) {
             if l == 0 {
-                *v = air;
+                *v = fill;
             }
         }
         kept
@@ -271,7 +274,8 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
             ""
         }
     );
-    let colours = (mode != DvrMode::Mip).then(|| SegmentColours::new(ct.dims, labels, &colours));
+    let colours = matches!(mode, DvrMode::Dvr | DvrMode::Iso | DvrMode::Cinematic)
+        .then(|| SegmentColours::new(ct.dims, labels, &colours));
     Ok(Some(Painted {
         colours,
         kept,

@@ -1744,7 +1744,7 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
             "-o",
             "x.png",
         ],
-        "a MIP shows HU, not colours; give --segment LIST",
+        "a projection shows HU, not colours; give --segment LIST",
     );
     refused(
         &[
@@ -1790,7 +1790,9 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
 /// `measure --wall --mask`'s lumen (1) and wall (2), on each device:
 /// - a MIP kept to the lumen: every pixel at most the plain MIP's (the voxels outside it set
 ///   to the CT's lowest value, and interpolation is monotone), the contrast lumen bright, and
-///   rays that pass no lumen voxel's neighbourhood at exactly that lowest value;
+///   rays that pass no lumen voxel's neighbourhood at exactly that lowest value; a MinIP kept
+///   to it likewise at least the plain MinIP's, the rest at the CT's highest value (on the
+///   GPU, its half float);
 /// - dvr from behind, coloured by both: the opacity (the EXR's A) is the plain frame's bit for
 ///   bit, and the pixels that change turn bluer (cyan lumen, magenta wall, where ct-aaa draws
 ///   contrast red); kept to the lumen, only pixels where the plain frame has some opacity
@@ -1807,11 +1809,11 @@ fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
         let exr = raystream_cpu::load_exr(f).unwrap();
         exr.channels[c].as_f32().unwrap().to_vec()
     };
-    let lowest = raystream_io::load_volume(std::path::Path::new(&vol), &Default::default())
-        .unwrap()
-        .value_range()
-        .unwrap()
-        .0;
+    let (lowest, highest) =
+        raystream_io::load_volume(std::path::Path::new(&vol), &Default::default())
+            .unwrap()
+            .value_range()
+            .unwrap();
     let mip = [vol.as_str(), "--mode", "mip", "--size", "60x80"];
     let back = [
         vol.as_str(),
@@ -1848,6 +1850,25 @@ fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
             "{dev}: MIP of the lumen: {air} pixels of air, {lit} over 200 HU, brightest {brightest}"
         );
         assert!(air > 1000 && lit > 40 && brightest > 400.0, "{dev}");
+        // A MinIP kept to the lumen: the rest set to the CT's highest value, which no minimum
+        // takes: every pixel at least the plain MinIP's, and rays far from the lumen at exactly
+        // that value; over the lumen, its darkest, still contrast-filled blood (over 0 HU).
+        let minip = [vol.as_str(), "--mode", "minip", "--size", "60x80"];
+        let plain = channel(&out("minip.exr", &[&minip]), "Y");
+        let kept = channel(&out("minip-lumen.exr", &[&minip, &lumen]), "Y");
+        // The GPU's texture holds half floats, 2 HU apart above 2048 HU.
+        let half_step = if *dev == "gpu" { 2.0 } else { 0.0 };
+        let (mut far, mut blood) = (0, 0);
+        for (k, p) in kept.iter().zip(&plain) {
+            if k.is_nan() {
+                continue;
+            }
+            assert!(k >= p, "{dev}: kept {k} below the plain MinIP's {p}");
+            far += ((*k - highest).abs() <= half_step) as usize;
+            blood += (*k > 0.0 && *k < 1000.0) as usize;
+        }
+        eprintln!("{dev}: MinIP of the lumen: {far} pixels far from it, {blood} of blood");
+        assert!(far > 1000 && blood > 40, "{dev}");
         // Coloured: the same opacity, bluer where it changes.
         let plain = out("dvr.exr", &[&back]);
         let painted = out("dvr-both.exr", &[&back, &both]);
@@ -1902,7 +1923,7 @@ fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
     for (args, want) in [
         (
             &[&mip[..], &["--segmentation", m]].concat(),
-            "a MIP shows HU, not colours; give --segment LIST",
+            "with --mode mip: a projection shows HU, not colours; give --segment LIST",
         ),
         (
             &[&mip[..], &["--segment", "1"]].concat(),
@@ -1917,21 +1938,21 @@ fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
             "--outline draws each segment's edge over a slice",
         ),
         (
+            &[vol.as_str(), "--mode", "minip", "--segmentation", m][..].to_vec(),
+            "with --mode minip: a projection shows HU, not colours",
+        ),
+        (
             &[
                 vol.as_str(),
                 "--mode",
-                "minip",
+                "average",
                 "--segmentation",
                 m,
                 "--segment",
                 "1",
             ][..]
                 .to_vec(),
-            "with --mode minip: colours dvr, iso and cinematic frames",
-        ),
-        (
-            &[vol.as_str(), "--mode", "average", "--segmentation", m][..].to_vec(),
-            "with --mode average",
+            "with --mode average: colours dvr, iso and cinematic frames, keeps mip and minip to segments",
         ),
         (
             &[
