@@ -68,17 +68,6 @@ impl SegmentColours {
     pub fn colour_at(&self, p: Vec3, base: Vec3) -> Vec3 {
         crate::sampling::trilinear(self.dims, p, |i, j, k| self.voxel(i, j, k, base))
     }
-
-    /// The labels present (each voxel's, in increasing order).
-    pub fn labels_present(&self) -> Vec<u16> {
-        let mut seen = vec![false; self.colours.len()];
-        for &l in &self.labels {
-            seen[l as usize] = true;
-        }
-        (1..seen.len() as u16)
-            .filter(|&l| seen[l as usize])
-            .collect()
-    }
 }
 
 #[cfg(test)]
@@ -123,7 +112,5 @@ mod tests {
                 "{h}"
             );
         }
-        assert_eq!(pair(0, 3).labels_present(), vec![3]);
-        assert_eq!(pair(2, 1).labels_present(), vec![1, 2]);
     }
 }

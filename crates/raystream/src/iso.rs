@@ -242,14 +242,13 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
 
 /// The labels `--segment LIST` names (numbers, a segmentation's segment labels in any case, or
 /// `all`), in the order named, among those `present` (some voxel holds each); an unknown one is
-/// refused, naming `file` and listing the labels present by number and name.
+/// refused, naming the file (`name`) and listing the labels present by number and name.
 pub fn pick_segments(
-    file: &dyn std::fmt::Display,
+    name: &dyn std::fmt::Display,
     list: &str,
     present: &[u32],
     known: &[raystream_io::SegmentLabel],
 ) -> Result<Vec<u32>> {
-    let name = file;
     let named = |l: u32| known.iter().find(|k| k.number as u32 == l);
     let listed = || {
         let list: Vec<String> = present
@@ -440,9 +439,7 @@ pub fn segment_surfaces(
             .map(|k| k.label.clone())
             .filter(|n| !n.is_empty())
             .unwrap_or_else(|| format!("label {l}"));
-        let colour = segment
-            .and_then(|k| k.colour)
-            .unwrap_or(crate::overlay::label_colour(l));
+        let colour = crate::overlay::segment_colour(known, l);
         out.push(SegmentSurface {
             label: l,
             name,

@@ -217,6 +217,15 @@ pub fn label_colour(label: u32) -> [u8; 3] {
     LABEL_COLOURS[(label as usize).saturating_sub(1) % LABEL_COLOURS.len()]
 }
 
+/// Label `l`'s colour among `known` segments: its own, else [`label_colour`]'s.
+pub fn segment_colour(known: &[raystream_io::SegmentLabel], l: u32) -> [u8; 3] {
+    known
+        .iter()
+        .find(|k| k.number as u32 == l)
+        .and_then(|k| k.colour)
+        .unwrap_or_else(|| label_colour(l))
+}
+
 /// A segmentation laid over pictures (`render --segmentation`): its label volume, the colour
 /// of each label that has one of its own (a Segmentation's, a structure set's, a colour
 /// table's), and a structure set's structures each whole (they overlap, and the label volume

@@ -231,12 +231,7 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
     let colours: Vec<(u32, Vec3)> = chosen
         .iter()
         .map(|&l| {
-            let srgb = on
-                .known
-                .iter()
-                .find(|k| k.number as u32 == l)
-                .and_then(|k| k.colour)
-                .unwrap_or_else(|| crate::overlay::label_colour(l));
+            let srgb = crate::overlay::segment_colour(&on.known, l);
             let c = srgb.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize]);
             (l, Vec3::from(c))
         })
