@@ -101,6 +101,23 @@ pub enum FrameFormat {
     Exr,
     /// DICOM Secondary Capture images of the PNG frames, one series in the source's study.
     Dcm,
+    /// One animated PNG (-o NAME.png), looping: the PNG frames exactly; browsers play it.
+    Apng,
+    /// One animated GIF (-o NAME.gif), looping: plays everywhere, each frame cut to its own 256
+    /// colours.
+    Gif,
+}
+
+impl FrameFormat {
+    /// The animation this format writes into one file, if it is one.
+    pub fn animation(self) -> Option<raystream_cpu::animation::AnimationKind> {
+        use raystream_cpu::animation::AnimationKind;
+        match self {
+            FrameFormat::Apng => Some(AnimationKind::Apng),
+            FrameFormat::Gif => Some(AnimationKind::Gif),
+            FrameFormat::Png | FrameFormat::Exr | FrameFormat::Dcm => None,
+        }
+    }
 }
 
 /// `render --aov`: what the image of each pixel's closest hit shows.
@@ -321,14 +338,15 @@ pub struct RenderArgs {
     /// A turntable of N frames, one every 360/N degrees about the image's up axis (the
     /// patient's superior axis unless --view superior/inferior), starting from --view and
     /// --orbit, written as OUTPUT/frame_000.png … (-o names the folder; --format exr for EXRs,
-    /// dcm for one DICOM series): with --mode, of the volume; else of the mesh, the scene or
-    /// the bones through the stream renderer, a mesh's or the bones' lights turning with the
-    /// camera.
+    /// dcm for one DICOM series, apng or gif for one looping animation -o names): with --mode,
+    /// of the volume; else of the mesh, the scene or the bones through the stream renderer, a
+    /// mesh's or the bones' lights turning with the camera.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=3600))]
     pub turntable: Option<u32>,
     /// With --mode slice (or a --slab): N parallel planes facing the camera, --slice-step
     /// apart, centred on --slice-at, written as OUTPUT/frame_000.png … (-o names the folder):
-    /// a reformatted series; with --format dcm, one DICOM series of reformatted CT images.
+    /// a reformatted series; with --format dcm, one DICOM series of reformatted CT images
+    /// (apng or gif: one animation, scrolling through them).
     #[arg(
         long,
         requires = "mode",
@@ -339,7 +357,8 @@ pub struct RenderArgs {
     /// With --mode, of a 4-D CT (cardiac phases, perfusion): a cine, one frame per temporal
     /// position in order, all from the same camera (with --path, the same curved plane: a CPR
     /// of each phase) with the same window or transfer function, written as
-    /// OUTPUT/frame_000.png … (-o names the folder); with --format dcm, one series.
+    /// OUTPUT/frame_000.png … (-o names the folder); with --format dcm, one series (apng or
+    /// gif: one animation).
     #[arg(long, requires = "mode", conflicts_with_all = ["turntable", "slices", "phase"])]
     pub cine: bool,
     /// With --mode slice, or --mode mip/minip/average and a --slab: a curved planar
@@ -430,9 +449,14 @@ pub struct RenderArgs {
     pub slice_step: Option<f32>,
     /// With --turntable, --slices or --cine: the frames' format; `exr` writes frame_000.exr …
     /// holding what `-o OUT.exr` holds for the mode (HU before the window for mip, minip,
-    /// average and slice; premultiplied float RGBA for dvr and iso); `dcm` one DICOM series.
+    /// average and slice; premultiplied float RGBA for dvr and iso); `dcm` one DICOM series;
+    /// `apng` and `gif` one looping animation, -o naming the file (NAME.png, NAME.gif).
     #[arg(long, requires = "frames", value_enum, default_value_t = FrameFormat::Png)]
     pub format: FrameFormat,
+    /// With --format apng or gif: the animation's frames a second, 1 to 50 (a GIF keeps
+    /// delays in hundredths of a second: 15 plays at 14.3). Default 10.
+    #[arg(long, requires = "frames", value_parser = clap::value_parser!(u32).range(1..=50))]
+    pub fps: Option<u32>,
     /// Render the frame this many times and report the median frame time and frames per
     /// second (scene loading, kd-tree build and upload apart).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]

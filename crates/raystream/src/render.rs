@@ -1318,40 +1318,79 @@ fn cine(
 /// names it.
 fn picture_format(a: &RenderArgs, frames: bool) -> Result<ImageFormat> {
     Ok(match (frames, a.format) {
-        (true, FrameFormat::Png | FrameFormat::Dcm) => ImageFormat::Png,
+        (true, FrameFormat::Png | FrameFormat::Dcm | FrameFormat::Apng | FrameFormat::Gif) => {
+            ImageFormat::Png
+        }
         (true, FrameFormat::Exr) => ImageFormat::Exr,
         (false, _) => image_format(&a.output)?,
     })
 }
 
-/// Where a series of frames goes: the folder `-o` names, the frames' extension, the width of
-/// their numbers, the DICOM series they make (.dcm frames) and the progress bar.
+/// Where a series of frames goes: files in the folder `-o` names (the frames' extension, the
+/// width of their numbers, the DICOM series they make for .dcm frames), or one animation `-o`
+/// names (--format apng, gif); and the progress bar.
 struct FrameFolder<'a> {
     dir: &'a Path,
     ext: &'static str,
     digits: usize,
     series: String,
+    animation: Option<Animation>,
     pb: ProgressBar,
+}
+
+/// An animation's container and rate, and its writer once the first frame gives its size.
+struct Animation {
+    kind: raystream_cpu::animation::AnimationKind,
+    fps: u32,
+    frames: u32,
+    writer: Option<raystream_cpu::animation::AnimationWriter>,
 }
 
 impl<'a> FrameFolder<'a> {
     /// The folder for `n` frames of `--what` in `format` (`--format dcm`: DICOM), created; a
-    /// name like an image's is refused.
+    /// name like an image's is refused. With --format apng or gif, the animation `-o` names,
+    /// which must end as its container does.
     fn new(a: &'a RenderArgs, n: u32, format: ImageFormat, what: &str) -> Result<Self> {
         let dir = a.output.as_path();
+        let animation = a.format.animation();
         let ext = match (format, a.format) {
             (_, FrameFormat::Dcm) => "dcm",
+            (_, FrameFormat::Gif) => "gif",
             (ImageFormat::Png, _) => "png",
             (ImageFormat::Exr, _) => "exr",
         };
-        if crate::common::image_format(dir).is_ok() {
-            bail!(
-                "{}: --{what} writes frame_000.{ext} … into a folder; name the folder with -o",
-                dir.display()
-            );
+        if let Some(kind) = animation {
+            let named = dir
+                .extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| e.eq_ignore_ascii_case(kind.extension()));
+            if !named {
+                bail!(
+                    "{}: --format {} writes one animation; name it NAME.{} with -o",
+                    dir.display(),
+                    kind.extension().replace("png", "apng"),
+                    kind.extension()
+                );
+            }
+            if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty()) {
+                std::fs::create_dir_all(parent)
+                    .with_context(|| format!("{}: cannot create", parent.display()))?;
+            }
+        } else {
+            if let Some(fps) = a.fps {
+                bail!(
+                    "--fps {fps}: the rate of an animation; give --format apng or gif (frames in a folder have none)"
+                );
+            }
+            if crate::common::image_format(dir).is_ok() {
+                bail!(
+                    "{}: --{what} writes frame_000.{ext} … into a folder; name the folder with -o",
+                    dir.display()
+                );
+            }
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("{}: cannot create", dir.display()))?;
         }
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create", dir.display()))?;
         let pb = if a.quiet {
             ProgressBar::hidden()
         } else {
@@ -1366,6 +1405,12 @@ impl<'a> FrameFolder<'a> {
             ext,
             digits: ((n - 1).max(1).ilog10() as usize + 1).max(3),
             series: raystream_io::new_uid(),
+            animation: animation.map(|kind| Animation {
+                kind,
+                fps: a.fps.unwrap_or(DEFAULT_FPS),
+                frames: n,
+                writer: None,
+            }),
             pb,
         })
     }
@@ -1375,7 +1420,70 @@ impl<'a> FrameFolder<'a> {
         self.dir
             .join(format!("frame_{i:0w$}.{}", self.ext, w = self.digits))
     }
+
+    /// Writes frame `i` (in order): its own file, `what` in an EXR's comments and `dicom`
+    /// describing a DICOM frame; or the animation's next frame.
+    fn write(&mut self, i: u32, picture: &Picture, what: &str, dicom: &DicomOut) -> Result<()> {
+        match &mut self.animation {
+            None => picture.save(&self.path(i), what, dicom)?,
+            Some(anim) => {
+                let Picture::Srgb8 { rgb, width, height } = picture else {
+                    unreachable!("an animation's frames are rendered as PNGs")
+                };
+                let writer = match &mut anim.writer {
+                    Some(w) => w,
+                    None => anim.writer.insert(
+                        raystream_cpu::animation::AnimationWriter::create(
+                            self.dir,
+                            anim.kind,
+                            (*width, *height),
+                            anim.frames,
+                            anim.fps,
+                        )
+                        .map_err(anyhow::Error::msg)?,
+                    ),
+                };
+                writer.push(rgb).map_err(anyhow::Error::msg)?;
+            }
+        }
+        self.pb.inc(1);
+        Ok(())
+    }
+
+    /// Ends the series (an animation's file), and says what was written, unless --quiet:
+    /// `how` the frames were made and `timing` the render's figures.
+    fn finish(self, n: u32, how: &str, timing: &str, quiet: bool) -> Result<()> {
+        self.pb.finish_and_clear();
+        let (to, format) = match self.animation {
+            Some(anim) => {
+                let played = anim.kind.played_fps(anim.fps);
+                anim.writer
+                    .expect("at least one frame")
+                    .finish()
+                    .map_err(anyhow::Error::msg)?;
+                (
+                    format!("an animation {}", self.dir.display()),
+                    format!(
+                        "{}, {played:.3} frames/s, looping",
+                        match anim.kind {
+                            raystream_cpu::animation::AnimationKind::Apng => "APNG",
+                            raystream_cpu::animation::AnimationKind::Gif => "GIF",
+                        }
+                    )
+                    .replace(".000 frames/s", " frames/s"),
+                )
+            }
+            None => (self.dir.display().to_string(), self.ext.to_string()),
+        };
+        if !quiet {
+            eprintln!("raystream: wrote {n} frames to {to} ({how}, {format}): {timing}");
+        }
+        Ok(())
+    }
 }
+
+/// An animation's frames a second unless --fps says.
+const DEFAULT_FPS: u32 = 10;
 
 /// Writes `n` frames, the i-th `frame(i)`'s, rendered with the sight and options it returns
 /// too, into the folder `-o` names (frame_000.png …, or .exr, or .dcm: then one series,
@@ -1389,7 +1497,7 @@ fn frame_series(
     what: &str,
     mut frame: impl FnMut(u32) -> Result<(dvr::Frame, Seen, DvrOptions)>,
 ) -> Result<()> {
-    let out = FrameFolder::new(a, n, format, what)?;
+    let mut out = FrameFolder::new(a, n, format, what)?;
     let mut frame_ms = Vec::new();
     let mut base = None;
     for i in 0..n {
@@ -1406,27 +1514,26 @@ fn frame_series(
                 (volume, overlay, track, labels),
             )
         };
-        f.picture
-            .save(&out.path(i), &exr_comment(a, &opt, volume, &seen), &dicom)?;
-        out.pb.inc(1);
+        out.write(i, &f.picture, &exr_comment(a, &opt, volume, &seen), &dicom)?;
     }
-    out.pb.finish_and_clear();
-    if !a.quiet {
-        // The frames differ in their camera, plane or phase only.
-        let base = base.expect("at least one frame");
-        let median = median_of(&mut frame_ms);
-        eprintln!(
-            "raystream: wrote {n} frames to {} ({}x{}, --mode {}, {}, {}): median render {median:.1} ms ({:.2} frames/s, file writing apart)",
-            out.dir.display(),
+    // The frames differ in their camera, plane or phase only.
+    let base = base.expect("at least one frame");
+    let median = median_of(&mut frame_ms);
+    out.finish(
+        n,
+        &format!(
+            "{}x{}, --mode {}, {}",
             base.width,
             base.height,
             base.mode.name(),
-            interpolation_words(base.interpolation),
-            out.ext,
+            interpolation_words(base.interpolation)
+        ),
+        &format!(
+            "median render {median:.1} ms ({:.2} frames/s, file writing apart)",
             1e3 / median
-        );
-    }
-    Ok(())
+        ),
+        a.quiet,
+    )
 }
 
 /// What a mesh or scene render starts from: the device, the scene and its kd-tree.
@@ -1465,7 +1572,7 @@ fn scene_turntable(
     (patient, overlay, units): (bool, Overlay, &str),
     format: ImageFormat,
 ) -> Result<()> {
-    let out = FrameFolder::new(a, n, format, "turntable")?;
+    let mut out = FrameFolder::new(a, n, format, "turntable")?;
     let [az, el] = orbit_angles(a);
     let base = base_view(a, t.view0, patient)?;
     let aspect = opt.width as f32 / opt.height as f32;
@@ -1494,8 +1601,9 @@ fn scene_turntable(
             series: Some((out.series.clone(), i + 1)),
             ..label(a, &mut picture, &cam, patient, overlay)
         };
-        picture.save(
-            &out.path(i),
+        out.write(
+            i,
+            &picture,
             &format!(
                 "linear RGB, {} spp, depth {}{}",
                 opt.spp,
@@ -1504,24 +1612,21 @@ fn scene_turntable(
             ),
             &dicom,
         )?;
-        out.pb.inc(1);
     }
-    out.pb.finish_and_clear();
-    if !a.quiet {
-        let median = median_of(&mut frame_ms);
-        eprintln!(
-            "raystream: wrote {n} frames to {} ({}x{}, {} spp, depth {}, {}): median render {median:.1} ms ({:.2} frames/s, {:.2} Mrays/s; file writing apart)",
-            out.dir.display(),
-            opt.width,
-            opt.height,
-            opt.spp,
-            opt.max_depth,
-            out.ext,
+    let median = median_of(&mut frame_ms);
+    out.finish(
+        n,
+        &format!(
+            "{}x{}, {} spp, depth {}",
+            opt.width, opt.height, opt.spp, opt.max_depth
+        ),
+        &format!(
+            "median render {median:.1} ms ({:.2} frames/s, {:.2} Mrays/s; file writing apart)",
             1e3 / median,
             rays as f64 / n as f64 / (median * 1e3),
-        );
-    }
-    Ok(())
+        ),
+        a.quiet,
+    )
 }
 
 /// A frame of the GPU's stream renderer as `format` keeps it (a PNG's 8-bit sRGB, converted on

@@ -1022,6 +1022,159 @@ fn turntable_writes_frames() {
     }
 }
 
+/// The frames of an animation (APNG as the png crate reads it, through image), as RGB.
+fn apng_frames(path: &Path) -> Vec<image::RgbImage> {
+    use image::AnimationDecoder;
+    let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    image::codecs::png::PngDecoder::new(file)
+        .unwrap()
+        .apng()
+        .unwrap()
+        .into_frames()
+        .collect_frames()
+        .unwrap()
+        .into_iter()
+        .map(|f| {
+            assert_eq!(f.delay().numer_denom_ms(), (100, 1), "10 frames/s");
+            image::DynamicImage::ImageRgba8(f.into_buffer()).to_rgb8()
+        })
+        .collect()
+}
+
+/// A GIF's frames as RGB, with their delays in 1/100 s; it must loop forever.
+fn gif_frames(path: &Path) -> Vec<(image::RgbImage, u16)> {
+    let mut o = gif::DecodeOptions::new();
+    o.set_color_output(gif::ColorOutput::RGBA);
+    let mut d = o.read_info(std::fs::File::open(path).unwrap()).unwrap();
+    assert_eq!(d.repeat(), gif::Repeat::Infinite);
+    let (w, h) = (d.width() as u32, d.height() as u32);
+    let mut out = Vec::new();
+    while let Some(f) = d.read_next_frame().unwrap() {
+        assert_eq!(
+            (f.left, f.top, f.width as u32, f.height as u32),
+            (0, 0, w, h)
+        );
+        let rgba = image::RgbaImage::from_raw(w, h, f.buffer.to_vec()).unwrap();
+        out.push((image::DynamicImage::ImageRgba8(rgba).to_rgb8(), f.delay));
+    }
+    out
+}
+
+/// `--format apng|gif` writes a turntable, a slice series or the stream renderer's turntable as
+/// one looping animation that `-o` names: an APNG's frames are the folder's PNG frames byte
+/// for byte, a GIF's the same within its 256 colours a frame, at the rate --fps asks; a name
+/// that is not the container's, and --fps without an animation, are refused.
+#[test]
+fn animations_hold_the_frames_a_folder_gets() {
+    let spot = mesh("spot.obj");
+    let cases: [(&str, Vec<&str>); 3] = [
+        (
+            "mip",
+            vec!["--mode", "mip", "--size", "48x40", "--turntable", "4"],
+        ),
+        (
+            "slices",
+            vec![
+                "--mode", "slice", "--view", "left", "--size", "40x40", "--slices", "3",
+            ],
+        ),
+        (
+            "spot",
+            vec![
+                &spot[..],
+                "--device",
+                "cpu",
+                "--size",
+                "40x32",
+                "--spp",
+                "1",
+                "--turntable",
+                "3",
+            ],
+        ),
+    ];
+    for (name, args) in &cases {
+        let dir = tmp(&format!("anim-{name}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        let with = |extra: &[&str]| {
+            let mut all = vec!["render", "-q"];
+            all.extend(args);
+            all.extend(extra);
+            let o = run(&all);
+            assert!(o.status.success(), "{all:?}: {}", stderr(&o));
+        };
+        with(&["-o", dir.to_str().unwrap()]);
+        let mut folder: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        folder.sort();
+        let folder: Vec<_> = folder
+            .iter()
+            .map(|p| image::open(p).unwrap().to_rgb8())
+            .collect();
+        assert!(folder.len() >= 3 && folder[0] != folder[1], "{name}");
+
+        let apng = tmp(&format!("anim-{name}.png"));
+        with(&["--format", "apng", "-o", apng.to_str().unwrap()]);
+        assert_eq!(
+            apng_frames(&apng),
+            folder,
+            "{name}: APNG against the folder"
+        );
+
+        let gif = tmp(&format!("anim-{name}.gif"));
+        with(&[
+            "--format",
+            "gif",
+            "--fps",
+            "20",
+            "-o",
+            gif.to_str().unwrap(),
+        ]);
+        let frames = gif_frames(&gif);
+        assert_eq!(frames.len(), folder.len(), "{name}");
+        for ((f, delay), want) in frames.iter().zip(&folder) {
+            assert_eq!(*delay, 5, "{name}: 1/20 s");
+            let mean = f
+                .as_raw()
+                .iter()
+                .zip(want.as_raw())
+                .map(|(&a, &b)| a.abs_diff(b) as f64)
+                .sum::<f64>()
+                / f.as_raw().len() as f64;
+            assert!(mean < 1.0, "{name}: GIF frame off by {mean} on average");
+        }
+    }
+    let out = tmp("anim-refused");
+    for (extra, want) in [
+        (vec!["--format", "gif", "-o", "x.png"], "name it NAME.gif"),
+        (vec!["--format", "apng", "-o", "x.gif"], "name it NAME.png"),
+        (vec!["--format", "apng", "-o", "folder"], "name it NAME.png"),
+        (
+            vec!["--fps", "12", "-o", "folder"],
+            "give --format apng or gif",
+        ),
+    ] {
+        let mut all = vec![
+            "render",
+            "--mode",
+            "mip",
+            "--size",
+            "8x8",
+            "--turntable",
+            "2",
+        ];
+        all.extend(&extra[..extra.len() - 1]);
+        let target = out.join(extra[extra.len() - 1]);
+        all.push(target.to_str().unwrap());
+        let o = run(&all);
+        assert_eq!(o.status.code(), Some(2), "{all:?}");
+        assert!(stderr(&o).contains(want), "{all:?}: {}", stderr(&o));
+        assert!(!target.exists(), "{all:?} left {}", target.display());
+    }
+}
+
 /// `render MESH|SCENE|(the bones) --turntable N -o DIR` through the stream renderer: on each
 /// device, frame i is, byte for byte, the picture `--orbit` at i·360/N degrees (from `--orbit`'s
 /// start) renders: for a mesh (its lights turning with the camera), for a scene file with a CT
