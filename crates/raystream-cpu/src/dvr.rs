@@ -137,6 +137,56 @@ pub struct DvrOptions {
     /// continuous gradient keeps coarse grids' surfaces free of wood-grain rings
     /// ([`crate::sampling`]).
     pub interpolation: Interpolation,
+    /// mip and minip of a volume kept to some segments: the value its hidden voxels hold,
+    /// beyond the volume's range ([`hidden_fill`]). A ray whose projection comes within
+    /// [`HIDDEN_MARGIN`] of it crossed no kept voxel and is a miss (NaN with `hu_values`,
+    /// else the background).
+    pub hidden_fill: Option<f32>,
+}
+
+/// How close to [`DvrOptions::hidden_fill`] a projection must come to be taken for it: half
+/// the gap [`hidden_fill`] leaves to the volume's range.
+pub const HIDDEN_MARGIN: f32 = 0.5;
+
+/// The value for the voxels a projection is kept from: for a MIP (`above` false) below
+/// `lowest`, for a MinIP above `highest`, by at least 1 after both are rounded to half floats
+/// (the GPU's texture), and itself a half float, so that every device reads it exactly and
+/// no voxel of the volume comes within [`HIDDEN_MARGIN`] of it.
+pub fn hidden_fill((lowest, highest): (f32, f32), above: bool) -> f32 {
+    use half::f16;
+    let step = |h: f16| {
+        // The next half float away from the range (its bit patterns are ordered by size
+        // within one sign).
+        let bits = h.to_bits();
+        let up = (h.to_f32() >= 0.0) == above;
+        let next = if h.to_f32() == 0.0 {
+            if above { 0x0001 } else { 0x8001 }
+        } else if up {
+            bits + 1
+        } else {
+            bits - 1
+        };
+        f16::from_bits(next)
+    };
+    let edge = if above { highest } else { lowest };
+    let mut h = f16::from_f32(edge);
+    let beyond = |v: f32| {
+        if above {
+            v >= edge.max(f16::from_f32(edge).to_f32()) + 1.0
+        } else {
+            v <= edge.min(f16::from_f32(edge).to_f32()) - 1.0
+        }
+    };
+    while h.is_finite() && !beyond(h.to_f32()) {
+        h = step(h);
+    }
+    if h.is_finite() {
+        h.to_f32()
+    } else {
+        // Past the half floats (65504): no GPU texture holds such a volume's values exactly
+        // anyway; the CPU's f32 reads this one.
+        if above { edge + 1.0 } else { edge - 1.0 }
+    }
 }
 
 impl Default for DvrOptions {
@@ -163,6 +213,7 @@ impl Default for DvrOptions {
             anisotropy: 0.0,
             exposure: 0.0,
             interpolation: Interpolation::Linear,
+            hidden_fill: None,
         }
     }
 }
@@ -1474,6 +1525,12 @@ fn march(
             } else {
                 best
             };
+            if opt
+                .hidden_fill
+                .is_some_and(|f| (v - f).abs() <= HIDDEN_MARGIN)
+            {
+                return Marched { taken, ..miss };
+            }
             Marched::opaque(
                 Vec3::splat(if opt.hu_values { v } else { windowed(v, win) }),
                 taken,
@@ -1536,6 +1593,113 @@ mod tests {
     use raystream_volume::TfPreset;
 
     use super::*;
+
+    /// The hidden voxels' value lies beyond the range by at least 1 after both are rounded to
+    /// half floats, is a half float itself, and is no further out than it must be (two half
+    /// float steps past the edge, plus 1): for CT ranges, odd ones, zero and both signs.
+    #[test]
+    fn hidden_fill_is_a_half_float_clear_of_the_range() {
+        use half::f16;
+        let edges = [
+            -1024.0, -3024.0, -2001.0, -2000.5, -8193.0, -1.0, 0.0, -0.0, 0.4, 3071.0, 3072.0,
+            2047.0, 4095.0, 12000.0, -31000.0, 1e-3,
+        ];
+        for &e in &edges {
+            for above in [false, true] {
+                let f = hidden_fill((e, e), above);
+                assert_eq!(f16::from_f32(f).to_f32(), f, "{e}: {f} is no half float");
+                let h = f16::from_f32(e).to_f32();
+                let step = |v: f32| {
+                    // The spacing of half floats about v.
+                    let b = f16::from_f32(v).to_bits();
+                    (f16::from_bits(b + 1).to_f32() - f16::from_bits(b).to_f32()).abs()
+                };
+                if above {
+                    assert!(f >= e.max(h) + 1.0, "{e}: {f}");
+                    assert!(f <= e.max(h) + 1.0 + 2.0 * step(e + 1.0), "{e}: {f}");
+                } else {
+                    assert!(f <= e.min(h) - 1.0, "{e}: {f}");
+                    assert!(f >= e.min(h) - 1.0 - 2.0 * step(e - 1.0), "{e}: {f}");
+                }
+                // No voxel of the range, read as f32 or as a half float, comes within the
+                // margin.
+                for v in [e, h] {
+                    assert!((v - f).abs() > HIDDEN_MARGIN, "{e}");
+                }
+            }
+        }
+        assert_eq!(hidden_fill((-70000.0, 70000.0), false), -70001.0);
+        assert_eq!(hidden_fill((-70000.0, 70000.0), true), 70001.0);
+        assert_eq!(hidden_fill((-1024.0, 3071.0), false), -1025.0);
+        assert_eq!(hidden_fill((-1024.0, 3071.0), true), 3074.0);
+    }
+
+    /// A MIP and a MinIP of a volume kept to a block (the rest at the hidden value): the rays
+    /// through the block give its values, as without the hidden value set, and the rays past
+    /// it are misses: NaN with `hu_values`, the background without.
+    #[test]
+    fn projections_kept_to_a_block_miss_beside_it() {
+        let inside = |x: usize, y: usize, z: usize| {
+            (6..10).contains(&x) && (6..10).contains(&y) && (4..12).contains(&z)
+        };
+        let vol = volume([16; 3], [1.0; 3], |x, y, z| {
+            if inside(x, y, z) {
+                100.0 + (x + y + z) as f32
+            } else {
+                -1000.0
+            }
+        });
+        for mode in [DvrMode::Mip, DvrMode::MinIp] {
+            let fill = hidden_fill((-1000.0, 121.0), mode == DvrMode::MinIp);
+            let mut kept = vol.clone();
+            for v in kept.data.iter_mut() {
+                if *v == -1000.0 {
+                    *v = fill;
+                }
+            }
+            let tf = grey(0.0);
+            let base = DvrOptions {
+                width: 24,
+                height: 24,
+                mode,
+                hu_values: true,
+                ..DvrOptions::default()
+            };
+            let cam = volume_camera(&kept, 1.0);
+            let r = CpuVolume::new(&kept, &tf);
+            let (plain, _) = r.render(&base, &cam);
+            let opt = DvrOptions {
+                hidden_fill: Some(fill),
+                ..base
+            };
+            let (hidden, _) = r.render(&opt, &cam);
+            let (mut values, mut misses) = (0, 0);
+            for (p, h) in plain.pixels.iter().zip(&hidden.pixels) {
+                if h.x.is_nan() {
+                    assert!(p.x.is_nan() || (p.x - fill).abs() <= HIDDEN_MARGIN, "{p:?}");
+                    misses += !p.x.is_nan() as usize;
+                } else {
+                    assert_eq!(p, h);
+                    values += 1;
+                }
+            }
+            assert!(
+                values > 20 && misses > 100,
+                "{mode:?}: {values} values, {misses} misses"
+            );
+            // Shown: the misses take the background.
+            let shown = DvrOptions {
+                hu_values: false,
+                ..opt
+            };
+            let (png, _) = r.render(&shown, &cam);
+            for (s, h) in png.pixels.iter().zip(&hidden.pixels) {
+                if h.x.is_nan() {
+                    assert_eq!(*s, shown.background);
+                }
+            }
+        }
+    }
 
     fn volume(
         dims: [usize; 3],

@@ -275,7 +275,7 @@ pub struct MediumParams {
     pub pad2: u32,
 }
 
-/// `DvrParams` in dvr.wgsl (uniform), 352 bytes: camera in LPS, the world → index transform,
+/// `DvrParams` in dvr.wgsl (uniform), 368 bytes: camera in LPS, the world → index transform,
 /// the mode and its parameters, the shadow light, crop box and clip planes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -360,6 +360,13 @@ pub struct DvrParams {
     /// 1: dvr, iso and cinematic samples take a segmentation's colours (bindings 14 and 15;
     /// `raystream_cpu::segments`), byte 348.
     pub segments: u32,
+    /// `DvrOptions::hidden_fill` (byte 352), used when `hidden` is 1 (byte 356): mip and minip
+    /// of a volume kept to segments take a projection this close to the hidden voxels' value
+    /// for a miss.
+    pub hidden_fill: f32,
+    pub hidden: u32,
+    pub pad0: u32,
+    pub pad1: u32,
 }
 
 /// `CprRow` in dvr.wgsl, 48 bytes: one image row of a curved planar reformation
@@ -390,7 +397,7 @@ const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
 const _: () = assert!(std::mem::size_of::<TriUv>() == 24);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
-const _: () = assert!(std::mem::size_of::<DvrParams>() == 352);
+const _: () = assert!(std::mem::size_of::<DvrParams>() == 368);
 const _: () = assert!(std::mem::size_of::<GpuCprRow>() == 48);
 const _: () = assert!(std::mem::size_of::<MediumParams>() == 144);
 

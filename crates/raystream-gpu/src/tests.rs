@@ -1058,6 +1058,23 @@ fn gpu_render_matches_cpu_on_a_scanned_mesh() {
     gpu_render_matches_cpu(&ctx, &scene, &opt, Submit::Wave, "bunny");
 }
 
+/// dvr.wgsl's HIDDEN_MARGIN is the CPU's (`raystream_cpu::dvr::HIDDEN_MARGIN`).
+#[test]
+fn dvr_wgsl_hidden_margin_is_the_cpus() {
+    let module = naga_module(&dvr_wgsl(), "dvr.wgsl");
+    let (_, c) = module
+        .constants
+        .iter()
+        .find(|(_, c)| c.name.as_deref() == Some("HIDDEN_MARGIN"))
+        .expect("dvr.wgsl declares HIDDEN_MARGIN");
+    match module.global_expressions[c.init] {
+        naga::Expression::Literal(naga::Literal::F32(v)) => {
+            assert_eq!(v, raystream_cpu::dvr::HIDDEN_MARGIN)
+        }
+        ref e => panic!("HIDDEN_MARGIN = {e:?}"),
+    }
+}
+
 #[test]
 fn dvr_wgsl_params_match_rust() {
     use layout::DvrParams;
@@ -1110,6 +1127,10 @@ fn dvr_wgsl_params_match_rust() {
         ("light_scale", offset_of!(DvrParams, light_scale)),
         ("interpolation", offset_of!(DvrParams, interpolation)),
         ("segments", offset_of!(DvrParams, segments)),
+        ("hidden_fill", offset_of!(DvrParams, hidden_fill)),
+        ("hidden", offset_of!(DvrParams, hidden)),
+        ("pad0", offset_of!(DvrParams, pad0)),
+        ("pad1", offset_of!(DvrParams, pad1)),
     ];
     check_struct(&module, "DvrParams", size_of::<DvrParams>(), &names);
     use layout::GpuCprRow;

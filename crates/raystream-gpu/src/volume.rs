@@ -774,6 +774,10 @@ impl<'a> GpuVolumeRenderer<'a> {
             light_scale: opt.exposure_scale(),
             interpolation: opt.interpolation.kernel_code(),
             segments: self.segmented as u32,
+            hidden_fill: opt.hidden_fill.unwrap_or(0.0),
+            hidden: opt.hidden_fill.is_some() as u32,
+            pad0: 0,
+            pad1: 0,
         };
         Ok((params, row_buf))
     }
@@ -1052,14 +1056,15 @@ impl<'a> GpuVolumeRenderer<'a> {
                     variance = a.chunks_exact(4).map(|a| a[1]).collect();
                 }
             }
-            let samples = px.chunks_exact(4).map(|p| p[3] as u64).sum();
+            let samples = px.chunks_exact(4).map(|p| p[3].abs() as u64).sum();
             // A ray that took no sample has no HU value: NaN, as on the CPU (the kernel writes
-            // the background there).
+            // the background there); nor has one that met no kept segment (samples counted
+            // negative: dvr.wgsl's march).
             let none = params.hu_values != 0;
             let pixels = px
                 .chunks_exact(4)
                 .map(|p| {
-                    if none && p[3] == 0.0 {
+                    if none && p[3] <= 0.0 {
                         Vec3::NAN
                     } else {
                         Vec3::new(p[0], p[1], p[2])

@@ -711,12 +711,13 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         }
         crate::segments::paint(crate::segments::Asked::of_render(a), mode, &volume, path)?
     };
-    let (volume, segment_colours, segment_words) = match painted {
-        Some(p) => (p.kept.unwrap_or(volume), p.colours, p.words),
-        None => (volume, None, String::new()),
+    let (volume, segment_colours, segment_words, hidden_fill) = match painted {
+        Some(p) => (p.kept.unwrap_or(volume), p.colours, p.words, p.hidden_fill),
+        None => (volume, None, String::new(), None),
     };
     let track = wall_track(a, &volume, curve.as_ref())?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
+    opt.hidden_fill = hidden_fill;
     if mode == DvrMode::Cinematic {
         opt.spp = a.spp.unwrap_or(opt.spp);
         opt.bounces = a.max_depth;

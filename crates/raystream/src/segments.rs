@@ -155,9 +155,13 @@ fn labels_on_ct(
 pub struct Painted {
     pub colours: Option<SegmentColours>,
     /// `--segment LIST`: the CT with every voxel outside the chosen segments set to the CT's
-    /// lowest value (air), so that only they are drawn; for a MinIP its highest, which no
-    /// minimum takes.
+    /// lowest value (air), so that only they are drawn; for a MIP just below it and for a
+    /// MinIP just above its highest, which no projection through a segment takes
+    /// (`hidden_fill`).
     pub kept: Option<Volume>,
+    /// mip and minip kept to segments: the hidden voxels' value, for `DvrOptions::hidden_fill`
+    /// (rays that meet no segment are misses: NaN in an EXR, padding in DICOM).
+    pub hidden_fill: Option<f32>,
     /// What the summary line says of it.
     pub words: String,
 }
@@ -236,13 +240,15 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
             (l, Vec3::from(c))
         })
         .collect();
+    let range = ct.value_range().unwrap_or((-1024.0, 3071.0));
+    let hidden_fill = match mode {
+        DvrMode::Mip | DvrMode::MinIp if a.segment.is_some() => Some(
+            raystream_cpu::dvr::hidden_fill(range, mode == DvrMode::MinIp),
+        ),
+        _ => None,
+    };
     let kept = a.segment.map(|_| {
-        let (lowest, highest) = ct.value_range().unwrap_or((-1024.0, 3071.0));
-        let fill = if mode == DvrMode::MinIp {
-            highest
-        } else {
-            lowest
-        };
+        let fill = hidden_fill.unwrap_or(range.0);
         let mut kept = ct.clone();
         for (v, &l) in kept.data.iter_mut().zip(&labels) {
             if l == 0 {
@@ -274,6 +280,7 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
     Ok(Some(Painted {
         colours,
         kept,
+        hidden_fill,
         words,
     }))
 }

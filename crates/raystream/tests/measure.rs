@@ -1788,11 +1788,12 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
 
 /// `render CT --mode … --segmentation LABELS [--segment LIST]` on the chest CT with
 /// `measure --wall --mask`'s lumen (1) and wall (2), on each device:
-/// - a MIP kept to the lumen: every pixel at most the plain MIP's (the voxels outside it set
-///   to the CT's lowest value, and interpolation is monotone), the contrast lumen bright, and
-///   rays that pass no lumen voxel's neighbourhood at exactly that lowest value; a MinIP kept
-///   to it likewise at least the plain MinIP's, the rest at the CT's highest value (on the
-///   GPU, its half float);
+/// - a MIP kept to the lumen and the wall: every pixel at most the plain MIP's (the voxels
+///   outside them set just below the CT's lowest value, and interpolation is monotone), the
+///   contrast lumen bright, and the rays that meet no segment misses, NaN in the EXR and the
+///   background in the PNG: every pixel where the MIP of the mask itself is 0, and no pixel
+///   where it is over 0.01; kept to the lumen, a MinIP likewise at least the plain MinIP's,
+///   the rays far from it misses;
 /// - dvr from behind, coloured by both: the opacity (the EXR's A) is the plain frame's bit for
 ///   bit, and the pixels that change turn bluer (cyan lumen, magenta wall, where ct-aaa draws
 ///   contrast red); kept to the lumen, only pixels where the plain frame has some opacity
@@ -1828,43 +1829,74 @@ fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
     ];
     let both = ["--segmentation", m];
     let lumen = ["--segmentation", m, "--segment", "1"];
+    let vessel = ["--segmentation", m, "--segment", "1,2"];
     let mut pngs = Vec::new();
     for dev in devices() {
         let out = |name: &str, args: &[&[&str]]| {
             render_to(&format!("paint-{dev}-{name}"), dev, &args.concat())
         };
         let plain = channel(&out("mip.exr", &[&mip]), "Y");
-        let kept = channel(&out("mip-lumen.exr", &[&mip, &lumen]), "Y");
-        let (mut air, mut lit) = (0, 0);
-        for (k, p) in kept.iter().zip(&plain) {
-            if k.is_nan() {
-                assert!(p.is_nan(), "{dev}: the same rays miss");
+        let kept = channel(&out("mip-vessel.exr", &[&mip, &vessel]), "Y");
+        // The mask's own MIP, on the same grid, framed and sampled as the CT: where it is 0
+        // no sample came near a segment voxel.
+        let mask_mip = channel(&out("mip-of-mask.exr", &[&[m], &mip[1..]]), "Y");
+        let (mut none, mut lit) = (0, 0);
+        for ((k, p), s) in kept.iter().zip(&plain).zip(&mask_mip) {
+            if p.is_nan() {
+                assert!(k.is_nan(), "{dev}: the same rays miss");
                 continue;
             }
-            assert!(k <= p, "{dev}: kept {k} above the plain MIP's {p}");
-            air += (*k == lowest) as usize;
+            if *s == 0.0 {
+                assert!(k.is_nan(), "{dev}: {k} HU where the mask's MIP is 0");
+            }
+            if k.is_nan() {
+                assert!(*s <= 0.01, "{dev}: a miss where the mask's MIP is {s}");
+                none += 1;
+                continue;
+            }
+            assert!(
+                k <= p && *k >= lowest - 1.5,
+                "{dev}: kept {k}, plain MIP {p}"
+            );
             lit += (*k > 200.0) as usize;
         }
         let brightest = kept.iter().copied().fold(f32::MIN, f32::max);
         eprintln!(
-            "{dev}: MIP of the lumen: {air} pixels of air, {lit} over 200 HU, brightest {brightest}"
+            "{dev}: MIP of the vessel: {none} pixels meet no segment, {lit} over 200 HU, brightest {brightest}"
         );
-        assert!(air > 1000 && lit > 40 && brightest > 400.0, "{dev}");
-        // A MinIP kept to the lumen: the rest set to the CT's highest value, which no minimum
-        // takes: every pixel at least the plain MinIP's, and rays far from the lumen at exactly
-        // that value; over the lumen, its darkest, still contrast-filled blood (over 0 HU).
+        assert!(none > 1000 && lit > 40 && brightest > 400.0, "{dev}");
+        // Its PNG: the misses in the background's colour.
+        let png = image::open(out("mip-vessel.png", &[&mip, &vessel]))
+            .unwrap()
+            .to_rgb8();
+        let bg = raystream_cpu::dvr::DvrOptions::default().background;
+        let bg = raystream_cpu::Image {
+            width: 1,
+            height: 1,
+            pixels: vec![bg],
+        }
+        .to_srgb8();
+        let misses = png.pixels().zip(&kept).filter(|(_, k)| k.is_nan());
+        for (px, _) in misses {
+            assert_eq!(px.0[..], bg[..], "{dev}: a miss drawn");
+        }
+        // A MinIP kept to the lumen: the rest set just above the CT's highest value, which no
+        // minimum through the lumen takes: every pixel at least the plain MinIP's, the rays
+        // far from the lumen misses; over the lumen, its darkest, still contrast-filled
+        // blood (over 0 HU).
         let minip = [vol.as_str(), "--mode", "minip", "--size", "60x80"];
         let plain = channel(&out("minip.exr", &[&minip]), "Y");
         let kept = channel(&out("minip-lumen.exr", &[&minip, &lumen]), "Y");
-        // The GPU's texture holds half floats, 2 HU apart above 2048 HU.
-        let half_step = if *dev == "gpu" { 2.0 } else { 0.0 };
         let (mut far, mut blood) = (0, 0);
         for (k, p) in kept.iter().zip(&plain) {
             if k.is_nan() {
+                far += !p.is_nan() as usize;
                 continue;
             }
-            assert!(k >= p, "{dev}: kept {k} below the plain MinIP's {p}");
-            far += ((*k - highest).abs() <= half_step) as usize;
+            assert!(
+                k >= p && *k <= highest + 2.5,
+                "{dev}: kept {k}, plain MinIP {p}"
+            );
             blood += (*k > 0.0 && *k < 1000.0) as usize;
         }
         eprintln!("{dev}: MinIP of the lumen: {far} pixels far from it, {blood} of blood");

@@ -72,7 +72,16 @@ struct DvrParams {
     // 1: dvr, iso and cinematic samples take the colours of a segmentation (segment_labels,
     // segment_colours) in place of the transfer function's.
     segments: u32,
+    // 1 (hidden): mip and minip of a volume kept to segments; a projection within
+    // HIDDEN_MARGIN of hidden_fill, the hidden voxels' value, met none of them: a miss
+    // (raystream_cpu::dvr::hidden_fill).
+    hidden_fill: f32,
+    hidden: u32,
+    pad0: u32,
+    pad1: u32,
 }
+
+const HIDDEN_MARGIN: f32 = 0.5;
 
 // One image row of a curved plane (raystream_cpu::cpr::CprRow, LPS): the path's point, the
 // pixels' side (mm), the unit step along the row and the unit direction of its rays.
@@ -358,6 +367,11 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32, at: vec3<f32>, n: vec3<f32>, reac
     if dp.mode == MODE_AVERAGE {
         best = sum / f32(taken);
     }
+    if dp.hidden != 0u && abs(best - dp.hidden_fill) <= HIDDEN_MARGIN {
+        // A miss that took samples: counted negative, so that the host tells it from a value
+        // (NaN with hu_values) and still counts its samples.
+        return missed(-f32(taken));
+    }
     if dp.hu_values != 0u {
         return Marched(vec3<f32>(best), 0.0, f32(taken));
     }
@@ -441,7 +455,7 @@ fn pack_srgb8(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invo
                 break;
             }
             let p = pixels[i];
-            taken += u32(p.w);
+            taken += u32(abs(p.w));
             for (var c = 0u; c < 3u; c++) {
                 let byte = 3u * k + c;
                 w[byte / 4u] |= srgb8(p[c]) << (8u * (byte % 4u));
