@@ -28,7 +28,7 @@ pub mod lumen;
 pub mod mask;
 pub mod medium;
 pub mod sampling;
-pub mod segments;
+pub use raystream_volume::segments;
 pub mod stenosis;
 pub mod wall;
 

@@ -45,7 +45,8 @@ impl<'a> Medium<'a> {
         tree: &KdTree,
         traversal: Traversal,
     ) -> Medium<'a> {
-        let marcher = Marcher::interpolated(&v.volume, Some(&v.tf), v.interpolation);
+        let marcher = Marcher::interpolated(&v.volume, Some(&v.tf), v.interpolation)
+            .painted(v.segments.as_ref());
         let step = crate::dvr::step_for(v.step_mm, &v.volume);
         let shadow_step = crate::dvr::shadow_step_for(v.step_mm, &v.volume);
         let lights: Vec<(Vec3, Vec3)> = scene
@@ -195,6 +196,8 @@ mod tests {
             step_mm: Some(0.25),
             shadows,
             interpolation: raystream_volume::Interpolation::Cubic,
+            segmentation: None,
+            segments: None,
         });
         s
     }
@@ -382,6 +385,8 @@ mod tests {
             step_mm: None,
             shadows: true,
             interpolation: raystream_volume::Interpolation::Cubic,
+            segmentation: None,
+            segments: None,
         });
         assert_eq!(draw(&with, 40, 30), plain);
     }

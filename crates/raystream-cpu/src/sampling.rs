@@ -34,6 +34,7 @@
 //! a clamped grid.
 
 use raystream_math::Vec3;
+pub(crate) use raystream_volume::trilinear;
 
 pub use raystream_volume::Interpolation;
 
@@ -360,47 +361,6 @@ fn halves(net: &[f32; 64]) -> [[f32; 64]; 8] {
         along_each_axis(&mut part, |a, line| *line = split(*line, h >> a & 1 == 1));
         part
     })
-}
-
-/// Trilinear interpolation at continuous index `p` of a grid of `dims` values read by `at`,
-/// clamped to the grid (the GPU's `sample_at` and `light_at` compute the same).
-pub(crate) fn trilinear<T>(dims: [usize; 3], p: Vec3, at: impl Fn(usize, usize, usize) -> T) -> T
-where
-    T: Copy
-        + std::ops::Add<Output = T>
-        + std::ops::Sub<Output = T>
-        + std::ops::Mul<f32, Output = T>,
-{
-    let [nx, ny, nz] = dims;
-    let c = |x: f32, n: usize| x.clamp(0.0, (n - 1) as f32);
-    let (x, y, z) = (c(p.x, nx), c(p.y, ny), c(p.z, nz));
-    let (i, j, k) = (
-        (x as usize).min(nx.saturating_sub(2)),
-        (y as usize).min(ny.saturating_sub(2)),
-        (z as usize).min(nz.saturating_sub(2)),
-    );
-    let (fx, fy, fz) = (x - i as f32, y - j as f32, z - k as f32);
-    let v = |di: usize, dj: usize, dk: usize| {
-        at(
-            (i + di).min(nx - 1),
-            (j + dj).min(ny - 1),
-            (k + dk).min(nz - 1),
-        )
-    };
-    let l = |a: T, b: T, w: f32| a + (b - a) * w;
-    l(
-        l(
-            l(v(0, 0, 0), v(1, 0, 0), fx),
-            l(v(0, 1, 0), v(1, 1, 0), fx),
-            fy,
-        ),
-        l(
-            l(v(0, 0, 1), v(1, 0, 1), fx),
-            l(v(0, 1, 1), v(1, 1, 1), fx),
-            fy,
-        ),
-        fz,
-    )
 }
 
 /// The cubic B-spline's weights of the voxels i − 1, i, i + 1, i + 2 at fraction `t` ∈ [0, 1]

@@ -270,7 +270,9 @@ pub struct MediumParams {
     /// `Interpolation::kernel_code`: 0 trilinear, 1 the cubic B-spline, 2 its interpolating
     /// form, shaded by the voxels' spline (byte 128).
     pub interpolation: u32,
-    pub pad0: u32,
+    /// 1: samples take a segmentation's colours (bindings 8 and 9; `SceneVolume::segments`),
+    /// byte 132.
+    pub segments: u32,
     pub pad1: u32,
     pub pad2: u32,
 }

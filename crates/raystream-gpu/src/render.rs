@@ -1140,6 +1140,15 @@ fn medium_layout(ctx: &crate::GpuContext) -> wgpu::BindGroupLayout {
                 entry(5, buffer(ro)),
                 entry(6, buffer(ro)),
                 entry(7, buffer(ro)),
+                entry(
+                    8,
+                    wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D3,
+                        multisampled: false,
+                    },
+                ),
+                entry(9, buffer(ro)),
             ],
         })
 }
@@ -1180,10 +1189,11 @@ fn medium_group(
         light_dims: grid_dims.map(|n| n as u32),
         grid_points: grid_dims.iter().product::<usize>() as u32,
         interpolation: v.interpolation.kernel_code(),
-        pad0: 0,
+        segments: v.segments.is_some() as u32,
         pad1: 0,
         pad2: 0,
     };
+    let (labels, colours) = crate::volume::segment_bindings(ctx, v.segments.as_ref())?;
     let none = wgpu::BufferUsages::empty();
     // A binding may not be empty: one value stands in when the volume is unshadowed.
     let grids = ctx.storage(
@@ -1211,6 +1221,8 @@ fn medium_group(
             entry(5, gpu.color.as_entire_binding()),
             entry(6, bricks.as_entire_binding()),
             entry(7, grids.as_entire_binding()),
+            entry(8, wgpu::BindingResource::TextureView(&labels)),
+            entry(9, colours.as_entire_binding()),
         ],
     }))
 }

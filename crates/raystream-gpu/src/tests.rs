@@ -307,7 +307,7 @@ fn render_wgsl_structs_match_rust() {
             ("light_dims", offset_of!(MediumParams, light_dims)),
             ("grid_points", offset_of!(MediumParams, grid_points)),
             ("interpolation", offset_of!(MediumParams, interpolation)),
-            ("pad0", offset_of!(MediumParams, pad0)),
+            ("segments", offset_of!(MediumParams, segments)),
             ("pad1", offset_of!(MediumParams, pad1)),
             ("pad2", offset_of!(MediumParams, pad2)),
         ],

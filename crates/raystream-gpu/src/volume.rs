@@ -169,10 +169,10 @@ impl GpuVolume {
     }
 }
 
-/// A segmentation's colours on the GPU (`raystream_cpu::segments`, dvr.wgsl's `painted`):
+/// A segmentation's colours on the GPU (`raystream_cpu::segments`, volume.wgsl's `painted`):
 /// each voxel's label as an R16Uint texture of the volume's grid, and the colour table; one
 /// voxel of label 0 and one empty colour where there is none.
-fn segment_bindings(
+pub(crate) fn segment_bindings(
     ctx: &GpuContext,
     segments: Option<&SegmentColours>,
 ) -> Result<(wgpu::TextureView, wgpu::Buffer), GpuError> {

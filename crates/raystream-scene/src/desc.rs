@@ -49,6 +49,52 @@ pub struct VolumeDesc {
     /// B-spline, the default, as `render --mode dvr`'s) or "cubic-interpolating" (the cubic
     /// B-spline through every voxel's value).
     pub interpolation: Option<String>,
+    /// A segmentation of the volume (a label map, DICOM Segmentation or RT Structure Set,
+    /// relative to the scene file): each sample in its segment's colour, as `render CT --mode
+    /// dvr --segmentation`.
+    pub segmentation: Option<String>,
+    /// Only these segments of `segmentation` drawn: "1,2", "all", names, or an array of
+    /// labels or names (as `--segment`).
+    pub segment: Option<SegmentList>,
+    /// The segmentation's names and colours: a 3D Slicer colour table or an ITK-SNAP label
+    /// description, relative to the scene file (as `--colour-table`).
+    pub colour_table: Option<String>,
+}
+
+/// `segment = "1,2"` or `segment = [1, 2]` (numbers or names).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(
+    untagged,
+    expecting = "segments as \"1,2\", \"all\" or names, or an array such as [1, \"Lumen\"]"
+)]
+pub enum SegmentList {
+    Text(String),
+    Items(Vec<SegmentItem>),
+}
+
+/// A segment named in a list: its label or its name.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged, expecting = "a segment's label (a whole number) or its name")]
+pub enum SegmentItem {
+    Label(u32),
+    Name(String),
+}
+
+impl SegmentList {
+    /// The list as `--segment` takes it: comma-separated.
+    pub fn as_option(&self) -> String {
+        match self {
+            SegmentList::Text(s) => s.clone(),
+            SegmentList::Items(items) => items
+                .iter()
+                .map(|i| match i {
+                    SegmentItem::Label(l) => l.to_string(),
+                    SegmentItem::Name(n) => n.clone(),
+                })
+                .collect::<Vec<_>>()
+                .join(","),
+        }
+    }
 }
 
 #[derive(Clone, Debug, Deserialize)]

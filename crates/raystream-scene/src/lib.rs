@@ -46,10 +46,11 @@ use std::path::{Path, PathBuf};
 pub use camera::{Camera, FRAME_VIEW, Projection, View};
 pub use desc::{
     CameraDesc, Frame, GroundDesc, LightDesc, MaterialDesc, ObjectDesc, Scale, SceneDesc,
-    VolumeDesc,
+    SegmentItem, SegmentList, VolumeDesc,
 };
 use raystream_io::{MeshError, MeshShading, MtlMaterial, Texture, TriMesh, Volume, VolumeError};
 use raystream_math::{Aabb, DVec3, MAX_COORDINATE, Vec2, Vec3, in_coordinate_range};
+use raystream_volume::segments::SegmentColours;
 use raystream_volume::{Interpolation, TfPreset, TransferFunction};
 
 /// What went wrong building a scene, naming the file.
@@ -168,6 +169,22 @@ pub struct SceneVolume {
     pub shadows: bool,
     /// How the volume is read between voxel centres.
     pub interpolation: Interpolation,
+    /// The segmentation the scene file names, to be laid on the volume's grid by whoever
+    /// renders it (the command line, which reads label maps, Segmentations and structure
+    /// sets), who then sets `segments` (and keeps `volume` to the chosen segments).
+    pub segmentation: Option<SceneSegmentation>,
+    /// Each voxel's segment and each segment's colour: samples take them in place of the
+    /// transfer function's colour (`raystream_volume::segments`).
+    pub segments: Option<SegmentColours>,
+}
+
+/// `segmentation`, `segment` and `colour_table` of a scene's `[volume]`, paths resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneSegmentation {
+    pub path: PathBuf,
+    /// Only these segments (as `--segment` takes them), or all.
+    pub segment: Option<String>,
+    pub colour_table: Option<PathBuf>,
 }
 
 impl SceneVolume {
@@ -217,12 +234,27 @@ impl SceneVolume {
                 phase: d.phase,
             },
         )?;
+        let segmentation = match &d.segmentation {
+            Some(path) => Some(SceneSegmentation {
+                path: base_dir.join(path),
+                segment: d.segment.as_ref().map(|s| s.as_option()),
+                colour_table: d.colour_table.as_ref().map(|t| base_dir.join(t)),
+            }),
+            None if d.segment.is_some() || d.colour_table.is_some() => {
+                return Err("volume: 'segment' and 'colour_table' choose and colour the segments of a 'segmentation'; give one"
+                    .to_string()
+                    .into());
+            }
+            None => None,
+        };
         Ok(SceneVolume {
             volume,
             tf,
             step_mm: d.step,
             shadows: d.shadows.unwrap_or(true),
             interpolation,
+            segmentation,
+            segments: None,
         })
     }
 
@@ -1201,6 +1233,35 @@ mod tests {
         }
     }
 
+    /// `segmentation`, `segment` (a string as `--segment` takes it, or an array of labels
+    /// and names) and `colour_table` are kept for the renderer, paths against the scene's
+    /// folder; the colours wait for it.
+    #[test]
+    fn a_volume_names_its_segmentation() {
+        let obj = "[[objects]]\nshape = \"sphere\"";
+        for (extra, segment) in [
+            ("", None),
+            ("segment = \"1, 2\"", Some("1, 2")),
+            ("segment = [1, \"Lumen\", 3]", Some("1,Lumen,3")),
+            ("segment = \"all\"\ncolour_table = \"t.ctbl\"", Some("all")),
+        ] {
+            let s = compile(&format!(
+                "{CT}segmentation = \"seg/labels.nii.gz\"\n{extra}\n{obj}"
+            ))
+            .unwrap();
+            let v = s.volume.unwrap();
+            let g = v.segmentation.expect("a segmentation");
+            let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../raystream/assets");
+            assert_eq!(g.path, assets.join("seg/labels.nii.gz"));
+            assert_eq!(g.segment.as_deref(), segment, "{extra}");
+            assert_eq!(
+                g.colour_table,
+                extra.contains("ctbl").then(|| assets.join("t.ctbl"))
+            );
+            assert!(v.segments.is_none());
+        }
+    }
+
     /// Volume mistakes name the scene file and the problem.
     #[test]
     fn volume_mistakes_are_named() {
@@ -1216,6 +1277,8 @@ mod tests {
                 "interpolation = \"tricubic\"",
                 "unknown interpolation 'tricubic' (linear, cubic, cubic-interpolating)",
             ),
+            ("segment = [1]", "a 'segmentation'; give one"),
+            ("colour_table = \"t.ctbl\"", "a 'segmentation'; give one"),
         ] {
             let e = compile(&format!("{CT}{extra}\n{obj}"))
                 .unwrap_err()
@@ -1224,6 +1287,13 @@ mod tests {
                 e.starts_with("test.toml: volume: ") && e.contains(want),
                 "{e}"
             );
+        }
+        // A list of segments that is none.
+        for extra in ["segment = 7", "segment = [1.5]"] {
+            let e = compile(&format!("{CT}segmentation = \"l.nii\"\n{extra}\n{obj}"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("segments as \"1,2\", \"all\" or names"), "{e}");
         }
         let e = compile(&format!("[volume]\npath = \"missing.nii\"\n{obj}"))
             .unwrap_err()

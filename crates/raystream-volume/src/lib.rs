@@ -4,10 +4,13 @@
 mod cases;
 pub mod centreline;
 pub mod distance;
+mod grid;
 mod marching;
+pub mod segments;
 mod stats;
 mod tf;
 
+pub use grid::trilinear;
 pub use marching::{
     IsoSurface, Simplified, departure, distances, extract_isosurface, point_triangle_distance,
     simplify, smooth,

@@ -125,7 +125,9 @@ const INFO_ASPECT: f32 = 4.0 / 3.0;
 /// A scene file as `render` would draw it: its triangles (objects and ground), materials,
 /// lights, camera, the objects' bounds, its CT volume and the kd-tree over the triangles.
 fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
-    let scene = raystream_scene::Scene::load(input)?;
+    let mut scene = raystream_scene::Scene::load(input)?;
+    // The volume's segmentation laid on it, as `render` lays it: a mistake shows here too.
+    let segments = crate::segments::paint_scene(&mut scene, input)?;
     let tree = a.tree.build(&scene.mesh);
     let b = scene.object_box;
     let cam = scene.camera_for(INFO_ASPECT);
@@ -143,6 +145,7 @@ fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 "step_mm": v.step_mm,
                 "shadows": v.shadows,
                 "phase": {"index": v.volume.phase.index, "count": v.volume.phase.count},
+                "segments": segments,
             })
         });
         print_line(json!({
@@ -219,6 +222,9 @@ fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 ""
             }
         );
+        if let Some(words) = &segments {
+            println!("  segments   {words}");
+        }
     }
     let s = &tree.stats;
     println!(

@@ -70,7 +70,18 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
     };
     let loaded = match a.input.as_deref() {
         None => volume_scene(Path::new(DEFAULT_CT_NAME), Some(DEFAULT_CT)),
-        Some(p) if is_scene_file(a) => Ok((Scene::load(p)?, None)),
+        Some(p) if is_scene_file(a) => {
+            let mut scene = Scene::load(p)?;
+            if let Some(words) = crate::segments::paint_scene(&mut scene, p)?
+                && !a.quiet
+            {
+                eprintln!(
+                    "raystream: {}: the volume in the colours of {words}",
+                    p.display()
+                );
+            }
+            Ok((scene, None))
+        }
         Some(p) if raystream_io::is_volume_path(p) => volume_scene(p, None),
         Some(p) => Ok((Scene::for_mesh_file(p)?, None)),
     }?;

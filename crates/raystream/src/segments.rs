@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use raystream_cpu::dvr::DvrMode;
 use raystream_cpu::segments::{MAX_LABEL, SegmentColours};
 use raystream_io::Volume;
@@ -283,4 +283,30 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
         hidden_fill,
         words,
     }))
+}
+
+/// A scene file's `[volume]` with `segmentation` (and `segment`, `colour_table`): the
+/// segmentation laid on the volume's grid as `render CT --mode dvr --segmentation` lays it, its
+/// colours set on the volume (`SceneVolume::segments`) and the volume kept to the chosen
+/// segments; what the summary says of it, or `None` for a scene without one.
+pub fn paint_scene(scene: &mut raystream_scene::Scene, file: &Path) -> Result<Option<String>> {
+    let Some(v) = scene.volume.as_mut() else {
+        return Ok(None);
+    };
+    let Some(s) = v.segmentation.clone() else {
+        return Ok(None);
+    };
+    let asked = Asked {
+        segmentation: Some(&s.path),
+        segment: s.segment.as_deref(),
+        colour_table: s.colour_table.as_deref(),
+    };
+    let painted = paint(asked, DvrMode::Dvr, &v.volume, file)
+        .with_context(|| format!("{}: [volume] segmentation", file.display()))?
+        .expect("a segmentation given");
+    if let Some(kept) = painted.kept {
+        v.volume = kept;
+    }
+    v.segments = painted.colours;
+    Ok(Some(painted.words.trim_start_matches("; ").to_string()))
 }

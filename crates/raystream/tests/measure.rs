@@ -2011,6 +2011,133 @@ fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
     }
 }
 
+/// A scene file's `[volume]` with `segmentation` (the chest CT with `measure --mask`'s lumen and
+/// wall, beside a small sphere), on each device: the volume's pixels change and turn bluer
+/// (cyan lumen, magenta wall, where ct-aaa draws contrast red), the sphere's and the
+/// background's do not; `segment = [1]` keeps the lumen alone, far fewer pixels; the GPU's
+/// frame is the CPU's within the render tests' tolerance; `segment` without `segmentation`,
+/// a label not present and a segmentation that cannot be read are refused, naming the scene.
+#[test]
+fn a_scene_volume_takes_its_segments_colours() {
+    let (vol, path) = (chest(), aorta());
+    let mask = tmp("scene-mask.nii.gz");
+    measure(&vol, &path, &["--wall", "--mask", mask.to_str().unwrap()]);
+    let scene = |name: &str, extra: &str| {
+        let file = tmp(&format!("scene-segments-{name}.toml"));
+        let text = format!(
+            "background = [0.1, 0.1, 0.12]\n[volume]\npath = {vol:?}\npreset = \"ct-aaa\"\n{extra}\n\n[[objects]]\nshape = \"sphere\"\nframe = \"lps\"\nscale = 12\ntranslate = [60, -300, 600]\n"
+        );
+        std::fs::write(&file, text).unwrap();
+        file.to_str().unwrap().to_string()
+    };
+    let m = mask.to_str().unwrap();
+    let plain = scene("plain", "");
+    let both = scene("both", &format!("segmentation = {m:?}"));
+    let lumen = scene("lumen", &format!("segmentation = {m:?}\nsegment = [1]"));
+    let args = ["--size", "60x80", "--spp", "1", "--view", "posterior"];
+    let mut frames = Vec::new();
+    for dev in devices() {
+        let img = |name: &str, s: &str| {
+            let f = render_to(
+                &format!("scene-seg-{dev}-{name}.png"),
+                dev,
+                &[&[s][..], &args].concat(),
+            );
+            image::open(&f).unwrap().to_rgb8()
+        };
+        let (p, b, l) = (
+            img("plain", &plain),
+            img("both", &both),
+            img("lumen", &lumen),
+        );
+        let bg = p.get_pixel(0, 0).0;
+        let changed: Vec<usize> = (0..p.len() / 3)
+            .filter(|&i| p.as_raw()[3 * i..3 * i + 3] != b.as_raw()[3 * i..3 * i + 3])
+            .collect();
+        let blue = |px: &[u8]| px[2] as i32 - px[0] as i32;
+        let bluer = changed
+            .iter()
+            .filter(|&&i| blue(&b.as_raw()[3 * i..]) > blue(&p.as_raw()[3 * i..]))
+            .count();
+        eprintln!("{dev}: {} pixels coloured, {bluer} bluer", changed.len());
+        assert!(
+            changed.len() > 20 && bluer * 10 >= changed.len() * 9,
+            "{dev}: {} changed, {bluer} bluer",
+            changed.len()
+        );
+        for &i in &changed {
+            assert_ne!(
+                p.as_raw()[3 * i..3 * i + 3],
+                bg,
+                "{dev}: the background coloured"
+            );
+        }
+        // The lumen alone: what is left of the volume is the lumen's, far less of the frame.
+        let drawn = |x: &image::RgbImage| x.pixels().filter(|q| q.0 != bg).count();
+        eprintln!(
+            "{dev}: {} pixels drawn, {} with the lumen alone",
+            drawn(&p),
+            drawn(&l)
+        );
+        let cyan = l.pixels().filter(|q| blue(&q.0) > 30).count();
+        assert!(drawn(&l) * 4 < drawn(&p) && cyan > 20, "{dev}: {cyan} cyan");
+        frames.push(img("both", &both));
+    }
+    // `info` lays the segmentation on the volume as render does, and says so.
+    let o = run(&["info", &both, "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let words = j["volume"]["segments"].as_str().unwrap();
+    assert!(
+        words.starts_with("segments 1, 2 of scene-mask.nii.gz"),
+        "{words}"
+    );
+    if let [cpu, gpu] = &frames[..] {
+        let mean = cpu
+            .as_raw()
+            .iter()
+            .zip(gpu.as_raw())
+            .map(|(a, b)| a.abs_diff(*b) as f64)
+            .sum::<f64>()
+            / cpu.as_raw().len() as f64;
+        assert!(mean < 0.5, "GPU vs CPU: {mean}/255");
+    }
+    for (name, extra, want) in [
+        (
+            "no-file",
+            "segment = \"1\"".to_string(),
+            "choose and colour the segments of a 'segmentation'",
+        ),
+        (
+            "absent",
+            format!("segmentation = {m:?}\nsegment = [7]"),
+            "no voxel holds label 7",
+        ),
+        (
+            "unread",
+            "segmentation = \"nowhere.nii.gz\"".to_string(),
+            "nowhere.nii.gz",
+        ),
+    ] {
+        let s = scene(name, &extra);
+        let o = run(&[
+            "render",
+            &s,
+            "-q",
+            "--device",
+            "cpu",
+            "-o",
+            tmp("x.png").to_str().unwrap(),
+        ]);
+        assert_eq!(o.status.code(), Some(2), "{name}");
+        let e = stderr(&o);
+        assert!(
+            e.contains(want) && e.contains(&format!("scene-segments-{name}.toml")),
+            "{name}: {e}"
+        );
+    }
+}
+
 /// The outer wall a millimetre at a time down the chest CT's aorta: each section's circle
 /// is chosen with what its neighbours found, so its width runs on from section to section.
 /// Without the neighbours (or with a refinement that creeps outwards) sections 41 and 42

@@ -119,40 +119,6 @@ const MODE_AVERAGE: u32 = 3u;
 const MODE_ISO: u32 = 4u;
 const MODE_SLICE: u32 = 5u;
 
-// The crop box and clip planes applied to [t.x, t.y] of the world ray o + t d, as the CPU's
-// clip_interval.
-// Voxel (i, j, k)'s colour: its segment's, else base.
-fn segment_voxel(i: u32, j: u32, k: u32, base: vec3<f32>) -> vec3<f32> {
-    let c = segment_colours[textureLoad(segment_labels, vec3<u32>(i, j, k), 0).x];
-    return select(base, c.xyz, c.w > 0.0);
-}
-
-// The colour of the sample at index p whose own colour (the transfer function's, or iso's
-// material) is base: with a segmentation, the trilinear blend of its eight nearest voxels'
-// segment colours, base for voxels of none, clamped to the grid, as the CPU's
-// SegmentColours::colour_at (the same lerps in the same order).
-fn painted(base: vec3<f32>, p: vec3<f32>) -> vec3<f32> {
-    if dp.segments == 0u {
-        return base;
-    }
-    let n = dp.dims;
-    let q = clamp(p, vec3<f32>(0.0), vec3<f32>(n - 1u));
-    let i = min(vec3<u32>(q), max(n, vec3<u32>(2u)) - 2u);
-    let f = q - vec3<f32>(i);
-    let e = min(i + 1u, n - 1u);
-    let c000 = segment_voxel(i.x, i.y, i.z, base);
-    let c100 = segment_voxel(e.x, i.y, i.z, base);
-    let c010 = segment_voxel(i.x, e.y, i.z, base);
-    let c110 = segment_voxel(e.x, e.y, i.z, base);
-    let c001 = segment_voxel(i.x, i.y, e.z, base);
-    let c101 = segment_voxel(e.x, i.y, e.z, base);
-    let c011 = segment_voxel(i.x, e.y, e.z, base);
-    let c111 = segment_voxel(e.x, e.y, e.z, base);
-    let y0 = lerp3(lerp3(c000, c100, f.x), lerp3(c010, c110, f.x), f.y);
-    let y1 = lerp3(lerp3(c001, c101, f.x), lerp3(c011, c111, f.x), f.y);
-    return lerp3(y0, y1, f.z);
-}
-
 // a + (b - a) t, as the CPU's trilinear: exactly a where b is a (mix's a (1 - t) + b t is
 // not), so that voxels of no segment leave the transfer function's colour as it is.
 fn lerp3(a: vec3<f32>, b: vec3<f32>, t: f32) -> vec3<f32> {
@@ -168,6 +134,8 @@ fn smooth_shading() -> bool {
     return dp.interpolation == 2u;
 }
 
+// The crop box and clip planes applied to [t.x, t.y] of the world ray o + t d, as the CPU's
+// clip_interval.
 fn clip_world(o: vec3<f32>, d: vec3<f32>, t_in: vec2<f32>) -> vec2<f32> {
     var t = t_in;
     let empty = vec2<f32>(1.0, 0.0);

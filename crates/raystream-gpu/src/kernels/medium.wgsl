@@ -32,7 +32,9 @@ struct MediumParams {
     // Interpolation::kernel_code of SceneVolume::interpolation: 0 trilinear, 1 cubic B-spline, 2
     // its interpolating form (coefficients in the first channel, the voxels in the second).
     interpolation: u32,
-    pad0: u32,
+    // 1: samples take the colours of a segmentation (segment_labels, segment_colours) in place
+    // of the transfer function's (SceneVolume::segments).
+    segments: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -45,6 +47,11 @@ struct MediumParams {
 @group(3) @binding(5) var<storage, read> color_points: array<vec4<f32>>;
 @group(3) @binding(6) var<storage, read> brick_visible: array<u32>;
 @group(3) @binding(7) var<storage, read> light_values: array<f32>;
+// A segmentation on the volume's grid (raystream_cpu::segments::SegmentColours): each voxel's
+// label, and per label its linear colour with w = 1, or w = 0 where it has none (a 1-voxel
+// placeholder when dp.segments is 0).
+@group(3) @binding(8) var segment_labels: texture_3d<u32>;
+@group(3) @binding(9) var<storage, read> segment_colours: array<vec4<f32>>;
 
 // volume.wgsl's choice of reconstruction (Interpolation::kernel_code).
 fn cubic_sampling() -> bool {
@@ -55,11 +62,6 @@ fn smooth_shading() -> bool {
     return dp.interpolation == 2u;
 }
 
-// volume.wgsl's sample colour: a scene's volume takes its transfer function's (a segmentation
-// colours only `render --mode`'s frames: dvr.wgsl's painted).
-fn painted(base: vec3<f32>, p: vec3<f32>) -> vec3<f32> {
-    return base;
-}
 
 // The scene frame (x = L, y = S, z = A) → LPS.
 fn scene_to_lps(p: vec3<f32>) -> vec3<f32> {

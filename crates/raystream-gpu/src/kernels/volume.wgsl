@@ -9,10 +9,45 @@
 // sample of colour `base` at index `p` (world `at`, seen along unit `d`) sends back, as the
 // CPU's shade_sample for the module's lights; `cubic_sampling()`: whether the volume is read by a
 // cubic B-spline (raystream_cpu::sampling::Interpolation::Cubic or CubicInterpolating) rather than
-// trilinearly; and `smooth_shading()`: whether the texture's second channel holds the voxels
-// whose spline's gradient shades it (CubicInterpolating).
+// trilinearly; `smooth_shading()`: whether the texture's second channel holds the voxels
+// whose spline's gradient shades it (CubicInterpolating); a segmentation's `segment_labels`
+// (an R16Uint texture of the volume's grid) and `segment_colours`, read when dp.segments is
+// 1; and lerp3(a, b, t) = a + (b - a) t.
 
 const FULL_SHADING_GRADIENT: f32 = 100.0;
+
+// Voxel (i, j, k)'s colour: its segment's, else base.
+fn segment_voxel(i: u32, j: u32, k: u32, base: vec3<f32>) -> vec3<f32> {
+    let c = segment_colours[textureLoad(segment_labels, vec3<u32>(i, j, k), 0).x];
+    return select(base, c.xyz, c.w > 0.0);
+}
+
+// The colour of the sample at index p whose own colour (the transfer function's, or iso's
+// material) is base: with a segmentation, the trilinear blend of its eight nearest voxels'
+// segment colours, base for voxels of none, clamped to the grid, as the CPU's
+// SegmentColours::colour_at (the same lerps in the same order).
+fn painted(base: vec3<f32>, p: vec3<f32>) -> vec3<f32> {
+    if dp.segments == 0u {
+        return base;
+    }
+    let n = dp.dims;
+    let q = clamp(p, vec3<f32>(0.0), vec3<f32>(n - 1u));
+    let i = min(vec3<u32>(q), max(n, vec3<u32>(2u)) - 2u);
+    let f = q - vec3<f32>(i);
+    let e = min(i + 1u, n - 1u);
+    let c000 = segment_voxel(i.x, i.y, i.z, base);
+    let c100 = segment_voxel(e.x, i.y, i.z, base);
+    let c010 = segment_voxel(i.x, e.y, i.z, base);
+    let c110 = segment_voxel(e.x, e.y, i.z, base);
+    let c001 = segment_voxel(i.x, i.y, e.z, base);
+    let c101 = segment_voxel(e.x, i.y, e.z, base);
+    let c011 = segment_voxel(i.x, e.y, e.z, base);
+    let c111 = segment_voxel(e.x, e.y, e.z, base);
+    let y0 = lerp3(lerp3(c000, c100, f.x), lerp3(c010, c110, f.x), f.y);
+    let y1 = lerp3(lerp3(c001, c101, f.x), lerp3(c011, c111, f.x), f.y);
+    return lerp3(y0, y1, f.z);
+}
+
 const BRICK: u32 = BRICK_SIZE;
 
 fn opacity_at(hu: f32) -> f32 {

@@ -8,7 +8,7 @@
 //! colour of its segment or, for a voxel of none (label 0, or a label given no colour), the
 //! transfer function's colour at the sample: segments meet in a blend a voxel wide rather than
 //! in voxel-sized steps, and a segment's colour fades into the transfer function's over its
-//! last voxel. The GPU's `painted` (kernels/dvr.wgsl) computes the same.
+//! last voxel. The GPU's `painted` (raystream-gpu's kernels/volume.wgsl) computes the same.
 
 use raystream_math::Vec3;
 
@@ -66,7 +66,7 @@ impl SegmentColours {
     /// colours of its eight nearest voxels, `base` (the transfer function's colour there) for
     /// those of no coloured segment.
     pub fn colour_at(&self, p: Vec3, base: Vec3) -> Vec3 {
-        crate::sampling::trilinear(self.dims, p, |i, j, k| self.voxel(i, j, k, base))
+        crate::grid::trilinear(self.dims, p, |i, j, k| self.voxel(i, j, k, base))
     }
 }
 
