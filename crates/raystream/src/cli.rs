@@ -335,6 +335,12 @@ pub struct RenderArgs {
     /// one, PNG output.
     #[arg(long)]
     pub labels: bool,
+    /// A scale bar in the bottom right corner, its length (1, 2 or 5 × 10^k mm, at most a
+    /// fifth of the width) written above it: views where every pixel spans the same
+    /// millimetres (--parallel, --mode slice, a CPR) of CT volumes, their bones and scenes
+    /// with one, PNG or DICOM output.
+    #[arg(long)]
+    pub scale_bar: bool,
     /// A turntable of N frames, one every 360/N degrees about the image's up axis (the
     /// patient's superior axis unless --view superior/inferior), starting from --view and
     /// --orbit, written as OUTPUT/frame_000.png … (-o names the folder; --format exr for EXRs,

@@ -1,20 +1,34 @@
 //! `render --labels`: the patient directions at the image's edges, as radiology viewers mark
 //! them (R/L, A/P, S/I; an oblique edge gets two or three letters, the strongest first).
 //!
-//! Six capital letters at one size are all it draws, so they are bitmaps here (5×7 cells, a
-//! cell a pixel or more) rather than a font file and a rasteriser, which would be larger than
-//! the glyphs.
+//! Six capital letters at one size, and for `--scale-bar` digits and "mm"/"cm", are all it
+//! draws, so they are bitmaps here (5×7 cells, a cell a pixel or more) rather than a font file
+//! and a rasteriser, which would be larger than the glyphs.
 
 use raystream_math::Vec3;
 
 /// 5×7 glyphs, a row a byte, the leftmost cell in bit 4.
-const GLYPHS: [(char, [u8; 7]); 6] = [
+const GLYPHS: [(char, [u8; 7]); 20] = [
     ('A', [0x0e, 0x11, 0x11, 0x1f, 0x11, 0x11, 0x11]),
     ('P', [0x1e, 0x11, 0x11, 0x1e, 0x10, 0x10, 0x10]),
     ('R', [0x1e, 0x11, 0x11, 0x1e, 0x14, 0x12, 0x11]),
     ('L', [0x10, 0x10, 0x10, 0x10, 0x10, 0x10, 0x1f]),
     ('S', [0x0f, 0x10, 0x10, 0x0e, 0x01, 0x01, 0x1e]),
     ('I', [0x0e, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0e]),
+    ('0', [0x0e, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0e]),
+    ('1', [0x04, 0x0c, 0x04, 0x04, 0x04, 0x04, 0x0e]),
+    ('2', [0x0e, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1f]),
+    ('3', [0x1f, 0x02, 0x04, 0x02, 0x01, 0x11, 0x0e]),
+    ('4', [0x02, 0x06, 0x0a, 0x12, 0x1f, 0x02, 0x02]),
+    ('5', [0x1f, 0x10, 0x1e, 0x01, 0x01, 0x11, 0x0e]),
+    ('6', [0x06, 0x08, 0x10, 0x1e, 0x11, 0x11, 0x0e]),
+    ('7', [0x1f, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08]),
+    ('8', [0x0e, 0x11, 0x11, 0x0e, 0x11, 0x11, 0x0e]),
+    ('9', [0x0e, 0x11, 0x11, 0x0f, 0x01, 0x02, 0x0c]),
+    ('.', [0x00, 0x00, 0x00, 0x00, 0x00, 0x0c, 0x0c]),
+    ('m', [0x00, 0x00, 0x1a, 0x15, 0x15, 0x15, 0x15]),
+    ('c', [0x00, 0x00, 0x0e, 0x10, 0x10, 0x11, 0x0e]),
+    (' ', [0x00; 7]),
 ];
 
 /// A direction's component counts toward its letters from this size up (11.5° off the plane
@@ -79,22 +93,29 @@ pub fn draw(rgb: &mut [u8], width: u32, height: u32, right: Vec3, up: Vec3) {
         }
     };
     for (x0, y0, text) in placements(width, height, right, up) {
-        for (k, ch) in text.chars().enumerate() {
-            let glyph = glyph(ch);
-            let gx = x0 as i64 + (k as i64 * 6) * s as i64;
-            // The black ring first, then the letter over it.
-            for pass in [0u8, 255] {
-                for (row, bits) in glyph.iter().enumerate() {
-                    for col in 0..5 {
-                        if bits & (0x10 >> col) == 0 {
-                            continue;
-                        }
-                        let (cx, cy) = (gx + col * s as i64, y0 as i64 + row as i64 * s as i64);
-                        let ring = if pass == 0 { 1 } else { 0 };
-                        for y in cy - ring..cy + s as i64 + ring {
-                            for x in cx - ring..cx + s as i64 + ring {
-                                put(x, y, pass);
-                            }
+        draw_text(&mut put, (x0 as i64, y0 as i64), s, &text);
+    }
+}
+
+/// Draws `text` with its first glyph's top-left at `at`, in cells of `s` pixels, a glyph every
+/// six cells, through `put(x, y, value)`: white cells, each ringed by black.
+pub fn draw_text(put: &mut impl FnMut(i64, i64, u8), (x0, y0): (i64, i64), s: u32, text: &str) {
+    let s = s as i64;
+    for (k, ch) in text.chars().enumerate() {
+        let glyph = glyph(ch);
+        let gx = x0 + k as i64 * 6 * s;
+        // The black ring first, then the letter over it.
+        for pass in [0u8, 255] {
+            for (row, bits) in glyph.iter().enumerate() {
+                for col in 0..5 {
+                    if bits & (0x10 >> col) == 0 {
+                        continue;
+                    }
+                    let (cx, cy) = (gx + col * s, y0 + row as i64 * s);
+                    let ring = if pass == 0 { 1 } else { 0 };
+                    for y in cy - ring..cy + s + ring {
+                        for x in cx - ring..cx + s + ring {
+                            put(x, y, pass);
                         }
                     }
                 }
@@ -103,13 +124,14 @@ pub fn draw(rgb: &mut [u8], width: u32, height: u32, right: Vec3, up: Vec3) {
     }
 }
 
-/// The glyph of one of the six letters.
+/// The glyph of one of the letters and signs drawn (the six directions, digits, '.', 'm', 'c',
+/// space).
 pub fn glyph(ch: char) -> [u8; 7] {
     GLYPHS
         .iter()
         .find(|(c, _)| *c == ch)
         .map(|(_, g)| *g)
-        .expect("one of A, P, R, L, S, I")
+        .expect("a letter or sign with a glyph")
 }
 
 #[cfg(test)]

@@ -12,6 +12,7 @@ mod measure;
 mod overlay;
 mod profile;
 mod render;
+mod scale_bar;
 mod segments;
 mod structured_report;
 mod trace;

@@ -172,6 +172,16 @@ fn label(
         if a.labels {
             crate::labels::draw(rgb, *width, *height, right, up);
         }
+        if a.scale_bar && patient {
+            if cam.parallel > 0.0 {
+                let mm = 2.0 * cam.parallel as f64 / *height as f64;
+                crate::scale_bar::draw(rgb, *width, *height, mm);
+            } else if !a.quiet {
+                eprintln!(
+                    "raystream: --scale-bar: the scene's own camera is a perspective one, with no one scale; no bar drawn"
+                );
+            }
+        }
     }
     // DICOM's Patient Orientation says H(ead) and F(oot) for superior and inferior.
     let dicom = |d| {
@@ -181,7 +191,7 @@ fn label(
     };
     DicomOut {
         orientation: patient.then(|| [dicom(right), dicom(-up)]),
-        annotated: a.labels || overlay.is_some() || a.draw_lumen.is_some(),
+        annotated: a.labels || a.scale_bar || overlay.is_some() || a.draw_lumen.is_some(),
         description: crate::common::options_in_words(a.input.as_deref(), &a.output),
         series: None,
         window: None,
@@ -229,15 +239,29 @@ fn volume_dicom(
         },
         Seen::Curved(plane) => DicomOut {
             orientation: None,
-            // The lumen's edges first, the marks over them.
+            // The lumen's edges first, the marks and the scale over them.
             annotated: draw_cpr_lumen(a, picture, plane, (volume, track))
-                | mark_path(a, picture, plane),
+                | mark_path(a, picture, plane)
+                | cpr_scale_bar(a, picture, plane),
             description: crate::common::options_in_words(a.input.as_deref(), &a.output),
             series: None,
             window,
             plane: None,
         },
     }
+}
+
+/// `--scale-bar` on a CPR, whose pixels are `plane.pixel_mm` square: whether it drew one.
+fn cpr_scale_bar(
+    a: &RenderArgs,
+    picture: &mut Picture,
+    plane: &raystream_cpu::cpr::CurvedPlane,
+) -> bool {
+    if let (true, Picture::Srgb8 { rgb, width, height }) = (a.scale_bar, &mut *picture) {
+        crate::scale_bar::draw(rgb, *width, *height, plane.pixel_mm as f64);
+        return true;
+    }
+    false
 }
 
 /// `--segmentation FILE`: its label volume, read and checked (whole numbers, none below 0),
@@ -557,6 +581,22 @@ fn check_labels(a: &RenderArgs, patient: bool, format: ImageFormat) -> Result<()
     if a.labels && format == ImageFormat::Exr {
         bail!("--labels draws on a PNG; an EXR holds the values themselves");
     }
+    if a.scale_bar {
+        if !patient {
+            bail!(
+                "{}: --scale-bar measures millimetres: CT volumes, their bones and scenes with one",
+                input_name(a).display()
+            );
+        }
+        if format == ImageFormat::Exr {
+            bail!("--scale-bar draws on a PNG; an EXR holds the values themselves");
+        }
+        if projection(a) == Projection::Perspective && a.path.is_none() {
+            bail!(
+                "--scale-bar: a perspective view has no one scale (near things look larger); give --parallel (--mode slice and a CPR have one)"
+            );
+        }
+    }
     Ok(())
 }
 
@@ -753,6 +793,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     };
     // Letters or a path drawn need the picture as seen.
     let drawn = a.labels
+        || a.scale_bar
         || a.draw_path.is_some()
         || a.draw_lumen.is_some()
         || !a.mark_at.is_empty()
@@ -1847,8 +1888,10 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         if a.turntable.is_some() {
             bail!("--turntable renders pictures; an AOV is one picture's hits");
         }
-        if a.labels || a.draw_path.is_some() {
-            bail!("--labels and --draw-path mark a rendered picture, not an AOV's values");
+        if a.labels || a.draw_path.is_some() || a.scale_bar {
+            bail!(
+                "--labels, --scale-bar and --draw-path mark a rendered picture, not an AOV's values"
+            );
         }
         if crate::common::is_dicom(&a.output) {
             bail!(

@@ -251,6 +251,137 @@ fn labels_mark_the_patients_directions() {
     }
 }
 
+/// `--scale-bar`: on a parallel MIP of the built-in CT (its EXR's comments give the pixel size)
+/// the bar's white run along its middle row is, in pixels, the round length its label says,
+/// and at most a fifth of the width; elsewhere than the bottom right corner the picture is
+/// the plain one. A sagittal slice, the bones seen in parallel and a CPR get one too; a
+/// perspective view, an EXR, a mesh and an AOV are refused.
+#[test]
+fn a_scale_bar_measures_the_picture() {
+    let (w, h) = (200u32, 150u32);
+    let render = |name: &str, extra: &[&str]| {
+        let out = tmp(&format!("scale-{name}"));
+        let mut args = vec!["render", "--size", "200x150", "--quiet", "--device", "cpu"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["-o", out.to_str().unwrap()]);
+        let o = run(&args);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        out
+    };
+    let mip = ["--mode", "mip", "--parallel"];
+    let exr = raystream_cpu::load_exr(&render("mip.exr", &mip)).unwrap();
+    let mm_px: f64 = exr
+        .comments
+        .split("pixels ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no pixel size in {:?}", exr.comments));
+    // The rule, written out: the longest 1, 2 or 5 x 10^k mm within a fifth of the width.
+    let most = w as f64 / 5.0 * mm_px;
+    let want_mm = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0]
+        .into_iter()
+        .rfind(|&l| l <= most)
+        .unwrap();
+    let want_px = (want_mm / mm_px).round() as usize;
+    let open = |p: &std::path::Path| image::open(p).unwrap().to_rgb8();
+    let plain = open(&render("mip.png", &mip));
+    let barred = open(&render(
+        "mip-bar.png",
+        &[&mip[..], &["--scale-bar"]].concat(),
+    ));
+    // The longest white run in the bottom fifth's rows.
+    let run_of = |img: &image::RgbImage| {
+        (h * 4 / 5..h)
+            .map(|y| {
+                let (mut best, mut cur) = (0, 0);
+                for x in 0..w {
+                    cur = if img.get_pixel(x, y).0 == [255; 3] {
+                        cur + 1
+                    } else {
+                        0
+                    };
+                    best = best.max(cur);
+                }
+                best
+            })
+            .max()
+            .unwrap()
+    };
+    eprintln!("{mm_px} mm a pixel: a {want_mm} mm bar of {want_px} pixels");
+    assert_eq!(run_of(&barred), want_px);
+    assert!(want_px as u32 <= w / 5 && want_px > 5);
+    for (x, y, p) in barred.enumerate_pixels() {
+        if x < w / 2 || y < h / 2 {
+            assert_eq!(p, plain.get_pixel(x, y), "({x}, {y}) changed");
+        }
+    }
+    // A slice, the bones in parallel, a CPR: a bar drawn, the picture changed only there.
+    let path = aorta();
+    let chest = chest();
+    for (name, args) in [
+        ("slice", vec!["--mode", "slice", "--view", "left"]),
+        ("bones", vec!["--parallel", "--spp", "1"]),
+        (
+            "cpr",
+            vec![&chest[..], "--mode", "slice", "--path", &path[..]],
+        ),
+    ] {
+        let plain = open(&render(&format!("{name}.png"), &args));
+        let barred = open(&render(
+            &format!("{name}-bar.png"),
+            &[&args[..], &["--scale-bar"]].concat(),
+        ));
+        let changed: Vec<(u32, u32)> = barred
+            .enumerate_pixels()
+            .filter(|(x, y, p)| *p != plain.get_pixel(*x, *y))
+            .map(|(x, y, _)| (x, y))
+            .collect();
+        assert!(changed.len() > 20, "{name}: {} changed", changed.len());
+        assert!(
+            changed.iter().all(|&(x, y)| x >= w / 2 && y >= h / 2),
+            "{name}: drawn outside the corner"
+        );
+    }
+    for (args, why) in [
+        (
+            vec!["render", "--mode", "mip", "--scale-bar", "-o", "x.png"],
+            "a perspective view has no one scale",
+        ),
+        (
+            vec![
+                "render",
+                "--mode",
+                "mip",
+                "--parallel",
+                "--scale-bar",
+                "-o",
+                "x.exr",
+            ],
+            "--scale-bar draws on a PNG",
+        ),
+        (
+            vec![
+                "render",
+                &mesh("spot.obj"),
+                "--parallel",
+                "--scale-bar",
+                "-o",
+                "x.png",
+            ],
+            "--scale-bar measures millimetres",
+        ),
+        (
+            vec!["render", "--aov", "depth", "--scale-bar", "-o", "x.png"],
+            "not an AOV's values",
+        ),
+    ] {
+        let o = run(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        assert!(stderr(&o).contains(why), "{args:?}: {}", stderr(&o));
+    }
+}
+
 /// `-o OUT.dcm`: the PNG's pixels as a DICOM Secondary Capture image that GDCM (through
 /// SimpleITK) reads, filed with the source series' patient and study, in a new series, with
 /// its Patient Orientation (the anterior view: rows toward the patient's left, columns toward
