@@ -11,7 +11,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a tex
         ../shared (JPEG-LS and 12-bit JPEG among them) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (meshes also shaded; volumes, and an RT Structure Set laid on its CT, also `--mode` mip, minip, average, slice,
         dvr or cinematic (half of those --denoise, some with --anisotropy and --exposure), some
-        with --interpolation linear, cubic or cubic-interpolating, some with --slab, to an EXR or a turntable of EXRs; some tinted by themselves as a label map, some
+        with --interpolation linear, cubic or cubic-interpolating, some with --slab, to an EXR, a turntable of EXRs or an animation (APNG, GIF); some tinted by themselves as a label map, some
         rendered (dvr, iso, mip, minip, cinematic) in the colours of their own segments or kept to some,
         or their segments made surfaces with `raystream iso --segment` (some simplified, some named
         by a mutated colour table) or rendered). Each run must exit 0 or 2, never panic, and an error
@@ -24,7 +24,8 @@ scenes: a scene with glass, a mirror, a mesh and a light, with one to three numb
         refuse it (exit 2, naming the file) or rays.py imgdiff finds them within the GPU tests'
         bounds (mean < 0.5/255, at most 0.1 % of pixels over 2/255). Half of them drop the
         file's camera for the framing one, turned by a random --orbit, some with --parallel; a
-        third hold the built-in CT as their [volume], read linearly or by the cubic B-spline.
+        third hold the built-in CT as their [volume], read linearly or by the cubic B-spline,
+        half of those in the colours of a label map of its halves (or kept to one).
 
 Prints each failure with its input (kept under the work folder) and a count at the end; exits 1
 if any failed. Run from the repository root after `cargo build --release`. The 2026-11-23
@@ -572,10 +573,17 @@ def fuzz_files(work, n, device):
             # neighbours only by clamping).
             if random.random() < 0.4:
                 extra += ["--interpolation", random.choice(["linear", "cubic", "cubic-interpolating"])]
-            # Some as a turntable of EXR frames into a folder.
+            # Some as a turntable (or a cine) of EXR frames into a folder, or as one animation.
             frames = ["--cine"] if four_d and not phase else ["--turntable", "2"]
-            out = (frames + ["--format", "exr", "-o", os.path.join(d, "frames")]
-                   if random.random() < 0.25 else ["-o", os.path.join(d, "o.exr")] + phase)
+            pick = random.random()
+            if pick < 0.2:
+                out = frames + ["--format", "exr", "-o", os.path.join(d, "frames")]
+            elif pick < 0.3:
+                kind = random.choice(["apng", "gif"])
+                out = frames + ["--format", kind, "--fps", random.choice(["1", "12", "50"]),
+                                "-o", os.path.join(d, "a." + ("png" if kind == "apng" else "gif"))]
+            else:
+                out = ["-o", os.path.join(d, "o.exr")] + phase
             why = run(["render", p, "--mode", mode, "--size", "8x8", "-q", "--device", device,
                        "--view", random.choice(["inferior", "left", "anterior"])] + extra + out, s)
             # Sometimes a slice of it tinted by itself as a label map (a Segmentation is one;
@@ -655,6 +663,16 @@ rotate = [0, 30, 0]
 """
 
 
+def halves_of(ct, work):
+    """A label map of `ct`'s two halves (scripts/halves-label-map.py), made once."""
+    out = os.path.join(work, "halves.mha")
+    if not os.path.exists(out):
+        info = subprocess.run([BIN, "info", ct, "--json"], capture_output=True, check=True).stdout
+        subprocess.run([sys.executable, os.path.join(ROOT, "scripts/halves-label-map.py"), out],
+                       input=info, check=True)
+    return out
+
+
 def fuzz_scenes(work, n):
     python = os.path.join(ROOT, ".venv/bin/python")
     rays_py = os.path.join(SHARED, "tools/rays.py")
@@ -667,10 +685,15 @@ def fuzz_scenes(work, n):
             framing = [f"--orbit={random.uniform(-360, 360):.3f},{random.uniform(-90, 90):.3f}"]
             framing += ["--parallel"] if random.random() < 0.5 else []
         if random.random() < 0.3:
-            # The built-in CT among the meshes, read either way (its numbers mutated too).
+            # The built-in CT among the meshes, read either way (its numbers mutated too), half
+            # of them in the colours of a label map of its halves on another grid, or kept to
+            # one half.
             ct = os.path.join(ROOT, "crates/raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz")
             s += (f'[volume]\npath = "{ct}"\npreset = "ct-bones"\nstep = 3.0\n'
                   f'interpolation = "{random.choice(["linear", "cubic", "cubic-interpolating"])}"\n')
+            if random.random() < 0.5:
+                s += f'segmentation = "{halves_of(ct, work)}"\n'
+                s += random.choice(["", 'segment = "all"\n', "segment = [2]\n", 'segment = "1, 2"\n'])
         for _ in range(random.randint(1, 3)):
             m = random.choice(list(re.finditer(r"-?\d+(\.\d+)?", s)))
             s = s[:m.start()] + random.choice(
