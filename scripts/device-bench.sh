@@ -147,6 +147,13 @@ done
 $bin render examples/spine_rods.toml --device gpu --size "$size" --spp 4 --max-depth 4 --repeat 10 --submit depth \
   -o "$tmp/spine-depth.png" 2>&1 | sed "s/^/[submit depth] /" | tee -a "$out/render.log"
 $py "$d/rays.py" imgdiff "$out/spine-rods-cpu.png" "$out/spine-rods-gpu.png" --json | tag '{"imgdiff": "spine_rods"}'
+# The same scene with its CT in the colours of a label map of its halves (open question 17):
+# every visible volume sample reads its eight voxels' labels (medium.wgsl's painted).
+$bin info "$ct" --json | $py scripts/halves-label-map.py "$tmp/halves.mha"
+sed "s|^\[volume\]|[volume]\nsegmentation = \"$tmp/halves.mha\"|; s|\.\./crates/raystream/assets|$PWD/crates/raystream/assets|" \
+  examples/spine_rods.toml > "$tmp/spine-segments.toml"
+$bin render "$tmp/spine-segments.toml" --device gpu --size "$size" --spp 4 --max-depth 4 --repeat 10 \
+  -o "$out/spine-segments-gpu.png" 2>&1 | sed "s/^/[scene segments] /" | tee -a "$out/render.log"
 }
 has "$parts" volume && {
 # Trilinear, as every run before 2026-12-03 measured it, then the cubic B-spline (the default
@@ -169,6 +176,15 @@ $bin bench "$ct" --mode mip --resample 512 --size "$dvr_size" --json --quiet --d
 $bin info "$ct" --json | $py scripts/halves-label-map.py "$tmp/halves.mha"
 $bin "${c[@]}" --device gpu --frames 36 --preset ct-bones --segmentation "$tmp/halves.mha" | tag '{"volume": "ct-bones cubic segments"}'
 $bin render "$ct" --mode dvr --shadows --preset ct-bones --device gpu --size "$dvr_size" -o "$out/dvr-bones-shadows-gpu.png" 2>&1 | tee -a "$out/render.log"
+# Animations (open question 18): a 36-frame dvr turntable as a folder of PNGs, one APNG and one
+# GIF; the wall time of each whole command, so that the encoding shows beside the GPU's frames.
+for f in png apng gif; do
+  o="$tmp/turntable-dvr"; [ $f = apng ] && o="$tmp/turntable-dvr.png"; [ $f = gif ] && o="$tmp/turntable-dvr.gif"
+  t0=$(date +%s%N)
+  $bin render "$ct" --mode dvr --preset ct-bones --device gpu --size "$dvr_size" --turntable 36 --format $f -o "$o" 2>&1 \
+    | sed "s/^/[animation $f] /" | tee -a "$out/render.log"
+  echo "[animation $f] wall $(( ($(date +%s%N) - t0) / 1000000 )) ms" | tee -a "$out/render.log"
+done
 # Cinematic rendering (64 paths a pixel, 4 scatterings): an orbit of 4 frames at 512³, one
 # picture of 256 paths a pixel, and one of 16 denoised.
 $bin bench "$ct" --mode cinematic --preset ct-bones --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 4 --interpolation linear | tag '{"volume": "cinematic ct-bones"}'
