@@ -1790,10 +1790,10 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
 /// `measure --wall --mask`'s lumen (1) and wall (2), on each device:
 /// - a MIP kept to the lumen and the wall: every pixel at most the plain MIP's (the voxels
 ///   outside them set just below the CT's lowest value, and interpolation is monotone), the
-///   contrast lumen bright, and the rays that meet no segment misses, NaN in the EXR and the
-///   background in the PNG: every pixel where the MIP of the mask itself is 0, and no pixel
-///   where it is over 0.01; kept to the lumen, a MinIP likewise at least the plain MinIP's,
-///   the rays far from it misses;
+///   contrast lumen bright, and the rays that meet no segment misses (NaN in the EXR, the
+///   padding value in DICOM, the background in the PNG): every pixel where the MIP of the mask
+///   itself is 0, and no pixel where it is over 0.01; kept to the lumen, a MinIP likewise at
+///   least the plain MinIP's, the rays far from it misses;
 /// - dvr from behind, coloured by both: the opacity (the EXR's A) is the plain frame's bit for
 ///   bit, and the pixels that change turn bluer (cyan lumen, magenta wall, where ct-aaa draws
 ///   contrast red); kept to the lumen, only pixels where the plain frame has some opacity
@@ -1865,6 +1865,19 @@ fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
             "{dev}: MIP of the vessel: {none} pixels meet no segment, {lit} over 200 HU, brightest {brightest}"
         );
         assert!(none > 1000 && lit > 40 && brightest > 400.0, "{dev}");
+        // Its DICOM: the HU rounded, the misses the padding value, as for rays that miss the
+        // CT (decode_pixel_data applies no rescale here: the stored values are the HU).
+        {
+            use dicom_pixeldata::PixelDecoder;
+            let dcm = out("mip-vessel.dcm", &[&mip, &vessel]);
+            let obj = dicom_object::open_file(&dcm).unwrap();
+            let got: Vec<f32> = obj.decode_pixel_data().unwrap().to_vec().unwrap();
+            assert_eq!(got.len(), kept.len());
+            for (g, k) in got.iter().zip(&kept) {
+                let want = if k.is_nan() { -32768.0 } else { k.round() };
+                assert_eq!(*g, want, "{dev}: DICOM against the EXR");
+            }
+        }
         // Its PNG: the misses in the background's colour.
         let png = image::open(out("mip-vessel.png", &[&mip, &vessel]))
             .unwrap()
