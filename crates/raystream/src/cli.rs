@@ -431,6 +431,11 @@ pub struct RenderArgs {
     /// structures, rather than its inside tinted (a structure set's structures each whole).
     #[arg(long, requires = "segmentation")]
     pub outline: bool,
+    /// With --segmentation (dvr, iso and cinematic in its colours, or a slice tinted by it),
+    /// or a label map's surfaces (--segment): each segment drawn, named beside a swatch of its
+    /// colour in the top left corner; PNG, or DICOM as the picture.
+    #[arg(long)]
+    pub legend: bool,
     /// With --path FILE (not --slices): marks these points of the path, mm along it from its
     /// first point (as `measure` gives a lesion's and its references' arc lengths), each a
     /// line across the CPR, yellow ringed in black; PNG, or DICOM as the picture.

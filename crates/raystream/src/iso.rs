@@ -19,6 +19,8 @@ pub struct Bones {
     pub voxels: usize,
     pub load_ms: f64,
     pub iso_ms: f64,
+    /// The segments' surfaces, named (`--legend`); none for bones.
+    pub legend: Vec<crate::legend::Entry>,
 }
 
 /// The surface at `hu` of `volume`, read from `path` in `load_ms`.
@@ -67,6 +69,7 @@ pub fn bones_of(
         voxels: volume.voxel_count(),
         load_ms,
         iso_ms: ms(t1.elapsed()),
+        legend: Vec::new(),
     })
 }
 

@@ -8,6 +8,7 @@ mod dvr;
 mod info;
 mod iso;
 mod labels;
+mod legend;
 mod measure;
 mod overlay;
 mod profile;

@@ -236,6 +236,8 @@ pub struct SegmentOverlay {
     pub structures: Vec<(u32, raystream_io::SegmentVoxels)>,
     /// Each segment's edge drawn in its colour, not its inside tinted.
     pub outline: bool,
+    /// The segments present, named (`--legend`).
+    pub legend: Vec<crate::legend::Entry>,
 }
 
 impl SegmentOverlay {

@@ -102,7 +102,7 @@ fn swatch(c: RGBColor, alpha: f64) -> impl Fn((i32, i32)) -> Rectangle<(i32, i32
 }
 
 /// The font every text of the plot is laid out in (registered once, before any plot).
-fn register_font() -> Result<()> {
+pub fn register_font() -> Result<()> {
     static FONT: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     let ok = *FONT.get_or_init(|| {
         plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())

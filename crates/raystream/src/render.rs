@@ -120,6 +120,18 @@ fn segments_scene(
         .map(|s| format!("{} ({})", s.label, s.name))
         .collect::<Vec<_>>()
         .join(", ");
+    let legend = surfaces
+        .iter()
+        .map(|s| crate::legend::Entry {
+            // "label N" where it has no name of its own, else "N Name".
+            name: if s.name == format!("label {}", s.label) {
+                s.name.clone()
+            } else {
+                format!("{} {}", s.label, s.name)
+            },
+            colour: s.colour,
+        })
+        .collect();
     let parts = surfaces
         .into_iter()
         .map(|s| raystream_scene::Surface {
@@ -135,6 +147,7 @@ fn segments_scene(
         voxels: labels.voxel_count(),
         load_ms,
         iso_ms: ms(t.elapsed()),
+        legend,
     };
     Ok((scene, Some(b)))
 }
@@ -226,29 +239,48 @@ fn volume_dicom(
     opt: &DvrOptions,
     (volume, overlay, track, labels): (&raystream_io::Volume, Overlay, Option<&Track>, Labels),
 ) -> DicomOut {
-    // The segmentation first, the lines drawn over it.
-    if let Some(l) = labels {
+    // The segmentation first, the lines drawn over it, the legend over all.
+    if let Some(l) = labels.overlay {
         tint_segmentation(picture, seen, opt, (volume, l));
     }
+    let legend = draw_legend(picture, labels.legend);
     let window = Some(opt.shown_window());
     match seen {
-        Seen::Camera(cam) => DicomOut {
-            window,
-            plane: image_plane(opt, volume, cam),
-            ..label(a, picture, cam, true, overlay)
-        },
+        Seen::Camera(cam) => {
+            let d = label(a, picture, cam, true, overlay);
+            DicomOut {
+                window,
+                plane: image_plane(opt, volume, cam),
+                annotated: d.annotated || legend,
+                ..d
+            }
+        }
         Seen::Curved(plane) => DicomOut {
             orientation: None,
             // The lumen's edges first, the marks and the scale over them.
             annotated: draw_cpr_lumen(a, picture, plane, (volume, track))
                 | mark_path(a, picture, plane)
-                | cpr_scale_bar(a, picture, plane),
+                | cpr_scale_bar(a, picture, plane)
+                | legend,
             description: crate::common::options_in_words(a.input.as_deref(), &a.output),
             series: None,
             window,
             plane: None,
         },
     }
+}
+
+/// `--legend`'s list drawn into a PNG's picture (none to draw: nothing): whether it drew one.
+fn draw_legend(picture: &mut Picture, legend: &[crate::legend::Entry]) -> bool {
+    if let (false, Picture::Srgb8 { rgb, width, height }) = (legend.is_empty(), &mut *picture) {
+        // Only the embedded font can fail to load; the picture stands without the legend.
+        if let Err(e) = crate::legend::draw(rgb, *width, *height, legend) {
+            eprintln!("raystream: --legend: {e}");
+            return false;
+        }
+        return true;
+    }
+    false
 }
 
 /// `--scale-bar` on a CPR, whose pixels are `plane.pixel_mm` square: whether it drew one.
@@ -321,10 +353,23 @@ fn segmentation(
             eprintln!("raystream: {name}: {w}");
         }
     }
-    let colours = crate::iso::segment_names(&labels, a.colour_table.as_deref())?
-        .into_iter()
+    let known = crate::iso::segment_names(&labels, a.colour_table.as_deref())?;
+    let colours = known
+        .iter()
         .filter_map(|k| Some((k.number as u32, k.colour?)))
         .collect();
+    let legend = if a.legend {
+        let present: std::collections::BTreeSet<u32> = labels
+            .data
+            .iter()
+            .filter(|&&v| v > 0.0)
+            .map(|&v| v as u32)
+            .collect();
+        let present: Vec<u32> = present.into_iter().collect();
+        crate::legend::entries(&present, &known)
+    } else {
+        Vec::new()
+    };
     let mut structures = Vec::new();
     if a.outline
         && let Some(whole) = whole
@@ -341,6 +386,7 @@ fn segmentation(
         colours,
         structures,
         outline: a.outline,
+        legend,
     }))
 }
 
@@ -762,9 +808,40 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         }
         crate::segments::paint(crate::segments::Asked::of_render(a), mode, &volume, path)?
     };
-    let (volume, segment_colours, segment_words, hidden_fill) = match painted {
-        Some(p) => (p.kept.unwrap_or(volume), p.colours, p.words, p.hidden_fill),
-        None => (volume, None, String::new(), None),
+    let (volume, segment_colours, segment_words, hidden_fill, painted_legend) = match painted {
+        Some(p) => (
+            p.kept.unwrap_or(volume),
+            p.colours,
+            p.words,
+            p.hidden_fill,
+            p.legend,
+        ),
+        None => (volume, None, String::new(), None, Vec::new()),
+    };
+    if a.legend {
+        if matches!(mode, DvrMode::Mip | DvrMode::MinIp) {
+            bail!(
+                "--legend names the colours of segments; --mode {} shows HU, with no segment in colour",
+                mode.name()
+            );
+        }
+        if format == ImageFormat::Exr {
+            bail!("--legend draws on a PNG; an EXR holds the values themselves");
+        }
+    }
+    let legend: &[crate::legend::Entry] = match (&labels, a.legend) {
+        (_, false) => &[],
+        (Some(l), true) => &l.legend,
+        (None, true) => &painted_legend,
+    };
+    if a.legend && legend.is_empty() {
+        bail!(
+            "--legend names the segments drawn in colour: give --segmentation LABELS (a label map, DICOM Segmentation or RT Structure Set)"
+        );
+    }
+    let labels = Labels {
+        overlay: labels.as_ref(),
+        legend,
     };
     let track = wall_track(a, &volume, curve.as_ref())?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
@@ -797,7 +874,8 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         || a.draw_path.is_some()
         || a.draw_lumen.is_some()
         || !a.mark_at.is_empty()
-        || labels.is_some();
+        || labels.overlay.is_some()
+        || !labels.legend.is_empty();
     opt.hu_values = format == ImageFormat::Exr || (dicom_out && mode.is_windowed() && !drawn);
     let aspect = opt.width as f32 / opt.height as f32;
     let renderer = dvr::Renderer::new(&backend, &volume, &tf, segment_colours.as_ref())?;
@@ -806,7 +884,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         return turntable(
             a,
             (&renderer, &volume, overlay, track.as_ref()),
-            labels.as_ref(),
+            labels,
             &opt,
             (view, curve.as_ref()),
             n,
@@ -819,7 +897,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         return path_sections(
             a,
             (&renderer, &volume, track.as_ref()),
-            labels.as_ref(),
+            labels,
             &opt,
             (view, curve),
             n,
@@ -829,7 +907,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     if let Some(n) = a.slices {
         return slice_series(
             a,
-            (&renderer, &volume, overlay, labels.as_ref()),
+            (&renderer, &volume, overlay, labels),
             &opt,
             &cam,
             n,
@@ -847,7 +925,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         return cine(
             a,
             (path, &volume, renderer),
-            (&backend, &tf, overlay, labels.as_ref()),
+            (&backend, &tf, overlay, labels),
             &opt,
             &seen,
             format,
@@ -913,7 +991,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         &mut frame.picture,
         &seen,
         &opt,
-        (&volume, overlay, track.as_ref(), labels.as_ref()),
+        (&volume, overlay, track.as_ref(), labels),
     );
     frame
         .picture
@@ -1169,46 +1247,62 @@ fn path_sections(
     let lumen =
         lumen_options(a, volume)?.map(|o| (o, raystream_cpu::dvr::Marcher::new(volume, None)));
     let wall = wall_options(a, volume)?;
-    // Each section tinted here, under its lumen and wall.
-    frame_series(a, (volume, None, None, None), n, format, "slices", |i| {
-        let cam = stations.section_camera(i, 0.5 * pixel * opt.height as f32, reach);
-        let row = &stations.rows[i as usize];
-        let opt = DvrOptions {
-            slice_at: Some(row.centre),
-            ..*opt
-        };
-        let mut f = renderer.frame(&opt, &cam, format)?;
-        if let Some(l) = labels {
-            tint_segmentation(&mut f.picture, &Seen::Camera(cam), &opt, (volume, l));
-        }
-        if let (Some((o, m)), crate::common::Picture::Srgb8 { rgb, width, height }) =
-            (&lumen, &mut f.picture)
-            && let Some(found) = raystream_cpu::lumen::measure_with_wall(
-                volume,
-                m,
-                row,
-                o,
-                wall.as_ref(),
-                track
-                    .and_then(|t| t.prior(stations.arc_mm[i as usize], row))
-                    .as_ref(),
-            )
-        {
-            let size = (*width, *height);
-            if let Some((_, outline)) = &found.wall {
-                crate::overlay::draw_wall(rgb, size, &cam, row, outline);
+    // Each section tinted here, under its lumen and wall (the legend over all, as for a slice).
+    let legend_only = Labels {
+        overlay: None,
+        ..labels
+    };
+    frame_series(
+        a,
+        (volume, None, None, legend_only),
+        n,
+        format,
+        "slices",
+        |i| {
+            let cam = stations.section_camera(i, 0.5 * pixel * opt.height as f32, reach);
+            let row = &stations.rows[i as usize];
+            let opt = DvrOptions {
+                slice_at: Some(row.centre),
+                ..*opt
+            };
+            let mut f = renderer.frame(&opt, &cam, format)?;
+            if let Some(l) = labels.overlay {
+                tint_segmentation(&mut f.picture, &Seen::Camera(cam), &opt, (volume, l));
             }
-            crate::overlay::draw_lumen(rgb, size, &cam, row, (&found.lumen, &found.edge));
-        }
-        Ok((f, Seen::Camera(cam), opt))
-    })
+            if let (Some((o, m)), crate::common::Picture::Srgb8 { rgb, width, height }) =
+                (&lumen, &mut f.picture)
+                && let Some(found) = raystream_cpu::lumen::measure_with_wall(
+                    volume,
+                    m,
+                    row,
+                    o,
+                    wall.as_ref(),
+                    track
+                        .and_then(|t| t.prior(stations.arc_mm[i as usize], row))
+                        .as_ref(),
+                )
+            {
+                let size = (*width, *height);
+                if let Some((_, outline)) = &found.wall {
+                    crate::overlay::draw_wall(rgb, size, &cam, row, outline);
+                }
+                crate::overlay::draw_lumen(rgb, size, &cam, row, (&found.lumen, &found.edge));
+            }
+            Ok((f, Seen::Camera(cam), opt))
+        },
+    )
 }
 
 /// `--draw-path FILE`'s spline, sampled densely (LPS mm), drawn over every frame of a camera.
 type Overlay<'a> = Option<&'a [raystream_math::DVec3]>;
 
-/// `--segmentation FILE`'s segments, laid over every frame of a slice or CPR.
-type Labels<'a> = Option<&'a crate::overlay::SegmentOverlay>;
+/// `--segmentation FILE` over every frame: its segments laid over a slice or CPR, and
+/// `--legend`'s list of the segments drawn (empty without it).
+#[derive(Clone, Copy, Default)]
+struct Labels<'a> {
+    overlay: Option<&'a crate::overlay::SegmentOverlay>,
+    legend: &'a [crate::legend::Entry],
+}
 
 /// `--path FILE`'s points, read once.
 struct Curve<'a> {
@@ -1610,6 +1704,8 @@ struct Turn<'a> {
     renderer: Option<&'a GpuRenderer<'a>>,
     view0: View,
     lights0: &'a [raystream_scene::Light],
+    /// `--legend`'s segments (the surfaces of `render LABELS --segment`), drawn on every frame.
+    legend: &'a [crate::legend::Entry],
 }
 
 /// `render [INPUT] --turntable N -o DIR` of a mesh, a scene file or the bones (the stream
@@ -1650,9 +1746,12 @@ fn scene_turntable(
             Picture::of_film(render_prepared(s, t.tree, t.medium, opt, count), format)
         };
         frame_ms.push(ms(t1.elapsed()));
+        let legend = draw_legend(&mut picture, t.legend);
+        let d = label(a, &mut picture, &cam, patient, overlay);
         let dicom = DicomOut {
             series: Some((out.series.clone(), i + 1)),
-            ..label(a, &mut picture, &cam, patient, overlay)
+            annotated: d.annotated || legend,
+            ..d
         };
         out.write(
             i,
@@ -1911,6 +2010,17 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         view0,
         lights0,
     } = load(a)?;
+    let no_legend = Vec::new();
+    let legend: &[crate::legend::Entry] = match (&bones, a.legend) {
+        (Some(b), true) if !b.legend.is_empty() => &b.legend,
+        (_, true) => bail!(
+            "--legend names the segments drawn in colour: give --segment LIST (a label map's surfaces) or a CT with --segmentation and --mode"
+        ),
+        _ => &no_legend,
+    };
+    if a.legend && format == ImageFormat::Exr {
+        bail!("--legend draws on a PNG; an EXR holds the values themselves");
+    }
     let patient = bones.is_some() || scene.volume.is_some();
     check_labels(a, patient, format)?;
     // `--draw-path`: over the bones or a scene with a CT volume, in its LPS millimetres.
@@ -1959,6 +2069,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             renderer: renderer.as_ref(),
             view0,
             lights0: &lights0,
+            legend,
         };
         let marks = (patient, overlay.as_deref(), units(&bones));
         return scene_turntable(a, n, turn, &opt, marks, format);
@@ -2025,7 +2136,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     bar.finish_and_clear();
     let mut image = image.expect("at least one frame");
     let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
-    let dicom = label(a, &mut image, &cam, patient, overlay.as_deref());
+    let legend = draw_legend(&mut image, legend);
+    let mut dicom = label(a, &mut image, &cam, patient, overlay.as_deref());
+    dicom.annotated |= legend;
     image.save(
         &a.output,
         &format!(

@@ -164,6 +164,8 @@ pub struct Painted {
     pub hidden_fill: Option<f32>,
     /// What the summary line says of it.
     pub words: String,
+    /// The segments drawn in colour, named (`--legend`): none for mip and minip.
+    pub legend: Vec<crate::legend::Entry>,
 }
 
 /// What `--segmentation`, `--segment` and `--colour-table` ask of a CT rendered directly.
@@ -275,13 +277,19 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
             ""
         }
     );
-    let colours = matches!(mode, DvrMode::Dvr | DvrMode::Iso | DvrMode::Cinematic)
-        .then(|| SegmentColours::new(ct.dims, labels, &colours));
+    let coloured = matches!(mode, DvrMode::Dvr | DvrMode::Iso | DvrMode::Cinematic);
+    let legend = if coloured {
+        crate::legend::entries(&chosen, &on.known)
+    } else {
+        Vec::new()
+    };
+    let colours = coloured.then(|| SegmentColours::new(ct.dims, labels, &colours));
     Ok(Some(Painted {
         colours,
         kept,
         hidden_fill,
         words,
+        legend,
     }))
 }
 

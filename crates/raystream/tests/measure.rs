@@ -18,6 +18,15 @@ fn measure(vol: &str, path: &str, args: &[&str]) -> serde_json::Value {
     serde_json::from_str(&stdout(&o)).expect("JSON")
 }
 
+/// The chest CT and `measure --wall --mask`'s label map of its aorta (lumen 1, wall 2), written
+/// as `name` under the test folder.
+fn chest_and_mask(name: &str) -> (String, std::path::PathBuf) {
+    let (vol, path) = (chest(), aorta());
+    let mask = tmp(name);
+    measure(&vol, &path, &["--wall", "--mask", mask.to_str().unwrap()]);
+    (vol, mask)
+}
+
 /// `measure VOLUME --path PATH ARGS -o CSV`, which must succeed: its text report.
 fn measure_text(vol: &str, path: &str, args: &[&str], csv: &std::path::Path) -> String {
     let mut all = vec!["measure", "--quiet", vol, "--path", path];
@@ -1802,9 +1811,7 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
 /// - what makes no sense is refused, naming the option.
 #[test]
 fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
-    let (vol, path) = (chest(), aorta());
-    let mask = tmp("paint-mask.nii.gz");
-    measure(&vol, &path, &["--wall", "--mask", mask.to_str().unwrap()]);
+    let (vol, mask) = chest_and_mask("paint-mask.nii.gz");
     let m = mask.to_str().unwrap();
     let channel = |f: &std::path::Path, c: &str| -> Vec<f32> {
         let exr = raystream_cpu::load_exr(f).unwrap();
@@ -2032,9 +2039,7 @@ fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
 /// a label not present and a segmentation that cannot be read are refused, naming the scene.
 #[test]
 fn a_scene_volume_takes_its_segments_colours() {
-    let (vol, path) = (chest(), aorta());
-    let mask = tmp("scene-mask.nii.gz");
-    measure(&vol, &path, &["--wall", "--mask", mask.to_str().unwrap()]);
+    let (vol, mask) = chest_and_mask("scene-mask.nii.gz");
     let scene = |name: &str, extra: &str| {
         let file = tmp(&format!("scene-segments-{name}.toml"));
         let text = format!(
@@ -3794,4 +3799,120 @@ fn structure_sets_are_laid_on_their_ct() {
 /// `colour` over `base` as `render --segmentation` tints a pixel: 45 % of it, rounded.
 fn blend(base: [u8; 3], colour: [u8; 3]) -> [u8; 3] {
     std::array::from_fn(|i| (base[i] as f32 * 0.55 + colour[i] as f32 * 0.45).round() as u8)
+}
+
+/// `--legend`: the segments drawn in colour listed in the top left corner, a swatch of each
+/// segment's colour (label 1 cyan, 2 magenta: `--segmentation`'s tints) beside its name, on
+/// a dvr frame coloured by `measure --mask`'s lumen and wall, on a slice tinted by them and on
+/// the mask's own surfaces; nothing outside the top left quarter changes. Without segments
+/// in colour, in a projection and into an EXR it is refused.
+#[test]
+fn a_legend_names_the_segments_in_colour() {
+    let (vol, mask) = chest_and_mask("legend-mask.nii.gz");
+    let m = mask.to_str().unwrap();
+    let (w, h) = (240u32, 320u32);
+    // Where the swatches lie, written out: text a 28th of the height (at least 12 pixels),
+    // swatches that high, half of it from the edges, a row a third more apart.
+    let t = (h / 28).max(12);
+    let swatch = |i: u32| (t / 2 + t / 2, t / 2 + i * (t + t / 3) + t / 2);
+    let cases: [(&str, Vec<&str>); 3] = [
+        (
+            "dvr",
+            vec![
+                &vol[..],
+                "--mode",
+                "dvr",
+                "--preset",
+                "ct-aaa",
+                "--view",
+                "posterior",
+                "--segmentation",
+                m,
+            ],
+        ),
+        (
+            "slice",
+            vec![
+                &vol[..],
+                "--mode",
+                "slice",
+                "--view",
+                "left",
+                "--segmentation",
+                m,
+            ],
+        ),
+        ("surfaces", vec![m, "--segment", "all", "--spp", "1"]),
+    ];
+    for (name, args) in &cases {
+        let size = ["--size", "240x320"];
+        let plain = render_to(
+            &format!("legend-{name}-plain.png"),
+            "cpu",
+            &[&args[..], &size].concat(),
+        );
+        let listed = render_to(
+            &format!("legend-{name}.png"),
+            "cpu",
+            &[&args[..], &size, &["--legend"]].concat(),
+        );
+        let (p, l) = (
+            image::open(&plain).unwrap().to_rgb8(),
+            image::open(&listed).unwrap().to_rgb8(),
+        );
+        for (i, colour) in [[0, 230, 255], [255, 64, 220]].into_iter().enumerate() {
+            let (x, y) = swatch(i as u32);
+            assert_eq!(l.get_pixel(x, y).0, colour, "{name}: swatch {i}");
+        }
+        let mut changed = 0;
+        for (x, y, q) in l.enumerate_pixels() {
+            if q != p.get_pixel(x, y) {
+                changed += 1;
+                assert!(x < w / 2 && y < h / 4, "{name}: ({x}, {y}) changed");
+            }
+        }
+        assert!(changed > 2 * t * t, "{name}: {changed} pixels");
+    }
+    for (args, why) in [
+        (
+            vec![&vol[..], "--mode", "dvr", "--legend"],
+            "give --segmentation LABELS",
+        ),
+        (
+            vec![
+                &vol[..],
+                "--mode",
+                "mip",
+                "--segmentation",
+                m,
+                "--segment",
+                "1",
+                "--legend",
+            ],
+            "--mode mip shows HU",
+        ),
+        (
+            vec![
+                &vol[..],
+                "--mode",
+                "dvr",
+                "--segmentation",
+                m,
+                "--legend",
+                "-o",
+                "x.exr",
+            ],
+            "--legend draws on a PNG",
+        ),
+        (vec![&vol[..], "--legend"], "give --segment LIST"),
+    ] {
+        let mut all = vec!["render", "-q"];
+        all.extend(&args);
+        if !args.contains(&"-o") {
+            all.extend(["-o", "x.png"]);
+        }
+        let o = run(&all);
+        assert_eq!(o.status.code(), Some(2), "{all:?}");
+        assert!(stderr(&o).contains(why), "{all:?}: {}", stderr(&o));
+    }
 }
