@@ -127,7 +127,7 @@ const INFO_ASPECT: f32 = 4.0 / 3.0;
 fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     let mut scene = raystream_scene::Scene::load(input)?;
     // The volume's segmentation laid on it, as `render` lays it: a mistake shows here too.
-    let segments = crate::segments::paint_scene(&mut scene, input)?;
+    let segments = crate::segments::paint_scene(&mut scene, input)?.map(|(words, _)| words);
     let tree = a.tree.build(&scene.mesh);
     let b = scene.object_box;
     let cam = scene.camera_for(INFO_ASPECT);

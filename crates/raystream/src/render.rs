@@ -54,7 +54,7 @@ fn is_scene_file(a: &RenderArgs) -> bool {
 
 /// The scene named by INPUT: none → the built-in CT's bones, `.toml` → scene file, a volume →
 /// its bones, else a mesh. Also says how the volume steps went, for volumes.
-fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
+fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend::Entry>)> {
     let hu = a.threshold.hu()?;
     let volume_scene = |path: &Path, embedded: Option<&[u8]>| -> Result<(Scene, Option<Bones>)> {
         let (volume, load_ms) = read_volume(path, &a.pick.select(), a.quiet, embedded)?;
@@ -68,23 +68,33 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>)> {
         let scene = Scene::for_bones(mesh, &b.surface.normals, path);
         Ok((scene, Some(b)))
     };
+    let mut scene_legend = Vec::new();
     let loaded = match a.input.as_deref() {
         None => volume_scene(Path::new(DEFAULT_CT_NAME), Some(DEFAULT_CT)),
         Some(p) if is_scene_file(a) => {
             let mut scene = Scene::load(p)?;
-            if let Some(words) = crate::segments::paint_scene(&mut scene, p)?
-                && !a.quiet
-            {
-                eprintln!(
-                    "raystream: {}: the volume in the colours of {words}",
-                    p.display()
-                );
+            if let Some((words, entries)) = crate::segments::paint_scene(&mut scene, p)? {
+                if !a.quiet {
+                    eprintln!(
+                        "raystream: {}: the volume in the colours of {words}",
+                        p.display()
+                    );
+                }
+                scene_legend = entries;
             }
             Ok((scene, None))
         }
         Some(p) if raystream_io::is_volume_path(p) => volume_scene(p, None),
         Some(p) => Ok((Scene::for_mesh_file(p)?, None)),
-    }?;
+    }
+    .map(|(scene, bones)| {
+        // A label map's surfaces name their segments; a scene file's volume, its own.
+        let legend = match &bones {
+            Some(b) => b.legend.clone(),
+            None => std::mem::take(&mut scene_legend),
+        };
+        (scene, bones, legend)
+    })?;
     if !a.quiet {
         for w in &loaded.0.warnings {
             eprintln!(
@@ -1688,6 +1698,8 @@ struct Loaded {
     backend: Backend,
     scene: Scene,
     bones: Option<Bones>,
+    /// `--legend`'s segments: a label map's surfaces', or a scene file's volume's.
+    legend: Vec<crate::legend::Entry>,
     load_ms: f64,
     tree: KdTree,
     /// The scene's own framing view and lights, before --view and --orbit moved them.
@@ -1811,7 +1823,7 @@ fn load(a: &RenderArgs) -> Result<Loaded> {
         bail!("--device gpu runs the rope traversal only (--traversal ropes)");
     }
     let t0 = Instant::now();
-    let (mut scene, bones) = load_scene(a)?;
+    let (mut scene, bones, legend) = load_scene(a)?;
     let (view0, lights0) = (scene.frame_view, scene.lights.clone());
     if a.turntable.is_some() && scene.camera.is_some() {
         bail!(
@@ -1849,6 +1861,7 @@ fn load(a: &RenderArgs) -> Result<Loaded> {
         backend,
         scene,
         bones,
+        legend,
         load_ms,
         tree,
         view0,
@@ -2005,19 +2018,18 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         backend,
         scene,
         bones,
+        legend,
         load_ms,
         tree,
         view0,
         lights0,
     } = load(a)?;
-    let no_legend = Vec::new();
-    let legend: &[crate::legend::Entry] = match (&bones, a.legend) {
-        (Some(b), true) if !b.legend.is_empty() => &b.legend,
-        (_, true) => bail!(
-            "--legend names the segments drawn in colour: give --segment LIST (a label map's surfaces) or a CT with --segmentation and --mode"
-        ),
-        _ => &no_legend,
-    };
+    if a.legend && legend.is_empty() {
+        bail!(
+            "--legend names the segments drawn in colour: give --segment LIST (a label map's surfaces), a CT with --segmentation and --mode, or a scene whose [volume] has a segmentation"
+        );
+    }
+    let legend: &[crate::legend::Entry] = if a.legend { &legend } else { &[] };
     if a.legend && format == ImageFormat::Exr {
         bail!("--legend draws on a PNG; an EXR holds the values themselves");
     }

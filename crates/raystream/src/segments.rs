@@ -296,8 +296,12 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
 /// A scene file's `[volume]` with `segmentation` (and `segment`, `colour_table`): the
 /// segmentation laid on the volume's grid as `render CT --mode dvr --segmentation` lays it, its
 /// colours set on the volume (`SceneVolume::segments`) and the volume kept to the chosen
-/// segments; what the summary says of it, or `None` for a scene without one.
-pub fn paint_scene(scene: &mut raystream_scene::Scene, file: &Path) -> Result<Option<String>> {
+/// segments; what the summary says of it and `--legend`'s entries, or `None` for a scene
+/// without one.
+pub fn paint_scene(
+    scene: &mut raystream_scene::Scene,
+    file: &Path,
+) -> Result<Option<(String, Vec<crate::legend::Entry>)>> {
     let Some(v) = scene.volume.as_mut() else {
         return Ok(None);
     };
@@ -316,5 +320,6 @@ pub fn paint_scene(scene: &mut raystream_scene::Scene, file: &Path) -> Result<Op
         v.volume = kept;
     }
     v.segments = painted.colours;
-    Ok(Some(painted.words.trim_start_matches("; ").to_string()))
+    let words = painted.words.trim_start_matches("; ").to_string();
+    Ok(Some((words, painted.legend)))
 }

@@ -2035,8 +2035,9 @@ fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
 /// wall, beside a small sphere), on each device: the volume's pixels change and turn bluer
 /// (cyan lumen, magenta wall, where ct-aaa draws contrast red), the sphere's and the
 /// background's do not; `segment = [1]` keeps the lumen alone, far fewer pixels; the GPU's
-/// frame is the CPU's within the render tests' tolerance; `segment` without `segmentation`,
-/// a label not present and a segmentation that cannot be read are refused, naming the scene.
+/// frame is the CPU's within the render tests' tolerance; `--legend` lists the two segments;
+/// `segment` without `segmentation`, a label not present and a segmentation that cannot be
+/// read are refused, naming the scene.
 #[test]
 fn a_scene_volume_takes_its_segments_colours() {
     let (vol, mask) = chest_and_mask("scene-mask.nii.gz");
@@ -2101,6 +2102,26 @@ fn a_scene_volume_takes_its_segments_colours() {
         assert!(drawn(&l) * 4 < drawn(&p) && cyan > 20, "{dev}: {cyan} cyan");
         frames.push(img("both", &both));
     }
+    // `--legend` lists the scene volume's segments, as for `--mode dvr` (swatches as
+    // a_legend_names_the_segments_in_colour writes them out, at least 12 pixels high).
+    let listed = render_to(
+        "scene-seg-legend.png",
+        "cpu",
+        &[&[&both[..]][..], &args, &["--legend"]].concat(),
+    );
+    let listed = image::open(&listed).unwrap().to_rgb8();
+    for (i, colour) in [[0, 230, 255], [255, 64, 220]].into_iter().enumerate() {
+        let t = 12;
+        let (x, y) = (t, t + i as u32 * (t + t / 3));
+        assert_eq!(listed.get_pixel(x, y).0, colour, "swatch {i}");
+    }
+    let o = run(&["render", &plain, "-q", "--legend", "-o", "x.png"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("a scene whose [volume] has a segmentation"),
+        "{}",
+        stderr(&o)
+    );
     // `info` lays the segmentation on the volume as render does, and says so.
     let o = run(&["info", &both, "--json"]);
     assert!(o.status.success(), "{}", stderr(&o));
