@@ -30,6 +30,14 @@ impl AnimationKind {
         }
     }
 
+    /// The container's name, as `--format` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            AnimationKind::Apng => "apng",
+            AnimationKind::Gif => "gif",
+        }
+    }
+
     /// The frame rate a player shows for `fps` frames a second asked: a GIF's delay is a whole
     /// number of hundredths of a second (the nearest), an APNG's the exact fraction 1/`fps`.
     pub fn played_fps(self, fps: u32) -> f64 {
@@ -269,6 +277,16 @@ mod tests {
         out
     }
 
+    /// `frames` (each `size`) written to `path` as a `kind` animation at `fps`.
+    fn write(path: &Path, kind: AnimationKind, size: (u32, u32), frames: &[Vec<u8>], fps: u32) {
+        let n = frames.len() as u32;
+        let mut a = AnimationWriter::create(path, kind, size, n, fps).unwrap();
+        for f in frames {
+            a.push(f).unwrap();
+        }
+        a.finish().unwrap();
+    }
+
     fn rgb_of(f: &image::Frame) -> Vec<u8> {
         f.buffer()
             .pixels()
@@ -281,11 +299,7 @@ mod tests {
         let (w, h) = (37, 23);
         let path = tmp("spin.png");
         let want = frames(w, h);
-        let mut a = AnimationWriter::create(&path, AnimationKind::Apng, (w, h), 3, 12).unwrap();
-        for f in &want {
-            a.push(f).unwrap();
-        }
-        a.finish().unwrap();
+        write(&path, AnimationKind::Apng, (w, h), &want, 12);
 
         // The png crate's own reading of the container: three frames, endless loop.
         let mut d = png::Decoder::new(BufReader::new(File::open(&path).unwrap()))
@@ -320,11 +334,7 @@ mod tests {
         let (w, h) = (256, 192);
         let path = tmp("spin.gif");
         let want = frames(w, h);
-        let mut a = AnimationWriter::create(&path, AnimationKind::Gif, (w, h), 3, 15).unwrap();
-        for f in &want {
-            a.push(f).unwrap();
-        }
-        a.finish().unwrap();
+        write(&path, AnimationKind::Gif, (w, h), &want, 15);
         let got = read_gif(&path);
         assert_eq!(got.len(), 3);
         for ((g, _), f) in got.iter().zip(&want) {
@@ -367,9 +377,13 @@ mod tests {
             })
             .collect();
         let path = tmp("ramp.gif");
-        let mut a = AnimationWriter::create(&path, AnimationKind::Gif, (w, h), 1, 10).unwrap();
-        a.push(&f).unwrap();
-        a.finish().unwrap();
+        write(
+            &path,
+            AnimationKind::Gif,
+            (w, h),
+            std::slice::from_ref(&f),
+            10,
+        );
         let got = read_gif(&path);
         assert_eq!(got.len(), 1);
         assert_eq!(got[0].0, f);

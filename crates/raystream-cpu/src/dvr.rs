@@ -168,16 +168,18 @@ pub fn hidden_fill((lowest, highest): (f32, f32), above: bool) -> f32 {
         };
         f16::from_bits(next)
     };
+    // At least 1 beyond the edge as f32 and as a half float; from the half float nearest
+    // that bound, out to the first at or past it.
     let edge = if above { highest } else { lowest };
-    let mut h = f16::from_f32(edge);
-    let beyond = |v: f32| {
-        if above {
-            v >= edge.max(f16::from_f32(edge).to_f32()) + 1.0
-        } else {
-            v <= edge.min(f16::from_f32(edge).to_f32()) - 1.0
-        }
+    let rounded = f16::from_f32(edge).to_f32();
+    let bound = if above {
+        edge.max(rounded) + 1.0
+    } else {
+        edge.min(rounded) - 1.0
     };
-    while h.is_finite() && !beyond(h.to_f32()) {
+    let short = |v: f32| if above { v < bound } else { v > bound };
+    let mut h = f16::from_f32(bound);
+    while h.is_finite() && short(h.to_f32()) {
         h = step(h);
     }
     if h.is_finite() {

@@ -86,15 +86,14 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend
         }
         Some(p) if raystream_io::is_volume_path(p) => volume_scene(p, None),
         Some(p) => Ok((Scene::for_mesh_file(p)?, None)),
-    }
-    .map(|(scene, bones)| {
-        // A label map's surfaces name their segments; a scene file's volume, its own.
-        let legend = match &bones {
-            Some(b) => b.legend.clone(),
-            None => std::mem::take(&mut scene_legend),
-        };
-        (scene, bones, legend)
-    })?;
+    }?;
+    // A label map's surfaces name their segments; a scene file's volume, its own.
+    let (scene, mut bones) = loaded;
+    let legend = match bones.as_mut() {
+        Some(b) => std::mem::take(&mut b.legend),
+        None => scene_legend,
+    };
+    let loaded = (scene, bones, legend);
     if !a.quiet {
         for w in &loaded.0.warnings {
             eprintln!(
@@ -130,18 +129,8 @@ fn segments_scene(
         .map(|s| format!("{} ({})", s.label, s.name))
         .collect::<Vec<_>>()
         .join(", ");
-    let legend = surfaces
-        .iter()
-        .map(|s| crate::legend::Entry {
-            // "label N" where it has no name of its own, else "N Name".
-            name: if s.name == format!("label {}", s.label) {
-                s.name.clone()
-            } else {
-                format!("{} {}", s.label, s.name)
-            },
-            colour: s.colour,
-        })
-        .collect();
+    let drawn: Vec<u32> = surfaces.iter().map(|s| s.label).collect();
+    let legend = crate::legend::entries(&drawn, &known);
     let parts = surfaces
         .into_iter()
         .map(|s| raystream_scene::Surface {
@@ -177,17 +166,18 @@ fn base_view(a: &RenderArgs, default: View, patient: bool) -> Result<View> {
 
 /// What is drawn over a PNG frame seen by `cam` (scene frame: x = the patient's left,
 /// y = superior, z = anterior): `--draw-path`'s `overlay`, then over it `--labels`' patient
-/// directions at the edges. Returns what a DICOM picture of it says: its rows' and columns'
-/// patient directions (where `patient`), and whether anything is drawn on it (the path, the
-/// letters, or `--draw-lumen`'s lumen, drawn before).
+/// directions at the edges, `--scale-bar`'s bar and `--legend`'s `legend`. Returns what a
+/// DICOM picture of it says: its rows' and columns' patient directions (where `patient`), and
+/// whether anything is drawn on it (these, or `--draw-lumen`'s lumen, drawn before).
 fn label(
     a: &RenderArgs,
     picture: &mut Picture,
     cam: &Camera,
-    patient: bool,
-    overlay: Overlay,
+    (patient, overlay): (bool, Overlay),
+    legend: &[crate::legend::Entry],
 ) -> DicomOut {
     let [right, up] = [cam.right, cam.up].map(raystream_cpu::dvr::scene_to_lps);
+    let listed = draw_legend(picture, legend);
     if let Picture::Srgb8 { rgb, width, height } = &mut *picture {
         if let Some(dense) = overlay {
             crate::overlay::draw_path(rgb, *width, *height, cam, dense);
@@ -214,7 +204,7 @@ fn label(
     };
     DicomOut {
         orientation: patient.then(|| [dicom(right), dicom(-up)]),
-        annotated: a.labels || a.scale_bar || overlay.is_some() || a.draw_lumen.is_some(),
+        annotated: a.labels || a.scale_bar || listed || overlay.is_some() || a.draw_lumen.is_some(),
         description: crate::common::options_in_words(a.input.as_deref(), &a.output),
         series: None,
         window: None,
@@ -249,29 +239,24 @@ fn volume_dicom(
     opt: &DvrOptions,
     (volume, overlay, track, labels): (&raystream_io::Volume, Overlay, Option<&Track>, Labels),
 ) -> DicomOut {
-    // The segmentation first, the lines drawn over it, the legend over all.
+    // The segmentation first, the legend, lines and letters drawn over it.
     if let Some(l) = labels.overlay {
         tint_segmentation(picture, seen, opt, (volume, l));
     }
-    let legend = draw_legend(picture, labels.legend);
     let window = Some(opt.shown_window());
     match seen {
-        Seen::Camera(cam) => {
-            let d = label(a, picture, cam, true, overlay);
-            DicomOut {
-                window,
-                plane: image_plane(opt, volume, cam),
-                annotated: d.annotated || legend,
-                ..d
-            }
-        }
+        Seen::Camera(cam) => DicomOut {
+            window,
+            plane: image_plane(opt, volume, cam),
+            ..label(a, picture, cam, (true, overlay), labels.legend)
+        },
         Seen::Curved(plane) => DicomOut {
             orientation: None,
             // The lumen's edges first, the marks and the scale over them.
             annotated: draw_cpr_lumen(a, picture, plane, (volume, track))
                 | mark_path(a, picture, plane)
                 | cpr_scale_bar(a, picture, plane)
-                | legend,
+                | draw_legend(picture, labels.legend),
             description: crate::common::options_in_words(a.input.as_deref(), &a.output),
             series: None,
             window,
@@ -637,6 +622,9 @@ fn check_labels(a: &RenderArgs, patient: bool, format: ImageFormat) -> Result<()
     if a.labels && format == ImageFormat::Exr {
         bail!("--labels draws on a PNG; an EXR holds the values themselves");
     }
+    if a.legend && format == ImageFormat::Exr {
+        bail!("--legend draws on a PNG; an EXR holds the values themselves");
+    }
     if a.scale_bar {
         if !patient {
             bail!(
@@ -822,22 +810,17 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         Some(p) => (
             p.kept.unwrap_or(volume),
             p.colours,
-            p.words,
+            format!("; {}", p.words),
             p.hidden_fill,
             p.legend,
         ),
         None => (volume, None, String::new(), None, Vec::new()),
     };
-    if a.legend {
-        if matches!(mode, DvrMode::Mip | DvrMode::MinIp) {
-            bail!(
-                "--legend names the colours of segments; --mode {} shows HU, with no segment in colour",
-                mode.name()
-            );
-        }
-        if format == ImageFormat::Exr {
-            bail!("--legend draws on a PNG; an EXR holds the values themselves");
-        }
+    if a.legend && matches!(mode, DvrMode::Mip | DvrMode::MinIp) {
+        bail!(
+            "--legend names the colours of segments; --mode {} shows HU, with no segment in colour",
+            mode.name()
+        );
     }
     let legend: &[crate::legend::Entry] = match (&labels, a.legend) {
         (_, false) => &[],
@@ -1257,7 +1240,7 @@ fn path_sections(
     let lumen =
         lumen_options(a, volume)?.map(|o| (o, raystream_cpu::dvr::Marcher::new(volume, None)));
     let wall = wall_options(a, volume)?;
-    // Each section tinted here, under its lumen and wall (the legend over all, as for a slice).
+    // Each section tinted here, under its lumen and wall (the legend drawn with the letters).
     let legend_only = Labels {
         overlay: None,
         ..labels
@@ -1512,7 +1495,6 @@ impl<'a> FrameFolder<'a> {
         let animation = a.format.animation();
         let ext = match (format, a.format) {
             (_, FrameFormat::Dcm) => "dcm",
-            (_, FrameFormat::Gif) => "gif",
             (ImageFormat::Png, _) => "png",
             (ImageFormat::Exr, _) => "exr",
         };
@@ -1525,7 +1507,7 @@ impl<'a> FrameFolder<'a> {
                 bail!(
                     "{}: --format {} writes one animation; name it NAME.{} with -o",
                     dir.display(),
-                    kind.extension().replace("png", "apng"),
+                    kind.name(),
                     kind.extension()
                 );
             }
@@ -1613,21 +1595,23 @@ impl<'a> FrameFolder<'a> {
         self.pb.finish_and_clear();
         let (to, format) = match self.animation {
             Some(anim) => {
-                let played = anim.kind.played_fps(anim.fps);
                 anim.writer
                     .expect("at least one frame")
                     .finish()
                     .map_err(anyhow::Error::msg)?;
+                // A GIF's rate is seldom whole (15 asked plays at 14.286).
+                let played = anim.kind.played_fps(anim.fps);
+                let rate = if played.fract() == 0.0 {
+                    format!("{played}")
+                } else {
+                    format!("{played:.3}")
+                };
                 (
                     format!("an animation {}", self.dir.display()),
                     format!(
-                        "{}, {played:.3} frames/s, looping",
-                        match anim.kind {
-                            raystream_cpu::animation::AnimationKind::Apng => "APNG",
-                            raystream_cpu::animation::AnimationKind::Gif => "GIF",
-                        }
-                    )
-                    .replace(".000 frames/s", " frames/s"),
+                        "{}, {rate} frames/s, looping",
+                        anim.kind.name().to_uppercase()
+                    ),
                 )
             }
             None => (self.dir.display().to_string(), self.ext.to_string()),
@@ -1758,12 +1742,9 @@ fn scene_turntable(
             Picture::of_film(render_prepared(s, t.tree, t.medium, opt, count), format)
         };
         frame_ms.push(ms(t1.elapsed()));
-        let legend = draw_legend(&mut picture, t.legend);
-        let d = label(a, &mut picture, &cam, patient, overlay);
         let dicom = DicomOut {
             series: Some((out.series.clone(), i + 1)),
-            annotated: d.annotated || legend,
-            ..d
+            ..label(a, &mut picture, &cam, (patient, overlay), t.legend)
         };
         out.write(
             i,
@@ -2030,9 +2011,6 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         );
     }
     let legend: &[crate::legend::Entry] = if a.legend { &legend } else { &[] };
-    if a.legend && format == ImageFormat::Exr {
-        bail!("--legend draws on a PNG; an EXR holds the values themselves");
-    }
     let patient = bones.is_some() || scene.volume.is_some();
     check_labels(a, patient, format)?;
     // `--draw-path`: over the bones or a scene with a CT volume, in its LPS millimetres.
@@ -2148,9 +2126,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     bar.finish_and_clear();
     let mut image = image.expect("at least one frame");
     let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
-    let legend = draw_legend(&mut image, legend);
-    let mut dicom = label(a, &mut image, &cam, patient, overlay.as_deref());
-    dicom.annotated |= legend;
+    let dicom = label(a, &mut image, &cam, (patient, overlay.as_deref()), legend);
     image.save(
         &a.output,
         &format!(

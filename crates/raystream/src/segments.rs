@@ -234,11 +234,13 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
             labels[n] = l as u16;
         }
     }
+    // Each segment's name and colour, once: the legend's, and linear, the samples'.
+    let entries = crate::legend::entries(&chosen, &on.known);
     let colours: Vec<(u32, Vec3)> = chosen
         .iter()
-        .map(|&l| {
-            let srgb = crate::overlay::segment_colour(&on.known, l);
-            let c = srgb.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize]);
+        .zip(&entries)
+        .map(|(&l, e)| {
+            let c = e.colour.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize]);
             (l, Vec3::from(c))
         })
         .collect();
@@ -262,7 +264,7 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
     let voxels = labels.iter().filter(|&&l| l > 0).count();
     let list: Vec<String> = chosen.iter().map(|l| l.to_string()).collect();
     let words = format!(
-        "; {} {} of {} ({voxels} voxels, matched on {}){}",
+        "{} {} of {} ({voxels} voxels, matched on {}){}",
         if chosen.len() == 1 {
             "segment"
         } else {
@@ -278,11 +280,7 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
         }
     );
     let coloured = matches!(mode, DvrMode::Dvr | DvrMode::Iso | DvrMode::Cinematic);
-    let legend = if coloured {
-        crate::legend::entries(&chosen, &on.known)
-    } else {
-        Vec::new()
-    };
+    let legend = if coloured { entries } else { Vec::new() };
     let colours = coloured.then(|| SegmentColours::new(ct.dims, labels, &colours));
     Ok(Some(Painted {
         colours,
@@ -320,6 +318,5 @@ pub fn paint_scene(
         v.volume = kept;
     }
     v.segments = painted.colours;
-    let words = painted.words.trim_start_matches("; ").to_string();
-    Ok(Some((words, painted.legend)))
+    Ok(Some((painted.words, painted.legend)))
 }

@@ -11,6 +11,13 @@ fn jitter(p: u32, s: u32, k: u32) -> f32 {
     return f32(x >> 8u) / 16777216.0;
 }
 
+// a + (b - a) t, as the CPU's trilinear and texture lerps: exactly a where b is a (mix's
+// a (1 - t) + b t is not), so that voxels of no segment leave the transfer function's colour
+// as it is.
+fn lerp3(a: vec3<f32>, b: vec3<f32>, t: f32) -> vec3<f32> {
+    return a + (b - a) * t;
+}
+
 // 8-bit sRGB's curve undone, as raystream-cpu's srgb_to_linear.
 fn srgb_to_linear(s: f32) -> f32 {
     let c = clamp(s, 0.0, 1.0);

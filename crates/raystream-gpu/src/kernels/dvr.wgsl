@@ -119,12 +119,6 @@ const MODE_AVERAGE: u32 = 3u;
 const MODE_ISO: u32 = 4u;
 const MODE_SLICE: u32 = 5u;
 
-// a + (b - a) t, as the CPU's trilinear: exactly a where b is a (mix's a (1 - t) + b t is
-// not), so that voxels of no segment leave the transfer function's colour as it is.
-fn lerp3(a: vec3<f32>, b: vec3<f32>, t: f32) -> vec3<f32> {
-    return a + (b - a) * t;
-}
-
 // volume.wgsl's choice of reconstruction (Interpolation::kernel_code).
 fn cubic_sampling() -> bool {
     return dp.interpolation != 0u;

@@ -62,7 +62,6 @@ fn smooth_shading() -> bool {
     return dp.interpolation == 2u;
 }
 
-
 // The scene frame (x = L, y = S, z = A) → LPS.
 fn scene_to_lps(p: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(p.x, -p.z, p.y);

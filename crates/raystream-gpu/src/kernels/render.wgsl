@@ -233,10 +233,6 @@ fn fold_unit(t: f32, cl: bool) -> f32 {
     return t - floor(t);
 }
 
-fn lerp3(a: vec3<f32>, b: vec3<f32>, t: f32) -> vec3<f32> {
-    return a + (b - a) * t;
-}
-
 // raystream_io::Texture::sample, step for step: texture `k`'s linear colour at `uv` (scaled
 // and offset; repeating or clamped; v up; bilinear between texel centres).
 fn texture_colour(k: u32, uv_in: vec2<f32>) -> vec3<f32> {

@@ -12,7 +12,7 @@
 // trilinearly; `smooth_shading()`: whether the texture's second channel holds the voxels
 // whose spline's gradient shades it (CubicInterpolating); a segmentation's `segment_labels`
 // (an R16Uint texture of the volume's grid) and `segment_colours`, read when dp.segments is
-// 1; and lerp3(a, b, t) = a + (b - a) t.
+// 1; lerp3 is common.wgsl's, which every module holding this core includes.
 
 const FULL_SHADING_GRADIENT: f32 = 100.0;
 
