@@ -3,12 +3,15 @@
 //! frames are rendered, so that a long series is never held whole in memory.
 //!
 //! The containers are the `png` crate's APNG encoder and the `gif` crate's encoder (each frame
-//! quantised by NeuQuant to its own palette); this module only sizes the delays and keeps a
-//! half-written file from being left behind.
+//! quantised by NeuQuant to its own palette); this module only sizes the delays, encodes on a
+//! thread of its own while the next frame renders, and keeps a half-written file from being
+//! left behind.
 
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{SyncSender, sync_channel};
+use std::thread::JoinHandle;
 
 /// The animation's container.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -65,9 +68,104 @@ enum Encoder {
     Gif(gif::Encoder<BufWriter<File>>),
 }
 
+impl Encoder {
+    /// Writes one frame, checked already to hold `width`×`height` RGB pixels.
+    fn write(
+        &mut self,
+        rgb: &[u8],
+        (width, height): (u32, u32),
+        delay_cs: u32,
+    ) -> Result<(), String> {
+        match self {
+            Encoder::Apng(w) => w
+                .write_image_data(rgb)
+                .map_err(|e| format!("cannot write APNG frame: {e}")),
+            Encoder::Gif(e) => {
+                let mut frame =
+                    gif::Frame::from_rgb_speed(width as u16, height as u16, rgb, GIF_SPEED);
+                frame.delay = delay_cs as u16;
+                e.write_frame(&frame)
+                    .map_err(|e| format!("cannot write GIF frame: {e}"))
+            }
+        }
+    }
+
+    /// Ends the file.
+    fn finish(self) -> Result<(), String> {
+        match self {
+            Encoder::Apng(w) => w.finish().map_err(|e| format!("cannot write APNG: {e}")),
+            Encoder::Gif(e) => e
+                .into_inner()
+                .map_err(|e| format!("cannot write GIF: {e}"))
+                .and_then(|w| {
+                    w.into_inner()
+                        .map_err(|e| format!("cannot write GIF: {}", e.error()))
+                        .map(drop)
+                }),
+        }
+    }
+}
+
+/// What a frame handed to an encoder that has stopped on an error is told.
+const STOPPED: &str = "the encoder stopped on an earlier frame's error";
+
+/// The thread that encodes the frames [`AnimationWriter::push`] hands it, so that the next
+/// frame renders meanwhile (a GIF frame's quantisation takes ≈ 80 ms a megapixel, more than a
+/// GPU's frame). It gives the encoder back when the frames stop coming, or its first error.
+struct Worker {
+    frames: Option<SyncSender<Vec<u8>>>,
+    thread: Option<JoinHandle<Result<Encoder, String>>>,
+}
+
+impl Worker {
+    /// Frames waiting for the encoder beyond the one it is on: one, so that a render never
+    /// waits for an encoder that is keeping up, and at most three frames are held.
+    const QUEUED: usize = 1;
+
+    fn spawn(mut encoder: Encoder, size: (u32, u32), delay_cs: u32) -> Worker {
+        let (tx, rx) = sync_channel::<Vec<u8>>(Self::QUEUED);
+        let thread = std::thread::spawn(move || {
+            for (i, rgb) in rx.into_iter().enumerate() {
+                encoder
+                    .write(&rgb, size, delay_cs)
+                    .map_err(|e| format!("frame {i}: {e}"))?;
+            }
+            Ok(encoder)
+        });
+        Worker {
+            frames: Some(tx),
+            thread: Some(thread),
+        }
+    }
+
+    /// Hands the next frame over; the encoder's error if it has stopped.
+    fn send(&mut self, rgb: Vec<u8>) -> Result<(), String> {
+        let Some(frames) = self.frames.as_ref() else {
+            return Err(STOPPED.into());
+        };
+        match frames.send(rgb) {
+            Ok(()) => Ok(()),
+            // The encoder stopped on an error: that error.
+            Err(_) => self.join().and(Err(STOPPED.into())),
+        }
+    }
+
+    /// Waits for every frame handed over to be written; the encoder, or its error.
+    fn join(&mut self) -> Result<Encoder, String> {
+        self.frames = None;
+        let Some(thread) = self.thread.take() else {
+            return Err(STOPPED.into());
+        };
+        match thread.join() {
+            Ok(r) => r,
+            Err(_) => Err("the encoder failed".into()),
+        }
+    }
+}
+
 /// An animation being written: [`AnimationWriter::push`] each frame in order, then
-/// [`AnimationWriter::finish`]. Dropped unfinished (an error while rendering), it removes its
-/// file.
+/// [`AnimationWriter::finish`]. Frames are encoded on a thread of their own. Dropped
+/// unfinished (an error while rendering), it removes its file.
 pub struct AnimationWriter {
     path: PathBuf,
     kind: AnimationKind,
@@ -75,8 +173,7 @@ pub struct AnimationWriter {
     height: u32,
     frames: u32,
     written: u32,
-    delay_cs: u32,
-    encoder: Option<Encoder>,
+    worker: Option<Worker>,
 }
 
 impl AnimationWriter {
@@ -115,8 +212,7 @@ impl AnimationWriter {
             height,
             frames,
             written: 0,
-            delay_cs: gif_delay_cs(fps),
-            encoder: None,
+            worker: None,
         };
         let encoder = match kind {
             AnimationKind::Apng => {
@@ -142,11 +238,13 @@ impl AnimationWriter {
                 Encoder::Gif(e)
             }
         };
-        writer.encoder = Some(encoder);
+        writer.worker = Some(Worker::spawn(encoder, (width, height), gif_delay_cs(fps)));
         Ok(writer)
     }
 
-    /// Appends the next frame: 8-bit sRGB, 3 bytes a pixel, rows from the top.
+    /// Appends the next frame: 8-bit sRGB, 3 bytes a pixel, rows from the top. It is encoded
+    /// while the caller goes on; an error of an earlier frame's encoding is returned here or
+    /// by [`AnimationWriter::finish`].
     pub fn push(&mut self, rgb: &[u8]) -> Result<(), String> {
         let name = self.path.display();
         let want = self.width as usize * self.height as usize * 3;
@@ -162,22 +260,11 @@ impl AnimationWriter {
         if self.written == self.frames {
             return Err(format!("{name}: more than the {} frames", self.frames));
         }
-        match self.encoder.as_mut().expect("open until finished") {
-            Encoder::Apng(w) => w
-                .write_image_data(rgb)
-                .map_err(|e| format!("{name}: cannot write APNG frame: {e}"))?,
-            Encoder::Gif(e) => {
-                let mut frame = gif::Frame::from_rgb_speed(
-                    self.width as u16,
-                    self.height as u16,
-                    rgb,
-                    GIF_SPEED,
-                );
-                frame.delay = self.delay_cs as u16;
-                e.write_frame(&frame)
-                    .map_err(|e| format!("{name}: cannot write GIF frame: {e}"))?;
-            }
-        }
+        self.worker
+            .as_mut()
+            .expect("open until finished")
+            .send(rgb.to_vec())
+            .map_err(|e| format!("{name}: {e}"))?;
         self.written += 1;
         Ok(())
     }
@@ -191,19 +278,11 @@ impl AnimationWriter {
                 self.written, self.frames
             ));
         }
-        let result = match self.encoder.take().expect("open until finished") {
-            Encoder::Apng(w) => w
-                .finish()
-                .map_err(|e| format!("{name}: cannot write APNG: {e}")),
-            Encoder::Gif(e) => e
-                .into_inner()
-                .map_err(|e| format!("{name}: cannot write GIF: {e}"))
-                .and_then(|w| {
-                    w.into_inner()
-                        .map_err(|e| format!("{name}: cannot write GIF: {}", e.error()))
-                        .map(drop)
-                }),
-        };
+        let mut worker = self.worker.take().expect("open until finished");
+        let result = worker
+            .join()
+            .and_then(Encoder::finish)
+            .map_err(|e| format!("{name}: {e}"));
         if result.is_err() {
             let _ = std::fs::remove_file(&self.path);
         }
@@ -218,8 +297,10 @@ impl AnimationWriter {
 
 impl Drop for AnimationWriter {
     fn drop(&mut self) {
-        // Unfinished: what was written is not a whole animation.
-        if self.encoder.take().is_some() {
+        // Unfinished: what was written is not a whole animation. The encoder lets go of the
+        // file before it is removed.
+        if let Some(mut worker) = self.worker.take() {
+            let _ = worker.join();
             let _ = std::fs::remove_file(&self.path);
         }
     }
@@ -406,6 +487,25 @@ mod tests {
         a.push(&f[0]).unwrap();
         drop(a);
         assert!(!path.exists());
+
+        // An encoder's error (here a file opened for reading) reaches the frames after it,
+        // and the frame it happened on is named.
+        let ro = tmp("read-only.gif");
+        std::fs::write(&ro, b"").unwrap();
+        let e = gif::Encoder::new(BufWriter::new(File::open(&ro).unwrap()), 64, 64, &[]).unwrap();
+        let mut worker = Worker::spawn(Encoder::Gif(e), (64, 64), 10);
+        let noise: Vec<u8> = (0..64 * 64 * 3u32)
+            .map(|i| (i.wrapping_mul(2_654_435_761) >> 24) as u8)
+            .collect();
+        let e = (0..50)
+            .find_map(|_| worker.send(noise.clone()).err())
+            .expect("writes to a read-only file fail");
+        assert!(
+            e.starts_with("frame ") && e.contains("cannot write GIF frame"),
+            "{e}"
+        );
+        assert_eq!(worker.send(noise).unwrap_err(), STOPPED);
+        assert_eq!(worker.join().err().unwrap(), STOPPED);
 
         for fps in [0, MAX_FPS + 1] {
             let e = AnimationWriter::create(&path, AnimationKind::Gif, (8, 8), 1, fps)
