@@ -12,7 +12,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a tex
         and `raystream render --aov prim` (meshes also shaded; volumes, and an RT Structure Set laid on its CT, also `--mode` mip, minip, average, slice,
         dvr or cinematic (half of those --denoise, some with --anisotropy and --exposure), some
         with --interpolation linear, cubic or cubic-interpolating, some with --slab, to an EXR, a turntable of EXRs or an animation (APNG, GIF); some tinted by themselves as a label map, some
-        rendered (dvr, iso, mip, minip, cinematic) in the colours of their own segments or kept to some,
+        rendered (dvr, iso, mip, minip, average, cinematic) in the colours of their own segments or kept to some,
         or their segments made surfaces with `raystream iso --segment` (some simplified, some named
         by a mutated colour table) or rendered). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
@@ -593,11 +593,11 @@ def fuzz_files(work, n, device):
                 why = run(["render", p, "--mode", "slice", "--size", "8x8", "-q", "--device",
                            device, "--segmentation", p] + outline + phase + ["-o", os.path.join(d, "t.png")], s)
             # Sometimes rendered in the colours of its own segments, or kept to some of them
-            # (a CT is refused as no label map; mip takes only --segment).
+            # (a CT is refused as no label map; the projections take only --segment).
             if not why and random.random() < 0.2:
-                m = random.choice(["dvr", "iso", "mip", "minip", "cinematic"])
+                m = random.choice(["dvr", "iso", "mip", "minip", "average", "cinematic"])
                 keep = (["--segment", random.choice(["all", "1", "2,1"])]
-                        if m in ("mip", "minip") or random.random() < 0.5 else [])
+                        if m in ("mip", "minip", "average") or random.random() < 0.5 else [])
                 more = ["--spp", "2", "--max-depth", "1"] if m == "cinematic" else []
                 why = run(["render", p, "--mode", m, "--size", "8x8", "-q", "--device", device,
                            "--segmentation", p] + keep + more + phase

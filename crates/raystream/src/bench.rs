@@ -13,9 +13,7 @@ use indicatif::ProgressBar;
 use rayon::prelude::*;
 use raystream_accel::{Counters, KdTree, Traversal, brute};
 use raystream_cpu::ImageFormat;
-use raystream_cpu::dvr::{
-    CpuVolume, DvrMode, DvrOptions, DvrStats, volume_camera, volume_camera_from,
-};
+use raystream_cpu::dvr::{DvrMode, DvrOptions, DvrStats, volume_camera, volume_camera_from};
 use raystream_io::TriMesh;
 use raystream_math::{Ray, Vec3};
 use raystream_scene::{Camera, Projection, VOLUME_VIEW};
@@ -431,14 +429,14 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
         segment: a.segment.as_deref(),
         colour_table: None,
     };
-    let (volume, colours) = match crate::segments::paint(asked, mode, &volume, &a.input)? {
+    let (volume, colours, weights) = match crate::segments::paint(asked, mode, &volume, &a.input)? {
         Some(p) => {
             base.hidden_fill = p.hidden_fill;
-            (p.kept.unwrap_or(volume), p.colours)
+            (p.kept.unwrap_or(volume), p.colours, p.weights)
         }
-        None => (volume, None),
+        None => (volume, None, None),
     };
-    let colours = colours.as_ref();
+    let (colours, weights) = (colours.as_ref(), weights.as_ref());
     let shadow_cases: &[bool] = if mode == DvrMode::Dvr {
         &[false, true]
     } else {
@@ -449,7 +447,7 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
     for &dev in &a.device {
         let backend = open_device(dev, a.adapter.as_deref(), quiet)?;
         let t = Instant::now();
-        let renderer = crate::dvr::Renderer::new(&backend, &volume, &tf, colours)?;
+        let renderer = crate::dvr::Renderer::new(&backend, &volume, &tf, colours, weights)?;
         let upload_ms = ms(t.elapsed());
         // The interpolating spline's coefficients, timed apart from upload and frames.
         let t = Instant::now();
@@ -469,10 +467,11 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
                     .frame(&small, &cam, ImageFormat::Png)?
                     .picture
                     .into_srgb8();
-                let (cpu, _) = CpuVolume::new(&volume, &tf)
-                    .painted(colours)
-                    .render(&small, &cam);
-                let (mean, _) = raystream_cpu::srgb8_diff(&cpu.to_srgb8(), &gpu);
+                let cpu = crate::dvr::Renderer::new(&Backend::Cpu, &volume, &tf, colours, weights)?
+                    .frame(&small, &cam, ImageFormat::Png)?
+                    .picture
+                    .into_srgb8();
+                let (mean, _) = raystream_cpu::srgb8_diff(&cpu, &gpu);
                 if mean >= 1.0 {
                     bail!(
                         "{}: the GPU's frame differs from the CPU's by {mean:.2}/255 on average (a bug); no figures",

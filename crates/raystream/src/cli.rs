@@ -260,8 +260,9 @@ pub struct RenderArgs {
     pub smooth: Option<u32>,
     /// A label map or DICOM Segmentation: the surfaces of its segments, each in its colour,
     /// instead of bones (numbers or a Segmentation's labels, comma-separated, or `all`, the
-    /// default for a Segmentation; as `iso --segment`). A CT with --mode dvr, iso, cinematic
-    /// or mip and --segmentation LABELS: only these segments of LABELS are drawn.
+    /// default for a Segmentation; as `iso --segment`). A CT with --mode dvr, iso, cinematic,
+    /// mip, minip or average and --segmentation LABELS: only these segments of LABELS are
+    /// drawn (an average: the mean of their voxels along each ray).
     #[arg(long, value_name = "LIST", conflicts_with = "iso")]
     pub segment: Option<String>,
     /// The label map's segments' names and colours, for `--segment` (which it implies) or
@@ -424,7 +425,8 @@ pub struct RenderArgs {
     /// in its own colour (a Segmentation's, a structure set's, `--colour-table`'s), else label
     /// 1 cyan, 2 magenta, then yellow, green, orange, blue; PNG, or DICOM as the picture. With
     /// --mode dvr, iso or cinematic: each sample in its segment's colour (the transfer
-    /// function's opacity); with --segment LIST (mip and minip too) only those segments drawn.
+    /// function's opacity); with --segment LIST (mip, minip and average too) only those
+    /// segments drawn.
     #[arg(long, value_name = "FILE")]
     pub segmentation: Option<PathBuf>,
     /// With --segmentation: each segment's edge drawn in its colour, as planning systems show
@@ -1131,7 +1133,8 @@ pub struct BenchArgs {
     /// cinematic), as `render --segmentation` colours them (laid on the resampled grid).
     #[arg(long, value_name = "FILE")]
     pub segmentation: Option<PathBuf>,
-    /// With --segmentation: only these segments drawn (mip and minip too), as `render --segment`.
+    /// With --segmentation: only these segments drawn (mip, minip and average too), as
+    /// `render --segment`.
     #[arg(long, value_name = "LIST", requires = "segmentation")]
     pub segment: Option<String>,
     /// Devices to measure, comma-separated (cpu, gpu, auto).

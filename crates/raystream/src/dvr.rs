@@ -193,7 +193,15 @@ pub fn default_interpolation(mode: DvrMode) -> Interpolation {
 }
 
 /// Renders frames of one volume on the CPU or the GPU.
-pub enum Renderer<'a> {
+pub struct Renderer<'a> {
+    device: Device<'a>,
+    /// An average kept to segments: the volume of the kept voxels' weights (1 kept, 0 hidden,
+    /// the volume's hidden voxels holding 0), rendered beside it ([`kept_mean`]).
+    weights: Option<Device<'a>>,
+}
+
+/// One volume's frames on one device.
+enum Device<'a> {
     Cpu {
         /// The volume, with its spline coefficients, brick tables and majorants kept from frame
         /// to frame.
@@ -225,41 +233,37 @@ pub struct Frame {
 
 impl<'a> Renderer<'a> {
     /// The frames of `volume` through `tf` on `backend`, their dvr, iso and cinematic samples
-    /// coloured by `segments` where given.
+    /// coloured by `segments` where given; `weights`: an average kept to segments' weights
+    /// ([`crate::segments::Painted::weights`]).
     pub fn new(
         backend: &'a Backend,
         volume: &'a Volume,
         tf: &'a TransferFunction,
         segments: Option<&'a SegmentColours>,
+        weights: Option<&'a Volume>,
     ) -> Result<Renderer<'a>> {
-        Ok(match backend {
-            Backend::Gpu(ctx) => Renderer::Gpu(Box::new(GpuVolumeRenderer::painted(
-                ctx, volume, tf, segments,
-            )?)),
-            Backend::Cpu => Renderer::Cpu {
-                volume: Box::new(CpuVolume::new(volume, tf).painted(segments)),
-                done: AtomicU64::new(0),
-            },
+        Ok(Renderer {
+            device: Device::new(backend, volume, tf, segments)?,
+            weights: weights
+                .map(|w| Device::new(backend, w, tf, None))
+                .transpose()?,
         })
     }
 
     /// Makes what frames read as `interpolation` need before any frame does (the interpolating
     /// spline's coefficients, and on the GPU their texture).
     pub fn prepare(&self, interpolation: Interpolation) -> Result<()> {
-        match self {
-            Renderer::Gpu(g) => g.prepare(interpolation)?,
-            Renderer::Cpu { volume, .. } => {
-                volume.grid(interpolation);
-            }
+        for d in std::iter::once(&self.device).chain(&self.weights) {
+            d.prepare(interpolation)?;
         }
         Ok(())
     }
 
     /// Cinematic paths traced so far, on either device (a progress bar's count).
     pub fn paths_done(&self) -> u64 {
-        match self {
-            Renderer::Cpu { done, .. } => done.load(Ordering::Relaxed),
-            Renderer::Gpu(g) => g.paths_done.load(Ordering::Relaxed),
+        match &self.device {
+            Device::Cpu { done, .. } => done.load(Ordering::Relaxed),
+            Device::Gpu(g) => g.paths_done.load(Ordering::Relaxed),
         }
     }
 
@@ -275,7 +279,45 @@ impl<'a> Renderer<'a> {
         let sight: Sight = sight.into();
         let t = Instant::now();
         let hu = opt.mode.is_windowed() && opt.hu_values;
-        if let (Renderer::Gpu(g), ImageFormat::Png, false) = (self, format, hu) {
+        if let Some(weights) = self
+            .weights
+            .as_ref()
+            .filter(|_| opt.mode == DvrMode::Average)
+        {
+            // Both averages in HU: the volume's (its hidden voxels 0) and the weights'.
+            let both = DvrOptions {
+                hu_values: true,
+                ..*opt
+            };
+            let (sum, cost) = self.device.film(&both, sight)?;
+            let (kept, weight_cost) = weights.film(&both, sight)?;
+            let mut film = kept_mean(&sum, &kept);
+            if !hu {
+                let win = opt.shown_window();
+                for p in &mut film.pixels {
+                    *p = if p.x.is_nan() {
+                        opt.background
+                    } else {
+                        Vec3::splat(raystream_cpu::dvr::windowed(p.x, win))
+                    };
+                }
+            }
+            let picture = if hu {
+                Picture::Values(film)
+            } else {
+                Picture::of_film(film, format)
+            };
+            let add = |a: Option<f64>, b: Option<f64>| a.zip(b).map(|(a, b)| a + b);
+            return Ok(Frame {
+                picture,
+                frame_ms: ms(t.elapsed()),
+                kernel_ms: add(cost.kernel_ms, weight_cost.kernel_ms),
+                samples: cost.samples + weight_cost.samples,
+                stats: cost.stats,
+                denoise: None,
+            });
+        }
+        if let (Device::Gpu(g), ImageFormat::Png, false) = (&self.device, format, hu) {
             let (rgb, times) = g.render_srgb8(opt, sight)?;
             let picture = Picture::Srgb8 {
                 rgb,
@@ -294,13 +336,13 @@ impl<'a> Renderer<'a> {
         if format == ImageFormat::Exr && !opt.mode.is_windowed() {
             // dvr and iso to an EXR: premultiplied RGBA, for compositing, in one pass: each
             // pixel's light C and opacity 1 − T, so that over a background B it is C + T·B.
-            let (film, alpha, kernel_ms, samples, stats, denoise) = match self {
-                Renderer::Gpu(g) => {
+            let (film, alpha, kernel_ms, samples, stats, denoise) = match &self.device {
+                Device::Gpu(g) => {
                     let (film, alpha, times) = g.render_rgba(opt, sight)?;
                     let (k, n) = (times.kernel_gpu_ms, times.samples);
                     (film, alpha, k, n, None, times.denoise)
                 }
-                Renderer::Cpu { volume, done } => {
+                Device::Cpu { volume, done } => {
                     let (film, alpha, stats) = volume.render_rgba_counted(opt, sight, done);
                     (film, alpha, None, stats.samples, Some(stats), stats.denoise)
                 }
@@ -314,7 +356,7 @@ impl<'a> Renderer<'a> {
                 denoise,
             });
         }
-        let (film, cost) = self.film(opt, sight)?;
+        let (film, cost) = self.device.film(opt, sight)?;
         let picture = if hu {
             Picture::Values(film)
         } else {
@@ -329,11 +371,65 @@ impl<'a> Renderer<'a> {
             denoise: cost.denoise,
         })
     }
+}
 
-    /// One frame's linear film and what it cost.
+/// The mean of the kept voxels along each ray, from two averages over the same samples: `sum`,
+/// of the volume with its hidden voxels set to 0 (each sample Σ wᵢ·mᵢ·vᵢ over the voxels it
+/// blends, mᵢ 1 for a kept voxel), and `kept`, of the weights mᵢ themselves (Σ wᵢ·mᵢ): their
+/// ratio weighs each kept voxel by how near the ray passes, and no hidden voxel counts. NaN
+/// (a miss) where the ray came near no kept voxel.
+pub fn kept_mean(sum: &Image, kept: &Image) -> Image {
+    let pixels = sum
+        .pixels
+        .iter()
+        .zip(&kept.pixels)
+        .map(|(s, k)| {
+            // Both NaN off the volume; 0/0 (NaN) where no sample blends a kept voxel.
+            if k.x > 0.0 {
+                Vec3::splat(s.x / k.x)
+            } else {
+                Vec3::NAN
+            }
+        })
+        .collect();
+    Image {
+        width: sum.width,
+        height: sum.height,
+        pixels,
+    }
+}
+
+impl<'a> Device<'a> {
+    fn new(
+        backend: &'a Backend,
+        volume: &'a Volume,
+        tf: &'a TransferFunction,
+        segments: Option<&'a SegmentColours>,
+    ) -> Result<Device<'a>> {
+        Ok(match backend {
+            Backend::Gpu(ctx) => Device::Gpu(Box::new(GpuVolumeRenderer::painted(
+                ctx, volume, tf, segments,
+            )?)),
+            Backend::Cpu => Device::Cpu {
+                volume: Box::new(CpuVolume::new(volume, tf).painted(segments)),
+                done: AtomicU64::new(0),
+            },
+        })
+    }
+
+    fn prepare(&self, interpolation: Interpolation) -> Result<()> {
+        match self {
+            Device::Gpu(g) => g.prepare(interpolation)?,
+            Device::Cpu { volume, .. } => {
+                volume.grid(interpolation);
+            }
+        }
+        Ok(())
+    }
+
     fn film(&self, opt: &DvrOptions, sight: Sight) -> Result<(Image, FilmCost)> {
         Ok(match self {
-            Renderer::Gpu(g) => {
+            Device::Gpu(g) => {
                 let (film, times) = g.render(opt, sight)?;
                 let cost = FilmCost {
                     kernel_ms: times.kernel_gpu_ms,
@@ -343,13 +439,13 @@ impl<'a> Renderer<'a> {
                 };
                 (film, cost)
             }
-            Renderer::Cpu { volume, done } if opt.mode == DvrMode::Cinematic => {
+            Device::Cpu { volume, done } if opt.mode == DvrMode::Cinematic => {
                 // Counted as its paths are traced, laid over the background here.
                 let (film, alpha, stats) = volume.render_rgba_counted(opt, sight, done);
                 let film = over_background(film, &alpha, opt.background);
                 (film, FilmCost::of_cpu(stats))
             }
-            Renderer::Cpu { volume, .. } => {
+            Device::Cpu { volume, .. } => {
                 let (film, stats) = volume.render(opt, sight);
                 (film, FilmCost::of_cpu(stats))
             }

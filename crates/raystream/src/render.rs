@@ -806,16 +806,18 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         }
         crate::segments::paint(crate::segments::Asked::of_render(a), mode, &volume, path)?
     };
-    let (volume, segment_colours, segment_words, hidden_fill, painted_legend) = match painted {
-        Some(p) => (
-            p.kept.unwrap_or(volume),
-            p.colours,
-            format!("; {}", p.words),
-            p.hidden_fill,
-            p.legend,
-        ),
-        None => (volume, None, String::new(), None, Vec::new()),
-    };
+    let (volume, segment_colours, segment_words, hidden_fill, weights, painted_legend) =
+        match painted {
+            Some(p) => (
+                p.kept.unwrap_or(volume),
+                p.colours,
+                format!("; {}", p.words),
+                p.hidden_fill,
+                p.weights,
+                p.legend,
+            ),
+            None => (volume, None, String::new(), None, None, Vec::new()),
+        };
     if a.legend && matches!(mode, DvrMode::Mip | DvrMode::MinIp) {
         bail!(
             "--legend names the colours of segments; --mode {} shows HU, with no segment in colour",
@@ -871,7 +873,13 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         || !labels.legend.is_empty();
     opt.hu_values = format == ImageFormat::Exr || (dicom_out && mode.is_windowed() && !drawn);
     let aspect = opt.width as f32 / opt.height as f32;
-    let renderer = dvr::Renderer::new(&backend, &volume, &tf, segment_colours.as_ref())?;
+    let renderer = dvr::Renderer::new(
+        &backend,
+        &volume,
+        &tf,
+        segment_colours.as_ref(),
+        weights.as_ref(),
+    )?;
     let view = base_view(a, VOLUME_VIEW, true)?;
     if let Some(n) = a.turntable {
         return turntable(
@@ -1440,8 +1448,11 @@ fn cine(
             {
                 warnings.push(format!("phase {}: {w}", i + 1));
             }
-            let frame =
-                dvr::Renderer::new(backend, &volume, tf, None)?.frame(opt, seen.sight(), format)?;
+            let frame = dvr::Renderer::new(backend, &volume, tf, None, None)?.frame(
+                opt,
+                seen.sight(),
+                format,
+            )?;
             Ok((frame, seen.clone(), *opt))
         },
     )?;

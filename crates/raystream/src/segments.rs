@@ -157,11 +157,15 @@ pub struct Painted {
     /// `--segment LIST`: the CT with every voxel outside the chosen segments set to the CT's
     /// lowest value (air), so that only they are drawn; for a MIP just below it and for a
     /// MinIP just above its highest, which no projection through a segment takes
-    /// (`hidden_fill`).
+    /// (`hidden_fill`); for an average 0, which `weights` leaves out.
     pub kept: Option<Volume>,
     /// mip and minip kept to segments: the hidden voxels' value, for `DvrOptions::hidden_fill`
     /// (rays that meet no segment are misses: NaN in an EXR, padding in DICOM).
     pub hidden_fill: Option<f32>,
+    /// An average kept to segments: 1 at each kept voxel, 0 at each hidden one (whose value in
+    /// `kept` is 0), on the CT's grid; the mean along a ray is the ratio of the two volumes'
+    /// averages (`dvr::kept_mean`), so that no hidden voxel counts.
+    pub weights: Option<Volume>,
     /// What the summary line says of it.
     pub words: String,
     /// The segments drawn in colour, named (`--legend`): none for mip and minip.
@@ -189,9 +193,10 @@ impl<'a> Asked<'a> {
 /// `render|bench CT --mode MODE --segmentation LABELS [--segment LIST]` (every mode but
 /// slice, whose pixels `--segmentation` tints instead): with dvr, iso and cinematic each sample
 /// takes its segment's colour, blended between voxels (`raystream_cpu::segments`), and the
-/// transfer function's opacity; `--segment LIST` keeps only the segments listed (mip and
-/// minip too: a MIP of the aorta without the bones in front of it, a MinIP of the lungs'
-/// airways without the air around the chest). `None` without `--segmentation`.
+/// transfer function's opacity; `--segment LIST` keeps only the segments listed (mip, minip
+/// and average too: a MIP of the aorta without the bones in front of it, a MinIP of the lungs'
+/// airways without the air around the chest, the liver's mean HU along each ray). `None`
+/// without `--segmentation`.
 pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Option<Painted>> {
     let Some(file) = a.segmentation else {
         if let Some(list) = a.segment {
@@ -205,14 +210,13 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
     let name = file.display();
     match mode {
         DvrMode::Dvr | DvrMode::Iso | DvrMode::Cinematic => {}
-        DvrMode::Mip | DvrMode::MinIp if a.segment.is_some() => {}
-        DvrMode::Mip | DvrMode::MinIp => bail!(
+        DvrMode::Mip | DvrMode::MinIp | DvrMode::Average if a.segment.is_some() => {}
+        DvrMode::Mip | DvrMode::MinIp | DvrMode::Average => bail!(
             "--segmentation {name} with --mode {}: a projection shows HU, not colours; give --segment LIST to project only those segments",
             mode.name()
         ),
-        _ => bail!(
-            "--segmentation {name} with --mode {}: colours dvr, iso and cinematic frames, keeps mip and minip to segments (--segment), and tints slices; a mean would count what lies outside the segments",
-            mode.name()
+        DvrMode::Slice => bail!(
+            "--segmentation {name} with --mode slice: a slice is tinted by its segments, not kept to them"
         ),
     }
     let on = on_ct(file, a.colour_table, ct, input)?;
@@ -251,8 +255,13 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
         ),
         _ => None,
     };
+    let average = mode == DvrMode::Average && a.segment.is_some();
     let kept = a.segment.map(|_| {
-        let fill = hidden_fill.unwrap_or(range.0);
+        let fill = match hidden_fill {
+            Some(f) => f,
+            None if average => 0.0,
+            None => range.0,
+        };
         let mut kept = ct.clone();
         for (v, &l) in kept.data.iter_mut().zip(&labels) {
             if l == 0 {
@@ -260,6 +269,17 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
             }
         }
         kept
+    });
+    let weights = average.then(|| {
+        let data = labels
+            .iter()
+            .map(|&l| if l > 0 { 1.0 } else { 0.0 })
+            .collect();
+        Volume {
+            origin: ct.origin,
+            direction: ct.direction,
+            ..Volume::hounsfield(ct.dims, ct.spacing, data)
+        }
     });
     let voxels = labels.iter().filter(|&&l| l > 0).count();
     let list: Vec<String> = chosen.iter().map(|l| l.to_string()).collect();
@@ -286,6 +306,7 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
         colours,
         kept,
         hidden_fill,
+        weights,
         words,
         legend,
     }))
