@@ -818,7 +818,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             ),
             None => (volume, None, String::new(), None, None, Vec::new()),
         };
-    if a.legend && matches!(mode, DvrMode::Mip | DvrMode::MinIp) {
+    if a.legend && matches!(mode, DvrMode::Mip | DvrMode::MinIp | DvrMode::Average) {
         bail!(
             "--legend names the colours of segments; --mode {} shows HU, with no segment in colour",
             mode.name()

@@ -4060,6 +4060,19 @@ fn a_legend_names_the_segments_in_colour() {
             vec![
                 &vol[..],
                 "--mode",
+                "average",
+                "--segmentation",
+                m,
+                "--segment",
+                "1",
+                "--legend",
+            ],
+            "--mode average shows HU",
+        ),
+        (
+            vec![
+                &vol[..],
+                "--mode",
                 "dvr",
                 "--segmentation",
                 m,
