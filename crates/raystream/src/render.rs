@@ -806,18 +806,13 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         }
         crate::segments::paint(crate::segments::Asked::of_render(a), mode, &volume, path)?
     };
-    let (volume, segment_colours, segment_words, hidden_fill, weights, painted_legend) =
-        match painted {
-            Some(p) => (
-                p.kept.unwrap_or(volume),
-                p.colours,
-                format!("; {}", p.words),
-                p.hidden_fill,
-                p.weights,
-                p.legend,
-            ),
-            None => (volume, None, String::new(), None, None, Vec::new()),
-        };
+    let (volume, painted) = match painted {
+        Some(mut p) => (p.kept.take().unwrap_or(volume), Some(p)),
+        None => (volume, None),
+    };
+    let mut segment_words = painted
+        .as_ref()
+        .map_or(String::new(), |p| format!("; {}", p.words));
     if a.legend && matches!(mode, DvrMode::Mip | DvrMode::MinIp | DvrMode::Average) {
         bail!(
             "--legend names the colours of segments; --mode {} shows HU, with no segment in colour",
@@ -827,7 +822,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     let legend: &[crate::legend::Entry] = match (&labels, a.legend) {
         (_, false) => &[],
         (Some(l), true) => &l.legend,
-        (None, true) => &painted_legend,
+        (None, true) => painted.as_ref().map_or(&[], |p| &p.legend),
     };
     if a.legend && legend.is_empty() {
         bail!(
@@ -840,7 +835,16 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     };
     let track = wall_track(a, &volume, curve.as_ref())?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
-    opt.hidden_fill = hidden_fill;
+    opt.hidden_fill = painted.as_ref().and_then(|p| p.hidden_fill);
+    // An average kept to segments is windowed on their values unless --window says.
+    if let Some((w, l)) = painted.as_ref().and_then(|p| p.window)
+        && opt.window.is_none()
+    {
+        opt.window = Some((w, l));
+        segment_words += &format!(
+            ", window {w:.0}/{l:.0} HU (their voxels' median, twice their 10th to 90th percentile)"
+        );
+    }
     if mode == DvrMode::Cinematic {
         opt.spp = a.spp.unwrap_or(opt.spp);
         opt.bounces = a.max_depth;
@@ -877,8 +881,8 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         &backend,
         &volume,
         &tf,
-        segment_colours.as_ref(),
-        weights.as_ref(),
+        painted.as_ref().and_then(|p| p.colours.as_ref()),
+        painted.as_ref().and_then(|p| p.weights.as_ref()),
     )?;
     let view = base_view(a, VOLUME_VIEW, true)?;
     if let Some(n) = a.turntable {

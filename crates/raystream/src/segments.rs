@@ -166,6 +166,11 @@ pub struct Painted {
     /// `kept` is 0), on the CT's grid; the mean along a ray is the ratio of the two volumes'
     /// averages (`dvr::kept_mean`), so that no hidden voxel counts.
     pub weights: Option<Volume>,
+    /// An average kept to segments: the window (width, level) in HU of the kept voxels' values
+    /// ([`spanning_window`]), for a picture without `--window` (the average's own window, −800
+    /// to 200 HU, is made for whole-body rays of air and tissue, and leaves an organ or a
+    /// contrast lumen one flat grey or white).
+    pub window: Option<(f32, f32)>,
     /// What the summary line says of it.
     pub words: String,
     /// The segments drawn in colour, named (`--legend`): none for mip and minip.
@@ -281,6 +286,16 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
             ..Volume::hounsfield(ct.dims, ct.spacing, data)
         }
     });
+    let window = average.then(|| {
+        let mut values: Vec<f32> = ct
+            .data
+            .iter()
+            .zip(&labels)
+            .filter(|&(_, &l)| l > 0)
+            .map(|(&v, _)| v)
+            .collect();
+        spanning_window(&mut values)
+    });
     let voxels = labels.iter().filter(|&&l| l > 0).count();
     let list: Vec<String> = chosen.iter().map(|l| l.to_string()).collect();
     let words = format!(
@@ -307,9 +322,28 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
         kept,
         hidden_fill,
         weights,
+        window: window.flatten(),
         words,
         legend,
     }))
+}
+
+/// A window (width, level) for `values` (reordered): centred on their median, twice as wide as
+/// their 10th to 90th percentile (about ±2.5 standard deviations of a normal spread, so that
+/// a mean along a ray, which varies less than the voxels, still spans grey levels, and a few
+/// voxels of metal, such as a stent's 5–8 % of a lumen, do not stretch it), at least 1 HU wide;
+/// `None` for no values.
+pub fn spanning_window(values: &mut [f32]) -> Option<(f32, f32)> {
+    if values.is_empty() {
+        return None;
+    }
+    let last = values.len() - 1;
+    let mut at = |q: f32| {
+        let k = (q * last as f32).round() as usize;
+        *values.select_nth_unstable_by(k, f32::total_cmp).1
+    };
+    let (p10, median, p90) = (at(0.1), at(0.5), at(0.9));
+    Some(((2.0 * (p90 - p10)).max(1.0), median))
 }
 
 /// A scene file's `[volume]` with `segmentation` (and `segment`, `colour_table`): the
@@ -340,4 +374,24 @@ pub fn paint_scene(
     }
     v.segments = painted.colours;
     Ok(Some((painted.words, painted.legend)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::spanning_window;
+
+    #[test]
+    fn a_window_is_centred_on_the_median_and_ignores_the_tails() {
+        // 0..=100 HU in any order: median 50, 10th and 90th percentiles 10 and 90.
+        let mut v: Vec<f32> = (0..=100).rev().map(|x| x as f32).collect();
+        assert_eq!(spanning_window(&mut v), Some((160.0, 50.0)));
+        // A tenth of the voxels metal does not move it.
+        let mut v: Vec<f32> = (0..=100).map(|x| x as f32).collect();
+        v.extend([3000.0; 9]);
+        let (w, l) = spanning_window(&mut v).unwrap();
+        assert!(w < 200.0 && (50.0..=60.0).contains(&l), "{w}/{l}");
+        // One value: a window 1 HU wide on it; none: no window.
+        assert_eq!(spanning_window(&mut [42.0]), Some((1.0, 42.0)));
+        assert_eq!(spanning_window(&mut []), None);
+    }
 }

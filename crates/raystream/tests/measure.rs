@@ -1823,7 +1823,9 @@ fn write_like(name: &str, like: &raystream_io::Volume, data: &[f32]) -> std::pat
 ///   there);
 /// - with every voxel kept, it is the plain average;
 /// - on the CT itself, it lies within the lumen voxels' range, is a miss where no sample came
-///   near a lumen voxel, and the GPU's equals the CPU's.
+///   near a lumen voxel, and the GPU's equals the CPU's;
+/// - its PNG without `--window` is windowed on the lumen's voxels: grey levels, not the white
+///   the average's own window gives.
 #[test]
 fn an_average_kept_to_a_segment_is_a_mean_of_its_voxels_alone() {
     let (vol, mask) = chest_and_mask("average-mask.nii.gz");
@@ -1924,6 +1926,53 @@ fn an_average_kept_to_a_segment_is_a_mean_of_its_voxels_alone() {
         assert!((150.0..500.0).contains(&mean), "{dev}: mean {mean} HU");
         films.push(kept);
     }
+    // Shown without --window, on its voxels' window (median 348 HU, 10th to 90th percentile
+    // 211 to 518 HU), the lumen spans grey levels; on the average's own (−800 to 200 HU) it
+    // would be white.
+    let png = tmp("average-lumen.png");
+    let mut args = vec!["render", "--device", "cpu", &vol, "--size", "60x80"];
+    args.extend_from_slice(&size[..2]);
+    args.extend_from_slice(&lumen);
+    args.extend_from_slice(&["-o", png.to_str().unwrap()]);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("window 614/348 HU (their voxels' median"),
+        "{}",
+        stderr(&o)
+    );
+    let greys = |png: &std::path::Path| -> Vec<u8> {
+        let img = image::open(png).unwrap().to_rgb8();
+        let bg = *img.get_pixel(0, 0);
+        img.pixels().filter(|p| **p != bg).map(|p| p[0]).collect()
+    };
+    let shown = greys(&png);
+    let white = shown.iter().filter(|&&g| g == 255).count();
+    let levels: std::collections::BTreeSet<u8> = shown.iter().copied().collect();
+    assert!(
+        shown.len() >= 60 && white * 20 < shown.len() && levels.len() >= 30,
+        "{} pixels, {white} white, {} grey levels",
+        shown.len(),
+        levels.len()
+    );
+    args.truncate(args.len() - 2);
+    let flat_png = tmp("average-lumen-default-window.png");
+    args.extend_from_slice(&[
+        "--window",
+        "1000",
+        "--level",
+        "-300",
+        "-o",
+        flat_png.to_str().unwrap(),
+    ]);
+    assert!(run(&args).status.success());
+    let white = greys(&flat_png).iter().filter(|&&g| g == 255).count();
+    assert!(
+        white * 10 >= shown.len() * 9,
+        "{white} of {} white",
+        shown.len()
+    );
+
     if let [cpu, gpu] = &films[..] {
         let (mut both, mut one, mut diff) = (0, 0, 0.0f64);
         for (c, g) in cpu.iter().zip(gpu) {
