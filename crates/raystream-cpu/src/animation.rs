@@ -10,8 +10,8 @@
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{SyncSender, sync_channel};
-use std::thread::JoinHandle;
+
+use crate::pipeline::Pipeline;
 
 /// The animation's container.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -106,66 +106,22 @@ impl Encoder {
     }
 }
 
-/// What a frame handed to an encoder that has stopped on an error is told.
-const STOPPED: &str = "the encoder stopped on an earlier frame's error";
-
-/// The thread that encodes the frames [`AnimationWriter::push`] hands it, so that the next
-/// frame renders meanwhile (a GIF frame's quantisation takes ≈ 80 ms a megapixel, more than a
-/// GPU's frame). It gives the encoder back when the frames stop coming, or its first error.
-struct Worker {
-    frames: Option<SyncSender<Vec<u8>>>,
-    thread: Option<JoinHandle<Result<Encoder, String>>>,
-}
-
-impl Worker {
-    /// Frames waiting for the encoder beyond the one it is on: one, so that a render never
-    /// waits for an encoder that is keeping up, and at most three frames are held.
-    const QUEUED: usize = 1;
-
-    fn spawn(mut encoder: Encoder, size: (u32, u32), delay_cs: u32) -> Worker {
-        let (tx, rx) = sync_channel::<Vec<u8>>(Self::QUEUED);
-        let thread = std::thread::spawn(move || {
-            for (i, rgb) in rx.into_iter().enumerate() {
-                encoder
-                    .write(&rgb, size, delay_cs)
-                    .map_err(|e| format!("frame {i}: {e}"))?;
-            }
-            Ok(encoder)
-        });
-        Worker {
-            frames: Some(tx),
-            thread: Some(thread),
-        }
-    }
-
-    /// Hands the next frame over; the encoder's error if it has stopped.
-    fn send(&mut self, rgb: Vec<u8>) -> Result<(), String> {
-        let Some(frames) = self.frames.as_ref() else {
-            return Err(STOPPED.into());
-        };
-        match frames.send(rgb) {
-            Ok(()) => Ok(()),
-            // The encoder stopped on an error: that error.
-            Err(_) => self.join().and(Err(STOPPED.into())),
-        }
-    }
-
-    /// Waits for every frame handed over to be written; the encoder, or its error.
-    fn join(&mut self) -> Result<Encoder, String> {
-        self.frames = None;
-        let Some(thread) = self.thread.take() else {
-            return Err(STOPPED.into());
-        };
-        match thread.join() {
-            Ok(r) => r,
-            Err(_) => Err("the encoder failed".into()),
-        }
+/// The encoder thread's work: frame `i`'s pixels written, the frame named in an error.
+fn encode(
+    size: (u32, u32),
+    delay_cs: u32,
+) -> impl FnMut(&mut Encoder, Vec<u8>, usize) -> Result<(), String> + Send + 'static {
+    move |encoder, rgb, i| {
+        encoder
+            .write(&rgb, size, delay_cs)
+            .map_err(|e| format!("frame {i}: {e}"))
     }
 }
 
 /// An animation being written: [`AnimationWriter::push`] each frame in order, then
-/// [`AnimationWriter::finish`]. Frames are encoded on a thread of their own. Dropped
-/// unfinished (an error while rendering), it removes its file.
+/// [`AnimationWriter::finish`]. Frames are encoded on a thread of their own (a
+/// [`Pipeline`]: a GIF frame's quantisation takes ≈ 80 ms a megapixel, more than a GPU's
+/// frame). Dropped unfinished (an error while rendering), it removes its file.
 pub struct AnimationWriter {
     path: PathBuf,
     kind: AnimationKind,
@@ -173,7 +129,7 @@ pub struct AnimationWriter {
     height: u32,
     frames: u32,
     written: u32,
-    worker: Option<Worker>,
+    encoder: Option<Pipeline<Vec<u8>, Encoder>>,
 }
 
 impl AnimationWriter {
@@ -212,7 +168,7 @@ impl AnimationWriter {
             height,
             frames,
             written: 0,
-            worker: None,
+            encoder: None,
         };
         let encoder = match kind {
             AnimationKind::Apng => {
@@ -238,7 +194,10 @@ impl AnimationWriter {
                 Encoder::Gif(e)
             }
         };
-        writer.worker = Some(Worker::spawn(encoder, (width, height), gif_delay_cs(fps)));
+        writer.encoder = Some(Pipeline::spawn(
+            encoder,
+            encode((width, height), gif_delay_cs(fps)),
+        ));
         Ok(writer)
     }
 
@@ -260,7 +219,7 @@ impl AnimationWriter {
         if self.written == self.frames {
             return Err(format!("{name}: more than the {} frames", self.frames));
         }
-        self.worker
+        self.encoder
             .as_mut()
             .expect("open until finished")
             .send(rgb.to_vec())
@@ -278,9 +237,9 @@ impl AnimationWriter {
                 self.written, self.frames
             ));
         }
-        let mut worker = self.worker.take().expect("open until finished");
-        let result = worker
-            .join()
+        let mut encoder = self.encoder.take().expect("open until finished");
+        let result = encoder
+            .finish()
             .and_then(Encoder::finish)
             .map_err(|e| format!("{name}: {e}"));
         if result.is_err() {
@@ -299,8 +258,8 @@ impl Drop for AnimationWriter {
     fn drop(&mut self) {
         // Unfinished: what was written is not a whole animation. The encoder lets go of the
         // file before it is removed.
-        if let Some(mut worker) = self.worker.take() {
-            let _ = worker.join();
+        if let Some(mut encoder) = self.encoder.take() {
+            let _ = encoder.finish();
             let _ = std::fs::remove_file(&self.path);
         }
     }
@@ -493,19 +452,18 @@ mod tests {
         let ro = tmp("read-only.gif");
         std::fs::write(&ro, b"").unwrap();
         let e = gif::Encoder::new(BufWriter::new(File::open(&ro).unwrap()), 64, 64, &[]).unwrap();
-        let mut worker = Worker::spawn(Encoder::Gif(e), (64, 64), 10);
+        let mut encoder = Pipeline::spawn(Encoder::Gif(e), encode((64, 64), 10));
         let noise: Vec<u8> = (0..64 * 64 * 3u32)
             .map(|i| (i.wrapping_mul(2_654_435_761) >> 24) as u8)
             .collect();
         let e = (0..50)
-            .find_map(|_| worker.send(noise.clone()).err())
+            .find_map(|_| encoder.send(noise.clone()).err())
             .expect("writes to a read-only file fail");
         assert!(
             e.starts_with("frame ") && e.contains("cannot write GIF frame"),
             "{e}"
         );
-        assert_eq!(worker.send(noise).unwrap_err(), STOPPED);
-        assert_eq!(worker.join().err().unwrap(), STOPPED);
+        assert_eq!(encoder.send(noise).unwrap_err(), crate::pipeline::STOPPED);
 
         for fps in [0, MAX_FPS + 1] {
             let e = AnimationWriter::create(&path, AnimationKind::Gif, (8, 8), 1, fps)

@@ -27,6 +27,7 @@ mod image_out;
 pub mod lumen;
 pub mod mask;
 pub mod medium;
+pub mod pipeline;
 pub mod sampling;
 pub use raystream_volume::segments;
 pub mod stenosis;

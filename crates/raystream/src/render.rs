@@ -1,7 +1,7 @@
 //! `raystream render`: a mesh, a scene file or the built-in scene to PNG.
 
 use rayon::prelude::*;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -18,6 +18,7 @@ use raystream_scene::{Camera, PatientView, Projection, Scene, VOLUME_VIEW, View}
 use raystream_cpu::cpr::CurvedPlane;
 use raystream_cpu::dvr::{DvrMode, DvrOptions, Sight, volume_camera_from};
 use raystream_cpu::lumen::LumenOptions;
+use raystream_cpu::pipeline::Pipeline;
 use raystream_cpu::wall::{Track, WallOptions};
 
 use crate::cli::{CprArg, FrameFormat, RenderArgs};
@@ -38,7 +39,7 @@ const DEFAULT_SPP: u32 = 4;
 const MAX_MESH_SPP: u32 = 1024;
 
 /// INPUT, or the built-in CT's name.
-fn input_name(a: &RenderArgs) -> std::path::PathBuf {
+fn input_name(a: &RenderArgs) -> PathBuf {
     a.input
         .clone()
         .unwrap_or_else(|| Path::new(DEFAULT_CT_NAME).to_path_buf())
@@ -1490,7 +1491,21 @@ struct FrameFolder<'a> {
     digits: usize,
     series: String,
     animation: Option<Animation>,
+    /// The frames' files, written on a thread of their own while the next frame renders (a
+    /// 1024² PNG's encoding takes as long as a slice's render); not for an animation.
+    saver: Option<Pipeline<(PathBuf, Picture, String, DicomOut), ()>>,
     pb: ProgressBar,
+}
+
+/// A frame of a folder saved to its file (`FrameFolder::saver`'s work).
+fn save_frame(
+    _: &mut (),
+    (path, picture, what, dicom): (PathBuf, Picture, String, DicomOut),
+    _: usize,
+) -> std::result::Result<(), String> {
+    picture
+        .save(&path, &what, &dicom)
+        .map_err(|e| format!("{e:#}"))
 }
 
 /// An animation's container and rate, and its writer once the first frame gives its size.
@@ -1565,21 +1580,30 @@ impl<'a> FrameFolder<'a> {
                 frames: n,
                 writer: None,
             }),
+            saver: animation.is_none().then(|| Pipeline::spawn((), save_frame)),
             pb,
         })
     }
 
     /// Frame `i`'s file.
-    fn path(&self, i: u32) -> std::path::PathBuf {
+    fn path(&self, i: u32) -> PathBuf {
         self.dir
             .join(format!("frame_{i:0w$}.{}", self.ext, w = self.digits))
     }
 
     /// Writes frame `i` (in order): its own file, `what` in an EXR's comments and `dicom`
-    /// describing a DICOM frame; or the animation's next frame.
-    fn write(&mut self, i: u32, picture: &Picture, what: &str, dicom: &DicomOut) -> Result<()> {
+    /// describing a DICOM frame; or the animation's next frame. Both are written on a thread of
+    /// their own: an error of an earlier frame's file is returned here or by `finish`.
+    fn write(&mut self, i: u32, picture: Picture, what: String, dicom: DicomOut) -> Result<()> {
         match &mut self.animation {
-            None => picture.save(&self.path(i), what, dicom)?,
+            None => {
+                let path = self.path(i);
+                self.saver
+                    .as_mut()
+                    .expect("a folder's frames are saved")
+                    .send((path, picture, what, dicom))
+                    .map_err(anyhow::Error::msg)?;
+            }
             Some(anim) => {
                 let Picture::Srgb8 { rgb, width, height } = picture else {
                     unreachable!("an animation's frames are rendered as PNGs")
@@ -1590,14 +1614,14 @@ impl<'a> FrameFolder<'a> {
                         raystream_cpu::animation::AnimationWriter::create(
                             self.dir,
                             anim.kind,
-                            (*width, *height),
+                            (width, height),
                             anim.frames,
                             anim.fps,
                         )
                         .map_err(anyhow::Error::msg)?,
                     ),
                 };
-                writer.push(rgb).map_err(anyhow::Error::msg)?;
+                writer.push(&rgb).map_err(anyhow::Error::msg)?;
             }
         }
         self.pb.inc(1);
@@ -1606,7 +1630,10 @@ impl<'a> FrameFolder<'a> {
 
     /// Ends the series (an animation's file), and says what was written, unless --quiet:
     /// `how` the frames were made and `timing` the render's figures.
-    fn finish(self, n: u32, how: &str, timing: &str, quiet: bool) -> Result<()> {
+    fn finish(mut self, n: u32, how: &str, timing: &str, quiet: bool) -> Result<()> {
+        if let Some(saver) = &mut self.saver {
+            saver.finish().map_err(anyhow::Error::msg)?;
+        }
         self.pb.finish_and_clear();
         let (to, format) = match self.animation {
             Some(anim) => {
@@ -1670,7 +1697,8 @@ fn frame_series(
                 (volume, overlay, track, labels),
             )
         };
-        out.write(i, &f.picture, &exr_comment(a, &opt, volume, &seen), &dicom)?;
+        let what = exr_comment(a, &opt, volume, &seen);
+        out.write(i, f.picture, what, dicom)?;
     }
     // The frames differ in their camera, plane or phase only.
     let base = base.expect("at least one frame");
@@ -1763,14 +1791,14 @@ fn scene_turntable(
         };
         out.write(
             i,
-            &picture,
-            &format!(
+            picture,
+            format!(
                 "linear RGB, {} spp, depth {}{}",
                 opt.spp,
                 opt.max_depth,
                 pixel_size(&cam, opt.height, units)
             ),
-            &dicom,
+            dicom,
         )?;
     }
     let median = median_of(&mut frame_ms);

@@ -388,3 +388,29 @@ fn segment_colours_refuse_what_they_cannot_draw() {
         "paint-far.nii: no segment holds a voxel of",
     );
 }
+
+/// A frame whose file cannot be written (its name taken by a folder) stops a series with an
+/// error naming that file, though frames are saved on a thread of their own while the next one
+/// renders; an animation that cannot be created is named likewise.
+#[test]
+fn a_frame_that_cannot_be_written_stops_the_series() {
+    let dir = tmp("unwritable-frames");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("frame_001.png")).unwrap();
+    let args = [
+        "render", "--device", "cpu", "--mode", "slice", "--slices", "4", "--size", "32x32", "-q",
+    ];
+    refused(
+        &[&args[..], &["-o", dir.to_str().unwrap()]].concat(),
+        "frame_001.png: cannot write PNG",
+    );
+    let anim = tmp("unwritable-frames/sub");
+    std::fs::create_dir_all(&anim).unwrap();
+    let gif = anim.join("spin.gif");
+    std::fs::create_dir_all(&gif).unwrap();
+    let e = refused(
+        &[&args[..], &["--format", "gif", "-o", gif.to_str().unwrap()]].concat(),
+        "spin.gif",
+    );
+    assert!(e.contains("cannot create"), "{e}");
+}
