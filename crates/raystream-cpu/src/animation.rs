@@ -201,10 +201,12 @@ impl AnimationWriter {
         Ok(writer)
     }
 
-    /// Appends the next frame: 8-bit sRGB, 3 bytes a pixel, rows from the top. It is encoded
-    /// while the caller goes on; an error of an earlier frame's encoding is returned here or
-    /// by [`AnimationWriter::finish`].
-    pub fn push(&mut self, rgb: &[u8]) -> Result<(), String> {
+    /// Appends the next frame: 8-bit sRGB, 3 bytes a pixel, rows from the top (moved to the
+    /// encoder's thread, copied only if borrowed). It is encoded while the caller goes on; an
+    /// error of an earlier frame's encoding is returned here or by
+    /// [`AnimationWriter::finish`].
+    pub fn push(&mut self, rgb: impl Into<Vec<u8>>) -> Result<(), String> {
+        let rgb = rgb.into();
         let name = self.path.display();
         let want = self.width as usize * self.height as usize * 3;
         if rgb.len() != want {
@@ -222,7 +224,7 @@ impl AnimationWriter {
         self.encoder
             .as_mut()
             .expect("open until finished")
-            .send(rgb.to_vec())
+            .send(rgb)
             .map_err(|e| format!("{name}: {e}"))?;
         self.written += 1;
         Ok(())
@@ -322,7 +324,7 @@ mod tests {
         let n = frames.len() as u32;
         let mut a = AnimationWriter::create(path, kind, size, n, fps).unwrap();
         for f in frames {
-            a.push(f).unwrap();
+            a.push(f.as_slice()).unwrap();
         }
         a.finish().unwrap();
     }
@@ -435,7 +437,7 @@ mod tests {
         let path = tmp("partial.png");
         let f = frames(8, 8);
         let mut a = AnimationWriter::create(&path, AnimationKind::Apng, (8, 8), 3, 10).unwrap();
-        a.push(&f[0]).unwrap();
+        a.push(f[0].as_slice()).unwrap();
         let e = a.push(&f[1][..10]).unwrap_err();
         assert!(e.contains("partial.png") && e.contains("10 bytes"), "{e}");
         let e = a.finish().unwrap_err();
@@ -443,7 +445,7 @@ mod tests {
         assert!(!path.exists(), "a half-written animation was left behind");
 
         let mut a = AnimationWriter::create(&path, AnimationKind::Gif, (8, 8), 1, 10).unwrap();
-        a.push(&f[0]).unwrap();
+        a.push(f[0].as_slice()).unwrap();
         drop(a);
         assert!(!path.exists());
 

@@ -186,15 +186,14 @@ fn label(
         if a.labels {
             crate::labels::draw(rgb, *width, *height, right, up);
         }
-        if a.scale_bar && patient {
-            if cam.parallel > 0.0 {
-                let mm = 2.0 * cam.parallel as f64 / *height as f64;
-                crate::scale_bar::draw(rgb, *width, *height, mm);
-            } else if !a.quiet {
-                eprintln!(
-                    "raystream: --scale-bar: the scene's own camera is a perspective one, with no one scale; no bar drawn"
-                );
-            }
+    }
+    if a.scale_bar && patient {
+        if cam.parallel > 0.0 {
+            draw_scale_bar(a, picture, |h| 2.0 * cam.parallel as f64 / h as f64);
+        } else if !a.quiet {
+            eprintln!(
+                "raystream: --scale-bar: the scene's own camera is a perspective one, with no one scale; no bar drawn"
+            );
         }
     }
     // DICOM's Patient Orientation says H(ead) and F(oot) for superior and inferior.
@@ -256,7 +255,7 @@ fn volume_dicom(
             // The lumen's edges first, the marks and the scale over them.
             annotated: draw_cpr_lumen(a, picture, plane, (volume, track))
                 | mark_path(a, picture, plane)
-                | cpr_scale_bar(a, picture, plane)
+                | draw_scale_bar(a, picture, |_| plane.pixel_mm as f64)
                 | draw_legend(picture, labels.legend),
             description: crate::common::options_in_words(a.input.as_deref(), &a.output),
             series: None,
@@ -279,14 +278,11 @@ fn draw_legend(picture: &mut Picture, legend: &[crate::legend::Entry]) -> bool {
     false
 }
 
-/// `--scale-bar` on a CPR, whose pixels are `plane.pixel_mm` square: whether it drew one.
-fn cpr_scale_bar(
-    a: &RenderArgs,
-    picture: &mut Picture,
-    plane: &raystream_cpu::cpr::CurvedPlane,
-) -> bool {
+/// `--scale-bar` on a PNG's picture whose square pixels are `mm_px(its height)` mm: whether it
+/// drew one.
+fn draw_scale_bar(a: &RenderArgs, picture: &mut Picture, mm_px: impl FnOnce(u32) -> f64) -> bool {
     if let (true, Picture::Srgb8 { rgb, width, height }) = (a.scale_bar, &mut *picture) {
-        crate::scale_bar::draw(rgb, *width, *height, plane.pixel_mm as f64);
+        crate::scale_bar::draw(rgb, *width, *height, mm_px(*height));
         return true;
     }
     false
@@ -1621,7 +1617,7 @@ impl<'a> FrameFolder<'a> {
                         .map_err(anyhow::Error::msg)?,
                     ),
                 };
-                writer.push(&rgb).map_err(anyhow::Error::msg)?;
+                writer.push(rgb).map_err(anyhow::Error::msg)?;
             }
         }
         self.pb.inc(1);

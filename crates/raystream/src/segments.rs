@@ -286,7 +286,7 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
             ..Volume::hounsfield(ct.dims, ct.spacing, data)
         }
     });
-    let window = average.then(|| {
+    let window = if average {
         let mut values: Vec<f32> = ct
             .data
             .iter()
@@ -295,7 +295,9 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
             .map(|(&v, _)| v)
             .collect();
         spanning_window(&mut values)
-    });
+    } else {
+        None
+    };
     let voxels = labels.iter().filter(|&&l| l > 0).count();
     let list: Vec<String> = chosen.iter().map(|l| l.to_string()).collect();
     let words = format!(
@@ -322,7 +324,7 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
         kept,
         hidden_fill,
         weights,
-        window: window.flatten(),
+        window,
         words,
         legend,
     }))

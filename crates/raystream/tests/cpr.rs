@@ -747,14 +747,7 @@ fn draw_path_marks_the_centreline_on_the_reference_view() {
         "--size",
         "97x97",
     ];
-    let exr = raystream_cpu::load_exr(&render_to("cpr-line.exr", "cpu", &view)).unwrap();
-    let pixel_mm: f32 = exr
-        .comments
-        .split("pixels ")
-        .nth(1)
-        .and_then(|s| s.split(' ').next())
-        .and_then(|s| s.parse().ok())
-        .unwrap();
+    let pixel_mm = exr_pixel_mm(&render_to("cpr-line.exr", "cpu", &view)) as f32;
     let plain = image::open(render_to("cpr-line-plain.png", "cpu", &view))
         .unwrap()
         .to_rgb8();

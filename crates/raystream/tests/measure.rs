@@ -1795,6 +1795,32 @@ fn render_tints_a_segmentation_over_a_slice_and_a_cpr() {
     );
 }
 
+/// The pixels (RGB, any scale) that differ between `plain` and `coloured`, which must be more
+/// than `at_least`, at least 90 % of them bluer (blue less red grows: cyan lumen, magenta
+/// wall over ct-aaa's red).
+fn changed_and_bluer(
+    dev: &str,
+    plain: &[[f32; 3]],
+    coloured: &[[f32; 3]],
+    at_least: usize,
+) -> Vec<usize> {
+    let changed: Vec<usize> = (0..plain.len())
+        .filter(|&i| plain[i] != coloured[i])
+        .collect();
+    let blue = |c: [f32; 3]| c[2] - c[0];
+    let bluer = changed
+        .iter()
+        .filter(|&&i| blue(coloured[i]) > blue(plain[i]))
+        .count();
+    eprintln!("{dev}: {} pixels coloured, {bluer} bluer", changed.len());
+    assert!(
+        changed.len() > at_least && bluer * 10 >= changed.len() * 9,
+        "{dev}: {} changed, {bluer} bluer",
+        changed.len()
+    );
+    changed
+}
+
 /// `data` (one value a voxel of `like`) written as a MetaImage on `like`'s grid under the test
 /// folder.
 fn write_like(name: &str, like: &raystream_io::Volume, data: &[f32]) -> std::path::PathBuf {
@@ -2133,18 +2159,7 @@ fn render_colours_a_ct_by_its_segments_and_keeps_it_to_them() {
                 .map(move |i| [r[i], g[i], b[i]])
                 .collect::<Vec<_>>()
         };
-        let (p, q) = (rgb(&plain), rgb(&painted));
-        let changed: Vec<usize> = (0..p.len()).filter(|&i| p[i] != q[i]).collect();
-        let bluer = changed
-            .iter()
-            .filter(|&&i| q[i][2] - q[i][0] > p[i][2] - p[i][0])
-            .count();
-        eprintln!("{dev}: {} pixels coloured, {bluer} bluer", changed.len());
-        assert!(
-            changed.len() > 30 && bluer * 10 >= changed.len() * 9,
-            "{dev}: {} changed, {bluer} bluer",
-            changed.len()
-        );
+        changed_and_bluer(dev, &rgb(&plain), &rgb(&painted), 30);
         // Kept to the lumen: what remains had some opacity before, and far less shows.
         let alpha = channel(&plain, "A");
         let kept = channel(&out("dvr-lumen.exr", &[&back, &lumen]), "A");
@@ -2263,20 +2278,11 @@ fn a_scene_volume_takes_its_segments_colours() {
             img("lumen", &lumen),
         );
         let bg = p.get_pixel(0, 0).0;
-        let changed: Vec<usize> = (0..p.len() / 3)
-            .filter(|&i| p.as_raw()[3 * i..3 * i + 3] != b.as_raw()[3 * i..3 * i + 3])
-            .collect();
+        let floats = |x: &image::RgbImage| -> Vec<[f32; 3]> {
+            x.pixels().map(|q| q.0.map(|c| c as f32)).collect()
+        };
+        let changed = changed_and_bluer(dev, &floats(&p), &floats(&b), 20);
         let blue = |px: &[u8]| px[2] as i32 - px[0] as i32;
-        let bluer = changed
-            .iter()
-            .filter(|&&i| blue(&b.as_raw()[3 * i..]) > blue(&p.as_raw()[3 * i..]))
-            .count();
-        eprintln!("{dev}: {} pixels coloured, {bluer} bluer", changed.len());
-        assert!(
-            changed.len() > 20 && bluer * 10 >= changed.len() * 9,
-            "{dev}: {} changed, {bluer} bluer",
-            changed.len()
-        );
         for &i in &changed {
             assert_ne!(
                 p.as_raw()[3 * i..3 * i + 3],

@@ -260,23 +260,11 @@ fn labels_mark_the_patients_directions() {
 fn a_scale_bar_measures_the_picture() {
     let (w, h) = (200u32, 150u32);
     let render = |name: &str, extra: &[&str]| {
-        let out = tmp(&format!("scale-{name}"));
-        let mut args = vec!["render", "--size", "200x150", "--quiet", "--device", "cpu"];
-        args.extend_from_slice(extra);
-        args.extend_from_slice(&["-o", out.to_str().unwrap()]);
-        let o = run(&args);
-        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
-        out
+        let args = [&["--size", "200x150"][..], extra].concat();
+        render_to(&format!("scale-{name}"), "cpu", &args)
     };
     let mip = ["--mode", "mip", "--parallel"];
-    let exr = raystream_cpu::load_exr(&render("mip.exr", &mip)).unwrap();
-    let mm_px: f64 = exr
-        .comments
-        .split("pixels ")
-        .nth(1)
-        .and_then(|t| t.split(' ').next())
-        .and_then(|t| t.parse().ok())
-        .unwrap_or_else(|| panic!("no pixel size in {:?}", exr.comments));
+    let mm_px = exr_pixel_mm(&render("mip.exr", &mip));
     // The rule, written out: the longest 1, 2 or 5 x 10^k mm within a fifth of the width.
     let most = w as f64 / 5.0 * mm_px;
     let want_mm = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0]

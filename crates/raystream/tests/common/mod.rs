@@ -93,6 +93,17 @@ pub fn refused(args: &[&str], want: &str) -> String {
     e
 }
 
+/// The pixel size (mm) an EXR's comments give ("… pixels 0.5 mm …").
+pub fn exr_pixel_mm(exr: &Path) -> f64 {
+    let comments = raystream_cpu::load_exr(exr).unwrap().comments;
+    comments
+        .split("pixels ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no pixel size in {comments:?}"))
+}
+
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
