@@ -175,11 +175,12 @@ $bin bench "$ct" --mode mip --resample 512 --size "$dvr_size" --json --quiet --d
 # every visible sample reads its eight voxels' labels; against ct-bones cubic above.
 $bin info "$ct" --json | $py scripts/halves-label-map.py "$tmp/halves.mha"
 $bin "${c[@]}" --device gpu --frames 36 --preset ct-bones --segmentation "$tmp/halves.mha" | tag '{"volume": "ct-bones cubic segments"}'
-# An average kept to a segment (open question 19): two frames over the same samples (the CT
-# with its hidden voxels 0, and the kept voxels' weights), against a plain average.
+# Projections kept to a segment (open question 19): one march reading the kept CT and its
+# weights from the two channels of one Rg16Float texture, against a plain one's R16Float.
 a=(bench "$ct" --mode average --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 36)
 $bin "${a[@]}" | tag '{"volume": "average"}'
 $bin "${a[@]}" --segmentation "$tmp/halves.mha" --segment 1 | tag '{"volume": "average kept to segments"}'
+$bin bench "$ct" --mode mip --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 36 --segmentation "$tmp/halves.mha" --segment 1 | tag '{"volume": "mip kept to segments"}'
 $bin render "$ct" --mode dvr --shadows --preset ct-bones --device gpu --size "$dvr_size" -o "$out/dvr-bones-shadows-gpu.png" 2>&1 | tee -a "$out/render.log"
 # Animations (open question 18): a 36-frame dvr turntable as a folder of PNGs, one APNG and one
 # GIF; the wall time of each whole command, so that the encoding shows beside the GPU's frames.

@@ -362,11 +362,11 @@ pub struct DvrParams {
     /// 1: dvr, iso and cinematic samples take a segmentation's colours (bindings 14 and 15;
     /// `raystream_cpu::segments`), byte 348.
     pub segments: u32,
-    /// `DvrOptions::hidden_fill` (byte 352), used when `hidden` is 1 (byte 356): mip and minip
-    /// of a volume kept to segments take a projection this close to the hidden voxels' value
-    /// for a miss.
-    pub hidden_fill: f32,
-    pub hidden: u32,
+    /// 1: mip, minip and average of a volume kept to segments (byte 352): the texture holds
+    /// the kept volume and its weights, and a sample is projected only within the segments
+    /// (`raystream_cpu::dvr::Marcher::sample_kept`).
+    pub kept: u32,
+    pub pad_kept: u32,
     pub pad0: u32,
     pub pad1: u32,
 }

@@ -15,8 +15,8 @@ use raystream_cpu::cinematic::{
 };
 use raystream_cpu::denoise::{DenoiseOptions, DenoiseTimes, Guides, NoisyFilm};
 use raystream_cpu::dvr::{
-    BRICK, DvrMode, DvrOptions, ISO_COLOUR, Interpolation, LightGrid, Marcher, Sight, SplineGrids,
-    brick_table, over_background, scene_to_lps,
+    BRICK, DvrMode, DvrOptions, ISO_COLOUR, Interpolation, KEPT_WEIGHT, LightGrid, Marcher, Sight,
+    SplineGrids, brick_table, over_background, scene_to_lps,
 };
 use raystream_cpu::segments::SegmentColours;
 use raystream_io::Volume;
@@ -47,7 +47,7 @@ pub(crate) fn volume_core_wgsl() -> String {
 pub fn dvr_wgsl() -> String {
     let [r, g, b] = ISO_COLOUR.to_array();
     format!(
-        "{}\nconst ISO_COLOUR: vec3<f32> = vec3<f32>({r:?}, {g:?}, {b:?});\n{COMMON_WGSL}\n{DVR_WGSL}\n{CINEMATIC_WGSL}",
+        "{}\nconst ISO_COLOUR: vec3<f32> = vec3<f32>({r:?}, {g:?}, {b:?});\nconst KEPT_WEIGHT: f32 = {KEPT_WEIGHT:?};\n{COMMON_WGSL}\n{DVR_WGSL}\n{CINEMATIC_WGSL}",
         volume_core_wgsl()
     )
 }
@@ -66,18 +66,18 @@ pub(crate) struct GpuVolume {
     pub to_index: ([Vec3; 3], Vec3),
 }
 
-/// The texture the kernels read `vol` from as `interpolation` reads it, `grid` its values
-/// ([`Marcher::grid`]): R16Float, or for the interpolating spline (kernel code 2) Rg16Float
-/// with the voxels, whose spline's gradient shades it, in the second channel.
+/// The texture the kernels read a volume of `dims` from: `grid`, the values it is read by
+/// (its HU, or the interpolating spline's coefficients: [`Marcher::grid`]), as R16Float, or
+/// with `second` as Rg16Float with `second` in the second channel: the voxels whose spline's
+/// gradient shades the interpolating spline ([`shading_channel`]), or a volume kept to
+/// segments' weights as the same interpolation reads them (dvr.wgsl's `sample_kept`).
 pub(crate) fn volume_texture(
     ctx: &GpuContext,
     label: &str,
-    vol: &Volume,
+    dims: [usize; 3],
     grid: &[f32],
-    interpolation: Interpolation,
+    second: Option<&[f32]>,
 ) -> Result<wgpu::TextureView, GpuError> {
-    let dims = vol.dims;
-    let shading = interpolation.prefiltered().then_some(&vol.data[..]);
     let max = ctx.limits.max_texture_dimension_3d as usize;
     if dims.iter().any(|&n| n > max) {
         return Err(ctx.err(format!(
@@ -96,7 +96,7 @@ pub(crate) fn volume_texture(
         mip_level_count: 1,
         sample_count: 1,
         dimension: wgpu::TextureDimension::D3,
-        format: if shading.is_some() {
+        format: if second.is_some() {
             wgpu::TextureFormat::Rg16Float
         } else {
             wgpu::TextureFormat::R16Float
@@ -105,15 +105,15 @@ pub(crate) fn volume_texture(
         view_formats: &[],
     });
     let half = |v: f32| half::f16::from_f32(v).to_bits();
-    let halves: Vec<u16> = match shading {
+    let halves: Vec<u16> = match second {
         None => grid.iter().map(|&v| half(v)).collect(),
-        Some(shading) => grid
+        Some(second) => grid
             .iter()
-            .zip(shading)
+            .zip(second)
             .flat_map(|(&v, &s)| [half(v), half(s)])
             .collect(),
     };
-    let channels = 1 + shading.is_some() as u32;
+    let channels = 1 + second.is_some() as u32;
     ctx.queue.write_texture(
         texture.as_image_copy(),
         bytemuck::cast_slice(&halves),
@@ -125,6 +125,13 @@ pub(crate) fn volume_texture(
         size,
     );
     Ok(texture.create_view(&Default::default()))
+}
+
+/// The second channel of a volume's texture as `interpolation` reads it: for the
+/// interpolating spline, the voxels, whose spline's gradient shades it (volume.wgsl's
+/// `smooth_shading`).
+pub(crate) fn shading_channel(vol: &Volume, interpolation: Interpolation) -> Option<&[f32]> {
+    interpolation.prefiltered().then_some(&vol.data[..])
 }
 
 impl GpuVolume {
@@ -140,9 +147,9 @@ impl GpuVolume {
         let view = volume_texture(
             ctx,
             "CT volume (HU, f16)",
-            vol,
+            vol.dims,
             marcher.grid(),
-            marcher.interpolation(),
+            shading_channel(vol, marcher.interpolation()),
         )?;
         let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("trilinear"),
@@ -286,6 +293,12 @@ pub struct GpuVolumeRenderer<'a> {
     segment_labels: wgpu::TextureView,
     segment_colours: wgpu::Buffer,
     segmented: bool,
+    /// mip, minip and average kept to segments: the kept voxels' weights
+    /// ([`Self::segmented`]), what each interpolation reads of them, and the textures of the
+    /// kept volume beside them (trilinear and the cubic B-spline; the interpolating spline).
+    weights: Option<&'a Volume>,
+    weight_grids: SplineGrids,
+    kept_views: [std::sync::OnceLock<wgpu::TextureView>; 2],
     /// Milliseconds spent uploading the volume and building the pipeline.
     pub upload_ms: f64,
 }
@@ -331,9 +344,32 @@ impl<'a> GpuVolumeRenderer<'a> {
         tf: &'a TransferFunction,
         segments: Option<&SegmentColours>,
     ) -> Result<GpuVolumeRenderer<'a>, GpuError> {
+        GpuVolumeRenderer::segmented(ctx, vol, tf, segments, None)
+    }
+
+    /// [`Self::painted`], and with `weights` the volume kept to some of its segments for mip,
+    /// minip and average, as `raystream_cpu::dvr::CpuVolume::kept` keeps it: `weights` on its
+    /// grid, 1 at each kept voxel and 0 at each hidden one, whose value in `vol` must be 0.
+    pub fn segmented(
+        ctx: &'a GpuContext,
+        vol: &'a Volume,
+        tf: &'a TransferFunction,
+        segments: Option<&SegmentColours>,
+        weights: Option<&'a Volume>,
+    ) -> Result<GpuVolumeRenderer<'a>, GpuError> {
         let t0 = Instant::now();
         if let Some(s) = segments {
             assert_eq!(s.dims, vol.dims, "segment colours on the volume's grid");
+        }
+        if let Some(w) = weights {
+            assert_eq!(w.dims, vol.dims, "weights on the volume's grid");
+            assert!(
+                w.data
+                    .iter()
+                    .zip(&vol.data)
+                    .all(|(w, v)| *w != 0.0 || *v == 0.0),
+                "a kept volume's hidden voxels hold 0"
+            );
         }
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let gpu = GpuVolume::new(ctx, vol, tf, &Marcher::new(vol, None))?;
@@ -389,6 +425,9 @@ impl<'a> GpuVolumeRenderer<'a> {
             segment_labels,
             segment_colours,
             segmented: segments.is_some(),
+            weights,
+            weight_grids: Default::default(),
+            kept_views: Default::default(),
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }
@@ -556,6 +595,13 @@ impl<'a> GpuVolumeRenderer<'a> {
     /// first, to time it apart).
     pub fn prepare(&self, interpolation: Interpolation) -> Result<(), GpuError> {
         self.texture(interpolation)?;
+        if self.weights.is_some() {
+            self.texture_for(&DvrOptions {
+                mode: DvrMode::Mip,
+                interpolation,
+                ..Default::default()
+            })?;
+        }
         self.ctx.wait()
     }
 
@@ -572,11 +618,34 @@ impl<'a> GpuVolumeRenderer<'a> {
         let v = volume_texture(
             self.ctx,
             label,
-            self.vol,
+            self.vol.dims,
             self.grid(interpolation),
-            interpolation,
+            shading_channel(self.vol, interpolation),
         )?;
         Ok(self.coefficient_view.get_or_init(|| v))
+    }
+
+    /// The texture a frame of `opt` reads: with weights ([`Self::segmented`]) and a projection,
+    /// the kept volume beside its weights, each as `opt.interpolation` reads it (uploaded on
+    /// first use: a texture for the trilinear and cubic B-spline, one for the interpolating
+    /// spline's coefficients); else [`Self::texture`].
+    fn texture_for(&self, opt: &DvrOptions) -> Result<&wgpu::TextureView, GpuError> {
+        let Some(weights) = self.weights.filter(|_| opt.mode.is_projection()) else {
+            return self.texture(opt.interpolation);
+        };
+        let i = opt.interpolation;
+        let slot = &self.kept_views[i.prefiltered() as usize];
+        if let Some(v) = slot.get() {
+            return Ok(v);
+        }
+        let v = volume_texture(
+            self.ctx,
+            "kept volume and its weights (f16)",
+            self.vol.dims,
+            self.grid(i),
+            Some(self.weight_grids.get(weights, i)),
+        )?;
+        Ok(slot.get_or_init(|| v))
     }
 
     /// The denoiser's guides of a cinematic frame seen by `cam`, as
@@ -619,7 +688,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         let n = opt.width as u64 * opt.height as u64;
         let out = ctx.work_buffer("guides", 32 * n, wgpu::BufferUsages::COPY_SRC)?;
         let majorants = self.majorant_buffer(opt.interpolation)?;
-        let texture = self.texture(opt.interpolation)?;
+        let texture = self.texture_for(opt)?;
         let entries: Vec<_> = [
             (0, param_buf.as_entire_binding()),
             (1, wgpu::BindingResource::TextureView(texture)),
@@ -774,8 +843,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             light_scale: opt.exposure_scale(),
             interpolation: opt.interpolation.kernel_code(),
             segments: self.segmented as u32,
-            hidden_fill: opt.hidden_fill.unwrap_or(0.0),
-            hidden: opt.hidden_fill.is_some() as u32,
+            kept: (self.weights.is_some() && opt.mode.is_projection()) as u32,
+            pad_kept: 0,
             pad0: 0,
             pad1: 0,
         };
@@ -889,7 +958,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         };
         // A frame of one dispatch binds a placeholder.
         let accum = accum.as_ref().unwrap_or(&self.no_rows);
-        let texture = self.texture(opt.interpolation)?;
+        let texture = self.texture_for(opt)?;
         let resource = |b: u32| match b {
             0 => param_buf.as_entire_binding(),
             1 => wgpu::BindingResource::TextureView(texture),

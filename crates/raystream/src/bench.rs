@@ -423,17 +423,14 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
         pb.finish_and_clear();
         resample_ms = Some(ms(t.elapsed()));
     }
-    let (tf, mut base) = crate::dvr::options(&a.look, &a.threshold, mode, a.size)?;
+    let (tf, base) = crate::dvr::options(&a.look, &a.threshold, mode, a.size)?;
     let asked = crate::segments::Asked {
         segmentation: a.segmentation.as_deref(),
         segment: a.segment.as_deref(),
         colour_table: None,
     };
     let (volume, colours, weights) = match crate::segments::paint(asked, mode, &volume, &a.input)? {
-        Some(p) => {
-            base.hidden_fill = p.hidden_fill;
-            (p.kept.unwrap_or(volume), p.colours, p.weights)
-        }
+        Some(p) => (p.kept.unwrap_or(volume), p.colours, p.weights),
         None => (volume, None, None),
     };
     let (colours, weights) = (colours.as_ref(), weights.as_ref());

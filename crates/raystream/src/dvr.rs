@@ -195,9 +195,6 @@ pub fn default_interpolation(mode: DvrMode) -> Interpolation {
 /// Renders frames of one volume on the CPU or the GPU.
 pub struct Renderer<'a> {
     device: Device<'a>,
-    /// An average kept to segments: the volume of the kept voxels' weights (1 kept, 0 hidden,
-    /// the volume's hidden voxels holding 0), rendered beside it ([`kept_mean`]).
-    weights: Option<Device<'a>>,
 }
 
 /// One volume's frames on one device.
@@ -233,7 +230,7 @@ pub struct Frame {
 
 impl<'a> Renderer<'a> {
     /// The frames of `volume` through `tf` on `backend`, their dvr, iso and cinematic samples
-    /// coloured by `segments` where given; `weights`: an average kept to segments' weights
+    /// coloured by `segments` where given; `weights`: mip, minip and average kept to segments
     /// ([`crate::segments::Painted::weights`]).
     pub fn new(
         backend: &'a Backend,
@@ -243,20 +240,14 @@ impl<'a> Renderer<'a> {
         weights: Option<&'a Volume>,
     ) -> Result<Renderer<'a>> {
         Ok(Renderer {
-            device: Device::new(backend, volume, tf, segments)?,
-            weights: weights
-                .map(|w| Device::new(backend, w, tf, None))
-                .transpose()?,
+            device: Device::new(backend, volume, tf, segments, weights)?,
         })
     }
 
     /// Makes what frames read as `interpolation` need before any frame does (the interpolating
     /// spline's coefficients, and on the GPU their texture).
     pub fn prepare(&self, interpolation: Interpolation) -> Result<()> {
-        for d in std::iter::once(&self.device).chain(&self.weights) {
-            d.prepare(interpolation)?;
-        }
-        Ok(())
+        self.device.prepare(interpolation)
     }
 
     /// Cinematic paths traced so far, on either device (a progress bar's count).
@@ -279,44 +270,6 @@ impl<'a> Renderer<'a> {
         let sight: Sight = sight.into();
         let t = Instant::now();
         let hu = opt.mode.is_windowed() && opt.hu_values;
-        if let Some(weights) = self
-            .weights
-            .as_ref()
-            .filter(|_| opt.mode == DvrMode::Average)
-        {
-            // Both averages in HU: the volume's (its hidden voxels 0) and the weights'.
-            let both = DvrOptions {
-                hu_values: true,
-                ..*opt
-            };
-            let (sum, cost) = self.device.film(&both, sight)?;
-            let (kept, weight_cost) = weights.film(&both, sight)?;
-            let mut film = kept_mean(&sum, &kept);
-            if !hu {
-                let win = opt.shown_window();
-                for p in &mut film.pixels {
-                    *p = if p.x.is_nan() {
-                        opt.background
-                    } else {
-                        Vec3::splat(raystream_cpu::dvr::windowed(p.x, win))
-                    };
-                }
-            }
-            let picture = if hu {
-                Picture::Values(film)
-            } else {
-                Picture::of_film(film, format)
-            };
-            let add = |a: Option<f64>, b: Option<f64>| a.zip(b).map(|(a, b)| a + b);
-            return Ok(Frame {
-                picture,
-                frame_ms: ms(t.elapsed()),
-                kernel_ms: add(cost.kernel_ms, weight_cost.kernel_ms),
-                samples: cost.samples + weight_cost.samples,
-                stats: cost.stats,
-                denoise: None,
-            });
-        }
         if let (Device::Gpu(g), ImageFormat::Png, false) = (&self.device, format, hu) {
             let (rgb, times) = g.render_srgb8(opt, sight)?;
             let picture = Picture::Srgb8 {
@@ -373,45 +326,20 @@ impl<'a> Renderer<'a> {
     }
 }
 
-/// The mean of the kept voxels along each ray, from two averages over the same samples: `sum`,
-/// of the volume with its hidden voxels set to 0 (each sample Σ wᵢ·mᵢ·vᵢ over the voxels it
-/// blends, mᵢ 1 for a kept voxel), and `kept`, of the weights mᵢ themselves (Σ wᵢ·mᵢ): their
-/// ratio weighs each kept voxel by how near the ray passes, and no hidden voxel counts. NaN
-/// (a miss) where the ray came near no kept voxel.
-pub fn kept_mean(sum: &Image, kept: &Image) -> Image {
-    let pixels = sum
-        .pixels
-        .iter()
-        .zip(&kept.pixels)
-        .map(|(s, k)| {
-            // Both NaN off the volume; 0/0 (NaN) where no sample blends a kept voxel.
-            if k.x > 0.0 {
-                Vec3::splat(s.x / k.x)
-            } else {
-                Vec3::NAN
-            }
-        })
-        .collect();
-    Image {
-        width: sum.width,
-        height: sum.height,
-        pixels,
-    }
-}
-
 impl<'a> Device<'a> {
     fn new(
         backend: &'a Backend,
         volume: &'a Volume,
         tf: &'a TransferFunction,
         segments: Option<&'a SegmentColours>,
+        weights: Option<&'a Volume>,
     ) -> Result<Device<'a>> {
         Ok(match backend {
-            Backend::Gpu(ctx) => Device::Gpu(Box::new(GpuVolumeRenderer::painted(
-                ctx, volume, tf, segments,
+            Backend::Gpu(ctx) => Device::Gpu(Box::new(GpuVolumeRenderer::segmented(
+                ctx, volume, tf, segments, weights,
             )?)),
             Backend::Cpu => Device::Cpu {
-                volume: Box::new(CpuVolume::new(volume, tf).painted(segments)),
+                volume: Box::new(CpuVolume::new(volume, tf).painted(segments).kept(weights)),
                 done: AtomicU64::new(0),
             },
         })

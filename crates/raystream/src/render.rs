@@ -832,7 +832,6 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     };
     let track = wall_track(a, &volume, curve.as_ref())?;
     let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
-    opt.hidden_fill = painted.as_ref().and_then(|p| p.hidden_fill);
     // An average kept to segments is windowed on their values unless --window says.
     if let Some((w, l)) = painted.as_ref().and_then(|p| p.window)
         && opt.window.is_none()

@@ -155,16 +155,14 @@ fn labels_on_ct(
 pub struct Painted {
     pub colours: Option<SegmentColours>,
     /// `--segment LIST`: the CT with every voxel outside the chosen segments set to the CT's
-    /// lowest value (air), so that only they are drawn; for a MIP just below it and for a
-    /// MinIP just above its highest, which no projection through a segment takes
-    /// (`hidden_fill`); for an average 0, which `weights` leaves out.
+    /// lowest value (air), so that only they are drawn; for mip, minip and average to 0, which
+    /// `weights` leaves out.
     pub kept: Option<Volume>,
-    /// mip and minip kept to segments: the hidden voxels' value, for `DvrOptions::hidden_fill`
-    /// (rays that meet no segment are misses: NaN in an EXR, padding in DICOM).
-    pub hidden_fill: Option<f32>,
-    /// An average kept to segments: 1 at each kept voxel, 0 at each hidden one (whose value in
-    /// `kept` is 0), on the CT's grid; the mean along a ray is the ratio of the two volumes'
-    /// averages (`dvr::kept_mean`), so that no hidden voxel counts.
+    /// mip, minip and average kept to segments: 1 at each kept voxel, 0 at each hidden one,
+    /// on the CT's grid (`CpuVolume::kept`): each sample is the kept voxels' own blend within
+    /// the segments and projects nothing outside them, so that no hidden voxel counts and no
+    /// fill value blends in at a segment's edge (rays that meet no segment are misses: NaN
+    /// in an EXR, padding in DICOM).
     pub weights: Option<Volume>,
     /// An average kept to segments: the window (width, level) in HU of the kept voxels' values
     /// ([`spanning_window`]), for a picture without `--window` (the average's own window, −800
@@ -254,19 +252,9 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
         })
         .collect();
     let range = ct.value_range().unwrap_or((-1024.0, 3071.0));
-    let hidden_fill = match mode {
-        DvrMode::Mip | DvrMode::MinIp if a.segment.is_some() => Some(
-            raystream_cpu::dvr::hidden_fill(range, mode == DvrMode::MinIp),
-        ),
-        _ => None,
-    };
-    let average = mode == DvrMode::Average && a.segment.is_some();
+    let projected = mode.is_projection() && a.segment.is_some();
     let kept = a.segment.map(|_| {
-        let fill = match hidden_fill {
-            Some(f) => f,
-            None if average => 0.0,
-            None => range.0,
-        };
+        let fill = if projected { 0.0 } else { range.0 };
         let mut kept = ct.clone();
         for (v, &l) in kept.data.iter_mut().zip(&labels) {
             if l == 0 {
@@ -275,7 +263,7 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
         }
         kept
     });
-    let weights = average.then(|| {
+    let weights = projected.then(|| {
         let data = labels
             .iter()
             .map(|&l| if l > 0 { 1.0 } else { 0.0 })
@@ -286,7 +274,7 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
             ..Volume::hounsfield(ct.dims, ct.spacing, data)
         }
     });
-    let window = if average {
+    let window = if mode == DvrMode::Average && a.segment.is_some() {
         let mut values: Vec<f32> = ct
             .data
             .iter()
@@ -322,7 +310,6 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
     Ok(Some(Painted {
         colours,
         kept,
-        hidden_fill,
         weights,
         window,
         words,

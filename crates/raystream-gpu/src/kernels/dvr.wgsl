@@ -72,16 +72,13 @@ struct DvrParams {
     // 1: dvr, iso and cinematic samples take the colours of a segmentation (segment_labels,
     // segment_colours) in place of the transfer function's.
     segments: u32,
-    // 1 (hidden): mip and minip of a volume kept to segments; a projection within
-    // HIDDEN_MARGIN of hidden_fill, the hidden voxels' value, met none of them: a miss
-    // (raystream_cpu::dvr::hidden_fill).
-    hidden_fill: f32,
-    hidden: u32,
+    // 1: mip, minip and average of a volume kept to segments: the texture's second channel
+    // holds the kept voxels' weights (sample_kept).
+    kept: u32,
+    pad_kept: u32,
     pad0: u32,
     pad1: u32,
 }
-
-const HIDDEN_MARGIN: f32 = 0.5;
 
 // One image row of a curved plane (raystream_cpu::cpr::CprRow, LPS): the path's point, the
 // pixels' side (mm), the unit step along the row and the unit direction of its rays.
@@ -307,18 +304,33 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32, at: vec3<f32>, n: vec3<f32>, reac
     }
     var sum = 0.0;
     var taken = 0u;
+    // Samples projected: all, or of a volume kept to segments those within them.
+    var projected = 0u;
     loop {
         let t = t0 + (f32(k) + jit) * step;
         if t > t1 {
             break;
         }
-        let v = sample_at(o_idx + d_idx * t);
-        if dp.mode == MODE_MIP {
-            best = max(best, v);
-        } else if dp.mode == MODE_MINIP {
-            best = min(best, v);
+        var v: f32;
+        var within = true;
+        if dp.kept != 0u {
+            // The kept voxels' own blend where the weights' reach KEPT_WEIGHT, as the CPU's
+            // Marcher::sample_kept: both channels filtered with the same weights.
+            let s = sample_both(o_idx + d_idx * t);
+            within = s.y >= KEPT_WEIGHT;
+            v = s.x / s.y;
         } else {
-            sum += v;
+            v = sample_at(o_idx + d_idx * t);
+        }
+        if within {
+            if dp.mode == MODE_MIP {
+                best = max(best, v);
+            } else if dp.mode == MODE_MINIP {
+                best = min(best, v);
+            } else {
+                sum += v;
+            }
+            projected += 1u;
         }
         taken += 1u;
         k += 1u;
@@ -326,13 +338,13 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32, at: vec3<f32>, n: vec3<f32>, reac
     if taken == 0u {
         return missed(0.0);
     }
-    if dp.mode == MODE_AVERAGE {
-        best = sum / f32(taken);
-    }
-    if dp.hidden != 0u && abs(best - dp.hidden_fill) <= HIDDEN_MARGIN {
-        // A miss that took samples: counted negative, so that the host tells it from a value
-        // (NaN with hu_values) and still counts its samples.
+    if projected == 0u {
+        // Samples, but none within the kept segments: a miss counted negative, so that the
+        // host tells it from a value (NaN with hu_values) and still counts its samples.
         return missed(-f32(taken));
+    }
+    if dp.mode == MODE_AVERAGE {
+        best = sum / f32(projected);
     }
     if dp.hu_values != 0u {
         return Marched(vec3<f32>(best), 0.0, f32(taken));

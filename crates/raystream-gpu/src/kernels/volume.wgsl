@@ -81,16 +81,22 @@ fn color_at(hu: f32) -> vec3<f32> {
 }
 
 // The texture's trilinear filter at continuous index `q` (voxel centres at integers; the
-// sampler clamps to the edge, as the CPU clamps indices): its first channel, the values the
-// volume is read by, or with `shading` the channel whose gradient shades it (the second, the
-// voxels, where the first holds the interpolating spline's coefficients).
-fn fetch_channel(q: vec3<f32>, shading: bool) -> f32 {
-    let t = textureSampleLevel(volume, trilinear, (q + 0.5) / vec3<f32>(dp.dims), 0.0);
-    return select(t.r, t.g, shading && smooth_shading());
+// sampler clamps to the edge, as the CPU clamps indices): both channels, the values the volume
+// is read by and the second channel (the voxels whose gradient shades the interpolating
+// spline's coefficients, or a kept volume's weights).
+fn fetch_both(q: vec3<f32>) -> vec2<f32> {
+    return textureSampleLevel(volume, trilinear, (q + 0.5) / vec3<f32>(dp.dims), 0.0).rg;
+}
+
+// The channel of `v` (fetch_both's) that the volume is read by, or with `shading` the one
+// whose gradient shades it (the second, the voxels, where the first holds the interpolating
+// spline's coefficients).
+fn channel_of(v: vec2<f32>, shading: bool) -> f32 {
+    return select(v.x, v.y, shading && smooth_shading());
 }
 
 fn fetch(q: vec3<f32>) -> f32 {
-    return fetch_channel(q, false);
+    return fetch_both(q).x;
 }
 
 // The cubic B-spline at one point, as the sums of eight trilinear fetches (Sigg & Hadwiger,
@@ -134,23 +140,26 @@ fn cubic_at(p: vec3<f32>) -> Cubic {
 }
 
 // Σ over the 2×2×2 fetch positions (x.x or x.y per axis, likewise y and z) of the product of
-// their axes' weights (wx.x or wx.y, …) times the fetched value (of the shading channel with
-// `s`: fetch_channel).
-fn fetch8(x: vec2<f32>, wx: vec2<f32>, y: vec2<f32>, wy: vec2<f32>, z: vec2<f32>, wz: vec2<f32>, s: bool) -> f32 {
-    let p0 = wy.x * (wx.x * fetch_channel(vec3<f32>(x.x, y.x, z.x), s) + wx.y * fetch_channel(vec3<f32>(x.y, y.x, z.x), s))
-           + wy.y * (wx.x * fetch_channel(vec3<f32>(x.x, y.y, z.x), s) + wx.y * fetch_channel(vec3<f32>(x.y, y.y, z.x), s));
-    let p1 = wy.x * (wx.x * fetch_channel(vec3<f32>(x.x, y.x, z.y), s) + wx.y * fetch_channel(vec3<f32>(x.y, y.x, z.y), s))
-           + wy.y * (wx.x * fetch_channel(vec3<f32>(x.x, y.y, z.y), s) + wx.y * fetch_channel(vec3<f32>(x.y, y.y, z.y), s));
+// their axes' weights (wx.x or wx.y, …) times the fetched values, both channels (fetch_both).
+fn fetch8(x: vec2<f32>, wx: vec2<f32>, y: vec2<f32>, wy: vec2<f32>, z: vec2<f32>, wz: vec2<f32>) -> vec2<f32> {
+    let p0 = wy.x * (wx.x * fetch_both(vec3<f32>(x.x, y.x, z.x)) + wx.y * fetch_both(vec3<f32>(x.y, y.x, z.x)))
+           + wy.y * (wx.x * fetch_both(vec3<f32>(x.x, y.y, z.x)) + wx.y * fetch_both(vec3<f32>(x.y, y.y, z.x)));
+    let p1 = wy.x * (wx.x * fetch_both(vec3<f32>(x.x, y.x, z.y)) + wx.y * fetch_both(vec3<f32>(x.y, y.x, z.y)))
+           + wy.y * (wx.x * fetch_both(vec3<f32>(x.x, y.y, z.y)) + wx.y * fetch_both(vec3<f32>(x.y, y.y, z.y)));
     return wz.x * p0 + wz.y * p1;
 }
 
-// The cubic B-spline's value at continuous index `p`, clamped to the grid.
-fn cubic_value(p: vec3<f32>) -> f32 {
+// The cubic B-spline's value at continuous index `p`, clamped to the grid: both channels.
+fn cubic_both(p: vec3<f32>) -> vec2<f32> {
     let c = cubic_at(p);
     let g1 = 1.0 - c.g0;
     return fetch8(vec2<f32>(c.h0.x, c.h1.x), vec2<f32>(c.g0.x, g1.x),
                   vec2<f32>(c.h0.y, c.h1.y), vec2<f32>(c.g0.y, g1.y),
-                  vec2<f32>(c.h0.z, c.h1.z), vec2<f32>(c.g0.z, g1.z), false);
+                  vec2<f32>(c.h0.z, c.h1.z), vec2<f32>(c.g0.z, g1.z));
+}
+
+fn cubic_value(p: vec3<f32>) -> f32 {
+    return cubic_both(p).x;
 }
 
 // The cubic B-spline's gradient per index unit at `p`, of the shading channel (the voxels'
@@ -166,9 +175,9 @@ fn cubic_gradient(p: vec3<f32>) -> vec3<f32> {
     let wy = vec2<f32>(c.g0.y, g1.y);
     let wz = vec2<f32>(c.g0.z, g1.z);
     return vec3<f32>(
-        fetch8(vec2<f32>(c.dh0.x, c.dh1.x), vec2<f32>(c.dg0.x, -c.dg0.x), vy, wy, vz, wz, true),
-        fetch8(vx, wx, vec2<f32>(c.dh0.y, c.dh1.y), vec2<f32>(c.dg0.y, -c.dg0.y), vz, wz, true),
-        fetch8(vx, wx, vy, wy, vec2<f32>(c.dh0.z, c.dh1.z), vec2<f32>(c.dg0.z, -c.dg0.z), true));
+        channel_of(fetch8(vec2<f32>(c.dh0.x, c.dh1.x), vec2<f32>(c.dg0.x, -c.dg0.x), vy, wy, vz, wz), true),
+        channel_of(fetch8(vx, wx, vec2<f32>(c.dh0.y, c.dh1.y), vec2<f32>(c.dg0.y, -c.dg0.y), vz, wz), true),
+        channel_of(fetch8(vx, wx, vy, wy, vec2<f32>(c.dh0.z, c.dh1.z), vec2<f32>(c.dg0.z, -c.dg0.z)), true));
 }
 
 // HU at continuous index `p`, clamped to the grid of voxel centres: trilinear, or the cubic
@@ -180,6 +189,15 @@ fn sample_at(p: vec3<f32>) -> f32 {
     let d = vec3<f32>(dp.dims);
     let q = clamp(p, vec3<f32>(0.0), d - 1.0);
     return fetch(q);
+}
+
+// Both channels at continuous index `p`, clamped to the grid, as sample_at reads the first.
+fn sample_both(p: vec3<f32>) -> vec2<f32> {
+    if cubic_sampling() {
+        return cubic_both(p);
+    }
+    let d = vec3<f32>(dp.dims);
+    return fetch_both(clamp(p, vec3<f32>(0.0), d - 1.0));
 }
 
 // The world gradient (HU per mm) at index `p`, as the CPU's Marcher::gradient: central
