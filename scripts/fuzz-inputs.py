@@ -16,7 +16,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a tex
         or their segments made surfaces with `raystream iso --segment` (some simplified, some named
         by a mutated colour table) or rendered). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
-        curved planar reformation (--path, straightened or stretched) through an intact volume, measured along
+        curved planar reformation (--path, straightened or stretched) or flown through (--fly) in an intact volume, measured along
         (`raystream measure`, sometimes grading a stenosis, plotting the profile or writing a label map) and tracked through (`raystream
         centreline`).
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
@@ -519,6 +519,12 @@ def fuzz_files(work, n, device):
                 why = run(["render", vol, "--path", p, "--mode", "slice", "--size", "16x16", "-q",
                            "--slices", random.choice(["1", "3"]), "--draw-lumen", "150",
                            "--draw-wall", "--device", device, "-o", os.path.join(d, "w")], s)
+            # Sometimes a fly-through along it (--fly), at an odd field of view.
+            if not why and os.path.exists(vol) and random.random() < 0.2:
+                look = random.choice([["dvr"], ["iso"], ["cinematic", "--spp", "2"]])
+                why = run(["render", vol, "--path", p, "--mode"] + look
+                          + ["--fly", random.choice(["1", "2"]), "--fov", random.choice(["1", "90", "179.9"]),
+                             "--size", "8x8", "-q", "--device", device, "-o", os.path.join(d, "fly")], s)
             # And the lumen measured along it (`measure`), with some valid options.
             count = random.choice([[], ["--sections", random.choice(["1", "3", "50"])]])
             # Sometimes a stenosis graded too, its lesion and references placed at random.

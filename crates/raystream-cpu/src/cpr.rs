@@ -341,6 +341,27 @@ impl CurvedPlane {
         }
     }
 
+    /// A fly-through's camera at row `y` (a virtual endoscopy's, `render --fly N`): at the
+    /// path's point there, looking ahead along the path (the direction from its first point to
+    /// its last), a perspective of `fov_deg` vertically (the scene frame of
+    /// `dvr::volume_camera`); the image's up is the row's "up" (against its normal: a
+    /// cross-section's up), which turns with the path without twisting about it, and its
+    /// right the other side of [`Self::section_camera`]'s, which looks back.
+    pub fn ahead_camera(&self, y: u32, fov_deg: f32) -> Camera {
+        let r = &self.rows[y as usize];
+        let tangent = r.normal.cross(r.lateral).normalize();
+        let (fwd, right) = (tangent, -r.lateral);
+        let scene = crate::dvr::lps_to_scene;
+        Camera {
+            eye: scene(self.path_point(y)),
+            fwd: scene(fwd),
+            right: scene(right),
+            up: scene(right.cross(fwd)),
+            tan_y: (0.5 * fov_deg.to_radians()).tan(),
+            parallel: 0.0,
+        }
+    }
+
     /// How many rows' path points lie inside `vol`'s grid of voxel centres (none: the path
     /// misses the volume, as a path in the wrong coordinates does).
     pub fn rows_inside(&self, vol: &raystream_io::Volume) -> usize {
@@ -927,6 +948,57 @@ mod tests {
         assert!(err([1.0, f64::NAN, 9.0]).contains("not on the path"));
         assert!(err([5.0, 1.0, 9.0]).contains("in order"));
         assert!(err([1.0, 1.0, 9.0]).contains("in order"));
+    }
+
+    /// A fly-through's cameras along a quarter circle in the x–z plane: each on the path at
+    /// its station, looking ahead (toward the next station, and along the circle's tangent),
+    /// an orthonormal right-handed frame whose up is the station's up; the frame turns with the
+    /// path without twisting (the image's right stays the plane's normal, +y or −y
+    /// throughout); the field of view as asked.
+    #[test]
+    fn ahead_cameras_ride_the_path_looking_along_it() {
+        use crate::dvr::scene_to_lps;
+        let points = arc(40.0, 5.0);
+        let n = 8;
+        let c = CurvedPlane::sections(&points, DVec3::Y, 0.0, n).unwrap();
+        let cams: Vec<Camera> = (0..n).map(|y| c.ahead_camera(y, 90.0)).collect();
+        for (y, cam) in cams.iter().enumerate() {
+            let (eye, fwd, right, up) = (
+                scene_to_lps(cam.eye),
+                scene_to_lps(cam.fwd),
+                scene_to_lps(cam.right),
+                scene_to_lps(cam.up),
+            );
+            assert!((eye - c.path_point(y as u32)).length() < 1e-4, "{y}: {eye}");
+            // On the circle of 40 mm about the origin, looking along its tangent.
+            let radial = eye.normalize();
+            assert!((eye.length() - 40.0).abs() < 0.05, "{y}: {eye}");
+            assert!(fwd.dot(radial).abs() < 0.02, "{y}: {fwd} against {radial}");
+            if y + 1 < n as usize {
+                let ahead = scene_to_lps(cams[y + 1].eye) - eye;
+                assert!(
+                    fwd.dot(ahead.normalize()) > 0.99,
+                    "{y}: {fwd} against {ahead}"
+                );
+            }
+            for (a, b) in [(fwd, right), (fwd, up), (right, up)] {
+                assert!(a.dot(b).abs() < 1e-5);
+            }
+            for v in [fwd, right, up] {
+                assert!((v.length() - 1.0).abs() < 1e-5);
+            }
+            assert!((right.cross(fwd) - up).length() < 1e-5, "{y}");
+            assert!(
+                (up + c.rows[y].normal).length() < 1e-5,
+                "{y}: up against the normal"
+            );
+            assert!(
+                (right.y.abs() - 1.0).abs() < 1e-5,
+                "{y}: right {right} twisted"
+            );
+            assert_eq!(right.y.signum(), scene_to_lps(cams[0].right).y.signum());
+            assert!((cam.tan_y - 1.0).abs() < 1e-6 && cam.parallel == 0.0);
+        }
     }
 
     #[test]

@@ -245,7 +245,7 @@ impl VolumePick {
 }
 
 #[derive(Args)]
-#[command(group(clap::ArgGroup::new("frames").args(["turntable", "slices", "cine"])))]
+#[command(group(clap::ArgGroup::new("frames").args(["turntable", "slices", "cine", "fly"])))]
 pub struct RenderArgs {
     /// Mesh (.obj, .ply, .stl, optionally .gz; .gltf, .glb), scene (.toml) or CT volume (DICOM folder,
     /// .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd); none: the built-in abdomen CT.
@@ -373,7 +373,8 @@ pub struct RenderArgs {
     /// per line, LPS mm): the path straightened down the image's height, its first point at
     /// the top, square pixels (the path's length over the height), the cut facing --view and
     /// turned about the path by --orbit AZ (--turntable N: a rotational CPR; --slices N: N
-    /// cross-sections perpendicular to the path, evenly along it).
+    /// cross-sections perpendicular to the path, evenly along it). With --mode dvr, iso or
+    /// cinematic and --fly N: a fly-through along it.
     #[arg(
         long,
         value_name = "FILE",
@@ -381,6 +382,23 @@ pub struct RenderArgs {
         conflicts_with = "slice_at"
     )]
     pub path: Option<PathBuf>,
+    /// With --path FILE and --mode dvr, iso or cinematic: a fly-through (virtual endoscopy,
+    /// as of a vessel's lumen), N frames with the camera on the path at the middles of N
+    /// equal parts of it, looking ahead along it (from its first point toward its last), the
+    /// image's up turning with the path without twisting about it, a perspective of --fov
+    /// degrees; written as OUTPUT/frame_000.png … (-o names the folder; --format exr, dcm,
+    /// apng or gif as for --turntable). A transfer function that lets the lumen's contrast
+    /// through and stops at its wall shows the wall from inside (examples/angioscopy.toml).
+    #[arg(
+        long,
+        requires = "path",
+        conflicts_with_all = ["turntable", "slices", "cine"],
+        value_parser = clap::value_parser!(u32).range(1..=3600)
+    )]
+    pub fly: Option<u32>,
+    /// With --fly: the camera's vertical field of view, degrees (above 0, below 180).
+    #[arg(long, value_name = "DEG", requires = "fly", default_value_t = 90.0)]
+    pub fov: f32,
     /// With --path: the CPR straightened (the path down the middle column, rows at its arc
     /// length) or stretched (Kanitsar 2002: the surface swept through the path along the
     /// view's right, unrolled so that the path keeps its length, drawn as the curve it makes

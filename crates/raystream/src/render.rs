@@ -750,7 +750,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             mode.name()
         ),
     };
-    let frames = a.turntable.is_some() || a.slices.is_some() || a.cine;
+    let frames = a.turntable.is_some() || a.slices.is_some() || a.cine || a.fly.is_some();
     let format = picture_format(a, frames)?;
     check_labels(a, true, format)?;
     check_path(a, mode)?;
@@ -894,6 +894,16 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     }
     let [az, el] = orbit_angles(a);
     let cam = volume_camera_from(&volume, aspect, view.orbit(az, el), projection(a));
+    if let (Some(n), Some(curve)) = (a.fly, &curve) {
+        return fly_through(
+            a,
+            (&renderer, &volume, labels),
+            &opt,
+            (view, curve),
+            n,
+            format,
+        );
+    }
     if let (Some(n), Some(curve)) = (a.slices, &curve) {
         return path_sections(
             a,
@@ -1112,6 +1122,26 @@ fn check_path(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         return Ok(());
     };
     let file = file.display();
+    if a.fly.is_some() {
+        if !matches!(mode, DvrMode::Dvr | DvrMode::Iso | DvrMode::Cinematic) {
+            bail!(
+                "--fly with --mode {}: a fly-through looks ahead from inside, through a transfer function (--mode dvr, iso or cinematic); a projection along the path is a CPR (--path with --slab)",
+                mode.name()
+            );
+        }
+        if !(a.fov > 0.0 && a.fov < 180.0) {
+            bail!(
+                "--fov {}: the field of view lies between 0 and 180 degrees",
+                a.fov
+            );
+        }
+        if a.orbit.is_some() || a.parallel || a.scale_bar {
+            bail!(
+                "--path {file} --fly: the camera rides the path, looking ahead in perspective (--orbit, --parallel and --scale-bar do not apply)"
+            );
+        }
+        return Ok(());
+    }
     match mode {
         DvrMode::Slice => {}
         DvrMode::Mip | DvrMode::MinIp | DvrMode::Average if a.look.slab.is_some() => {}
@@ -1214,6 +1244,36 @@ fn turntable(
         let seen = seen_from(a, volume, opt, look, az + 360.0 * i as f32 / n as f32)?;
         Ok((renderer.frame(opt, seen.sight(), format)?, seen, *opt))
     })
+}
+
+/// `render --mode dvr|iso|cinematic --path FILE --fly N -o DIR`: a fly-through, N frames
+/// from cameras on the path at the middles of N equal parts of it, each looking ahead along
+/// it ([`CurvedPlane::ahead_camera`]), `--fov` degrees high: a virtual endoscopy of the
+/// lumen the path runs in.
+fn fly_through(
+    a: &RenderArgs,
+    (renderer, volume, labels): (&dvr::Renderer, &raystream_io::Volume, Labels),
+    opt: &DvrOptions,
+    (view, curve): (View, &Curve),
+    n: u32,
+    format: ImageFormat,
+) -> Result<()> {
+    let right = raystream_cpu::dvr::scene_to_lps(view.basis().col(0)).as_dvec3();
+    let stations = CurvedPlane::sections(&curve.points, right, 0.0, n)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", curve.file.display()))?;
+    inside(curve.file, &stations, volume)?;
+    frame_series(
+        a,
+        (volume, None, None, labels),
+        n,
+        format,
+        "fly-through",
+        |i| {
+            let cam = stations.ahead_camera(i, a.fov);
+            let seen = Seen::Camera(cam);
+            Ok((renderer.frame(opt, seen.sight(), format)?, seen, *opt))
+        },
+    )
 }
 
 /// `render --mode slice --path FILE --slices N -o DIR` (or a projection's `--slab`): N

@@ -789,3 +789,151 @@ fn draw_path_marks_the_centreline_on_the_reference_view() {
         stderr(&o)
     );
 }
+
+/// `render --mode dvr --tf examples/angioscopy.toml --path FILE --fly N`: a fly-through down a
+/// tube of contrast (300 HU, 10 mm radius, its edge a 1 mm ramp to the 40 HU wall round it),
+/// open at the grid's far end, along a path on its axis. From inside, the wall stops every ray
+/// but those that leave through the far end: a clear disc about the image's centre, whose
+/// radius is the tube's over the distance to the end, in the perspective's terms
+/// ((R / D) / tan(fov / 2) · half the height): each frame's camera on the axis at the middle
+/// of its part of the path, looking ahead along it (the disc centred, and growing frame by
+/// frame as the end nears), on both devices.
+#[test]
+fn a_fly_through_looks_down_a_tube_from_its_axis() {
+    let dims = [48usize, 48, 128];
+    let axis = 23.5;
+    let data: Vec<f32> = (0..dims[0] * dims[1] * dims[2])
+        .map(|n| {
+            let (x, y) = ((n % dims[0]) as f64, (n / dims[0] % dims[1]) as f64);
+            let r = ((x - axis).powi(2) + (y - axis).powi(2)).sqrt();
+            (300.0 - 260.0 * (r - 9.5).clamp(0.0, 1.0)) as f32
+        })
+        .collect();
+    let like = raystream_io::Volume::hounsfield(dims, [1.0; 3], vec![0.0; data.len()]);
+    let tube = write_like("fly-tube.mha", &like, &data);
+    let path = tmp("fly-axis.txt");
+    std::fs::write(&path, format!("{axis} {axis} 10\n{axis} {axis} 90\n")).unwrap();
+    let tf = repo().join("examples/angioscopy.toml");
+    // The wall: where the ramp crosses 145 HU, half-way through the transfer function's edge.
+    let wall = 9.5 + (300.0 - 145.0) / 260.0;
+    let (n, side) = (4u32, 160usize);
+    let mut radii = Vec::new();
+    for dev in devices() {
+        let dir = render_to(
+            &format!("fly-{dev}"),
+            dev,
+            &[
+                tube.to_str().unwrap(),
+                "--mode",
+                "dvr",
+                "--tf",
+                tf.to_str().unwrap(),
+                "--path",
+                path.to_str().unwrap(),
+                "--fly",
+                &n.to_string(),
+                "--fov",
+                "90",
+                "--size",
+                &format!("{side}x{side}"),
+                "--format",
+                "exr",
+            ],
+        );
+        let mut got = Vec::new();
+        for i in 0..n {
+            let exr = raystream_cpu::load_exr(&dir.join(format!("frame_{i:03}.exr"))).unwrap();
+            let alpha = exr.channels["A"].as_f32().unwrap();
+            // The clear pixels: their count as a disc's area, and their centroid.
+            let clear: Vec<(f64, f64)> = (0..side * side)
+                .filter(|&p| alpha[p] < 0.5)
+                .map(|p| ((p % side) as f64 + 0.5, (p / side) as f64 + 0.5))
+                .collect();
+            let radius = (clear.len() as f64 / std::f64::consts::PI).sqrt();
+            let c = clear
+                .iter()
+                .fold((0.0, 0.0), |(x, y), p| (x + p.0, y + p.1));
+            let centre = (c.0 / clear.len() as f64, c.1 / clear.len() as f64);
+            // The eye at the middle of part i of the path (z 10 to 90), the end at z 127.
+            let eye = 10.0 + (i as f64 + 0.5) * 80.0 / n as f64;
+            let want = wall / (127.0 - eye) * side as f64 / 2.0;
+            eprintln!(
+                "{dev} frame {i}: clear disc radius {radius:.2} px (want {want:.2}), centre ({:.2}, {:.2})",
+                centre.0, centre.1
+            );
+            assert!(
+                (radius - want).abs() <= 0.04 * want + 0.5,
+                "{dev} frame {i}: radius {radius} px, want {want}"
+            );
+            let mid = side as f64 / 2.0;
+            assert!(
+                (centre.0 - mid).abs() < 0.5 && (centre.1 - mid).abs() < 0.5,
+                "{dev} frame {i}: disc centred at {centre:?}"
+            );
+            // Everything else is the wall, seen close.
+            let wall_px = alpha.iter().filter(|&&a| a > 0.99).count();
+            assert!(wall_px + clear.len() * 2 > side * side, "{dev} frame {i}");
+            got.push(radius);
+        }
+        radii.push(got);
+    }
+    if let [cpu, gpu] = &radii[..] {
+        for (c, g) in cpu.iter().zip(gpu) {
+            assert!((c - g).abs() < 0.5, "the CPU's disc {c} px, the GPU's {g}");
+        }
+    }
+}
+
+/// A fly-through through the chest CT's aorta (its lumen enhanced, a stent graft in it), two
+/// frames on the CPU: from inside the lumen the wall, pink under examples/angioscopy.toml,
+/// surrounds the view (most pixels opaque and redder than they are blue); and what it refuses.
+#[test]
+fn a_fly_through_the_aorta_sees_its_wall_and_misuse_is_refused() {
+    let (vol, path) = (chest(), aorta());
+    let tf = repo().join("examples/angioscopy.toml");
+    let tf = tf.to_str().unwrap();
+    let dir = render_to(
+        "fly-aorta",
+        "cpu",
+        &[
+            &vol, "--mode", "dvr", "--tf", tf, "--path", &path, "--fly", "2", "--size", "48x48",
+        ],
+    );
+    for i in 0..2 {
+        let img = image::open(dir.join(format!("frame_{i:03}.png")))
+            .unwrap()
+            .to_rgb8();
+        let pink = img
+            .pixels()
+            .filter(|p| p[0] as u32 > p[2] as u32 + 40)
+            .count();
+        let all = (img.width() * img.height()) as usize;
+        assert!(pink * 2 > all, "frame {i}: {pink} of {all} pixels pink");
+    }
+    let fly = |more: &[&str], want: &str| {
+        let mut args = vec!["render", &vol, "--path", &path, "--fly", "2"];
+        args.extend_from_slice(more);
+        args.extend_from_slice(&["-o", "/tmp/never-written"]);
+        refused(&args, want);
+    };
+    fly(&["--mode", "mip"], "--fly with --mode mip");
+    fly(&["--mode", "dvr", "--fov", "180"], "--fov 180");
+    fly(
+        &["--mode", "dvr", "--orbit", "30,0"],
+        "the camera rides the path",
+    );
+    fly(&["--mode", "dvr", "--slices", "3"], "cannot be used with");
+    refused(
+        &[
+            "render",
+            &vol,
+            "--mode",
+            "dvr",
+            "--fly",
+            "2",
+            "-o",
+            "/tmp/never-written",
+        ],
+        "--path",
+    );
+}

@@ -384,3 +384,23 @@ pub fn iod_errors(file: &Path) -> Vec<String> {
         }
     }
 }
+
+/// `data` (one value a voxel of `like`) written as a MetaImage on `like`'s grid under the test
+/// folder.
+pub fn write_like(name: &str, like: &raystream_io::Volume, data: &[f32]) -> std::path::PathBuf {
+    let [nx, ny, nz] = like.dims;
+    let ([sx, sy, sz], [ox, oy, oz], d) = (like.spacing, like.origin, like.direction);
+    // TransformMatrix: the i axis' direction, then j's, then k's.
+    let axes: Vec<String> = (0..3)
+        .flat_map(|c| (0..3).map(move |r| d[r][c].to_string()))
+        .collect();
+    let mut bytes = format!(
+        "ObjectType = Image\nNDims = 3\nDimSize = {nx} {ny} {nz}\nElementSpacing = {sx} {sy} {sz}\nOffset = {ox} {oy} {oz}\nTransformMatrix = {}\nElementType = MET_FLOAT\nElementByteOrderMSB = False\nElementDataFile = LOCAL\n",
+        axes.join(" ")
+    )
+    .into_bytes();
+    bytes.extend(data.iter().flat_map(|v| v.to_le_bytes()));
+    let path = tmp(name);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
