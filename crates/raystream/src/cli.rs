@@ -246,6 +246,7 @@ impl VolumePick {
 
 #[derive(Args)]
 #[command(group(clap::ArgGroup::new("frames").args(["turntable", "slices", "cine", "fly"])))]
+#[command(group(clap::ArgGroup::new("stations").args(["slices", "fly"]).multiple(false)))]
 pub struct RenderArgs {
     /// Mesh (.obj, .ply, .stl, optionally .gz; .gltf, .glb), scene (.toml) or CT volume (DICOM folder,
     /// .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd); none: the built-in abdomen CT.
@@ -384,7 +385,8 @@ pub struct RenderArgs {
     pub path: Option<PathBuf>,
     /// With --path FILE and --mode dvr, iso or cinematic: a fly-through (virtual endoscopy,
     /// as of a vessel's lumen), N frames with the camera on the path at the middles of N
-    /// equal parts of it, looking ahead along it (from its first point toward its last), the
+    /// equal parts of it (or --slice-step MM apart about --path-at MM, as cross-sections),
+    /// looking ahead along it (from its first point toward its last), the
     /// image's up turning with the path without twisting about it, a perspective of --fov
     /// degrees; written as OUTPUT/frame_000.png … (-o names the folder; --format exr, dcm,
     /// apng or gif as for --turntable). A transfer function that lets the lumen's contrast
@@ -468,15 +470,16 @@ pub struct RenderArgs {
         allow_hyphen_values = true
     )]
     pub mark_at: Vec<f64>,
-    /// With --path FILE --slices N: the cross-sections lie about this point of the path, mm
-    /// along it from its first point (default: its middle), as `measure` gives a section's
-    /// arc length: `--slices 1 --path-at MM` is the cross-section there.
-    #[arg(long, value_name = "MM", requires_all = ["path", "slices"], allow_negative_numbers = true)]
+    /// With --path FILE --slices N (or --fly N): the cross-sections (the fly-through's
+    /// cameras) lie about this point of the path, mm along it from its first point (default:
+    /// its middle), as `measure` gives a section's arc length: `--slices 1 --path-at MM` is
+    /// the cross-section there.
+    #[arg(long, value_name = "MM", requires_all = ["path", "stations"], allow_negative_numbers = true)]
     pub path_at: Option<f64>,
     /// With --slices: the planes' spacing in mm (default: the pixel size, for cubic voxels);
-    /// with --path, the cross-sections' spacing along the path, about its middle (default:
-    /// evenly along all of it).
-    #[arg(long, value_name = "MM", requires = "slices")]
+    /// with --path, the cross-sections' (or with --fly the cameras') spacing along the path,
+    /// about its middle (default: evenly along all of it).
+    #[arg(long, value_name = "MM", requires = "stations")]
     pub slice_step: Option<f32>,
     /// With --turntable, --slices or --cine: the frames' format; `exr` writes frame_000.exr …
     /// holding what `-o OUT.exr` holds for the mode (HU before the window for mip, minip,

@@ -1140,6 +1140,11 @@ fn check_path(a: &RenderArgs, mode: DvrMode) -> Result<()> {
                 "--path {file} --fly: the camera rides the path, looking ahead in perspective (--orbit, --parallel and --scale-bar do not apply)"
             );
         }
+        if !a.mark_at.is_empty() || a.draw_lumen.is_some() || a.cpr == CprArg::Stretched {
+            bail!(
+                "--path {file} --fly: a fly-through is no CPR (--mark-at, --draw-lumen and --cpr draw on one)"
+            );
+        }
         return Ok(());
     }
     match mode {
@@ -1247,9 +1252,10 @@ fn turntable(
 }
 
 /// `render --mode dvr|iso|cinematic --path FILE --fly N -o DIR`: a fly-through, N frames
-/// from cameras on the path at the middles of N equal parts of it, each looking ahead along
-/// it ([`CurvedPlane::ahead_camera`]), `--fov` degrees high: a virtual endoscopy of the
-/// lumen the path runs in.
+/// from cameras on the path at the middles of N equal parts of it (or `--slice-step` apart
+/// about `--path-at`, as cross-sections are), each looking ahead along it
+/// ([`CurvedPlane::ahead_camera`]), `--fov` degrees high: a virtual endoscopy of the lumen
+/// the path runs in.
 fn fly_through(
     a: &RenderArgs,
     (renderer, volume, labels): (&dvr::Renderer, &raystream_io::Volume, Labels),
@@ -1259,7 +1265,11 @@ fn fly_through(
     format: ImageFormat,
 ) -> Result<()> {
     let right = raystream_cpu::dvr::scene_to_lps(view.basis().col(0)).as_dvec3();
-    let stations = CurvedPlane::sections(&curve.points, right, 0.0, n)
+    let spacing = raystream_cpu::cpr::Spacing {
+        step_mm: a.slice_step.map(f64::from),
+        centre_mm: a.path_at,
+    };
+    let stations = CurvedPlane::sections_spaced(&curve.points, right, 0.0, n, spacing)
         .map_err(|e| anyhow::anyhow!("{}: {e}", curve.file.display()))?;
     inside(curve.file, &stations, volume)?;
     frame_series(

@@ -797,7 +797,8 @@ fn draw_path_marks_the_centreline_on_the_reference_view() {
 /// radius is the tube's over the distance to the end, in the perspective's terms
 /// ((R / D) / tan(fov / 2) · half the height): each frame's camera on the axis at the middle
 /// of its part of the path, looking ahead along it (the disc centred, and growing frame by
-/// frame as the end nears), on both devices.
+/// frame as the end nears), on both devices; and spaced as cross-sections are
+/// (`--slice-step`, `--path-at`), the cameras where those put them.
 #[test]
 fn a_fly_through_looks_down_a_tube_from_its_axis() {
     let dims = [48usize, 48, 128];
@@ -882,6 +883,41 @@ fn a_fly_through_looks_down_a_tube_from_its_axis() {
             assert!((c - g).abs() < 0.5, "the CPU's disc {c} px, the GPU's {g}");
         }
     }
+    // Three cameras 10 mm apart about 40 mm along the path (z 50): at z 40, 50 and 60.
+    let dir = render_to(
+        "fly-spaced",
+        "cpu",
+        &[
+            tube.to_str().unwrap(),
+            "--mode",
+            "dvr",
+            "--tf",
+            tf.to_str().unwrap(),
+            "--path",
+            path.to_str().unwrap(),
+            "--fly",
+            "3",
+            "--slice-step",
+            "10",
+            "--path-at",
+            "40",
+            "--size",
+            &format!("{side}x{side}"),
+            "--format",
+            "exr",
+        ],
+    );
+    for (i, eye) in [40.0, 50.0, 60.0].into_iter().enumerate() {
+        let exr = raystream_cpu::load_exr(&dir.join(format!("frame_{i:03}.exr"))).unwrap();
+        let alpha = exr.channels["A"].as_f32().unwrap();
+        let clear = alpha.iter().filter(|&&a| a < 0.5).count();
+        let radius = (clear as f64 / std::f64::consts::PI).sqrt();
+        let want = wall / (127.0 - eye) * side as f64 / 2.0;
+        assert!(
+            (radius - want).abs() <= 0.04 * want + 0.5,
+            "spaced frame {i}: radius {radius} px, want {want}"
+        );
+    }
 }
 
 /// A fly-through through the chest CT's aorta (its lumen enhanced, a stent graft in it), two
@@ -923,6 +959,8 @@ fn a_fly_through_the_aorta_sees_its_wall_and_misuse_is_refused() {
         "the camera rides the path",
     );
     fly(&["--mode", "dvr", "--slices", "3"], "cannot be used with");
+    fly(&["--mode", "dvr", "--mark-at", "10"], "a fly-through is no CPR");
+    fly(&["--mode", "dvr", "--slice-step", "200"], "beyond the path");
     refused(
         &[
             "render",
