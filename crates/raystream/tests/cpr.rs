@@ -959,7 +959,10 @@ fn a_fly_through_the_aorta_sees_its_wall_and_misuse_is_refused() {
         "the camera rides the path",
     );
     fly(&["--mode", "dvr", "--slices", "3"], "cannot be used with");
-    fly(&["--mode", "dvr", "--mark-at", "10"], "a fly-through is no CPR");
+    fly(
+        &["--mode", "dvr", "--mark-at", "10"],
+        "a fly-through is no CPR",
+    );
     fly(&["--mode", "dvr", "--slice-step", "200"], "beyond the path");
     refused(
         &[
