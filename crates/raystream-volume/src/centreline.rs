@@ -1,6 +1,7 @@
 //! A vessel's centreline from a few points placed in its lumen, as a vascular workstation
 //! tracks one from clicks: the minimal path (Deschamps and Cohen 2001) through the lumen —
-//! the voxels at or above a threshold (contrast-filled blood), closed over thin gaps — from
+//! the voxels at or above a threshold (contrast-filled blood; or at or below it, an airway's
+//! gas), closed over thin gaps — from
 //! each point to the next, where a step costs its length over the fourth power of its distance
 //! from the lumen's wall, so that the path keeps to the middle of the vessel and goes round its
 //! bends rather than across them. The voxel path is then smoothed along its length and resampled as the
@@ -23,8 +24,11 @@ use crate::distance::squared_distance;
 /// How the centreline is found.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CentrelineOptions {
-    /// Voxels at or above this are lumen, HU.
+    /// Voxels at or above this are lumen, HU (or at or below it, with `dark`).
     pub threshold_hu: f32,
+    /// The lumen is the voxels at or below the threshold: an airway's or a bowel's gas,
+    /// darker than the wall round it, rather than contrast-filled blood, brighter.
+    pub dark: bool,
     /// Each point placed is moved to the deepest lumen voxel within this distance, mm.
     pub seed_mm: f64,
     /// The box searched reaches this far beyond the points' extent, mm.
@@ -45,6 +49,7 @@ impl Default for CentrelineOptions {
     fn default() -> CentrelineOptions {
         CentrelineOptions {
             threshold_hu: 150.0,
+            dark: false,
             seed_mm: 5.0,
             margin_mm: 30.0,
             close_mm: 3.0,
@@ -75,6 +80,24 @@ pub struct Centreline {
 }
 
 impl CentrelineOptions {
+    /// Whether a voxel of value `v` is lumen.
+    pub fn is_lumen(&self, v: f32) -> bool {
+        if self.dark {
+            v <= self.threshold_hu
+        } else {
+            v >= self.threshold_hu
+        }
+    }
+
+    /// The lumen's side of the threshold, in words: "at or above" (or "at or below").
+    pub fn side(&self) -> &'static str {
+        if self.dark {
+            "at or below"
+        } else {
+            "at or above"
+        }
+    }
+
     pub fn check(&self) -> Result<(), String> {
         if !self.threshold_hu.is_finite() {
             return Err(format!(
@@ -116,7 +139,7 @@ pub fn centreline(
     let mask: Vec<bool> = (0..grid.len())
         .map(|k| {
             let [i, j, l] = grid.ijk(k);
-            vol.at(i, j, l) >= opt.threshold_hu
+            opt.is_lumen(vol.at(i, j, l))
         })
         .collect();
     // Closed: gaps narrower than the disc (a dissection flap, a stent graft's fabric, noise
@@ -147,11 +170,12 @@ pub fn centreline(
             .deepest_near(vol, w, opt.seed_mm, &mask, &depth)
             .ok_or_else(|| {
                 format!(
-                    "point {} ({:.1}, {:.1}, {:.1}) mm LPS: no lumen at or above {} HU within {} mm (a point off the vessel, or a scan without contrast: --lumen HU, --seed MM)",
+                    "point {} ({:.1}, {:.1}, {:.1}) mm LPS: no lumen {} {} HU within {} mm (a point off the vessel, or a scan without contrast: --lumen HU, --seed MM)",
                     n + 1,
                     w.x,
                     w.y,
                     w.z,
+                    opt.side(),
                     opt.threshold_hu,
                     opt.seed_mm
                 )
@@ -165,9 +189,10 @@ pub fn centreline(
             .minimal_path(vol, pair[0], pair[1], &mask, &depth)
             .ok_or_else(|| {
                 format!(
-                    "points {} and {}: the lumen at or above {} HU does not join them within {} mm of the points (a gap, an occlusion or a stenosis below the threshold: a lower --lumen, or more points)",
+                    "points {} and {}: the lumen {} {} HU does not join them within {} mm of the points (a gap, an occlusion or a stenosis beyond the threshold: another --lumen, or more points)",
                     n + 1,
                     n + 2,
+                    opt.side(),
                     opt.threshold_hu,
                     opt.margin_mm
                 )
@@ -536,6 +561,59 @@ mod tests {
             .map(|p| p.z)
             .fold(f64::INFINITY, f64::min);
         assert!((low - 4.0).abs() < 0.8, "{low}");
+    }
+
+    /// A dark lumen (`dark`: an airway's gas in tissue) is tracked as its bright mirror is: the
+    /// U of tubes with its values negated, at the negated threshold, gives the same
+    /// centreline, point for point.
+    #[test]
+    fn a_dark_lumen_is_found_as_its_bright_mirror() {
+        let u = |p: DVec3| {
+            let leg = |cx: f64| 3.0 - ((p.x - cx).powi(2) + (p.y - 28.0).powi(2)).sqrt();
+            let bend = if p.z < 12.0 {
+                let q = ((p.x - 28.0).powi(2) + (p.z - 12.0).powi(2)).sqrt();
+                3.0 - ((q - 8.0).powi(2) + (p.y - 28.0).powi(2)).sqrt()
+            } else {
+                -10.0
+            };
+            let straight = if (12.0..=50.0).contains(&p.z) {
+                leg(20.0).max(leg(36.0))
+            } else {
+                -10.0
+            };
+            straight.max(bend)
+        };
+        let bright = phantom(1.0, 56, u);
+        let dark = phantom(1.0, 56, |p| -u(p));
+        let ends = [DVec3::new(20.0, 28.0, 48.0), DVec3::new(36.0, 28.0, 48.0)];
+        let o = CentrelineOptions {
+            margin_mm: 50.0,
+            ..Default::default()
+        };
+        let want = centreline(&bright, &ends, &o).unwrap();
+        let got = centreline(
+            &dark,
+            &ends,
+            &CentrelineOptions {
+                threshold_hu: -o.threshold_hu,
+                dark: true,
+                ..o
+            },
+        )
+        .unwrap();
+        assert_eq!(got, want);
+        // Nothing below -2000 HU: the error says which side of the threshold it looked.
+        let e = centreline(
+            &dark,
+            &ends,
+            &CentrelineOptions {
+                threshold_hu: -2000.0,
+                dark: true,
+                ..o
+            },
+        )
+        .unwrap_err();
+        assert!(e.contains("no lumen at or below -2000 HU"), "{e}");
     }
 
     #[test]

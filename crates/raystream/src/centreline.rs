@@ -1,5 +1,5 @@
 //! `raystream centreline`: a vessel's centreline through a CT volume's contrast-filled lumen
-//! from a few points placed in it (see `raystream_volume::centreline`), written as a path that
+//! (or, `--dark`, an airway's) from a few points placed in it (see `raystream_volume::centreline`), written as a path that
 //! `render --path` and `measure --path` read.
 
 use std::time::Instant;
@@ -24,6 +24,7 @@ pub fn run(a: &CentrelineArgs) -> Result<()> {
     }
     let opt = CentrelineOptions {
         threshold_hu: a.vessel.lumen,
+        dark: a.dark,
         seed_mm: a.vessel.seed,
         margin_mm: a.margin,
         close_mm: a.close,
@@ -41,7 +42,8 @@ pub fn run(a: &CentrelineArgs) -> Result<()> {
     let line = centreline(&volume, &points, &opt).map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     pb.finish_and_clear();
     let what = format!(
-        "raystream centreline: the lumen (>= {} HU) of {} through the {} points of {}, {:.1} mm",
+        "raystream centreline: the lumen ({} {} HU) of {} through the {} points of {}, {:.1} mm",
+        if a.dark { "<=" } else { ">=" },
         a.vessel.lumen,
         file_name(&a.input),
         points.len(),

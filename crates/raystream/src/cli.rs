@@ -1025,6 +1025,11 @@ pub struct CentrelineArgs {
     pub output: PathBuf,
     #[command(flatten)]
     pub vessel: LumenPick,
+    /// The lumen is the voxels at or below --lumen HU: an airway's gas (with --lumen -950,
+    /// clear of the lung round the bronchi at about -850) or a bowel's, darker than the wall,
+    /// for a fly-through (render --fly) of a virtual bronchoscopy or colonography.
+    #[arg(long)]
+    pub dark: bool,
     /// The search reaches this far beyond the points' extent, mm.
     #[arg(
         long,

@@ -935,17 +935,7 @@ fn a_fly_through_the_aorta_sees_its_wall_and_misuse_is_refused() {
             &vol, "--mode", "dvr", "--tf", tf, "--path", &path, "--fly", "2", "--size", "48x48",
         ],
     );
-    for i in 0..2 {
-        let img = image::open(dir.join(format!("frame_{i:03}.png")))
-            .unwrap()
-            .to_rgb8();
-        let pink = img
-            .pixels()
-            .filter(|p| p[0] as u32 > p[2] as u32 + 40)
-            .count();
-        let all = (img.width() * img.height()) as usize;
-        assert!(pink * 2 > all, "frame {i}: {pink} of {all} pixels pink");
-    }
+    wall_round_most_of(&dir, 2);
     let fly = |more: &[&str], want: &str| {
         let mut args = vec!["render", &vol, "--path", &path, "--fly", "2"];
         args.extend_from_slice(more);
@@ -977,4 +967,75 @@ fn a_fly_through_the_aorta_sees_its_wall_and_misuse_is_refused() {
         ],
         "--path",
     );
+}
+
+/// A virtual bronchoscopy of the chest CT: `centreline --dark --lumen -950` from
+/// examples/chest_airway_points.txt (the trachea, then the left main bronchus) tracks the
+/// airway's gas, every control point of it in air (under -850 HU, the lung's parenchyma),
+/// from within 5 mm of each point placed, 100 to 120 mm long; and `render --fly` along it
+/// under examples/bronchoscopy.toml sees the airway's wall, pink, round most of each frame.
+#[test]
+fn a_fly_through_the_airway_follows_a_dark_centreline() {
+    let vol = chest();
+    let points = repo().join("examples/chest_airway_points.txt");
+    let line = tmp("airway.mrk.json");
+    let o = run(&[
+        "centreline",
+        "--quiet",
+        &vol,
+        "--path",
+        points.to_str().unwrap(),
+        "--dark",
+        "--lumen",
+        "-950",
+        "-o",
+        line.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let path = raystream_io::read_curve(&line).unwrap();
+    let placed = raystream_io::read_curve(&points).unwrap();
+    let ct = raystream_io::load_volume(Path::new(&vol), &Default::default()).unwrap();
+    for p in &path {
+        let q = ct.world_to_index(*p).round();
+        let v = ct.at(q.x as usize, q.y as usize, q.z as usize);
+        assert!(v < -850.0, "{p}: {v} HU on the airway's path");
+    }
+    assert!(path[0].distance(placed[0]) < 5.0 && path[path.len() - 1].distance(placed[1]) < 5.0);
+    let length: f64 = path.windows(2).map(|w| w[0].distance(w[1])).sum();
+    assert!((100.0..120.0).contains(&length), "{length} mm");
+    let tf = repo().join("examples/bronchoscopy.toml");
+    let dir = render_to(
+        "fly-airway",
+        "cpu",
+        &[
+            &vol,
+            "--mode",
+            "dvr",
+            "--tf",
+            tf.to_str().unwrap(),
+            "--path",
+            line.to_str().unwrap(),
+            "--fly",
+            "2",
+            "--size",
+            "48x48",
+        ],
+    );
+    wall_round_most_of(&dir, 2);
+}
+
+/// Each of a fly-through's `n` PNG frames in `dir` is mostly a wall seen from inside: over
+/// half its pixels pink (red over blue by more than 40 levels).
+fn wall_round_most_of(dir: &Path, n: u32) {
+    for i in 0..n {
+        let img = image::open(dir.join(format!("frame_{i:03}.png")))
+            .unwrap()
+            .to_rgb8();
+        let pink = img
+            .pixels()
+            .filter(|p| p[0] as u32 > p[2] as u32 + 40)
+            .count();
+        let all = (img.width() * img.height()) as usize;
+        assert!(pink * 2 > all, "frame {i}: {pink} of {all} pixels pink");
+    }
 }
