@@ -18,7 +18,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a tex
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
         curved planar reformation (--path, straightened or stretched) or flown through (--fly) in an intact volume, measured along
         (`raystream measure`, sometimes grading a stenosis, plotting the profile or writing a label map) and tracked through (`raystream
-        centreline`).
+        centreline`, some of a dark lumen).
 scenes: a scene with glass, a mirror, a mesh and a light, with one to three numbers replaced by
         absurd ones (0, -1, ±inf, nan, 1e30 ...), rendered on the CPU and the GPU: either both
         refuse it (exit 2, naming the file) or rays.py imgdiff finds them within the GPU tests'
@@ -547,7 +547,8 @@ def fuzz_files(work, n, device):
             # And a centreline tracked through its points.
             why = why or (os.path.exists(vol) and run(
                 ["centreline", vol, "--path", p, "-q", "-o", os.path.join(d, "cl.mrk.json"),
-                 "--lumen", random.choice(["-500", "0", "150"])], s))
+                 "--lumen", random.choice(["-500", "0", "150"])]
+                + (["--dark"] if random.random() < 0.3 else []), s))
             if why:
                 bad += 1
                 print(f"FAIL {p}: {why}")
