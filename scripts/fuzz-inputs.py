@@ -543,7 +543,8 @@ def fuzz_files(work, n, device):
                 + (["--plot", os.path.join(d, "p." + random.choice(["svg", "png", "dcm"]))]
                    if random.random() < 0.5 else [])
                 + (["--mask", os.path.join(d, "m." + random.choice(["nii", "nii.gz"]))]
-                   if random.random() < 0.3 else []), s))
+                   if random.random() < 0.3 else [])
+                + (["--dark"] if random.random() < 0.2 else []), s))
             # And a centreline tracked through its points.
             why = why or (os.path.exists(vol) and run(
                 ["centreline", vol, "--path", p, "-q", "-o", os.path.join(d, "cl.mrk.json"),

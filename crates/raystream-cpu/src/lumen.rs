@@ -24,8 +24,13 @@ use crate::wall::{Outline, Prior, Track, Wall, WallOptions, wall_about};
 /// How the lumen is found on a section.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LumenOptions {
-    /// Samples at or above this are lumen, HU.
+    /// Samples at or above this are lumen, HU (at or below it, with `dark`).
     pub threshold_hu: f32,
+    /// The lumen is the samples at or below the threshold: an airway's gas, darker than its
+    /// wall, rather than contrast-filled blood, brighter. Found as the bright lumen of the
+    /// values negated about the negated threshold, so that every step (the seed, the flood,
+    /// the edge's crossing between samples) is the same.
+    pub dark: bool,
     /// The side of the square sampled about the path's point, mm: the widest lumen measured
     /// whole (a lumen that reaches its edge is reported as open).
     pub field_mm: f64,
@@ -46,10 +51,20 @@ impl LumenOptions {
     pub fn for_volume(vol: &Volume) -> LumenOptions {
         LumenOptions {
             threshold_hu: 150.0,
+            dark: false,
             field_mm: 100.0,
             pixel_mm: (crate::dvr::min_spacing(vol) as f64 / 4.0).max(100.0 / 1024.0),
             seed_mm: 5.0,
             open_mm: 2.0,
+        }
+    }
+
+    /// The lumen's side of the threshold, in words: "at or above" (or "at or below").
+    pub fn bound_words(&self) -> &'static str {
+        if self.dark {
+            "at or below"
+        } else {
+            "at or above"
         }
     }
 
@@ -392,7 +407,9 @@ fn segment_on(
     let (n, p) = (opt.side(), opt.pixel_mm);
     let offset = |k: usize| grid_offset(n, p, k % n, k / n);
     let at = sampler(vol, m, row);
-    let sample = |k: usize| at(offset(k));
+    // A dark lumen: the bright lumen of the values negated (`LumenOptions::dark`).
+    let sign = if opt.dark { -1.0 } else { 1.0 };
+    let sample = |k: usize| sign * at(offset(k));
     // The grid's samples, each taken when first needed.
     let mut values = vec![0f32; n * n];
     let mut taken = vec![false; n * n];
@@ -403,7 +420,7 @@ fn segment_on(
         }
         values[k]
     };
-    let threshold = opt.threshold_hu;
+    let threshold = sign * opt.threshold_hu;
     // The seed: the lumen pixel nearest the path's point, within seed_mm (with Fit::Lumen
     // only the square about the grid's middle that holds that disc is searched).
     let reach = opt.seed_mm.max(0.5 * p * std::f64::consts::SQRT_2);
@@ -914,6 +931,55 @@ mod tests {
     /// even), within 0.03 mm, from a path on the axis, off it, and outside the tube within the
     /// seed radius (the run is then the lumen's on the line, wholly to one side); none when
     /// the line misses the tube.
+    /// A dark lumen (`dark`: an airway's gas in its wall) measures as its bright mirror does:
+    /// a tube of radius 7.3 mm and a side branch cut off by the opening, its values negated,
+    /// at the negated threshold, gives every section's lumen bit for bit (area, diameters,
+    /// centroid, outline); read as bright at that threshold, it is another lumen.
+    #[test]
+    fn a_dark_lumen_measures_as_its_bright_mirror() {
+        let (r, axis) = (7.3, DVec2::new(31.6, 32.2));
+        let f = |p: DVec3| {
+            let tube = r - (p.truncate() - axis).length();
+            let branch = 1.2 - ((p.y - 32.2).powi(2) + (p.z - 12.0).powi(2)).sqrt();
+            tube.max(if p.x > axis.x { branch } else { -10.0 })
+        };
+        let bright = phantom(24, f);
+        let dark = phantom(24, |p| -f(p));
+        let path = [DVec3::new(31.0, 33.0, 2.0), DVec3::new(31.0, 33.0, 21.0)];
+        let o = LumenOptions {
+            threshold_hu: 30.0,
+            ..opt(&bright)
+        };
+        let want = measure_path(&bright, &path, 7, DVec3::X, &o, None).unwrap();
+        let mirrored = LumenOptions {
+            threshold_hu: -30.0,
+            dark: true,
+            ..o
+        };
+        let got = measure_path(&dark, &path, 7, DVec3::X, &mirrored, None).unwrap();
+        assert_eq!(got.len(), want.len());
+        for (g, w) in got.iter().zip(&want) {
+            assert!(w.lumen.is_some(), "the tube");
+            assert_eq!(format!("{:?}", g.lumen), format!("{:?}", w.lumen));
+        }
+        let other = measure_path(
+            &dark,
+            &path,
+            7,
+            DVec3::X,
+            &LumenOptions {
+                dark: false,
+                ..mirrored
+            },
+            None,
+        )
+        .unwrap();
+        assert_ne!(
+            format!("{:?}", other[3].lumen),
+            format!("{:?}", want[3].lumen)
+        );
+    }
+
     #[test]
     fn the_lumen_across_a_row_is_the_chord_of_the_tube() {
         let (r, axis) = (7.3, DVec2::new(31.6, 32.2));

@@ -24,7 +24,7 @@ pub fn run(a: &CentrelineArgs) -> Result<()> {
     }
     let opt = CentrelineOptions {
         threshold_hu: a.vessel.lumen,
-        dark: a.dark,
+        dark: a.vessel.dark,
         seed_mm: a.vessel.seed,
         margin_mm: a.margin,
         close_mm: a.close,
@@ -43,7 +43,7 @@ pub fn run(a: &CentrelineArgs) -> Result<()> {
     pb.finish_and_clear();
     let what = format!(
         "raystream centreline: the lumen ({} {} HU) of {} through the {} points of {}, {:.1} mm",
-        if a.dark { "<=" } else { ">=" },
+        if a.vessel.dark { "<=" } else { ">=" },
         a.vessel.lumen,
         file_name(&a.input),
         points.len(),

@@ -847,6 +847,12 @@ pub struct LumenPick {
         allow_negative_numbers = true
     )]
     pub lumen: f32,
+    /// The lumen is the voxels at or below --lumen HU: an airway's gas (with --lumen -950,
+    /// clear of the lung round the bronchi at about -850) or a bowel's, darker than the wall
+    /// (`centreline`: for a fly-through, render --fly, of a virtual bronchoscopy; `measure`:
+    /// the airway's lumen section by section).
+    #[arg(long)]
+    pub dark: bool,
     /// The lumen is looked for this far from the path's points, mm (`measure`: its sample
     /// nearest the point; `centreline`: its deepest voxel, where the point is moved).
     #[arg(
@@ -1025,11 +1031,6 @@ pub struct CentrelineArgs {
     pub output: PathBuf,
     #[command(flatten)]
     pub vessel: LumenPick,
-    /// The lumen is the voxels at or below --lumen HU: an airway's gas (with --lumen -950,
-    /// clear of the lung round the bronchi at about -850) or a bowel's, darker than the wall,
-    /// for a fly-through (render --fly) of a virtual bronchoscopy or colonography.
-    #[arg(long)]
-    pub dark: bool,
     /// The search reaches this far beyond the points' extent, mm.
     #[arg(
         long,

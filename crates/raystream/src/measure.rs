@@ -83,6 +83,7 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     }
     let opt = LumenOptions {
         threshold_hu: a.vessel.lumen,
+        dark: a.vessel.dark,
         field_mm: a.field,
         seed_mm: a.vessel.seed,
         open_mm: a.open,
@@ -95,6 +96,11 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         ..WallOptions::default()
     });
     if let Some(w) = &wall {
+        if opt.dark {
+            bail!(
+                "--wall with --dark: the outer wall is found beyond a bright lumen (a vessel's), not an airway's"
+            );
+        }
         w.check(&opt).map_err(|e| anyhow::anyhow!("--wall: {e}"))?;
     }
     let file = a.path.display();
@@ -221,7 +227,8 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     }
     if !found {
         bail!(
-            "{file}: no lumen at or above {} HU within {} mm of the path on any of its {n} sections (a non-contrast scan, or the path off the vessel: --lumen HU, --seed MM)",
+            "{file}: no lumen {} {} HU within {} mm of the path on any of its {n} sections (a non-contrast scan, or the path off the vessel: --lumen HU, --seed MM)",
+            opt.bound_words(),
             a.vessel.lumen,
             a.vessel.seed
         );
@@ -653,8 +660,9 @@ fn report_text(
     let length = winding.length_mm;
     let n = sections.len();
     let mut t = format!(
-        "{}: the lumen (>= {} HU, connected to the path within {} mm, opened by a {} mm disc) on {n} sections of {} ({length:.1} mm), {:.2} mm apart, sampled every {:.3} mm over {} mm\n",
+        "{}: the lumen ({} {} HU, connected to the path within {} mm, opened by a {} mm disc) on {n} sections of {} ({length:.1} mm), {:.2} mm apart, sampled every {:.3} mm over {} mm\n",
         a.input.display(),
+        if opt.dark { "<=" } else { ">=" },
         opt.threshold_hu,
         opt.seed_mm,
         opt.open_mm,
@@ -747,15 +755,22 @@ fn report_text(
     if open > 0 {
         let _ = writeln!(
             t,
-            "open: {open} of {n} sections, where the lumen reaches the {} mm field's edge (wider than the field, or joined to a bright neighbour such as bone at this threshold): their figures are of the part in the field",
-            opt.field_mm
+            "open: {open} of {n} sections, where the lumen reaches the {} mm field's edge (wider than the field, or joined to {} at this threshold): their figures are of the part in the field",
+            opt.field_mm,
+            if opt.dark {
+                "a dark neighbour such as the lung, or another airway where it divides"
+            } else {
+                "a bright neighbour such as bone"
+            }
         );
     }
     if none > 0 {
         let _ = writeln!(
             t,
-            "none: {none} of {n} sections with no lumen at or above {} HU within {} mm of the path",
-            opt.threshold_hu, opt.seed_mm
+            "none: {none} of {n} sections with no lumen {} {} HU within {} mm of the path",
+            opt.bound_words(),
+            opt.threshold_hu,
+            opt.seed_mm
         );
     }
     if let Some(hu) = a.wall {
@@ -1035,6 +1050,7 @@ fn report_json(
         "distance_metric": winding.distance_metric.map(round3),
         "turning_deg_per_cm": round3(winding.turning_deg_per_cm),
         "threshold_hu": opt.threshold_hu,
+        "dark": opt.dark,
         "field_mm": opt.field_mm,
         "seed_mm": opt.seed_mm,
         "open_mm": opt.open_mm,

@@ -972,8 +972,9 @@ fn a_fly_through_the_aorta_sees_its_wall_and_misuse_is_refused() {
 /// A virtual bronchoscopy of the chest CT: `centreline --dark --lumen -950` from
 /// examples/chest_airway_points.txt (the trachea, then the left main bronchus) tracks the
 /// airway's gas, every control point of it in air (under -850 HU, the lung's parenchyma),
-/// from within 5 mm of each point placed, 100 to 120 mm long; and `render --fly` along it
-/// under examples/bronchoscopy.toml sees the airway's wall, pink, round most of each frame.
+/// from within 5 mm of each point placed, 100 to 120 mm long; `measure --dark` along it gives
+/// the trachea's and the left main bronchus's widths; and `render --fly` along it under
+/// examples/bronchoscopy.toml sees the airway's wall, pink, round most of each frame.
 #[test]
 fn a_fly_through_the_airway_follows_a_dark_centreline() {
     let vol = chest();
@@ -1003,6 +1004,49 @@ fn a_fly_through_the_airway_follows_a_dark_centreline() {
     assert!(path[0].distance(placed[0]) < 5.0 && path[path.len() - 1].distance(placed[1]) < 5.0);
     let length: f64 = path.windows(2).map(|w| w[0].distance(w[1])).sum();
     assert!((100.0..120.0).contains(&length), "{length} mm");
+    // Measured along it (`measure --dark`, the gas at or below -500 HU, half-way to the wall):
+    // the trachea's lumen 15 to 23 mm across over its first 45 mm, the left main bronchus's
+    // 8 to 16 mm over its last 35; the carina between (where the two bronchi part, open).
+    let o = run(&[
+        "measure",
+        "--quiet",
+        &vol,
+        "--path",
+        line.to_str().unwrap(),
+        "--dark",
+        "--lumen",
+        "-500",
+        "--sections",
+        "10",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(m["dark"], true);
+    for s in m["sections"].as_array().unwrap() {
+        let arc = s["arc_mm"].as_f64().unwrap();
+        let d = s["equivalent_diameter_mm"].as_f64();
+        let want = if arc < 45.0 {
+            15.0..23.0
+        } else if arc > length - 35.0 {
+            8.0..16.0
+        } else {
+            continue;
+        };
+        assert_eq!(s["lumen"], "closed", "{s}");
+        assert!(d.is_some_and(|d| want.contains(&d)), "{s}");
+    }
+    refused(
+        &[
+            "measure",
+            &vol,
+            "--path",
+            line.to_str().unwrap(),
+            "--dark",
+            "--wall",
+        ],
+        "--wall with --dark",
+    );
     let tf = repo().join("examples/bronchoscopy.toml");
     let dir = render_to(
         "fly-airway",
