@@ -26,6 +26,9 @@ if [ "${1:-}" = --pack ]; then
   strip -o "$d/raystream" target/release/raystream
   cp ../shared/data/meshes/{stanford_bunny.ply,stanford_lucy_100k.ply,turbine_blade.ply} "$d/meshes/"
   cp ../shared/data/volumes/nifti/abdomen_pelvis_ct_totalseg.nii.gz "$d/ct/"
+  # The chest CT with its aorta's path and the fly-through's transfer function (question 20).
+  cp ../shared/data/volumes/nifti/chest_ct_stents_totalseg.nii.gz examples/chest_aorta.mrk.json \
+    examples/angioscopy.toml "$d/ct/"
   cp ../shared/tools/rays.py scripts/sort-rays.py "$d/"
   du -sh "$d"
   exit 0
@@ -199,6 +202,14 @@ $bin render "$ct" --mode cinematic --preset ct-aaa --spp 256 --device gpu --size
 # Denoised: 16 paths a pixel, traced, guided and filtered on the GPU (its line names what the
 # guides and the filter took).
 $bin render "$ct" --mode cinematic --preset ct-aaa --spp 16 --denoise --device gpu --size "$dvr_size" -o "$out/cinematic-denoised-gpu.png" 2>&1 | tee -a "$out/render.log"
+# A fly-through of the chest CT's aorta (open question 20): 36 frames from inside the lumen,
+# on the GPU and (4 frames) on the CPU; the median frame time is on each line.
+chest=$d/ct/chest_ct_stents_totalseg.nii.gz
+[ -f "$chest" ] && for dev in gpu cpu; do
+  n=36; [ $dev = cpu ] && n=4
+  $bin render "$chest" --mode dvr --tf "$d/ct/angioscopy.toml" --path "$d/ct/chest_aorta.mrk.json" --fly $n \
+    --device $dev --size "$dvr_size" -o "$tmp/fly-$dev" 2>&1 | sed "s/^/[fly $dev] /" | tee -a "$out/render.log"
+done
 }
 (cd "$out" && shopt -s nullglob && f=(./*.png ./*.exr) && [ ${#f[@]} -gt 0 ] \
   && tar cf images.tar "${f[@]}" && rm -f "${f[@]}")

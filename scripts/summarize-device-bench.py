@@ -226,6 +226,26 @@ def cinematic_table(path, out):
     out.append("")
 
 
+FLY = re.compile(r"^\[fly (\w+)\] raystream: wrote (\d+) frames .*?\((\d+x\d+), --mode (\w+).*?median render ([\d.]+) ms")
+
+
+def fly_table(path, out):
+    """render.log's fly-throughs (open question 20): the median frame's time on each device."""
+    rows = []
+    with open(path) as f:
+        for line in f:
+            m = FLY.match(line)
+            if m:
+                rows.append(m.groups())
+    if not rows:
+        return
+    out.append("| fly-through | device | frames | size | median frame ms |")
+    out.append("|---|---|---|---|---|")
+    for dev, n, size, mode, ms in rows:
+        out.append(f"| {mode} | {dev} | {n} | {size} | {float(ms):.1f} |")
+    out.append("")
+
+
 def volume_table(lines, out):
     """The volume benches (`bench VOLUME --mode … --json`, tagged "volume"): frames/s by wall
     and kernel time, and samples/s."""
@@ -271,6 +291,7 @@ def main():
     if a.render:
         render_table(a.render, out)
         cinematic_table(a.render, out)
+        fly_table(a.render, out)
     print("\n".join(out))
 
 
