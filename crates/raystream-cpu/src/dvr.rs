@@ -1077,14 +1077,7 @@ impl<'a> CpuVolume<'a> {
     /// blend with what is hidden; a ray that meets no segment is a miss.
     pub fn kept(mut self, weights: Option<&'a Volume>) -> CpuVolume<'a> {
         if let Some(w) = weights {
-            assert_eq!(w.dims, self.vol.dims, "weights on the volume's grid");
-            assert!(
-                w.data
-                    .iter()
-                    .zip(&self.vol.data)
-                    .all(|(w, v)| *w != 0.0 || *v == 0.0),
-                "a kept volume's hidden voxels hold 0"
-            );
+            check_kept(self.vol, w);
         }
         self.weights = weights;
         self
@@ -1165,6 +1158,20 @@ impl<'a> CpuVolume<'a> {
         };
         (film, rays.iter().map(|c| 1.0 - c.transmit).collect(), stats)
     }
+}
+
+/// Panics unless `weights` can keep `vol` to segments ([`CpuVolume::kept`], and the GPU's
+/// renderer likewise): on its grid, and 0 wherever `vol` is not (a hidden voxel holds 0).
+pub fn check_kept(vol: &Volume, weights: &Volume) {
+    assert_eq!(weights.dims, vol.dims, "weights on the volume's grid");
+    assert!(
+        weights
+            .data
+            .iter()
+            .zip(&vol.data)
+            .all(|(w, v)| *w != 0.0 || *v == 0.0),
+        "a kept volume's hidden voxels hold 0"
+    );
 }
 
 /// Renders `vol` (HU) with `tf` (dvr mode; `None` elsewhere is fine) over `opt.background`

@@ -61,11 +61,7 @@ impl LumenOptions {
 
     /// The lumen's side of the threshold, in words: "at or above" (or "at or below").
     pub fn bound_words(&self) -> &'static str {
-        if self.dark {
-            "at or below"
-        } else {
-            "at or above"
-        }
+        raystream_volume::centreline::bound_words(self.dark)
     }
 
     /// The grid's side in pixels.

@@ -362,14 +362,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             assert_eq!(s.dims, vol.dims, "segment colours on the volume's grid");
         }
         if let Some(w) = weights {
-            assert_eq!(w.dims, vol.dims, "weights on the volume's grid");
-            assert!(
-                w.data
-                    .iter()
-                    .zip(&vol.data)
-                    .all(|(w, v)| *w != 0.0 || *v == 0.0),
-                "a kept volume's hidden voxels hold 0"
-            );
+            raystream_cpu::dvr::check_kept(vol, w);
         }
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let gpu = GpuVolume::new(ctx, vol, tf, &Marcher::new(vol, None))?;
@@ -595,12 +588,8 @@ impl<'a> GpuVolumeRenderer<'a> {
     /// first, to time it apart).
     pub fn prepare(&self, interpolation: Interpolation) -> Result<(), GpuError> {
         self.texture(interpolation)?;
-        if self.weights.is_some() {
-            self.texture_for(&DvrOptions {
-                mode: DvrMode::Mip,
-                interpolation,
-                ..Default::default()
-            })?;
+        if let Some(weights) = self.weights {
+            self.kept_texture(weights, interpolation)?;
         }
         self.ctx.wait()
     }
@@ -625,15 +614,28 @@ impl<'a> GpuVolumeRenderer<'a> {
         Ok(self.coefficient_view.get_or_init(|| v))
     }
 
+    /// The kept voxels' weights a frame of `mode` reads: a projection's, where there are any.
+    fn kept_weights(&self, mode: DvrMode) -> Option<&'a Volume> {
+        self.weights.filter(|_| mode.is_projection())
+    }
+
     /// The texture a frame of `opt` reads: with weights ([`Self::segmented`]) and a projection,
     /// the kept volume beside its weights, each as `opt.interpolation` reads it (uploaded on
     /// first use: a texture for the trilinear and cubic B-spline, one for the interpolating
     /// spline's coefficients); else [`Self::texture`].
     fn texture_for(&self, opt: &DvrOptions) -> Result<&wgpu::TextureView, GpuError> {
-        let Some(weights) = self.weights.filter(|_| opt.mode.is_projection()) else {
-            return self.texture(opt.interpolation);
-        };
-        let i = opt.interpolation;
+        match self.kept_weights(opt.mode) {
+            Some(weights) => self.kept_texture(weights, opt.interpolation),
+            None => self.texture(opt.interpolation),
+        }
+    }
+
+    /// The kept volume beside its `weights`, as interpolation `i` reads each.
+    fn kept_texture(
+        &self,
+        weights: &Volume,
+        i: Interpolation,
+    ) -> Result<&wgpu::TextureView, GpuError> {
         let slot = &self.kept_views[i.prefiltered() as usize];
         if let Some(v) = slot.get() {
             return Ok(v);
@@ -843,7 +845,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             light_scale: opt.exposure_scale(),
             interpolation: opt.interpolation.kernel_code(),
             segments: self.segmented as u32,
-            kept: (self.weights.is_some() && opt.mode.is_projection()) as u32,
+            kept: self.kept_weights(opt.mode).is_some() as u32,
             pad_kept: 0,
             pad0: 0,
             pad1: 0,

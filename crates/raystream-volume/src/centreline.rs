@@ -59,6 +59,13 @@ impl Default for CentrelineOptions {
     }
 }
 
+/// A lumen's side of its threshold, in words: "at or above" (a bright lumen, contrast-filled
+/// blood), or with `dark` "at or below" (an airway's gas); the centreline's and the sections'
+/// (`raystream_cpu::lumen::LumenOptions::dark`) alike.
+pub fn bound_words(dark: bool) -> &'static str {
+    if dark { "at or below" } else { "at or above" }
+}
+
 /// The most voxels a search box may hold: about 40 bytes each at the most (the mask, the
 /// closing's and the wall's distance transforms, the search's costs and links), 640 MiB. An
 /// aorta from the arch to the iliac arteries in a 0.7 mm CTA fills about half of it.
@@ -89,13 +96,9 @@ impl CentrelineOptions {
         }
     }
 
-    /// The lumen's side of the threshold, in words: "at or above" (or "at or below").
-    pub fn side(&self) -> &'static str {
-        if self.dark {
-            "at or below"
-        } else {
-            "at or above"
-        }
+    /// The lumen's side of the threshold, in words ([`bound_words`]).
+    pub fn bound_words(&self) -> &'static str {
+        bound_words(self.dark)
     }
 
     pub fn check(&self) -> Result<(), String> {
@@ -175,7 +178,7 @@ pub fn centreline(
                     w.x,
                     w.y,
                     w.z,
-                    opt.side(),
+                    opt.bound_words(),
                     opt.threshold_hu,
                     opt.seed_mm
                 )
@@ -192,7 +195,7 @@ pub fn centreline(
                     "points {} and {}: the lumen {} {} HU does not join them within {} mm of the points (a gap, an occlusion or a stenosis beyond the threshold: another --lumen, or more points)",
                     n + 1,
                     n + 2,
-                    opt.side(),
+                    opt.bound_words(),
                     opt.threshold_hu,
                     opt.margin_mm
                 )

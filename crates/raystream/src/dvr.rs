@@ -193,12 +193,7 @@ pub fn default_interpolation(mode: DvrMode) -> Interpolation {
 }
 
 /// Renders frames of one volume on the CPU or the GPU.
-pub struct Renderer<'a> {
-    device: Device<'a>,
-}
-
-/// One volume's frames on one device.
-enum Device<'a> {
+pub enum Renderer<'a> {
     Cpu {
         /// The volume, with its spline coefficients, brick tables and majorants kept from frame
         /// to frame.
@@ -239,22 +234,34 @@ impl<'a> Renderer<'a> {
         segments: Option<&'a SegmentColours>,
         weights: Option<&'a Volume>,
     ) -> Result<Renderer<'a>> {
-        Ok(Renderer {
-            device: Device::new(backend, volume, tf, segments, weights)?,
+        Ok(match backend {
+            Backend::Gpu(ctx) => Renderer::Gpu(Box::new(GpuVolumeRenderer::segmented(
+                ctx, volume, tf, segments, weights,
+            )?)),
+            Backend::Cpu => Renderer::Cpu {
+                volume: Box::new(CpuVolume::new(volume, tf).painted(segments).kept(weights)),
+                done: AtomicU64::new(0),
+            },
         })
     }
 
     /// Makes what frames read as `interpolation` need before any frame does (the interpolating
     /// spline's coefficients, and on the GPU their texture).
     pub fn prepare(&self, interpolation: Interpolation) -> Result<()> {
-        self.device.prepare(interpolation)
+        match self {
+            Renderer::Gpu(g) => g.prepare(interpolation)?,
+            Renderer::Cpu { volume, .. } => {
+                volume.grid(interpolation);
+            }
+        }
+        Ok(())
     }
 
     /// Cinematic paths traced so far, on either device (a progress bar's count).
     pub fn paths_done(&self) -> u64 {
-        match &self.device {
-            Device::Cpu { done, .. } => done.load(Ordering::Relaxed),
-            Device::Gpu(g) => g.paths_done.load(Ordering::Relaxed),
+        match self {
+            Renderer::Cpu { done, .. } => done.load(Ordering::Relaxed),
+            Renderer::Gpu(g) => g.paths_done.load(Ordering::Relaxed),
         }
     }
 
@@ -270,7 +277,7 @@ impl<'a> Renderer<'a> {
         let sight: Sight = sight.into();
         let t = Instant::now();
         let hu = opt.mode.is_windowed() && opt.hu_values;
-        if let (Device::Gpu(g), ImageFormat::Png, false) = (&self.device, format, hu) {
+        if let (Renderer::Gpu(g), ImageFormat::Png, false) = (self, format, hu) {
             let (rgb, times) = g.render_srgb8(opt, sight)?;
             let picture = Picture::Srgb8 {
                 rgb,
@@ -289,13 +296,13 @@ impl<'a> Renderer<'a> {
         if format == ImageFormat::Exr && !opt.mode.is_windowed() {
             // dvr and iso to an EXR: premultiplied RGBA, for compositing, in one pass: each
             // pixel's light C and opacity 1 − T, so that over a background B it is C + T·B.
-            let (film, alpha, kernel_ms, samples, stats, denoise) = match &self.device {
-                Device::Gpu(g) => {
+            let (film, alpha, kernel_ms, samples, stats, denoise) = match self {
+                Renderer::Gpu(g) => {
                     let (film, alpha, times) = g.render_rgba(opt, sight)?;
                     let (k, n) = (times.kernel_gpu_ms, times.samples);
                     (film, alpha, k, n, None, times.denoise)
                 }
-                Device::Cpu { volume, done } => {
+                Renderer::Cpu { volume, done } => {
                     let (film, alpha, stats) = volume.render_rgba_counted(opt, sight, done);
                     (film, alpha, None, stats.samples, Some(stats), stats.denoise)
                 }
@@ -309,7 +316,7 @@ impl<'a> Renderer<'a> {
                 denoise,
             });
         }
-        let (film, cost) = self.device.film(opt, sight)?;
+        let (film, cost) = self.film(opt, sight)?;
         let picture = if hu {
             Picture::Values(film)
         } else {
@@ -326,38 +333,10 @@ impl<'a> Renderer<'a> {
     }
 }
 
-impl<'a> Device<'a> {
-    fn new(
-        backend: &'a Backend,
-        volume: &'a Volume,
-        tf: &'a TransferFunction,
-        segments: Option<&'a SegmentColours>,
-        weights: Option<&'a Volume>,
-    ) -> Result<Device<'a>> {
-        Ok(match backend {
-            Backend::Gpu(ctx) => Device::Gpu(Box::new(GpuVolumeRenderer::segmented(
-                ctx, volume, tf, segments, weights,
-            )?)),
-            Backend::Cpu => Device::Cpu {
-                volume: Box::new(CpuVolume::new(volume, tf).painted(segments).kept(weights)),
-                done: AtomicU64::new(0),
-            },
-        })
-    }
-
-    fn prepare(&self, interpolation: Interpolation) -> Result<()> {
-        match self {
-            Device::Gpu(g) => g.prepare(interpolation)?,
-            Device::Cpu { volume, .. } => {
-                volume.grid(interpolation);
-            }
-        }
-        Ok(())
-    }
-
+impl Renderer<'_> {
     fn film(&self, opt: &DvrOptions, sight: Sight) -> Result<(Image, FilmCost)> {
         Ok(match self {
-            Device::Gpu(g) => {
+            Renderer::Gpu(g) => {
                 let (film, times) = g.render(opt, sight)?;
                 let cost = FilmCost {
                     kernel_ms: times.kernel_gpu_ms,
@@ -367,13 +346,13 @@ impl<'a> Device<'a> {
                 };
                 (film, cost)
             }
-            Device::Cpu { volume, done } if opt.mode == DvrMode::Cinematic => {
+            Renderer::Cpu { volume, done } if opt.mode == DvrMode::Cinematic => {
                 // Counted as its paths are traced, laid over the background here.
                 let (film, alpha, stats) = volume.render_rgba_counted(opt, sight, done);
                 let film = over_background(film, &alpha, opt.background);
                 (film, FilmCost::of_cpu(stats))
             }
-            Device::Cpu { volume, .. } => {
+            Renderer::Cpu { volume, .. } => {
                 let (film, stats) = volume.render(opt, sight);
                 (film, FilmCost::of_cpu(stats))
             }

@@ -818,33 +818,43 @@ fn a_fly_through_looks_down_a_tube_from_its_axis() {
     // The wall: where the ramp crosses 145 HU, half-way through the transfer function's edge.
     let wall = 9.5 + (300.0 - 145.0) / 260.0;
     let (n, side) = (4u32, 160usize);
+    let size = format!("{side}x{side}");
+    // `--fly` down the tube on `dev` with `more`: each frame's EXR opacity.
+    let fly = |name: &str, dev: &str, more: &[&str]| -> Vec<Vec<f32>> {
+        let mut args = vec![
+            tube.to_str().unwrap(),
+            "--mode",
+            "dvr",
+            "--tf",
+            tf.to_str().unwrap(),
+            "--path",
+            path.to_str().unwrap(),
+            "--size",
+            &size,
+            "--format",
+            "exr",
+        ];
+        args.extend_from_slice(more);
+        let dir = render_to(name, dev, &args);
+        let frames = more[more.iter().position(|&m| m == "--fly").unwrap() + 1];
+        (0..frames.parse::<u32>().unwrap())
+            .map(|i| {
+                let exr = raystream_cpu::load_exr(&dir.join(format!("frame_{i:03}.exr"))).unwrap();
+                exr.channels["A"].as_f32().unwrap().to_vec()
+            })
+            .collect()
+    };
+    // The clear disc's radius predicted from the eye's height on the axis (the end at z 127).
+    let want = |eye: f64| wall / (127.0 - eye) * side as f64 / 2.0;
     let mut radii = Vec::new();
     for dev in devices() {
-        let dir = render_to(
+        let frames = fly(
             &format!("fly-{dev}"),
             dev,
-            &[
-                tube.to_str().unwrap(),
-                "--mode",
-                "dvr",
-                "--tf",
-                tf.to_str().unwrap(),
-                "--path",
-                path.to_str().unwrap(),
-                "--fly",
-                &n.to_string(),
-                "--fov",
-                "90",
-                "--size",
-                &format!("{side}x{side}"),
-                "--format",
-                "exr",
-            ],
+            &["--fly", &n.to_string(), "--fov", "90"],
         );
         let mut got = Vec::new();
-        for i in 0..n {
-            let exr = raystream_cpu::load_exr(&dir.join(format!("frame_{i:03}.exr"))).unwrap();
-            let alpha = exr.channels["A"].as_f32().unwrap();
+        for (i, alpha) in frames.iter().enumerate() {
             // The clear pixels: their count as a disc's area, and their centroid.
             let clear: Vec<(f64, f64)> = (0..side * side)
                 .filter(|&p| alpha[p] < 0.5)
@@ -855,9 +865,8 @@ fn a_fly_through_looks_down_a_tube_from_its_axis() {
                 .iter()
                 .fold((0.0, 0.0), |(x, y), p| (x + p.0, y + p.1));
             let centre = (c.0 / clear.len() as f64, c.1 / clear.len() as f64);
-            // The eye at the middle of part i of the path (z 10 to 90), the end at z 127.
-            let eye = 10.0 + (i as f64 + 0.5) * 80.0 / n as f64;
-            let want = wall / (127.0 - eye) * side as f64 / 2.0;
+            // The eye at the middle of part i of the path (z 10 to 90).
+            let want = want(10.0 + (i as f64 + 0.5) * 80.0 / n as f64);
             eprintln!(
                 "{dev} frame {i}: clear disc radius {radius:.2} px (want {want:.2}), centre ({:.2}, {:.2})",
                 centre.0, centre.1
@@ -884,35 +893,15 @@ fn a_fly_through_looks_down_a_tube_from_its_axis() {
         }
     }
     // Three cameras 10 mm apart about 40 mm along the path (z 50): at z 40, 50 and 60.
-    let dir = render_to(
+    let frames = fly(
         "fly-spaced",
         "cpu",
-        &[
-            tube.to_str().unwrap(),
-            "--mode",
-            "dvr",
-            "--tf",
-            tf.to_str().unwrap(),
-            "--path",
-            path.to_str().unwrap(),
-            "--fly",
-            "3",
-            "--slice-step",
-            "10",
-            "--path-at",
-            "40",
-            "--size",
-            &format!("{side}x{side}"),
-            "--format",
-            "exr",
-        ],
+        &["--fly", "3", "--slice-step", "10", "--path-at", "40"],
     );
-    for (i, eye) in [40.0, 50.0, 60.0].into_iter().enumerate() {
-        let exr = raystream_cpu::load_exr(&dir.join(format!("frame_{i:03}.exr"))).unwrap();
-        let alpha = exr.channels["A"].as_f32().unwrap();
+    for (i, (alpha, eye)) in frames.iter().zip([40.0, 50.0, 60.0]).enumerate() {
         let clear = alpha.iter().filter(|&&a| a < 0.5).count();
         let radius = (clear as f64 / std::f64::consts::PI).sqrt();
-        let want = wall / (127.0 - eye) * side as f64 / 2.0;
+        let want = want(eye);
         assert!(
             (radius - want).abs() <= 0.04 * want + 0.5,
             "spaced frame {i}: radius {radius} px, want {want}"
