@@ -17,6 +17,7 @@
 //! pixel's contributions are added in the same order whatever the waves, so the image does not
 //! depend on them.
 
+pub mod airway;
 pub mod animation;
 mod aov;
 pub mod cinematic;

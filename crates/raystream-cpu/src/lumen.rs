@@ -556,7 +556,7 @@ pub(crate) fn measure_segmented(g: &Segmented, row: &CprRow) -> (Lumen, Vec<DVec
 }
 
 /// The diameter of a circle of `area_mm2`, mm.
-pub(crate) fn equivalent_diameter(area_mm2: f64) -> f64 {
+pub fn equivalent_diameter(area_mm2: f64) -> f64 {
     2.0 * (area_mm2 / std::f64::consts::PI).sqrt()
 }
 

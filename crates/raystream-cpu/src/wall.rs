@@ -50,32 +50,68 @@ use crate::cpr::{CprRow, CurvedPlane};
 use crate::dvr::Marcher;
 use crate::lumen::{self, Callipers, Lumen, LumenOptions, Segmented};
 
+/// Where a wall's outer edge is placed on each ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum WallEdge {
+    /// A vessel's (about a bright lumen): where the HU first fall below this, the fat or lung
+    /// about it (this module).
+    Below(f32),
+    /// An airway's (about a dark lumen): both its edges at half maximum ([`crate::airway`]).
+    HalfMaximum,
+}
+
 /// How the outer wall is found.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WallOptions {
-    /// Samples below this, HU, are the fat or lung about the vessel.
-    pub threshold_hu: f32,
-    /// How many rays are cast from the vessel's centre, evenly about it.
+    pub edge: WallEdge,
+    /// How many rays are cast from the lumen's centre, evenly about it.
     pub rays: usize,
 }
 
 impl Default for WallOptions {
-    /// −30 HU (halfway between the wall's 30–60 HU and fat's −100), 180 rays (2° apart).
+    /// A vessel's, below −30 HU (halfway between the wall's 30–60 HU and fat's −100), 180
+    /// rays (2° apart).
     fn default() -> WallOptions {
-        WallOptions {
-            threshold_hu: -30.0,
-            rays: 180,
-        }
+        WallOptions::vessel(-30.0)
     }
 }
 
 impl WallOptions {
+    /// A vessel's wall, its edge below `threshold_hu`, on 180 rays.
+    pub fn vessel(threshold_hu: f32) -> WallOptions {
+        WallOptions {
+            edge: WallEdge::Below(threshold_hu),
+            rays: 180,
+        }
+    }
+
+    /// An airway's wall, at half maximum on 180 rays.
+    pub fn airway() -> WallOptions {
+        WallOptions {
+            edge: WallEdge::HalfMaximum,
+            rays: 180,
+        }
+    }
+
     pub fn check(&self, lumen: &LumenOptions) -> Result<(), String> {
-        if !(self.threshold_hu.is_finite() && self.threshold_hu < lumen.threshold_hu) {
-            return Err(format!(
-                "a wall threshold of {} HU: it must be a number below the lumen's {} HU",
-                self.threshold_hu, lumen.threshold_hu
-            ));
+        match self.edge {
+            WallEdge::Below(_) if lumen.dark => {
+                return Err(
+                    "a wall below a threshold lies about a bright lumen (a vessel's); an airway's (a dark lumen) is found at half maximum".into(),
+                );
+            }
+            WallEdge::Below(hu) if !(hu.is_finite() && hu < lumen.threshold_hu) => {
+                return Err(format!(
+                    "a wall threshold of {hu} HU: it must be a number below the lumen's {} HU",
+                    lumen.threshold_hu
+                ));
+            }
+            WallEdge::HalfMaximum if !lumen.dark => {
+                return Err(
+                    "a wall at half maximum lies about a dark lumen (an airway's); a vessel's is found below a threshold".into(),
+                );
+            }
+            _ => {}
         }
         if !(16..=4096).contains(&self.rays) {
             return Err(format!("{} rays: between 16 and 4096", self.rays));
@@ -126,9 +162,16 @@ pub struct Wall {
     /// The calliper width across the longest chord, mm.
     pub cross_diameter_mm: f64,
     /// The outline's greatest distance from the lumen's edge, mm: the thickest the wall and
-    /// what lines it (thrombus, an unenhanced false lumen) are.
+    /// what lines it (thrombus, an unenhanced false lumen) are. An airway's: its thickest ray.
     pub max_thickness_mm: f64,
-    /// The fitted circle's centre (LPS mm) and diameter, mm.
+    /// The outline's mean distance from the lumen's edge, mm. An airway's: the mean of its
+    /// rays' thicknesses, each between its edges at half maximum.
+    pub mean_thickness_mm: f64,
+    /// The area inside the wall's inner edge, mm²: a vessel's lumen's; an airway's, inside
+    /// its edges at half maximum.
+    pub inner_area_mm2: f64,
+    /// The fitted circle's centre (LPS mm) and diameter, mm (an airway's: fitted by least
+    /// squares to its outer edges).
     pub centre: DVec3,
     pub circle_diameter_mm: f64,
     /// The fraction of the rays whose edge was seen (on the circle, or followed along the
@@ -137,6 +180,46 @@ pub struct Wall {
     /// The circle is the one the section's neighbours along the path agree on ([`Prior`]),
     /// where the section by itself would have taken another.
     pub from_neighbours: bool,
+}
+
+impl Wall {
+    /// A wall's figures from its `outline` on `row`'s section (mm, the section's own
+    /// coordinates), the `thickness` measured at its points (or rays), the area inside its
+    /// inner edge, its circle, the share of it seen, and whether the circle is the neighbours'.
+    pub(crate) fn from_outline(
+        row: &CprRow,
+        outline: &[DVec2],
+        thickness: &[f64],
+        inner_area_mm2: f64,
+        circle: Circle,
+        seen: f64,
+        from_neighbours: bool,
+    ) -> Wall {
+        let area = polygon_area(outline);
+        let k = Callipers::of(outline);
+        Wall {
+            area_mm2: area,
+            equivalent_diameter_mm: lumen::equivalent_diameter(area),
+            max_diameter_mm: k.max_mm,
+            max_ends: k.max_ends.map(|q| row.point(q)),
+            min_diameter_mm: k.min_mm,
+            min_direction: row.direction(k.min_across).normalize_or_zero(),
+            cross_diameter_mm: k.cross_mm,
+            max_thickness_mm: thickness.iter().copied().fold(0.0, f64::max),
+            mean_thickness_mm: thickness.iter().sum::<f64>() / thickness.len().max(1) as f64,
+            inner_area_mm2,
+            centre: row.point(circle.o),
+            circle_diameter_mm: 2.0 * circle.r,
+            seen,
+            from_neighbours,
+        }
+    }
+
+    /// The share of the wall's area between its inner edge and its outline, %: an airway's
+    /// wall area percentage (WA %); a vessel's plaque or thrombus burden.
+    pub fn area_percent(&self) -> f64 {
+        100.0 * (1.0 - self.inner_area_mm2 / self.area_mm2)
+    }
 }
 
 /// What a section's neighbours along the path agree its wall's circle is: the median of the
@@ -170,6 +253,10 @@ impl Track {
         opt: &LumenOptions,
         wall: &WallOptions,
     ) -> Result<Track, String> {
+        // An airway's wall is found on each section by itself.
+        if wall.edge == WallEdge::HalfMaximum {
+            return Ok(Track { found: Vec::new() });
+        }
         let length = crate::cpr::tortuosity(points)?.length_mm;
         let n = (length / TRACK_STEP_MM).round().clamp(1.0, 1e6) as u32;
         let plane = CurvedPlane::sections(points, DVec3::X, 0.0, n)?;
@@ -232,7 +319,7 @@ pub struct WallVolumes {
     /// The sections with a wall, and the length of path they stand for, mm.
     pub sections: usize,
     pub length_mm: f64,
-    /// What their walls hold, and their lumens, mm³.
+    /// What their walls hold, and what their inner edges hold (a vessel's lumens), mm³.
     pub wall_mm3: f64,
     pub lumen_mm3: f64,
 }
@@ -248,7 +335,7 @@ impl WallVolumes {
             sections: with.len(),
             length_mm: with.len() as f64 * step_mm,
             wall_mm3: with.iter().map(|(w, _)| w.area_mm2).sum::<f64>() * step_mm,
-            lumen_mm3: with.iter().map(|(_, l)| l.area_mm2).sum::<f64>() * step_mm,
+            lumen_mm3: with.iter().map(|(w, _)| w.inner_area_mm2).sum::<f64>() * step_mm,
         })
     }
 }
@@ -285,9 +372,9 @@ struct Ray {
 
 /// A circle on the section, mm.
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct Circle {
-    o: DVec2,
-    r: f64,
+pub(crate) struct Circle {
+    pub o: DVec2,
+    pub r: f64,
 }
 
 impl Circle {
@@ -313,7 +400,7 @@ impl Circle {
 
     /// The least-squares (Kåsa) circle through `pts`: x² + y² + a x + b y + c = 0 solved for
     /// a, b, c, about the points' mean (for conditioning).
-    fn fitted(pts: &[DVec2]) -> Option<Circle> {
+    pub(crate) fn fitted(pts: &[DVec2]) -> Option<Circle> {
         let mean = pts.iter().copied().sum::<DVec2>() / pts.len() as f64;
         let mut m = [[0.0f64; 4]; 3];
         for &p in pts {
@@ -344,6 +431,16 @@ impl Circle {
         let c = w.length_squared() - self.r * self.r;
         -b + (b * b - c).max(0.0).sqrt()
     }
+}
+
+/// The area a closed polygon holds (the shoelace formula).
+pub(crate) fn polygon_area(pts: &[DVec2]) -> f64 {
+    0.5 * pts
+        .iter()
+        .zip(pts.iter().cycle().skip(1))
+        .map(|(a, b)| a.perp_dot(*b))
+        .sum::<f64>()
+        .abs()
 }
 
 /// Gaussian elimination with partial pivoting on an augmented 3×4 matrix.
@@ -650,13 +747,19 @@ pub(crate) fn wall_about(
     g: &Segmented,
     (lumen, edge): (&Lumen, &[DVec2]),
 ) -> Option<(Wall, Outline)> {
+    let wall_hu = match wall.edge {
+        WallEdge::Below(hu) => hu,
+        WallEdge::HalfMaximum => {
+            return crate::airway::airway_wall(vol, m, row, opt, wall.rays, g, lumen);
+        }
+    };
     if lumen.open {
         return None;
     }
     let sample = lumen::sampler(vol, m, row);
     let hull = lumen::convex_hull(edge);
     let reach = 0.5 * opt.field_mm;
-    let hu = [opt.threshold_hu, wall.threshold_hu];
+    let hu = [opt.threshold_hu, wall_hu];
     let step = opt.pixel_mm;
     // From the lumen's centroid, then again from the circle's centre.
     let first = row.offset_of(lumen.centroid);
@@ -684,40 +787,27 @@ pub(crate) fn wall_about(
             o + ray.dir * r.max(ray.lumen)
         })
         .collect();
-    let area = 0.5
-        * outline
-            .iter()
-            .zip(outline.iter().cycle().skip(1))
-            .map(|(a, b)| a.perp_dot(*b))
-            .sum::<f64>()
-            .abs();
-    let k = Callipers::of(&outline);
     let seen = agrees.iter().filter(|&&a| a).count() as f64 / rays.len() as f64;
     // Every outline point against every lumen edge point: a few hundred of each.
-    let max_thickness_mm = outline
+    let gaps: Vec<f64> = outline
         .iter()
         .map(|p| {
             edge.iter()
                 .map(|q| p.distance_squared(*q))
                 .fold(f64::INFINITY, f64::min)
+                .sqrt()
         })
-        .fold(0.0, f64::max)
-        .sqrt();
+        .collect();
     Some((
-        Wall {
-            area_mm2: area,
-            equivalent_diameter_mm: lumen::equivalent_diameter(area),
-            max_diameter_mm: k.max_mm,
-            max_ends: k.max_ends.map(|q| row.point(q)),
-            min_diameter_mm: k.min_mm,
-            min_direction: row.direction(k.min_across).normalize_or_zero(),
-            cross_diameter_mm: k.cross_mm,
-            max_thickness_mm,
-            centre: row.point(circle.o),
-            circle_diameter_mm: 2.0 * circle.r,
+        Wall::from_outline(
+            row,
+            &outline,
+            &gaps,
+            lumen.area_mm2,
+            circle,
             seen,
-            from_neighbours: was_prior || is_prior,
-        },
+            was_prior || is_prior,
+        ),
         Outline {
             points: outline,
             seen: agrees,

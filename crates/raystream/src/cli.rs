@@ -909,15 +909,17 @@ pub struct MeasureArgs {
     /// aneurysm or a dissection is followed): rays from its centre out to the fat or lung
     /// about it, below HU [default: -30], a circle fitted to the edges they find (the one its
     /// neighbours along the path agree on, where they do), the outline where seen and the
-    /// circle where a neighbour hides it.
+    /// circle where a neighbour hides it. With --dark, an airway's wall instead (no HU): its
+    /// inner and outer edges at half maximum on rays from the lumen's centre, as quantitative
+    /// airway CT measures them, with its mean thickness and its share of the airway's area
+    /// (WA %).
     #[arg(
         long,
         value_name = "HU",
         num_args = 0..=1,
-        default_missing_value = "-30",
         allow_negative_numbers = true
     )]
-    pub wall: Option<f32>,
+    pub wall: Option<Option<f32>>,
     /// Grade a stenosis: the lesion's area and smallest diameter against the reference, the
     /// vessel's diameter there without it (fitted to the sections about it, or --reference),
     /// and the narrowed segment's length.

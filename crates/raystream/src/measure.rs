@@ -12,7 +12,7 @@ use raystream_cpu::cpr::{CurvedPlane, PathAngle, Tortuosity};
 use raystream_cpu::dvr::Marcher;
 use raystream_cpu::lumen::{self, LumenOptions, Section};
 use raystream_cpu::stenosis::{self, ReferenceSource, Stenosis};
-use raystream_cpu::wall::{Track, Wall, WallOptions, WallVolumes};
+use raystream_cpu::wall::{Track, Wall, WallEdge, WallOptions, WallVolumes};
 use raystream_math::DVec3;
 use serde_json::json;
 
@@ -48,6 +48,11 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         bail!(
             "{}: --structures writes a DICOM RT Structure Set (.dcm): name it so",
             r.display()
+        );
+    }
+    if a.report.is_some() && a.vessel.dark {
+        bail!(
+            "--report with --dark: the Structured Report codes a vessel's findings (SNOMED CT's vessel lumen and outside diameters); an airway's are not coded"
         );
     }
     if let Some(r) = &a.report
@@ -91,16 +96,13 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     };
     opt.check()
         .map_err(|e| anyhow::anyhow!("--lumen/--field/--seed/--open: {e}"))?;
-    let wall = a.wall.map(|hu| WallOptions {
-        threshold_hu: hu,
-        ..WallOptions::default()
-    });
+    if let (Some(Some(hu)), true) = (a.wall, opt.dark) {
+        bail!(
+            "--wall {hu} with --dark: an airway's wall is found at half maximum on each ray, with no threshold; give --wall alone"
+        );
+    }
+    let wall = wall_options(a, &opt);
     if let Some(w) = &wall {
-        if opt.dark {
-            bail!(
-                "--wall with --dark: the outer wall is found beyond a bright lumen (a vessel's), not an airway's"
-            );
-        }
         w.check(&opt).map_err(|e| anyhow::anyhow!("--wall: {e}"))?;
     }
     let file = a.path.display();
@@ -236,6 +238,16 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     Ok(())
 }
 
+/// `--wall [HU]`'s options: a vessel's wall, below HU (-30 by default); with `--dark`, an
+/// airway's, at half maximum.
+fn wall_options(a: &MeasureArgs, opt: &LumenOptions) -> Option<WallOptions> {
+    a.wall.map(|hu| match hu {
+        _ if opt.dark => WallOptions::airway(),
+        Some(hu) => WallOptions::vessel(hu),
+        None => WallOptions::default(),
+    })
+}
+
 /// A section's state: its lumen closed, open (reaching the field's edge) or not found.
 fn status(s: &Section) -> &'static str {
     match &s.lumen {
@@ -252,7 +264,7 @@ fn csv(sections: &[Section], graded: Option<&Stenosis>, walls: bool) -> String {
         "section,arc_mm,x,y,z,tangent_x,tangent_y,tangent_z,status,area_mm2,equivalent_diameter_mm,max_diameter_mm,cross_diameter_mm,min_diameter_mm,centroid_x,centroid_y,centroid_z,offset_mm",
     );
     if walls {
-        t += ",wall_area_mm2,wall_equivalent_diameter_mm,wall_max_diameter_mm,wall_cross_diameter_mm,wall_min_diameter_mm,wall_max_thickness_mm,wall_seen";
+        t += ",wall_area_mm2,wall_equivalent_diameter_mm,wall_max_diameter_mm,wall_cross_diameter_mm,wall_min_diameter_mm,wall_max_thickness_mm,wall_seen,wall_mean_thickness_mm,wall_inner_area_mm2,wall_area_percent";
     }
     t += if graded.is_some() {
         ",reference_diameter_mm\n"
@@ -297,17 +309,20 @@ fn csv(sections: &[Section], graded: Option<&Stenosis>, walls: bool) -> String {
             (Some(w), _) => {
                 let _ = write!(
                     t,
-                    ",{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
+                    ",{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
                     w.area_mm2,
                     w.equivalent_diameter_mm,
                     w.max_diameter_mm,
                     w.cross_diameter_mm,
                     w.min_diameter_mm,
                     w.max_thickness_mm,
-                    w.seen
+                    w.seen,
+                    w.mean_thickness_mm,
+                    w.inner_area_mm2,
+                    w.area_percent()
                 );
             }
-            (None, true) => t.push_str(",,,,,,,"),
+            (None, true) => t.push_str(",,,,,,,,,,"),
             (None, false) => {}
         }
         if let Some(g) = graded {
@@ -355,7 +370,11 @@ pub(crate) fn widest_wall(sections: &[Section]) -> Option<(usize, &Wall)> {
 
 /// The outer wall's lines of the text report: the widest section, and on how many sections
 /// a wall was found.
-fn wall_text(sections: &[Section], hu: f32, step_mm: f64) -> String {
+fn wall_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String {
+    let hu = match wall.edge {
+        WallEdge::Below(hu) => hu,
+        WallEdge::HalfMaximum => return airway_text(sections, wall, step_mm),
+    };
     let closed = sections.iter().filter(|s| status(s) == "closed").count();
     let found = sections.iter().filter(|s| s.wall.is_some()).count();
     let mut t = String::new();
@@ -402,6 +421,73 @@ fn wall_text(sections: &[Section], hu: f32, step_mm: f64) -> String {
         let _ = writeln!(
             t,
             "volume: the walls hold {:.1} ml over the {} sections with one ({:.1} mm of the path), their lumens {:.1} ml: {:.1} ml of wall, thrombus and unenhanced lumen",
+            v.wall_mm3 / 1000.0,
+            v.sections,
+            v.length_mm,
+            v.lumen_mm3 / 1000.0,
+            (v.wall_mm3 - v.lumen_mm3) / 1000.0
+        );
+    }
+    t
+}
+
+/// An airway's wall's lines of the text report: on how many sections it was found, its mean
+/// thickness and share of the airway's area over them, the thickest, and what the walls hold.
+fn airway_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String {
+    let closed = sections.iter().filter(|s| status(s) == "closed").count();
+    let walls: Vec<(usize, &Wall)> = sections
+        .iter()
+        .enumerate()
+        .filter_map(|(i, s)| s.wall.as_ref().map(|w| (i, w)))
+        .collect();
+    let mut t = format!(
+        "airway wall: found on {} of the {closed} sections with a closed lumen, its inner and outer edges at half maximum on {} rays from the lumen's centroid (halfway between the gas and the wall's peak, and between the peak and the lung or fat beyond; none where fewer than a quarter of the rays see past the wall)\n",
+        walls.len(),
+        wall.rays
+    );
+    if walls.is_empty() {
+        return t;
+    }
+    let mean =
+        |f: fn(&Wall) -> f64| walls.iter().map(|(_, w)| f(w)).sum::<f64>() / walls.len() as f64;
+    let range = |f: fn(&Wall) -> f64| {
+        walls
+            .iter()
+            .map(|(_, w)| f(w))
+            .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], x| {
+                [lo.min(x), hi.max(x)]
+            })
+    };
+    let [lo, hi] = range(|w| w.mean_thickness_mm);
+    let [plo, phi] = range(Wall::area_percent);
+    let _ = writeln!(
+        t,
+        "wall thickness: {:.2} mm on average over them ({lo:.2} to {hi:.2} mm section by section); wall area {:.1} % of the airway's (WA %; {plo:.1} to {phi:.1} %)",
+        mean(|w| w.mean_thickness_mm),
+        mean(Wall::area_percent),
+    );
+    if let Some((i, w)) = wall_with_most(sections, |w| w.mean_thickness_mm) {
+        let c = w.centre;
+        let _ = writeln!(
+            t,
+            "thickest wall: section {} at {:.1} mm, ({:.1}, {:.1}, {:.1}) mm LPS: {:.2} mm on average (its thickest ray {:.2} mm), WA {:.1} %, the airway D eq {:.2} mm outside and {:.2} mm inside it, its edges seen on {:.0} % of the rays",
+            i + 1,
+            sections[i].arc_mm,
+            c.x,
+            c.y,
+            c.z,
+            w.mean_thickness_mm,
+            w.max_thickness_mm,
+            w.area_percent(),
+            w.equivalent_diameter_mm,
+            raystream_cpu::lumen::equivalent_diameter(w.inner_area_mm2),
+            100.0 * w.seen
+        );
+    }
+    if let Some(v) = WallVolumes::of(sections, step_mm) {
+        let _ = writeln!(
+            t,
+            "volume: the walls hold {:.1} ml over the {} sections with one ({:.1} mm of the path), inside their inner edges {:.1} ml: {:.1} ml of wall",
             v.wall_mm3 / 1000.0,
             v.sections,
             v.length_mm,
@@ -478,7 +564,7 @@ pub(crate) struct MaskWritten {
 
 /// The segments of a DICOM Segmentation `--mask`, as its labels: the lumen, and what the outer
 /// wall holds beyond it (the vessel's wall, and any thrombus lining it).
-pub(crate) fn mask_segments(wall: bool) -> Vec<raystream_io::Segment<'static>> {
+pub(crate) fn mask_segments(wall: bool, dark: bool) -> Vec<raystream_io::Segment<'static>> {
     use raystream_cpu::mask::{LUMEN, WALL};
     use raystream_io::{Code, Segment};
     // DICOM CID 7150 (Segmentation Property Category), 7156 (Vascular Segmentation Type), 7166.
@@ -490,7 +576,11 @@ pub(crate) fn mask_segments(wall: bool) -> Vec<raystream_io::Segment<'static>> {
     let mut segments = vec![Segment {
         value: LUMEN,
         label: "Lumen",
-        description: "The vessel's lumen along the path",
+        description: if dark {
+            "The airway's lumen along the path"
+        } else {
+            "The vessel's lumen along the path"
+        },
         category: anatomy,
         kind: Code {
             value: "91747007",
@@ -503,13 +593,26 @@ pub(crate) fn mask_segments(wall: bool) -> Vec<raystream_io::Segment<'static>> {
     if wall {
         segments.push(Segment {
             value: WALL,
-            label: "Wall and thrombus",
+            label: if dark {
+                "Airway wall"
+            } else {
+                "Wall and thrombus"
+            },
             description: "Within the outer wall, beyond the lumen",
             category: anatomy,
-            kind: Code {
-                value: "59820001",
-                scheme: "SCT",
-                meaning: "Blood vessel",
+            kind: if dark {
+                // CID 7166's (the DICOM master list's) airway.
+                Code {
+                    value: "89187006",
+                    scheme: "SCT",
+                    meaning: "Airway structure",
+                }
+            } else {
+                Code {
+                    value: "59820001",
+                    scheme: "SCT",
+                    meaning: "Blood vessel",
+                }
             },
             colour: [255, 0, 255],
         });
@@ -542,13 +645,15 @@ fn write_mask(
     let info = raystream_io::SegmentationInfo {
         description: if wall.is_some() {
             "raystream measure: lumen, outer wall beyond it"
+        } else if opt.dark {
+            "raystream measure: airway lumen"
         } else {
             "raystream measure: lumen"
         },
         algorithm: "raystream measure",
         version: env!("CARGO_PKG_VERSION"),
     };
-    let segments = mask_segments(wall.is_some());
+    let segments = mask_segments(wall.is_some(), opt.dark);
     let (frames, segmentation) = if let Some(out) = out
         && raystream_io::is_segmentation_path(out)
     {
@@ -673,7 +778,7 @@ fn report_text(
     );
     t += "section   arc mm         x         y         z   area mm2   D eq mm  D max mm  D cross mm  D min mm  offset mm  lumen";
     t += if a.wall.is_some() {
-        "  wall mm2  wall D eq  wall D max  wall D cross  wall D min  seen %\n"
+        "  wall mm2  wall D eq  wall D max  wall D cross  wall D min  seen %  WT mm  WA %\n"
     } else {
         "\n"
     };
@@ -710,17 +815,19 @@ fn report_text(
             (Some(w), _) => {
                 let _ = write!(
                     t,
-                    "{:>10.1} {:>10.2} {:>11.2} {:>13.2} {:>11.2} {:>7.0}",
+                    "{:>10.1} {:>10.2} {:>11.2} {:>13.2} {:>11.2} {:>7.0} {:>6.2} {:>5.1}",
                     w.area_mm2,
                     w.equivalent_diameter_mm,
                     w.max_diameter_mm,
                     w.cross_diameter_mm,
                     w.min_diameter_mm,
-                    100.0 * w.seen
+                    100.0 * w.seen,
+                    w.mean_thickness_mm,
+                    w.area_percent()
                 );
             }
             (None, true) => {
-                t += "         -          -           -             -           -       -";
+                t += "         -          -           -             -           -       -      -     -";
             }
             (None, false) => {}
         }
@@ -773,13 +880,13 @@ fn report_text(
             opt.seed_mm
         );
     }
-    if let Some(hu) = a.wall {
-        t += &wall_text(sections, hu, length / n as f64);
+    if let Some(w) = wall_options(a, opt) {
+        t += &wall_text(sections, &w, length / n as f64);
     }
     t += &winding_words(winding);
     t.push('\n');
     if let Some(g) = findings.lesions.first() {
-        t += &stenosis_text(sections, g);
+        t += &stenosis_text(sections, g, opt.dark);
     }
     if let (Some(n), [_, more @ ..]) = (a.lesions, findings.lesions) {
         let _ = writeln!(
@@ -794,7 +901,7 @@ fn report_text(
                 .join(", ")
         );
         for g in more {
-            t += &stenosis_text(sections, g);
+            t += &stenosis_text(sections, g, opt.dark);
         }
     }
     if let Some(g) = findings.angle {
@@ -849,7 +956,7 @@ fn reference_words(sections: &[Section], g: &Stenosis) -> String {
 }
 
 /// The graded stenosis, four lines of the text report.
-fn stenosis_text(sections: &[Section], g: &Stenosis) -> String {
+fn stenosis_text(sections: &[Section], g: &Stenosis, dark: bool) -> String {
     let s = &sections[g.lesion];
     let l = s.lumen.as_ref().expect("a graded lesion has a lumen");
     let c = l.centroid;
@@ -885,7 +992,7 @@ fn stenosis_text(sections: &[Section], g: &Stenosis) -> String {
         g.area_pct,
         stenosis::severity(g.diameter_pct),
         severity_band(g.diameter_pct),
-    ) + &against_wall_text(s)
+    ) + &against_wall_text(s, dark)
 }
 
 /// A lesion graded against the outer wall at its own section (when `--wall` found one there):
@@ -901,12 +1008,19 @@ pub(crate) fn against_wall(s: &Section) -> Option<(f64, f64, &Wall)> {
     ))
 }
 
-/// [`against_wall`] as a line of the text report (empty without a wall at the lesion).
-fn against_wall_text(s: &Section) -> String {
+/// [`against_wall`] as a line of the text report (empty without a wall at the lesion); `dark`:
+/// an airway's.
+fn against_wall_text(s: &Section, dark: bool) -> String {
     match against_wall(s) {
         Some((d, a, w)) => format!(
-            "against the wall: {d:.1} % by diameter (D min against the outer wall's D eq there, {:.2} mm, as ECST grades), {a:.1} % of the wall's {:.1} mm2 not lumen (plaque or thrombus burden)\n",
-            w.equivalent_diameter_mm, w.area_mm2
+            "against the wall: {d:.1} % by diameter (D min against the outer wall's D eq there, {:.2} mm, as ECST grades), {a:.1} % of the wall's {:.1} mm2 not lumen ({})\n",
+            w.equivalent_diameter_mm,
+            w.area_mm2,
+            if dark {
+                "the airway's wall"
+            } else {
+                "plaque or thrombus burden"
+            }
         ),
         None => String::new(),
     }
@@ -1080,8 +1194,21 @@ fn report_json(
     if let Some(g) = findings.angle {
         m.insert("angle".into(), angle_json(g));
     }
-    if let Some(hu) = a.wall {
-        m.insert("wall_threshold_hu".into(), json!(hu));
+    if let Some(w) = wall_options(a, opt) {
+        let walls: Vec<&Wall> = sections.iter().filter_map(|s| s.wall.as_ref()).collect();
+        let mean = |f: fn(&Wall) -> f64| {
+            (!walls.is_empty())
+                .then(|| round3(walls.iter().map(|w| f(w)).sum::<f64>() / walls.len() as f64))
+        };
+        match w.edge {
+            WallEdge::Below(hu) => m.insert("wall_threshold_hu".into(), json!(hu)),
+            WallEdge::HalfMaximum => m.insert("wall_edge".into(), json!("half_maximum")),
+        };
+        m.insert(
+            "wall_mean_thickness_mm".into(),
+            json!(mean(|w| w.mean_thickness_mm)),
+        );
+        m.insert("wall_area_percent".into(), json!(mean(Wall::area_percent)));
         m.insert(
             "widest_wall_section".into(),
             json!(widest_wall(sections).map(|(i, _)| i + 1)),
@@ -1112,6 +1239,9 @@ fn wall_json(w: &Wall) -> serde_json::Value {
         "min_diameter_mm": round3(w.min_diameter_mm),
         "min_diameter_direction": w.min_direction.to_array(),
         "max_thickness_mm": round3(w.max_thickness_mm),
+        "mean_thickness_mm": round3(w.mean_thickness_mm),
+        "inner_area_mm2": round3(w.inner_area_mm2),
+        "area_percent": round3(w.area_percent()),
         "centre": v3(w.centre),
         "circle_diameter_mm": round3(w.circle_diameter_mm),
         "seen": round3(w.seen),

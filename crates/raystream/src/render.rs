@@ -434,10 +434,7 @@ fn wall_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option<
     let (Some(hu), Some(lumen)) = (a.draw_wall, lumen_options(a, volume)?) else {
         return Ok(None);
     };
-    let w = WallOptions {
-        threshold_hu: hu,
-        ..WallOptions::default()
-    };
+    let w = WallOptions::vessel(hu);
     w.check(&lumen)
         .map_err(|e| anyhow::anyhow!("--draw-wall {hu}: {e}"))?;
     Ok(Some(w))

@@ -268,7 +268,8 @@ pub(crate) fn groups(sections: &[Section], findings: &Findings) -> Vec<Measureme
     }
 
     if let Some(mask) = findings.mask.filter(|m| m.segmentation.is_some()) {
-        let segments = crate::measure::mask_segments(mask.wall.is_some());
+        // (A Structured Report is refused with --dark: the segments are a vessel's.)
+        let segments = crate::measure::mask_segments(mask.wall.is_some(), false);
         let volumes = std::iter::once(mask.lumen).chain(mask.wall);
         for (number, (seg, (_, ml))) in segments.iter().zip(volumes).enumerate() {
             groups.push(MeasurementGroup {

@@ -996,6 +996,17 @@ fn a_fly_through_the_airway_follows_a_dark_centreline() {
     // Measured along it (`measure --dark`, the gas at or below -500 HU, half-way to the wall):
     // the trachea's lumen 15 to 23 mm across over its first 45 mm, the left main bronchus's
     // 8 to 16 mm over its last 35; the carina between (where the two bronchi part, open).
+    // With `--wall`, the airway's wall at half maximum: on the trachea, seen on a quarter to
+    // three fifths of the rays (those into the right lung and the fat about it; the rest meet
+    // the oesophagus, the aortic arch and the mediastinum's soft tissue), 2.0 to 3.6 mm thick
+    // (measured 2.5-3.1: a thin wall blurred on this 1.5 mm grid, overstated as half maximum
+    // overstates it), WA 30 to 50 % (measured 37-43), its inner edge's area the lumen's at -500
+    // HU within 10 % (half-way between the gas and a peak near 0 HU); on the left main bronchus,
+    // none: it runs between contrast-filled vessels and the stent graft, and no ray sees fat or
+    // lung past its wall (a stent's wire is no wall). Its `--mask`: the lumen's voxels gas
+    // (median under -900 HU), the wall's (label 2) the wall's tissue (median -600 to 100 HU;
+    // measured -4), as many as the JSON counts.
+    let mask = tmp("airway-mask.nii.gz");
     let o = run(&[
         "measure",
         "--quiet",
@@ -1007,11 +1018,15 @@ fn a_fly_through_the_airway_follows_a_dark_centreline() {
         "-500",
         "--sections",
         "10",
+        "--wall",
+        "--mask",
+        mask.to_str().unwrap(),
         "--json",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let m: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     assert_eq!(m["dark"], true);
+    assert_eq!(m["wall_edge"], "half_maximum");
     for s in m["sections"].as_array().unwrap() {
         let arc = s["arc_mm"].as_f64().unwrap();
         let d = s["equivalent_diameter_mm"].as_f64();
@@ -1024,7 +1039,31 @@ fn a_fly_through_the_airway_follows_a_dark_centreline() {
         };
         assert_eq!(s["lumen"], "closed", "{s}");
         assert!(d.is_some_and(|d| want.contains(&d)), "{s}");
+        let w = &s["wall"];
+        if arc > 45.0 {
+            assert!(w.is_null(), "{s}");
+            continue;
+        }
+        let num = |k: &str| w[k].as_f64().unwrap();
+        assert!((0.25..0.6).contains(&num("seen")), "{s}");
+        assert!((2.0..3.6).contains(&num("mean_thickness_mm")), "{s}");
+        assert!((30.0..50.0).contains(&num("area_percent")), "{s}");
+        let lumen = s["area_mm2"].as_f64().unwrap();
+        assert!((num("inner_area_mm2") / lumen - 1.0).abs() < 0.1, "{s}");
     }
+    let labels = raystream_io::load_volume(&mask, &Default::default()).unwrap();
+    let median_hu = |label: f32| {
+        let mut v: Vec<f32> = (labels.data.iter().zip(&ct.data))
+            .filter(|(l, _)| **l == label)
+            .map(|(_, hu)| *hu)
+            .collect();
+        v.sort_by(f32::total_cmp);
+        (v.len(), v[v.len() / 2])
+    };
+    let ((gas_n, gas), (wall_n, wall)) = (median_hu(1.0), median_hu(2.0));
+    assert_eq!(wall_n as u64, m["mask"]["wall_voxels"].as_u64().unwrap());
+    assert!(gas_n > wall_n && gas < -900.0, "{gas_n} {gas}");
+    assert!((-600.0..100.0).contains(&wall), "{wall_n} {wall}");
     refused(
         &[
             "measure",
@@ -1033,8 +1072,9 @@ fn a_fly_through_the_airway_follows_a_dark_centreline() {
             line.to_str().unwrap(),
             "--dark",
             "--wall",
+            "-30",
         ],
-        "--wall with --dark",
+        "--wall -30 with --dark: an airway's wall is found at half maximum",
     );
     let tf = repo().join("examples/bronchoscopy.toml");
     let dir = render_to(

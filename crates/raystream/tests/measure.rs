@@ -2490,6 +2490,16 @@ fn the_outer_wall_of_the_aorta() {
             "{s}"
         );
         assert!(thick >= 0.5 * (eq - lumen_eq) - 0.5, "{s}");
+        // Its mean thickness no more than its thickest; inside it, the lumen; the share of its
+        // area beyond that, the burden.
+        let mean = num(w, "mean_thickness_mm");
+        assert!(mean > 0.0 && mean <= thick + 1e-3, "{s}");
+        assert!(
+            (num(w, "inner_area_mm2") - num(s, "area_mm2")).abs() < 2e-3,
+            "{s}"
+        );
+        let burden = 100.0 * (1.0 - num(s, "area_mm2") / num(w, "area_mm2"));
+        assert!((num(w, "area_percent") - burden).abs() < 0.01, "{s}");
         if (20.0..80.0).contains(&arc) {
             // About the stent graft: its wall (and what is left of the sac) a few mm wide.
             assert!((1.0..7.0).contains(&(eq - lumen_eq)), "{s}");
@@ -2613,7 +2623,7 @@ fn the_outer_wall_of_the_aorta() {
         csv.lines()
             .next()
             .unwrap()
-            .ends_with(",wall_min_diameter_mm,wall_max_thickness_mm,wall_seen")
+            .ends_with(",wall_max_thickness_mm,wall_seen,wall_mean_thickness_mm,wall_inner_area_mm2,wall_area_percent")
     );
 }
 
