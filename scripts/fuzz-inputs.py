@@ -517,8 +517,10 @@ def fuzz_files(work, n, device):
             # Sometimes cross-sections with the lumen and the outer wall drawn.
             if not why and os.path.exists(vol) and random.random() < 0.2:
                 why = run(["render", vol, "--path", p, "--mode", "slice", "--size", "16x16", "-q",
-                           "--slices", random.choice(["1", "3"]), "--draw-lumen", "150",
-                           "--draw-wall", "--device", device, "-o", os.path.join(d, "w")], s)
+                           "--slices", random.choice(["1", "3"]), "--device", device,
+                           "-o", os.path.join(d, "w")]
+                          + random.choice([["--draw-lumen", "150", "--draw-wall"],
+                                           ["--draw-lumen", "-500", "--draw-dark", "--draw-wall"]]), s)
             # Sometimes a fly-through along it (--fly), at an odd field of view.
             if not why and os.path.exists(vol) and random.random() < 0.2:
                 look = random.choice([["dvr"], ["iso"], ["cinematic", "--spp", "2"]])
@@ -534,7 +536,7 @@ def fuzz_files(work, n, device):
                                    ["--lesions", random.choice(["1", "3", "100"])]])
             # Sometimes the outer wall too, below the lumen's threshold.
             lumen = random.choice(["-500", "0", "150"])
-            wall = random.choice([[], ["--wall", str(float(lumen) - random.choice([1, 180]))]])
+            wall = random.choice([[], ["--wall"], ["--wall", str(float(lumen) - random.choice([1, 180]))]])
             why = why or (os.path.exists(vol) and run(
                 ["measure", vol, "--path", p, "-q", "--json", "-o", os.path.join(d, "m.csv"),
                  "--lumen", lumen, "--open", random.choice(["0", "2"])] + count + grade + wall

@@ -428,16 +428,21 @@ pub struct RenderArgs {
     /// With --draw-lumen: also the vessel's outer wall that `measure --wall` finds (fat or
     /// lung below HU [default: -30] about it), in magenta. On cross-sections (--slices N) its
     /// outline, solid where its edge was seen and dotted where the fitted circle stands in for
-    /// it; on a CPR, where it meets each row, a pixel at either edge.
+    /// it; on a CPR, where it meets each row, a pixel at either edge. With --draw-dark, the
+    /// airway's wall that `measure --dark --wall` finds at half maximum (no HU), solid where
+    /// its outer edge was seen.
     #[arg(
         long,
         value_name = "HU",
         num_args = 0..=1,
-        default_missing_value = "-30",
         requires = "draw_lumen",
         allow_negative_numbers = true
     )]
-    pub draw_wall: Option<f32>,
+    pub draw_wall: Option<Option<f32>>,
+    /// With --draw-lumen: the lumen is the samples at or below HU, an airway's gas, as
+    /// `measure --dark` finds it.
+    #[arg(long, requires = "draw_lumen")]
+    pub draw_dark: bool,
     /// With --mode slice (a slice, or a CPR with --path, and their frames): tints each pixel by the
     /// label of a label map, DICOM Segmentation or RT Structure Set (FILE: NIfTI, NRRD,
     /// MetaImage, DICOM SEG or RTSTRUCT; `measure --mask` writes the first and the SEG) at the

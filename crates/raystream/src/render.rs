@@ -421,6 +421,7 @@ fn lumen_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option
     };
     let o = LumenOptions {
         threshold_hu: hu,
+        dark: a.draw_dark,
         ..LumenOptions::for_volume(volume)
     };
     o.check()
@@ -428,15 +429,24 @@ fn lumen_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option
     Ok(Some(o))
 }
 
-/// `--draw-wall HU`'s wall options (`measure --wall`'s at that threshold), checked against
+/// `--draw-wall [HU]`'s wall options (`measure --wall`'s at that threshold, -30 HU by
+/// default; with `--draw-dark`, an airway's at half maximum), checked against
 /// `--draw-lumen`'s.
 fn wall_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option<WallOptions>> {
     let (Some(hu), Some(lumen)) = (a.draw_wall, lumen_options(a, volume)?) else {
         return Ok(None);
     };
-    let w = WallOptions::vessel(hu);
+    let w = match hu {
+        Some(hu) if a.draw_dark => bail!(
+            "--draw-wall {hu} with --draw-dark: an airway's wall is found at half maximum, with no threshold; give --draw-wall alone"
+        ),
+        _ if a.draw_dark => WallOptions::airway(),
+        Some(hu) => WallOptions::vessel(hu),
+        None => WallOptions::default(),
+    };
+    let what = hu.map_or("--draw-wall".to_string(), |hu| format!("--draw-wall {hu}"));
     w.check(&lumen)
-        .map_err(|e| anyhow::anyhow!("--draw-wall {hu}: {e}"))?;
+        .map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
     Ok(Some(w))
 }
 

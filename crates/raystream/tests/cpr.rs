@@ -1076,6 +1076,63 @@ fn a_fly_through_the_airway_follows_a_dark_centreline() {
         ],
         "--wall -30 with --dark: an airway's wall is found at half maximum",
     );
+    // Drawn on four cross-sections (`render --draw-lumen -500 --draw-dark --draw-wall`, the
+    // planes `measure --sections 4` measures): the wall's outline changes pixels on the
+    // trachea's two, where a wall is found, and none on the left main bronchus's two.
+    let sections = |name: &str, wall: &[&str]| {
+        let dir = tmp(name);
+        std::fs::remove_dir_all(&dir).ok();
+        let args = [
+            &[
+                &vol[..],
+                "--mode",
+                "slice",
+                "--path",
+                line.to_str().unwrap(),
+                "--slices",
+                "4",
+                "--size",
+                "96x96",
+                "--draw-lumen",
+                "-500",
+                "--draw-dark",
+            ],
+            wall,
+        ]
+        .concat();
+        render_to(name, "cpu", &args)
+    };
+    let (plain, drawn) = (
+        sections("airway-lumen", &[]),
+        sections("airway-wall", &["--draw-wall"]),
+    );
+    for i in 0..4 {
+        let name = format!("frame_{i:03}.png");
+        let a = image::open(plain.join(&name)).unwrap().to_rgb8();
+        let b = image::open(drawn.join(&name)).unwrap().to_rgb8();
+        let changed = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
+        assert_eq!(changed > 0, i < 2, "section {i}: {changed} pixels changed");
+    }
+    refused(
+        &[
+            "render",
+            &vol,
+            "--mode",
+            "slice",
+            "--path",
+            line.to_str().unwrap(),
+            "--slices",
+            "2",
+            "--draw-lumen",
+            "-500",
+            "--draw-dark",
+            "--draw-wall",
+            "-30",
+            "-o",
+            "/tmp/never-written",
+        ],
+        "--draw-wall -30 with --draw-dark",
+    );
     let tf = repo().join("examples/bronchoscopy.toml");
     let dir = render_to(
         "fly-airway",
