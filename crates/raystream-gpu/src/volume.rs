@@ -16,7 +16,7 @@ use raystream_cpu::cinematic::{
 use raystream_cpu::denoise::{DenoiseOptions, DenoiseTimes, Guides, NoisyFilm};
 use raystream_cpu::dvr::{
     BRICK, DvrMode, DvrOptions, ISO_COLOUR, Interpolation, KEPT_WEIGHT, LightGrid, Marcher, Sight,
-    SplineGrids, brick_table, over_background, scene_to_lps,
+    SplineGrids, brick_table, kept_brick_table, over_background, scene_to_lps,
 };
 use raystream_cpu::segments::SegmentColours;
 use raystream_io::Volume;
@@ -299,6 +299,9 @@ pub struct GpuVolumeRenderer<'a> {
     weights: Option<&'a Volume>,
     weight_grids: SplineGrids,
     kept_views: [std::sync::OnceLock<wgpu::TextureView>; 2],
+    /// Per interpolation, the bricks a kept projection may see
+    /// (`raystream_cpu::dvr::kept_brick_table`), made on first use.
+    kept_bricks: [std::sync::OnceLock<wgpu::Buffer>; 3],
     /// Milliseconds spent uploading the volume and building the pipeline.
     pub upload_ms: f64,
 }
@@ -421,6 +424,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             weights,
             weight_grids: Default::default(),
             kept_views: Default::default(),
+            kept_bricks: Default::default(),
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }
@@ -571,6 +575,26 @@ impl<'a> GpuVolumeRenderer<'a> {
             self.vol.dims,
             self.grid(interpolation),
             self.tf,
+            interpolation,
+        );
+        let b = brick_buffer(self.ctx, &table)?;
+        Ok(cell.get_or_init(|| b))
+    }
+
+    /// The bricks a projection kept to `weights`' segments may see, read as `interpolation`,
+    /// made on first use.
+    fn kept_brick_buffer(
+        &self,
+        weights: &Volume,
+        interpolation: Interpolation,
+    ) -> Result<&wgpu::Buffer, GpuError> {
+        let cell = &self.kept_bricks[interpolation as usize];
+        if let Some(b) = cell.get() {
+            return Ok(b);
+        }
+        let table = kept_brick_table(
+            self.vol.dims,
+            self.weight_grids.get(weights, interpolation),
             interpolation,
         );
         let b = brick_buffer(self.ctx, &table)?;
@@ -812,7 +836,9 @@ impl<'a> GpuVolumeRenderer<'a> {
             origin: v3(origin),
             window_level: l,
             dims: self.vol.dims.map(|n| n as u32),
-            skip_empty: (opt.skip_empty && opt.mode == DvrMode::Dvr) as u32,
+            skip_empty: (opt.skip_empty
+                && (opt.mode == DvrMode::Dvr || self.kept_weights(opt.mode).is_some()))
+                as u32,
             bricks: self.gpu.brick_dims,
             opacity_count: self.tf.opacity.len() as u32,
             background: v3(opt.background),
@@ -952,11 +978,12 @@ impl<'a> GpuVolumeRenderer<'a> {
         if batches.len() > 1 && accum.as_ref().is_none_or(|a| a.size() < 32 * n) {
             *accum = Some(ctx.work_buffer("running sums", 32 * n, wgpu::BufferUsages::empty())?);
         }
-        // The brick table is read only where dvr skips empty space.
-        let bricks = if params.skip_empty != 0 {
-            self.brick_buffer(opt.interpolation)?
-        } else {
-            &self.no_rows
+        // The brick table is read only where dvr skips empty space, or a kept projection the
+        // bricks outside its segments.
+        let bricks = match self.kept_weights(opt.mode) {
+            _ if params.skip_empty == 0 => &self.no_rows,
+            Some(w) => self.kept_brick_buffer(w, opt.interpolation)?,
+            None => self.brick_buffer(opt.interpolation)?,
         };
         // A frame of one dispatch binds a placeholder.
         let accum = accum.as_ref().unwrap_or(&self.no_rows);

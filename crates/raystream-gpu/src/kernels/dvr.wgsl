@@ -311,6 +311,15 @@ fn march(o: vec3<f32>, d: vec3<f32>, jit: f32, at: vec3<f32>, n: vec3<f32>, reac
         if t > t1 {
             break;
         }
+        // Of a volume kept to segments, the bricks outside them, whose samples are none (the
+        // CPU's kept_brick_table).
+        if dp.kept != 0u && dp.skip_empty != 0u {
+            let next = skip_brick(o_idx + d_idx * t, t, t0, d_idx, step, jit, k);
+            if next > k {
+                k = next;
+                continue;
+            }
+        }
         var v: f32;
         var within = true;
         if dp.kept != 0u {
