@@ -9,26 +9,27 @@
 //! thinner it is: no one threshold fits thin and thick walls alike. So each ray from the
 //! lumen's centroid places the wall's edges at half maximum, as the standard full width at half
 //! maximum method does (Nakano et al., Am J Respir Crit Care Med 2000): the wall's peak is the
-//! highest sample past the lumen, confirmed where the HU beyond it fall [`DIP_HU`] below it (the
-//! lung or fat outside, below [`OUTSIDE_MAX_HU`]); the inner edge is where the HU cross halfway between the lumen's gas
-//! (its lowest sample on the ray) and the peak, and the outer edge where they cross halfway
-//! between the peak and the lowest sample beyond it (before the HU rise again into a
-//! neighbour). A ray that meets no such dip within [`REACH_MM`] of the lumen (the wall pressed
-//! against a vessel, the oesophagus or the mediastinum's soft tissue), or meets something
-//! brighter than a wall first ([`WALL_MAX_HU`]: contrast-filled blood, calcium, a stent),
-//! finds no edges.
+//! highest sample past the lumen, confirmed where the HU beyond it fall [`DIP_HU`] below it;
+//! the inner edge is where the HU cross halfway between the lumen's gas (its lowest sample on
+//! the ray) and the peak, and the outer edge where they cross halfway between the peak and the
+//! lowest sample beyond it (before the HU rise again into a neighbour), which must be fat or
+//! lung ([`OUTSIDE_MAX_HU`]). A ray that meets no such dip within [`REACH_MM`] of the lumen (the
+//! wall pressed against a vessel, the oesophagus or the mediastinum's soft tissue), or meets
+//! something brighter than a wall first ([`WALL_MAX_HU`]: contrast-filled blood, calcium, a
+//! stent), finds no outer edge.
 //!
 //! A neighbour with a narrow gap of lung between it and the wall (the bronchus's own artery)
 //! can still give a ray the two of them as one peak: rays over twice the median thickness are
 //! left out. The rest must be at least a quarter of the rays, and eight. A ray that finds the
 //! wall's inner edge but does not see past the wall is given the median thickness of those
 //! that do beyond it (its peak is then the highest sample within reach, short of anything
-//! brighter than a wall); one that finds neither edge takes its neighbours' by angle.
-//! A lumen whose centroid lies outside it, or whose largest diameter is over twice its smallest
-//! (two bronchi at once, where the airway divides), has no wall measured. The inner and outer outlines give the areas; the thickness is the mean over the rays with
-//! their own edges. Like every half-maximum method this overstates a wall much thinner than the
-//! scanner's blur (there the peak's width is the blur's), and it reads the wall's thickness
-//! along rays from the centroid, across the wall where the airway is round.
+//! brighter than a wall); one that finds neither edge takes its neighbours' by angle. A lumen
+//! whose centroid lies outside it, or whose largest diameter is over twice its smallest (two
+//! bronchi at once, where the airway divides), has no wall measured. The inner and outer
+//! outlines give the areas; the thickness is the mean over the rays with their own edges. Like
+//! every half-maximum method this overstates a wall much thinner than the scanner's blur
+//! (there the peak's width is the blur's), and it reads the wall's thickness along rays from
+//! the centroid, across the wall where the airway is round.
 //!
 //! Written here: the method is a few dozen lines of 1-D profile analysis on the sections that
 //! `lumen` samples, and no crate does it.
