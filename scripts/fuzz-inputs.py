@@ -534,9 +534,13 @@ def fuzz_files(work, n, device):
                                    ["--reference", random.choice(["3", "2,30", "1,2,3", "-1"])],
                                    ["--span", random.choice(["0.1", "5", "1e9"])],
                                    ["--lesions", random.choice(["1", "3", "100"])]])
-            # Sometimes the outer wall too, below the lumen's threshold.
+            # Sometimes the outer wall too: a vessel's below the lumen's threshold (its default,
+            # -30 HU, where that is below it), an airway's (--dark) with no threshold.
             lumen = random.choice(["-500", "0", "150"])
-            wall = random.choice([[], ["--wall"], ["--wall", str(float(lumen) - random.choice([1, 180]))]])
+            dark = ["--dark"] if random.random() < 0.2 else []
+            wall = random.choice([[], ["--wall"]] if dark else
+                                 [[], ["--wall", str(float(lumen) - random.choice([1, 180]))]]
+                                 + ([["--wall"]] if float(lumen) > -30 else []))
             why = why or (os.path.exists(vol) and run(
                 ["measure", vol, "--path", p, "-q", "--json", "-o", os.path.join(d, "m.csv"),
                  "--lumen", lumen, "--open", random.choice(["0", "2"])] + count + grade + wall
@@ -546,7 +550,7 @@ def fuzz_files(work, n, device):
                    if random.random() < 0.5 else [])
                 + (["--mask", os.path.join(d, "m." + random.choice(["nii", "nii.gz"]))]
                    if random.random() < 0.3 else [])
-                + (["--dark"] if random.random() < 0.2 else []), s))
+                + dark, s))
             # And a centreline tracked through its points.
             why = why or (os.path.exists(vol) and run(
                 ["centreline", vol, "--path", p, "-q", "-o", os.path.join(d, "cl.mrk.json"),
