@@ -71,6 +71,11 @@ pub(crate) struct Edges {
     pub outer: f64,
 }
 
+/// [`REACH_MM`] in samples `step` mm apart.
+fn reach_samples(step: f64) -> usize {
+    (REACH_MM / step).ceil() as usize
+}
+
 /// Where the HU cross `level` between samples `i` and `i + 1` (`a` and `b`), mm.
 fn crossing(a: f32, b: f32, level: f32, i: usize, step: f64) -> f64 {
     let t = if a == b {
@@ -95,7 +100,7 @@ pub(crate) struct RayWall {
 /// wall, the volume's edge or the reach), and the outer edge where a dip confirms that peak;
 /// none where nothing rises past the lumen.
 pub(crate) fn half_maximum(v: &[f32], last: usize, step: f64) -> Option<RayWall> {
-    let reach = (REACH_MM / step).ceil() as usize;
+    let reach = reach_samples(step);
     let air = v[..=last.min(v.len() - 1)]
         .iter()
         .copied()
@@ -140,7 +145,7 @@ pub(crate) fn half_maximum(v: &[f32], last: usize, step: f64) -> Option<RayWall>
 /// having fallen [`DIP_HU`] below it at sample `k`: halfway from the peak to the lowest HU
 /// beyond it; none where that is not fat or lung.
 fn outer_edge(v: &[f32], peak: usize, k: usize, step: f64) -> Option<f64> {
-    let reach = (REACH_MM / step).ceil() as usize;
+    let reach = reach_samples(step);
     let top = v[peak];
     // The lowest HU beyond it, until they rise again by half the dip (a neighbour).
     let mut low = v[k];
@@ -218,7 +223,7 @@ pub(crate) fn airway_wall(
     let sample = lumen::sampler(vol, m, row);
     let step = opt.pixel_mm;
     let n = (0.5 * opt.field_mm / step).floor() as usize;
-    let reach = 2 * (REACH_MM / step).ceil() as usize;
+    let reach = 2 * reach_samples(step);
     let dirs: Vec<DVec2> = (0..rays)
         .map(|k| {
             let a = std::f64::consts::TAU * k as f64 / rays as f64;

@@ -567,18 +567,14 @@ impl<'a> GpuVolumeRenderer<'a> {
 
     /// The brick table of frames read as `interpolation`, made on first use.
     fn brick_buffer(&self, interpolation: Interpolation) -> Result<&wgpu::Buffer, GpuError> {
-        let cell = &self.bricks[interpolation as usize];
-        if let Some(b) = cell.get() {
-            return Ok(b);
-        }
-        let table = brick_table(
-            self.vol.dims,
-            self.grid(interpolation),
-            self.tf,
-            interpolation,
-        );
-        let b = brick_buffer(self.ctx, &table)?;
-        Ok(cell.get_or_init(|| b))
+        self.table_buffer(&self.bricks[interpolation as usize], || {
+            brick_table(
+                self.vol.dims,
+                self.grid(interpolation),
+                self.tf,
+                interpolation,
+            )
+        })
     }
 
     /// The bricks a projection kept to `weights`' segments may see, read as `interpolation`,
@@ -588,16 +584,25 @@ impl<'a> GpuVolumeRenderer<'a> {
         weights: &Volume,
         interpolation: Interpolation,
     ) -> Result<&wgpu::Buffer, GpuError> {
-        let cell = &self.kept_bricks[interpolation as usize];
+        self.table_buffer(&self.kept_bricks[interpolation as usize], || {
+            kept_brick_table(
+                self.vol.dims,
+                self.weight_grids.get(weights, interpolation),
+                interpolation,
+            )
+        })
+    }
+
+    /// The brick table in `cell`, uploaded from `table` the first time.
+    fn table_buffer<'s>(
+        &'s self,
+        cell: &'s std::sync::OnceLock<wgpu::Buffer>,
+        table: impl FnOnce() -> Vec<bool>,
+    ) -> Result<&'s wgpu::Buffer, GpuError> {
         if let Some(b) = cell.get() {
             return Ok(b);
         }
-        let table = kept_brick_table(
-            self.vol.dims,
-            self.weight_grids.get(weights, interpolation),
-            interpolation,
-        );
-        let b = brick_buffer(self.ctx, &table)?;
+        let b = brick_buffer(self.ctx, &table())?;
         Ok(cell.get_or_init(|| b))
     }
 

@@ -445,11 +445,12 @@ fn airway_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String
         walls.len(),
         wall.rays
     );
-    if walls.is_empty() {
+    let (Some(thickness), Some(percent)) = (
+        wall_mean(sections, |w| w.mean_thickness_mm),
+        wall_mean(sections, Wall::area_percent),
+    ) else {
         return t;
-    }
-    let mean =
-        |f: fn(&Wall) -> f64| walls.iter().map(|(_, w)| f(w)).sum::<f64>() / walls.len() as f64;
+    };
     let range = |f: fn(&Wall) -> f64| {
         walls
             .iter()
@@ -462,9 +463,7 @@ fn airway_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String
     let [plo, phi] = range(Wall::area_percent);
     let _ = writeln!(
         t,
-        "wall thickness: {:.2} mm on average over them ({lo:.2} to {hi:.2} mm section by section); wall area {:.1} % of the airway's (WA %; {plo:.1} to {phi:.1} %)",
-        mean(|w| w.mean_thickness_mm),
-        mean(Wall::area_percent),
+        "wall thickness: {thickness:.2} mm on average over them ({lo:.2} to {hi:.2} mm section by section); wall area {percent:.1} % of the airway's (WA %; {plo:.1} to {phi:.1} %)",
     );
     if let Some((i, w)) = wall_with_most(sections, |w| w.mean_thickness_mm) {
         let c = w.centre;
@@ -496,6 +495,15 @@ fn airway_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String
         );
     }
     t
+}
+
+/// The mean of `figure` over the sections' walls; none without a wall.
+fn wall_mean(sections: &[Section], figure: fn(&Wall) -> f64) -> Option<f64> {
+    let walls: Vec<f64> = sections
+        .iter()
+        .filter_map(|s| s.wall.as_ref().map(figure))
+        .collect();
+    (!walls.is_empty()).then(|| walls.iter().sum::<f64>() / walls.len() as f64)
 }
 
 /// The path's angle at a point, in words.
@@ -1195,11 +1203,7 @@ fn report_json(
         m.insert("angle".into(), angle_json(g));
     }
     if let Some(w) = wall_options(a, opt) {
-        let walls: Vec<&Wall> = sections.iter().filter_map(|s| s.wall.as_ref()).collect();
-        let mean = |f: fn(&Wall) -> f64| {
-            (!walls.is_empty())
-                .then(|| round3(walls.iter().map(|w| f(w)).sum::<f64>() / walls.len() as f64))
-        };
+        let mean = |f: fn(&Wall) -> f64| wall_mean(sections, f).map(round3);
         match w.edge {
             WallEdge::Below(hu) => m.insert("wall_threshold_hu".into(), json!(hu)),
             WallEdge::HalfMaximum => m.insert("wall_edge".into(), json!("half_maximum")),

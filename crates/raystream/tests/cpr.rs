@@ -969,19 +969,7 @@ fn a_fly_through_the_airway_follows_a_dark_centreline() {
     let vol = chest();
     let points = repo().join("examples/chest_airway_points.txt");
     let line = tmp("airway.mrk.json");
-    let o = run(&[
-        "centreline",
-        "--quiet",
-        &vol,
-        "--path",
-        points.to_str().unwrap(),
-        "--dark",
-        "--lumen",
-        "-950",
-        "-o",
-        line.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    dark_centreline(&vol, &points, &line);
     let path = raystream_io::read_curve(&line).unwrap();
     let placed = raystream_io::read_curve(&points).unwrap();
     let ct = raystream_io::load_volume(Path::new(&vol), &Default::default()).unwrap();
@@ -1007,24 +995,12 @@ fn a_fly_through_the_airway_follows_a_dark_centreline() {
     // (median under -900 HU), the wall's (label 2) the wall's tissue (median -600 to 100 HU;
     // measured -4), as many as the JSON counts.
     let mask = tmp("airway-mask.nii.gz");
-    let o = run(&[
-        "measure",
-        "--quiet",
+    let m = dark_measure(
         &vol,
-        "--path",
-        line.to_str().unwrap(),
-        "--dark",
-        "--lumen",
-        "-500",
-        "--sections",
-        "10",
-        "--wall",
-        "--mask",
-        mask.to_str().unwrap(),
-        "--json",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let m: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        &line,
+        ("-500", "10"),
+        &["--mask", mask.to_str().unwrap()],
+    );
     assert_eq!(m["dark"], true);
     assert_eq!(m["wall_edge"], "half_maximum");
     for s in m["sections"].as_array().unwrap() {
@@ -1054,22 +1030,7 @@ fn a_fly_through_the_airway_follows_a_dark_centreline() {
     // The wall's edges are placed on each ray's own profile, not at the lumen's threshold:
     // with the lumen at -950 HU (its gas alone) the same walls, their thickness within 0.2 mm
     // (measured within 0.11) and their WA within 1 % (within 0.4).
-    let o = run(&[
-        "measure",
-        "--quiet",
-        &vol,
-        "--path",
-        line.to_str().unwrap(),
-        "--dark",
-        "--lumen",
-        "-950",
-        "--sections",
-        "10",
-        "--wall",
-        "--json",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let gas: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let gas = dark_measure(&vol, &line, ("-950", "10"), &[]);
     let walls = |m: &serde_json::Value| -> Vec<serde_json::Value> {
         m["sections"]
             .as_array()
@@ -1207,35 +1168,8 @@ fn the_airway_wall_takes_more_of_the_smaller_bronchi() {
     let vol = chest();
     let points = repo().join("examples/chest_right_airway_points.txt");
     let line = tmp("right-airway.mrk.json");
-    let o = run(&[
-        "centreline",
-        "--quiet",
-        &vol,
-        "--path",
-        points.to_str().unwrap(),
-        "--dark",
-        "--lumen",
-        "-950",
-        "-o",
-        line.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = run(&[
-        "measure",
-        "--quiet",
-        &vol,
-        "--path",
-        line.to_str().unwrap(),
-        "--dark",
-        "--lumen",
-        "-950",
-        "--sections",
-        "20",
-        "--wall",
-        "--json",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let m: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    dark_centreline(&vol, &points, &line);
+    let m = dark_measure(&vol, &line, ("-950", "20"), &[]);
     let length = m["length_mm"].as_f64().unwrap();
     assert!((150.0..185.0).contains(&length), "{length} mm");
     let wa = |s: &serde_json::Value| s["wall"]["area_percent"].as_f64();
@@ -1274,6 +1208,51 @@ fn the_airway_wall_takes_more_of_the_smaller_bronchi() {
         mean(&small) >= mean(&trachea) + 20.0,
         "{small:?} {trachea:?}"
     );
+}
+
+/// `centreline --dark --lumen -950` of `vol` through `points`, written to `line`.
+fn dark_centreline(vol: &str, points: &Path, line: &Path) {
+    let o = run(&[
+        "centreline",
+        "--quiet",
+        vol,
+        "--path",
+        points.to_str().unwrap(),
+        "--dark",
+        "--lumen",
+        "-950",
+        "-o",
+        line.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// `measure --dark --lumen LUMEN --sections N --wall --json` of `vol` along `line`, and
+/// `extra`: its JSON.
+fn dark_measure(
+    vol: &str,
+    line: &Path,
+    (lumen, sections): (&str, &str),
+    extra: &[&str],
+) -> serde_json::Value {
+    let mut args = vec![
+        "measure",
+        "--quiet",
+        vol,
+        "--path",
+        line.to_str().unwrap(),
+        "--dark",
+        "--lumen",
+        lumen,
+        "--sections",
+        sections,
+        "--wall",
+        "--json",
+    ];
+    args.extend(extra);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    serde_json::from_str(&stdout(&o)).unwrap()
 }
 
 /// Each of a fly-through's `n` PNG frames in `dir` is mostly a wall seen from inside: over
