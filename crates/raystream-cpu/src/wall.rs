@@ -58,6 +58,16 @@ pub enum WallEdge {
     Below(f32),
     /// An airway's (about a dark lumen): both its edges at half maximum ([`crate::airway`]).
     HalfMaximum,
+    /// An airway's: its thickness from the HU summed across it, which the scanner's blur
+    /// keeps, about the middle of its edges at half maximum ([`crate::airway`]).
+    Integral,
+}
+
+impl WallEdge {
+    /// An airway's wall (about a dark lumen), at half maximum or by the integral.
+    pub fn is_airway(self) -> bool {
+        matches!(self, WallEdge::HalfMaximum | WallEdge::Integral)
+    }
 }
 
 /// How the outer wall is found.
@@ -93,6 +103,14 @@ impl WallOptions {
         }
     }
 
+    /// An airway's wall, its thickness by the integral on 180 rays.
+    pub fn airway_integral() -> WallOptions {
+        WallOptions {
+            edge: WallEdge::Integral,
+            rays: 180,
+        }
+    }
+
     pub fn check(&self, lumen: &LumenOptions) -> Result<(), String> {
         match self.edge {
             WallEdge::Below(_) if lumen.dark => {
@@ -106,9 +124,9 @@ impl WallOptions {
                     lumen.threshold_hu
                 ));
             }
-            WallEdge::HalfMaximum if !lumen.dark => {
+            e if e.is_airway() && !lumen.dark => {
                 return Err(
-                    "a wall at half maximum lies about a dark lumen (an airway's); a vessel's is found below a threshold".into(),
+                    "a wall at half maximum or by the integral lies about a dark lumen (an airway's); a vessel's is found below a threshold".into(),
                 );
             }
             _ => {}
@@ -165,10 +183,10 @@ pub struct Wall {
     /// what lines it (thrombus, an unenhanced false lumen) are. An airway's: its thickest ray.
     pub max_thickness_mm: f64,
     /// The outline's mean distance from the lumen's edge, mm. An airway's: the mean of its
-    /// rays' thicknesses, each between its edges at half maximum.
+    /// rays' thicknesses, each between its edges at half maximum (or by the integral).
     pub mean_thickness_mm: f64,
     /// The area inside the wall's inner edge, mm²: a vessel's lumen's; an airway's, inside
-    /// its edges at half maximum.
+    /// its rays' inner edges.
     pub inner_area_mm2: f64,
     /// The fitted circle's centre (LPS mm) and diameter, mm (an airway's: fitted by least
     /// squares to its outer edges).
@@ -254,7 +272,7 @@ impl Track {
         wall: &WallOptions,
     ) -> Result<Track, String> {
         // An airway's wall is found on each section by itself.
-        if wall.edge == WallEdge::HalfMaximum {
+        if wall.edge.is_airway() {
             return Ok(Track { found: Vec::new() });
         }
         let length = crate::cpr::tortuosity(points)?.length_mm;
@@ -749,8 +767,8 @@ pub(crate) fn wall_about(
 ) -> Option<(Wall, Outline)> {
     let wall_hu = match wall.edge {
         WallEdge::Below(hu) => hu,
-        WallEdge::HalfMaximum => {
-            return crate::airway::airway_wall(vol, m, row, opt, wall.rays, g, lumen);
+        WallEdge::HalfMaximum | WallEdge::Integral => {
+            return crate::airway::airway_wall(vol, m, row, opt, wall, g, lumen);
         }
     };
     if lumen.open {

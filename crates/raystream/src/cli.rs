@@ -85,6 +85,18 @@ pub enum KernelsArg {
     Ifif,
 }
 
+/// `measure --dark --wall --wall-edge`: how an airway's wall is placed on each ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum AirwayEdge {
+    /// Both its edges at half maximum: quantitative airway CT's standard, comparable with the
+    /// published figures (Pi10 among them); it overstates a wall thinner than the scanner's blur.
+    HalfMaximum,
+    /// Its thickness from the HU summed across it, which the blur keeps (thin walls near their
+    /// own thickness; the wall's density taken as soft tissue's 40 HU, or its peak where
+    /// higher), about the middle of its edges at half maximum.
+    Integral,
+}
+
 /// `render --path --cpr`: how the curved plane is laid out.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum CprArg {
@@ -443,6 +455,10 @@ pub struct RenderArgs {
     /// `measure --dark` finds it.
     #[arg(long, requires = "draw_lumen")]
     pub draw_dark: bool,
+    /// With --draw-dark --draw-wall: how the airway's wall is placed on each ray, as `measure
+    /// --wall-edge` [default: half-maximum].
+    #[arg(long, value_enum, value_name = "EDGE", requires = "draw_wall")]
+    pub draw_wall_edge: Option<AirwayEdge>,
     /// With --mode slice (a slice, or a CPR with --path, and their frames): tints each pixel by the
     /// label of a label map, DICOM Segmentation or RT Structure Set (FILE: NIfTI, NRRD,
     /// MetaImage, DICOM SEG or RTSTRUCT; `measure --mask` writes the first and the SEG) at the
@@ -481,6 +497,16 @@ pub struct RenderArgs {
     /// the cross-section there.
     #[arg(long, value_name = "MM", requires_all = ["path", "stations"], allow_negative_numbers = true)]
     pub path_at: Option<f64>,
+    /// With --path FILE --slices N: each cross-section's height in mm (its width in
+    /// proportion), about the path's point: a zoom on the vessel or airway, as a workstation's
+    /// cross-section viewer shows it (default: the volume's finest spacing a pixel).
+    #[arg(
+        long,
+        value_name = "MM",
+        requires_all = ["path", "slices"],
+        allow_negative_numbers = true
+    )]
+    pub field: Option<f32>,
     /// With --slices: the planes' spacing in mm (default: the pixel size, for cubic voxels);
     /// with --path, the cross-sections' (or with --fly the cameras') spacing along the path,
     /// about its middle (default: evenly along all of it).
@@ -925,6 +951,9 @@ pub struct MeasureArgs {
         allow_negative_numbers = true
     )]
     pub wall: Option<Option<f32>>,
+    /// With --dark --wall: how the airway's wall is placed on each ray [default: half-maximum].
+    #[arg(long, value_enum, value_name = "EDGE")]
+    pub wall_edge: Option<AirwayEdge>,
     /// Grade a stenosis: the lesion's area and smallest diameter against the reference, the
     /// vessel's diameter there without it (fitted to the sections about it, or --reference),
     /// and the narrowed segment's length.

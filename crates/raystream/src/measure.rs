@@ -8,6 +8,7 @@
 use std::fmt::Write as _;
 
 use anyhow::{Context, Result, bail};
+use raystream_cpu::airway::Pi10;
 use raystream_cpu::cpr::{CurvedPlane, PathAngle, Tortuosity};
 use raystream_cpu::dvr::Marcher;
 use raystream_cpu::lumen::{self, LumenOptions, Section};
@@ -16,7 +17,7 @@ use raystream_cpu::wall::{Track, Wall, WallEdge, WallOptions, WallVolumes};
 use raystream_math::DVec3;
 use serde_json::json;
 
-use crate::cli::MeasureArgs;
+use crate::cli::{AirwayEdge, MeasureArgs};
 use crate::common::{file_name, print_line, round3, spinner};
 use crate::iso::read_volume;
 
@@ -99,6 +100,11 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     if let (Some(Some(hu)), true) = (a.wall, opt.dark) {
         bail!(
             "--wall {hu} with --dark: an airway's wall is found at half maximum on each ray, with no threshold; give --wall alone"
+        );
+    }
+    if a.wall_edge.is_some() && !(opt.dark && a.wall.is_some()) {
+        bail!(
+            "--wall-edge places an airway's wall: give it with --dark --wall (a vessel's wall is found below --wall HU)"
         );
     }
     let wall = wall_options(a, &opt);
@@ -239,9 +245,12 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
 }
 
 /// `--wall [HU]`'s options: a vessel's wall, below HU (-30 by default); with `--dark`, an
-/// airway's, at half maximum.
+/// airway's, at half maximum or (`--wall-edge integral`) by the integral.
 fn wall_options(a: &MeasureArgs, opt: &LumenOptions) -> Option<WallOptions> {
     a.wall.map(|hu| match hu {
+        _ if opt.dark && a.wall_edge == Some(AirwayEdge::Integral) => {
+            WallOptions::airway_integral()
+        }
         _ if opt.dark => WallOptions::airway(),
         Some(hu) => WallOptions::vessel(hu),
         None => WallOptions::default(),
@@ -373,7 +382,9 @@ pub(crate) fn widest_wall(sections: &[Section]) -> Option<(usize, &Wall)> {
 fn wall_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String {
     let hu = match wall.edge {
         WallEdge::Below(hu) => hu,
-        WallEdge::HalfMaximum => return airway_text(sections, wall, step_mm),
+        WallEdge::HalfMaximum | WallEdge::Integral => {
+            return airway_text(sections, wall, step_mm);
+        }
     };
     let closed = sections.iter().filter(|s| status(s) == "closed").count();
     let found = sections.iter().filter(|s| s.wall.is_some()).count();
@@ -440,10 +451,21 @@ fn airway_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String
         .enumerate()
         .filter_map(|(i, s)| s.wall.as_ref().map(|w| (i, w)))
         .collect();
+    let how = if wall.edge == WallEdge::Integral {
+        format!(
+            "its thickness from the HU summed across it on {} rays from the lumen's centroid (the scanner's blur keeps the sum; the wall's density taken as {} HU, or its peak where higher), about the middle of its edges at half maximum",
+            wall.rays,
+            raystream_cpu::airway::WALL_HU
+        )
+    } else {
+        format!(
+            "its inner and outer edges at half maximum on {} rays from the lumen's centroid (halfway between the gas and the wall's peak, and between the peak and the lung or fat beyond)",
+            wall.rays
+        )
+    };
     let mut t = format!(
-        "airway wall: found on {} of the {closed} sections with a closed lumen, its inner and outer edges at half maximum on {} rays from the lumen's centroid (halfway between the gas and the wall's peak, and between the peak and the lung or fat beyond; none where fewer than a quarter of the rays see past the wall)\n",
+        "airway wall: found on {} of the {closed} sections with a closed lumen, {how}; none where fewer than a quarter of the rays see past the wall\n",
         walls.len(),
-        wall.rays
     );
     let (Some(thickness), Some(percent)) = (
         wall_mean(sections, |w| w.mean_thickness_mm),
@@ -465,6 +487,29 @@ fn airway_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String
         t,
         "wall thickness: {thickness:.2} mm on average over them ({lo:.2} to {hi:.2} mm section by section); wall area {percent:.1} % of the airway's (WA %; {plo:.1} to {phi:.1} %)",
     );
+    match Pi10::of(sections) {
+        Ok(p) => {
+            let _ = writeln!(
+                t,
+                "Pi10: {:.2} mm (the square root of the wall area of an airway 10 mm round inside, on the line fitted to √WA against the inner perimeter over the {} sections, Pi {:.1} to {:.1} mm{}: √WA = {:.3} mm + {:.4} × Pi, r² {:.2})",
+                p.value_mm,
+                p.sections,
+                p.perimeter_range_mm[0],
+                p.perimeter_range_mm[1],
+                if p.extrapolated() {
+                    ", 10 mm beyond them: extrapolated"
+                } else {
+                    ""
+                },
+                p.intercept_mm,
+                p.slope,
+                p.r2
+            );
+        }
+        Err(why) => {
+            let _ = writeln!(t, "Pi10: none: {why}");
+        }
+    }
     if let Some((i, w)) = wall_with_most(sections, |w| w.mean_thickness_mm) {
         let c = w.centre;
         let _ = writeln!(
@@ -1207,12 +1252,34 @@ fn report_json(
         match w.edge {
             WallEdge::Below(hu) => m.insert("wall_threshold_hu".into(), json!(hu)),
             WallEdge::HalfMaximum => m.insert("wall_edge".into(), json!("half_maximum")),
+            WallEdge::Integral => m.insert("wall_edge".into(), json!("integral")),
         };
         m.insert(
             "wall_mean_thickness_mm".into(),
             json!(mean(|w| w.mean_thickness_mm)),
         );
         m.insert("wall_area_percent".into(), json!(mean(Wall::area_percent)));
+        if w.edge.is_airway() {
+            let pi10 = Pi10::of(sections);
+            if let Err(why) = &pi10 {
+                m.insert("pi10_why_none".into(), json!(why));
+            }
+            m.insert(
+                "pi10".into(),
+                match pi10 {
+                    Ok(p) => json!({
+                        "value_mm": round3(p.value_mm),
+                        "intercept_mm": round3(p.intercept_mm),
+                        "slope": (p.slope * 1e5).round() / 1e5,
+                        "r2": round3(p.r2),
+                        "sections": p.sections,
+                        "perimeter_range_mm": p.perimeter_range_mm.map(round3),
+                        "extrapolated": p.extrapolated(),
+                    }),
+                    Err(_) => json!(null),
+                },
+            );
+        }
         m.insert(
             "widest_wall_section".into(),
             json!(widest_wall(sections).map(|(i, _)| i + 1)),

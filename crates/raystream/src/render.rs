@@ -21,7 +21,7 @@ use raystream_cpu::lumen::LumenOptions;
 use raystream_cpu::pipeline::Pipeline;
 use raystream_cpu::wall::{Track, WallOptions};
 
-use crate::cli::{CprArg, FrameFormat, RenderArgs};
+use crate::cli::{AirwayEdge, CprArg, FrameFormat, RenderArgs};
 use crate::common::{
     Backend, DicomOut, Picture, gpu_tracer, image_format, median as median_of, ms, open_device,
     spinner,
@@ -430,7 +430,8 @@ fn lumen_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option
 }
 
 /// `--draw-wall [HU]`'s wall options (`measure --wall`'s at that threshold, -30 HU by
-/// default; with `--draw-dark`, an airway's at half maximum), checked against
+/// default; with `--draw-dark`, an airway's at half maximum, or by the integral with
+/// `--draw-wall-edge integral`), checked against
 /// `--draw-lumen`'s.
 fn wall_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option<WallOptions>> {
     let (Some(hu), Some(lumen)) = (a.draw_wall, lumen_options(a, volume)?) else {
@@ -440,7 +441,13 @@ fn wall_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option<
         Some(hu) if a.draw_dark => bail!(
             "--draw-wall {hu} with --draw-dark: an airway's wall is found at half maximum, with no threshold; give --draw-wall alone"
         ),
+        _ if a.draw_dark && a.draw_wall_edge == Some(AirwayEdge::Integral) => {
+            WallOptions::airway_integral()
+        }
         _ if a.draw_dark => WallOptions::airway(),
+        _ if a.draw_wall_edge.is_some() => bail!(
+            "--draw-wall-edge places an airway's wall: give it with --draw-dark (a vessel's wall is found below --draw-wall HU)"
+        ),
         Some(hu) => WallOptions::vessel(hu),
         None => WallOptions::default(),
     };
@@ -1296,8 +1303,8 @@ fn fly_through(
 /// `render --mode slice --path FILE --slices N -o DIR` (or a projection's `--slab`): N
 /// cross-sections of the path, each perpendicular to it at the arc length (i + ½)·L/N (with
 /// `--slice-step MM`, MM apart about its middle), centred on it at the volume's finest
-/// spacing, the CPR's lateral direction to the right: the planes a vessel's diameter is
-/// measured on, as reformatted CT images with their planes.
+/// spacing a pixel (or `--field MM` high), the CPR's lateral direction to the right: the
+/// planes a vessel's diameter is measured on, as reformatted CT images with their planes.
 fn path_sections(
     a: &RenderArgs,
     (renderer, volume, track): (&dvr::Renderer, &raystream_io::Volume, Option<&Track>),
@@ -1316,7 +1323,13 @@ fn path_sections(
     let stations = CurvedPlane::sections_spaced(&curve.points, right, az as f64, n, spacing)
         .map_err(|e| anyhow::anyhow!("{}: {e}", curve.file.display()))?;
     inside(curve.file, &stations, volume)?;
-    let pixel = raystream_cpu::dvr::min_spacing(volume);
+    let half_height = match a.field {
+        Some(mm) if !(mm.is_finite() && mm > 0.0 && mm <= 1e5) => {
+            bail!("--field {mm}: a cross-section's height must be above 0 mm, and at most 100 m")
+        }
+        Some(mm) => 0.5 * mm,
+        None => 0.5 * raystream_cpu::dvr::min_spacing(volume) * opt.height as f32,
+    };
     let extent = volume.dims.map(|d| d as f64);
     let reach = (0..3)
         .map(|i| (extent[i] * volume.spacing[i]).powi(2))
@@ -1337,7 +1350,7 @@ fn path_sections(
         format,
         "slices",
         |i| {
-            let cam = stations.section_camera(i, 0.5 * pixel * opt.height as f32, reach);
+            let cam = stations.section_camera(i, half_height, reach);
             let row = &stations.rows[i as usize];
             let opt = DvrOptions {
                 slice_at: Some(row.centre),

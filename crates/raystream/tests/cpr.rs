@@ -511,6 +511,32 @@ fn plane_of(obj: &dicom_object::DefaultDicomObject, k: usize) -> (DVec3, DVec3) 
     (at, row.cross(col))
 }
 
+/// `render --mode slice --path PATH --slices N --size 9x9 --format dcm` of `vol` and `extra`
+/// into the folder `name` (on the CPU): its N DICOM images.
+fn dicom_sections(
+    (vol, path): (&str, &str),
+    (name, n): (&str, &str),
+    extra: &[&str],
+) -> Vec<dicom_object::DefaultDicomObject> {
+    let dir = tmp(name);
+    std::fs::remove_dir_all(&dir).ok();
+    let args = [
+        &[
+            "render", "--quiet", "--device", "cpu", vol, "--mode", "slice", "--path", path,
+            "--slices", n, "--size", "9x9", "--format", "dcm",
+        ][..],
+        extra,
+        &["-o", dir.to_str().unwrap()],
+    ]
+    .concat();
+    let o = run(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let count: usize = n.parse().unwrap();
+    (0..count)
+        .map(|i| dicom_object::open_file(dir.join(format!("frame_{i:03}.dcm"))).unwrap())
+        .collect()
+}
+
 /// `--path --slices N --slice-step MM`: N cross-sections MM apart along the path about its
 /// middle: their centres MM apart (chords of a gently curving path), the middle one the
 /// single section `--slices 1` cuts at the path's middle, each plane perpendicular to the
@@ -521,33 +547,9 @@ fn plane_of(obj: &dicom_object::DefaultDicomObject, k: usize) -> (DVec3, DVec3) 
 fn cross_sections_step_along_the_path() {
     let (vol, path) = (chest(), aorta());
     let sections = |n: &str, step: &[&str]| -> Vec<(DVec3, DVec3)> {
-        let dir = tmp(&format!("cpr-step-{n}"));
-        std::fs::remove_dir_all(&dir).ok();
-        let args = [
-            &[
-                "render",
-                "--quiet",
-                "--device",
-                "cpu",
-                &vol[..],
-                "--mode",
-                "slice",
-            ][..],
-            &[
-                "--path", &path, "--slices", n, "--size", "9x9", "--format", "dcm",
-            ],
-            step,
-            &["-o", dir.to_str().unwrap()],
-        ]
-        .concat();
-        let o = run(&args);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let count: usize = n.parse().unwrap();
-        (0..count)
-            .map(|i| {
-                let obj = dicom_object::open_file(dir.join(format!("frame_{i:03}.dcm"))).unwrap();
-                plane_of(&obj, 4)
-            })
+        dicom_sections((&vol, &path), (&format!("cpr-step-{n}"), n), step)
+            .iter()
+            .map(|obj| plane_of(obj, 4))
             .collect()
     };
     let s = sections("7", &["--slice-step", "5"]);
@@ -626,6 +628,60 @@ fn cross_sections_step_along_the_path() {
     refused(
         &far,
         "about 1000 mm along it run from 1000.0 to 1000.0 mm: beyond the path's",
+    );
+}
+
+/// `--path --slices N --field MM`: each cross-section MM high about the same point of the
+/// path, its pixels MM over the height (18 mm on 9 rows: 2 mm; by default the CT's 1.5 mm
+/// spacing); a field that is not above 0 is refused, and one without --path --slices.
+#[test]
+fn a_cross_section_s_field_sets_its_pixels() {
+    use dicom_dictionary_std::tags;
+    let (vol, path) = (chest(), aorta());
+    let section = |name: &str, field: &[&str]| {
+        let at = [&["--path-at", "60"][..], field].concat();
+        let obj = &dicom_sections((&vol, &path), (name, "1"), &at)[0];
+        (plane_of(obj, 4), dicom_numbers(obj, tags::PIXEL_SPACING))
+    };
+    let ((centre, normal), spacing) = section("field-default", &[]);
+    let ((zoomed, zoomed_normal), zoomed_spacing) = section("field-18", &["--field", "18"]);
+    assert_eq!(spacing, [1.5, 1.5]);
+    assert_eq!(zoomed_spacing, [2.0, 2.0]);
+    assert!((centre - zoomed).length() < 0.01 && normal.dot(zoomed_normal) > 0.9999);
+    let args = |field: &str| {
+        [
+            "render",
+            &vol[..],
+            "--mode",
+            "slice",
+            "--path",
+            &path[..],
+            "--slices",
+            "1",
+            "--field",
+            field,
+            "-o",
+            "/tmp/never-written",
+        ]
+        .map(String::from)
+    };
+    for bad in ["0", "-5", "nan"] {
+        let a = args(bad);
+        let a: Vec<&str> = a.iter().map(|s| s.as_str()).collect();
+        refused(&a, "a cross-section's height must be above 0 mm");
+    }
+    refused(
+        &[
+            "render",
+            &vol,
+            "--mode",
+            "slice",
+            "--field",
+            "18",
+            "-o",
+            "/tmp/never-written",
+        ],
+        "--path",
     );
 }
 
@@ -1079,58 +1135,64 @@ fn a_fly_through_the_airway_follows_a_dark_centreline() {
     // Drawn on four cross-sections (`render --draw-lumen -500 --draw-dark --draw-wall`, the
     // planes `measure --sections 4` measures): the wall's outline changes pixels on the
     // trachea's two, where a wall is found, and none on the left main bronchus's two.
+    let line_str = line.to_str().unwrap();
+    let on_sections = |n: &'static str| {
+        [
+            &vol[..],
+            "--mode",
+            "slice",
+            "--path",
+            line_str,
+            "--slices",
+            n,
+        ]
+    };
     let sections = |name: &str, wall: &[&str]| {
         let dir = tmp(name);
         std::fs::remove_dir_all(&dir).ok();
-        let args = [
-            &[
-                &vol[..],
-                "--mode",
-                "slice",
-                "--path",
-                line.to_str().unwrap(),
-                "--slices",
-                "4",
-                "--size",
-                "96x96",
-                "--draw-lumen",
-                "-500",
-                "--draw-dark",
-            ],
-            wall,
-        ]
-        .concat();
-        render_to(name, "cpu", &args)
+        let lumen = ["--size", "96x96", "--draw-lumen", "-500", "--draw-dark"];
+        render_to(name, "cpu", &[&on_sections("4")[..], &lumen, wall].concat())
     };
     let (plain, drawn) = (
         sections("airway-lumen", &[]),
         sections("airway-wall", &["--draw-wall"]),
     );
+    // By the integral too (`--draw-wall-edge integral`).
+    let integral = sections(
+        "airway-wall-integral",
+        &["--draw-wall", "--draw-wall-edge", "integral"],
+    );
     for i in 0..4 {
         let name = format!("frame_{i:03}.png");
         let a = image::open(plain.join(&name)).unwrap().to_rgb8();
-        let b = image::open(drawn.join(&name)).unwrap().to_rgb8();
-        let changed = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
-        assert_eq!(changed > 0, i < 2, "section {i}: {changed} pixels changed");
+        for with_wall in [&drawn, &integral] {
+            let b = image::open(with_wall.join(&name)).unwrap().to_rgb8();
+            let changed = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
+            assert_eq!(changed > 0, i < 2, "section {i}: {changed} pixels changed");
+        }
     }
-    refused(
+    let drawn_sections = |draw: &[&str], want: &str| {
+        let args = [
+            &["render"][..],
+            &on_sections("2"),
+            &["-o", "/tmp/never-written"],
+            draw,
+        ]
+        .concat();
+        refused(&args, want);
+    };
+    drawn_sections(
         &[
-            "render",
-            &vol,
-            "--mode",
-            "slice",
-            "--path",
-            line.to_str().unwrap(),
-            "--slices",
-            "2",
             "--draw-lumen",
-            "-500",
-            "--draw-dark",
+            "150",
             "--draw-wall",
-            "-30",
-            "-o",
-            "/tmp/never-written",
+            "--draw-wall-edge",
+            "integral",
         ],
+        "--draw-wall-edge places an airway's wall",
+    );
+    drawn_sections(
+        &["--draw-lumen", "-500", "--draw-dark", "--draw-wall", "-30"],
         "--draw-wall -30 with --draw-dark",
     );
     let tf = repo().join("examples/bronchoscopy.toml");
@@ -1165,10 +1227,7 @@ fn a_fly_through_the_airway_follows_a_dark_centreline() {
 /// maximum overstates a wall the more, the thinner it is against the blur).
 #[test]
 fn the_airway_wall_takes_more_of_the_smaller_bronchi() {
-    let vol = chest();
-    let points = repo().join("examples/chest_right_airway_points.txt");
-    let line = tmp("right-airway.mrk.json");
-    dark_centreline(&vol, &points, &line);
+    let (vol, line) = right_airway("right-airway.mrk.json");
     let m = dark_measure(&vol, &line, ("-950", "20"), &[]);
     let length = m["length_mm"].as_f64().unwrap();
     assert!((150.0..185.0).contains(&length), "{length} mm");
@@ -1208,6 +1267,117 @@ fn the_airway_wall_takes_more_of_the_smaller_bronchi() {
         mean(&small) >= mean(&trachea) + 20.0,
         "{small:?} {trachea:?}"
     );
+}
+
+/// Down the right lung again (40 sections), the wall by the integral (`--wall-edge integral`)
+/// against half maximum: about as thick on the trachea (within 0.8 mm a section, measured
+/// 0.25-0.55 thinner), where the wall is thicker than the blur, and at least 0.5 mm thinner on
+/// average over the last 50 mm (measured 1.1 mm, 0.8-2.8 mm against 2.2-3.2: at 1.5 mm
+/// voxels half maximum reads the blur), none 3 mm thick there; Pi10 from each, over
+/// every section with a wall, the integral's at least 1.5 mm below half maximum's (measured
+/// 4.5 and 7.3 mm), extrapolated below the smallest bronchi (Pi 13-18 mm), and both lines
+/// rising with the airway's size; the text says the same. `--wall-edge` is refused without
+/// `--dark --wall`.
+#[test]
+fn the_integral_reads_the_small_bronchi_walls_thinner_than_half_maximum() {
+    let (vol, line) = right_airway("right-airway-integral.mrk.json");
+    let half = dark_measure(&vol, &line, ("-950", "40"), &[]);
+    let integral = dark_measure(&vol, &line, ("-950", "40"), &["--wall-edge", "integral"]);
+    assert_eq!(half["wall_edge"], "half_maximum");
+    assert_eq!(integral["wall_edge"], "integral");
+    let length = half["length_mm"].as_f64().unwrap();
+    let thickness =
+        |m: &serde_json::Value, i: usize| m["sections"][i]["wall"]["mean_thickness_mm"].as_f64();
+    let (mut distal_half, mut distal_integral) = (Vec::new(), Vec::new());
+    for (i, s) in half["sections"].as_array().unwrap().iter().enumerate() {
+        let arc = s["arc_mm"].as_f64().unwrap();
+        let (Some(h), Some(t)) = (thickness(&half, i), thickness(&integral, i)) else {
+            continue;
+        };
+        if arc < 40.0 {
+            assert!(t < h && h - t < 0.8, "section {}: {h} {t}", i + 1);
+        } else if arc > length - 50.0 {
+            assert!(t < 3.0, "section {}: {t}", i + 1);
+            distal_half.push(h);
+            distal_integral.push(t);
+        }
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    assert!(distal_half.len() >= 8, "{distal_half:?}");
+    assert!(
+        mean(&distal_half) - mean(&distal_integral) >= 0.5,
+        "{distal_half:?} {distal_integral:?}"
+    );
+    let walls = |m: &serde_json::Value| {
+        m["sections"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|s| !s["wall"].is_null())
+            .count() as u64
+    };
+    let (p_half, p_integral) = (&half["pi10"], &integral["pi10"]);
+    for (m, p) in [(&half, p_half), (&integral, p_integral)] {
+        assert_eq!(p["sections"].as_u64().unwrap(), walls(m), "{p}");
+        assert_eq!(p["extrapolated"], true, "{p}");
+        let lo = p["perimeter_range_mm"][0].as_f64().unwrap();
+        assert!(
+            (10.0..20.0).contains(&lo) && p["slope"].as_f64().unwrap() > 0.0,
+            "{p}"
+        );
+    }
+    let value = |p: &serde_json::Value| p["value_mm"].as_f64().unwrap();
+    assert!(
+        (3.5..6.0).contains(&value(p_integral)) && value(p_half) - value(p_integral) >= 1.5,
+        "{p_half} {p_integral}"
+    );
+    let o = run(&[
+        "measure",
+        "--quiet",
+        &vol,
+        "--path",
+        line.to_str().unwrap(),
+        "--dark",
+        "--lumen",
+        "-950",
+        "--sections",
+        "40",
+        "--wall",
+        "--wall-edge",
+        "integral",
+    ]);
+    let t = stdout(&o);
+    assert!(
+        t.contains(&format!("Pi10: {:.2} mm", value(p_integral)))
+            && t.contains("extrapolated")
+            && t.contains("its thickness from the HU summed across it"),
+        "{t}"
+    );
+    for extra in [&["--wall"][..], &["--dark"]] {
+        let args = [
+            &[
+                "measure",
+                &vol[..],
+                "--path",
+                line.to_str().unwrap(),
+                "--wall-edge",
+                "integral",
+            ][..],
+            extra,
+        ]
+        .concat();
+        refused(&args, "--wall-edge places an airway's wall");
+    }
+}
+
+/// The chest CT, and the centreline down its right lung from
+/// examples/chest_right_airway_points.txt, written to `name`.
+fn right_airway(name: &str) -> (String, std::path::PathBuf) {
+    let vol = chest();
+    let points = repo().join("examples/chest_right_airway_points.txt");
+    let line = tmp(name);
+    dark_centreline(&vol, &points, &line);
+    (vol, line)
 }
 
 /// `centreline --dark --lumen -950` of `vol` through `points`, written to `line`.
