@@ -520,7 +520,10 @@ def fuzz_files(work, n, device):
                            "--slices", random.choice(["1", "3"]), "--device", device,
                            "-o", os.path.join(d, "w")]
                           + random.choice([["--draw-lumen", "150", "--draw-wall"],
-                                           ["--draw-lumen", "-500", "--draw-dark", "--draw-wall"]]), s)
+                                           ["--draw-lumen", "-500", "--draw-dark", "--draw-wall"],
+                                           ["--draw-lumen", "-950", "--draw-dark", "--draw-wall",
+                                            "--draw-wall-edge", "integral"]])
+                          + random.choice([[], ["--field", random.choice(["0.01", "20", "1e5"])]]), s)
             # Sometimes a fly-through along it (--fly), at an odd field of view.
             if not why and os.path.exists(vol) and random.random() < 0.2:
                 look = random.choice([["dvr"], ["iso"], ["cinematic", "--spp", "2"]])
@@ -535,12 +538,17 @@ def fuzz_files(work, n, device):
                                    ["--span", random.choice(["0.1", "5", "1e9"])],
                                    ["--lesions", random.choice(["1", "3", "100"])]])
             # Sometimes the outer wall too: a vessel's below the lumen's threshold (its default,
-            # -30 HU, where that is below it), an airway's (--dark) with no threshold.
+            # -30 HU, where that is below it), an airway's (--dark) with no threshold, at half
+            # maximum or by the integral.
             lumen = random.choice(["-500", "0", "150"])
             dark = ["--dark"] if random.random() < 0.2 else []
-            wall = random.choice([[], ["--wall"]] if dark else
+            wall = random.choice([[], ["--wall"], ["--wall", "--wall-edge", "integral"]] if dark else
                                  [[], ["--wall", str(float(lumen) - random.choice([1, 180]))]]
                                  + ([["--wall"]] if float(lumen) > -30 else []))
+            # Sometimes an airway's walls drawn for Pi10 (refused, naming the plot, where there
+            # is no Pi10).
+            pi10 = (["--plot-pi10", os.path.join(d, "pi.svg")]
+                    if dark and wall and random.random() < 0.5 else [])
             why = why or (os.path.exists(vol) and run(
                 ["measure", vol, "--path", p, "-q", "--json", "-o", os.path.join(d, "m.csv"),
                  "--lumen", lumen, "--open", random.choice(["0", "2"])] + count + grade + wall
@@ -550,7 +558,7 @@ def fuzz_files(work, n, device):
                    if random.random() < 0.5 else [])
                 + (["--mask", os.path.join(d, "m." + random.choice(["nii", "nii.gz"]))]
                    if random.random() < 0.3 else [])
-                + dark, s))
+                + pi10 + dark, (s, "pi.svg") if pi10 else s))
             # And a centreline tracked through its points.
             why = why or (os.path.exists(vol) and run(
                 ["centreline", vol, "--path", p, "-q", "-o", os.path.join(d, "cl.mrk.json"),

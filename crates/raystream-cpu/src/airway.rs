@@ -405,6 +405,21 @@ pub fn inner_perimeter(w: &Wall) -> f64 {
     2.0 * (std::f64::consts::PI * w.inner_area_mm2).sqrt()
 }
 
+/// The points [`Pi10`] fits its line to: each wall on `sections`, its internal perimeter and
+/// the square root of its area (mm), `[Pi, √WA]`.
+pub fn pi10_points(sections: &[crate::lumen::Section]) -> Vec<[f64; 2]> {
+    sections
+        .iter()
+        .filter_map(|s| s.wall.as_ref())
+        .map(|w| {
+            [
+                inner_perimeter(w),
+                (w.area_mm2 - w.inner_area_mm2).max(0.0).sqrt(),
+            ]
+        })
+        .collect()
+}
+
 /// Pi10 is fitted over at least this many sections ...
 const PI10_MIN_SECTIONS: usize = 5;
 /// ... whose largest inner perimeter is at least this many times their smallest (airways of
@@ -445,24 +460,15 @@ impl Pi10 {
     /// Pi10 of the airway walls on `sections` (measured at half maximum); or why there is
     /// none.
     pub fn of(sections: &[crate::lumen::Section]) -> Result<Pi10, String> {
-        let points: Vec<(f64, f64)> = sections
-            .iter()
-            .filter_map(|s| s.wall.as_ref())
-            .map(|w| {
-                (
-                    inner_perimeter(w),
-                    (w.area_mm2 - w.inner_area_mm2).max(0.0).sqrt(),
-                )
-            })
-            .collect();
+        let points = pi10_points(sections);
         let n = points.len();
         if n < PI10_MIN_SECTIONS {
             return Err(format!(
                 "{n} sections with an airway wall, fewer than the {PI10_MIN_SECTIONS} a line needs"
             ));
         }
-        let lo = points.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
-        let hi = points.iter().map(|p| p.0).fold(0.0, f64::max);
+        let lo = points.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min);
+        let hi = points.iter().map(|p| p[0]).fold(0.0, f64::max);
         if hi < PI10_MIN_SPREAD * lo {
             return Err(format!(
                 "the inner perimeters span only {lo:.1} to {hi:.1} mm: airways of one size, \
@@ -471,11 +477,11 @@ impl Pi10 {
             ));
         }
         let k = n as f64;
-        let mx = points.iter().map(|p| p.0).sum::<f64>() / k;
-        let my = points.iter().map(|p| p.1).sum::<f64>() / k;
-        let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
-        let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
-        let syy: f64 = points.iter().map(|p| (p.1 - my).powi(2)).sum();
+        let mx = points.iter().map(|p| p[0]).sum::<f64>() / k;
+        let my = points.iter().map(|p| p[1]).sum::<f64>() / k;
+        let sxx: f64 = points.iter().map(|p| (p[0] - mx).powi(2)).sum();
+        let sxy: f64 = points.iter().map(|p| (p[0] - mx) * (p[1] - my)).sum();
+        let syy: f64 = points.iter().map(|p| (p[1] - my).powi(2)).sum();
         let slope = sxy / sxx;
         let intercept = my - slope * mx;
         Ok(Pi10 {

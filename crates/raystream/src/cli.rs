@@ -942,8 +942,8 @@ pub struct MeasureArgs {
     /// neighbours along the path agree on, where they do), the outline where seen and the
     /// circle where a neighbour hides it. With --dark, an airway's wall instead (no HU): its
     /// inner and outer edges at half maximum on rays from the lumen's centre, as quantitative
-    /// airway CT measures them, with its mean thickness and its share of the airway's area
-    /// (WA %).
+    /// airway CT measures them (or by the integral: --wall-edge), with its mean thickness, its
+    /// share of the airway's area (WA %) and Pi10 over the sections.
     #[arg(
         long,
         value_name = "HU",
@@ -1020,6 +1020,11 @@ pub struct MeasureArgs {
     /// sections, and with --stenosis the reference, the lesion and the narrowed segment.
     #[arg(long, value_name = "FILE.svg|png|dcm")]
     pub plot: Option<PathBuf>,
+    /// With --dark --wall: draw the airway's walls for Pi10 to FILE (.svg, .png or .dcm, as
+    /// --plot): √WA against the internal perimeter, a dot a section, the line fitted to them
+    /// and Pi10 ringed on it at 10 mm.
+    #[arg(long, value_name = "FILE.svg|png|dcm")]
+    pub plot_pi10: Option<PathBuf>,
     /// From a DICOM series, write the findings as a DICOM Structured Report that files with
     /// its study (Imaging Measurement Report, TID 1500, in a Comprehensive 3D SR: PACS,
     /// OHIF, 3D Slicer): the vessel's path length, widest and narrowest lumen and outer wall

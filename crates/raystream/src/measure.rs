@@ -31,8 +31,13 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
             a.every
         );
     }
-    if let Some(p) = &a.plot {
+    for p in [&a.plot, &a.plot_pi10].into_iter().flatten() {
         crate::profile::PlotFormat::of(p)?;
+    }
+    if a.plot_pi10.is_some() && !(a.vessel.dark && a.wall.is_some()) {
+        bail!(
+            "--plot-pi10 draws an airway's walls: give it with --dark --wall (Pi10 is an airway's)"
+        );
     }
     if let Some(m) = &a.mask
         && !raystream_io::is_label_map_path(m)
@@ -186,22 +191,28 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     if let Some(out) = &a.plot
         && found
     {
-        // A DICOM picture's burnt-in title names no files (they may name the patient).
-        let title = if crate::common::is_dicom(out) {
-            "The lumen along the path".to_string()
-        } else {
-            format!(
-                "{}: the lumen along {}",
-                file_name(&a.input),
-                file_name(&a.path)
-            )
+        let chart = crate::profile::Chart::Profile {
+            sections: &sections,
+            length_mm: length,
+            graded: &lesions,
         };
-        let dicom = crate::common::DicomOut {
-            annotated: true,
-            description: crate::common::options_in_words(Some(&a.input), out),
-            ..Default::default()
+        plot(a, out, "The lumen along the path", "the lumen", &chart)?;
+    }
+    if let Some(out) = &a.plot_pi10 {
+        let fit = Pi10::of(&sections).map_err(|why| {
+            anyhow::anyhow!("{}: --plot-pi10: no Pi10 to draw: {why}", out.display())
+        })?;
+        let chart = crate::profile::Chart::Pi10 {
+            sections: &sections,
+            fit: &fit,
         };
-        crate::profile::write(out, &title, &sections, length, &lesions, &dicom)?;
+        plot(
+            a,
+            out,
+            "The airway's walls for Pi10",
+            "the airway's walls for Pi10",
+            &chart,
+        )?;
     }
     let mask = if found && (a.mask.is_some() || a.structures.is_some()) {
         Some(write_mask(
@@ -242,6 +253,32 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Writes `chart` to `out`, headed `dicom_title` in a DICOM picture (whose burnt-in title
+/// names no files: they may name the patient), and otherwise "INPUT: WHAT along PATH".
+fn plot(
+    a: &MeasureArgs,
+    out: &std::path::Path,
+    dicom_title: &str,
+    what: &str,
+    chart: &crate::profile::Chart,
+) -> Result<()> {
+    let title = if crate::common::is_dicom(out) {
+        dicom_title.to_string()
+    } else {
+        format!(
+            "{}: {what} along {}",
+            file_name(&a.input),
+            file_name(&a.path)
+        )
+    };
+    let dicom = crate::common::DicomOut {
+        annotated: true,
+        description: crate::common::options_in_words(Some(&a.input), out),
+        ..Default::default()
+    };
+    crate::profile::write(out, &title, chart, &dicom)
 }
 
 /// `--wall [HU]`'s options: a vessel's wall, below HU (-30 by default); with `--dark`, an
@@ -489,20 +526,25 @@ fn airway_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String
     );
     match Pi10::of(sections) {
         Ok(p) => {
+            let [lo, hi] = p.perimeter_range_mm;
+            let range = format!("the inner perimeters fitted, {lo:.1} to {hi:.1} mm");
             let _ = writeln!(
                 t,
-                "Pi10: {:.2} mm (the square root of the wall area of an airway 10 mm round inside, on the line fitted to √WA against the inner perimeter over the {} sections, Pi {:.1} to {:.1} mm{}: √WA = {:.3} mm + {:.4} × Pi, r² {:.2})",
+                "Pi10: {:.2} mm{}: the square root of the wall area of an airway 10 mm round inside, on the line √WA = {:.3} mm + {:.4} × Pi fitted over {} sections{}, r² {:.2}",
                 p.value_mm,
-                p.sections,
-                p.perimeter_range_mm[0],
-                p.perimeter_range_mm[1],
                 if p.extrapolated() {
-                    ", 10 mm beyond them: extrapolated"
+                    format!(", extrapolated (10 mm lies outside {range})")
                 } else {
-                    ""
+                    String::new()
                 },
                 p.intercept_mm,
                 p.slope,
+                p.sections,
+                if p.extrapolated() {
+                    String::new()
+                } else {
+                    format!(" ({range})")
+                },
                 p.r2
             );
         }

@@ -17,6 +17,7 @@ use std::path::Path;
 use anyhow::{Context, Result, anyhow, bail};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use raystream_cpu::airway::{self, Pi10};
 use raystream_cpu::lumen::{Lumen, Section};
 use raystream_cpu::stenosis::{self, ReferenceSource, Stenosis};
 
@@ -114,36 +115,118 @@ pub fn register_font() -> Result<()> {
     Ok(())
 }
 
-/// The profile as SVG text; `title` heads it, `length_mm` is the path's length.
-pub fn svg(
-    title: &str,
-    sections: &[Section],
-    length_mm: f64,
-    graded: &[Stenosis],
-) -> Result<String> {
+/// What a plot shows.
+#[derive(Clone, Copy)]
+pub enum Chart<'a> {
+    /// The lumen's diameters against arc length along a path `length_mm` long, with its
+    /// graded stenoses.
+    Profile {
+        sections: &'a [Section],
+        length_mm: f64,
+        graded: &'a [Stenosis],
+    },
+    /// An airway's walls: √WA against the internal perimeter, a dot a section, and the line
+    /// Pi10 is read off.
+    Pi10 {
+        sections: &'a [Section],
+        fit: &'a Pi10,
+    },
+}
+
+impl Chart<'_> {
+    /// Draws the chart on `root`, `title` heading it.
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        title: &str,
+    ) -> std::result::Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+        match *self {
+            Chart::Profile {
+                sections,
+                length_mm,
+                graded,
+            } => draw(root, title, sections, length_mm, graded),
+            Chart::Pi10 { sections, fit } => draw_pi10(root, title, sections, fit),
+        }
+    }
+
+    /// What it is, in words, for an error.
+    fn words(&self) -> &'static str {
+        match self {
+            Chart::Profile { .. } => "the profile",
+            Chart::Pi10 { .. } => "the Pi10 plot",
+        }
+    }
+}
+
+/// The chart as SVG text; `title` heads it.
+pub fn svg(title: &str, chart: &Chart) -> Result<String> {
     register_font()?;
     let mut out = String::new();
     {
         let root = SVGBackend::with_string(&mut out, SIZE).into_drawing_area();
-        draw(&root, title, sections, length_mm, graded).map_err(|e| anyhow!("{e}"))?;
+        chart.draw(&root, title).map_err(|e| anyhow!("{e}"))?;
     }
     Ok(out)
 }
 
-/// The profile as pixels: [`SIZE`], 8-bit RGB, row by row from the top left.
-pub fn rgb(
-    title: &str,
-    sections: &[Section],
-    length_mm: f64,
-    graded: &[Stenosis],
-) -> Result<Vec<u8>> {
+/// The chart as pixels: [`SIZE`], 8-bit RGB, row by row from the top left.
+pub fn rgb(title: &str, chart: &Chart) -> Result<Vec<u8>> {
     register_font()?;
     let mut out = vec![0u8; 3 * SIZE.0 as usize * SIZE.1 as usize];
     {
         let root = BitMapBackend::with_buffer(&mut out, SIZE).into_drawing_area();
-        draw(&root, title, sections, length_mm, graded).map_err(|e| anyhow!("{e}"))?;
+        chart.draw(&root, title).map_err(|e| anyhow!("{e}"))?;
     }
     Ok(out)
+}
+
+/// A chart of millimetres against millimetres.
+type Axes<'a, DB> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// `root` filled white and headed `title`, a chart over `x` and `y` on it, its axes named
+/// `x_desc` and `y_desc`, its grid faint.
+fn axes<'a, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
+    title: &str,
+    (x, y): (std::ops::Range<f64>, std::ops::Range<f64>),
+    (x_desc, y_desc): (&str, &str),
+) -> std::result::Result<Axes<'a, DB>, DrawingAreaErrorKind<DB::ErrorType>> {
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 20))
+        .margin(14)
+        .x_label_area_size(44)
+        .y_label_area_size(56)
+        .build_cartesian_2d(x, y)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .light_line_style(BLACK.mix(0.05))
+        .bold_line_style(BLACK.mix(0.15))
+        .draw()?;
+    Ok(chart)
+}
+
+/// The chart's legend, in a box at `at`.
+fn legend<'a, DB: DrawingBackend + 'a>(
+    chart: &mut Axes<'a, DB>,
+    at: SeriesLabelPosition,
+) -> std::result::Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    chart
+        .configure_series_labels()
+        .position(at)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.4))
+        .label_font(("sans-serif", 14))
+        .draw()
 }
 
 /// Draws the profile on `root`.
@@ -171,22 +254,12 @@ fn draw<DB: DrawingBackend>(
     let ymax = (top * 1.3).max(1.0);
     let ymin = reference.iter().copied().fold(0.0, f64::min);
     {
-        root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, ("sans-serif", 20))
-            .margin(14)
-            .x_label_area_size(44)
-            .y_label_area_size(56)
-            .build_cartesian_2d(0.0..length_mm.max(1e-3), ymin..ymax)?;
-        chart
-            .configure_mesh()
-            .x_desc("arc length along the path (mm)")
-            .y_desc("diameter (mm)")
-            .x_label_formatter(&|v| format!("{v:.0}"))
-            .y_label_formatter(&|v| format!("{v:.0}"))
-            .light_line_style(BLACK.mix(0.05))
-            .bold_line_style(BLACK.mix(0.15))
-            .draw()?;
+        let mut chart = axes(
+            root,
+            title,
+            (0.0..length_mm.max(1e-3), ymin..ymax),
+            ("arc length along the path (mm)", "diameter (mm)"),
+        )?;
 
         // The narrowed segments first, under the lines; the first lesion's in the legend.
         for (k, n) in graded
@@ -299,13 +372,7 @@ fn draw<DB: DrawingBackend>(
                 )))?;
             }
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK.mix(0.4))
-            .label_font(("sans-serif", 14))
-            .draw()?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         root.present()?;
     }
     Ok(())
@@ -336,24 +403,18 @@ impl PlotFormat {
     }
 }
 
-/// Writes the profile to `file`, as its name says ([`PlotFormat::of`]); a DICOM file as
+/// Writes the chart to `file`, as its name says ([`PlotFormat::of`]); a DICOM file as
 /// `dicom` describes it.
-pub fn write(
-    file: &Path,
-    title: &str,
-    sections: &[Section],
-    length_mm: f64,
-    graded: &[Stenosis],
-    dicom: &DicomOut,
-) -> Result<()> {
-    let cannot = |e: anyhow::Error| anyhow!("{}: cannot draw the profile: {e}", file.display());
+pub fn write(file: &Path, title: &str, chart: &Chart, dicom: &DicomOut) -> Result<()> {
+    let cannot =
+        |e: anyhow::Error| anyhow!("{}: cannot draw {}: {e}", file.display(), chart.words());
     match PlotFormat::of(file)? {
         PlotFormat::Svg => {
-            let text = svg(title, sections, length_mm, graded).map_err(cannot)?;
+            let text = svg(title, chart).map_err(cannot)?;
             std::fs::write(file, text).with_context(|| format!("cannot write {}", file.display()))
         }
         PlotFormat::Png | PlotFormat::Dicom => {
-            let rgb = rgb(title, sections, length_mm, graded).map_err(cannot)?;
+            let rgb = rgb(title, chart).map_err(cannot)?;
             let picture = Picture::Srgb8 {
                 rgb,
                 width: SIZE.0,
@@ -362,6 +423,85 @@ pub fn write(
             picture.save(file, "", dicom)
         }
     }
+}
+
+/// Draws an airway's √WA against its internal perimeter on `root`: a dot a section with a
+/// wall, the line fitted to them (solid over the perimeters measured, dashed where it is
+/// carried to 10 mm beyond them), and Pi10 ringed on it at 10 mm.
+fn draw_pi10<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    title: &str,
+    sections: &[Section],
+    fit: &Pi10,
+) -> std::result::Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let points = airway::pi10_points(sections);
+    let [lo, hi] = fit.perimeter_range_mm;
+    let line = |pi: f64| fit.intercept_mm + fit.slope * pi;
+    let xmax = (hi * 1.05).max(12.0);
+    let top = points
+        .iter()
+        .map(|p| p[1])
+        .chain([line(0.0), line(xmax), fit.value_mm])
+        .fold(0.0, f64::max);
+    // Room above the highest for the legend.
+    let ymax = (top * 1.35).max(1.0);
+    let mut chart = axes(
+        root,
+        title,
+        (0.0..xmax, 0.0..ymax),
+        (
+            "internal perimeter Pi (mm)",
+            "square root of the wall area, √WA (mm)",
+        ),
+    )?;
+    chart
+        .draw_series(
+            points
+                .iter()
+                .map(|&[x, y]| Circle::new((x, y), 3, EQ.filled())),
+        )?
+        .label(format!("a section's wall ({})", points.len()))
+        .legend(swatch(EQ, 1.0));
+    chart
+        .draw_series(LineSeries::new(
+            [lo, hi].map(|x| (x, line(x))),
+            REFERENCE.stroke_width(2),
+        ))?
+        .label(format!(
+            "√WA = {:.2} mm + {:.4} × Pi (r² {:.2})",
+            fit.intercept_mm, fit.slope, fit.r2
+        ))
+        .legend(swatch(REFERENCE, 1.0));
+    if fit.extrapolated() {
+        // Carried to 10 mm: dashed, from 10 mm (so that a dash starts there) to the nearer end
+        // of the perimeters measured.
+        let to = if 10.0 < lo { lo } else { hi };
+        chart.draw_series(DashedLineSeries::new(
+            [10.0, to].map(|x| (x, line(x))),
+            8,
+            5,
+            REFERENCE.stroke_width(2),
+        ))?;
+    }
+    chart
+        .draw_series(std::iter::once(Circle::new(
+            (10.0, fit.value_mm),
+            6,
+            LESION.stroke_width(2),
+        )))?
+        .label(format!(
+            "Pi10 {:.2} mm: √WA at Pi = 10 mm{}",
+            fit.value_mm,
+            if fit.extrapolated() {
+                " (extrapolated)"
+            } else {
+                ""
+            }
+        ))
+        .legend(swatch(LESION, 1.0));
+    legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
+    root.present()?;
+    Ok(())
 }
 
 #[cfg(test)]
@@ -374,6 +514,15 @@ mod tests {
 
     /// A section's figure, mm.
     type Figure = fn(&Lumen) -> f64;
+
+    /// The profile of made-up `sections` along a path 60 mm long.
+    fn profile<'a>(sections: &'a [Section], graded: &'a [Stenosis]) -> Chart<'a> {
+        Chart::Profile {
+            sections,
+            length_mm: 60.0,
+            graded,
+        }
+    }
 
     /// One SVG element: its tag and attributes.
     struct Element {
@@ -760,8 +909,8 @@ mod tests {
         };
         let g = stenosis::grade(&sections, 60.0, &opts).unwrap();
         for graded in [vec![], vec![g]] {
-            let text = svg("made up", &sections, 60.0, &graded).unwrap();
-            let pixels = rgb("made up", &sections, 60.0, &graded).unwrap();
+            let text = svg("made up", &profile(&sections, &graded)).unwrap();
+            let pixels = rgb("made up", &profile(&sections, &graded)).unwrap();
             assert!(check_pixels(&pixels, &text) > 500);
         }
     }
@@ -815,7 +964,7 @@ mod tests {
     #[test]
     fn the_profile_draws_each_figure_where_it_is() {
         let sections = made_up();
-        let plain = svg("made up", &sections, 60.0, &[]).unwrap();
+        let plain = svg("made up", &profile(&sections, &[])).unwrap();
         // Runs: 0–19, 21 (lone), 25–59.
         assert_eq!(check_plot(&plain, &sections, &[]), 2);
         let opts = StenosisOptions {
@@ -826,7 +975,7 @@ mod tests {
         let g = stenosis::grade(&sections, 60.0, &opts).unwrap();
         assert_eq!(g.lesion, 40);
         assert!(g.narrowed.is_some());
-        let graded = svg("made up", &sections, 60.0, std::slice::from_ref(&g)).unwrap();
+        let graded = svg("made up", &profile(&sections, std::slice::from_ref(&g))).unwrap();
         check_plot(&graded, &sections, std::slice::from_ref(&g));
         // A placed reference and no narrowed segment (the grade's own figures, changed).
         let placed = Stenosis {
@@ -835,7 +984,11 @@ mod tests {
             narrowed: None,
             ..g.clone()
         };
-        let placed_svg = svg("made up", &sections, 60.0, std::slice::from_ref(&placed)).unwrap();
+        let placed_svg = svg(
+            "made up",
+            &profile(&sections, std::slice::from_ref(&placed)),
+        )
+        .unwrap();
         check_plot(&placed_svg, &sections, std::slice::from_ref(&placed));
         assert!(placed_svg.contains("reference (placed)"));
         // Tandem lesions: a second, milder narrowing at 8 mm; both drawn, each where its
@@ -853,7 +1006,7 @@ mod tests {
         let both = stenosis::grade_lesions(&tandem, 60.0, &opts, 3).unwrap();
         assert_eq!(both.len(), 2, "{both:?}");
         assert_eq!((both[0].lesion, both[1].lesion), (40, 8));
-        let tandem_svg = svg("made up", &tandem, 60.0, &both).unwrap();
+        let tandem_svg = svg("made up", &profile(&tandem, &both)).unwrap();
         check_plot(&tandem_svg, &tandem, &both);
         assert!(tandem_svg.contains("lesion 2 at 8.5 mm"));
     }
@@ -892,7 +1045,15 @@ mod tests {
         };
         let g = stenosis::grade(&sections, length, &opts).unwrap();
         assert!(g.narrowed.is_some());
-        let text = svg("aorta", &sections, length, std::slice::from_ref(&g)).unwrap();
+        let text = svg(
+            "aorta",
+            &Chart::Profile {
+                sections: &sections,
+                length_mm: length,
+                graded: std::slice::from_ref(&g),
+            },
+        )
+        .unwrap();
         assert!(check_plot(&text, &sections, std::slice::from_ref(&g)) >= 1);
     }
 }

@@ -1370,6 +1370,144 @@ fn the_integral_reads_the_small_bronchi_walls_thinner_than_half_maximum() {
     }
 }
 
+/// `measure --dark --wall --plot-pi10 FILE.svg` down the right lung: a dot a section with a
+/// wall, each where its internal perimeter and √WA (from the JSON's areas) put it on one
+/// linear scale per axis (within a pixel); the fitted line solid from the smallest perimeter
+/// to the largest, dashed on to 10 mm, and Pi10 ringed there, on the same scales. Without a
+/// Pi10 (three sections) it is refused, naming the file and why; and without --dark --wall.
+#[test]
+fn pi10_plot_draws_the_walls_and_their_line() {
+    let (vol, line) = right_airway("right-airway-pi10.mrk.json");
+    let svg = tmp("pi10.svg");
+    let m = dark_measure(
+        &vol,
+        &line,
+        ("-950", "40"),
+        &[
+            "--wall-edge",
+            "integral",
+            "--plot-pi10",
+            svg.to_str().unwrap(),
+        ],
+    );
+    let text = std::fs::read_to_string(&svg).unwrap();
+    // plotters writes one element a line: <circle cx=".." cy=".." r=".." .. fill="#RRGGBB" ../>
+    let attr = |line: &str, k: &str| -> Option<String> {
+        let at = line.find(&format!(" {k}=\""))? + k.len() + 3;
+        Some(line[at..].split('"').next()?.to_string())
+    };
+    let num = |line: &str, k: &str| attr(line, k).unwrap().parse::<f64>().unwrap();
+    let dots: Vec<[f64; 2]> = text
+        .lines()
+        .filter(|l| {
+            l.trim_start().starts_with("<circle") && attr(l, "fill").as_deref() == Some("#1F77B4")
+        })
+        .map(|l| [num(l, "cx"), num(l, "cy")])
+        .collect();
+    let walls: Vec<[f64; 2]> = m["sections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|s| {
+            let w = &s["wall"];
+            let (outer, inner) = (w["area_mm2"].as_f64()?, w["inner_area_mm2"].as_f64()?);
+            Some([
+                2.0 * (std::f64::consts::PI * inner).sqrt(),
+                (outer - inner).sqrt(),
+            ])
+        })
+        .collect();
+    let fit = &m["pi10"];
+    assert_eq!(dots.len(), walls.len());
+    assert_eq!(dots.len() as u64, fit["sections"].as_u64().unwrap());
+    // Each axis's scale from the two walls farthest apart on it.
+    let scale = |axis: usize| {
+        let by = |a: &&[f64; 2], b: &&[f64; 2]| a[axis].total_cmp(&b[axis]);
+        let (i, j) = (
+            walls
+                .iter()
+                .enumerate()
+                .min_by(|a, b| by(&a.1, &b.1))
+                .unwrap()
+                .0,
+            walls
+                .iter()
+                .enumerate()
+                .max_by(|a, b| by(&a.1, &b.1))
+                .unwrap()
+                .0,
+        );
+        let k = (dots[j][axis] - dots[i][axis]) / (walls[j][axis] - walls[i][axis]);
+        let (w0, d0) = (walls[i][axis], dots[i][axis]);
+        move |v: f64| d0 + k * (v - w0)
+    };
+    let (px, py) = (scale(0), scale(1));
+    for (d, w) in dots.iter().zip(&walls) {
+        assert!(
+            (d[0] - px(w[0])).abs() < 1.0 && (d[1] - py(w[1])).abs() < 1.0,
+            "{d:?} {w:?}"
+        );
+    }
+    let value = |k: &str| fit[k].as_f64().unwrap();
+    let on_line = |pi: f64| [px(pi), py(value("intercept_mm") + value("slope") * pi)];
+    let [lo, hi] = [0, 1].map(|i| fit["perimeter_range_mm"][i].as_f64().unwrap());
+    let red: Vec<Vec<[f64; 2]>> = text
+        .lines()
+        .filter(|l| {
+            l.trim_start().starts_with("<polyline")
+                && attr(l, "stroke").as_deref() == Some("#D62728")
+        })
+        .map(|l| {
+            attr(l, "points")
+                .unwrap()
+                .split_whitespace()
+                .map(|p| {
+                    let (x, y) = p.split_once(',').unwrap();
+                    [x.parse().unwrap(), y.parse().unwrap()]
+                })
+                .collect()
+        })
+        .collect();
+    let near = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).abs() < 1.5 && (p[1] - q[1]).abs() < 1.5;
+    // The solid line (two points, the legend's swatch is a rectangle), and its dashes on to 10.
+    assert!(
+        red.iter()
+            .any(|l| l.len() == 2 && near(l[0], on_line(lo)) && near(l[1], on_line(hi))),
+        "{red:?}"
+    );
+    let dashes: Vec<&[f64; 2]> = red.iter().filter(|l| l.len() == 2).flatten().collect();
+    assert!(
+        dashes.iter().any(|&&p| near(p, on_line(10.0))),
+        "{dashes:?}"
+    );
+    let ring = text
+        .lines()
+        .find(|l| {
+            l.trim_start().starts_with("<circle") && attr(l, "stroke").as_deref() == Some("#9467BD")
+        })
+        .unwrap();
+    let pi10 = [num(ring, "cx"), num(ring, "cy")];
+    assert!(near(pi10, [px(10.0), py(value("value_mm"))]), "{pi10:?}");
+    // Refused: no Pi10 from three sections, and without --dark --wall.
+    let line_str = line.to_str().unwrap();
+    let args = |extra: &[&'static str]| -> Vec<&str> {
+        let plot = [
+            "measure",
+            &vol[..],
+            "--path",
+            line_str,
+            "--plot-pi10",
+            "/tmp/never.svg",
+        ];
+        [&plot[..], extra].concat()
+    };
+    refused(
+        &args(&["--dark", "--lumen", "-950", "--wall", "--sections", "3"]),
+        "/tmp/never.svg: --plot-pi10: no Pi10 to draw: ",
+    );
+    refused(&args(&["--dark"]), "--plot-pi10 draws an airway's walls");
+}
+
 /// The chest CT, and the centreline down its right lung from
 /// examples/chest_right_airway_points.txt, written to `name`.
 fn right_airway(name: &str) -> (String, std::path::PathBuf) {
