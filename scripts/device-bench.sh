@@ -9,8 +9,9 @@
 # nodes and triangles per ray), the default scene's frame rate, and the volume modes' frame rates.
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
-# PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene) picks the parts; TRACERS (default "gpu spin
-# ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; spin = the fused kernel with RAYSTREAM_GPU_WAIT=spin; sorted = the diffuse and random
+# PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene) picks the parts; TRACERS (default "gpu block
+# ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; block = the fused kernel with
+# RAYSTREAM_GPU_WAIT=block, blocking waits against the spinning ones a hardware GPU has by default; sorted = the diffuse and random
 # sets reordered by sort-rays.py; costs = the fused kernel on trees built with --sah-traversal-cost 2, 4, 8) the tracers of
 # the trace part. The fused and if-if trace lines and bench's lines carry the
 # kernels' SIMD efficiency and residency peak (gpu_stats); every GPU trace line but split's also carries stream_ms (the
@@ -51,7 +52,7 @@ for l in sys.stdin:
 
 echo "{\"machine\": \"$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"date\": \"$(date -u +%FT%TZ)\"}" | tee -a "$res"
 parts=${PARTS:-trace render volume}
-tracers=${TRACERS:-gpu spin ifif wg split sorted costs cpu embree}
+tracers=${TRACERS:-gpu block ifif wg split sorted costs cpu embree}
 has() { [[ " $1 " == *" $2 "* ]]; }
 has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
   mesh=$d/meshes/$m.ply
@@ -83,9 +84,10 @@ has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; 
         | tag "$t, \"tracer\": \"raystream-gpu-fused\", \"order\": \"octant-morton\"}"
       $py "$d/rays.py" check "$mesh" "$tmp/sorted.rays" "$tmp/sorted.hits" --json | tag "$t, \"check\": \"gpu-fused-sorted\"}"
       rm -f "$tmp/sorted.rays"; }
-    # The fused kernel again with spinning waits (RAYSTREAM_GPU_WAIT=spin), for the A/B.
-    has "$tracers" spin && RAYSTREAM_GPU_WAIT=spin $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-spin.hits" "${any[@]}" --device gpu \
-      --repeat 10 --json --quiet | tag "$t, \"tracer\": \"raystream-gpu-fused-spin\"}"
+    # The fused kernel again with blocking waits (RAYSTREAM_GPU_WAIT=block; a hardware GPU's
+    # spin by default), for the A/B.
+    has "$tracers" block && RAYSTREAM_GPU_WAIT=block $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-block.hits" "${any[@]}" --device gpu \
+      --repeat 10 --json --quiet | tag "$t, \"tracer\": \"raystream-gpu-fused-block\"}"
     $py "$d/rays.py" check "$mesh" "$rays" "$tmp/gpu-fused.hits" "${any[@]}" --json | tag "$t, \"check\": \"gpu-fused\"}"
     has "$tracers" split && { cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-split.hits" && echo "$m $kind: split hits == fused hits byte for byte" \
       || echo "$m $kind: SPLIT HITS DIFFER from fused"; }

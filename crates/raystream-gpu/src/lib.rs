@@ -228,7 +228,8 @@ impl GpuContext {
     }
 
     /// Makes waits for the GPU spin (poll the fence) for up to 5 ms before they block; the
-    /// CLI turns it on with `RAYSTREAM_GPU_WAIT=spin`; every wait for a submission obeys it.
+    /// CLI turns it on for hardware adapters (`RAYSTREAM_GPU_WAIT=spin` or `block` chooses);
+    /// every wait for a submission obeys it.
     pub fn set_spin_wait(&mut self, on: bool) {
         self.spin_wait = on;
     }

@@ -39,13 +39,25 @@ impl Backend {
 /// when there is one and otherwise the CPU path (a software adapter such as lavapipe is far
 /// slower than the CPU path), and says which it used.
 pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Backend> {
-    // `RAYSTREAM_GPU_WAIT=spin`: waits for the GPU poll before they block (an experiment for
-    // sandboxed machines, where a blocking wait costs ≈ 0.5 ms; see BENCHMARKS.md).
-    // `RAYSTREAM_GPU_WORKGROUP=N`: the ray-query kernels' threads per workgroup (an experiment
-    // for `trace`; see BENCHMARKS.md).
+    // Waits for a hardware GPU poll its fence before they block: on the H200 that made every
+    // `trace` row 7-28 % faster by wall time (BENCHMARKS.md, 2026-12-04); a software adapter
+    // blocks, since the CPU that would spin is the one rendering. `RAYSTREAM_GPU_WAIT=spin` or
+    // `block` chooses either. `RAYSTREAM_GPU_WORKGROUP=N`: the ray-query kernels' threads per
+    // workgroup (an experiment for `trace`; see BENCHMARKS.md).
     let open = |adapter| {
         GpuContext::new(adapter).and_then(|mut ctx| {
-            ctx.set_spin_wait(std::env::var("RAYSTREAM_GPU_WAIT").is_ok_and(|v| v == "spin"));
+            let spin = match std::env::var("RAYSTREAM_GPU_WAIT").as_deref() {
+                Ok("spin") => true,
+                Ok("block") => false,
+                Ok(v) => {
+                    return Err(GpuError::Wgpu(
+                        format!("RAYSTREAM_GPU_WAIT={v:?}: spin or block"),
+                        ctx.info.name.clone(),
+                    ));
+                }
+                Err(_) => !ctx.is_software(),
+            };
+            ctx.set_spin_wait(spin);
             if let Ok(v) = std::env::var("RAYSTREAM_GPU_WORKGROUP") {
                 let threads = v.trim().parse().map_err(|_| {
                     GpuError::Wgpu(

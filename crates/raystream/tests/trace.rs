@@ -140,6 +140,45 @@ fn read_hits(path: &std::path::Path) -> Vec<(f32, u32)> {
         .collect()
 }
 
+/// `RAYSTREAM_GPU_WAIT`: the GPU's waits spin or block (a hardware GPU spins by default, a
+/// software one blocks), the same hits either way; any other value is refused, saying which.
+#[test]
+fn gpu_waits_spin_or_block() {
+    if !gpu_available() {
+        return;
+    }
+    let hits = |wait: &str| {
+        let (rays, out) = (tmp("wait.rays"), tmp(&format!("wait-{wait}.hits")));
+        std::fs::write(
+            &rays,
+            f32s(&[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY]),
+        )
+        .unwrap();
+        let o = bin()
+            .env("RAYSTREAM_GPU_WAIT", wait)
+            .args(["trace", &mesh("spot.obj"), "--rays", rays.to_str().unwrap()])
+            .args(["-o", out.to_str().unwrap(), "--device", "gpu", "-q"])
+            .output()
+            .unwrap();
+        (o, std::fs::read(out).unwrap_or_default())
+    };
+    let (spin, spun) = hits("spin");
+    let (block, blocked) = hits("block");
+    assert!(
+        spin.status.success() && block.status.success(),
+        "{}",
+        stderr(&spin)
+    );
+    assert!(!spun.is_empty() && spun == blocked);
+    let (bad, _) = hits("sometimes");
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        stderr(&bad).contains("RAYSTREAM_GPU_WAIT=\"sometimes\": spin or block"),
+        "{}",
+        stderr(&bad)
+    );
+}
+
 /// GPU `trace` on the standard ray sets: passes rays.py's Embree check, and equals the CPU's
 /// hits (prim, and t within 1e-5 relative; only ties at shared edges may differ).
 #[test]
