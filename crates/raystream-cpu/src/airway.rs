@@ -42,9 +42,10 @@
 //! tissue's, [`WALL_HU`] (or the peak, where it is higher: a thick wall's plateau); the middle
 //! is the middle of the edges at half maximum, and the inner and outer edges lie half the
 //! thickness either side of it; rays over twice the median thickness are left out by this
-//! thickness (a vessel past a thin wall stands out against the wall's millimetre, where
-//! beside the blur-widened half-maximum widths it need not). Under a Gaussian blur of 0.8 mm that gives walls from 0.4 to 3
-//! mm within 0.06 mm, where half maximum reads a 0.4 mm wall as 1.9 mm (the unit tests).
+//! thickness (a vessel past a thin wall stands out against the wall's millimetre, where beside
+//! the blur-widened half-maximum widths it need not). Under a Gaussian blur of 0.8 mm that
+//! gives walls from 0.4 to 3 mm within 0.06 mm, where half maximum reads a 0.4 mm wall as 1.9
+//! mm (the unit tests).
 //!
 //! Written here: the method is a few dozen lines of 1-D profile analysis on the sections that
 //! `lumen` samples, and no crate does it.
@@ -401,7 +402,7 @@ pub(crate) fn airway_wall(
 
 /// An airway wall's internal perimeter, mm, as [`Pi10`] takes it: the circle's of its inner
 /// edge's area.
-pub fn inner_perimeter(w: &Wall) -> f64 {
+fn inner_perimeter(w: &Wall) -> f64 {
     2.0 * (std::f64::consts::PI * w.inner_area_mm2).sqrt()
 }
 

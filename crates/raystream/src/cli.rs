@@ -97,6 +97,17 @@ pub enum AirwayEdge {
     Integral,
 }
 
+impl AirwayEdge {
+    /// The airway wall's options `--wall-edge` (or `--draw-wall-edge`) asks for: at half
+    /// maximum where it is not given.
+    pub fn options(edge: Option<AirwayEdge>) -> raystream_cpu::wall::WallOptions {
+        match edge {
+            Some(AirwayEdge::Integral) => raystream_cpu::wall::WallOptions::airway_integral(),
+            Some(AirwayEdge::HalfMaximum) | None => raystream_cpu::wall::WallOptions::airway(),
+        }
+    }
+}
+
 /// `render --path --cpr`: how the curved plane is laid out.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum CprArg {

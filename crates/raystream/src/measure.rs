@@ -198,13 +198,16 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         };
         plot(a, out, "The lumen along the path", "the lumen", &chart)?;
     }
-    if let Some(out) = &a.plot_pi10 {
-        let fit = Pi10::of(&sections).map_err(|why| {
+    let pi10 = wall
+        .filter(|(w, _)| w.edge.is_airway())
+        .map(|_| Pi10::of(&sections));
+    if let (Some(out), Some(fit)) = (&a.plot_pi10, &pi10) {
+        let fit = fit.as_ref().map_err(|why| {
             anyhow::anyhow!("{}: --plot-pi10: no Pi10 to draw: {why}", out.display())
         })?;
         let chart = crate::profile::Chart::Pi10 {
             sections: &sections,
-            fit: &fit,
+            fit,
         };
         plot(
             a,
@@ -232,6 +235,7 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         angle: angle.as_ref(),
         mask: mask.as_ref(),
         report: None,
+        pi10: pi10.as_ref(),
     };
     if let Some(out) = &a.report
         && found
@@ -285,10 +289,7 @@ fn plot(
 /// airway's, at half maximum or (`--wall-edge integral`) by the integral.
 fn wall_options(a: &MeasureArgs, opt: &LumenOptions) -> Option<WallOptions> {
     a.wall.map(|hu| match hu {
-        _ if opt.dark && a.wall_edge == Some(AirwayEdge::Integral) => {
-            WallOptions::airway_integral()
-        }
-        _ if opt.dark => WallOptions::airway(),
+        _ if opt.dark => AirwayEdge::options(a.wall_edge),
         Some(hu) => WallOptions::vessel(hu),
         None => WallOptions::default(),
     })
@@ -416,11 +417,16 @@ pub(crate) fn widest_wall(sections: &[Section]) -> Option<(usize, &Wall)> {
 
 /// The outer wall's lines of the text report: the widest section, and on how many sections
 /// a wall was found.
-fn wall_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String {
+fn wall_text(
+    sections: &[Section],
+    wall: &WallOptions,
+    step_mm: f64,
+    pi10: Option<&Result<Pi10, String>>,
+) -> String {
     let hu = match wall.edge {
         WallEdge::Below(hu) => hu,
         WallEdge::HalfMaximum | WallEdge::Integral => {
-            return airway_text(sections, wall, step_mm);
+            return airway_text(sections, wall, step_mm, pi10);
         }
     };
     let closed = sections.iter().filter(|s| status(s) == "closed").count();
@@ -481,7 +487,12 @@ fn wall_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String {
 
 /// An airway's wall's lines of the text report: on how many sections it was found, its mean
 /// thickness and share of the airway's area over them, the thickest, and what the walls hold.
-fn airway_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String {
+fn airway_text(
+    sections: &[Section],
+    wall: &WallOptions,
+    step_mm: f64,
+    pi10: Option<&Result<Pi10, String>>,
+) -> String {
     let closed = sections.iter().filter(|s| status(s) == "closed").count();
     let walls: Vec<(usize, &Wall)> = sections
         .iter()
@@ -524,33 +535,28 @@ fn airway_text(sections: &[Section], wall: &WallOptions, step_mm: f64) -> String
         t,
         "wall thickness: {thickness:.2} mm on average over them ({lo:.2} to {hi:.2} mm section by section); wall area {percent:.1} % of the airway's (WA %; {plo:.1} to {phi:.1} %)",
     );
-    match Pi10::of(sections) {
-        Ok(p) => {
+    match pi10 {
+        Some(Ok(p)) => {
             let [lo, hi] = p.perimeter_range_mm;
             let range = format!("the inner perimeters fitted, {lo:.1} to {hi:.1} mm");
+            let (extrapolated, fitted) = if p.extrapolated() {
+                (
+                    format!(", extrapolated (10 mm lies outside {range})"),
+                    String::new(),
+                )
+            } else {
+                (String::new(), format!(" ({range})"))
+            };
             let _ = writeln!(
                 t,
-                "Pi10: {:.2} mm{}: the square root of the wall area of an airway 10 mm round inside, on the line √WA = {:.3} mm + {:.4} × Pi fitted over {} sections{}, r² {:.2}",
-                p.value_mm,
-                if p.extrapolated() {
-                    format!(", extrapolated (10 mm lies outside {range})")
-                } else {
-                    String::new()
-                },
-                p.intercept_mm,
-                p.slope,
-                p.sections,
-                if p.extrapolated() {
-                    String::new()
-                } else {
-                    format!(" ({range})")
-                },
-                p.r2
+                "Pi10: {:.2} mm{extrapolated}: the square root of the wall area of an airway 10 mm round inside, on the line √WA = {:.3} mm + {:.4} × Pi fitted over {} sections{fitted}, r² {:.2}",
+                p.value_mm, p.intercept_mm, p.slope, p.sections, p.r2
             );
         }
-        Err(why) => {
+        Some(Err(why)) => {
             let _ = writeln!(t, "Pi10: none: {why}");
         }
+        None => {}
     }
     if let Some((i, w)) = wall_with_most(sections, |w| w.mean_thickness_mm) {
         let c = w.centre;
@@ -636,6 +642,8 @@ pub(crate) struct Findings<'a> {
     pub angle: Option<&'a PathAngle>,
     pub mask: Option<&'a MaskWritten>,
     pub report: Option<&'a crate::structured_report::ReportOut>,
+    /// With an airway's wall: Pi10 over the sections, or why there is none.
+    pub pi10: Option<&'a Result<Pi10, String>>,
 }
 
 /// What `--mask` wrote: the file, its labels' voxels and volumes, and the sections they came
@@ -976,7 +984,7 @@ fn report_text(
         );
     }
     if let Some(w) = wall_options(a, opt) {
-        t += &wall_text(sections, &w, length / n as f64);
+        t += &wall_text(sections, &w, length / n as f64, findings.pi10);
     }
     t += &winding_words(winding);
     t.push('\n');
@@ -1301,9 +1309,8 @@ fn report_json(
             json!(mean(|w| w.mean_thickness_mm)),
         );
         m.insert("wall_area_percent".into(), json!(mean(Wall::area_percent)));
-        if w.edge.is_airway() {
-            let pi10 = Pi10::of(sections);
-            if let Err(why) = &pi10 {
+        if let Some(pi10) = findings.pi10 {
+            if let Err(why) = pi10 {
                 m.insert("pi10_why_none".into(), json!(why));
             }
             m.insert(

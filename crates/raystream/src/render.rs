@@ -441,10 +441,7 @@ fn wall_options(a: &RenderArgs, volume: &raystream_io::Volume) -> Result<Option<
         Some(hu) if a.draw_dark => bail!(
             "--draw-wall {hu} with --draw-dark: an airway's wall is found at half maximum, with no threshold; give --draw-wall alone"
         ),
-        _ if a.draw_dark && a.draw_wall_edge == Some(AirwayEdge::Integral) => {
-            WallOptions::airway_integral()
-        }
-        _ if a.draw_dark => WallOptions::airway(),
+        _ if a.draw_dark => AirwayEdge::options(a.draw_wall_edge),
         _ if a.draw_wall_edge.is_some() => bail!(
             "--draw-wall-edge places an airway's wall: give it with --draw-dark (a vessel's wall is found below --draw-wall HU)"
         ),
