@@ -9,7 +9,9 @@
 # nodes and triangles per ray), the default scene's frame rate, and the volume modes' frame rates.
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
-# PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene) picks the parts; TRACERS (default "gpu block
+# PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene; "ab": this binary against
+# BASE=another on the primary and shadow sets; "pixels": the default scene's camera rays by rows or blocks; "waves": its
+# frame in waves of WAVES samples) picks the parts; TRACERS (default "gpu block
 # ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; block = the fused kernel with
 # RAYSTREAM_GPU_WAIT=block, blocking waits against the spinning ones a hardware GPU has by default; sorted = the diffuse and random
 # sets reordered by sort-rays.py; costs = the fused kernel on trees built with --sah-traversal-cost 2, 4, 8) the tracers of
@@ -110,6 +112,57 @@ has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; 
   done
   rm -rf "$tmp/bench-$m" "$tmp/bench.hits"
 done
+
+# Two binaries alternated (BASE=the other binary; its lines tagged "binary": "base", this one's
+# "new"): the primary and shadow sets, trace --repeat 20, two rounds; one rays.py check each.
+has "$parts" ab && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
+  mesh=$d/meshes/$m.ply
+  for kind in primary shadow; do
+    rays=$tmp/$m-$kind.rays
+    $py "$d/rays.py" gen "$mesh" --kind $kind --size "$size" -o "$rays" > /dev/null || { echo "gen failed: $m $kind"; continue; }
+    any=(); [ $kind = shadow ] && any=(--any)
+    for round in 1 2; do
+      for which in base new; do
+        b=$bin; [ $which = base ] && b=${BASE:?BASE=the other binary}
+        $b trace "$mesh" --rays "$rays" -o "$tmp/ab-$which.hits" "${any[@]}" --device gpu --repeat 20 --json --quiet \
+          | tag "{\"mesh\": \"$m\", \"kind\": \"$kind\", \"tracer\": \"raystream-gpu-fused\", \"binary\": \"$which\", \"round\": $round}"
+      done
+    done
+    $py "$d/rays.py" check "$mesh" "$rays" "$tmp/ab-new.hits" "${any[@]}" --json | tag "{\"mesh\": \"$m\", \"kind\": \"$kind\", \"check\": \"gpu-fused\"}"
+    cmp -s "$tmp/ab-base.hits" "$tmp/ab-new.hits" && echo "$m $kind: base and new hits byte for byte" || echo "$m $kind: BASE AND NEW HITS DIFFER"
+    rm -f "$rays" "$tmp"/*.hits
+  done
+done
+
+# The default scene's camera rays row by row or in blocks of pixels (RAYSTREAM_GPU_PIXELS), at
+# 1 and 4 samples a pixel, alternated twice: frame times and kernels; the PNGs must be equal.
+has "$parts" pixels && for spp in 1 4; do
+  for round in 1 2; do
+    for order in rows blocks; do
+      RAYSTREAM_GPU_PIXELS=$order $bin render --device gpu --size "$size" --spp $spp --max-depth 4 --repeat 20 \
+        -o "$tmp/pixels-$order.png" 2>&1 | sed "s/^/[pixels $order, $spp spp, round $round] /" | tee -a "$out/render.log"
+    done
+  done
+  cmp "$tmp/pixels-rows.png" "$tmp/pixels-blocks.png" && echo "[pixels] $spp spp: the same PNG" | tee -a "$out/render.log"
+done
+
+# The default scene in waves of WAVES samples (RAYSTREAM_GPU_WAVE; default 2^20 to 2^23), 4 spp,
+# two rounds; the PNGs must be equal; then the CPU's frame against the GPU's (rays.py imgdiff).
+has "$parts" waves && {
+waves=${WAVES:-1048576 2097152 4194304 8388608}
+for round in 1 2; do
+  for wave in $waves; do
+    RAYSTREAM_GPU_WAVE=$wave $bin render --device gpu --size "$size" --max-depth 4 --repeat 20 -o "$tmp/wave-$wave.png" 2>&1 \
+      | sed "s/^/[wave $wave, round $round] /" | tee -a "$out/render.log"
+  done
+done
+first=${waves%% *}
+for wave in $waves; do
+  cmp "$tmp/wave-$first.png" "$tmp/wave-$wave.png" && echo "[waves] $wave: the same PNG as $first" | tee -a "$out/render.log"
+done
+$bin render --device cpu --size "$size" --max-depth 4 -o "$tmp/default-cpu.png" 2>&1 | sed "s/^/[cpu] /" | tee -a "$out/render.log"
+$py "$d/rays.py" imgdiff "$tmp/default-cpu.png" "$tmp/wave-${waves##* }.png" 2>&1 | sed "s/^/[imgdiff] /" | tee -a "$out/render.log"
+}
 
 ct=$d/ct/abdomen_pelvis_ct_totalseg.nii.gz
 # The default scene (the abdomen CT's bones) at depth 4; the CPU on all cores for the ratio.

@@ -218,7 +218,19 @@ pub struct RenderParams {
     pub light_count: u32,
     /// Largest workgroup count per dispatch dimension (byte 112).
     pub max_groups: u32,
-    pub pad: [u32; 3],
+    /// Rows per band of the camera rays' pixel order: 1, row by row; more, bands of that
+    /// many rows, each band column by column (byte 116; [`band_rows`]).
+    pub band: u32,
+    pub pad: [u32; 2],
+}
+
+/// The rows of a band of pixels whose column-by-column order puts the pixels of one subgroup
+/// of `lanes` invocations, `spp` samples each, in a block about as tall as wide: the largest
+/// power of two at most the square root of its pixels (32 lanes: 4 rows at 1 sample a pixel,
+/// 8 × 4 pixels; 2 rows at 4 samples, 4 × 2), 1 (row by row) when they are fewer than 4.
+pub fn band_rows(lanes: u32, spp: u32) -> u32 {
+    let pixels = (lanes / spp.max(1)).max(1);
+    1 << (pixels.ilog2() / 2)
 }
 
 /// Slots of the render kernels' counter buffer (`counters` in render.wgsl).

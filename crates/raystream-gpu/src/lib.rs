@@ -23,7 +23,8 @@ use wgpu::util::DeviceExt;
 
 pub use denoise::{GpuDenoiser, denoise_wgsl};
 pub use render::{
-    GpuRenderStats, GpuRenderer, MAX_WAVE, MAX_WAVE_DEPTHS, STAGES, Submit, render_wgsl,
+    DEFAULT_WAVE, GpuRenderStats, GpuRenderer, MAX_WAVE, MAX_WAVE_DEPTHS, STAGES, Submit,
+    render_wgsl,
 };
 pub use split::{ITERATIONS_PER_SUBMIT, split_wgsl};
 pub use volume::{GpuDvrTimes, GpuVolumeRenderer, dvr_wgsl};
@@ -102,6 +103,14 @@ pub enum GpuError {
         need: u64,
         limit: u64,
     },
+    #[error(
+        "GPU '{adapter}': out of memory for {what} ({need} bytes; a smaller --size or --spp needs less)"
+    )]
+    OutOfMemory {
+        adapter: String,
+        what: &'static str,
+        need: u64,
+    },
     #[error("GPU '{adapter}': {0}", adapter = .1)]
     Wgpu(String, String),
     #[error("GPU '{0}': the device was lost ({1})")]
@@ -120,6 +129,11 @@ pub struct GpuContext {
     spin_wait: bool,
     /// Threads per workgroup of the ray-query kernels (fused, if-if, persistent).
     query_workgroup: u32,
+    /// The stream renderer's camera rays in blocks of pixels rather than rows (see
+    /// [`GpuContext::set_pixel_blocks`]).
+    pixel_blocks: bool,
+    /// The stream renderer's most samples a wave (see [`GpuContext::set_render_wave`]).
+    render_wave: u32,
 }
 
 /// How long a spinning wait polls before it blocks.
@@ -224,6 +238,8 @@ impl GpuContext {
             lost,
             spin_wait: false,
             query_workgroup: WORKGROUP_SIZE,
+            pixel_blocks: true,
+            render_wave: render::DEFAULT_WAVE,
         })
     }
 
@@ -249,6 +265,39 @@ impl GpuContext {
             ));
         }
         self.query_workgroup = threads;
+        Ok(())
+    }
+
+    /// Makes the stream renderer generate its camera rays in blocks of pixels (bands of rows,
+    /// each band column by column, the band as tall as a square block of one subgroup's
+    /// pixels; the default) or row by row: blocks keep a subgroup's rays closer together (on
+    /// the H200 the default scene's `intersect_closest` ran 2-7 % faster: BENCHMARKS.md). The
+    /// film is the same either way (its sums do not depend on order). The CLI sets it from
+    /// `RAYSTREAM_GPU_PIXELS=blocks|rows`.
+    pub fn set_pixel_blocks(&mut self, on: bool) {
+        self.pixel_blocks = on;
+    }
+
+    /// Whether the stream renderer's camera rays go in blocks of pixels.
+    pub fn pixel_blocks(&self) -> bool {
+        self.pixel_blocks
+    }
+
+    /// Sets the samples of a stream renderer's wave (made after it), from 1 to
+    /// [`render::MAX_WAVE`] ([`render::DEFAULT_WAVE`] by default); the image does not depend
+    /// on it. The CLI sets it
+    /// from `RAYSTREAM_GPU_WAVE` (an experiment: BENCHMARKS.md).
+    pub fn set_render_wave(&mut self, samples: u32) -> Result<(), GpuError> {
+        if !(1..=render::MAX_WAVE).contains(&samples) {
+            return Err(GpuError::Wgpu(
+                format!(
+                    "a wave of {samples} samples: from 1 to {}",
+                    render::MAX_WAVE
+                ),
+                self.info.name.clone(),
+            ));
+        }
+        self.render_wave = samples;
         Ok(())
     }
 
@@ -281,10 +330,10 @@ impl GpuContext {
 
     /// Waits for all submitted work, failing instead of hanging past `GPU_TIMEOUT`.
     ///
-    /// With spinning waits ([`GpuContext::set_spin_wait`]) it first polls the fence (without blocking) for up to
-    /// [`SPIN_WAIT`]: under a sandbox such as gVisor a blocking fence wait costs ≈ 0.5 ms of
-    /// wake-up latency (BENCHMARKS.md), which dominates short queries. An experiment to be
-    /// measured on a hardware GPU; blocking stays the default until it is.
+    /// With spinning waits ([`GpuContext::set_spin_wait`]) it first polls the fence (without
+    /// blocking) for up to [`SPIN_WAIT`]: on the H200 (under gVisor) a blocking fence wait
+    /// cost 0.03-0.21 ms more wake-up latency than polling, up to a third of a 2 M-ray query's
+    /// wall time (BENCHMARKS.md, 2026-12-04).
     fn wait(&self) -> Result<(), GpuError> {
         self.wait_for(None)
     }
@@ -314,6 +363,43 @@ impl GpuContext {
         Ok(())
     }
 
+    /// Runs the work wgpu holds for the next submission (the copies of buffers created with
+    /// contents, from their staging buffers) and zeroes `clear` (which wgpu would otherwise
+    /// zero lazily before their first use), then waits: a submission timed after this holds
+    /// its own work alone.
+    fn settle(&self, clear: &[&wgpu::Buffer]) -> Result<(), GpuError> {
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("settle"),
+            });
+        for buf in clear {
+            enc.clear_buffer(buf, 0, None);
+        }
+        self.queue.submit([enc.finish()]);
+        self.wait()
+    }
+
+    /// Milliseconds from submitting an empty command buffer to seeing it done: the floor under
+    /// any one query's wall time on this adapter, driver and host (the median of `runs`).
+    pub fn round_trip_ms(&self, runs: u32) -> Result<f64, GpuError> {
+        self.settle(&[])?;
+        let mut times: Vec<f64> = (0..runs.max(1))
+            .map(|_| {
+                let t0 = Instant::now();
+                let enc = self
+                    .device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                        label: Some("round trip"),
+                    });
+                self.queue.submit([enc.finish()]);
+                self.wait().map(|_| t0.elapsed().as_secs_f64() * 1e3)
+            })
+            .collect::<Result<_, _>>()?;
+        times.sort_by(f64::total_cmp);
+        Ok(times[times.len() / 2])
+    }
+
     /// A zeroed storage buffer of `size` bytes (copyable both ways, plus `extra` usages),
     /// refused with a clear error beyond what a kernel can bind.
     fn work_buffer(
@@ -331,7 +417,8 @@ impl GpuContext {
                 limit,
             });
         }
-        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let buf = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(what),
             size: size.max(64).next_multiple_of(4),
             usage: wgpu::BufferUsages::STORAGE
@@ -339,7 +426,15 @@ impl GpuContext {
                 | wgpu::BufferUsages::COPY_SRC
                 | extra,
             mapped_at_creation: false,
-        }))
+        });
+        match pollster::block_on(scope.pop()) {
+            Some(_) => Err(GpuError::OutOfMemory {
+                adapter: self.info.name.clone(),
+                what,
+                need: size,
+            }),
+            None => Ok(buf),
+        }
     }
 
     /// A timestamp query set of `count` entries, the buffer to resolve it into and a mappable
@@ -627,6 +722,11 @@ pub struct TraceTimes {
 }
 
 impl<'a> GpuTracer<'a> {
+    /// The context the tracer runs in.
+    pub fn context(&self) -> &'a GpuContext {
+        self.ctx
+    }
+
     pub fn new(ctx: &'a GpuContext, tree: &KdTree) -> Result<GpuTracer<'a>, GpuError> {
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -966,7 +1066,7 @@ impl<'a> GpuTracer<'a> {
         }
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let q = self.query(rays, any, kernels)?;
-        ctx.wait()?;
+        ctx.settle(&[&q.hit_buf])?;
         let t0 = Instant::now();
         let mut enc = ctx
             .device
@@ -1026,7 +1126,8 @@ impl<'a> GpuTracer<'a> {
             mapped_at_creation: false,
         });
         let timer = ctx.timer(2);
-        ctx.wait()?;
+        // The rays' copy and the hits' zeroing are the upload's, not the timed query's.
+        ctx.settle(&[hit_buf])?;
         let upload_ms = t0.elapsed().as_secs_f64() * 1e3;
 
         // Submission to completion: one round trip (the timestamps travel back with it).

@@ -1,8 +1,8 @@
 //! The GPU stream renderer: the CPU renderer's stages (`raystream-cpu`) as the compute kernels
 //! of `kernels/render.wgsl`, joined by ray queues that stay on the device.
 //!
-//! The host is the paper's "CPU control". It splits the frame into waves of at most
-//! [`MAX_WAVE`] samples; for each wave it generates the camera rays, then records depth after
+//! The host is the paper's "CPU control". It splits the frame into waves of (by default)
+//! [`DEFAULT_WAVE`] samples; for each wave it generates the camera rays, then records depth after
 //! depth, swapping the two ray queues, each depth's kernels dispatched indirectly from counts
 //! the kernels wrote themselves ([`Submit`]):
 //! - [`Submit::Wave`] (where no hit can spawn two rays): all of a wave's depths go in one
@@ -29,7 +29,7 @@ use raystream_scene::{Camera, Light, Scene};
 
 use crate::layout::{
     GpuLight, GpuMaterial, MediumParams, NO_TEXTURE, RayWork, RenderParams, ShadeTri, ShadowWork,
-    TEXTURE_INFO, TEXTURE_INFO_WORDS, TriUv, Vertex, counter,
+    TEXTURE_INFO, TEXTURE_INFO_WORDS, TriUv, Vertex, band_rows, counter,
 };
 use crate::volume::{GpuVolume, volume_core_wgsl};
 use crate::{
@@ -47,10 +47,16 @@ pub fn film_wgsl() -> String {
 }
 pub(crate) const COMMON_WGSL: &str = include_str!("kernels/common.wgsl");
 
-/// Samples generated and traced together; bounds the queues' memory (about 300 bytes a sample
-/// with two lights). Measured on an H100 (BENCHMARKS.md): 2^22 (a 1920x1080 frame at 4 spp in
-/// two waves instead of eight) made the frame slower, 146 ms against 106 ms, so 2^20 stays.
-pub const MAX_WAVE: u32 = 1 << 20;
+/// Samples generated and traced together by default: a 1920x1080 frame at 4 spp in one wave.
+/// It bounds the queues' memory (272 bytes a sample with two lights: 2.3 GB at this size; a
+/// device out of memory for them renders again in waves half as large). On the H200
+/// (BENCHMARKS.md, 2026-12-04) the default scene at that size ran 52.7 frames/s in one wave
+/// against 49.4 in two, 42.5 in four and 32.1 in eight (2^20): a dispatch's last workgroups
+/// leave the GPU idle, and fewer, larger dispatches pay that less often. (An H100 run of
+/// 2026-11, before the wave was one submission, had found 2^22 slower than 2^20.)
+pub const DEFAULT_WAVE: u32 = 1 << 23;
+/// The most samples a wave may be set to ([`crate::GpuContext::set_render_wave`]).
+pub const MAX_WAVE: u32 = 1 << 23;
 /// Fixed-point steps per unit of radiance in the film.
 pub const FILM_SCALE: f32 = (1u32 << 24) as f32;
 /// The largest single contribution the film takes (keeps one rounded step inside a u32).
@@ -97,7 +103,7 @@ pub enum Submit {
     Depth,
     /// One submission per wave holding all of its depths, and the next wave submitted before
     /// the host reads this one's counters, so that the GPU never waits for the host inside a
-    /// frame (each round trip costs ≈ 0.5 ms under a sandbox such as gVisor: BENCHMARKS.md).
+    /// frame (a round trip's wait costs the GPU idle time: BENCHMARKS.md).
     /// A queue that empties makes the later depths dispatch no workgroups, and each depth's
     /// counters are copied aside for the statistics. Only where no hit spawns two rays: no
     /// queue then outgrows the wave, and every queue is sized for it up front.
@@ -153,7 +159,8 @@ pub struct GpuRenderer<'a> {
     film_pipeline: wgpu::ComputePipeline,
     /// The film straight to 8-bit sRGB, for [`GpuRenderer::render_srgb8`].
     srgb8_pipeline: wgpu::ComputePipeline,
-    /// Samples per wave: at most [`MAX_WAVE`], less where the device's bindings need it.
+    /// Samples per wave: [`DEFAULT_WAVE`] or as the context sets, less where the device's
+    /// bindings need it.
     wave: u32,
     /// The submission asked for ([`Submit::Wave`] unless told), and whether a hit can spawn
     /// two rays (some material both reflects and refracts), which rules it out.
@@ -542,7 +549,7 @@ impl<'a> GpuRenderer<'a> {
             .iter()
             .any(|m| m.transparency > 0.0 && (m.reflectivity > 0.0 || m.fresnel));
         Ok(GpuRenderer {
-            wave: MAX_WAVE.min(fit).max(1),
+            wave: ctx.render_wave.min(fit).max(1),
             submit: Submit::Wave,
             branches,
             tracer,
@@ -666,7 +673,7 @@ impl<'a> GpuRenderer<'a> {
     }
 
     /// Traces at most `samples` samples at a time (the default is the most that fits, up to
-    /// [`MAX_WAVE`]); the image does not depend on it.
+    /// [`DEFAULT_WAVE`] or the context's wave); the image does not depend on it.
     pub fn with_wave(mut self, samples: u32) -> Self {
         self.wave = self.wave.min(samples.max(1));
         self
@@ -724,8 +731,9 @@ impl<'a> GpuRenderer<'a> {
     }
 
     /// Renders in waves of at most `self.wave` samples. Where a hit can spawn two rays the
-    /// queues may double every depth; when one then needs more than a binding holds, the frame
-    /// starts again in waves half as large (the image does not depend on the wave size).
+    /// queues may double every depth; when one then needs more than a binding holds, or the
+    /// device has no memory left for a wave's queues, the frame starts again in waves half as
+    /// large (the image does not depend on the wave size).
     fn run(
         &self,
         opt: &RenderOptions,
@@ -736,6 +744,11 @@ impl<'a> GpuRenderer<'a> {
         loop {
             match self.run_in_waves(opt, progress, srgb8, wave) {
                 Err(GpuError::TooLarge { what, .. }) if GROWING.contains(&what) && wave > 1 => {
+                    wave /= 2;
+                }
+                Err(GpuError::OutOfMemory { what, .. })
+                    if (GROWING.contains(&what) || what == "ray queue") && wave > 1 =>
+                {
                     wave /= 2;
                 }
                 r => return r,
@@ -814,6 +827,12 @@ impl<'a> GpuRenderer<'a> {
             max_depth: opt.max_depth,
             light_count: lights as u32,
             max_groups: ctx.limits.max_compute_workgroups_per_dimension.max(1),
+            band: if ctx.pixel_blocks() {
+                // A subgroup's lanes; an adapter that varies them runs at most this many.
+                band_rows(ctx.info.subgroup_max_size.clamp(1, 128), opt.spp)
+            } else {
+                1
+            },
             ..Default::default()
         };
         let mut stats = GpuRenderStats {

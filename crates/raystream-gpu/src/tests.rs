@@ -334,11 +334,32 @@ fn render_wgsl_structs_match_rust() {
             ("max_depth", offset_of!(RenderParams, max_depth)),
             ("light_count", offset_of!(RenderParams, light_count)),
             ("max_groups", offset_of!(RenderParams, max_groups)),
-            ("pad0", pad),
-            ("pad1", pad + 4),
-            ("pad2", pad + 8),
+            ("band", offset_of!(RenderParams, band)),
+            ("pad1", pad),
+            ("pad2", pad + 4),
         ],
     );
+}
+
+/// The camera rays' bands: one subgroup's pixels (its lanes over the samples a pixel) form a
+/// block about as tall as wide: h² ≤ pixels < 4h², h a power of two; row by row (h = 1) once a
+/// subgroup holds fewer than 4 pixels.
+#[test]
+fn pixel_bands_make_square_blocks() {
+    use crate::layout::band_rows;
+    assert_eq!(band_rows(32, 1), 4); // 8 × 4 pixels
+    assert_eq!(band_rows(32, 4), 2); // 4 × 2
+    assert_eq!(band_rows(64, 1), 8);
+    assert_eq!(band_rows(32, 16), 1);
+    assert_eq!(band_rows(32, 64), 1);
+    for lanes in [1, 4, 8, 16, 32, 64, 128] {
+        for spp in [0, 1, 2, 3, 4, 5, 9, 16, 100] {
+            let h = band_rows(lanes, spp);
+            let pixels = (lanes / spp.max(1)).max(1);
+            assert!(h.is_power_of_two(), "{lanes} lanes, {spp} spp: {h}");
+            assert!(h * h <= pixels && pixels < 4 * h * h, "{lanes}, {spp}: {h}");
+        }
+    }
 }
 
 /// The GPU, or `None` (skip) where there is none — except under CI, where GPU tests must run.

@@ -35,36 +35,60 @@ impl Backend {
     }
 }
 
+/// Environment variable `name` set to `on` (true) or `off` (false); `None` where it is unset;
+/// any other value refused, naming both.
+fn env_switch(
+    ctx: &GpuContext,
+    name: &str,
+    [on, off]: [&str; 2],
+) -> Result<Option<bool>, GpuError> {
+    match std::env::var(name) {
+        Err(_) => Ok(None),
+        Ok(v) if v == on => Ok(Some(true)),
+        Ok(v) if v == off => Ok(Some(false)),
+        Ok(v) => Err(GpuError::Wgpu(
+            format!("{name}={v:?}: {on} or {off}"),
+            ctx.info.name.clone(),
+        )),
+    }
+}
+
+/// Environment variable `name` as a number of `what`; `None` where it is unset.
+fn env_count(ctx: &GpuContext, name: &str, what: &str) -> Result<Option<u32>, GpuError> {
+    match std::env::var(name) {
+        Err(_) => Ok(None),
+        Ok(v) => v.trim().parse().map(Some).map_err(|_| {
+            GpuError::Wgpu(
+                format!("{name}={v:?} is not a number of {what}"),
+                ctx.info.name.clone(),
+            )
+        }),
+    }
+}
+
 /// Opens the device: `gpu` fails clearly when no adapter opens; `auto` takes a hardware GPU
 /// when there is one and otherwise the CPU path (a software adapter such as lavapipe is far
 /// slower than the CPU path), and says which it used.
 pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Backend> {
     // Waits for a hardware GPU poll its fence before they block: on the H200 that made every
-    // `trace` row 7-28 % faster by wall time (BENCHMARKS.md, 2026-12-04); a software adapter
+    // `trace` row 2-45 % faster by wall time (BENCHMARKS.md, 2026-12-04); a software adapter
     // blocks, since the CPU that would spin is the one rendering. `RAYSTREAM_GPU_WAIT=spin` or
-    // `block` chooses either. `RAYSTREAM_GPU_WORKGROUP=N`: the ray-query kernels' threads per
+    // `block` chooses either. `RAYSTREAM_GPU_PIXELS=blocks|rows`: the stream renderer's camera
+    // rays in blocks of pixels or row by row (GpuContext::set_pixel_blocks; the same image).
+    // `RAYSTREAM_GPU_WAVE=N`: at most N samples a wave of the stream renderer (an experiment).
+    // `RAYSTREAM_GPU_WORKGROUP=N`: the ray-query kernels' threads per
     // workgroup (an experiment for `trace`; see BENCHMARKS.md).
     let open = |adapter| {
         GpuContext::new(adapter).and_then(|mut ctx| {
-            let spin = match std::env::var("RAYSTREAM_GPU_WAIT").as_deref() {
-                Ok("spin") => true,
-                Ok("block") => false,
-                Ok(v) => {
-                    return Err(GpuError::Wgpu(
-                        format!("RAYSTREAM_GPU_WAIT={v:?}: spin or block"),
-                        ctx.info.name.clone(),
-                    ));
-                }
-                Err(_) => !ctx.is_software(),
-            };
-            ctx.set_spin_wait(spin);
-            if let Ok(v) = std::env::var("RAYSTREAM_GPU_WORKGROUP") {
-                let threads = v.trim().parse().map_err(|_| {
-                    GpuError::Wgpu(
-                        format!("RAYSTREAM_GPU_WORKGROUP={v:?} is not a number of threads"),
-                        ctx.info.name.clone(),
-                    )
-                })?;
+            let spin = env_switch(&ctx, "RAYSTREAM_GPU_WAIT", ["spin", "block"])?;
+            ctx.set_spin_wait(spin.unwrap_or(!ctx.is_software()));
+            if let Some(blocks) = env_switch(&ctx, "RAYSTREAM_GPU_PIXELS", ["blocks", "rows"])? {
+                ctx.set_pixel_blocks(blocks);
+            }
+            if let Some(samples) = env_count(&ctx, "RAYSTREAM_GPU_WAVE", "samples")? {
+                ctx.set_render_wave(samples)?;
+            }
+            if let Some(threads) = env_count(&ctx, "RAYSTREAM_GPU_WORKGROUP", "threads")? {
                 ctx.set_query_workgroup(threads)?;
             }
             Ok(ctx)

@@ -103,6 +103,9 @@ pub struct Traced {
     pub stream_ms: Option<f64>,
     /// GPU split kernels only: leaf steps with rays in them (the longest walk's leaves).
     pub split_steps: Option<u32>,
+    /// GPU only: the median round trip of an empty submission (`repeat` of them), the floor
+    /// under `trace_ms` that no kernel can lower.
+    pub round_trip_ms: Option<f64>,
 }
 
 /// Untimed GPU runs before the timed ones: until this much time has passed…
@@ -126,6 +129,7 @@ pub fn trace_timed(
     let mut gpu_times = Vec::new();
     let mut stream_ms = None;
     let mut split_steps = None;
+    let mut round_trip_ms = None;
     let (hits, upload_ms) = match gpu {
         None => {
             let mut hits = trace_all(tree, rays, any, traversal);
@@ -166,6 +170,7 @@ pub fn trace_timed(
                 }
                 stream_ms = Some(ms);
             }
+            round_trip_ms = Some(tracer.context().round_trip_ms(repeat)?);
             let records = hits
                 .iter()
                 .map(|h| HitRecord {
@@ -189,6 +194,7 @@ pub fn trace_timed(
         kernel_gpu_ms,
         stream_ms,
         split_steps,
+        round_trip_ms,
     })
 }
 
@@ -287,6 +293,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             "trace_ms_min": round3(t.trace_ms_min),
             "gpu_kernel_ms": t.kernel_gpu_ms.map(round3),
             "stream_ms": t.stream_ms.map(round3),
+            "round_trip_ms": t.round_trip_ms.map(round3),
             "split_steps": t.split_steps,
             "mrays_per_s": round3(mrays),
             "hits": n_hits,
@@ -309,6 +316,11 @@ pub fn run(a: &TraceArgs) -> Result<()> {
                 "raystream: streamed: {ms:.2} ms a query ({:.2} Mrays/s), {} queued in one submission",
                 rays.len() as f64 / (ms * 1e-3) / 1e6,
                 a.repeat
+            );
+        }
+        if let Some(ms) = t.round_trip_ms {
+            eprintln!(
+                "raystream: an empty submission's round trip: {ms:.3} ms (the floor under a query's time)"
             );
         }
         if let Some(s) = &stats {

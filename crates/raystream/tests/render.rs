@@ -481,6 +481,91 @@ fn gpu_render_submit_modes_give_the_same_image() {
     assert!(pngs[0] == pngs[1], "--submit wave and depth differ");
 }
 
+/// `RAYSTREAM_GPU_PIXELS=blocks|rows`: the camera rays in blocks of pixels or row by row give
+/// the same PNG (every pixel gets its own samples once, whatever the order; the size leaves a
+/// short last band), at one sample a pixel and at several; other values are refused.
+#[test]
+fn gpu_render_pixel_orders_give_the_same_image() {
+    if !gpu_available() {
+        return;
+    }
+    let render = |order: &str, spp: &str| {
+        let out = tmp(&format!("pixels-{order}-{spp}.png"));
+        let o = bin()
+            .env("RAYSTREAM_GPU_PIXELS", order)
+            .args(["render", "--size", "67x45", "--spp", spp, "--device", "gpu"])
+            .args(["-q", "-o", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        (o, std::fs::read(&out).unwrap_or_default())
+    };
+    for spp in ["1", "2"] {
+        let (rows, by_rows) = render("rows", spp);
+        let (blocks, by_blocks) = render("blocks", spp);
+        assert!(rows.status.success(), "{}", stderr(&rows));
+        assert!(blocks.status.success(), "{}", stderr(&blocks));
+        assert!(!by_rows.is_empty() && by_rows == by_blocks, "spp {spp}");
+    }
+    let (bad, _) = render("tiles", "1");
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        stderr(&bad).contains("RAYSTREAM_GPU_PIXELS=\"tiles\": blocks or rows"),
+        "{}",
+        stderr(&bad)
+    );
+}
+
+/// `RAYSTREAM_GPU_WAVE=N`: the stream renderer in waves of at most N samples gives the same
+/// PNG as in one wave (here 1000 samples: 67 × 67 pixels at 4 samples take 18 waves, the last
+/// a part, one submission each); 0, more than the most, or
+/// not a number is refused.
+#[test]
+fn gpu_render_wave_size_leaves_the_image() {
+    if !gpu_available() {
+        return;
+    }
+    let render = |wave: Option<&str>| {
+        let out = tmp(&format!("wave-{}.png", wave.unwrap_or("default")));
+        let mut cmd = bin();
+        if let Some(w) = wave {
+            cmd.env("RAYSTREAM_GPU_WAVE", w);
+        }
+        let o = cmd
+            .args(["render", "--size", "67x67", "--device", "gpu", "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        (o, std::fs::read(&out).unwrap_or_default())
+    };
+    let (one, whole) = render(None);
+    let (many, waves) = render(Some("1000"));
+    assert!(one.status.success(), "{}", stderr(&one));
+    assert!(many.status.success(), "{}", stderr(&many));
+    assert!(
+        stderr(&one).contains("on 1 submission, one per wave"),
+        "{}",
+        stderr(&one)
+    );
+    assert!(
+        stderr(&many).contains("on 18 submissions, one per wave"),
+        "{}",
+        stderr(&many)
+    );
+    assert!(!whole.is_empty() && whole == waves);
+    for (bad, why) in [
+        ("0", "a wave of 0 samples: from 1 to 8388608"),
+        ("9999999", "a wave of 9999999 samples: from 1 to 8388608"),
+        (
+            "many",
+            "RAYSTREAM_GPU_WAVE=\"many\" is not a number of samples",
+        ),
+    ] {
+        let (o, _) = render(Some(bad));
+        assert_eq!(o.status.code(), Some(2), "{bad}");
+        assert!(stderr(&o).contains(why), "{bad}: {}", stderr(&o));
+    }
+}
+
 /// Objects a million units from the origin (a CT whose header puts it a kilometre off, say):
 /// hit points there are good only to their f32 rounding (1/16 unit), so secondary rays start
 /// at least 32 of those units off the surface, and the GPU still gives the CPU's picture

@@ -85,7 +85,8 @@ struct RenderParams {
     max_depth: u32,
     light_count: u32,
     max_groups: u32,
-    pad0: u32,
+    // Rows per band of the camera rays' pixel order (1: row by row).
+    band: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -139,6 +140,21 @@ fn write_args(at: u32, n: u32) {
     args[at + 2u] = 1u;
 }
 
+// The pixel that comes `k`th in the camera rays' order: row by row when rp.band is 1; else
+// in bands of rp.band rows (the last band may be shorter), each band column by column, so that
+// a subgroup's consecutive pixels form a block rather than a strip of one row.
+fn pixel_in_order(k: u32) -> u32 {
+    if rp.band <= 1u {
+        return k;
+    }
+    let band_pixels = rp.width * rp.band;
+    let band = k / band_pixels;
+    let first_row = band * rp.band;
+    let rows = min(rp.band, rp.height - first_row);
+    let j = k - band * band_pixels;
+    return (first_row + j % rows) * rp.width + j / rows;
+}
+
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn generate_camera_rays(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = ray_index(gid, groups);
@@ -146,7 +162,7 @@ fn generate_camera_rays(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(
         return;
     }
     let idx = rp.sample_base + i;
-    let pixel = idx / rp.spp;
+    let pixel = pixel_in_order(idx / rp.spp);
     let s = idx % rp.spp;
     var j = vec2<f32>(0.5, 0.5);
     if rp.spp > 1u {
