@@ -134,6 +134,10 @@ pub struct GpuContext {
     pixel_blocks: bool,
     /// The stream renderer's most samples a wave (see [`GpuContext::set_render_wave`]).
     render_wave: u32,
+    /// Tests only: the work buffers by these names fail as out of memory, each once, while
+    /// they are at least the given bytes.
+    #[cfg(test)]
+    fail_alloc: Mutex<Vec<(&'static str, u64)>>,
 }
 
 /// How long a spinning wait polls before it blocks.
@@ -240,6 +244,8 @@ impl GpuContext {
             query_workgroup: WORKGROUP_SIZE,
             pixel_blocks: true,
             render_wave: render::DEFAULT_WAVE,
+            #[cfg(test)]
+            fail_alloc: Mutex::new(Vec::new()),
         })
     }
 
@@ -417,6 +423,19 @@ impl GpuContext {
                 limit,
             });
         }
+        let out_of_memory = || GpuError::OutOfMemory {
+            adapter: self.info.name.clone(),
+            what,
+            need: size,
+        };
+        #[cfg(test)]
+        {
+            let mut fail = self.fail_alloc.lock().unwrap();
+            if let Some(k) = fail.iter().position(|&(w, at)| w == what && size >= at) {
+                fail.remove(k);
+                return Err(out_of_memory());
+            }
+        }
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let buf = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(what),
@@ -428,11 +447,7 @@ impl GpuContext {
             mapped_at_creation: false,
         });
         match pollster::block_on(scope.pop()) {
-            Some(_) => Err(GpuError::OutOfMemory {
-                adapter: self.info.name.clone(),
-                what,
-                need: size,
-            }),
+            Some(_) => Err(out_of_memory()),
             None => Ok(buf),
         }
     }

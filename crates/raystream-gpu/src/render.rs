@@ -740,7 +740,10 @@ impl<'a> GpuRenderer<'a> {
         progress: &mut dyn FnMut(DepthStats),
         srgb8: bool,
     ) -> Result<(Pixels, GpuRenderStats), GpuError> {
-        let mut wave = self.wave;
+        // Halved from the wave the frame runs in (no larger than the frame), not from the
+        // renderer's most.
+        let samples = opt.width as u64 * opt.height as u64 * opt.spp as u64;
+        let mut wave = (self.wave as u64).min(samples.max(1)) as u32;
         loop {
             match self.run_in_waves(opt, progress, srgb8, wave) {
                 Err(GpuError::TooLarge { what, .. }) if GROWING.contains(&what) && wave > 1 => {

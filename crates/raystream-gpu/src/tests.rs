@@ -2066,6 +2066,50 @@ fn queues_past_a_binding_render_again_in_smaller_waves() {
     assert!(image == want, "the frame rendered again differs");
 }
 
+/// A device without the memory for a wave's queues renders the frame again in waves half as
+/// large (here the ray queue and then the shadow queue fail while they are as large as the whole
+/// frame's or half of it): the same image as in one wave, in four. Out of memory for the film,
+/// which no wave size shrinks, is an error that names it.
+#[test]
+fn a_wave_out_of_memory_renders_again_in_halves() {
+    let Some(ctx) = gpu() else { return };
+    let scene =
+        raystream_scene::Scene::for_mesh(TriMesh::icosphere(2), Path::new("ball.obj")).unwrap();
+    let opt = raystream_cpu::RenderOptions {
+        width: 40,
+        height: 30,
+        spp: 2,
+        max_depth: 2,
+        traversal: Traversal::Ropes,
+    };
+    let samples = 40 * 30 * 2;
+    let ray_bytes = std::mem::size_of::<crate::layout::RayWork>() as u64;
+    let tree = KdTree::build(&scene.mesh, Builder::Sah);
+    let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+    let renderer = GpuRenderer::new(&tracer, &scene, &tree).unwrap();
+    let (whole, one) = renderer.render(&opt, |_| {}).unwrap();
+    assert_eq!(one.waves, 1);
+    // One wave of all samples, then one of half: both fail; a quarter of the frame fits.
+    let lights = scene.lights.len().max(1) as u64;
+    *ctx.fail_alloc.lock().unwrap() = vec![
+        ("ray queue", samples * ray_bytes),
+        ("shadow queue", samples / 2 * lights * ray_bytes),
+    ];
+    let renderer = GpuRenderer::new(&tracer, &scene, &tree).unwrap();
+    let (halved, stats) = renderer.render(&opt, |_| {}).unwrap();
+    assert!(
+        ctx.fail_alloc.lock().unwrap().is_empty(),
+        "both failures were met"
+    );
+    assert_eq!(stats.waves, 4, "waves of a quarter of the frame");
+    assert!(halved == whole, "the frame in smaller waves differs");
+    // The film does not shrink with the wave: its failure is the frame's.
+    *ctx.fail_alloc.lock().unwrap() = vec![("film", 0)];
+    let renderer = GpuRenderer::new(&tracer, &scene, &tree).unwrap();
+    let e = renderer.render(&opt, |_| {}).unwrap_err().to_string();
+    assert!(e.contains("out of memory for film ("), "{e}");
+}
+
 /// `GpuRenderer::set_view`: the frame after it is, bit for bit, the frame of a renderer over
 /// the scene with that view and those lights; a view with another number of lights is refused.
 #[test]
