@@ -104,7 +104,7 @@ pub enum GpuError {
         limit: u64,
     },
     #[error(
-        "GPU '{adapter}': out of memory for {what} ({need} bytes; a smaller --size or --spp needs less)"
+        "GPU '{adapter}': out of memory for {what} ({need} bytes; --device cpu has no such limit)"
     )]
     OutOfMemory {
         adapter: String,
@@ -124,6 +124,9 @@ pub struct GpuContext {
     pub info: wgpu::AdapterInfo,
     pub limits: wgpu::Limits,
     lost: Arc<Mutex<Option<String>>>,
+    /// The first GPU error outside every error scope (wgpu's default would panic); every wait
+    /// after it fails with it.
+    uncaptured: Arc<Mutex<Option<String>>>,
     /// Waits poll the fence in a loop for up to [`SPIN_WAIT`] before blocking (see
     /// [`GpuContext::wait`]).
     spin_wait: bool,
@@ -234,12 +237,18 @@ impl GpuContext {
         device.set_device_lost_callback(move |reason, msg| {
             *lost_cb.lock().unwrap() = Some(format!("{reason:?}: {msg}"));
         });
+        let uncaptured = Arc::new(Mutex::new(None));
+        let uncaptured_cb = uncaptured.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            uncaptured_cb.lock().unwrap().get_or_insert(e.to_string());
+        }));
         Ok(GpuContext {
             device,
             queue,
             info,
             limits,
             lost,
+            uncaptured,
             spin_wait: false,
             query_workgroup: WORKGROUP_SIZE,
             pixel_blocks: true,
@@ -355,7 +364,7 @@ impl GpuContext {
                     .poll(wgpu::PollType::Poll)
                     .map_err(|e| self.err(format!("polling the GPU: {e}")))?;
                 if status.is_queue_empty() {
-                    return Ok(());
+                    return self.check_uncaptured();
                 }
                 std::hint::spin_loop();
             }
@@ -366,7 +375,15 @@ impl GpuContext {
                 timeout: Some(GPU_TIMEOUT),
             })
             .map_err(|e| self.err(format!("waiting for the GPU: {e}")))?;
-        Ok(())
+        self.check_uncaptured()
+    }
+
+    /// The GPU error that no error scope caught, if one came.
+    fn check_uncaptured(&self) -> Result<(), GpuError> {
+        match self.uncaptured.lock().unwrap().clone() {
+            Some(e) => Err(self.err(format!("an earlier GPU error: {e}"))),
+            None => Ok(()),
+        }
     }
 
     /// Runs the work wgpu holds for the next submission (the copies of buffers created with
@@ -423,6 +440,27 @@ impl GpuContext {
                 limit,
             });
         }
+        self.allocate(what, size, || {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(what),
+                size: size.max(64).next_multiple_of(4),
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_DST
+                    | wgpu::BufferUsages::COPY_SRC
+                    | extra,
+                mapped_at_creation: false,
+            })
+        })
+    }
+
+    /// Makes `what`, a buffer of `size` bytes, with `make`; out of memory is an error naming it
+    /// (wgpu would otherwise report it to no one in particular).
+    fn allocate(
+        &self,
+        what: &'static str,
+        size: u64,
+        make: impl FnOnce() -> wgpu::Buffer,
+    ) -> Result<wgpu::Buffer, GpuError> {
         let out_of_memory = || GpuError::OutOfMemory {
             adapter: self.info.name.clone(),
             what,
@@ -437,15 +475,7 @@ impl GpuContext {
             }
         }
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let buf = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(what),
-            size: size.max(64).next_multiple_of(4),
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_DST
-                | wgpu::BufferUsages::COPY_SRC
-                | extra,
-            mapped_at_creation: false,
-        });
+        let buf = make();
         match pollster::block_on(scope.pop()) {
             Some(_) => Err(out_of_memory()),
             None => Ok(buf),
@@ -595,13 +625,14 @@ impl GpuContext {
         } else {
             bytes
         };
-        Ok(self
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(what),
-                contents: bytes,
-                usage: wgpu::BufferUsages::STORAGE | usage,
-            }))
+        self.allocate(what, bytes.len() as u64, || {
+            self.device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(what),
+                    contents: bytes,
+                    usage: wgpu::BufferUsages::STORAGE | usage,
+                })
+        })
     }
 }
 

@@ -2066,6 +2066,32 @@ fn queues_past_a_binding_render_again_in_smaller_waves() {
     assert!(image == want, "the frame rendered again differs");
 }
 
+/// A GPU error outside every error scope (a buffer both mappable for reading and for writing)
+/// does not panic, as wgpu's default handler would: the next wait fails with it, as do the
+/// ones after. Out of memory for an upload (injected here) is an error naming the buffer.
+#[test]
+fn uncaught_gpu_errors_and_full_memory_are_errors() {
+    let Some(ctx) = gpu() else { return };
+    let tree = KdTree::build(&TriMesh::icosphere(1), Builder::Sah);
+    *ctx.fail_alloc.lock().unwrap() = vec![("kd triangles", 0)];
+    let e = GpuTracer::new(&ctx, &tree).err().unwrap().to_string();
+    assert!(e.contains("out of memory for kd triangles ("), "{e}");
+    assert!(ctx.wait().is_ok());
+    let _bad = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("both ways"),
+        size: 16,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::MAP_WRITE,
+        mapped_at_creation: false,
+    });
+    for _ in 0..2 {
+        let e = ctx.wait().unwrap_err().to_string();
+        assert!(
+            e.contains("an earlier GPU error") && e.contains("both ways"),
+            "{e}"
+        );
+    }
+}
+
 /// A device without the memory for a wave's queues renders the frame again in waves half as
 /// large (here the ray queue and then the shadow queue fail while they are as large as the whole
 /// frame's or half of it): the same image as in one wave, in four. Out of memory for the film,
