@@ -11,8 +11,9 @@
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
 # PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene; "ab": this binary against
 # BASE=another on the primary and shadow sets; "pixels": the default scene's camera rays by rows or blocks; "waves": its
-# frame in waves of WAVES samples) picks the parts; TRACERS (default "gpu block
-# ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; block = the fused kernel with
+# frame in waves of WAVES samples; "checks": its kernels with and without wgpu's run-time checks) picks the parts; TRACERS (default "gpu block
+# unchecked ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; unchecked = the fused
+# kernel without wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=off); block = the fused kernel with
 # RAYSTREAM_GPU_WAIT=block, blocking waits against the spinning ones a hardware GPU has by default; sorted = the diffuse and random
 # sets reordered by sort-rays.py; costs = the fused kernel on trees built with --sah-traversal-cost 2, 4, 8) the tracers of
 # the trace part. The fused and if-if trace lines and bench's lines carry the
@@ -54,7 +55,7 @@ for l in sys.stdin:
 
 echo "{\"machine\": \"$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"date\": \"$(date -u +%FT%TZ)\"}" | tee -a "$res"
 parts=${PARTS:-trace render volume}
-tracers=${TRACERS:-gpu block ifif wg split sorted costs cpu embree}
+tracers=${TRACERS:-gpu block unchecked ifif wg split sorted costs cpu embree}
 has() { [[ " $1 " == *" $2 "* ]]; }
 has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
   mesh=$d/meshes/$m.ply
@@ -86,6 +87,11 @@ has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; 
         | tag "$t, \"tracer\": \"raystream-gpu-fused\", \"order\": \"octant-morton\"}"
       $py "$d/rays.py" check "$mesh" "$tmp/sorted.rays" "$tmp/sorted.hits" --json | tag "$t, \"check\": \"gpu-fused-sorted\"}"
       rm -f "$tmp/sorted.rays"; }
+    # The fused kernel compiled without wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=off): the
+    # same hits, faster?
+    has "$tracers" unchecked && { RAYSTREAM_GPU_CHECKS=off $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-unchecked.hits" "${any[@]}" \
+      --device gpu --repeat 10 --json --quiet | tag "$t, \"tracer\": \"raystream-gpu-fused-unchecked\"}"
+      cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-unchecked.hits" || echo "$m $kind: UNCHECKED HITS DIFFER from fused"; }
     # The fused kernel again with blocking waits (RAYSTREAM_GPU_WAIT=block; a hardware GPU's
     # spin by default), for the A/B.
     has "$tracers" block && RAYSTREAM_GPU_WAIT=block $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-block.hits" "${any[@]}" --device gpu \
@@ -145,6 +151,18 @@ has "$parts" pixels && for spp in 1 4; do
   done
   cmp "$tmp/pixels-rows.png" "$tmp/pixels-blocks.png" && echo "[pixels] $spp spp: the same PNG" | tee -a "$out/render.log"
 done
+
+# The default scene with its kd-tree kernels checked and unchecked (RAYSTREAM_GPU_CHECKS), 4 spp,
+# alternated twice; the PNGs must be equal.
+has "$parts" checks && {
+for round in 1 2; do
+  for c in on off; do
+    RAYSTREAM_GPU_CHECKS=$c $bin render --device gpu --size "$size" --max-depth 4 --repeat 20 -o "$tmp/checks-$c.png" 2>&1 \
+      | sed "s/^/[checks $c, round $round] /" | tee -a "$out/render.log"
+  done
+done
+cmp "$tmp/checks-on.png" "$tmp/checks-off.png" && echo "[checks] the same PNG" | tee -a "$out/render.log"
+}
 
 # The default scene in waves of WAVES samples (RAYSTREAM_GPU_WAVE; default 2^20 to 2^23), 4 spp,
 # two rounds; the PNGs must be equal; then the CPU's frame against the GPU's (rays.py imgdiff).

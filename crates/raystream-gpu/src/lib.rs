@@ -137,6 +137,9 @@ pub struct GpuContext {
     pixel_blocks: bool,
     /// The stream renderer's most samples a wave (see [`GpuContext::set_render_wave`]).
     render_wave: u32,
+    /// The kd-tree kernels compiled without wgpu's run-time checks (see
+    /// [`GpuContext::set_unchecked_kernels`]).
+    unchecked: bool,
     /// Tests only: the work buffers by these names fail as out of memory, each once, while
     /// they are at least the given bytes.
     #[cfg(test)]
@@ -253,6 +256,7 @@ impl GpuContext {
             query_workgroup: WORKGROUP_SIZE,
             pixel_blocks: true,
             render_wave: render::DEFAULT_WAVE,
+            unchecked: false,
             #[cfg(test)]
             fail_alloc: Mutex::new(Vec::new()),
         })
@@ -314,6 +318,40 @@ impl GpuContext {
         }
         self.render_wave = samples;
         Ok(())
+    }
+
+    /// Compiles the kd-tree kernels made after it (the ray queries, and the stream renderer of
+    /// a scene without a volume) without wgpu's run-time checks: no clamping of array and vector indices, no counters
+    /// bounding every loop, no guards on integer division. An experiment for a hardware GPU
+    /// (on lavapipe the same hits, and no difference beyond its noise: BENCHMARKS.md); checked
+    /// by default. Sound for
+    /// these kernels because every index they form is guarded by the ray or queue count or
+    /// comes from a tree that `raystream_accel`'s builder made (children, ropes and triangle
+    /// ranges in bounds, axes below 3: the invariants `KdTree::validate` checks, tested on
+    /// every mesh of ../shared and on random ones), and every loop is bounded by `max_steps`,
+    /// a leaf's count or the tree's depth. The CLI sets it from `RAYSTREAM_GPU_CHECKS=off`.
+    pub fn set_unchecked_kernels(&mut self, on: bool) {
+        self.unchecked = on;
+    }
+
+    /// A kd-tree kernel module from WGSL `source`: without wgpu's run-time checks where
+    /// [`GpuContext::set_unchecked_kernels`] asked and `volume` is false (a volume's marching
+    /// loops end only by their floats, so they keep wgpu's loop bounds).
+    fn tree_module(&self, label: &str, source: String, volume: bool) -> wgpu::ShaderModule {
+        let desc = wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        };
+        if self.unchecked && !volume {
+            // SAFETY: the kernels' indices and loops are bounded as `set_unchecked_kernels`
+            // says.
+            unsafe {
+                self.device
+                    .create_shader_module_trusted(desc, wgpu::ShaderRuntimeChecks::unchecked())
+            }
+        } else {
+            self.device.create_shader_module(desc)
+        }
     }
 
     /// Threads per workgroup of the ray-query kernels.
@@ -791,12 +829,11 @@ impl<'a> GpuTracer<'a> {
             bytemuck::cast_slice(&tree.tris),
             wgpu::BufferUsages::empty(),
         )?;
-        let module = ctx
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("queries.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(queries_wgsl_sized(ctx.query_workgroup).into()),
-            });
+        let module = ctx.tree_module(
+            "queries.wgsl",
+            queries_wgsl_sized(ctx.query_workgroup),
+            false,
+        );
         let closest = ctx.auto_pipeline(&module, "intersect_closest");
         let any = ctx.auto_pipeline(&module, "intersect_any");
         if let Some(e) = pollster::block_on(scope.pop()) {

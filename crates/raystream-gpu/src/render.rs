@@ -450,12 +450,7 @@ impl<'a> GpuRenderer<'a> {
             ctx.buffer_layout("dispatch args", &[rw]),
         ];
         let medium_layout = scene.volume.as_ref().map(|_| medium_layout(ctx));
-        let module = ctx
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("render.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(render_wgsl().into()),
-            });
+        let module = ctx.tree_module("render.wgsl", render_wgsl(), scene.volume.is_some());
         // The kernels that write dispatch arguments see them as group 3; the others may not
         // (a buffer cannot be storage and indirect-argument source in one dispatch).
         let layout = |groups: usize| {

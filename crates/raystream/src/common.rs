@@ -76,6 +76,8 @@ pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Back
     // `block` chooses either. `RAYSTREAM_GPU_PIXELS=blocks|rows`: the stream renderer's camera
     // rays in blocks of pixels or row by row (GpuContext::set_pixel_blocks; the same image).
     // `RAYSTREAM_GPU_WAVE=N`: at most N samples a wave of the stream renderer (an experiment).
+    // `RAYSTREAM_GPU_CHECKS=off`: the kd-tree kernels without wgpu's run-time checks (an
+    // experiment; GpuContext::set_unchecked_kernels says why it is sound).
     // `RAYSTREAM_GPU_WORKGROUP=N`: the ray-query kernels' threads per
     // workgroup (an experiment for `trace`; see BENCHMARKS.md).
     let open = |adapter| {
@@ -84,6 +86,9 @@ pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Back
             ctx.set_spin_wait(spin.unwrap_or(!ctx.is_software()));
             if let Some(blocks) = env_switch(&ctx, "RAYSTREAM_GPU_PIXELS", ["blocks", "rows"])? {
                 ctx.set_pixel_blocks(blocks);
+            }
+            if let Some(checked) = env_switch(&ctx, "RAYSTREAM_GPU_CHECKS", ["on", "off"])? {
+                ctx.set_unchecked_kernels(!checked);
             }
             if let Some(samples) = env_count(&ctx, "RAYSTREAM_GPU_WAVE", "samples")? {
                 ctx.set_render_wave(samples)?;

@@ -179,6 +179,78 @@ fn gpu_waits_spin_or_block() {
     );
 }
 
+/// `RAYSTREAM_GPU_CHECKS=off`: the kd-tree kernels without wgpu's run-time checks trace the
+/// same hits (a 32 × 32 fan of rays at spot, most of them hitting) and render the same frame of
+/// a mesh as with them; any other value is refused.
+#[test]
+fn gpu_kernels_without_run_time_checks_agree() {
+    if !gpu_available() {
+        return;
+    }
+    let rays = tmp("checks.rays");
+    let fan: Vec<f32> = (0..32 * 32)
+        .flat_map(|k| {
+            let (x, y) = ((k % 32) as f32 / 31.0 - 0.5, (k / 32) as f32 / 31.0 - 0.5);
+            [0.0, 0.0, 5.0, 0.0, 0.3 * x, 0.3 * y, -1.0, f32::INFINITY]
+        })
+        .collect();
+    std::fs::write(&rays, f32s(&fan)).unwrap();
+    let run = |checks: &str| {
+        let (hits, png) = (
+            tmp(&format!("checks-{checks}.hits")),
+            tmp(&format!("checks-{checks}.png")),
+        );
+        let trace = bin()
+            .env("RAYSTREAM_GPU_CHECKS", checks)
+            .args(["trace", &mesh("spot.obj"), "--rays", rays.to_str().unwrap()])
+            .args(["-o", hits.to_str().unwrap(), "--device", "gpu", "-q"])
+            .output()
+            .unwrap();
+        let render = bin()
+            .env("RAYSTREAM_GPU_CHECKS", checks)
+            .args([
+                "render",
+                &mesh("spot.obj"),
+                "--size",
+                "64x48",
+                "--device",
+                "gpu",
+                "-q",
+            ])
+            .args(["-o", png.to_str().unwrap()])
+            .output()
+            .unwrap();
+        (
+            trace,
+            render,
+            std::fs::read(hits).unwrap_or_default(),
+            std::fs::read(png).unwrap_or_default(),
+        )
+    };
+    let (t_on, r_on, hits_on, png_on) = run("on");
+    let (t_off, r_off, hits_off, png_off) = run("off");
+    for o in [&t_on, &r_on, &t_off, &r_off] {
+        assert!(o.status.success(), "{}", stderr(o));
+    }
+    let hit = hits_on
+        .chunks_exact(16)
+        .filter(|h| f32::from_le_bytes(h[..4].try_into().unwrap()).is_finite())
+        .count();
+    assert!(hit > 300, "{hit} of 1024 rays hit");
+    assert!(
+        hits_on == hits_off,
+        "the hits differ without run-time checks"
+    );
+    assert!(!png_on.is_empty() && png_on == png_off, "the frames differ");
+    let (bad, _, _, _) = run("maybe");
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        stderr(&bad).contains("RAYSTREAM_GPU_CHECKS=\"maybe\": on or off"),
+        "{}",
+        stderr(&bad)
+    );
+}
+
 /// GPU `trace` on the standard ray sets: passes rays.py's Embree check, and equals the CPU's
 /// hits (prim, and t within 1e-5 relative; only ties at shared edges may differ).
 #[test]
