@@ -290,7 +290,7 @@ impl GpuContext {
     /// Makes the stream renderer generate its camera rays in blocks of pixels (bands of rows,
     /// each band column by column, the band as tall as a square block of one subgroup's
     /// pixels; the default) or row by row: blocks keep a subgroup's rays closer together (on
-    /// the H200 the default scene's `intersect_closest` ran 2-7 % faster: BENCHMARKS.md). The
+    /// the H200 the default scene's `intersect_closest` ran 2.5-6 % faster: BENCHMARKS.md). The
     /// film is the same either way (its sums do not depend on order). The CLI sets it from
     /// `RAYSTREAM_GPU_PIXELS=blocks|rows`.
     pub fn set_pixel_blocks(&mut self, on: bool) {
@@ -304,8 +304,7 @@ impl GpuContext {
 
     /// Sets the samples of a stream renderer's wave (made after it), from 1 to
     /// [`render::MAX_WAVE`] ([`render::DEFAULT_WAVE`] by default); the image does not depend
-    /// on it. The CLI sets it
-    /// from `RAYSTREAM_GPU_WAVE` (an experiment: BENCHMARKS.md).
+    /// on it. The CLI sets it from `RAYSTREAM_GPU_WAVE` (an experiment: BENCHMARKS.md).
     pub fn set_render_wave(&mut self, samples: u32) -> Result<(), GpuError> {
         if !(1..=render::MAX_WAVE).contains(&samples) {
             return Err(GpuError::Wgpu(
@@ -321,15 +320,15 @@ impl GpuContext {
     }
 
     /// Compiles the kd-tree kernels made after it (the ray queries, and the stream renderer of
-    /// a scene without a volume) without wgpu's run-time checks: no clamping of array and vector indices, no counters
-    /// bounding every loop, no guards on integer division. An experiment for a hardware GPU
-    /// (on lavapipe the same hits, and no difference beyond its noise: BENCHMARKS.md); checked
-    /// by default. Sound for
-    /// these kernels because every index they form is guarded by the ray or queue count or
-    /// comes from a tree that `raystream_accel`'s builder made (children, ropes and triangle
-    /// ranges in bounds, axes below 3: the invariants `KdTree::validate` checks, tested on
-    /// every mesh of ../shared and on random ones), and every loop is bounded by `max_steps`,
-    /// a leaf's count or the tree's depth. The CLI sets it from `RAYSTREAM_GPU_CHECKS=off`.
+    /// a scene without a volume) without wgpu's run-time checks: no clamping of array and
+    /// vector indices, no counters bounding every loop, no guards on integer division. An
+    /// experiment for a hardware GPU (on lavapipe the same hits, and no difference beyond its
+    /// noise: BENCHMARKS.md); checked by default. Sound for these kernels because every index
+    /// they form is guarded by the ray or queue count or comes from a tree that
+    /// `raystream_accel`'s builder made (children, ropes and triangle ranges in bounds, axes
+    /// below 3: the invariants `KdTree::validate` checks, tested on every mesh of ../shared
+    /// and on random ones), and every loop is bounded by `max_steps`, a leaf's count or the
+    /// tree's depth. The CLI sets it from `RAYSTREAM_GPU_CHECKS=off`.
     pub fn set_unchecked_kernels(&mut self, on: bool) {
         self.unchecked = on;
     }
