@@ -440,24 +440,14 @@ impl GpuContext {
         self.wait()
     }
 
-    /// Milliseconds from submitting an empty command buffer to seeing it done: the floor under
-    /// any one query's wall time on this adapter, driver and host (the median of `runs`).
-    pub fn round_trip_ms(&self, runs: u32) -> Result<f64, GpuError> {
+    /// Milliseconds from submitting an empty command buffer to seeing it done (once earlier
+    /// work has settled): the floor under any one query's wall time on this adapter, driver
+    /// and host.
+    pub fn round_trip_ms(&self) -> Result<f64, GpuError> {
         self.settle(&[])?;
-        let mut times: Vec<f64> = (0..runs.max(1))
-            .map(|_| {
-                let t0 = Instant::now();
-                let enc = self
-                    .device
-                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                        label: Some("round trip"),
-                    });
-                self.queue.submit([enc.finish()]);
-                self.wait().map(|_| t0.elapsed().as_secs_f64() * 1e3)
-            })
-            .collect::<Result<_, _>>()?;
-        times.sort_by(f64::total_cmp);
-        Ok(times[times.len() / 2])
+        let t0 = Instant::now();
+        self.settle(&[])?;
+        Ok(t0.elapsed().as_secs_f64() * 1e3)
     }
 
     /// A zeroed storage buffer of `size` bytes (copyable both ways, plus `extra` usages),

@@ -110,8 +110,9 @@ pub enum Submit {
     Wave,
 }
 
-/// The queues that [`Submit::Depth`] grows depth by depth (their `ensure` names).
-const GROWING: [&str; 3] = ["next ray queue", "shadow queue", "hits"];
+/// The buffers sized by the wave (their `work_buffer` names): the ray queue, and the queues
+/// that [`Submit::Depth`] grows depth by depth. A smaller wave needs less of each.
+const WAVE_SIZED: [&str; 4] = ["ray queue", "next ray queue", "shadow queue", "hits"];
 
 /// The deepest frame run as [`Submit::Wave`] (max depth + 1): beyond it a wave's passes
 /// outgrow one timestamp query set, and queues empty long before.
@@ -741,19 +742,18 @@ impl<'a> GpuRenderer<'a> {
         let mut wave = (self.wave as u64).min(samples.max(1)) as u32;
         loop {
             match self.run_in_waves(opt, progress, srgb8, wave) {
-                Err(GpuError::TooLarge { what, .. }) if GROWING.contains(&what) && wave > 1 => {
-                    wave /= 2;
-                }
-                Err(GpuError::OutOfMemory { what, .. })
-                    if (GROWING.contains(&what) || what == "ray queue") && wave > 1 =>
+                Err(GpuError::TooLarge { what, .. } | GpuError::OutOfMemory { what, .. })
+                    if WAVE_SIZED.contains(&what) && wave > 1 =>
                 {
-                    wave /= 2;
+                    wave /= 2
                 }
                 r => return r,
             }
         }
     }
 
+    /// One try of [`Self::run`] in waves of `wave` samples (at most the frame's: `run` sees
+    /// to it).
     fn run_in_waves(
         &self,
         opt: &RenderOptions,
@@ -773,7 +773,6 @@ impl<'a> GpuRenderer<'a> {
                 opt.width, opt.height, opt.spp
             )));
         }
-        let wave = (wave as u64).min(total) as u32;
         let lights = scene.lights.len() as u64;
         let depths = opt.max_depth as u64 + 1;
         let submit = self.submit_for(opt);

@@ -170,7 +170,10 @@ pub fn trace_timed(
                 }
                 stream_ms = Some(ms);
             }
-            round_trip_ms = Some(tracer.context().round_trip_ms(repeat)?);
+            let mut trips = (0..repeat.max(1))
+                .map(|_| tracer.context().round_trip_ms())
+                .collect::<Result<Vec<_>, _>>()?;
+            round_trip_ms = Some(median(&mut trips));
             let records = hits
                 .iter()
                 .map(|h| HitRecord {

@@ -491,13 +491,10 @@ fn gpu_render_pixel_orders_give_the_same_image() {
     }
     let render = |order: &str, spp: &str| {
         let out = tmp(&format!("pixels-{order}-{spp}.png"));
-        let o = bin()
-            .env("RAYSTREAM_GPU_PIXELS", order)
-            .args(["render", "--size", "67x45", "--spp", spp, "--device", "gpu"])
-            .args(["-q", "-o", out.to_str().unwrap()])
-            .output()
-            .unwrap();
-        (o, std::fs::read(&out).unwrap_or_default())
+        let args = [
+            "render", "--size", "67x45", "--spp", spp, "--device", "gpu", "-q",
+        ];
+        run_with_env("RAYSTREAM_GPU_PIXELS", Some(order), &args, &out)
     };
     for spp in ["1", "2"] {
         let (rows, by_rows) = render("rows", spp);
@@ -526,16 +523,8 @@ fn gpu_render_wave_size_leaves_the_image() {
     }
     let render = |wave: Option<&str>| {
         let out = tmp(&format!("wave-{}.png", wave.unwrap_or("default")));
-        let mut cmd = bin();
-        if let Some(w) = wave {
-            cmd.env("RAYSTREAM_GPU_WAVE", w);
-        }
-        let o = cmd
-            .args(["render", "--size", "67x67", "--device", "gpu", "-o"])
-            .arg(&out)
-            .output()
-            .unwrap();
-        (o, std::fs::read(&out).unwrap_or_default())
+        let args = ["render", "--size", "67x67", "--device", "gpu"];
+        run_with_env("RAYSTREAM_GPU_WAVE", wave, &args, &out)
     };
     let (one, whole) = render(None);
     let (many, waves) = render(Some("1000"));

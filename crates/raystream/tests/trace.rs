@@ -3,6 +3,8 @@
 
 mod common;
 use common::*;
+use std::path::Path;
+use std::process::Output;
 
 #[test]
 fn formats_contract_and_json() {
@@ -140,6 +142,22 @@ fn read_hits(path: &std::path::Path) -> Vec<(f32, u32)> {
         .collect()
 }
 
+/// `trace spot.obj --rays RAYS --device gpu -o OUT` with `var` set to `value`: its output and
+/// the hits it wrote.
+fn spot_on_gpu(var: &str, value: &str, rays: &Path, out: &Path) -> (Output, Vec<u8>) {
+    let spot = mesh("spot.obj");
+    let args = [
+        "trace",
+        &spot,
+        "--rays",
+        rays.to_str().unwrap(),
+        "--device",
+        "gpu",
+        "-q",
+    ];
+    run_with_env(var, Some(value), &args, out)
+}
+
 /// `RAYSTREAM_GPU_WAIT`: the GPU's waits spin or block (a hardware GPU spins by default, a
 /// software one blocks), the same hits either way; any other value is refused, saying which.
 #[test]
@@ -154,13 +172,7 @@ fn gpu_waits_spin_or_block() {
             f32s(&[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY]),
         )
         .unwrap();
-        let o = bin()
-            .env("RAYSTREAM_GPU_WAIT", wait)
-            .args(["trace", &mesh("spot.obj"), "--rays", rays.to_str().unwrap()])
-            .args(["-o", out.to_str().unwrap(), "--device", "gpu", "-q"])
-            .output()
-            .unwrap();
-        (o, std::fs::read(out).unwrap_or_default())
+        spot_on_gpu("RAYSTREAM_GPU_WAIT", wait, &rays, &out)
     };
     let (spin, spun) = hits("spin");
     let (block, blocked) = hits("block");
@@ -195,37 +207,14 @@ fn gpu_kernels_without_run_time_checks_agree() {
         })
         .collect();
     std::fs::write(&rays, f32s(&fan)).unwrap();
+    let spot = mesh("spot.obj");
     let run = |checks: &str| {
-        let (hits, png) = (
-            tmp(&format!("checks-{checks}.hits")),
-            tmp(&format!("checks-{checks}.png")),
-        );
-        let trace = bin()
-            .env("RAYSTREAM_GPU_CHECKS", checks)
-            .args(["trace", &mesh("spot.obj"), "--rays", rays.to_str().unwrap()])
-            .args(["-o", hits.to_str().unwrap(), "--device", "gpu", "-q"])
-            .output()
-            .unwrap();
-        let render = bin()
-            .env("RAYSTREAM_GPU_CHECKS", checks)
-            .args([
-                "render",
-                &mesh("spot.obj"),
-                "--size",
-                "64x48",
-                "--device",
-                "gpu",
-                "-q",
-            ])
-            .args(["-o", png.to_str().unwrap()])
-            .output()
-            .unwrap();
-        (
-            trace,
-            render,
-            std::fs::read(hits).unwrap_or_default(),
-            std::fs::read(png).unwrap_or_default(),
-        )
+        let render = ["render", &spot, "--size", "64x48", "--device", "gpu", "-q"];
+        let hits = tmp(&format!("checks-{checks}.hits"));
+        let png = tmp(&format!("checks-{checks}.png"));
+        let (trace, hits) = spot_on_gpu("RAYSTREAM_GPU_CHECKS", checks, &rays, &hits);
+        let (render, png) = run_with_env("RAYSTREAM_GPU_CHECKS", Some(checks), &render, &png);
+        (trace, render, hits, png)
     };
     let (t_on, r_on, hits_on, png_on) = run("on");
     let (t_off, r_off, hits_off, png_off) = run("off");

@@ -14,6 +14,27 @@ pub fn run(args: &[&str]) -> Output {
     bin().args(args).output().expect("raystream runs")
 }
 
+/// Runs `raystream ARGS -o OUT` with environment variable `var` set to `value` (left unset
+/// with `None`): its output, and the bytes OUT holds afterwards (none where it wrote none).
+pub fn run_with_env(
+    var: &str,
+    value: Option<&str>,
+    args: &[&str],
+    out: &Path,
+) -> (Output, Vec<u8>) {
+    let mut cmd = bin();
+    if let Some(v) = value {
+        cmd.env(var, v);
+    }
+    let o = cmd
+        .args(args)
+        .arg("-o")
+        .arg(out)
+        .output()
+        .expect("raystream runs");
+    (o, std::fs::read(out).unwrap_or_default())
+}
+
 pub fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../..")
