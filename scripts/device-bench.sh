@@ -9,7 +9,7 @@
 # nodes and triangles per ray), the default scene's frame rate, and the volume modes' frame rates.
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
-# PARTS (default "trace render volume"; also "scene": meshes and the CT in one scene; "ab": this binary against
+# PARTS (default "trace render volume"; also "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
 # BASE=another on the primary and shadow sets; "pixels": the default scene's camera rays by rows or blocks; "waves": its
 # frame in waves of WAVES samples; "checks": its kernels with and without wgpu's run-time checks) picks the parts; TRACERS (default "gpu block
 # unchecked ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; unchecked = the fused
@@ -139,6 +139,41 @@ has "$parts" ab && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
     rm -f "$rays" "$tmp"/*.hits
   done
 done
+
+# The entry grid (--entry-grid N, 128 the default; 0: every walk from the root): the primary,
+# shadow and diffuse sets with GRIDS (default "0 64 128 256") alternated, two rounds (work counts
+# in the first), each line tagged "entry_grid_res"; the hits must not change. Then the default
+# scene with and without the grid, alternated twice; the PNGs must be equal.
+has "$parts" entry && {
+grids=${GRIDS:-0 64 128 256}
+for m in stanford_bunny stanford_lucy_100k turbine_blade; do
+  mesh=$d/meshes/$m.ply
+  for kind in primary shadow diffuse; do
+    rays=$tmp/$m-$kind.rays
+    $py "$d/rays.py" gen "$mesh" --kind $kind --size "$size" -o "$rays" > /dev/null || { echo "gen failed: $m $kind"; continue; }
+    any=(); [ $kind = shadow ] && any=(--any)
+    for round in 1 2; do
+      stats=(); [ $round = 1 ] && stats=(--stats)
+      for g in $grids; do
+        $bin trace "$mesh" --rays "$rays" -o "$tmp/entry-$g.hits" "${any[@]}" --device gpu --entry-grid $g --repeat 20 --json \
+          --quiet "${stats[@]}" | tag "{\"mesh\": \"$m\", \"kind\": \"$kind\", \"tracer\": \"raystream-gpu-fused\", \"entry_grid_res\": $g, \"round\": $round}"
+      done
+    done
+    for g in $grids; do
+      cmp -s "$tmp/entry-${grids%% *}.hits" "$tmp/entry-$g.hits" || echo "$m $kind: ENTRY GRID $g HITS DIFFER"
+    done
+    $py "$d/rays.py" check "$mesh" "$rays" "$tmp/entry-128.hits" "${any[@]}" --json | tag "{\"mesh\": \"$m\", \"kind\": \"$kind\", \"check\": \"gpu-fused\"}"
+    rm -f "$rays" "$tmp"/*.hits
+  done
+done
+for round in 1 2; do
+  for g in 0 128; do
+    $bin render --device gpu --size "$size" --max-depth 4 --repeat 20 --entry-grid $g -o "$tmp/entry-$g.png" 2>&1 \
+      | sed "s/^/[entry grid $g, round $round] /" | tee -a "$out/render.log"
+  done
+done
+cmp "$tmp/entry-0.png" "$tmp/entry-128.png" && echo "[entry] the same PNG" | tee -a "$out/render.log"
+}
 
 # The default scene's camera rays row by row or in blocks of pixels (RAYSTREAM_GPU_PIXELS), at
 # 1 and 4 samples a pixel, alternated twice: frame times and kernels; the PNGs must be equal.

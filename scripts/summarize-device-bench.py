@@ -61,7 +61,7 @@ def index(lines):
     by = {}
     for o in lines:
         tracer = o.get("tracer")
-        if not tracer or "kind" not in o or "rays" not in o:
+        if not tracer or "kind" not in o or "rays" not in o or "entry_grid_res" in o:
             continue
         variant = tracer
         if o.get("rays_from") == "bench":
@@ -141,6 +141,42 @@ def variants_table(by, out):
         ratio = lambda x, y: f"{x / y:.2f}" if x and y else "–"  # noqa: E731
         out.append(f"| {m} | {k} | {v} | {fmt(w)} | {fmt(kn)} | {fmt(bw)} | {fmt(bk)} | "
                    f"{ratio(w, bw)} | {ratio(kn, bk)} | {'–' if steps is None else steps} |")
+    out.append("")
+
+
+def entry_table(lines, out):
+    """The entry grid's sizes side by side (device-bench.sh's entry part): kernel Grays/s of each
+    round, wall Grays/s of the fastest round, and traversal steps per ray where counted."""
+    runs = defaultdict(lambda: defaultdict(list))
+    steps = {}
+    for o in lines:
+        res = o.get("entry_grid_res")
+        if res is None or "rays" not in o:
+            continue
+        runs[(o["mesh"], o["kind"])][res].append(o)
+        st = (o.get("gpu_stats") or {}).get("steps_per_ray", {}).get("traversal")
+        if st is not None:
+            steps[(o["mesh"], o["kind"], res)] = st
+    if not runs:
+        return
+    out.append("| mesh | rays | entry grid | kernel, each round | wall (best) | inner steps a ray | "
+               "kernel / no grid |")
+    out.append("|" + "---|" * 7)
+    for (m, k), by_res in sorted(runs.items()):
+        def best_kernel(res):
+            g = [grays(o["rays"], o.get("gpu_kernel_ms")) for o in by_res.get(res, [])]
+            g = [x for x in g if x]
+            return max(g) if g else None
+        base = best_kernel(0)
+        for res in sorted(by_res):
+            os_ = by_res[res]
+            kern = ", ".join(fmt(grays(o["rays"], o.get("gpu_kernel_ms"))) for o in os_)
+            wall = max((grays(o["rays"], o.get("trace_ms")) or 0) for o in os_) or None
+            b = best_kernel(res)
+            ratio = f"{b / base:.2f}" if b and base else "–"
+            st = steps.get((m, k, res))
+            out.append(f"| {m} | {k} | {res or 'none'} | {kern} | {fmt(wall)} | "
+                       f"{'–' if st is None else fmt(st)} | {ratio} |")
     out.append("")
 
 
@@ -285,6 +321,7 @@ def main():
         out.append("")
     query_table(by, out)
     variants_table(by, out)
+    entry_table(lines, out)
     stats_table(by, a.sms, a.threads_per_sm, out)
     checks(lines, out)
     volume_table(lines, out)

@@ -11,6 +11,7 @@
 pub mod brute;
 mod build;
 pub mod clip;
+pub mod entry;
 mod flat;
 pub mod intersect;
 pub mod layout;
@@ -27,6 +28,7 @@ use raystream_math::{Aabb, DVec3, Ray, Vec3};
 use traverse::RopeWalk;
 pub use traverse::{Counters, Traversal};
 
+use entry::EntryGrid;
 use layout::{KdInner, KdLeaf, KdTri};
 
 /// A ray–triangle hit: distance in units of the ray direction's length, the triangle's prim id,
@@ -71,6 +73,8 @@ pub struct KdTree {
     pub inners: Vec<KdInner>,
     pub leaves: Vec<KdLeaf>,
     pub tris: Vec<KdTri>,
+    /// Where rope walks start their first descent ([`entry`]).
+    pub entry: EntryGrid,
     pub stats: TreeStats,
 }
 
@@ -120,6 +124,7 @@ impl KdTree {
         let root_node = build::build(corners, &prims, bounds, builder, traversal_cost);
         let (flat, root) = flat::flatten(&root_node, bounds, corners);
         root_node.free();
+        let entry = EntryGrid::build(&bounds, root, &flat.inners, entry::DEFAULT_RES);
         let build_ms = start.elapsed().as_secs_f64() * 1e3;
         let empty_leaves = flat.leaves.iter().filter(|l| l.count == 0).count();
         let full = flat.leaves.len() - empty_leaves;
@@ -142,6 +147,7 @@ impl KdTree {
             inners: flat.inners,
             leaves: flat.leaves,
             tris: flat.tris,
+            entry,
             stats,
         }
     }
@@ -216,6 +222,12 @@ impl KdTree {
             (Traversal::Stack, false) => self.stack::<false, true>(ray, counters),
             (Traversal::Stack, true) => self.stack::<true, true>(ray, counters),
         }
+    }
+
+    /// Rebuilds the entry grid with `res` cells along the scene box's longest side (0: none,
+    /// every walk starting at the root; at most [`entry::MAX_RES`]). The hits do not change.
+    pub fn set_entry_grid(&mut self, res: u32) {
+        self.entry = EntryGrid::build(&self.bounds, self.root, &self.inners, res);
     }
 
     /// The box of a leaf.

@@ -485,6 +485,10 @@ proptest! {
                 soup_rays.push(ray);
             }
             check_batched(&tree, &soup_rays, "soup");
+            if !tree.entry.cells.is_empty() {
+                soup_rays.extend(rays_on_planes(&tree, 64, tris.len() as u64 + 1));
+                check_entry_grid(&tree, &soup_rays, "soup");
+            }
         }
     }
 
@@ -501,4 +505,192 @@ proptest! {
             prop_assert!((p - ray.at(h.t)).length() <= 1e-3 * (1.0 + p.length()));
         }
     }
+}
+
+/// The same tree's rope walks with its entry grid and without one (every walk from the root):
+/// the same hits, bit for bit, the same leaves and triangles visited ray by ray (the walks
+/// reach the same first leaf, so all later steps are the same), and never more inner steps.
+/// Returns the inner steps with and without the grid.
+fn check_entry_grid(tree: &KdTree, rays: &[Ray], what: &str) -> (u64, u64) {
+    let mut rooted = tree.clone();
+    rooted.set_entry_grid(0);
+    assert!(rooted.entry.cells.is_empty());
+    let bits =
+        |h: Option<crate::Hit>| h.map(|h| (h.t.to_bits(), h.prim, h.u.to_bits(), h.v.to_bits()));
+    let (mut with, mut without) = (0, 0);
+    for ray in rays {
+        for any in [false, true] {
+            let (mut a, mut b) = (crate::Counters::default(), crate::Counters::default());
+            let ha = tree.intersect_counted(ray, Traversal::Ropes, any, &mut a);
+            let hb = rooted.intersect_counted(ray, Traversal::Ropes, any, &mut b);
+            assert_eq!(
+                bits(ha),
+                bits(hb),
+                "{what} (any {any}): hits differ for {ray:?}"
+            );
+            assert_eq!(
+                (a.leaves, a.triangles),
+                (b.leaves, b.triangles),
+                "{what} (any {any}): other leaves for {ray:?}"
+            );
+            assert!(a.inner <= b.inner, "{what}: more inner steps for {ray:?}");
+            with += a.inner;
+            without += b.inner;
+        }
+    }
+    (with, without)
+}
+
+/// Rays whose entry points lie exactly on the tree's split planes and on the grid's cell
+/// boundaries, from inside the box (t_min = 0 there, or a t_min that puts the entry point
+/// there) and from outside it.
+fn rays_on_planes(tree: &KdTree, n: usize, seed: u64) -> Vec<Ray> {
+    let b = tree.bounds;
+    let mut rng = Rng(seed);
+    let g = &tree.entry;
+    (0..n)
+        .map(|i| {
+            let mut p = b.min + (b.max - b.min) * Vec3::new(rng.next(), rng.next(), rng.next());
+            let a = i % 3;
+            if i % 2 == 0 {
+                let node = &tree.inners[(i * 7919) % tree.inners.len()];
+                p[node.axis as usize] = node.split;
+            } else if g.res[a] > 0 {
+                let cell = (rng.next() * g.res[a] as f32) as u32;
+                p[a] = b.min[a] + cell as f32 / g.scale[a];
+            }
+            let mut d = rng.unit();
+            if i % 5 == 0 {
+                d[(a + 1) % 3] = 0.0;
+            }
+            match i % 4 {
+                0 | 1 => Ray::new(p, d, 0.0, f32::INFINITY),
+                2 => Ray::new(p - d * 3.0, d, 3.0, f32::INFINITY),
+                _ => Ray::new(p - d * 2.0 * b.radius(), d, 0.0, f32::INFINITY),
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn the_entry_grid_gives_the_same_walks_from_fewer_steps() {
+    for name in ["stanford_bunny.ply", "spot.obj", "goblet_vase.stl"] {
+        let mesh = shared_mesh(name);
+        let c = corners(&mesh);
+        for builder in BUILDERS {
+            let tree = KdTree::build(&mesh, builder);
+            tree.validate(&c).unwrap();
+            assert!(!tree.entry.cells.is_empty(), "{name}: no entry grid");
+            let mut rays = rays_through(&mesh, 3000, 17);
+            rays.extend(rays_on_planes(&tree, 3000, 23));
+            let (with, without) = check_entry_grid(&tree, &rays, name);
+            // Half the rays start inside the box, where the descent is longest.
+            assert!(
+                (with as f64) < 0.8 * without as f64,
+                "{name} {builder:?}: {with} inner steps with the grid, {without} without"
+            );
+        }
+    }
+}
+
+#[test]
+fn entry_grids_of_any_size_start_at_the_deepest_node_that_holds_the_cell() {
+    let mesh = shared_mesh("utah_teapot.obj");
+    let c = corners(&mesh);
+    let mut tree = KdTree::build(&mesh, Builder::Sah);
+    let rays = rays_through(&mesh, 500, 5);
+    for res in [1, 2, 7, 32, 255, 256, 1000] {
+        tree.set_entry_grid(res);
+        let g = &tree.entry;
+        assert_eq!(*g.res.iter().max().unwrap(), res.min(crate::entry::MAX_RES));
+        tree.validate(&c).unwrap();
+        // The one-pass fill against the definition, cell by cell.
+        let [rx, ry, _] = g.res;
+        for (k, &node) in g.cells.iter().enumerate() {
+            let ijk = [k as u32 % rx, (k as u32 / rx) % ry, k as u32 / (rx * ry)];
+            let lo = std::array::from_fn(|a| g.grown(&tree.bounds, a, ijk[a]).0);
+            let hi = std::array::from_fn(|a| g.grown(&tree.bounds, a, ijk[a]).1);
+            assert_eq!(
+                node,
+                crate::entry::covering_node(tree.root, &tree.inners, &lo, &hi),
+                "{res}: cell {ijk:?}"
+            );
+        }
+        check_entry_grid(&tree, &rays, "teapot");
+    }
+    // Deeper starts with finer cells.
+    tree.set_entry_grid(8);
+    let coarse = tree.entry.mean_depth;
+    tree.set_entry_grid(128);
+    assert!(
+        tree.entry.mean_depth > coarse + 3.0,
+        "{coarse} → {}",
+        tree.entry.mean_depth
+    );
+}
+
+#[test]
+fn entry_grid_edge_cases() {
+    // A flat scene: one cell across its thin axis.
+    let mut c = Vec::new();
+    for i in 0..16 {
+        for j in 0..16 {
+            let p = |dx: f32, dy: f32| Vec3::new(i as f32 + dx, j as f32 + dy, 0.0);
+            c.push([p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0)]);
+            c.push([p(0.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)]);
+        }
+    }
+    let tree = KdTree::build_from_corners(&c, Builder::Sah);
+    tree.validate(&c).unwrap();
+    assert_eq!(tree.entry.res, [128, 128, 1]);
+    let mut rays = rays_on_planes(&tree, 2000, 3);
+    for i in 0..=16 {
+        // Straight down onto the quads' shared edges, and from within the plane.
+        rays.push(Ray::new(
+            Vec3::new(i as f32, 7.5, 3.0),
+            -Vec3::Z,
+            0.0,
+            f32::INFINITY,
+        ));
+        rays.push(Ray::new(
+            Vec3::new(i as f32, 7.5, 0.0),
+            Vec3::X,
+            0.0,
+            f32::INFINITY,
+        ));
+    }
+    check_entry_grid(&tree, &rays, "flat");
+    // An origin far away starts at the root (the lookup's rounding could matter there).
+    let g = &tree.entry;
+    let start = |o: Vec3, t0: f32| {
+        g.start(
+            tree.root,
+            tree.bounds.min.to_array(),
+            o.to_array(),
+            [0.0, 0.0, -1.0],
+            t0,
+        )
+    };
+    assert_ne!(start(Vec3::new(3.5, 3.5, 1.0), 1.0), tree.root);
+    assert_eq!(start(Vec3::new(3.5, 3.5, 1e7), 1e7), tree.root);
+    // One triangle: the root is a leaf, no grid.
+    let one = KdTree::build_from_corners(&c[..1], Builder::Sah);
+    assert!(one.entry.cells.is_empty() && one.entry.res == [0; 3]);
+    // A corrupted cell is caught.
+    let mut bad = tree.clone();
+    let k = bad.entry.cells.len() / 2 + 5;
+    bad.entry.cells[k] = bad.root;
+    let err = bad.validate(&c).unwrap_err();
+    assert!(
+        err.contains("entry cell") && err.contains("child that holds"),
+        "{err}"
+    );
+    let mut bad = tree.clone();
+    let leaf = crate::layout::leaf_ref(0);
+    bad.entry.cells[k] = leaf;
+    assert!(
+        bad.validate(&c)
+            .unwrap_err()
+            .contains("does not hold the cell")
+    );
 }

@@ -254,10 +254,17 @@ impl Walker for RopeWalk {
     #[inline(always)]
     fn start(tree: &KdTree, ray: &Ray) -> Option<Self> {
         let (t_entry, _, r) = tree.start(ray)?;
+        let node = tree.entry.start(
+            tree.root,
+            tree.bounds.min.to_array(),
+            ray.origin.to_array(),
+            ray.dir.to_array(),
+            t_entry,
+        );
         Some(RopeWalk {
             t_best: ray.t_max,
             r,
-            node: tree.root,
+            node,
             t_entry,
             best: None,
             leaf_budget: tree.leaves.len() + tree.inners.len() + 1,

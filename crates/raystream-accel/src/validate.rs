@@ -14,7 +14,8 @@ impl KdTree {
     /// - every leaf entry is a real triangle (exact corners, prim id) that meets the leaf's box;
     /// - every non-degenerate triangle meeting the interior of a leaf's box is listed in it;
     /// - every rope leads to the deepest node whose box covers the leaf's face from the other
-    ///   side, and `NO_ROPE` only on faces on the scene boundary.
+    ///   side, and `NO_ROPE` only on faces on the scene boundary;
+    /// - every entry-grid cell starts at the deepest node whose box holds the grown cell.
     pub fn validate(&self, corners: &[[Vec3; 3]]) -> Result<(), String> {
         let mut inner_boxes = vec![None; self.inners.len()];
         let mut leaf_seen = vec![false; self.leaves.len()];
@@ -173,6 +174,47 @@ impl KdTree {
                     if na == a || !(n.split > b.min[na] && n.split < b.max[na]) {
                         return Err(format!("leaf {i}: rope {f:?} could be pushed further down"));
                     }
+                }
+            }
+        }
+
+        // The entry grid: each cell starts at the deepest node whose box holds the cell grown
+        // by two margins (within the scene box).
+        let g = &self.entry;
+        let cells: usize = g.res.iter().map(|&r| r as usize).product();
+        if g.cells.len() != cells || (cells == 0) != (g.res == [0; 3]) {
+            return Err(format!(
+                "entry grid of {:?} cells holds {} entries",
+                g.res,
+                g.cells.len()
+            ));
+        }
+        for (c, &node) in g.cells.iter().enumerate() {
+            let [rx, ry, _] = g.res.map(|r| r as usize);
+            let ijk = [c % rx, (c / rx) % ry, c / (rx * ry)];
+            let span: [(f64, f64); 3] = std::array::from_fn(|a| {
+                let (lo, hi) = g.grown(&self.bounds, a, ijk[a] as u32);
+                (
+                    lo.max(self.bounds.min[a] as f64),
+                    hi.min(self.bounds.max[a] as f64),
+                )
+            });
+            if !is_leaf(node) && node as usize >= self.inners.len() {
+                return Err(format!("entry cell {ijk:?}: node {node} out of range"));
+            }
+            let b = node_box(node);
+            if (0..3).any(|a| (b.min[a] as f64) > span[a].0 || (b.max[a] as f64) < span[a].1) {
+                return Err(format!(
+                    "entry cell {ijk:?}: node {node:#x}'s box {b:?} does not hold the cell"
+                ));
+            }
+            if !is_leaf(node) {
+                let n = &self.inners[node as usize];
+                let (lo, hi) = span[n.axis as usize];
+                if !(n.split as f64 > lo && (n.split as f64) < hi) {
+                    return Err(format!(
+                        "entry cell {ijk:?}: node {node} has a child that holds the cell"
+                    ));
                 }
             }
         }

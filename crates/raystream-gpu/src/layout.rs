@@ -61,7 +61,7 @@ impl GpuHit {
     }
 }
 
-/// `Params` in WGSL (uniform), 48 bytes.
+/// `Params` in WGSL (uniform), 80 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Params {
@@ -73,10 +73,18 @@ pub struct Params {
     pub max_steps: u32,
     /// Triangle references in the tree; 0 = empty scene (byte 12).
     pub tri_count: u32,
-    /// Scene box minimum, w unused (byte 16).
-    pub scene_min: [f32; 4],
-    /// Scene box maximum, w unused (byte 32).
-    pub scene_max: [f32; 4],
+    /// Scene box minimum (byte 16).
+    pub scene_min: [f32; 3],
+    /// The entry grid's margin (`EntryGrid::margin`, byte 28).
+    pub entry_margin: f32,
+    /// Scene box maximum (byte 32).
+    pub scene_max: [f32; 3],
+    /// The entry grid's largest coordinate magnitude (`EntryGrid::reach`, byte 44).
+    pub entry_reach: f32,
+    /// The entry grid's cells per world unit along each axis, w unused (byte 48).
+    pub entry_scale: [f32; 4],
+    /// The entry grid's cells along each axis, all 0 without a grid; w unused (byte 64).
+    pub entry_res: [u32; 4],
 }
 
 /// `RayWork` in render.wgsl, 48 bytes: a ray of a render queue, the pixel it adds to and the
@@ -402,7 +410,7 @@ pub struct GpuCprRow {
 
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
 const _: () = assert!(std::mem::size_of::<GpuHit>() == 16);
-const _: () = assert!(std::mem::size_of::<Params>() == 48);
+const _: () = assert!(std::mem::size_of::<Params>() == 80);
 const _: () = assert!(std::mem::size_of::<RayWork>() == 48);
 const _: () = assert!(std::mem::size_of::<ShadowWork>() == 48);
 const _: () = assert!(std::mem::size_of::<Vertex>() == 32);

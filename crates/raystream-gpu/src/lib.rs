@@ -17,6 +17,7 @@ use std::time::{Duration, Instant};
 
 use layout::{GpuHit, GpuRay, Params};
 use raystream_accel::KdTree;
+use raystream_accel::entry::ERROR_SCALE as ENTRY_ERROR_SCALE;
 use raystream_accel::layout::{LEAF_BIT, NO_ROPE};
 use raystream_math::Ray;
 use wgpu::util::DeviceExt;
@@ -49,7 +50,7 @@ fn kdtree_core_wgsl() -> String {
 /// [`kdtree_core_wgsl`] with `workgroup` threads per workgroup.
 fn kdtree_core_wgsl_sized(workgroup: u32) -> String {
     format!(
-        "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {workgroup}u;\n\n{KDTREE_WGSL}"
+        "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {workgroup}u;\nconst ENTRY_ERROR_SCALE: f32 = {ENTRY_ERROR_SCALE:?};\n\n{KDTREE_WGSL}"
     )
 }
 
@@ -669,6 +670,8 @@ pub struct GpuTracer<'a> {
     inners: wgpu::Buffer,
     leaves: wgpu::Buffer,
     tris: wgpu::Buffer,
+    /// The entry grid's cells (`KdTree::entry`).
+    entry: wgpu::Buffer,
     params: Params,
     closest: wgpu::ComputePipeline,
     any: wgpu::ComputePipeline,
@@ -772,9 +775,9 @@ struct Query<'p> {
     hit_buf: wgpu::Buffer,
     hit_bytes: u64,
     param_buf: wgpu::Buffer,
-    /// Binding 6, where the kernel has one: the persistent kernels' ray counter, the
+    /// Binding 7, where the kernel has one: the persistent kernels' ray counter, the
     /// statistics query's counters.
-    slot6: Option<wgpu::Buffer>,
+    slot7: Option<wgpu::Buffer>,
     bind: wgpu::BindGroup,
     pipeline: &'p wgpu::ComputePipeline,
     label: &'static str,
@@ -818,6 +821,11 @@ impl<'a> GpuTracer<'a> {
             bytemuck::cast_slice(&tree.tris),
             wgpu::BufferUsages::empty(),
         )?;
+        let entry = ctx.storage(
+            "kd entry grid",
+            bytemuck::cast_slice(&tree.entry.cells),
+            wgpu::BufferUsages::empty(),
+        )?;
         let module = ctx.tree_module(
             "queries.wgsl",
             queries_wgsl_sized(ctx.query_workgroup),
@@ -830,19 +838,25 @@ impl<'a> GpuTracer<'a> {
         }
         ctx.wait()?;
         let b = tree.bounds;
+        let g = &tree.entry;
         let params = Params {
             ray_count: 0,
             root: tree.root,
             max_steps: (tree.leaves.len() + tree.inners.len() + 1).min(u32::MAX as usize) as u32,
             tri_count: tree.tris.len() as u32,
-            scene_min: b.min.extend(0.0).to_array(),
-            scene_max: b.max.extend(0.0).to_array(),
+            scene_min: b.min.to_array(),
+            entry_margin: g.margin,
+            scene_max: b.max.to_array(),
+            entry_reach: g.reach,
+            entry_scale: [g.scale[0], g.scale[1], g.scale[2], 0.0],
+            entry_res: [g.res[0], g.res[1], g.res[2], 0],
         };
         Ok(GpuTracer {
             ctx,
             inners,
             leaves,
             tris,
+            entry,
             params,
             closest,
             any,
@@ -856,7 +870,8 @@ impl<'a> GpuTracer<'a> {
         })
     }
 
-    /// The tree as bind group 0 of the render kernels (`layout`: params, inners, leaves, tris).
+    /// The tree as bind group 0 of the render kernels (`layout`: params, inners, leaves, tris,
+    /// entry cells).
     fn bind_tree(&self, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
         let params = self
             .ctx
@@ -869,7 +884,7 @@ impl<'a> GpuTracer<'a> {
         self.ctx.bind_buffers(
             "kd-tree",
             layout,
-            &[&params, &self.inners, &self.leaves, &self.tris],
+            &[&params, &self.inners, &self.leaves, &self.tris, &self.entry],
         )
     }
 
@@ -954,7 +969,7 @@ impl<'a> GpuTracer<'a> {
             let dims = ctx.dims(batch.len() as u32);
             let q = self.bind_query(batch, pipeline, "query statistics", dims, Some(stats_buf))?;
             self.run_fused(&q, None)?;
-            let stats_buf = q.slot6.as_ref().expect("bound above");
+            let stats_buf = q.slot7.as_ref().expect("bound above");
             let w = read_words(ctx, stats_buf)?;
             let counter = |k: usize| u64_at(&w, k);
             for k in 0..3 {
@@ -1023,7 +1038,8 @@ impl<'a> GpuTracer<'a> {
     }
 
     /// The rays and hit buffers of a query of `rays` by `pipeline` over `dims` workgroups,
-    /// bound with the tree (bindings 0-5) and `slot6` at binding 6 where the kernel has one
+    /// bound with the tree (bindings 0-4), the rays (5), the hits (6) and `slot7` at binding 7
+    /// where the kernel has one
     /// (the persistent kernels' ray counter, the statistics query's counters).
     fn bind_query<'p>(
         &self,
@@ -1031,7 +1047,7 @@ impl<'a> GpuTracer<'a> {
         pipeline: &'p wgpu::ComputePipeline,
         label: &'static str,
         dims: [u32; 3],
-        slot6: Option<wgpu::Buffer>,
+        slot7: Option<wgpu::Buffer>,
     ) -> Result<Query<'p>, GpuError> {
         let ctx = self.ctx;
         let n = rays.len();
@@ -1066,17 +1082,18 @@ impl<'a> GpuTracer<'a> {
             &self.inners,
             &self.leaves,
             &self.tris,
+            &self.entry,
             &ray_buf,
             &hit_buf,
         ];
-        buffers.extend(&slot6);
+        buffers.extend(&slot7);
         let bind = ctx.bind_buffers(label, &pipeline.get_bind_group_layout(0), &buffers);
         Ok(Query {
             ray_buf,
             hit_buf,
             hit_bytes,
             param_buf,
-            slot6,
+            slot7,
             bind,
             pipeline,
             label,
@@ -1147,7 +1164,7 @@ impl<'a> GpuTracer<'a> {
             });
         for run in 0..runs {
             // The persistent kernels' ray counter restarts for each query.
-            if let Some(next_ray) = &q.slot6 {
+            if let Some(next_ray) = &q.slot7 {
                 enc.clear_buffer(next_ray, 0, None);
             }
             if run + 1 == runs {

@@ -445,7 +445,7 @@ impl<'a> GpuRenderer<'a> {
         let ro = wgpu::BufferBindingType::Storage { read_only: true };
         let rw = wgpu::BufferBindingType::Storage { read_only: false };
         let layouts = [
-            ctx.buffer_layout("kd-tree", &[uniform, ro, ro, ro]),
+            ctx.buffer_layout("kd-tree", &[uniform, ro, ro, ro, ro]),
             ctx.buffer_layout("scene", &[uniform, ro, ro, ro, ro, ro, ro]),
             ctx.buffer_layout("queues", &[rw; 6]),
             ctx.buffer_layout("dispatch args", &[rw]),

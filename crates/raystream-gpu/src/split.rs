@@ -39,7 +39,7 @@ impl SplitKernels {
         let ro = Storage { read_only: true };
         let rw = Storage { read_only: false };
         let layouts = [
-            ctx.buffer_layout("split tree and rays", &[Uniform, ro, ro, ro, ro, rw]),
+            ctx.buffer_layout("split tree and rays", &[Uniform, ro, ro, ro, ro, ro, rw]),
             ctx.buffer_layout("split lists", &[rw; 5]),
             ctx.buffer_layout("split args", &[rw]),
         ];
@@ -135,6 +135,7 @@ pub(crate) fn run(
             &tracer.inners,
             &tracer.leaves,
             &tracer.tris,
+            &tracer.entry,
             rays,
             hits,
         ],

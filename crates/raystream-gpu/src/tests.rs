@@ -205,7 +205,11 @@ fn wgsl_structs_match_rust() {
             ("max_steps", offset_of!(Params, max_steps)),
             ("tri_count", offset_of!(Params, tri_count)),
             ("scene_min", offset_of!(Params, scene_min)),
+            ("entry_margin", offset_of!(Params, entry_margin)),
             ("scene_max", offset_of!(Params, scene_max)),
+            ("entry_reach", offset_of!(Params, entry_reach)),
+            ("entry_scale", offset_of!(Params, entry_scale)),
+            ("entry_res", offset_of!(Params, entry_res)),
         ],
     );
 }
@@ -632,6 +636,65 @@ fn query_statistics_count_the_cpu_walk() {
     let (c, i) = (eff(&coherent), eff(&incoherent));
     eprintln!("SIMD efficiency of traversal steps: coherent {c:.3}, incoherent {i:.3}");
     assert!(c > i, "coherent {c} vs incoherent {i}");
+}
+
+/// The entry grid on the GPU: the kernels start each walk at the node the CPU's lookup gives
+/// (the statistics query's inner steps equal the CPU's, with the grid and without it), and the
+/// hits are the same records as without it, also for rays that enter on split planes.
+#[test]
+fn the_entry_grid_changes_no_gpu_hit() {
+    let Some(ctx) = gpu() else { return };
+    let has_subgroups = ctx.device.features().contains(wgpu::Features::SUBGROUP);
+    let mesh = shared_mesh("stanford_bunny.ply");
+    let with = KdTree::build(&mesh, Builder::Sah);
+    assert!(!with.entry.cells.is_empty());
+    let mut without = with.clone();
+    without.set_entry_grid(0);
+    let mut rays = test_rays(&mesh, 6000);
+    // Entry points on split planes: from inside the box, and from outside through them.
+    let b = with.bounds;
+    let mut rng = Rng(11);
+    for (i, n) in with.inners.iter().enumerate().step_by(7).take(3000) {
+        let mut p = b.min + (b.max - b.min) * Vec3::new(rng.f(), rng.f(), rng.f());
+        p[n.axis as usize] = n.split;
+        let d = Vec3::new(rng.f(), rng.f(), rng.f()) * 2.0 - 1.0;
+        rays.push(if i % 2 == 0 {
+            Ray::new(p, d, 0.0, f32::INFINITY)
+        } else {
+            Ray::new(p - d * 4.0 * b.radius(), d, 0.0, f32::INFINITY)
+        });
+    }
+    let (gw, gwo) = (
+        GpuTracer::new(&ctx, &with).unwrap(),
+        GpuTracer::new(&ctx, &without).unwrap(),
+    );
+    for any in [false, true] {
+        let (a, _) = gw.trace(&rays, any).unwrap();
+        let (o, _) = gwo.trace(&rays, any).unwrap();
+        assert!(a == o, "any={any}: the grid changed GPU hits");
+        compare(&with, &rays, &a, any, "entry grid");
+        let mut steps = Vec::new();
+        for (tree, tracer) in [(&with, &gw), (&without, &gwo)] {
+            let Some(stats) = tracer.query_stats(&rays, any).unwrap() else {
+                assert!(!has_subgroups);
+                continue;
+            };
+            let mut c = raystream_accel::Counters::default();
+            for r in &rays {
+                tree.intersect_counted(r, Traversal::Ropes, any, &mut c);
+            }
+            assert_eq!(
+                (stats.steps[0], stats.steps[1], stats.listed),
+                (c.inner, c.leaves, c.triangles),
+                "any={any}: GPU (inner, leaves, triangles) vs the CPU's"
+            );
+            steps.push(c.inner);
+        }
+        if let [w, wo] = steps[..] {
+            eprintln!("any={any}: {w} inner steps with the grid, {wo} without");
+            assert!((w as f64) < 0.8 * wo as f64, "{w} vs {wo}");
+        }
+    }
 }
 
 /// `stats.wgsl`'s 64-bit counters carry into their high word: 256 invocations, in many

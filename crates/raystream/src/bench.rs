@@ -278,7 +278,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                     "kernels": kernels.map(kernels_name),
                     "build_ms": round3(build_ms),
                     "upload_ms": round3(t.upload_ms),
-                    "kdtree": tree_json(&tree.stats),
+                    "kdtree": tree_json(&tree),
                     "trace_ms": round3(t.trace_ms),
                     "trace_ms_min": round3(t.trace_ms_min),
                     // Per-kernel GPU time from timestamp queries, by stage name.

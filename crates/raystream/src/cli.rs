@@ -217,11 +217,21 @@ pub struct TreeArgs {
     /// shallower trees with fuller leaves.
     #[arg(long, default_value_t = raystream_accel::DEFAULT_TRAVERSAL_COST, value_parser = parse_traversal_cost, allow_negative_numbers = true)]
     pub sah_traversal_cost: f32,
+    /// Rope walks start their first descent at the node of their entry point's cell in a grid
+    /// over the scene box, with this many cells along its longest side (0: at the root; at
+    /// most 256). The same hits at any size; larger grids skip more of the descent.
+    #[arg(long, default_value_t = raystream_accel::entry::DEFAULT_RES, value_parser = clap::value_parser!(u32).range(0..=raystream_accel::entry::MAX_RES as i64))]
+    pub entry_grid: u32,
 }
 
 impl TreeArgs {
     pub fn build(&self, mesh: &raystream_io::TriMesh) -> raystream_accel::KdTree {
-        raystream_accel::KdTree::build_with(mesh, self.builder.into(), self.sah_traversal_cost)
+        let mut tree =
+            raystream_accel::KdTree::build_with(mesh, self.builder.into(), self.sah_traversal_cost);
+        if self.entry_grid != raystream_accel::entry::DEFAULT_RES {
+            tree.set_entry_grid(self.entry_grid);
+        }
+        tree
     }
 }
 

@@ -3,13 +3,15 @@
 //! a scene file as `render` would draw it.
 
 use anyhow::{Result, bail};
-use raystream_accel::TreeStats;
+use raystream_accel::KdTree;
 use serde_json::json;
 
 use crate::cli::InfoArgs;
 use crate::common::{file_name, print_line, round3};
 
-pub fn tree_json(s: &TreeStats) -> serde_json::Value {
+pub fn tree_json(tree: &KdTree) -> serde_json::Value {
+    let s = &tree.stats;
+    let g = &tree.entry;
     json!({
         "builder": s.builder,
         "nodes": s.nodes,
@@ -21,7 +23,25 @@ pub fn tree_json(s: &TreeStats) -> serde_json::Value {
         "mean_tris_per_leaf": round3(s.mean_tris_per_leaf),
         "references": s.references,
         "build_ms": round3(s.build_ms),
+        "entry_grid": (!g.cells.is_empty()).then(|| json!({
+            "cells": g.res,
+            "bytes": g.bytes(),
+            "mean_depth": round3(g.mean_depth),
+        })),
     })
+}
+
+/// The entry grid in words, as `info` prints it.
+fn entry_grid_line(g: &raystream_accel::entry::EntryGrid) -> String {
+    if g.cells.is_empty() {
+        return "none: walks start at the root".into();
+    }
+    let [x, y, z] = g.res;
+    format!(
+        "{x}x{y}x{z} cells ({:.2} MB); walks start {:.1} levels below the root on average over the cells",
+        g.bytes() as f64 / 1e6,
+        g.mean_depth
+    )
 }
 
 pub fn run(a: &InfoArgs) -> Result<()> {
@@ -75,7 +95,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             "triangles": mesh.len(),
             "degenerate_triangles": mesh.len() - s.triangles,
             "bounds": [b.min.to_array(), b.max.to_array()],
-            "kdtree": tree_json(s),
+            "kdtree": tree_json(&tree),
             "materials": used.iter().map(|(name, n, t)| json!({"name": name, "triangles": n, "texture": t})).collect::<Vec<_>>(),
             "texture_coordinates": !materials.uvs.is_empty(),
             "warnings": materials.warnings,
@@ -106,6 +126,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             s.references,
             s.build_ms
         );
+        println!("  entry grid {}", entry_grid_line(&tree.entry));
         for (name, n, texture) in &used {
             match texture {
                 Some([w, h]) => println!("  material   {name}: {n} triangles, a {w}x{h} texture"),
@@ -164,7 +185,7 @@ fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             },
             "bounds": [b.min.to_array(), b.max.to_array()],
             "volume": volume,
-            "kdtree": tree_json(&tree.stats),
+            "kdtree": tree_json(&tree),
         }));
         return Ok(());
     }
@@ -231,6 +252,7 @@ fn scene_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
         "  kd-tree    {}: {} nodes, {} leaves, SAH cost {:.2}, built in {:.1} ms",
         s.builder, s.nodes, s.leaves, s.sah_cost, s.build_ms
     );
+    println!("  entry grid {}", entry_grid_line(&tree.entry));
     Ok(())
 }
 

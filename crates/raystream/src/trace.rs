@@ -284,6 +284,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             "query": if a.any { "any" } else { "closest" },
             "builder": tree.stats.builder,
             "sah_traversal_cost": tree.stats.traversal_cost,
+            "entry_grid": (!tree.entry.cells.is_empty()).then_some(tree.entry.res),
             "traversal": traversal.name(),
             "kernels": matches!(backend, Backend::Gpu(_)).then(|| kernels_name(a.kernels.into())),
             "query_workgroup": match &backend {

@@ -208,6 +208,37 @@ fn info_json() {
         d["kdtree"]["leaves"].as_u64() < j["kdtree"]["leaves"].as_u64(),
         "{d} vs {j}"
     );
+    // The entry grid: 128 cells along the longest side by default, cubic cells, none with 0;
+    // the text says so too.
+    let g = &j["kdtree"]["entry_grid"];
+    let cells: Vec<u64> = g["cells"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_u64().unwrap())
+        .collect();
+    assert_eq!(cells.iter().max(), Some(&128), "{g}");
+    assert_eq!(
+        g["bytes"].as_u64().unwrap(),
+        4 * cells.iter().product::<u64>()
+    );
+    assert!(g["mean_depth"].as_f64().unwrap() > 3.0, "{g}");
+    let off = run(&[
+        "info",
+        &mesh("utah_teapot.obj"),
+        "--json",
+        "--entry-grid",
+        "0",
+    ]);
+    let o: serde_json::Value = serde_json::from_str(stdout(&off).trim()).unwrap();
+    assert!(o["kdtree"]["entry_grid"].is_null(), "{o}");
+    let text = stdout(&run(&[
+        "info",
+        &mesh("utah_teapot.obj"),
+        "--entry-grid",
+        "16",
+    ]));
+    assert!(text.contains("entry grid 16x"), "{text}");
     for bad in ["0", "-1", "nan", "1e9", "cheap"] {
         let o = run(&[
             "info",

@@ -434,6 +434,27 @@ fn device_bench_summary() {
             ms(0.05)
         ),
         r#"{"mesh": "stanford_lucy_100k", "kind": "primary", "check": "gpu-fused", "pass": false, "hit_agree": 0.99, "prim_agree": 0.98}"#.to_string(),
+        // The entry part: two grid sizes, two rounds, work counted in the first.
+        format!(
+            r#"{{"device": "gpu", "mesh": "stanford_lucy_100k", "kind": "primary", "tracer": "raystream-gpu-fused", "entry_grid_res": 0, "round": 1, "rays": {n}, "trace_ms": {}, "gpu_kernel_ms": {}, "gpu_stats": {{"steps_per_ray": {{"traversal": 9.0}}}}}}"#,
+            ms(3.6),
+            ms(4.89)
+        ),
+        format!(
+            r#"{{"device": "gpu", "mesh": "stanford_lucy_100k", "kind": "primary", "tracer": "raystream-gpu-fused", "entry_grid_res": 128, "round": 1, "rays": {n}, "trace_ms": {}, "gpu_kernel_ms": {}, "gpu_stats": {{"steps_per_ray": {{"traversal": 6.0}}}}}}"#,
+            ms(3.9),
+            ms(5.3)
+        ),
+        format!(
+            r#"{{"device": "gpu", "mesh": "stanford_lucy_100k", "kind": "primary", "tracer": "raystream-gpu-fused", "entry_grid_res": 0, "round": 2, "rays": {n}, "trace_ms": {}, "gpu_kernel_ms": {}}}"#,
+            ms(3.5),
+            ms(4.9)
+        ),
+        format!(
+            r#"{{"device": "gpu", "mesh": "stanford_lucy_100k", "kind": "primary", "tracer": "raystream-gpu-fused", "entry_grid_res": 128, "round": 2, "rays": {n}, "trace_ms": {}, "gpu_kernel_ms": {}}}"#,
+            ms(4.0),
+            ms(5.4)
+        ),
         r#"{"volume": "cinematic ct-bones", "kind": "volume", "mode": "cinematic", "interpolation": "cubic", "shadows": false, "spp": 64, "bounces": 4, "device": "gpu", "dims": [512, 512, 512], "size": "1024x1024", "frame_ms": 2000.0, "frames_per_s": 0.5, "kernel_frames_per_s": 0.51, "samples_per_frame": 2500000000.0, "msamples_per_s_kernel": 1275.0}"#.to_string(),
     ];
     std::fs::write(&results, lines.join("\n") + "\n").unwrap();
@@ -481,6 +502,15 @@ fn device_bench_summary() {
     // The leaf-size variant beside the fused kernel: 5.5 / 4.89 of its kernel time.
     assert!(
         out.contains("| raystream-gpu-fused (K=4) | 2.5 | 5.5 | 2.25 | 4.89 | 1.11 | 1.12 | – |"),
+        "{out}"
+    );
+    // The entry grid's sizes side by side, neither in the tables above: 5.4 / 4.9.
+    assert!(
+        out.contains("| stanford_lucy_100k | primary | 128 | 5.3, 5.4 | 4 | 6 | 1.10 |"),
+        "{out}"
+    );
+    assert!(
+        out.contains("| stanford_lucy_100k | primary | none | 4.89, 4.9 | 3.6 | 9 | 1.00 |"),
         "{out}"
     );
     // The cinematic pictures: the frame's time, and the denoiser's parts.
@@ -564,4 +594,103 @@ ref.export(out + "/ref.ply")
             embree_check(&py, &reference, &rays, &hits, false, name);
         }
     }
+}
+
+/// `--entry-grid N`: walks start at their entry point's cell in a grid of N cells along the
+/// scene's longest side, or at the root with 0. The same hits, byte for byte, on every device
+/// and every ray kind, and the same frame; `bench` counts fewer inner steps; sizes past 256
+/// are refused.
+#[test]
+fn the_entry_grid_changes_no_hit_and_no_pixel() {
+    let Some(py) = python() else { return };
+    let m = mesh("stanford_bunny.ply");
+    for kind in ["primary", "shadow", "diffuse"] {
+        let rays = tmp(&format!("entry-{kind}.rays"));
+        gen_rays(&py, &m, kind, "64x48", &rays);
+        for &device in devices() {
+            let files: Vec<Vec<u8>> = ["0", "128", "256"]
+                .iter()
+                .map(|res| {
+                    let hits = tmp(&format!("entry-{kind}-{device}-{res}.hits"));
+                    let extra = ["--device", device, "--entry-grid", res];
+                    trace_to(&m, &rays, &hits, kind == "shadow", &extra);
+                    std::fs::read(hits).unwrap()
+                })
+                .collect();
+            assert!(
+                files[0].len() > 1000 * 16,
+                "{kind}: {} bytes of hits",
+                files[0].len()
+            );
+            assert!(
+                files[0] == files[1] && files[0] == files[2],
+                "{kind} on the {device}: the hits depend on the entry grid"
+            );
+        }
+    }
+    for &device in devices() {
+        let frames: Vec<Vec<u8>> = ["0", "32"]
+            .iter()
+            .map(|res| {
+                let name = format!("entry-{device}-{res}.png");
+                let args = ["--size", "64x48", "--entry-grid", res];
+                std::fs::read(render_to(&name, device, &args)).unwrap()
+            })
+            .collect();
+        assert!(
+            frames[0] == frames[1],
+            "the {device}'s frame depends on the entry grid"
+        );
+    }
+    let steps = |res: &str| {
+        let o = run(&[
+            "bench",
+            &m,
+            "--size",
+            "48x32",
+            "--device",
+            "cpu",
+            "--json",
+            "-q",
+            "--entry-grid",
+            res,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let lines: Vec<serde_json::Value> = stdout(&o)
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        lines
+            .iter()
+            .find(|j| j["kind"] == "shadow")
+            .unwrap()
+            .clone()
+    };
+    let (with, without) = (steps("128"), steps("0"));
+    let cells = with["kdtree"]["entry_grid"]["cells"]
+        .as_array()
+        .unwrap()
+        .clone();
+    assert_eq!(
+        cells.iter().map(|c| c.as_u64().unwrap()).max(),
+        Some(128),
+        "{with}"
+    );
+    assert!(without["kdtree"]["entry_grid"].is_null(), "{without}");
+    let inner = |j: &serde_json::Value| j["inner_per_ray"].as_f64().unwrap();
+    assert!(inner(&with) < 0.8 * inner(&without), "{with} vs {without}");
+    assert_eq!(with["leaves_per_ray"], without["leaves_per_ray"]);
+    refused(
+        &[
+            "trace",
+            &m,
+            "--rays",
+            "x.rays",
+            "-o",
+            "x.hits",
+            "--entry-grid",
+            "257",
+        ],
+        "257 is not in 0..=256",
+    );
 }

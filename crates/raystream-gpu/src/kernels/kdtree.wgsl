@@ -49,14 +49,21 @@ struct Params {
     root: u32,
     max_steps: u32,
     tri_count: u32,
-    scene_min: vec4<f32>,
-    scene_max: vec4<f32>,
+    scene_min: vec3<f32>,
+    entry_margin: f32,
+    scene_max: vec3<f32>,
+    entry_reach: f32,
+    entry_scale: vec4<f32>,
+    entry_res: vec4<u32>,
 }
 
+// The tree: bindings 0-4 of group 0 in every kernel that traces.
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> inners: array<KdInner>;
 @group(0) @binding(2) var<storage, read> leaves: array<KdLeaf>;
 @group(0) @binding(3) var<storage, read> tris: array<KdTri>;
+// The entry grid's cells (raystream-accel's entry.rs), x fastest.
+@group(0) @binding(4) var<storage, read> entry_cells: array<u32>;
 
 
 // NaN and infinity by their bits: shader compilers may assume float arithmetic is finite.
@@ -183,6 +190,27 @@ fn clip_to_scene(r: RayIn, w: Walk) -> vec2<f32> {
     return vec2<f32>(t0, t1);
 }
 
+// The node where a walk entering at `t0` starts its first descent: its entry point's cell's,
+// or the root without a grid or where the lookup's rounding could matter. The same leaf as the
+// descent from the root, bit for bit (entry.rs says why); ENTRY_ERROR_SCALE comes from there.
+fn entry_node(w: Walk, t0: f32) -> u32 {
+    if params.entry_res.x == 0u {
+        return params.root;
+    }
+    let ao = abs(w.o);
+    let ad = abs(w.d);
+    let err = ENTRY_ERROR_SCALE * (max(max(ao.x, ao.y), ao.z) + abs(t0) * max(max(ad.x, ad.y), ad.z)
+        + params.entry_reach);
+    if !(err < params.entry_margin) {
+        return params.root;
+    }
+    let res = params.entry_res.xyz;
+    let p = w.o + t0 * w.d;
+    let c = vec3<u32>(clamp(floor((p - params.scene_min) * params.entry_scale.xyz), vec3<f32>(0.0),
+        vec3<f32>(res - 1u)));
+    return entry_cells[(c.z * res.y + c.y) * res.x + c.x];
+}
+
 // One step from the inner node `node` toward the leaf that holds the ray's point at `t_entry`.
 fn descend_step(node: u32, w: Walk, t_entry: f32) -> u32 {
     stat(STAT_INNER);
@@ -291,7 +319,7 @@ fn trace(r: RayIn, any_hit: bool) -> HitOut {
         return best;
     }
     var t_entry = span.x;
-    var node = params.root;
+    var node = entry_node(w, t_entry);
     for (var step = 0u; step < params.max_steps; step++) {
         node = descend(node, w, t_entry);
         let li = node & ~LEAF_BIT;
@@ -323,7 +351,7 @@ fn trace_ifif(r: RayIn, any_hit: bool) -> HitOut {
         return best;
     }
     var t_entry = span.x;
-    var node = params.root;
+    var node = entry_node(w, t_entry);
     var li = 0u;
     var next_tri = 0u;
     var end_tri = 0u;

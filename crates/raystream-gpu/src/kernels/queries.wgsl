@@ -1,8 +1,8 @@
 // Ray queries: one hit record per ray of a queue (RAYS.bin in, HITS.bin out), closest or any.
-// Follows kdtree.wgsl, whose group 0 bindings 0-3 hold the tree.
+// Follows kdtree.wgsl, whose group 0 bindings 0-4 hold the tree.
 
-@group(0) @binding(4) var<storage, read> rays: array<RayIn>;
-@group(0) @binding(5) var<storage, read_write> hits: array<HitOut>;
+@group(0) @binding(5) var<storage, read> rays: array<RayIn>;
+@group(0) @binding(6) var<storage, read_write> hits: array<HitOut>;
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn intersect_closest(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -40,7 +40,7 @@ fn intersect_any_ifif(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(nu
 // Persistent threads (Aila & Laine 2009): a fixed grid, sized to fill the GPU rather than one
 // thread per ray, whose threads fetch the next ray from a global counter whenever they finish
 // one, so that no thread idles behind a long ray of its workgroup while rays remain.
-@group(0) @binding(6) var<storage, read_write> next_ray: atomic<u32>;
+@group(0) @binding(7) var<storage, read_write> next_ray: atomic<u32>;
 
 fn fetch_and_trace(any_hit: bool) {
     loop {

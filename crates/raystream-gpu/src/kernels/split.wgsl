@@ -1,5 +1,5 @@
 // Ray queries with traversal and intersection in separate kernels, as the paper lays them out
-// (`--kernels split`). Follows kdtree.wgsl (group 0 bindings 0-3: the tree).
+// (`--kernels split`). Follows kdtree.wgsl (group 0 bindings 0-4: the tree).
 //
 //   split_init:      clip every ray to the scene; those that enter go to the next list
 //   split_traverse:  descend each active ray to its next leaf → a (ray, leaf) work item
@@ -21,8 +21,8 @@ struct WorkItem {
     leaf: u32,
 }
 
-@group(0) @binding(4) var<storage, read> rays: array<RayIn>;
-@group(0) @binding(5) var<storage, read_write> hits: array<HitOut>;
+@group(0) @binding(5) var<storage, read> rays: array<RayIn>;
+@group(0) @binding(6) var<storage, read_write> hits: array<HitOut>;
 @group(1) @binding(0) var<storage, read_write> state: array<RayState>;
 @group(1) @binding(1) var<storage, read_write> live: array<u32>;
 @group(1) @binding(2) var<storage, read_write> items: array<WorkItem>;
@@ -45,9 +45,10 @@ fn split_init(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     }
     let r = rays[i];
     hits[i] = miss_record();
-    let span = clip_to_scene(r, walk_of(r));
+    let w = walk_of(r);
+    let span = clip_to_scene(r, w);
     if span.x <= span.y {
-        state[i] = RayState(span.x, params.root);
+        state[i] = RayState(span.x, entry_node(w, span.x));
         // Into the list that the first split_advance makes the active one.
         next_live[atomicAdd(&counts[1], 1u)] = i;
     }

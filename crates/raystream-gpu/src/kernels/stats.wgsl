@@ -3,8 +3,8 @@
 // Aila & Laine 2009). Follows kdtree.wgsl. naga takes the subgroup built-ins without `enable
 // subgroups;` (it does not know that directive yet); the device needs wgpu's SUBGROUP feature.
 
-@group(0) @binding(4) var<storage, read> rays: array<RayIn>;
-@group(0) @binding(5) var<storage, read_write> hits: array<HitOut>;
+@group(0) @binding(5) var<storage, read> rays: array<RayIn>;
+@group(0) @binding(6) var<storage, read_write> hits: array<HitOut>;
 // Every counter is 64 bits, a (low, high) pair of words carried by `add64`, so that one dispatch
 // can count a whole 1080p ray set. Counters 0-2: steps of each kind (inner, leaf, triangle)
 // summed over lanes; 3: triangles listed in the visited leaves; 4-6: active lanes summed over
@@ -13,7 +13,7 @@
 // LIVE, the invocations between their entry and their exit now; PEAK, the most LIVE ever
 // reached (the invocations the GPU held at once: achieved occupancy's peak); LANES, the
 // subgroup size.
-@group(0) @binding(6) var<storage, read_write> stats: array<atomic<u32>, STATS_WORDS>;
+@group(0) @binding(7) var<storage, read_write> stats: array<atomic<u32>, STATS_WORDS>;
 
 var<private> subgroup_lanes: u32;
 var<private> lane_steps: array<u32, 4>;
