@@ -1050,7 +1050,8 @@ pub struct MeasureArgs {
     /// its study (Imaging Measurement Report, TID 1500, in a Comprehensive 3D SR: PACS,
     /// OHIF, 3D Slicer): the vessel's path length, widest and narrowest lumen and outer wall
     /// with where each was taken, each graded lesion, the angle, and with a DICOM
-    /// Segmentation --mask, each segment's volume, referencing it.
+    /// Segmentation --mask, each segment's volume, referencing it. With --dark, the airway's:
+    /// its lumen, and with --wall its wall's thickness, WA % and Pi10.
     #[arg(long, value_name = "FILE.dcm")]
     pub report: Option<PathBuf>,
     #[command(flatten)]

@@ -56,11 +56,6 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
             r.display()
         );
     }
-    if a.report.is_some() && a.vessel.dark {
-        bail!(
-            "--report with --dark: the Structured Report codes a vessel's findings (SNOMED CT's vessel lumen and outside diameters); an airway's are not coded"
-        );
-    }
     if let Some(r) = &a.report
         && !raystream_io::is_segmentation_path(r)
     {
@@ -236,11 +231,12 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
         mask: mask.as_ref(),
         report: None,
         pi10: pi10.as_ref(),
+        wall_integral: wall.is_some_and(|(w, _)| w.edge == WallEdge::Integral),
     };
     if let Some(out) = &a.report
         && found
     {
-        report = crate::structured_report::write(out, &volume, &sections, &findings)?;
+        report = crate::structured_report::write(out, &volume, &sections, &findings, opt.dark)?;
         findings.report = Some(&report);
     }
     if a.json {
@@ -644,6 +640,9 @@ pub(crate) struct Findings<'a> {
     pub report: Option<&'a crate::structured_report::ReportOut>,
     /// With an airway's wall: Pi10 over the sections, or why there is none.
     pub pi10: Option<&'a Result<Pi10, String>>,
+    /// The airway's wall was measured by the integral (`--wall-edge integral`), not at half
+    /// maximum.
+    pub wall_integral: bool,
 }
 
 /// What `--mask` wrote: the file, its labels' voxels and volumes, and the sections they came

@@ -10,11 +10,24 @@
 //!   the lesion's smallest diameter and area, the reference diameter, the narrowed length,
 //!   and against the outer wall, its diameter stenosis and plaque burden;
 //! - with a DICOM Segmentation `--mask`, each segment's volume, the segment referenced.
+//!
+//! An airway's (`--dark`) is coded from DICOM's general measurements instead (CID 7470/7471's
+//! diameter and area, DCM's wall thickness, SNOMED CT's airway structure and lumen):
+//! - "Airway along the path": its length, tortuosity and `--angle`'s angle;
+//! - "Airway lumen": the widest lumen's largest diameter, the narrowest's smallest diameter
+//!   and area;
+//! - with `--wall`, "Airway wall": its thickness (the mean over the sections with a wall, and
+//!   the thickest section's), its share of the airway's area (WA %) and Pi10, which DICOM
+//!   does not code (raystream's own codes);
+//! - "Stenosis N" at the airway: diameter and area stenosis, the smallest diameter and area,
+//!   the reference diameter, the narrowed length;
+//! - with a Segmentation, the lumen's and the wall's volumes.
 
 use std::path::Path;
 
 use anyhow::Result;
 use raystream_cpu::lumen::Section;
+use raystream_cpu::stenosis::Stenosis;
 use raystream_cpu::wall::WallVolumes;
 use raystream_io::{Code, Measurement, MeasurementGroup, RAYSTREAM_SCHEME, Region};
 use raystream_math::DVec3;
@@ -85,6 +98,18 @@ const MAXIMUM: Code = sct("56851009", "Maximum");
 const MINIMUM: Code = sct("255605001", "Minimum");
 
 const BLOOD_VESSEL: Code = sct("59820001", "Blood vessel");
+// An airway's: CID 7151/7192's airway, CID 7470's diameter, CID 7471's area, the lumen as
+// the mask's segment is coded, DCM's wall thickness, and CID 7464's mean.
+const AIRWAY: Code = sct("89187006", "Airway structure");
+const LUMEN: Code = sct("91747007", "Lumen");
+const DIAMETER: Code = sct("81827009", "Diameter");
+const AREA: Code = sct("42798000", "Area");
+const MEAN: Code = sct("373098007", "Mean");
+const WALL_THICKNESS: Code = Code {
+    value: "122445",
+    scheme: "DCM",
+    meaning: "Wall Thickness",
+};
 const STENOSIS: Code = sct("415582006", "Stenosis");
 const LENGTH: Code = sct("410668003", "Length");
 const TORTUOSITY: Code = sct("15690004", "Tortuosity");
@@ -116,6 +141,24 @@ const PLAQUE_BURDEN: Code = Code {
 
 // raystream's own concepts and methods, where DICOM's groups have none.
 const REFERENCE_DIAMETER: Code = own("RS-REFDIAM", "Reference vessel diameter");
+const REFERENCE_AIRWAY_DIAMETER: Code = own("RS-REFAWDIAM", "Reference airway diameter");
+const WALL_AREA_PERCENT: Code = own("RS-WAPCT", "Wall area percent of the airway (WA %)");
+const PI10: Code = own(
+    "RS-PI10",
+    "Pi10: sqrt of wall area at 10 mm inner perimeter",
+);
+const PI10_FIT: Code = own(
+    "RS-PI10FIT",
+    "sqrt(wall area) against inner perimeter, a line fitted",
+);
+const HALF_MAXIMUM: Code = own(
+    "RS-FWHM",
+    "Wall edges at half maximum on rays (Nakano 2000)",
+);
+const WALL_INTEGRAL: Code = own(
+    "RS-WALLINT",
+    "Wall thickness from the HU summed across it on rays",
+);
 const AGAINST_REFERENCE: Code = own(
     "RS-REFERENCE",
     "D min against the reference diameter at the lesion",
@@ -145,8 +188,16 @@ fn measure(concept: Code, value: f64, unit: Code) -> Measurement {
     }
 }
 
-/// The measurement groups of the findings on `sections`, in the report's order.
-pub(crate) fn groups(sections: &[Section], findings: &Findings) -> Vec<MeasurementGroup> {
+/// The measurement groups of the findings on `sections`, in the report's order; `dark`: an
+/// airway's.
+pub(crate) fn groups(
+    sections: &[Section],
+    findings: &Findings,
+    dark: bool,
+) -> Vec<MeasurementGroup> {
+    if dark {
+        return airway_groups(sections, findings);
+    }
     let mut vessel = vec![Measurement {
         region: Some(Region::Polyline(
             sections.iter().map(|s| s.row.centre.as_dvec3()).collect(),
@@ -209,52 +260,17 @@ pub(crate) fn groups(sections: &[Section], findings: &Findings) -> Vec<Measureme
 
     for (k, g) in findings.lesions.iter().enumerate() {
         let s = &sections[g.lesion];
-        let l = s.lumen.as_ref().expect("a graded lesion has a lumen");
-        let at = || Some(Region::Point(l.centroid));
-        let mut m = vec![
-            Measurement {
-                method: Some(AGAINST_REFERENCE),
-                region: at(),
-                ..measure(DIAMETER_STENOSIS, g.diameter_pct, PERCENT)
-            },
-            Measurement {
-                method: Some(AGAINST_REFERENCE),
-                region: at(),
-                ..measure(AREA_STENOSIS, g.area_pct, PERCENT)
-            },
-            Measurement {
-                derivation: Some(MINIMUM),
-                region: at(),
-                ..measure(LUMEN_DIAMETER, l.min_diameter_mm, MM)
-            },
-            Measurement {
-                region: at(),
-                ..measure(LUMEN_AREA, l.area_mm2, MM2)
-            },
-            Measurement {
-                region: Some(Region::Point(s.row.centre.as_dvec3())),
-                ..measure(REFERENCE_DIAMETER, g.at_lesion_mm, MM)
-            },
-        ];
-        if let Some(n) = &g.narrowed {
-            m.push(Measurement {
-                region: Some(Region::Polyline(
-                    sections[n.sections[0]..=n.sections[1]]
-                        .iter()
-                        .map(|s| s.row.centre.as_dvec3())
-                        .collect::<Vec<DVec3>>(),
-                )),
-                ..measure(LESION_LENGTH, n.mm[1] - n.mm[0], MM)
-            });
-        }
+        let codes = [LUMEN_DIAMETER, LUMEN_AREA, REFERENCE_DIAMETER];
+        let mut m = lesion_measurements(sections, g, codes);
         if let Some((d, a, _)) = against_wall(s) {
+            let at = s.lumen.as_ref().map(|l| Region::Point(l.centroid));
             m.push(Measurement {
                 method: Some(AGAINST_WALL),
-                region: at(),
+                region: at.clone(),
                 ..measure(DIAMETER_STENOSIS, d, PERCENT)
             });
             m.push(Measurement {
-                region: at(),
+                region: at,
                 ..measure(PLAQUE_BURDEN, a, PERCENT)
             });
         }
@@ -267,20 +283,194 @@ pub(crate) fn groups(sections: &[Section], findings: &Findings) -> Vec<Measureme
         });
     }
 
-    if let Some(mask) = findings.mask.filter(|m| m.segmentation.is_some()) {
-        // (A Structured Report is refused with --dark: the segments are a vessel's.)
-        let segments = crate::measure::mask_segments(mask.wall.is_some(), false);
-        let volumes = std::iter::once(mask.lumen).chain(mask.wall);
-        for (number, (seg, (_, ml))) in segments.iter().zip(volumes).enumerate() {
-            groups.push(MeasurementGroup {
-                tracking_id: seg.label.to_string(),
-                finding: seg.kind,
-                finding_site: None,
-                segment: Some(number as u16 + 1),
-                measurements: vec![measure(VOLUME, ml, ML)],
+    groups.extend(segment_groups(findings, false));
+    groups
+}
+
+/// A graded lesion's measurements: diameter and area stenosis against the reference, the
+/// smallest diameter and the area at the lesion, the reference diameter and the narrowed
+/// length; `[diameter, area, reference]` code the lumen's diameter and area and the reference
+/// diameter (a vessel's or an airway's).
+fn lesion_measurements(
+    sections: &[Section],
+    g: &Stenosis,
+    [diameter, area, reference]: [Code; 3],
+) -> Vec<Measurement> {
+    let s = &sections[g.lesion];
+    let l = s.lumen.as_ref().expect("a graded lesion has a lumen");
+    let at = || Some(Region::Point(l.centroid));
+    let mut m = vec![
+        Measurement {
+            method: Some(AGAINST_REFERENCE),
+            region: at(),
+            ..measure(DIAMETER_STENOSIS, g.diameter_pct, PERCENT)
+        },
+        Measurement {
+            method: Some(AGAINST_REFERENCE),
+            region: at(),
+            ..measure(AREA_STENOSIS, g.area_pct, PERCENT)
+        },
+        Measurement {
+            derivation: Some(MINIMUM),
+            region: at(),
+            ..measure(diameter, l.min_diameter_mm, MM)
+        },
+        Measurement {
+            region: at(),
+            ..measure(area, l.area_mm2, MM2)
+        },
+        Measurement {
+            region: Some(Region::Point(s.row.centre.as_dvec3())),
+            ..measure(reference, g.at_lesion_mm, MM)
+        },
+    ];
+    if let Some(n) = &g.narrowed {
+        m.push(Measurement {
+            region: Some(Region::Polyline(
+                sections[n.sections[0]..=n.sections[1]]
+                    .iter()
+                    .map(|s| s.row.centre.as_dvec3())
+                    .collect::<Vec<DVec3>>(),
+            )),
+            ..measure(LESION_LENGTH, n.mm[1] - n.mm[0], MM)
+        });
+    }
+    m
+}
+
+/// With a DICOM Segmentation `--mask`, each segment's volume, the segment referenced.
+fn segment_groups(findings: &Findings, dark: bool) -> Vec<MeasurementGroup> {
+    let Some(mask) = findings.mask.filter(|m| m.segmentation.is_some()) else {
+        return Vec::new();
+    };
+    let segments = crate::measure::mask_segments(mask.wall.is_some(), dark);
+    let volumes = std::iter::once(mask.lumen).chain(mask.wall);
+    segments
+        .iter()
+        .zip(volumes)
+        .enumerate()
+        .map(|(number, (seg, (_, ml)))| MeasurementGroup {
+            tracking_id: seg.label.to_string(),
+            finding: seg.kind,
+            finding_site: None,
+            segment: Some(number as u16 + 1),
+            measurements: vec![measure(VOLUME, ml, ML)],
+        })
+        .collect()
+}
+
+/// An airway's groups: along the path, the lumen, the wall, the stenoses, the segments.
+fn airway_groups(sections: &[Section], findings: &Findings) -> Vec<MeasurementGroup> {
+    let centres = || Region::Polyline(sections.iter().map(|s| s.row.centre.as_dvec3()).collect());
+    let mut along = vec![Measurement {
+        region: Some(centres()),
+        ..measure(LENGTH, findings.winding.length_mm, MM)
+    }];
+    if let Some(d) = findings.winding.distance_metric {
+        along.push(Measurement {
+            method: Some(DISTANCE_METRIC),
+            ..measure(TORTUOSITY, d, RATIO)
+        });
+    }
+    if let Some(g) = findings.angle {
+        along.push(Measurement {
+            method: Some(CHORD_ANGLE),
+            region: Some(Region::Polyline(g.points.to_vec())),
+            ..measure(ANGLE, g.deviation_deg, DEGREE)
+        });
+    }
+    let group =
+        |id: &str, finding: Code, site: Option<Code>, m: Vec<Measurement>| MeasurementGroup {
+            tracking_id: id.into(),
+            finding,
+            finding_site: site,
+            segment: None,
+            measurements: m,
+        };
+    let mut groups = vec![group("Airway along the path", AIRWAY, None, along)];
+    if let Some((w, n)) = extremes(sections) {
+        let lumen = |i: usize| sections[i].lumen.as_ref().expect("a closed lumen");
+        let (w, n) = (lumen(w), lumen(n));
+        let m = vec![
+            Measurement {
+                derivation: Some(MAXIMUM),
+                region: Some(Region::Polyline(w.max_ends.to_vec())),
+                ..measure(DIAMETER, w.max_diameter_mm, MM)
+            },
+            Measurement {
+                derivation: Some(MINIMUM),
+                region: Some(Region::Point(n.centroid)),
+                ..measure(DIAMETER, n.min_diameter_mm, MM)
+            },
+            Measurement {
+                derivation: Some(MINIMUM),
+                region: Some(Region::Point(n.centroid)),
+                ..measure(AREA, n.area_mm2, MM2)
+            },
+        ];
+        groups.push(group("Airway lumen", AIRWAY, Some(LUMEN), m));
+    }
+    let walls: Vec<(usize, &raystream_cpu::wall::Wall)> = sections
+        .iter()
+        .enumerate()
+        .filter_map(|(i, s)| s.wall.as_ref().map(|w| (i, w)))
+        .collect();
+    if !walls.is_empty() {
+        let method = if findings.wall_integral {
+            WALL_INTEGRAL
+        } else {
+            HALF_MAXIMUM
+        };
+        let mean = |f: fn(&raystream_cpu::wall::Wall) -> f64| {
+            walls.iter().map(|(_, w)| f(w)).sum::<f64>() / walls.len() as f64
+        };
+        let (i, thickest) = walls
+            .iter()
+            .max_by(|a, b| a.1.mean_thickness_mm.total_cmp(&b.1.mean_thickness_mm))
+            .copied()
+            .expect("walls");
+        let mut m = vec![
+            Measurement {
+                derivation: Some(MEAN),
+                method: Some(method),
+                region: Some(centres()),
+                ..measure(WALL_THICKNESS, mean(|w| w.mean_thickness_mm), MM)
+            },
+            Measurement {
+                derivation: Some(MAXIMUM),
+                method: Some(method),
+                region: Some(Region::Point(sections[i].row.centre.as_dvec3())),
+                ..measure(WALL_THICKNESS, thickest.mean_thickness_mm, MM)
+            },
+            Measurement {
+                derivation: Some(MEAN),
+                method: Some(method),
+                ..measure(
+                    WALL_AREA_PERCENT,
+                    mean(raystream_cpu::wall::Wall::area_percent),
+                    PERCENT,
+                )
+            },
+        ];
+        if let Some(Ok(p)) = findings.pi10 {
+            m.push(Measurement {
+                method: Some(PI10_FIT),
+                ..measure(PI10, p.value_mm, MM)
             });
         }
+        groups.push(group("Airway wall", AIRWAY, None, m));
     }
+    for (k, g) in findings.lesions.iter().enumerate() {
+        let codes = [DIAMETER, AREA, REFERENCE_AIRWAY_DIAMETER];
+        let m = lesion_measurements(sections, g, codes);
+        groups.push(group(
+            &format!("Stenosis {}", k + 1),
+            STENOSIS,
+            Some(AIRWAY),
+            m,
+        ));
+    }
+    groups.extend(segment_groups(findings, true));
     groups
 }
 
@@ -290,10 +480,15 @@ pub(crate) fn write(
     volume: &raystream_io::Volume,
     sections: &[Section],
     findings: &Findings,
+    dark: bool,
 ) -> Result<ReportOut> {
-    let groups = groups(sections, findings);
+    let groups = groups(sections, findings, dark);
     let info = raystream_io::ReportInfo {
-        description: "raystream measure: the vessel along the path",
+        description: if dark {
+            "raystream measure: the airway along the path"
+        } else {
+            "raystream measure: the vessel along the path"
+        },
         device: "raystream measure",
         version: env!("CARGO_PKG_VERSION"),
         segmentation: findings.mask.and_then(|m| m.segmentation.clone()),

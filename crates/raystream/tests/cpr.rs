@@ -1578,3 +1578,162 @@ fn wall_round_most_of(dir: &Path, n: u32) {
         assert!(pink * 2 > all, "frame {i}: {pink} of {all} pixels pink");
     }
 }
+
+/// `measure --dark --wall --report FILE.dcm` down the right lung, from the chest CT as a DICOM
+/// series: an airway's findings as a DICOM Imaging Measurement Report, coded as an airway's
+/// (airway structure, lumen, diameter and area, wall thickness; WA % and Pi10 in raystream's
+/// own scheme), each figure the JSON report's of the same run as highdicom reads it back, the
+/// segments `Lumen` and `Airway wall` referenced; dciodvfy and dsrdump find no error; `info`
+/// reads the same groups.
+#[test]
+fn an_airways_findings_as_a_dicom_structured_report() {
+    use serde_json::json;
+    let dir = tmp("chest-series-airway-report");
+    let study = chest_series(&dir);
+    let series = dir.to_str().unwrap().to_string();
+    let points = repo().join("examples/chest_right_airway_points.txt");
+    let line = tmp("airway-report-line.txt");
+    dark_centreline(&series, &points, &line);
+    let (seg, sr) = (tmp("airway-report-seg.dcm"), tmp("airway-report.dcm"));
+    let m = dark_measure(
+        &series,
+        &line,
+        ("-950", "80"),
+        &[
+            "--lesions",
+            "1",
+            "--mask",
+            seg.to_str().unwrap(),
+            "--report",
+            sr.to_str().unwrap(),
+        ],
+    );
+    let num = |v: &serde_json::Value, key: &str| {
+        v[key].as_f64().unwrap_or_else(|| panic!("{key} in {v}"))
+    };
+    let sections = m["sections"].as_array().unwrap();
+    let section = |key: &str| &sections[m[key].as_u64().unwrap() as usize - 1];
+    let (widest, narrowest) = (section("widest_section"), section("narrowest_section"));
+    let value = |concept: &str,
+                 v: f64,
+                 unit: &str,
+                 derivation: Option<&str>,
+                 method: Option<&str>| {
+        json!({"concept": concept, "value": v, "unit": unit, "derivation": derivation, "method": method})
+    };
+    let (maximum, minimum, mean) = (Some("56851009"), Some("255605001"), Some("373098007"));
+    // The thickest wall: the sections' largest mean thickness.
+    let thickest = sections
+        .iter()
+        .filter_map(|s| s["wall"]["mean_thickness_mm"].as_f64())
+        .fold(f64::NEG_INFINITY, f64::max);
+    let fwhm = Some("RS-FWHM");
+    let pi10 = &m["pi10"];
+    assert!(pi10.is_object(), "Pi10 down the right lung: {m}");
+    let mut along = vec![value("410668003", num(&m, "length_mm"), "mm", None, None)];
+    if let Some(d) = m["distance_metric"].as_f64() {
+        along.push(value("15690004", d, "1", None, Some("RS-DISTMETRIC")));
+    }
+    let mut want = vec![
+        json!({"template": "1501", "tracking_id": "Airway along the path", "finding": "89187006",
+            "sites": [], "measurements": along}),
+        json!({"template": "1501", "tracking_id": "Airway lumen", "finding": "89187006",
+            "sites": ["91747007"], "measurements": [
+            value("81827009", num(widest, "max_diameter_mm"), "mm", maximum, None),
+            value("81827009", num(narrowest, "min_diameter_mm"), "mm", minimum, None),
+            value("42798000", num(narrowest, "area_mm2"), "mm2", minimum, None),
+        ]}),
+        json!({"template": "1501", "tracking_id": "Airway wall", "finding": "89187006",
+            "sites": [], "measurements": [
+            value("122445", num(&m, "wall_mean_thickness_mm"), "mm", mean, fwhm),
+            value("122445", thickest, "mm", maximum, fwhm),
+            value("RS-WAPCT", num(&m, "wall_area_percent"), "%", mean, fwhm),
+            value("RS-PI10", num(pi10, "value_mm"), "mm", None, Some("RS-PI10FIT")),
+        ]}),
+    ];
+    for (k, g) in m["stenoses"].as_array().unwrap().iter().enumerate() {
+        let reference = Some("RS-REFERENCE");
+        let mut lesion = vec![
+            value(
+                "408715008",
+                num(g, "diameter_stenosis_pct"),
+                "%",
+                None,
+                reference,
+            ),
+            value(
+                "408714007",
+                num(g, "area_stenosis_pct"),
+                "%",
+                None,
+                reference,
+            ),
+            value("81827009", num(g, "min_diameter_mm"), "mm", minimum, None),
+            value("42798000", num(g, "area_mm2"), "mm2", None, None),
+            value(
+                "RS-REFAWDIAM",
+                num(&g["reference"], "diameter_mm"),
+                "mm",
+                None,
+                None,
+            ),
+        ];
+        if g["narrowed"].is_object() {
+            lesion.push(value(
+                "408716009",
+                num(&g["narrowed"], "length_mm"),
+                "mm",
+                None,
+                None,
+            ));
+        }
+        want.push(
+            json!({"template": "1501", "tracking_id": format!("Stenosis {}", k + 1),
+            "finding": "415582006", "sites": ["89187006"], "measurements": lesion}),
+        );
+    }
+    assert_eq!(want.len(), 4, "one graded lesion: {m}");
+    want.extend(segment_groups_want(
+        &seg,
+        &dir,
+        &m["mask"],
+        ("Airway wall", "89187006"),
+    ));
+    let count: usize = want
+        .iter()
+        .map(|g| g["measurements"].as_array().unwrap().len())
+        .sum();
+    assert_eq!(
+        m["report"],
+        json!({"file": sr.to_str().unwrap(), "format": "dicom-sr", "groups": want.len(), "measurements": count})
+    );
+    if let Some(got) = highdicom_report(&sr) {
+        assert_eq!(got["study"], study.study_uid.as_str());
+        let got = got["groups"].as_array().unwrap();
+        assert_eq!(got.len(), want.len(), "{got:?}");
+        for (g, w) in got.iter().zip(&want) {
+            assert_eq!(g, w);
+        }
+    }
+    let o = run(&["info", sr.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let got = info["groups"].as_array().unwrap();
+    let ids: Vec<&str> = got
+        .iter()
+        .map(|g| g["tracking_id"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        ids,
+        [
+            "Airway along the path",
+            "Airway lumen",
+            "Airway wall",
+            "Stenosis 1",
+            "Lumen",
+            "Airway wall"
+        ]
+    );
+    assert_eq!(iod_errors(&sr), Vec::<String>::new());
+    assert_eq!(sr_errors(&sr), Vec::<String>::new());
+}

@@ -2827,21 +2827,12 @@ fn the_findings_as_a_dicom_structured_report() {
             value("122354", num(w, "area_pct"), "%", None, None),
         ]}));
     }
-    let seg_uid = dicom_text(
-        &dicom_object::open_file(&seg).unwrap(),
-        tags::SOP_INSTANCE_UID,
-    );
-    let ct = dicom_object::open_file(dir.join("0001.dcm")).unwrap();
-    let ct_series = dicom_text(&ct, tags::SERIES_INSTANCE_UID);
-    for (n, label, finding, ml) in [
-        (1, "Lumen", "91747007", "lumen_ml"),
-        (2, "Wall and thrombus", "59820001", "wall_ml"),
-    ] {
-        want.push(json!({
-            "template": "1411", "tracking_id": label, "finding": finding,
-            "segmentation": seg_uid, "segment": [n], "source_series": ct_series,
-            "measurements": [value("118565006", num(&m["mask"], ml), "ml", None, None)]}));
-    }
+    want.extend(segment_groups_want(
+        &seg,
+        &dir,
+        &m["mask"],
+        ("Wall and thrombus", "59820001"),
+    ));
     let count: usize = want
         .iter()
         .map(|g| g["measurements"].as_array().unwrap().len())
@@ -2851,15 +2842,7 @@ fn the_findings_as_a_dicom_structured_report() {
         json!({"file": sr_file, "format": "dicom-sr", "groups": want.len(), "measurements": count})
     );
     // highdicom reads the same groups and figures.
-    if let Some(py) = python_with("highdicom") {
-        let o = std::process::Command::new(&py)
-            .arg(repo().join("crates/raystream/tests/highdicom_sr.py"))
-            .arg("read")
-            .arg(&sr)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "highdicom: {}", stderr(&o));
-        let got: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    if let Some(got) = highdicom_report(&sr) {
         assert_eq!(got["sop_class"], raystream_io::COMPREHENSIVE_3D_SR);
         assert_eq!(got["study"], study.study_uid.as_str());
         assert_eq!(got["devices"], json!(["raystream measure"]));

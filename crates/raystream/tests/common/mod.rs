@@ -391,6 +391,53 @@ pub fn chest_series(dir: &Path) -> raystream_io::DicomStudy {
 /// dicom3tools' `dciodvfy` on `file`: the errors it finds against the standard's IOD for the
 /// file's SOP class (its warnings aside). Where it is not installed, none, and a note; under
 /// CI (`CI=true`) that fails.
+/// What highdicom (an independent reader) finds in a DICOM Structured Report
+/// (tests/highdicom_sr.py read): its SOP class, study, devices and measurement groups; none
+/// where Python has no highdicom.
+pub fn highdicom_report(sr: &Path) -> Option<serde_json::Value> {
+    let py = python_with("highdicom")?;
+    let o = Command::new(&py)
+        .arg(repo().join("crates/raystream/tests/highdicom_sr.py"))
+        .arg("read")
+        .arg(sr)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "highdicom: {}", stderr(&o));
+    Some(serde_json::from_str(&stdout(&o)).unwrap())
+}
+
+/// The report groups (as [`highdicom_report`] gives them) that `measure --mask SEG.dcm
+/// --report` writes for the lumen's and the wall's segments of the series in `series_dir`:
+/// each its volume from `mask` (the JSON report's), the Segmentation and segment referenced.
+/// `wall`: the wall segment's label and finding code.
+pub fn segment_groups_want(
+    seg: &Path,
+    series_dir: &Path,
+    mask: &serde_json::Value,
+    (wall, wall_finding): (&str, &str),
+) -> Vec<serde_json::Value> {
+    use dicom_dictionary_std::tags;
+    let seg_uid = dicom_text(
+        &dicom_object::open_file(seg).unwrap(),
+        tags::SOP_INSTANCE_UID,
+    );
+    let ct = dicom_object::open_file(series_dir.join("0001.dcm")).unwrap();
+    let ct_series = dicom_text(&ct, tags::SERIES_INSTANCE_UID);
+    [
+        (1, "Lumen", "91747007", "lumen_ml"),
+        (2, wall, wall_finding, "wall_ml"),
+    ]
+    .into_iter()
+    .map(|(n, label, finding, ml)| {
+        serde_json::json!({
+                "template": "1411", "tracking_id": label, "finding": finding,
+                "segmentation": seg_uid, "segment": [n], "source_series": ct_series,
+                "measurements": [{"concept": "118565006", "value": mask[ml].as_f64().unwrap(),
+                    "unit": "ml", "derivation": null, "method": null}]})
+    })
+    .collect()
+}
+
 pub fn iod_errors(file: &Path) -> Vec<String> {
     match Command::new("dciodvfy").arg(file).output() {
         Ok(o) => format!("{}{}", stdout(&o), stderr(&o))
