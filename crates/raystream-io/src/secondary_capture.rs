@@ -293,6 +293,12 @@ pub fn write_secondary_capture(
     write_dicom(obj, path, sop_class, &sop_uid).map_err(|e| fail(&e))
 }
 
+/// Explicit VR Little Endian.
+pub(crate) const EXPLICIT_VR_LE: &str = "1.2.840.10008.1.2.1";
+/// Deflated Explicit VR Little Endian: the data set through zlib's deflate, which every DICOM
+/// toolkit reads (DCMTK, pydicom, dicom3tools, dicom-rs, dcmjs).
+pub(crate) const DEFLATED_EXPLICIT_VR_LE: &str = "1.2.840.10008.1.2.1.99";
+
 /// Writes `obj` to `path` as a DICOM file storing instance `sop_uid` of `sop_class`, Explicit
 /// VR Little Endian.
 pub(crate) fn write_dicom(
@@ -301,9 +307,19 @@ pub(crate) fn write_dicom(
     sop_class: &str,
     sop_uid: &str,
 ) -> Result<(), String> {
+    write_dicom_as(obj, path, (sop_class, sop_uid), EXPLICIT_VR_LE)
+}
+
+/// [`write_dicom`] in transfer syntax `ts` ([`EXPLICIT_VR_LE`] or [`DEFLATED_EXPLICIT_VR_LE`]).
+pub(crate) fn write_dicom_as(
+    obj: InMemDicomObject,
+    path: &Path,
+    (sop_class, sop_uid): (&str, &str),
+    ts: &str,
+) -> Result<(), String> {
     obj.with_meta(
         FileMetaTableBuilder::new()
-            .transfer_syntax("1.2.840.10008.1.2.1")
+            .transfer_syntax(ts)
             .media_storage_sop_class_uid(sop_class)
             .media_storage_sop_instance_uid(sop_uid),
     )

@@ -1328,6 +1328,15 @@ fn the_mask_as_a_dicom_segmentation_of_the_series() {
     // The Segmentation, frame by frame, back onto the grid.
     let obj = dicom_object::open_file(&seg).unwrap();
     let text = |tag| dicom_text(&obj, tag);
+    // Deflated: its bit frames, mostly zeros, take a twentieth of their room.
+    assert_eq!(obj.meta().transfer_syntax(), "1.2.840.10008.1.2.1.99");
+    let frame_bytes =
+        (nx * ny).div_ceil(8) as u64 * text(tags::NUMBER_OF_FRAMES).parse::<u64>().unwrap();
+    let size = std::fs::metadata(&seg).unwrap().len();
+    assert!(
+        size * 10 < frame_bytes,
+        "{size} bytes for {frame_bytes} of frames"
+    );
     assert_eq!(text(tags::SOP_CLASS_UID), raystream_io::SEGMENTATION);
     assert_eq!(text(tags::MODALITY), "SEG");
     assert_eq!(text(tags::STUDY_INSTANCE_UID), study.study_uid);
