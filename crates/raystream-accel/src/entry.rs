@@ -96,8 +96,7 @@ impl EntryGrid {
         let mut fill = Fill {
             inners,
             res: res.map(|r| r as usize),
-            lo: std::array::from_fn(|a| (0..res[a]).map(|i| grid.grown(bounds, a, i).0).collect()),
-            hi: std::array::from_fn(|a| (0..res[a]).map(|i| grid.grown(bounds, a, i).1).collect()),
+            spans: std::array::from_fn(|a| (0..res[a]).map(|i| grid.grown(bounds, a, i)).collect()),
             cells: vec![root; res.iter().map(|&r| r as usize).product()],
             depth_sum: 0.0,
         };
@@ -139,18 +138,24 @@ impl EntryGrid {
         self.cells[index]
     }
 
+    /// Cell `k` of [`Self::cells`] as its (x, y, z) indices.
+    pub fn cell(&self, k: usize) -> [u32; 3] {
+        let [rx, ry, _] = self.res.map(|r| r as usize);
+        [k % rx, (k / rx) % ry, k / (rx * ry)].map(|i| i as u32)
+    }
+
     /// The table's size in bytes.
     pub fn bytes(&self) -> usize {
         self.cells.len() * std::mem::size_of::<u32>()
     }
 }
 
-/// The grid being filled: each cell's grown bounds along each axis (`lo`, `hi`), the cells.
+/// The grid being filled: each cell's grown span along each axis ([`EntryGrid::grown`]), the
+/// cells.
 struct Fill<'a> {
     inners: &'a [KdInner],
     res: [usize; 3],
-    lo: [Vec<f64>; 3],
-    hi: [Vec<f64>; 3],
+    spans: [Vec<(f64, f64)>; 3],
     cells: Vec<u32>,
     depth_sum: f64,
 }
@@ -173,17 +178,14 @@ impl Fill<'_> {
         let split = n.split as f64;
         let r = block[a].clone();
         // Cells are in order along the axis: those below the plane, those it cuts, those above.
-        let below = r.start
-            + self.hi[a][r.clone()]
-                .iter()
-                .take_while(|&&h| split >= h)
-                .count();
+        let spans = &self.spans[a][r.clone()];
+        let below = r.start + spans.iter().take_while(|&&(_, hi)| split >= hi).count();
         let above = below.max(
             r.end
-                - self.lo[a][r.clone()]
+                - spans
                     .iter()
                     .rev()
-                    .take_while(|&&l| split <= l)
+                    .take_while(|&&(lo, _)| split <= lo)
                     .count(),
         );
         let part = |range: std::ops::Range<usize>| {

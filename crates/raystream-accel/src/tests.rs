@@ -605,11 +605,10 @@ fn entry_grids_of_any_size_start_at_the_deepest_node_that_holds_the_cell() {
         assert_eq!(*g.res.iter().max().unwrap(), res.min(crate::entry::MAX_RES));
         tree.validate(&c).unwrap();
         // The one-pass fill against the definition, cell by cell.
-        let [rx, ry, _] = g.res;
         for (k, &node) in g.cells.iter().enumerate() {
-            let ijk = [k as u32 % rx, (k as u32 / rx) % ry, k as u32 / (rx * ry)];
-            let lo = std::array::from_fn(|a| g.grown(&tree.bounds, a, ijk[a]).0);
-            let hi = std::array::from_fn(|a| g.grown(&tree.bounds, a, ijk[a]).1);
+            let ijk = g.cell(k);
+            let span: [(f64, f64); 3] = std::array::from_fn(|a| g.grown(&tree.bounds, a, ijk[a]));
+            let (lo, hi) = (span.map(|s| s.0), span.map(|s| s.1));
             assert_eq!(
                 node,
                 crate::entry::covering_node(tree.root, &tree.inners, &lo, &hi),

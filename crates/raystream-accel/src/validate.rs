@@ -190,10 +190,9 @@ impl KdTree {
             ));
         }
         for (c, &node) in g.cells.iter().enumerate() {
-            let [rx, ry, _] = g.res.map(|r| r as usize);
-            let ijk = [c % rx, (c / rx) % ry, c / (rx * ry)];
+            let ijk = g.cell(c);
             let span: [(f64, f64); 3] = std::array::from_fn(|a| {
-                let (lo, hi) = g.grown(&self.bounds, a, ijk[a] as u32);
+                let (lo, hi) = g.grown(&self.bounds, a, ijk[a]);
                 (
                     lo.max(self.bounds.min[a] as f64),
                     hi.min(self.bounds.max[a] as f64),

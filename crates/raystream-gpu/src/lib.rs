@@ -1039,8 +1039,8 @@ impl<'a> GpuTracer<'a> {
 
     /// The rays and hit buffers of a query of `rays` by `pipeline` over `dims` workgroups,
     /// bound with the tree (bindings 0-4), the rays (5), the hits (6) and `slot7` at binding 7
-    /// where the kernel has one
-    /// (the persistent kernels' ray counter, the statistics query's counters).
+    /// where the kernel has one (the persistent kernels' ray counter, the statistics query's
+    /// counters).
     fn bind_query<'p>(
         &self,
         rays: &[Ray],

@@ -397,7 +397,10 @@ pub(crate) fn extremes(sections: &[Section]) -> Option<(usize, usize)> {
 }
 
 /// The section whose outer wall has the most of `figure`, and its wall.
-fn wall_with_most(sections: &[Section], figure: fn(&Wall) -> f64) -> Option<(usize, &Wall)> {
+pub(crate) fn wall_with_most(
+    sections: &[Section],
+    figure: fn(&Wall) -> f64,
+) -> Option<(usize, &Wall)> {
     sections
         .iter()
         .enumerate()
@@ -587,7 +590,7 @@ fn airway_text(
 }
 
 /// The mean of `figure` over the sections' walls; none without a wall.
-fn wall_mean(sections: &[Section], figure: fn(&Wall) -> f64) -> Option<f64> {
+pub(crate) fn wall_mean(sections: &[Section], figure: fn(&Wall) -> f64) -> Option<f64> {
     let walls: Vec<f64> = sections
         .iter()
         .filter_map(|s| s.wall.as_ref().map(figure))

@@ -26,14 +26,15 @@
 use std::path::Path;
 
 use anyhow::Result;
+use raystream_cpu::cpr::PathAngle;
 use raystream_cpu::lumen::Section;
 use raystream_cpu::stenosis::Stenosis;
-use raystream_cpu::wall::WallVolumes;
+use raystream_cpu::wall::{Wall, WallVolumes};
 use raystream_io::{Code, Measurement, MeasurementGroup, RAYSTREAM_SCHEME, Region};
 use raystream_math::DVec3;
 use serde_json::json;
 
-use crate::measure::{Findings, against_wall, extremes, widest_wall};
+use crate::measure::{Findings, against_wall, extremes, wall_mean, wall_with_most, widest_wall};
 
 /// What `--report` wrote.
 pub(crate) struct ReportOut {
@@ -198,37 +199,8 @@ pub(crate) fn groups(
     if dark {
         return airway_groups(sections, findings);
     }
-    let mut vessel = vec![Measurement {
-        region: Some(Region::Polyline(
-            sections.iter().map(|s| s.row.centre.as_dvec3()).collect(),
-        )),
-        ..measure(LENGTH, findings.winding.length_mm, MM)
-    }];
-    if let Some(d) = findings.winding.distance_metric {
-        vessel.push(Measurement {
-            method: Some(DISTANCE_METRIC),
-            ..measure(TORTUOSITY, d, RATIO)
-        });
-    }
-    if let Some((w, n)) = extremes(sections) {
-        let lumen = |i: usize| sections[i].lumen.as_ref().expect("a closed lumen");
-        let (w, n) = (lumen(w), lumen(n));
-        vessel.push(Measurement {
-            derivation: Some(MAXIMUM),
-            region: Some(Region::Polyline(w.max_ends.to_vec())),
-            ..measure(LUMEN_DIAMETER, w.max_diameter_mm, MM)
-        });
-        vessel.push(Measurement {
-            derivation: Some(MINIMUM),
-            region: Some(Region::Point(n.centroid)),
-            ..measure(LUMEN_DIAMETER, n.min_diameter_mm, MM)
-        });
-        vessel.push(Measurement {
-            derivation: Some(MINIMUM),
-            region: Some(Region::Point(n.centroid)),
-            ..measure(LUMEN_AREA, n.area_mm2, MM2)
-        });
-    }
+    let mut vessel = path_measurements(sections, findings);
+    vessel.extend(lumen_extremes(sections, [LUMEN_DIAMETER, LUMEN_AREA]));
     if let Some((_, w)) = widest_wall(sections) {
         vessel.push(Measurement {
             derivation: Some(MAXIMUM),
@@ -243,13 +215,7 @@ pub(crate) fn groups(
         vessel.push(measure(WALL_VOLUME, v.wall_mm3 / 1000.0, ML));
         vessel.push(measure(LUMEN_VOLUME, v.lumen_mm3 / 1000.0, ML));
     }
-    if let Some(g) = findings.angle {
-        vessel.push(Measurement {
-            method: Some(CHORD_ANGLE),
-            region: Some(Region::Polyline(g.points.to_vec())),
-            ..measure(ANGLE, g.deviation_deg, DEGREE)
-        });
-    }
+    vessel.extend(findings.angle.map(angle_measurement));
     let mut groups = vec![MeasurementGroup {
         tracking_id: "Vessel along the path".into(),
         finding: BLOOD_VESSEL,
@@ -338,6 +304,63 @@ fn lesion_measurements(
     m
 }
 
+/// The path through the sections' centres.
+fn centres(sections: &[Section]) -> Region {
+    Region::Polyline(sections.iter().map(|s| s.row.centre.as_dvec3()).collect())
+}
+
+/// The path's length (along the sections' centres) and its tortuosity.
+fn path_measurements(sections: &[Section], findings: &Findings) -> Vec<Measurement> {
+    let mut m = vec![Measurement {
+        region: Some(centres(sections)),
+        ..measure(LENGTH, findings.winding.length_mm, MM)
+    }];
+    if let Some(d) = findings.winding.distance_metric {
+        m.push(Measurement {
+            method: Some(DISTANCE_METRIC),
+            ..measure(TORTUOSITY, d, RATIO)
+        });
+    }
+    m
+}
+
+/// `--angle`'s angle, at its three points.
+fn angle_measurement(g: &PathAngle) -> Measurement {
+    Measurement {
+        method: Some(CHORD_ANGLE),
+        region: Some(Region::Polyline(g.points.to_vec())),
+        ..measure(ANGLE, g.deviation_deg, DEGREE)
+    }
+}
+
+/// The widest lumen's largest diameter (its ends) and the narrowest's smallest diameter and
+/// area (its centroid), coded `[diameter, area]` (a vessel's or an airway's); none without a
+/// closed lumen.
+fn lumen_extremes(sections: &[Section], [diameter, area]: [Code; 2]) -> Vec<Measurement> {
+    let Some((w, n)) = extremes(sections) else {
+        return Vec::new();
+    };
+    let lumen = |i: usize| sections[i].lumen.as_ref().expect("a closed lumen");
+    let (w, n) = (lumen(w), lumen(n));
+    vec![
+        Measurement {
+            derivation: Some(MAXIMUM),
+            region: Some(Region::Polyline(w.max_ends.to_vec())),
+            ..measure(diameter, w.max_diameter_mm, MM)
+        },
+        Measurement {
+            derivation: Some(MINIMUM),
+            region: Some(Region::Point(n.centroid)),
+            ..measure(diameter, n.min_diameter_mm, MM)
+        },
+        Measurement {
+            derivation: Some(MINIMUM),
+            region: Some(Region::Point(n.centroid)),
+            ..measure(area, n.area_mm2, MM2)
+        },
+    ]
+}
+
 /// With a DICOM Segmentation `--mask`, each segment's volume, the segment referenced.
 fn segment_groups(findings: &Findings, dark: bool) -> Vec<MeasurementGroup> {
     let Some(mask) = findings.mask.filter(|m| m.segmentation.is_some()) else {
@@ -361,24 +384,8 @@ fn segment_groups(findings: &Findings, dark: bool) -> Vec<MeasurementGroup> {
 
 /// An airway's groups: along the path, the lumen, the wall, the stenoses, the segments.
 fn airway_groups(sections: &[Section], findings: &Findings) -> Vec<MeasurementGroup> {
-    let centres = || Region::Polyline(sections.iter().map(|s| s.row.centre.as_dvec3()).collect());
-    let mut along = vec![Measurement {
-        region: Some(centres()),
-        ..measure(LENGTH, findings.winding.length_mm, MM)
-    }];
-    if let Some(d) = findings.winding.distance_metric {
-        along.push(Measurement {
-            method: Some(DISTANCE_METRIC),
-            ..measure(TORTUOSITY, d, RATIO)
-        });
-    }
-    if let Some(g) = findings.angle {
-        along.push(Measurement {
-            method: Some(CHORD_ANGLE),
-            region: Some(Region::Polyline(g.points.to_vec())),
-            ..measure(ANGLE, g.deviation_deg, DEGREE)
-        });
-    }
+    let mut along = path_measurements(sections, findings);
+    along.extend(findings.angle.map(angle_measurement));
     let group =
         |id: &str, finding: Code, site: Option<Code>, m: Vec<Measurement>| MeasurementGroup {
             tracking_id: id.into(),
@@ -388,53 +395,28 @@ fn airway_groups(sections: &[Section], findings: &Findings) -> Vec<MeasurementGr
             measurements: m,
         };
     let mut groups = vec![group("Airway along the path", AIRWAY, None, along)];
-    if let Some((w, n)) = extremes(sections) {
-        let lumen = |i: usize| sections[i].lumen.as_ref().expect("a closed lumen");
-        let (w, n) = (lumen(w), lumen(n));
-        let m = vec![
-            Measurement {
-                derivation: Some(MAXIMUM),
-                region: Some(Region::Polyline(w.max_ends.to_vec())),
-                ..measure(DIAMETER, w.max_diameter_mm, MM)
-            },
-            Measurement {
-                derivation: Some(MINIMUM),
-                region: Some(Region::Point(n.centroid)),
-                ..measure(DIAMETER, n.min_diameter_mm, MM)
-            },
-            Measurement {
-                derivation: Some(MINIMUM),
-                region: Some(Region::Point(n.centroid)),
-                ..measure(AREA, n.area_mm2, MM2)
-            },
-        ];
-        groups.push(group("Airway lumen", AIRWAY, Some(LUMEN), m));
+    let lumen = lumen_extremes(sections, [DIAMETER, AREA]);
+    if !lumen.is_empty() {
+        groups.push(group("Airway lumen", AIRWAY, Some(LUMEN), lumen));
     }
-    let walls: Vec<(usize, &raystream_cpu::wall::Wall)> = sections
-        .iter()
-        .enumerate()
-        .filter_map(|(i, s)| s.wall.as_ref().map(|w| (i, w)))
-        .collect();
-    if !walls.is_empty() {
+    // The walls' figures as the text and the JSON report give them.
+    let thickness = |w: &Wall| w.mean_thickness_mm;
+    if let (Some(mean_mm), Some(percent), Some((i, thickest))) = (
+        wall_mean(sections, thickness),
+        wall_mean(sections, Wall::area_percent),
+        wall_with_most(sections, thickness),
+    ) {
         let method = if findings.wall_integral {
             WALL_INTEGRAL
         } else {
             HALF_MAXIMUM
         };
-        let mean = |f: fn(&raystream_cpu::wall::Wall) -> f64| {
-            walls.iter().map(|(_, w)| f(w)).sum::<f64>() / walls.len() as f64
-        };
-        let (i, thickest) = walls
-            .iter()
-            .max_by(|a, b| a.1.mean_thickness_mm.total_cmp(&b.1.mean_thickness_mm))
-            .copied()
-            .expect("walls");
         let mut m = vec![
             Measurement {
                 derivation: Some(MEAN),
                 method: Some(method),
-                region: Some(centres()),
-                ..measure(WALL_THICKNESS, mean(|w| w.mean_thickness_mm), MM)
+                region: Some(centres(sections)),
+                ..measure(WALL_THICKNESS, mean_mm, MM)
             },
             Measurement {
                 derivation: Some(MAXIMUM),
@@ -445,11 +427,7 @@ fn airway_groups(sections: &[Section], findings: &Findings) -> Vec<MeasurementGr
             Measurement {
                 derivation: Some(MEAN),
                 method: Some(method),
-                ..measure(
-                    WALL_AREA_PERCENT,
-                    mean(raystream_cpu::wall::Wall::area_percent),
-                    PERCENT,
-                )
+                ..measure(WALL_AREA_PERCENT, percent, PERCENT)
             },
         ];
         if let Some(Ok(p)) = findings.pi10 {

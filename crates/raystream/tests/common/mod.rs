@@ -406,6 +406,35 @@ pub fn highdicom_report(sr: &Path) -> Option<serde_json::Value> {
     Some(serde_json::from_str(&stdout(&o)).unwrap())
 }
 
+/// `measure --report SR`'s JSON line (`reported`) names `sr` with `want`'s groups and
+/// measurements; and where highdicom is installed it reads from `sr` a Comprehensive 3D SR of
+/// study `study_uid` by "raystream measure" whose groups are `want`, one for one.
+pub fn check_report(
+    reported: &serde_json::Value,
+    sr: &Path,
+    study_uid: &str,
+    want: &[serde_json::Value],
+) {
+    let count: usize = want
+        .iter()
+        .map(|g| g["measurements"].as_array().unwrap().len())
+        .sum();
+    assert_eq!(
+        *reported,
+        serde_json::json!({"file": sr.to_str().unwrap(), "format": "dicom-sr", "groups": want.len(), "measurements": count})
+    );
+    if let Some(got) = highdicom_report(sr) {
+        assert_eq!(got["sop_class"], raystream_io::COMPREHENSIVE_3D_SR);
+        assert_eq!(got["study"], study_uid);
+        assert_eq!(got["devices"], serde_json::json!(["raystream measure"]));
+        let got = got["groups"].as_array().unwrap();
+        assert_eq!(got.len(), want.len(), "{got:?}");
+        for (g, w) in got.iter().zip(want) {
+            assert_eq!(g, w);
+        }
+    }
+}
+
 /// The report groups (as [`highdicom_report`] gives them) that `measure --mask SEG.dcm
 /// --report` writes for the lumen's and the wall's segments of the series in `series_dir`:
 /// each its volume from `mask` (the JSON report's), the Segmentation and segment referenced.
