@@ -9,8 +9,7 @@ cd "$(dirname "$0")/.."
 d=${1:?data folder}; out=${2:?output folder}; sizes=("${@:3}")
 mkdir -p "$out"
 part() { local name=$1; shift; env "$@" bash scripts/device-bench.sh "$d" "$out/$name" "${sizes[@]}" > "$out/$name.log" 2>&1; }
-part 0-entry PARTS="entry checks" TRACERS=unchecked
-part 1-trace PARTS=trace TRACERS="gpu unchecked block costs ifif wg"
+part 1-trace PARTS=trace TRACERS="gpu checked block costs ifif wg"
 part 2-render PARTS=render
 part 3-trace PARTS=trace TRACERS="split sorted cpu embree"
 part 4-volume PARTS="volume scene"

@@ -12,8 +12,8 @@
 # PARTS (default "trace render volume"; also "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
 # BASE=another on the primary and shadow sets; "pixels": the default scene's camera rays by rows or blocks; "waves": its
 # frame in waves of WAVES samples; "checks": its kernels with and without wgpu's run-time checks) picks the parts; TRACERS (default "gpu block
-# unchecked ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; unchecked = the fused
-# kernel without wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=off); block = the fused kernel with
+# checked ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; checked = the fused
+# kernel with wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=on; off by default); block = the fused kernel with
 # RAYSTREAM_GPU_WAIT=block, blocking waits against the spinning ones a hardware GPU has by default; sorted = the diffuse and random
 # sets reordered by sort-rays.py; costs = the fused kernel on trees built with --sah-traversal-cost 2, 4, 8) the tracers of
 # the trace part. The fused and if-if trace lines and bench's lines carry the
@@ -55,11 +55,12 @@ for l in sys.stdin:
 
 echo "{\"machine\": \"$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"date\": \"$(date -u +%FT%TZ)\"}" | tee -a "$res"
 parts=${PARTS:-trace render volume}
-tracers=${TRACERS:-gpu block unchecked ifif wg split sorted costs cpu embree}
+tracers=${TRACERS:-gpu block checked ifif wg split sorted costs cpu embree}
 has() { [[ " $1 " == *" $2 "* ]]; }
-has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
+# MESHES and KINDS (default: all three meshes, all four kinds) narrow the trace part.
+has "$parts" trace && for m in ${MESHES:-stanford_bunny stanford_lucy_100k turbine_blade}; do
   mesh=$d/meshes/$m.ply
-  for kind in primary diffuse shadow random; do
+  for kind in ${KINDS:-primary diffuse shadow random}; do
     rays=$tmp/$m-$kind.rays
     $py "$d/rays.py" gen "$mesh" --kind $kind --size "$size" -o "$rays" > /dev/null || { echo "gen failed: $m $kind"; continue; }
     any=(); [ $kind = shadow ] && any=(--any)
@@ -87,11 +88,11 @@ has "$parts" trace && for m in stanford_bunny stanford_lucy_100k turbine_blade; 
         | tag "$t, \"tracer\": \"raystream-gpu-fused\", \"order\": \"octant-morton\"}"
       $py "$d/rays.py" check "$mesh" "$tmp/sorted.rays" "$tmp/sorted.hits" --json | tag "$t, \"check\": \"gpu-fused-sorted\"}"
       rm -f "$tmp/sorted.rays"; }
-    # The fused kernel compiled without wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=off): the
-    # same hits, faster?
-    has "$tracers" unchecked && { RAYSTREAM_GPU_CHECKS=off $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-unchecked.hits" "${any[@]}" \
-      --device gpu --repeat 10 --json --quiet | tag "$t, \"tracer\": \"raystream-gpu-fused-unchecked\"}"
-      cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-unchecked.hits" || echo "$m $kind: UNCHECKED HITS DIFFER from fused"; }
+    # The fused kernel compiled with wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=on; the
+    # default drops them): the same hits, how much slower?
+    has "$tracers" checked && { RAYSTREAM_GPU_CHECKS=on $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-checked.hits" "${any[@]}" \
+      --device gpu --repeat 10 --json --quiet | tag "$t, \"tracer\": \"raystream-gpu-fused-checked\"}"
+      cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-checked.hits" || echo "$m $kind: CHECKED HITS DIFFER from fused"; }
     # The fused kernel again with blocking waits (RAYSTREAM_GPU_WAIT=block; a hardware GPU's
     # spin by default), for the A/B.
     has "$tracers" block && RAYSTREAM_GPU_WAIT=block $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-block.hits" "${any[@]}" --device gpu \
@@ -146,7 +147,8 @@ done
 # scene with and without the grid, alternated twice; the PNGs must be equal.
 has "$parts" entry && {
 grids=${GRIDS:-0 64 128 256}
-for m in stanford_bunny stanford_lucy_100k turbine_blade; do
+# Lucy and the turbine first: their primary rays are where Warp still leads (BENCHMARKS.md).
+for m in stanford_lucy_100k turbine_blade stanford_bunny; do
   mesh=$d/meshes/$m.ply
   for kind in primary shadow diffuse; do
     rays=$tmp/$m-$kind.rays

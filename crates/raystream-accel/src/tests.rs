@@ -693,3 +693,110 @@ fn entry_grid_edge_cases() {
             .contains("does not hold the cell")
     );
 }
+
+/// `check_links` passes every built tree (empty, one leaf, real meshes, both builders) and
+/// catches each index a kernel without bounds checks would follow out of its array, or a
+/// cycle that would keep a descent going; `validate` refuses the same trees.
+#[test]
+fn check_links_catches_every_index_out_of_range() {
+    use crate::layout::{LEAF_BIT, NO_ROPE, leaf_ref};
+    KdTree::build_from_corners(&[], Builder::Sah)
+        .check_links()
+        .unwrap();
+    let mesh = shared_mesh("spot.obj");
+    let c = corners(&mesh);
+    KdTree::build_from_corners(&c[..1], Builder::Sah)
+        .check_links()
+        .unwrap();
+    for builder in BUILDERS {
+        KdTree::build(&mesh, builder).check_links().unwrap();
+    }
+    let tree = KdTree::build(&mesh, Builder::Sah);
+    let (n, l, tris) = (
+        tree.inners.len() as u32,
+        tree.leaves.len() as u32,
+        tree.tris.len() as u32,
+    );
+    let mid = tree.inners.len() / 2;
+    let leaf = tree.leaves.len() / 2;
+    type Break = Box<dyn Fn(&mut KdTree)>;
+    let breaks: Vec<(&str, Break, &str)> = vec![
+        ("root", Box::new(move |t| t.root = n), "root"),
+        ("leaf root", Box::new(move |t| t.root = leaf_ref(l)), "root"),
+        ("axis", Box::new(move |t| t.inners[mid].axis = 3), "axis 3"),
+        ("child", Box::new(move |t| t.inners[mid].right = n), "child"),
+        (
+            "leaf child",
+            Box::new(move |t| t.inners[mid].left = leaf_ref(l + 7)),
+            "child",
+        ),
+        // A cycle: an inner node whose child is itself or an earlier node.
+        (
+            "cycle",
+            Box::new(move |t| t.inners[mid].left = mid as u32),
+            "child",
+        ),
+        ("back", Box::new(move |t| t.inners[mid].right = 0), "child"),
+        (
+            "range",
+            Box::new(move |t| t.leaves[leaf].first = tris - t.leaves[leaf].count + 1),
+            "triangles",
+        ),
+        (
+            "overflow",
+            Box::new(move |t| {
+                t.leaves[leaf].first = u32::MAX;
+                t.leaves[leaf].count = 2;
+            }),
+            "triangles",
+        ),
+        (
+            "rope",
+            Box::new(move |t| t.leaves[leaf].ropes[3] = LEAF_BIT | l),
+            "rope",
+        ),
+        (
+            "inner rope",
+            Box::new(move |t| t.leaves[leaf].ropes[0] = n + 1),
+            "rope",
+        ),
+        (
+            "cell",
+            Box::new(move |t| *t.entry.cells.last_mut().unwrap() = n),
+            "entry cell",
+        ),
+        (
+            "cells",
+            Box::new(|t| {
+                t.entry.cells.pop();
+            }),
+            "entry grid",
+        ),
+        (
+            "res",
+            Box::new(|t| t.entry.res[2] = crate::entry::MAX_RES + 1),
+            "entry grid",
+        ),
+        (
+            "scale",
+            Box::new(|t| t.entry.scale[1] = f32::NAN),
+            "entry grid",
+        ),
+        (
+            "box",
+            Box::new(|t| t.bounds.min.x = f32::NEG_INFINITY),
+            "entry grid",
+        ),
+    ];
+    for (what, break_it, says) in breaks {
+        let mut bad = tree.clone();
+        break_it(&mut bad);
+        let err = bad.check_links().unwrap_err();
+        assert!(err.contains(says), "{what}: {err}");
+        assert!(bad.validate(&c).is_err(), "{what}");
+    }
+    // What stays in range passes, even where `validate` would object: a rope to the exit.
+    let mut ok = tree.clone();
+    ok.leaves[leaf].ropes[0] = NO_ROPE;
+    ok.check_links().unwrap();
+}

@@ -3,6 +3,7 @@
 use raystream_math::{Aabb, Vec3};
 
 use crate::clip::{clipped_bounds, overlaps_interior};
+use crate::entry::MAX_RES;
 use crate::layout::{Face, LEAF_BIT, MAX_DEPTH, NO_ROPE, is_leaf};
 use crate::{KdTree, is_degenerate};
 
@@ -17,6 +18,7 @@ impl KdTree {
     ///   side, and `NO_ROPE` only on faces on the scene boundary;
     /// - every entry-grid cell starts at the deepest node whose box holds the grown cell.
     pub fn validate(&self, corners: &[[Vec3; 3]]) -> Result<(), String> {
+        self.check_links()?;
         let mut inner_boxes = vec![None; self.inners.len()];
         let mut leaf_seen = vec![false; self.leaves.len()];
         if self.tris.is_empty() && self.inners.is_empty() {
@@ -247,5 +249,83 @@ impl KdTree {
             }
         }
         Ok(())
+    }
+
+    /// Checks, in one pass over the arrays and without the triangles, every index a walk
+    /// follows: what kernels compiled without bounds checks rely on (`raystream-gpu` runs it
+    /// before it uploads a tree). The root, children, ropes and entry cells name nodes that
+    /// exist, and an inner node's inner children come after it (so every descent ends);
+    /// axes are below 3; leaves' triangle ranges lie inside `tris`; the entry grid's cells
+    /// match its size, and the numbers that place a point in a cell are finite. A tree that
+    /// passes [`KdTree::validate`] passes this; a tree built here always does.
+    pub fn check_links(&self) -> Result<(), String> {
+        let (inners, leaves) = (self.inners.len(), self.leaves.len());
+        if leaves >= LEAF_BIT as usize || self.tris.len() > u32::MAX as usize {
+            return Err(format!(
+                "{leaves} leaves and {} triangle entries",
+                self.tris.len()
+            ));
+        }
+        let node = |r: u32| {
+            if is_leaf(r) {
+                ((r & !LEAF_BIT) as usize) < leaves
+            } else {
+                (r as usize) < inners
+            }
+        };
+        if !node(self.root) {
+            return Err(format!("root {:#x} out of range", self.root));
+        }
+        for (i, n) in self.inners.iter().enumerate() {
+            if n.axis > 2 {
+                return Err(format!("inner node {i}: axis {}", n.axis));
+            }
+            for c in [n.left, n.right] {
+                if !node(c) || (!is_leaf(c) && c as usize <= i) {
+                    return Err(format!("inner node {i}: child {c:#x} out of range"));
+                }
+            }
+        }
+        for (i, l) in self.leaves.iter().enumerate() {
+            if l.first as u64 + l.count as u64 > self.tris.len() as u64 {
+                return Err(format!(
+                    "leaf {i}: triangles {}..{} of {}",
+                    l.first,
+                    l.first as u64 + l.count as u64,
+                    self.tris.len()
+                ));
+            }
+            if let Some(r) = l.ropes.iter().find(|&&r| r != NO_ROPE && !node(r)) {
+                return Err(format!("leaf {i}: rope {r:#x} out of range"));
+            }
+        }
+        let g = &self.entry;
+        if g.res[0] == 0 {
+            return Ok(());
+        }
+        let cells = g.res.iter().map(|&r| r as usize).product::<usize>();
+        let finite = [g.margin, g.reach]
+            .into_iter()
+            .chain(g.scale)
+            .chain(self.bounds.min.to_array())
+            .chain(self.bounds.max.to_array())
+            .all(f32::is_finite);
+        if g.res.iter().any(|&r| r == 0 || r > MAX_RES) || g.cells.len() != cells || !finite {
+            return Err(format!(
+                "entry grid of {:?} cells holds {} entries (scale {:?}, scene box {:?})",
+                g.res,
+                g.cells.len(),
+                g.scale,
+                self.bounds
+            ));
+        }
+        match g.cells.iter().position(|&c| !node(c)) {
+            Some(c) => Err(format!(
+                "entry cell {:?}: node {:#x} out of range",
+                g.cell(c),
+                g.cells[c]
+            )),
+            None => Ok(()),
+        }
     }
 }

@@ -257,7 +257,7 @@ impl GpuContext {
             query_workgroup: WORKGROUP_SIZE,
             pixel_blocks: true,
             render_wave: render::DEFAULT_WAVE,
-            unchecked: false,
+            unchecked: true,
             #[cfg(test)]
             fail_alloc: Mutex::new(Vec::new()),
         })
@@ -320,16 +320,19 @@ impl GpuContext {
         Ok(())
     }
 
-    /// Compiles the kd-tree kernels made after it (the ray queries, and the stream renderer of
-    /// a scene without a volume) without wgpu's run-time checks: no clamping of array and
-    /// vector indices, no counters bounding every loop, no guards on integer division. An
-    /// experiment for a hardware GPU (on lavapipe the same hits, and no difference beyond its
-    /// noise: BENCHMARKS.md); checked by default. Sound for these kernels because every index
-    /// they form is guarded by the ray or queue count or comes from a tree that
-    /// `raystream_accel`'s builder made (children, ropes and triangle ranges in bounds, axes
-    /// below 3: the invariants `KdTree::validate` checks, tested on every mesh of ../shared
-    /// and on random ones), and every loop is bounded by `max_steps`, a leaf's count or the
-    /// tree's depth. The CLI sets it from `RAYSTREAM_GPU_CHECKS=off`.
+    /// Whether the kd-tree kernels made after it (the ray queries, and the stream renderer of
+    /// a scene without a volume) compile without wgpu's run-time checks: no clamping of array
+    /// and vector indices, no counters bounding every loop, no guards on integer division.
+    /// Unchecked by default: on the H200 that made the fused kernel 1.12-1.27x faster on
+    /// every ray set, with the same hits (BENCHMARKS.md, 2026-12-04); on lavapipe no difference
+    /// beyond its noise. Sound because every index these kernels form is guarded by the ray
+    /// or queue count (queues are sized so that none can overflow), or comes from a tree and a
+    /// scene whose links [`GpuTracer::new`] ([`KdTree::check_links`]) and
+    /// [`render::GpuRenderer::new`] check before they upload them (children, ropes, entry
+    /// cells and triangle ranges in bounds, axes below 3, descents that end; vertex, material,
+    /// texture and primitive indices in bounds), and every loop is bounded by `max_steps`, a
+    /// leaf's count, a light count or the tree's depth. The CLI's `RAYSTREAM_GPU_CHECKS=on`
+    /// restores the checks.
     pub fn set_unchecked_kernels(&mut self, on: bool) {
         self.unchecked = on;
     }
@@ -688,6 +691,9 @@ pub struct GpuTracer<'a> {
     /// The most rays one query binds: its rays (32 bytes each, its largest buffer) must fit in
     /// a storage binding (128 MiB on lavapipe, 2 GiB on an H100); more are traced in chunks.
     max_rays: usize,
+    /// One past the largest primitive id in the tree (0 for none): the renderer indexes its
+    /// per-triangle arrays with the hits' ids.
+    prims: u64,
     /// Milliseconds spent uploading the tree.
     pub upload_ms: f64,
 }
@@ -803,8 +809,13 @@ impl<'a> GpuTracer<'a> {
         self.ctx
     }
 
+    /// Uploads `tree` and builds the query kernels; refuses a tree whose links
+    /// ([`KdTree::check_links`]) would lead a kernel out of its arrays.
     pub fn new(ctx: &'a GpuContext, tree: &KdTree) -> Result<GpuTracer<'a>, GpuError> {
         let t0 = Instant::now();
+        tree.check_links()
+            .map_err(|e| ctx.err(format!("the kd-tree's links are broken: {e}")))?;
+        let prims = tree.tris.iter().map(|t| t.prim() as u64 + 1).max();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let inners = ctx.storage(
             "kd inner nodes",
@@ -866,6 +877,7 @@ impl<'a> GpuTracer<'a> {
             stats: std::sync::OnceLock::new(),
             module,
             max_rays: (ctx.max_binding() / std::mem::size_of::<GpuRay>() as u64).max(1) as usize,
+            prims: prims.unwrap_or(0),
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }

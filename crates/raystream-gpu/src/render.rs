@@ -356,6 +356,82 @@ fn texture_table(scene: &Scene) -> Vec<u32> {
     table
 }
 
+/// Checks every index the render kernels follow from `scene`'s arrays (what kernels compiled
+/// without bounds checks rely on: `GpuContext::set_unchecked_kernels`): one normal and ray
+/// offset a vertex, vertex and material indices in range, texture coordinates for every
+/// triangle where a material has a texture, texels filling each texture, and the tree's
+/// `prims` (one past its largest primitive id) no more than the triangles. The scene loaders
+/// make such scenes; a scene put together by hand may not.
+fn scene_links(scene: &Scene, prims: u64) -> Result<(), String> {
+    let (vertices, tris) = (scene.mesh.positions.len(), scene.mesh.triangles.len());
+    if scene.normals.len() != vertices || scene.ray_offsets.len() != vertices {
+        return Err(format!(
+            "{vertices} vertices, {} normals, {} ray offsets",
+            scene.normals.len(),
+            scene.ray_offsets.len()
+        ));
+    }
+    if let Some(t) = scene
+        .mesh
+        .triangles
+        .iter()
+        .position(|t| t.iter().any(|&v| v as usize >= vertices))
+    {
+        return Err(format!("triangle {t}: a vertex beyond the {vertices}"));
+    }
+    if scene.material_of.len() != tris {
+        return Err(format!(
+            "{tris} triangles, {} material indices",
+            scene.material_of.len()
+        ));
+    }
+    if prims > tris as u64 {
+        return Err(format!(
+            "the kd-tree's primitive ids go up to {}, the scene has {tris} triangles",
+            prims - 1
+        ));
+    }
+    let materials = scene.materials.len();
+    if let Some(t) = scene
+        .material_of
+        .iter()
+        .position(|&m| m as usize >= materials)
+    {
+        return Err(format!("triangle {t}: a material beyond the {materials}"));
+    }
+    let textures = scene.textures.len();
+    let mut textured = false;
+    for (i, m) in scene.materials.iter().enumerate() {
+        match m.texture {
+            Some(k) if k as usize >= textures => {
+                return Err(format!("material {i}: texture {k} of {textures}"));
+            }
+            Some(_) => textured = true,
+            None => {}
+        }
+    }
+    if textured && scene.uvs.len() != tris {
+        return Err(format!(
+            "{tris} textured triangles, {} with texture coordinates",
+            scene.uvs.len()
+        ));
+    }
+    for (k, t) in scene.textures.iter().enumerate() {
+        if t.width == 0
+            || t.height == 0
+            || t.texels.len() as u64 != t.width as u64 * t.height as u64
+        {
+            return Err(format!(
+                "texture {k}: {}x{} with {} texels",
+                t.width,
+                t.height,
+                t.texels.len()
+            ));
+        }
+    }
+    Ok(())
+}
+
 impl<'a> GpuRenderer<'a> {
     /// Uploads `scene`'s vertices, triangles, materials and lights, whose kd-tree `tree` is
     /// `tracer`'s, and builds the render pipelines. A scene's volume goes up as a texture
@@ -366,6 +442,8 @@ impl<'a> GpuRenderer<'a> {
         tree: &KdTree,
     ) -> Result<GpuRenderer<'a>, GpuError> {
         let ctx = tracer.ctx;
+        scene_links(scene, tracer.prims)
+            .map_err(|e| ctx.err(format!("the scene's links are broken: {e}")))?;
         let need = 3 + 6 + 6 + if scene.volume.is_some() { 4 } else { 1 };
         if ctx.limits.max_storage_buffers_per_shader_stage < need {
             return Err(ctx.err(format!(

@@ -407,6 +407,91 @@ fn a_tree_too_large_for_a_binding_is_a_clear_error() {
     );
 }
 
+/// The kd-tree kernels compile without wgpu's checks by default, so a tree or a scene whose
+/// links would lead them out of their arrays is refused before anything is uploaded, saying
+/// which link; the scene loaders' scenes and built trees pass.
+#[test]
+fn broken_trees_and_scenes_are_refused_before_upload() {
+    let Some(ctx) = gpu() else { return };
+    assert!(
+        ctx.unchecked,
+        "the kd-tree kernels are unchecked by default"
+    );
+    let scene = raystream_scene::Scene::builtin_default();
+    let tree = KdTree::build(&scene.mesh, Builder::Sah);
+    let mut bad = tree.clone();
+    let mid = bad.inners.len() / 2;
+    bad.inners[mid].axis = 3;
+    let e = GpuTracer::new(&ctx, &bad)
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        e.contains("the kd-tree's links are broken") && e.contains("axis 3"),
+        "{e}"
+    );
+    let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+    GpuRenderer::new(&tracer, &scene, &tree).unwrap();
+    // A 2 × 2 texture on the first material, with or without texture coordinates.
+    let texture = |s: &mut raystream_scene::Scene, texels: usize, uvs: bool| {
+        s.textures.push(raystream_io::Texture {
+            width: 2,
+            height: 2,
+            texels: vec![[255; 4]; texels],
+            mapping: Default::default(),
+        });
+        s.materials[0].texture = Some(0);
+        if uvs {
+            s.uvs = vec![[raystream_math::Vec2::ZERO; 3]; s.mesh.triangles.len()];
+        }
+    };
+    let mut s = scene.clone();
+    texture(&mut s, 4, true);
+    GpuRenderer::new(&tracer, &s, &tree).unwrap();
+    type Break = Box<dyn Fn(&mut raystream_scene::Scene)>;
+    let breaks: Vec<(Break, &str)> = vec![
+        (Box::new(|s| s.normals.truncate(1)), "normals"),
+        (
+            Box::new(|s| s.mesh.triangles[3][1] = 1 << 30),
+            "triangle 3: a vertex",
+        ),
+        (
+            Box::new(|s| s.material_of[5] = 99),
+            "triangle 5: a material",
+        ),
+        (Box::new(|s| s.material_of.truncate(1)), "material indices"),
+        // The tree's primitives beyond the scene's triangles.
+        (
+            Box::new(|s| {
+                s.mesh.triangles.truncate(1);
+                s.material_of.truncate(1);
+            }),
+            "primitive ids go up to",
+        ),
+        (Box::new(|s| s.materials[0].texture = Some(7)), "texture 7"),
+        (
+            Box::new(move |s| texture(s, 4, false)),
+            "with texture coordinates",
+        ),
+        (
+            Box::new(move |s| texture(s, 3, true)),
+            "texture 0: 2x2 with 3 texels",
+        ),
+    ];
+    for (break_it, says) in breaks {
+        let mut s = scene.clone();
+        break_it(&mut s);
+        let e = GpuRenderer::new(&tracer, &s, &tree)
+            .err()
+            .expect(says)
+            .to_string();
+        assert!(
+            e.contains("the scene's links are broken") && e.contains(says),
+            "{says}: {e}"
+        );
+    }
+}
+
 struct Rng(u64);
 impl Rng {
     fn f(&mut self) -> f32 {

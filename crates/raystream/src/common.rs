@@ -76,8 +76,9 @@ pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Back
     // `block` chooses either. `RAYSTREAM_GPU_PIXELS=blocks|rows`: the stream renderer's camera
     // rays in blocks of pixels or row by row (GpuContext::set_pixel_blocks; the same image).
     // `RAYSTREAM_GPU_WAVE=N`: at most N samples a wave of the stream renderer (an experiment).
-    // `RAYSTREAM_GPU_CHECKS=off`: the kd-tree kernels without wgpu's run-time checks (an
-    // experiment; GpuContext::set_unchecked_kernels says why it is sound).
+    // `RAYSTREAM_GPU_CHECKS=on`: the kd-tree kernels with wgpu's run-time checks (off by
+    // default: 1.12-1.27x faster on the H200; GpuContext::set_unchecked_kernels says why it is
+    // sound).
     // `RAYSTREAM_GPU_WORKGROUP=N`: the ray-query kernels' threads per
     // workgroup (an experiment for `trace`; see BENCHMARKS.md).
     let open = |adapter| {

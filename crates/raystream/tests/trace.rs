@@ -191,9 +191,9 @@ fn gpu_waits_spin_or_block() {
     );
 }
 
-/// `RAYSTREAM_GPU_CHECKS=off`: the kd-tree kernels without wgpu's run-time checks trace the
-/// same hits (a 32 × 32 fan of rays at spot, most of them hitting) and render the same frame of
-/// a mesh as with them; any other value is refused.
+/// `RAYSTREAM_GPU_CHECKS=on|off`: the kd-tree kernels with and without (the default) wgpu's
+/// run-time checks trace the same hits (a 32 × 32 fan of rays at spot, most of them hitting)
+/// and render the same frame of a mesh; any other value is refused.
 #[test]
 fn gpu_kernels_without_run_time_checks_agree() {
     if !gpu_available() {
