@@ -68,35 +68,43 @@ impl GpuDenoiser {
             bytemuck::cast_slice(&g),
             wgpu::BufferUsages::empty(),
         )?;
-        self.filter(ctx, noisy, (&guide_buf, guides.tolerance), opt)
-    }
-
-    /// [`Self::denoise`] along guides already on the GPU, laid out as `guide_volume` writes
-    /// them (per pixel (albedo, depth or −1), then (normal, 0)), with their depth tolerance.
-    pub(crate) fn filter(
-        &self,
-        ctx: &GpuContext,
-        noisy: &NoisyFilm,
-        (guide_buf, tolerance): (&wgpu::Buffer, f32),
-        opt: &DenoiseOptions,
-    ) -> Result<(Image, Vec<f32>), GpuError> {
-        let (w, h) = (noisy.film.width, noisy.film.height);
-        let n = w as usize * h as usize;
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let light: Vec<[f32; 4]> = noisy
+        // The frame as the volume renderer leaves it: (light, 0), then (opacity, variance, 0, 0).
+        let frame: Vec<[f32; 4]> = noisy
             .film
             .pixels
             .iter()
-            .zip(&noisy.alpha)
-            .map(|(c, a)| [c.x, c.y, c.z, *a])
+            .map(|c| [c.x, c.y, c.z, 0.0])
+            .chain(
+                noisy
+                    .alpha
+                    .iter()
+                    .zip(&noisy.variance)
+                    .map(|(&a, &v)| [a, v, 0.0, 0.0]),
+            )
             .collect();
-        let none = wgpu::BufferUsages::empty();
-        let raw_light = ctx.storage("noisy light", bytemuck::cast_slice(&light), none)?;
-        let raw_var = ctx.storage(
-            "noisy variance",
-            bytemuck::cast_slice(&noisy.variance),
-            none,
+        let frame = ctx.storage(
+            "noisy frame",
+            bytemuck::cast_slice(&frame),
+            wgpu::BufferUsages::empty(),
         )?;
+        let size = (noisy.film.width, noisy.film.height);
+        self.filter(ctx, (&frame, size), (&guide_buf, guides.tolerance), opt)
+    }
+
+    /// [`Self::denoise`] of a frame already on the GPU, laid out as the volume renderer's
+    /// premultiplied output (per pixel (light, samples), then (opacity, variance of its
+    /// luminance, 0, 0)), `size` pixels, along guides laid out as `guide_volume` writes them
+    /// (per pixel (albedo, depth or −1), then (normal, 0)), with their depth tolerance.
+    pub(crate) fn filter(
+        &self,
+        ctx: &GpuContext,
+        (frame, (w, h)): (&wgpu::Buffer, (u32, u32)),
+        (guide_buf, tolerance): (&wgpu::Buffer, f32),
+        opt: &DenoiseOptions,
+    ) -> Result<(Image, Vec<f32>), GpuError> {
+        let n = w as usize * h as usize;
+        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let none = wgpu::BufferUsages::empty();
         let lights = [
             ctx.work_buffer(
                 "denoised light",
@@ -169,12 +177,11 @@ impl GpuDenoiser {
             &self.demodulate,
             &[
                 (0, &first),
-                (1, &raw_light),
                 (2, &lights[0]),
-                (3, &raw_var),
                 (4, &vars[0]),
                 (5, guide_buf),
                 (6, &slopes),
+                (8, frame),
             ],
         );
         let mut at = 0;

@@ -1307,20 +1307,22 @@ fn record_pass(enc: &mut wgpu::CommandEncoder, q: &Query, timer: Option<&Timer>)
 enum Pixels {
     Linear(raystream_cpu::Image),
     Srgb8(Vec<u8>),
+    /// Left on the GPU, in the buffer the caller named.
+    OnGpu,
 }
 
 impl Pixels {
     fn into_linear(self) -> raystream_cpu::Image {
         match self {
             Pixels::Linear(image) => image,
-            Pixels::Srgb8(_) => unreachable!("asked for linear pixels"),
+            _ => unreachable!("asked for linear pixels"),
         }
     }
 
     fn into_srgb8(self) -> Vec<u8> {
         match self {
             Pixels::Srgb8(rgb) => rgb,
-            Pixels::Linear(_) => unreachable!("asked for sRGB pixels"),
+            _ => unreachable!("asked for sRGB pixels"),
         }
     }
 }

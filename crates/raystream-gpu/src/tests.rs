@@ -1562,6 +1562,57 @@ fn gpu_cinematic_film_for_the_denoiser_matches_cpu() {
     assert!(diff < 0.5, "denoised pictures differ by {diff}/255");
 }
 
+/// A small cinematic frame for the denoiser's tests: 8 paths a pixel, 2 scatterings.
+fn cinematic(width: u32, height: u32) -> raystream_cpu::dvr::DvrOptions {
+    raystream_cpu::dvr::DvrOptions {
+        width,
+        height,
+        mode: raystream_cpu::dvr::DvrMode::Cinematic,
+        spp: 8,
+        bounces: 2,
+        ..Default::default()
+    }
+}
+
+/// A denoised cinematic frame filters the traced frame where it lies on the GPU: the same
+/// light and opacity, bit for bit, as the frame and guides read back and denoised from the
+/// host (`GpuDenoiser::denoise`), in one dispatch and in several; the same sample count as the
+/// frame without the denoiser, and the filter's times reported.
+#[test]
+fn a_denoised_frame_is_filtered_where_it_was_traced() {
+    use raystream_cpu::denoise::DenoiseOptions;
+    use raystream_cpu::dvr::{DvrOptions, volume_camera};
+    use raystream_volume::TfPreset;
+    let Some(ctx) = gpu() else { return };
+    let vol = abdomen_ct();
+    let tf = TfPreset::CtBones.function();
+    let gd = GpuDenoiser::new(&ctx);
+    for (w, h, per) in [(64, 48, 0), (61, 45, 3 * 61 * 45)] {
+        let opt = DvrOptions {
+            denoise: true,
+            ..cinematic(w, h)
+        };
+        let cam = volume_camera(&vol, w as f32 / h as f32);
+        let mut gpu = GpuVolumeRenderer::new(&ctx, &vol, &tf).unwrap();
+        if per > 0 {
+            gpu.paths_per_dispatch = per;
+        }
+        let (img, alpha, times) = gpu.render_rgba(&opt, &cam).unwrap();
+        let (film, film_times) = gpu.render_film(&opt, &cam).unwrap();
+        let guides = gpu.guides(&opt, &cam).unwrap();
+        let (want, want_alpha) = gd
+            .denoise(&ctx, &film, &guides, &DenoiseOptions::default())
+            .unwrap();
+        assert_eq!((img.width, img.height), (w, h));
+        assert!(img.pixels == want.pixels, "{w}x{h}: the light differs");
+        assert!(alpha == want_alpha, "{w}x{h}: the opacity differs");
+        assert_eq!(times.samples, film_times.samples, "{w}x{h}");
+        assert!(times.samples > 0);
+        let d = times.denoise.expect("the filter's times");
+        assert!(d.filter_ms > 0.0 && d.guides_ms > 0.0 && times.frame_ms >= d.filter_ms);
+    }
+}
+
 /// The GPU's denoiser against the CPU's (the reference) on the same noisy abdomen frame and
 /// guides: the same light and opacity within 1e-5 (relative, or absolute below 1), with the
 /// default settings, without demodulation, with five passes, and on a frame whose size is no
@@ -1570,21 +1621,14 @@ fn gpu_cinematic_film_for_the_denoiser_matches_cpu() {
 fn gpu_denoiser_matches_cpu() {
     use raystream_cpu::cinematic::{guides, render_film};
     use raystream_cpu::denoise::{DenoiseOptions, denoise};
-    use raystream_cpu::dvr::{DvrMode, DvrOptions, volume_camera};
+    use raystream_cpu::dvr::volume_camera;
     use raystream_volume::TfPreset;
     let Some(ctx) = gpu() else { return };
     let vol = abdomen_ct();
     let tf = TfPreset::CtMuscle.function();
     let gd = GpuDenoiser::new(&ctx);
     for (w, h) in [(64, 48), (61, 45)] {
-        let opt = DvrOptions {
-            width: w,
-            height: h,
-            mode: DvrMode::Cinematic,
-            spp: 8,
-            bounces: 2,
-            ..Default::default()
-        };
+        let opt = cinematic(w, h);
         let cam = volume_camera(&vol, w as f32 / h as f32);
         let (noisy, _) = render_film(&vol, &tf, &opt, &cam);
         let g = guides(&vol, &tf, &opt, &cam);

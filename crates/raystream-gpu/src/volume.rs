@@ -237,12 +237,15 @@ pub(crate) fn brick_buffer(ctx: &GpuContext, visible: &[bool]) -> Result<wgpu::B
 pub const PATHS_PER_DISPATCH: u64 = 1 << 20;
 
 /// What a frame reads back: 8-bit sRGB packed on the GPU, the float frame over the
-/// background, or the float frame premultiplied (no background) with each pixel's opacity.
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Output {
+/// background, or the float frame premultiplied (no background) with each pixel's opacity;
+/// or nothing but its sample count, the premultiplied frame copied into a buffer on the GPU
+/// (for the denoiser).
+#[derive(Clone, Copy)]
+enum Output<'b> {
     Srgb8,
     Linear,
     Premultiplied,
+    OnGpu(&'b wgpu::Buffer),
 }
 
 /// A volume and its transfer function on the GPU, ready for direct volume rendering.
@@ -517,16 +520,22 @@ impl<'a> GpuVolumeRenderer<'a> {
         };
         let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
         let t0 = Instant::now();
-        let (noisy, mut times) = self.render_film(opt, cam)?;
-        // The guides stay on the GPU for the filter.
+        // Compiled with the first denoised frame (in its frame time, not its filter's).
+        let denoiser = self.denoiser.get_or_init(|| GpuDenoiser::new(self.ctx));
+        // The frame, its variances and the guides stay on the GPU for the filter.
+        let film = self.ctx.work_buffer(
+            "cinematic frame",
+            opt.width as u64 * opt.height as u64 * 32,
+            wgpu::BufferUsages::COPY_DST,
+        )?;
+        let (_, _, _, mut times) = self.run(opt, Sight::Camera(cam), Output::OnGpu(&film))?;
         let t = Instant::now();
         let (guides, tolerance) = self.guide_buffer(opt, cam)?;
         let guides_ms = ms(t);
         let t = Instant::now();
-        let denoiser = self.denoiser.get_or_init(|| GpuDenoiser::new(self.ctx));
         let (film, alpha) = denoiser.filter(
             self.ctx,
-            &noisy,
+            (&film, (opt.width, opt.height)),
             (&guides, tolerance),
             &DenoiseOptions::default(),
         )?;
@@ -892,8 +901,14 @@ impl<'a> GpuVolumeRenderer<'a> {
         sight: Sight,
         output: Output,
     ) -> Result<(Pixels, Vec<f32>, Vec<f32>, GpuDvrTimes), GpuError> {
-        let srgb8 = output == Output::Srgb8;
-        let premultiplied = output == Output::Premultiplied;
+        let srgb8 = matches!(output, Output::Srgb8);
+        let on_gpu = match output {
+            Output::OnGpu(b) => Some(b),
+            _ => None,
+        };
+        let premultiplied = matches!(output, Output::Premultiplied | Output::OnGpu(_));
+        // The sample count comes from the packing kernel's sum where no floats come back.
+        let count_on_gpu = srgb8 || on_gpu.is_some();
         let ctx = self.ctx;
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -1107,7 +1122,7 @@ impl<'a> GpuVolumeRenderer<'a> {
                     .fetch_add(batches[i].1 as u64 * n, Ordering::Relaxed);
             }
         }
-        if srgb8 {
+        if count_on_gpu {
             enc.clear_buffer(sum, 0, None);
             let pack = group("pack sRGB", &self.pack_pipeline, &[0, 6, 8, 9]);
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -1126,12 +1141,17 @@ impl<'a> GpuVolumeRenderer<'a> {
         }
         if srgb8 {
             enc.copy_buffer_to_buffer(packed, 0, packed_read, 0, packed_bytes);
+        }
+        if count_on_gpu {
             enc.copy_buffer_to_buffer(sum, 0, packed_read, packed_bytes, 8);
-        } else {
-            enc.copy_buffer_to_buffer(pixels, 0, readback, 0, pixel_bytes);
+        }
+        match on_gpu {
+            Some(to) => enc.copy_buffer_to_buffer(pixels, 0, to, 0, pixel_bytes),
+            None if !srgb8 => enc.copy_buffer_to_buffer(pixels, 0, readback, 0, pixel_bytes),
+            None => {}
         }
         ctx.queue.submit([enc.finish()]);
-        let words = read_words(ctx, if srgb8 { packed_read } else { readback })?;
+        let words = read_words(ctx, if count_on_gpu { packed_read } else { readback })?;
         if let Some(&(_, count)) = batches.last() {
             self.paths_done
                 .fetch_add(count as u64 * n, Ordering::Relaxed);
@@ -1144,11 +1164,14 @@ impl<'a> GpuVolumeRenderer<'a> {
             return Err(ctx.err(e));
         }
         let (mut alpha, mut variance) = (Vec::new(), Vec::new());
-        let (out, samples) = if srgb8 {
+        let (out, samples) = if count_on_gpu {
             let at = (packed_bytes / 4) as usize;
             let samples = words[at] as u64 | (words[at + 1] as u64) << 32;
             let bytes: &[u8] = bytemuck::cast_slice(&words);
-            (Pixels::Srgb8(bytes[..3 * n as usize].to_vec()), samples)
+            match on_gpu {
+                Some(_) => (Pixels::OnGpu, samples),
+                None => (Pixels::Srgb8(bytes[..3 * n as usize].to_vec()), samples),
+            }
         } else {
             let floats: &[f32] = bytemuck::cast_slice(&words);
             let px = &floats[..4 * n as usize];

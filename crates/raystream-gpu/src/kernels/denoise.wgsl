@@ -33,6 +33,10 @@ struct DenoiseParams {
 // Per pixel the depth's change a pixel right and a pixel down; and the blurred variance.
 @group(0) @binding(6) var<storage, read_write> slopes: array<vec2<f32>>;
 @group(0) @binding(7) var<storage, read_write> blurred: array<f32>;
+// The traced frame, as the volume renderer leaves it on the GPU (volume.rs, premultiplied
+// output): per pixel (premultiplied light, samples), then per pixel (opacity, variance of its
+// luminance, 0, 0). Only `demodulate` reads it.
+@group(0) @binding(8) var<storage, read> frame: array<vec4<f32>>;
 
 const EPSILON: f32 = 1e-10;
 
@@ -54,8 +58,8 @@ fn modulation(p: u32) -> vec3<f32> {
     return vec3<f32>(1.0);
 }
 
-// The light divided by the albedo (and the variance by its luminance squared), into the
-// output pair; and the depth slopes (as the CPU's depth_slopes).
+// The frame's light divided by the albedo (and its variance by the albedo's luminance
+// squared), into the first pair; and the depth slopes (as the CPU's depth_slopes).
 @compute @workgroup_size(8, 8)
 fn demodulate(@builtin(global_invocation_id) gid: vec3<u32>) {
     let pi = pixel_of(gid);
@@ -64,10 +68,10 @@ fn demodulate(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let p = u32(pi);
     let m = modulation(p);
-    let c = light_in[p];
-    light_out[p] = vec4<f32>(c.xyz / m, c.w);
+    let second = frame[prm.width * prm.height + p];
+    light_out[p] = vec4<f32>(frame[p].xyz / m, second.x);
     let lm = luminance(m);
-    var_out[p] = var_in[p] / (lm * lm);
+    var_out[p] = second.y / (lm * lm);
     let w = prm.width;
     let zp = guides[p].w;
     if zp < 0.0 {
