@@ -99,11 +99,35 @@ impl GpuDenoiser {
         &self,
         ctx: &GpuContext,
         (frame, (w, h)): (&wgpu::Buffer, (u32, u32)),
-        (guide_buf, tolerance): (&wgpu::Buffer, f32),
+        guides: (&wgpu::Buffer, f32),
         opt: &DenoiseOptions,
     ) -> Result<(Image, Vec<f32>), GpuError> {
-        let n = w as usize * h as usize;
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let light = self.filter_on_gpu(ctx, (frame, (w, h)), guides, opt, None)?;
+        let out: Vec<[f32; 4]> = read_back(ctx, &light)?;
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(ctx.err(e));
+        }
+        let film = Image {
+            width: w,
+            height: h,
+            pixels: out.iter().map(|c| Vec3::new(c[0], c[1], c[2])).collect(),
+        };
+        Ok((film, out.iter().map(|c| c[3]).collect()))
+    }
+
+    /// [`Self::filter`], its passes submitted and its output left on the GPU: per pixel
+    /// (premultiplied light, opacity), or with `over` the light over that background (as
+    /// `raystream_cpu::dvr::over_background`), for a frame packed to sRGB there.
+    pub(crate) fn filter_on_gpu(
+        &self,
+        ctx: &GpuContext,
+        (frame, (w, h)): (&wgpu::Buffer, (u32, u32)),
+        (guide_buf, tolerance): (&wgpu::Buffer, f32),
+        opt: &DenoiseOptions,
+        over: Option<Vec3>,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        let n = w as usize * h as usize;
         let none = wgpu::BufferUsages::empty();
         let lights = [
             ctx.work_buffer(
@@ -134,6 +158,8 @@ impl GpuDenoiser {
                 sigma_albedo: opt.sigma_albedo,
                 tolerance,
                 demodulate: opt.demodulate,
+                over: over.is_some() as u32,
+                background: over.unwrap_or_default().to_array(),
                 ..Default::default()
             };
             wgpu::util::DeviceExt::create_buffer_init(
@@ -214,15 +240,7 @@ impl GpuDenoiser {
             ],
         );
         ctx.queue.submit([enc.finish()]);
-        let out: Vec<[f32; 4]> = read_back(ctx, &lights[1 - at])?;
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(ctx.err(e));
-        }
-        let film = Image {
-            width: w,
-            height: h,
-            pixels: out.iter().map(|c| Vec3::new(c[0], c[1], c[2])).collect(),
-        };
-        Ok((film, out.iter().map(|c| c[3]).collect()))
+        let [a, b] = lights;
+        Ok(if at == 0 { b } else { a })
     }
 }

@@ -437,7 +437,11 @@ pub struct DenoiseParams {
     pub sigma_albedo: f32,
     pub tolerance: f32,
     pub demodulate: f32,
-    pub _pad0: u32,
+    /// 1: the last pass puts the light over `background` (for a frame packed to sRGB on the
+    /// GPU); 0: it stays premultiplied, the opacity beside it.
+    pub over: u32,
     pub _pad1: u32,
     pub _pad2: u32,
+    pub background: [f32; 3],
+    pub _pad3: f32,
 }

@@ -1310,9 +1310,11 @@ fn dvr_wgsl_params_match_rust() {
         ("sigma_albedo", offset_of!(DenoiseParams, sigma_albedo)),
         ("tolerance", offset_of!(DenoiseParams, tolerance)),
         ("demodulate", offset_of!(DenoiseParams, demodulate)),
-        ("_pad0", offset_of!(DenoiseParams, _pad0)),
+        ("over", offset_of!(DenoiseParams, over)),
         ("_pad1", offset_of!(DenoiseParams, _pad1)),
         ("_pad2", offset_of!(DenoiseParams, _pad2)),
+        ("background", offset_of!(DenoiseParams, background)),
+        ("_pad3", offset_of!(DenoiseParams, _pad3)),
     ];
     check_struct(&module, "DenoiseParams", size_of::<DenoiseParams>(), &names);
 }
@@ -1576,8 +1578,9 @@ fn cinematic(width: u32, height: u32) -> raystream_cpu::dvr::DvrOptions {
 
 /// A denoised cinematic frame filters the traced frame where it lies on the GPU: the same
 /// light and opacity, bit for bit, as the frame and guides read back and denoised from the
-/// host (`GpuDenoiser::denoise`), in one dispatch and in several; the same sample count as the
-/// frame without the denoiser, and the filter's times reported.
+/// host (`GpuDenoiser::denoise`), in one dispatch and in several; put over the background and
+/// packed to sRGB there, the host's bytes of that frame within 1/255; the same sample count as
+/// the frame without the denoiser, and the filter's times reported.
 #[test]
 fn a_denoised_frame_is_filtered_where_it_was_traced() {
     use raystream_cpu::denoise::DenoiseOptions;
@@ -1590,6 +1593,7 @@ fn a_denoised_frame_is_filtered_where_it_was_traced() {
     for (w, h, per) in [(64, 48, 0), (61, 45, 3 * 61 * 45)] {
         let opt = DvrOptions {
             denoise: true,
+            background: raystream_math::Vec3::new(0.9, 0.5, 0.2),
             ..cinematic(w, h)
         };
         let cam = volume_camera(&vol, w as f32 / h as f32);
@@ -1610,6 +1614,15 @@ fn a_denoised_frame_is_filtered_where_it_was_traced() {
         assert!(times.samples > 0);
         let d = times.denoise.expect("the filter's times");
         assert!(d.filter_ms > 0.0 && d.guides_ms > 0.0 && times.frame_ms >= d.filter_ms);
+        // Put over the background and packed to sRGB on the GPU: the bytes of the frame
+        // above put over it on the host, within 1/255 where the GPU rounds differently.
+        let (rgb, rgb_times) = gpu.render_srgb8(&opt, &cam).unwrap();
+        let over = raystream_cpu::dvr::over_background(img, &alpha, opt.background);
+        let what = format!("{w}x{h} sRGB");
+        let off = srgb8_within_one(&rgb, &over.to_srgb8(), &what);
+        assert!(off * 100 <= rgb.len(), "{what}: {off} bytes differ");
+        assert_eq!(rgb_times.samples, times.samples, "{what}");
+        assert!(rgb_times.denoise.is_some(), "{what}");
     }
 }
 

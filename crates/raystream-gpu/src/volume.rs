@@ -248,6 +248,30 @@ enum Output<'b> {
     OnGpu(&'b wgpu::Buffer),
 }
 
+/// A denoised frame as [`GpuVolumeRenderer::denoised`] delivers it.
+enum Denoised {
+    /// The premultiplied light and each pixel's opacity.
+    Rgba(Image, Vec<f32>),
+    /// Over the background, 8-bit sRGB (3 bytes a pixel).
+    Srgb8(Vec<u8>),
+}
+
+impl Denoised {
+    fn into_rgba(self) -> (Image, Vec<f32>) {
+        match self {
+            Denoised::Rgba(film, alpha) => (film, alpha),
+            Denoised::Srgb8(_) => unreachable!("asked for the premultiplied frame"),
+        }
+    }
+
+    fn into_srgb8(self) -> Vec<u8> {
+        match self {
+            Denoised::Srgb8(rgb) => rgb,
+            Denoised::Rgba(..) => unreachable!("asked for sRGB bytes"),
+        }
+    }
+}
+
 /// A volume and its transfer function on the GPU, ready for direct volume rendering.
 pub struct GpuVolumeRenderer<'a> {
     ctx: &'a GpuContext,
@@ -440,7 +464,8 @@ impl<'a> GpuVolumeRenderer<'a> {
         sight: impl Into<Sight<'s>>,
     ) -> Result<(Image, GpuDvrTimes), GpuError> {
         let sight = sight.into();
-        if let Some((film, alpha, times)) = self.denoised(opt, sight)? {
+        if let Some((out, times)) = self.denoised(opt, sight, false)? {
+            let (film, alpha) = out.into_rgba();
             return Ok((over_background(film, &alpha, opt.background), times));
         }
         let (pixels, _, _, times) = self.run(opt, sight, Output::Linear)?;
@@ -456,8 +481,9 @@ impl<'a> GpuVolumeRenderer<'a> {
         sight: impl Into<Sight<'s>>,
     ) -> Result<(Image, Vec<f32>, GpuDvrTimes), GpuError> {
         let sight = sight.into();
-        if let Some(denoised) = self.denoised(opt, sight)? {
-            return Ok(denoised);
+        if let Some((out, times)) = self.denoised(opt, sight, false)? {
+            let (film, alpha) = out.into_rgba();
+            return Ok((film, alpha, times));
         }
         let (pixels, alpha, _, times) = self.run(opt, sight, Output::Premultiplied)?;
         Ok((pixels.into_linear(), alpha, times))
@@ -471,11 +497,8 @@ impl<'a> GpuVolumeRenderer<'a> {
         sight: impl Into<Sight<'s>>,
     ) -> Result<(Vec<u8>, GpuDvrTimes), GpuError> {
         let sight = sight.into();
-        if let Some((film, alpha, times)) = self.denoised(opt, sight)? {
-            return Ok((
-                over_background(film, &alpha, opt.background).to_srgb8(),
-                times,
-            ));
+        if let Some((out, times)) = self.denoised(opt, sight, true)? {
+            return Ok((out.into_srgb8(), times));
         }
         let (pixels, _, _, times) = self.run(opt, sight, Output::Srgb8)?;
         Ok((pixels.into_srgb8(), times))
@@ -506,12 +529,15 @@ impl<'a> GpuVolumeRenderer<'a> {
 
     /// With `opt.denoise`, a cinematic frame denoised: traced here, its guides marched here
     /// ([`Self::guides`]) and filtered here ([`GpuDenoiser`], `raystream_cpu::denoise`'s passes
-    /// in WGSL), the frame's time including the filter's. `None` for any other frame.
+    /// in WGSL), the frame's time including the filter's: premultiplied with its opacity, or
+    /// with `srgb8` put over the background and packed to sRGB on the GPU. `None` for any
+    /// other frame.
     fn denoised(
         &self,
         opt: &DvrOptions,
         sight: Sight,
-    ) -> Result<Option<(Image, Vec<f32>, GpuDvrTimes)>, GpuError> {
+        srgb8: bool,
+    ) -> Result<Option<(Denoised, GpuDvrTimes)>, GpuError> {
         if !(opt.denoise && opt.mode == DvrMode::Cinematic) {
             return Ok(None);
         }
@@ -528,23 +554,98 @@ impl<'a> GpuVolumeRenderer<'a> {
             opt.width as u64 * opt.height as u64 * 32,
             wgpu::BufferUsages::COPY_DST,
         )?;
-        let (_, _, _, mut times) = self.run(opt, Sight::Camera(cam), Output::OnGpu(&film))?;
+        let (_, _, _, mut times) = self.run(opt, sight, Output::OnGpu(&film))?;
         let t = Instant::now();
-        let (guides, tolerance) = self.guide_buffer(opt, cam)?;
+        let guides = self.guide_buffer(opt, cam)?;
         let guides_ms = ms(t);
         let t = Instant::now();
-        let (film, alpha) = denoiser.filter(
-            self.ctx,
-            (&film, (opt.width, opt.height)),
-            (&guides, tolerance),
-            &DenoiseOptions::default(),
-        )?;
+        let frame = (&film, (opt.width, opt.height));
+        let settings = DenoiseOptions::default();
+        let out = if srgb8 {
+            let scope = self
+                .ctx
+                .device
+                .push_error_scope(wgpu::ErrorFilter::Validation);
+            let over = Some(opt.background);
+            let light =
+                denoiser.filter_on_gpu(self.ctx, frame, (&guides.0, guides.1), &settings, over)?;
+            let rgb = self.srgb8_of(opt, sight, &light)?;
+            if let Some(e) = pollster::block_on(scope.pop()) {
+                return Err(self.ctx.err(e));
+            }
+            Denoised::Srgb8(rgb)
+        } else {
+            let (film, alpha) =
+                denoiser.filter(self.ctx, frame, (&guides.0, guides.1), &settings)?;
+            Denoised::Rgba(film, alpha)
+        };
         times.denoise = Some(DenoiseTimes {
             guides_ms,
             filter_ms: ms(t),
         });
         times.frame_ms = ms(t0);
-        Ok(Some((film, alpha, times)))
+        Ok(Some((out, times)))
+    }
+
+    /// Records `pack_srgb8` over `n` pixels with bindings `bind` (params, pixels, packed
+    /// bytes, and the sample sum `sum`, cleared first).
+    fn encode_pack(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        bind: &wgpu::BindGroup,
+        sum: &wgpu::Buffer,
+        n: u64,
+    ) {
+        enc.clear_buffer(sum, 0, None);
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("pack_srgb8"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pack_pipeline);
+        pass.set_bind_group(0, bind, &[]);
+        let groups = (n as u32).div_ceil(4 * 64);
+        let gx = groups.min(self.ctx.limits.max_compute_workgroups_per_dimension.max(1));
+        pass.dispatch_workgroups(gx, groups.div_ceil(gx), 1);
+    }
+
+    /// A frame of `opt`'s size on the GPU (per pixel a colour over the background, and a
+    /// fourth float) as 8-bit sRGB, 3 bytes a pixel, packed there so that a fifth of the bytes
+    /// come back.
+    fn srgb8_of(
+        &self,
+        opt: &DvrOptions,
+        sight: Sight,
+        pixels: &wgpu::Buffer,
+    ) -> Result<Vec<u8>, GpuError> {
+        let ctx = self.ctx;
+        let (params, _) = self.params(opt, sight, false)?;
+        let param_buf = self.uniform("pack params", &params);
+        let n = opt.width as u64 * opt.height as u64;
+        let none = wgpu::BufferUsages::empty();
+        let packed = ctx.work_buffer("sRGB pixels", n.div_ceil(4) * 12, none)?;
+        let sum = ctx.work_buffer("sample count", 8, none)?;
+        let entries: Vec<_> = [(0, &param_buf), (6, pixels), (8, &packed), (9, &sum)]
+            .into_iter()
+            .map(|(binding, b)| wgpu::BindGroupEntry {
+                binding,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("pack sRGB"),
+            layout: &self.pack_pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        let mut enc = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("pack_srgb8"),
+            });
+        self.encode_pack(&mut enc, &bind, &sum, n);
+        ctx.queue.submit([enc.finish()]);
+        let mut bytes: Vec<u8> = read_back(ctx, &packed)?;
+        bytes.truncate(3 * n as usize);
+        Ok(bytes)
     }
 
     /// A uniform buffer holding `params`.
@@ -1123,17 +1224,8 @@ impl<'a> GpuVolumeRenderer<'a> {
             }
         }
         if count_on_gpu {
-            enc.clear_buffer(sum, 0, None);
             let pack = group("pack sRGB", &self.pack_pipeline, &[0, 6, 8, 9]);
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("pack_srgb8"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pack_pipeline);
-            pass.set_bind_group(0, &pack, &[]);
-            let groups = (n as u32).div_ceil(4 * 64);
-            let gx = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
-            pass.dispatch_workgroups(gx, groups.div_ceil(gx), 1);
+            self.encode_pack(&mut enc, &pack, sum, n);
         }
         // One submission: the kernels, their timestamps and the copy of the pixels to read.
         if let Some(t) = timer {

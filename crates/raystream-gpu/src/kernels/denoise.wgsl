@@ -16,9 +16,12 @@ struct DenoiseParams {
     tolerance: f32,
     // Added to the albedo before dividing by it (0: no demodulation).
     demodulate: f32,
-    _pad0: u32,
+    // 1: `remodulate` puts the light over `background` (a frame packed to sRGB next).
+    over: u32,
     _pad1: u32,
     _pad2: u32,
+    background: vec3<f32>,
+    _pad3: f32,
 }
 
 @group(0) @binding(0) var<uniform> prm: DenoiseParams;
@@ -196,7 +199,8 @@ fn atrous(@builtin(global_invocation_id) gid: vec3<u32>) {
     var_out[p] = sum_v / (sum_w * sum_w);
 }
 
-// The albedo multiplied back.
+// The albedo multiplied back; with `over`, the light put over the background (as the CPU's
+// dvr::over_background).
 @compute @workgroup_size(8, 8)
 fn remodulate(@builtin(global_invocation_id) gid: vec3<u32>) {
     let pi = pixel_of(gid);
@@ -205,5 +209,9 @@ fn remodulate(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let p = u32(pi);
     let c = light_in[p];
-    light_out[p] = vec4<f32>(c.xyz * modulation(p), c.w);
+    var light = c.xyz * modulation(p);
+    if prm.over != 0u {
+        light += (1.0 - c.w) * prm.background;
+    }
+    light_out[p] = vec4<f32>(light, c.w);
 }
