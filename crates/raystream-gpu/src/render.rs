@@ -33,7 +33,7 @@ use crate::layout::{
 };
 use crate::volume::{GpuVolume, volume_core_wgsl};
 use crate::{
-    GpuContext, GpuError, GpuHit, GpuTracer, Pixels, Timer, WORKGROUP_SIZE, kdtree_wgsl,
+    GpuContext, GpuError, GpuHit, GpuTracer, Pixels, Timer, WORKGROUP_SIZE, kdtree_wgsl, read_back,
     read_back_after, read_words, u64_at,
 };
 
@@ -1108,13 +1108,18 @@ impl<'a> GpuRenderer<'a> {
             enc.copy_buffer_to_buffer(&q.image, 0, &q.image_read, 0, pixels * 12);
         }
         ctx.queue.submit([enc.finish()]);
-        let words = read_words(ctx, if srgb8 { &q.packed_read } else { &q.image_read })?;
+        // The packed bytes straight into the frame's vector; the float film as words.
+        let (mut bytes, words): (Vec<u8>, Vec<u32>) = if srgb8 {
+            (read_back(ctx, &q.packed_read)?, Vec::new())
+        } else {
+            (Vec::new(), read_words(ctx, &q.image_read)?)
+        };
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
         let film = if srgb8 {
-            let bytes: &[u8] = bytemuck::cast_slice(&words);
-            Pixels::Srgb8(bytes[..3 * pixels as usize].to_vec())
+            bytes.truncate(3 * pixels as usize);
+            Pixels::Srgb8(bytes)
         } else {
             let sums: &[f32] = bytemuck::cast_slice(&words);
             Pixels::Linear(Image {

@@ -1243,7 +1243,13 @@ impl<'a> GpuVolumeRenderer<'a> {
             None => {}
         }
         ctx.queue.submit([enc.finish()]);
-        let words = read_words(ctx, if count_on_gpu { packed_read } else { readback })?;
+        // The packed bytes (and the sample sum after them) straight into the frame's vector;
+        // floats as words.
+        let (mut bytes, words): (Vec<u8>, Vec<u32>) = if count_on_gpu {
+            (read_back(ctx, packed_read)?, Vec::new())
+        } else {
+            (Vec::new(), read_words(ctx, readback)?)
+        };
         if let Some(&(_, count)) = batches.last() {
             self.paths_done
                 .fetch_add(count as u64 * n, Ordering::Relaxed);
@@ -1257,12 +1263,12 @@ impl<'a> GpuVolumeRenderer<'a> {
         }
         let (mut alpha, mut variance) = (Vec::new(), Vec::new());
         let (out, samples) = if count_on_gpu {
-            let at = (packed_bytes / 4) as usize;
-            let samples = words[at] as u64 | (words[at + 1] as u64) << 32;
-            let bytes: &[u8] = bytemuck::cast_slice(&words);
+            let at = packed_bytes as usize;
+            let samples = u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap());
+            bytes.truncate(3 * n as usize);
             match on_gpu {
                 Some(_) => (Pixels::OnGpu, samples),
-                None => (Pixels::Srgb8(bytes[..3 * n as usize].to_vec()), samples),
+                None => (Pixels::Srgb8(bytes), samples),
             }
         } else {
             let floats: &[f32] = bytemuck::cast_slice(&words);
