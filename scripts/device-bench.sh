@@ -10,7 +10,8 @@
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
 # PARTS (default "trace render volume"; also "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
-# BASE=another on the primary and shadow sets; "pixels": the default scene's camera rays by rows or blocks; "waves": its
+# BASE=another on the primary and shadow sets; "abframes": the same on whole frames (the default scene, a dvr orbit,
+# a denoised cinematic frame); "pixels": the default scene's camera rays by rows or blocks; "waves": its
 # frame in waves of WAVES samples; "checks": its kernels with and without wgpu's run-time checks) picks the parts; TRACERS (default "gpu block
 # checked ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; checked = the fused
 # kernel with wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=on; off by default); block = the fused kernel with
@@ -140,6 +141,28 @@ has "$parts" ab && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
     rm -f "$rays" "$tmp"/*.hits
   done
 done
+
+# "abframes": this binary against BASE=another on whole frames, alternated twice: the default
+# scene (PNG), a 36-frame dvr orbit of the CT (bench) and a denoised cinematic frame; the PNGs
+# compared with rays.py imgdiff. For changes of the frame's host side (readbacks, buffers).
+has "$parts" abframes && {
+ct=$d/ct/abdomen_pelvis_ct_totalseg.nii.gz
+for round in 1 2; do
+  for which in base new; do
+    b=$bin; [ $which = base ] && b=${BASE:?BASE=the other binary}
+    $b render --device gpu --size "$size" --max-depth 4 --repeat 20 -o "$tmp/abframes-$which.png" 2>&1 \
+      | sed "s/^/[abframes scene $which, round $round] /" | tee -a "$out/render.log"
+    $b bench "$ct" --mode dvr --preset ct-bones --resample 512 --size "$dvr_size" --json --quiet --device gpu --frames 36 \
+      | tag "{\"volume\": \"ct-bones\", \"binary\": \"$which\", \"round\": $round}"
+    $b render "$ct" --mode cinematic --preset ct-aaa --spp 16 --denoise --device gpu --size "$dvr_size" --repeat 5 \
+      -o "$tmp/abframes-denoised-$which.png" 2>&1 | sed "s/^/[abframes denoised $which, round $round] /" | tee -a "$out/render.log"
+  done
+done
+for k in "" denoised-; do
+  $py "$d/rays.py" imgdiff "$tmp/abframes-${k}base.png" "$tmp/abframes-${k}new.png" 2>&1 | sed "s/^/[abframes ${k}imgdiff] /" \
+    | tee -a "$out/render.log"
+done
+}
 
 # The entry grid (--entry-grid N, 128 the default; 0: every walk from the root): the primary,
 # shadow and diffuse sets with GRIDS (default "0 64 128 256") alternated, two rounds (work counts
