@@ -337,6 +337,12 @@ impl GpuContext {
         self.unchecked = on;
     }
 
+    /// Whether the kd-tree kernels made after now compile without wgpu's run-time checks
+    /// ([`GpuContext::set_unchecked_kernels`]).
+    pub fn unchecked_kernels(&self) -> bool {
+        self.unchecked
+    }
+
     /// A kd-tree kernel module from WGSL `source`: without wgpu's run-time checks where
     /// [`GpuContext::set_unchecked_kernels`] asked and `volume` is false (a volume's marching
     /// loops end only by their floats, so they keep wgpu's loop bounds).

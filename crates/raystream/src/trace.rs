@@ -291,6 +291,11 @@ pub fn run(a: &TraceArgs) -> Result<()> {
                 Backend::Gpu(ctx) => Some(ctx.query_workgroup()),
                 Backend::Cpu => None,
             },
+            // The kd-tree kernels with wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=on) or not.
+            "run_time_checks": match &backend {
+                Backend::Gpu(ctx) => Some(!ctx.unchecked_kernels()),
+                Backend::Cpu => None,
+            },
             "build_ms": round3(t.build_ms),
             "upload_ms": round3(t.upload_ms),
             "trace_ms": round3(t.trace_ms),

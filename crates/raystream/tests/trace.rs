@@ -193,7 +193,8 @@ fn gpu_waits_spin_or_block() {
 
 /// `RAYSTREAM_GPU_CHECKS=on|off`: the kd-tree kernels with and without (the default) wgpu's
 /// run-time checks trace the same hits (a 32 × 32 fan of rays at spot, most of them hitting)
-/// and render the same frame of a mesh; any other value is refused.
+/// and render the same frame of a mesh, and `trace --json` says which ran; any other value is
+/// refused.
 #[test]
 fn gpu_kernels_without_run_time_checks_agree() {
     if !gpu_available() {
@@ -231,6 +232,39 @@ fn gpu_kernels_without_run_time_checks_agree() {
         "the hits differ without run-time checks"
     );
     assert!(!png_on.is_empty() && png_on == png_off, "the frames differ");
+    // `trace --json` says which kernels ran: without the checks unless asked for them.
+    let spot = mesh("spot.obj");
+    for (value, checked) in [(None, false), (Some("on"), true), (Some("off"), false)] {
+        let mut args = vec![
+            "trace",
+            &spot,
+            "--rays",
+            rays.to_str().unwrap(),
+            "--json",
+            "-q",
+        ];
+        let (o, _) = run_with_env(
+            "RAYSTREAM_GPU_CHECKS",
+            value,
+            &[&args[..], &["--device", "gpu"]].concat(),
+            &tmp("checks-json.hits"),
+        );
+        let line: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        assert_eq!(
+            line["run_time_checks"],
+            serde_json::json!(checked),
+            "{value:?}"
+        );
+        args.extend(["--device", "cpu"]);
+        let (o, _) = run_with_env(
+            "RAYSTREAM_GPU_CHECKS",
+            value,
+            &args,
+            &tmp("checks-json.hits"),
+        );
+        let line: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        assert!(line["run_time_checks"].is_null(), "the CPU has no kernels");
+    }
     let (bad, _, _, _) = run("maybe");
     assert_eq!(bad.status.code(), Some(2));
     assert!(
