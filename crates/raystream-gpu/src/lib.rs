@@ -821,7 +821,12 @@ impl<'a> GpuTracer<'a> {
         let t0 = Instant::now();
         tree.check_links()
             .map_err(|e| ctx.err(format!("the kd-tree's links are broken: {e}")))?;
-        let prims = tree.tris.iter().map(|t| t.prim() as u64 + 1).max();
+        let prims = tree
+            .tris
+            .iter()
+            .map(|t| t.prim() as u64 + 1)
+            .max()
+            .unwrap_or(0);
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let inners = ctx.storage(
             "kd inner nodes",
@@ -883,7 +888,7 @@ impl<'a> GpuTracer<'a> {
             stats: std::sync::OnceLock::new(),
             module,
             max_rays: (ctx.max_binding() / std::mem::size_of::<GpuRay>() as u64).max(1) as usize,
-            prims: prims.unwrap_or(0),
+            prims,
             upload_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }

@@ -610,7 +610,8 @@ impl<'a> GpuVolumeRenderer<'a> {
 
     /// A frame of `opt`'s size on the GPU (per pixel a colour over the background, and a
     /// fourth float) as 8-bit sRGB, 3 bytes a pixel, packed there so that a fifth of the bytes
-    /// come back.
+    /// come back: through the frame buffers' packed bytes and their mappable copy, which the
+    /// frame just traced at this size has made.
     fn srgb8_of(
         &self,
         opt: &DvrOptions,
@@ -621,10 +622,15 @@ impl<'a> GpuVolumeRenderer<'a> {
         let (params, _) = self.params(opt, sight, false)?;
         let param_buf = self.uniform("pack params", &params);
         let n = opt.width as u64 * opt.height as u64;
-        let none = wgpu::BufferUsages::empty();
-        let packed = ctx.work_buffer("sRGB pixels", n.div_ceil(4) * 12, none)?;
-        let sum = ctx.work_buffer("sample count", 8, none)?;
-        let entries: Vec<_> = [(0, &param_buf), (6, pixels), (8, &packed), (9, &sum)]
+        let packed_bytes = n.div_ceil(4) * 12;
+        let frame = self.frame.lock().unwrap();
+        let FrameBuffers {
+            packed,
+            sum,
+            packed_read,
+            ..
+        } = frame.as_ref().expect("a frame traced at this size");
+        let entries: Vec<_> = [(0, &param_buf), (6, pixels), (8, packed), (9, sum)]
             .into_iter()
             .map(|(binding, b)| wgpu::BindGroupEntry {
                 binding,
@@ -641,9 +647,10 @@ impl<'a> GpuVolumeRenderer<'a> {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("pack_srgb8"),
             });
-        self.encode_pack(&mut enc, &bind, &sum, n);
+        self.encode_pack(&mut enc, &bind, sum, n);
+        enc.copy_buffer_to_buffer(packed, 0, packed_read, 0, packed_bytes);
         ctx.queue.submit([enc.finish()]);
-        let mut bytes: Vec<u8> = read_back(ctx, &packed)?;
+        let mut bytes: Vec<u8> = read_back(ctx, packed_read)?;
         bytes.truncate(3 * n as usize);
         Ok(bytes)
     }

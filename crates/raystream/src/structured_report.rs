@@ -80,6 +80,14 @@ const fn ucum(value: &'static str, meaning: &'static str) -> Code {
     }
 }
 
+const fn dcm(value: &'static str, meaning: &'static str) -> Code {
+    Code {
+        value,
+        scheme: "DCM",
+        meaning,
+    }
+}
+
 const fn own(value: &'static str, meaning: &'static str) -> Code {
     Code {
         value,
@@ -106,11 +114,7 @@ const LUMEN: Code = sct("91747007", "Lumen");
 const DIAMETER: Code = sct("81827009", "Diameter");
 const AREA: Code = sct("42798000", "Area");
 const MEAN: Code = sct("373098007", "Mean");
-const WALL_THICKNESS: Code = Code {
-    value: "122445",
-    scheme: "DCM",
-    meaning: "Wall Thickness",
-};
+const WALL_THICKNESS: Code = dcm("122445", "Wall Thickness");
 const STENOSIS: Code = sct("415582006", "Stenosis");
 const LENGTH: Code = sct("410668003", "Length");
 const TORTUOSITY: Code = sct("15690004", "Tortuosity");
@@ -124,21 +128,9 @@ const LESION_LENGTH: Code = sct("408716009", "Stenotic Lesion Length");
 const VOLUME: Code = sct("118565006", "Volume");
 // CID 3485's volumes: within the outer wall (as IVUS's external elastic membrane), and the
 // lumen's.
-const WALL_VOLUME: Code = Code {
-    value: "122371",
-    scheme: "DCM",
-    meaning: "EEM Volume",
-};
-const LUMEN_VOLUME: Code = Code {
-    value: "122372",
-    scheme: "DCM",
-    meaning: "Lumen Volume",
-};
-const PLAQUE_BURDEN: Code = Code {
-    value: "122354",
-    scheme: "DCM",
-    meaning: "Plaque Burden",
-};
+const WALL_VOLUME: Code = dcm("122371", "EEM Volume");
+const LUMEN_VOLUME: Code = dcm("122372", "Lumen Volume");
+const PLAQUE_BURDEN: Code = dcm("122354", "Plaque Burden");
 
 // raystream's own concepts and methods, where DICOM's groups have none.
 const REFERENCE_DIAMETER: Code = own("RS-REFDIAM", "Reference vessel diameter");

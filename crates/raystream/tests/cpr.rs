@@ -1614,13 +1614,7 @@ fn an_airways_findings_as_a_dicom_structured_report() {
     let sections = m["sections"].as_array().unwrap();
     let section = |key: &str| &sections[m[key].as_u64().unwrap() as usize - 1];
     let (widest, narrowest) = (section("widest_section"), section("narrowest_section"));
-    let value = |concept: &str,
-                 v: f64,
-                 unit: &str,
-                 derivation: Option<&str>,
-                 method: Option<&str>| {
-        json!({"concept": concept, "value": v, "unit": unit, "derivation": derivation, "method": method})
-    };
+    let value = sr_measurement;
     let (maximum, minimum, mean) = (Some("56851009"), Some("255605001"), Some("373098007"));
     // The thickest wall: the sections' largest mean thickness.
     let thickest = sections

@@ -2798,13 +2798,7 @@ fn the_findings_as_a_dicom_structured_report() {
     let section = |key: &str| &sections[m[key].as_u64().unwrap() as usize - 1];
     let (widest, narrowest) = (section("widest_section"), section("narrowest_section"));
     let wall = &section("widest_wall_section")["wall"];
-    let value = |concept: &str,
-                 v: f64,
-                 unit: &str,
-                 derivation: Option<&str>,
-                 method: Option<&str>| {
-        json!({"concept": concept, "value": v, "unit": unit, "derivation": derivation, "method": method})
-    };
+    let value = sr_measurement;
     let (maximum, minimum) = (Some("56851009"), Some("255605001"));
     let mut want = vec![json!({
     "template": "1501", "tracking_id": "Vessel along the path", "finding": "59820001",

@@ -406,6 +406,18 @@ pub fn highdicom_report(sr: &Path) -> Option<serde_json::Value> {
     Some(serde_json::from_str(&stdout(&o)).unwrap())
 }
 
+/// A numeric measurement as `info --json` reads it from a structured report: its concept's
+/// code, value, unit's code and, where coded, derivation and method.
+pub fn sr_measurement(
+    concept: &str,
+    value: f64,
+    unit: &str,
+    derivation: Option<&str>,
+    method: Option<&str>,
+) -> serde_json::Value {
+    serde_json::json!({"concept": concept, "value": value, "unit": unit, "derivation": derivation, "method": method})
+}
+
 /// `measure --report SR`'s JSON line (`reported`) names `sr` with `want`'s groups and
 /// measurements; and where highdicom is installed it reads from `sr` a Comprehensive 3D SR of
 /// study `study_uid` by "raystream measure" whose groups are `want`, one for one.
