@@ -10,7 +10,7 @@
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
 # PARTS (default "trace render volume"; also "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
-# BASE=another on the primary and shadow sets; "abframes": the same on whole frames (the default scene, a dvr orbit,
+# BASE=another on the primary, shadow and diffuse sets; "abframes": the same on whole frames (the default scene, a dvr orbit,
 # a denoised cinematic frame); "pixels": the default scene's camera rays by rows or blocks; "waves": its
 # frame in waves of WAVES samples; "checks": its kernels with and without wgpu's run-time checks) picks the parts; TRACERS (default "gpu block
 # checked ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; checked = the fused
@@ -122,10 +122,11 @@ has "$parts" trace && for m in ${MESHES:-stanford_bunny stanford_lucy_100k turbi
 done
 
 # Two binaries alternated (BASE=the other binary; its lines tagged "binary": "base", this one's
-# "new"): the primary and shadow sets, trace --repeat 20, two rounds; one rays.py check each.
+# "new"): the primary, shadow and diffuse sets (AB_KINDS narrows them), trace --repeat 20, two
+# rounds; one rays.py check each.
 has "$parts" ab && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
   mesh=$d/meshes/$m.ply
-  for kind in primary shadow; do
+  for kind in ${AB_KINDS:-primary shadow diffuse}; do
     rays=$tmp/$m-$kind.rays
     $py "$d/rays.py" gen "$mesh" --kind $kind --size "$size" -o "$rays" > /dev/null || { echo "gen failed: $m $kind"; continue; }
     any=(); [ $kind = shadow ] && any=(--any)

@@ -149,7 +149,9 @@ fn miss_record() -> HitOut {
 }
 
 // A ray prepared for traversal: -0 direction components made +0 (so that "negative" means
-// strictly negative, as on the CPU), their inverses, and the watertight test's shear.
+// strictly negative, as on the CPU), their inverses, and the watertight test's shear. The
+// traversal loop reads a direction's sign from its inverse (1/d < 0 exactly where d < 0, +0
+// giving +inf), so that `d` need not stay in registers past the walk's start.
 struct Walk {
     o: vec3<f32>,
     d: vec3<f32>,
@@ -163,30 +165,26 @@ fn walk_of(r: RayIn) -> Walk {
 }
 
 // The ray's [t0, t1] inside the scene box; t0 > t1 (or NaN) when it misses the box or is invalid.
+// The CPU's `Aabb::clip_ray`, its loop over x, y, z on all three axes at once: an axis the ray
+// runs parallel to misses the box when its origin lies outside the slab and bounds nothing
+// otherwise.
 fn clip_to_scene(r: RayIn, w: Walk) -> vec2<f32> {
     let none = vec2<f32>(1.0, 0.0);
     if !ray_is_valid(r) || params.tri_count == 0u {
         return none;
     }
-    var t0 = r.t_min;
-    var t1 = r.t_max;
-    for (var a = 0u; a < 3u; a++) {
-        if w.d[a] == 0.0 {
-            if w.o[a] < params.scene_min[a] || w.o[a] > params.scene_max[a] {
-                return none;
-            }
-            continue;
-        }
-        var near = (params.scene_min[a] - w.o[a]) * w.inv[a];
-        var far = (params.scene_max[a] - w.o[a]) * w.inv[a];
-        if near > far {
-            let t = near;
-            near = far;
-            far = t;
-        }
-        t0 = max(t0, near);
-        t1 = min(t1, far);
+    let parallel = w.d == vec3<f32>(0.0);
+    if any(parallel & ((w.o < params.scene_min) | (w.o > params.scene_max))) {
+        return none;
     }
+    let near = (params.scene_min - w.o) * w.inv;
+    let far = (params.scene_max - w.o) * w.inv;
+    let swap = near > far;
+    let inf = bitcast<f32>(0x7f800000u);
+    let lo = select(select(near, far, swap), vec3<f32>(-inf), parallel);
+    let hi = select(select(far, near, swap), vec3<f32>(inf), parallel);
+    let t0 = max(max(max(r.t_min, lo.x), lo.y), lo.z);
+    let t1 = min(min(min(r.t_max, hi.x), hi.y), hi.z);
     return vec2<f32>(t0, t1);
 }
 
@@ -211,22 +209,18 @@ fn entry_node(w: Walk, t0: f32) -> u32 {
     return entry_cells[(c.z * res.y + c.y) * res.x + c.x];
 }
 
-// One step from the inner node `node` toward the leaf that holds the ray's point at `t_entry`.
+// One step from the inner node `node` toward the leaf that holds the ray's point at `t_entry`,
+// as the CPU takes it: the plane crossed at or before the entry point puts the point on the far
+// side. A ray parallel to the plane (inv = +inf) crosses it at -inf (beyond it: far), +inf or
+// NaN (on it or before it: near, unless t_entry is +inf, as on the CPU), so it needs no branch
+// of its own.
 fn descend_step(node: u32, w: Walk, t_entry: f32) -> u32 {
     stat(STAT_INNER);
     let n = inners[node];
     let a = n.axis;
-    var far: bool;
-    if w.d[a] == 0.0 {
-        far = w.o[a] > n.split;
-    } else {
-        far = (n.split - w.o[a]) * w.inv[a] <= t_entry;
-    }
+    let far = (n.split - w.o[a]) * w.inv[a] <= t_entry;
     // far side = right for a positive direction, left for a negative one
-    if far != (w.d[a] < 0.0) {
-        return n.right;
-    }
-    return n.left;
+    return select(n.left, n.right, far != (w.inv[a] < 0.0));
 }
 
 // From `start` down to the leaf that holds the ray's point at `t_entry`.
@@ -284,21 +278,26 @@ struct Exit {
 }
 
 fn leaf_exit(li: u32, w: Walk, best: HitOut, t_max: f32) -> Exit {
-    let bmin = leaves[li].bmin;
-    let bmax = leaves[li].bmax;
+    // All three axes at once, as the CPU's loop over x, y, z takes them: an axis the ray runs
+    // parallel to (inv = +inf) gives +inf or NaN (the descent keeps the origin inside the
+    // leaf's slab of that axis), which never bound the exit, and a tie goes to the first axis
+    // (strict <).
+    let neg = w.inv < vec3<f32>(0.0);
+    let t = (select(leaves[li].bmax, leaves[li].bmin, neg) - w.o) * w.inv;
+    let faces = vec3<u32>(1u, 3u, 5u) - vec3<u32>(neg);
     var t_exit = bitcast<f32>(0x7f800000u);
     var face = 0u;
-    for (var a = 0u; a < 3u; a++) {
-        if w.d[a] == 0.0 {
-            continue;
-        }
-        let neg = w.d[a] < 0.0;
-        let bound = select(bmax[a], bmin[a], neg);
-        let t = (bound - w.o[a]) * w.inv[a];
-        if t < t_exit {
-            t_exit = t;
-            face = 2u * a + select(1u, 0u, neg);
-        }
+    if t.x < t_exit {
+        t_exit = t.x;
+        face = faces.x;
+    }
+    if t.y < t_exit {
+        t_exit = t.y;
+        face = faces.y;
+    }
+    if t.z < t_exit {
+        t_exit = t.z;
+        face = faces.z;
     }
     var t_best = best.t;
     if best.prim == NO_PRIM {
