@@ -383,12 +383,10 @@ fn trace_stats() {
     assert!(line["split_steps"].is_null(), "{line}");
     // The queued queries' wall time per query (their hits were checked against a lone one's).
     assert!(line["stream_ms"].as_f64().unwrap() > 0.0, "{line}");
-    // An empty submission's round trip: the floor under a query's wall time, below it.
+    // An empty submission's round trip, measured. Not compared with the query's time: two
+    // timings on a loaded machine can fall either way (CI once saw 1.74 ms against 0.55).
     let floor = line["round_trip_ms"].as_f64().unwrap();
-    assert!(
-        floor > 0.0 && floor < line["trace_ms"].as_f64().unwrap(),
-        "{line}"
-    );
+    assert!(floor > 0.0 && floor.is_finite(), "{line}");
     assert!(
         s["steps_per_ray"]["traversal"].as_f64().unwrap() > 1.0,
         "{line}"
