@@ -19,6 +19,38 @@ pub struct GpuDenoiser {
     remodulate: wgpu::ComputePipeline,
 }
 
+/// The filter's working buffers for frames of up to [`DenoiseBuffers::pixels`] pixels: the
+/// ping-ponged light and variance, the depth slopes and the blurred variance. Every pass writes
+/// each pixel of its frame before any pass reads it, so they are reused from frame to frame
+/// without clearing (the volume renderer keeps one set across its denoised frames).
+pub(crate) struct DenoiseBuffers {
+    lights: [wgpu::Buffer; 2],
+    vars: [wgpu::Buffer; 2],
+    slopes: wgpu::Buffer,
+    blurred: wgpu::Buffer,
+    pixels: u64,
+}
+
+impl DenoiseBuffers {
+    pub(crate) fn new(ctx: &GpuContext, pixels: u64) -> Result<DenoiseBuffers, GpuError> {
+        let none = wgpu::BufferUsages::empty();
+        let light = || ctx.work_buffer("denoised light", 16 * pixels, wgpu::BufferUsages::COPY_SRC);
+        let var = || ctx.work_buffer("denoised variance", 4 * pixels, none);
+        Ok(DenoiseBuffers {
+            lights: [light()?, light()?],
+            vars: [var()?, var()?],
+            slopes: ctx.work_buffer("depth slopes", 8 * pixels, none)?,
+            blurred: ctx.work_buffer("blurred variance", 4 * pixels, none)?,
+            pixels,
+        })
+    }
+
+    /// Whether these buffers hold a frame of `pixels` pixels.
+    pub(crate) fn fits(&self, pixels: u64) -> bool {
+        pixels <= self.pixels
+    }
+}
+
 /// The WGSL source of the denoiser's kernels.
 pub fn denoise_wgsl() -> &'static str {
     DENOISE_WGSL
@@ -88,23 +120,35 @@ impl GpuDenoiser {
             wgpu::BufferUsages::empty(),
         )?;
         let size = (noisy.film.width, noisy.film.height);
-        self.filter(ctx, (&frame, size), (&guide_buf, guides.tolerance), opt)
+        let work = DenoiseBuffers::new(ctx, n as u64)?;
+        self.filter(
+            ctx,
+            (&frame, size),
+            (&guide_buf, guides.tolerance),
+            opt,
+            &work,
+        )
     }
 
     /// [`Self::denoise`] of a frame already on the GPU, laid out as the volume renderer's
     /// premultiplied output (per pixel (light, samples), then (opacity, variance of its
     /// luminance, 0, 0)), `size` pixels, along guides laid out as `guide_volume` writes them
     /// (per pixel (albedo, depth or −1), then (normal, 0)), with their depth tolerance.
+    /// The filter works in `work`, which must fit the frame.
     pub(crate) fn filter(
         &self,
         ctx: &GpuContext,
         (frame, (w, h)): (&wgpu::Buffer, (u32, u32)),
         guides: (&wgpu::Buffer, f32),
         opt: &DenoiseOptions,
+        work: &DenoiseBuffers,
     ) -> Result<(Image, Vec<f32>), GpuError> {
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let light = self.filter_on_gpu(ctx, (frame, (w, h)), guides, opt, None)?;
-        let out: Vec<[f32; 4]> = read_back(ctx, &light)?;
+        let light = self.filter_on_gpu(ctx, (frame, (w, h)), guides, opt, None, work)?;
+        let n = w as usize * h as usize;
+        let mut out: Vec<[f32; 4]> = read_back(ctx, light)?;
+        // The buffers may be larger than the frame.
+        out.truncate(n);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
@@ -116,37 +160,30 @@ impl GpuDenoiser {
         Ok((film, out.iter().map(|c| c[3]).collect()))
     }
 
-    /// [`Self::filter`], its passes submitted and its output left on the GPU: per pixel
-    /// (premultiplied light, opacity), or with `over` the light over that background (as
-    /// `raystream_cpu::dvr::over_background`), for a frame packed to sRGB there.
-    pub(crate) fn filter_on_gpu(
+    /// [`Self::filter`], its passes submitted and its output left on the GPU, in one of
+    /// `work`'s buffers (which must fit the frame): per pixel (premultiplied light, opacity),
+    /// or with `over` the light over that background (as `raystream_cpu::dvr::over_background`),
+    /// for a frame packed to sRGB there.
+    pub(crate) fn filter_on_gpu<'w>(
         &self,
         ctx: &GpuContext,
         (frame, (w, h)): (&wgpu::Buffer, (u32, u32)),
         (guide_buf, tolerance): (&wgpu::Buffer, f32),
         opt: &DenoiseOptions,
         over: Option<Vec3>,
-    ) -> Result<wgpu::Buffer, GpuError> {
-        let n = w as usize * h as usize;
-        let none = wgpu::BufferUsages::empty();
-        let lights = [
-            ctx.work_buffer(
-                "denoised light",
-                16 * n as u64,
-                wgpu::BufferUsages::COPY_SRC,
-            )?,
-            ctx.work_buffer(
-                "denoised light",
-                16 * n as u64,
-                wgpu::BufferUsages::COPY_SRC,
-            )?,
-        ];
-        let vars = [
-            ctx.work_buffer("denoised variance", 4 * n as u64, none)?,
-            ctx.work_buffer("denoised variance", 4 * n as u64, none)?,
-        ];
-        let slopes = ctx.work_buffer("depth slopes", 8 * n as u64, none)?;
-        let blurred = ctx.work_buffer("blurred variance", 4 * n as u64, none)?;
+        work: &'w DenoiseBuffers,
+    ) -> Result<&'w wgpu::Buffer, GpuError> {
+        assert!(
+            work.fits(w as u64 * h as u64),
+            "the denoiser's buffers fit the frame"
+        );
+        let DenoiseBuffers {
+            lights,
+            vars,
+            slopes,
+            blurred,
+            ..
+        } = work;
         let params = |gap: u32| {
             let p = DenoiseParams {
                 width: w,
@@ -206,7 +243,7 @@ impl GpuDenoiser {
                 (2, &lights[0]),
                 (4, &vars[0]),
                 (5, guide_buf),
-                (6, &slopes),
+                (6, slopes),
                 (8, frame),
             ],
         );
@@ -214,7 +251,7 @@ impl GpuDenoiser {
         let pass_params: Vec<wgpu::Buffer> = (0..opt.passes).map(|k| params(1 << k)).collect();
         for p in &pass_params {
             let (i, o) = (at, 1 - at);
-            dispatch(&self.blur, &[(0, p), (3, &vars[i]), (7, &blurred)]);
+            dispatch(&self.blur, &[(0, p), (3, &vars[i]), (7, blurred)]);
             dispatch(
                 &self.atrous,
                 &[
@@ -224,8 +261,8 @@ impl GpuDenoiser {
                     (3, &vars[i]),
                     (4, &vars[o]),
                     (5, guide_buf),
-                    (6, &slopes),
-                    (7, &blurred),
+                    (6, slopes),
+                    (7, blurred),
                 ],
             );
             at = o;
@@ -240,7 +277,6 @@ impl GpuDenoiser {
             ],
         );
         ctx.queue.submit([enc.finish()]);
-        let [a, b] = lights;
-        Ok(if at == 0 { b } else { a })
+        Ok(&lights[1 - at])
     }
 }

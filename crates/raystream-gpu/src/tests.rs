@@ -1663,7 +1663,9 @@ fn cinematic(width: u32, height: u32) -> raystream_cpu::dvr::DvrOptions {
 /// light and opacity, bit for bit, as the frame and guides read back and denoised from the
 /// host (`GpuDenoiser::denoise`), in one dispatch and in several; put over the background and
 /// packed to sRGB there, the host's bytes of that frame within 1/255; the same sample count as
-/// the frame without the denoiser, and the filter's times reported.
+/// the frame without the denoiser, and the filter's times reported. A renderer that keeps its
+/// denoising buffers from frame to frame (a smaller frame in a larger one's, then the larger
+/// again) gives each frame bit for bit as a new renderer does.
 #[test]
 fn a_denoised_frame_is_filtered_where_it_was_traced() {
     use raystream_cpu::denoise::DenoiseOptions;
@@ -1673,6 +1675,8 @@ fn a_denoised_frame_is_filtered_where_it_was_traced() {
     let vol = abdomen_ct();
     let tf = TfPreset::CtBones.function();
     let gd = GpuDenoiser::new(&ctx);
+    let mut reused = GpuVolumeRenderer::new(&ctx, &vol, &tf).unwrap();
+    let mut first = None;
     for (w, h, per) in [(64, 48, 0), (61, 45, 3 * 61 * 45)] {
         let opt = DvrOptions {
             denoise: true,
@@ -1706,7 +1710,29 @@ fn a_denoised_frame_is_filtered_where_it_was_traced() {
         assert!(off * 100 <= rgb.len(), "{what}: {off} bytes differ");
         assert_eq!(rgb_times.samples, times.samples, "{what}");
         assert!(rgb_times.denoise.is_some(), "{what}");
+        // The renderer that keeps its buffers: the frames above, bit for bit.
+        reused.paths_per_dispatch = gpu.paths_per_dispatch;
+        let (again, again_alpha, _) = reused.render_rgba(&opt, &cam).unwrap();
+        assert!(
+            again.pixels == want.pixels,
+            "{w}x{h}: the kept buffers' light differs"
+        );
+        assert!(
+            again_alpha == want_alpha,
+            "{w}x{h}: the kept buffers' opacity differs"
+        );
+        assert!(
+            reused.render_srgb8(&opt, &cam).unwrap().0 == rgb,
+            "{what}: kept buffers"
+        );
+        first.get_or_insert((opt, cam, rgb));
     }
+    // Back to the first, larger frame after the smaller one filled part of its buffers.
+    let (opt, cam, rgb) = first.unwrap();
+    assert!(
+        reused.render_srgb8(&opt, &cam).unwrap().0 == rgb,
+        "the first frame again"
+    );
 }
 
 /// The GPU's denoiser against the CPU's (the reference) on the same noisy abdomen frame and

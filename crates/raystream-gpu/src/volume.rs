@@ -25,6 +25,7 @@ use raystream_scene::Camera;
 use raystream_volume::TransferFunction;
 use wgpu::util::DeviceExt;
 
+use crate::denoise::DenoiseBuffers;
 use crate::layout::{DvrParams, GpuCprRow};
 use crate::render::COMMON_WGSL;
 use crate::{
@@ -286,6 +287,8 @@ pub struct GpuVolumeRenderer<'a> {
     guide_pipeline: wgpu::ComputePipeline,
     /// The denoiser, made on first use.
     denoiser: std::sync::OnceLock<GpuDenoiser>,
+    /// The last denoised frame's buffers, kept for the next one of the same size or smaller.
+    denoise_work: Mutex<Option<DenoiseWork>>,
     /// Cinematic paths traced so far, added to as each dispatch completes (what a progress bar
     /// counts: `width · height · spp` a frame).
     pub paths_done: AtomicU64,
@@ -331,6 +334,26 @@ pub struct GpuVolumeRenderer<'a> {
     kept_bricks: [std::sync::OnceLock<wgpu::Buffer>; 3],
     /// Milliseconds spent uploading the volume and building the pipeline.
     pub upload_ms: f64,
+}
+
+/// A denoised frame's buffers on the GPU, for frames of up to `filter`'s pixels: the traced
+/// frame, its guides and the filter's working buffers. Made for the first denoised frame (or a
+/// larger one) and reused, so that a frame allocates (and wgpu zeroes) none of its 124 bytes a
+/// pixel; every pixel of each is written before it is read.
+struct DenoiseWork {
+    film: wgpu::Buffer,
+    guides: wgpu::Buffer,
+    filter: DenoiseBuffers,
+}
+
+impl DenoiseWork {
+    fn new(ctx: &GpuContext, pixels: u64) -> Result<DenoiseWork, GpuError> {
+        Ok(DenoiseWork {
+            film: ctx.work_buffer("cinematic frame", 32 * pixels, wgpu::BufferUsages::COPY_DST)?,
+            guides: ctx.work_buffer("guides", 32 * pixels, wgpu::BufferUsages::COPY_SRC)?,
+            filter: DenoiseBuffers::new(ctx, pixels)?,
+        })
+    }
 }
 
 struct FrameBuffers {
@@ -432,6 +455,7 @@ impl<'a> GpuVolumeRenderer<'a> {
             path_pipeline,
             guide_pipeline,
             denoiser: std::sync::OnceLock::new(),
+            denoise_work: Mutex::new(None),
             paths_done: AtomicU64::new(0),
             grids: Default::default(),
             coefficient_view: Default::default(),
@@ -548,18 +572,27 @@ impl<'a> GpuVolumeRenderer<'a> {
         let t0 = Instant::now();
         // Compiled with the first denoised frame (in its frame time, not its filter's).
         let denoiser = self.denoiser.get_or_init(|| GpuDenoiser::new(self.ctx));
-        // The frame, its variances and the guides stay on the GPU for the filter.
-        let film = self.ctx.work_buffer(
-            "cinematic frame",
-            opt.width as u64 * opt.height as u64 * 32,
-            wgpu::BufferUsages::COPY_DST,
-        )?;
-        let (_, _, _, mut times) = self.run(opt, sight, Output::OnGpu(&film))?;
+        // The frame, its variances and the guides stay on the GPU for the filter, in the
+        // buffers of the frames before where they fit.
+        let pixels = opt.width as u64 * opt.height as u64;
+        let mut work = self.denoise_work.lock().unwrap();
+        if work.as_ref().is_none_or(|w| !w.filter.fits(pixels)) {
+            // The old buffers go first: two frames' worth need not fit at once.
+            *work = None;
+            *work = Some(DenoiseWork::new(self.ctx, pixels)?);
+        }
+        let DenoiseWork {
+            film,
+            guides,
+            filter: buffers,
+        } = work.as_ref().unwrap();
+        let (_, _, _, mut times) = self.run(opt, sight, Output::OnGpu(film))?;
         let t = Instant::now();
-        let guides = self.guide_buffer(opt, cam)?;
+        let tolerance = self.march_guides(opt, cam, guides)?;
         let guides_ms = ms(t);
         let t = Instant::now();
-        let frame = (&film, (opt.width, opt.height));
+        let frame = (film, (opt.width, opt.height));
+        let guides = (guides, tolerance);
         let settings = DenoiseOptions::default();
         let out = if srgb8 {
             let scope = self
@@ -568,15 +601,14 @@ impl<'a> GpuVolumeRenderer<'a> {
                 .push_error_scope(wgpu::ErrorFilter::Validation);
             let over = Some(opt.background);
             let light =
-                denoiser.filter_on_gpu(self.ctx, frame, (&guides.0, guides.1), &settings, over)?;
-            let rgb = self.srgb8_of(opt, sight, &light)?;
+                denoiser.filter_on_gpu(self.ctx, frame, guides, &settings, over, buffers)?;
+            let rgb = self.srgb8_of(opt, sight, light)?;
             if let Some(e) = pollster::block_on(scope.pop()) {
                 return Err(self.ctx.err(e));
             }
             Denoised::Srgb8(rgb)
         } else {
-            let (film, alpha) =
-                denoiser.filter(self.ctx, frame, (&guides.0, guides.1), &settings)?;
+            let (film, alpha) = denoiser.filter(self.ctx, frame, guides, &settings, buffers)?;
             Denoised::Rgba(film, alpha)
         };
         times.denoise = Some(DenoiseTimes {
@@ -799,8 +831,11 @@ impl<'a> GpuVolumeRenderer<'a> {
     /// The denoiser's guides of a cinematic frame seen by `cam`, as
     /// `raystream_cpu::cinematic::guides` marches them, marched here and read back.
     pub fn guides(&self, opt: &DvrOptions, cam: &Camera) -> Result<Guides, GpuError> {
-        let (out, tolerance) = self.guide_buffer(opt, cam)?;
         let n = opt.width as usize * opt.height as usize;
+        let out = self
+            .ctx
+            .work_buffer("guides", 32 * n as u64, wgpu::BufferUsages::COPY_SRC)?;
+        let tolerance = self.march_guides(opt, cam, &out)?;
         let floats: Vec<f32> = read_back(self.ctx, &out)?;
         let (first, second) = floats.split_at(4 * n);
         Ok(Guides {
@@ -822,19 +857,19 @@ impl<'a> GpuVolumeRenderer<'a> {
         })
     }
 
-    /// The guides left on the GPU, laid out as [`GpuDenoiser`] reads them (per pixel
-    /// (albedo, depth or −1), then (normal, 0)), once marched; and their depth tolerance.
-    fn guide_buffer(
+    /// Marches the guides into `out` (at least 32 bytes a pixel), laid out as
+    /// [`GpuDenoiser`] reads them (per pixel (albedo, depth or −1), then (normal, 0)), and
+    /// waits for them; their depth tolerance.
+    fn march_guides(
         &self,
         opt: &DvrOptions,
         cam: &Camera,
-    ) -> Result<(wgpu::Buffer, f32), GpuError> {
+        out: &wgpu::Buffer,
+    ) -> Result<f32, GpuError> {
         let ctx = self.ctx;
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let (params, _) = self.params(opt, Sight::Camera(cam), false)?;
         let param_buf = self.uniform("guide params", &params);
-        let n = opt.width as u64 * opt.height as u64;
-        let out = ctx.work_buffer("guides", 32 * n, wgpu::BufferUsages::COPY_SRC)?;
         let majorants = self.majorant_buffer(opt.interpolation)?;
         let texture = self.texture_for(opt)?;
         let entries: Vec<_> = [
@@ -875,7 +910,7 @@ impl<'a> GpuVolumeRenderer<'a> {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));
         }
-        Ok((out, params.step))
+        Ok(params.step)
     }
 
     /// The kernels' parameters of a frame seen by `sight`, and a curved plane's rows.
