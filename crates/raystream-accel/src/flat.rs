@@ -91,11 +91,7 @@ fn emit(
         KdBuildNode::Leaf(prims) => {
             for (t, &p) in out.tris.iter_mut().zip(prims) {
                 let [a, b, c] = corners[p as usize];
-                *t = KdTri {
-                    v0: [a.x, a.y, a.z, f32::from_bits(p)],
-                    v1: [b.x, b.y, b.z, 0.0],
-                    v2: [c.x, c.y, c.z, 0.0],
-                };
+                *t = KdTri::new([a.to_array(), b.to_array(), c.to_array()], p);
             }
             out.leaves[0] = KdLeaf {
                 min: b.min.to_array(),

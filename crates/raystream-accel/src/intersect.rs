@@ -9,12 +9,13 @@ use raystream_math::{Ray, Vec3};
 
 use crate::layout::KdTri;
 
-/// Per-ray constants of the watertight test: the axis permutation and the shear. Arrays of 4
-/// indexed with `k & 3` keep bounds checks out of the hot loop.
+/// Per-ray constants of the watertight test: the axis permutation (kx, ky, kz), the origin in
+/// its order and the shear.
 #[derive(Clone, Copy, Debug)]
 pub struct WatertightRay {
-    origin: [f32; 4],
     k: [usize; 3],
+    /// The origin along kx, ky, kz.
+    origin: [f32; 3],
     shear: [f32; 3],
 }
 
@@ -36,8 +37,8 @@ impl WatertightRay {
         }
         let o = ray.origin;
         Self {
-            origin: [o.x, o.y, o.z, 0.0],
             k: [kx, ky, kz],
+            origin: [o[kx], o[ky], o[kz]],
             shear: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
         }
     }
@@ -52,39 +53,42 @@ impl WatertightRay {
         t_min: f32,
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
-        self.intersect4(
-            &v0.extend(0.0).to_array(),
-            &v1.extend(0.0).to_array(),
-            &v2.extend(0.0).to_array(),
-            t_min,
-            t_max,
-        )
+        let along = |k: usize| [v0[k], v1[k], v2[k]];
+        let [kx, ky, kz] = self.k;
+        self.solve(along(kx), along(ky), along(kz), t_min, t_max)
     }
 
+    /// [`Self::intersect`] of a leaf's triangle, its rows read in the ray's order of the axes.
     #[inline(always)]
     pub fn intersect_tri(&self, tri: &KdTri, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
-        self.intersect4(&tri.v0, &tri.v1, &tri.v2, t_min, t_max)
+        // `min(2)`: k is below 3, and the compiler need not check it.
+        let along = |k: usize| {
+            let [a, b, c, _] = tri.axes[k.min(2)];
+            [a, b, c]
+        };
+        let [kx, ky, kz] = self.k;
+        self.solve(along(kx), along(ky), along(kz), t_min, t_max)
     }
 
+    /// The test of a triangle given by its corners' coordinates along kx, ky and kz.
     #[inline(always)]
-    fn intersect4(
+    fn solve(
         &self,
-        v0: &[f32; 4],
-        v1: &[f32; 4],
-        v2: &[f32; 4],
+        x: [f32; 3],
+        y: [f32; 3],
+        z: [f32; 3],
         t_min: f32,
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
-        let (kx, ky, kz) = (self.k[0] & 3, self.k[1] & 3, self.k[2] & 3);
         let [sx, sy, sz] = self.shear;
-        let o = &self.origin;
-        let (az, bz, cz) = (v0[kz] - o[kz], v1[kz] - o[kz], v2[kz] - o[kz]);
-        let ax = (v0[kx] - o[kx]) - sx * az;
-        let ay = (v0[ky] - o[ky]) - sy * az;
-        let bx = (v1[kx] - o[kx]) - sx * bz;
-        let by = (v1[ky] - o[ky]) - sy * bz;
-        let cx = (v2[kx] - o[kx]) - sx * cz;
-        let cy = (v2[ky] - o[ky]) - sy * cz;
+        let [ox, oy, oz] = self.origin;
+        let (az, bz, cz) = (z[0] - oz, z[1] - oz, z[2] - oz);
+        let ax = (x[0] - ox) - sx * az;
+        let ay = (y[0] - oy) - sy * az;
+        let bx = (x[1] - ox) - sx * bz;
+        let by = (y[1] - oy) - sy * bz;
+        let cx = (x[2] - ox) - sx * cz;
+        let cy = (y[2] - oy) - sy * cz;
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;

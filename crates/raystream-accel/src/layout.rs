@@ -86,19 +86,38 @@ pub struct KdLeaf {
     pub pad: [u32; 2],
 }
 
-/// A triangle as a leaf references it, 48 bytes: corners in world units and the prim id
-/// (index in the mesh's file order) in `v0[3]`, stored as its bit pattern.
+/// A triangle as a leaf references it, 48 bytes, by axis: `axes[k]` holds its three corners'
+/// coordinates along axis k (corners 0, 1, 2, in world units), and `axes[0][3]` the prim id
+/// (index in the mesh's file order) as its bit pattern. By axis, so that the watertight test,
+/// which reads the corners along the ray's own order of the axes, loads each row with the
+/// ray's axis as its index instead of picking components out of three corners (GPU kernels
+/// pay for such picks with selects; BENCHMARKS.md, 2026-12-04, seventeenth session).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct KdTri {
-    pub v0: [f32; 4],
-    pub v1: [f32; 4],
-    pub v2: [f32; 4],
+    pub axes: [[f32; 4]; 3],
 }
 
 impl KdTri {
+    /// The entry of triangle `prim` with these corners.
+    pub fn new(corners: [[f32; 3]; 3], prim: u32) -> KdTri {
+        let [a, b, c] = corners;
+        KdTri {
+            axes: [
+                [a[0], b[0], c[0], f32::from_bits(prim)],
+                [a[1], b[1], c[1], 0.0],
+                [a[2], b[2], c[2], 0.0],
+            ],
+        }
+    }
+
     pub fn prim(&self) -> u32 {
-        self.v0[3].to_bits()
+        self.axes[0][3].to_bits()
+    }
+
+    /// Corner `i` (0, 1 or 2).
+    pub fn corner(&self, i: usize) -> [f32; 3] {
+        [self.axes[0][i], self.axes[1][i], self.axes[2][i]]
     }
 }
 

@@ -125,7 +125,7 @@ impl KdTree {
                 let c = corners
                     .get(t.prim() as usize)
                     .ok_or(format!("leaf {i}: prim {} out of range", t.prim()))?;
-                let stored = [t.v0, t.v1, t.v2].map(|v| Vec3::new(v[0], v[1], v[2]));
+                let stored = [0, 1, 2].map(|k| Vec3::from_array(t.corner(k)));
                 if stored != *c {
                     return Err(format!(
                         "leaf {i}: corners of prim {} differ from the mesh",

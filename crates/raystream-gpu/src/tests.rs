@@ -170,11 +170,7 @@ fn wgsl_structs_match_rust() {
     check(
         "KdTri",
         size_of::<KdTri>(),
-        &[
-            ("v0", offset_of!(KdTri, v0)),
-            ("v1", offset_of!(KdTri, v1)),
-            ("v2", offset_of!(KdTri, v2)),
-        ],
+        &[("axes", offset_of!(KdTri, axes))],
     );
     check(
         "RayIn",

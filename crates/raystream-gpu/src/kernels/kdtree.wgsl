@@ -24,10 +24,9 @@ struct KdLeaf {
     pad: array<u32, 2>,
 }
 
+// By axis: axes[k] = the three corners' coordinates along axis k, axes[0].w the prim id's bits.
 struct KdTri {
-    v0: vec4<f32>,
-    v1: vec4<f32>,
-    v2: vec4<f32>,
+    axes: array<vec4<f32>, 3>,
 }
 
 struct RayIn {
@@ -88,9 +87,11 @@ fn ray_is_valid(r: RayIn) -> bool {
     return r.t_min <= r.t_max;
 }
 
+// The watertight test's per-ray constants: the axis permutation (kx, ky, kz), the origin along
+// kx, ky, kz, and the shear.
 struct Watertight {
-    o: vec3<f32>,
     k: vec3<u32>,
+    o: vec3<f32>,
     shear: vec3<f32>,
 }
 
@@ -110,26 +111,23 @@ fn watertight_ray(r: RayIn) -> Watertight {
         ky = t;
     }
     let d = r.dir;
-    return Watertight(r.origin, vec3<u32>(kx, ky, kz), vec3<f32>(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]));
+    let o = r.origin;
+    return Watertight(vec3<u32>(kx, ky, kz), vec3<f32>(o[kx], o[ky], o[kz]),
+        vec3<f32>(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]));
 }
 
-// (t, u, v, 1) of a hit with t_min <= t <= t_max, or w = 0 on a miss (Woop, Benthin & Wald 2013).
-fn intersect_triangle(w: Watertight, tri: KdTri, t_min: f32, t_max: f32) -> vec4<f32> {
-    let kx = w.k.x;
-    let ky = w.k.y;
-    let kz = w.k.z;
-    let a = tri.v0.xyz - w.o;
-    let b = tri.v1.xyz - w.o;
-    let c = tri.v2.xyz - w.o;
-    let ax = a[kx] - w.shear.x * a[kz];
-    let ay = a[ky] - w.shear.y * a[kz];
-    let bx = b[kx] - w.shear.x * b[kz];
-    let by = b[ky] - w.shear.y * b[kz];
-    let cx = c[kx] - w.shear.x * c[kz];
-    let cy = c[ky] - w.shear.y * c[kz];
-    let u = cx * by - cy * bx;
-    let v = ax * cy - ay * cx;
-    let ww = bx * ay - by * ax;
+// (t, u, v, 1) of a hit of triangle entry `i` with t_min <= t <= t_max, or w = 0 on a miss
+// (Woop, Benthin & Wald 2013). Its rows are read in the ray's order of the axes, each with the
+// ray's axis as its index, and each holds the three corners: the arithmetic is the CPU's
+// (intersect.rs), three corners at a time.
+fn intersect_triangle(w: Watertight, i: u32, t_min: f32, t_max: f32) -> vec4<f32> {
+    let z = tris[i].axes[w.k.z].xyz - w.o.z;
+    let x = (tris[i].axes[w.k.x].xyz - w.o.x) - w.shear.x * z;
+    let y = (tris[i].axes[w.k.y].xyz - w.o.y) - w.shear.y * z;
+    // Corners a, b, c are components x, y, z of each.
+    let u = x.z * y.y - y.z * x.y;
+    let v = x.x * y.z - y.x * x.z;
+    let ww = x.y * y.x - y.y * x.x;
     if (u < 0.0 || v < 0.0 || ww < 0.0) && (u > 0.0 || v > 0.0 || ww > 0.0) {
         return vec4<f32>(0.0);
     }
@@ -137,7 +135,7 @@ fn intersect_triangle(w: Watertight, tri: KdTri, t_min: f32, t_max: f32) -> vec4
     if det == 0.0 {
         return vec4<f32>(0.0);
     }
-    let t = w.shear.z * (u * a[kz] + v * b[kz] + ww * c[kz]) / det;
+    let t = w.shear.z * (u * z.x + v * z.y + ww * z.z) / det;
     if !(t >= t_min && t <= t_max) {
         return vec4<f32>(0.0);
     }
@@ -236,14 +234,13 @@ fn descend(start: u32, w: Walk, t_entry: f32) -> u32 {
 // returns whether `best` changed (with `any_hit`, any hit in range changes it).
 fn test_triangle(i: u32, r: RayIn, w: Walk, any_hit: bool, best: ptr<function, HitOut>) -> bool {
     stat(STAT_TRIANGLE);
-    let tri = tris[i];
     var t_best = (*best).t;
     if (*best).prim == NO_PRIM {
         t_best = r.t_max;
     }
-    let h = intersect_triangle(w.wt, tri, r.t_min, t_best);
+    let h = intersect_triangle(w.wt, i, r.t_min, t_best);
     if h.w != 0.0 && (any_hit || h.x < t_best || (*best).prim == NO_PRIM) {
-        *best = HitOut(h.x, bitcast<u32>(tri.v0.w), h.y, h.z);
+        *best = HitOut(h.x, bitcast<u32>(tris[i].axes[0].w), h.y, h.z);
         return true;
     }
     return false;
