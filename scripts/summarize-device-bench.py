@@ -7,7 +7,7 @@ tables, so that a session with a device spends its minutes measuring, not tabula
 Prints Markdown: the ray-query table against the issue's peers (Grays/s by single-query wall
 time, kernel time and streamed queries, with the first bar -- at least half the best GPU peer --
 judged by each), the variants (spinning waits, if-if, leaf size, split, sorted sets, bench's
-own sets), divergence and occupancy (peak resident invocations over SMs x 2048), failed
+own sets), two binaries alternated (the ab part), divergence and occupancy (peak resident invocations over SMs x 2048), failed
 rays.py checks, the render frame rates of each `--submit` mode, the volume modes' orbits
 (dvr, mip, cinematic: `bench VOLUME --mode`), and render.log's cinematic pictures (the frame's
 time, and what a denoised one's guides and filter took). Only the standard library.
@@ -61,7 +61,7 @@ def index(lines):
     by = {}
     for o in lines:
         tracer = o.get("tracer")
-        if not tracer or "kind" not in o or "rays" not in o or "entry_grid_res" in o:
+        if not tracer or "kind" not in o or "rays" not in o or "entry_grid_res" in o or "binary" in o:
             continue
         variant = tracer
         if o.get("rays_from") == "bench":
@@ -180,6 +180,36 @@ def entry_table(lines, out):
     out.append("")
 
 
+def ab_table(lines, out):
+    """Two binaries alternated (device-bench.sh's ab part, lines tagged "binary": "base" or
+    "new"): kernel Grays/s of each round, wall Grays/s of the fastest, and new over base by the
+    best round of each."""
+    runs = defaultdict(lambda: defaultdict(list))
+    for o in lines:
+        if o.get("binary") in ("base", "new") and o.get("tracer") and "rays" in o and "kind" in o:
+            runs[(o["mesh"], o["kind"])][o["binary"]].append(o)
+    if not runs:
+        return
+    out.append("| mesh | rays | base kernel, each round | new kernel, each round | base wall (best) | "
+               "new wall (best) | kernel new / base | wall new / base |")
+    out.append("|" + "---|" * 8)
+    order = lambda mk: (mk[0], KINDS.index(mk[1]) if mk[1] in KINDS else len(KINDS))  # noqa: E731
+    for (m, k) in sorted(runs, key=order):
+        by_bin = runs[(m, k)]
+        def each(which, key):
+            return [grays(o["rays"], o.get(key)) for o in by_bin.get(which, [])]
+        def best(which, key):
+            g = [x for x in each(which, key) if x]
+            return max(g) if g else None
+        ratio = lambda x, y: f"{x / y:.2f}" if x and y else "–"  # noqa: E731
+        kern = {w: ", ".join(fmt(x) for x in each(w, "gpu_kernel_ms")) or "–" for w in ("base", "new")}
+        out.append(f"| {m} | {k} | {kern['base']} | {kern['new']} | {fmt(best('base', 'trace_ms'))} | "
+                   f"{fmt(best('new', 'trace_ms'))} | "
+                   f"{ratio(best('new', 'gpu_kernel_ms'), best('base', 'gpu_kernel_ms'))} | "
+                   f"{ratio(best('new', 'trace_ms'), best('base', 'trace_ms'))} |")
+    out.append("")
+
+
 def stats_table(by, sms, threads_per_sm, out):
     rows = [(m, k, v, o["gpu_stats"]) for (m, k, v), o in sorted(by.items()) if o.get("gpu_stats")]
     if not rows:
@@ -292,9 +322,12 @@ def volume_table(lines, out):
     out.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for o in rows:
         dims = "×".join(str(n) for n in o.get("dims", []))
+        name = o.get("volume", "–")
+        if o.get("binary"):
+            name += f" ({o['binary']}, round {o.get('round', '–')})"
         kernel = o.get("msamples_per_s_kernel")
         out.append(
-            f"| {o.get('volume', '–')} | {o.get('mode')} | {o.get('interpolation', 'linear')} "
+            f"| {name} | {o.get('mode')} | {o.get('interpolation', 'linear')} "
             f"| {'yes' if o.get('shadows') else 'no'} "
             f"| {o.get('spp') or '–'} | {o.get('device')} | {dims} | {o.get('size')} "
             f"| {fmt(o.get('frames_per_s'))} | {fmt(o.get('kernel_frames_per_s'))} "
@@ -322,6 +355,7 @@ def main():
     query_table(by, out)
     variants_table(by, out)
     entry_table(lines, out)
+    ab_table(lines, out)
     stats_table(by, a.sms, a.threads_per_sm, out)
     checks(lines, out)
     volume_table(lines, out)

@@ -476,6 +476,17 @@ fn device_bench_summary() {
             ms(4.0),
             ms(5.4)
         ),
+        // The ab part: two binaries, base and new, a round each (apart from the tables above).
+        format!(
+            r#"{{"device": "gpu", "mesh": "stanford_lucy_100k", "kind": "primary", "tracer": "raystream-gpu-fused", "binary": "base", "round": 1, "rays": {n}, "trace_ms": {}, "gpu_kernel_ms": {}}}"#,
+            ms(4.0),
+            ms(5.0)
+        ),
+        format!(
+            r#"{{"device": "gpu", "mesh": "stanford_lucy_100k", "kind": "primary", "tracer": "raystream-gpu-fused", "binary": "new", "round": 1, "rays": {n}, "trace_ms": {}, "gpu_kernel_ms": {}}}"#,
+            ms(4.4),
+            ms(5.5)
+        ),
         r#"{"volume": "cinematic ct-bones", "kind": "volume", "mode": "cinematic", "interpolation": "cubic", "shadows": false, "spp": 64, "bounces": 4, "device": "gpu", "dims": [512, 512, 512], "size": "1024x1024", "frame_ms": 2000.0, "frames_per_s": 0.5, "kernel_frames_per_s": 0.51, "samples_per_frame": 2500000000.0, "msamples_per_s_kernel": 1275.0}"#.to_string(),
     ];
     std::fs::write(&results, lines.join("\n") + "\n").unwrap();
@@ -532,6 +543,11 @@ fn device_bench_summary() {
     );
     assert!(
         out.contains("| stanford_lucy_100k | primary | none | 4.89, 4.9 | 3.6 | 9 | 1.00 |"),
+        "{out}"
+    );
+    // The two binaries side by side: new over base, 5.5 / 5.0 by kernel, 4.4 / 4.0 by wall.
+    assert!(
+        out.contains("| stanford_lucy_100k | primary | 5 | 5.5 | 4 | 4.4 | 1.10 | 1.10 |"),
         "{out}"
     );
     // The cinematic pictures: the frame's time, and the denoiser's parts.
