@@ -55,6 +55,8 @@ impl WatertightRay {
         t_min: f32,
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
+        // Arrays, as in `new`: no branch on the run-time axis.
+        let (v0, v1, v2) = (v0.to_array(), v1.to_array(), v2.to_array());
         let along = |k: usize| [v0[k], v1[k], v2[k]];
         let [kx, ky, kz] = self.k;
         self.solve(along(kx), along(ky), along(kz), t_min, t_max)
