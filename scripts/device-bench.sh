@@ -11,7 +11,8 @@
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
 # PARTS (default "trace render volume"; also "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
 # BASE=another on the primary, shadow and diffuse sets; "abframes": the same on whole frames (the default scene, a dvr orbit,
-# a denoised cinematic frame); "pixels": the default scene's camera rays by rows or blocks; "waves": its
+# a denoised cinematic frame); "floor": where a query's wall time goes (the floor kernel beside the
+# query); "pixels": the default scene's camera rays by rows or blocks; "waves": its
 # frame in waves of WAVES samples; "checks": its kernels with and without wgpu's run-time checks) picks the parts; TRACERS (default "gpu block
 # checked ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; checked = the fused
 # kernel with wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=on; off by default); block = the fused kernel with
@@ -139,6 +140,22 @@ has "$parts" ab && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
     done
     $py "$d/rays.py" check "$mesh" "$rays" "$tmp/ab-new.hits" "${any[@]}" --json | tag "{\"mesh\": \"$m\", \"kind\": \"$kind\", \"check\": \"gpu-fused\"}"
     cmp -s "$tmp/ab-base.hits" "$tmp/ab-new.hits" && echo "$m $kind: base and new hits byte for byte" || echo "$m $kind: BASE AND NEW HITS DIFFER"
+    rm -f "$rays" "$tmp"/*.hits
+  done
+done
+
+# "floor": where a query's wall time goes. trace --stats --repeat 20 of the primary and shadow
+# sets (FLOOR_KINDS) of each mesh: the query's wall, kernel and streamed time beside the floor
+# kernel's on the same rays (each ray read, a miss written, no traversal) and an empty
+# submission's round trip (summarize-device-bench.py's floor table).
+has "$parts" floor && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
+  mesh=$d/meshes/$m.ply
+  for kind in ${FLOOR_KINDS:-primary shadow}; do
+    rays=$tmp/$m-$kind.rays
+    $py "$d/rays.py" gen "$mesh" --kind $kind --size "$size" -o "$rays" > /dev/null || { echo "gen failed: $m $kind"; continue; }
+    any=(); [ $kind = shadow ] && any=(--any)
+    $bin trace "$mesh" --rays "$rays" -o "$tmp/floor.hits" "${any[@]}" --device gpu --repeat 20 --json --quiet --stats \
+      | tag "{\"mesh\": \"$m\", \"kind\": \"$kind\", \"tracer\": \"raystream-gpu-fused\", \"part\": \"floor\"}"
     rm -f "$rays" "$tmp"/*.hits
   done
 done

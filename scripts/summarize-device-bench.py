@@ -7,7 +7,8 @@ tables, so that a session with a device spends its minutes measuring, not tabula
 Prints Markdown: the ray-query table against the issue's peers (Grays/s by single-query wall
 time, kernel time and streamed queries, with the first bar -- at least half the best GPU peer --
 judged by each), the variants (spinning waits, if-if, leaf size, split, sorted sets, bench's
-own sets), two binaries alternated (the ab part), divergence and occupancy (peak resident invocations over SMs x 2048), failed
+own sets), two binaries alternated (the ab part), where a query's wall time goes (the floor
+kernel beside each query run with --stats), divergence and occupancy (peak resident invocations over SMs x 2048), failed
 rays.py checks, the render frame rates of each `--submit` mode, the volume modes' orbits
 (dvr, mip, cinematic: `bench VOLUME --mode`), and render.log's cinematic pictures (the frame's
 time, and what a denoised one's guides and filter took). Only the standard library.
@@ -61,7 +62,8 @@ def index(lines):
     by = {}
     for o in lines:
         tracer = o.get("tracer")
-        if not tracer or "kind" not in o or "rays" not in o or "entry_grid_res" in o or "binary" in o:
+        if not tracer or "kind" not in o or "rays" not in o or "entry_grid_res" in o or "binary" in o \
+                or o.get("part") == "floor":
             continue
         variant = tracer
         if o.get("rays_from") == "bench":
@@ -78,6 +80,8 @@ def index(lines):
 
 def query_table(by, out):
     meshes = sorted({m for m, _, _ in by})
+    if not meshes:
+        return
     out.append("| mesh | rays | count | GPU wall | GPU kernel | GPU streamed | OptiX | Warp | "
                "½ best GPU peer | bar by wall | by streamed | by kernel | CPU | Embree | GPU wall / CPU |")
     out.append("|" + "---|" * 15)
@@ -207,6 +211,31 @@ def ab_table(lines, out):
                    f"{fmt(best('new', 'trace_ms'))} | "
                    f"{ratio(best('new', 'gpu_kernel_ms'), best('base', 'gpu_kernel_ms'))} | "
                    f"{ratio(best('new', 'trace_ms'), best('base', 'trace_ms'))} |")
+    out.append("")
+
+
+def floor_table(lines, out):
+    """Where a query's wall time goes (trace lines with --stats carry "floor": the same rays
+    through a kernel that reads each ray and writes a miss): ms of the query and of the floor by
+    wall, kernel (timestamps) and streamed time, an empty submission's round trip, and the
+    traversal's own share of the kernel (query kernel - floor kernel)."""
+    rows = [o for o in lines if isinstance(o.get("floor"), dict) and "kind" in o and "binary" not in o]
+    if not rows:
+        return
+    out.append("| mesh | rays | tracer | wall | kernel | streamed | round trip | floor wall | floor kernel | "
+               "floor streamed | wall - kernel | floor wall - floor kernel | kernel - floor kernel |")
+    out.append("|" + "---|" * 13)
+    ms = lambda x: "–" if x is None else f"{x:.3f}"  # noqa: E731
+    sub = lambda x, y: None if x is None or y is None else x - y  # noqa: E731
+    order = lambda o: (o["mesh"], KINDS.index(o["kind"]) if o["kind"] in KINDS else len(KINDS))  # noqa: E731
+    for o in sorted(rows, key=order):
+        f = o["floor"]
+        out.append(f"| {o['mesh']} | {o['kind']} | {o.get('tracer', '–')} | {ms(o.get('trace_ms'))} | "
+                   f"{ms(o.get('gpu_kernel_ms'))} | {ms(o.get('stream_ms'))} | {ms(o.get('round_trip_ms'))} | "
+                   f"{ms(f.get('trace_ms'))} | {ms(f.get('gpu_kernel_ms'))} | {ms(f.get('stream_ms'))} | "
+                   f"{ms(sub(o.get('trace_ms'), o.get('gpu_kernel_ms')))} | "
+                   f"{ms(sub(f.get('trace_ms'), f.get('gpu_kernel_ms')))} | "
+                   f"{ms(sub(o.get('gpu_kernel_ms'), f.get('gpu_kernel_ms')))} |")
     out.append("")
 
 
@@ -356,6 +385,7 @@ def main():
     variants_table(by, out)
     entry_table(lines, out)
     ab_table(lines, out)
+    floor_table(lines, out)
     stats_table(by, a.sms, a.threads_per_sm, out)
     checks(lines, out)
     volume_table(lines, out)

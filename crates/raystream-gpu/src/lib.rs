@@ -689,6 +689,8 @@ pub struct GpuTracer<'a> {
     persistent: std::sync::OnceLock<[wgpu::ComputePipeline; 2]>,
     /// The "if-if" kernels (closest, any), built on first use.
     ifif: std::sync::OnceLock<[wgpu::ComputePipeline; 2]>,
+    /// The floor kernel ([`Kernels::Floor`]), built on first use.
+    floor: std::sync::OnceLock<wgpu::ComputePipeline>,
     /// The statistics query's kernels (closest, any; then the same as "if-if"), built on
     /// first use.
     stats: std::sync::OnceLock<[wgpu::ComputePipeline; 4]>,
@@ -720,6 +722,11 @@ pub enum Kernels {
     /// one traversal step and one triangle step, so threads in different phases share
     /// iterations (the fused kernel runs "while-while": all inner steps, then all triangles).
     IfIf,
+    /// No traversal: each thread reads its ray and writes a miss, so its hits are all misses.
+    /// A diagnostic, not a query: its wall, kernel and streamed times are the floor under every
+    /// query kernel's on the same rays (the dispatch over their grid, their memory traffic and
+    /// the host's round trip); what a query takes beyond them is the traversal's.
+    Floor,
 }
 
 /// The work of a fused query, counted on the GPU by the statistics kernels (`stats.wgsl`).
@@ -885,6 +892,7 @@ impl<'a> GpuTracer<'a> {
             split: std::sync::OnceLock::new(),
             persistent: std::sync::OnceLock::new(),
             ifif: std::sync::OnceLock::new(),
+            floor: std::sync::OnceLock::new(),
             stats: std::sync::OnceLock::new(),
             module,
             max_rays: (ctx.max_binding() / std::mem::size_of::<GpuRay>() as u64).max(1) as usize,
@@ -933,6 +941,37 @@ impl<'a> GpuTracer<'a> {
         })
     }
 
+    /// `query_floor`, laid out as the query kernels (it reads no tree, but binds a query's
+    /// buffers: params, the tree's four, the rays, the hits).
+    fn floor_kernel(&self) -> &wgpu::ComputePipeline {
+        self.floor.get_or_init(|| {
+            use wgpu::BufferBindingType::{Storage, Uniform};
+            let ro = Storage { read_only: true };
+            let rw = Storage { read_only: false };
+            let layout = self
+                .ctx
+                .buffer_layout("query_floor", &[Uniform, ro, ro, ro, ro, ro, rw]);
+            let pipeline_layout =
+                self.ctx
+                    .device
+                    .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                        label: Some("query_floor"),
+                        bind_group_layouts: &[Some(&layout)],
+                        immediate_size: 0,
+                    });
+            self.ctx
+                .device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some("query_floor"),
+                    layout: Some(&pipeline_layout),
+                    module: &self.module,
+                    entry_point: Some("query_floor"),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
+        })
+    }
+
     fn persistent_kernels(&self) -> &[wgpu::ComputePipeline; 2] {
         self.persistent.get_or_init(|| {
             ["intersect_closest_persistent", "intersect_any_persistent"]
@@ -958,7 +997,7 @@ impl<'a> GpuTracer<'a> {
         let ifif = match kernels {
             Kernels::Fused => false,
             Kernels::IfIf => true,
-            Kernels::Split | Kernels::Persistent => return Ok(None),
+            Kernels::Split | Kernels::Persistent | Kernels::Floor => return Ok(None),
         };
         if !ctx.device.features().contains(wgpu::Features::SUBGROUP) {
             return Ok(None);
@@ -1040,6 +1079,7 @@ impl<'a> GpuTracer<'a> {
                 &self.ifif_kernels()[any as usize],
                 ["intersect_closest_ifif", "intersect_any_ifif"][any as usize],
             ),
+            (Kernels::Floor, _) => (self.floor_kernel(), "query_floor"),
             (_, true) => (&self.any, "intersect_any"),
             (_, false) => (&self.closest, "intersect_closest"),
         };
@@ -1245,7 +1285,7 @@ impl<'a> GpuTracer<'a> {
         // Submission to completion: one round trip (the timestamps travel back with it).
         let t1 = Instant::now();
         let (kernel_gpu_ms, split_steps) = match kernels {
-            Kernels::Fused | Kernels::IfIf | Kernels::Persistent => {
+            Kernels::Fused | Kernels::IfIf | Kernels::Persistent | Kernels::Floor => {
                 (self.run_fused(&q, timer.as_ref())?, None)
             }
             Kernels::Split => {

@@ -993,6 +993,47 @@ fn streamed_queries_each_trace_every_ray() {
     }
 }
 
+/// The floor kernel traverses nothing: every valid ray's record is the miss record, every
+/// invalid one's is marked (u = 1, so that the whole ray was read), lone and streamed alike, and
+/// its times are measured.
+#[test]
+fn the_floor_kernel_reads_every_ray_and_traverses_nothing() {
+    let Some(ctx) = gpu() else { return };
+    let mesh = shared_mesh("stanford_bunny.ply");
+    let tree = KdTree::build(&mesh, Builder::Sah);
+    let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+    let mut rays = test_rays(&mesh, 4096);
+    // Invalid rays, each by one field: a NaN origin, an infinite direction, t_min > t_max.
+    rays[7].origin.y = f32::NAN;
+    rays[100].dir.z = f32::INFINITY;
+    (rays[2000].t_min, rays[2000].t_max) = (2.0, 1.0);
+    let (closest, _) = tracer.trace(&rays, false).unwrap();
+    assert!(
+        closest.iter().any(|h| h.prim != NO_PRIM),
+        "the rays hit the bunny"
+    );
+    let (hits, times) = tracer.trace_with(&rays, false, Kernels::Floor).unwrap();
+    assert!(times.kernel_ms > 0.0);
+    for (i, h) in hits.iter().enumerate() {
+        let invalid = [7, 100, 2000].contains(&i);
+        assert_eq!(h.prim, NO_PRIM, "ray {i}");
+        assert_eq!(h.t, f32::INFINITY, "ray {i}");
+        assert_eq!((h.u, h.v), (invalid as u32 as f32, 0.0), "ray {i}");
+    }
+    let (streamed, ms) = tracer
+        .trace_streamed(&rays, true, Kernels::Floor, 3)
+        .unwrap()
+        .unwrap();
+    assert!(ms > 0.0);
+    assert_eq!(streamed, hits);
+    assert!(
+        tracer
+            .query_stats_with(&rays, false, Kernels::Floor)
+            .unwrap()
+            .is_none()
+    );
+}
+
 /// More rays than one query can bind are traced in chunks: the same hits as one query, for
 /// every kernel layout, the chunks' times summed; a stream of such queries is not measured.
 #[test]

@@ -1160,7 +1160,9 @@ pub struct TraceArgs {
     pub repeat: u32,
     /// GPU, fused or ifif kernels: also count the kernel's steps per ray, its SIMD efficiency
     /// (the share of subgroup lanes busy) and the most invocations resident at once, where
-    /// the adapter has subgroups.
+    /// the adapter has subgroups; and time the floor under the query on the same rays (a
+    /// kernel that reads each ray and writes a miss, traversing nothing: `floor` in the JSON),
+    /// so that what the traversal takes stands apart from the dispatch and its memory traffic.
     #[arg(long)]
     pub stats: bool,
     /// Print one JSON line of timings.

@@ -227,6 +227,7 @@ pub fn kernels_name(k: Kernels) -> &'static str {
         Kernels::Split => "split",
         Kernels::Persistent => "persistent",
         Kernels::IfIf => "ifif",
+        Kernels::Floor => "floor",
     }
 }
 
@@ -265,6 +266,20 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             };
             Some(s)
         }
+    };
+    // With --stats, the floor under the query's times on these rays (`Kernels::Floor`): what
+    // of them is the dispatch, its memory traffic and the round trip, not the traversal.
+    let floor = match (&gpu, &stats) {
+        (Some(tracer), Some(_)) => Some(trace_timed(
+            Some(tracer),
+            &tree,
+            &rays,
+            a.any,
+            traversal,
+            Kernels::Floor,
+            a.repeat,
+        )?),
+        _ => None,
     };
     pb.finish_and_clear();
     let bytes: &[u8] = bytemuck::cast_slice(&t.hits);
@@ -307,6 +322,12 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             "mrays_per_s": round3(mrays),
             "hits": n_hits,
             "gpu_stats": stats.as_ref().map(gpu_stats_json),
+            "floor": floor.as_ref().map(|f| json!({
+                "trace_ms": round3(f.trace_ms),
+                "trace_ms_min": round3(f.trace_ms_min),
+                "gpu_kernel_ms": f.kernel_gpu_ms.map(round3),
+                "stream_ms": f.stream_ms.map(round3),
+            })),
         }));
     } else if !a.quiet {
         eprintln!(
@@ -336,6 +357,18 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             eprintln!(
                 "raystream: GPU work and SIMD efficiency: {}",
                 gpu_stats_json(s)
+            );
+        }
+        if let Some(f) = &floor {
+            let gpu_ms = f
+                .kernel_gpu_ms
+                .map_or(String::new(), |ms| format!(", {ms:.3} ms by timestamps"));
+            let stream = f
+                .stream_ms
+                .map_or(String::new(), |ms| format!(", {ms:.3} ms streamed"));
+            eprintln!(
+                "raystream: the floor (each ray read, a miss written, no traversal): {:.3} ms{gpu_ms}{stream}",
+                f.trace_ms
             );
         }
     }

@@ -61,3 +61,18 @@ fn intersect_closest_persistent() {
 fn intersect_any_persistent() {
     fetch_and_trace(true);
 }
+
+// The floor under every query kernel on these rays: no traversal, each thread reads its ray
+// and writes a miss (u = 1 for an invalid ray, so that the whole ray is read). Bound with the
+// query's bind group (the pipeline takes `intersect_closest`'s layout); its wall, kernel and
+// streamed times are what a dispatch over the grid and its memory traffic cost, the rest of a
+// query's time is the traversal's (`trace --stats` reports them as `floor`).
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn query_floor(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = ray_index(gid, groups);
+    if i < params.ray_count {
+        var h = miss_record();
+        h.u = select(0.0, 1.0, !ray_is_valid(rays[i]));
+        hits[i] = h;
+    }
+}
