@@ -1406,6 +1406,10 @@ pub(crate) fn decode_frames(
         .map_err(|e| {
             VolumeError::invalid(&s.file, format!("cannot build the file meta table: {e}"))
         })?;
+    if JPEG_2000.contains(&s.ts_uid.as_str()) {
+        check_jpeg2000(&obj, s.rows as usize, s.cols as usize)
+            .map_err(|e| VolumeError::invalid(&s.file, format!("JPEG 2000 pixel data: {e}")))?;
+    }
     let pixels = obj.decode_pixel_data().map_err(|e| {
         VolumeError::invalid(
             &s.file,
@@ -1436,6 +1440,113 @@ pub(crate) fn decode_frames(
             Ok(values)
         })
         .collect()
+}
+
+/// The transfer syntaxes dicom-pixeldata decodes with OpenJPEG: JPEG 2000 (Part 1 and 2,
+/// lossless and lossy) and High-Throughput JPEG 2000.
+const JPEG_2000: [&str; 7] = [
+    "1.2.840.10008.1.2.4.90",
+    "1.2.840.10008.1.2.4.91",
+    "1.2.840.10008.1.2.4.92",
+    "1.2.840.10008.1.2.4.93",
+    "1.2.840.10008.1.2.4.201",
+    "1.2.840.10008.1.2.4.202",
+    "1.2.840.10008.1.2.4.203",
+];
+
+/// Checks that each frame's JPEG 2000 codestream (PS3.5 A.4.4: the frame's fragments, as the
+/// decoder is given them) declares the image the DICOM header does: `cols` × `rows` samples
+/// and at most Samples per Pixel components. dicom-pixeldata's adapter writes each decoded
+/// component's samples into a buffer sized by the header without checking, so a stream that
+/// declares a larger image (or one component more) panics it. Reads only the SIZ marker
+/// segment (ITU-T T.800 A.5.1), through a JP2 file's boxes where a writer wrapped the stream
+/// in one; written here because no Rust crate parses JPEG 2000 headers without decoding.
+fn check_jpeg2000(
+    obj: &dicom_object::DefaultDicomObject,
+    rows: usize,
+    cols: usize,
+) -> Result<(), String> {
+    use dicom_encoding::adapters::PixelDataObject;
+    let frames = obj.number_of_frames().unwrap_or(1).max(1);
+    let samples = obj.samples_per_pixel().unwrap_or(1) as usize;
+    for k in 0..frames {
+        // A frame the object cannot give is the decoder's own clear error.
+        let Some(data) = obj.frame_pixel_data(k) else {
+            continue;
+        };
+        let frame = k + 1;
+        let siz = jpeg2000_siz(&data).map_err(|e| format!("frame {frame}: {e}"))?;
+        if (siz.width, siz.height) != (cols, rows) {
+            return Err(format!(
+                "frame {frame}: the codestream holds a {}×{} image, the header says {cols}×{rows} (Columns × Rows)",
+                siz.width, siz.height
+            ));
+        }
+        if siz.components > samples {
+            return Err(format!(
+                "frame {frame}: the codestream holds {} components, the header says {samples} (Samples per Pixel)",
+                siz.components
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// What a JPEG 2000 codestream's SIZ marker segment declares.
+#[derive(Debug, PartialEq)]
+struct Jpeg2000Siz {
+    width: usize,
+    height: usize,
+    components: usize,
+}
+
+/// The SIZ marker segment of a codestream (it follows the SOC marker), or of the contiguous
+/// codestream box (`jp2c`) of a JP2 file.
+fn jpeg2000_siz(data: &[u8]) -> Result<Jpeg2000Siz, String> {
+    const SOC_SIZ: [u8; 4] = [0xFF, 0x4F, 0xFF, 0x51];
+    const JP2_SIGNATURE: [u8; 12] = [0, 0, 0, 12, b'j', b'P', b' ', b' ', 0x0D, 0x0A, 0x87, 0x0A];
+    let mut stream = data;
+    if data.starts_with(&JP2_SIGNATURE) {
+        // Boxes: a 4-byte length (1: an 8-byte length follows the type; 0: to the end), a type.
+        let mut rest = data;
+        stream = loop {
+            let head = |n: usize| rest.get(..n).ok_or("a JP2 file without a codestream box");
+            let len = u32::from_be_bytes(head(8)?[..4].try_into().unwrap()) as u64;
+            let (header, len) = match len {
+                0 => (8, rest.len() as u64),
+                1 => (16, u64::from_be_bytes(head(16)?[8..].try_into().unwrap())),
+                n => (8, n),
+            };
+            if &rest[4..8] == b"jp2c" {
+                break &rest[header..];
+            }
+            if len < header as u64 || len > rest.len() as u64 {
+                return Err(format!(
+                    "a JP2 box of {len} bytes where {} remain",
+                    rest.len()
+                ));
+            }
+            rest = &rest[len as usize..];
+        };
+    }
+    if !stream.starts_with(&SOC_SIZ) {
+        return Err("no codestream header (SOC and SIZ markers) at the frame's start".into());
+    }
+    // Lsiz, Rsiz, Xsiz, Ysiz, XOsiz, YOsiz, 4 tile fields, Csiz: 38 bytes after the marker.
+    let f = stream.get(4..42).ok_or("a truncated SIZ marker segment")?;
+    let u32_at = |i: usize| u32::from_be_bytes(f[i..i + 4].try_into().unwrap()) as usize;
+    let (x, y, x0, y0) = (u32_at(4), u32_at(8), u32_at(12), u32_at(16));
+    let components = u16::from_be_bytes([f[36], f[37]]) as usize;
+    let (Some(width), Some(height)) = (x.checked_sub(x0), y.checked_sub(y0)) else {
+        return Err(format!(
+            "an image origin ({x0}, {y0}) beyond its extent ({x}, {y})"
+        ));
+    };
+    Ok(Jpeg2000Siz {
+        width,
+        height,
+        components,
+    })
 }
 
 /// RLE Lossless (PS3.5 Annex G).
@@ -1703,6 +1814,53 @@ mod tests {
             PixelFragmentSequence::new(Vec::new(), vec![f]),
         ));
         obj
+    }
+
+    /// A codestream's SIZ marker segment: SOC, SIZ, then Lsiz .. Csiz and one component.
+    fn siz(x: u32, y: u32, x0: u32, y0: u32, components: u16) -> Vec<u8> {
+        let mut b = vec![0xFF, 0x4F, 0xFF, 0x51, 0, 41, 0, 0];
+        for v in [x, y, x0, y0, 512, 512, 0, 0] {
+            b.extend(v.to_be_bytes());
+        }
+        b.extend(components.to_be_bytes());
+        b.extend([0x0F, 1, 1]);
+        b
+    }
+
+    /// The image a codestream declares, raw or in a JP2 file's codestream box (after the
+    /// signature, a 16-byte box of an 8-byte length, and a box to the end); and each way the
+    /// header can be missing, cut or absurd, refused with what it is.
+    #[test]
+    fn jpeg2000_headers_are_read_before_decoding() {
+        let want = |width, height, components| Jpeg2000Siz {
+            width,
+            height,
+            components,
+        };
+        assert_eq!(jpeg2000_siz(&siz(512, 512, 0, 0, 1)), Ok(want(512, 512, 1)));
+        assert_eq!(
+            jpeg2000_siz(&siz(600, 520, 88, 8, 3)),
+            Ok(want(512, 512, 3))
+        );
+        let mut jp2 = vec![0, 0, 0, 12, b'j', b'P', b' ', b' ', 0x0D, 0x0A, 0x87, 0x0A];
+        jp2.extend([0, 0, 0, 1, b'f', b't', b'y', b'p', 0, 0, 0, 0, 0, 0, 0, 16]);
+        jp2.extend([0, 0, 0, 0, b'j', b'p', b'2', b'c']);
+        jp2.extend(siz(64, 32, 0, 0, 1));
+        assert_eq!(jpeg2000_siz(&jp2), Ok(want(64, 32, 1)));
+        let refused = |data: &[u8], says: &str| {
+            let e = jpeg2000_siz(data).unwrap_err();
+            assert!(e.contains(says), "{e}");
+        };
+        refused(&jp2[..28], "without a codestream box");
+        let mut long_box = jp2.clone();
+        long_box[15] = 255;
+        refused(&long_box, "a JP2 box of 255 bytes where 69 remain");
+        refused(&[0xFF, 0xD8, 0xFF, 0xE0], "no codestream header");
+        refused(&siz(512, 512, 0, 0, 1)[..30], "truncated SIZ");
+        refused(
+            &siz(512, 512, 600, 0, 1),
+            "origin (600, 0) beyond its extent (512, 512)",
+        );
     }
 
     /// PackBits runs counted against the frame's bytes: literals (n + 1 bytes), repeats

@@ -280,6 +280,50 @@ fn undecodable_transfer_syntaxes_are_clear_errors() {
     }
 }
 
+/// A JPEG 2000 slice whose codestream declares a wider image than its header (9728 columns
+/// for 512), or a second component: a clear error naming the file and both figures, where
+/// dicom-pixeldata's decoder wrote the decoded samples past its buffer (a panic, found by
+/// scripts/fuzz-inputs.py). The slice unchanged still decodes.
+#[test]
+fn jpeg2000_streams_that_contradict_the_header_are_refused() {
+    let path = shared(TS_DIR).join("ct_1.2.840.10008.1.2.4.90_JPEG2000LosslessOnly.dcm");
+    let bytes = std::fs::read(&path).unwrap();
+    let soc = bytes
+        .windows(4)
+        .position(|w| w == [0xFF, 0x4F, 0xFF, 0x51])
+        .unwrap();
+    let dir = std::env::temp_dir().join(format!("raystream-j2k-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let patched = |at: usize, value: &[u8], name: &str| {
+        let mut b = bytes.clone();
+        b[soc + at..soc + at + value.len()].copy_from_slice(value);
+        let p = dir.join(name);
+        std::fs::write(&p, b).unwrap();
+        p
+    };
+    // Xsiz (bytes 8-11 of the stream), then Csiz (bytes 40-41).
+    let wide = patched(8, &9728u32.to_be_bytes(), "wide.dcm");
+    let e = load_volume(&wide, &Default::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("wide.dcm")
+            && e.contains("the codestream holds a 9728×512 image, the header says 512×512"),
+        "{e}"
+    );
+    let two = patched(40, &2u16.to_be_bytes(), "two.dcm");
+    let e = load_volume(&two, &Default::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("two.dcm") && e.contains("holds 2 components, the header says 1"),
+        "{e}"
+    );
+    let v = load_volume(&path, &Default::default()).unwrap();
+    assert_eq!(v.dims, [512, 512, 1]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 fn load_ts(ts: &str) -> Result<Volume, VolumeError> {
     let dir = shared(TS_DIR);
     let prefix = format!("ct_1.2.840.10008.{ts}_");
