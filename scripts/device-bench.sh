@@ -12,7 +12,7 @@
 # PARTS (default "trace render volume"; also "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
 # BASE=another on the primary, shadow and diffuse sets; "abframes": the same on whole frames (the default scene, a dvr orbit,
 # a denoised cinematic frame); "floor": where a query's wall time goes (the floor kernel beside the
-# query); "pixels": the default scene's camera rays by rows or blocks; "waves": its
+# query, with and without timestamps); "pixels": the default scene's camera rays by rows or blocks; "waves": its
 # frame in waves of WAVES samples; "checks": its kernels with and without wgpu's run-time checks) picks the parts; TRACERS (default "gpu block
 # checked ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; checked = the fused
 # kernel with wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=on; off by default); block = the fused kernel with
@@ -147,15 +147,21 @@ done
 # "floor": where a query's wall time goes. trace --stats --repeat 20 of the primary and shadow
 # sets (FLOOR_KINDS) of each mesh: the query's wall, kernel and streamed time beside the floor
 # kernel's on the same rays (each ray read, a miss written, no traversal) and an empty
-# submission's round trip (summarize-device-bench.py's floor table).
+# submission's round trip; then the same with RAYSTREAM_GPU_TIMESTAMPS=off (what the
+# timestamps' writes, resolve and readback add to the wall time); two rounds
+# (summarize-device-bench.py's floor table).
 has "$parts" floor && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
   mesh=$d/meshes/$m.ply
   for kind in ${FLOOR_KINDS:-primary shadow}; do
     rays=$tmp/$m-$kind.rays
     $py "$d/rays.py" gen "$mesh" --kind $kind --size "$size" -o "$rays" > /dev/null || { echo "gen failed: $m $kind"; continue; }
     any=(); [ $kind = shadow ] && any=(--any)
-    $bin trace "$mesh" --rays "$rays" -o "$tmp/floor.hits" "${any[@]}" --device gpu --repeat 20 --json --quiet --stats \
-      | tag "{\"mesh\": \"$m\", \"kind\": \"$kind\", \"tracer\": \"raystream-gpu-fused\", \"part\": \"floor\"}"
+    for round in 1 2; do
+      for stamps in on off; do
+        RAYSTREAM_GPU_TIMESTAMPS=$stamps $bin trace "$mesh" --rays "$rays" -o "$tmp/floor.hits" "${any[@]}" --device gpu \
+          --repeat 20 --json --quiet --stats | tag "{\"mesh\": \"$m\", \"kind\": \"$kind\", \"tracer\": \"raystream-gpu-fused\", \"part\": \"floor\", \"timestamps\": \"$stamps\", \"round\": $round}"
+      done
+    done
     rm -f "$rays" "$tmp"/*.hits
   done
 done

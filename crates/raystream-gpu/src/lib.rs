@@ -141,6 +141,9 @@ pub struct GpuContext {
     /// The kd-tree kernels compiled without wgpu's run-time checks (see
     /// [`GpuContext::set_unchecked_kernels`]).
     unchecked: bool,
+    /// Kernels time their passes with timestamp queries where the adapter has them (see
+    /// [`GpuContext::set_timestamps`]).
+    timestamps: bool,
     /// Tests only: the work buffers by these names fail as out of memory, each once, while
     /// they are at least the given bytes.
     #[cfg(test)]
@@ -258,6 +261,7 @@ impl GpuContext {
             pixel_blocks: true,
             render_wave: render::DEFAULT_WAVE,
             unchecked: true,
+            timestamps: true,
             #[cfg(test)]
             fail_alloc: Mutex::new(Vec::new()),
         })
@@ -335,6 +339,14 @@ impl GpuContext {
     /// restores the checks.
     pub fn set_unchecked_kernels(&mut self, on: bool) {
         self.unchecked = on;
+    }
+
+    /// Turns the kernels' timestamps off (or on again, where the adapter has timestamp
+    /// queries): a query's or frame's wall time then holds no timestamp writes, resolve or
+    /// readback, and no kernel time is reported. The CLI's `RAYSTREAM_GPU_TIMESTAMPS=off`:
+    /// device-bench.sh's floor part measures what the timestamps add to a query's wall time.
+    pub fn set_timestamps(&mut self, on: bool) {
+        self.timestamps = on;
     }
 
     /// Whether the kd-tree kernels made after now compile without wgpu's run-time checks
@@ -520,38 +532,41 @@ impl GpuContext {
     }
 
     /// A timestamp query set of `count` entries, the buffer to resolve it into and a mappable
-    /// copy, where the adapter has timestamp queries.
+    /// copy, where the adapter has timestamp queries and they are on
+    /// ([`GpuContext::set_timestamps`]).
     fn timer(&self, count: u32) -> Option<Timer> {
-        self.device
-            .features()
-            .contains(wgpu::Features::TIMESTAMP_QUERY)
-            .then(|| {
-                let set = self.device.create_query_set(&wgpu::QuerySetDescriptor {
-                    label: Some("kernel timestamps"),
-                    ty: wgpu::QueryType::Timestamp,
-                    count,
-                });
-                let buffer = |label, usage| {
-                    self.device.create_buffer(&wgpu::BufferDescriptor {
-                        label: Some(label),
-                        size: count as u64 * 8,
-                        usage,
-                        mapped_at_creation: false,
-                    })
-                };
-                Timer {
-                    resolve: buffer(
-                        "resolved timestamps",
-                        wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                    ),
-                    readback: buffer(
-                        "timestamps readback",
-                        wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                    ),
-                    set,
-                    count,
-                }
-            })
+        (self.timestamps
+            && self
+                .device
+                .features()
+                .contains(wgpu::Features::TIMESTAMP_QUERY))
+        .then(|| {
+            let set = self.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("kernel timestamps"),
+                ty: wgpu::QueryType::Timestamp,
+                count,
+            });
+            let buffer = |label, usage| {
+                self.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: count as u64 * 8,
+                    usage,
+                    mapped_at_creation: false,
+                })
+            };
+            Timer {
+                resolve: buffer(
+                    "resolved timestamps",
+                    wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                ),
+                readback: buffer(
+                    "timestamps readback",
+                    wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                ),
+                set,
+                count,
+            }
+        })
     }
 
     /// The compute pipeline of `entry` in `module`, its bind group layouts derived from what the

@@ -81,6 +81,8 @@ pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Back
     // sound).
     // `RAYSTREAM_GPU_WORKGROUP=N`: the ray-query kernels' threads per
     // workgroup (an experiment for `trace`; see BENCHMARKS.md).
+    // `RAYSTREAM_GPU_TIMESTAMPS=off`: no timestamp queries (no kernel times; what they add to
+    // a query's wall time, device-bench.sh's floor part).
     let open = |adapter| {
         GpuContext::new(adapter).and_then(|mut ctx| {
             let spin = env_switch(&ctx, "RAYSTREAM_GPU_WAIT", ["spin", "block"])?;
@@ -93,6 +95,9 @@ pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Back
             }
             if let Some(samples) = env_count(&ctx, "RAYSTREAM_GPU_WAVE", "samples")? {
                 ctx.set_render_wave(samples)?;
+            }
+            if let Some(on) = env_switch(&ctx, "RAYSTREAM_GPU_TIMESTAMPS", ["on", "off"])? {
+                ctx.set_timestamps(on);
             }
             if let Some(threads) = env_count(&ctx, "RAYSTREAM_GPU_WORKGROUP", "threads")? {
                 ctx.set_query_workgroup(threads)?;

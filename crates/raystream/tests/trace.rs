@@ -142,11 +142,17 @@ fn read_hits(path: &std::path::Path) -> Vec<(f32, u32)> {
         .collect()
 }
 
-/// `trace spot.obj --rays RAYS --device gpu -o OUT` with `var` set to `value`: its output and
-/// the hits it wrote.
-fn spot_on_gpu(var: &str, value: &str, rays: &Path, out: &Path) -> (Output, Vec<u8>) {
+/// `trace spot.obj --rays RAYS --device gpu -q EXTRA... -o OUT` with `var` set to `value`:
+/// its output and the hits it wrote.
+fn spot_on_gpu(
+    var: &str,
+    value: &str,
+    rays: &Path,
+    out: &Path,
+    extra: &[&str],
+) -> (Output, Vec<u8>) {
     let spot = mesh("spot.obj");
-    let args = [
+    let mut args = vec![
         "trace",
         &spot,
         "--rays",
@@ -155,6 +161,7 @@ fn spot_on_gpu(var: &str, value: &str, rays: &Path, out: &Path) -> (Output, Vec<
         "gpu",
         "-q",
     ];
+    args.extend(extra);
     run_with_env(var, Some(value), &args, out)
 }
 
@@ -172,7 +179,7 @@ fn gpu_waits_spin_or_block() {
             f32s(&[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY]),
         )
         .unwrap();
-        spot_on_gpu("RAYSTREAM_GPU_WAIT", wait, &rays, &out)
+        spot_on_gpu("RAYSTREAM_GPU_WAIT", wait, &rays, &out, &[])
     };
     let (spin, spun) = hits("spin");
     let (block, blocked) = hits("block");
@@ -191,8 +198,23 @@ fn gpu_waits_spin_or_block() {
     );
 }
 
+/// A RAYS.bin (temp file `name`) of an n × n fan of rays from (0, 0, 5) down at spot.obj,
+/// most of them hitting it.
+fn fan_at_spot(name: &str, n: usize) -> std::path::PathBuf {
+    let rays = tmp(name);
+    let step = (n - 1) as f32;
+    let fan: Vec<f32> = (0..n * n)
+        .flat_map(|k| {
+            let (x, y) = ((k % n) as f32 / step - 0.5, (k / n) as f32 / step - 0.5);
+            [0.0, 0.0, 5.0, 0.0, 0.3 * x, 0.3 * y, -1.0, f32::INFINITY]
+        })
+        .collect();
+    std::fs::write(&rays, f32s(&fan)).unwrap();
+    rays
+}
+
 /// `RAYSTREAM_GPU_CHECKS=on|off`: the kd-tree kernels with and without (the default) wgpu's
-/// run-time checks trace the same hits (a 32 × 32 fan of rays at spot, most of them hitting)
+/// run-time checks trace the same hits (a 32 × 32 fan of rays at spot)
 /// and render the same frame of a mesh, and `trace --json` says which ran; any other value is
 /// refused.
 #[test]
@@ -200,20 +222,13 @@ fn gpu_kernels_without_run_time_checks_agree() {
     if !gpu_available() {
         return;
     }
-    let rays = tmp("checks.rays");
-    let fan: Vec<f32> = (0..32 * 32)
-        .flat_map(|k| {
-            let (x, y) = ((k % 32) as f32 / 31.0 - 0.5, (k / 32) as f32 / 31.0 - 0.5);
-            [0.0, 0.0, 5.0, 0.0, 0.3 * x, 0.3 * y, -1.0, f32::INFINITY]
-        })
-        .collect();
-    std::fs::write(&rays, f32s(&fan)).unwrap();
+    let rays = fan_at_spot("checks.rays", 32);
     let spot = mesh("spot.obj");
     let run = |checks: &str| {
         let render = ["render", &spot, "--size", "64x48", "--device", "gpu", "-q"];
         let hits = tmp(&format!("checks-{checks}.hits"));
         let png = tmp(&format!("checks-{checks}.png"));
-        let (trace, hits) = spot_on_gpu("RAYSTREAM_GPU_CHECKS", checks, &rays, &hits);
+        let (trace, hits) = spot_on_gpu("RAYSTREAM_GPU_CHECKS", checks, &rays, &hits, &[]);
         let (render, png) = run_with_env("RAYSTREAM_GPU_CHECKS", Some(checks), &render, &png);
         (trace, render, hits, png)
     };
@@ -258,6 +273,63 @@ fn gpu_kernels_without_run_time_checks_agree() {
     assert_eq!(bad.status.code(), Some(2));
     assert!(
         stderr(&bad).contains("RAYSTREAM_GPU_CHECKS=\"maybe\": on or off"),
+        "{}",
+        stderr(&bad)
+    );
+}
+
+/// `RAYSTREAM_GPU_TIMESTAMPS=off`: no timestamp queries, so no kernel time in `trace --json`
+/// (the query's and the floor's, with `--stats`) while the wall times are still measured, the
+/// same hits and the same frame as with them; any other value is refused.
+#[test]
+fn gpu_timestamps_can_be_turned_off() {
+    if !gpu_available() {
+        return;
+    }
+    let rays = fan_at_spot("stamps.rays", 16);
+    let spot = mesh("spot.obj");
+    let render = ["render", &spot, "--size", "48x32", "--device", "gpu", "-q"];
+    let run = |value: &str| {
+        let (trace, hits) = spot_on_gpu(
+            "RAYSTREAM_GPU_TIMESTAMPS",
+            value,
+            &rays,
+            &tmp(&format!("stamps-{value}.hits")),
+            &["--json", "--stats"],
+        );
+        let (render, png) = run_with_env(
+            "RAYSTREAM_GPU_TIMESTAMPS",
+            Some(value),
+            &render,
+            &tmp(&format!("stamps-{value}.png")),
+        );
+        (trace, hits, render, png)
+    };
+    let (on, hits_on, r_on, png_on) = run("on");
+    let (off, hits_off, r_off, png_off) = run("off");
+    for o in [&on, &off, &r_on, &r_off] {
+        assert!(o.status.success(), "{}", stderr(o));
+    }
+    assert!(!hits_on.is_empty() && hits_on == hits_off);
+    assert!(!png_on.is_empty() && png_on == png_off, "the frames differ");
+    let on: serde_json::Value = serde_json::from_str(stdout(&on).trim()).unwrap();
+    let off: serde_json::Value = serde_json::from_str(stdout(&off).trim()).unwrap();
+    // lavapipe has timestamps: on, the kernel times are there; off, they are not.
+    assert!(on["gpu_kernel_ms"].as_f64().unwrap() > 0.0, "{on}");
+    assert!(on["floor"]["gpu_kernel_ms"].as_f64().unwrap() > 0.0, "{on}");
+    assert!(off["gpu_kernel_ms"].is_null(), "{off}");
+    assert!(off["floor"]["gpu_kernel_ms"].is_null(), "{off}");
+    for key in ["trace_ms", "stream_ms"] {
+        assert!(off[key].as_f64().unwrap() > 0.0, "{key}: {off}");
+        assert!(
+            off["floor"][key].as_f64().unwrap() > 0.0,
+            "floor {key}: {off}"
+        );
+    }
+    let (bad, _, _, _) = run("sometimes");
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        stderr(&bad).contains("RAYSTREAM_GPU_TIMESTAMPS=\"sometimes\": on or off"),
         "{}",
         stderr(&bad)
     );
@@ -558,7 +630,7 @@ fn device_bench_summary() {
     // Where the wall time goes: the query and the floor kernel, in ms (0.922 - 0.424 = 0.498
     // beside the query; 0.424 - 0.050 = 0.374 of kernel time is the traversal's).
     assert!(
-        out.contains("| stanford_lucy_100k | primary | raystream-gpu-fused | 0.922 | 0.424 | 0.741 | 0.020 | 0.120 | 0.050 | 0.070 | 0.498 | 0.070 | 0.374 |"),
+        out.contains("| stanford_lucy_100k | primary | raystream-gpu-fused | on | 0.922 | 0.424 | 0.741 | 0.020 | 0.120 | 0.050 | 0.070 | 0.498 | 0.070 | 0.374 |"),
         "{out}"
     );
     // The cinematic pictures: the frame's time, and the denoiser's parts.
