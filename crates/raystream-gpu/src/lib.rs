@@ -1187,6 +1187,7 @@ impl<'a> GpuTracer<'a> {
         any: bool,
         kernels: Kernels,
         chunk: usize,
+        timed: bool,
     ) -> Result<(Vec<GpuHit>, TraceTimes), GpuError> {
         let mut hits = Vec::with_capacity(rays.len());
         let mut total = TraceTimes::default();
@@ -1203,7 +1204,7 @@ impl<'a> GpuTracer<'a> {
             }
         }
         for (k, part) in rays.chunks(chunk).enumerate() {
-            let (h, t) = self.trace_with(part, any, kernels)?;
+            let (h, t) = self.trace_run(part, any, kernels, timed)?;
             hits.extend(h);
             total.upload_ms += t.upload_ms;
             total.kernel_ms += t.kernel_ms;
@@ -1267,6 +1268,29 @@ impl<'a> GpuTracer<'a> {
         any: bool,
         kernels: Kernels,
     ) -> Result<(Vec<GpuHit>, TraceTimes), GpuError> {
+        self.trace_run(rays, any, kernels, true)
+    }
+
+    /// As [`GpuTracer::trace_with`] with no timestamp queries (no `kernel_gpu_ms`; the split
+    /// kernels keep theirs): the wall time of a query as a program that does not time its
+    /// kernels sees it, without the timestamps' writes, resolve and readback.
+    pub fn trace_untimed(
+        &self,
+        rays: &[Ray],
+        any: bool,
+        kernels: Kernels,
+    ) -> Result<(Vec<GpuHit>, TraceTimes), GpuError> {
+        self.trace_run(rays, any, kernels, false)
+    }
+
+    /// A query, its kernel timed where `timed` and the adapter can.
+    fn trace_run(
+        &self,
+        rays: &[Ray],
+        any: bool,
+        kernels: Kernels,
+        timed: bool,
+    ) -> Result<(Vec<GpuHit>, TraceTimes), GpuError> {
         let ctx = self.ctx;
         let n = rays.len();
         if n == 0 {
@@ -1274,7 +1298,7 @@ impl<'a> GpuTracer<'a> {
         }
         let chunk = self.max_rays;
         if n > chunk {
-            return self.trace_chunked(rays, any, kernels, chunk);
+            return self.trace_chunked(rays, any, kernels, chunk, timed);
         }
         let t0 = Instant::now();
         let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -1292,7 +1316,7 @@ impl<'a> GpuTracer<'a> {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let timer = ctx.timer(2);
+        let timer = if timed { ctx.timer(2) } else { None };
         // The rays' copy and the hits' zeroing are the upload's, not the timed query's.
         ctx.settle(&[hit_buf])?;
         let upload_ms = t0.elapsed().as_secs_f64() * 1e3;

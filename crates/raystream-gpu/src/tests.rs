@@ -967,6 +967,7 @@ fn query_workgroup_sizes_give_the_same_hits() {
 /// Queries queued back to back in one submission each trace every ray: the last one's hits
 /// (its hit buffer cleared just before it) equal a lone query's, for every kernel layout the
 /// host does not drive step by step; persistent threads restart their ray counter each time.
+/// An untimed query traces the same hits, timed by the wall clock alone.
 #[test]
 fn streamed_queries_each_trace_every_ray() {
     let Some(ctx) = gpu() else { return };
@@ -976,13 +977,22 @@ fn streamed_queries_each_trace_every_ray() {
     let rays = test_rays(&mesh, 4096);
     for any in [false, true] {
         for kernels in [Kernels::Fused, Kernels::IfIf, Kernels::Persistent] {
-            let (want, _) = tracer.trace_with(&rays, any, kernels).unwrap();
+            let (want, timed) = tracer.trace_with(&rays, any, kernels).unwrap();
             let (hits, ms) = tracer
                 .trace_streamed(&rays, any, kernels, 3)
                 .unwrap()
                 .unwrap();
             assert!(ms > 0.0);
             assert_eq!(hits, want, "any={any} {kernels:?}: streamed hits differ");
+            // Untimed: the same hits, a wall time and no kernel time.
+            let (hits, untimed) = tracer.trace_untimed(&rays, any, kernels).unwrap();
+            assert_eq!(hits, want, "any={any} {kernels:?}: untimed hits differ");
+            let stamps = ctx
+                .device
+                .features()
+                .contains(wgpu::Features::TIMESTAMP_QUERY);
+            assert_eq!(timed.kernel_gpu_ms.is_some(), stamps);
+            assert!(untimed.kernel_gpu_ms.is_none() && untimed.kernel_ms > 0.0);
         }
         assert!(
             tracer

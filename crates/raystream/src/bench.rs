@@ -285,6 +285,8 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                     "gpu_kernel_ms": t.kernel_gpu_ms.map(|k| json!({ kernel_label(kernels, any): round3(k) })),
                     // Wall time per query of --repeat queries queued in one submission.
                     "stream_ms": t.stream_ms.map(round3),
+                    // Wall time per query without timestamp queries (each after a timed one).
+                    "untimed_ms": t.untimed_ms.map(round3),
                     "mrays_per_s": round3(n / (t.trace_ms * 1e-3) / 1e6),
                     "inner_per_ray": round3(c.inner as f64 / n),
                     "leaves_per_ray": round3(c.leaves as f64 / n),

@@ -106,6 +106,9 @@ pub struct Traced {
     /// GPU only: the median round trip of an empty submission (`repeat` of them), the floor
     /// under `trace_ms` that no kernel can lower.
     pub round_trip_ms: Option<f64>,
+    /// GPU only: the median wall time of `repeat` queries run without timestamp queries, each
+    /// after a timed one (`trace_ms`'s queries write, resolve and read back two timestamps).
+    pub untimed_ms: Option<f64>,
 }
 
 /// Untimed GPU runs before the timed ones: until this much time has passed…
@@ -130,6 +133,7 @@ pub fn trace_timed(
     let mut stream_ms = None;
     let mut split_steps = None;
     let mut round_trip_ms = None;
+    let mut untimed = Vec::new();
     let (hits, upload_ms) = match gpu {
         None => {
             let mut hits = trace_all(tree, rays, any, traversal);
@@ -160,6 +164,15 @@ pub fn trace_timed(
                 hits = h;
                 times.push(t.kernel_ms);
                 gpu_times.extend(t.kernel_gpu_ms);
+                // The same query untimed, right after: what the timestamps cost the wall.
+                let (h, t) = tracer.trace_untimed(rays, any, kernels)?;
+                if h != hits {
+                    bail!(
+                        "{} rays: an untimed query's hits differ from a timed one's",
+                        rays.len()
+                    );
+                }
+                untimed.push(t.kernel_ms);
             }
             if let Some((h, ms)) = tracer.trace_streamed(rays, any, kernels, repeat)? {
                 if h != hits {
@@ -198,6 +211,7 @@ pub fn trace_timed(
         stream_ms,
         split_steps,
         round_trip_ms,
+        untimed_ms: (!untimed.is_empty()).then(|| median(&mut untimed)),
     })
 }
 
@@ -318,6 +332,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
             "gpu_kernel_ms": t.kernel_gpu_ms.map(round3),
             "stream_ms": t.stream_ms.map(round3),
             "round_trip_ms": t.round_trip_ms.map(round3),
+            "untimed_ms": t.untimed_ms.map(round3),
             "split_steps": t.split_steps,
             "mrays_per_s": round3(mrays),
             "hits": n_hits,
@@ -327,6 +342,7 @@ pub fn run(a: &TraceArgs) -> Result<()> {
                 "trace_ms_min": round3(f.trace_ms_min),
                 "gpu_kernel_ms": f.kernel_gpu_ms.map(round3),
                 "stream_ms": f.stream_ms.map(round3),
+                "untimed_ms": f.untimed_ms.map(round3),
             })),
         }));
     } else if !a.quiet {
@@ -346,6 +362,12 @@ pub fn run(a: &TraceArgs) -> Result<()> {
                 "raystream: streamed: {ms:.2} ms a query ({:.2} Mrays/s), {} queued in one submission",
                 rays.len() as f64 / (ms * 1e-3) / 1e6,
                 a.repeat
+            );
+        }
+        if let Some(ms) = t.untimed_ms {
+            eprintln!(
+                "raystream: untimed: {ms:.3} ms a query ({:.2} Mrays/s) without timestamp queries",
+                rays.len() as f64 / (ms * 1e-3) / 1e6
             );
         }
         if let Some(ms) = t.round_trip_ms {

@@ -459,8 +459,10 @@ fn trace_stats() {
     // timings on a loaded machine can fall either way (CI once saw 1.74 ms against 0.55).
     let floor = line["round_trip_ms"].as_f64().unwrap();
     assert!(floor > 0.0 && floor.is_finite(), "{line}");
+    // The wall time of untimed queries, each after a timed one.
+    assert!(line["untimed_ms"].as_f64().unwrap() > 0.0, "{line}");
     // The floor kernel's times on the same rays (no traversal), measured and reported.
-    for key in ["trace_ms", "trace_ms_min", "stream_ms"] {
+    for key in ["trace_ms", "trace_ms_min", "stream_ms", "untimed_ms"] {
         let ms = line["floor"][key].as_f64().unwrap_or(-1.0);
         assert!(ms > 0.0 && ms.is_finite(), "floor {key}: {line}");
     }
@@ -517,7 +519,7 @@ fn device_bench_summary() {
         r#"{"machine": "16 cores, Intel(R) Xeon(R) Processor", "date": "2026-11-23T10:00:00Z"}"#
             .to_string(),
         format!(
-            r#"{{"device": "gpu", "adapter": "NVIDIA H100 80GB HBM3", "mesh": "stanford_lucy_100k", "kind": "primary", "tracer": "raystream-gpu-fused", "rays": {n}, "trace_ms": {}, "gpu_kernel_ms": {}, "stream_ms": {}, "sah_traversal_cost": 1.0, "gpu_stats": {{"steps_per_ray": {{"traversal": 9.0, "leaf": 2.8, "triangle": 1.9}}, "simd_efficiency": {{"traversal": 0.5, "leaf": 0.7, "triangle": 0.25}}, "subgroup_size": 32, "peak_resident_invocations": 135168}}, "round_trip_ms": 0.02, "floor": {{"trace_ms": 0.12, "gpu_kernel_ms": 0.05, "stream_ms": 0.07}}}}"#,
+            r#"{{"device": "gpu", "adapter": "NVIDIA H100 80GB HBM3", "mesh": "stanford_lucy_100k", "kind": "primary", "tracer": "raystream-gpu-fused", "rays": {n}, "trace_ms": {}, "gpu_kernel_ms": {}, "stream_ms": {}, "sah_traversal_cost": 1.0, "gpu_stats": {{"steps_per_ray": {{"traversal": 9.0, "leaf": 2.8, "triangle": 1.9}}, "simd_efficiency": {{"traversal": 0.5, "leaf": 0.7, "triangle": 0.25}}, "subgroup_size": 32, "peak_resident_invocations": 135168}}, "round_trip_ms": 0.02, "untimed_ms": 0.9, "floor": {{"trace_ms": 0.12, "gpu_kernel_ms": 0.05, "stream_ms": 0.07, "untimed_ms": 0.09}}}}"#,
             ms(2.25),
             ms(4.89),
             ms(2.8)
@@ -627,10 +629,11 @@ fn device_bench_summary() {
         out.contains("| stanford_lucy_100k | primary | 5 | 5.5 | 4 | 4.4 | 1.10 | 1.10 |"),
         "{out}"
     );
-    // Where the wall time goes: the query and the floor kernel, in ms (0.922 - 0.424 = 0.498
-    // beside the query; 0.424 - 0.050 = 0.374 of kernel time is the traversal's).
+    // Where the wall time goes: the query and the floor kernel, in ms, timed and untimed
+    // (0.922 - 0.424 = 0.498 beside the query; 0.424 - 0.050 = 0.374 of kernel time is the
+    // traversal's).
     assert!(
-        out.contains("| stanford_lucy_100k | primary | raystream-gpu-fused | on | 0.922 | 0.424 | 0.741 | 0.020 | 0.120 | 0.050 | 0.070 | 0.498 | 0.070 | 0.374 |"),
+        out.contains("| stanford_lucy_100k | primary | raystream-gpu-fused | on | 0.922 | 0.900 | 0.424 | 0.741 | 0.020 | 0.120 | 0.090 | 0.050 | 0.070 | 0.498 | 0.070 | 0.374 |"),
         "{out}"
     );
     // The cinematic pictures: the frame's time, and the denoiser's parts.
