@@ -247,11 +247,24 @@ pub fn min_spacing(vol: &Volume) -> f32 {
     vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min) as f32
 }
 
+/// The most samples a ray takes across a volume's box (its diagonal): 2^20, as many as a
+/// 512³ volume crossed at the smallest step `--step-mm` may ask (1/1000 of a voxel); the
+/// default step takes about 1,800 there.
+pub const MAX_SAMPLES_PER_RAY: f64 = 1_048_576.0;
+
 /// The march's step in mm: `step_mm`, or half the smallest voxel spacing (never below 1/1000
-/// of it).
+/// of it), and never so small that a ray across the box's diagonal would take more than
+/// [`MAX_SAMPLES_PER_RAY`] samples: a volume whose spacings differ by many orders (a corrupt
+/// header's 1e-6 beside 2.5 mm) would otherwise march for hours, a lone ray for billions of
+/// steps.
 pub fn step_for(step_mm: Option<f32>, vol: &Volume) -> f32 {
     let s = min_spacing(vol);
-    step_mm.unwrap_or(0.5 * s).max(1e-3 * s)
+    let diagonal = (0..3)
+        .map(|i| (vol.dims[i] as f64 * vol.spacing[i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let budget = (diagonal / MAX_SAMPLES_PER_RAY) as f32;
+    step_mm.unwrap_or(0.5 * s).max(1e-3 * s).max(budget)
 }
 
 /// The step of the light grids' shadow rays: the march's step, but at least one voxel (the
@@ -2095,6 +2108,26 @@ mod tests {
         assert_eq!(shadow_step_for(None, &vol), 0.6);
         assert_eq!(shadow_step_for(Some(0.2), &vol), 0.6);
         assert_eq!(shadow_step_for(Some(1.5), &vol), 1.5);
+    }
+
+    /// A ray takes at most MAX_SAMPLES_PER_RAY samples across the box, however small one
+    /// spacing is beside the others (the fuzzer's hang: 1e-6 mm beside 2.5 mm); real volumes
+    /// keep their steps, the smallest `--step-mm` of a 512³ one included.
+    #[test]
+    fn a_ray_takes_a_bounded_number_of_samples() {
+        let vol = volume([6, 5, 4], [1e-6, 0.8, 2.5], |_, _, _| 0.0);
+        let diagonal = (4.0f64.powi(2) + 10.0f64.powi(2) + 6e-6f64.powi(2)).sqrt();
+        let step = step_for(None, &vol) as f64;
+        assert!(diagonal / step <= MAX_SAMPLES_PER_RAY * 1.0001, "{step}");
+        assert!(diagonal / step >= MAX_SAMPLES_PER_RAY * 0.9999, "{step}");
+        // A 512³ CT's grid (step_for reads no voxel).
+        let ct = Volume {
+            dims: [512, 512, 512],
+            spacing: [0.7, 0.7, 1.0],
+            ..vol.clone()
+        };
+        assert_eq!(step_for(None, &ct), 0.35);
+        assert!((step_for(Some(1e-9), &ct) - 7e-4).abs() < 1e-9);
     }
 
     /// The light grid holds each grid point's shadow ray exactly, and between grid points

@@ -1047,7 +1047,14 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             let stats = frame
                 .stats
                 .unwrap_or_else(|| dvr::estimate_stats(&volume, &tf, &opt, seen.sight()));
-            let what = format!("{format_words}{slab}, step {:.3} mm", stats.step_mm);
+            // Three decimals, or three significant digits for a step below 0.01 mm (a
+            // microscope's voxels, or a march held to its sample budget).
+            let step = if stats.step_mm >= 0.01 {
+                format!("{:.3}", stats.step_mm)
+            } else {
+                format!("{:.3e}", stats.step_mm)
+            };
+            let what = format!("{format_words}{slab}, step {step} mm");
             let counts = format!(
                 ", {} skipped as empty ({:.0} %{}){}",
                 stats.skipped,

@@ -382,8 +382,12 @@ impl IntoFinite for (f32, f32) {
 /// header beyond it is corrupt; and there f32 positions are still good to 1/16 mm, while the
 /// renderings drift apart further out (the CPU and GPU differ at 10⁹ mm).
 pub const MAX_GRID_REACH_MM: f64 = 1e6;
+/// The smallest voxel spacing a volume may have, mm: a picometre, far below any imaging's
+/// (electron microscopy's are nanometres); below it the spacing is a corrupt header's, and
+/// as an f32 it would vanish into denormals.
+pub const MIN_SPACING_MM: f64 = 1e-9;
 
-/// Dimensions within [`MAX_VOXELS`], spacing finite and positive, origin finite, the grid
+/// Dimensions within [`MAX_VOXELS`], spacing finite and at least [`MIN_SPACING_MM`], origin finite, the grid
 /// within ±[`MAX_GRID_REACH_MM`], direction finite with unit, linearly independent columns.
 /// Called on header values before any allocation, and again on the finished volume.
 pub(crate) fn check_geometry(
@@ -398,6 +402,14 @@ pub(crate) fn check_geometry(
         return Err(VolumeError::invalid(
             path,
             format!("voxel spacing {spacing:?} mm is not finite and positive"),
+        ));
+    }
+    if spacing.iter().any(|s| *s < MIN_SPACING_MM) {
+        return Err(VolumeError::invalid(
+            path,
+            format!(
+                "voxel spacing {spacing:?} mm: below {MIN_SPACING_MM:e} mm (a picometre), no voxel of any imaging (a corrupt header?)"
+            ),
         ));
     }
     if origin.iter().any(|o| !o.is_finite()) {
