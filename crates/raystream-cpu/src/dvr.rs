@@ -259,11 +259,7 @@ pub const MAX_SAMPLES_PER_RAY: f64 = 1_048_576.0;
 /// steps.
 pub fn step_for(step_mm: Option<f32>, vol: &Volume) -> f32 {
     let s = min_spacing(vol);
-    let diagonal = (0..3)
-        .map(|i| (vol.dims[i] as f64 * vol.spacing[i]).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    let budget = (diagonal / MAX_SAMPLES_PER_RAY) as f32;
+    let budget = (vol.diagonal_mm() / MAX_SAMPLES_PER_RAY) as f32;
     step_mm.unwrap_or(0.5 * s).max(1e-3 * s).max(budget)
 }
 

@@ -583,6 +583,54 @@ impl GpuContext {
             })
     }
 
+    /// A pipeline layout of bind groups `groups` (group i laid out as `groups[i]`).
+    fn pipeline_layout(
+        &self,
+        label: &str,
+        groups: &[&wgpu::BindGroupLayout],
+    ) -> wgpu::PipelineLayout {
+        let groups: Vec<_> = groups.iter().map(|&g| Some(g)).collect();
+        self.device
+            .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: &groups,
+                immediate_size: 0,
+            })
+    }
+
+    /// The compute pipeline of `entry` in `module` with `layout` (shared by kernels that bind
+    /// the same groups) and its override `constants`.
+    fn layout_pipeline(
+        &self,
+        module: &wgpu::ShaderModule,
+        entry: &str,
+        layout: &wgpu::PipelineLayout,
+        constants: &[(&str, f64)],
+    ) -> wgpu::ComputePipeline {
+        self.device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(layout),
+                module,
+                entry_point: Some(entry),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants,
+                    ..Default::default()
+                },
+                cache: None,
+            })
+    }
+
+    /// The bind group layout of a ray query's group 0, as [`GpuTracer`] binds it: the
+    /// parameters (uniform), the tree's inner nodes, leaves, triangles and entry cells and the
+    /// rays (read-only), the hits.
+    fn query_layout(&self, label: &str) -> wgpu::BindGroupLayout {
+        use wgpu::BufferBindingType::{Storage, Uniform};
+        let ro = Storage { read_only: true };
+        let rw = Storage { read_only: false };
+        self.buffer_layout(label, &[Uniform, ro, ro, ro, ro, ro, rw])
+    }
+
     /// Workgroups (x, y, 1) for `n` items of one thread each, as the kernels' dispatch-argument
     /// writers compute them.
     fn dims(&self, n: u32) -> [u32; 3] {
@@ -957,33 +1005,12 @@ impl<'a> GpuTracer<'a> {
     }
 
     /// `query_floor`, laid out as the query kernels (it reads no tree, but binds a query's
-    /// buffers: params, the tree's four, the rays, the hits).
+    /// buffers).
     fn floor_kernel(&self) -> &wgpu::ComputePipeline {
         self.floor.get_or_init(|| {
-            use wgpu::BufferBindingType::{Storage, Uniform};
-            let ro = Storage { read_only: true };
-            let rw = Storage { read_only: false };
-            let layout = self
-                .ctx
-                .buffer_layout("query_floor", &[Uniform, ro, ro, ro, ro, ro, rw]);
-            let pipeline_layout =
-                self.ctx
-                    .device
-                    .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                        label: Some("query_floor"),
-                        bind_group_layouts: &[Some(&layout)],
-                        immediate_size: 0,
-                    });
-            self.ctx
-                .device
-                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some("query_floor"),
-                    layout: Some(&pipeline_layout),
-                    module: &self.module,
-                    entry_point: Some("query_floor"),
-                    compilation_options: Default::default(),
-                    cache: None,
-                })
+            let ctx = self.ctx;
+            let layout = ctx.pipeline_layout("query_floor", &[&ctx.query_layout("query_floor")]);
+            ctx.layout_pipeline(&self.module, "query_floor", &layout, &[])
         })
     }
 

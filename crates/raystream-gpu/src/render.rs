@@ -532,29 +532,15 @@ impl<'a> GpuRenderer<'a> {
         let module = ctx.tree_module("render.wgsl", render_wgsl(), scene.volume.is_some());
         // The kernels that write dispatch arguments see them as group 3; the others may not
         // (a buffer cannot be storage and indirect-argument source in one dispatch).
-        let layout = |groups: usize| {
-            let l: Vec<_> = layouts[..groups].iter().map(Some).collect();
-            ctx.device
-                .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some("render"),
-                    bind_group_layouts: &l,
-                    immediate_size: 0,
-                })
-        };
-        let (work, control) = (layout(3), layout(4));
+        let [tree_layout, scene_layout, queues, args] = &layouts;
+        let work = ctx.pipeline_layout("render", &[tree_layout, scene_layout, queues]);
+        let control = ctx.pipeline_layout("render", &[tree_layout, scene_layout, queues, args]);
         // The volume stages see the volume as group 3.
         let volume = medium_layout.as_ref().map(|m| {
-            ctx.device
-                .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some("render volume stages"),
-                    bind_group_layouts: &[
-                        Some(&layouts[0]),
-                        Some(&layouts[1]),
-                        Some(&layouts[2]),
-                        Some(m),
-                    ],
-                    immediate_size: 0,
-                })
+            ctx.pipeline_layout(
+                "render volume stages",
+                &[tree_layout, scene_layout, queues, m],
+            )
         });
         let pipelines = STAGES
             .iter()
@@ -565,17 +551,7 @@ impl<'a> GpuRenderer<'a> {
                     _ if VOLUME_STAGES.contains(&k) => volume.as_ref()?,
                     _ => &work,
                 };
-                Some(
-                    ctx.device
-                        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                            label: Some(entry),
-                            layout: Some(layout),
-                            module: &module,
-                            entry_point: Some(entry),
-                            compilation_options: Default::default(),
-                            cache: None,
-                        }),
-                )
+                Some(ctx.layout_pipeline(&module, entry, layout, &[]))
             })
             .collect();
         let medium = match (&scene.volume, &medium_layout) {
@@ -594,22 +570,12 @@ impl<'a> GpuRenderer<'a> {
                 label: Some("film.wgsl"),
                 source: wgpu::ShaderSource::Wgsl(film_wgsl().into()),
             });
-        let film_pipeline =
-            ctx.device
-                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some("resolve_film"),
-                    layout: Some(&ctx.device.create_pipeline_layout(
-                        &wgpu::PipelineLayoutDescriptor {
-                            label: Some("film"),
-                            bind_group_layouts: &[Some(&film_layout)],
-                            immediate_size: 0,
-                        },
-                    )),
-                    module: &film_module,
-                    entry_point: Some("resolve_film"),
-                    compilation_options: Default::default(),
-                    cache: None,
-                });
+        let film_pipeline = ctx.layout_pipeline(
+            &film_module,
+            "resolve_film",
+            &ctx.pipeline_layout("film", &[&film_layout]),
+            &[],
+        );
         let srgb8_pipeline = ctx.auto_pipeline(&film_module, "resolve_film_srgb8");
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(ctx.err(e));

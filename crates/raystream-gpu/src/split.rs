@@ -35,11 +35,9 @@ pub(crate) struct SplitKernels {
 
 impl SplitKernels {
     pub(crate) fn new(ctx: &GpuContext) -> SplitKernels {
-        use wgpu::BufferBindingType::{Storage, Uniform};
-        let ro = Storage { read_only: true };
-        let rw = Storage { read_only: false };
+        let rw = wgpu::BufferBindingType::Storage { read_only: false };
         let layouts = [
-            ctx.buffer_layout("split tree and rays", &[Uniform, ro, ro, ro, ro, ro, rw]),
+            ctx.query_layout("split tree and rays"),
             ctx.buffer_layout("split lists", &[rw; 5]),
             ctx.buffer_layout("split args", &[rw]),
         ];
@@ -49,31 +47,13 @@ impl SplitKernels {
                 label: Some("split.wgsl"),
                 source: wgpu::ShaderSource::Wgsl(split_wgsl().into()),
             });
-        let pipeline_layout = |groups: usize| {
-            let l: Vec<_> = layouts[..groups].iter().map(Some).collect();
-            ctx.device
-                .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some("split"),
-                    bind_group_layouts: &l,
-                    immediate_size: 0,
-                })
-        };
-        let (work, control) = (pipeline_layout(2), pipeline_layout(3));
+        let [tree, lists, args] = &layouts;
+        let work = ctx.pipeline_layout("split", &[tree, lists]);
+        let control = ctx.pipeline_layout("split", &[tree, lists, args]);
         let max_groups = ctx.limits.max_compute_workgroups_per_dimension.max(1) as f64;
         let pipeline = |name: &str, layout: &wgpu::PipelineLayout, any: bool| {
             let constants = [("ANY_HIT", any as u32 as f64), ("MAX_GROUPS", max_groups)];
-            ctx.device
-                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(name),
-                    layout: Some(layout),
-                    module: &module,
-                    entry_point: Some(name),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &constants,
-                        ..Default::default()
-                    },
-                    cache: None,
-                })
+            ctx.layout_pipeline(&module, name, layout, &constants)
         };
         SplitKernels {
             init: pipeline("split_init", &work, false),

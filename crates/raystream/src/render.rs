@@ -1334,11 +1334,7 @@ fn path_sections(
         Some(mm) => 0.5 * mm,
         None => 0.5 * raystream_cpu::dvr::min_spacing(volume) * opt.height as f32,
     };
-    let extent = volume.dims.map(|d| d as f64);
-    let reach = (0..3)
-        .map(|i| (extent[i] * volume.spacing[i]).powi(2))
-        .sum::<f64>()
-        .sqrt() as f32;
+    let reach = volume.diagonal_mm() as f32;
     let lumen =
         lumen_options(a, volume)?.map(|o| (o, raystream_cpu::dvr::Marcher::new(volume, None)));
     let wall = wall_options(a, volume)?;

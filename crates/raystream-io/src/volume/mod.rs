@@ -233,6 +233,15 @@ impl Volume {
         self.dims[0] * self.dims[1] * self.dims[2]
     }
 
+    /// The length of the grid's diagonal, mm: dims × spacing along each axis (the farthest a
+    /// straight line runs through an unsheared grid).
+    pub fn diagonal_mm(&self) -> f64 {
+        (0..3)
+            .map(|i| (self.dims[i] as f64 * self.spacing[i]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+
     /// A voxel's volume, millilitres (the grid's cell, sheared or not).
     pub fn voxel_ml(&self) -> f64 {
         self.index_to_world_affine().matrix3.determinant().abs() / 1000.0
