@@ -13,7 +13,8 @@
 # BASE=another on the primary, shadow and diffuse sets; "abframes": the same on whole frames (the default scene, a dvr orbit,
 # a denoised cinematic frame); "floor": where a query's wall time goes (the floor kernel beside the
 # query, with and without timestamps); "pixels": the default scene's camera rays by rows or blocks; "waves": its
-# frame in waves of WAVES samples; "checks": its kernels with and without wgpu's run-time checks) picks the parts; TRACERS (default "gpu block
+# frame in waves of WAVES samples; "checks": its kernels with and without wgpu's run-time checks; "appends": its
+# shade_hits reserving queue slots a lane or a subgroup at a time) picks the parts; TRACERS (default "gpu block
 # checked ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; checked = the fused
 # kernel with wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=on; off by default); block = the fused kernel with
 # RAYSTREAM_GPU_WAIT=block, blocking waits against the spinning ones a hardware GPU has by default; sorted = the diffuse and random
@@ -236,17 +237,25 @@ has "$parts" pixels && for spp in 1 4; do
   cmp "$tmp/pixels-rows.png" "$tmp/pixels-blocks.png" && echo "[pixels] $spp spp: the same PNG" | tee -a "$out/render.log"
 done
 
-# The default scene with its kd-tree kernels checked and unchecked (RAYSTREAM_GPU_CHECKS), 4 spp,
-# alternated twice; the PNGs must be equal.
-has "$parts" checks && {
-for round in 1 2; do
-  for c in on off; do
-    RAYSTREAM_GPU_CHECKS=$c $bin render --device gpu --size "$size" --max-depth 4 --repeat 20 -o "$tmp/checks-$c.png" 2>&1 \
-      | sed "s/^/[checks $c, round $round] /" | tee -a "$out/render.log"
+# The default scene (4 spp, depth 4, 20 frames) with environment variable VAR set to A and to B,
+# alternated twice, lines tagged "[NAME VALUE, round R]"; the two PNGs must be equal.
+render_ab() {
+  local name=$1 var=$2 a=$3 b=$4 round v
+  for round in 1 2; do
+    for v in "$a" "$b"; do
+      env "$var=$v" $bin render --device gpu --size "$size" --max-depth 4 --repeat 20 -o "$tmp/$name-$v.png" 2>&1 \
+        | sed "s/^/[$name $v, round $round] /" | tee -a "$out/render.log"
+    done
   done
-done
-cmp "$tmp/checks-on.png" "$tmp/checks-off.png" && echo "[checks] the same PNG" | tee -a "$out/render.log"
+  cmp "$tmp/$name-$a.png" "$tmp/$name-$b.png" && echo "[$name] the same PNG" | tee -a "$out/render.log"
 }
+
+# The default scene with its kd-tree kernels checked and unchecked (RAYSTREAM_GPU_CHECKS).
+has "$parts" checks && render_ab checks RAYSTREAM_GPU_CHECKS on off
+
+# The default scene with shade_hits reserving queue slots a lane or a subgroup at a time
+# (RAYSTREAM_GPU_APPENDS; subgroup by default where the adapter has subgroups).
+has "$parts" appends && render_ab appends RAYSTREAM_GPU_APPENDS atomic subgroup
 
 # The default scene in waves of WAVES samples (RAYSTREAM_GPU_WAVE; default 2^20 to 2^23), 4 spp,
 # two rounds; the PNGs must be equal; then the CPU's frame against the GPU's (rays.py imgdiff).

@@ -144,6 +144,9 @@ pub struct GpuContext {
     /// Kernels time their passes with timestamp queries where the adapter has them (see
     /// [`GpuContext::set_timestamps`]).
     timestamps: bool,
+    /// The stream renderer's `shade_hits` reserves queue slots a subgroup at a time where the
+    /// adapter has subgroup operations (see [`GpuContext::set_subgroup_appends`]).
+    subgroup_appends: bool,
     /// Tests only: the work buffers by these names fail as out of memory, each once, while
     /// they are at least the given bytes.
     #[cfg(test)]
@@ -262,6 +265,7 @@ impl GpuContext {
             render_wave: render::DEFAULT_WAVE,
             unchecked: true,
             timestamps: true,
+            subgroup_appends: true,
             #[cfg(test)]
             fail_alloc: Mutex::new(Vec::new()),
         })
@@ -347,6 +351,23 @@ impl GpuContext {
     /// device-bench.sh's floor part measures what the timestamps add to a query's wall time.
     pub fn set_timestamps(&mut self, on: bool) {
         self.timestamps = on;
+    }
+
+    /// Whether the stream renderers made after it reserve their queues' slots in `shade_hits`
+    /// a subgroup at a time (one atomic add a subgroup for its hit count, each light's shadow
+    /// rays and the next depth's rays, the lanes' slots by prefix sums) or a lane at a time
+    /// (an atomic add for every hit, shadow ray and derived ray, all on the same three
+    /// counters). Subgroups only where the adapter has subgroup operations; the film is the
+    /// same either way (its sums do not depend on the queues' order). The CLI's
+    /// `RAYSTREAM_GPU_APPENDS=subgroup|atomic`.
+    pub fn set_subgroup_appends(&mut self, on: bool) {
+        self.subgroup_appends = on;
+    }
+
+    /// Whether the stream renderers made after now reserve queue slots a subgroup at a time:
+    /// asked for ([`GpuContext::set_subgroup_appends`]) and possible on this adapter.
+    pub fn subgroup_appends(&self) -> bool {
+        self.subgroup_appends && self.device.features().contains(wgpu::Features::SUBGROUP)
     }
 
     /// Whether the kd-tree kernels made after now compile without wgpu's run-time checks

@@ -37,7 +37,8 @@ fn all_kernel_modules() -> Vec<(&'static str, String)> {
         ("queries.wgsl", queries_wgsl()),
         ("stats.wgsl", stats_wgsl()),
         ("split.wgsl", split_wgsl()),
-        ("render.wgsl", render_wgsl()),
+        ("render.wgsl", render_wgsl(false)),
+        ("render.wgsl, subgroup appends", render_wgsl(true)),
         ("film.wgsl", render::film_wgsl()),
         ("dvr.wgsl", volume::dvr_wgsl()),
     ]
@@ -215,7 +216,7 @@ fn wgsl_structs_match_rust() {
 fn render_wgsl_structs_match_rust() {
     use layout::*;
     use std::mem::{offset_of, size_of};
-    let module = naga_module(&render_wgsl(), "render.wgsl");
+    let module = naga_module(&render_wgsl(false), "render.wgsl");
     let check = |name: &str, size: usize, offsets: &[(&str, usize)]| {
         check_struct(&module, name, size, offsets)
     };
@@ -1281,6 +1282,32 @@ fn gpu_render_matches_cpu(
             assert_eq!(told, told_here, "{what}: progress of {how}");
         }
     }
+    // Queue slots reserved a lane at a time or a subgroup at a time (the default where the
+    // adapter has subgroups): the queues' order differs, the film and the counts do not.
+    let mut other_ctx = self::gpu().unwrap();
+    other_ctx.set_subgroup_appends(!ctx.subgroup_appends());
+    let has_subgroups = ctx.device.features().contains(wgpu::Features::SUBGROUP);
+    assert_eq!(
+        ctx.subgroup_appends() || other_ctx.subgroup_appends(),
+        has_subgroups,
+        "{what}: subgroup appends wherever the adapter has subgroups"
+    );
+    let other_tracer = GpuTracer::new(&other_ctx, &tree).unwrap();
+    let other = GpuRenderer::new(&other_tracer, scene, &tree).unwrap();
+    let (image, s) = other.render(opt, |_| {}).unwrap();
+    let how = if other_ctx.subgroup_appends() {
+        "a subgroup"
+    } else {
+        "a lane"
+    };
+    assert_eq!(
+        gpu, image,
+        "{what}: the film of slots reserved {how} at a time differs"
+    );
+    assert_eq!(
+        stats.depths, s.depths,
+        "{what}: the counts of slots reserved {how} at a time differ"
+    );
 }
 
 #[test]

@@ -543,6 +543,33 @@ fn gpu_render_pixel_orders_give_the_same_image() {
     );
 }
 
+/// `RAYSTREAM_GPU_APPENDS=subgroup|atomic`: `shade_hits` reserving queue slots a subgroup or a
+/// lane at a time gives the same PNG (the film's sums do not depend on the queues' order);
+/// other values are refused.
+#[test]
+fn gpu_render_appends_give_the_same_image() {
+    if !gpu_available() {
+        return;
+    }
+    let render = |appends: &str| {
+        let out = tmp(&format!("appends-{appends}.png"));
+        let args = ["render", "--size", "67x45", "--device", "gpu", "-q"];
+        run_with_env("RAYSTREAM_GPU_APPENDS", Some(appends), &args, &out)
+    };
+    let (atomic, by_atomic) = render("atomic");
+    let (subgroup, by_subgroup) = render("subgroup");
+    assert!(atomic.status.success(), "{}", stderr(&atomic));
+    assert!(subgroup.status.success(), "{}", stderr(&subgroup));
+    assert!(!by_atomic.is_empty() && by_atomic == by_subgroup);
+    let (bad, _) = render("warp");
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        stderr(&bad).contains("RAYSTREAM_GPU_APPENDS=\"warp\": subgroup or atomic"),
+        "{}",
+        stderr(&bad)
+    );
+}
+
 /// `RAYSTREAM_GPU_WAVE=N`: the stream renderer in waves of at most N samples gives the same
 /// PNG as in one wave (here 1000 samples: 67 × 67 pixels at 4 samples take 18 waves, the last
 /// a part, one submission each); 0, more than the most, or

@@ -360,7 +360,10 @@ fn shade_hits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     if h.prim == NO_PRIM {
         return;
     }
-    atomicAdd(&counters[HITS], 1u);
+    // From here on every lane that hit appends together (`append`, from the Rust prelude,
+    // may reserve a subgroup's slots at once): no lane leaves before the last append but all
+    // together, at the depth limit.
+    _ = append(HITS, 1u);
     let w = queue_in[i];
     let s = surface(w, h);
     let m = materials[shade_tris[h.prim].material];
@@ -384,32 +387,35 @@ fn shade_hits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
         let to_light = light.position.xyz - origin;
         let l = normalize(to_light);
         let cos = dot(s.ns, l);
-        if cos <= 0.0 || dot(s.ng, to_light) <= 0.0 || k <= 0.0 {
-            continue;
+        let lit = !(cos <= 0.0 || dot(s.ng, to_light) <= 0.0 || k <= 0.0);
+        let at = append(SHADOWS, select(0u, 1u, lit));
+        if lit {
+            let rd = max(dot(reflect_about(-l, s.ns), -s.dir), 0.0);
+            var spec = 0.0;
+            if rd > 0.0 {
+                spec = pow(rd, m.shininess);
+            }
+            let radiance = wk * (diffuse * cos + m.specular * spec) * light.color.xyz;
+            shadows[at] = ShadowWork(RayIn(origin, 0.0, to_light, 1.0 - 1e-4), radiance, w.pixel);
         }
-        let rd = max(dot(reflect_about(-l, s.ns), -s.dir), 0.0);
-        var spec = 0.0;
-        if rd > 0.0 {
-            spec = pow(rd, m.shininess);
-        }
-        let radiance = wk * (diffuse * cos + m.specular * spec) * light.color.xyz;
-        let at = atomicAdd(&counters[SHADOWS], 1u);
-        shadows[at] = ShadowWork(RayIn(origin, 0.0, to_light, 1.0 - 1e-4), radiance, w.pixel);
     }
 
+    // The same for every lane: the depth this dispatch shades.
     if atomicLoad(&counters[DEPTH]) >= rp.max_depth {
         return;
     }
-    if split.r * max_element(w.weight) > 1e-3 {
+    let reflects = split.r * max_element(w.weight) > 1e-3;
+    let refracts = split.refr.w != 0.0 && split.t * max_element(w.weight) > 1e-3;
+    var at = append(NEXT, select(0u, 1u, reflects) + select(0u, 1u, refracts));
+    if reflects {
         var d = reflect_about(s.dir, s.ns);
         if dot(d, s.ng) <= 0.0 {
             d = reflect_about(s.dir, s.ng);
         }
-        let at = atomicAdd(&counters[NEXT], 1u);
         queue_out[at] = RayWork(RayIn(s.p + s.ng * s.offset, 0.0, d, T_FAR), w.weight * split.r, w.pixel);
+        at += 1u;
     }
-    if split.refr.w != 0.0 && split.t * max_element(w.weight) > 1e-3 {
-        let at = atomicAdd(&counters[NEXT], 1u);
+    if refracts {
         queue_out[at] = RayWork(RayIn(s.p - s.ng * s.offset, 0.0, split.refr.xyz, T_FAR), w.weight * split.t, w.pixel);
     }
 }
