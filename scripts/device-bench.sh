@@ -15,7 +15,8 @@
 # query, with and without timestamps); "pixels": the default scene's camera rays by rows or blocks; "waves": its
 # frame in waves of WAVES samples; "checks": its kernels with and without wgpu's run-time checks; "appends": its
 # shade_hits reserving queue slots a lane or a subgroup at a time) picks the parts; TRACERS (default "gpu block
-# checked ifif wg split sorted costs cpu embree"; wg = the fused kernel at 32, 128 and 256 threads a workgroup; checked = the fused
+# checked ifif wg split sorted costs cpu embree"; also "split-atomic": the split kernels' lists filled a lane at a time (RAYSTREAM_GPU_APPENDS=atomic);
+# wg = the fused kernel at 32, 128 and 256 threads a workgroup; checked = the fused
 # kernel with wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=on; off by default); block = the fused kernel with
 # RAYSTREAM_GPU_WAIT=block, blocking waits against the spinning ones a hardware GPU has by default; sorted = the diffuse and random
 # sets reordered by sort-rays.py; costs = the fused kernel on trees built with --sah-traversal-cost 2, 4, 8) the tracers of
@@ -74,6 +75,11 @@ has "$parts" trace && for m in ${MESHES:-stanford_bunny stanford_lucy_100k turbi
       $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-$k.hits" "${any[@]}" --device gpu --kernels $k --repeat 10 --json --quiet \
         "${stats[@]}" | tag "$t, \"tracer\": \"raystream-gpu-$k\"}"
     done
+    # The split kernels with their lists filled a lane at a time (RAYSTREAM_GPU_APPENDS=atomic;
+    # a subgroup at a time by default where the adapter has subgroups): the same hits, faster?
+    has "$tracers" split-atomic && { RAYSTREAM_GPU_APPENDS=atomic $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-split-atomic.hits" \
+      "${any[@]}" --device gpu --kernels split --repeat 10 --json --quiet | tag "$t, \"tracer\": \"raystream-gpu-split-atomic\"}"
+      cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-split-atomic.hits" || echo "$m $kind: SPLIT-ATOMIC HITS DIFFER from fused"; }
     # Leaf size: the SAH builder pricing a traversal step dearer (shallower trees, fuller leaves).
     has "$tracers" costs && for kt in 2 4 8; do
       $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-kt.hits" "${any[@]}" --device gpu --sah-traversal-cost $kt --repeat 10 --json \

@@ -67,6 +67,37 @@ fn kdtree_wgsl_sized(workgroup: u32) -> String {
     )
 }
 
+/// WGSL `fn append(slot: u32, n: u32) -> u32` over the queue counters `counters` (an
+/// `array<atomic<u32>, _>` of the module), for kernels that append to queues (`shade_hits`, the
+/// split kernels): it reserves `n` consecutive slots of the queue counted by `counters[slot]`
+/// and returns the first. A lane at a time, that is an atomic add of `n`; with
+/// `subgroups` (the device needs wgpu's SUBGROUP feature), the subgroup's first active lane
+/// adds the subgroup's total (warp-aggregated atomics: one atomic on the shared counter a
+/// subgroup instead of one a lane) and each lane takes its place after the lanes before it (a
+/// prefix sum), so every active lane of a subgroup must call it together, `n` 0 where a lane
+/// appends nothing.
+fn append_wgsl(subgroups: bool, counters: &str) -> String {
+    let body = if subgroups {
+        // The first active lane (none before it) is the one subgroupBroadcastFirst reads;
+        // naga has no subgroupElect.
+        "    let total = subgroupAdd(n);
+    var first = 0u;
+    if subgroupExclusiveAdd(1u) == 0u && total != 0u {
+        first = atomicAdd(&COUNTERS[slot], total);
+    }
+    return subgroupBroadcastFirst(first) + subgroupExclusiveAdd(n);"
+    } else {
+        "    if n == 0u {
+        return 0u;
+    }
+    return atomicAdd(&COUNTERS[slot], n);"
+    };
+    format!(
+        "\n// Reserves `n` consecutive slots of the queue counted by `{counters}[slot]`; returns the first.\nfn append(slot: u32, n: u32) -> u32 {{\n{}\n}}\n",
+        body.replace("COUNTERS", counters)
+    )
+}
+
 /// The WGSL source of the statistics query (`stats_closest`, `stats_any`); needs subgroups.
 pub fn stats_wgsl() -> String {
     format!(

@@ -62,47 +62,13 @@ pub const FILM_SCALE: f32 = (1u32 << 24) as f32;
 /// The largest single contribution the film takes (keeps one rounded step inside a u32).
 pub const MAX_CONTRIBUTION: f32 = 255.0;
 
-/// `append(slot, n)` for render.wgsl, a lane at a time: an atomic add of `n` to the counter.
-const APPEND_ATOMIC_WGSL: &str = "
-// Reserves `n` consecutive slots of the queue counted by `counters[slot]`; returns the first.
-fn append(slot: u32, n: u32) -> u32 {
-    if n == 0u {
-        return 0u;
-    }
-    return atomicAdd(&counters[slot], n);
-}
-";
-
-/// `append(slot, n)` for render.wgsl, a subgroup at a time: the first active lane adds the
-/// subgroup's total to the counter (warp-aggregated atomics), and each lane takes its place
-/// after the lanes before it (a prefix sum). Every active lane of a subgroup must call it
-/// together, `n` 0 where a lane appends nothing.
-const APPEND_SUBGROUP_WGSL: &str = "
-// Reserves `n` consecutive slots of the queue counted by `counters[slot]`; returns the first.
-// The subgroup's active lanes reserve theirs with one atomic add.
-fn append(slot: u32, n: u32) -> u32 {
-    let total = subgroupAdd(n);
-    // The first active lane (none before it), as subgroupBroadcastFirst reads it; naga has no
-    // subgroupElect.
-    var first = 0u;
-    if subgroupExclusiveAdd(1u) == 0u && total != 0u {
-        first = atomicAdd(&counters[slot], total);
-    }
-    return subgroupBroadcastFirst(first) + subgroupExclusiveAdd(n);
-}
-";
-
 /// The WGSL source of the render kernels: the kd-tree code, the render constants, the kernels,
 /// and the volume stages (the volume core and `kernels/medium.wgsl`). `subgroup_appends`:
 /// `shade_hits` reserves queue slots a subgroup at a time (the device needs wgpu's SUBGROUP
 /// feature; [`crate::GpuContext::set_subgroup_appends`]).
 pub fn render_wgsl(subgroup_appends: bool) -> String {
     use counter::*;
-    let append = if subgroup_appends {
-        APPEND_SUBGROUP_WGSL
-    } else {
-        APPEND_ATOMIC_WGSL
-    };
+    let append = crate::append_wgsl(subgroup_appends, "counters");
     format!(
         "{}\nconst FILM_SCALE: f32 = {FILM_SCALE:?};\nconst MAX_CONTRIBUTION: f32 = {MAX_CONTRIBUTION:?};\nconst COUNTER_SLOTS: u32 = {SLOTS}u;\nconst QUEUE: u32 = {QUEUE}u;\nconst NEXT: u32 = {NEXT}u;\nconst SHADOWS: u32 = {SHADOWS}u;\nconst HITS: u32 = {HITS}u;\nconst STAT_RAYS: u32 = {STAT_RAYS}u;\nconst STAT_HITS: u32 = {STAT_HITS}u;\nconst STAT_SHADOWS: u32 = {STAT_SHADOWS}u;\nconst DEPTH: u32 = {DEPTH}u;\nconst NO_TEXTURE: u32 = {NO_TEXTURE}u;\nconst TEXTURE_INFO: u32 = {TEXTURE_INFO}u;\nconst TEXTURE_INFO_WORDS: u32 = {TEXTURE_INFO_WORDS}u;\n\n{COMMON_WGSL}\n{RENDER_WGSL}\n{append}\n{}\n{MEDIUM_WGSL}",
         kdtree_wgsl(),

@@ -18,9 +18,15 @@ const SPLIT_WGSL: &str = include_str!("kernels/split.wgsl");
 /// Leaf steps recorded per submission.
 pub const ITERATIONS_PER_SUBMIT: u32 = 16;
 
-/// The WGSL source of the split kernels.
-pub fn split_wgsl() -> String {
-    format!("{}\n{SPLIT_WGSL}", kdtree_wgsl())
+/// The WGSL source of the split kernels; `subgroup_appends`: their lists' slots reserved a
+/// subgroup at a time ([`crate::GpuContext::set_subgroup_appends`]; the device needs wgpu's
+/// SUBGROUP feature).
+pub fn split_wgsl(subgroup_appends: bool) -> String {
+    format!(
+        "{}\n{SPLIT_WGSL}\n{}",
+        kdtree_wgsl(),
+        crate::append_wgsl(subgroup_appends, "counts")
+    )
 }
 
 /// The split pipelines of one tracer (built on first use).
@@ -41,12 +47,7 @@ impl SplitKernels {
             ctx.buffer_layout("split lists", &[rw; 5]),
             ctx.buffer_layout("split args", &[rw]),
         ];
-        let module = ctx
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("split.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(split_wgsl().into()),
-            });
+        let module = ctx.tree_module("split.wgsl", split_wgsl(ctx.subgroup_appends()), false);
         let [tree, lists, args] = &layouts;
         let work = ctx.pipeline_layout("split", &[tree, lists]);
         let control = ctx.pipeline_layout("split", &[tree, lists, args]);

@@ -36,7 +36,8 @@ fn all_kernel_modules() -> Vec<(&'static str, String)> {
     vec![
         ("queries.wgsl", queries_wgsl()),
         ("stats.wgsl", stats_wgsl()),
-        ("split.wgsl", split_wgsl()),
+        ("split.wgsl", split_wgsl(false)),
+        ("split.wgsl, subgroup appends", split_wgsl(true)),
         ("render.wgsl", render_wgsl(false)),
         ("render.wgsl, subgroup appends", render_wgsl(true)),
         ("film.wgsl", render::film_wgsl()),
@@ -141,7 +142,7 @@ fn check_struct(module: &naga::Module, name: &str, size: usize, offsets: &[(&str
 #[test]
 fn wgsl_structs_match_rust() {
     let module = naga_module(&queries_wgsl(), "queries.wgsl");
-    naga_module(&split_wgsl(), "split.wgsl");
+    naga_module(&split_wgsl(false), "split.wgsl");
     let check = |name: &str, size: usize, offsets: &[(&str, usize)]| {
         check_struct(&module, name, size, offsets)
     };
@@ -721,6 +722,35 @@ fn gpu_hits_equal_cpu_hits_on_every_mesh() {
             }
         }
     }
+}
+
+/// The split kernels' lists filled a lane at a time or a subgroup at a time (the default where
+/// the adapter has subgroups): the lists' order differs, the hits and the steps do not.
+#[test]
+fn split_kernels_give_the_same_hits_however_their_lists_fill() {
+    let Some(mut ctx) = gpu() else { return };
+    let mesh = shared_mesh("stanford_bunny.ply");
+    let tree = KdTree::build(&mesh, Builder::Sah);
+    let rays = test_rays(&mesh, 4096);
+    let mut runs = Vec::new();
+    for subgroups in [true, false] {
+        ctx.set_subgroup_appends(subgroups);
+        let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+        let (fused, _) = tracer.trace(&rays, false).unwrap();
+        for any in [false, true] {
+            let (split, times) = tracer.trace_with(&rays, any, Kernels::Split).unwrap();
+            if !any {
+                assert_eq!(
+                    fused, split,
+                    "subgroup appends {subgroups}: split differs from fused"
+                );
+            }
+            runs.push((split, times.split_steps));
+        }
+    }
+    assert!(runs[0].1.is_some_and(|s| s > 1));
+    assert_eq!(runs[0], runs[2], "closest hits");
+    assert_eq!(runs[1], runs[3], "any hits");
 }
 
 /// The statistics query walks the same nodes as the CPU's rope traversal, step for step: the

@@ -47,10 +47,13 @@ fn split_init(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     hits[i] = miss_record();
     let w = walk_of(r);
     let span = clip_to_scene(r, w);
-    if span.x <= span.y {
+    // Into the list that the first split_advance makes the active one (`append`, from the
+    // Rust prelude, may reserve a subgroup's slots at once: every lane calls it).
+    let enters = span.x <= span.y;
+    let at = append(1u, select(0u, 1u, enters));
+    if enters {
         state[i] = RayState(span.x, entry_node(w, span.x));
-        // Into the list that the first split_advance makes the active one.
-        next_live[atomicAdd(&counts[1], 1u)] = i;
+        next_live[at] = i;
     }
 }
 
@@ -78,18 +81,23 @@ fn split_intersect(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_w
     let li = item.leaf & ~LEAF_BIT;
     var best = hits[i];
     let any_hit = ANY_HIT != 0u;
+    // An any-hit query ends at its first hit.
+    var done = false;
     if intersect_leaf(li, r, w, any_hit, &best) {
         hits[i] = best;
-        if any_hit {
-            return;
-        }
+        done = any_hit;
     }
-    let exit = leaf_exit(li, w, best, r.t_max);
-    if exit.next == NO_ROPE {
-        return;
+    var exit = Exit(0.0, NO_ROPE);
+    if !done {
+        exit = leaf_exit(li, w, best, r.t_max);
     }
-    state[i] = RayState(max(state[i].t_entry, exit.t), exit.next);
-    next_live[atomicAdd(&counts[1], 1u)] = i;
+    // Unfinished rays back to the other list; every lane calls `append` (see split_init).
+    let goes_on = exit.next != NO_ROPE;
+    let at = append(1u, select(0u, 1u, goes_on));
+    if goes_on {
+        state[i] = RayState(max(state[i].t_entry, exit.t), exit.next);
+        next_live[at] = i;
+    }
 }
 
 @compute @workgroup_size(1)
