@@ -175,7 +175,7 @@ pub struct GpuContext {
     /// Kernels time their passes with timestamp queries where the adapter has them (see
     /// [`GpuContext::set_timestamps`]).
     timestamps: bool,
-    /// The stream renderer's `shade_hits` reserves queue slots a subgroup at a time where the
+    /// `shade_hits` and the split kernels reserve queue slots a subgroup at a time where the
     /// adapter has subgroup operations (see [`GpuContext::set_subgroup_appends`]).
     subgroup_appends: bool,
     /// Tests only: the work buffers by these names fail as out of memory, each once, while
@@ -384,13 +384,13 @@ impl GpuContext {
         self.timestamps = on;
     }
 
-    /// Whether the stream renderers made after it reserve their queues' slots in `shade_hits`
-    /// a subgroup at a time (one atomic add a subgroup for its hit count, each light's shadow
-    /// rays and the next depth's rays, the lanes' slots by prefix sums) or a lane at a time
-    /// (an atomic add for every hit, shadow ray and derived ray, all on the same three
-    /// counters). Subgroups only where the adapter has subgroup operations; the film is the
-    /// same either way (its sums do not depend on the queues' order). The CLI's
-    /// `RAYSTREAM_GPU_APPENDS=subgroup|atomic`.
+    /// Whether the stream renderers and split kernels made after it reserve their queues'
+    /// slots a subgroup at a time (`shade_hits`: one atomic add a subgroup for its hit count,
+    /// each light's shadow rays and the next depth's rays; the split kernels: one for the rays
+    /// going on to the next leaf step; the lanes' slots by prefix sums) or a lane at a time
+    /// (an atomic add for every ray, all on the same few counters). Subgroups only where the
+    /// adapter has subgroup operations; the film and the hits are the same either way (they
+    /// do not depend on the queues' order). The CLI's `RAYSTREAM_GPU_APPENDS=subgroup|atomic`.
     pub fn set_subgroup_appends(&mut self, on: bool) {
         self.subgroup_appends = on;
     }

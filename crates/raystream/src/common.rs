@@ -83,9 +83,9 @@ pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Back
     // workgroup (an experiment for `trace`; see BENCHMARKS.md).
     // `RAYSTREAM_GPU_TIMESTAMPS=off`: no timestamp queries (no kernel times; what they add to
     // a query's wall time, device-bench.sh's floor part).
-    // `RAYSTREAM_GPU_APPENDS=subgroup|atomic`: the stream renderer's `shade_hits` reserves
-    // queue slots a subgroup at a time (the default where the adapter has subgroups) or a lane
-    // at a time (GpuContext::set_subgroup_appends; the same image).
+    // `RAYSTREAM_GPU_APPENDS=subgroup|atomic`: the stream renderer's `shade_hits` and the split
+    // kernels reserve queue slots a subgroup at a time (the default where the adapter has
+    // subgroups) or a lane at a time (GpuContext::set_subgroup_appends; the same image and hits).
     let open = |adapter| {
         GpuContext::new(adapter).and_then(|mut ctx| {
             let spin = env_switch(&ctx, "RAYSTREAM_GPU_WAIT", ["spin", "block"])?;
