@@ -121,9 +121,12 @@ fn watertight_ray(r: RayIn) -> Watertight {
 // ray's axis as its index, and each holds the three corners: the arithmetic is the CPU's
 // (intersect.rs), three corners at a time.
 fn intersect_triangle(w: Watertight, i: u32, t_min: f32, t_max: f32) -> vec4<f32> {
-    let z = tris[i].axes[w.k.z].xyz - w.o.z;
-    let x = (tris[i].axes[w.k.x].xyz - w.o.x) - w.shear.x * z;
-    let y = (tris[i].axes[w.k.y].xyz - w.o.y) - w.shear.y * z;
+    let rx = tris[i].axes[w.k.x].xyz;
+    let ry = tris[i].axes[w.k.y].xyz;
+    let rz = tris[i].axes[w.k.z].xyz;
+    let z = rz - w.o.z;
+    let x = (rx - w.o.x) - w.shear.x * z;
+    let y = (ry - w.o.y) - w.shear.y * z;
     // Corners a, b, c are components x, y, z of each.
     let u = x.z * y.y - y.z * x.y;
     let v = x.x * y.z - y.x * x.z;
@@ -135,11 +138,26 @@ fn intersect_triangle(w: Watertight, i: u32, t_min: f32, t_max: f32) -> vec4<f32
     if det == 0.0 {
         return vec4<f32>(0.0);
     }
-    let t = w.shear.z * (u * z.x + v * z.y + ww * z.z) / det;
-    if !(t >= t_min && t <= t_max) {
+    // A ray all but parallel to the plane may reach it at infinity: no hit.
+    let t = plane_t(rx, ry, rz, w);
+    if !(t >= t_min && t <= t_max) || not_finite(t) {
         return vec4<f32>(0.0);
     }
     return vec4<f32>(t, v / det, ww / det, 1.0);
+}
+
+// The distance along the ray to the triangle's plane, from its corners' coordinates along kx,
+// ky, kz (rows x, y, z): t = sz · n·(a − o) / n·(sx, sy, 1), n from the corners' edges, as
+// the CPU computes it (intersect.rs `plane_t`, which says why not the paper's depths
+// interpolated by the edge functions: they cancel where the triangle's projection along the
+// ray is a sliver, such as a long ground plane seen at a grazing angle).
+fn plane_t(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight) -> f32 {
+    let e1 = vec3<f32>(x.y - x.x, y.y - y.x, z.y - z.x);
+    let e2 = vec3<f32>(x.z - x.x, y.z - y.x, z.z - z.x);
+    let n = vec3<f32>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+    let along = n.x * (x.x - w.o.x) + n.y * (y.x - w.o.y) + n.z * (z.x - w.o.z);
+    let facing = n.x * w.shear.x + n.y * w.shear.y + n.z;
+    return w.shear.z * (along / facing);
 }
 
 fn miss_record() -> HitOut {
