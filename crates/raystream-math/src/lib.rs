@@ -7,7 +7,9 @@ pub use glam::{
 
 /// The largest coordinate a mesh, scene or volume may hold, in scene units (millimetres for
 /// CT). The watertight triangle test (Woop et al. 2013) multiplies three coordinate differences
-/// in f32, which overflows from about 7·10¹² on, and the CPU and GPU then disagree; 10¹⁰
+/// in f32 (its t, the plane's normal from two edges dotted with a third difference, up to 48
+/// times the cube of the largest coordinate), which overflows from about 2·10¹² on, and the CPU
+/// and GPU then disagree; 10¹⁰
 /// leaves room for the ground and the camera placed around the objects (tens of times their
 /// size). Inputs beyond it are refused with an error, not rendered wrong.
 pub const MAX_COORDINATE: f32 = 1e10;
