@@ -143,7 +143,9 @@ fn intersect_triangle(w: Watertight, i: u32, t_min: f32, t_max: f32) -> vec4<f32
     if !(t >= t_min && t <= t_max) || not_finite(t) {
         return vec4<f32>(0.0);
     }
-    return vec4<f32>(t, v / det, ww / det, 1.0);
+    // One reciprocal for both weights, as the CPU computes them.
+    let inv = 1.0 / det;
+    return vec4<f32>(t, v * inv, ww * inv, 1.0);
 }
 
 // The distance along the ray to the triangle's plane, from its corners' coordinates along kx,
