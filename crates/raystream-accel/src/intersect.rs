@@ -2,8 +2,9 @@
 //! Intersection", JCGT 2(1)). Rays through a shared edge or vertex hit at least one of the
 //! triangles sharing it, so closed meshes have no cracks.
 //!
-//! Contract: a hit needs `t_min ≤ t ≤ t_max` and a finite `t`; edges count as inside; degenerate triangles and
-//! rays in the triangle's plane never hit. `u`, `v` are the weights of v1 and v2.
+//! Contract: a hit needs a finite `t` with `t_min ≤ t ≤ t_max`; edges count as inside;
+//! degenerate triangles and rays in the triangle's plane never hit. `u`, `v` are the weights of
+//! v1 and v2.
 
 use raystream_math::{Ray, Vec3};
 
