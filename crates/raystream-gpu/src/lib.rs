@@ -395,8 +395,9 @@ impl GpuContext {
         self.subgroup_appends = on;
     }
 
-    /// Whether the stream renderers made after now reserve queue slots a subgroup at a time:
-    /// asked for ([`GpuContext::set_subgroup_appends`]) and possible on this adapter.
+    /// Whether the stream renderers and split kernels made after now reserve queue slots a
+    /// subgroup at a time: asked for ([`GpuContext::set_subgroup_appends`]) and possible on
+    /// this adapter.
     pub fn subgroup_appends(&self) -> bool {
         self.subgroup_appends && self.device.features().contains(wgpu::Features::SUBGROUP)
     }

@@ -404,8 +404,9 @@ fn shade_hits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     if atomicLoad(&counters[DEPTH]) >= rp.max_depth {
         return;
     }
-    let reflects = split.r * max_element(w.weight) > 1e-3;
-    let refracts = split.refr.w != 0.0 && split.t * max_element(w.weight) > 1e-3;
+    let strongest = max_element(w.weight);
+    let reflects = split.r * strongest > 1e-3;
+    let refracts = split.refr.w != 0.0 && split.t * strongest > 1e-3;
     var at = append(NEXT, select(0u, 1u, reflects) + select(0u, 1u, refracts));
     if reflects {
         var d = reflect_about(s.dir, s.ns);

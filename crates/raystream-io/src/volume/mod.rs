@@ -396,8 +396,9 @@ pub const MAX_GRID_REACH_MM: f64 = 1e6;
 /// as an f32 it would vanish into denormals.
 pub const MIN_SPACING_MM: f64 = 1e-9;
 
-/// Dimensions within [`MAX_VOXELS`], spacing finite and at least [`MIN_SPACING_MM`], origin finite, the grid
-/// within ±[`MAX_GRID_REACH_MM`], direction finite with unit, linearly independent columns.
+/// Dimensions within [`MAX_VOXELS`], spacing finite and at least [`MIN_SPACING_MM`], origin
+/// finite, the grid within ±[`MAX_GRID_REACH_MM`], direction finite with unit, linearly
+/// independent columns.
 /// Called on header values before any allocation, and again on the finished volume.
 pub(crate) fn check_geometry(
     path: &Path,
