@@ -143,21 +143,19 @@ impl GpuDenoiser {
         opt: &DenoiseOptions,
         work: &DenoiseBuffers,
     ) -> Result<(Image, Vec<f32>), GpuError> {
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let light = self.filter_on_gpu(ctx, (frame, (w, h)), guides, opt, None, work)?;
-        let n = w as usize * h as usize;
-        let mut out: Vec<[f32; 4]> = read_back(ctx, light)?;
-        // The buffers may be larger than the frame.
-        out.truncate(n);
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(ctx.err(e));
-        }
-        let film = Image {
-            width: w,
-            height: h,
-            pixels: out.iter().map(|c| Vec3::new(c[0], c[1], c[2])).collect(),
-        };
-        Ok((film, out.iter().map(|c| c[3]).collect()))
+        ctx.scoped(|| {
+            let light = self.filter_on_gpu(ctx, (frame, (w, h)), guides, opt, None, work)?;
+            let n = w as usize * h as usize;
+            let mut out: Vec<[f32; 4]> = read_back(ctx, light)?;
+            // The buffers may be larger than the frame.
+            out.truncate(n);
+            let film = Image {
+                width: w,
+                height: h,
+                pixels: out.iter().map(|c| Vec3::new(c[0], c[1], c[2])).collect(),
+            };
+            Ok((film, out.iter().map(|c| c[3]).collect()))
+        })
     }
 
     /// [`Self::filter`], its passes submitted and its output left on the GPU, in one of

@@ -481,12 +481,18 @@ impl GpuContext {
                 std::hint::spin_loop();
             }
         }
+        // A wait that fails because its submission did (an earlier error that no scope
+        // caught made it invalid) reports that error, the cause.
         self.device
             .poll(wgpu::PollType::Wait {
                 submission_index: index,
                 timeout: Some(GPU_TIMEOUT),
             })
-            .map_err(|e| self.err(format!("waiting for the GPU: {e}")))?;
+            .map_err(|e| {
+                self.check_uncaptured()
+                    .err()
+                    .unwrap_or_else(|| self.err(format!("waiting for the GPU: {e}")))
+            })?;
         self.check_uncaptured()
     }
 
@@ -553,6 +559,19 @@ impl GpuContext {
                 mapped_at_creation: false,
             })
         })
+    }
+
+    /// Runs `work` inside an error scope of wgpu's validation errors, and returns the error the
+    /// scope caught, if it caught one, even where `work` failed too: an invalid pipeline,
+    /// binding or dispatch is the cause, and what `work` saw of it (a submission that failed, a
+    /// wait for it) only its consequence.
+    fn scoped<T>(&self, work: impl FnOnce() -> Result<T, GpuError>) -> Result<T, GpuError> {
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let result = work();
+        match pollster::block_on(scope.pop()) {
+            Some(e) => Err(self.err(e)),
+            None => result,
+        }
     }
 
     /// Makes `what`, a buffer of `size` bytes, with `make`; out of memory is an error naming it
@@ -950,37 +969,36 @@ impl<'a> GpuTracer<'a> {
             .map(|t| t.prim() as u64 + 1)
             .max()
             .unwrap_or(0);
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let inners = ctx.storage(
-            "kd inner nodes",
-            bytemuck::cast_slice(&tree.inners),
-            wgpu::BufferUsages::empty(),
-        )?;
-        let leaves = ctx.storage(
-            "kd leaves",
-            bytemuck::cast_slice(&tree.leaves),
-            wgpu::BufferUsages::empty(),
-        )?;
-        let tris = ctx.storage(
-            "kd triangles",
-            bytemuck::cast_slice(&tree.tris),
-            wgpu::BufferUsages::empty(),
-        )?;
-        let entry = ctx.storage(
-            "kd entry grid",
-            bytemuck::cast_slice(&tree.entry.cells),
-            wgpu::BufferUsages::empty(),
-        )?;
-        let module = ctx.tree_module(
-            "queries.wgsl",
-            queries_wgsl_sized(ctx.query_workgroup),
-            false,
-        );
-        let closest = ctx.auto_pipeline(&module, "intersect_closest");
-        let any = ctx.auto_pipeline(&module, "intersect_any");
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(ctx.err(e));
-        }
+        let (inners, leaves, tris, entry, module, closest, any) = ctx.scoped(|| {
+            let inners = ctx.storage(
+                "kd inner nodes",
+                bytemuck::cast_slice(&tree.inners),
+                wgpu::BufferUsages::empty(),
+            )?;
+            let leaves = ctx.storage(
+                "kd leaves",
+                bytemuck::cast_slice(&tree.leaves),
+                wgpu::BufferUsages::empty(),
+            )?;
+            let tris = ctx.storage(
+                "kd triangles",
+                bytemuck::cast_slice(&tree.tris),
+                wgpu::BufferUsages::empty(),
+            )?;
+            let entry = ctx.storage(
+                "kd entry grid",
+                bytemuck::cast_slice(&tree.entry.cells),
+                wgpu::BufferUsages::empty(),
+            )?;
+            let module = ctx.tree_module(
+                "queries.wgsl",
+                queries_wgsl_sized(ctx.query_workgroup),
+                false,
+            );
+            let closest = ctx.auto_pipeline(&module, "intersect_closest");
+            let any = ctx.auto_pipeline(&module, "intersect_any");
+            Ok((inners, leaves, tris, entry, module, closest, any))
+        })?;
         ctx.wait()?;
         let b = tree.bounds;
         let g = &tree.entry;
@@ -1097,58 +1115,57 @@ impl<'a> GpuTracer<'a> {
         if !ctx.device.features().contains(wgpu::Features::SUBGROUP) {
             return Ok(None);
         }
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let pipeline = &self.stats.get_or_init(|| {
-            let module = ctx
-                .device
-                .create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some("stats.wgsl"),
-                    source: wgpu::ShaderSource::Wgsl(stats_wgsl().into()),
-                });
-            [
-                "stats_closest",
-                "stats_any",
-                "stats_closest_ifif",
-                "stats_any_ifif",
-            ]
-            .map(|entry| ctx.auto_pipeline(&module, entry))
-        })[2 * ifif as usize + any as usize];
-        let mut total = QueryStats {
-            rays: rays.len() as u64,
-            ..QueryStats::default()
-        };
-        for batch in rays.chunks(STATS_BATCH.min(self.max_rays)) {
-            let stats_buf = ctx.work_buffer(
-                "query statistics",
-                4 * STATS_WORDS as u64,
-                wgpu::BufferUsages::empty(),
-            )?;
-            let dims = ctx.dims(batch.len() as u32);
-            let q = self.bind_query(batch, pipeline, "query statistics", dims, Some(stats_buf))?;
-            self.run_fused(&q, None)?;
-            let stats_buf = q.slot7.as_ref().expect("bound above");
-            let w = read_words(ctx, stats_buf)?;
-            let counter = |k: usize| u64_at(&w, k);
-            for k in 0..3 {
-                total.steps[k] += counter(k);
-                total.active_lanes[k] += counter(4 + k);
-                total.lane_slots[k] += counter(7 + k);
+        ctx.scoped(|| {
+            let pipeline = &self.stats.get_or_init(|| {
+                let module = ctx
+                    .device
+                    .create_shader_module(wgpu::ShaderModuleDescriptor {
+                        label: Some("stats.wgsl"),
+                        source: wgpu::ShaderSource::Wgsl(stats_wgsl().into()),
+                    });
+                [
+                    "stats_closest",
+                    "stats_any",
+                    "stats_closest_ifif",
+                    "stats_any_ifif",
+                ]
+                .map(|entry| ctx.auto_pipeline(&module, entry))
+            })[2 * ifif as usize + any as usize];
+            let mut total = QueryStats {
+                rays: rays.len() as u64,
+                ..QueryStats::default()
+            };
+            for batch in rays.chunks(STATS_BATCH.min(self.max_rays)) {
+                let stats_buf = ctx.work_buffer(
+                    "query statistics",
+                    4 * STATS_WORDS as u64,
+                    wgpu::BufferUsages::empty(),
+                )?;
+                let dims = ctx.dims(batch.len() as u32);
+                let q =
+                    self.bind_query(batch, pipeline, "query statistics", dims, Some(stats_buf))?;
+                self.run_fused(&q, None)?;
+                let stats_buf = q.slot7.as_ref().expect("bound above");
+                let w = read_words(ctx, stats_buf)?;
+                let counter = |k: usize| u64_at(&w, k);
+                for k in 0..3 {
+                    total.steps[k] += counter(k);
+                    total.active_lanes[k] += counter(4 + k);
+                    total.lane_slots[k] += counter(7 + k);
+                }
+                total.listed += counter(3);
+                // Every invocation that entered has left: the residency count balances.
+                if w[STATS_LIVE] != 0 {
+                    return Err(ctx.err(format!(
+                        "the statistics query's residency count ended at {} instead of 0",
+                        w[STATS_LIVE] as i32
+                    )));
+                }
+                total.peak_resident = total.peak_resident.max(w[STATS_PEAK] as u64);
+                total.subgroup_size = total.subgroup_size.max(w[STATS_LANES]);
             }
-            total.listed += counter(3);
-            // Every invocation that entered has left: the residency count balances.
-            if w[STATS_LIVE] != 0 {
-                return Err(ctx.err(format!(
-                    "the statistics query's residency count ended at {} instead of 0",
-                    w[STATS_LIVE] as i32
-                )));
-            }
-            total.peak_resident = total.peak_resident.max(w[STATS_PEAK] as u64);
-            total.subgroup_size = total.subgroup_size.max(w[STATS_LANES]);
-        }
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(ctx.err(e));
-        }
-        Ok(Some(total))
+            Ok(Some(total))
+        })
     }
 
     fn split_kernels(&self) -> &split::SplitKernels {
@@ -1312,33 +1329,31 @@ impl<'a> GpuTracer<'a> {
         if kernels == Kernels::Split || rays.is_empty() || runs == 0 || rays.len() > self.max_rays {
             return Ok(None);
         }
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let q = self.query(rays, any, kernels)?;
-        ctx.settle(&[&q.hit_buf])?;
-        let t0 = Instant::now();
-        let mut enc = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("streamed queries"),
-            });
-        for run in 0..runs {
-            // The persistent kernels' ray counter restarts for each query.
-            if let Some(next_ray) = &q.slot7 {
-                enc.clear_buffer(next_ray, 0, None);
+        ctx.scoped(|| {
+            let q = self.query(rays, any, kernels)?;
+            ctx.settle(&[&q.hit_buf])?;
+            let t0 = Instant::now();
+            let mut enc = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("streamed queries"),
+                });
+            for run in 0..runs {
+                // The persistent kernels' ray counter restarts for each query.
+                if let Some(next_ray) = &q.slot7 {
+                    enc.clear_buffer(next_ray, 0, None);
+                }
+                if run + 1 == runs {
+                    enc.clear_buffer(&q.hit_buf, 0, None);
+                }
+                record_pass(&mut enc, &q, None);
             }
-            if run + 1 == runs {
-                enc.clear_buffer(&q.hit_buf, 0, None);
-            }
-            record_pass(&mut enc, &q, None);
-        }
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait()?;
-        let ms = t0.elapsed().as_secs_f64() * 1e3 / runs as f64;
-        let hits = read_back(ctx, &q.hit_buf)?;
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(ctx.err(e));
-        }
-        Ok(Some((hits, ms)))
+            ctx.queue.submit([enc.finish()]);
+            ctx.wait()?;
+            let ms = t0.elapsed().as_secs_f64() * 1e3 / runs as f64;
+            let hits = read_back(ctx, &q.hit_buf)?;
+            Ok(Some((hits, ms)))
+        })
     }
 
     /// As [`GpuTracer::trace`], with the fused or the split kernels (same hits).
@@ -1381,63 +1396,61 @@ impl<'a> GpuTracer<'a> {
             return self.trace_chunked(rays, any, kernels, chunk, timed);
         }
         let t0 = Instant::now();
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let q = self.query(rays, any, kernels)?;
-        let Query {
-            ref ray_buf,
-            ref hit_buf,
-            hit_bytes,
-            ref param_buf,
-            ..
-        } = q;
-        let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("hits readback"),
-            size: hit_bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let timer = if timed { ctx.timer(2) } else { None };
-        // The rays' copy and the hits' zeroing are the upload's, not the timed query's.
-        ctx.settle(&[hit_buf])?;
-        let upload_ms = t0.elapsed().as_secs_f64() * 1e3;
-
-        // Submission to completion: one round trip (the timestamps travel back with it).
-        let t1 = Instant::now();
-        let (kernel_gpu_ms, split_steps) = match kernels {
-            Kernels::Fused | Kernels::IfIf | Kernels::Persistent | Kernels::Floor => {
-                (self.run_fused(&q, timer.as_ref())?, None)
-            }
-            Kernels::Split => {
-                let r = split::run(self, param_buf, ray_buf, hit_buf, n as u32, any)?;
-                (r.kernel_gpu_ms, Some(r.steps))
-            }
-        };
-        ctx.wait()?;
-        let kernel_ms = t1.elapsed().as_secs_f64() * 1e3;
-
-        let t2 = Instant::now();
-        let mut enc = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("readback"),
+        ctx.scoped(|| {
+            let q = self.query(rays, any, kernels)?;
+            let Query {
+                ref ray_buf,
+                ref hit_buf,
+                hit_bytes,
+                ref param_buf,
+                ..
+            } = q;
+            let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("hits readback"),
+                size: hit_bytes,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
             });
-        enc.copy_buffer_to_buffer(hit_buf, 0, &readback, 0, hit_bytes);
-        ctx.queue.submit([enc.finish()]);
-        let hits: Vec<GpuHit> = read_back(ctx, &readback)?;
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(ctx.err(e));
-        }
-        let readback_ms = t2.elapsed().as_secs_f64() * 1e3;
-        Ok((
-            hits,
-            TraceTimes {
-                upload_ms,
-                kernel_ms,
-                readback_ms,
-                kernel_gpu_ms,
-                split_steps,
-            },
-        ))
+            let timer = if timed { ctx.timer(2) } else { None };
+            // The rays' copy and the hits' zeroing are the upload's, not the timed query's.
+            ctx.settle(&[hit_buf])?;
+            let upload_ms = t0.elapsed().as_secs_f64() * 1e3;
+
+            // Submission to completion: one round trip (the timestamps travel back with it).
+            let t1 = Instant::now();
+            let (kernel_gpu_ms, split_steps) = match kernels {
+                Kernels::Fused | Kernels::IfIf | Kernels::Persistent | Kernels::Floor => {
+                    (self.run_fused(&q, timer.as_ref())?, None)
+                }
+                Kernels::Split => {
+                    let r = split::run(self, param_buf, ray_buf, hit_buf, n as u32, any)?;
+                    (r.kernel_gpu_ms, Some(r.steps))
+                }
+            };
+            ctx.wait()?;
+            let kernel_ms = t1.elapsed().as_secs_f64() * 1e3;
+
+            let t2 = Instant::now();
+            let mut enc = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("readback"),
+                });
+            enc.copy_buffer_to_buffer(hit_buf, 0, &readback, 0, hit_bytes);
+            ctx.queue.submit([enc.finish()]);
+            let hits: Vec<GpuHit> = read_back(ctx, &readback)?;
+            let readback_ms = t2.elapsed().as_secs_f64() * 1e3;
+            Ok((
+                hits,
+                TraceTimes {
+                    upload_ms,
+                    kernel_ms,
+                    readback_ms,
+                    kernel_gpu_ms,
+                    split_steps,
+                },
+            ))
+        })
     }
 
     /// One dispatch of a query's kernel; its own time where timestamps exist.

@@ -454,168 +454,167 @@ impl<'a> GpuRenderer<'a> {
                 ctx.limits.max_storage_buffers_per_shader_stage
             )));
         }
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let vertices: Vec<Vertex> = scene
-            .mesh
-            .positions
-            .iter()
-            .zip(&scene.normals)
-            .zip(&scene.ray_offsets)
-            .map(|((p, n), &offset)| Vertex {
-                position: p.extend(1.0).to_array(),
-                normal: n.extend(offset).to_array(),
-            })
-            .collect();
-        let shade_tris: Vec<ShadeTri> = scene
-            .mesh
-            .triangles
-            .iter()
-            .zip(&scene.material_of)
-            .map(|(&v, &material)| ShadeTri { v, material })
-            .collect();
-        let materials: Vec<GpuMaterial> = scene
-            .materials
-            .iter()
-            .map(|m| GpuMaterial {
-                ambient: v3(m.ambient),
-                reflectivity: m.reflectivity,
-                diffuse: v3(m.diffuse),
-                transparency: m.transparency,
-                specular: v3(m.specular),
-                shininess: m.shininess,
-                ior: m.ior,
-                fresnel: m.fresnel as u32,
-                texture: m.texture.unwrap_or(NO_TEXTURE),
-                pad: 0,
-            })
-            .collect();
-        let lights: Vec<GpuLight> = scene.lights.iter().map(gpu_light).collect();
-        let none = wgpu::BufferUsages::empty();
-        let vertices = ctx.storage("vertices", bytemuck::cast_slice(&vertices), none)?;
-        let shade_tris =
-            ctx.storage("shading triangles", bytemuck::cast_slice(&shade_tris), none)?;
-        let materials = ctx.storage("materials", bytemuck::cast_slice(&materials), none)?;
-        let lights = ctx.storage(
-            "lights",
-            bytemuck::cast_slice(&lights),
-            wgpu::BufferUsages::COPY_DST,
-        )?;
-        let tri_uvs: Vec<TriUv> = scene
-            .uvs
-            .iter()
-            .map(|[a, b, c]| TriUv {
-                a: a.to_array(),
-                b: b.to_array(),
-                c: c.to_array(),
-            })
-            .collect();
-        // A scene without textures binds a zeroed element it never reads.
-        let tri_uvs = ctx.storage("texture coordinates", bytemuck::cast_slice(&tri_uvs), none)?;
-        let textures = ctx.storage(
-            "textures",
-            bytemuck::cast_slice(&texture_table(scene)),
-            none,
-        )?;
-        let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("render params"),
-            size: std::mem::size_of::<RenderParams>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let uniform = wgpu::BufferBindingType::Uniform;
-        let ro = wgpu::BufferBindingType::Storage { read_only: true };
-        let rw = wgpu::BufferBindingType::Storage { read_only: false };
-        let layouts = [
-            ctx.buffer_layout("kd-tree", &[uniform, ro, ro, ro, ro]),
-            ctx.buffer_layout("scene", &[uniform, ro, ro, ro, ro, ro, ro]),
-            ctx.buffer_layout("queues", &[rw; 6]),
-            ctx.buffer_layout("dispatch args", &[rw]),
-        ];
-        let medium_layout = scene.volume.as_ref().map(|_| medium_layout(ctx));
-        let module = ctx.tree_module(
-            "render.wgsl",
-            render_wgsl(ctx.subgroup_appends()),
-            scene.volume.is_some(),
-        );
-        // The kernels that write dispatch arguments see them as group 3; the others may not
-        // (a buffer cannot be storage and indirect-argument source in one dispatch).
-        let [tree_layout, scene_layout, queues, args] = &layouts;
-        let work = ctx.pipeline_layout("render", &[tree_layout, scene_layout, queues]);
-        let control = ctx.pipeline_layout("render", &[tree_layout, scene_layout, queues, args]);
-        // The volume stages see the volume as group 3.
-        let volume = medium_layout.as_ref().map(|m| {
-            ctx.pipeline_layout(
-                "render volume stages",
-                &[tree_layout, scene_layout, queues, m],
-            )
-        });
-        let pipelines = STAGES
-            .iter()
-            .enumerate()
-            .map(|(k, &entry)| {
-                let layout = match entry {
-                    "prepare_shadows" | "advance" => &control,
-                    _ if VOLUME_STAGES.contains(&k) => volume.as_ref()?,
-                    _ => &work,
-                };
-                Some(ctx.layout_pipeline(&module, entry, layout, &[]))
-            })
-            .collect();
-        let medium = match (&scene.volume, &medium_layout) {
-            (Some(v), Some(layout)) => {
-                let m = Medium::new(v, scene, tree, Traversal::Ropes);
-                let gpu = GpuVolume::new(ctx, &v.volume, &v.tf, m.marcher())?;
-                let group = medium_group(ctx, layout, &gpu, &m, v, scene.lights.len())?;
-                Some((gpu, group))
-            }
-            _ => None,
-        };
-        let film_layout = ctx.buffer_layout("film", &[ro, rw]);
-        let film_module = ctx
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("film.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(film_wgsl().into()),
+        ctx.scoped(|| {
+            let vertices: Vec<Vertex> = scene
+                .mesh
+                .positions
+                .iter()
+                .zip(&scene.normals)
+                .zip(&scene.ray_offsets)
+                .map(|((p, n), &offset)| Vertex {
+                    position: p.extend(1.0).to_array(),
+                    normal: n.extend(offset).to_array(),
+                })
+                .collect();
+            let shade_tris: Vec<ShadeTri> = scene
+                .mesh
+                .triangles
+                .iter()
+                .zip(&scene.material_of)
+                .map(|(&v, &material)| ShadeTri { v, material })
+                .collect();
+            let materials: Vec<GpuMaterial> = scene
+                .materials
+                .iter()
+                .map(|m| GpuMaterial {
+                    ambient: v3(m.ambient),
+                    reflectivity: m.reflectivity,
+                    diffuse: v3(m.diffuse),
+                    transparency: m.transparency,
+                    specular: v3(m.specular),
+                    shininess: m.shininess,
+                    ior: m.ior,
+                    fresnel: m.fresnel as u32,
+                    texture: m.texture.unwrap_or(NO_TEXTURE),
+                    pad: 0,
+                })
+                .collect();
+            let lights: Vec<GpuLight> = scene.lights.iter().map(gpu_light).collect();
+            let none = wgpu::BufferUsages::empty();
+            let vertices = ctx.storage("vertices", bytemuck::cast_slice(&vertices), none)?;
+            let shade_tris =
+                ctx.storage("shading triangles", bytemuck::cast_slice(&shade_tris), none)?;
+            let materials = ctx.storage("materials", bytemuck::cast_slice(&materials), none)?;
+            let lights = ctx.storage(
+                "lights",
+                bytemuck::cast_slice(&lights),
+                wgpu::BufferUsages::COPY_DST,
+            )?;
+            let tri_uvs: Vec<TriUv> = scene
+                .uvs
+                .iter()
+                .map(|[a, b, c]| TriUv {
+                    a: a.to_array(),
+                    b: b.to_array(),
+                    c: c.to_array(),
+                })
+                .collect();
+            // A scene without textures binds a zeroed element it never reads.
+            let tri_uvs =
+                ctx.storage("texture coordinates", bytemuck::cast_slice(&tri_uvs), none)?;
+            let textures = ctx.storage(
+                "textures",
+                bytemuck::cast_slice(&texture_table(scene)),
+                none,
+            )?;
+            let params = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("render params"),
+                size: std::mem::size_of::<RenderParams>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
             });
-        let film_pipeline = ctx.layout_pipeline(
-            &film_module,
-            "resolve_film",
-            &ctx.pipeline_layout("film", &[&film_layout]),
-            &[],
-        );
-        let srgb8_pipeline = ctx.auto_pipeline(&film_module, "resolve_film_srgb8");
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(ctx.err(e));
-        }
-        let per_sample = 48 * 2.max(scene.lights.len() as u64);
-        let fit = (ctx.max_binding() / per_sample).min(u32::MAX as u64) as u32;
-        // A hit spawns two rays only off a material that refracts and also reflects (by its
-        // reflectivity or by Fresnel); scenes hold no NaN (desc.rs checks both lie in [0, 1]).
-        let branches = scene
-            .materials
-            .iter()
-            .any(|m| m.transparency > 0.0 && (m.reflectivity > 0.0 || m.fresnel));
-        Ok(GpuRenderer {
-            wave: ctx.render_wave.min(fit).max(1),
-            submit: Submit::Wave,
-            branches,
-            tracer,
-            scene,
-            vertices,
-            shade_tris,
-            materials,
-            lights,
-            tri_uvs,
-            textures,
-            params,
-            layouts,
-            pipelines,
-            medium,
-            film_layout,
-            film_pipeline,
-            srgb8_pipeline,
-            frame: std::sync::Mutex::new(None),
-            camera: std::sync::Mutex::new(None),
+            let uniform = wgpu::BufferBindingType::Uniform;
+            let ro = wgpu::BufferBindingType::Storage { read_only: true };
+            let rw = wgpu::BufferBindingType::Storage { read_only: false };
+            let layouts = [
+                ctx.buffer_layout("kd-tree", &[uniform, ro, ro, ro, ro]),
+                ctx.buffer_layout("scene", &[uniform, ro, ro, ro, ro, ro, ro]),
+                ctx.buffer_layout("queues", &[rw; 6]),
+                ctx.buffer_layout("dispatch args", &[rw]),
+            ];
+            let medium_layout = scene.volume.as_ref().map(|_| medium_layout(ctx));
+            let module = ctx.tree_module(
+                "render.wgsl",
+                render_wgsl(ctx.subgroup_appends()),
+                scene.volume.is_some(),
+            );
+            // The kernels that write dispatch arguments see them as group 3; the others may not
+            // (a buffer cannot be storage and indirect-argument source in one dispatch).
+            let [tree_layout, scene_layout, queues, args] = &layouts;
+            let work = ctx.pipeline_layout("render", &[tree_layout, scene_layout, queues]);
+            let control = ctx.pipeline_layout("render", &[tree_layout, scene_layout, queues, args]);
+            // The volume stages see the volume as group 3.
+            let volume = medium_layout.as_ref().map(|m| {
+                ctx.pipeline_layout(
+                    "render volume stages",
+                    &[tree_layout, scene_layout, queues, m],
+                )
+            });
+            let pipelines = STAGES
+                .iter()
+                .enumerate()
+                .map(|(k, &entry)| {
+                    let layout = match entry {
+                        "prepare_shadows" | "advance" => &control,
+                        _ if VOLUME_STAGES.contains(&k) => volume.as_ref()?,
+                        _ => &work,
+                    };
+                    Some(ctx.layout_pipeline(&module, entry, layout, &[]))
+                })
+                .collect();
+            let medium = match (&scene.volume, &medium_layout) {
+                (Some(v), Some(layout)) => {
+                    let m = Medium::new(v, scene, tree, Traversal::Ropes);
+                    let gpu = GpuVolume::new(ctx, &v.volume, &v.tf, m.marcher())?;
+                    let group = medium_group(ctx, layout, &gpu, &m, v, scene.lights.len())?;
+                    Some((gpu, group))
+                }
+                _ => None,
+            };
+            let film_layout = ctx.buffer_layout("film", &[ro, rw]);
+            let film_module = ctx
+                .device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("film.wgsl"),
+                    source: wgpu::ShaderSource::Wgsl(film_wgsl().into()),
+                });
+            let film_pipeline = ctx.layout_pipeline(
+                &film_module,
+                "resolve_film",
+                &ctx.pipeline_layout("film", &[&film_layout]),
+                &[],
+            );
+            let srgb8_pipeline = ctx.auto_pipeline(&film_module, "resolve_film_srgb8");
+            let per_sample = 48 * 2.max(scene.lights.len() as u64);
+            let fit = (ctx.max_binding() / per_sample).min(u32::MAX as u64) as u32;
+            // A hit spawns two rays only off a material that refracts and also reflects (by its
+            // reflectivity or by Fresnel); scenes hold no NaN (desc.rs checks both lie in [0, 1]).
+            let branches = scene
+                .materials
+                .iter()
+                .any(|m| m.transparency > 0.0 && (m.reflectivity > 0.0 || m.fresnel));
+            Ok(GpuRenderer {
+                wave: ctx.render_wave.min(fit).max(1),
+                submit: Submit::Wave,
+                branches,
+                tracer,
+                scene,
+                vertices,
+                shade_tris,
+                materials,
+                lights,
+                tri_uvs,
+                textures,
+                params,
+                layouts,
+                pipelines,
+                medium,
+                film_layout,
+                film_pipeline,
+                srgb8_pipeline,
+                frame: std::sync::Mutex::new(None),
+                camera: std::sync::Mutex::new(None),
+            })
         })
     }
 
@@ -815,310 +814,315 @@ impl<'a> GpuRenderer<'a> {
         let ctx = self.tracer.ctx;
         let scene = self.scene;
         let t0 = Instant::now();
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let pixels = opt.width as u64 * opt.height as u64;
-        let total = pixels * opt.spp as u64;
-        if total > u32::MAX as u64 {
-            return Err(ctx.err(format!(
-                "{}x{} pixels at {} samples is more than 2^32 samples",
-                opt.width, opt.height, opt.spp
-            )));
-        }
-        let lights = scene.lights.len() as u64;
-        let depths = opt.max_depth as u64 + 1;
-        let submit = self.submit_for(opt);
-        // Each depth's passes, and a whole wave's (what one readback's timestamps cover).
-        let depth_passes: Vec<Vec<usize>> = (0..=opt.max_depth).map(|d| self.passes(d)).collect();
-        let wave_passes = depth_passes.concat();
-        let shape = FrameShape {
-            pixels,
-            wave: wave as u64,
-            lights,
-            counter_sets: if submit == Submit::Wave { depths } else { 1 },
-            passes: match submit {
-                Submit::Wave => wave_passes.len() as u64,
-                Submit::Depth => STAGES.len() as u64,
-            },
-        };
-        let kept = self.frame.lock().unwrap().take();
-        let mut q = match kept {
-            Some((k, q)) if k == shape => {
-                let mut enc = ctx
-                    .device
-                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                        label: Some("clear film"),
-                    });
-                enc.clear_buffer(&q.film, 0, None);
-                ctx.queue.submit([enc.finish()]);
-                q
+        ctx.scoped(|| {
+            let pixels = opt.width as u64 * opt.height as u64;
+            let total = pixels * opt.spp as u64;
+            if total > u32::MAX as u64 {
+                return Err(ctx.err(format!(
+                    "{}x{} pixels at {} samples is more than 2^32 samples",
+                    opt.width, opt.height, opt.spp
+                )));
             }
-            _ => self.queues(&shape)?,
-        };
-        let cam = self
-            .camera
-            .lock()
-            .unwrap()
-            .unwrap_or_else(|| scene.camera_for(opt.width as f32 / opt.height as f32));
-        let mut params = RenderParams {
-            eye: v3(cam.eye),
-            tan_y: cam.tan_y,
-            parallel: cam.parallel,
-            fwd: v3(cam.fwd),
-            width: opt.width,
-            right: v3(cam.right),
-            height: opt.height,
-            up: v3(cam.up),
-            spp: opt.spp,
-            background: v3(scene.background),
-            strata: strata(opt.spp),
-            ambient_light: v3(scene.ambient_light),
-            max_depth: opt.max_depth,
-            light_count: lights as u32,
-            max_groups: ctx.limits.max_compute_workgroups_per_dimension.max(1),
-            band: if ctx.pixel_blocks() {
-                // A subgroup's lanes; an adapter that varies them runs at most this many.
-                band_rows(ctx.info.subgroup_max_size.clamp(1, 128), opt.spp)
-            } else {
-                1
-            },
-            ..Default::default()
-        };
-        let mut stats = GpuRenderStats {
-            submit,
-            ..Default::default()
-        };
-        let mut tally = Tally {
-            stage_ms: [0.0; STAGES.len()],
-            timed: q.resolve.is_some(),
-        };
-        let tree_group = self.tracer.bind_tree(&self.layouts[0]);
-        let scene_group = ctx.bind_buffers(
-            "scene",
-            &self.layouts[1],
-            &[
-                &self.params,
-                &self.vertices,
-                &self.shade_tris,
-                &self.materials,
-                &self.lights,
-                &self.tri_uvs,
-                &self.textures,
-            ],
-        );
-        let args_group = ctx.bind_buffers("args", &self.layouts[3], &[&q.args]);
-        let work_group = |q: &Queues, cur: usize| {
-            ctx.bind_buffers(
-                "queues",
-                &self.layouts[2],
-                &[
-                    &q.counters,
-                    &q.rays[cur],
-                    &q.hits,
-                    &q.rays[1 - cur],
-                    &q.shadows,
-                    &q.film,
-                ],
-            )
-        };
-        let groups = |q: &Queues| Groups {
-            tree: tree_group.clone(),
-            scene: scene_group.clone(),
-            args: args_group.clone(),
-            work: [work_group(q, 0), work_group(q, 1)],
-        };
-        let stamp_offset = shape.counter_sets * COUNTER_BYTES;
-        // The wave submitted last, whose counters are still to be read: (readback slot,
-        // submission).
-        let mut in_flight: Option<(usize, wgpu::SubmissionIndex)> = None;
-        let mut slot = 0usize;
-        // Bound anew only where a depth grows a queue ([`Submit::Depth`]).
-        let mut g = groups(&q);
-        let mut base = 0u64;
-        while base < total {
-            let n = (total - base).min(wave as u64) as u32;
-            stats.waves += 1;
-            params.sample_base = base as u32;
-            params.sample_count = n;
-            // With the last wave still queued: queue writes run at the start of the next
-            // submission, and a queue's submissions run one after another (wgpu-hal's `submit`
-            // contract), so the last wave reads its own parameters and counters.
-            ctx.queue
-                .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-            let mut counters = [0u32; counter::SLOTS as usize];
-            counters[counter::QUEUE as usize] = n;
-            ctx.queue
-                .write_buffer(&q.counters, 0, bytemuck::cast_slice(&counters));
-            ctx.queue
-                .write_buffer(&q.args, QUEUE_ARGS, bytemuck::cast_slice(&ctx.dims(n)));
-            if submit == Submit::Wave {
-                // Every depth in one submission; the counters after each depth go aside.
-                let mut enc = ctx
-                    .device
-                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                        label: Some("wave"),
-                    });
-                let mut pass = 0u32;
-                for (depth, order) in depth_passes.iter().enumerate() {
-                    pass = self.record_depth(&mut enc, order, n, &g, depth % 2, &q, pass);
-                    let at = depth as u64 * COUNTER_BYTES;
-                    enc.copy_buffer_to_buffer(&q.counters, 0, &q.readback[slot], at, COUNTER_BYTES);
+            let lights = scene.lights.len() as u64;
+            let depths = opt.max_depth as u64 + 1;
+            let submit = self.submit_for(opt);
+            // Each depth's passes, and a whole wave's (what one readback's timestamps cover).
+            let depth_passes: Vec<Vec<usize>> =
+                (0..=opt.max_depth).map(|d| self.passes(d)).collect();
+            let wave_passes = depth_passes.concat();
+            let shape = FrameShape {
+                pixels,
+                wave: wave as u64,
+                lights,
+                counter_sets: if submit == Submit::Wave { depths } else { 1 },
+                passes: match submit {
+                    Submit::Wave => wave_passes.len() as u64,
+                    Submit::Depth => STAGES.len() as u64,
+                },
+            };
+            let kept = self.frame.lock().unwrap().take();
+            let mut q = match kept {
+                Some((k, q)) if k == shape => {
+                    let mut enc =
+                        ctx.device
+                            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                                label: Some("clear film"),
+                            });
+                    enc.clear_buffer(&q.film, 0, None);
+                    ctx.queue.submit([enc.finish()]);
+                    q
                 }
-                q.copy_stamps(&mut enc, pass, slot, stamp_offset);
-                let cmd = enc.finish();
-                let waited = Instant::now();
-                let index = ctx.queue.submit([cmd]);
-                stats.submissions += 1;
-                stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
-                // The GPU has this wave queued while the host reads the last one's counters.
-                if let Some((s, i)) = in_flight.replace((slot, index)) {
-                    let buf = &q.readback[s];
-                    tally.wave(ctx, buf, i, &shape, &wave_passes, &mut stats, progress)?;
-                }
-                slot = 1 - slot;
-                base += n as u64;
-                continue;
-            }
-            let mut cur = 0usize;
-            let mut count = n as u64;
-            for (depth, order) in depth_passes.iter().enumerate() {
-                let grew = [
-                    self.ensure::<RayWork>(&mut q.rays[1 - cur], "next ray queue", 2 * count)?,
-                    self.ensure::<ShadowWork>(&mut q.shadows, "shadow queue", count * lights)?,
-                    self.ensure::<GpuHit>(&mut q.hits, "hits", count.max(count * lights))?,
-                ];
-                if grew.contains(&true) {
-                    g = groups(&q);
-                }
-                let mut enc = ctx
-                    .device
-                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                        label: Some("depth"),
-                    });
-                let passes = self.record_depth(&mut enc, order, n, &g, cur, &q, 0);
-                q.copy_stamps(&mut enc, passes, 0, stamp_offset);
-                enc.copy_buffer_to_buffer(&q.counters, 0, &q.readback[0], 0, COUNTER_BYTES);
-                let cmd = enc.finish();
-                let waited = Instant::now();
-                ctx.queue.submit([cmd]);
-                stats.submissions += 1;
-                let words = read_words(ctx, &q.readback[0])?;
-                stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
-                let stamps = &words[stamp_offset as usize / 4..];
-                tally.stamps(stamps, order, ctx);
-                count = tally.depth(&words, depth as u32, &mut stats, progress);
-                if count == 0 {
-                    break;
-                }
-                cur = 1 - cur;
-            }
-            base += n as u64;
-        }
-        if let Some((s, i)) = in_flight {
-            let buf = &q.readback[s];
-            tally.wave(ctx, buf, i, &shape, &wave_passes, &mut stats, progress)?;
-        }
-        let (stage_ms, timed) = (tally.stage_ms, tally.timed);
-        let film_t = Instant::now();
-        let scale = 1.0 / (FILM_SCALE as f64 * opt.spp as f64);
-        let mut enc = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("resolve film"),
-            });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("resolve_film"),
-                timestamp_writes: None,
-            });
-            if srgb8 {
-                let pack = wgpu::util::DeviceExt::create_buffer_init(
-                    &ctx.device,
-                    &wgpu::util::BufferInitDescriptor {
-                        label: Some("pack params"),
-                        contents: bytemuck::cast_slice(&[
-                            (scale as f32).to_bits(),
-                            pixels as u32,
-                            0,
-                            0,
-                        ]),
-                        usage: wgpu::BufferUsages::UNIFORM,
-                    },
-                );
-                let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("film to sRGB"),
-                    layout: &self.srgb8_pipeline.get_bind_group_layout(0),
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: q.film.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: q.packed.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: pack.as_entire_binding(),
-                        },
-                    ],
-                });
-                pass.set_pipeline(&self.srgb8_pipeline);
-                pass.set_bind_group(0, &group, &[]);
-                let [gx, gy, _] = ctx.dims(pixels.div_ceil(4) as u32);
-                pass.dispatch_workgroups(gx, gy, 1);
-            } else {
-                let group = ctx.bind_buffers("film", &self.film_layout, &[&q.film, &q.image]);
-                pass.set_pipeline(&self.film_pipeline);
-                pass.set_bind_group(0, &group, &[]);
-                let [gx, gy, _] = ctx.dims(pixels as u32);
-                pass.dispatch_workgroups(gx, gy, 1);
-            }
-        }
-        let packed_bytes = pixels.div_ceil(4) * 12;
-        if srgb8 {
-            enc.copy_buffer_to_buffer(&q.packed, 0, &q.packed_read, 0, packed_bytes);
-        } else {
-            enc.copy_buffer_to_buffer(&q.image, 0, &q.image_read, 0, pixels * 12);
-        }
-        ctx.queue.submit([enc.finish()]);
-        // The packed bytes straight into the frame's vector; the float film as words.
-        let (mut bytes, words): (Vec<u8>, Vec<u32>) = if srgb8 {
-            (read_back(ctx, &q.packed_read)?, Vec::new())
-        } else {
-            (Vec::new(), read_words(ctx, &q.image_read)?)
-        };
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(ctx.err(e));
-        }
-        let film = if srgb8 {
-            bytes.truncate(3 * pixels as usize);
-            Pixels::Srgb8(bytes)
-        } else {
-            let sums: &[f32] = bytemuck::cast_slice(&words);
-            Pixels::Linear(Image {
+                _ => self.queues(&shape)?,
+            };
+            let cam = self
+                .camera
+                .lock()
+                .unwrap()
+                .unwrap_or_else(|| scene.camera_for(opt.width as f32 / opt.height as f32));
+            let mut params = RenderParams {
+                eye: v3(cam.eye),
+                tan_y: cam.tan_y,
+                parallel: cam.parallel,
+                fwd: v3(cam.fwd),
                 width: opt.width,
+                right: v3(cam.right),
                 height: opt.height,
-                pixels: sums[..3 * pixels as usize]
-                    .chunks_exact(3)
-                    .map(|p| {
-                        let ch = |c: usize| (p[c] as f64 * scale) as f32;
-                        Vec3::new(ch(0), ch(1), ch(2))
-                    })
-                    .collect(),
-            })
-        };
-        *self.frame.lock().unwrap() = Some((shape, q));
-        stats.film_ms = film_t.elapsed().as_secs_f64() * 1e3;
-        stats.render_ms = t0.elapsed().as_secs_f64() * 1e3;
-        stats.kernel_gpu_ms = timed.then(|| {
-            STAGES
-                .iter()
-                .enumerate()
-                .filter(|(k, _)| self.pipelines[*k].is_some())
-                .map(|(k, &name)| (name, stage_ms[k]))
-                .collect()
-        });
-        Ok((film, stats))
+                up: v3(cam.up),
+                spp: opt.spp,
+                background: v3(scene.background),
+                strata: strata(opt.spp),
+                ambient_light: v3(scene.ambient_light),
+                max_depth: opt.max_depth,
+                light_count: lights as u32,
+                max_groups: ctx.limits.max_compute_workgroups_per_dimension.max(1),
+                band: if ctx.pixel_blocks() {
+                    // A subgroup's lanes; an adapter that varies them runs at most this many.
+                    band_rows(ctx.info.subgroup_max_size.clamp(1, 128), opt.spp)
+                } else {
+                    1
+                },
+                ..Default::default()
+            };
+            let mut stats = GpuRenderStats {
+                submit,
+                ..Default::default()
+            };
+            let mut tally = Tally {
+                stage_ms: [0.0; STAGES.len()],
+                timed: q.resolve.is_some(),
+            };
+            let tree_group = self.tracer.bind_tree(&self.layouts[0]);
+            let scene_group = ctx.bind_buffers(
+                "scene",
+                &self.layouts[1],
+                &[
+                    &self.params,
+                    &self.vertices,
+                    &self.shade_tris,
+                    &self.materials,
+                    &self.lights,
+                    &self.tri_uvs,
+                    &self.textures,
+                ],
+            );
+            let args_group = ctx.bind_buffers("args", &self.layouts[3], &[&q.args]);
+            let work_group = |q: &Queues, cur: usize| {
+                ctx.bind_buffers(
+                    "queues",
+                    &self.layouts[2],
+                    &[
+                        &q.counters,
+                        &q.rays[cur],
+                        &q.hits,
+                        &q.rays[1 - cur],
+                        &q.shadows,
+                        &q.film,
+                    ],
+                )
+            };
+            let groups = |q: &Queues| Groups {
+                tree: tree_group.clone(),
+                scene: scene_group.clone(),
+                args: args_group.clone(),
+                work: [work_group(q, 0), work_group(q, 1)],
+            };
+            let stamp_offset = shape.counter_sets * COUNTER_BYTES;
+            // The wave submitted last, whose counters are still to be read: (readback slot,
+            // submission).
+            let mut in_flight: Option<(usize, wgpu::SubmissionIndex)> = None;
+            let mut slot = 0usize;
+            // Bound anew only where a depth grows a queue ([`Submit::Depth`]).
+            let mut g = groups(&q);
+            let mut base = 0u64;
+            while base < total {
+                let n = (total - base).min(wave as u64) as u32;
+                stats.waves += 1;
+                params.sample_base = base as u32;
+                params.sample_count = n;
+                // With the last wave still queued: queue writes run at the start of the next
+                // submission, and a queue's submissions run one after another (wgpu-hal's `submit`
+                // contract), so the last wave reads its own parameters and counters.
+                ctx.queue
+                    .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+                let mut counters = [0u32; counter::SLOTS as usize];
+                counters[counter::QUEUE as usize] = n;
+                ctx.queue
+                    .write_buffer(&q.counters, 0, bytemuck::cast_slice(&counters));
+                ctx.queue
+                    .write_buffer(&q.args, QUEUE_ARGS, bytemuck::cast_slice(&ctx.dims(n)));
+                if submit == Submit::Wave {
+                    // Every depth in one submission; the counters after each depth go aside.
+                    let mut enc =
+                        ctx.device
+                            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                                label: Some("wave"),
+                            });
+                    let mut pass = 0u32;
+                    for (depth, order) in depth_passes.iter().enumerate() {
+                        pass = self.record_depth(&mut enc, order, n, &g, depth % 2, &q, pass);
+                        let at = depth as u64 * COUNTER_BYTES;
+                        enc.copy_buffer_to_buffer(
+                            &q.counters,
+                            0,
+                            &q.readback[slot],
+                            at,
+                            COUNTER_BYTES,
+                        );
+                    }
+                    q.copy_stamps(&mut enc, pass, slot, stamp_offset);
+                    let cmd = enc.finish();
+                    let waited = Instant::now();
+                    let index = ctx.queue.submit([cmd]);
+                    stats.submissions += 1;
+                    stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
+                    // The GPU has this wave queued while the host reads the last one's counters.
+                    if let Some((s, i)) = in_flight.replace((slot, index)) {
+                        let buf = &q.readback[s];
+                        tally.wave(ctx, buf, i, &shape, &wave_passes, &mut stats, progress)?;
+                    }
+                    slot = 1 - slot;
+                    base += n as u64;
+                    continue;
+                }
+                let mut cur = 0usize;
+                let mut count = n as u64;
+                for (depth, order) in depth_passes.iter().enumerate() {
+                    let grew = [
+                        self.ensure::<RayWork>(&mut q.rays[1 - cur], "next ray queue", 2 * count)?,
+                        self.ensure::<ShadowWork>(&mut q.shadows, "shadow queue", count * lights)?,
+                        self.ensure::<GpuHit>(&mut q.hits, "hits", count.max(count * lights))?,
+                    ];
+                    if grew.contains(&true) {
+                        g = groups(&q);
+                    }
+                    let mut enc =
+                        ctx.device
+                            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                                label: Some("depth"),
+                            });
+                    let passes = self.record_depth(&mut enc, order, n, &g, cur, &q, 0);
+                    q.copy_stamps(&mut enc, passes, 0, stamp_offset);
+                    enc.copy_buffer_to_buffer(&q.counters, 0, &q.readback[0], 0, COUNTER_BYTES);
+                    let cmd = enc.finish();
+                    let waited = Instant::now();
+                    ctx.queue.submit([cmd]);
+                    stats.submissions += 1;
+                    let words = read_words(ctx, &q.readback[0])?;
+                    stats.wait_ms += waited.elapsed().as_secs_f64() * 1e3;
+                    let stamps = &words[stamp_offset as usize / 4..];
+                    tally.stamps(stamps, order, ctx);
+                    count = tally.depth(&words, depth as u32, &mut stats, progress);
+                    if count == 0 {
+                        break;
+                    }
+                    cur = 1 - cur;
+                }
+                base += n as u64;
+            }
+            if let Some((s, i)) = in_flight {
+                let buf = &q.readback[s];
+                tally.wave(ctx, buf, i, &shape, &wave_passes, &mut stats, progress)?;
+            }
+            let (stage_ms, timed) = (tally.stage_ms, tally.timed);
+            let film_t = Instant::now();
+            let scale = 1.0 / (FILM_SCALE as f64 * opt.spp as f64);
+            let mut enc = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("resolve film"),
+                });
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("resolve_film"),
+                    timestamp_writes: None,
+                });
+                if srgb8 {
+                    let pack = wgpu::util::DeviceExt::create_buffer_init(
+                        &ctx.device,
+                        &wgpu::util::BufferInitDescriptor {
+                            label: Some("pack params"),
+                            contents: bytemuck::cast_slice(&[
+                                (scale as f32).to_bits(),
+                                pixels as u32,
+                                0,
+                                0,
+                            ]),
+                            usage: wgpu::BufferUsages::UNIFORM,
+                        },
+                    );
+                    let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some("film to sRGB"),
+                        layout: &self.srgb8_pipeline.get_bind_group_layout(0),
+                        entries: &[
+                            wgpu::BindGroupEntry {
+                                binding: 0,
+                                resource: q.film.as_entire_binding(),
+                            },
+                            wgpu::BindGroupEntry {
+                                binding: 2,
+                                resource: q.packed.as_entire_binding(),
+                            },
+                            wgpu::BindGroupEntry {
+                                binding: 3,
+                                resource: pack.as_entire_binding(),
+                            },
+                        ],
+                    });
+                    pass.set_pipeline(&self.srgb8_pipeline);
+                    pass.set_bind_group(0, &group, &[]);
+                    let [gx, gy, _] = ctx.dims(pixels.div_ceil(4) as u32);
+                    pass.dispatch_workgroups(gx, gy, 1);
+                } else {
+                    let group = ctx.bind_buffers("film", &self.film_layout, &[&q.film, &q.image]);
+                    pass.set_pipeline(&self.film_pipeline);
+                    pass.set_bind_group(0, &group, &[]);
+                    let [gx, gy, _] = ctx.dims(pixels as u32);
+                    pass.dispatch_workgroups(gx, gy, 1);
+                }
+            }
+            let packed_bytes = pixels.div_ceil(4) * 12;
+            if srgb8 {
+                enc.copy_buffer_to_buffer(&q.packed, 0, &q.packed_read, 0, packed_bytes);
+            } else {
+                enc.copy_buffer_to_buffer(&q.image, 0, &q.image_read, 0, pixels * 12);
+            }
+            ctx.queue.submit([enc.finish()]);
+            // The packed bytes straight into the frame's vector; the float film as words.
+            let (mut bytes, words): (Vec<u8>, Vec<u32>) = if srgb8 {
+                (read_back(ctx, &q.packed_read)?, Vec::new())
+            } else {
+                (Vec::new(), read_words(ctx, &q.image_read)?)
+            };
+            let film = if srgb8 {
+                bytes.truncate(3 * pixels as usize);
+                Pixels::Srgb8(bytes)
+            } else {
+                let sums: &[f32] = bytemuck::cast_slice(&words);
+                Pixels::Linear(Image {
+                    width: opt.width,
+                    height: opt.height,
+                    pixels: sums[..3 * pixels as usize]
+                        .chunks_exact(3)
+                        .map(|p| {
+                            let ch = |c: usize| (p[c] as f64 * scale) as f32;
+                            Vec3::new(ch(0), ch(1), ch(2))
+                        })
+                        .collect(),
+                })
+            };
+            *self.frame.lock().unwrap() = Some((shape, q));
+            stats.film_ms = film_t.elapsed().as_secs_f64() * 1e3;
+            stats.render_ms = t0.elapsed().as_secs_f64() * 1e3;
+            stats.kernel_gpu_ms = timed.then(|| {
+                STAGES
+                    .iter()
+                    .enumerate()
+                    .filter(|(k, _)| self.pipelines[*k].is_some())
+                    .map(|(k, &name)| (name, stage_ms[k]))
+                    .collect()
+            });
+            Ok((film, stats))
+        })
     }
 
     fn queues(&self, shape: &FrameShape) -> Result<Queues, GpuError> {

@@ -33,7 +33,7 @@ pub fn split_wgsl(subgroup_appends: bool) -> String {
 pub(crate) struct SplitKernels {
     layouts: [wgpu::BindGroupLayout; 3],
     init: wgpu::ComputePipeline,
-    traverse: wgpu::ComputePipeline,
+    pub(crate) traverse: wgpu::ComputePipeline,
     /// Closest, any.
     intersect: [wgpu::ComputePipeline; 2],
     advance: wgpu::ComputePipeline,

@@ -2644,3 +2644,79 @@ fn a_view_set_renders_as_a_scene_with_it() {
     assert!(turned == want, "the view set differs from the scene's");
     assert!(turned != front, "the view did not change the frame");
 }
+
+/// A query whose kernel is invalid (here one that failed to compile, as a driver may fail one)
+/// reports the kernel's error, the cause, and not what followed from it: the split query
+/// reported only that its wait for a submission failed ("a submission index that has not been
+/// returned by a successful submission"). A scoped piece of work that failed on its own keeps
+/// its own error where the scope caught none.
+#[test]
+fn an_invalid_kernel_is_the_error_reported() {
+    let Some(mut ctx) = gpu() else { return };
+    let tree = KdTree::build(&TriMesh::icosphere(1), Builder::Sah);
+    let rays = [Ray::new(
+        Vec3::new(0.0, 0.0, 5.0),
+        Vec3::new(0.0, 0.0, -1.0),
+        0.0,
+        f32::INFINITY,
+    )];
+    for timestamps in [true, false] {
+        ctx.set_timestamps(timestamps);
+        let mut tracer = GpuTracer::new(&ctx, &tree).unwrap();
+        let want = tracer.trace(&rays, false).unwrap().0[0];
+        assert_ne!(want.prim, NO_PRIM);
+        assert_eq!(
+            tracer.trace_with(&rays, false, Kernels::Split).unwrap().0[0],
+            want
+        );
+        // A kernel that failed to compile, in the fused and the split query.
+        let broken = |entry: &str| {
+            let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+            let module = ctx
+                .device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("broken.wgsl"),
+                    source: wgpu::ShaderSource::Wgsl(
+                        format!("@compute @workgroup_size(1) fn {entry}() {{ let x: u32 = 1.5; }}")
+                            .into(),
+                    ),
+                });
+            let pipeline = ctx.auto_pipeline(&module, entry);
+            assert!(pollster::block_on(scope.pop()).is_some());
+            pipeline
+        };
+        // One at a time: the split query binds the fused kernel's layout too.
+        let closest = std::mem::replace(&mut tracer.closest, broken("intersect_closest"));
+        let e = tracer.trace(&rays, false).err().unwrap().to_string();
+        assert!(
+            e.contains("'intersect_closest' label is invalid") && !e.contains("submission index"),
+            "{e}"
+        );
+        tracer.closest = closest;
+        let split = tracer.split.get_mut().unwrap();
+        let traverse = std::mem::replace(&mut split.traverse, broken("split_traverse"));
+        let e = tracer
+            .trace_with(&rays, false, Kernels::Split)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("'split_traverse' label is invalid") && !e.contains("submission index"),
+            "{e}"
+        );
+        tracer.split.get_mut().unwrap().traverse = traverse;
+        // The context stays usable: the errors were the queries'.
+        assert_eq!(tracer.trace(&rays, false).unwrap().0[0], want);
+        assert_eq!(
+            tracer.trace_with(&rays, false, Kernels::Split).unwrap().0[0],
+            want
+        );
+    }
+    let own = ctx.scoped(|| -> Result<(), GpuError> { Err(ctx.err("the work's own failure")) });
+    assert!(
+        own.unwrap_err()
+            .to_string()
+            .contains("the work's own failure")
+    );
+    assert_eq!(ctx.scoped(|| Ok(7)).unwrap(), 7);
+}

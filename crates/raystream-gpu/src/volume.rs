@@ -417,66 +417,64 @@ impl<'a> GpuVolumeRenderer<'a> {
         if let Some(w) = weights {
             raystream_cpu::dvr::check_kept(vol, w);
         }
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let gpu = GpuVolume::new(ctx, vol, tf, &Marcher::new(vol, None))?;
-        let (segment_labels, segment_colours) = segment_bindings(ctx, segments)?;
-        let module = ctx
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("dvr.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(dvr_wgsl().into()),
-            });
-        let pipeline = ctx.auto_pipeline(&module, "render_volume");
-        let path_pipeline = ctx.auto_pipeline(&module, "path_trace_volume");
-        let guide_pipeline = ctx.auto_pipeline(&module, "guide_volume");
-        let light_pipeline = ctx.auto_pipeline(&module, "light_grid");
-        let pack_pipeline = ctx.auto_pipeline(&module, "pack_srgb8");
-        let light_dims = LightGrid::dims_for(vol.dims);
-        let light_values = ctx.work_buffer(
-            "light grid",
-            4 * light_dims.iter().product::<usize>() as u64,
-            wgpu::BufferUsages::empty(),
-        )?;
-        let no_rows = ctx.storage(
-            "no curved plane",
-            bytemuck::bytes_of(&GpuCprRow::default()),
-            wgpu::BufferUsages::empty(),
-        )?;
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(ctx.err(e));
-        }
-        ctx.wait()?;
-        Ok(GpuVolumeRenderer {
-            ctx,
-            vol,
-            tf,
-            gpu,
-            pipeline,
-            path_pipeline,
-            guide_pipeline,
-            denoiser: std::sync::OnceLock::new(),
-            denoise_work: Mutex::new(None),
-            paths_done: AtomicU64::new(0),
-            grids: Default::default(),
-            coefficient_view: Default::default(),
-            majorants: Default::default(),
-            bricks: Default::default(),
-            accum: Mutex::new(None),
-            paths_per_dispatch: PATHS_PER_DISPATCH,
-            light_pipeline,
-            pack_pipeline,
-            light_values,
-            light_dims: light_dims.map(|n| n as u32),
-            no_rows,
-            frame: Mutex::new(None),
-            segment_labels,
-            segment_colours,
-            segmented: segments.is_some(),
-            weights,
-            weight_grids: Default::default(),
-            kept_views: Default::default(),
-            kept_bricks: Default::default(),
-            upload_ms: t0.elapsed().as_secs_f64() * 1e3,
+        ctx.scoped(|| {
+            let gpu = GpuVolume::new(ctx, vol, tf, &Marcher::new(vol, None))?;
+            let (segment_labels, segment_colours) = segment_bindings(ctx, segments)?;
+            let module = ctx
+                .device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("dvr.wgsl"),
+                    source: wgpu::ShaderSource::Wgsl(dvr_wgsl().into()),
+                });
+            let pipeline = ctx.auto_pipeline(&module, "render_volume");
+            let path_pipeline = ctx.auto_pipeline(&module, "path_trace_volume");
+            let guide_pipeline = ctx.auto_pipeline(&module, "guide_volume");
+            let light_pipeline = ctx.auto_pipeline(&module, "light_grid");
+            let pack_pipeline = ctx.auto_pipeline(&module, "pack_srgb8");
+            let light_dims = LightGrid::dims_for(vol.dims);
+            let light_values = ctx.work_buffer(
+                "light grid",
+                4 * light_dims.iter().product::<usize>() as u64,
+                wgpu::BufferUsages::empty(),
+            )?;
+            let no_rows = ctx.storage(
+                "no curved plane",
+                bytemuck::bytes_of(&GpuCprRow::default()),
+                wgpu::BufferUsages::empty(),
+            )?;
+            ctx.wait()?;
+            Ok(GpuVolumeRenderer {
+                ctx,
+                vol,
+                tf,
+                gpu,
+                pipeline,
+                path_pipeline,
+                guide_pipeline,
+                denoiser: std::sync::OnceLock::new(),
+                denoise_work: Mutex::new(None),
+                paths_done: AtomicU64::new(0),
+                grids: Default::default(),
+                coefficient_view: Default::default(),
+                majorants: Default::default(),
+                bricks: Default::default(),
+                accum: Mutex::new(None),
+                paths_per_dispatch: PATHS_PER_DISPATCH,
+                light_pipeline,
+                pack_pipeline,
+                light_values,
+                light_dims: light_dims.map(|n| n as u32),
+                no_rows,
+                frame: Mutex::new(None),
+                segment_labels,
+                segment_colours,
+                segmented: segments.is_some(),
+                weights,
+                weight_grids: Default::default(),
+                kept_views: Default::default(),
+                kept_bricks: Default::default(),
+                upload_ms: t0.elapsed().as_secs_f64() * 1e3,
+            })
         })
     }
 
@@ -595,17 +593,12 @@ impl<'a> GpuVolumeRenderer<'a> {
         let guides = (guides, tolerance);
         let settings = DenoiseOptions::default();
         let out = if srgb8 {
-            let scope = self
-                .ctx
-                .device
-                .push_error_scope(wgpu::ErrorFilter::Validation);
-            let over = Some(opt.background);
-            let light =
-                denoiser.filter_on_gpu(self.ctx, frame, guides, &settings, over, buffers)?;
-            let rgb = self.srgb8_of(opt, sight, light)?;
-            if let Some(e) = pollster::block_on(scope.pop()) {
-                return Err(self.ctx.err(e));
-            }
+            let rgb = self.ctx.scoped(|| {
+                let over = Some(opt.background);
+                let light =
+                    denoiser.filter_on_gpu(self.ctx, frame, guides, &settings, over, buffers)?;
+                self.srgb8_of(opt, sight, light)
+            })?;
             Denoised::Srgb8(rgb)
         } else {
             let (film, alpha) = denoiser.filter(self.ctx, frame, guides, &settings, buffers)?;
@@ -867,50 +860,48 @@ impl<'a> GpuVolumeRenderer<'a> {
         out: &wgpu::Buffer,
     ) -> Result<f32, GpuError> {
         let ctx = self.ctx;
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let (params, _) = self.params(opt, Sight::Camera(cam), false)?;
-        let param_buf = self.uniform("guide params", &params);
-        let majorants = self.majorant_buffer(opt.interpolation)?;
-        let texture = self.texture_for(opt)?;
-        let entries: Vec<_> = [
-            (0, param_buf.as_entire_binding()),
-            (1, wgpu::BindingResource::TextureView(texture)),
-            (2, wgpu::BindingResource::Sampler(&self.gpu.sampler)),
-            (3, self.gpu.opacity.as_entire_binding()),
-            (4, self.gpu.color.as_entire_binding()),
-            (11, majorants.as_entire_binding()),
-            (13, out.as_entire_binding()),
-            (14, wgpu::BindingResource::TextureView(&self.segment_labels)),
-            (15, self.segment_colours.as_entire_binding()),
-        ]
-        .into_iter()
-        .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource })
-        .collect();
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("guides"),
-            layout: &self.guide_pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
-        let mut enc = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("guide_volume"),
+        ctx.scoped(|| {
+            let (params, _) = self.params(opt, Sight::Camera(cam), false)?;
+            let param_buf = self.uniform("guide params", &params);
+            let majorants = self.majorant_buffer(opt.interpolation)?;
+            let texture = self.texture_for(opt)?;
+            let entries: Vec<_> = [
+                (0, param_buf.as_entire_binding()),
+                (1, wgpu::BindingResource::TextureView(texture)),
+                (2, wgpu::BindingResource::Sampler(&self.gpu.sampler)),
+                (3, self.gpu.opacity.as_entire_binding()),
+                (4, self.gpu.color.as_entire_binding()),
+                (11, majorants.as_entire_binding()),
+                (13, out.as_entire_binding()),
+                (14, wgpu::BindingResource::TextureView(&self.segment_labels)),
+                (15, self.segment_colours.as_entire_binding()),
+            ]
+            .into_iter()
+            .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource })
+            .collect();
+            let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("guides"),
+                layout: &self.guide_pipeline.get_bind_group_layout(0),
+                entries: &entries,
             });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("guide_volume"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.guide_pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
-        }
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait()?;
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(ctx.err(e));
-        }
-        Ok(params.step)
+            let mut enc = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("guide_volume"),
+                });
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("guide_volume"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&self.guide_pipeline);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
+            }
+            ctx.queue.submit([enc.finish()]);
+            ctx.wait()?;
+            Ok(params.step)
+        })
     }
 
     /// The kernels' parameters of a frame seen by `sight`, and a curved plane's rows.
@@ -1054,308 +1045,307 @@ impl<'a> GpuVolumeRenderer<'a> {
         let count_on_gpu = srgb8 || on_gpu.is_some();
         let ctx = self.ctx;
         let t0 = Instant::now();
-        let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let (params, row_buf) = self.params(opt, sight, premultiplied)?;
-        let row_buf = row_buf.as_ref().unwrap_or(&self.no_rows);
-        let param_buf = self.uniform("dvr params", &params);
-        let n = opt.width as u64 * opt.height as u64;
-        // 4 pixels in 3 words.
-        let packed_bytes = n.div_ceil(4) * 12;
-        // 16 bytes a pixel; premultiplied, another 16 for its opacity.
-        let pixel_bytes = n * 16 * (1 + premultiplied as u64);
-        let mut frame = self.frame.lock().unwrap();
-        if frame
-            .as_ref()
-            .is_none_or(|f| f.pixels.size() < pixel_bytes || f.packed.size() < packed_bytes)
-        {
-            *frame = Some(FrameBuffers {
-                pixels: ctx.work_buffer(
-                    "volume pixels",
-                    pixel_bytes,
-                    wgpu::BufferUsages::empty(),
-                )?,
-                readback: ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("volume pixels readback"),
-                    size: pixel_bytes.max(64),
-                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                }),
-                packed: ctx.work_buffer(
-                    "sRGB pixels",
-                    packed_bytes,
-                    wgpu::BufferUsages::empty(),
-                )?,
-                sum: ctx.work_buffer("sample count", 8, wgpu::BufferUsages::empty())?,
-                packed_read: ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("sRGB pixels readback"),
-                    size: packed_bytes + 8,
-                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                }),
-                timer: ctx.timer(2),
-            });
-        }
-        let FrameBuffers {
-            pixels,
-            readback,
-            packed,
-            sum,
-            packed_read,
-            timer,
-        } = frame.as_ref().unwrap();
-        let shadows = params.shadows != 0;
-        // Bindings by number; the light grid's kernel uses no colour points (4) and no pixels
-        // (6), and each pipeline's layout holds exactly the bindings its entry point uses.
-        let cinematic = opt.mode == DvrMode::Cinematic;
-        let majorants = if cinematic {
-            Some(self.majorant_buffer(opt.interpolation)?)
-        } else {
-            None
-        };
-        // cinematic: the dispatches' samples, [first, first + count) each, their parameters,
-        // and the running sums between them.
-        let batches: Vec<(u32, u32)> = if cinematic {
-            let per = self
-                .paths_per_dispatch
-                .div_ceil(n.max(1))
-                .clamp(1, opt.spp.max(1) as u64) as u32;
-            (0..opt.spp)
-                .step_by(per as usize)
-                .map(|f| (f, per.min(opt.spp - f)))
-                .collect()
-        } else {
-            Vec::new()
-        };
-        let batch_params: Vec<wgpu::Buffer> = batches
-            .iter()
-            .map(|&(sample_first, sample_count)| {
-                let p = DvrParams {
-                    sample_first,
-                    sample_count,
-                    ..params
-                };
-                self.uniform("cinematic dispatch params", &p)
-            })
-            .collect();
-        let mut accum = self.accum.lock().unwrap();
-        if batches.len() > 1 && accum.as_ref().is_none_or(|a| a.size() < 32 * n) {
-            *accum = Some(ctx.work_buffer("running sums", 32 * n, wgpu::BufferUsages::empty())?);
-        }
-        // The brick table is read only where dvr skips empty space, or a kept projection the
-        // bricks outside its segments.
-        let bricks = match self.kept_weights(opt.mode) {
-            _ if params.skip_empty == 0 => &self.no_rows,
-            Some(w) => self.kept_brick_buffer(w, opt.interpolation)?,
-            None => self.brick_buffer(opt.interpolation)?,
-        };
-        // A frame of one dispatch binds a placeholder.
-        let accum = accum.as_ref().unwrap_or(&self.no_rows);
-        let texture = self.texture_for(opt)?;
-        let resource = |b: u32| match b {
-            0 => param_buf.as_entire_binding(),
-            1 => wgpu::BindingResource::TextureView(texture),
-            2 => wgpu::BindingResource::Sampler(&self.gpu.sampler),
-            3 => self.gpu.opacity.as_entire_binding(),
-            4 => self.gpu.color.as_entire_binding(),
-            5 => bricks.as_entire_binding(),
-            6 => pixels.as_entire_binding(),
-            7 => self.light_values.as_entire_binding(),
-            8 => packed.as_entire_binding(),
-            9 => sum.as_entire_binding(),
-            10 => row_buf.as_entire_binding(),
-            11 => majorants.expect("a cinematic frame").as_entire_binding(),
-            12 => accum.as_entire_binding(),
-            14 => wgpu::BindingResource::TextureView(&self.segment_labels),
-            _ => self.segment_colours.as_entire_binding(),
-        };
-        let group = |label, pipeline: &wgpu::ComputePipeline, bindings: &[u32]| {
-            let entries: Vec<_> = bindings
+        ctx.scoped(|| {
+            let (params, row_buf) = self.params(opt, sight, premultiplied)?;
+            let row_buf = row_buf.as_ref().unwrap_or(&self.no_rows);
+            let param_buf = self.uniform("dvr params", &params);
+            let n = opt.width as u64 * opt.height as u64;
+            // 4 pixels in 3 words.
+            let packed_bytes = n.div_ceil(4) * 12;
+            // 16 bytes a pixel; premultiplied, another 16 for its opacity.
+            let pixel_bytes = n * 16 * (1 + premultiplied as u64);
+            let mut frame = self.frame.lock().unwrap();
+            if frame
+                .as_ref()
+                .is_none_or(|f| f.pixels.size() < pixel_bytes || f.packed.size() < packed_bytes)
+            {
+                *frame = Some(FrameBuffers {
+                    pixels: ctx.work_buffer(
+                        "volume pixels",
+                        pixel_bytes,
+                        wgpu::BufferUsages::empty(),
+                    )?,
+                    readback: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some("volume pixels readback"),
+                        size: pixel_bytes.max(64),
+                        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                        mapped_at_creation: false,
+                    }),
+                    packed: ctx.work_buffer(
+                        "sRGB pixels",
+                        packed_bytes,
+                        wgpu::BufferUsages::empty(),
+                    )?,
+                    sum: ctx.work_buffer("sample count", 8, wgpu::BufferUsages::empty())?,
+                    packed_read: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some("sRGB pixels readback"),
+                        size: packed_bytes + 8,
+                        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                        mapped_at_creation: false,
+                    }),
+                    timer: ctx.timer(2),
+                });
+            }
+            let FrameBuffers {
+                pixels,
+                readback,
+                packed,
+                sum,
+                packed_read,
+                timer,
+            } = frame.as_ref().unwrap();
+            let shadows = params.shadows != 0;
+            // Bindings by number; the light grid's kernel uses no colour points (4) and no pixels
+            // (6), and each pipeline's layout holds exactly the bindings its entry point uses.
+            let cinematic = opt.mode == DvrMode::Cinematic;
+            let majorants = if cinematic {
+                Some(self.majorant_buffer(opt.interpolation)?)
+            } else {
+                None
+            };
+            // cinematic: the dispatches' samples, [first, first + count) each, their parameters,
+            // and the running sums between them.
+            let batches: Vec<(u32, u32)> = if cinematic {
+                let per = self
+                    .paths_per_dispatch
+                    .div_ceil(n.max(1))
+                    .clamp(1, opt.spp.max(1) as u64) as u32;
+                (0..opt.spp)
+                    .step_by(per as usize)
+                    .map(|f| (f, per.min(opt.spp - f)))
+                    .collect()
+            } else {
+                Vec::new()
+            };
+            let batch_params: Vec<wgpu::Buffer> = batches
                 .iter()
-                .map(|&binding| wgpu::BindGroupEntry {
-                    binding,
-                    resource: resource(binding),
+                .map(|&(sample_first, sample_count)| {
+                    let p = DvrParams {
+                        sample_first,
+                        sample_count,
+                        ..params
+                    };
+                    self.uniform("cinematic dispatch params", &p)
                 })
                 .collect();
-            ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some(label),
-                layout: &pipeline.get_bind_group_layout(0),
-                entries: &entries,
-            })
-        };
-        // One bind group a dispatch: the volume kernel's, or the path tracer's with its
-        // dispatch's parameters in binding 0.
-        let (pipeline, binds) = if cinematic {
-            let p = &self.path_pipeline;
-            let binds = batch_params
-                .iter()
-                .map(|params| {
-                    let entries: Vec<_> = [0, 1, 2, 3, 4, 6, 11, 12, 14, 15]
-                        .into_iter()
-                        .map(|binding| wgpu::BindGroupEntry {
-                            binding,
-                            resource: match binding {
-                                0 => params.as_entire_binding(),
-                                b => resource(b),
-                            },
-                        })
-                        .collect();
-                    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                        label: Some("path trace"),
-                        layout: &p.get_bind_group_layout(0),
-                        entries: &entries,
+            let mut accum = self.accum.lock().unwrap();
+            if batches.len() > 1 && accum.as_ref().is_none_or(|a| a.size() < 32 * n) {
+                *accum =
+                    Some(ctx.work_buffer("running sums", 32 * n, wgpu::BufferUsages::empty())?);
+            }
+            // The brick table is read only where dvr skips empty space, or a kept projection the
+            // bricks outside its segments.
+            let bricks = match self.kept_weights(opt.mode) {
+                _ if params.skip_empty == 0 => &self.no_rows,
+                Some(w) => self.kept_brick_buffer(w, opt.interpolation)?,
+                None => self.brick_buffer(opt.interpolation)?,
+            };
+            // A frame of one dispatch binds a placeholder.
+            let accum = accum.as_ref().unwrap_or(&self.no_rows);
+            let texture = self.texture_for(opt)?;
+            let resource = |b: u32| match b {
+                0 => param_buf.as_entire_binding(),
+                1 => wgpu::BindingResource::TextureView(texture),
+                2 => wgpu::BindingResource::Sampler(&self.gpu.sampler),
+                3 => self.gpu.opacity.as_entire_binding(),
+                4 => self.gpu.color.as_entire_binding(),
+                5 => bricks.as_entire_binding(),
+                6 => pixels.as_entire_binding(),
+                7 => self.light_values.as_entire_binding(),
+                8 => packed.as_entire_binding(),
+                9 => sum.as_entire_binding(),
+                10 => row_buf.as_entire_binding(),
+                11 => majorants.expect("a cinematic frame").as_entire_binding(),
+                12 => accum.as_entire_binding(),
+                14 => wgpu::BindingResource::TextureView(&self.segment_labels),
+                _ => self.segment_colours.as_entire_binding(),
+            };
+            let group = |label, pipeline: &wgpu::ComputePipeline, bindings: &[u32]| {
+                let entries: Vec<_> = bindings
+                    .iter()
+                    .map(|&binding| wgpu::BindGroupEntry {
+                        binding,
+                        resource: resource(binding),
                     })
+                    .collect();
+                ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some(label),
+                    layout: &pipeline.get_bind_group_layout(0),
+                    entries: &entries,
                 })
-                .collect();
-            (p, binds)
-        } else {
-            let p = &self.pipeline;
-            (
-                p,
-                vec![group("dvr", p, &[0, 1, 2, 3, 4, 5, 6, 7, 10, 14, 15])],
-            )
-        };
-        let light_bind =
-            shadows.then(|| group("light grid", &self.light_pipeline, &[0, 1, 2, 3, 5, 7]));
-        let mut enc = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("render_volume"),
-            });
-        if let Some(light_bind) = &light_bind {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("light_grid"),
-                timestamp_writes: timer.as_ref().map(|t| t.writes(Some(0), None)),
-            });
-            pass.set_pipeline(&self.light_pipeline);
-            pass.set_bind_group(0, light_bind, &[]);
-            let n = self.light_dims.iter().product::<u32>();
-            let groups = n.div_ceil(64);
-            let gx = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
-            pass.dispatch_workgroups(gx, groups.div_ceil(gx), 1);
-        }
-        for (i, bind) in binds.iter().enumerate() {
-            let (first, last) = (i == 0, i + 1 == binds.len());
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("render_volume"),
-                // With shadows the light grid's pass wrote the first stamp: the kernel time
-                // covers both; the path tracer's dispatches are timed from the first to the
-                // last.
-                timestamp_writes: timer
-                    .as_ref()
-                    .filter(|_| first || last)
-                    .map(|t| t.writes((first && !shadows).then_some(0), last.then_some(1))),
-            });
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, bind, &[]);
-            pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
-            drop(pass);
-            // A path-traced frame of several dispatches submits them one by one, each waited
-            // for: a frame may take minutes, a submission no longer than the GPU timeout.
-            if !last {
-                let done = std::mem::replace(
-                    &mut enc,
-                    ctx.device
-                        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                            label: Some("render_volume"),
-                        }),
-                );
-                ctx.queue.submit([done.finish()]);
-                ctx.wait()?;
-                self.paths_done
-                    .fetch_add(batches[i].1 as u64 * n, Ordering::Relaxed);
+            };
+            // One bind group a dispatch: the volume kernel's, or the path tracer's with its
+            // dispatch's parameters in binding 0.
+            let (pipeline, binds) = if cinematic {
+                let p = &self.path_pipeline;
+                let binds = batch_params
+                    .iter()
+                    .map(|params| {
+                        let entries: Vec<_> = [0, 1, 2, 3, 4, 6, 11, 12, 14, 15]
+                            .into_iter()
+                            .map(|binding| wgpu::BindGroupEntry {
+                                binding,
+                                resource: match binding {
+                                    0 => params.as_entire_binding(),
+                                    b => resource(b),
+                                },
+                            })
+                            .collect();
+                        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                            label: Some("path trace"),
+                            layout: &p.get_bind_group_layout(0),
+                            entries: &entries,
+                        })
+                    })
+                    .collect();
+                (p, binds)
+            } else {
+                let p = &self.pipeline;
+                (
+                    p,
+                    vec![group("dvr", p, &[0, 1, 2, 3, 4, 5, 6, 7, 10, 14, 15])],
+                )
+            };
+            let light_bind =
+                shadows.then(|| group("light grid", &self.light_pipeline, &[0, 1, 2, 3, 5, 7]));
+            let mut enc = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("render_volume"),
+                });
+            if let Some(light_bind) = &light_bind {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("light_grid"),
+                    timestamp_writes: timer.as_ref().map(|t| t.writes(Some(0), None)),
+                });
+                pass.set_pipeline(&self.light_pipeline);
+                pass.set_bind_group(0, light_bind, &[]);
+                let n = self.light_dims.iter().product::<u32>();
+                let groups = n.div_ceil(64);
+                let gx = groups.min(ctx.limits.max_compute_workgroups_per_dimension.max(1));
+                pass.dispatch_workgroups(gx, groups.div_ceil(gx), 1);
             }
-        }
-        if count_on_gpu {
-            let pack = group("pack sRGB", &self.pack_pipeline, &[0, 6, 8, 9]);
-            self.encode_pack(&mut enc, &pack, sum, n);
-        }
-        // One submission: the kernels, their timestamps and the copy of the pixels to read.
-        if let Some(t) = timer {
-            t.resolve(&mut enc);
-        }
-        if srgb8 {
-            enc.copy_buffer_to_buffer(packed, 0, packed_read, 0, packed_bytes);
-        }
-        if count_on_gpu {
-            enc.copy_buffer_to_buffer(sum, 0, packed_read, packed_bytes, 8);
-        }
-        match on_gpu {
-            Some(to) => enc.copy_buffer_to_buffer(pixels, 0, to, 0, pixel_bytes),
-            None if !srgb8 => enc.copy_buffer_to_buffer(pixels, 0, readback, 0, pixel_bytes),
-            None => {}
-        }
-        ctx.queue.submit([enc.finish()]);
-        // The packed bytes (and the sample sum after them) straight into the frame's vector;
-        // floats as words.
-        let (mut bytes, words): (Vec<u8>, Vec<u32>) = if count_on_gpu {
-            (read_back(ctx, packed_read)?, Vec::new())
-        } else {
-            (Vec::new(), read_words(ctx, readback)?)
-        };
-        if let Some(&(_, count)) = batches.last() {
-            self.paths_done
-                .fetch_add(count as u64 * n, Ordering::Relaxed);
-        }
-        let kernel_gpu_ms = match timer {
-            Some(t) => read_elapsed_ms(ctx, t)?,
-            None => None,
-        };
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(ctx.err(e));
-        }
-        let (mut alpha, mut variance) = (Vec::new(), Vec::new());
-        let (out, samples) = if count_on_gpu {
-            let at = packed_bytes as usize;
-            let samples = u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap());
-            bytes.truncate(3 * n as usize);
-            match on_gpu {
-                Some(_) => (Pixels::OnGpu, samples),
-                None => (Pixels::Srgb8(bytes), samples),
-            }
-        } else {
-            let floats: &[f32] = bytemuck::cast_slice(&words);
-            let px = &floats[..4 * n as usize];
-            if premultiplied {
-                let a = &floats[4 * n as usize..8 * n as usize];
-                alpha = a.chunks_exact(4).map(|a| a[0]).collect();
-                if cinematic {
-                    variance = a.chunks_exact(4).map(|a| a[1]).collect();
+            for (i, bind) in binds.iter().enumerate() {
+                let (first, last) = (i == 0, i + 1 == binds.len());
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("render_volume"),
+                    // With shadows the light grid's pass wrote the first stamp: the kernel time
+                    // covers both; the path tracer's dispatches are timed from the first to the
+                    // last.
+                    timestamp_writes: timer
+                        .as_ref()
+                        .filter(|_| first || last)
+                        .map(|t| t.writes((first && !shadows).then_some(0), last.then_some(1))),
+                });
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, bind, &[]);
+                pass.dispatch_workgroups(opt.width.div_ceil(8), opt.height.div_ceil(8), 1);
+                drop(pass);
+                // A path-traced frame of several dispatches submits them one by one, each waited
+                // for: a frame may take minutes, a submission no longer than the GPU timeout.
+                if !last {
+                    let done = std::mem::replace(
+                        &mut enc,
+                        ctx.device
+                            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                                label: Some("render_volume"),
+                            }),
+                    );
+                    ctx.queue.submit([done.finish()]);
+                    ctx.wait()?;
+                    self.paths_done
+                        .fetch_add(batches[i].1 as u64 * n, Ordering::Relaxed);
                 }
             }
-            let samples = px.chunks_exact(4).map(|p| p[3].abs() as u64).sum();
-            // A ray that took no sample has no HU value: NaN, as on the CPU (the kernel writes
-            // the background there); nor has one that met no kept segment (samples counted
-            // negative: dvr.wgsl's march).
-            let none = params.hu_values != 0;
-            let pixels = px
-                .chunks_exact(4)
-                .map(|p| {
-                    if none && p[3] <= 0.0 {
-                        Vec3::NAN
-                    } else {
-                        Vec3::new(p[0], p[1], p[2])
+            if count_on_gpu {
+                let pack = group("pack sRGB", &self.pack_pipeline, &[0, 6, 8, 9]);
+                self.encode_pack(&mut enc, &pack, sum, n);
+            }
+            // One submission: the kernels, their timestamps and the copy of the pixels to read.
+            if let Some(t) = timer {
+                t.resolve(&mut enc);
+            }
+            if srgb8 {
+                enc.copy_buffer_to_buffer(packed, 0, packed_read, 0, packed_bytes);
+            }
+            if count_on_gpu {
+                enc.copy_buffer_to_buffer(sum, 0, packed_read, packed_bytes, 8);
+            }
+            match on_gpu {
+                Some(to) => enc.copy_buffer_to_buffer(pixels, 0, to, 0, pixel_bytes),
+                None if !srgb8 => enc.copy_buffer_to_buffer(pixels, 0, readback, 0, pixel_bytes),
+                None => {}
+            }
+            ctx.queue.submit([enc.finish()]);
+            // The packed bytes (and the sample sum after them) straight into the frame's vector;
+            // floats as words.
+            let (mut bytes, words): (Vec<u8>, Vec<u32>) = if count_on_gpu {
+                (read_back(ctx, packed_read)?, Vec::new())
+            } else {
+                (Vec::new(), read_words(ctx, readback)?)
+            };
+            if let Some(&(_, count)) = batches.last() {
+                self.paths_done
+                    .fetch_add(count as u64 * n, Ordering::Relaxed);
+            }
+            let kernel_gpu_ms = match timer {
+                Some(t) => read_elapsed_ms(ctx, t)?,
+                None => None,
+            };
+            let (mut alpha, mut variance) = (Vec::new(), Vec::new());
+            let (out, samples) = if count_on_gpu {
+                let at = packed_bytes as usize;
+                let samples = u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap());
+                bytes.truncate(3 * n as usize);
+                match on_gpu {
+                    Some(_) => (Pixels::OnGpu, samples),
+                    None => (Pixels::Srgb8(bytes), samples),
+                }
+            } else {
+                let floats: &[f32] = bytemuck::cast_slice(&words);
+                let px = &floats[..4 * n as usize];
+                if premultiplied {
+                    let a = &floats[4 * n as usize..8 * n as usize];
+                    alpha = a.chunks_exact(4).map(|a| a[0]).collect();
+                    if cinematic {
+                        variance = a.chunks_exact(4).map(|a| a[1]).collect();
                     }
-                })
-                .collect();
-            (
-                Pixels::Linear(Image {
-                    width: opt.width,
-                    height: opt.height,
-                    pixels,
-                }),
-                samples,
-            )
-        };
-        Ok((
-            out,
-            alpha,
-            variance,
-            GpuDvrTimes {
-                frame_ms: t0.elapsed().as_secs_f64() * 1e3,
-                kernel_gpu_ms,
-                samples,
-                denoise: None,
-            },
-        ))
+                }
+                let samples = px.chunks_exact(4).map(|p| p[3].abs() as u64).sum();
+                // A ray that took no sample has no HU value: NaN, as on the CPU (the kernel writes
+                // the background there); nor has one that met no kept segment (samples counted
+                // negative: dvr.wgsl's march).
+                let none = params.hu_values != 0;
+                let pixels = px
+                    .chunks_exact(4)
+                    .map(|p| {
+                        if none && p[3] <= 0.0 {
+                            Vec3::NAN
+                        } else {
+                            Vec3::new(p[0], p[1], p[2])
+                        }
+                    })
+                    .collect();
+                (
+                    Pixels::Linear(Image {
+                        width: opt.width,
+                        height: opt.height,
+                        pixels,
+                    }),
+                    samples,
+                )
+            };
+            Ok((
+                out,
+                alpha,
+                variance,
+                GpuDvrTimes {
+                    frame_ms: t0.elapsed().as_secs_f64() * 1e3,
+                    kernel_gpu_ms,
+                    samples,
+                    denoise: None,
+                },
+            ))
+        })
     }
 }
