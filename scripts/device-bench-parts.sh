@@ -9,6 +9,16 @@ cd "$(dirname "$0")/.."
 d=${1:?data folder}; out=${2:?output folder}; sizes=("${@:3}")
 mkdir -p "$out"
 part() { local name=$1; shift; env "$@" bash scripts/device-bench.sh "$d" "$out/$name" "${sizes[@]}" > "$out/$name.log" 2>&1; }
+# With a base binary packed beside this one (`device-bench.sh --pack DIR BASE_REV`), first what
+# BENCHMARKS.md lists as not yet timed on a GPU: the two binaries' ray queries and whole frames
+# alternated, where a query's wall time goes, and the queues filled a lane or a subgroup at a time.
+if [ -f "$d/base.gz" ] || [ -x "$d/base" ]; then
+  part 0-ab PARTS=ab
+  part 0-floor PARTS=floor
+  part 0-appends PARTS=appends
+  part 0-split PARTS=trace TRACERS="split split-atomic" MESHES=turbine_blade
+  part 0-abframes PARTS=abframes
+fi
 part 1-trace PARTS=trace TRACERS="gpu checked block costs ifif wg"
 part 2-render PARTS=render
 part 3-trace PARTS=trace TRACERS="split sorted cpu embree"

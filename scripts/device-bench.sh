@@ -28,10 +28,39 @@ set -uo pipefail
 cd "$(dirname "$0")/.."
 
 if [ "${1:-}" = --pack ]; then
-  d=${2:?--pack DIR}
+  d=${2:?--pack DIR [BASE_REV]}; base_rev=${3:-}
   mkdir -p "$d/meshes" "$d/ct"
+  # The Vulkan loader (.gl) and rays.py's Embree wheels (.whl) for the device, once a checkout.
+  if [ ! -d .gl ]; then
+    grep -qx '/.gl/' .git/info/exclude 2>/dev/null || echo /.gl/ >> .git/info/exclude
+    mkdir -p .gl /tmp/amd64/partial
+    o=(-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64)
+    apt-get "${o[@]}" update -qq && (cd .gl && apt-get "${o[@]}" download libvulkan1 libegl1 libglvnd0) \
+      || { rm -rf .gl; echo "--pack: could not download the Vulkan loader into .gl" >&2; exit 1; }
+  fi
+  if [ ! -d .whl ]; then
+    grep -qx '/.whl/' .git/info/exclude 2>/dev/null || echo /.whl/ >> .git/info/exclude
+    mkdir -p .whl
+    for p in embreex==4.4.0.post1 trimesh==5.2.0; do
+      python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+        --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 -d .whl $p \
+        || { rm -rf .whl; echo "--pack: could not download $p into .whl" >&2; exit 1; }
+    done
+  fi
   cargo build --release --quiet
-  strip -o "$d/raystream" target/release/raystream
+  # Binaries travel gzipped (a carry holds 64 MiB in all); the run unpacks them.
+  strip -o "$d/raystream" target/release/raystream && gzip -9f "$d/raystream"
+  # BASE_REV: another commit's release build beside it, for the "ab" and "abframes" parts
+  # (built in a worktree of its own, into target/base).
+  if [ -n "$base_rev" ]; then
+    wt=$(mktemp -d)/base
+    git worktree add --detach "$wt" "$base_rev" >/dev/null || { echo "--pack: no commit $base_rev" >&2; exit 1; }
+    CARGO_TARGET_DIR=$PWD/target/base cargo build --release --quiet --manifest-path "$wt/Cargo.toml"
+    git worktree remove --force "$wt"
+    strip -o "$d/base" target/base/release/raystream && gzip -9f "$d/base"
+    git rev-parse --short "$base_rev" > "$d/base.rev"
+  fi
+  git rev-parse --short HEAD > "$d/raystream.rev"
   cp ../shared/data/meshes/{stanford_bunny.ply,stanford_lucy_100k.ply,turbine_blade.ply} "$d/meshes/"
   cp ../shared/data/volumes/nifti/abdomen_pelvis_ct_totalseg.nii.gz "$d/ct/"
   # The chest CT with its aorta's path and the fly-through's transfer function (question 20).
@@ -44,6 +73,11 @@ fi
 
 d=${1:?data folder}; out=${2:?output folder}; size=${3:-1920x1080}; dvr_size=${4:-1024x1024}
 py=${RAYSTREAM_PYTHON:-python3}
+# --pack's binaries arrive gzipped; a base binary packed beside this one is the default BASE.
+for b in raystream base; do
+  [ -f "$d/$b.gz" ] && [ ! -x "$d/$b" ] && gunzip -c "$d/$b.gz" > "$d/$b" && chmod +x "$d/$b"
+done
+[ -z "${BASE:-}" ] && [ -x "$d/base" ] && BASE=$d/base
 bin=$d/raystream
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
@@ -57,7 +91,10 @@ for l in sys.stdin:
     if l.startswith("{"):
         o=json.loads(l); o.update(t); print(json.dumps(o), flush=True)' "$1" | tee -a "$res"; }
 
-echo "{\"machine\": \"$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"date\": \"$(date -u +%FT%TZ)\"}" | tee -a "$res"
+revs=""
+[ -f "$d/raystream.rev" ] && revs="$revs, \"commit\": \"$(cat "$d/raystream.rev")\""
+[ -f "$d/base.rev" ] && revs="$revs, \"base_commit\": \"$(cat "$d/base.rev")\""
+echo "{\"machine\": \"$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"date\": \"$(date -u +%FT%TZ)\"$revs}" | tee -a "$res"
 parts=${PARTS:-trace render volume}
 tracers=${TRACERS:-gpu block checked ifif wg split sorted costs cpu embree}
 has() { [[ " $1 " == *" $2 "* ]]; }

@@ -386,7 +386,8 @@ def main():
     commit = next((o["commit"] for o in lines if "commit" in o), None)
     if machine:
         out.append(f"Machine: {machine['machine']}, {machine.get('date', '')}; adapter: {adapter}; "
-                   f"commit: {commit or 'not recorded'}.")
+                   f"commit: {commit or 'not recorded'}"
+                   + (f", base {machine['base_commit']}." if "base_commit" in machine else "."))
         out.append("")
     query_table(by, out)
     variants_table(by, out)
