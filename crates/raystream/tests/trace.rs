@@ -335,15 +335,23 @@ fn gpu_timestamps_can_be_turned_off() {
     );
 }
 
-/// GPU `trace` on the standard ray sets: passes rays.py's Embree check, and equals the CPU's
-/// hits (prim, and t within 1e-5 relative; only ties at shared edges may differ).
+/// GPU `trace` on the standard ray sets of every mesh in ../shared/data/meshes: passes
+/// rays.py's Embree check, and equals the CPU's hits (prim, and t within 1e-5 relative; only
+/// ties at shared edges may differ).
 #[test]
 fn gpu_trace_agrees_with_cpu_and_embree() {
     if !gpu_available() {
         return;
     }
     let Some(py) = python() else { return };
-    for name in ["spot.obj", "stanford_lucy_100k.ply", "turbine_blade.ply"] {
+    let mut names: Vec<String> = std::fs::read_dir(shared().join("data/meshes"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| [".obj", ".ply", ".stl"].iter().any(|x| n.ends_with(x)))
+        .collect();
+    names.sort();
+    assert!(names.len() >= 6, "meshes: {names:?}");
+    for name in &names {
         let m = mesh(name);
         for kind in ["primary", "shadow", "diffuse", "random"] {
             let stem = format!("gpu-{name}-{kind}");
