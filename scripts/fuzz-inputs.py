@@ -723,22 +723,46 @@ def fuzz_scenes(work, n):
         name = f"scene{i}.toml"
         p = os.path.join(work, name)
         open(p, "w").write(s)
-        codes, why = [], None
-        for dev in ("cpu", "gpu"):
-            png = os.path.join(work, f"scene{i}-{dev}.png")
-            why = why or run(["render", p, "--size", "24x16", "--spp", "2", "--max-depth", "3",
-                              "-q", "--device", dev, "-o", png] + framing, name)
-            codes.append(os.path.exists(png))
-        if not why and codes == [True, True]:
+        def render_both(size):
+            """None and whether both devices rendered it, or what went wrong."""
+            codes, why = [], None
+            for dev in ("cpu", "gpu"):
+                png = os.path.join(work, f"scene{i}-{dev}.png")
+                if os.path.exists(png):
+                    os.remove(png)
+                why = why or run(["render", p, "--size", size, "--spp", "2", "--max-depth", "3",
+                                  "-q", "--device", dev, "-o", png] + framing, name)
+                codes.append(os.path.exists(png))
+            if why or codes == [False, False]:
+                return why, False
+            if codes != [True, True]:
+                return "one device rendered it, the other refused it", False
+            return None, True
+
+        def compare():
+            """The issue's bound on the two images: mean < 0.5/255, at most 0.1 % of pixels
+            beyond 2/255; the difference, or None."""
             r = subprocess.run([python, rays_py, "imgdiff",
                                 os.path.join(work, f"scene{i}-cpu.png"),
                                 os.path.join(work, f"scene{i}-gpu.png"), "--json"],
                                capture_output=True)
             j = json.loads(r.stdout)
             if j["mean_abs_diff"] >= 0.5 or j["frac_gt_2"] > 0.001:
-                why = f"GPU vs CPU: mean {j['mean_abs_diff']:.3f}/255, {j['frac_gt_2']:.4f} > 2/255"
-        elif not why and codes != [False, False]:
-            why = "one device rendered it, the other refused it"
+                return j
+            return None
+
+        why, both = render_both("24x16")
+        j = compare() if both else None
+        if j and j["mean_abs_diff"] < 0.5 and j["frac_gt_2"] * 384 < 1.5:
+            # One pixel in 384 is past a bound made for frames (0.1 %): judge it again on 96x64
+            # (a scene at the f32 edge functions' limit, a strip drawn out to 1e9, differs by
+            # such a pixel; BENCHMARKS.md, "A long ground plane").
+            why, both = render_both("96x64")
+            j = compare() if both else None
+            print(f"{name}: one pixel beyond 2/255 at 24x16; at 96x64 "
+                  + (why or ("beyond the bound" if j else "within it")))
+        if j:
+            why = f"GPU vs CPU: mean {j['mean_abs_diff']:.3f}/255, {j['frac_gt_2']:.4f} > 2/255"
         if why:
             bad += 1
             print(f"FAIL {p} {' '.join(framing)}: {why}")
