@@ -969,37 +969,6 @@ impl<'a> GpuTracer<'a> {
             .map(|t| t.prim() as u64 + 1)
             .max()
             .unwrap_or(0);
-        let (inners, leaves, tris, entry, module, closest, any) = ctx.scoped(|| {
-            let inners = ctx.storage(
-                "kd inner nodes",
-                bytemuck::cast_slice(&tree.inners),
-                wgpu::BufferUsages::empty(),
-            )?;
-            let leaves = ctx.storage(
-                "kd leaves",
-                bytemuck::cast_slice(&tree.leaves),
-                wgpu::BufferUsages::empty(),
-            )?;
-            let tris = ctx.storage(
-                "kd triangles",
-                bytemuck::cast_slice(&tree.tris),
-                wgpu::BufferUsages::empty(),
-            )?;
-            let entry = ctx.storage(
-                "kd entry grid",
-                bytemuck::cast_slice(&tree.entry.cells),
-                wgpu::BufferUsages::empty(),
-            )?;
-            let module = ctx.tree_module(
-                "queries.wgsl",
-                queries_wgsl_sized(ctx.query_workgroup),
-                false,
-            );
-            let closest = ctx.auto_pipeline(&module, "intersect_closest");
-            let any = ctx.auto_pipeline(&module, "intersect_any");
-            Ok((inners, leaves, tris, entry, module, closest, any))
-        })?;
-        ctx.wait()?;
         let b = tree.bounds;
         let g = &tree.entry;
         let params = Params {
@@ -1014,24 +983,40 @@ impl<'a> GpuTracer<'a> {
             entry_scale: [g.scale[0], g.scale[1], g.scale[2], 0.0],
             entry_res: [g.res[0], g.res[1], g.res[2], 0],
         };
-        Ok(GpuTracer {
-            ctx,
-            inners,
-            leaves,
-            tris,
-            entry,
-            params,
-            closest,
-            any,
-            split: std::sync::OnceLock::new(),
-            persistent: std::sync::OnceLock::new(),
-            ifif: std::sync::OnceLock::new(),
-            floor: std::sync::OnceLock::new(),
-            stats: std::sync::OnceLock::new(),
-            module,
-            max_rays: (ctx.max_binding() / std::mem::size_of::<GpuRay>() as u64).max(1) as usize,
-            prims,
-            upload_ms: t0.elapsed().as_secs_f64() * 1e3,
+        let upload = |what, bytes: &[u8]| ctx.storage(what, bytes, wgpu::BufferUsages::empty());
+        ctx.scoped(|| {
+            let inners = upload("kd inner nodes", bytemuck::cast_slice(&tree.inners))?;
+            let leaves = upload("kd leaves", bytemuck::cast_slice(&tree.leaves))?;
+            let tris = upload("kd triangles", bytemuck::cast_slice(&tree.tris))?;
+            let entry = upload("kd entry grid", bytemuck::cast_slice(&tree.entry.cells))?;
+            let module = ctx.tree_module(
+                "queries.wgsl",
+                queries_wgsl_sized(ctx.query_workgroup),
+                false,
+            );
+            let closest = ctx.auto_pipeline(&module, "intersect_closest");
+            let any = ctx.auto_pipeline(&module, "intersect_any");
+            ctx.wait()?;
+            Ok(GpuTracer {
+                ctx,
+                inners,
+                leaves,
+                tris,
+                entry,
+                params,
+                closest,
+                any,
+                split: std::sync::OnceLock::new(),
+                persistent: std::sync::OnceLock::new(),
+                ifif: std::sync::OnceLock::new(),
+                floor: std::sync::OnceLock::new(),
+                stats: std::sync::OnceLock::new(),
+                module,
+                max_rays: (ctx.max_binding() / std::mem::size_of::<GpuRay>() as u64).max(1)
+                    as usize,
+                prims,
+                upload_ms: t0.elapsed().as_secs_f64() * 1e3,
+            })
         })
     }
 
