@@ -16,6 +16,7 @@
 # frame in waves of WAVES samples; "checks": its kernels with and without wgpu's run-time checks; "appends": its
 # shade_hits reserving queue slots a lane or a subgroup at a time) picks the parts; TRACERS (default "gpu block
 # checked ifif wg split sorted costs cpu embree"; also "split-atomic": the split kernels' lists filled a lane at a time (RAYSTREAM_GPU_APPENDS=atomic);
+# "planes-f32": the fused kernel without its f64 planes (RAYSTREAM_GPU_PLANES=f32);
 # wg = the fused kernel at 32, 128 and 256 threads a workgroup; checked = the fused
 # kernel with wgpu's run-time checks (RAYSTREAM_GPU_CHECKS=on; off by default); block = the fused kernel with
 # RAYSTREAM_GPU_WAIT=block, blocking waits against the spinning ones a hardware GPU has by default; sorted = the diffuse and random
@@ -117,6 +118,12 @@ has "$parts" trace && for m in ${MESHES:-stanford_bunny stanford_lucy_100k turbi
     has "$tracers" split-atomic && { RAYSTREAM_GPU_APPENDS=atomic $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-split-atomic.hits" \
       "${any[@]}" --device gpu --kernels split --repeat 10 --json --quiet | tag "$t, \"tracer\": \"raystream-gpu-split-atomic\"}"
       cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-split-atomic.hits" || echo "$m $kind: SPLIT-ATOMIC HITS DIFFER from fused"; }
+    # The fused kernel with huge triangles' planes left in f32 (RAYSTREAM_GPU_PLANES=f32; f64 by
+    # default where the adapter has it): what the f64 path's code costs (registers) where it
+    # never runs; the hits differ only where it does (about 4 tests in 10^5).
+    has "$tracers" planes-f32 && { RAYSTREAM_GPU_PLANES=f32 $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-planes-f32.hits" \
+      "${any[@]}" --device gpu --repeat 10 --json --quiet | tag "$t, \"tracer\": \"raystream-gpu-planes-f32\"}"
+      cmp -s "$tmp/gpu-fused.hits" "$tmp/gpu-planes-f32.hits" || echo "$m $kind: f32 planes give other hits than f64 ones"; }
     # Leaf size: the SAH builder pricing a traversal step dearer (shallower trees, fuller leaves).
     has "$tracers" costs && for kt in 2 4 8; do
       $bin trace "$mesh" --rays "$rays" -o "$tmp/gpu-kt.hits" "${any[@]}" --device gpu --sah-traversal-cost $kt --repeat 10 --json \

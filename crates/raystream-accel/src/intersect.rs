@@ -125,19 +125,33 @@ impl WatertightRay {
     }
 }
 
+/// How far `plane_t` trusts f32: where the corner's offset from the origin times the edges'
+/// lengths exceeds this many times the plane's distance times the normal's length
+/// (`|r|·|e1|·|e2| > L·|n·r|`, lengths by their largest component, all as the f32 test computes
+/// them), the plane is computed again in f64 (`plane_t_f64`; on the GPU where the adapter has
+/// f64, kdtree.wgsl). The f32 normal is only as good as its edges' rounding: the plane turns
+/// by about one rounding about the corner it is taken through, and a corner 5 × 10⁶ away moves
+/// it by about 0.3 where the ray starts, so that a huge ground quad turned 0.3° was hit at t
+/// off by more than the camera's height above it, behind the camera or not at all
+/// (`scripts/sliver-model.py`: 9,833 of 17,984 rays missed it, 4,051 that point away hit it).
+/// The f32 t's relative error is a few 2⁻²⁴ of the ratio at most. On the standard 640×480
+/// sets of the meshes in ../shared/data/meshes, 232 of 5.6 M tests exceed 2¹⁰ (secondary rays
+/// leaving a surface, whose distance to its plane is small), so that a GPU's warp all but
+/// never waits for f64.
+pub const PLANE_T_LEVER: f32 = 1024.0;
+
 /// The distance along the ray to the plane of the triangle with corners' coordinates `x`, `y`,
 /// `z` along the ray's axes kx, ky, kz, from the origin `o` in that order, with the ray's
 /// `shear` (its direction is `(sx, sy, 1) / sz` in that order): the plane's normal from the
-/// corners' edges, `t = sz · n·(a − o) / n·(sx, sy, 1)`.
+/// corners' edges, `t = sz · n·(a − o) / n·(sx, sy, 1)`; in f64 where f32 cannot be trusted
+/// ([`PLANE_T_LEVER`]).
 ///
 /// Not the paper's `t = sz · (u·az + v·bz + w·cz) / det`: that interpolates the corners'
 /// depths by the edge functions, which cancel where the triangle's projection along the ray
 /// is a sliver, far longer than wide (a ground plane seen at a grazing angle: a 5 × 10⁶ quad
 /// seen 7° from its plane had its edge functions 10⁻³ off and missed 16 % of the rays that
-/// hit it, the others' t off by up to 25×, where Embree's plane-based t was right). The
-/// normal from the edges is exact there (the edges are axis-aligned) and, in general, good to
-/// the rounding of the corners; the edge functions still decide the hit, so the test stays
-/// watertight.
+/// hit it, the others' t off by up to 25×, where Embree's plane-based t was right). The edge
+/// functions still decide the hit, so the test stays watertight.
 #[inline(always)]
 fn plane_t(x: [f32; 3], y: [f32; 3], z: [f32; 3], o: [f32; 3], shear: [f32; 3]) -> f32 {
     let e1 = [x[1] - x[0], y[1] - y[0], z[1] - z[0]];
@@ -147,7 +161,40 @@ fn plane_t(x: [f32; 3], y: [f32; 3], z: [f32; 3], o: [f32; 3], shear: [f32; 3]) 
         e1[2] * e2[0] - e1[0] * e2[2],
         e1[0] * e2[1] - e1[1] * e2[0],
     ];
-    let along = n[0] * (x[0] - o[0]) + n[1] * (y[0] - o[1]) + n[2] * (z[0] - o[2]);
+    let r = [x[0] - o[0], y[0] - o[1], z[0] - o[2]];
+    let along = n[0] * r[0] + n[1] * r[1] + n[2] * r[2];
+    // The same products in the same order as kdtree.wgsl, so that both take the same path.
+    // Lengths by their largest component: within the input's ±10¹⁰ nothing overflows, and a
+    // scene scaled by a power of two takes the same path everywhere (squared lengths, cheaper
+    // on lavapipe, overflow from about 10⁶, and the picture changed with the scale).
+    if largest(e1) * largest(e2) * largest(r) > PLANE_T_LEVER * along.abs() {
+        return plane_t_f64(x, y, z, o, shear);
+    }
     let facing = n[0] * shear[0] + n[1] * shear[1] + n[2];
     shear[2] * (along / facing)
+}
+
+/// The largest of `v`'s magnitudes.
+#[inline(always)]
+fn largest(v: [f32; 3]) -> f32 {
+    v[0].abs().max(v[1].abs()).max(v[2].abs())
+}
+
+/// [`plane_t`] in f64: the edges and the corner's offset from the origin are exact there, the
+/// normal's products too, so that only the sums round, 2⁻⁵³ of their terms.
+#[cold]
+#[inline(never)]
+fn plane_t_f64(x: [f32; 3], y: [f32; 3], z: [f32; 3], o: [f32; 3], shear: [f32; 3]) -> f32 {
+    let (x, y, z) = (x.map(f64::from), y.map(f64::from), z.map(f64::from));
+    let (o, shear) = (o.map(f64::from), shear.map(f64::from));
+    let e1 = [x[1] - x[0], y[1] - y[0], z[1] - z[0]];
+    let e2 = [x[2] - x[0], y[2] - y[0], z[2] - z[0]];
+    let n = [
+        e1[1] * e2[2] - e1[2] * e2[1],
+        e1[2] * e2[0] - e1[0] * e2[2],
+        e1[0] * e2[1] - e1[1] * e2[0],
+    ];
+    let along = n[0] * (x[0] - o[0]) + n[1] * (y[0] - o[1]) + n[2] * (z[0] - o[2]);
+    let facing = n[0] * shear[0] + n[1] * shear[1] + n[2];
+    (shear[2] * (along / facing)) as f32
 }

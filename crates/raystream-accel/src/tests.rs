@@ -572,6 +572,54 @@ fn long_ground_planes_are_hit_where_their_planes_are() {
     }
 }
 
+/// Ground quads too large for f32 planes, turned off the axes: the plane through a corner 5 ×
+/// 10⁶ away, from the f32 normal, lay 0.3 off where the rays start, 1 above it, so that the
+/// tree's t (before `PLANE_T_LEVER`) missed half the rays that hit a strip turned 0.3° and hit
+/// a quarter of those that point away from it. From (0, 1, 5), 11° below the horizon ± 22°
+/// and along a strip ± 2.6° (a narrow view, so that most rays meet it): every ray whose f64
+/// hit lies 10⁻³ of a triangle inside it hits, at the f64 t within 1e-5, through the tree and
+/// by the test alone; none whose f64 ray misses by that much does.
+#[test]
+fn huge_turned_ground_quads_are_hit_where_their_planes_are() {
+    use brute::{BIG_TURNED_QUADS, turned_quad_margin};
+    for (w, l, degrees) in BIG_TURNED_QUADS {
+        let mesh = brute::turned_quad(w, l, degrees);
+        let tree = KdTree::build(&mesh, Builder::Sah);
+        let corners: Vec<[Vec3; 3]> = (0..2).map(|i| mesh.corners(i)).collect();
+        let (mut inside, mut outside) = (0, 0);
+        for ray in brute::turned_quad_rays(96, 64) {
+            let what = format!("{w} x {l} turned {degrees}°: {ray:?}");
+            let got = tree.intersect(&ray, Traversal::Ropes);
+            let alone = brute::closest(&corners, &ray);
+            match brute::verdict_f64(&corners, &ray, turned_quad_margin(w, l)) {
+                brute::Verdict::Inside(t) => {
+                    inside += 1;
+                    for (h, how) in [(got, "through the tree"), (alone, "alone")] {
+                        let h = h.unwrap_or_else(|| panic!("{what} misses {how}"));
+                        let err = ((h.t as f64 - t) / t).abs();
+                        assert!(err < 1e-5, "{what} {how}: t {} against {t}", h.t);
+                    }
+                    assert!(tree.intersect_any(&ray, Traversal::Ropes).is_some());
+                }
+                brute::Verdict::Outside => {
+                    outside += 1;
+                    assert!(got.is_none() && alone.is_none(), "{what} hits: {got:?}");
+                    assert!(
+                        tree.intersect_any(&ray, Traversal::Ropes).is_none(),
+                        "{what}"
+                    );
+                }
+                brute::Verdict::Near => {}
+            }
+        }
+        eprintln!("{w} x {l}: {inside}, {outside}");
+        assert!(
+            inside > 300 && outside > 1000,
+            "{w} x {l}: {inside}, {outside}"
+        );
+    }
+}
+
 /// The same tree's rope walks with its entry grid and without one (every walk from the root):
 /// the same hits, bit for bit, the same leaves and triangles visited ray by ray (the walks
 /// reach the same first leaf, so all later steps are the same), and never more inner steps.

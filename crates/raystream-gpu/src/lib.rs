@@ -18,6 +18,7 @@ use std::time::{Duration, Instant};
 use layout::{GpuHit, GpuRay, Params};
 use raystream_accel::KdTree;
 use raystream_accel::entry::ERROR_SCALE as ENTRY_ERROR_SCALE;
+use raystream_accel::intersect::PLANE_T_LEVER;
 use raystream_accel::layout::{LEAF_BIT, NO_ROPE};
 use raystream_math::Ray;
 use wgpu::util::DeviceExt;
@@ -40,6 +41,7 @@ const GPU_TIMEOUT: Duration = Duration::from_secs(120);
 const KDTREE_WGSL: &str = include_str!("kernels/kdtree.wgsl");
 const QUERIES_WGSL: &str = include_str!("kernels/queries.wgsl");
 const STATS_WGSL: &str = include_str!("kernels/stats.wgsl");
+const PLANE_F64_WGSL: &str = include_str!("kernels/plane_f64.wgsl");
 
 /// The constants every kernel shares, from their Rust definitions, then the kd-tree code
 /// (without its work counters).
@@ -50,7 +52,7 @@ fn kdtree_core_wgsl() -> String {
 /// [`kdtree_core_wgsl`] with `workgroup` threads per workgroup.
 fn kdtree_core_wgsl_sized(workgroup: u32) -> String {
     format!(
-        "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {workgroup}u;\nconst ENTRY_ERROR_SCALE: f32 = {ENTRY_ERROR_SCALE:?};\n\n{KDTREE_WGSL}"
+        "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {workgroup}u;\nconst ENTRY_ERROR_SCALE: f32 = {ENTRY_ERROR_SCALE:?};\nconst PLANE_T_LEVER: f32 = {PLANE_T_LEVER:?};\n\n{KDTREE_WGSL}"
     )
 }
 
@@ -95,6 +97,22 @@ fn append_wgsl(subgroups: bool, counters: &str) -> String {
     format!(
         "\n// Reserves `n` consecutive slots of the queue counted by `{counters}[slot]`; returns the first.\nfn append(slot: u32, n: u32) -> u32 {{\n{}\n}}\n",
         body.replace("COUNTERS", counters)
+    )
+}
+
+/// Kernel `source` (holding kdtree.wgsl) with its triangle test's `plane_t_wide` in f64
+/// (plane_f64.wgsl) instead of f32; the module needs wgpu's SHADER_F64 feature.
+pub fn with_f64_planes(source: &str) -> String {
+    const BEGIN: &str = "// PLANE_T_WIDE:";
+    const END: &str = "// END PLANE_T_WIDE";
+    let (Some(begin), Some(end)) = (source.find(BEGIN), source.find(END)) else {
+        unreachable!("kdtree.wgsl's plane_t_wide is marked by {BEGIN} and {END}");
+    };
+    format!(
+        "{}{}{}",
+        &source[..begin],
+        PLANE_F64_WGSL.trim_end(),
+        &source[end + END.len()..]
     )
 }
 
@@ -178,6 +196,9 @@ pub struct GpuContext {
     /// `shade_hits` and the split kernels reserve queue slots a subgroup at a time where the
     /// adapter has subgroup operations (see [`GpuContext::set_subgroup_appends`]).
     subgroup_appends: bool,
+    /// The triangle test places huge triangles' planes in f64 where the adapter has it (see
+    /// [`GpuContext::set_f64_planes`]).
+    f64_planes: bool,
     /// Tests only: the work buffers by these names fail as out of memory, each once, while
     /// they are at least the given bytes.
     #[cfg(test)]
@@ -261,8 +282,12 @@ impl GpuContext {
         let limits = chosen.limits();
         // Per-kernel times come from timestamp queries where the adapter has them.
         // Subgroups, where there are, for the statistics query's SIMD efficiency.
-        let features =
-            chosen.features() & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::SUBGROUP);
+        // f64, where there is, for the planes of triangles too large for f32's
+        // (`GpuContext::set_f64_planes`).
+        let features = chosen.features()
+            & (wgpu::Features::TIMESTAMP_QUERY
+                | wgpu::Features::SUBGROUP
+                | wgpu::Features::SHADER_F64);
         let (device, queue) = pollster::block_on(chosen.request_device(&wgpu::DeviceDescriptor {
             label: Some("raystream"),
             required_features: features,
@@ -297,6 +322,7 @@ impl GpuContext {
             unchecked: true,
             timestamps: true,
             subgroup_appends: true,
+            f64_planes: true,
             #[cfg(test)]
             fail_alloc: Mutex::new(Vec::new()),
         })
@@ -402,6 +428,23 @@ impl GpuContext {
         self.subgroup_appends && self.device.features().contains(wgpu::Features::SUBGROUP)
     }
 
+    /// Whether the kd-tree kernels made after now compute a triangle's plane again in f64 where
+    /// the f32 one cannot place it (a triangle far larger than its distance from the ray's
+    /// origin, such as a huge ground quad: raystream-accel's `PLANE_T_LEVER`), as the CPU does,
+    /// or in f32 as before. f64 only where the adapter has it (wgpu's SHADER_F64: Vulkan and
+    /// DX12 on most GPUs, lavapipe; not Metal); the test takes that path for about 4 in 10⁵
+    /// triangles of the standard ray sets, so the hits are otherwise the same. The CLI's
+    /// `RAYSTREAM_GPU_PLANES=f64|f32` (f64 by default: f32 to measure what the path costs).
+    pub fn set_f64_planes(&mut self, on: bool) {
+        self.f64_planes = on;
+    }
+
+    /// Whether the kd-tree kernels made after now place huge triangles' planes in f64: asked
+    /// for ([`GpuContext::set_f64_planes`]) and possible on this adapter.
+    pub fn f64_planes(&self) -> bool {
+        self.f64_planes && self.device.features().contains(wgpu::Features::SHADER_F64)
+    }
+
     /// Whether the kd-tree kernels made after now compile without wgpu's run-time checks
     /// ([`GpuContext::set_unchecked_kernels`]).
     pub fn unchecked_kernels(&self) -> bool {
@@ -412,6 +455,7 @@ impl GpuContext {
     /// [`GpuContext::set_unchecked_kernels`] asked and `volume` is false (a volume's marching
     /// loops end only by their floats, so they keep wgpu's loop bounds).
     fn tree_module(&self, label: &str, source: String, volume: bool) -> wgpu::ShaderModule {
+        let source = self.tree_source(source);
         let desc = wgpu::ShaderModuleDescriptor {
             label: Some(label),
             source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -425,6 +469,16 @@ impl GpuContext {
             }
         } else {
             self.device.create_shader_module(desc)
+        }
+    }
+
+    /// Kernel `source` (holding kdtree.wgsl) as this context compiles it: its planes in f64
+    /// where [`GpuContext::f64_planes`].
+    fn tree_source(&self, source: String) -> String {
+        if self.f64_planes() {
+            with_f64_planes(&source)
+        } else {
+            source
         }
     }
 
@@ -1106,7 +1160,7 @@ impl<'a> GpuTracer<'a> {
                     .device
                     .create_shader_module(wgpu::ShaderModuleDescriptor {
                         label: Some("stats.wgsl"),
-                        source: wgpu::ShaderSource::Wgsl(stats_wgsl().into()),
+                        source: wgpu::ShaderSource::Wgsl(ctx.tree_source(stats_wgsl()).into()),
                     });
                 [
                     "stats_closest",

@@ -45,6 +45,30 @@ fn all_kernel_modules() -> Vec<(&'static str, String)> {
     ]
 }
 
+/// The kd-tree kernels as a context with f64 compiles them (`GpuContext::f64_planes`): the f32
+/// `plane_t_wide` replaced by plane_f64.wgsl's, once, in every module that traces; each
+/// validates with f64 and needs it.
+#[test]
+fn f64_plane_kernels_validate() {
+    let mut modules = 0;
+    for (what, src) in all_kernel_modules() {
+        if !src.contains("fn plane_t_wide(") {
+            continue;
+        }
+        modules += 1;
+        let wide = with_f64_planes(&src);
+        assert_eq!(wide.matches("fn plane_t_wide(").count(), 1, "{what}");
+        assert!(wide.contains("let xd = vec3<f64>(x);"), "{what}");
+        naga_module(&wide, what);
+        let module = naga::front::wgsl::parse_str(&wide).unwrap();
+        let without = naga::valid::Capabilities::all() - naga::valid::Capabilities::FLOAT64;
+        let checked = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), without)
+            .validate(&module);
+        assert!(checked.is_err(), "{what} validates without f64");
+    }
+    assert_eq!(modules, 6);
+}
+
 /// The kernels run on Vulkan here (SPIR-V), but raystream claims Metal and DX12 too: each
 /// entry point of every module goes through the same translation wgpu's Metal and DX12
 /// back-ends make (naga to MSL 2.4, to HLSL shader model 6.0), validated against only the
@@ -771,6 +795,81 @@ fn long_ground_planes_are_hit_where_their_planes_are() {
             assert!(inside > 3000, "{inside}");
         }
     }
+}
+
+/// Huge ground quads turned off the axes (raystream-accel's
+/// `huge_turned_ground_quads_are_hit_where_their_planes_are`), whose planes f32 cannot place
+/// where the rays start: with f64 planes every kernel layout hits every ray whose f64 hit lies
+/// inside by the margin at the f64 t within 1e-5, closest and any hit, and none that misses
+/// by it; the CPU hits the same rays (t within 1e-6, which its f64 and the GPU's agree to).
+/// With f32 planes (`set_f64_planes(false)`, the kernels before) the 5 × 10⁶ strip turned 0.3°
+/// fails that, as the CPU's test did. lavapipe has f64: CI fails without it.
+#[test]
+fn huge_turned_ground_quads_are_hit_where_their_planes_are() {
+    use raystream_accel::brute::{self, BIG_TURNED_QUADS, Verdict};
+    let Some(mut ctx) = gpu() else { return };
+    assert!(
+        ctx.f64_planes() || !std::env::var("CI").is_ok_and(|v| v == "true"),
+        "{}: no f64 (wgpu's SHADER_F64)",
+        ctx.info.name
+    );
+    if !ctx.f64_planes() {
+        eprintln!("skipping: {} has no f64", ctx.info.name);
+        return;
+    }
+    let rays = brute::turned_quad_rays(64, 48);
+    // Whether every ray the f64 verdict is sure of agrees with it, `trace`d with `kernels`.
+    let agrees = |tracer: &GpuTracer, corners: &[[Vec3; 3]], margin: f64, kernels, any| {
+        let (hits, _) = tracer.trace_with(&rays, any, kernels).unwrap();
+        rays.iter().zip(&hits).all(|(ray, h)| {
+            match brute::verdict_f64(corners, ray, margin) {
+                // An any-hit query may report the other triangle where both are hit.
+                Verdict::Inside(t) => {
+                    h.prim != NO_PRIM && (any || ((h.t as f64 - t) / t).abs() < 1e-5)
+                }
+                Verdict::Outside => h.prim == NO_PRIM,
+                Verdict::Near => true,
+            }
+        })
+    };
+    for (w, l, degrees) in BIG_TURNED_QUADS {
+        let mesh = brute::turned_quad(w, l, degrees);
+        let tree = KdTree::build(&mesh, Builder::Sah);
+        let corners: Vec<[Vec3; 3]> = (0..2).map(|i| mesh.corners(i)).collect();
+        let margin = brute::turned_quad_margin(w, l);
+        let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+        for kernels in [
+            Kernels::Fused,
+            Kernels::Split,
+            Kernels::Persistent,
+            Kernels::IfIf,
+        ] {
+            for any in [false, true] {
+                let what = format!("{w} x {l} turned {degrees}°, {kernels:?}, any {any}");
+                assert!(agrees(&tracer, &corners, margin, kernels, any), "{what}");
+            }
+        }
+        let (hits, _) = tracer.trace(&rays, false).unwrap();
+        for (ray, h) in rays.iter().zip(&hits) {
+            // Either triangle where a ray meets their shared edge (a tie): the same t.
+            let cpu = tree.intersect(ray, Traversal::Ropes);
+            assert_eq!(cpu.is_some(), h.prim != NO_PRIM, "{ray:?}");
+            if let Some(c) = cpu {
+                assert!(
+                    ((c.t - h.t) / c.t).abs() < 1e-6,
+                    "{ray:?}: {} against {}",
+                    h.t,
+                    c.t
+                );
+            }
+        }
+    }
+    ctx.set_f64_planes(false);
+    let mesh = brute::turned_quad(5.0, 5e6, 0.3);
+    let tree = KdTree::build(&mesh, Builder::Sah);
+    let corners: Vec<[Vec3; 3]> = (0..2).map(|i| mesh.corners(i)).collect();
+    let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+    assert!(!agrees(&tracer, &corners, 1e-2, Kernels::Fused, false));
 }
 
 /// The split kernels' lists filled a lane at a time or a subgroup at a time (the default where

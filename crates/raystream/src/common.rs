@@ -86,6 +86,9 @@ pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Back
     // `RAYSTREAM_GPU_APPENDS=subgroup|atomic`: the stream renderer's `shade_hits` and the split
     // kernels reserve queue slots a subgroup at a time (the default where the adapter has
     // subgroups) or a lane at a time (GpuContext::set_subgroup_appends; the same image and hits).
+    // `RAYSTREAM_GPU_PLANES=f64|f32`: the triangle test places the planes of triangles too large
+    // for f32 in f64 (the default where the adapter has f64, as the CPU does) or leaves them in
+    // f32 (GpuContext::set_f64_planes: what the path costs).
     let open = |adapter| {
         GpuContext::new(adapter).and_then(|mut ctx| {
             let spin = env_switch(&ctx, "RAYSTREAM_GPU_WAIT", ["spin", "block"])?;
@@ -104,6 +107,9 @@ pub fn open_device(d: Device, adapter: Option<&str>, quiet: bool) -> Result<Back
             }
             if let Some(on) = env_switch(&ctx, "RAYSTREAM_GPU_APPENDS", ["subgroup", "atomic"])? {
                 ctx.set_subgroup_appends(on);
+            }
+            if let Some(on) = env_switch(&ctx, "RAYSTREAM_GPU_PLANES", ["f64", "f32"])? {
+                ctx.set_f64_planes(on);
             }
             if let Some(threads) = env_count(&ctx, "RAYSTREAM_GPU_WORKGROUP", "threads")? {
                 ctx.set_query_workgroup(threads)?;

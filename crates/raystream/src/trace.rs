@@ -325,6 +325,12 @@ pub fn run(a: &TraceArgs) -> Result<()> {
                 Backend::Gpu(ctx) => Some(!ctx.unchecked_kernels()),
                 Backend::Cpu => None,
             },
+            // Huge triangles' planes in f64 (where the adapter has it) or f32
+            // (RAYSTREAM_GPU_PLANES=f32); the CPU's are in f64.
+            "f64_planes": match &backend {
+                Backend::Gpu(ctx) => ctx.f64_planes(),
+                Backend::Cpu => true,
+            },
             "build_ms": round3(t.build_ms),
             "upload_ms": round3(t.upload_ms),
             "trace_ms": round3(t.trace_ms),

@@ -335,6 +335,103 @@ fn gpu_timestamps_can_be_turned_off() {
     );
 }
 
+/// `RAYSTREAM_GPU_PLANES`: a ground quad 10⁷ long turned 0.3°, whose plane f32 cannot place
+/// where the rays start (raystream-accel's `huge_turned_ground_quads_are_hit_where_their_planes_are`),
+/// traced from an OBJ file: by default the GPU places it in f64 as the CPU does and hits the
+/// same rays (t within 1e-6, `"f64_planes": true`); with `f32` (`false`, the kernels before)
+/// over a tenth of the rays miss or move by more than 10⁻³ (on lavapipe 602 of 1,536 moved); any
+/// other value is refused.
+#[test]
+fn gpu_planes_of_huge_triangles_in_f64_or_f32() {
+    if !gpu_available() {
+        return;
+    }
+    let quad = raystream_accel::brute::turned_quad(5.0, 5e6, 0.3);
+    let obj = tmp("huge-quad.obj");
+    let mut text = String::new();
+    for p in &quad.positions {
+        text += &format!("v {:?} {:?} {:?}\n", p.x, p.y, p.z);
+    }
+    for t in &quad.triangles {
+        text += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    std::fs::write(&obj, text).unwrap();
+    let rays = tmp("huge-quad.rays");
+    let packed: Vec<f32> = raystream_accel::brute::turned_quad_rays(48, 32)
+        .iter()
+        .flat_map(|r| {
+            let (o, d) = (r.origin, r.dir);
+            [o.x, o.y, o.z, r.t_min, d.x, d.y, d.z, r.t_max]
+        })
+        .collect();
+    std::fs::write(&rays, f32s(&packed)).unwrap();
+    let trace = |device: &str, planes: Option<&str>, name: &str| {
+        let args = [
+            "trace",
+            obj.to_str().unwrap(),
+            "--rays",
+            rays.to_str().unwrap(),
+            "--json",
+            "-q",
+            "--device",
+            device,
+        ];
+        let (o, hits) = run_with_env("RAYSTREAM_GPU_PLANES", planes, &args, &tmp(name));
+        let line = serde_json::from_str::<serde_json::Value>(stdout(&o).trim()).ok();
+        (o, line.map(|l| l["f64_planes"].clone()), hits)
+    };
+    // (t, hit) of each record.
+    let records = |hits: &[u8]| -> Vec<(f32, bool)> {
+        hits.chunks_exact(16)
+            .map(|h| {
+                let t = f32::from_le_bytes(h[..4].try_into().unwrap());
+                (
+                    t,
+                    u32::from_le_bytes(h[4..8].try_into().unwrap()) != u32::MAX,
+                )
+            })
+            .collect()
+    };
+    let (cpu, cpu_f64, cpu_hits) = trace("cpu", None, "huge-quad-cpu.hits");
+    let (gpu, gpu_f64, gpu_hits) = trace("gpu", None, "huge-quad-gpu.hits");
+    let (f32, f32_f64, f32_hits) = trace("gpu", Some("f32"), "huge-quad-f32.hits");
+    for o in [&cpu, &gpu, &f32] {
+        assert!(o.status.success(), "{}", stderr(o));
+    }
+    assert_eq!(cpu_f64, Some(serde_json::json!(true)));
+    assert_eq!(gpu_f64, Some(serde_json::json!(true)), "lavapipe has f64");
+    assert_eq!(f32_f64, Some(serde_json::json!(false)));
+    let (cpu, gpu, f32) = (records(&cpu_hits), records(&gpu_hits), records(&f32_hits));
+    assert!(cpu.iter().filter(|h| h.1).count() > 500, "too few hits");
+    for (k, (c, g)) in cpu.iter().zip(&gpu).enumerate() {
+        assert_eq!(c.1, g.1, "ray {k}: hit on one device only");
+        assert!(
+            !c.1 || ((c.0 - g.0) / c.0).abs() < 1e-6,
+            "ray {k}: {} against {}",
+            g.0,
+            c.0
+        );
+    }
+    let changed = cpu
+        .iter()
+        .zip(&f32)
+        .filter(|(c, f)| c.1 != f.1 || (c.1 && ((c.0 - f.0) / c.0).abs() > 1e-3))
+        .count();
+    eprintln!("{changed} of {} rays change in f32", cpu.len());
+    assert!(
+        changed * 10 > cpu.len(),
+        "{changed} of {} rays change in f32",
+        cpu.len()
+    );
+    let (bad, _, _) = trace("gpu", Some("f16"), "huge-quad-bad.hits");
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        stderr(&bad).contains("RAYSTREAM_GPU_PLANES=\"f16\": f64 or f32"),
+        "{}",
+        stderr(&bad)
+    );
+}
+
 /// GPU `trace` on the standard ray sets of every mesh in ../shared/data/meshes: passes
 /// rays.py's Embree check, and equals the CPU's hits (prim, and t within 1e-5 relative; only
 /// ties at shared edges may differ).

@@ -152,8 +152,34 @@ fn intersect_triangle(w: Watertight, i: u32, t_min: f32, t_max: f32) -> vec4<f32
 // ky, kz (rows x, y, z): t = sz · n·(a − o) / n·(sx, sy, 1), n from the corners' edges, as
 // the CPU computes it (intersect.rs `plane_t`, which says why not the paper's depths
 // interpolated by the edge functions: they cancel where the triangle's projection along the
-// ray is a sliver, such as a long ground plane seen at a grazing angle).
+// ray is a sliver, such as a long ground plane seen at a grazing angle). Where the corner's
+// offset from the origin times the edges' lengths exceeds PLANE_T_LEVER times |n·r| (a huge
+// triangle near the ray's origin: intersect.rs says why), the f32 normal cannot place the
+// plane, and `plane_t_wide` computes it again: in f64 where the adapter has it (lib.rs puts
+// plane_f64.wgsl's in place of the f32 one below), as the CPU does.
 fn plane_t(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight) -> f32 {
+    let e1 = vec3<f32>(x.y - x.x, y.y - y.x, z.y - z.x);
+    let e2 = vec3<f32>(x.z - x.x, y.z - y.x, z.z - z.x);
+    let n = vec3<f32>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+    let r = vec3<f32>(x.x - w.o.x, y.x - w.o.y, z.x - w.o.z);
+    let along = n.x * r.x + n.y * r.y + n.z * r.z;
+    let facing = n.x * w.shear.x + n.y * w.shear.y + n.z;
+    var t = w.shear.z * (along / facing);
+    if largest(e1) * largest(e2) * largest(r) > PLANE_T_LEVER * abs(along) {
+        t = plane_t_wide(x, y, z, w);
+    }
+    return t;
+}
+
+// The largest of v's magnitudes, as the CPU's.
+fn largest(v: vec3<f32>) -> f32 {
+    let a = abs(v);
+    return max(max(a.x, a.y), a.z);
+}
+
+// PLANE_T_WIDE: `plane_t` again, where f32 cannot place the plane; on an adapter without f64,
+// f32 as before (lib.rs replaces this function up to its closing brace).
+fn plane_t_wide(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight) -> f32 {
     let e1 = vec3<f32>(x.y - x.x, y.y - y.x, z.y - z.x);
     let e2 = vec3<f32>(x.z - x.x, y.z - y.x, z.z - z.x);
     let n = vec3<f32>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
@@ -161,6 +187,7 @@ fn plane_t(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight) -> f32 {
     let facing = n.x * w.shear.x + n.y * w.shear.y + n.z;
     return w.shear.z * (along / facing);
 }
+// END PLANE_T_WIDE
 
 fn miss_record() -> HitOut {
     return HitOut(bitcast<f32>(0x7f800000u), NO_PRIM, 0.0, 0.0);
