@@ -49,7 +49,9 @@ if [ "${1:-}" = --pack ]; then
     done
   fi
   cargo build --release --quiet
-  # Binaries travel gzipped (a carry holds 64 MiB in all); the run unpacks them.
+  # Binaries travel gzipped (a carry holds 64 MiB in all); the run unpacks them, unless an
+  # unpacked one is there already (from a trial run here): remove those, or the old ones run.
+  rm -f "$d/raystream" "$d/base"
   strip -o "$d/raystream" target/release/raystream && gzip -9f "$d/raystream"
   # BASE_REV: another commit's release build beside it, for the "ab" and "abframes" parts
   # (built in a worktree of its own, into target/base).
