@@ -235,6 +235,9 @@ pub struct AdapterSummary {
     pub timestamps: bool,
     /// Subgroup operations: the statistics query (SIMD efficiency, residency).
     pub subgroups: bool,
+    /// f64 in kernels: huge triangles' planes as the CPU places them
+    /// ([`GpuContext::set_f64_planes`]).
+    pub f64: bool,
     /// The largest storage buffer a kernel can bind, and the largest buffer, bytes.
     pub max_storage_binding: u64,
     pub max_buffer: u64,
@@ -252,6 +255,7 @@ pub fn list_adapters() -> Vec<AdapterSummary> {
                 info: a.get_info(),
                 timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
                 subgroups: features.contains(wgpu::Features::SUBGROUP),
+                f64: features.contains(wgpu::Features::SHADER_F64),
                 max_storage_binding: limits.max_storage_buffer_binding_size,
                 max_buffer: limits.max_buffer_size,
                 max_workgroups_per_dimension: limits.max_compute_workgroups_per_dimension,

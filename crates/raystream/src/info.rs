@@ -562,6 +562,7 @@ fn gpu_info(json: bool) {
                     "timestamps": a.timestamps,
                     "subgroups": a.subgroups,
                     "subgroup_sizes": [a.info.subgroup_min_size, a.info.subgroup_max_size],
+                    "f64": a.f64,
                     "max_storage_binding": a.max_storage_binding,
                     "max_buffer": a.max_buffer,
                     "max_workgroups_per_dimension": a.max_workgroups_per_dimension,
@@ -588,11 +589,16 @@ fn gpu_info(json: bool) {
             a.info.driver_info
         );
         println!(
-            "    timestamps {}, subgroups {} ({}–{} lanes), storage binding up to {} MiB, buffers up to {} MiB",
+            "    timestamps {}, subgroups {} ({}–{} lanes), f64 {}, storage binding up to {} MiB, buffers up to {} MiB",
             if a.timestamps { "yes" } else { "no" },
             if a.subgroups { "yes" } else { "no" },
             a.info.subgroup_min_size,
             a.info.subgroup_max_size,
+            if a.f64 {
+                "yes"
+            } else {
+                "no (huge triangles' planes in f32)"
+            },
             a.max_storage_binding >> 20,
             a.max_buffer >> 20
         );

@@ -314,7 +314,8 @@ fn info_lists_gpu_adapters() {
                 .iter()
                 .any(|a| a["name"].as_str().unwrap().contains("llvmpipe")
                     && a["subgroups"] == true
-                    && a["timestamps"] == true),
+                    && a["timestamps"] == true
+                    && a["f64"] == true),
             "{j}"
         );
     }
