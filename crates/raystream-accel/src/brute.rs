@@ -80,32 +80,32 @@ pub fn verdict_f64(corners: &[[Vec3; 3]], ray: &Ray, margin: f64) -> Verdict {
 
 /// Each triangle's `(index, t, u, v)` where the ray meets its plane within [t_min, t_max], by
 /// Möller–Trumbore in f64 (`u`, `v` the weights of corners 1 and 2); none for an invalid ray.
-fn planes_f64(corners: &[[Vec3; 3]], ray: &Ray) -> Vec<(usize, f64, f64, f64)> {
-    if !ray.is_valid() {
-        return Vec::new();
-    }
-    let o = ray.origin.as_dvec3();
-    let d = ray.dir.as_dvec3();
-    let mut out = Vec::new();
-    for (i, c) in corners.iter().enumerate() {
-        let [a, b, e] = c.map(|v| v.as_dvec3());
-        let (e1, e2) = (b - a, e - a);
-        let p = d.cross(e2);
-        let det = e1.dot(p);
-        if det == 0.0 {
-            continue;
-        }
-        let inv = 1.0 / det;
-        let s = o - a;
-        let u = s.dot(p) * inv;
-        let q: DVec3 = s.cross(e1);
-        let v = d.dot(q) * inv;
-        let t = e2.dot(q) * inv;
-        if t >= ray.t_min as f64 && t <= ray.t_max as f64 {
-            out.push((i, t, u, v));
-        }
-    }
-    out
+fn planes_f64<'a>(
+    corners: &'a [[Vec3; 3]],
+    ray: &Ray,
+) -> impl Iterator<Item = (usize, f64, f64, f64)> + 'a {
+    let (valid, t_min, t_max) = (ray.is_valid(), ray.t_min as f64, ray.t_max as f64);
+    let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+    corners
+        .iter()
+        .enumerate()
+        .filter(move |_| valid)
+        .filter_map(move |(i, c)| {
+            let [a, b, e] = c.map(|v| v.as_dvec3());
+            let (e1, e2) = (b - a, e - a);
+            let p = d.cross(e2);
+            let det = e1.dot(p);
+            if det == 0.0 {
+                return None;
+            }
+            let inv = 1.0 / det;
+            let s = o - a;
+            let u = s.dot(p) * inv;
+            let q: DVec3 = s.cross(e1);
+            let v = d.dot(q) * inv;
+            let t = e2.dot(q) * inv;
+            (t >= t_min && t <= t_max).then_some((i, t, u, v))
+        })
 }
 
 /// Quads `(w, l, degrees)` for [`turned_quad`] whose planes f32 cannot resolve where rays from

@@ -154,6 +154,24 @@ pub const PLANE_T_LEVER: f32 = 1024.0;
 /// functions still decide the hit, so the test stays watertight.
 #[inline(always)]
 fn plane_t(x: [f32; 3], y: [f32; 3], z: [f32; 3], o: [f32; 3], shear: [f32; 3]) -> f32 {
+    let (along, facing, [e1, e2, r]) = plane_terms(x, y, z, o, shear);
+    // The same products in the same order as kdtree.wgsl, so that both take the same path.
+    // Lengths by their largest component: within the input's ±10¹⁰ nothing overflows, and a
+    // scene scaled by a power of two takes the same path everywhere (squared lengths, cheaper
+    // on lavapipe, overflow from about 10⁶, and the picture changed with the scale).
+    if largest(e1) * largest(e2) * largest(r) > PLANE_T_LEVER * along.abs() {
+        return plane_t_f64(x, y, z, o, shear);
+    }
+    shear[2] * (along / facing)
+}
+
+/// `plane_t`'s `n·(a − o)` and `n·(sx, sy, 1)`, with the edges e1, e2 and `r = a − o`, in
+/// `T`'s arithmetic: f32 for the test, f64 where f32 cannot place the plane.
+#[inline(always)]
+fn plane_terms<T>(x: [T; 3], y: [T; 3], z: [T; 3], o: [T; 3], shear: [T; 3]) -> (T, T, [[T; 3]; 3])
+where
+    T: Copy + std::ops::Add<Output = T> + std::ops::Sub<Output = T> + std::ops::Mul<Output = T>,
+{
     let e1 = [x[1] - x[0], y[1] - y[0], z[1] - z[0]];
     let e2 = [x[2] - x[0], y[2] - y[0], z[2] - z[0]];
     let n = [
@@ -163,15 +181,8 @@ fn plane_t(x: [f32; 3], y: [f32; 3], z: [f32; 3], o: [f32; 3], shear: [f32; 3]) 
     ];
     let r = [x[0] - o[0], y[0] - o[1], z[0] - o[2]];
     let along = n[0] * r[0] + n[1] * r[1] + n[2] * r[2];
-    // The same products in the same order as kdtree.wgsl, so that both take the same path.
-    // Lengths by their largest component: within the input's ±10¹⁰ nothing overflows, and a
-    // scene scaled by a power of two takes the same path everywhere (squared lengths, cheaper
-    // on lavapipe, overflow from about 10⁶, and the picture changed with the scale).
-    if largest(e1) * largest(e2) * largest(r) > PLANE_T_LEVER * along.abs() {
-        return plane_t_f64(x, y, z, o, shear);
-    }
     let facing = n[0] * shear[0] + n[1] * shear[1] + n[2];
-    shear[2] * (along / facing)
+    (along, facing, [e1, e2, r])
 }
 
 /// The largest of `v`'s magnitudes.
@@ -185,16 +196,7 @@ fn largest(v: [f32; 3]) -> f32 {
 #[cold]
 #[inline(never)]
 fn plane_t_f64(x: [f32; 3], y: [f32; 3], z: [f32; 3], o: [f32; 3], shear: [f32; 3]) -> f32 {
-    let (x, y, z) = (x.map(f64::from), y.map(f64::from), z.map(f64::from));
-    let (o, shear) = (o.map(f64::from), shear.map(f64::from));
-    let e1 = [x[1] - x[0], y[1] - y[0], z[1] - z[0]];
-    let e2 = [x[2] - x[0], y[2] - y[0], z[2] - z[0]];
-    let n = [
-        e1[1] * e2[2] - e1[2] * e2[1],
-        e1[2] * e2[0] - e1[0] * e2[2],
-        e1[0] * e2[1] - e1[1] * e2[0],
-    ];
-    let along = n[0] * (x[0] - o[0]) + n[1] * (y[0] - o[1]) + n[2] * (z[0] - o[2]);
-    let facing = n[0] * shear[0] + n[1] * shear[1] + n[2];
-    (shear[2] * (along / facing)) as f32
+    let wide = |v: [f32; 3]| v.map(f64::from);
+    let (along, facing, _) = plane_terms(wide(x), wide(y), wide(z), wide(o), wide(shear));
+    (f64::from(shear[2]) * (along / facing)) as f32
 }

@@ -102,7 +102,7 @@ fn append_wgsl(subgroups: bool, counters: &str) -> String {
 
 /// Kernel `source` (holding kdtree.wgsl) with its triangle test's `plane_t_wide` in f64
 /// (plane_f64.wgsl) instead of f32; the module needs wgpu's SHADER_F64 feature.
-pub fn with_f64_planes(source: &str) -> String {
+pub(crate) fn with_f64_planes(source: &str) -> String {
     const BEGIN: &str = "// PLANE_T_WIDE:";
     const END: &str = "// END PLANE_T_WIDE";
     let (Some(begin), Some(end)) = (source.find(BEGIN), source.find(END)) else {

@@ -337,7 +337,7 @@ fn gpu_timestamps_can_be_turned_off() {
 
 /// `RAYSTREAM_GPU_PLANES`: a ground quad 10⁷ long turned 0.3°, whose plane f32 cannot place
 /// where the rays start (raystream-accel's `huge_turned_ground_quads_are_hit_where_their_planes_are`),
-/// traced from an OBJ file: by default the GPU places it in f64 as the CPU does and hits the
+/// traced from a PLY file: by default the GPU places it in f64 as the CPU does and hits the
 /// same rays (t within 1e-6, `"f64_planes": true`); with `f32` (`false`, the kernels before)
 /// over a tenth of the rays miss or move by more than 10⁻³ (on lavapipe 602 of 1,536 moved); any
 /// other value is refused.
@@ -347,22 +347,12 @@ fn gpu_planes_of_huge_triangles_in_f64_or_f32() {
         return;
     }
     let quad = raystream_accel::brute::turned_quad(5.0, 5e6, 0.3);
-    let obj = tmp("huge-quad.obj");
-    let mut text = String::new();
-    for p in &quad.positions {
-        text += &format!("v {:?} {:?} {:?}\n", p.x, p.y, p.z);
-    }
-    for t in &quad.triangles {
-        text += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
-    }
-    std::fs::write(&obj, text).unwrap();
+    let obj = tmp("huge-quad.ply");
+    raystream_io::write_mesh(&obj, &quad, None).unwrap();
     let rays = tmp("huge-quad.rays");
     let packed: Vec<f32> = raystream_accel::brute::turned_quad_rays(48, 32)
         .iter()
-        .flat_map(|r| {
-            let (o, d) = (r.origin, r.dir);
-            [o.x, o.y, o.z, r.t_min, d.x, d.y, d.z, r.t_max]
-        })
+        .flat_map(|r| r.to_array())
         .collect();
     std::fs::write(&rays, f32s(&packed)).unwrap();
     let trace = |device: &str, planes: Option<&str>, name: &str| {

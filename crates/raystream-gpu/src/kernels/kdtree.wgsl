@@ -166,7 +166,7 @@ fn plane_t(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight) -> f32 {
     let facing = n.x * w.shear.x + n.y * w.shear.y + n.z;
     var t = w.shear.z * (along / facing);
     if largest(e1) * largest(e2) * largest(r) > PLANE_T_LEVER * abs(along) {
-        t = plane_t_wide(x, y, z, w);
+        t = plane_t_wide(x, y, z, w, t);
     }
     return t;
 }
@@ -177,15 +177,10 @@ fn largest(v: vec3<f32>) -> f32 {
     return max(max(a.x, a.y), a.z);
 }
 
-// PLANE_T_WIDE: `plane_t` again, where f32 cannot place the plane; on an adapter without f64,
-// f32 as before (lib.rs replaces this function up to its closing brace).
-fn plane_t_wide(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight) -> f32 {
-    let e1 = vec3<f32>(x.y - x.x, y.y - y.x, z.y - z.x);
-    let e2 = vec3<f32>(x.z - x.x, y.z - y.x, z.z - z.x);
-    let n = vec3<f32>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
-    let along = n.x * (x.x - w.o.x) + n.y * (y.x - w.o.y) + n.z * (z.x - w.o.z);
-    let facing = n.x * w.shear.x + n.y * w.shear.y + n.z;
-    return w.shear.z * (along / facing);
+// PLANE_T_WIDE: `plane_t` again, where f32 cannot place the plane, given its f32 `t`; on an
+// adapter without f64 that `t` (lib.rs replaces this function up to its closing brace).
+fn plane_t_wide(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight, t: f32) -> f32 {
+    return t;
 }
 // END PLANE_T_WIDE
 

@@ -1,8 +1,8 @@
 // PLANE_T_WIDE: `plane_t` in f64, as the CPU's `plane_t_f64` computes it: the edges, the
 // corner's offset from the origin and the normal's products are exact, only the sums round.
 // A t beyond f32's range (a ray all but parallel to the plane) or NaN comes back as +inf, which
-// the test rejects as the CPU does its infinity or NaN.
-fn plane_t_wide(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight) -> f32 {
+// the test rejects as the CPU does its infinity or NaN. (`t32`, the f32 t, is not needed here.)
+fn plane_t_wide(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight, t32: f32) -> f32 {
     let xd = vec3<f64>(x);
     let yd = vec3<f64>(y);
     let zd = vec3<f64>(z);
