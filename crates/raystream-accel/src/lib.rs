@@ -14,6 +14,7 @@ pub mod clip;
 pub mod entry;
 mod flat;
 pub mod intersect;
+pub mod isa;
 pub mod layout;
 mod traverse;
 mod validate;
@@ -29,6 +30,7 @@ use traverse::RopeWalk;
 pub use traverse::{Counters, Traversal};
 
 use entry::EntryGrid;
+pub use isa::Isa;
 use layout::{KdInner, KdLeaf, KdTri};
 
 /// A ray–triangle hit: distance in units of the ray direction's length, the triangle's prim id,
@@ -172,7 +174,7 @@ impl KdTree {
 
     /// [`Self::intersect`] (or [`Self::intersect_any`] with `any`) of every ray, into `out`:
     /// the same answers, faster on many rays (eight rope walks interleaved; stack traversal
-    /// ray by ray).
+    /// ray by ray), in the instruction set [`Isa::current`].
     pub fn intersect_many(
         &self,
         rays: &[Ray],
@@ -180,6 +182,40 @@ impl KdTree {
         any: bool,
         out: &mut [Option<Hit>],
     ) {
+        self.intersect_many_in(Isa::current(), rays, traversal, any, out)
+    }
+
+    /// [`Self::intersect_many`] compiled for the instruction set `isa`; the baseline's where
+    /// the processor lacks it ([`Isa::available`]). The answers are the same bytes in every
+    /// instruction set.
+    pub fn intersect_many_in(
+        &self,
+        isa: Isa,
+        rays: &[Ray],
+        traversal: Traversal,
+        any: bool,
+        out: &mut [Option<Hit>],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if isa == Isa::X86_64V3 && isa.available() {
+            // SAFETY: the processor has every feature `queries_v3` is compiled for.
+            unsafe { self.queries_v3(rays, traversal, any, out) };
+            return;
+        }
+        let _ = isa;
+        self.queries(rays, traversal, any, out)
+    }
+
+    /// [`Self::queries`] compiled for x86-64-v3 (see [`isa`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,movbe,f16c")]
+    fn queries_v3(&self, rays: &[Ray], traversal: Traversal, any: bool, out: &mut [Option<Hit>]) {
+        self.queries(rays, traversal, any, out)
+    }
+
+    /// The body of [`Self::intersect_many`], inlined into each instruction set's copy.
+    #[inline(always)]
+    fn queries(&self, rays: &[Ray], traversal: Traversal, any: bool, out: &mut [Option<Hit>]) {
         match (traversal, any) {
             (Traversal::Ropes, false) => self.walk_many::<RopeWalk, false>(rays, out),
             (Traversal::Ropes, true) => self.walk_many::<RopeWalk, true>(rays, out),

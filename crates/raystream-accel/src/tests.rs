@@ -5,7 +5,7 @@ use raystream_io::{TriMesh, load_mesh};
 use raystream_math::{Ray, Vec3};
 
 use crate::layout::KdTri;
-use crate::{Builder, DEFAULT_TRAVERSAL_COST, KdTree, Traversal, brute};
+use crate::{Builder, DEFAULT_TRAVERSAL_COST, Hit, Isa, KdTree, Traversal, brute};
 
 const BUILDERS: [Builder; 2] = [Builder::Sah, Builder::Median];
 const TRAVERSALS: [Traversal; 2] = [Traversal::Ropes, Traversal::Stack];
@@ -111,21 +111,43 @@ fn real_meshes_agree_with_brute_force_and_validate() {
     }
 }
 
-/// The batched queries (interleaved rope walks) answer every ray exactly as one-ray queries
-/// do, closest and any hit, with both traversals.
+/// The instruction sets this processor runs the batched queries in. Under `CI=true` an x86-64
+/// machine must have x86-64-v3, so that its copy of the queries is tested there.
+fn isas() -> Vec<Isa> {
+    if cfg!(target_arch = "x86_64") && std::env::var("CI").is_ok_and(|v| v == "true") {
+        assert!(
+            Isa::X86_64V3.available(),
+            "CI=true: this x86-64 processor lacks x86-64-v3, whose queries would go untested"
+        );
+    }
+    Isa::ALL.into_iter().filter(|isa| isa.available()).collect()
+}
+
+/// A hit's bytes, so that a hit at −0 differs from one at +0.
+fn hit_bits(h: &Option<Hit>) -> Option<[u32; 4]> {
+    h.map(|h| [h.t.to_bits(), h.prim, h.u.to_bits(), h.v.to_bits()])
+}
+
+/// The batched queries (interleaved rope walks), in every instruction set the processor has,
+/// answer every ray exactly as one-ray queries do, byte for byte, closest and any hit, with
+/// both traversals.
 fn check_batched(tree: &KdTree, rays: &[Ray], what: &str) {
     for trav in TRAVERSALS {
         for any in [false, true] {
-            let mut got = vec![None; rays.len()];
-            tree.intersect_many(rays, trav, any, &mut got);
-            assert_eq!(got, tree.intersect_all(rays, trav, any), "{what}");
-            for (ray, g) in rays.iter().zip(&got) {
-                let want = if any {
-                    tree.intersect_any(ray, trav)
-                } else {
-                    tree.intersect(ray, trav)
-                };
-                assert_eq!(*g, want, "{what} {trav:?} any={any}: {ray:?}");
+            let all = tree.intersect_all(rays, trav, any);
+            for isa in isas() {
+                let mut got = vec![None; rays.len()];
+                tree.intersect_many_in(isa, rays, trav, any, &mut got);
+                for ((ray, g), a) in rays.iter().zip(&got).zip(&all) {
+                    let want = if any {
+                        tree.intersect_any(ray, trav)
+                    } else {
+                        tree.intersect(ray, trav)
+                    };
+                    let is = format!("{what} {trav:?} any={any} {}", isa.name());
+                    assert_eq!(hit_bits(g), hit_bits(&want), "{is}: {ray:?}");
+                    assert_eq!(hit_bits(a), hit_bits(&want), "{is}, all: {ray:?}");
+                }
             }
         }
     }
@@ -587,7 +609,10 @@ fn huge_turned_ground_quads_are_hit_where_their_planes_are() {
         let tree = KdTree::build(&mesh, Builder::Sah);
         let corners: Vec<[Vec3; 3]> = (0..2).map(|i| mesh.corners(i)).collect();
         let (mut inside, mut outside) = (0, 0);
-        for ray in brute::turned_quad_rays(96, 64) {
+        let rays = brute::turned_quad_rays(96, 64);
+        // The batched queries in every instruction set, the f64 planes among them.
+        check_batched(&tree, &rays, &format!("{w} x {l} turned {degrees}°"));
+        for ray in rays {
             let what = format!("{w} x {l} turned {degrees}°: {ray:?}");
             let got = tree.intersect(&ray, Traversal::Ropes);
             let alone = brute::closest(&corners, &ray);

@@ -82,6 +82,7 @@ pub(crate) struct RayCtx {
 }
 
 impl RayCtx {
+    #[inline(always)]
     fn new(ray: &Ray) -> Self {
         let d = ray.dir.map(|x| if x == 0.0 { 0.0 } else { x });
         Self {
@@ -135,6 +136,7 @@ impl KdTree {
 
     /// The ray's interval inside the scene box and its traversal constants; `None` for a ray
     /// that cannot hit anything (invalid, empty scene, or missing the box).
+    #[inline(always)]
     fn start(&self, ray: &Ray) -> Option<(f32, f32, RayCtx)> {
         if !ray.is_valid() || self.tris.is_empty() {
             return None;
@@ -183,6 +185,7 @@ impl KdTree {
     /// those of [`Self::walk_one`], ray for ray: each walk runs the same steps. What it gains
     /// is memory-level parallelism: a single walk is a chain of dependent node loads that
     /// mostly miss the caches, and the interleaved walks' loads overlap.
+    #[inline(always)]
     pub(crate) fn walk_many<W: Walker, const ANY: bool>(
         &self,
         rays: &[Ray],

@@ -60,6 +60,7 @@ impl Ray {
 
     /// Whether a query may hit anything: finite origin, direction and t_min, a t_max that is not
     /// NaN, a non-zero direction and `t_min ≤ t_max`. Every query treats an invalid ray as a miss.
+    #[inline]
     pub fn is_valid(&self) -> bool {
         self.origin.is_finite()
             && self.dir.is_finite()
@@ -148,6 +149,7 @@ impl Aabb {
     /// Parametric interval `[t0, t1]` of the ray inside the box (slab test), clipped to the
     /// ray's own range; `None` if the ray misses the box. Axes with a zero direction component
     /// only test that the origin lies within the slab.
+    #[inline]
     pub fn clip_ray(&self, ray: &Ray) -> Option<(f32, f32)> {
         let mut t0 = ray.t_min;
         let mut t1 = ray.t_max;

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use raystream_accel::KdTree;
+use raystream_accel::{Isa, KdTree};
 use raystream_cpu::{ExrSamples, Image, ImageFormat};
 use raystream_gpu::{GpuContext, GpuError, GpuTracer};
 use raystream_io::TriMesh;
@@ -423,7 +423,25 @@ pub fn cpu_model() -> String {
                 .map(|(_, v)| v.trim().to_string())
         })
         .unwrap_or_else(|| std::env::consts::ARCH.to_string());
-    format!("{name} ({} threads)", rayon::current_num_threads())
+    format!(
+        "{name} ({} threads, {})",
+        rayon::current_num_threads(),
+        Isa::current().name()
+    )
+}
+
+/// `RAYSTREAM_CPU_ISA=x86-64-v3|baseline`: the instruction set of the CPU ray queries (the
+/// best this processor has by default; `baseline` measures what x86-64-v3 gains, in the same
+/// binary). Any other value, or one the processor cannot run, is refused.
+pub fn choose_cpu_isa() -> Result<()> {
+    const NAME: &str = "RAYSTREAM_CPU_ISA";
+    match std::env::var(NAME) {
+        Err(_) => Ok(()),
+        Ok(v) => v
+            .parse::<Isa>()
+            .and_then(Isa::choose)
+            .map_err(|e| anyhow::anyhow!("{NAME}={v:?}: {e}")),
+    }
 }
 
 pub fn median(v: &mut [f64]) -> f64 {

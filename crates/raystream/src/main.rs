@@ -32,7 +32,7 @@ fn main() -> ExitCode {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
     let args = cli::Cli::parse();
-    let result = match args.command {
+    let result = common::choose_cpu_isa().and_then(|()| match args.command {
         cli::Command::Render(a) => render::run(&a),
         cli::Command::Trace(a) => trace::run(&a),
         cli::Command::Iso(a) => iso::run(&a),
@@ -40,7 +40,7 @@ fn main() -> ExitCode {
         cli::Command::Centreline(a) => centreline::run(&a),
         cli::Command::Info(a) => info::run(&a),
         cli::Command::Bench(a) => bench::run(&a),
-    };
+    });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

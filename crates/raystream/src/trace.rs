@@ -4,7 +4,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use raystream_accel::{Hit, KdTree, Traversal};
+use raystream_accel::{Hit, Isa, KdTree, Traversal};
 use raystream_math::Ray;
 use serde_json::json;
 
@@ -331,6 +331,8 @@ pub fn run(a: &TraceArgs) -> Result<()> {
                 Backend::Gpu(ctx) => ctx.f64_planes(),
                 Backend::Cpu => true,
             },
+            // The instruction set of the CPU's queries (RAYSTREAM_CPU_ISA).
+            "cpu_isa": matches!(backend, Backend::Cpu).then(|| Isa::current().name()),
             "build_ms": round3(t.build_ms),
             "upload_ms": round3(t.upload_ms),
             "trace_ms": round3(t.trace_ms),

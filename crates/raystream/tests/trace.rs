@@ -213,6 +213,58 @@ fn fan_at_spot(name: &str, n: usize) -> std::path::PathBuf {
     rays
 }
 
+/// `RAYSTREAM_CPU_ISA=baseline|x86-64-v3`: the CPU's queries in the build's baseline and in
+/// x86-64-v3 (the default where the processor has it, as every x86-64 CI machine must) write
+/// the same bytes for a 48 × 48 fan at spot, closest and any hit; the JSON and the adapter
+/// say which ran; any other value is refused, naming the variable.
+#[test]
+fn cpu_queries_in_either_instruction_set() {
+    let rays = fan_at_spot("isa.rays", 48);
+    let spot = mesh("spot.obj");
+    let trace = |isa: Option<&str>, any: bool| {
+        let name = format!("isa-{}-{any}.hits", isa.unwrap_or("default"));
+        let mut args = vec!["trace", &spot, "--rays", rays.to_str().unwrap()];
+        args.extend(["--device", "cpu", "--json", "-q"]);
+        if any {
+            args.push("--any");
+        }
+        let (o, hits) = run_with_env("RAYSTREAM_CPU_ISA", isa, &args, &tmp(&name));
+        assert!(o.status.success(), "{isa:?}: {}", stderr(&o));
+        let line: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        let adapter = line["adapter"].as_str().unwrap().to_string();
+        (line["cpu_isa"].as_str().unwrap().to_string(), adapter, hits)
+    };
+    let v3 = cfg!(target_arch = "x86_64") && std::env::var("CI").is_ok_and(|v| v == "true");
+    for any in [false, true] {
+        let (isa, adapter, default) = trace(None, any);
+        assert!(adapter.ends_with(&format!(", {isa})")), "{adapter}");
+        if v3 {
+            assert_eq!(
+                isa, "x86-64-v3",
+                "CI=true: an x86-64 CI machine must have it"
+            );
+        }
+        let (base, _, baseline) = trace(Some("baseline"), any);
+        assert_eq!(base, "baseline");
+        assert_eq!(baseline.len(), 48 * 48 * 16);
+        assert!(baseline == default, "any={any}: the bytes differ");
+        let hit = |h: &[u8]| h[4..8] != [0xff; 4];
+        assert!(default.chunks_exact(16).filter(|h| hit(h)).count() > 500);
+    }
+    let (bad, _) = run_with_env(
+        "RAYSTREAM_CPU_ISA",
+        Some("avx-512"),
+        &["trace", &spot, "--rays", rays.to_str().unwrap(), "-q"],
+        &tmp("isa-bad.hits"),
+    );
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        stderr(&bad).contains("RAYSTREAM_CPU_ISA=\"avx-512\": unknown instruction set"),
+        "{}",
+        stderr(&bad)
+    );
+}
+
 /// `RAYSTREAM_GPU_CHECKS=on|off`: the kd-tree kernels with and without (the default) wgpu's
 /// run-time checks trace the same hits (a 32 × 32 fan of rays at spot)
 /// and render the same frame of a mesh, and `trace --json` says which ran; any other value is
