@@ -130,9 +130,11 @@ impl EntryGrid {
         let mut index = 0;
         for a in (0..3).rev() {
             let p = o[a] + t0 * d[a];
-            let i = ((p - scene_min[a]) * self.scale[a])
-                .floor()
-                .clamp(0.0, (self.res[a] - 1) as f32) as usize;
+            // Clamped, then truncated: the floor of the clamped value, which is not negative
+            // (`floor` is a call into libm on x86-64's baseline, which has no rounding
+            // instruction before SSE4.1).
+            let i =
+                ((p - scene_min[a]) * self.scale[a]).clamp(0.0, (self.res[a] - 1) as f32) as usize;
             index = index * self.res[a] as usize + i;
         }
         self.cells[index]
