@@ -117,7 +117,11 @@ impl WatertightRay {
             return None;
         }
         // A ray all but parallel to the plane may reach it at infinity: no hit.
-        let t = plane_t(x, y, z, [ox, oy, oz], [sx, sy, sz]);
+        let (o, shear) = ([ox, oy, oz], [sx, sy, sz]);
+        let t = match plane_t(x, y, z, o, shear, t_min, t_max) {
+            PlaneT::Near(t) | PlaneT::Outside(t) => t,
+            PlaneT::Wide => plane_t_f64(x, y, z, o, shear),
+        };
         if !(t >= t_min && t <= t_max && t.is_finite()) {
             return None;
         }
@@ -138,14 +142,28 @@ impl WatertightRay {
 /// The f32 t's relative error is a few 2⁻²⁴ of the ratio at most. On the standard 640×480
 /// sets of the meshes in ../shared/data/meshes, 232 of 5.6 M tests exceed 2¹⁰ (secondary rays
 /// leaving a surface, whose distance to its plane is small), so that a GPU's warp all but
-/// never waits for f64.
+/// never waits for f64. Renders have more: every shadow or reflected ray leaving the default
+/// scene's floor (10⁴ wide) exceeds it for the floor it left, 45 % of the tests that passed
+/// the edge functions; [`PLANE_T_SLACK`] rejects all but 0.1 % of those in f32.
 pub const PLANE_T_LEVER: f32 = 1024.0;
+
+/// What f32 makes of a triangle's plane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum PlaneT {
+    /// The t, good to a few 2⁻²⁴ of the lever (below [`PLANE_T_LEVER`]).
+    Near(f32),
+    /// A t beyond the lever, but outside `[t_min, t_max]` by more than twice its
+    /// [`PLANE_T_SLACK`]: rejected, as f64's would be.
+    Outside(f32),
+    /// f64 must place the plane.
+    Wide,
+}
 
 /// The distance along the ray to the plane of the triangle with corners' coordinates `x`, `y`,
 /// `z` along the ray's axes kx, ky, kz, from the origin `o` in that order, with the ray's
 /// `shear` (its direction is `(sx, sy, 1) / sz` in that order): the plane's normal from the
-/// corners' edges, `t = sz · n·(a − o) / n·(sx, sy, 1)`; in f64 where f32 cannot be trusted
-/// ([`PLANE_T_LEVER`]).
+/// corners' edges, `t = sz · n·(a − o) / n·(sx, sy, 1)`; `Wide` where f32 cannot be trusted
+/// ([`PLANE_T_LEVER`]) and f64 (`plane_t_f64`) must place the plane.
 ///
 /// Not the paper's `t = sz · (u·az + v·bz + w·cz) / det`: that interpolates the corners'
 /// depths by the edge functions, which cancel where the triangle's projection along the ray
@@ -153,17 +171,80 @@ pub const PLANE_T_LEVER: f32 = 1024.0;
 /// seen 7° from its plane had its edge functions 10⁻³ off and missed 16 % of the rays that
 /// hit it, the others' t off by up to 25×, where Embree's plane-based t was right). The edge
 /// functions still decide the hit, so the test stays watertight.
+///
+/// Where the f32 t lies outside `[t_min, t_max]` by more than twice its error bound
+/// ([`PLANE_T_SLACK`]), the test rejects it whatever f64 would say: `Outside`, and no f64.
 #[inline(always)]
-fn plane_t(x: [f32; 3], y: [f32; 3], z: [f32; 3], o: [f32; 3], shear: [f32; 3]) -> f32 {
+#[allow(clippy::too_many_arguments)]
+fn plane_t(
+    x: [f32; 3],
+    y: [f32; 3],
+    z: [f32; 3],
+    o: [f32; 3],
+    shear: [f32; 3],
+    t_min: f32,
+    t_max: f32,
+) -> PlaneT {
     let (along, facing, [e1, e2, r]) = plane_terms(x, y, z, o, shear);
+    let t = shear[2] * (along / facing);
     // The same products in the same order as kdtree.wgsl, so that both take the same path.
     // Lengths by their largest component: within the input's ±10¹⁰ nothing overflows, and a
     // scene scaled by a power of two takes the same path everywhere (squared lengths, cheaper
     // on lavapipe, overflow from about 10⁶, and the picture changed with the scale).
-    if largest(e1) * largest(e2) * largest(r) > PLANE_T_LEVER * along.abs() {
-        return plane_t_f64(x, y, z, o, shear);
+    // (NaN stays in f32, as before.)
+    if !(largest(e1) * largest(e2) * largest(r) > PLANE_T_LEVER * along.abs()) {
+        return PlaneT::Near(t);
     }
-    shear[2] * (along / facing)
+    let slack = plane_t_slack(t, facing, [e1, e2, r], shear);
+    // NaN (an overflow, a facing too small to bound) goes to f64.
+    if t + 2.0 * slack < t_min || t - 2.0 * slack > t_max {
+        PlaneT::Outside(t)
+    } else {
+        PlaneT::Wide
+    }
+}
+
+/// A bound on how far `plane_t`'s f32 t can lie from the t of the same corners and ray in
+/// exact arithmetic, component by component. With u = 2⁻²⁴, the normal's component
+/// n_i = p_i − q_i (p_i, q_i the edges' two products) and N_i = |p_i| + |q_i|:
+/// - the edges and `r = a − o` are each off by u of themselves, n_i by 4u·N_i;
+/// - `along = n·r` by Δa = 8u·A, A = Σ N_i·|r_i| (each term's inputs and product, two sums);
+/// - `facing = n·(sx, sy, 1)` by Δf = 7u·F, F = Σ N_i·|s_i| with s = (sx, sy, 1);
+/// - t = sz·along/facing by (|sz|·Δa + |t|·Δf)/(|facing| − Δf) + 2u·|t|, t the exact one.
+///   Where |facing| > 2⁻¹⁵·F (Δf under 1/73 of it), that is at most
+///   11u·|sz|·A/|facing| + 10u·F·|t|/|facing| + 2.1u·|t| with t the f32 one.
+///
+/// The slack is 16u·(|sz|·A + F·|t|)/|facing| + 4u·|t| (`PLANE_T_SLACK` = 16u): over 1.45
+/// times that bound, and NaN where facing is too small for it (f64 decides). The test rejects
+/// a t outside [t_min, t_max] by more than twice the slack, so the exact t lies outside by more
+/// than 1.3 slack (at least 5u·|t|, more than half an f32 step at the range's end): f64's t,
+/// rounded to f32, would be rejected too, and the hits are the same bytes without it.
+///
+/// The case is a ray leaving a surface, its origin a hair off the plane of the triangle it
+/// left: the lever (a corner 5,000 away on a floor 10⁴ wide, a shadow ray 0.0125 above it)
+/// sends it to f64, and in a render of the default scene 45 % of the triangles that passed
+/// the edge test went there for a t behind the ray. Component by component the floor's
+/// normal is one product and `along` does not cancel: the slack is a few u of t. (A bound by
+/// the largest components, L(e1)·L(e2)·L(r), was as large as t itself there and skipped
+/// nothing.)
+pub const PLANE_T_SLACK: f32 = 1.0 / 1_048_576.0;
+
+/// [`PLANE_T_SLACK`]'s bound for `t`, given `facing` and the edges and the corner's offset
+/// `[e1, e2, r]`; NaN where facing is too small for the bound to hold.
+#[inline(always)]
+fn plane_t_slack(t: f32, facing: f32, [e1, e2, r]: [[f32; 3]; 3], shear: [f32; 3]) -> f32 {
+    let n = [
+        (e1[1] * e2[2]).abs() + (e1[2] * e2[1]).abs(),
+        (e1[2] * e2[0]).abs() + (e1[0] * e2[2]).abs(),
+        (e1[0] * e2[1]).abs() + (e1[1] * e2[0]).abs(),
+    ];
+    let a = n[0] * r[0].abs() + n[1] * r[1].abs() + n[2] * r[2].abs();
+    let f = n[0] * shear[0].abs() + n[1] * shear[1].abs() + n[2];
+    let facing = facing.abs();
+    if !(facing > f * (1.0 / 32_768.0)) {
+        return f32::NAN;
+    }
+    PLANE_T_SLACK * (shear[2].abs() * a + f * t.abs()) / facing + (1.0 / 4_194_304.0) * t.abs()
 }
 
 /// `plane_t`'s `n·(a − o)` and `n·(sx, sy, 1)`, with the edges e1, e2 and `r = a − o`, in
@@ -200,4 +281,149 @@ fn plane_t_f64(x: [f32; 3], y: [f32; 3], z: [f32; 3], o: [f32; 3], shear: [f32; 
     let wide = |v: [f32; 3]| v.map(f64::from);
     let (along, facing, _) = plane_terms(wide(x), wide(y), wide(z), wide(o), wide(shear));
     (f64::from(shear[2]) * (along / facing)) as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    use crate::tests::Rng;
+
+    fn vec(rng: &mut Rng) -> Vec3 {
+        Vec3::new(rng.next(), rng.next(), rng.next()) * 2.0 - 1.0
+    }
+
+    /// 10 to a power between `lo` and `hi`.
+    fn pow10(rng: &mut Rng, lo: f32, hi: f32) -> f32 {
+        10f32.powf(lo + (hi - lo) * rng.next())
+    }
+
+    /// Where f32 skips f64 (`Outside`: a t beyond the lever but outside the range by twice its
+    /// slack), f64's t is outside the range too, so the test's answer is the same bytes. Rays
+    /// leave triangles of 10⁻² to 10⁷ across, lying along the axes or turned, long or not, from
+    /// 10⁻⁹ to 10⁻² of their size off their plane, toward it or away, and the range's ends lie
+    /// within a few slacks of the f32 t, where a bound too tight would show. A ray leaving a
+    /// floor 10⁴ wide 0.0125 above it (the default scene's shadow rays) is `Outside`.
+    #[test]
+    fn planes_f32_skips_are_rejected_by_f64_too() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        let (mut outside, mut wide, mut near) = (0, 0, 0);
+        for case in 0..400_000 {
+            let size = pow10(&mut rng, -2.0, 7.0);
+            let (mut e1, mut e2) = (vec(&mut rng) * size, vec(&mut rng) * size);
+            if case % 3 == 0 {
+                // Along the axes: a floor.
+                e1.y = 0.0;
+                e2.y = 0.0;
+            } else if case % 3 == 1 {
+                // Long: a strip.
+                e2 *= pow10(&mut rng, -6.0, 0.0);
+            }
+            let a = vec(&mut rng) * pow10(&mut rng, 0.0, 7.0);
+            let (b, c) = (a + e1, a + e2);
+            let n = e1.cross(e2).normalize_or_zero();
+            let (u, v) = (rng.next(), rng.next());
+            let (u, v) = if u + v > 1.0 {
+                (1.0 - u, 1.0 - v)
+            } else {
+                (u, v)
+            };
+            let side = if rng.next() < 0.5 { 1.0 } else { -1.0 };
+            let origin = a + e1 * u + e2 * v + n * side * size * pow10(&mut rng, -9.0, -2.0);
+            let mut dir = vec(&mut rng);
+            if case % 5 == 0 {
+                // Grazing.
+                dir -= n * n.dot(dir) * (1.0 - pow10(&mut rng, -6.0, 0.0));
+            }
+            let ray = Ray::new(origin, dir, 0.0, f32::INFINITY);
+            if !ray.is_valid() || n == Vec3::ZERO {
+                continue;
+            }
+            let wt = WatertightRay::new(&ray);
+            let [kx, ky, kz] = wt.k;
+            let along = |k: usize| [a[k], b[k], c[k]];
+            let (x, y, z) = (along(kx), along(ky), along(kz));
+            let t64 = plane_t_f64(x, y, z, wt.origin, wt.shear);
+            let free = plane_t(
+                x,
+                y,
+                z,
+                wt.origin,
+                wt.shear,
+                f32::NEG_INFINITY,
+                f32::INFINITY,
+            );
+            let t32 = match free {
+                PlaneT::Near(t) => {
+                    near += 1;
+                    t
+                }
+                PlaneT::Wide => shear_t(x, y, z, wt.origin, wt.shear),
+                PlaneT::Outside(t) => panic!("outside an infinite range: {t}"),
+            };
+            if free != PlaneT::Wide || !t32.is_finite() {
+                continue;
+            }
+            // The range's ends a few slacks from the f32 t, on either side.
+            let (_, facing, terms) = plane_terms(x, y, z, wt.origin, wt.shear);
+            let slack = plane_t_slack(t32, facing, terms, wt.shear);
+            let off = |rng: &mut Rng| slack * (1.5 + 3.0 * rng.next());
+            for (t_min, t_max) in [
+                (t32 + off(&mut rng), f32::INFINITY),
+                (f32::NEG_INFINITY, t32 - off(&mut rng)),
+                (0.0, f32::INFINITY),
+            ] {
+                match plane_t(x, y, z, wt.origin, wt.shear, t_min, t_max) {
+                    PlaneT::Outside(t) => {
+                        outside += 1;
+                        assert!(!(t >= t_min && t <= t_max));
+                        assert!(
+                            !(t64 >= t_min && t64 <= t_max),
+                            "case {case}: f32 {t} skipped f64's {t64} in [{t_min}, {t_max}] (slack {slack})"
+                        );
+                    }
+                    PlaneT::Wide => wide += 1,
+                    PlaneT::Near(t) => panic!("the lever changed with the range: {t}"),
+                }
+            }
+        }
+        eprintln!("{near} near, {outside} outside, {wide} wide");
+        assert!(
+            outside > 100_000 && wide > 10_000,
+            "{near} near, {outside} outside, {wide} wide"
+        );
+        // The default scene's floor: a shadow ray 0.0125 above a quad 10⁴ wide, 5,000 from its
+        // corner, leaves it: f32 rejects the floor behind it.
+        let (a, b, c) = (
+            Vec3::new(-5000.0, 0.0, -5000.0),
+            Vec3::new(5000.0, 0.0, -5000.0),
+            Vec3::new(-5000.0, 0.0, 5000.0),
+        );
+        let ray = Ray::new(
+            Vec3::new(-10.0, 0.0125, 3.0),
+            Vec3::new(300.0, 800.0, -200.0),
+            0.0,
+            1.0,
+        );
+        let wt = WatertightRay::new(&ray);
+        let [kx, ky, kz] = wt.k;
+        let along = |k: usize| [a[k], b[k], c[k]];
+        let got = plane_t(
+            along(kx),
+            along(ky),
+            along(kz),
+            wt.origin,
+            wt.shear,
+            0.0,
+            1.0,
+        );
+        assert!(matches!(got, PlaneT::Outside(t) if t < 0.0), "{got:?}");
+        assert_eq!(wt.intersect(a, b, c, 0.0, 1.0), None);
+    }
+
+    /// The f32 t that `plane_t_f32` computes, whatever it decides.
+    fn shear_t(x: [f32; 3], y: [f32; 3], z: [f32; 3], o: [f32; 3], shear: [f32; 3]) -> f32 {
+        let (along, facing, _) = plane_terms(x, y, z, o, shear);
+        shear[2] * (along / facing)
+    }
 }

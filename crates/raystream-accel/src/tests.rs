@@ -22,9 +22,9 @@ fn shared_mesh(name: &str) -> TriMesh {
 }
 
 /// xorshift: deterministic, dependency-free numbers for ray sets.
-struct Rng(u64);
+pub(crate) struct Rng(pub(crate) u64);
 impl Rng {
-    fn next(&mut self) -> f32 {
+    pub(crate) fn next(&mut self) -> f32 {
         self.0 ^= self.0 << 13;
         self.0 ^= self.0 >> 7;
         self.0 ^= self.0 << 17;

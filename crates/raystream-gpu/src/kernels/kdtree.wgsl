@@ -139,7 +139,7 @@ fn intersect_triangle(w: Watertight, i: u32, t_min: f32, t_max: f32) -> vec4<f32
         return vec4<f32>(0.0);
     }
     // A ray all but parallel to the plane may reach it at infinity: no hit.
-    let t = plane_t(rx, ry, rz, w);
+    let t = plane_t(rx, ry, rz, w, t_min, t_max);
     if !(t >= t_min && t <= t_max) || not_finite(t) {
         return vec4<f32>(0.0);
     }
@@ -156,8 +156,11 @@ fn intersect_triangle(w: Watertight, i: u32, t_min: f32, t_max: f32) -> vec4<f32
 // offset from the origin times the edges' lengths exceeds PLANE_T_LEVER times |n·r| (a huge
 // triangle near the ray's origin: intersect.rs says why), the f32 normal cannot place the
 // plane, and `plane_t_wide` computes it again: in f64 where the adapter has it (lib.rs puts
-// plane_f64.wgsl's in place of the f32 one below), as the CPU does.
-fn plane_t(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight) -> f32 {
+// plane_f64.wgsl's in place of the f32 one below), as the CPU does. Unless the f32 t lies
+// outside [t_min, t_max] by more than twice its error bound (PLANE_T_SLACK, intersect.rs):
+// the test rejects it whatever f64 says (a ray leaving a surface, its origin a hair off the
+// plane of the triangle it left).
+fn plane_t(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight, t_min: f32, t_max: f32) -> f32 {
     let e1 = vec3<f32>(x.y - x.x, y.y - y.x, z.y - z.x);
     let e2 = vec3<f32>(x.z - x.x, y.z - y.x, z.z - z.x);
     let n = vec3<f32>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
@@ -166,7 +169,17 @@ fn plane_t(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight) -> f32 {
     let facing = n.x * w.shear.x + n.y * w.shear.y + n.z;
     var t = w.shear.z * (along / facing);
     if largest(e1) * largest(e2) * largest(r) > PLANE_T_LEVER * abs(along) {
-        t = plane_t_wide(x, y, z, w, t);
+        // The CPU's plane_t_slack; a facing too small to bound, or an overflow (NaN), goes to f64.
+        let nb = vec3<f32>(abs(e1.y * e2.z) + abs(e1.z * e2.y), abs(e1.z * e2.x) + abs(e1.x * e2.z),
+            abs(e1.x * e2.y) + abs(e1.y * e2.x));
+        let ab = nb.x * abs(r.x) + nb.y * abs(r.y) + nb.z * abs(r.z);
+        let fb = nb.x * abs(w.shear.x) + nb.y * abs(w.shear.y) + nb.z;
+        let f = abs(facing);
+        let slack = PLANE_T_SLACK * (abs(w.shear.z) * ab + fb * abs(t)) / f + (1.0 / 4194304.0) * abs(t);
+        let outside = t + 2.0 * slack < t_min || t - 2.0 * slack > t_max;
+        if !(f > fb * (1.0 / 32768.0) && outside) {
+            t = plane_t_wide(x, y, z, w, t);
+        }
     }
     return t;
 }
