@@ -388,6 +388,14 @@ fn pixel_bands_make_square_blocks() {
     }
 }
 
+/// Every kernel layout that traces (all but the floor).
+const LAYOUTS: [Kernels; 4] = [
+    Kernels::Fused,
+    Kernels::Split,
+    Kernels::Persistent,
+    Kernels::IfIf,
+];
+
 /// The GPU, or `None` (skip) where there is none — except under CI, where GPU tests must run.
 fn gpu() -> Option<GpuContext> {
     match GpuContext::new(None) {
@@ -838,12 +846,7 @@ fn huge_turned_ground_quads_are_hit_where_their_planes_are() {
         let corners: Vec<[Vec3; 3]> = (0..2).map(|i| mesh.corners(i)).collect();
         let margin = brute::turned_quad_margin(w, l);
         let tracer = GpuTracer::new(&ctx, &tree).unwrap();
-        for kernels in [
-            Kernels::Fused,
-            Kernels::Split,
-            Kernels::Persistent,
-            Kernels::IfIf,
-        ] {
+        for kernels in LAYOUTS {
             for any in [false, true] {
                 let what = format!("{w} x {l} turned {degrees}°, {kernels:?}, any {any}");
                 assert!(agrees(&tracer, &corners, margin, kernels, any), "{what}");
@@ -870,6 +873,77 @@ fn huge_turned_ground_quads_are_hit_where_their_planes_are() {
     let corners: Vec<[Vec3; 3]> = (0..2).map(|i| mesh.corners(i)).collect();
     let tracer = GpuTracer::new(&ctx, &tree).unwrap();
     assert!(!agrees(&tracer, &corners, 1e-2, Kernels::Fused, false));
+}
+
+/// Rays leaving large quads a hair off their planes (a floor 10⁴ wide, as in the default scene,
+/// and the huge turned quads), up or down, some grazing, from 10⁻⁷ to 10⁻² of the quad's size
+/// above or below it: beyond the plane lever, where the f32 t lies outside the ray's range by
+/// twice its slack the GPU rejects it in f32 as the CPU does (`PLANE_T_SLACK`), and elsewhere
+/// places the plane in f64. Every kernel layout, closest and any hit: the CPU's hits and
+/// misses, at its t within 1e-6.
+#[test]
+fn rays_leaving_large_quads_agree_with_the_cpu() {
+    use raystream_accel::brute::{self, BIG_TURNED_QUADS};
+    let Some(ctx) = gpu() else { return };
+    if !ctx.f64_planes() {
+        eprintln!("skipping: {} has no f64", ctx.info.name);
+        return;
+    }
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut quads = vec![(5e3f32, 5e3f32, 0.0f32)];
+    quads.extend(BIG_TURNED_QUADS);
+    let (mut hits, mut misses) = (0, 0);
+    for (w, l, degrees) in quads {
+        let mesh = brute::turned_quad(w, l, degrees);
+        let tree = KdTree::build(&mesh, Builder::Sah);
+        let [a, b, c] = mesh.corners(0).map(|v| v.as_dvec3());
+        let n = (b - a).cross(c - a).normalize();
+        let size = (b - a).length().max((c - a).length());
+        let rays: Vec<Ray> = (0..2048)
+            .map(|k| {
+                let (u, v) = (next() as f64, next() as f64);
+                let (u, v) = if u + v > 1.0 {
+                    (1.0 - u, 1.0 - v)
+                } else {
+                    (u, v)
+                };
+                let side = if k % 2 == 0 { 1.0 } else { -1.0 };
+                let off = side * size * 10f64.powf(-7.0 + 5.0 * next() as f64);
+                let o = a + (b - a) * u + (c - a) * v + n * off;
+                let mut d = Vec3::new(next(), next(), next()) * 2.0 - 1.0;
+                if k % 3 == 0 {
+                    let nf = n.as_vec3();
+                    d -= nf * nf.dot(d) * (1.0 - 10f32.powf(-4.0 * next()));
+                }
+                let t_max = [f32::INFINITY, 1.0, 1e-3][k % 3];
+                Ray::new(o.as_vec3(), d, 0.0, t_max)
+            })
+            .collect();
+        let tracer = GpuTracer::new(&ctx, &tree).unwrap();
+        for any in [false, true] {
+            let cpu = tree.intersect_all(&rays, Traversal::Ropes, any);
+            for kernels in LAYOUTS {
+                let (gpu, _) = tracer.trace_with(&rays, any, kernels).unwrap();
+                for ((ray, c), g) in rays.iter().zip(&cpu).zip(&gpu) {
+                    let what = format!("{w} x {l} turned {degrees}°, {kernels:?}, any {any}");
+                    assert_eq!(c.is_some(), g.prim != NO_PRIM, "{what}: {ray:?}");
+                    if let Some(c) = c {
+                        let err = ((c.t - g.t) / c.t).abs();
+                        assert!(err < 1e-6, "{what}: {ray:?}: {} against {}", g.t, c.t);
+                    }
+                }
+            }
+            hits += cpu.iter().filter(|h| h.is_some()).count();
+            misses += cpu.iter().filter(|h| h.is_none()).count();
+        }
+    }
+    assert!(hits > 1000 && misses > 2000, "{hits} hits, {misses} misses");
 }
 
 /// The split kernels' lists filled a lane at a time or a subgroup at a time (the default where
@@ -1240,12 +1314,7 @@ fn oversized_queries_are_traced_in_chunks() {
         .features()
         .contains(wgpu::Features::TIMESTAMP_QUERY);
     for any in [false, true] {
-        for kernels in [
-            Kernels::Fused,
-            Kernels::Split,
-            Kernels::Persistent,
-            Kernels::IfIf,
-        ] {
+        for kernels in LAYOUTS {
             let (want, _) = whole.trace_with(&rays, any, kernels).unwrap();
             let (got, times) = chunked.trace_with(&rays, any, kernels).unwrap();
             assert_eq!(got, want, "any={any} {kernels:?}: chunked hits differ");
