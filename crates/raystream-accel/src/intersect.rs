@@ -57,11 +57,16 @@ impl WatertightRay {
         t_min: f32,
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
+        let [x, y, z] = self.rows(v0, v1, v2);
+        self.solve(x, y, z, t_min, t_max)
+    }
+
+    /// The corners' coordinates along kx, ky and kz, a row an axis.
+    #[inline(always)]
+    fn rows(&self, v0: Vec3, v1: Vec3, v2: Vec3) -> [[f32; 3]; 3] {
         // Arrays, as in `new`: no branch on the run-time axis.
         let (v0, v1, v2) = (v0.to_array(), v1.to_array(), v2.to_array());
-        let along = |k: usize| [v0[k], v1[k], v2[k]];
-        let [kx, ky, kz] = self.k;
-        self.solve(along(kx), along(ky), along(kz), t_min, t_max)
+        self.k.map(|k| [v0[k], v1[k], v2[k]])
     }
 
     /// [`Self::intersect`] of a leaf's triangle, its rows read in the ray's order of the axes.
@@ -120,7 +125,7 @@ impl WatertightRay {
         let (o, shear) = ([ox, oy, oz], [sx, sy, sz]);
         let t = match plane_t(x, y, z, o, shear, t_min, t_max) {
             PlaneT::Near(t) | PlaneT::Outside(t) => t,
-            PlaneT::Wide => plane_t_f64(x, y, z, o, shear),
+            PlaneT::Wide(_) => plane_t_f64(x, y, z, o, shear),
         };
         if !(t >= t_min && t <= t_max && t.is_finite()) {
             return None;
@@ -155,8 +160,8 @@ enum PlaneT {
     /// A t beyond the lever, but outside `[t_min, t_max]` by more than twice its
     /// [`PLANE_T_SLACK`]: rejected, as f64's would be.
     Outside(f32),
-    /// f64 must place the plane.
-    Wide,
+    /// The f32 t, which f64 must place again.
+    Wide(f32),
 }
 
 /// The distance along the ray to the plane of the triangle with corners' coordinates `x`, `y`,
@@ -200,7 +205,7 @@ fn plane_t(
     if t + 2.0 * slack < t_min || t - 2.0 * slack > t_max {
         PlaneT::Outside(t)
     } else {
-        PlaneT::Wide
+        PlaneT::Wide(t)
     }
 }
 
@@ -214,7 +219,8 @@ fn plane_t(
 ///   Where |facing| > 2⁻¹⁵·F (Δf under 1/73 of it), that is at most
 ///   11u·|sz|·A/|facing| + 10u·F·|t|/|facing| + 2.1u·|t| with t the f32 one.
 ///
-/// The slack is 16u·(|sz|·A + F·|t|)/|facing| + 4u·|t| (`PLANE_T_SLACK` = 16u): over 1.45
+/// The slack is 16u·(|sz|·A + F·|t|)/|facing| + 4u·|t| (`PLANE_T_SLACK` = 16u and
+/// [`PLANE_T_SLACK_OF_T`]; [`PLANE_T_MIN_FACING`] the 2⁻¹⁵ above): over 1.45
 /// times that bound, and NaN where facing is too small for it (f64 decides). The test rejects
 /// a t outside [t_min, t_max] by more than twice the slack, so the exact t lies outside by more
 /// than 1.3 slack (at least 5u·|t|, more than half an f32 step at the range's end): f64's t,
@@ -229,6 +235,12 @@ fn plane_t(
 /// nothing.)
 pub const PLANE_T_SLACK: f32 = 1.0 / 1_048_576.0;
 
+/// The slack's share of |t| itself (4u = 2⁻²²: the division and the product by sz).
+pub const PLANE_T_SLACK_OF_T: f32 = 1.0 / 4_194_304.0;
+
+/// The smallest |facing| the slack holds for, as a share of F (2⁻¹⁵: Δf under 1/73 of it).
+pub const PLANE_T_MIN_FACING: f32 = 1.0 / 32_768.0;
+
 /// [`PLANE_T_SLACK`]'s bound for `t`, given `facing` and the edges and the corner's offset
 /// `[e1, e2, r]`; NaN where facing is too small for the bound to hold.
 #[inline(always)]
@@ -241,10 +253,10 @@ fn plane_t_slack(t: f32, facing: f32, [e1, e2, r]: [[f32; 3]; 3], shear: [f32; 3
     let a = n[0] * r[0].abs() + n[1] * r[1].abs() + n[2] * r[2].abs();
     let f = n[0] * shear[0].abs() + n[1] * shear[1].abs() + n[2];
     let facing = facing.abs();
-    if !(facing > f * (1.0 / 32_768.0)) {
+    if !(facing > f * PLANE_T_MIN_FACING) {
         return f32::NAN;
     }
-    PLANE_T_SLACK * (shear[2].abs() * a + f * t.abs()) / facing + (1.0 / 4_194_304.0) * t.abs()
+    PLANE_T_SLACK * (shear[2].abs() * a + f * t.abs()) / facing + PLANE_T_SLACK_OF_T * t.abs()
 }
 
 /// `plane_t`'s `n·(a − o)` and `n·(sx, sy, 1)`, with the edges e1, e2 and `r = a − o`, in
@@ -340,30 +352,18 @@ mod tests {
                 continue;
             }
             let wt = WatertightRay::new(&ray);
-            let [kx, ky, kz] = wt.k;
-            let along = |k: usize| [a[k], b[k], c[k]];
-            let (x, y, z) = (along(kx), along(ky), along(kz));
+            let [x, y, z] = wt.rows(a, b, c);
             let t64 = plane_t_f64(x, y, z, wt.origin, wt.shear);
-            let free = plane_t(
-                x,
-                y,
-                z,
-                wt.origin,
-                wt.shear,
-                f32::NEG_INFINITY,
-                f32::INFINITY,
-            );
-            let t32 = match free {
-                PlaneT::Near(t) => {
+            let (lo, hi) = (f32::NEG_INFINITY, f32::INFINITY);
+            let t32 = match plane_t(x, y, z, wt.origin, wt.shear, lo, hi) {
+                PlaneT::Near(_) => {
                     near += 1;
-                    t
+                    continue;
                 }
-                PlaneT::Wide => shear_t(x, y, z, wt.origin, wt.shear),
+                PlaneT::Wide(t) if t.is_finite() => t,
+                PlaneT::Wide(_) => continue,
                 PlaneT::Outside(t) => panic!("outside an infinite range: {t}"),
             };
-            if free != PlaneT::Wide || !t32.is_finite() {
-                continue;
-            }
             // The range's ends a few slacks from the f32 t, on either side.
             let (_, facing, terms) = plane_terms(x, y, z, wt.origin, wt.shear);
             let slack = plane_t_slack(t32, facing, terms, wt.shear);
@@ -382,7 +382,7 @@ mod tests {
                             "case {case}: f32 {t} skipped f64's {t64} in [{t_min}, {t_max}] (slack {slack})"
                         );
                     }
-                    PlaneT::Wide => wide += 1,
+                    PlaneT::Wide(_) => wide += 1,
                     PlaneT::Near(t) => panic!("the lever changed with the range: {t}"),
                 }
             }
@@ -406,24 +406,9 @@ mod tests {
             1.0,
         );
         let wt = WatertightRay::new(&ray);
-        let [kx, ky, kz] = wt.k;
-        let along = |k: usize| [a[k], b[k], c[k]];
-        let got = plane_t(
-            along(kx),
-            along(ky),
-            along(kz),
-            wt.origin,
-            wt.shear,
-            0.0,
-            1.0,
-        );
+        let [x, y, z] = wt.rows(a, b, c);
+        let got = plane_t(x, y, z, wt.origin, wt.shear, 0.0, 1.0);
         assert!(matches!(got, PlaneT::Outside(t) if t < 0.0), "{got:?}");
         assert_eq!(wt.intersect(a, b, c, 0.0, 1.0), None);
-    }
-
-    /// The f32 t that `plane_t_f32` computes, whatever it decides.
-    fn shear_t(x: [f32; 3], y: [f32; 3], z: [f32; 3], o: [f32; 3], shear: [f32; 3]) -> f32 {
-        let (along, facing, _) = plane_terms(x, y, z, o, shear);
-        shear[2] * (along / facing)
     }
 }

@@ -196,14 +196,14 @@ impl KdTree {
         any: bool,
         out: &mut [Option<Hit>],
     ) {
-        #[cfg(target_arch = "x86_64")]
-        if isa == Isa::X86_64V3 && isa.available() {
+        match isa {
             // SAFETY: the processor has every feature `queries_v3` is compiled for.
-            unsafe { self.queries_v3(rays, traversal, any, out) };
-            return;
+            #[cfg(target_arch = "x86_64")]
+            Isa::X86_64V3 if isa.available() => unsafe {
+                self.queries_v3(rays, traversal, any, out)
+            },
+            _ => self.queries(rays, traversal, any, out),
         }
-        let _ = isa;
-        self.queries(rays, traversal, any, out)
     }
 
     /// [`Self::queries`] compiled for x86-64-v3 (see [`isa`]).

@@ -18,7 +18,9 @@ use std::time::{Duration, Instant};
 use layout::{GpuHit, GpuRay, Params};
 use raystream_accel::KdTree;
 use raystream_accel::entry::ERROR_SCALE as ENTRY_ERROR_SCALE;
-use raystream_accel::intersect::{PLANE_T_LEVER, PLANE_T_SLACK};
+use raystream_accel::intersect::{
+    PLANE_T_LEVER, PLANE_T_MIN_FACING, PLANE_T_SLACK, PLANE_T_SLACK_OF_T,
+};
 use raystream_accel::layout::{LEAF_BIT, NO_ROPE};
 use raystream_math::Ray;
 use wgpu::util::DeviceExt;
@@ -52,7 +54,7 @@ fn kdtree_core_wgsl() -> String {
 /// [`kdtree_core_wgsl`] with `workgroup` threads per workgroup.
 fn kdtree_core_wgsl_sized(workgroup: u32) -> String {
     format!(
-        "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {workgroup}u;\nconst ENTRY_ERROR_SCALE: f32 = {ENTRY_ERROR_SCALE:?};\nconst PLANE_T_LEVER: f32 = {PLANE_T_LEVER:?};\nconst PLANE_T_SLACK: f32 = {PLANE_T_SLACK:?};\n\n{KDTREE_WGSL}"
+        "const LEAF_BIT: u32 = {LEAF_BIT:#x}u;\nconst NO_ROPE: u32 = {NO_ROPE:#x}u;\nconst NO_PRIM: u32 = {NO_PRIM:#x}u;\nconst WORKGROUP_SIZE: u32 = {workgroup}u;\nconst ENTRY_ERROR_SCALE: f32 = {ENTRY_ERROR_SCALE:?};\nconst PLANE_T_LEVER: f32 = {PLANE_T_LEVER:?};\nconst PLANE_T_SLACK: f32 = {PLANE_T_SLACK:?};\nconst PLANE_T_SLACK_OF_T: f32 = {PLANE_T_SLACK_OF_T:?};\nconst PLANE_T_MIN_FACING: f32 = {PLANE_T_MIN_FACING:?};\n\n{KDTREE_WGSL}"
     )
 }
 

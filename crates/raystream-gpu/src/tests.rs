@@ -396,11 +396,16 @@ const LAYOUTS: [Kernels; 4] = [
     Kernels::IfIf,
 ];
 
+/// Whether the tests run under CI (`CI=true`), where skipping is a failure.
+fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
+}
+
 /// The GPU, or `None` (skip) where there is none — except under CI, where GPU tests must run.
 fn gpu() -> Option<GpuContext> {
     match GpuContext::new(None) {
         Ok(ctx) => Some(ctx),
-        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => panic!(
+        Err(e) if in_ci() => panic!(
             "CI=true but no GPU adapter: {e} (install lavapipe: ../shared/tools/install-lavapipe.sh)"
         ),
         Err(e) => {
@@ -817,7 +822,7 @@ fn huge_turned_ground_quads_are_hit_where_their_planes_are() {
     use raystream_accel::brute::{self, BIG_TURNED_QUADS, Verdict};
     let Some(mut ctx) = gpu() else { return };
     assert!(
-        ctx.f64_planes() || !std::env::var("CI").is_ok_and(|v| v == "true"),
+        ctx.f64_planes() || !in_ci(),
         "{}: no f64 (wgpu's SHADER_F64)",
         ctx.info.name
     );

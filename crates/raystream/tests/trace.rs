@@ -234,7 +234,7 @@ fn cpu_queries_in_either_instruction_set() {
         let adapter = line["adapter"].as_str().unwrap().to_string();
         (line["cpu_isa"].as_str().unwrap().to_string(), adapter, hits)
     };
-    let v3 = cfg!(target_arch = "x86_64") && std::env::var("CI").is_ok_and(|v| v == "true");
+    let v3 = cfg!(target_arch = "x86_64") && in_ci();
     for any in [false, true] {
         let (isa, adapter, default) = trace(None, any);
         assert!(adapter.ends_with(&format!(", {isa})")), "{adapter}");

@@ -175,9 +175,9 @@ fn plane_t(x: vec3<f32>, y: vec3<f32>, z: vec3<f32>, w: Watertight, t_min: f32, 
         let ab = nb.x * abs(r.x) + nb.y * abs(r.y) + nb.z * abs(r.z);
         let fb = nb.x * abs(w.shear.x) + nb.y * abs(w.shear.y) + nb.z;
         let f = abs(facing);
-        let slack = PLANE_T_SLACK * (abs(w.shear.z) * ab + fb * abs(t)) / f + (1.0 / 4194304.0) * abs(t);
+        let slack = PLANE_T_SLACK * (abs(w.shear.z) * ab + fb * abs(t)) / f + PLANE_T_SLACK_OF_T * abs(t);
         let outside = t + 2.0 * slack < t_min || t - 2.0 * slack > t_max;
-        if !(f > fb * (1.0 / 32768.0) && outside) {
+        if !(f > fb * PLANE_T_MIN_FACING && outside) {
             t = plane_t_wide(x, y, z, w, t);
         }
     }
