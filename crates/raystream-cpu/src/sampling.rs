@@ -388,11 +388,14 @@ pub(crate) fn bspline_weights(t: f32) -> ([f32; 4], [f32; 4]) {
 /// fraction across it, and the four voxels i − 1 … i + 2 the spline reads there, clamped to the
 /// grid (as a texture's clamp-to-edge addressing reads them on the GPU).
 fn cubic_axis(x: f32, n: usize) -> (f32, [usize; 4]) {
-    let x = x.clamp(0.0, (n - 1) as f32);
-    let i = x.floor();
-    let last = n as isize - 1;
-    let idx = [-1, 0, 1, 2].map(|d| (i as isize + d).clamp(0, last) as usize);
-    (x - i, idx)
+    // −0 as +0, so that the fraction is +0 there as `x − floor(x)` made it.
+    let x = x.clamp(0.0, (n - 1) as f32) + 0.0;
+    // x ≥ 0 (or NaN, which truncates to 0 as it floors to NaN and then 0): truncation floors
+    // it, without the library call `floor` is on x86-64's baseline.
+    let i = x as usize;
+    let last = n - 1;
+    let idx = [i.saturating_sub(1), i, (i + 1).min(last), (i + 2).min(last)];
+    (x - i as f32, idx)
 }
 
 /// The cubic B-spline's value at continuous index `p` of the grid `data` (`dims`, x fastest),
@@ -557,6 +560,44 @@ fn solve_line(inv: &[f64], line: &mut [f64]) {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// [`cubic_axis`] gives what the floor and the signed clamps gave (the fraction's bits
+    /// too, +0 at −0), over grids of 1 to 6 voxels, inside and outside them, on voxel centres,
+    /// far out, and at NaN and ±∞.
+    #[test]
+    fn cubic_axes_are_the_floors_and_clamps() {
+        let plain = |x: f32, n: usize| {
+            let x = x.clamp(0.0, (n - 1) as f32);
+            let i = x.floor();
+            let last = n as isize - 1;
+            let idx = [-1, 0, 1, 2].map(|d| (i as isize + d).clamp(0, last) as usize);
+            (x - i, idx)
+        };
+        let mut xs = vec![
+            0.0,
+            -0.0,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            1e30,
+            -1e30,
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+            0.999_999_94,
+        ];
+        xs.extend((0..4000).map(|k| k as f32 / 400.0 - 3.0));
+        xs.extend((0..8).map(|k| k as f32));
+        for n in 1..=6 {
+            for &x in &xs {
+                let (t, idx) = cubic_axis(x, n);
+                let (pt, pidx) = plain(x, n);
+                assert!(
+                    idx == pidx && t.to_bits() == pt.to_bits(),
+                    "x {x} n {n}: ({t}, {idx:?}) vs ({pt}, {pidx:?})"
+                );
+            }
+        }
+    }
 
     /// The uniform cubic B-spline basis function from its definition (f64): the piecewise
     /// cubic centred on 0, support (−2, 2).
