@@ -391,10 +391,12 @@ fn cubic_axis(x: f32, n: usize) -> (f32, [usize; 4]) {
     // −0 as +0, so that the fraction is +0 there as `x − floor(x)` made it.
     let x = x.clamp(0.0, (n - 1) as f32) + 0.0;
     // x ≥ 0 (or NaN, which truncates to 0 as it floors to NaN and then 0): truncation floors
-    // it, without the library call `floor` is on x86-64's baseline.
-    let i = x as usize;
+    // it, without the library call `floor` is on x86-64's baseline; through u32 (x < n), whose
+    // conversions to and from f32 are single instructions there, where usize's are not.
+    let i = x as u32;
     let last = n - 1;
-    let idx = [i.saturating_sub(1), i, (i + 1).min(last), (i + 2).min(last)];
+    let u = i as usize;
+    let idx = [u.saturating_sub(1), u, (u + 1).min(last), (u + 2).min(last)];
     (x - i as f32, idx)
 }
 

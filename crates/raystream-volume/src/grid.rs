@@ -14,12 +14,12 @@ where
     let [nx, ny, nz] = dims;
     let c = |x: f32, n: usize| x.clamp(0.0, (n - 1) as f32);
     let (x, y, z) = (c(p.x, nx), c(p.y, ny), c(p.z, nz));
-    let (i, j, k) = (
-        (x as usize).min(nx.saturating_sub(2)),
-        (y as usize).min(ny.saturating_sub(2)),
-        (z as usize).min(nz.saturating_sub(2)),
-    );
+    // Through u32 (each coordinate is below its axis's size): x86-64's baseline converts
+    // between f32 and u32 in one instruction, between f32 and usize in several.
+    let cell = |x: f32, n: usize| (x as u32).min(n.saturating_sub(2) as u32);
+    let (i, j, k) = (cell(x, nx), cell(y, ny), cell(z, nz));
     let (fx, fy, fz) = (x - i as f32, y - j as f32, z - k as f32);
+    let (i, j, k) = (i as usize, j as usize, k as usize);
     let v = |di: usize, dj: usize, dk: usize| {
         at(
             (i + di).min(nx - 1),

@@ -414,3 +414,75 @@ fn vol_index(p: raystream_math::DVec3) -> raystream_math::DVec3 {
         (0..3).map(|row| r[row][c] * p[row]).sum()
     }))
 }
+
+/// [`grid::trilinear`] gives what its first form gave (cells and fractions through usize),
+/// bit for bit, on grids of 1 to 5 points an axis, inside and outside them, on grid points,
+/// far out, and at NaN, ±0 and ±∞; and the corners' values at the corners.
+#[test]
+fn trilinear_is_its_first_form() {
+    fn plain(dims: [usize; 3], p: Vec3, at: impl Fn(usize, usize, usize) -> f32) -> f32 {
+        let [nx, ny, nz] = dims;
+        let c = |x: f32, n: usize| x.clamp(0.0, (n - 1) as f32);
+        let (x, y, z) = (c(p.x, nx), c(p.y, ny), c(p.z, nz));
+        let (i, j, k) = (
+            (x as usize).min(nx.saturating_sub(2)),
+            (y as usize).min(ny.saturating_sub(2)),
+            (z as usize).min(nz.saturating_sub(2)),
+        );
+        let (fx, fy, fz) = (x - i as f32, y - j as f32, z - k as f32);
+        let v = |di: usize, dj: usize, dk: usize| {
+            at(
+                (i + di).min(nx - 1),
+                (j + dj).min(ny - 1),
+                (k + dk).min(nz - 1),
+            )
+        };
+        let l = |a: f32, b: f32, w: f32| a + (b - a) * w;
+        l(
+            l(
+                l(v(0, 0, 0), v(1, 0, 0), fx),
+                l(v(0, 1, 0), v(1, 1, 0), fx),
+                fy,
+            ),
+            l(
+                l(v(0, 0, 1), v(1, 0, 1), fx),
+                l(v(0, 1, 1), v(1, 1, 1), fx),
+                fy,
+            ),
+            fz,
+        )
+    }
+    let mut xs = vec![
+        0.0,
+        -0.0,
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        1e30,
+        -1e30,
+        4.9999995,
+    ];
+    xs.extend((0..70).map(|k| k as f32 / 10.0 - 1.0));
+    let mut compared = 0;
+    for dims in [[1, 1, 1], [2, 3, 5], [5, 4, 2], [4, 1, 3]] {
+        let at = |i: usize, j: usize, k: usize| ((i * 7 + j * 13 + k * 29) % 17) as f32 - 8.5;
+        for (n, &x) in xs.iter().enumerate() {
+            for &y in xs.iter().skip(n % 7).step_by(7) {
+                for &z in xs.iter().skip(n % 5).step_by(5) {
+                    let p = Vec3::new(x, y, z);
+                    let (v, pv) = (grid::trilinear(dims, p, at), plain(dims, p, at));
+                    assert_eq!(v.to_bits(), pv.to_bits(), "{dims:?} at {p}: {v} vs {pv}");
+                    compared += 1;
+                }
+            }
+        }
+        let last = dims.map(|n| n - 1);
+        let corner = Vec3::new(last[0] as f32, last[1] as f32, last[2] as f32);
+        assert_eq!(
+            grid::trilinear(dims, corner, at),
+            at(last[0], last[1], last[2])
+        );
+        assert_eq!(grid::trilinear(dims, Vec3::ZERO, at), at(0, 0, 0));
+    }
+    assert!(compared > 10_000, "{compared}");
+}
