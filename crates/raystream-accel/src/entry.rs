@@ -132,9 +132,10 @@ impl EntryGrid {
             let p = o[a] + t0 * d[a];
             // Clamped, then truncated: the floor of the clamped value, which is not negative
             // (`floor` is a call into libm on x86-64's baseline, which has no rounding
-            // instruction before SSE4.1).
-            let i =
-                ((p - scene_min[a]) * self.scale[a]).clamp(0.0, (self.res[a] - 1) as f32) as usize;
+            // instruction before SSE4.1). Through u32, below `res` there: x86-64 has no
+            // conversion from f32 to an unsigned 64-bit integer before AVX-512.
+            let i = ((p - scene_min[a]) * self.scale[a]).clamp(0.0, (self.res[a] - 1) as f32) as u32
+                as usize;
             index = index * self.res[a] as usize + i;
         }
         self.cells[index]
