@@ -6,9 +6,12 @@
 //! round the same way; what changes is their encoding (three-operand VEX forms, fewer register
 //! moves), SSE4.1's rounding and BMI. With the walk's start inlined into it, the queries
 //! were 4–29 % faster than the baseline build's on the standard 1920×1080 sets (BENCHMARKS.md).
+//! The CPU volume renderers (`raystream-cpu`'s `dvr::march_v3` and `cinematic::pixel_v3`) run
+//! each pixel in the same instruction set, chosen here too.
 //!
-//! Hand-written rather than through a multiversioning crate: it is one function, dispatched
-//! once per chunk of rays, and its test compares the two copies byte for byte.
+//! Hand-written rather than through a multiversioning crate: each copy is one function whose
+//! callees are `#[inline(always)]` into it, dispatched per chunk of rays or per pixel, and its
+//! test compares the two copies byte for byte.
 
 use std::sync::atomic::{AtomicU8, Ordering};
 
@@ -52,7 +55,8 @@ impl Isa {
         }
     }
 
-    /// The instruction set the queries run in: the one chosen with [`Isa::choose`], else
+    /// The instruction set the queries (and the CPU volume renderers' pixels) run in: the one
+    /// chosen with [`Isa::choose`], else
     /// [`Isa::detected`].
     pub fn current() -> Isa {
         match CHOSEN.load(Ordering::Relaxed) {

@@ -24,6 +24,7 @@
 use std::sync::atomic::AtomicU64;
 
 use rayon::prelude::*;
+use raystream_accel::Isa;
 use raystream_io::Volume;
 use raystream_math::Vec3;
 use raystream_scene::{Camera, Projection, VOLUME_VIEW, View};
@@ -32,7 +33,9 @@ use raystream_volume::TransferFunction;
 use crate::Image;
 use crate::cpr::CurvedPlane;
 pub use crate::sampling::Interpolation;
-use crate::sampling::{block_bound, bspline_coefficients, tricubic, tricubic_value, trilinear};
+use crate::sampling::{
+    block_bound, bspline_coefficients, tricubic, tricubic_value, trilinear, trilinear_in,
+};
 use crate::segments::SegmentColours;
 
 /// What a ray computes.
@@ -389,6 +392,7 @@ pub(crate) fn cell_corners(dims: [usize; 3], cell: usize, b: usize) -> ([usize; 
 
 /// The cell of `cell`³ (of `cells` per axis) holding index `p`, and the ray parameter where
 /// the ray p + (s − t)·d_idx leaves it.
+#[inline(always)]
 pub(crate) fn cell_exit(
     p: Vec3,
     t: f32,
@@ -401,7 +405,10 @@ pub(crate) fn cell_exit(
     // past u32's range saturates, and is clamped to the last cell as before. The exits are
     // computed for every axis and kept where the ray moves along it, without branches; a
     // face's index (at most the grid's size) goes to f32 through u32 too.
-    let b = [0, 1, 2].map(|a| ((p[a].max(0.0) as u32 as usize) / cell).min(cells[a] - 1));
+    // Spelled out rather than `[0, 1, 2].map(…)`, whose closure the compiler may leave out of
+    // line, in the baseline's code, when this is inlined into an x86-64-v3 copy.
+    let cell_of = |a: usize| ((p[a].max(0.0) as u32 as usize) / cell).min(cells[a] - 1);
+    let b = [cell_of(0), cell_of(1), cell_of(2)];
     let mut t_exit = f32::INFINITY;
     for a in 0..3 {
         let bound = (b[a] + (d_idx[a] > 0.0) as usize) * cell;
@@ -633,12 +640,11 @@ impl<'a> Marcher<'a> {
 
     /// The value at continuous index `p` (clamped to the grid), interpolated trilinearly or
     /// by the cubic B-spline (of the voxels, or of the coefficients that interpolate them).
+    #[inline(always)]
     pub fn sample(&self, p: Vec3) -> f32 {
         let dims = self.vol.dims;
         match self.interpolation {
-            Interpolation::Linear => trilinear(dims, p, |i, j, k| {
-                self.grid[i + dims[0] * (j + dims[1] * k)]
-            }),
+            Interpolation::Linear => trilinear_in(dims, &self.grid, p),
             Interpolation::Cubic | Interpolation::CubicInterpolating => {
                 tricubic_value(dims, &self.grid, p)
             }
@@ -663,6 +669,7 @@ impl<'a> Marcher<'a> {
     /// `None` elsewhere (outside the segments), so that no hidden voxel's value and no fill
     /// value reaches a projection, not even blended at a segment's edge. Without weights,
     /// [`Self::sample`].
+    #[inline(always)]
     pub fn sample_kept(&self, p: Vec3) -> Option<f32> {
         let Some(w) = &self.weights else {
             return Some(self.sample(p));
@@ -691,6 +698,7 @@ impl<'a> Marcher<'a> {
     /// 0.125 against trilinear's 0.040), so it is shaded by the approximating spline's, which
     /// turns smoothly: its values keep their peaks, and its normals are `cubic`'s at the same
     /// points.
+    #[inline(always)]
     pub fn gradient(&self, p: Vec3) -> Vec3 {
         let g = match self.interpolation {
             Interpolation::Linear => {
@@ -709,6 +717,7 @@ impl<'a> Marcher<'a> {
     }
 
     /// The ray's [t0, t1] (mm along unit `d`) inside the grid of voxel centres.
+    #[inline(always)]
     pub(crate) fn clip(&self, o_idx: Vec3, d_idx: Vec3) -> Option<(f32, f32)> {
         let (mut t0, mut t1) = (0.0f32, f32::INFINITY);
         for a in 0..3 {
@@ -790,6 +799,7 @@ impl<'a> Marcher<'a> {
     /// by `lights` (`shade_sample`); early termination below 1 % transmittance, transparent
     /// bricks skipped when `skip`.
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     pub fn composite(
         &self,
         tf: &TransferFunction,
@@ -842,6 +852,7 @@ impl<'a> Marcher<'a> {
     /// Where index point `q` (ray parameter `t`) lies in a transparent brick: the index of the
     /// first sample of the lattice t0 + (k + jitter)·step past that brick (at least k + 1).
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     fn skip_brick(
         &self,
         q: Vec3,
@@ -1092,6 +1103,8 @@ pub struct CpuVolume<'a> {
     weight_grids: SplineGrids,
     /// Per interpolation, the bricks a kept projection may see ([`kept_brick_table`]).
     kept_bricks: [std::sync::OnceLock<Vec<bool>>; 3],
+    /// The instruction set its pixels are marched in ([`Self::in_isa`]).
+    isa: Isa,
 }
 
 impl<'a> CpuVolume<'a> {
@@ -1106,7 +1119,16 @@ impl<'a> CpuVolume<'a> {
             weights: None,
             weight_grids: Default::default(),
             kept_bricks: Default::default(),
+            isa: Isa::current(),
         }
+    }
+
+    /// The volume with its pixels marched in the instruction set `isa` (by default the one
+    /// the CPU ray queries run in, [`Isa::current`]; the baseline's where the processor lacks
+    /// `isa`): the same pixels, bit for bit, in every one.
+    pub fn in_isa(mut self, isa: Isa) -> CpuVolume<'a> {
+        self.isa = isa;
+        self
     }
 
     /// The volume with its dvr, iso and cinematic samples coloured by `segments` (on its
@@ -1358,7 +1380,7 @@ fn march_frame(
         };
         let majorants = cv.majorants(&marcher);
         let (paths, denoised) =
-            crate::cinematic::frame(vol, &marcher, tf, majorants, opt, cam, done);
+            crate::cinematic::frame(&marcher, tf, majorants, opt, cam, done, cv.isa);
         let mut rays: Vec<Marched> = paths
             .iter()
             .map(|p| Marched {
@@ -1398,7 +1420,7 @@ fn march_frame(
         .map(|pixel| {
             let (ray, slice) = sight.ray(opt, pixel, slice_at, half_slab);
             let light = light.zip(grid.as_ref());
-            march(&marcher, tf, opt, (win, step, slice), light, ray)
+            march_in(cv.isa, &marcher, tf, opt, (win, step, slice), light, ray)
         })
         .collect();
     let stats = DvrStats {
@@ -1452,6 +1474,7 @@ pub struct SampleLight<'a> {
 /// magnitude so that homogeneous regions stay unshaded (lit without a normal), times the
 /// light's colour and what its light grid lets through. With one white unshadowed light this
 /// is the classic headlight shading.
+#[inline(always)]
 fn shade_sample(
     m: &Marcher,
     tf: &TransferFunction,
@@ -1551,8 +1574,43 @@ struct Slice {
     reach: f32,
 }
 
+/// [`march`] compiled for the instruction set `isa` where the processor has it, else the
+/// baseline's: the same pixel, bit for bit (Rust contracts no multiply and add into an FMA).
+fn march_in(
+    isa: Isa,
+    m: &Marcher,
+    tf: &TransferFunction,
+    opt: &DvrOptions,
+    frame: ((f32, f32), f32, Slice),
+    light: Option<(Vec3, &LightGrid)>,
+    ray: Ray3,
+) -> Marched {
+    match isa {
+        // SAFETY: the processor has every feature `march_v3` is compiled for.
+        #[cfg(target_arch = "x86_64")]
+        Isa::X86_64V3 if isa.available() => unsafe { march_v3(m, tf, opt, frame, light, ray) },
+        _ => march(m, tf, opt, frame, light, ray),
+    }
+}
+
+/// [`march`] compiled for x86-64-v3 (`raystream_accel::isa`): every function of a sample's
+/// path is `#[inline(always)]` into it, or it would run the baseline's code.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,movbe,f16c")]
+fn march_v3(
+    m: &Marcher,
+    tf: &TransferFunction,
+    opt: &DvrOptions,
+    frame: ((f32, f32), f32, Slice),
+    light: Option<(Vec3, &LightGrid)>,
+    ray: Ray3,
+) -> Marched {
+    march(m, tf, opt, frame, light, ray)
+}
+
 /// One ray: colour, samples taken, samples skipped; `win`, `step` and `slice` resolved from
 /// `opt` once a frame.
+#[inline(always)]
 fn march(
     m: &Marcher,
     tf: &TransferFunction,
@@ -3085,6 +3143,87 @@ mod tests {
             let m = Marcher::new(&vol, None);
             let g = m.gradient(Vec3::new(5.3, 6.1, 4.7));
             assert!((g - slope.as_vec3()).length() < 1e-3, "{g} vs {slope}");
+        }
+    }
+
+    /// Every mode's pixels marched in x86-64-v3 ([`CpuVolume::in_isa`]) are the baseline's, bit
+    /// for bit, and so are their sample counts: the abdomen CT in dvr (each interpolation, a
+    /// crop, shadows through the light grid), cinematic (each interpolation), mip, minip,
+    /// average, iso and slice. Under `CI=true` an x86-64 machine must have x86-64-v3, so that
+    /// the copy is tested there.
+    #[test]
+    fn volume_pixels_are_the_same_in_every_instruction_set() {
+        if cfg!(target_arch = "x86_64") && std::env::var("CI").is_ok_and(|v| v == "true") {
+            assert!(
+                Isa::X86_64V3.available(),
+                "CI=true: this x86-64 processor lacks x86-64-v3, whose volume renderers would go untested"
+            );
+        }
+        let vol = abdomen();
+        let cam = volume_camera(&vol, 1.25);
+        let base = DvrOptions {
+            width: 40,
+            height: 32,
+            ..Default::default()
+        };
+        let crop = Some([Vec3::splat(-400.0), Vec3::new(40.0, 400.0, 400.0)]);
+        let mut runs = Vec::new();
+        for interpolation in [
+            Interpolation::Linear,
+            Interpolation::Cubic,
+            Interpolation::CubicInterpolating,
+        ] {
+            for (mode, preset) in [
+                (DvrMode::Dvr, TfPreset::CtBones),
+                (DvrMode::Dvr, TfPreset::CtMuscle),
+                (DvrMode::Cinematic, TfPreset::CtBones),
+                (DvrMode::Mip, TfPreset::MipBone),
+                (DvrMode::MinIp, TfPreset::CtBone),
+                (DvrMode::Average, TfPreset::CtBone),
+                (DvrMode::Iso, TfPreset::CtBone),
+                (DvrMode::Slice, TfPreset::CtBone),
+            ] {
+                let opt = DvrOptions {
+                    mode,
+                    interpolation,
+                    spp: 4,
+                    shadows: preset == TfPreset::CtBones,
+                    crop: (preset == TfPreset::CtMuscle).then_some(crop).flatten(),
+                    ..base
+                };
+                runs.push((preset, opt));
+            }
+        }
+        let isas: Vec<Isa> = Isa::ALL.into_iter().filter(|i| i.available()).collect();
+        for (preset, opt) in runs {
+            let tf = preset.function();
+            let what = format!(
+                "{} {} {:?}",
+                opt.mode.name(),
+                preset.name(),
+                opt.interpolation
+            );
+            let frames: Vec<(Image, DvrStats)> = isas
+                .iter()
+                .map(|&isa| CpuVolume::new(&vol, &tf).in_isa(isa).render(&opt, &cam))
+                .collect();
+            let (first, stats) = &frames[0];
+            assert!(stats.samples > 0, "{what}");
+            let bits = |im: &Image| -> Vec<[u32; 3]> {
+                im.pixels
+                    .iter()
+                    .map(|p| p.to_array().map(f32::to_bits))
+                    .collect()
+            };
+            for ((im, s), isa) in frames.iter().zip(&isas).skip(1) {
+                assert!(
+                    bits(im) == bits(first),
+                    "{what}: {} differs from {}",
+                    isa.name(),
+                    isas[0].name()
+                );
+                assert_eq!(s.samples, stats.samples, "{what}: {}", isa.name());
+            }
         }
     }
 

@@ -34,7 +34,7 @@
 //! a clamped grid.
 
 use raystream_math::Vec3;
-pub(crate) use raystream_volume::trilinear;
+pub(crate) use raystream_volume::{trilinear, trilinear_in};
 
 pub use raystream_volume::Interpolation;
 
@@ -389,7 +389,7 @@ pub(crate) fn bspline_weights(t: f32) -> ([f32; 4], [f32; 4]) {
 /// grid (as a texture's clamp-to-edge addressing reads them on the GPU).
 fn cubic_axis(x: f32, n: usize) -> (f32, [usize; 4]) {
     // −0 as +0, so that the fraction is +0 there as `x − floor(x)` made it.
-    let x = x.clamp(0.0, (n - 1) as f32) + 0.0;
+    let x = raystream_volume::clamp_to_grid(x, n) + 0.0;
     // x ≥ 0 (or NaN, which truncates to 0 as it floors to NaN and then 0): truncation floors
     // it, without the library call `floor` is on x86-64's baseline; through u32 (x < n), whose
     // conversions to and from f32 are single instructions there, where usize's are not.
@@ -403,6 +403,7 @@ fn cubic_axis(x: f32, n: usize) -> (f32, [usize; 4]) {
 /// The cubic B-spline's value at continuous index `p` of the grid `data` (`dims`, x fastest),
 /// clamped to the grid: [`tricubic`]'s value, the same sums in the same order (bit for bit),
 /// without the gradient's (a march's samples need only the value).
+#[inline(always)]
 pub(crate) fn tricubic_value(dims: [usize; 3], data: &[f32], p: Vec3) -> f32 {
     let (tx, ix) = cubic_axis(p.x, dims[0]);
     let (ty, iy) = cubic_axis(p.y, dims[1]);
@@ -430,6 +431,7 @@ pub(crate) fn tricubic_value(dims: [usize; 3], data: &[f32], p: Vec3) -> f32 {
 
 /// The cubic B-spline at continuous index `p` of the grid `data` (`dims`, x fastest), clamped
 /// to the grid, and its gradient per index unit: (value, ∂/∂i, ∂/∂j, ∂/∂k).
+#[inline(always)]
 pub(crate) fn tricubic(dims: [usize; 3], data: &[f32], p: Vec3) -> (f32, Vec3) {
     let (tx, ix) = cubic_axis(p.x, dims[0]);
     let (ty, iy) = cubic_axis(p.y, dims[1]);

@@ -10,7 +10,7 @@ pub mod segments;
 mod stats;
 mod tf;
 
-pub use grid::trilinear;
+pub use grid::{clamp_to_grid, trilinear, trilinear_in};
 pub use marching::{
     IsoSurface, Simplified, departure, distances, extract_isosurface, point_triangle_distance,
     simplify, smooth,

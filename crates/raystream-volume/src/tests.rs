@@ -415,8 +415,8 @@ fn vol_index(p: raystream_math::DVec3) -> raystream_math::DVec3 {
     }))
 }
 
-/// [`grid::trilinear`] gives what its first form gave (cells and fractions through usize),
-/// bit for bit, on grids of 1 to 5 points an axis, inside and outside them, on grid points,
+/// [`grid::trilinear`] and [`grid::trilinear_in`] give what the first form gave (cells and
+/// fractions through usize, `f32::clamp`), bit for bit, on grids of 1 to 5 points an axis, inside and outside them, on grid points,
 /// far out, and at NaN, ±0 and ±∞; and the corners' values at the corners.
 #[test]
 fn trilinear_is_its_first_form() {
@@ -466,12 +466,17 @@ fn trilinear_is_its_first_form() {
     let mut compared = 0;
     for dims in [[1, 1, 1], [2, 3, 5], [5, 4, 2], [4, 1, 3]] {
         let at = |i: usize, j: usize, k: usize| ((i * 7 + j * 13 + k * 29) % 17) as f32 - 8.5;
+        let data: Vec<f32> = (0..dims[2])
+            .flat_map(|k| (0..dims[1]).flat_map(move |j| (0..dims[0]).map(move |i| at(i, j, k))))
+            .collect();
         for (n, &x) in xs.iter().enumerate() {
             for &y in xs.iter().skip(n % 7).step_by(7) {
                 for &z in xs.iter().skip(n % 5).step_by(5) {
                     let p = Vec3::new(x, y, z);
                     let (v, pv) = (grid::trilinear(dims, p, at), plain(dims, p, at));
                     assert_eq!(v.to_bits(), pv.to_bits(), "{dims:?} at {p}: {v} vs {pv}");
+                    let g = grid::trilinear_in(dims, &data, p);
+                    assert_eq!(g.to_bits(), pv.to_bits(), "{dims:?} at {p}: {g} vs {pv}");
                     compared += 1;
                 }
             }
@@ -485,4 +490,31 @@ fn trilinear_is_its_first_form() {
         assert_eq!(grid::trilinear(dims, Vec3::ZERO, at), at(0, 0, 0));
     }
     assert!(compared > 10_000, "{compared}");
+}
+
+/// [`grid::clamp_to_grid`] is `f32::clamp(x, 0, n − 1)` bit for bit: NaN, ±0, ±∞, and the
+/// values around both ends.
+#[test]
+fn clamps_to_the_grid_as_f32_clamp() {
+    let mut xs = vec![
+        0.0,
+        -0.0,
+        f32::NAN,
+        -f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+    ];
+    xs.extend((0..200).map(|k| k as f32 / 20.0 - 2.0));
+    for n in [1usize, 2, 7] {
+        let hi = (n - 1) as f32;
+        xs.extend([hi, -hi, hi + 1e-6, f32::from_bits(hi.to_bits() + 1)]);
+        for &x in &xs {
+            let (c, want) = (grid::clamp_to_grid(x, n), x.clamp(0.0, hi));
+            assert_eq!(
+                c.to_bits(),
+                want.to_bits(),
+                "{x} on {n} points: {c} vs {want}"
+            );
+        }
+    }
 }

@@ -181,6 +181,7 @@ impl TfPreset {
     }
 }
 
+#[inline(always)]
 fn lerp_at<T: Copy>(points: &[(f32, T)], hu: f32, mix: impl Fn(T, T, f32) -> T) -> T {
     let i = points.partition_point(|p| p.0 <= hu);
     if i == 0 {
@@ -214,11 +215,13 @@ struct TfFile {
 
 impl TransferFunction {
     /// Opacity per mm at `hu`.
+    #[inline(always)]
     pub fn opacity_at(&self, hu: f32) -> f32 {
         lerp_at(&self.opacity, hu, |a, b, w| a + (b - a) * w)
     }
 
     /// Linear RGB at `hu`.
+    #[inline(always)]
     pub fn color_at(&self, hu: f32) -> [f32; 3] {
         lerp_at(&self.color, hu, |a, b, w| {
             [0, 1, 2].map(|c| a[c] + (b[c] - a[c]) * w)

@@ -216,7 +216,8 @@ fn fan_at_spot(name: &str, n: usize) -> std::path::PathBuf {
 /// `RAYSTREAM_CPU_ISA=baseline|x86-64-v3`: the CPU's queries in the build's baseline and in
 /// x86-64-v3 (the default where the processor has it, as every x86-64 CI machine must) write
 /// the same bytes for a 48 × 48 fan at spot, closest and any hit; the JSON and the adapter
-/// say which ran; any other value is refused, naming the variable.
+/// say which ran; the CPU volume renderers (dvr, cinematic) write the same PNG in either; any
+/// other value is refused, naming the variable.
 #[test]
 fn cpu_queries_in_either_instruction_set() {
     let rays = fan_at_spot("isa.rays", 48);
@@ -250,6 +251,24 @@ fn cpu_queries_in_either_instruction_set() {
         assert!(baseline == default, "any={any}: the bytes differ");
         let hit = |h: &[u8]| h[4..8] != [0xff; 4];
         assert!(default.chunks_exact(16).filter(|h| hit(h)).count() > 500);
+    }
+    // The CPU volume renderers' pixels follow it too: the same PNG either way.
+    let ct = builtin_ct();
+    for mode in ["dvr", "cinematic"] {
+        let mut args = vec!["render", &ct, "--mode", mode, "--size", "48x40"];
+        if mode == "cinematic" {
+            args.extend(["--spp", "2"]);
+        }
+        args.extend(["--device", "cpu", "-q"]);
+        let png = |isa: Option<&str>| {
+            let name = format!("isa-{mode}-{}.png", isa.unwrap_or("default"));
+            let (o, png) = run_with_env("RAYSTREAM_CPU_ISA", isa, &args, &tmp(&name));
+            assert!(o.status.success(), "{mode} {isa:?}: {}", stderr(&o));
+            png
+        };
+        let (default, baseline) = (png(None), png(Some("baseline")));
+        assert!(default.len() > 1000, "{mode}: {} bytes", default.len());
+        assert!(default == baseline, "{mode}: the PNGs differ");
     }
     let (bad, _) = run_with_env(
         "RAYSTREAM_CPU_ISA",
