@@ -308,6 +308,9 @@ pub struct Marcher<'a> {
     /// Per brick: whether anything in it is visible (dvr mode) — empty-space skipping.
     visible: std::borrow::Cow<'a, [bool]>,
     interpolation: Interpolation,
+    /// The instruction set [`Self::absorb`] and [`Self::composite_ray`] run in
+    /// ([`Self::in_isa`]).
+    isa: Isa,
     /// A segmentation's colours, which the samples take in place of the transfer function's.
     segments: Option<&'a SegmentColours>,
     /// mip, minip and average kept to segments: the kept voxels' weights as the interpolation
@@ -559,9 +562,19 @@ impl<'a> Marcher<'a> {
             bricks,
             visible,
             interpolation,
+            isa: Isa::current(),
             segments: None,
             weights: None,
         }
+    }
+
+    /// The marcher whose shadow rays ([`Self::absorb`]) and mesh scenes' segments
+    /// ([`Self::composite_ray`]) run in the instruction set `isa` (by default
+    /// [`Isa::current`]; the baseline's where the processor lacks it): the same bits in every
+    /// one.
+    pub fn in_isa(mut self, isa: Isa) -> Marcher<'a> {
+        self.isa = isa;
+        self
     }
 
     /// The marcher with its samples coloured by `segments` (on the volume's grid), where
@@ -764,6 +777,42 @@ impl<'a> Marcher<'a> {
         tf: &TransferFunction,
         o_idx: Vec3,
         d_idx: Vec3,
+        span: [f32; 2],
+        step: f32,
+        jitter: f32,
+    ) -> (f32, u64) {
+        match self.isa {
+            // SAFETY: the processor has every feature `absorb_v3` is compiled for.
+            #[cfg(target_arch = "x86_64")]
+            Isa::X86_64V3 if self.isa.available() => unsafe {
+                self.absorb_v3(tf, o_idx, d_idx, span, step, jitter)
+            },
+            _ => self.absorb_here(tf, o_idx, d_idx, span, step, jitter),
+        }
+    }
+
+    /// [`Self::absorb`] compiled for x86-64-v3 (`raystream_accel::isa`), as [`march_v3`].
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,movbe,f16c")]
+    fn absorb_v3(
+        &self,
+        tf: &TransferFunction,
+        o_idx: Vec3,
+        d_idx: Vec3,
+        span: [f32; 2],
+        step: f32,
+        jitter: f32,
+    ) -> (f32, u64) {
+        self.absorb_here(tf, o_idx, d_idx, span, step, jitter)
+    }
+
+    /// [`Self::absorb`] in the instruction set of its caller.
+    #[inline(always)]
+    fn absorb_here(
+        &self,
+        tf: &TransferFunction,
+        o_idx: Vec3,
+        d_idx: Vec3,
         [t0, t1]: [f32; 2],
         step: f32,
         jitter: f32,
@@ -798,6 +847,46 @@ impl<'a> Marcher<'a> {
     /// `o_idx`, `d_idx` its index form) on the lattice t0 + (k + jitter)·step, each sample lit
     /// by `lights` (`shade_sample`); early termination below 1 % transmittance, transparent
     /// bricks skipped when `skip`.
+    /// [`Self::composite`] in the marcher's instruction set ([`Self::in_isa`]), for callers
+    /// outside a march (a mesh scene's segments of a ray through its volume).
+    #[allow(clippy::too_many_arguments)]
+    pub fn composite_ray(
+        &self,
+        tf: &TransferFunction,
+        ray: Ray3,
+        idx: (Vec3, Vec3),
+        span: [f32; 2],
+        step: f32,
+        skip: bool,
+        lights: &[SampleLight],
+    ) -> Composited {
+        match self.isa {
+            // SAFETY: the processor has every feature `composite_v3` is compiled for.
+            #[cfg(target_arch = "x86_64")]
+            Isa::X86_64V3 if self.isa.available() => unsafe {
+                self.composite_v3(tf, ray, idx, span, step, skip, lights)
+            },
+            _ => self.composite(tf, ray, idx, span, step, skip, lights),
+        }
+    }
+
+    /// [`Self::composite`] compiled for x86-64-v3 (`raystream_accel::isa`), as [`march_v3`].
+    #[cfg(target_arch = "x86_64")]
+    #[allow(clippy::too_many_arguments)]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,movbe,f16c")]
+    fn composite_v3(
+        &self,
+        tf: &TransferFunction,
+        ray: Ray3,
+        idx: (Vec3, Vec3),
+        span: [f32; 2],
+        step: f32,
+        skip: bool,
+        lights: &[SampleLight],
+    ) -> Composited {
+        self.composite(tf, ray, idx, span, step, skip, lights)
+    }
+
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     pub fn composite(
@@ -1189,6 +1278,7 @@ impl<'a> CpuVolume<'a> {
         }
         .painted(self.segments)
         .kept(weights.map(Cow::Borrowed))
+        .in_isa(self.isa)
     }
 
     /// The majorant grid of cinematic frames read as `m` reads the volume.
