@@ -482,16 +482,16 @@ pub fn variance_of_mean(sum: f32, sum_sq: f32, n: u32) -> f32 {
     (sum_sq / n - mean * mean).max(0.0) / (n - 1.0)
 }
 
-/// [`pixel`] compiled for the instruction set `isa` where the processor has it, else the
-/// baseline's: the same paths, bit for bit.
+/// [`pixel`] compiled for the marcher's instruction set ([`Marcher::in_isa`]) where the
+/// processor has it, else the baseline's: the same paths, bit for bit.
 fn pixel_in(
-    isa: Isa,
     tracker: &Tracker,
     opt: &DvrOptions,
     cam: &Camera,
     lighting: &Lighting,
     px: u32,
 ) -> PixelPaths {
+    let isa = tracker.m.isa();
     match isa {
         // SAFETY: the processor has every feature `pixel_v3` is compiled for.
         #[cfg(target_arch = "x86_64")]
@@ -560,14 +560,13 @@ pub(crate) fn frame(
     opt: &DvrOptions,
     cam: &Camera,
     done: Option<&AtomicU64>,
-    isa: Isa,
 ) -> (Vec<PixelPaths>, Option<Denoised>) {
     let lighting = Lighting::studio(opt, cam);
     let tracker = Tracker { m, tf, majorants };
     let paths: Vec<PixelPaths> = (0..opt.width * opt.height)
         .into_par_iter()
         .map(|px| {
-            let p = pixel_in(isa, &tracker, opt, cam, &lighting, px);
+            let p = pixel_in(&tracker, opt, cam, &lighting, px);
             if let Some(done) = done {
                 done.fetch_add(opt.spp as u64, Ordering::Relaxed);
             }
@@ -608,15 +607,7 @@ pub fn render_film(
         ..frame_options(vol, opt, Sight::Camera(cam))
     };
     let m = Marcher::interpolated(vol, None, opt.interpolation);
-    let (paths, _) = frame(
-        &m,
-        tf,
-        &Majorants::new(&m, tf),
-        opt,
-        cam,
-        None,
-        Isa::current(),
-    );
+    let (paths, _) = frame(&m, tf, &Majorants::new(&m, tf), opt, cam, None);
     (film_of(opt, &paths), paths.iter().map(|p| p.taken).sum())
 }
 

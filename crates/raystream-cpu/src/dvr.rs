@@ -308,8 +308,8 @@ pub struct Marcher<'a> {
     /// Per brick: whether anything in it is visible (dvr mode) — empty-space skipping.
     visible: std::borrow::Cow<'a, [bool]>,
     interpolation: Interpolation,
-    /// The instruction set [`Self::absorb`] and [`Self::composite_ray`] run in
-    /// ([`Self::in_isa`]).
+    /// The instruction set [`Self::absorb`], [`Self::composite_ray`] and the frames' pixels
+    /// run in ([`Self::in_isa`]).
     isa: Isa,
     /// A segmentation's colours, which the samples take in place of the transfer function's.
     segments: Option<&'a SegmentColours>,
@@ -405,11 +405,11 @@ pub(crate) fn cell_exit(
 ) -> (usize, f32) {
     // Through u32: x86-64's baseline has no unsigned 64-bit conversion, so `as usize` takes
     // two conversions and selects (perf put 8 % of a cinematic frame on this line). An index
-    // past u32's range saturates, and is clamped to the last cell as before. The exits are
-    // computed for every axis and kept where the ray moves along it, without branches; a
-    // face's index (at most the grid's size) goes to f32 through u32 too.
-    // Spelled out rather than `[0, 1, 2].map(…)`, whose closure the compiler may leave out of
-    // line, in the baseline's code, when this is inlined into an x86-64-v3 copy.
+    // past u32's range saturates, and is clamped to the last cell as before; a face's index
+    // (at most the grid's size) goes to f32 through u32 too. The cells are spelled out rather
+    // than `[0, 1, 2].map(…)`, whose closure the compiler may leave out of line (in the
+    // baseline's code) inside an x86-64-v3 copy. Every axis's exit is computed and kept where
+    // the ray moves along it, without branches.
     let cell_of = |a: usize| ((p[a].max(0.0) as u32 as usize) / cell).min(cells[a] - 1);
     let b = [cell_of(0), cell_of(1), cell_of(2)];
     let mut t_exit = f32::INFINITY;
@@ -575,6 +575,11 @@ impl<'a> Marcher<'a> {
     pub fn in_isa(mut self, isa: Isa) -> Marcher<'a> {
         self.isa = isa;
         self
+    }
+
+    /// The instruction set it runs in ([`Self::in_isa`]).
+    pub(crate) fn isa(&self) -> Isa {
+        self.isa
     }
 
     /// The marcher with its samples coloured by `segments` (on the volume's grid), where
@@ -843,10 +848,6 @@ impl<'a> Marcher<'a> {
         (transmit, taken)
     }
 
-    /// Front-to-back emission–absorption over `[t0, t1]` (mm) of `ray` (LPS, unit direction;
-    /// `o_idx`, `d_idx` its index form) on the lattice t0 + (k + jitter)·step, each sample lit
-    /// by `lights` (`shade_sample`); early termination below 1 % transmittance, transparent
-    /// bricks skipped when `skip`.
     /// [`Self::composite`] in the marcher's instruction set ([`Self::in_isa`]), for callers
     /// outside a march (a mesh scene's segments of a ray through its volume).
     #[allow(clippy::too_many_arguments)]
@@ -887,6 +888,10 @@ impl<'a> Marcher<'a> {
         self.composite(tf, ray, idx, span, step, skip, lights)
     }
 
+    /// Front-to-back emission–absorption over `[t0, t1]` (mm) of `ray` (LPS, unit direction;
+    /// `o_idx`, `d_idx` its index form) on the lattice t0 + (k + jitter)·step, each sample lit
+    /// by `lights` (`shade_sample`); early termination below 1 % transmittance, transparent
+    /// bricks skipped when `skip`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     pub fn composite(
@@ -1469,8 +1474,7 @@ fn march_frame(
             panic!("cinematic rendering is seen by a camera, not a curved plane");
         };
         let majorants = cv.majorants(&marcher);
-        let (paths, denoised) =
-            crate::cinematic::frame(&marcher, tf, majorants, opt, cam, done, cv.isa);
+        let (paths, denoised) = crate::cinematic::frame(&marcher, tf, majorants, opt, cam, done);
         let mut rays: Vec<Marched> = paths
             .iter()
             .map(|p| Marched {
@@ -1510,7 +1514,7 @@ fn march_frame(
         .map(|pixel| {
             let (ray, slice) = sight.ray(opt, pixel, slice_at, half_slab);
             let light = light.zip(grid.as_ref());
-            march_in(cv.isa, &marcher, tf, opt, (win, step, slice), light, ray)
+            march_in(&marcher, tf, opt, (win, step, slice), light, ray)
         })
         .collect();
     let stats = DvrStats {
@@ -1664,10 +1668,9 @@ struct Slice {
     reach: f32,
 }
 
-/// [`march`] compiled for the instruction set `isa` where the processor has it, else the
+/// [`march`] compiled for the marcher's instruction set where the processor has it, else the
 /// baseline's: the same pixel, bit for bit (Rust contracts no multiply and add into an FMA).
 fn march_in(
-    isa: Isa,
     m: &Marcher,
     tf: &TransferFunction,
     opt: &DvrOptions,
@@ -1675,10 +1678,10 @@ fn march_in(
     light: Option<(Vec3, &LightGrid)>,
     ray: Ray3,
 ) -> Marched {
-    match isa {
+    match m.isa {
         // SAFETY: the processor has every feature `march_v3` is compiled for.
         #[cfg(target_arch = "x86_64")]
-        Isa::X86_64V3 if isa.available() => unsafe { march_v3(m, tf, opt, frame, light, ray) },
+        Isa::X86_64V3 if m.isa.available() => unsafe { march_v3(m, tf, opt, frame, light, ray) },
         _ => march(m, tf, opt, frame, light, ray),
     }
 }
@@ -3243,12 +3246,6 @@ mod tests {
     /// the copy is tested there.
     #[test]
     fn volume_pixels_are_the_same_in_every_instruction_set() {
-        if cfg!(target_arch = "x86_64") && std::env::var("CI").is_ok_and(|v| v == "true") {
-            assert!(
-                Isa::X86_64V3.available(),
-                "CI=true: this x86-64 processor lacks x86-64-v3, whose volume renderers would go untested"
-            );
-        }
         let vol = abdomen();
         let cam = volume_camera(&vol, 1.25);
         let base = DvrOptions {
@@ -3284,7 +3281,7 @@ mod tests {
                 runs.push((preset, opt));
             }
         }
-        let isas: Vec<Isa> = Isa::ALL.into_iter().filter(|i| i.available()).collect();
+        let isas = crate::tests::isas();
         for (preset, opt) in runs {
             let tf = preset.function();
             let what = format!(
@@ -3299,12 +3296,7 @@ mod tests {
                 .collect();
             let (first, stats) = &frames[0];
             assert!(stats.samples > 0, "{what}");
-            let bits = |im: &Image| -> Vec<[u32; 3]> {
-                im.pixels
-                    .iter()
-                    .map(|p| p.to_array().map(f32::to_bits))
-                    .collect()
-            };
+            let bits = crate::tests::pixel_bits;
             for ((im, s), isa) in frames.iter().zip(&isas).skip(1) {
                 assert!(
                     bits(im) == bits(first),
@@ -3347,13 +3339,8 @@ mod tests {
     /// and at NaN, ±0 and ±∞, along every axis, diagonals and axis-parallel rays.
     #[test]
     fn cell_exits_are_the_plain_walks() {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut rng = crate::tests::XorShift(0x9e37_79b9_7f4a_7c15);
+        let mut next = move || rng.next_u64();
         let special = [
             0.0,
             -0.0,

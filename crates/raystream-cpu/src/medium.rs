@@ -428,18 +428,13 @@ mod tests {
             max_depth: 2,
             traversal: Traversal::Ropes,
         };
-        let bits = |img: &Image| -> Vec<[u32; 3]> {
-            img.pixels
-                .iter()
-                .map(|p| p.to_array().map(f32::to_bits))
-                .collect()
-        };
         let probe = Vec3::new(6.5, 9.25, 12.75);
         let mut frames = Vec::new();
-        for isa in Isa::ALL.into_iter().filter(|i| i.available()) {
+        for isa in crate::tests::isas() {
             let m = Medium::new_in(isa, s.volume.as_ref().unwrap(), &s, &tree, Traversal::Ropes);
             let img = crate::render_prepared(&s, &tree, Some(&m), &opt, |_| {});
-            frames.push((isa, bits(&img), m.light_grids()[0].at(probe).to_bits()));
+            let grid = m.light_grids()[0].at(probe).to_bits();
+            frames.push((isa, crate::tests::pixel_bits(&img), grid));
         }
         let (first, image, grid) = &frames[0];
         let background = Vec3::new(0.1, 0.2, 0.3).to_array().map(f32::to_bits);

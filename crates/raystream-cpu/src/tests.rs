@@ -28,6 +28,27 @@ impl XorShift {
     }
 }
 
+/// The instruction sets this processor marches volumes in ([`raystream_accel::Isa`]). Under
+/// `CI=true` an x86-64 machine must have x86-64-v3, so that its copies are tested there.
+pub(crate) fn isas() -> Vec<raystream_accel::Isa> {
+    use raystream_accel::Isa;
+    if cfg!(target_arch = "x86_64") && std::env::var("CI").is_ok_and(|v| v == "true") {
+        assert!(
+            Isa::X86_64V3.available(),
+            "CI=true: this x86-64 processor lacks x86-64-v3, whose volume renderers would go untested"
+        );
+    }
+    Isa::ALL.into_iter().filter(|i| i.available()).collect()
+}
+
+/// Every pixel's bits, so that frames compare bit for bit (−0 against +0, NaN payloads).
+pub(crate) fn pixel_bits(img: &Image) -> Vec<[u32; 3]> {
+    img.pixels
+        .iter()
+        .map(|p| p.to_array().map(f32::to_bits))
+        .collect()
+}
+
 fn scene(toml_text: &str) -> Scene {
     let desc: SceneDesc = toml::from_str(toml_text).unwrap();
     Scene::from_desc(&desc, Path::new("."), Path::new("test.toml")).unwrap()
