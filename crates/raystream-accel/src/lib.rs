@@ -236,12 +236,26 @@ impl KdTree {
 
     /// [`Self::intersect_many`] over all rays in parallel (rayon, in chunks of 1024 rays).
     pub fn intersect_all(&self, rays: &[Ray], traversal: Traversal, any: bool) -> Vec<Option<Hit>> {
-        const CHUNK: usize = 1024;
-        let mut hits = vec![None; rays.len()];
-        rays.par_chunks(CHUNK)
-            .zip(hits.par_chunks_mut(CHUNK))
-            .for_each(|(r, h)| self.intersect_many(r, traversal, any, h));
+        let mut hits = Vec::new();
+        self.intersect_all_into(rays, traversal, any, &mut hits);
         hits
+    }
+
+    /// [`Self::intersect_all`] into `out` (cleared first, its memory kept): a caller that
+    /// queries again and again allocates the answers once.
+    pub fn intersect_all_into(
+        &self,
+        rays: &[Ray],
+        traversal: Traversal,
+        any: bool,
+        out: &mut Vec<Option<Hit>>,
+    ) {
+        const CHUNK: usize = 1024;
+        out.clear();
+        out.resize(rays.len(), None);
+        rays.par_chunks(CHUNK)
+            .zip(out.par_chunks_mut(CHUNK))
+            .for_each(|(r, h)| self.intersect_many(r, traversal, any, h));
     }
 
     /// As [`Self::intersect`] / [`Self::intersect_any`], adding the work done to `counters`.

@@ -134,8 +134,10 @@ pub fn prepare_volume<'a>(
 /// At most this many samples are traced at once: the frame is rendered in waves of whole
 /// pixels, so that memory stays bounded at any size and sample count (a 1080p frame at 256 spp
 /// would otherwise queue 531 M rays, 25 GB, at once). A pixel's sums run in the same order
-/// whatever the wave, so the image is the same byte for byte.
-pub const WAVE_SAMPLES: u32 = 1 << 20;
+/// whatever the wave, so the image is the same byte for byte. 2¹⁸: with the queues kept
+/// ([`RenderQueues`]) larger waves were no faster (2²⁰: the same frame time at three times
+/// the memory, BENCHMARKS.md, 2026-12-05), and every wave still has work for many cores.
+pub const WAVE_SAMPLES: u32 = 1 << 18;
 
 /// Pixels in one wave of `opt`'s frame.
 pub fn wave_pixels(opt: &RenderOptions) -> u32 {
@@ -155,16 +157,37 @@ pub fn render_prepared(
     opt: &RenderOptions,
     progress: impl FnMut(DepthStats),
 ) -> Image {
-    render_in_waves(scene, tree, medium, opt, wave_pixels(opt), progress)
+    render_prepared_in(
+        scene,
+        tree,
+        medium,
+        opt,
+        &mut RenderQueues::default(),
+        progress,
+    )
 }
 
-/// [`render_prepared`] in waves of `wave_pixels` pixels (the same image for any wave size).
+/// [`render_prepared`] through `queues`: frames rendered one after another (a turntable,
+/// `--repeat`) keep them, and with them the memory their queues have touched.
+pub fn render_prepared_in(
+    scene: &Scene,
+    tree: &KdTree,
+    medium: Option<&Medium>,
+    opt: &RenderOptions,
+    queues: &mut RenderQueues,
+    progress: impl FnMut(DepthStats),
+) -> Image {
+    render_in_waves(scene, tree, medium, opt, wave_pixels(opt), queues, progress)
+}
+
+/// [`render_prepared_in`] in waves of `wave_pixels` pixels (the same image for any wave size).
 pub fn render_in_waves(
     scene: &Scene,
     tree: &KdTree,
     medium: Option<&Medium>,
     opt: &RenderOptions,
     wave_pixels: u32,
+    queues: &mut RenderQueues,
     mut progress: impl FnMut(DepthStats),
 ) -> Image {
     let cam = scene.camera_for(opt.width as f32 / opt.height as f32);
@@ -173,8 +196,8 @@ pub fn render_in_waves(
     let wave_pixels = wave_pixels.max(1);
     for first in (0..pixels).step_by(wave_pixels as usize) {
         let wave = first..(first + wave_pixels).min(pixels);
-        let queue = camera_rays_of(&cam, opt.width, opt.height, opt.spp, wave);
-        trace_wave(scene, tree, medium, opt, queue, &mut film, &mut progress);
+        camera_rays_into(&cam, opt.width, opt.height, opt.spp, wave, &mut queues.rays);
+        trace_wave(scene, tree, medium, opt, queues, &mut film, &mut progress);
     }
     let scale = 1.0 / opt.spp as f32;
     Image {
@@ -184,39 +207,77 @@ pub fn render_in_waves(
     }
 }
 
-/// One wave's camera rays (`queue`) through every depth, into `film`.
+/// The renderer's queues and its stages' scratch, kept across the depths and waves of a frame
+/// (and by [`render_prepared_in`] across frames): each stage clears and refills them, so that
+/// their memory is touched once instead of allocated afresh at every depth. (glibc hands
+/// blocks that large back to the kernel when they are freed, and the kernel faulted in and
+/// zeroed every page of the next ones again: BENCHMARKS.md, 2026-12-05.)
+#[derive(Default)]
+pub struct RenderQueues {
+    /// This depth's rays, then (swapped with `next` after each depth) the next depth's.
+    rays: Vec<RayWorkItem>,
+    next: Vec<RayWorkItem>,
+    hits: Vec<HitWorkItem>,
+    misses: Vec<RayWorkItem>,
+    local: Vec<Contribution>,
+    shadows: Vec<ShadowWorkItem>,
+    lit: Vec<Contribution>,
+    /// The shading stage's runs of hits.
+    runs: Vec<Shaded>,
+    scratch: QueryScratch,
+}
+
+/// What the query stages use on their way: the rays alone (as the kd-tree takes them), their
+/// answers, and what each shadow ray brings.
+#[derive(Default)]
+struct QueryScratch {
+    rays: Vec<Ray>,
+    found: Vec<Option<Hit>>,
+    reaching: Vec<Option<Vec3>>,
+}
+
+/// One wave's camera rays (`q.rays`) through every depth, into `film`.
 fn trace_wave(
     scene: &Scene,
     tree: &KdTree,
     medium: Option<&Medium>,
     opt: &RenderOptions,
-    mut queue: Vec<RayWorkItem>,
+    q: &mut RenderQueues,
     film: &mut [Vec3],
     progress: &mut impl FnMut(DepthStats),
 ) {
     for depth in 0..=opt.max_depth {
-        if queue.is_empty() {
+        if q.rays.is_empty() {
             break;
         }
-        let (mut hits, mut misses) = intersect_closest(tree, &queue, opt.traversal);
+        let (hits, misses) = (&mut q.hits, &mut q.misses);
+        closest_into(tree, &q.rays, opt.traversal, &mut q.scratch, hits, misses);
         let volume_samples = match medium {
-            Some(m) => march_volume(m, &mut hits, &mut misses, film),
+            Some(m) => march_volume(m, &mut q.hits, &mut q.misses, film),
             None => 0,
         };
-        handle_misses(&misses, scene.background, film);
+        handle_misses(&q.misses, scene.background, film);
         let spawn = depth < opt.max_depth;
-        let (local, shadows, next) = shade_hits(scene, &hits, spawn);
-        let lit = intersect_any(tree, &shadows, opt.traversal, medium);
-        accumulate(film, &local);
-        accumulate(film, &lit);
+        let outputs = (&mut q.local, &mut q.shadows, &mut q.next);
+        shade_hits_into(scene, &q.hits, spawn, &mut q.runs, outputs);
+        any_into(
+            tree,
+            &q.shadows,
+            opt.traversal,
+            medium,
+            &mut q.scratch,
+            &mut q.lit,
+        );
+        accumulate(film, &q.local);
+        accumulate(film, &q.lit);
         progress(DepthStats {
             depth,
-            rays: queue.len(),
-            hits: hits.len(),
-            shadow_rays: shadows.len(),
+            rays: q.rays.len(),
+            hits: q.hits.len(),
+            shadow_rays: q.shadows.len(),
             volume_samples,
         });
-        queue = next;
+        std::mem::swap(&mut q.rays, &mut q.next);
     }
 }
 
@@ -251,29 +312,45 @@ fn camera_rays_of(
     spp: u32,
     pixels: std::ops::Range<u32>,
 ) -> Vec<RayWorkItem> {
+    let mut rays = Vec::new();
+    camera_rays_into(cam, width, height, spp, pixels, &mut rays);
+    rays
+}
+
+/// [`camera_rays_of`] into `out` (cleared first; its memory kept), each sample written in
+/// place by its index: pixel-major, `spp` samples a pixel.
+fn camera_rays_into(
+    cam: &Camera,
+    width: u32,
+    height: u32,
+    spp: u32,
+    pixels: std::ops::Range<u32>,
+    out: &mut Vec<RayWorkItem>,
+) {
     let n = strata(spp);
     let weight = Vec3::ONE;
-    pixels
+    let count = pixels.len() * spp as usize;
+    (0..count)
         .into_par_iter()
-        .flat_map_iter(|pixel| {
+        .map(|i| {
+            let pixel = pixels.start + (i / spp as usize) as u32;
+            let s = (i % spp as usize) as u32;
             let (x, y) = ((pixel % width) as f32, (pixel / width) as f32);
-            (0..spp).map(move |s| {
-                let (jx, jy) = if spp == 1 {
-                    (0.5, 0.5)
-                } else {
-                    (
-                        ((s % n) as f32 + jitter(pixel, s, 0)) / n as f32,
-                        ((s / n) as f32 + jitter(pixel, s, 1)) / n as f32,
-                    )
-                };
-                RayWorkItem {
-                    ray: cam.ray(x + jx, y + jy, width, height),
-                    pixel,
-                    weight,
-                }
-            })
+            let (jx, jy) = if spp == 1 {
+                (0.5, 0.5)
+            } else {
+                (
+                    ((s % n) as f32 + jitter(pixel, s, 0)) / n as f32,
+                    ((s / n) as f32 + jitter(pixel, s, 1)) / n as f32,
+                )
+            };
+            RayWorkItem {
+                ray: cam.ray(x + jx, y + jy, width, height),
+                pixel,
+                weight,
+            }
         })
-        .collect()
+        .collect_into_vec(out);
 }
 
 /// Stage 2: closest hits; the queue is split into hits and misses (order kept).
@@ -282,17 +359,37 @@ pub fn intersect_closest(
     queue: &[RayWorkItem],
     traversal: Traversal,
 ) -> (Vec<HitWorkItem>, Vec<RayWorkItem>) {
-    let rays: Vec<Ray> = queue.iter().map(|w| w.ray).collect();
-    let hits = tree.intersect_all(&rays, traversal, false);
-    let mut hit_items = Vec::with_capacity(hits.len());
-    let mut misses = Vec::new();
-    for (item, hit) in queue.iter().zip(hits) {
-        match hit {
-            Some(hit) => hit_items.push(HitWorkItem { item: *item, hit }),
+    let (mut hits, mut misses) = (Vec::new(), Vec::new());
+    let scratch = &mut QueryScratch::default();
+    closest_into(tree, queue, traversal, scratch, &mut hits, &mut misses);
+    (hits, misses)
+}
+
+/// [`intersect_closest`] into `hits` and `misses` (cleared first), through `scratch`.
+fn closest_into(
+    tree: &KdTree,
+    queue: &[RayWorkItem],
+    traversal: Traversal,
+    scratch: &mut QueryScratch,
+    hits: &mut Vec<HitWorkItem>,
+    misses: &mut Vec<RayWorkItem>,
+) {
+    queue
+        .par_iter()
+        .map(|w| w.ray)
+        .collect_into_vec(&mut scratch.rays);
+    tree.intersect_all_into(&scratch.rays, traversal, false, &mut scratch.found);
+    hits.clear();
+    misses.clear();
+    // Room for the most either can take, so that they never grow by copying.
+    hits.reserve(queue.len());
+    misses.reserve(queue.len());
+    for (item, hit) in queue.iter().zip(&scratch.found) {
+        match *hit {
+            Some(hit) => hits.push(HitWorkItem { item: *item, hit }),
             None => misses.push(*item),
         }
     }
-    (hit_items, misses)
 }
 
 /// Stage 2½, in scenes with a volume: each ray's segment up to its hit (or out of the scene)
@@ -447,27 +544,53 @@ pub fn shade_hits(
     hits: &[HitWorkItem],
     spawn: bool,
 ) -> (Vec<Contribution>, Vec<ShadowWorkItem>, Vec<RayWorkItem>) {
-    // One pass: each hit's surface is found once, and its outputs go to the three queues of
-    // its run of hits; the runs are joined in order, so the queues come out in hit order
-    // whatever the split.
-    let runs = hits
-        .par_iter()
-        .with_min_len(256)
-        .fold(Shaded::default, |mut out, h| {
-            shade_hit(scene, h, spawn, &mut out);
-            out
-        })
-        .collect_vec_list();
-    let mut all = Shaded {
-        local: Vec::with_capacity(hits.len()),
-        ..Default::default()
-    };
-    for run in runs.into_iter().flatten() {
-        all.local.extend(run.local);
-        all.shadows.extend(run.shadows);
-        all.next.extend(run.next);
-    }
+    let mut all = Shaded::default();
+    let outputs = (&mut all.local, &mut all.shadows, &mut all.next);
+    shade_hits_into(scene, hits, spawn, &mut Vec::new(), outputs);
     (all.local, all.shadows, all.next)
+}
+
+/// Hits a run of [`shade_hits_into`] shades.
+const SHADE_RUN: usize = 4096;
+
+/// [`shade_hits`] into the three queues `(local, shadows, next)`, each cleared first, through
+/// `runs` (its runs' queues, kept with their memory for the next call).
+fn shade_hits_into(
+    scene: &Scene,
+    hits: &[HitWorkItem],
+    spawn: bool,
+    runs: &mut Vec<Shaded>,
+    (local, shadows, next): (
+        &mut Vec<Contribution>,
+        &mut Vec<ShadowWorkItem>,
+        &mut Vec<RayWorkItem>,
+    ),
+) {
+    // One pass: each hit's surface is found once, and its outputs go to the three queues of
+    // its run of hits; the runs are joined in order, so the queues come out in hit order.
+    runs.resize_with(hits.len().div_ceil(SHADE_RUN), Shaded::default);
+    runs.par_iter_mut()
+        .zip(hits.par_chunks(SHADE_RUN))
+        .for_each(|(run, hits)| {
+            run.local.clear();
+            run.shadows.clear();
+            run.next.clear();
+            for h in hits {
+                shade_hit(scene, h, spawn, run);
+            }
+        });
+    local.clear();
+    shadows.clear();
+    next.clear();
+    let total = |len: fn(&Shaded) -> usize| runs.iter().map(len).sum::<usize>();
+    local.reserve(total(|r| r.local.len()));
+    shadows.reserve(total(|r| r.shadows.len()));
+    next.reserve(total(|r| r.next.len()));
+    for run in runs.iter() {
+        local.extend_from_slice(&run.local);
+        shadows.extend_from_slice(&run.shadows);
+        next.extend_from_slice(&run.next);
+    }
 }
 
 /// What [`shade_hits`] makes of a run of hits: their local terms, shadow rays and next rays.
@@ -545,11 +668,35 @@ pub fn intersect_any(
     traversal: Traversal,
     medium: Option<&Medium>,
 ) -> Vec<Contribution> {
-    let rays: Vec<Ray> = shadows.iter().map(|s| s.ray).collect();
-    let blocked = tree.intersect_all(&rays, traversal, true);
-    let reaching: Vec<Option<Vec3>> = shadows
+    let mut lit = Vec::new();
+    any_into(
+        tree,
+        shadows,
+        traversal,
+        medium,
+        &mut QueryScratch::default(),
+        &mut lit,
+    );
+    lit
+}
+
+/// [`intersect_any`] into `lit` (cleared first), through `scratch`.
+fn any_into(
+    tree: &KdTree,
+    shadows: &[ShadowWorkItem],
+    traversal: Traversal,
+    medium: Option<&Medium>,
+    scratch: &mut QueryScratch,
+    lit: &mut Vec<Contribution>,
+) {
+    shadows
         .par_iter()
-        .zip(blocked)
+        .map(|s| s.ray)
+        .collect_into_vec(&mut scratch.rays);
+    tree.intersect_all_into(&scratch.rays, traversal, true, &mut scratch.found);
+    shadows
+        .par_iter()
+        .zip(&scratch.found)
         .with_min_len(256)
         .map(|(s, blocked)| {
             if blocked.is_some() {
@@ -560,12 +707,15 @@ pub fn intersect_any(
                 None => s.radiance,
             })
         })
-        .collect();
-    shadows
-        .iter()
-        .zip(reaching)
-        .filter_map(|(s, r)| r.map(|r| (s.pixel, r)))
-        .collect()
+        .collect_into_vec(&mut scratch.reaching);
+    lit.clear();
+    lit.reserve(shadows.len());
+    lit.extend(
+        shadows
+            .iter()
+            .zip(&scratch.reaching)
+            .filter_map(|(s, r)| r.map(|r| (s.pixel, r))),
+    );
 }
 
 /// Stage 6: adds contributions to the film in queue order (deterministic).

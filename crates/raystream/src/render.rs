@@ -9,8 +9,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use raystream_accel::Traversal;
 use raystream_accel::{Hit, KdTree};
 use raystream_cpu::{
-    AOV_CHUNK, Aov, AovBuilder, DepthStats, ImageFormat, RenderOptions, aov_rays_of,
-    prepare_volume, render_prepared,
+    AOV_CHUNK, Aov, AovBuilder, DepthStats, ImageFormat, RenderOptions, RenderQueues, aov_rays_of,
+    prepare_volume, render_prepared_in,
 };
 use raystream_gpu::GpuRenderer;
 use raystream_scene::{Camera, PatientView, Projection, Scene, VOLUME_VIEW, View};
@@ -1852,6 +1852,7 @@ fn scene_turntable(
     // The CPU renders from the scene's framing view and lights: a copy of the scene, made
     // once and turned frame by frame (the GPU's renderer takes the camera and lights).
     let mut cpu_scene: Option<Scene> = None;
+    let mut queues = RenderQueues::default();
     let mut frame_ms = Vec::new();
     let mut rays = 0usize;
     for i in 0..n {
@@ -1867,7 +1868,8 @@ fn scene_turntable(
             let s = cpu_scene.get_or_insert_with(|| t.scene.clone());
             s.frame_view = view;
             s.lights = lights;
-            Picture::of_film(render_prepared(s, t.tree, t.medium, opt, count), format)
+            let film = render_prepared_in(s, t.tree, t.medium, opt, &mut queues, count);
+            Picture::of_film(film, format)
         };
         frame_ms.push(ms(t1.elapsed()));
         let dicom = DicomOut {
@@ -2210,6 +2212,8 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     let mut total_rays = 0usize;
     let mut kernel_ms = None;
     let mut split = None;
+    // The CPU's queues, kept from frame to frame.
+    let mut queues = RenderQueues::default();
     for _ in 0..a.repeat {
         total_rays = 0;
         volume_samples = 0;
@@ -2239,7 +2243,14 @@ pub fn run(a: &RenderArgs) -> Result<()> {
                 picture
             }
             None => Picture::of_film(
-                render_prepared(&scene, &tree, medium.as_ref(), &opt, &mut on_depth),
+                render_prepared_in(
+                    &scene,
+                    &tree,
+                    medium.as_ref(),
+                    &opt,
+                    &mut queues,
+                    &mut on_depth,
+                ),
                 format,
             ),
         };
