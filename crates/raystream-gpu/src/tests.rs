@@ -810,6 +810,22 @@ fn long_ground_planes_are_hit_where_their_planes_are() {
     }
 }
 
+/// The GPU context where the adapter has f64 (wgpu's SHADER_F64, which the huge triangles'
+/// planes need); `None`, skipping, on an adapter without it, but never in CI: lavapipe has it.
+fn gpu_with_f64() -> Option<GpuContext> {
+    let ctx = gpu()?;
+    assert!(
+        ctx.f64_planes() || !in_ci(),
+        "{}: no f64 (wgpu's SHADER_F64)",
+        ctx.info.name
+    );
+    if !ctx.f64_planes() {
+        eprintln!("skipping: {} has no f64", ctx.info.name);
+        return None;
+    }
+    Some(ctx)
+}
+
 /// Huge ground quads turned off the axes (raystream-accel's
 /// `huge_turned_ground_quads_are_hit_where_their_planes_are`), whose planes f32 cannot place
 /// where the rays start: with f64 planes every kernel layout hits every ray whose f64 hit lies
@@ -820,16 +836,9 @@ fn long_ground_planes_are_hit_where_their_planes_are() {
 #[test]
 fn huge_turned_ground_quads_are_hit_where_their_planes_are() {
     use raystream_accel::brute::{self, BIG_TURNED_QUADS, Verdict};
-    let Some(mut ctx) = gpu() else { return };
-    assert!(
-        ctx.f64_planes() || !in_ci(),
-        "{}: no f64 (wgpu's SHADER_F64)",
-        ctx.info.name
-    );
-    if !ctx.f64_planes() {
-        eprintln!("skipping: {} has no f64", ctx.info.name);
+    let Some(mut ctx) = gpu_with_f64() else {
         return;
-    }
+    };
     let rays = brute::turned_quad_rays(64, 48);
     // Whether every ray the f64 verdict is sure of agrees with it, `trace`d with `kernels`.
     let agrees = |tracer: &GpuTracer, corners: &[[Vec3; 3]], margin: f64, kernels, any| {
@@ -889,11 +898,7 @@ fn huge_turned_ground_quads_are_hit_where_their_planes_are() {
 #[test]
 fn rays_leaving_large_quads_agree_with_the_cpu() {
     use raystream_accel::brute::{self, BIG_TURNED_QUADS};
-    let Some(ctx) = gpu() else { return };
-    if !ctx.f64_planes() {
-        eprintln!("skipping: {} has no f64", ctx.info.name);
-        return;
-    }
+    let Some(ctx) = gpu_with_f64() else { return };
     let mut seed = 0x2545_f491_4f6c_dd1du64;
     let mut next = move || {
         seed ^= seed << 13;
