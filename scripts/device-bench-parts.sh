@@ -19,6 +19,7 @@ if [ -f "$d/base.gz" ] || [ -x "$d/base" ]; then
   part 0-split PARTS=trace TRACERS="split split-atomic" MESHES=turbine_blade
   part 0-planes PARTS=trace TRACERS="planes-f32" KINDS="primary shadow diffuse"
   part 0-abframes PARTS=abframes
+  part 0-build PARTS=build
 fi
 part 1-trace PARTS=trace TRACERS="gpu checked block costs ifif wg"
 part 2-render PARTS=render

@@ -9,7 +9,7 @@
 # nodes and triangles per ray), the default scene's frame rate, and the volume modes' frame rates.
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
-# PARTS (default "trace render volume"; also "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
+# PARTS (default "trace render volume"; also "build": the kd-tree build at 1 to every thread, BASE against this binary; "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
 # BASE=another on the primary, shadow and diffuse sets; "abframes": the same on whole frames (the default scene, a dvr orbit,
 # a denoised cinematic frame); "floor": where a query's wall time goes (the floor kernel beside the
 # query, with and without timestamps); "pixels": the default scene's camera rays by rows or blocks; "waves": its
@@ -203,6 +203,20 @@ done
 # submission's round trip; then the same with RAYSTREAM_GPU_TIMESTAMPS=off (what the
 # timestamps' writes, resolve and readback add to the wall time); two rounds
 # (summarize-device-bench.py's floor table).
+# The kd-tree build on the host's cores (CPU only; no GPU): the chest CT's bones (578,256
+# triangles) and the turbine blade, BASE and this binary alternated at 1, 2, 4, 8 and every
+# thread, three rounds (`info --json`'s kdtree.build_ms): what splitting large nodes' references
+# in parallel runs (the twenty-fourth session's, 2026-12-05) gains beyond the development machine's two cores.
+has "$parts" build && [ -n "${BASE:-}" ] && {
+  $bin iso "$d/ct/chest_ct_stents_totalseg.nii.gz" -o "$tmp/chest_bones.ply" --quiet
+  for round in 1 2 3; do for th in 1 2 4 8 "$(nproc)"; do for which in base new; do
+    b=$bin; [ $which = base ] && b=$BASE
+    for m in "$tmp/chest_bones.ply" "$d/meshes/turbine_blade.ply"; do
+      RAYON_NUM_THREADS=$th $b info "$m" --json \
+        | tag "{\"part\": \"build\", \"binary\": \"$which\", \"threads\": $th, \"round\": $round, \"mesh\": \"$(basename "$m" .ply)\"}"
+    done
+  done; done; done
+}
 has "$parts" floor && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
   mesh=$d/meshes/$m.ply
   for kind in ${FLOOR_KINDS:-primary shadow}; do

@@ -214,6 +214,25 @@ def ab_table(lines, out):
     out.append("")
 
 
+def build_table(lines, out):
+    """The kd-tree build by threads (device-bench.sh's build part): the median build_ms of each
+    binary, and new over base."""
+    runs = defaultdict(lambda: defaultdict(list))
+    for o in lines:
+        if o.get("part") == "build" and "kdtree" in o:
+            runs[(o["mesh"], o["threads"])][o["binary"]].append(o["kdtree"]["build_ms"])
+    if not runs:
+        return
+    out.append("| mesh | threads | base build, ms (median) | new build, ms (median) | new / base |")
+    out.append("|" + "---|" * 5)
+    for (m, th) in sorted(runs):
+        med = {w: statistics.median(v) if v else None for w, v in runs[(m, th)].items()}
+        b, n = med.get("base"), med.get("new")
+        out.append(f"| {m} | {th} | {fmt(b)} | {fmt(n)} | "
+                   + (f"{n / b:.2f}" if b and n else "–") + " |")
+    out.append("")
+
+
 def floor_table(lines, out):
     """Where a query's wall time goes (trace lines with --stats carry "floor": the same rays
     through a kernel that reads each ray and writes a miss): ms of the query and of the floor by
@@ -393,6 +412,7 @@ def main():
     variants_table(by, out)
     entry_table(lines, out)
     ab_table(lines, out)
+    build_table(lines, out)
     floor_table(lines, out)
     stats_table(by, a.sms, a.threads_per_sm, out)
     checks(lines, out)

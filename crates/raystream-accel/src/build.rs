@@ -11,6 +11,7 @@
 //!   tests unless the caller prices it otherwise (`KdTree::build_with`): dearer steps make
 //!   shallower trees with fuller leaves.
 
+use rayon::prelude::*;
 use raystream_math::{Aabb, Vec3};
 
 use crate::clip::split_clipped_bounds;
@@ -62,10 +63,15 @@ const BINS: usize = 32;
 const EXACT_MAX: usize = 12;
 /// Nodes with more references than this build their two subtrees in parallel.
 const PARALLEL_MIN: usize = 2048;
+/// Nodes with at least this many references also bin and partition them in parallel, in runs
+/// of [`SPLIT_RUN`].
+const PARALLEL_SPLIT_MIN: usize = 1 << 16;
+const SPLIT_RUN: usize = 1 << 13;
 /// The median builder stops at this many references.
 const MEDIAN_LEAF: usize = 8;
 
 /// A node of the tree under construction (builder only).
+#[derive(PartialEq)]
 pub(crate) enum KdBuildNode {
     Leaf(Vec<u32>),
     Inner {
@@ -149,6 +155,8 @@ struct Ctx<'a> {
     max_depth: usize,
     /// A traversal step's cost in triangle tests (SAH).
     traversal_cost: f32,
+    /// Nodes of this many references or more bin and partition them in parallel runs.
+    split_min: usize,
 }
 
 /// The depth limit for `n` triangles: 8 + 1.3·log2(n) (as pbrt), at most [`MAX_DEPTH`].
@@ -165,11 +173,32 @@ pub(crate) fn build(
     builder: Builder,
     traversal_cost: f32,
 ) -> KdBuildNode {
+    build_splitting(
+        corners,
+        prims,
+        bounds,
+        builder,
+        traversal_cost,
+        PARALLEL_SPLIT_MIN,
+    )
+}
+
+/// [`build`], nodes of `split_min` references or more binned and partitioned in parallel runs
+/// (the same tree whatever `split_min`).
+pub(crate) fn build_splitting(
+    corners: &[[Vec3; 3]],
+    prims: &[u32],
+    bounds: Aabb,
+    builder: Builder,
+    traversal_cost: f32,
+    split_min: usize,
+) -> KdBuildNode {
     let ctx = Ctx {
         corners,
         builder,
         max_depth: depth_limit(prims.len()),
         traversal_cost,
+        split_min,
     };
     let refs: Vec<Ref> = prims
         .iter()
@@ -263,7 +292,7 @@ impl Ctx<'_> {
                 .filter_map(|a| exact_sweep(refs, b, a, kt))
                 .min_by(|x, y| x.cost.total_cmp(&y.cost))
         } else {
-            binned(refs, b, kt)
+            binned(refs, b, kt, self.split_min)
         }?;
         (best.cost < leaf_cost).then_some(best)
     }
@@ -272,32 +301,20 @@ impl Ctx<'_> {
     /// side is written over `refs` (each reference gives it at most one, so it never overtakes
     /// the reading), and only the right side is allocated, to the size it can reach: a node
     /// no longer allocates twice its references, which page faults made a tenth of a build.
+    /// Large nodes (`split_min`) split runs of them in parallel.
     fn partition(&self, mut refs: Vec<Ref>, s: Split) -> (Vec<Ref>, Vec<Ref>) {
-        let a = s.axis;
-        let reach_right = refs.iter().filter(|r| !(r.bounds.max[a] < s.pos)).count();
+        if refs.len() >= self.split_min {
+            return self.partition_runs(&refs, s);
+        }
+        let reach_right = refs
+            .iter()
+            .filter(|r| !(r.bounds.max[s.axis] < s.pos))
+            .count();
         let mut right = Vec::with_capacity(reach_right);
         let mut kept = 0;
         for i in 0..refs.len() {
             let r = refs[i];
-            let (lo, hi) = (r.bounds.min[a], r.bounds.max[a]);
-            let (below, above) = if hi < s.pos {
-                (Some(r.bounds), None)
-            } else if lo > s.pos {
-                (None, Some(r.bounds))
-            } else if lo == hi {
-                // In the plane: on both sides, for rays that start on it or run inside it.
-                (Some(r.bounds), Some(r.bounds))
-            } else {
-                // Straddles or touches the plane. Children are closed boxes: a triangle that
-                // touches a child's face is in it, so a ray starting on (or running in) a split
-                // plane finds it from either side.
-                // Clipping tightens the bounds in each child, and drops the triangle from a
-                // child it only seemed to reach through its (outward-rounded) bounds.
-                // The triangle is clipped to its bounds in this node once, then split.
-                let tri = &self.corners[r.prim as usize];
-                let [below, above] = split_clipped_bounds(tri, &r.bounds, a, s.pos);
-                (below, above)
-            };
+            let (below, above) = self.sides(&r, s);
             if let Some(bounds) = below {
                 refs[kept] = Ref {
                     prim: r.prim,
@@ -314,6 +331,64 @@ impl Ctx<'_> {
         }
         refs.truncate(kept);
         (refs, right)
+    }
+
+    /// [`Self::partition`] of a large node: runs of [`SPLIT_RUN`] references split in
+    /// parallel, each into sides of its own, joined in order (the same sides as one pass).
+    /// Above a build's first levels every subtree is a parallel task of its own; this keeps
+    /// the cores busy in those levels too, whose nodes hold all the references.
+    fn partition_runs(&self, refs: &[Ref], s: Split) -> (Vec<Ref>, Vec<Ref>) {
+        let runs: Vec<(Vec<Ref>, Vec<Ref>)> = refs
+            .par_chunks(SPLIT_RUN)
+            .map(|run| {
+                let (mut left, mut right) = (Vec::new(), Vec::new());
+                for r in run {
+                    let (below, above) = self.sides(r, s);
+                    for (side, bounds) in [(&mut left, below), (&mut right, above)] {
+                        if let Some(bounds) = bounds {
+                            side.push(Ref {
+                                prim: r.prim,
+                                bounds,
+                            });
+                        }
+                    }
+                }
+                (left, right)
+            })
+            .collect();
+        let mut left = Vec::with_capacity(runs.iter().map(|r| r.0.len()).sum());
+        let mut right = Vec::with_capacity(runs.iter().map(|r| r.1.len()).sum());
+        for (l, r) in runs {
+            left.extend_from_slice(&l);
+            right.extend_from_slice(&r);
+        }
+        (left, right)
+    }
+
+    /// The bounds of reference `r` below and above the split `s`, `None` on a side it does not
+    /// reach.
+    #[inline]
+    fn sides(&self, r: &Ref, s: Split) -> (Option<Aabb>, Option<Aabb>) {
+        let a = s.axis;
+        let (lo, hi) = (r.bounds.min[a], r.bounds.max[a]);
+        if hi < s.pos {
+            (Some(r.bounds), None)
+        } else if lo > s.pos {
+            (None, Some(r.bounds))
+        } else if lo == hi {
+            // In the plane: on both sides, for rays that start on it or run inside it.
+            (Some(r.bounds), Some(r.bounds))
+        } else {
+            // Straddles or touches the plane. Children are closed boxes: a triangle that
+            // touches a child's face is in it, so a ray starting on (or running in) a split
+            // plane finds it from either side.
+            // Clipping tightens the bounds in each child, and drops the triangle from a
+            // child it only seemed to reach through its (outward-rounded) bounds.
+            // The triangle is clipped to its bounds in this node once, then split.
+            let tri = &self.corners[r.prim as usize];
+            let [below, above] = split_clipped_bounds(tri, &r.bounds, a, s.pos);
+            (below, above)
+        }
     }
 }
 
@@ -340,21 +415,41 @@ fn sah_cost(b: &Aabb, inv_area: f32, axis: usize, pos: f32, nl: usize, nr: usize
 
 /// The cheapest of the `BINS − 1` planes per axis, counting the references in one pass over
 /// them for all three axes.
-fn binned(refs: &[Ref], b: &Aabb, kt: f32) -> Option<Split> {
+fn binned(refs: &[Ref], b: &Aabb, kt: f32, split_min: usize) -> Option<Split> {
     let ext = b.extent();
     let scale: [f32; 3] = std::array::from_fn(|a| BINS as f32 / ext[a]);
     // Through u32, not usize: the baseline x86-64 has no unsigned 64-bit conversion (two
     // conversions and a select each). The same bin: below 0 and NaN give 0 either way, and
     // beyond u32 saturates to the last bin as beyond usize did.
     let bin = |x: f32, a: usize| (((x - b.min[a]) * scale[a]) as u32).min(BINS as u32 - 1) as usize;
-    let mut starts = [[0u32; BINS]; 3];
-    let mut ends = [[0u32; BINS]; 3];
-    for r in refs {
-        for a in 0..3 {
-            starts[a][bin(r.bounds.min[a], a)] += 1;
-            ends[a][bin(r.bounds.max[a], a)] += 1;
+    // Counts per run of references, summed: the same counts in any order.
+    let count = |run: &[Ref]| {
+        let mut starts = [[0u32; BINS]; 3];
+        let mut ends = [[0u32; BINS]; 3];
+        for r in run {
+            for a in 0..3 {
+                starts[a][bin(r.bounds.min[a], a)] += 1;
+                ends[a][bin(r.bounds.max[a], a)] += 1;
+            }
         }
-    }
+        (starts, ends)
+    };
+    let (starts, ends) = if refs.len() >= split_min {
+        refs.par_chunks(SPLIT_RUN).map(count).reduce(
+            || ([[0; BINS]; 3], [[0; BINS]; 3]),
+            |(mut s, mut e), (s2, e2)| {
+                for a in 0..3 {
+                    for i in 0..BINS {
+                        s[a][i] += s2[a][i];
+                        e[a][i] += e2[a][i];
+                    }
+                }
+                (s, e)
+            },
+        )
+    } else {
+        count(refs)
+    };
     let inv_area = 1.0 / b.area();
     let mut best: Option<Split> = None;
     for axis in 0..3 {

@@ -2,8 +2,9 @@ use std::path::Path;
 
 use proptest::prelude::*;
 use raystream_io::{TriMesh, load_mesh};
-use raystream_math::{Ray, Vec3};
+use raystream_math::{Aabb, Ray, Vec3};
 
+use crate::build;
 use crate::layout::KdTri;
 use crate::{Builder, DEFAULT_TRAVERSAL_COST, Hit, Isa, KdTree, Traversal, brute};
 
@@ -206,6 +207,26 @@ fn large_meshes_validate() {
         for ray in rays_through(&mesh, 300, 11) {
             check_ray(&tree, &c, &ray, name);
         }
+    }
+}
+
+/// Large nodes bin and partition their references in parallel runs; the tree is the one a
+/// single pass over them builds, node for node and reference for reference (both builders,
+/// every node of 512 references or more split in runs against none).
+#[test]
+fn parallel_splits_build_the_same_tree() {
+    let mesh = shared_mesh("stanford_bunny.ply");
+    let c = corners(&mesh);
+    let prims: Vec<u32> = (0..c.len() as u32)
+        .filter(|&i| !crate::is_degenerate(&c[i as usize]))
+        .collect();
+    let bounds = c.iter().flatten().fold(Aabb::EMPTY, |b, &p| b.grow(p));
+    for builder in BUILDERS {
+        let tree = |split_min| build::build_splitting(&c, &prims, bounds, builder, 1.0, split_min);
+        assert!(
+            tree(512) == tree(usize::MAX),
+            "{builder:?}: runs in parallel changed the tree"
+        );
     }
 }
 
