@@ -568,7 +568,13 @@ fn shade_hits_into(
 ) {
     // One pass: each hit's surface is found once, and its outputs go to the three queues of
     // its run of hits; the runs are joined in order, so the queues come out in hit order.
-    runs.resize_with(hits.len().div_ceil(SHADE_RUN), Shaded::default);
+    // Runs are only added: a later depth's fewer hits leave the others' memory for the next
+    // wave.
+    let count = hits.len().div_ceil(SHADE_RUN);
+    if runs.len() < count {
+        runs.resize_with(count, Shaded::default);
+    }
+    let runs = &mut runs[..count];
     runs.par_iter_mut()
         .zip(hits.par_chunks(SHADE_RUN))
         .for_each(|(run, hits)| {
