@@ -313,21 +313,12 @@ impl Ctx<'_> {
         let mut right = Vec::with_capacity(reach_right);
         let mut kept = 0;
         for i in 0..refs.len() {
-            let r = refs[i];
-            let (below, above) = self.sides(&r, s);
-            if let Some(bounds) = below {
-                refs[kept] = Ref {
-                    prim: r.prim,
-                    bounds,
-                };
+            let (below, above) = self.sides(&refs[i], s);
+            if let Some(r) = below {
+                refs[kept] = r;
                 kept += 1;
             }
-            if let Some(bounds) = above {
-                right.push(Ref {
-                    prim: r.prim,
-                    bounds,
-                });
-            }
+            right.extend(above);
         }
         refs.truncate(kept);
         (refs, right)
@@ -344,14 +335,8 @@ impl Ctx<'_> {
                 let (mut left, mut right) = (Vec::new(), Vec::new());
                 for r in run {
                     let (below, above) = self.sides(r, s);
-                    for (side, bounds) in [(&mut left, below), (&mut right, above)] {
-                        if let Some(bounds) = bounds {
-                            side.push(Ref {
-                                prim: r.prim,
-                                bounds,
-                            });
-                        }
-                    }
+                    left.extend(below);
+                    right.extend(above);
                 }
                 (left, right)
             })
@@ -365,19 +350,19 @@ impl Ctx<'_> {
         (left, right)
     }
 
-    /// The bounds of reference `r` below and above the split `s`, `None` on a side it does not
-    /// reach.
+    /// Reference `r` below and above the split `s`, with its bounds on each side; `None` on a
+    /// side it does not reach.
     #[inline]
-    fn sides(&self, r: &Ref, s: Split) -> (Option<Aabb>, Option<Aabb>) {
+    fn sides(&self, r: &Ref, s: Split) -> (Option<Ref>, Option<Ref>) {
         let a = s.axis;
         let (lo, hi) = (r.bounds.min[a], r.bounds.max[a]);
         if hi < s.pos {
-            (Some(r.bounds), None)
+            (Some(*r), None)
         } else if lo > s.pos {
-            (None, Some(r.bounds))
+            (None, Some(*r))
         } else if lo == hi {
             // In the plane: on both sides, for rays that start on it or run inside it.
-            (Some(r.bounds), Some(r.bounds))
+            (Some(*r), Some(*r))
         } else {
             // Straddles or touches the plane. Children are closed boxes: a triangle that
             // touches a child's face is in it, so a ray starting on (or running in) a split
@@ -387,7 +372,11 @@ impl Ctx<'_> {
             // The triangle is clipped to its bounds in this node once, then split.
             let tri = &self.corners[r.prim as usize];
             let [below, above] = split_clipped_bounds(tri, &r.bounds, a, s.pos);
-            (below, above)
+            let with = |bounds| Ref {
+                prim: r.prim,
+                bounds,
+            };
+            (below.map(with), above.map(with))
         }
     }
 }

@@ -214,26 +214,46 @@ pub fn render_in_waves(
 /// zeroed every page of the next ones again: BENCHMARKS.md, 2026-12-05.)
 #[derive(Default)]
 pub struct RenderQueues {
-    /// This depth's rays, then (swapped with `next` after each depth) the next depth's.
+    /// This depth's rays, then (swapped with `shaded.next` after each depth) the next
+    /// depth's.
     rays: Vec<RayWorkItem>,
-    next: Vec<RayWorkItem>,
     hits: Vec<HitWorkItem>,
     misses: Vec<RayWorkItem>,
-    local: Vec<Contribution>,
-    shadows: Vec<ShadowWorkItem>,
-    lit: Vec<Contribution>,
-    /// The shading stage's runs of hits.
+    /// The shading stage's queues (its `next` swapped with `rays` after each depth), and its
+    /// runs of hits.
+    shaded: Shaded,
     runs: Vec<Shaded>,
+    lit: Vec<Contribution>,
     scratch: QueryScratch,
 }
 
-/// What the query stages use on their way: the rays alone (as the kd-tree takes them), their
-/// answers, and what each shadow ray brings.
+/// What the query stages use on their way: the query, and what each shadow ray brings.
 #[derive(Default)]
 struct QueryScratch {
+    query: Query,
+    reaching: Vec<Option<Contribution>>,
+}
+
+/// A query's rays (as the kd-tree takes them) and their answers.
+#[derive(Default)]
+struct Query {
     rays: Vec<Ray>,
     found: Vec<Option<Hit>>,
-    reaching: Vec<Option<Vec3>>,
+}
+
+impl Query {
+    /// The closest (or, with `any`, some) hit of each ray of `rays`, in their order.
+    fn run(
+        &mut self,
+        tree: &KdTree,
+        rays: impl IndexedParallelIterator<Item = Ray>,
+        traversal: Traversal,
+        any: bool,
+    ) -> &[Option<Hit>] {
+        rays.collect_into_vec(&mut self.rays);
+        tree.intersect_all_into(&self.rays, traversal, any, &mut self.found);
+        &self.found
+    }
 }
 
 /// One wave's camera rays (`q.rays`) through every depth, into `film`.
@@ -250,34 +270,40 @@ fn trace_wave(
         if q.rays.is_empty() {
             break;
         }
-        let (hits, misses) = (&mut q.hits, &mut q.misses);
-        closest_into(tree, &q.rays, opt.traversal, &mut q.scratch, hits, misses);
+        closest_into(
+            tree,
+            &q.rays,
+            opt.traversal,
+            &mut q.scratch.query,
+            &mut q.hits,
+            &mut q.misses,
+        );
         let volume_samples = match medium {
             Some(m) => march_volume(m, &mut q.hits, &mut q.misses, film),
             None => 0,
         };
         handle_misses(&q.misses, scene.background, film);
         let spawn = depth < opt.max_depth;
-        let outputs = (&mut q.local, &mut q.shadows, &mut q.next);
-        shade_hits_into(scene, &q.hits, spawn, &mut q.runs, outputs);
+        shade_hits_into(scene, &q.hits, spawn, &mut q.runs, &mut q.shaded);
+        let shadows = &q.shaded.shadows;
         any_into(
             tree,
-            &q.shadows,
+            shadows,
             opt.traversal,
             medium,
             &mut q.scratch,
             &mut q.lit,
         );
-        accumulate(film, &q.local);
+        accumulate(film, &q.shaded.local);
         accumulate(film, &q.lit);
         progress(DepthStats {
             depth,
             rays: q.rays.len(),
             hits: q.hits.len(),
-            shadow_rays: q.shadows.len(),
+            shadow_rays: shadows.len(),
             volume_samples,
         });
-        std::mem::swap(&mut q.rays, &mut q.next);
+        std::mem::swap(&mut q.rays, &mut q.shaded.next);
     }
 }
 
@@ -360,31 +386,28 @@ pub fn intersect_closest(
     traversal: Traversal,
 ) -> (Vec<HitWorkItem>, Vec<RayWorkItem>) {
     let (mut hits, mut misses) = (Vec::new(), Vec::new());
-    let scratch = &mut QueryScratch::default();
-    closest_into(tree, queue, traversal, scratch, &mut hits, &mut misses);
+    let query = &mut Query::default();
+    closest_into(tree, queue, traversal, query, &mut hits, &mut misses);
     (hits, misses)
 }
 
-/// [`intersect_closest`] into `hits` and `misses` (cleared first), through `scratch`.
+/// [`intersect_closest`] into `hits` and `misses` (cleared first), through `query`.
 fn closest_into(
     tree: &KdTree,
     queue: &[RayWorkItem],
     traversal: Traversal,
-    scratch: &mut QueryScratch,
+    query: &mut Query,
     hits: &mut Vec<HitWorkItem>,
     misses: &mut Vec<RayWorkItem>,
 ) {
-    queue
-        .par_iter()
-        .map(|w| w.ray)
-        .collect_into_vec(&mut scratch.rays);
-    tree.intersect_all_into(&scratch.rays, traversal, false, &mut scratch.found);
+    let rays = queue.par_iter().map(|w| w.ray);
+    let found = query.run(tree, rays, traversal, false);
     hits.clear();
     misses.clear();
     // Room for the most either can take, so that they never grow by copying.
     hits.reserve(queue.len());
     misses.reserve(queue.len());
-    for (item, hit) in queue.iter().zip(&scratch.found) {
+    for (item, hit) in queue.iter().zip(found) {
         match *hit {
             Some(hit) => hits.push(HitWorkItem { item: *item, hit }),
             None => misses.push(*item),
@@ -545,26 +568,21 @@ pub fn shade_hits(
     spawn: bool,
 ) -> (Vec<Contribution>, Vec<ShadowWorkItem>, Vec<RayWorkItem>) {
     let mut all = Shaded::default();
-    let outputs = (&mut all.local, &mut all.shadows, &mut all.next);
-    shade_hits_into(scene, hits, spawn, &mut Vec::new(), outputs);
+    shade_hits_into(scene, hits, spawn, &mut Vec::new(), &mut all);
     (all.local, all.shadows, all.next)
 }
 
 /// Hits a run of [`shade_hits_into`] shades.
 const SHADE_RUN: usize = 4096;
 
-/// [`shade_hits`] into the three queues `(local, shadows, next)`, each cleared first, through
-/// `runs` (its runs' queues, kept with their memory for the next call).
+/// [`shade_hits`] into `out`'s three queues, cleared first, through `runs` (its runs'
+/// queues, kept with their memory for the next call).
 fn shade_hits_into(
     scene: &Scene,
     hits: &[HitWorkItem],
     spawn: bool,
     runs: &mut Vec<Shaded>,
-    (local, shadows, next): (
-        &mut Vec<Contribution>,
-        &mut Vec<ShadowWorkItem>,
-        &mut Vec<RayWorkItem>,
-    ),
+    out: &mut Shaded,
 ) {
     // One pass: each hit's surface is found once, and its outputs go to the three queues of
     // its run of hits; the runs are joined in order, so the queues come out in hit order.
@@ -578,24 +596,20 @@ fn shade_hits_into(
     runs.par_iter_mut()
         .zip(hits.par_chunks(SHADE_RUN))
         .for_each(|(run, hits)| {
-            run.local.clear();
-            run.shadows.clear();
-            run.next.clear();
+            run.clear();
             for h in hits {
                 shade_hit(scene, h, spawn, run);
             }
         });
-    local.clear();
-    shadows.clear();
-    next.clear();
+    out.clear();
     let total = |len: fn(&Shaded) -> usize| runs.iter().map(len).sum::<usize>();
-    local.reserve(total(|r| r.local.len()));
-    shadows.reserve(total(|r| r.shadows.len()));
-    next.reserve(total(|r| r.next.len()));
+    out.local.reserve(total(|r| r.local.len()));
+    out.shadows.reserve(total(|r| r.shadows.len()));
+    out.next.reserve(total(|r| r.next.len()));
     for run in runs.iter() {
-        local.extend_from_slice(&run.local);
-        shadows.extend_from_slice(&run.shadows);
-        next.extend_from_slice(&run.next);
+        out.local.extend_from_slice(&run.local);
+        out.shadows.extend_from_slice(&run.shadows);
+        out.next.extend_from_slice(&run.next);
     }
 }
 
@@ -605,6 +619,14 @@ struct Shaded {
     local: Vec<Contribution>,
     shadows: Vec<ShadowWorkItem>,
     next: Vec<RayWorkItem>,
+}
+
+impl Shaded {
+    fn clear(&mut self) {
+        self.local.clear();
+        self.shadows.clear();
+        self.next.clear();
+    }
 }
 
 /// One hit: its ambient term, a shadow ray toward each light that can reach it, and (with
@@ -695,33 +717,26 @@ fn any_into(
     scratch: &mut QueryScratch,
     lit: &mut Vec<Contribution>,
 ) {
+    let rays = shadows.par_iter().map(|s| s.ray);
+    let blocked = scratch.query.run(tree, rays, traversal, true);
     shadows
         .par_iter()
-        .map(|s| s.ray)
-        .collect_into_vec(&mut scratch.rays);
-    tree.intersect_all_into(&scratch.rays, traversal, true, &mut scratch.found);
-    shadows
-        .par_iter()
-        .zip(&scratch.found)
+        .zip(blocked)
         .with_min_len(256)
         .map(|(s, blocked)| {
             if blocked.is_some() {
                 return None;
             }
-            Some(match medium {
+            let radiance = match medium {
                 Some(m) => s.radiance * m.transmittance(&s.ray, dvr::start_jitter(s.pixel)),
                 None => s.radiance,
-            })
+            };
+            Some((s.pixel, radiance))
         })
         .collect_into_vec(&mut scratch.reaching);
     lit.clear();
     lit.reserve(shadows.len());
-    lit.extend(
-        shadows
-            .iter()
-            .zip(&scratch.reaching)
-            .filter_map(|(s, r)| r.map(|r| (s.pixel, r))),
-    );
+    lit.extend(scratch.reaching.iter().flatten());
 }
 
 /// Stage 6: adds contributions to the film in queue order (deterministic).

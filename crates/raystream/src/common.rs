@@ -431,8 +431,9 @@ pub fn cpu_model() -> String {
 }
 
 /// `RAYSTREAM_CPU_ISA=x86-64-v3|baseline`: the instruction set of the CPU ray queries and
-/// volume renderers' pixels (the best this processor has by default; `baseline` measures what x86-64-v3 gains, in the same
-/// binary). Any other value, or one the processor cannot run, is refused.
+/// volume renderers' pixels (the best this processor has by default; `baseline` measures what
+/// x86-64-v3 gains, in the same binary). Any other value, or one the processor cannot run, is
+/// refused.
 pub fn choose_cpu_isa() -> Result<()> {
     const NAME: &str = "RAYSTREAM_CPU_ISA";
     match std::env::var(NAME) {
