@@ -20,6 +20,7 @@ if [ -f "$d/base.gz" ] || [ -x "$d/base" ]; then
   part 0-planes PARTS=trace TRACERS="planes-f32" KINDS="primary shadow diffuse"
   part 0-abframes PARTS=abframes
   part 0-build PARTS=build
+  part 0-cpuframes PARTS=cpuframes
 fi
 part 1-trace PARTS=trace TRACERS="gpu checked block costs ifif wg"
 part 2-render PARTS=render

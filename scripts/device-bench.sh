@@ -9,7 +9,8 @@
 # nodes and triangles per ray), the default scene's frame rate, and the volume modes' frame rates.
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
-# PARTS (default "trace render volume"; also "build": the kd-tree build at 1 to every thread, BASE against this binary; "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
+# PARTS (default "trace render volume"; also "build": the kd-tree build at 1 to every thread, BASE against this binary;
+# "cpuframes": the CPU renderer's frames at 4, 8 and every thread, BASE against this binary; "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
 # BASE=another on the primary, shadow and diffuse sets; "abframes": the same on whole frames (the default scene, a dvr orbit,
 # a denoised cinematic frame); "floor": where a query's wall time goes (the floor kernel beside the
 # query, with and without timestamps); "pixels": the default scene's camera rays by rows or blocks; "waves": its
@@ -216,6 +217,17 @@ has "$parts" build && [ -n "${BASE:-}" ] && {
         | tag "{\"part\": \"build\", \"binary\": \"$which\", \"threads\": $th, \"round\": $round, \"mesh\": \"$(basename "$m" .ply)\"}"
     done
   done; done; done
+}
+# "cpuframes": the CPU renderer's frame (the default scene, 4 spp, depth 4, median of 3), this
+# binary against BASE at 4, 8 and every thread, alternated twice: its serial passes are what more
+# threads do not shorten. The PNGs are compared.
+has "$parts" cpuframes && [ -n "${BASE:-}" ] && {
+for round in 1 2; do for th in 4 8 "$(nproc)"; do for which in base new; do
+  b=$bin; [ $which = base ] && b=$BASE
+  RAYON_NUM_THREADS=$th $b render --device cpu --size "$size" --max-depth 4 --repeat 3 -o "$tmp/cpuframes-$which.png" 2>&1 \
+    | sed "s/^/[cpuframes $which, $th threads, round $round] /" | tee -a "$out/render.log"
+done; done; done
+cmp "$tmp/cpuframes-base.png" "$tmp/cpuframes-new.png" && echo "[cpuframes] the same PNG" | tee -a "$out/render.log"
 }
 has "$parts" floor && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
   mesh=$d/meshes/$m.ply

@@ -299,22 +299,42 @@ FRAME = re.compile(r"^\[submit (\w+), (\d+) spp\] raystream: wrote .*? render ([
                    r"\d+ = ([\d.]+) frames/s")
 
 
-def render_table(path, out):
+def pairs_table(path, pattern, header, keys, reverse=False, out=None):
+    """render.log's frame times matched by `pattern` (groups: the row, one of the two `keys`,
+    the time), one row per row value: each key's times and their medians' ratio."""
     runs = defaultdict(list)
     with open(path) as f:
         for line in f:
-            m = FRAME.match(line)
+            m = pattern.match(line)
             if m:
-                runs[(int(m.group(2)), m.group(1))].append(float(m.group(3)))
+                runs[(int(m["row"]), m["key"])].append(float(m["ms"]))
     if not runs:
         return
-    out.append("| spp | `--submit depth` frame ms | `--submit wave` frame ms | wave / depth (medians) |")
+    out.append(header)
     out.append("|---|---|---|---|")
-    for spp in sorted({s for s, _ in runs}, reverse=True):
-        d, w = runs.get((spp, "depth"), []), runs.get((spp, "wave"), [])
-        ratio = f"{statistics.median(w) / statistics.median(d):.2f}" if d and w else "–"
-        out.append(f"| {spp} | {', '.join(f'{x:.1f}' for x in d)} | {', '.join(f'{x:.1f}' for x in w)} | {ratio} |")
+    a, b = keys
+    for row in sorted({r for r, _ in runs}, reverse=reverse):
+        x, y = runs.get((row, a), []), runs.get((row, b), [])
+        ratio = f"{statistics.median(y) / statistics.median(x):.2f}" if x and y else "–"
+        out.append(f"| {row} | {', '.join(f'{v:.1f}' for v in x)} | {', '.join(f'{v:.1f}' for v in y)} | {ratio} |")
     out.append("")
+
+
+FRAME = re.compile(r"^\[submit (?P<key>\w+), (?P<row>\d+) spp\] raystream: wrote .*? render (?P<ms>[\d.]+) ms median of "
+                   r"\d+ = [\d.]+ frames/s")
+# The "cpuframes" part: base against new at each thread count.
+CPU_FRAME = re.compile(r"^\[cpuframes (?P<key>base|new), (?P<row>\d+) threads, round \d+\] raystream: wrote .*? "
+                       r"render (?P<ms>[\d.]+) ms median")
+
+
+def render_table(path, out):
+    pairs_table(path, FRAME, "| spp | `--submit depth` frame ms | `--submit wave` frame ms | wave / depth (medians) |",
+                ("depth", "wave"), reverse=True, out=out)
+
+
+def cpuframes_table(path, out):
+    pairs_table(path, CPU_FRAME, "| CPU threads | base frame ms | new frame ms | new / base (medians) |",
+                ("base", "new"), out=out)
 
 
 # The interpolation ("trilinear", "cubic B-spline") follows the mode since 2026-12-03.
@@ -419,6 +439,7 @@ def main():
     volume_table(lines, out)
     if a.render:
         render_table(a.render, out)
+        cpuframes_table(a.render, out)
         cinematic_table(a.render, out)
         fly_table(a.render, out)
     print("\n".join(out))

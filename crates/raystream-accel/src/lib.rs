@@ -252,7 +252,9 @@ impl KdTree {
     ) {
         const CHUNK: usize = 1024;
         out.clear();
-        out.resize(rays.len(), None);
+        // Filled in parallel: serial, this was a pass over every answer that no core count
+        // shortens.
+        out.par_extend(rays.par_iter().map(|_| None));
         rays.par_chunks(CHUNK)
             .zip(out.par_chunks_mut(CHUNK))
             .for_each(|(r, h)| self.intersect_many(r, traversal, any, h));

@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use rayon::prelude::*;
 use raystream_math::Vec3;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -38,10 +39,12 @@ pub fn srgb_to_linear(s: f32) -> f32 {
 impl Image {
     /// 8-bit sRGB, 3 bytes per pixel.
     pub fn to_srgb8(&self) -> Vec<u8> {
-        self.pixels
-            .iter()
-            .flat_map(|p| [srgb(p.x), srgb(p.y), srgb(p.z)])
-            .collect()
+        let pixels: Vec<[u8; 3]> = self
+            .pixels
+            .par_iter()
+            .map(|p| [srgb(p.x), srgb(p.y), srgb(p.z)])
+            .collect();
+        pixels.into_flattened()
     }
 
     /// How far `other` is from this image in 8-bit sRGB, as `rays.py imgdiff` measures: the

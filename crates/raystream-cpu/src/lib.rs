@@ -28,6 +28,7 @@ mod image_out;
 pub mod lumen;
 pub mod mask;
 pub mod medium;
+mod passes;
 pub mod pipeline;
 pub mod sampling;
 pub use raystream_volume::segments;
@@ -38,6 +39,8 @@ use rayon::prelude::*;
 use raystream_accel::{Hit, KdTree, Traversal};
 use raystream_math::{Ray, Vec3};
 use raystream_scene::{Camera, Scene};
+
+use passes::{add_sorted, add_to_film};
 
 pub use aov::{
     AOV_CHUNK, Aov, AovBuilder, AovImage, AovValues, NO_PRIM, aov_image, aov_rays, aov_rays_of,
@@ -203,7 +206,7 @@ pub fn render_in_waves(
     Image {
         width: opt.width,
         height: opt.height,
-        pixels: film.into_iter().map(|c| c * scale).collect(),
+        pixels: film.into_par_iter().map(|c| c * scale).collect(),
     }
 }
 
@@ -223,7 +226,6 @@ pub struct RenderQueues {
     /// runs of hits.
     shaded: Shaded,
     runs: Vec<Shaded>,
-    lit: Vec<Contribution>,
     scratch: QueryScratch,
 }
 
@@ -231,7 +233,7 @@ pub struct RenderQueues {
 #[derive(Default)]
 struct QueryScratch {
     query: Query,
-    reaching: Vec<Option<Contribution>>,
+    reaching: Vec<Option<Vec3>>,
 }
 
 /// A query's rays (as the kd-tree takes them) and their answers.
@@ -282,20 +284,22 @@ fn trace_wave(
             Some(m) => march_volume(m, &mut q.hits, &mut q.misses, film),
             None => 0,
         };
-        handle_misses(&q.misses, scene.background, film);
+        // The film passes of `handle_misses` and `accumulate` without their order check:
+        // this frame's queues are in pixel order.
+        let (misses, bg) = (&q.misses, scene.background);
+        add_sorted(
+            film,
+            misses.len(),
+            |i| misses[i].pixel,
+            |i| Some(misses[i].weight * bg),
+        );
         let spawn = depth < opt.max_depth;
         shade_hits_into(scene, &q.hits, spawn, &mut q.runs, &mut q.shaded);
         let shadows = &q.shaded.shadows;
-        any_into(
-            tree,
-            shadows,
-            opt.traversal,
-            medium,
-            &mut q.scratch,
-            &mut q.lit,
-        );
-        accumulate(film, &q.shaded.local);
-        accumulate(film, &q.lit);
+        let reaching = shadows_reaching(tree, shadows, opt.traversal, medium, &mut q.scratch);
+        let local = &q.shaded.local;
+        add_sorted(film, local.len(), |i| local[i].0, |i| Some(local[i].1));
+        add_sorted(film, shadows.len(), |i| shadows[i].pixel, |i| reaching[i]);
         progress(DepthStats {
             depth,
             rays: q.rays.len(),
@@ -402,17 +406,14 @@ fn closest_into(
 ) {
     let rays = queue.par_iter().map(|w| w.ray);
     let found = query.run(tree, rays, traversal, false);
-    hits.clear();
-    misses.clear();
-    // Room for the most either can take, so that they never grow by copying.
-    hits.reserve(queue.len());
-    misses.reserve(queue.len());
-    for (item, hit) in queue.iter().zip(found) {
-        match *hit {
-            Some(hit) => hits.push(HitWorkItem { item: *item, hit }),
-            None => misses.push(*item),
-        }
-    }
+    let pick = |i: usize| match found[i] {
+        Some(hit) => Ok(HitWorkItem {
+            item: queue[i],
+            hit,
+        }),
+        None => Err(queue[i]),
+    };
+    passes::split_into(queue.len(), pick, hits, misses);
 }
 
 /// Stage 2½, in scenes with a volume: each ray's segment up to its hit (or out of the scene)
@@ -444,17 +445,19 @@ pub fn march_volume(
             .with_min_len(64)
             .map(|m| through(m, m.ray.t_max)),
     );
-    let samples = emitted.iter().map(|e| e.1).sum();
-    let contributions: Vec<Contribution> = emitted.into_iter().map(|e| e.0).collect();
-    accumulate(film, &contributions);
+    let samples = emitted.par_iter().map(|e| e.1).sum();
+    // The hits' and then the misses' (each queue in pixel order, the two together not).
+    let (from_hits, from_misses) = emitted.split_at(hits.len());
+    for part in [from_hits, from_misses] {
+        add_sorted(film, part.len(), |i| part[i].0.0, |i| Some(part[i].0.1));
+    }
     samples
 }
 
 /// Stage 3: rays that leave the scene add the background.
 pub fn handle_misses(misses: &[RayWorkItem], background: Vec3, film: &mut [Vec3]) {
-    for m in misses {
-        film[m.pixel as usize] += m.weight * background;
-    }
+    let colour = |i: usize| Some(misses[i].weight * background);
+    add_to_film(film, misses.len(), |i| misses[i].pixel, colour);
 }
 
 /// Schlick's approximation of the Fresnel reflectance for a ray from index `n1` into `n2`.
@@ -601,16 +604,10 @@ fn shade_hits_into(
                 shade_hit(scene, h, spawn, run);
             }
         });
-    out.clear();
-    let total = |len: fn(&Shaded) -> usize| runs.iter().map(len).sum::<usize>();
-    out.local.reserve(total(|r| r.local.len()));
-    out.shadows.reserve(total(|r| r.shadows.len()));
-    out.next.reserve(total(|r| r.next.len()));
-    for run in runs.iter() {
-        out.local.extend_from_slice(&run.local);
-        out.shadows.extend_from_slice(&run.shadows);
-        out.next.extend_from_slice(&run.next);
-    }
+    let runs = &*runs;
+    passes::concat_into(&mut out.local, runs.len(), |r| &runs[r].local);
+    passes::concat_into(&mut out.shadows, runs.len(), |r| &runs[r].shadows);
+    passes::concat_into(&mut out.next, runs.len(), |r| &runs[r].next);
 }
 
 /// What [`shade_hits`] makes of a run of hits: their local terms, shadow rays and next rays.
@@ -717,6 +714,25 @@ fn any_into(
     scratch: &mut QueryScratch,
     lit: &mut Vec<Contribution>,
 ) {
+    let reaching = shadows_reaching(tree, shadows, traversal, medium, scratch);
+    lit.clear();
+    lit.extend(
+        shadows
+            .iter()
+            .zip(reaching)
+            .filter_map(|(s, r)| Some((s.pixel, (*r)?))),
+    );
+}
+
+/// What each shadow ray of `shadows` brings its pixel, in their order: its radiance times the
+/// volume's transmittance along it where nothing blocks it, else `None`.
+fn shadows_reaching<'a>(
+    tree: &KdTree,
+    shadows: &[ShadowWorkItem],
+    traversal: Traversal,
+    medium: Option<&Medium>,
+    scratch: &'a mut QueryScratch,
+) -> &'a [Option<Vec3>] {
     let rays = shadows.par_iter().map(|s| s.ray);
     let blocked = scratch.query.run(tree, rays, traversal, true);
     shadows
@@ -727,23 +743,19 @@ fn any_into(
             if blocked.is_some() {
                 return None;
             }
-            let radiance = match medium {
+            Some(match medium {
                 Some(m) => s.radiance * m.transmittance(&s.ray, dvr::start_jitter(s.pixel)),
                 None => s.radiance,
-            };
-            Some((s.pixel, radiance))
+            })
         })
         .collect_into_vec(&mut scratch.reaching);
-    lit.clear();
-    lit.reserve(shadows.len());
-    lit.extend(scratch.reaching.iter().flatten());
+    &scratch.reaching
 }
 
 /// Stage 6: adds contributions to the film in queue order (deterministic).
 pub fn accumulate(film: &mut [Vec3], contributions: &[Contribution]) {
-    for &(pixel, c) in contributions {
-        film[pixel as usize] += c;
-    }
+    let c = contributions;
+    add_to_film(film, c.len(), |i| c[i].0, |i| Some(c[i].1));
 }
 
 #[cfg(test)]
