@@ -201,7 +201,7 @@ pub(crate) fn build_splitting(
         split_min,
     };
     let refs: Vec<Ref> = prims
-        .iter()
+        .par_iter()
         .map(|&prim| Ref {
             prim,
             bounds: Aabb::from_points(&corners[prim as usize]),

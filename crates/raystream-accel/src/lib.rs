@@ -117,12 +117,19 @@ impl KdTree {
             "SAH traversal cost {traversal_cost} outside {TRAVERSAL_COST_RANGE:?}"
         );
         let start = Instant::now();
+        // In parallel, as every pass of the build over all the triangles (a serial one is a
+        // part of the build that no core count shortens). Boxes grow by min and max, which
+        // give the same box in any order but for the sign of a zero (min(−0, +0) may be
+        // either): zeros are made +0, so that the tree's bytes never depend on the order.
         let prims: Vec<u32> = (0..corners.len() as u32)
+            .into_par_iter()
             .filter(|&i| !is_degenerate(&corners[i as usize]))
             .collect();
-        let bounds = prims.iter().fold(Aabb::EMPTY, |b, &i| {
-            corners[i as usize].iter().fold(b, |b, &p| b.grow(p))
-        });
+        let bounds = prims
+            .par_iter()
+            .map(|&i| Aabb::from_points(&corners[i as usize]))
+            .reduce(|| Aabb::EMPTY, Aabb::union);
+        let bounds = Aabb::new(bounds.min + 0.0, bounds.max + 0.0);
         let root_node = build::build(corners, &prims, bounds, builder, traversal_cost);
         let (flat, root) = flat::flatten(&root_node, bounds, corners);
         root_node.free();

@@ -231,6 +231,31 @@ fn parallel_splits_build_the_same_tree() {
 }
 
 #[test]
+fn a_scene_box_on_a_negative_zero_is_the_same_in_any_order() {
+    // Corners at −0 and +0 on the box's faces: the parallel reduction may meet them in any
+    // order, and min(−0, +0) may be either; the box (and so the tree's bytes) must not.
+    let (n, p) = (-0.0f32, 0.0f32);
+    let tri = |a: f32, b: f32| {
+        [
+            Vec3::new(a, b, 1.0),
+            Vec3::new(1.0, a, b),
+            Vec3::new(b, 1.0, a),
+        ]
+    };
+    let forward: Vec<[Vec3; 3]> = (0..5000)
+        .map(|i| if i % 2 == 0 { tri(n, p) } else { tri(p, n) })
+        .collect();
+    let backward: Vec<[Vec3; 3]> = forward.iter().rev().copied().collect();
+    let bits = |t: &KdTree| [t.bounds.min, t.bounds.max].map(|v| v.to_array().map(f32::to_bits));
+    let zero = bits(&KdTree::build_from_corners(&forward, Builder::Sah));
+    assert_eq!(zero[0], [0; 3], "the box's low corner is +0");
+    assert_eq!(
+        zero,
+        bits(&KdTree::build_from_corners(&backward, Builder::Sah))
+    );
+}
+
+#[test]
 fn sah_beats_median() {
     let mesh = shared_mesh("stanford_bunny.ply");
     let sah = KdTree::build(&mesh, Builder::Sah);
