@@ -258,10 +258,13 @@ impl KdTree {
         out: &mut Vec<Option<Hit>>,
     ) {
         const CHUNK: usize = 1024;
-        out.clear();
-        // Filled in parallel: serial, this was a pass over every answer that no core count
-        // shortens.
-        out.par_extend(rays.par_iter().map(|_| None));
+        // Every answer is written by the query, so `out` only needs its length: entries it
+        // already has are not set beforehand (a pass over all the answers, 20 bytes a ray,
+        // which a caller that keeps `out` across queries would pay each time), and those it
+        // gains are set in parallel.
+        out.truncate(rays.len());
+        let missing = rays.len() - out.len();
+        out.par_extend((0..missing).into_par_iter().map(|_| None));
         rays.par_chunks(CHUNK)
             .zip(out.par_chunks_mut(CHUNK))
             .for_each(|(r, h)| self.intersect_many(r, traversal, any, h));

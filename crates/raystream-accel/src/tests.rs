@@ -129,6 +129,14 @@ fn hit_bits(h: &Option<Hit>) -> Option<[u32; 4]> {
     h.map(|h| [h.t.to_bits(), h.prim, h.u.to_bits(), h.v.to_bits()])
 }
 
+/// An answer no query gives, set where a query's answers go before it runs.
+const STALE: Hit = Hit {
+    t: -1.0,
+    prim: u32::MAX,
+    u: 2.0,
+    v: 2.0,
+};
+
 /// The batched queries (interleaved rope walks), in every instruction set the processor has,
 /// answer every ray exactly as one-ray queries do, byte for byte, closest and any hit, with
 /// both traversals.
@@ -136,8 +144,19 @@ fn check_batched(tree: &KdTree, rays: &[Ray], what: &str) {
     for trav in TRAVERSALS {
         for any in [false, true] {
             let all = tree.intersect_all(rays, trav, any);
+            // Answers kept from other queries, longer and shorter: every ray's is written
+            // over them (none is set before a query).
+            for len in [rays.len() + 3, rays.len() / 2] {
+                let mut kept = vec![Some(STALE); len];
+                tree.intersect_all_into(rays, trav, any, &mut kept);
+                let is = format!("{what} {trav:?} any={any}, over {len} stale answers");
+                assert_eq!(kept.len(), rays.len(), "{is}");
+                for (k, a) in kept.iter().zip(&all) {
+                    assert_eq!(hit_bits(k), hit_bits(a), "{is}");
+                }
+            }
             for isa in isas() {
-                let mut got = vec![None; rays.len()];
+                let mut got = vec![Some(STALE); rays.len()];
                 tree.intersect_many_in(isa, rays, trav, any, &mut got);
                 for ((ray, g), a) in rays.iter().zip(&got).zip(&all) {
                     let want = if any {
