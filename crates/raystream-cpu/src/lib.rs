@@ -446,10 +446,11 @@ pub fn march_volume(
             .map(|m| through(m, m.ray.t_max)),
     );
     let samples = emitted.par_iter().map(|e| e.1).sum();
-    // The hits' and then the misses' (each queue in pixel order, the two together not).
+    // The hits' and then the misses' (the renderer's are each in pixel order, the two
+    // together not; a caller's may be in any: checked).
     let (from_hits, from_misses) = emitted.split_at(hits.len());
     for part in [from_hits, from_misses] {
-        add_sorted(film, part.len(), |i| part[i].0.0, |i| Some(part[i].0.1));
+        add_to_film(film, part.len(), |i| part[i].0.0, |i| Some(part[i].0.1));
     }
     samples
 }
