@@ -10,7 +10,7 @@
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
 # PARTS (default "trace render volume"; also "build": the kd-tree build at 1 to every thread, BASE against this binary;
-# "cpuframes": the CPU renderer's frames at 4, 8 and every thread, BASE against this binary; "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
+# "cpuframes": the CPU renderer's frames at 4, 8 and every thread, BASE against this binary, then in waves of CPU_WAVES samples; "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
 # BASE=another on the primary, shadow and diffuse sets; "abframes": the same on whole frames (the default scene, a dvr orbit,
 # a denoised cinematic frame); "floor": where a query's wall time goes (the floor kernel beside the
 # query, with and without timestamps); "pixels": the default scene's camera rays by rows or blocks; "waves": its
@@ -228,6 +228,17 @@ for round in 1 2; do for th in 4 8 "$(nproc)"; do for which in base new; do
     | sed "s/^/[cpuframes $which, $th threads, round $round] /" | tee -a "$out/render.log"
 done; done; done
 cmp "$tmp/cpuframes-base.png" "$tmp/cpuframes-new.png" && echo "[cpuframes] the same PNG" | tee -a "$out/render.log"
+# Then this binary's frame on every thread in waves of CPU_WAVES samples (RAYSTREAM_CPU_WAVE;
+# 2^18 the default), alternated twice: the wave that suits 16 cores. The PNGs must be equal.
+cpu_waves=${CPU_WAVES:-65536 262144 1048576 4194304}
+for round in 1 2; do for w in $cpu_waves; do
+  RAYSTREAM_CPU_WAVE=$w $bin render --device cpu --size "$size" --max-depth 4 --repeat 3 -o "$tmp/cpuwave-$w.png" 2>&1 \
+    | sed "s/^/[cpuwave $w, round $round] /" | tee -a "$out/render.log"
+done; done
+for w in $cpu_waves; do
+  cmp -s "$tmp/cpuwave-${cpu_waves%% *}.png" "$tmp/cpuwave-$w.png" && echo "[cpuwave $w] the same PNG" \
+    || echo "[cpuwave $w] THE PNG DIFFERS"
+done | tee -a "$out/render.log"
 }
 has "$parts" floor && for m in stanford_bunny stanford_lucy_100k turbine_blade; do
   mesh=$d/meshes/$m.ply

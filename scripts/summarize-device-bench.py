@@ -327,6 +327,28 @@ CPU_FRAME = re.compile(r"^\[cpuframes (?P<key>base|new), (?P<row>\d+) threads, r
                        r"render (?P<ms>[\d.]+) ms median")
 
 
+# The "cpuframes" part's waves: the CPU frame on every thread in waves of N samples.
+CPU_WAVE = re.compile(r"^\[cpuwave (?P<row>\d+), round \d+\] raystream: wrote .*? render (?P<ms>[\d.]+) ms median")
+
+
+def cpuwave_table(path, out):
+    runs = defaultdict(list)
+    with open(path) as f:
+        for line in f:
+            m = CPU_WAVE.match(line)
+            if m:
+                runs[int(m["row"])].append(float(m["ms"]))
+    if not runs:
+        return
+    default = runs.get(1 << 18)
+    out.append("| CPU wave, samples | frame ms | against 2^18 (medians) |")
+    out.append("|---|---|---|")
+    for w in sorted(runs):
+        ratio = f"{statistics.median(runs[w]) / statistics.median(default):.2f}" if default else "–"
+        out.append(f"| {w} | {', '.join(f'{v:.1f}' for v in runs[w])} | {ratio} |")
+    out.append("")
+
+
 def render_table(path, out):
     pairs_table(path, FRAME, "| spp | `--submit depth` frame ms | `--submit wave` frame ms | wave / depth (medians) |",
                 ("depth", "wave"), reverse=True, out=out)
@@ -440,6 +462,7 @@ def main():
     if a.render:
         render_table(a.render, out)
         cpuframes_table(a.render, out)
+        cpuwave_table(a.render, out)
         cinematic_table(a.render, out)
         fly_table(a.render, out)
     print("\n".join(out))

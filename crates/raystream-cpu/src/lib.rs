@@ -144,12 +144,12 @@ pub const WAVE_SAMPLES: u32 = 1 << 18;
 
 /// Pixels in one wave of `opt`'s frame.
 pub fn wave_pixels(opt: &RenderOptions) -> u32 {
-    (WAVE_SAMPLES / opt.spp.max(1)).max(1)
+    RenderQueues::default().wave_pixels(opt)
 }
 
 /// Waves the CPU renders `opt`'s frame in (each reports every depth it runs to the progress).
 pub fn waves(opt: &RenderOptions) -> u32 {
-    (opt.width * opt.height).div_ceil(wave_pixels(opt))
+    RenderQueues::default().waves(opt)
 }
 
 /// [`render`] with the scene's volume already prepared (`medium`, from [`prepare_volume`]).
@@ -180,7 +180,8 @@ pub fn render_prepared_in(
     queues: &mut RenderQueues,
     progress: impl FnMut(DepthStats),
 ) -> Image {
-    render_in_waves(scene, tree, medium, opt, wave_pixels(opt), queues, progress)
+    let wave = queues.wave_pixels(opt);
+    render_in_waves(scene, tree, medium, opt, wave, queues, progress)
 }
 
 /// [`render_prepared_in`] in waves of `wave_pixels` pixels (the same image for any wave size).
@@ -217,6 +218,8 @@ pub fn render_in_waves(
 /// zeroed every page of the next ones again: BENCHMARKS.md, 2026-12-05.)
 #[derive(Default)]
 pub struct RenderQueues {
+    /// Samples a wave holds at most; 0: [`WAVE_SAMPLES`].
+    wave_samples: u32,
     /// This depth's rays, then (swapped with `shaded.next` after each depth) the next
     /// depth's.
     rays: Vec<RayWorkItem>,
@@ -227,6 +230,32 @@ pub struct RenderQueues {
     shaded: Shaded,
     runs: Vec<Shaded>,
     scratch: QueryScratch,
+}
+
+impl RenderQueues {
+    /// Queues for frames in waves of at most `samples` samples (whole pixels, one at least)
+    /// instead of [`WAVE_SAMPLES`]: an experiment (the CLI's `RAYSTREAM_CPU_WAVE`), for the
+    /// wave that suits a machine's cores. The image is the same for any wave.
+    pub fn with_wave(samples: u32) -> Self {
+        Self {
+            wave_samples: samples,
+            ..Self::default()
+        }
+    }
+
+    /// Pixels in one wave of `opt`'s frame through these queues.
+    pub fn wave_pixels(&self, opt: &RenderOptions) -> u32 {
+        let samples = match self.wave_samples {
+            0 => WAVE_SAMPLES,
+            n => n,
+        };
+        (samples / opt.spp.max(1)).max(1)
+    }
+
+    /// Waves `opt`'s frame takes through these queues.
+    pub fn waves(&self, opt: &RenderOptions) -> u32 {
+        (opt.width * opt.height).div_ceil(self.wave_pixels(opt))
+    }
 }
 
 /// What the query stages use on their way: the query, and what each shadow ray brings.

@@ -6,7 +6,7 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use raystream_accel::{Isa, KdTree};
-use raystream_cpu::{ExrSamples, Image, ImageFormat};
+use raystream_cpu::{ExrSamples, Image, ImageFormat, RenderQueues};
 use raystream_gpu::{GpuContext, GpuError, GpuTracer};
 use raystream_io::TriMesh;
 
@@ -442,6 +442,23 @@ pub fn choose_cpu_isa() -> Result<()> {
             .parse::<Isa>()
             .and_then(Isa::choose)
             .map_err(|e| anyhow::anyhow!("{NAME}={v:?}: {e}")),
+    }
+}
+
+/// The CPU renderer's queues: in waves of `RAYSTREAM_CPU_WAVE=N` samples where it is set (an
+/// experiment, for the wave that suits a machine's cores; the same image for any wave), else
+/// of [`raystream_cpu::WAVE_SAMPLES`]. Any other value than a positive number is refused.
+pub fn cpu_queues() -> Result<RenderQueues> {
+    const NAME: &str = "RAYSTREAM_CPU_WAVE";
+    match std::env::var(NAME) {
+        Err(_) => Ok(RenderQueues::default()),
+        Ok(v) => match v.trim().parse::<u32>() {
+            Ok(n) if n > 0 => Ok(RenderQueues::with_wave(n)),
+            _ => Err(anyhow::anyhow!(
+                "{NAME}={v:?} is not a number of samples (1 to {})",
+                u32::MAX
+            )),
+        },
     }
 }
 

@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use raystream_accel::Traversal;
 use raystream_accel::{Hit, KdTree};
 use raystream_cpu::{
-    AOV_CHUNK, Aov, AovBuilder, DepthStats, ImageFormat, RenderOptions, RenderQueues, aov_rays_of,
+    AOV_CHUNK, Aov, AovBuilder, DepthStats, ImageFormat, RenderOptions, aov_rays_of,
     prepare_volume, render_prepared_in,
 };
 use raystream_gpu::GpuRenderer;
@@ -1852,7 +1852,7 @@ fn scene_turntable(
     // The CPU renders from the scene's framing view and lights: a copy of the scene, made
     // once and turned frame by frame (the GPU's renderer takes the camera and lights).
     let mut cpu_scene: Option<Scene> = None;
-    let mut queues = RenderQueues::default();
+    let mut queues = crate::common::cpu_queues()?;
     let mut frame_ms = Vec::new();
     let mut rays = 0usize;
     for i in 0..n {
@@ -2194,10 +2194,12 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         let marks = (patient, overlay.as_deref(), units(&bones));
         return scene_turntable(a, n, turn, &opt, marks, format);
     }
-    // The progress bar counts depths (of every wave, on the GPU) over all repeats.
+    // The CPU's queues, kept from frame to frame.
+    let mut queues = crate::common::cpu_queues()?;
+    // The progress bar counts depths (of every wave) over all repeats.
     let waves = match &renderer {
         Some(r) => r.waves(&opt),
-        None => raystream_cpu::waves(&opt) as u64,
+        None => queues.waves(&opt) as u64,
     };
     let bar = if a.quiet {
         ProgressBar::hidden()
@@ -2212,8 +2214,6 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     let mut total_rays = 0usize;
     let mut kernel_ms = None;
     let mut split = None;
-    // The CPU's queues, kept from frame to frame.
-    let mut queues = RenderQueues::default();
     for _ in 0..a.repeat {
         total_rays = 0;
         volume_samples = 0;
@@ -2311,6 +2311,13 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             total_rays as f64 / median / 1e3,
             total_rays
         );
+        if renderer.is_none() {
+            eprintln!(
+                "raystream: the CPU's frame in {waves} wave{} of {} pixels at most",
+                if waves == 1 { "" } else { "s" },
+                queues.wave_pixels(&opt)
+            );
+        }
         if let Some(k) = kernel_ms {
             let parts: Vec<String> = k
                 .iter()

@@ -571,47 +571,81 @@ fn gpu_render_appends_give_the_same_image() {
     );
 }
 
+/// Renders the default scene at 67 × 67 pixels, 4 samples, on `device` with `var` unset and
+/// set to 1000 samples (67 × 67 pixels take 18 waves of 250 pixels, the last a part): both
+/// succeed, say so (`one`, `many` in their messages) and give the same PNG; each of `bad`'s
+/// values fails with exit status 2 and its message.
+fn wave_size_leaves_the_image(
+    var: &str,
+    device: &str,
+    [one_says, many_says]: [&str; 2],
+    bad: &[(&str, &str)],
+) {
+    let render = |wave: Option<&str>| {
+        let out = tmp(&format!("{device}-wave-{}.png", wave.unwrap_or("default")));
+        let args = ["render", "--size", "67x67", "--device", device];
+        run_with_env(var, wave, &args, &out)
+    };
+    let (one, whole) = render(None);
+    let (many, waves) = render(Some("1000"));
+    for (o, says) in [(&one, one_says), (&many, many_says)] {
+        assert!(o.status.success(), "{}", stderr(o));
+        assert!(stderr(o).contains(says), "{says}: {}", stderr(o));
+    }
+    assert!(!whole.is_empty() && whole == waves);
+    for (value, why) in bad {
+        let (o, _) = render(Some(value));
+        assert_eq!(o.status.code(), Some(2), "{value}");
+        assert!(stderr(&o).contains(why), "{value}: {}", stderr(&o));
+    }
+}
+
 /// `RAYSTREAM_GPU_WAVE=N`: the stream renderer in waves of at most N samples gives the same
-/// PNG as in one wave (here 1000 samples: 67 × 67 pixels at 4 samples take 18 waves, the last
-/// a part, one submission each); 0, more than the most, or
-/// not a number is refused.
+/// PNG as in one wave (18 waves of 1000 samples, one submission each); 0, more than the most,
+/// or not a number is refused.
 #[test]
 fn gpu_render_wave_size_leaves_the_image() {
     if !gpu_available() {
         return;
     }
-    let render = |wave: Option<&str>| {
-        let out = tmp(&format!("wave-{}.png", wave.unwrap_or("default")));
-        let args = ["render", "--size", "67x67", "--device", "gpu"];
-        run_with_env("RAYSTREAM_GPU_WAVE", wave, &args, &out)
-    };
-    let (one, whole) = render(None);
-    let (many, waves) = render(Some("1000"));
-    assert!(one.status.success(), "{}", stderr(&one));
-    assert!(many.status.success(), "{}", stderr(&many));
-    assert!(
-        stderr(&one).contains("on 1 submission, one per wave"),
-        "{}",
-        stderr(&one)
+    wave_size_leaves_the_image(
+        "RAYSTREAM_GPU_WAVE",
+        "gpu",
+        [
+            "on 1 submission, one per wave",
+            "on 18 submissions, one per wave",
+        ],
+        &[
+            ("0", "a wave of 0 samples: from 1 to 8388608"),
+            ("9999999", "a wave of 9999999 samples: from 1 to 8388608"),
+            (
+                "many",
+                "RAYSTREAM_GPU_WAVE=\"many\" is not a number of samples",
+            ),
+        ],
     );
-    assert!(
-        stderr(&many).contains("on 18 submissions, one per wave"),
-        "{}",
-        stderr(&many)
+}
+
+/// `RAYSTREAM_CPU_WAVE=N`: the CPU renderer in waves of at most N samples gives the same PNG
+/// as in its default waves (18 of 1000 samples against one); 0 or not a number is refused.
+#[test]
+fn cpu_render_wave_size_leaves_the_image() {
+    wave_size_leaves_the_image(
+        "RAYSTREAM_CPU_WAVE",
+        "cpu",
+        [
+            "the CPU's frame in 1 wave of 65536 pixels at most",
+            "the CPU's frame in 18 waves of 250 pixels at most",
+        ],
+        &[
+            ("0", "RAYSTREAM_CPU_WAVE=\"0\" is not a number of samples"),
+            (
+                "many",
+                "RAYSTREAM_CPU_WAVE=\"many\" is not a number of samples",
+            ),
+            ("-5", "RAYSTREAM_CPU_WAVE=\"-5\" is not a number of samples"),
+        ],
     );
-    assert!(!whole.is_empty() && whole == waves);
-    for (bad, why) in [
-        ("0", "a wave of 0 samples: from 1 to 8388608"),
-        ("9999999", "a wave of 9999999 samples: from 1 to 8388608"),
-        (
-            "many",
-            "RAYSTREAM_GPU_WAVE=\"many\" is not a number of samples",
-        ),
-    ] {
-        let (o, _) = render(Some(bad));
-        assert_eq!(o.status.code(), Some(2), "{bad}");
-        assert!(stderr(&o).contains(why), "{bad}: {}", stderr(&o));
-    }
 }
 
 /// Objects a million units from the origin (a CT whose header puts it a kilometre off, say):
