@@ -325,9 +325,9 @@ impl Ctx<'_> {
     }
 
     /// [`Self::partition`] of a large node: runs of [`SPLIT_RUN`] references split in
-    /// parallel, each into sides of its own, joined in order (the same sides as one pass).
-    /// Above a build's first levels every subtree is a parallel task of its own; this keeps
-    /// the cores busy in those levels too, whose nodes hold all the references.
+    /// parallel, each into sides of its own, joined in order in parallel (the same sides as
+    /// one pass). Above a build's first levels every subtree is a parallel task of its own;
+    /// this keeps the cores busy in those levels too, whose nodes hold all the references.
     fn partition_runs(&self, refs: &[Ref], s: Split) -> (Vec<Ref>, Vec<Ref>) {
         let runs: Vec<(Vec<Ref>, Vec<Ref>)> = refs
             .par_chunks(SPLIT_RUN)
@@ -341,12 +341,9 @@ impl Ctx<'_> {
                 (left, right)
             })
             .collect();
-        let mut left = Vec::with_capacity(runs.iter().map(|r| r.0.len()).sum());
-        let mut right = Vec::with_capacity(runs.iter().map(|r| r.1.len()).sum());
-        for (l, r) in runs {
-            left.extend_from_slice(&l);
-            right.extend_from_slice(&r);
-        }
+        let (mut left, mut right) = (Vec::new(), Vec::new());
+        crate::par::concat_into(&mut left, runs.len(), |r| &runs[r].0);
+        crate::par::concat_into(&mut right, runs.len(), |r| &runs[r].1);
         (left, right)
     }
 

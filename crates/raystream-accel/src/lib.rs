@@ -16,6 +16,7 @@ mod flat;
 pub mod intersect;
 pub mod isa;
 pub mod layout;
+pub mod par;
 mod traverse;
 mod validate;
 
@@ -248,8 +249,8 @@ impl KdTree {
         hits
     }
 
-    /// [`Self::intersect_all`] into `out` (cleared first, its memory kept): a caller that
-    /// queries again and again allocates the answers once.
+    /// [`Self::intersect_all`] into `out` (made one answer a ray, its memory kept): a caller
+    /// that queries again and again allocates the answers once.
     pub fn intersect_all_into(
         &self,
         rays: &[Ray],

@@ -40,7 +40,7 @@ use raystream_accel::{Hit, KdTree, Traversal};
 use raystream_math::{Ray, Vec3};
 use raystream_scene::{Camera, Scene};
 
-use passes::{add_sorted, add_to_film};
+use passes::add_to_film;
 
 pub use aov::{
     AOV_CHUNK, Aov, AovBuilder, AovImage, AovValues, NO_PRIM, aov_image, aov_rays, aov_rays_of,
@@ -144,12 +144,22 @@ pub const WAVE_SAMPLES: u32 = 1 << 18;
 
 /// Pixels in one wave of `opt`'s frame.
 pub fn wave_pixels(opt: &RenderOptions) -> u32 {
-    RenderQueues::default().wave_pixels(opt)
+    pixels_a_wave(WAVE_SAMPLES, opt)
 }
 
 /// Waves the CPU renders `opt`'s frame in (each reports every depth it runs to the progress).
 pub fn waves(opt: &RenderOptions) -> u32 {
-    RenderQueues::default().waves(opt)
+    waves_of(wave_pixels(opt), opt)
+}
+
+/// Pixels in a wave of at most `samples` samples of `opt`'s frame (one at least).
+fn pixels_a_wave(samples: u32, opt: &RenderOptions) -> u32 {
+    (samples / opt.spp.max(1)).max(1)
+}
+
+/// Waves of `wave_pixels` pixels that `opt`'s frame takes.
+fn waves_of(wave_pixels: u32, opt: &RenderOptions) -> u32 {
+    (opt.width * opt.height).div_ceil(wave_pixels)
 }
 
 /// [`render`] with the scene's volume already prepared (`medium`, from [`prepare_volume`]).
@@ -245,16 +255,15 @@ impl RenderQueues {
 
     /// Pixels in one wave of `opt`'s frame through these queues.
     pub fn wave_pixels(&self, opt: &RenderOptions) -> u32 {
-        let samples = match self.wave_samples {
-            0 => WAVE_SAMPLES,
-            n => n,
-        };
-        (samples / opt.spp.max(1)).max(1)
+        match self.wave_samples {
+            0 => wave_pixels(opt),
+            n => pixels_a_wave(n, opt),
+        }
     }
 
     /// Waves `opt`'s frame takes through these queues.
     pub fn waves(&self, opt: &RenderOptions) -> u32 {
-        (opt.width * opt.height).div_ceil(self.wave_pixels(opt))
+        waves_of(self.wave_pixels(opt), opt)
     }
 }
 
@@ -313,22 +322,20 @@ fn trace_wave(
             Some(m) => march_volume(m, &mut q.hits, &mut q.misses, film),
             None => 0,
         };
-        // The film passes of `handle_misses` and `accumulate` without their order check:
-        // this frame's queues are in pixel order.
-        let (misses, bg) = (&q.misses, scene.background);
-        add_sorted(
-            film,
-            misses.len(),
-            |i| misses[i].pixel,
-            |i| Some(misses[i].weight * bg),
-        );
+        // This frame's queues are in pixel order: the film's adds skip their order check.
+        add_misses(&q.misses, scene.background, film, true);
         let spawn = depth < opt.max_depth;
         shade_hits_into(scene, &q.hits, spawn, &mut q.runs, &mut q.shaded);
         let shadows = &q.shaded.shadows;
         let reaching = shadows_reaching(tree, shadows, opt.traversal, medium, &mut q.scratch);
-        let local = &q.shaded.local;
-        add_sorted(film, local.len(), |i| local[i].0, |i| Some(local[i].1));
-        add_sorted(film, shadows.len(), |i| shadows[i].pixel, |i| reaching[i]);
+        add_contributions(film, &q.shaded.local, true);
+        add_to_film(
+            film,
+            shadows.len(),
+            true,
+            |i| shadows[i].pixel,
+            |i| reaching[i],
+        );
         progress(DepthStats {
             depth,
             rays: q.rays.len(),
@@ -442,7 +449,7 @@ fn closest_into(
         }),
         None => Err(queue[i]),
     };
-    passes::split_into(queue.len(), pick, hits, misses);
+    raystream_accel::par::split_into(queue.len(), pick, hits, misses);
 }
 
 /// Stage 2½, in scenes with a volume: each ray's segment up to its hit (or out of the scene)
@@ -479,15 +486,26 @@ pub fn march_volume(
     // together not; a caller's may be in any: checked).
     let (from_hits, from_misses) = emitted.split_at(hits.len());
     for part in [from_hits, from_misses] {
-        add_to_film(film, part.len(), |i| part[i].0.0, |i| Some(part[i].0.1));
+        add_to_film(
+            film,
+            part.len(),
+            false,
+            |i| part[i].0.0,
+            |i| Some(part[i].0.1),
+        );
     }
     samples
 }
 
 /// Stage 3: rays that leave the scene add the background.
 pub fn handle_misses(misses: &[RayWorkItem], background: Vec3, film: &mut [Vec3]) {
+    add_misses(misses, background, film, false);
+}
+
+/// [`handle_misses`], the misses' order checked unless `in_order` vouches for it.
+fn add_misses(misses: &[RayWorkItem], background: Vec3, film: &mut [Vec3], in_order: bool) {
     let colour = |i: usize| Some(misses[i].weight * background);
-    add_to_film(film, misses.len(), |i| misses[i].pixel, colour);
+    add_to_film(film, misses.len(), in_order, |i| misses[i].pixel, colour);
 }
 
 /// Schlick's approximation of the Fresnel reflectance for a ray from index `n1` into `n2`.
@@ -635,9 +653,9 @@ fn shade_hits_into(
             }
         });
     let runs = &*runs;
-    passes::concat_into(&mut out.local, runs.len(), |r| &runs[r].local);
-    passes::concat_into(&mut out.shadows, runs.len(), |r| &runs[r].shadows);
-    passes::concat_into(&mut out.next, runs.len(), |r| &runs[r].next);
+    raystream_accel::par::concat_into(&mut out.local, runs.len(), |r| &runs[r].local);
+    raystream_accel::par::concat_into(&mut out.shadows, runs.len(), |r| &runs[r].shadows);
+    raystream_accel::par::concat_into(&mut out.next, runs.len(), |r| &runs[r].next);
 }
 
 /// What [`shade_hits`] makes of a run of hits: their local terms, shadow rays and next rays.
@@ -723,35 +741,13 @@ pub fn intersect_any(
     traversal: Traversal,
     medium: Option<&Medium>,
 ) -> Vec<Contribution> {
-    let mut lit = Vec::new();
-    any_into(
-        tree,
-        shadows,
-        traversal,
-        medium,
-        &mut QueryScratch::default(),
-        &mut lit,
-    );
-    lit
-}
-
-/// [`intersect_any`] into `lit` (cleared first), through `scratch`.
-fn any_into(
-    tree: &KdTree,
-    shadows: &[ShadowWorkItem],
-    traversal: Traversal,
-    medium: Option<&Medium>,
-    scratch: &mut QueryScratch,
-    lit: &mut Vec<Contribution>,
-) {
-    let reaching = shadows_reaching(tree, shadows, traversal, medium, scratch);
-    lit.clear();
-    lit.extend(
-        shadows
-            .iter()
-            .zip(reaching)
-            .filter_map(|(s, r)| Some((s.pixel, (*r)?))),
-    );
+    let mut scratch = QueryScratch::default();
+    let reaching = shadows_reaching(tree, shadows, traversal, medium, &mut scratch);
+    shadows
+        .iter()
+        .zip(reaching)
+        .filter_map(|(s, r)| Some((s.pixel, (*r)?)))
+        .collect()
 }
 
 /// What each shadow ray of `shadows` brings its pixel, in their order: its radiance times the
@@ -784,8 +780,12 @@ fn shadows_reaching<'a>(
 
 /// Stage 6: adds contributions to the film in queue order (deterministic).
 pub fn accumulate(film: &mut [Vec3], contributions: &[Contribution]) {
-    let c = contributions;
-    add_to_film(film, c.len(), |i| c[i].0, |i| Some(c[i].1));
+    add_contributions(film, contributions, false);
+}
+
+/// [`accumulate`], the contributions' order checked unless `in_order` vouches for it.
+fn add_contributions(film: &mut [Vec3], c: &[Contribution], in_order: bool) {
+    add_to_film(film, c.len(), in_order, |i| c[i].0, |i| Some(c[i].1));
 }
 
 #[cfg(test)]
