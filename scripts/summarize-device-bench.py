@@ -299,15 +299,18 @@ FRAME = re.compile(r"^\[submit (\w+), (\d+) spp\] raystream: wrote .*? render ([
                    r"\d+ = ([\d.]+) frames/s")
 
 
-def pairs_table(path, pattern, header, keys, reverse=False, out=None):
+def log_matches(path, pattern):
+    """The matches of `pattern` on render.log's lines, in order."""
+    with open(path) as f:
+        return [m for m in map(pattern.match, f) if m]
+
+
+def pairs_table(path, pattern, header, keys, out, reverse=False):
     """render.log's frame times matched by `pattern` (groups: the row, one of the two `keys`,
     the time), one row per row value: each key's times and their medians' ratio."""
     runs = defaultdict(list)
-    with open(path) as f:
-        for line in f:
-            m = pattern.match(line)
-            if m:
-                runs[(int(m["row"]), m["key"])].append(float(m["ms"]))
+    for m in log_matches(path, pattern):
+        runs[(int(m["row"]), m["key"])].append(float(m["ms"]))
     if not runs:
         return
     out.append(header)
@@ -333,11 +336,8 @@ CPU_WAVE = re.compile(r"^\[cpuwave (?P<row>\d+), round \d+\] raystream: wrote .*
 
 def cpuwave_table(path, out):
     runs = defaultdict(list)
-    with open(path) as f:
-        for line in f:
-            m = CPU_WAVE.match(line)
-            if m:
-                runs[int(m["row"])].append(float(m["ms"]))
+    for m in log_matches(path, CPU_WAVE):
+        runs[int(m["row"])].append(float(m["ms"]))
     if not runs:
         return
     default = runs.get(1 << 18)
@@ -351,12 +351,12 @@ def cpuwave_table(path, out):
 
 def render_table(path, out):
     pairs_table(path, FRAME, "| spp | `--submit depth` frame ms | `--submit wave` frame ms | wave / depth (medians) |",
-                ("depth", "wave"), reverse=True, out=out)
+                ("depth", "wave"), out, reverse=True)
 
 
 def cpuframes_table(path, out):
     pairs_table(path, CPU_FRAME, "| CPU threads | base frame ms | new frame ms | new / base (medians) |",
-                ("base", "new"), out=out)
+                ("base", "new"), out)
 
 
 # The interpolation ("trilinear", "cubic B-spline") follows the mode since 2026-12-03.
