@@ -779,7 +779,11 @@ def main():
     random.seed(a.seed)
     work = tempfile.mkdtemp(prefix="raystream-fuzz-")
     bad = fuzz_files(work, a.runs, a.device) if a.what == "files" else fuzz_scenes(work, a.runs)
-    print(f"{a.what}: {a.runs} runs, {bad} failed (inputs of failures kept in {work})")
+    if bad:
+        print(f"{a.what}: {a.runs} runs, {bad} failed (inputs of failures kept in {work})")
+    else:
+        shutil.rmtree(work)
+        print(f"{a.what}: {a.runs} runs, 0 failed")
     sys.exit(1 if bad else 0)
 
 

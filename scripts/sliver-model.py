@@ -227,7 +227,14 @@ def main():
     ap.add_argument("--device", default="cpu", help="with --check: cpu or gpu")
     args = ap.parse_args()
     o, d = camera_rays(args.width, args.height)
-    work = tempfile.mkdtemp(prefix="sliver-model-")
+    with tempfile.TemporaryDirectory(prefix="sliver-model-") as work:
+        differ = run(args, o, d, work)
+    if differ:
+        sys.exit(1)
+
+
+def run(args, o, d, work):
+    """The table, and the number of rays where the tracer differs from the model."""
     differ = 0
     names = list(METHODS)
     print("| half-length | turned | f64 hits | " + " | ".join(names)
@@ -255,8 +262,7 @@ def main():
                 if n:
                     print(f"sliver-model: {n} rays differ from the model", file=sys.stderr)
             print(f"| {length:.0e} | {degrees}° | {right.sum()} | " + " | ".join(cells) + " |")
-    if differ:
-        sys.exit(1)
+    return differ
 
 
 if __name__ == "__main__":

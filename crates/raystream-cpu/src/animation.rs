@@ -302,10 +302,14 @@ mod tests {
             .collect()
     }
 
-    fn tmp(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("raystream-anim-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir.join(name)
+    /// `name` in a scratch folder of its own, removed with the folder when the test ends.
+    fn tmp(name: &str) -> (tempfile::TempDir, PathBuf) {
+        let dir = tempfile::Builder::new()
+            .prefix("raystream-anim-")
+            .tempdir()
+            .unwrap();
+        let path = dir.path().join(name);
+        (dir, path)
     }
 
     /// A GIF's frames as RGB and their delays (1/100 s), checking that it loops forever.
@@ -346,7 +350,7 @@ mod tests {
     #[test]
     fn apng_keeps_every_frame_exactly_and_loops_at_the_asked_rate() {
         let (w, h) = (37, 23);
-        let path = tmp("spin.png");
+        let (_dir, path) = tmp("spin.png");
         let want = frames(w, h);
         write(&path, AnimationKind::Apng, (w, h), &want, 12);
 
@@ -381,7 +385,7 @@ mod tests {
     #[test]
     fn gif_frames_keep_their_colours_within_a_palette_and_their_delay() {
         let (w, h) = (256, 192);
-        let path = tmp("spin.gif");
+        let (_dir, path) = tmp("spin.gif");
         let want = frames(w, h);
         write(&path, AnimationKind::Gif, (w, h), &want, 15);
         let got = read_gif(&path);
@@ -425,7 +429,7 @@ mod tests {
                 [k * 241.0, k * 214.0, k * 180.0].map(|v| v as u8)
             })
             .collect();
-        let path = tmp("ramp.gif");
+        let (_dir, path) = tmp("ramp.gif");
         write(
             &path,
             AnimationKind::Gif,
@@ -441,7 +445,7 @@ mod tests {
 
     #[test]
     fn an_unfinished_animation_leaves_no_file_and_bad_frames_are_refused() {
-        let path = tmp("partial.png");
+        let (_dir, path) = tmp("partial.png");
         let f = frames(8, 8);
         let mut a = AnimationWriter::create(&path, AnimationKind::Apng, (8, 8), 3, 10).unwrap();
         a.push(f[0].as_slice()).unwrap();
@@ -458,7 +462,7 @@ mod tests {
 
         // An encoder's error (here a file opened for reading) reaches the frames after it,
         // and the frame it happened on is named.
-        let ro = tmp("read-only.gif");
+        let (_ro_dir, ro) = tmp("read-only.gif");
         std::fs::write(&ro, b"").unwrap();
         let e = gif::Encoder::new(BufWriter::new(File::open(&ro).unwrap()), 64, 64, &[]).unwrap();
         let mut encoder = Pipeline::spawn(Encoder::Gif(e), encode((64, 64), 10));

@@ -337,10 +337,10 @@ fn depth_aov_png_round_trip() {
         height: 1,
         values: AovValues::Depth(vec![f32::INFINITY, 2.0, 1.0, 1.5]),
     };
-    let path = std::env::temp_dir().join(format!("raystream-aov-{}.png", std::process::id()));
+    let dir = scratch();
+    let path = dir.path().join("aov.png");
     img.save_png(&path).unwrap();
     let back = image::open(&path).unwrap().to_luma16();
-    std::fs::remove_file(&path).ok();
     assert_eq!(back.into_raw(), vec![0, 1, 65535, 32768]);
 }
 
@@ -353,8 +353,8 @@ fn read_exr(path: &Path) -> std::collections::BTreeMap<String, ExrSamples> {
 /// distances with +∞ for a miss, normals, triangle numbers as 32-bit integers.
 #[test]
 fn exr_round_trip_keeps_the_values() {
-    let dir = std::env::temp_dir().join(format!("raystream-exr-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = scratch();
+    let dir = scratch.path();
     let film = Image {
         width: 3,
         height: 2,
@@ -418,7 +418,14 @@ fn exr_round_trip_keeps_the_values() {
         ExrSamples::U32(prims),
         "exact above 2^24, as no float is"
     );
-    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A scratch folder of its own, removed when the test ends, passed or failed.
+fn scratch() -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix("raystream-cpu-")
+        .tempdir()
+        .unwrap()
 }
 
 /// The format follows the output's extension; any other is refused by name.

@@ -110,8 +110,8 @@ mod tests {
     use super::*;
 
     fn table(name: &str, text: &str) -> Result<Vec<SegmentLabel>, String> {
-        let dir = std::env::temp_dir().join(format!("raystream-ctbl-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = crate::tests::scratch_dir("ctbl");
+        let dir = scratch.path();
         let path = dir.join(name);
         std::fs::write(&path, text).unwrap();
         read_colour_table(&path).map_err(|e| e.to_string())

@@ -269,8 +269,8 @@ mod tests {
     use super::*;
 
     fn read(name: &str, text: &str) -> Result<Vec<DVec3>, String> {
-        let dir = std::env::temp_dir().join(format!("raystream-curve-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = crate::tests::scratch_dir("curve");
+        let dir = scratch.path();
         let file = dir.join(name);
         std::fs::write(&file, text).unwrap();
         let r = read_curve(&file).map_err(|e| e.to_string());
@@ -373,8 +373,8 @@ mod tests {
 
     #[test]
     fn a_written_path_reads_back_to_the_micrometre_in_either_format() {
-        let dir = std::env::temp_dir().join(format!("raystream-curve-w-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = crate::tests::scratch_dir("curve-w");
+        let dir = scratch.path();
         let points = vec![
             DVec3::new(-12.3456789, 200.0001, -0.0004),
             DVec3::new(1.0, 2.0, 3.0),

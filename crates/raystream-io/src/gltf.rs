@@ -611,9 +611,8 @@ mod tests {
                             {"scale": [2, 2, 2], "mesh": 0},
                             {"rotation": [0, 0, 0.70710677, 0.70710677], "mesh": 0}]"#;
 
-    fn write(name: &str, bytes: &[u8]) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join("raystream-io-gltf-tests");
-        std::fs::create_dir_all(&dir).unwrap();
+    /// `bytes` written to `name` in the test's scratch folder `dir`.
+    fn write(dir: &std::path::Path, name: &str, bytes: &[u8]) -> std::path::PathBuf {
         let path = dir.join(name);
         std::fs::write(&path, bytes).unwrap();
         path
@@ -625,7 +624,13 @@ mod tests {
     /// the list's material its base colour.
     #[test]
     fn a_scene_places_each_instance_of_its_meshes() {
-        let path = write("quad.glb", &glb(&quad_json(POSITION, NODES), &quad_bin()));
+        let scratch = crate::tests::scratch_dir("gltf");
+        let dir = scratch.path();
+        let path = write(
+            dir,
+            "quad.glb",
+            &glb(&quad_json(POSITION, NODES), &quad_bin()),
+        );
         let (mesh, shading) = load_mesh_with_shading(&path).unwrap();
         assert_eq!(mesh.triangles.len(), 8);
         assert_eq!(mesh.positions.len(), 16);
@@ -669,12 +674,12 @@ mod tests {
         );
         // The same triangles without the shading, and from a .gltf beside its .bin.
         assert_eq!(crate::load_mesh(&path).unwrap(), mesh);
-        write("quad.bin", &quad_bin());
+        write(dir, "quad.bin", &quad_bin());
         let json = quad_json(POSITION, NODES).replace(
             r#""buffers": [{"byteLength": 112}]"#,
             r#""buffers": [{"byteLength": 112, "uri": "quad.bin"}]"#,
         );
-        let text = write("quad.gltf", json.as_bytes());
+        let text = write(dir, "quad.gltf", json.as_bytes());
         assert_eq!(crate::load_mesh(&text).unwrap(), mesh);
         // A base colour texture without texture coordinates is not applied: a warning, and
         // the factor stands in.
@@ -687,7 +692,7 @@ mod tests {
                 r#""meshes""#,
                 r#""textures": [{"source": 0}], "images": [{"uri": "brick.png"}], "meshes""#,
             );
-        let path = write("textured.glb", &glb(&textured, &quad_bin()));
+        let path = write(dir, "textured.glb", &glb(&textured, &quad_bin()));
         let (again, shading) = load_mesh_with_shading(&path).unwrap();
         assert_eq!(again, mesh);
         assert_eq!(shading.materials[0].diffuse, Some([0.8, 0.2, 0.1]));
@@ -702,7 +707,7 @@ mod tests {
             r#""asset""#,
             r#""extensionsUsed": ["KHR_materials_emissive_strength"], "asset""#,
         );
-        let path = write("extended.glb", &glb(&extended, &quad_bin()));
+        let path = write(dir, "extended.glb", &glb(&extended, &quad_bin()));
         let (again, shading) = load_mesh_with_shading(&path).unwrap();
         assert_eq!(again, mesh);
         assert!(
@@ -727,6 +732,8 @@ mod tests {
     /// that is missing) is a warning and the base colour stands in.
     #[test]
     fn base_colour_textures_are_read() {
+        let scratch = crate::tests::scratch_dir("gltf");
+        let dir = scratch.path();
         let mut png = Vec::new();
         image::RgbaImage::from_fn(2, 2, |x, y| {
             image::Rgba([100 * x as u8, 100 * y as u8, 7, 255])
@@ -763,7 +770,7 @@ mod tests {
         };
         let in_bin = r#"{"bufferView": 3, "mimeType": "image/png"}"#;
         let (clamp, mirror) = (33071, 33648);
-        let path = write("textured-quad.glb", &glb(&doc(in_bin, clamp), &bin));
+        let path = write(dir, "textured-quad.glb", &glb(&doc(in_bin, clamp), &bin));
         let (_, shading) = load_mesh_with_shading(&path).unwrap();
         assert!(shading.warnings.is_empty(), "{:?}", shading.warnings);
         let t = shading.materials[0].image.as_ref().expect("the texture");
@@ -789,7 +796,7 @@ mod tests {
                 r#""baseColorTexture": {"index": 0, "extensions": {"KHR_texture_transform": {"offset": [0.5, 0.1], "scale": [2, 0.5]}}}"#,
             )
             .replace(r#""asset""#, r#""extensionsUsed": ["KHR_texture_transform"], "asset""#);
-        let path = write("transformed-quad.glb", &glb(&transformed, &bin));
+        let path = write(dir, "transformed-quad.glb", &glb(&transformed, &bin));
         let (_, shading) = load_mesh_with_shading(&path).unwrap();
         assert!(shading.warnings.is_empty(), "{:?}", shading.warnings);
         let moved = shading.materials[0].image.as_ref().unwrap();
@@ -802,7 +809,7 @@ mod tests {
             "{got} for {want:?}"
         );
         // A mirrored repeat repeats, with a warning.
-        let path = write("mirrored-quad.glb", &glb(&doc(in_bin, mirror), &bin));
+        let path = write(dir, "mirrored-quad.glb", &glb(&doc(in_bin, mirror), &bin));
         let (_, shading) = load_mesh_with_shading(&path).unwrap();
         assert!(!shading.materials[0].image.as_ref().unwrap().mapping.clamp);
         assert!(
@@ -818,15 +825,11 @@ mod tests {
             r#"{{"uri": "data:image/png;base64,{}"}}"#,
             base64::engine::general_purpose::STANDARD.encode(&png)
         );
-        std::fs::write(
-            std::env::temp_dir().join("raystream-io-gltf-tests/my paint.png"),
-            &png,
-        )
-        .unwrap();
+        std::fs::write(dir.join("my paint.png"), &png).unwrap();
         // (The MIME type a view's image must name is not needed: the bytes say what they are.)
         let unnamed = r#"{"bufferView": 3}"#;
         for image in [data.as_str(), r#"{"uri": "my%20paint.png"}"#, unnamed] {
-            let path = write("uri-image.glb", &glb(&doc(image, clamp), &bin));
+            let path = write(dir, "uri-image.glb", &glb(&doc(image, clamp), &bin));
             let (_, shading) = load_mesh_with_shading(&path).unwrap();
             assert!(shading.warnings.is_empty(), "{:?}", shading.warnings);
             assert_eq!(shading.materials[0].image.as_ref().unwrap().texels, texels);
@@ -851,7 +854,7 @@ mod tests {
             ),
             (r#"{"name": "nowhere"}"#, "neither a buffer view nor a URI"),
         ] {
-            let path = write("lost-image.glb", &glb(&doc(image, clamp), &bin));
+            let path = write(dir, "lost-image.glb", &glb(&doc(image, clamp), &bin));
             let (_, shading) = load_mesh_with_shading(&path).unwrap();
             assert!(shading.materials[0].image.is_none());
             assert!(

@@ -118,9 +118,8 @@ mod tests {
     /// Written on an oblique, anisotropic grid and read back: the same grid, the same labels.
     #[test]
     fn a_label_map_reads_back_on_its_grid() {
-        let dir = std::env::temp_dir().join(format!("raystream-label-test-{}", std::process::id()));
-        std::fs::remove_dir_all(&dir).ok();
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = crate::tests::scratch_dir("label-test");
+        let dir = scratch.path();
         let (c, s) = (0.6f64.cos(), 0.6f64.sin());
         let like = Volume {
             origin: [-120.5, 33.25, 710.0],
@@ -155,7 +154,7 @@ mod tests {
             assert_eq!(back, labels, "{name}");
         }
         // Nothing else was written beside them.
-        let mut names: Vec<String> = std::fs::read_dir(&dir)
+        let mut names: Vec<String> = std::fs::read_dir(dir)
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .collect();
@@ -169,6 +168,5 @@ mod tests {
         assert!(e.to_string().contains("m.nrrd"), "{e}");
         let e = write_label_map(&dir.join("n.nii"), &like, &labels[1..], "").unwrap_err();
         assert!(e.to_string().contains("59 labels"), "{e}");
-        std::fs::remove_dir_all(&dir).ok();
     }
 }

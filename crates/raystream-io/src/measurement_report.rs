@@ -837,8 +837,8 @@ mod tests {
         }
     }
 
-    fn path(name: &str) -> std::path::PathBuf {
-        std::env::temp_dir().join(format!("raystream-sr-{name}-{}.dcm", std::process::id()))
+    fn path(name: &str) -> crate::tests::ScratchFile {
+        crate::tests::scratch_file(&format!("sr-{name}.dcm"))
     }
 
     /// The tree's measurement: its value, unit and point, in the volume's frame of

@@ -452,8 +452,8 @@ mod tests {
     /// 2.25, the pixels byte for byte (an odd count padded), the orientation and annotation.
     #[test]
     fn secondary_capture_round_trip() {
-        let dir = std::env::temp_dir().join(format!("raystream-sc-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = crate::tests::scratch_dir("sc");
+        let dir = scratch.path();
         let (w, h) = (5u32, 3u32);
         let rgb: Vec<u8> = (0..3 * w * h).map(|i| (i * 7) as u8).collect();
         let study = DicomStudy {
@@ -525,7 +525,6 @@ mod tests {
             e.to_string().starts_with(&path.display().to_string()),
             "{e}"
         );
-        std::fs::remove_dir_all(&dir).ok();
     }
 
     /// HU pixels: signed 16-bit MONOCHROME2 that dicom-pixeldata turns back into the values,
@@ -533,8 +532,8 @@ mod tests {
     #[test]
     fn hu_pixels_round_trip() {
         use dicom_pixeldata::PixelDecoder;
-        let dir = std::env::temp_dir().join(format!("raystream-sc-hu-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = crate::tests::scratch_dir("sc-hu");
+        let dir = scratch.path();
         let path = dir.join("hu.dcm");
         let values = [-1000.4, -0.6, 0.0, 12.5, 1e6, -1e6, f32::NAN, 3071.0];
         let pixels = CapturePixels::Hu {
@@ -558,6 +557,5 @@ mod tests {
                 -1000.0, -1.0, 0.0, 13.0, 32767.0, -32767.0, -32768.0, 3071.0
             ]
         );
-        std::fs::remove_dir_all(&dir).ok();
     }
 }

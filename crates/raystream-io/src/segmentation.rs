@@ -650,7 +650,7 @@ pub(crate) mod tests {
         labels[9 + 8] = 1; // slice 1, pixel (2, 2)
         labels[27 + 4] = 2; // slice 3, the centre
         labels[27 + 5] = 2;
-        let path = std::env::temp_dir().join(format!("raystream-seg-{}.dcm", std::process::id()));
+        let path = crate::tests::scratch_file("seg.dcm");
         let info = SegmentationInfo {
             description: "test",
             algorithm: "test",
@@ -847,8 +847,7 @@ pub(crate) mod tests {
         let (s, c) = 15f64.to_radians().sin_cos();
         v.direction = [[1.0, 0.0, 0.0], [0.0, 1.0, s], [0.0, 0.0, c]];
         let labels: Vec<u8> = (0..36u8).map(|i| [0, 1, 2, 0, 1][i as usize % 5]).collect();
-        let path =
-            std::env::temp_dir().join(format!("raystream-seg-tilt-{}.dcm", std::process::id()));
+        let path = crate::tests::scratch_file("seg-tilt.dcm");
         let info = SegmentationInfo {
             description: "test",
             algorithm: "test",

@@ -2,6 +2,43 @@ use std::path::{Path, PathBuf};
 
 use super::*;
 
+/// A scratch folder of its own under the system's temporary one, removed when the test ends,
+/// passed or failed (`tempfile`).
+pub(crate) fn scratch_dir(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("raystream-io-{name}-"))
+        .tempdir()
+        .unwrap()
+}
+
+/// A file's path in a scratch folder of its own: the folder goes when this does.
+pub(crate) struct ScratchFile {
+    path: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+impl std::ops::Deref for ScratchFile {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl AsRef<Path> for ScratchFile {
+    fn as_ref(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// `name` in a scratch folder of its own ([`scratch_dir`]).
+pub(crate) fn scratch_file(name: &str) -> ScratchFile {
+    let dir = scratch_dir(name.split('.').next().unwrap_or(name));
+    ScratchFile {
+        path: dir.path().join(name),
+        _dir: dir,
+    }
+}
+
 fn shared_mesh(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/data/meshes")
@@ -217,8 +254,8 @@ fn garbage_is_an_error_not_a_panic() {
 fn written_meshes_read_back_identically() {
     let mesh = TriMesh::icosphere(2);
     let normals = mesh.vertex_normals();
-    let dir = std::env::temp_dir().join(format!("raystream-write-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = scratch_dir("write");
+    let dir = scratch.path();
     for name in ["m.ply", "m.obj", "m.stl"] {
         let path = dir.join(name);
         write_mesh(&path, &mesh, Some(&normals)).unwrap();
@@ -232,7 +269,6 @@ fn written_meshes_read_back_identically() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("m.vtk"), "{e}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The volume a closed mesh encloses: an icosphere's, a little under the unit ball's (its
@@ -257,7 +293,8 @@ fn enclosed_volume_of_a_closed_mesh() {
 /// read back, each part's triangles are its own, in order. An STL refuses two.
 #[test]
 fn mesh_parts_keep_their_names_and_colours() {
-    let dir = scratch("parts");
+    let scratch = scratch_dir("parts");
+    let dir = scratch.path();
     let a = TriMesh::icosphere(1);
     let mut b = TriMesh::icosphere(2);
     b.positions
@@ -347,15 +384,6 @@ fn mesh_parts_keep_their_names_and_colours() {
         e.contains("m.stl: an STL file holds one surface, not 2"),
         "{e}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
-}
-
-/// A folder of its own under the system's temporary one, emptied.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("raystream-io-{name}-{}", std::process::id()));
-    std::fs::remove_dir_all(&dir).ok();
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 const TWO_LIBRARIES_OBJ: &str = "mtllib paint.mtl
@@ -382,7 +410,8 @@ f 1 2 4
 /// texture out; the geometry is the same either way.
 #[test]
 fn obj_textures_and_their_coordinates() {
-    let dir = scratch("uv");
+    let scratch = scratch_dir("uv");
+    let dir = scratch.path();
     let quad = "mtllib t.mtl\nusemtl painted\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n\
                 vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvt 0.5 0.5\nf 1/1 2/2 3/3 4/4\nf 1/5 3/3 4/4\n";
     std::fs::write(dir.join("q.obj"), quad).unwrap();
@@ -478,7 +507,8 @@ fn texture_options_are_read_or_named() {
 
 #[test]
 fn obj_materials_follow_the_faces() {
-    let dir = scratch("mtl");
+    let scratch = scratch_dir("mtl");
+    let dir = scratch.path();
     std::fs::write(dir.join("scene.obj"), TWO_LIBRARIES_OBJ).unwrap();
     std::fs::write(
         dir.join("paint.mtl"),
@@ -579,7 +609,6 @@ fn obj_materials_follow_the_faces() {
     );
     let (_, m) = load_mesh_with_shading(&shared_mesh("goblet_vase.stl")).unwrap();
     assert_eq!(m, MeshShading::default());
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// A cube with a normal per face (`vn`), as modelling tools write hard edges.
@@ -596,7 +625,8 @@ f 2//4 3//4 7//4 6//4\nf 1//5 2//5 6//5 5//5\nf 4//6 8//6 7//6 3//6
 /// same as without normals; files without normals give none.
 #[test]
 fn file_normals_are_kept() {
-    let dir = scratch("normals");
+    let scratch = scratch_dir("normals");
+    let dir = scratch.path();
     std::fs::write(dir.join("cube.obj"), HARD_CUBE_OBJ).unwrap();
     let (mesh, s) = load_mesh_with_shading(&dir.join("cube.obj")).unwrap();
     // The same faces without their normals: 8 shared vertices.
@@ -648,5 +678,4 @@ fn file_normals_are_kept() {
         let (_, s) = load_mesh_with_shading(&shared_mesh(name)).unwrap();
         assert!(s.normals.is_empty(), "{name}");
     }
-    std::fs::remove_dir_all(&dir).ok();
 }

@@ -229,8 +229,8 @@ mod tests {
 
     #[test]
     fn bad_images_are_errors() {
-        let dir = std::env::temp_dir().join(format!("raystream-tex-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = crate::tests::scratch_dir("tex");
+        let dir = scratch.path();
         let png = dir.join("t.png");
         image::RgbaImage::from_pixel(3, 2, image::Rgba([10, 20, 30, 255]))
             .save(&png)
@@ -256,6 +256,5 @@ mod tests {
             e.contains("100000x100000 image") && e.contains("limit"),
             "{e}"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

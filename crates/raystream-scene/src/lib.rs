@@ -1009,8 +1009,11 @@ mod tests {
     /// value is an error naming the object and the material.
     #[test]
     fn scene_objects_keep_their_obj_materials() {
-        let dir = std::env::temp_dir().join(format!("raystream-scene-mtl-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("raystream-scene-mtl-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         std::fs::write(
             dir.join("two.obj"),
             "mtllib two.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 2 0 0\nusemtl red\nf 1 2 3\nusemtl blue\nf 2 4 3\n",
@@ -1023,7 +1026,7 @@ mod tests {
         .unwrap();
         let scene = |text: &str| {
             let desc: SceneDesc = toml::from_str(text).unwrap();
-            Scene::from_desc(&desc, &dir, Path::new("s.toml"))
+            Scene::from_desc(&desc, dir, Path::new("s.toml"))
         };
         let own =
             scene("[[objects]]\nmesh = \"two.obj\"\n[[objects]]\nshape = \"quad\"\n").unwrap();
@@ -1061,7 +1064,6 @@ mod tests {
             "{:?}",
             missing.warnings
         );
-        std::fs::remove_dir_all(&dir).ok();
     }
 
     fn compile(text: &str) -> Result<Scene, SceneError> {

@@ -239,8 +239,11 @@ fn transfer_functions() {
         // Air is transparent in every CT preset.
         assert_eq!(p.function().opacity_at(-1000.0), 0.0, "{}", p.name());
     }
-    let dir = std::env::temp_dir().join(format!("raystream-tf-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = tempfile::Builder::new()
+        .prefix("raystream-tf-")
+        .tempdir()
+        .unwrap();
+    let dir = scratch.path();
     let good = dir.join("good.toml");
     std::fs::write(
         &good,

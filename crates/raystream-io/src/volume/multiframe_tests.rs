@@ -4,7 +4,7 @@
 //! positions), read back as the series itself, voxel for voxel; and what is wrong in one named.
 //! Also the 4-D series of single-frame files: the same slices at two temporal positions.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use dicom_core::value::PixelFragmentSequence;
 use dicom_core::{DataElement, PrimitiveValue, VR};
@@ -20,10 +20,8 @@ fn series() -> Volume {
     load_volume(&dir, &Default::default()).unwrap()
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("raystream-mf-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+fn scratch(name: &str) -> crate::tests::ScratchFile {
+    crate::tests::scratch_file(name)
 }
 
 /// How a test file departs from the plain layout.
@@ -48,7 +46,7 @@ fn decimals(tag: dicom_core::Tag, v: &[f64]) -> DataElement<InMemDicomObject> {
 
 /// `v` as an enhanced CT file: each slice a frame, stored as HU + 1024 + k with its own
 /// intercept (frame k in the series), the frames in a shuffled order.
-fn write_enhanced(v: &Volume, layout: Layout, name: &str) -> PathBuf {
+fn write_enhanced(v: &Volume, layout: Layout, name: &str) -> crate::tests::ScratchFile {
     let [nx, ny, nz] = v.dims;
     let col = |a: usize| [v.direction[0][a], v.direction[1][a], v.direction[2][a]];
     let (row, colv, axis) = (col(0), col(1), col(2));
@@ -308,7 +306,8 @@ fn a_4d_series_of_single_frame_files_reads_the_phase_asked_for() {
         data: first.data.iter().map(|v| v + 100.0).collect(),
         ..first.clone()
     };
-    let dir = std::env::temp_dir().join(format!("raystream-4d-{}", std::process::id()));
+    let scratch = crate::tests::scratch_dir("4d");
+    let dir = scratch.path().to_path_buf();
     let flat = dir.join("3d");
     std::fs::create_dir_all(&flat).unwrap();
     let mut names: Vec<_> = std::fs::read_dir(&src)
@@ -371,7 +370,6 @@ fn a_4d_series_of_single_frame_files_reads_the_phase_asked_for() {
     let got = load_volume(&flat, &Default::default()).unwrap();
     assert_same(&got, &first, "3-D");
     assert_eq!(got.phase, Phase::default());
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

@@ -706,10 +706,8 @@ mod tests {
     /// One contour: its geometric type and its points, given in `grid`'s index space.
     type Contour = (&'static str, Vec<[f64; 3]>);
 
-    fn scratch(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("raystream-rt-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir.join(name)
+    fn scratch(name: &str) -> crate::tests::ScratchFile {
+        crate::tests::scratch_file(name)
     }
 
     /// A grid turned 30° about an oblique axis, voxels 0.8 × 0.7 × 2.5 mm.
@@ -725,7 +723,11 @@ mod tests {
     }
 
     /// Writes a structure set of `rois` (number, name, contours in `g`'s index space) to `name`.
-    fn write(name: &str, g: &Volume, rois: &[(i64, &str, Vec<Contour>)]) -> PathBuf {
+    fn write(
+        name: &str,
+        g: &Volume,
+        rois: &[(i64, &str, Vec<Contour>)],
+    ) -> crate::tests::ScratchFile {
         let path = scratch(name);
         let decimals = |tag, v: Vec<f64>| {
             let s: Vec<String> = v.iter().map(|x| format!("{x}")).collect();

@@ -292,8 +292,8 @@ fn jpeg2000_streams_that_contradict_the_header_are_refused() {
         .windows(4)
         .position(|w| w == [0xFF, 0x4F, 0xFF, 0x51])
         .unwrap();
-    let dir = std::env::temp_dir().join(format!("raystream-j2k-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = crate::tests::scratch_dir("j2k");
+    let dir = scratch.path();
     let patched = |at: usize, value: &[u8], name: &str| {
         let mut b = bytes.clone();
         b[soc + at..soc + at + value.len()].copy_from_slice(value);
@@ -321,7 +321,6 @@ fn jpeg2000_streams_that_contradict_the_header_are_refused() {
     );
     let v = load_volume(&path, &Default::default()).unwrap();
     assert_eq!(v.dims, [512, 512, 1]);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 fn load_ts(ts: &str) -> Result<Volume, VolumeError> {
@@ -584,8 +583,8 @@ fn unknown_series_lists_the_ones_there() {
 #[test]
 fn a_gap_left_by_an_unreadable_slice_names_the_file() {
     let src = shared("dicom/abdomen_ct_j2k_totalseg");
-    let dir = std::env::temp_dir().join(format!("raystream-gap-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = crate::tests::scratch_dir("gap");
+    let dir = scratch.path();
     let mut names: Vec<_> = std::fs::read_dir(&src)
         .unwrap()
         .map(|e| e.unwrap().file_name())
@@ -596,7 +595,7 @@ fn a_gap_left_by_an_unreadable_slice_names_the_file() {
     }
     // Cut the slice in the middle of the stack (by position, not by name) to 3000 bytes.
     assert_eq!(
-        load_volume(&dir, &Default::default()).unwrap().dims[2],
+        load_volume(dir, &Default::default()).unwrap().dims[2],
         names.len()
     );
     let mut by_z: Vec<(f64, &std::ffi::OsString)> = names
@@ -610,10 +609,9 @@ fn a_gap_left_by_an_unreadable_slice_names_the_file() {
     let cut = by_z[by_z.len() / 2].1;
     let bytes = std::fs::read(dir.join(cut)).unwrap();
     std::fs::write(dir.join(cut), &bytes[..3000]).unwrap();
-    let e = load_volume(&dir, &Default::default())
+    let e = load_volume(dir, &Default::default())
         .unwrap_err()
         .to_string();
-    std::fs::remove_dir_all(&dir).ok();
     assert!(
         e.contains("uneven slice spacing")
             && e.contains("1 unreadable file was in the folder")
@@ -658,8 +656,8 @@ fn nrrd_attached_raw_in_ras_is_turned_into_lps() {
 #[test]
 fn nrrd_gzip_and_detached_data() {
     use std::io::Write;
-    let dir = std::env::temp_dir().join(format!("raystream-nrrd-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = crate::tests::scratch_dir("nrrd");
+    let dir = scratch.path();
     let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
     gz.write_all(&ramp_i16()).unwrap();
     std::fs::write(dir.join("ramp.raw.gz"), gz.finish().unwrap()).unwrap();
@@ -671,7 +669,6 @@ fn nrrd_gzip_and_detached_data() {
         v.direction,
         [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The ramp's three phases, `ramp + 100 t` for t = 0, 1, 2: one volume after another
@@ -994,8 +991,8 @@ fn a_4d_nifti_reads_the_phase_asked_for() {
     let e = nifti::parse(cut, path, Some(3)).unwrap_err().to_string();
     assert!(e.starts_with("t4.nii") && e.contains("truncated"), "{e}");
 
-    let dir = std::env::temp_dir().join(format!("raystream-phase-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = crate::tests::scratch_dir("phase");
+    let dir = scratch.path();
     let mut nrrd_bytes = b"NRRD0004\ntype: short\ndimension: 3\nspace: LPS\nsizes: 4 3 2\nspace directions: (1,0,0) (0,1,0) (0,0,1)\nencoding: raw\n\n".to_vec();
     nrrd_bytes.extend(ramp_i16());
     let file = dir.join("ramp.nrrd");
@@ -1014,7 +1011,6 @@ fn a_4d_nifti_reads_the_phase_asked_for() {
             && e.contains("phase 2 requested, but the image has one temporal position (phase 1)"),
         "{e}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
