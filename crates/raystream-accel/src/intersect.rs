@@ -58,7 +58,7 @@ impl WatertightRay {
         t_max: f32,
     ) -> Option<(f32, f32, f32)> {
         let [x, y, z] = self.rows(v0, v1, v2);
-        self.solve(x, y, z, t_min, t_max)
+        self.finish(self.edges(x, y, z).uvw, x, y, z, t_min, t_max)
     }
 
     /// The corners' coordinates along kx, ky and kz, a row an axis.
@@ -84,19 +84,6 @@ impl WatertightRay {
         #[cfg(not(target_arch = "x86_64"))]
         let uvw = self.edges(x, y, z).uvw;
         self.finish(uvw, x, y, z, t_min, t_max)
-    }
-
-    /// The test of a triangle given by its corners' coordinates along kx, ky and kz.
-    #[inline(always)]
-    fn solve(
-        &self,
-        x: [f32; 3],
-        y: [f32; 3],
-        z: [f32; 3],
-        t_min: f32,
-        t_max: f32,
-    ) -> Option<(f32, f32, f32)> {
-        self.finish(self.edges(x, y, z).uvw, x, y, z, t_min, t_max)
     }
 
     /// The corners sheared into the ray's frame (the origin at 0, the ray along kz) and their
@@ -169,7 +156,8 @@ impl WatertightRay {
         }
     }
 
-    /// The rest of the test, from the edge functions on.
+    /// The rest of the test of a triangle given by its corners' coordinates along kx, ky and
+    /// kz, from its edge functions `uvw` on.
     #[inline(always)]
     fn finish(
         &self,
