@@ -61,6 +61,7 @@ if [ "${1:-}" = --pack ]; then
     git worktree add --detach "$wt" "$base_rev" >/dev/null || { echo "--pack: no commit $base_rev" >&2; exit 1; }
     CARGO_TARGET_DIR=$PWD/target/base cargo build --release --quiet --manifest-path "$wt/Cargo.toml"
     git worktree remove --force "$wt"
+    rmdir "$(dirname "$wt")"
     strip -o "$d/base" target/base/release/raystream && gzip -9f "$d/base"
     git rev-parse --short "$base_rev" > "$d/base.rev"
   fi
