@@ -273,9 +273,7 @@ mod tests {
         let dir = scratch.path();
         let file = dir.join(name);
         std::fs::write(&file, text).unwrap();
-        let r = read_curve(&file).map_err(|e| e.to_string());
-        std::fs::remove_file(&file).unwrap();
-        r
+        read_curve(&file).map_err(|e| e.to_string())
     }
 
     #[test]
@@ -391,7 +389,6 @@ mod tests {
                     "{name}: {a} for {b}"
                 );
             }
-            std::fs::remove_file(&file).unwrap();
         }
         let e = write_curve(Path::new("/nonexistent/p.txt"), &points, "").unwrap_err();
         assert!(e.to_string().contains("/nonexistent/p.txt"), "{e}");

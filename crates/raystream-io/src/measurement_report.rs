@@ -868,7 +868,6 @@ mod tests {
             .unwrap();
             assert_eq!((w.groups, w.measurements), (1, 1));
             let obj = open_file(&p).unwrap();
-            std::fs::remove_file(&p).ok();
             let items =
                 |o: &InMemDicomObject, tag| o.element(tag).unwrap().items().unwrap().to_vec();
             let text = |o: &InMemDicomObject, tag| {
@@ -928,7 +927,6 @@ mod tests {
         m.region = Some(Region::Polyline(vec![DVec3::new(4.0, 5.0, 6.0)]));
         write_measurement_report(&p, &grid(), &[group(vec![m], None)], &info()).unwrap();
         let obj = open_file(&p).unwrap();
-        std::fs::remove_file(&p).ok();
         let last = |o: &InMemDicomObject| {
             o.element(tags::CONTENT_SEQUENCE)
                 .unwrap()

@@ -773,7 +773,6 @@ pub(crate) mod tests {
             let e = crate::load_volume(&p, &Default::default())
                 .unwrap_err()
                 .to_string();
-            std::fs::remove_file(&p).ok();
             assert!(e.starts_with(&p.display().to_string()), "{e}");
             e
         };
@@ -825,7 +824,6 @@ pub(crate) mod tests {
                 }
             }
         }
-        std::fs::remove_file(&cut).ok();
         assert!(refused >= 3, "{refused} of 6 cuts refused");
         // Nothing labelled: an error naming the file, and nothing written.
         std::fs::remove_file(&path).ok();
@@ -855,7 +853,6 @@ pub(crate) mod tests {
         };
         write_segmentation(&path, &v, &labels, &segments(), &info).unwrap();
         let back = crate::load_volume(&path, &Default::default()).unwrap();
-        std::fs::remove_file(&path).ok();
         assert_eq!(back.dims, v.dims);
         for a in 0..3 {
             assert!(

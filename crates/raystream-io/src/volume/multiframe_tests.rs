@@ -20,10 +20,6 @@ fn series() -> Volume {
     load_volume(&dir, &Default::default()).unwrap()
 }
 
-fn scratch(name: &str) -> crate::tests::ScratchFile {
-    crate::tests::scratch_file(name)
-}
-
 /// How a test file departs from the plain layout.
 #[derive(Clone, Copy, Default)]
 struct Layout {
@@ -171,7 +167,7 @@ fn write_enhanced(v: &Volume, layout: Layout, name: &str) -> crate::tests::Scrat
         ));
         "1.2.840.10008.1.2.1"
     };
-    let path = scratch(name);
+    let path = crate::tests::scratch_file(name);
     obj.with_meta(
         FileMetaTableBuilder::new()
             .transfer_syntax(ts)
@@ -235,7 +231,6 @@ fn an_enhanced_ct_reads_as_the_series_it_was_made_from() {
     ] {
         let file = write_enhanced(&want, layout, name);
         let got = load_volume(&file, &Default::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
-        std::fs::remove_file(&file).unwrap();
         assert_same(&got, &want, name);
         assert!(got.warnings.is_empty(), "{name}: {:?}", got.warnings);
         assert_eq!(got.series.as_ref().unwrap().count, 20, "{name}");
@@ -289,7 +284,6 @@ fn a_4d_enhanced_ct_reads_the_phase_asked_for() {
                 && e.contains("phase 3 requested, but the image has 2 temporal positions"),
             "{name}: {e}"
         );
-        std::fs::remove_file(&file).unwrap();
     }
 }
 
@@ -397,7 +391,6 @@ fn a_broken_enhanced_ct_is_an_error_naming_the_file_and_frame() {
         let e = load_volume(&file, &Default::default())
             .unwrap_err()
             .to_string();
-        std::fs::remove_file(&file).unwrap();
         assert!(
             e.starts_with(file.to_str().unwrap()) && e.contains(says),
             "{e}"
@@ -439,7 +432,6 @@ fn damaged_enhanced_ct_files_are_errors_never_panics() {
     ] {
         let file = write_enhanced(&small, layout, name);
         let bytes = std::fs::read(&file).unwrap();
-        std::fs::remove_file(&file).unwrap();
         let path = Path::new("mf.dcm");
         let decode = |b: &[u8]| -> Result<usize, VolumeError> {
             let mut slices = dicom::parse_file(b, path)?;

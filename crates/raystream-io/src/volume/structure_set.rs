@@ -706,10 +706,6 @@ mod tests {
     /// One contour: its geometric type and its points, given in `grid`'s index space.
     type Contour = (&'static str, Vec<[f64; 3]>);
 
-    fn scratch(name: &str) -> crate::tests::ScratchFile {
-        crate::tests::scratch_file(name)
-    }
-
     /// A grid turned 30° about an oblique axis, voxels 0.8 × 0.7 × 2.5 mm.
     fn grid() -> Volume {
         let mut v = Volume::hounsfield([40, 30, 6], [0.8, 0.7, 2.5], vec![0.0; 40 * 30 * 6]);
@@ -728,7 +724,7 @@ mod tests {
         g: &Volume,
         rois: &[(i64, &str, Vec<Contour>)],
     ) -> crate::tests::ScratchFile {
-        let path = scratch(name);
+        let path = crate::tests::scratch_file(name);
         let decimals = |tag, v: Vec<f64>| {
             let s: Vec<String> = v.iter().map(|x| format!("{x}")).collect();
             DataElement::new(tag, VR::DS, PrimitiveValue::Strs(s.into()))
