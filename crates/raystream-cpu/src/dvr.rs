@@ -20,6 +20,63 @@
 //! picture every run) so that the sampling lattice does not show as wood-grain rings. (The
 //! rings trilinear reconstruction draws on coarse grids, a voxel of depth apart, are another
 //! matter: [`crate::sampling`].)
+//!
+//! # Example
+//!
+//! A CT (the abdomen/pelvis CT in the repository's `../shared/data`; a DICOM folder, NRRD or
+//! MetaImage loads the same way) in Hounsfield units and LPS millimetres; its bones as a
+//! marching-cubes surface for the kd-tree tracer; then the volume itself, directly rendered
+//! with a bone preset and as a maximum intensity projection whose pixels hold HU:
+//!
+//! ```
+//! use std::path::Path;
+//!
+//! use raystream_accel::{Builder, KdTree};
+//! use raystream_cpu::dvr::{DvrMode, DvrOptions, render_volume, volume_camera};
+//! use raystream_cpu::{RenderOptions, render};
+//! use raystream_io::{VolumeSelect, load_volume};
+//! use raystream_scene::Scene;
+//! use raystream_volume::{TfPreset, extract_isosurface};
+//!
+//! let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
+//! let path = data.join("volumes/nifti/abdomen_pelvis_ct_totalseg.nii.gz");
+//! let ct = load_volume(&path, &VolumeSelect::default())?;
+//! assert_eq!((ct.dims, ct.spacing), ([122, 101, 112], [3.0, 3.0, 3.0]));
+//! let hu_max = ct.data.iter().copied().fold(f32::MIN, f32::max);
+//!
+//! // Bone at 300 HU: triangles in LPS mm with gradient normals, inside the volume's box.
+//! let bones = extract_isosurface(&ct, 300.0);
+//! assert_eq!(bones.normals.len(), bones.mesh.positions.len());
+//! let far = ct.index_to_world([121.0, 100.0, 111.0].into());
+//! let near = ct.index_to_world([0.0; 3].into());
+//! for p in &bones.mesh.positions {
+//!     for a in 0..3 {
+//!         let (lo, hi) = (near[a].min(far[a]), near[a].max(far[a]));
+//!         assert!(p[a] as f64 >= lo - 1e-3 && p[a] as f64 <= hi + 1e-3);
+//!     }
+//! }
+//! let scene = Scene::for_bones(bones.mesh, &bones.normals, &path);
+//! let tree = KdTree::build(&scene.mesh, Builder::Sah);
+//! let opt = RenderOptions { width: 64, height: 64, spp: 1, ..Default::default() };
+//! let surface = render(&scene, &tree, &opt, |_| {});
+//!
+//! // The volume itself: front-to-back emission and absorption through a transfer function.
+//! let cam = volume_camera(&ct, 1.0);
+//! let dvr = DvrOptions { width: 64, height: 64, ..Default::default() };
+//! let (picture, stats) = render_volume(&ct, &TfPreset::CtBone.function(), &dvr, &cam);
+//! // Bricks the preset leaves transparent (air, soft tissue) were skipped, not sampled.
+//! assert!(stats.samples > 0 && stats.skipped > 0);
+//! assert_eq!((surface.pixels.len(), picture.pixels.len()), (64 * 64, 64 * 64));
+//!
+//! // A MIP in HU (no window): every pixel the largest value its ray met, so none above the
+//! // volume's largest, and some in cortical bone.
+//! let mip = DvrOptions { mode: DvrMode::Mip, hu_values: true, ..dvr };
+//! let (hu, _) = render_volume(&ct, &TfPreset::CtBone.function(), &mip, &cam);
+//! let met = hu.pixels.iter().map(|p| p.x).filter(|x| x.is_finite());
+//! let brightest = met.fold(f32::MIN, f32::max);
+//! assert!(brightest <= hu_max && brightest > 1000.0, "{brightest} HU");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 use std::sync::atomic::AtomicU64;
 
