@@ -234,6 +234,8 @@ impl SceneVolume {
                 phase: d.phase,
             },
         )?;
+        // A lone slice as the slab it images: a plane of no depth would take no sample.
+        let volume = volume.slab_of_lone_slices().unwrap_or(volume);
         let segmentation = match &d.segmentation {
             Some(path) => Some(SceneSegmentation {
                 path: base_dir.join(path),

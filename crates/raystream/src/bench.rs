@@ -412,10 +412,12 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
     let quiet = a.quiet || a.json;
     let t0 = Instant::now();
     let pb = spinner(quiet, &format!("reading {}", a.input.display()));
-    let mut volume = raystream_io::load_volume(&a.input, &Default::default())?;
+    let volume = raystream_io::load_volume(&a.input, &Default::default())?;
     pb.finish_and_clear();
-    let load_ms = ms(t0.elapsed());
     let source_dims = volume.dims;
+    // As `render --mode` draws it: a lone slice as the slab it images.
+    let mut volume = crate::common::slab_if_lone(volume, &a.input, quiet);
+    let load_ms = ms(t0.elapsed());
     let mut resample_ms = None;
     if let Some(n) = a.resample {
         let n = n as usize;

@@ -492,6 +492,51 @@ pub fn print_line(line: impl std::fmt::Display) {
     }
 }
 
+/// A lone slice's view (`volume`'s grid holds one voxel along an axis: one DICOM image, a 2-D
+/// NIfTI): along that axis, as such images are read (an axial slice from below, the patient's
+/// right on the image's left; a coronal one from the front; a sagittal one from the patient's
+/// left), with its `--view` name; `None` for a volume of several slices along every axis.
+pub fn lone_slice_view(
+    volume: &raystream_io::Volume,
+) -> Option<(raystream_scene::PatientView, &'static str)> {
+    use raystream_scene::PatientView;
+    let axis = volume.dims.iter().rposition(|&n| n == 1)?;
+    // The patient axis (L, P, S) the index axis runs closest to.
+    let column = volume.direction.map(|row| row[axis].abs());
+    let lps = (0..3).max_by(|&a, &b| column[a].total_cmp(&column[b]))?;
+    Some(match lps {
+        0 => (PatientView::Left, "left"),
+        1 => (PatientView::Anterior, "anterior"),
+        _ => (PatientView::Inferior, "inferior"),
+    })
+}
+
+/// `volume` from `path`, a lone slice made the slab of tissue it images
+/// ([`raystream_io::Volume::slab_of_lone_slices`]) so that rays through it meet its values
+/// over its thickness; said unless `quiet`.
+pub fn slab_if_lone(
+    volume: raystream_io::Volume,
+    path: &Path,
+    quiet: bool,
+) -> raystream_io::Volume {
+    let Some(slab) = volume.slab_of_lone_slices() else {
+        return volume;
+    };
+    if !quiet {
+        let [x, y, z] = volume.dims;
+        let thick: Vec<String> = (0..3)
+            .filter(|&a| volume.dims[a] == 1)
+            .map(|a| format!("{} mm", volume.spacing[a]))
+            .collect();
+        eprintln!(
+            "raystream: {}: a lone slice ({x} × {y} × {z} voxels): drawn as the slab of tissue it images, {} thick",
+            path.display(),
+            thick.join(" × ")
+        );
+    }
+    slab
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -21,6 +21,8 @@ pub struct Bones {
     pub iso_ms: f64,
     /// The segments' surfaces, named (`--legend`); none for bones.
     pub legend: Vec<crate::legend::Entry>,
+    /// A lone slice's view along its axis ([`crate::common::lone_slice_view`]).
+    pub lone_view: Option<(raystream_scene::PatientView, &'static str)>,
 }
 
 /// The surface at `hu` of `volume`, read from `path` in `load_ms`.
@@ -70,6 +72,7 @@ pub fn bones_of(
         load_ms,
         iso_ms: ms(t1.elapsed()),
         legend: Vec::new(),
+        lone_view: None,
     })
 }
 

@@ -60,11 +60,17 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend
     let volume_scene = |path: &Path, embedded: Option<&[u8]>| -> Result<(Scene, Option<Bones>)> {
         let (volume, load_ms) = read_volume(path, &a.pick.select(), a.quiet, embedded)?;
         let (segment, table) = (a.segment.as_deref(), a.colour_table.as_deref());
+        let lone_view = crate::common::lone_slice_view(&volume);
         if crate::iso::wants_segments(&volume, &a.threshold, segment, table) {
-            return segments_scene(a, path, &volume, load_ms);
+            let (scene, mut b) = segments_scene(a, path, &volume, load_ms)?;
+            if let Some(b) = b.as_mut() {
+                b.lone_view = lone_view;
+            }
+            return Ok((scene, b));
         }
         let smoothing = a.smooth.unwrap_or(0);
         let mut b = crate::iso::bones_of(&volume, path, hu, smoothing, a.quiet, load_ms)?;
+        b.lone_view = lone_view;
         let mesh = std::mem::take(&mut b.surface.mesh);
         let scene = Scene::for_bones(mesh, &b.surface.normals, path);
         Ok((scene, Some(b)))
@@ -142,6 +148,7 @@ fn segments_scene(
         .collect();
     let scene = Scene::for_surfaces(parts, path);
     let b = Bones {
+        lone_view: None,
         surface: Default::default(),
         what: format!("segments {what}"),
         voxels: labels.voxel_count(),
@@ -163,6 +170,23 @@ fn base_view(a: &RenderArgs, default: View, patient: bool) -> Result<View> {
         Some(v) => PatientView::from(v).view(),
         None => default,
     })
+}
+
+/// The view a volume is seen from without `--view`: a lone slice's, along its axis
+/// ([`crate::common::lone_slice_view`], said unless `--quiet`), else `default`.
+fn lone_or(a: &RenderArgs, lone: Option<(PatientView, &str)>, default: View) -> View {
+    match lone {
+        Some((view, name)) if a.view.is_none() => {
+            if !a.quiet {
+                eprintln!(
+                    "raystream: {}: seen along the slice's axis, as with --view {name}",
+                    input_name(a).display()
+                );
+            }
+            view.view()
+        }
+        _ => default,
+    }
 }
 
 /// What is drawn over a PNG frame seen by `cam` (scene frame: x = the patient's left,
@@ -793,6 +817,8 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         select.phase = Some(1);
     }
     let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
+    let lone = crate::common::lone_slice_view(&volume);
+    let volume = crate::common::slab_if_lone(volume, path, a.quiet);
     let labels = segmentation(a, format, &volume)?;
     // Every other mode colours (dvr, iso, cinematic) or keeps to segments (--segment).
     let painted = if mode == DvrMode::Slice {
@@ -891,7 +917,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         painted.as_ref().and_then(|p| p.colours.as_ref()),
         painted.as_ref().and_then(|p| p.weights.as_ref()),
     )?;
-    let view = base_view(a, VOLUME_VIEW, true)?;
+    let view = base_view(a, lone_or(a, lone, VOLUME_VIEW), true)?;
     if let Some(n) = a.turntable {
         return turntable(
             a,
@@ -1517,6 +1543,7 @@ fn cine(
                 ..a.pick.select()
             };
             let volume = raystream_io::load_volume(path, &select)?;
+            let volume = volume.slab_of_lone_slices().unwrap_or(volume);
             let grid = |v: &raystream_io::Volume| (v.dims, v.spacing, v.origin, v.direction);
             if grid(&volume) != grid(first) {
                 bail!(
@@ -1942,7 +1969,8 @@ fn load(a: &RenderArgs) -> Result<Loaded> {
             input_name(a).display()
         );
     }
-    if a.view.is_some() || a.orbit.is_some() || a.parallel {
+    let lone = bones.as_ref().and_then(|b| b.lone_view);
+    if a.view.is_some() || a.orbit.is_some() || a.parallel || lone.is_some() {
         if scene.camera.is_some() {
             bail!(
                 "{}: the scene sets its camera; --view, --orbit and --parallel set the framing camera of scenes without one",
@@ -1952,7 +1980,7 @@ fn load(a: &RenderArgs) -> Result<Loaded> {
         scene.frame_projection = projection(a);
         let [az, el] = orbit_angles(a);
         let patient = bones.is_some() || scene.volume.is_some();
-        scene.frame_view = base_view(a, view0, patient)?.orbit(az, el);
+        scene.frame_view = base_view(a, lone_or(a, lone, view0), patient)?.orbit(az, el);
         scene.lights = studio_lights(a, &scene, view0, &lights0, scene.frame_view);
         if scene.frame_view.back.y < 0.0 && scene.ground_triangles > 0 {
             scene.leave_out_ground();

@@ -52,6 +52,11 @@ pub fn on_ct(file: &Path, colour_table: Option<&Path>, ct: &Volume, input: &Path
         ("structures laid on the CT's grid", known)
     } else {
         let labels = raystream_io::load_volume(file, &raystream_io::VolumeSelect::default())?;
+        // A lone slice's labels on the slab its CT was made (crate::common::slab_if_lone).
+        let labels = match labels.slab_of_lone_slices() {
+            Some(slab) if same_grid(&slab, ct) => slab,
+            _ => labels,
+        };
         if let Some(v) = crate::common::not_a_label(&labels) {
             bail!("{name}: --segmentation takes a label map (whole numbers from 0); it holds {v}");
         }
@@ -75,6 +80,16 @@ pub fn on_ct(file: &Path, colour_table: Option<&Path>, ct: &Volume, input: &Path
     })
 }
 
+/// Whether `labels` lie on the CT's grid, voxel for voxel.
+fn same_grid(labels: &Volume, ct: &Volume) -> bool {
+    labels.dims == ct.dims
+        && (0..3).all(|a| {
+            (labels.origin[a] - ct.origin[a]).abs() < 1e-3
+                && (labels.spacing[a] - ct.spacing[a]).abs() < 1e-6 * ct.spacing[a]
+                && (0..3).all(|b| (labels.direction[a][b] - ct.direction[a][b]).abs() < 1e-6)
+        })
+}
+
 /// Each CT voxel's segments in `labels` (a label volume; with `whole`, its segments each
 /// whole, overlaps and all), gathered as the CT voxels of each label into `members`; how they
 /// were matched: voxel for voxel on the CT's own grid, else the label voxel nearest each CT
@@ -85,12 +100,7 @@ fn labels_on_ct(
     members: &mut BTreeMap<u32, Vec<usize>>,
 ) -> &'static str {
     let [nx, ny, nz] = ct.dims;
-    let same = labels.dims == ct.dims
-        && (0..3).all(|a| {
-            (labels.origin[a] - ct.origin[a]).abs() < 1e-3
-                && (labels.spacing[a] - ct.spacing[a]).abs() < 1e-6 * ct.spacing[a]
-                && (0..3).all(|b| (labels.direction[a][b] - ct.direction[a][b]).abs() < 1e-6)
-        });
+    let same = same_grid(labels, ct);
     let to_labels = labels.index_to_world_affine().inverse() * ct.index_to_world_affine();
     let [lx, ly, lz] = labels.dims;
     // Slice by slice in parallel (a 512³ CT on another grid took 2.9 s on one thread), each

@@ -3,6 +3,8 @@
 
 mod common;
 
+use std::path::Path;
+
 use common::*;
 use serde_json::Value;
 
@@ -1147,4 +1149,111 @@ fn iso_writes_glb_in_gltfs_metres_and_axes() {
     {
         assert!((got - *want as f64).abs() < 1e-6, "{got} for {want}");
     }
+}
+
+/// A lone slice (one DICOM image) is drawn as the slab of tissue it images, seen along its
+/// axis unless `--view` says. Before, every mode but a slice seen from below drew an empty
+/// picture of a plane no ray sampled, and said nothing. Every mode now draws it, the GPU as
+/// the CPU; a MIP across the slab in parallel projection is the slice itself, HU for HU; the
+/// default view is `--view inferior`'s (an axial image as it is read); and a label map of the
+/// slice lies on the slab voxel for voxel.
+#[test]
+fn a_lone_slice_is_drawn_as_the_slab_it_images() {
+    let one =
+        volume("dicom/ct_slice_transfer_syntaxes/ct_1.2.840.10008.1.2.1_LittleEndianExplicit.dcm");
+    let ct = raystream_io::load_volume(Path::new(&one), &Default::default()).unwrap();
+    assert_eq!(ct.dims, [512, 512, 1]);
+    let png = |p: &Path| image::open(p).unwrap().to_rgb8();
+    for mode in [
+        "dvr",
+        "mip",
+        "minip",
+        "average",
+        "iso",
+        "slice",
+        "cinematic",
+    ] {
+        let mut pictures = Vec::new();
+        for dev in devices() {
+            let args = [one.as_str(), "--mode", mode, "--size", "64x64"];
+            let out = render_to(&format!("lone-{mode}-{dev}.png"), dev, &args);
+            pictures.push(png(&out));
+        }
+        // Not a uniform background: the slice's tissue shows in many shades.
+        let shades: std::collections::BTreeSet<[u8; 3]> =
+            pictures[0].pixels().map(|p| p.0).collect();
+        assert!(shades.len() > 20, "{mode}: {} shades", shades.len());
+        if let [cpu, gpu] = &pictures[..] {
+            let (mean, _) = raystream_cpu::srgb8_diff(cpu.as_raw(), gpu.as_raw());
+            assert!(
+                mean < 0.5,
+                "{mode}: the GPU's picture is {mean}/255 off the CPU's"
+            );
+        }
+    }
+
+    // Across the slab, every sample of a ray in parallel projection holds the slice's value
+    // where the ray crosses it: the MIP is the slice.
+    let exr = |name: &str, mode: &str| {
+        let args = [
+            one.as_str(),
+            "--mode",
+            mode,
+            "--parallel",
+            "--size",
+            "96x96",
+        ];
+        let e = raystream_cpu::load_exr(&render_to(name, "cpu", &args)).unwrap();
+        e.channels["Y"].as_f32().unwrap().to_vec()
+    };
+    let (mip, slice) = (exr("lone-mip.exr", "mip"), exr("lone-slice.exr", "slice"));
+    let inside = slice.iter().filter(|v| v.is_finite()).count();
+    assert!(inside > 96 * 96 / 2, "{inside} pixels see the slice");
+    for (i, (m, s)) in mip.iter().zip(&slice).enumerate() {
+        assert!(
+            m.is_nan() == s.is_nan() && (m.is_nan() || (m - s).abs() <= 1e-3 * s.abs().max(1.0)),
+            "pixel {i}: MIP {m} HU, slice {s} HU"
+        );
+    }
+
+    // Seen as --view inferior sees it, the bone surface too.
+    for (name, more) in [("slice", &["--mode", "slice"][..]), ("bones", &[][..])] {
+        let pair = ["default", "inferior"].map(|view| {
+            let mut args = vec![one.as_str(), "--size", "64x64"];
+            args.extend_from_slice(more);
+            if view == "inferior" {
+                args.extend_from_slice(&["--view", "inferior"]);
+            }
+            png(&render_to(&format!("lone-{name}-{view}.png"), "cpu", &args))
+        });
+        assert_eq!(
+            pair[0], pair[1],
+            "{name}: the default view is not --view inferior's"
+        );
+    }
+
+    // A label map of the slice (its bone) colours the slab's two layers, matched voxel for voxel.
+    let bone: Vec<u8> = ct.data.iter().map(|&v| (v >= 300.0) as u8).collect();
+    let voxels = bone.iter().filter(|&&b| b == 1).count();
+    let labels = tmp("lone-bone.nii.gz");
+    raystream_io::write_label_map(&labels, &ct, &bone, "bone").unwrap();
+    let args = [
+        "render",
+        one.as_str(),
+        "--mode",
+        "dvr",
+        "--segmentation",
+        labels.to_str().unwrap(),
+        "--size",
+        "64x64",
+        "--device",
+        "cpu",
+        "-o",
+    ];
+    let out = tmp("lone-segmented.png");
+    let o = run(&[&args[..], &[out.to_str().unwrap()]].concat());
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    let want = format!("({} voxels, matched on the CT's grid)", 2 * voxels);
+    assert!(e.contains(&want), "{want} not in: {e}");
 }

@@ -279,6 +279,41 @@ impl Volume {
         raystream_math::DAffine3::from_mat3_translation(m, DVec3::from(self.origin))
     }
 
+    /// A lone slice (one DICOM image, a 2-D NIfTI: the grid holds one voxel along some axis)
+    /// as the slab of tissue it images: along each such axis, two layers of the same values
+    /// half a spacing either side of the slice, so that the box of voxel centres, which
+    /// renderers march through and frame, is a spacing thick instead of a plane no ray
+    /// samples. Anywhere in the slab the values are the slice's (interpolation between equal
+    /// layers), and the plane through its middle is the slice itself. `None` where every axis
+    /// holds two voxels or more.
+    pub fn slab_of_lone_slices(&self) -> Option<Volume> {
+        if self.dims.iter().all(|&n| n > 1) {
+            return None;
+        }
+        let dims = self.dims.map(|n| n.max(2));
+        // Both layers of a doubled axis are the slice.
+        let src = |x: usize, a: usize| if self.dims[a] == 1 { 0 } else { x };
+        let mut data = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    data.push(self.at(src(i, 0), src(j, 1), src(k, 2)));
+                }
+            }
+        }
+        // The first layer half a spacing before the slice along its axis's direction.
+        let shift: [f64; 3] = std::array::from_fn(|a| if self.dims[a] == 1 { -0.5 } else { 0.0 });
+        let origin = self.index_to_world(DVec3::from(shift)).to_array();
+        Some(Volume {
+            dims,
+            origin,
+            data,
+            warnings: self.warnings.clone(),
+            series: self.series.clone(),
+            ..*self
+        })
+    }
+
     /// The same field on a grid of `dims` voxels (each ≥ 2, or 1 where the volume has 1)
     /// spanning the same voxel-centre box: same origin and direction, spacing scaled so that
     /// the first and last centres stay put; values by trilinear interpolation. Used to bring a

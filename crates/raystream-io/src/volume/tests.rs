@@ -153,6 +153,64 @@ fn index_and_world_transforms_invert_each_other() {
     assert!((v.index_to_world_affine().transform_point3(p) - w).length() < 1e-9);
 }
 
+/// A lone slice becomes a slab a spacing thick: two layers of its values half a spacing
+/// either side of it along its axis (whatever the grid's direction), the rest of the geometry
+/// unchanged; a volume of several slices is left as it is.
+#[test]
+fn a_lone_slice_becomes_a_slab_of_its_spacing() {
+    let one = load_volume(&shared(LE_EXPLICIT), &Default::default()).unwrap();
+    assert_eq!(one.dims, [512, 512, 1]);
+    // An oblique lone slice along the first axis, and a single voxel, beside the real one.
+    let mut side = Volume::hounsfield(
+        [1, 3, 4],
+        [2.5, 0.7, 1.3],
+        (0..12).map(|v| v as f32).collect(),
+    );
+    let (c, s) = (0.6f64, 0.8f64);
+    side.direction = [[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]];
+    side.origin = [10.0, -20.0, 30.0];
+    let dot = Volume::hounsfield([1, 1, 1], [1.0, 2.0, 3.0], vec![700.0]);
+    for v in [&one, &side, &dot] {
+        let slab = v.slab_of_lone_slices().expect("a lone slice");
+        assert_eq!(slab.dims, v.dims.map(|n| n.max(2)));
+        assert_eq!((slab.spacing, slab.direction), (v.spacing, v.direction));
+        assert_eq!(slab.data.len(), slab.voxel_count());
+        // Each voxel of the slab: the slice's value, half a spacing off the slice along each
+        // doubled axis.
+        let [nx, ny, nz] = slab.dims;
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let at = [i, j, k];
+                    let src: [usize; 3] =
+                        std::array::from_fn(|a| if v.dims[a] == 1 { 0 } else { at[a] });
+                    let off: [f64; 3] = std::array::from_fn(|a| {
+                        if v.dims[a] == 1 {
+                            at[a] as f64 - 0.5
+                        } else {
+                            0.0
+                        }
+                    });
+                    let p = DVec3::from(src.map(|x| x as f64)) + DVec3::from(off);
+                    let want = v.index_to_world(p);
+                    let got = slab.index_to_world(DVec3::from(at.map(|x| x as f64)));
+                    assert!((got - want).length() < 1e-9, "{at:?}: {got} vs {want}");
+                    assert_eq!(slab.at(i, j, k), v.at(src[0], src[1], src[2]));
+                }
+            }
+        }
+        // The slab's middle plane is the slice's.
+        let mid = DVec3::from(v.dims.map(|n| if n == 1 { 0.5 } else { 0.0 }));
+        assert!((slab.index_to_world(mid) - v.index_to_world(DVec3::ZERO)).length() < 1e-9);
+    }
+    let ct = load_volume(
+        &shared("nifti/abdomen_pelvis_ct_totalseg.nii.gz"),
+        &Default::default(),
+    )
+    .unwrap();
+    assert!(ct.slab_of_lone_slices().is_none());
+}
+
 /// Resampling keeps the box of voxel centres and reproduces a field trilinear interpolation
 /// is exact for (linear in each axis), at the new grid's world positions.
 #[test]
