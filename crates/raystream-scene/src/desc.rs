@@ -36,7 +36,8 @@ pub struct VolumeDesc {
     /// The temporal position (phase) of a 4-D CT, from 1 (default: the first).
     pub phase: Option<usize>,
     /// Transfer-function preset: ct-bone (default), ct-bones, ct-aaa, ct-muscle, ct-lung,
-    /// mip-bone.
+    /// mip-bone. Without it or `tf`, values of no known unit take a ramp from their own
+    /// background up ([`raystream_volume::auto::unit_free_transfer`]).
     pub preset: Option<String>,
     /// A transfer-function TOML file, relative to the scene file (instead of `preset`).
     pub tf: Option<String>,

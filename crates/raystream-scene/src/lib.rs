@@ -236,6 +236,17 @@ impl SceneVolume {
         )?;
         // A lone slice as the slab it images: a plane of no depth would take no sample.
         let volume = volume.slab_of_lone_slices().unwrap_or(volume);
+        // Values of no known unit, given no transfer function: CT-Bone's HU mean nothing
+        // there; a ramp from the values' own background up (raystream_volume::auto).
+        let unit_free = (d.tf.is_none()
+            && d.preset.is_none()
+            && volume.unit != raystream_io::ValueUnit::Hounsfield)
+            .then(|| {
+                let spacing = volume.spacing.iter().copied().fold(f64::INFINITY, f64::min);
+                raystream_volume::auto::unit_free_transfer(&volume.data, spacing)
+            })
+            .flatten();
+        let tf = unit_free.map_or(tf, |(ramp, _)| ramp);
         let segmentation = match &d.segmentation {
             Some(path) => Some(SceneSegmentation {
                 path: base_dir.join(path),

@@ -1,6 +1,7 @@
 //! CT volume processing: isosurface extraction ([`extract_isosurface`]) and the HU presets
 //! ([`Preset`]) that `raystream iso` and `raystream render VOLUME` use.
 
+pub mod auto;
 mod cases;
 pub mod centreline;
 pub mod distance;

@@ -427,7 +427,10 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
         pb.finish_and_clear();
         resample_ms = Some(ms(t.elapsed()));
     }
-    let (tf, base) = crate::dvr::options(&a.look, &a.threshold, mode, a.size)?;
+    let (mut tf, mut base) = crate::dvr::options(&a.look, &a.threshold, mode, a.size)?;
+    let unit_free = (&a.look, &a.threshold);
+    let seen = (&volume, a.input.as_path());
+    crate::dvr::unit_free_defaults(unit_free, seen, quiet, &mut tf, &mut base);
     let asked = crate::segments::Asked {
         segmentation: a.segmentation.as_deref(),
         segment: a.segment.as_deref(),

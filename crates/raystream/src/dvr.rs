@@ -19,6 +19,61 @@ use raystream_volume::{TfPreset, TransferFunction};
 use crate::cli::{Threshold, VolumeLook, WindowArg};
 use crate::common::{Backend, Picture, ms};
 
+/// For a volume whose values have no known unit (an 8-bit scientific-visualisation scan, MR),
+/// the defaults the user did not override come from its values
+/// ([`raystream_volume::auto`]), since the HU presets' mean nothing there (CT-Bone made an
+/// 8-bit scan a uniform pink box, the CT windows a grey one): dvr and cinematic take a ramp
+/// from their Otsu threshold (the background transparent) to their largest value, and iso
+/// the surface at that threshold in the ramp's colours, unless `--tf`, `--preset` or `--iso`
+/// says; the windowed modes (mip, minip, average, slice) a window spanning their range,
+/// unless `--window` says. Said unless `quiet`.
+pub fn unit_free_defaults(
+    (look, threshold): (&VolumeLook, &Threshold),
+    (volume, path): (&Volume, &std::path::Path),
+    quiet: bool,
+    tf: &mut TransferFunction,
+    opt: &mut DvrOptions,
+) {
+    if volume.unit == raystream_io::ValueUnit::Hounsfield {
+        return;
+    }
+    let Some((lo, hi)) = raystream_volume::auto::finite_range(&volume.data) else {
+        return;
+    };
+    let say = |what: String| {
+        if !quiet {
+            eprintln!(
+                "raystream: {}: values of no known unit ({lo} .. {hi}): {what}",
+                path.display()
+            );
+        }
+    };
+    let transfer = matches!(opt.mode, DvrMode::Dvr | DvrMode::Cinematic | DvrMode::Iso);
+    if transfer && look.tf.is_none() && threshold.preset.is_none() {
+        let spacing = raystream_cpu::dvr::min_spacing(volume) as f64;
+        let Some((ramp, t)) = raystream_volume::auto::unit_free_transfer(&volume.data, spacing)
+        else {
+            return;
+        };
+        *tf = ramp;
+        if opt.mode == DvrMode::Iso {
+            if threshold.iso.is_none() {
+                opt.iso_hu = t;
+                say(format!(
+                    "the surface at {t}, their Otsu threshold (between the background and the object; --iso V sets another), in a ramp's colours"
+                ));
+            }
+        } else {
+            say(format!(
+                "opacity ramped from 0 at {t}, their Otsu threshold (the background transparent), to {hi} (--tf FILE sets another)"
+            ));
+        }
+    } else if opt.mode.is_windowed() && opt.window.is_none() && hi > lo {
+        opt.window = Some((hi - lo, 0.5 * (lo + hi)));
+        say("the window spans them (--window W --level L sets another)".into());
+    }
+}
+
 /// The transfer function and options `--mode MODE` asks for, checked.
 pub fn options(
     look: &VolumeLook,

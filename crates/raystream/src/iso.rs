@@ -25,6 +25,56 @@ pub struct Bones {
     pub lone_view: Option<(raystream_scene::PatientView, &'static str)>,
 }
 
+/// The threshold of `volume`'s surface: `--iso`'s or the preset's; for values of no known unit
+/// given neither, their Otsu threshold ([`raystream_volume::auto::otsu_threshold`]: the edge
+/// between the background and the object), since an HU preset means nothing there (bone's 300
+/// lies above every value of an 8-bit scan); but not for a label map (whole numbers from 0,
+/// piecewise constant: [`raystream_volume::auto::equal_neighbour_share`]), whose surfaces
+/// are its segments'. Said unless `quiet`.
+pub fn surface_threshold(
+    volume: &Volume,
+    threshold: &crate::cli::Threshold,
+    path: &Path,
+    quiet: bool,
+) -> Result<f32> {
+    let given = threshold.iso.is_some() || threshold.preset.is_some();
+    // A label map's surfaces are its segments' (--segment), not a split of its numbers.
+    let labels = || {
+        crate::common::not_a_label(volume).is_none()
+            && raystream_volume::auto::equal_neighbour_share(volume.dims, &volume.data) >= 0.5
+    };
+    let otsu = if volume.unit == ValueUnit::Hounsfield || given || labels() {
+        None
+    } else {
+        raystream_volume::auto::otsu_threshold(&volume.data)
+    };
+    let Some(t) = otsu else {
+        let hu = threshold.hu()?;
+        if !quiet && volume.unit != ValueUnit::Hounsfield {
+            eprintln!(
+                "raystream: {}: values are not known to be Hounsfield units; the threshold {hu} applies to the raw values",
+                path.display()
+            );
+        }
+        return Ok(hu);
+    };
+    if !quiet {
+        eprintln!(
+            "raystream: {}: values of no known unit: the surface at {t}, their Otsu threshold (between the background and the object; --iso V sets another)",
+            path.display()
+        );
+    }
+    Ok(t)
+}
+
+/// `value` with its unit: "300 HU", or the bare number where the volume's unit is unknown.
+pub fn value_words(volume: &Volume, value: f32) -> String {
+    match volume.unit {
+        ValueUnit::Hounsfield => format!("{value} HU"),
+        ValueUnit::Unknown => format!("{value}"),
+    }
+}
+
 /// The surface at `hu` of `volume`, read from `path` in `load_ms`.
 pub fn bones_of(
     volume: &Volume,
@@ -34,18 +84,15 @@ pub fn bones_of(
     quiet: bool,
     load_ms: f64,
 ) -> Result<Bones> {
-    if !quiet && volume.unit != ValueUnit::Hounsfield {
-        eprintln!(
-            "raystream: {}: values are not known to be Hounsfield units; the threshold {hu} applies to the raw values",
-            path.display()
-        );
-    }
     let t1 = Instant::now();
     let pb = spinner(
         quiet,
         &format!(
-            "marching cubes over {}x{}x{} voxels at {hu} HU",
-            volume.dims[0], volume.dims[1], volume.dims[2]
+            "marching cubes over {}x{}x{} voxels at {}",
+            volume.dims[0],
+            volume.dims[1],
+            volume.dims[2],
+            value_words(volume, hu)
         ),
     );
     let mut surface = extract_isosurface(volume, hu);
@@ -67,7 +114,7 @@ pub fn bones_of(
     }
     Ok(Bones {
         surface,
-        what: format!("at {hu} HU"),
+        what: format!("at {}", value_words(volume, hu)),
         voxels: volume.voxel_count(),
         load_ms,
         iso_ms: ms(t1.elapsed()),
@@ -120,12 +167,13 @@ pub fn wants_segments(
 }
 
 pub fn run(a: &IsoArgs) -> Result<()> {
-    let hu = a.threshold.hu()?;
+    a.threshold.hu()?;
     let (volume, load_ms) = read_volume(&a.input, &a.pick.select(), a.quiet, None)?;
     let segment = a.segment.as_deref();
     if wants_segments(&volume, &a.threshold, segment, a.colour_table.as_deref()) {
         return run_segments(a, &volume, load_ms);
     }
+    let hu = surface_threshold(&volume, &a.threshold, &a.input, a.quiet)?;
     let mut b = bones_of(
         &volume,
         &a.input,
@@ -139,10 +187,11 @@ pub fn run(a: &IsoArgs) -> Result<()> {
     raystream_io::write_mesh(&a.output, &b.surface.mesh, Some(&b.surface.normals))?;
     if !a.quiet {
         eprintln!(
-            "raystream: wrote {} ({} vertices, {} triangles at {hu} HU): load {:.0} ms, isosurface {:.0} ms ({:.0} M voxels/s), write {:.0} ms",
+            "raystream: wrote {} ({} vertices, {} triangles at {}): load {:.0} ms, isosurface {:.0} ms ({:.0} M voxels/s), write {:.0} ms",
             a.output.display(),
             b.surface.mesh.positions.len(),
             b.surface.mesh.len(),
+            value_words(&volume, hu),
             b.load_ms,
             b.iso_ms,
             b.voxels as f64 / b.iso_ms / 1e3,

@@ -56,7 +56,7 @@ fn is_scene_file(a: &RenderArgs) -> bool {
 /// The scene named by INPUT: none → the built-in CT's bones, `.toml` → scene file, a volume →
 /// its bones, else a mesh. Also says how the volume steps went, for volumes.
 fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend::Entry>)> {
-    let hu = a.threshold.hu()?;
+    a.threshold.hu()?;
     let volume_scene = |path: &Path, embedded: Option<&[u8]>| -> Result<(Scene, Option<Bones>)> {
         let (volume, load_ms) = read_volume(path, &a.pick.select(), a.quiet, embedded)?;
         let (segment, table) = (a.segment.as_deref(), a.colour_table.as_deref());
@@ -69,6 +69,7 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend
             return Ok((scene, b));
         }
         let smoothing = a.smooth.unwrap_or(0);
+        let hu = crate::iso::surface_threshold(&volume, &a.threshold, path, a.quiet)?;
         let mut b = crate::iso::bones_of(&volume, path, hu, smoothing, a.quiet, load_ms)?;
         b.lone_view = lone_view;
         let mesh = std::mem::take(&mut b.surface.mesh);
@@ -868,7 +869,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         legend,
     };
     let track = wall_track(a, &volume, curve.as_ref())?;
-    let (tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
+    let (mut tf, mut opt) = dvr::options(&a.look, &a.threshold, mode, a.size)?;
     // An average kept to segments is windowed on their values unless --window says.
     if let Some((w, l)) = painted.as_ref().and_then(|p| p.window)
         && opt.window.is_none()
@@ -878,6 +879,8 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             ", window {w:.0}/{l:.0} HU (their voxels' median, twice their 10th to 90th percentile)"
         );
     }
+    let unit_free = (&a.look, &a.threshold);
+    dvr::unit_free_defaults(unit_free, (&volume, path), a.quiet, &mut tf, &mut opt);
     if mode == DvrMode::Cinematic {
         opt.spp = a.spp.unwrap_or(opt.spp);
         opt.bounces = a.max_depth;

@@ -1257,3 +1257,95 @@ fn a_lone_slice_is_drawn_as_the_slab_it_images() {
     let want = format!("({} voxels, matched on the CT's grid)", 2 * voxels);
     assert!(e.contains(&want), "{want} not in: {e}");
 }
+
+/// A volume whose values have no known unit (the 8-bit SciVis bonsai) takes its defaults from
+/// its values. Before, `render` refused it (bone's 300 lies above its every value), dvr drew
+/// CT-Bone's uniform box and the CT windows a grey one. Now the bone surface and iso mode
+/// stand at its Otsu threshold; dvr's ramp leaves every ray that meets only values below it
+/// transparent, as a MIP of the same rays tells; the windows span its range; the GPU draws
+/// the CPU's pictures; and what the user gives (`--iso`, `--window`) still rules.
+#[test]
+fn values_of_no_known_unit_take_their_defaults_from_the_values() {
+    let bonsai = volume("nifti/scivis_bonsai.nii.gz");
+    let v = raystream_io::load_volume(Path::new(&bonsai), &Default::default()).unwrap();
+    assert_eq!(v.unit, raystream_io::ValueUnit::Unknown);
+    let t = raystream_volume::auto::otsu_threshold(&v.data).unwrap();
+    let said = |args: &[&str], name: &str| {
+        let out = tmp(name);
+        let mut all = vec![
+            "render",
+            bonsai.as_str(),
+            "--size",
+            "48x48",
+            "--device",
+            "cpu",
+        ];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["-o", out.to_str().unwrap()]);
+        let o = run(&all);
+        assert!(o.status.success(), "{all:?}: {}", stderr(&o));
+        stderr(&o)
+    };
+    let otsu = format!("the surface at {t}, their Otsu threshold");
+    for (args, name) in [
+        (&[][..], "unit-free-bones.png"),
+        (&["--mode", "iso"][..], "unit-free-iso.png"),
+    ] {
+        let e = said(args, name);
+        assert!(e.contains(&otsu), "{args:?}: {e}");
+    }
+    let e = said(&["--iso", "120"], "unit-free-120.png");
+    assert!(
+        !e.contains("Otsu") && e.contains("the threshold 120 applies to the raw values"),
+        "{e}"
+    );
+
+    // dvr: a pixel whose ray meets only values below the threshold (its MIP) shows the
+    // background, as the picture's corner, whose ray misses the volume, does.
+    let args = [bonsai.as_str(), "--mode", "dvr", "--size", "64x64"];
+    let mut pictures = Vec::new();
+    for dev in devices() {
+        let out = render_to(&format!("unit-free-dvr-{dev}.png"), dev, &args);
+        pictures.push(image::open(out).unwrap().to_rgb8());
+    }
+    if let [cpu, gpu] = &pictures[..] {
+        let (mean, _) = raystream_cpu::srgb8_diff(cpu.as_raw(), gpu.as_raw());
+        assert!(mean < 0.5, "the GPU's picture is {mean}/255 off the CPU's");
+    }
+    let mip_args = [bonsai.as_str(), "--mode", "mip", "--size", "64x64"];
+    let mip = raystream_cpu::load_exr(&render_to("unit-free-mip.exr", "cpu", &mip_args)).unwrap();
+    let mip = mip.channels["Y"].as_f32().unwrap();
+    assert!(mip[0].is_nan(), "the corner's ray meets the volume");
+    let dvr = &pictures[0];
+    let background = dvr.get_pixel(0, 0).0;
+    let (mut clear, mut shown) = (0, 0);
+    for (i, m) in mip.iter().enumerate() {
+        let p = dvr.get_pixel(i as u32 % 64, i as u32 / 64).0;
+        if m.is_nan() || *m < t {
+            assert_eq!(
+                p, background,
+                "pixel {i}: MIP {m} below {t}, yet not the background"
+            );
+            clear += 1;
+        } else if *m > 200.0 && p != background {
+            shown += 1;
+        }
+    }
+    assert!(
+        clear > 64 * 64 / 4 && shown > 100,
+        "{clear} clear, {shown} shown"
+    );
+
+    // The windowed modes span the values: the largest (255) is white; --window still rules.
+    let brightest = |args: &[&str], name: &str| {
+        let mut all = vec![bonsai.as_str(), "--size", "64x64"];
+        all.extend_from_slice(args);
+        let png = image::open(render_to(name, "cpu", &all))
+            .unwrap()
+            .to_luma8();
+        png.pixels().map(|p| p.0[0]).max().unwrap()
+    };
+    assert_eq!(brightest(&["--mode", "mip"], "unit-free-mip.png"), 255);
+    let narrow = ["--mode", "mip", "--window", "1000", "--level", "1000"];
+    assert!(brightest(&narrow, "unit-free-mip-window.png") < 100);
+}
