@@ -326,30 +326,87 @@ fn group(slices: &[Slice]) -> Vec<(String, usize, String)> {
     v
 }
 
-/// Parses every DICOM file of a folder (or the one file given); files that are not DICOM are
-/// skipped with a warning, a folder without any DICOM image is an error.
+/// At most this many files are read from the folders below a folder that holds none of its
+/// own (a CD's or a PACS export's tree): more is an error asking for the series' own folder,
+/// not minutes of parsing a disk.
+pub const MAX_TREE_FILES: usize = 1 << 17;
+/// How many folders deep below such a folder its tree is searched (a CD's DICOM/ST000/SE000
+/// is three).
+pub const MAX_TREE_DEPTH: usize = 8;
+
+/// A folder's files (not DICOMDIR, not hidden ones) and its folders (not those behind links,
+/// which could lead back up the tree), each in path order.
+fn folder_entries(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>), VolumeError> {
+    let (mut files, mut dirs) = (Vec::new(), Vec::new());
+    for entry in std::fs::read_dir(dir).map_err(|e| VolumeError::io(dir, e))? {
+        let Ok(entry) = entry else { continue };
+        let p = entry.path();
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if name.starts_with('.') {
+            continue;
+        }
+        if entry.file_type().is_ok_and(|t| t.is_dir()) {
+            dirs.push(p);
+        } else if p.is_file() && !name.eq_ignore_ascii_case("DICOMDIR") {
+            files.push(p);
+        }
+    }
+    files.sort();
+    dirs.sort();
+    Ok((files, dirs))
+}
+
+/// The files to read from folder `path`: its own; where it holds none (a CD's root, with a
+/// DICOMDIR beside a tree such as DICOM/ST000/SE000, or an export's patient/study/series
+/// folders), those of the folders below it, as viewers import such trees, with a warning that
+/// says so.
+fn files_to_read(path: &Path) -> Result<(Vec<PathBuf>, Option<String>), VolumeError> {
+    let (files, dirs) = folder_entries(path)?;
+    if !files.is_empty() || dirs.is_empty() {
+        return Ok((files, None));
+    }
+    let (mut found, mut folders) = (Vec::new(), 0usize);
+    let mut pending: Vec<(PathBuf, usize)> = dirs.into_iter().rev().map(|d| (d, 1)).collect();
+    while let Some((dir, depth)) = pending.pop() {
+        let (files, dirs) = folder_entries(&dir)?;
+        if !files.is_empty() {
+            folders += 1;
+        }
+        found.extend(files);
+        if found.len() > MAX_TREE_FILES {
+            return Err(VolumeError::invalid(
+                path,
+                format!(
+                    "the folders below it hold more than {MAX_TREE_FILES} files: give the series' own folder"
+                ),
+            ));
+        }
+        if depth < MAX_TREE_DEPTH {
+            pending.extend(dirs.into_iter().rev().map(|d| (d, depth + 1)));
+        }
+    }
+    let note = format!(
+        "it holds no file of its own: read the {} files in the {folders} folder{} below it",
+        found.len(),
+        if folders == 1 { "" } else { "s" }
+    );
+    Ok((found, Some(note)))
+}
+
+/// Parses every DICOM file of a folder (or the one file given; a folder with no file of its
+/// own, the folders below it: [`files_to_read`]); files that are not DICOM are skipped with a
+/// warning, a folder without any DICOM image is an error.
 fn read_folder(path: &Path) -> Result<(Vec<Slice>, Vec<String>), VolumeError> {
-    let files: Vec<PathBuf> = if path.is_dir() {
-        let mut v: Vec<PathBuf> = std::fs::read_dir(path)
-            .map_err(|e| VolumeError::io(path, e))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| {
-                p.is_file()
-                    && !p
-                        .file_name()
-                        .and_then(|n| n.to_str())
-                        .is_some_and(|n| n.starts_with('.') || n.eq_ignore_ascii_case("DICOMDIR"))
-            })
-            .collect();
-        v.sort();
-        v
+    let (files, tree) = if path.is_dir() {
+        files_to_read(path)?
     } else {
-        vec![path.to_path_buf()]
+        (vec![path.to_path_buf()], None)
     };
     let parsed: Vec<Result<Vec<Slice>, VolumeError>> =
         files.par_iter().map(|f| read_file(f)).collect();
     let mut slices = Vec::new();
-    let mut warnings = Vec::new();
+    let mut warnings: Vec<String> = tree.into_iter().collect();
     let mut first_error = None;
     for r in parsed {
         match r {
@@ -369,7 +426,10 @@ fn read_folder(path: &Path) -> Result<(Vec<Slice>, Vec<String>), VolumeError> {
                 path,
                 format!("no readable DICOM image in the folder (first problem: {e})"),
             ),
-            None => VolumeError::invalid(path, "the folder is empty"),
+            None => VolumeError::invalid(
+                path,
+                "the folder is empty (and no folder below it holds a file)",
+            ),
         });
     }
     Ok((slices, warnings))

@@ -153,6 +153,71 @@ fn index_and_world_transforms_invert_each_other() {
     assert!((v.index_to_world_affine().transform_point3(p) - w).length() < 1e-9);
 }
 
+/// Copies the files of `src` into `dst` (made with its parents).
+fn copy_folder(src: &Path, dst: &Path) {
+    std::fs::create_dir_all(dst).unwrap();
+    for e in std::fs::read_dir(src).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dst.join(e.file_name())).unwrap();
+    }
+}
+
+/// A folder that holds no file of its own (a CD's root: a DICOMDIR beside DICOM/ST000/SE000…)
+/// is read through the folders below it, as viewers import such trees: the largest series, the
+/// same volume as from its own folder, the others listed, a warning saying where the files
+/// were. A folder with files of its own is read alone, as before; the search stops
+/// `MAX_TREE_DEPTH` folders down, and an empty tree is an error that says it looked.
+#[test]
+fn a_cds_folder_tree_is_read_through_its_folders() {
+    let series = shared("dicom/abdomen_ct_j2k_totalseg");
+    let scratch = crate::tests::scratch_dir("cd");
+    let cd = scratch.path().join("cd");
+    copy_folder(&series, &cd.join("DICOM/ST000/SE000"));
+    let other = cd.join("DICOM/ST000/SE001");
+    std::fs::create_dir_all(&other).unwrap();
+    std::fs::copy(shared(LE_EXPLICIT), other.join("IM0000")).unwrap();
+    std::fs::write(cd.join("DICOMDIR"), b"not read").unwrap();
+    let want = load_volume(&series, &Default::default()).unwrap();
+    let got = load_volume(&cd, &Default::default()).unwrap();
+    assert_eq!(
+        (got.dims, got.origin, got.spacing),
+        (want.dims, want.origin, want.spacing)
+    );
+    assert_eq!(got.data, want.data);
+    assert!(
+        got.warnings.iter().any(
+            |w| w == "it holds no file of its own: read the 21 files in the 2 folders below it"
+        ),
+        "{:?}",
+        got.warnings
+    );
+    let listed = list_dicom_series(&cd).unwrap();
+    assert_eq!(listed.iter().map(|s| s.1).collect::<Vec<_>>(), [20, 1]);
+
+    // A folder with a file of its own: that file alone.
+    let own = scratch.path().join("own");
+    copy_folder(&series, &own.join("sub"));
+    std::fs::copy(shared(LE_EXPLICIT), own.join("slice.dcm")).unwrap();
+    assert_eq!(
+        load_volume(&own, &Default::default()).unwrap().dims,
+        [512, 512, 1]
+    );
+
+    // Beyond the search's depth: not found.
+    let mut deep = scratch.path().join("deep");
+    for level in 0..=dicom::MAX_TREE_DEPTH {
+        deep = deep.join(format!("level{level}"));
+    }
+    std::fs::create_dir_all(&deep).unwrap();
+    std::fs::copy(shared(LE_EXPLICIT), deep.join("IM0000")).unwrap();
+    let e = load_volume(&scratch.path().join("deep"), &Default::default()).unwrap_err();
+    assert!(
+        e.to_string()
+            .ends_with("the folder is empty (and no folder below it holds a file)"),
+        "{e}"
+    );
+}
+
 /// A lone slice becomes a slab a spacing thick: two layers of its values half a spacing
 /// either side of it along its axis (whatever the grid's direction), the rest of the geometry
 /// unchanged; a volume of several slices is left as it is.
