@@ -8,7 +8,8 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a tex
         library and a PNG texture, any of them mutated; a PLY with normals), tiny volumes
         (NIfTI, NRRD and MetaImage, attached and detached, via SimpleITK; 4-D ones, and
         3D Slicer's interleaved 4-D NRRD, read at a --phase or as a --cine) and real DICOM slices from
-        ../shared (JPEG-LS and 12-bit JPEG among them) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
+        ../shared (JPEG-LS and 12-bit JPEG among them; three of a series in a ZIP, as a PACS
+        hands a study out) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
         and `raystream render --aov prim` (meshes also shaded; volumes, and an RT Structure Set laid on its CT, also `--mode` mip, minip, average, slice,
         dvr or cinematic (half of those --denoise, some with --anisotropy and --exposure), some
         with --interpolation linear, cubic or cubic-interpolating, some with --slab, to an EXR, a turntable of EXRs or an animation (APNG, GIF); some tinted by themselves as a label map, some
@@ -44,6 +45,7 @@ import struct
 import subprocess
 import sys
 import tempfile
+import zipfile
 import zlib
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -190,6 +192,14 @@ def seeds(d):
     for n in names[:4] + [n for n in names if re.search(r"\.4\.(51|57|70|80|81|90|91)_|\.1\.2\.5_", n)]:
         shutil.copy(os.path.join(ts, n), os.path.join(d, n))
         os.chmod(os.path.join(d, n), 0o644)
+    # A ZIP of a series' first slices as a PACS hands a study out, in a CD's folders beside a
+    # DICOMDIR, stored and deflated (the archive is mutated whole).
+    series = os.path.join(SHARED, "data/volumes/dicom/abdomen_ct_j2k_totalseg")
+    with zipfile.ZipFile(os.path.join(d, "st.zip"), "w") as z:
+        for k, n in enumerate(sorted(os.listdir(series))[:3]):
+            z.write(os.path.join(series, n), f"DICOM/ST000/SE000/IM{k:04}",
+                    compress_type=zipfile.ZIP_DEFLATED if k % 2 else zipfile.ZIP_STORED)
+        z.writestr("DICOMDIR", b"not read")
 
 
 def item(**kw):

@@ -285,7 +285,7 @@ fn read_mesh_file(path: &Path) -> Result<(MeshFormat, Vec<u8>), MeshError> {
     let format = MeshFormat::from_path(path).ok_or_else(|| {
         MeshError::invalid(
             path,
-            "unsupported mesh format (expected .obj, .ply, .stl, optionally .gz, or .gltf, .glb)",
+            "unsupported format: not a mesh (.obj, .ply, .stl, optionally .gz, or .gltf, .glb) nor a volume (a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd)",
         )
     })?;
     let bytes = std::fs::read(path).map_err(|error| MeshError::Io {

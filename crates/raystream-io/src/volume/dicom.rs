@@ -183,7 +183,9 @@ pub(crate) fn series_and_frames(path: &Path) -> Result<Vec<(String, usize, Strin
 
 pub(crate) fn load(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeError> {
     // A file is read and parsed once: a Segmentation, or an image's slices.
-    let (slices, mut warnings) = if path.is_file() {
+    let (slices, mut warnings) = if is_zip(path) {
+        read_zip(path)?
+    } else if path.is_file() {
         let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
         let (meta, obj) = parse_dataset(&bytes, path)?;
         if super::segmentation::is_segmentation(&meta, &obj) {
@@ -398,41 +400,175 @@ fn files_to_read(path: &Path) -> Result<(Vec<PathBuf>, Option<String>), VolumeEr
 /// own, the folders below it: [`files_to_read`]); files that are not DICOM are skipped with a
 /// warning, a folder without any DICOM image is an error.
 fn read_folder(path: &Path) -> Result<(Vec<Slice>, Vec<String>), VolumeError> {
+    if is_zip(path) {
+        return read_zip(path);
+    }
     let (files, tree) = if path.is_dir() {
         files_to_read(path)?
     } else {
         (vec![path.to_path_buf()], None)
     };
-    let parsed: Vec<Result<Vec<Slice>, VolumeError>> =
-        files.par_iter().map(|f| read_file(f)).collect();
-    let mut slices = Vec::new();
-    let mut warnings: Vec<String> = tree.into_iter().collect();
-    let mut first_error = None;
-    for r in parsed {
-        match r {
-            Ok(s) => slices.extend(s),
-            Err(e) => {
-                if path.is_dir() {
-                    warnings.push(format!("skipped {e}"));
+    let mut found = Found {
+        warnings: tree.into_iter().collect(),
+        ..Default::default()
+    };
+    found.add(
+        files.par_iter().map(|f| read_file(f)).collect(),
+        path.is_dir(),
+    );
+    found.finish(path, path.is_dir(), "the folder")
+}
+
+/// The slices parsed so far from a folder's or an archive's files, the files skipped, and the
+/// first problem.
+#[derive(Default)]
+struct Found {
+    slices: Vec<Slice>,
+    warnings: Vec<String>,
+    first_error: Option<VolumeError>,
+}
+
+impl Found {
+    /// Files' parses; where `many` (a folder, an archive), the files that are not DICOM images
+    /// are skipped with a warning.
+    fn add(&mut self, parsed: Vec<Result<Vec<Slice>, VolumeError>>, many: bool) {
+        for r in parsed {
+            match r {
+                Ok(s) => self.slices.extend(s),
+                Err(e) => {
+                    if many {
+                        self.warnings.push(format!("skipped {e}"));
+                    }
+                    self.first_error.get_or_insert(e);
                 }
-                first_error.get_or_insert(e);
             }
         }
     }
-    if slices.is_empty() {
-        return Err(match first_error {
-            Some(e) if !path.is_dir() => e,
+
+    /// The slices and warnings; an error where no image was found in `path` (`what`: "the
+    /// folder", "the archive").
+    fn finish(
+        self,
+        path: &Path,
+        many: bool,
+        what: &str,
+    ) -> Result<(Vec<Slice>, Vec<String>), VolumeError> {
+        if !self.slices.is_empty() {
+            return Ok((self.slices, self.warnings));
+        }
+        Err(match self.first_error {
+            Some(e) if !many => e,
             Some(e) => VolumeError::invalid(
                 path,
-                format!("no readable DICOM image in the folder (first problem: {e})"),
+                format!("no readable DICOM image in {what} (first problem: {e})"),
             ),
-            None => VolumeError::invalid(
+            None if what == "the folder" => VolumeError::invalid(
                 path,
                 "the folder is empty (and no folder below it holds a file)",
             ),
-        });
+            None => VolumeError::invalid(path, format!("{what} holds no file")),
+        })
     }
-    Ok((slices, warnings))
+}
+
+/// At most this many bytes are unpacked from a ZIP (its files' sizes summed, as they unpack,
+/// not as they claim): a larger study is unpacked by its user, not into memory here.
+pub const MAX_ZIP_BYTES: u64 = 1 << 32;
+/// A ZIP's files unpacked, then parsed in parallel, at a time.
+const ZIP_BATCH: usize = 64;
+
+/// Whether `path` is a ZIP archive (by its name).
+fn is_zip(path: &Path) -> bool {
+    path.is_file()
+        && path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("zip"))
+}
+
+/// Parses every DICOM file of a ZIP archive, as [`read_folder`] a folder's: its folders
+/// flattened, DICOMDIR, hidden files and macOS's `__MACOSX` resource forks left out, every
+/// other file that is not a DICOM image skipped with a warning. Files are named in errors as
+/// `ARCHIVE.zip/PATH/IN/IT`.
+fn read_zip(path: &Path) -> Result<(Vec<Slice>, Vec<String>), VolumeError> {
+    read_zip_within(path, MAX_ZIP_BYTES)
+}
+
+/// [`read_zip`], unpacking at most `limit` bytes.
+pub(crate) fn read_zip_within(
+    path: &Path,
+    limit: u64,
+) -> Result<(Vec<Slice>, Vec<String>), VolumeError> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
+    let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file))
+        .map_err(|e| VolumeError::invalid(path, format!("not a readable ZIP archive: {e}")))?;
+    if zip.len() > MAX_TREE_FILES {
+        return Err(VolumeError::invalid(
+            path,
+            format!(
+                "the archive holds {} entries, more than {MAX_TREE_FILES}: unpack it and give the series' folder",
+                zip.len()
+            ),
+        ));
+    }
+    let mut found = Found::default();
+    let mut batch: Vec<(PathBuf, Vec<u8>)> = Vec::new();
+    let mut unpacked = 0u64;
+    let parse = |batch: &mut Vec<(PathBuf, Vec<u8>)>, found: &mut Found| {
+        let parsed = batch
+            .par_iter()
+            .map(|(name, bytes)| parse_file(bytes, name))
+            .collect();
+        found.add(parsed, true);
+        batch.clear();
+    };
+    for i in 0..zip.len() {
+        let mut entry = zip
+            .by_index(i)
+            .map_err(|e| VolumeError::invalid(path, format!("entry {i} of the archive: {e}")))?;
+        let name = match entry.name() {
+            Ok(n) => n.to_string(),
+            Err(e) => {
+                found.warnings.push(format!("skipped entry {i}: {e}"));
+                continue;
+            }
+        };
+        let base = name.rsplit('/').next().unwrap_or_default();
+        if !entry.is_file()
+            || base.is_empty()
+            || base.starts_with('.')
+            || base.eq_ignore_ascii_case("DICOMDIR")
+            || name.starts_with("__MACOSX/")
+        {
+            continue;
+        }
+        let inner = path.join(&name);
+        // Read no further than the room left: the size an entry claims is not trusted.
+        let room = limit - unpacked;
+        let mut bytes = Vec::new();
+        let read = (&mut entry).take(room + 1).read_to_end(&mut bytes);
+        unpacked += bytes.len() as u64;
+        if unpacked > limit {
+            return Err(VolumeError::invalid(
+                path,
+                format!(
+                    "its files unpack to more than {limit} bytes: unpack it and give the series' folder"
+                ),
+            ));
+        }
+        if let Err(e) = read {
+            let e = VolumeError::invalid(&inner, format!("cannot be unpacked: {e}"));
+            found.add(vec![Err(e)], true);
+            continue;
+        }
+        batch.push((inner, bytes));
+        if batch.len() == ZIP_BATCH {
+            parse(&mut batch, &mut found);
+        }
+    }
+    parse(&mut batch, &mut found);
+    found.finish(path, true, "the archive")
 }
 
 /// What the file meta group says: the transfer syntax, and the instance it stores (Media Storage

@@ -63,7 +63,11 @@ impl VolumeFormat {
             Some(Self::Nrrd)
         } else if name.ends_with(".mha") || name.ends_with(".mhd") {
             Some(Self::MetaImage)
-        } else if name.ends_with(".dcm") {
+        } else if name.ends_with(".dcm") || name.ends_with(".zip") {
+            // A ZIP: a DICOM study as a PACS or a web viewer hands it out.
+            Some(Self::Dicom)
+        } else if has_dicom_preamble(path) {
+            // A DICOM file without the extension, as on a CD (DICOM/ST000/SE000/IM0000).
             Some(Self::Dicom)
         } else {
             None
@@ -80,7 +84,17 @@ impl VolumeFormat {
     }
 }
 
-/// Whether `path` names something [`load_volume`] reads (a directory, or a volume extension).
+/// Whether the file at `path` starts as a DICOM Part 10 file: a 128-byte preamble, then "DICM".
+fn has_dicom_preamble(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = [0u8; 132];
+    std::fs::File::open(path)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .is_ok_and(|_| &head[128..] == b"DICM")
+}
+
+/// Whether `path` names something [`load_volume`] reads (a directory, a volume extension, a
+/// ZIP, or a DICOM file by its preamble).
 pub fn is_volume_path(path: &Path) -> bool {
     VolumeFormat::from_path(path).is_some()
 }
@@ -507,7 +521,7 @@ pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeE
     let format = VolumeFormat::from_path(path).ok_or_else(|| {
         VolumeError::invalid(
             path,
-            "unsupported volume format (expected a DICOM folder, .dcm, .nii, .nii.gz, .nrrd, .nhdr, .mha or .mhd)",
+            "unsupported volume format (expected a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha or .mhd)",
         )
     })?;
     if !path.exists() {

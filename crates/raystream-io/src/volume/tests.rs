@@ -218,6 +218,88 @@ fn a_cds_folder_tree_is_read_through_its_folders() {
     );
 }
 
+/// A ZIP of a study, as a PACS or a web viewer hands it out, reads as its series' folder: its
+/// folders flattened, DICOMDIR and macOS's `__MACOSX` left out, another file skipped with a
+/// warning naming it inside the archive; a DICOM file without an extension is a volume too;
+/// an archive that unpacks beyond the limit, and a file that is no ZIP, are errors naming it.
+#[test]
+fn a_zip_of_a_study_reads_as_its_folder() {
+    use std::io::Write;
+    let series = shared("dicom/abdomen_ct_j2k_totalseg");
+    let scratch = crate::tests::scratch_dir("zip");
+    let zip_path = scratch.path().join("Study.ZIP");
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(&zip_path).unwrap());
+    let stored =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    let deflated = zip::write::SimpleFileOptions::default();
+    let mut names: Vec<_> = std::fs::read_dir(&series)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    names.sort();
+    for (i, f) in names.iter().enumerate() {
+        let name = format!("PATIENT/DICOM/ST000/SE000/IM{i:04}");
+        zip.start_file(name, if i % 2 == 0 { stored } else { deflated })
+            .unwrap();
+        zip.write_all(&std::fs::read(f).unwrap()).unwrap();
+    }
+    for (name, bytes) in [
+        ("PATIENT/DICOMDIR", &b"not read"[..]),
+        ("__MACOSX/PATIENT/._IM0000", b"resource fork"),
+        ("PATIENT/README.TXT", b"a note"),
+    ] {
+        zip.start_file(name, deflated).unwrap();
+        zip.write_all(bytes).unwrap();
+    }
+    zip.finish().unwrap();
+
+    assert!(is_volume_path(&zip_path));
+    let want = load_volume(&series, &Default::default()).unwrap();
+    let got = load_volume(&zip_path, &Default::default()).unwrap();
+    assert_eq!(
+        (got.dims, got.origin, got.spacing),
+        (want.dims, want.origin, want.spacing)
+    );
+    assert_eq!(got.data, want.data);
+    let skipped: Vec<&String> = got
+        .warnings
+        .iter()
+        .filter(|w| w.starts_with("skipped"))
+        .collect();
+    assert_eq!(skipped.len(), 1, "{:?}", got.warnings);
+    assert!(
+        skipped[0].contains("Study.ZIP/PATIENT/README.TXT"),
+        "{skipped:?}"
+    );
+    assert_eq!(list_dicom_series(&zip_path).unwrap()[0].1, names.len());
+
+    // A DICOM file as a CD names it, without an extension.
+    let bare = scratch.path().join("IM0000");
+    std::fs::copy(&names[0], &bare).unwrap();
+    assert!(is_volume_path(&bare));
+    assert_eq!(
+        load_volume(&bare, &Default::default()).unwrap().dims,
+        [512, 512, 1]
+    );
+
+    let e = dicom::read_zip_within(&zip_path, 1 << 20)
+        .map(|_| ())
+        .unwrap_err();
+    assert!(
+        e.to_string().contains("unpack to more than 1048576 bytes"),
+        "{e}"
+    );
+    let junk = scratch.path().join("junk.zip");
+    std::fs::write(&junk, b"PK but no archive").unwrap();
+    let e = load_volume(&junk, &Default::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("junk.zip") && e.contains("not a readable ZIP archive"),
+        "{e}"
+    );
+}
+
 /// A lone slice becomes a slab a spacing thick: two layers of its values half a spacing
 /// either side of it along its axis (whatever the grid's direction), the rest of the geometry
 /// unchanged; a volume of several slices is left as it is.
