@@ -1230,6 +1230,40 @@ mod tests {
         }
     }
 
+    /// A scene's volume of no known unit, given no transfer function, takes the ramp of its
+    /// own values (CT-Bone filled the SciVis bonsai's box); a preset named still rules, and a
+    /// CT keeps CT-Bone; a lone slice joins as the slab it images.
+    #[test]
+    fn volumes_join_as_the_renderers_draw_them() {
+        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/volumes");
+        let scene = |path: &Path, extra: &str| {
+            let text = format!(
+                "[volume]\npath = {:?}\n{extra}\n[[objects]]\nshape = \"sphere\"",
+                path.to_str().unwrap()
+            );
+            compile(&text).unwrap().volume.unwrap()
+        };
+        let bonsai = data.join("nifti/scivis_bonsai.nii.gz");
+        let v = scene(&bonsai, "");
+        let spacing = v
+            .volume
+            .spacing
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        let (ramp, _) =
+            raystream_volume::auto::unit_free_transfer(&v.volume.data, spacing).unwrap();
+        assert_eq!(v.tf, ramp);
+        let named = scene(&bonsai, "preset = \"ct-bone\"");
+        assert_eq!(named.tf, TfPreset::CtBone.function());
+        let ct = compile(&format!("{CT}\n[[objects]]\nshape = \"sphere\"")).unwrap();
+        assert_eq!(ct.volume.unwrap().tf, TfPreset::CtBone.function());
+        let slice = data.join(
+            "dicom/ct_slice_transfer_syntaxes/ct_1.2.840.10008.1.2.1_LittleEndianExplicit.dcm",
+        );
+        assert_eq!(scene(&slice, "").volume.dims, [512, 512, 2]);
+    }
+
     /// A scene's volume is read by the cubic B-spline unless it says "linear".
     #[test]
     fn volume_interpolation_defaults_to_cubic() {
