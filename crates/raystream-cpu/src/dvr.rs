@@ -3045,7 +3045,7 @@ mod tests {
     #[test]
     fn the_interpolating_splines_tables_hug_its_values() {
         use crate::cinematic::{MAJORANT_CELL, sigma_of};
-        use crate::sampling::{block_hull, widened};
+        use crate::sampling::{block_hull, widened_by};
         let vol = abdomen();
         let tf = TfPreset::CtBones.function();
         let coefficients = spline_grid(&vol, Interpolation::CubicInterpolating);
@@ -3058,7 +3058,8 @@ mod tests {
             (0..cell_dims(vol.dims, cell).iter().product::<usize>())
                 .map(|b| {
                     let (lo, hi) = cell_corners(vol.dims, cell, b);
-                    let (l, h) = widened(block_hull(vol.dims, &coefficients, lo, hi).hull);
+                    let b = block_hull(vol.dims, &coefficients, lo, hi);
+                    let (l, h) = widened_by(b.hull, b.scale);
                     sigma_of(tf.max_opacity_in(l, h))
                 })
                 .collect()

@@ -172,6 +172,7 @@ pub(crate) fn block_hull(
         hull: (low, high),
         met: (met_low, met_high),
         corners,
+        scale: block.iter().fold(0.0f32, |m, v| m.max(v.abs())),
     }
 }
 
@@ -187,12 +188,21 @@ pub(crate) struct BlockHull {
     /// them). The spline is continuous, so it takes every value in this range somewhere in
     /// the block: no bound can be tighter.
     pub met: (f32, f32),
+    /// The largest magnitude among the values the block's samples read (the block and its
+    /// halo), for [`widened_by`].
+    pub scale: f32,
 }
 
-/// A range widened by 10⁻⁵ of its values: the spline's sums round in f32, and where a bound is
-/// met (a voxel centre) a sample may round just past it.
-pub(crate) fn widened((lo, hi): (f32, f32)) -> (f32, f32) {
-    (lo - 1e-5 * (1.0 + lo.abs()), hi + 1e-5 * (1.0 + hi.abs()))
+/// A range widened by 10⁻⁵ of its ends' magnitude, or of `scale` (the largest coefficient the
+/// spline's sums read) where that is more: the sums round in f32, and where a bound is met (a
+/// voxel centre) a sample may round just past it. A sum's rounding is relative to its terms, not to its value: past a sharp edge the
+/// interpolating spline's coefficients ring to thousands while it takes values near 0, and a
+/// sample there rounded 4·10⁻⁵ past a bound widened by its value alone (proptest, nz = 1).
+pub(crate) fn widened_by((lo, hi): (f32, f32), scale: f32) -> (f32, f32) {
+    (
+        lo - 1e-5 * (1.0 + lo.abs().max(scale)),
+        hi + 1e-5 * (1.0 + hi.abs().max(scale)),
+    )
 }
 
 /// How many times [`block_bound`] halves a cell's Bézier patch along each axis, at most: on
@@ -225,8 +235,13 @@ pub(crate) fn block_bound(
     hi: [usize; 3],
     worst: &impl Fn(f32, f32) -> f32,
 ) -> f32 {
-    let BlockHull { hull, met, corners } = block_hull(dims, grid, lo, hi);
-    let (l, h) = widened(hull);
+    let BlockHull {
+        hull,
+        met,
+        corners,
+        scale,
+    } = block_hull(dims, grid, lo, hi);
+    let (l, h) = widened_by(hull, scale);
     let whole = worst(l, h);
     let mut bound = worst(met.0, met.1);
     if whole <= bound {
@@ -250,12 +265,12 @@ pub(crate) fn block_bound(
                         }
                     }
                 }
-                let (l, h) = widened((l, h));
+                let (l, h) = widened_by((l, h), scale);
                 if worst(l, h) <= bound {
                     continue;
                 }
                 let cell = [lo[0] + i, lo[1] + j, lo[2] + k];
-                refine(&cell_net(dims, grid, cell), 0, worst, &mut bound);
+                refine(&cell_net(dims, grid, cell), (0, scale), worst, &mut bound);
                 if bound >= whole {
                     return whole;
                 }
@@ -267,13 +282,18 @@ pub(crate) fn block_bound(
 
 /// Raises `bound` to `worst` of the Bézier patch `net`'s hull where that exceeds it, halving
 /// the patch while it does, [`SUBDIVISIONS`] times at most ([`block_bound`]).
-fn refine(net: &[f32; 64], depth: u32, worst: &impl Fn(f32, f32) -> f32, bound: &mut f32) {
+fn refine(
+    net: &[f32; 64],
+    (depth, scale): (u32, f32),
+    worst: &impl Fn(f32, f32) -> f32,
+    bound: &mut f32,
+) {
     let range = net
         .iter()
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
             (l.min(v), h.max(v))
         });
-    let (l, h) = widened(range);
+    let (l, h) = widened_by(range, scale);
     let here = worst(l, h);
     if here <= *bound {
         return;
@@ -283,7 +303,7 @@ fn refine(net: &[f32; 64], depth: u32, worst: &impl Fn(f32, f32) -> f32, bound: 
         return;
     }
     for part in halves(net) {
-        refine(&part, depth + 1, worst, bound);
+        refine(&part, (depth + 1, scale), worst, bound);
     }
 }
 
@@ -997,8 +1017,8 @@ mod tests {
             let (at, over) = tent(centre, width);
             for g in [data.clone(), bspline_coefficients(dims, &data)] {
                 let bound = block_bound(dims, &g, lo, hi, &over);
-                let BlockHull { hull, met, .. } = block_hull(dims, &g, lo, hi);
-                let (l, h) = widened(hull);
+                let BlockHull { hull, met, scale, .. } = block_hull(dims, &g, lo, hi);
+                let (l, h) = widened_by(hull, scale);
                 prop_assert!(bound <= over(l, h));
                 prop_assert!(bound >= over(met.0, met.1));
                 // A lattice of 9 points a cell, its faces included.
