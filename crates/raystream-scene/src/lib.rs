@@ -241,10 +241,7 @@ impl SceneVolume {
         let unit_free = (d.tf.is_none()
             && d.preset.is_none()
             && volume.unit != raystream_io::ValueUnit::Hounsfield)
-            .then(|| {
-                let spacing = volume.spacing.iter().copied().fold(f64::INFINITY, f64::min);
-                raystream_volume::auto::unit_free_transfer(&volume.data, spacing)
-            })
+            .then(|| raystream_volume::auto::unit_free_transfer(&volume))
             .flatten();
         let tf = unit_free.map_or(tf, |(ramp, _)| ramp);
         let segmentation = match &d.segmentation {
@@ -1245,14 +1242,7 @@ mod tests {
         };
         let bonsai = data.join("nifti/scivis_bonsai.nii.gz");
         let v = scene(&bonsai, "");
-        let spacing = v
-            .volume
-            .spacing
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min);
-        let (ramp, _) =
-            raystream_volume::auto::unit_free_transfer(&v.volume.data, spacing).unwrap();
+        let (ramp, _) = raystream_volume::auto::unit_free_transfer(&v.volume).unwrap();
         assert_eq!(v.tf, ramp);
         let named = scene(&bonsai, "preset = \"ct-bone\"");
         assert_eq!(named.tf, TfPreset::CtBone.function());

@@ -5,6 +5,8 @@
 
 use rayon::prelude::*;
 
+use raystream_io::Volume;
+
 use crate::tf::{Shading, TransferFunction};
 
 /// Bins of [`otsu_threshold`]'s histogram: one a value for 8-bit data.
@@ -118,14 +120,15 @@ impl TransferFunction {
     }
 }
 
-/// The transfer function for a volume of `values` on voxels `min_spacing` mm apart whose
-/// unit is unknown: [`TransferFunction::ramp`] from their Otsu threshold (the background
-/// transparent) to their largest value, which lets half the light through a voxel's depth;
-/// and the threshold. `None` where fewer than two distinct values are finite.
-pub fn unit_free_transfer(values: &[f32], min_spacing: f64) -> Option<(TransferFunction, f32)> {
-    let t = otsu_threshold(values)?;
-    let (_, hi) = finite_range(values)?;
-    let opacity = 1.0 - 0.5f64.powf(1.0 / min_spacing.max(1e-6));
+/// The transfer function for `volume` when its unit is unknown: [`TransferFunction::ramp`]
+/// from its values' Otsu threshold (the background transparent) to their largest, which lets
+/// half the light through a voxel's depth (its smallest spacing); and the threshold. `None`
+/// where fewer than two distinct values are finite.
+pub fn unit_free_transfer(volume: &Volume) -> Option<(TransferFunction, f32)> {
+    let t = otsu_threshold(&volume.data)?;
+    let (_, hi) = finite_range(&volume.data)?;
+    let spacing = volume.spacing.iter().copied().fold(f64::INFINITY, f64::min);
+    let opacity = 1.0 - 0.5f64.powf(1.0 / spacing.max(1e-6));
     Some((TransferFunction::ramp(t, hi, opacity as f32), t))
 }
 
@@ -246,7 +249,8 @@ mod tests {
         let mut v: Vec<f32> = vec![5.0; 5000];
         v.extend(vec![180.0; 1000]);
         v.push(250.0);
-        let (tf, t) = unit_free_transfer(&v, 2.0).unwrap();
+        let n = v.len();
+        let (tf, t) = unit_free_transfer(&Volume::hounsfield([n, 1, 1], [2.0; 3], v)).unwrap();
         assert!(t > 5.0 && t <= 180.0, "{t}");
         assert_eq!(tf.opacity_at(5.0), 0.0);
         assert_eq!(tf.opacity_at(t), 0.0);

@@ -50,9 +50,7 @@ pub fn unit_free_defaults(
     };
     let transfer = matches!(opt.mode, DvrMode::Dvr | DvrMode::Cinematic | DvrMode::Iso);
     if transfer && look.tf.is_none() && threshold.preset.is_none() {
-        let spacing = raystream_cpu::dvr::min_spacing(volume) as f64;
-        let Some((ramp, t)) = raystream_volume::auto::unit_free_transfer(&volume.data, spacing)
-        else {
+        let Some((ramp, t)) = raystream_volume::auto::unit_free_transfer(volume) else {
             return;
         };
         *tf = ramp;

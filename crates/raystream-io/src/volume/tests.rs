@@ -162,6 +162,15 @@ fn copy_folder(src: &Path, dst: &Path) {
     }
 }
 
+/// `got` lies on `want`'s grid with its values.
+fn assert_same_grid_and_values(got: &Volume, want: &Volume) {
+    assert_eq!(
+        (got.dims, got.origin, got.spacing),
+        (want.dims, want.origin, want.spacing)
+    );
+    assert_eq!(got.data, want.data);
+}
+
 /// A folder that holds no file of its own (a CD's root: a DICOMDIR beside DICOM/ST000/SE000…)
 /// is read through the folders below it, as viewers import such trees: the largest series, the
 /// same volume as from its own folder, the others listed, a warning saying where the files
@@ -179,11 +188,7 @@ fn a_cds_folder_tree_is_read_through_its_folders() {
     std::fs::write(cd.join("DICOMDIR"), b"not read").unwrap();
     let want = load_volume(&series, &Default::default()).unwrap();
     let got = load_volume(&cd, &Default::default()).unwrap();
-    assert_eq!(
-        (got.dims, got.origin, got.spacing),
-        (want.dims, want.origin, want.spacing)
-    );
-    assert_eq!(got.data, want.data);
+    assert_same_grid_and_values(&got, &want);
     assert!(
         got.warnings.iter().any(
             |w| w == "it holds no file of its own: read the 21 files in the 2 folders below it"
@@ -256,11 +261,7 @@ fn a_zip_of_a_study_reads_as_its_folder() {
     assert!(is_volume_path(&zip_path));
     let want = load_volume(&series, &Default::default()).unwrap();
     let got = load_volume(&zip_path, &Default::default()).unwrap();
-    assert_eq!(
-        (got.dims, got.origin, got.spacing),
-        (want.dims, want.origin, want.spacing)
-    );
-    assert_eq!(got.data, want.data);
+    assert_same_grid_and_values(&got, &want);
     let skipped: Vec<&String> = got
         .warnings
         .iter()
