@@ -28,6 +28,25 @@ pub fn finite_range(values: &[f32]) -> Option<(f32, f32)> {
     (lo <= hi).then_some((lo, hi))
 }
 
+/// Share of the finite values [`clipped_range`] leaves out at each end of an auto-contrast
+/// window: 0.5 %, a few saturated pixels either way (ImageJ's auto-contrast saturates 0.35 % in
+/// all), so that a handful of outliers (a metal clip, a hot pixel) do not set the span.
+pub const CLIPPED_TAIL: f64 = 0.005;
+
+/// The range of the finite values less a `tail` share at each end: from the value of rank
+/// ⌊tail·(n − 1)⌋ to that of rank ⌈(1 − tail)·(n − 1)⌉ in ascending order (the exact order
+/// statistics; `tail` in 0 .. ½). `None` where no value is finite.
+pub fn clipped_range(values: &[f32], tail: f64) -> Option<(f32, f32)> {
+    let mut finite: Vec<f32> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    let last = finite.len().checked_sub(1)?;
+    let tail = tail.clamp(0.0, 0.5);
+    let lo_rank = (tail * last as f64).floor() as usize;
+    let hi_rank = (((1.0 - tail) * last as f64).ceil() as usize).clamp(lo_rank, last);
+    let (_, &mut hi, _) = finite.select_nth_unstable_by(hi_rank, f32::total_cmp);
+    let (_, &mut lo, _) = finite[..=hi_rank].select_nth_unstable_by(lo_rank, f32::total_cmp);
+    Some((lo, hi))
+}
+
 /// Otsu's threshold of the finite values (NaN and ±∞ left out): the value that splits them
 /// into the two classes (below it, and at or above it) whose between-class variance is
 /// largest, over a histogram of [`OTSU_BINS`] bins spanning their range (a class boundary is a
@@ -166,6 +185,27 @@ mod tests {
         let n = values.len() as f64;
         let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
         (a.len() as f64) * (b.len() as f64) * (mean(&a) - mean(&b)).powi(2) / (n * n)
+    }
+
+    /// The clipped range is the sorted values' order statistics at the tail's ranks, NaN and
+    /// infinities left out, and with no tail the finite range.
+    #[test]
+    fn a_clipped_range_leaves_out_its_tails() {
+        let mut values: Vec<f32> = (0..1000).map(|i| ((i * 7919) % 1000) as f32).collect();
+        values.extend([f32::NAN, f32::INFINITY, f32::NEG_INFINITY]);
+        // 1000 finite values 0 .. 999: ranks ⌊0.005 · 999⌋ = 4 and ⌈0.995 · 999⌉ = 995.
+        assert_eq!(clipped_range(&values, CLIPPED_TAIL), Some((4.0, 995.0)));
+        assert_eq!(clipped_range(&values, 0.0), finite_range(&values));
+        assert_eq!(clipped_range(&values, 0.5), Some((499.0, 500.0)));
+        // Three outliers at each end stay within the tails (1006 values: ranks 5 and 1000,
+        // the values 2 and 997 after the three below).
+        let mut spiked = values.clone();
+        spiked.extend([1e9; 3]);
+        spiked.extend([-1e9; 3]);
+        assert_eq!(clipped_range(&spiked, CLIPPED_TAIL), Some((2.0, 997.0)));
+        assert_eq!(clipped_range(&[7.0], CLIPPED_TAIL), Some((7.0, 7.0)));
+        assert_eq!(clipped_range(&[f32::NAN], CLIPPED_TAIL), None);
+        assert_eq!(clipped_range(&[], CLIPPED_TAIL), None);
     }
 
     /// On 8-bit values (one bin a value over 0 .. 255) the histogram's split is the exact one:

@@ -430,7 +430,9 @@ fn bench_dvr(a: &BenchArgs, mode: DvrMode) -> Result<()> {
     let (mut tf, mut base) = crate::dvr::options(&a.look, &a.threshold, mode, a.size)?;
     let unit_free = (&a.look, &a.threshold);
     let seen = (&volume, a.input.as_path());
-    crate::dvr::unit_free_defaults(unit_free, seen, quiet, &mut tf, &mut base);
+    if let Some(w) = crate::dvr::unit_free_defaults(unit_free, seen, quiet, &mut tf, &mut base) {
+        w.spanning_the_voxels(&mut base);
+    }
     let asked = crate::segments::Asked {
         segmentation: a.segmentation.as_deref(),
         segment: a.segment.as_deref(),

@@ -25,21 +25,20 @@ use crate::common::{Backend, Picture, ms};
 /// 8-bit scan a uniform pink box, the CT windows a grey one): dvr and cinematic take a ramp
 /// from their Otsu threshold (the background transparent) to their largest value, and iso
 /// the surface at that threshold in the ramp's colours, unless `--tf`, `--preset` or `--iso`
-/// says; the windowed modes (mip, minip, average, slice) a window spanning their range,
-/// unless `--window` says. Said unless `quiet`.
+/// says; a slice a window spanning their range, unless `--window` says. Said unless `quiet`.
+/// The projections' (mip, minip, average) window is left to [`ProjectionWindow`]: they do not
+/// span the voxels' range (an average of a scan mostly air reached a third of it).
 pub fn unit_free_defaults(
     (look, threshold): (&VolumeLook, &Threshold),
     (volume, path): (&Volume, &std::path::Path),
     quiet: bool,
     tf: &mut TransferFunction,
     opt: &mut DvrOptions,
-) {
+) -> Option<ProjectionWindow> {
     if volume.unit == raystream_io::ValueUnit::Hounsfield {
-        return;
+        return None;
     }
-    let Some((lo, hi)) = raystream_volume::auto::finite_range(&volume.data) else {
-        return;
-    };
+    let (lo, hi) = raystream_volume::auto::finite_range(&volume.data)?;
     let say = |what: String| {
         if !quiet {
             eprintln!(
@@ -50,9 +49,7 @@ pub fn unit_free_defaults(
     };
     let transfer = matches!(opt.mode, DvrMode::Dvr | DvrMode::Cinematic | DvrMode::Iso);
     if transfer && look.tf.is_none() && threshold.preset.is_none() {
-        let Some((ramp, t)) = raystream_volume::auto::unit_free_transfer(volume) else {
-            return;
-        };
+        let (ramp, t) = raystream_volume::auto::unit_free_transfer(volume)?;
         *tf = ramp;
         if opt.mode == DvrMode::Iso {
             if threshold.iso.is_none() {
@@ -66,9 +63,102 @@ pub fn unit_free_defaults(
                 "opacity ramped from 0 at {t}, their Otsu threshold (the background transparent), to {hi} (--tf FILE sets another)"
             ));
         }
+    } else if opt.mode.is_projection() && opt.window.is_none() {
+        return Some(ProjectionWindow {
+            range: (lo, hi),
+            path: path.to_owned(),
+            quiet,
+        });
     } else if opt.mode.is_windowed() && opt.window.is_none() && hi > lo {
-        opt.window = Some((hi - lo, 0.5 * (lo + hi)));
+        opt.window = Some(spanning(lo, hi));
         say("the window spans them (--window W --level L sets another)".into());
+    }
+    None
+}
+
+/// The window (width, level) from `lo` to `hi`.
+fn spanning(lo: f32, hi: f32) -> (f32, f32) {
+    (hi - lo, 0.5 * (lo + hi))
+}
+
+/// `v` to four significant figures (85.19, 0.04172, 1234).
+fn four_figures(v: f32) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return v.to_string();
+    }
+    let decimals = (3 - v.abs().log10().floor() as i32).max(0) as usize;
+    format!("{v:.decimals$}")
+}
+
+/// Pixels along the longer side of the film [`ProjectionWindow::set_by_probe`] renders.
+const PROBE_PIXELS: u32 = 128;
+
+/// A projection's window for values of no known unit, still to be set: from the projection
+/// itself, as an image viewer's auto-contrast sets it, since the projected values need not
+/// span the voxels' (on the SciVis bonsai, an 8-bit scan, the average of the rays reached
+/// 94 of its 255 and its minimum 44, which a window over 0 .. 255 showed near black).
+#[must_use = "the window is still to be set"]
+pub struct ProjectionWindow {
+    /// The voxels' finite range.
+    range: (f32, f32),
+    path: std::path::PathBuf,
+    quiet: bool,
+}
+
+impl ProjectionWindow {
+    /// The window spanning the voxels' range, for frames nobody looks at (a benchmark's).
+    pub fn spanning_the_voxels(self, opt: &mut DvrOptions) {
+        opt.window = Some(spanning(self.range.0, self.range.1));
+    }
+
+    /// The window spanning the projected values of a probe frame seen by `sight` (at most
+    /// [`PROBE_PIXELS`] along its longer side, the film's aspect kept), less
+    /// [`raystream_volume::auto::CLIPPED_TAIL`] at each end; the voxels' range where the
+    /// probe sees one value or none. Said unless quiet.
+    pub fn set_by_probe<'s>(
+        self,
+        renderer: &Renderer,
+        opt: &mut DvrOptions,
+        sight: impl Into<Sight<'s>>,
+    ) -> Result<()> {
+        let scale = (PROBE_PIXELS as f32 / opt.width.max(opt.height) as f32).min(1.0);
+        let side = |n: u32| ((n as f32 * scale).round() as u32).max(1);
+        let probe = DvrOptions {
+            width: side(opt.width),
+            height: side(opt.height),
+            hu_values: true,
+            ..*opt
+        };
+        let (film, _) = renderer.film(&probe, sight.into())?;
+        let values: Vec<f32> = film.pixels.iter().map(|p| p.x).collect();
+        let tail = raystream_volume::auto::CLIPPED_TAIL;
+        let (lo, hi) = self.range;
+        let words = match raystream_volume::auto::clipped_range(&values, tail) {
+            Some((a, b)) if b > a => {
+                opt.window = Some(spanning(a, b));
+                format!(
+                    "the window spans the {}'s values less {} % at each end, {} .. {}",
+                    opt.mode.name(),
+                    tail * 100.0,
+                    four_figures(a),
+                    four_figures(b)
+                )
+            }
+            _ => {
+                opt.window = Some(spanning(lo, hi));
+                format!(
+                    "the {} sees one value or none: the window spans them",
+                    opt.mode.name()
+                )
+            }
+        };
+        if !self.quiet {
+            eprintln!(
+                "raystream: {}: values of no known unit ({lo} .. {hi}): {words} (--window W --level L sets another)",
+                self.path.display()
+            );
+        }
+        Ok(())
     }
 }
 

@@ -352,6 +352,8 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 })
                 .collect()
         });
+    // Where render and iso draw the surface of values of no known unit.
+    let surface = crate::iso::default_surface(&v);
     let unit = match v.unit {
         raystream_io::ValueUnit::Hounsfield => "HU",
         raystream_io::ValueUnit::Unknown => "unknown",
@@ -397,6 +399,7 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             Some((lo, hi)) => json!([lo, hi]),
             None => serde_json::Value::Null,
         };
+        out["default_surface"] = json!(surface);
         if let Some(s) = series {
             out["series"] = s;
         }
@@ -449,6 +452,11 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
         match range {
             Some((lo, hi)) => println!("  values     {lo} .. {hi} ({unit})"),
             None => println!("  values     all NaN"),
+        }
+        if let Some(t) = surface {
+            println!(
+                "  surface    at {t}, the values' Otsu threshold (render's and iso's, unless --iso V)"
+            );
         }
         for (l, n, ml, name) in labels.iter().flatten() {
             let name = if name.is_empty() {

@@ -38,16 +38,7 @@ pub fn surface_threshold(
     quiet: bool,
 ) -> Result<f32> {
     let given = threshold.iso.is_some() || threshold.preset.is_some();
-    // A label map's surfaces are its segments' (--segment), not a split of its numbers.
-    let labels = || {
-        crate::common::not_a_label(volume).is_none()
-            && raystream_volume::auto::equal_neighbour_share(volume.dims, &volume.data) >= 0.5
-    };
-    let otsu = if volume.unit == ValueUnit::Hounsfield || given || labels() {
-        None
-    } else {
-        raystream_volume::auto::otsu_threshold(&volume.data)
-    };
+    let otsu = if given { None } else { default_surface(volume) };
     let Some(t) = otsu else {
         let hu = threshold.hu()?;
         if !quiet && volume.unit != ValueUnit::Hounsfield {
@@ -65,6 +56,21 @@ pub fn surface_threshold(
         );
     }
     Ok(t)
+}
+
+/// Where the surface of a volume of no known unit stands unless `--iso` or `--preset` says:
+/// its values' Otsu threshold. `None` for a CT (its surface is bone's, in HU), a label map (its
+/// surfaces are its segments', `--segment`, not a split of its numbers) and a volume of fewer
+/// than two distinct values.
+pub fn default_surface(volume: &Volume) -> Option<f32> {
+    let labels = || {
+        crate::common::not_a_label(volume).is_none()
+            && raystream_volume::auto::equal_neighbour_share(volume.dims, &volume.data) >= 0.5
+    };
+    if volume.unit == ValueUnit::Hounsfield || labels() {
+        return None;
+    }
+    raystream_volume::auto::otsu_threshold(&volume.data)
 }
 
 /// `value` with its unit: "300 HU", or the bare number where the volume's unit is unknown.

@@ -880,7 +880,8 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         );
     }
     let unit_free = (&a.look, &a.threshold);
-    dvr::unit_free_defaults(unit_free, (&volume, path), a.quiet, &mut tf, &mut opt);
+    let window_from_projection =
+        dvr::unit_free_defaults(unit_free, (&volume, path), a.quiet, &mut tf, &mut opt);
     if mode == DvrMode::Cinematic {
         opt.spp = a.spp.unwrap_or(opt.spp);
         opt.bounces = a.max_depth;
@@ -921,6 +922,12 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         painted.as_ref().and_then(|p| p.weights.as_ref()),
     )?;
     let view = base_view(a, lone_or(a, lone, VOLUME_VIEW), true)?;
+    let [az, el] = orbit_angles(a);
+    let cam = volume_camera_from(&volume, aspect, view.orbit(az, el), projection(a));
+    if let Some(w) = window_from_projection {
+        // From the first view: a turntable's or a cine's frames share the one window.
+        w.set_by_probe(&renderer, &mut opt, &cam)?;
+    }
     if let Some(n) = a.turntable {
         return turntable(
             a,
@@ -932,8 +939,6 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
             format,
         );
     }
-    let [az, el] = orbit_angles(a);
-    let cam = volume_camera_from(&volume, aspect, view.orbit(az, el), projection(a));
     if let (Some(n), Some(curve)) = (a.fly, &curve) {
         return fly_through(
             a,

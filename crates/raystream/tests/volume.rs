@@ -1287,6 +1287,20 @@ fn values_of_no_known_unit_take_their_defaults_from_the_values() {
         stderr(&o)
     };
     let otsu = format!("the surface at {t}, their Otsu threshold");
+    // `info` says where that surface stands; of a CT and of a label map it says nothing
+    // (bone's threshold and the segments' surfaces rule there).
+    assert_eq!(info(&bonsai)["default_surface"].as_f64(), Some(t as f64));
+    let ct = volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz");
+    assert!(info(&ct)["default_surface"].is_null());
+    let labels = tmp("unit-free-labels.nrrd");
+    let mut nrrd = b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 8 8 8\nencoding: raw\n\n".to_vec();
+    nrrd.extend((0..512).map(|i| [0u8, 3, 5][(i % 8 / 3) as usize]));
+    std::fs::write(&labels, nrrd).unwrap();
+    let labels = labels.to_str().unwrap();
+    assert!(info(labels)["default_surface"].is_null());
+    let o = run(&["info", &bonsai]);
+    let line = format!("surface    at {t}, the values' Otsu threshold");
+    assert!(stdout(&o).contains(&line), "{}", stdout(&o));
     for (args, name) in [
         (&[][..], "unit-free-bones.png"),
         (&["--mode", "iso"][..], "unit-free-iso.png"),
@@ -1336,7 +1350,7 @@ fn values_of_no_known_unit_take_their_defaults_from_the_values() {
         "{clear} clear, {shown} shown"
     );
 
-    // The windowed modes span the values: the largest (255) is white; --window still rules.
+    // The MIP's window spans its values: the largest is white; --window still rules.
     let brightest = |args: &[&str], name: &str| {
         let mut all = vec![bonsai.as_str(), "--size", "64x64"];
         all.extend_from_slice(args);
@@ -1348,4 +1362,65 @@ fn values_of_no_known_unit_take_their_defaults_from_the_values() {
     assert_eq!(brightest(&["--mode", "mip"], "unit-free-mip.png"), 255);
     let narrow = ["--mode", "mip", "--window", "1000", "--level", "1000"];
     assert!(brightest(&narrow, "unit-free-mip-window.png") < 100);
+}
+
+/// A projection of values of no known unit is windowed on the values it projects, less 0.5 %
+/// at each end (an image viewer's auto-contrast), not on the voxels' range: the bonsai's
+/// average and minimum reach less than half its 0 .. 255, and a window over 0 .. 255 drew
+/// them near black. At 64×64 the probe frame the window comes from is the frame itself, so
+/// each byte is the window of its EXR value; the GPU's picture is the CPU's.
+#[test]
+fn a_projection_of_no_known_unit_is_windowed_on_what_it_projects() {
+    let bonsai = volume("nifti/scivis_bonsai.nii.gz");
+    for mode in ["average", "minip"] {
+        let args = [bonsai.as_str(), "--mode", mode, "--size", "64x64"];
+        let name = format!("unit-free-{mode}");
+        let exr =
+            raystream_cpu::load_exr(&render_to(&format!("{name}.exr"), "cpu", &args)).unwrap();
+        let values = exr.channels["Y"].as_f32().unwrap().to_vec();
+        let tail = raystream_volume::auto::CLIPPED_TAIL;
+        let (lo, hi) = raystream_volume::auto::clipped_range(&values, tail).unwrap();
+        assert!(lo < hi && hi < 128.0, "{mode}: {lo} .. {hi}");
+        let mut pictures = Vec::new();
+        for dev in devices() {
+            let out = tmp(&format!("{name}-{dev}.png"));
+            let all = ["render", "--device", dev, "-o", out.to_str().unwrap()];
+            let o = run(&[&all[..], &args[..]].concat());
+            let e = stderr(&o);
+            assert!(o.status.success(), "{e}");
+            let said = format!("the window spans the {mode}'s values less 0.5 % at each end");
+            assert!(e.contains(&said), "{e}");
+            pictures.push(image::open(out).unwrap().to_luma8());
+        }
+        let cpu = &pictures[0];
+        let (mut black, mut white) = (0, 0);
+        for (i, v) in values.iter().enumerate().filter(|(_, v)| v.is_finite()) {
+            let byte = cpu.as_raw()[i];
+            let want = 255.0 * ((v - lo) / (hi - lo)).clamp(0.0, 1.0);
+            assert!(
+                (byte as f32 - want).abs() <= 1.0,
+                "{mode}: pixel {i}, value {v}: {byte}, not {want} in the window {lo} .. {hi}"
+            );
+            black += (byte == 0) as usize;
+            white += (byte == 255) as usize;
+        }
+        // Both ends of the grey scale are reached, white by the top 0.5 % (of 4096 pixels, at
+        // least the values ranked above the 99.5th percentile).
+        assert!(
+            black > 0 && white >= 10,
+            "{mode}: {black} black, {white} white"
+        );
+        if let [_, gpu] = &pictures[..] {
+            let near = cpu
+                .as_raw()
+                .iter()
+                .zip(gpu.as_raw())
+                .filter(|(a, b)| a.abs_diff(**b) <= 2)
+                .count();
+            assert!(
+                near as f64 >= 0.999 * cpu.as_raw().len() as f64,
+                "{mode}: {near} of the GPU's pixels within 2/255 of the CPU's"
+            );
+        }
+    }
 }
