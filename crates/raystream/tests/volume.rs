@@ -1256,6 +1256,58 @@ fn a_lone_slice_is_drawn_as_the_slab_it_images() {
     assert!(o.status.success(), "{e}");
     let want = format!("({} voxels, matched on the CT's grid)", 2 * voxels);
     assert!(e.contains(&want), "{want} not in: {e}");
+
+    // An RT Structure Set traced from that label map by rt-utils: its contours lie in the
+    // slice's plane, midway between the slab's layers, and colour both, as the label map does
+    // (the same picture), with no contour said to lie between slices. Named from the folder
+    // above it or from its own (relative paths), it still finds its CT beside it.
+    let Some(py) = python_with("rt_utils") else {
+        return;
+    };
+    let root = tmp("lone-rt");
+    std::fs::remove_dir_all(&root).ok();
+    std::fs::create_dir_all(root.join("ct")).unwrap();
+    std::fs::create_dir_all(root.join("rt")).unwrap();
+    std::fs::copy(&one, root.join("ct/slice.dcm")).unwrap();
+    let rt = root.join("rt/structures.dcm");
+    let o = std::process::Command::new(&py)
+        .arg(repo().join("crates/raystream/tests/rtutils_struct.py"))
+        .args([root.join("ct"), labels.clone(), rt.clone()])
+        // Label 1's colour where a label map names none (overlay::EDGE's cyan).
+        .arg("Bone=1:0,230,255")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "rt-utils: {}", stderr(&o));
+    let traced = tmp("lone-segmented-rt.png");
+    let rt_args = [&args[..5], &[rt.to_str().unwrap()], &args[6..]].concat();
+    let o = run(&[&rt_args[..], &[traced.to_str().unwrap()]].concat());
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    let want = format!(
+        "({} voxels, matched on structures laid on the CT's grid)",
+        2 * voxels
+    );
+    assert!(
+        e.contains(&want) && !e.contains("between slices"),
+        "{want} not in: {e}"
+    );
+    assert!(
+        png(&traced) == png(&out),
+        "the structure set's picture is not the label map's"
+    );
+    for (dir, file) in [
+        (&root, "rt/structures.dcm"),
+        (&root.join("rt"), "structures.dcm"),
+    ] {
+        let o = bin()
+            .current_dir(dir)
+            .args(["info", "--json", file])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{file}: {}", stderr(&o));
+        let v: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        assert_eq!(v["labels"][0]["voxels"], voxels, "{file}");
+    }
 }
 
 /// A volume whose values have no known unit (the 8-bit SciVis bonsai) takes its defaults from

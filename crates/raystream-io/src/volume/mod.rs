@@ -304,9 +304,17 @@ impl Volume {
         if self.dims.iter().all(|&n| n > 1) {
             return None;
         }
-        let dims = self.dims.map(|n| n.max(2));
-        // Both layers of a doubled axis are the slice.
-        let src = |x: usize, a: usize| if self.dims[a] == 1 { 0 } else { x };
+        let lone = self.dims.map(|n| n == 1);
+        // Both layers of a doubled axis are the slice; the first lies half a spacing before it
+        // along its axis's direction.
+        Some(self.relayered(self.dims.map(|n| n.max(2)), lone, -0.5))
+    }
+
+    /// The volume on `dims`, which differs from its own along the axes `along` only: there,
+    /// every voxel reads the volume's first layer, and the first voxel lies `shift` spacings
+    /// from the volume's first.
+    fn relayered(&self, dims: [usize; 3], along: [bool; 3], shift: f64) -> Volume {
+        let src = |x: usize, a: usize| if along[a] { 0 } else { x };
         let mut data = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
         for k in 0..dims[2] {
             for j in 0..dims[1] {
@@ -315,17 +323,40 @@ impl Volume {
                 }
             }
         }
-        // The first layer half a spacing before the slice along its axis's direction.
-        let shift: [f64; 3] = std::array::from_fn(|a| if self.dims[a] == 1 { -0.5 } else { 0.0 });
-        let origin = self.index_to_world(DVec3::from(shift)).to_array();
-        Some(Volume {
+        let shift = along.map(|on| if on { shift } else { 0.0 });
+        Volume {
             dims,
-            origin,
+            origin: self.index_to_world(DVec3::from(shift)).to_array(),
             data,
             warnings: self.warnings.clone(),
             series: self.series.clone(),
             ..*self
-        })
+        }
+    }
+
+    /// The lone slice a slab of [`Volume::slab_of_lone_slices`] was made from: along each
+    /// axis of two layers holding the same values, one layer midway between them. `None` where
+    /// no axis is such. (A two-slice volume whose slices are equal reads as a slab too: the
+    /// field is the same.)
+    pub fn lone_slice_of_slab(&self) -> Option<Volume> {
+        let [nx, ny, _] = self.dims;
+        let layers_equal = |a: usize| {
+            self.dims[a] == 2
+                && (0..self.data.len()).all(|n| {
+                    let ijk = [n % nx, (n / nx) % ny, n / (nx * ny)];
+                    ijk[a] == 1 || {
+                        let mut other = ijk;
+                        other[a] = 1;
+                        self.data[n] == self.at(other[0], other[1], other[2])
+                    }
+                })
+        };
+        let lone: [bool; 3] = std::array::from_fn(layers_equal);
+        if !lone.contains(&true) {
+            return None;
+        }
+        let dims: [usize; 3] = std::array::from_fn(|a| if lone[a] { 1 } else { self.dims[a] });
+        Some(self.relayered(dims, lone, 0.5))
     }
 
     /// The same field on a grid of `dims` voxels (each ≥ 2, or 1 where the volume has 1)

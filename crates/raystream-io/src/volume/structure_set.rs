@@ -88,6 +88,35 @@ pub struct SegmentVoxels {
 }
 
 impl SegmentVoxels {
+    /// The voxels on a grid of `from` voxels, one layer along some axes, on a grid of `to`
+    /// that repeats that layer along them (a lone slice's slab,
+    /// [`Volume::slab_of_lone_slices`]): each voxel held on every layer.
+    fn thickened(&self, from: [usize; 3], to: [usize; 3]) -> SegmentVoxels {
+        if self.voxels == 0 {
+            return self.clone();
+        }
+        let wide: [bool; 3] = std::array::from_fn(|a| from[a] == 1 && to[a] > 1);
+        let lo = std::array::from_fn(|a| if wide[a] { 0 } else { self.lo[a] });
+        let size: [usize; 3] = std::array::from_fn(|a| if wide[a] { to[a] } else { self.dims[a] });
+        let src = |x: usize, a: usize| if wide[a] { 0 } else { x };
+        let mut inside = Vec::with_capacity(size[0] * size[1] * size[2]);
+        for k in 0..size[2] {
+            for j in 0..size[1] {
+                for i in 0..size[0] {
+                    let (i, j, k) = (src(i, 0), src(j, 1), src(k, 2));
+                    inside.push(self.inside[i + self.dims[0] * (j + self.dims[1] * k)]);
+                }
+            }
+        }
+        let voxels = inside.iter().filter(|&&b| b).count();
+        SegmentVoxels {
+            lo,
+            dims: size,
+            inside,
+            voxels,
+        }
+    }
+
     /// Whether it holds the grid's voxel `ijk`.
     pub fn holds(&self, ijk: [usize; 3]) -> bool {
         let at: [Option<usize>; 3] =
@@ -173,10 +202,18 @@ impl StructureSet {
             _ => Path::new("."),
         };
         let mut folders = vec![own.to_path_buf()];
-        if let Some(Ok(entries)) = own.parent().map(std::fs::read_dir) {
+        // The folder above, found from the real path: a relative `rt/structures.dcm`'s folder
+        // has the empty path for parent (which read_dir refuses), and `structures.dcm`'s is
+        // "." (whose parent is empty too). Its own folder is not read twice.
+        let own_real = std::fs::canonicalize(own).ok();
+        if let Some(Ok(entries)) = own_real
+            .as_deref()
+            .and_then(Path::parent)
+            .map(std::fs::read_dir)
+        {
             let mut beside: Vec<PathBuf> = entries
                 .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.is_dir() && p.as_path() != own)
+                .filter(|p| p.is_dir() && std::fs::canonicalize(p).ok() != own_real)
                 .collect();
             beside.sort();
             folders.extend(beside);
@@ -219,6 +256,25 @@ impl StructureSet {
     /// The voxels of `roi` on `grid`'s slices (see the module docs), and how its contours met
     /// the grid.
     pub fn rasterise(&self, roi: &Roi, grid: &Volume) -> (SegmentVoxels, RasterNotes) {
+        let (region, notes) = self.rasterise_on_slices(roi, grid);
+        if notes.between == 0 || grid.dims[2] != 2 {
+            return (region, notes);
+        }
+        // A lone slice drawn as the slab it images (Volume::slab_of_lone_slices): contours
+        // drawn on the slice lie midway between the slab's two layers, which are both the
+        // slice, so they are laid on the slice and it is thickened as the CT was, rather than
+        // on one layer arbitrarily.
+        if let Some(slice) = grid.lone_slice_of_slab().filter(|s| s.dims[2] == 1) {
+            let (on_slice, n) = self.rasterise_on_slices(roi, &slice);
+            if n.between == 0 && n.beyond <= notes.beyond && n.off_plane <= notes.off_plane {
+                return (on_slice.thickened(slice.dims, grid.dims), n);
+            }
+        }
+        (region, notes)
+    }
+
+    /// [`Self::rasterise`] on `grid`'s slices as they stand.
+    fn rasterise_on_slices(&self, roi: &Roi, grid: &Volume) -> (SegmentVoxels, RasterNotes) {
         let [nx, ny, nz] = grid.dims;
         let to_index = grid.index_to_world_affine().inverse();
         let mut notes = RasterNotes::default();
@@ -979,6 +1035,63 @@ mod tests {
         );
         assert!(labels.warnings.iter().any(|w| w.contains("beyond the CT")));
         assert!(labels.warnings.iter().any(|w| w.contains("between slices")));
+    }
+
+    /// Contours drawn on a lone slice lie midway between the two layers of the slab it is
+    /// drawn as (`Volume::slab_of_lone_slices`): each is laid on both, held there as on the
+    /// slice and with no contour "between slices"; a contour on a layer of a two-slice CT
+    /// stays on that layer alone.
+    #[test]
+    fn a_lone_slices_structures_lie_through_its_slab() {
+        let mut slice = grid();
+        slice.dims[2] = 1;
+        slice.data.truncate(40 * 30);
+        slice.data[7] = 100.0;
+        let ring = vec![
+            circle([20.0, 15.0], 9.0, 0.0, 64),
+            circle([20.0, 15.0], 4.0, 0.0, 64),
+        ];
+        let bar = vec![rect([1.0, 2.0], [1.0, 25.0], 0.0)];
+        let path = write("lone.dcm", &slice, &[(1, "Ring", ring), (2, "Bar", bar)]);
+        let set = StructureSet::read(&path).unwrap();
+        let slab = slice.slab_of_lone_slices().unwrap();
+        for roi in &set.rois {
+            let (on_slice, notes) = set.rasterise(roi, &slice);
+            assert_eq!(notes, RasterNotes::default());
+            assert!(on_slice.voxels > 0, "{}", roi.name);
+            let (through, notes) = set.rasterise(roi, &slab);
+            assert_eq!(notes, RasterNotes::default(), "{}", roi.name);
+            assert_eq!(through.voxels, 2 * on_slice.voxels, "{}", roi.name);
+            for k in 0..2 {
+                for j in 0..30 {
+                    for i in 0..40 {
+                        assert_eq!(
+                            through.holds([i, j, k]),
+                            on_slice.holds([i, j, 0]),
+                            "{} voxel {i} {j} {k}",
+                            roi.name
+                        );
+                    }
+                }
+            }
+        }
+        // A contour on a layer of the slab is that layer's; one midway between the slices of
+        // a CT whose two slices differ is laid on its nearest, as anywhere else.
+        let mut two = slab.clone();
+        two.data[40 * 30 + 7] = -5.0;
+        assert!(two.lone_slice_of_slab().is_none());
+        let boxes = vec![
+            (1, "First", vec![rect([3.0, 3.0], [9.0, 8.0], 0.0)]),
+            (2, "Midway", vec![rect([3.0, 3.0], [9.0, 8.0], 0.5)]),
+        ];
+        let path = write("layers.dcm", &two, &boxes);
+        let set = StructureSet::read(&path).unwrap();
+        let (first, notes) = set.rasterise(&set.rois[0], &slab);
+        assert_eq!(notes, RasterNotes::default());
+        assert_eq!((first.lo[2], first.dims[2], first.voxels), (0, 1, 7 * 6));
+        let (midway, notes) = set.rasterise(&set.rois[1], &two);
+        assert_eq!(notes.between, 1);
+        assert_eq!((midway.dims[2], midway.voxels), (1, 7 * 6));
     }
 
     #[test]

@@ -350,7 +350,21 @@ fn a_lone_slice_becomes_a_slab_of_its_spacing() {
         // The slab's middle plane is the slice's.
         let mid = DVec3::from(v.dims.map(|n| if n == 1 { 0.5 } else { 0.0 }));
         assert!((slab.index_to_world(mid) - v.index_to_world(DVec3::ZERO)).length() < 1e-9);
+        // And the slab gives back its slice: the same grid, to rounding, and values.
+        let back = slab.lone_slice_of_slab().expect("a slab");
+        assert_eq!((back.dims, back.spacing), (v.dims, v.spacing));
+        assert!((DVec3::from(back.origin) - DVec3::from(v.origin)).length() < 1e-9);
+        assert_eq!(back.data, v.data);
     }
+    // Only the axes whose two layers are equal are collapsed; layers that differ are no slab.
+    let data = [0.0, 1.0, 2.0, 3.0].repeat(2);
+    let two = Volume::hounsfield([2, 2, 2], [1.0; 3], data);
+    let back = two
+        .lone_slice_of_slab()
+        .expect("the third axis's layers are equal");
+    assert_eq!((back.dims, &back.data[..]), ([2, 2, 1], &two.data[..4]));
+    let differ = Volume::hounsfield([2, 2, 2], [1.0; 3], (0..8).map(|v| v as f32).collect());
+    assert!(differ.lone_slice_of_slab().is_none());
     let ct = load_volume(
         &shared("nifti/abdomen_pelvis_ct_totalseg.nii.gz"),
         &Default::default(),
