@@ -33,32 +33,109 @@ pub fn finite_range(values: &[f32]) -> Option<(f32, f32)> {
 /// all), so that a handful of outliers (a metal clip, a hot pixel) do not set the span.
 pub const CLIPPED_TAIL: f64 = 0.005;
 
+/// Share of the finite values left out at each end of the span the defaults take as the
+/// values' range ([`robust_range`]): one in 10⁴, so that a few outlying voxels (one hot voxel
+/// of 10,000 in an 8-bit scan made its ramp transparent and its window black) do not set it,
+/// while a scan's brightest structures, whose voxels are many more, still do.
+pub const OUTLIER_TAIL: f64 = 1e-4;
+
+/// Bins of each pass of [`order_statistic`]'s histogram.
+const RANK_BINS: usize = 4096;
+
+/// Values few enough for [`order_statistic`] to gather and select among.
+const RANK_GATHER: usize = 1 << 16;
+
+/// The finite value of rank `rank` (0 the smallest) among `values`, NaN and ±∞ left out:
+/// exactly the value a sort of the finite values puts there. `None` where `rank` is not below
+/// their count. Found without copying the values (a 512³ volume's would be 0.5 GB): each pass
+/// bins the values still in play into `RANK_BINS` bins over their range, keeps the bin
+/// holding the rank (binning is monotonic, so a bin holds a run of ranks, and its smallest
+/// and largest values bound it exactly), and stops when the values in play are all one or
+/// few enough (`RANK_GATHER`) to select among. Each pass narrows the range at least
+/// `RANK_BINS`-fold, for its smallest and largest values fall in the first and last bins.
+pub fn order_statistic(values: &[f32], rank: usize) -> Option<f32> {
+    let (mut lo, mut hi) = finite_range(values)?;
+    let mut rank = rank;
+    loop {
+        if lo == hi {
+            // All in play are one value; the first pass checks that the rank lies among them.
+            return (rank < values.par_iter().filter(|v| **v == lo).count()).then_some(lo);
+        }
+        let in_play = |v: &f32| *v >= lo && *v <= hi;
+        let width = (hi as f64 - lo as f64) / RANK_BINS as f64;
+        let bin = |v: f32| (((v as f64 - lo as f64) / width) as usize).min(RANK_BINS - 1);
+        // Each bin's count, smallest and largest value.
+        let empty = || vec![(0usize, f32::INFINITY, f32::NEG_INFINITY); RANK_BINS];
+        let bins = values
+            .par_chunks(1 << 16)
+            .map(|run| {
+                let mut b = empty();
+                for &v in run.iter().filter(|v| in_play(v)) {
+                    let e = &mut b[bin(v)];
+                    *e = (e.0 + 1, e.1.min(v), e.2.max(v));
+                }
+                b
+            })
+            .reduce(empty, |mut a, b| {
+                for (x, y) in a.iter_mut().zip(&b) {
+                    *x = (x.0 + y.0, x.1.min(y.1), x.2.max(y.2));
+                }
+                a
+            });
+        let count: usize = bins.iter().map(|b| b.0).sum();
+        if rank >= count {
+            return None;
+        }
+        if count <= RANK_GATHER {
+            let mut run: Vec<f32> = values.par_iter().copied().filter(in_play).collect();
+            return Some(*run.select_nth_unstable_by(rank, f32::total_cmp).1);
+        }
+        let mut seen = 0;
+        for &(n, min, max) in &bins {
+            if rank < seen + n {
+                rank -= seen;
+                (lo, hi) = (min, max);
+                break;
+            }
+            seen += n;
+        }
+    }
+}
+
 /// The range of the finite values less a `tail` share at each end: from the value of rank
-/// ⌊tail·(n − 1)⌋ to that of rank ⌈(1 − tail)·(n − 1)⌉ in ascending order (the exact order
-/// statistics; `tail` in 0 .. ½). `None` where no value is finite.
+/// ⌊tail·(n − 1)⌋ to that of rank ⌈(1 − tail)·(n − 1)⌉ in ascending order (exact order
+/// statistics, [`order_statistic`]; `tail` in 0 .. ½). `None` where no value is finite.
 pub fn clipped_range(values: &[f32], tail: f64) -> Option<(f32, f32)> {
-    let mut finite: Vec<f32> = values.iter().copied().filter(|v| v.is_finite()).collect();
-    let last = finite.len().checked_sub(1)?;
+    let n = values.par_iter().filter(|v| v.is_finite()).count();
+    let last = n.checked_sub(1)?;
     let tail = tail.clamp(0.0, 0.5);
     let lo_rank = (tail * last as f64).floor() as usize;
     let hi_rank = (((1.0 - tail) * last as f64).ceil() as usize).clamp(lo_rank, last);
-    let (_, &mut hi, _) = finite.select_nth_unstable_by(hi_rank, f32::total_cmp);
-    let (_, &mut lo, _) = finite[..=hi_rank].select_nth_unstable_by(lo_rank, f32::total_cmp);
-    Some((lo, hi))
+    Some((
+        order_statistic(values, lo_rank)?,
+        order_statistic(values, hi_rank)?,
+    ))
+}
+
+/// The span the defaults take as the finite values' range: [`clipped_range`] less
+/// [`OUTLIER_TAIL`] at each end (fewer than 10⁴ values: their whole range).
+pub fn robust_range(values: &[f32]) -> Option<(f32, f32)> {
+    clipped_range(values, OUTLIER_TAIL)
 }
 
 /// Otsu's threshold of the finite values (NaN and ±∞ left out): the value that splits them
 /// into the two classes (below it, and at or above it) whose between-class variance is
-/// largest, over a histogram of [`OTSU_BINS`] bins spanning their range (a class boundary is a
-/// bin's edge). The background and the object of a scan are such classes. `None` where fewer
-/// than two distinct values are finite.
+/// largest, over a histogram of [`OTSU_BINS`] bins spanning their [`robust_range`] (values
+/// beyond it counted in the end bins, so that a few outliers neither widen the bins nor
+/// weigh as far as they lie; a class boundary is a bin's edge). The background and the object
+/// of a scan are such classes. `None` where that range is one value.
 pub fn otsu_threshold(values: &[f32]) -> Option<f32> {
-    let (lo, hi) = finite_range(values)?;
+    let (lo, hi) = robust_range(values)?;
     if hi <= lo {
         return None;
     }
     let width = (hi as f64 - lo as f64) / OTSU_BINS as f64;
-    let bin = |v: f32| (((v as f64 - lo as f64) / width) as usize).min(OTSU_BINS - 1);
+    let bin = |v: f32| (((v.clamp(lo, hi) as f64 - lo as f64) / width) as usize).min(OTSU_BINS - 1);
     let counts = values
         .par_chunks(1 << 16)
         .map(|run| {
@@ -140,12 +217,12 @@ impl TransferFunction {
 }
 
 /// The transfer function for `volume` when its unit is unknown: [`TransferFunction::ramp`]
-/// from its values' Otsu threshold (the background transparent) to their largest, which lets
-/// half the light through a voxel's depth (its smallest spacing); and the threshold. `None`
-/// where fewer than two distinct values are finite.
+/// from its values' Otsu threshold (the background transparent) to the top of their
+/// [`robust_range`], which lets half the light through a voxel's depth (its smallest
+/// spacing); and the threshold. `None` where that range is one value.
 pub fn unit_free_transfer(volume: &Volume) -> Option<(TransferFunction, f32)> {
     let t = otsu_threshold(&volume.data)?;
-    let (_, hi) = finite_range(&volume.data)?;
+    let (_, hi) = robust_range(&volume.data)?;
     let spacing = volume.spacing.iter().copied().fold(f64::INFINITY, f64::min);
     let opacity = 1.0 - 0.5f64.powf(1.0 / spacing.max(1e-6));
     Some((TransferFunction::ramp(t, hi, opacity as f32), t))
@@ -185,6 +262,84 @@ mod tests {
         let n = values.len() as f64;
         let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
         (a.len() as f64) * (b.len() as f64) * (mean(&a) - mean(&b)).powi(2) / (n * n)
+    }
+
+    /// Every rank's order statistic is the sorted finite values' entry there, on data past
+    /// the gathering size (several passes), with heavy ties, NaN and infinities, negative
+    /// zeros and values a few ulps apart; a rank past the count is `None`.
+    #[test]
+    fn order_statistics_are_the_sorted_values() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for case in 0..6 {
+            let n = [10, 1000, 70_000, 200_000, 300_000, 150_000][case];
+            let values: Vec<f32> = (0..n)
+                .map(|_| {
+                    let r = next();
+                    match (case, r % 10) {
+                        (_, 0) if case > 1 => f32::NAN,
+                        (_, 1) if case > 2 => f32::INFINITY,
+                        // 70 % one value: a bin that never thins out.
+                        (3, 2..=8) => 0.0,
+                        (3, _) => -0.0,
+                        // Values a few ulps apart around 1000.
+                        (4, _) => f32::from_bits(1000f32.to_bits() + (r >> 40) as u32 % 97),
+                        _ => ((r >> 11) as f64 / (1u64 << 53) as f64 * 2e6 - 1e6) as f32,
+                    }
+                })
+                .collect();
+            let mut sorted: Vec<f32> = values.iter().copied().filter(|v| v.is_finite()).collect();
+            sorted.sort_by(f32::total_cmp);
+            let ranks = [0, 1, sorted.len() / 3, sorted.len() / 2, sorted.len() - 1];
+            for rank in ranks
+                .into_iter()
+                .chain((0..20).map(|_| next() as usize % sorted.len()))
+            {
+                let got = order_statistic(&values, rank).unwrap();
+                // -0.0 and 0.0 are equal; compare as values.
+                assert!(
+                    got == sorted[rank],
+                    "case {case}, rank {rank}: {got} vs {}",
+                    sorted[rank]
+                );
+            }
+            assert_eq!(order_statistic(&values, sorted.len()), None);
+        }
+        assert_eq!(order_statistic(&[f32::NAN, 2.0, 2.0], 1), Some(2.0));
+        assert_eq!(order_statistic(&[f32::NAN, 2.0, 2.0], 2), None);
+        assert_eq!(order_statistic(&[], 0), None);
+    }
+
+    /// A few outliers move neither Otsu's threshold (by more than a bin) nor the robust range,
+    /// where the whole range would have spread 8-bit values over 40 times the bins' width.
+    #[test]
+    fn outliers_do_not_set_the_defaults() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut values: Vec<f32> = (0..100_000)
+            .map(|i| {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                let base = if i % 5 == 0 { 180.0 } else { 40.0 };
+                (base + (seed % 61) as f32 - 30.0).clamp(0.0, 255.0)
+            })
+            .collect();
+        values.extend([0.0; 20]);
+        values.extend([255.0; 20]);
+        let clean = otsu_threshold(&values).unwrap();
+        assert_eq!(robust_range(&values), Some((0.0, 255.0)));
+        let mut spiked = values.clone();
+        spiked.extend([1e4, 2e4, -5e3]);
+        assert_eq!(finite_range(&spiked), Some((-5e3, 2e4)));
+        assert_eq!(robust_range(&spiked), Some((0.0, 255.0)));
+        let t = otsu_threshold(&spiked).unwrap();
+        assert!((t - clean).abs() <= 1.0, "{t} vs {clean}");
+        assert!((70.0..150.0).contains(&t), "{t}");
     }
 
     /// The clipped range is the sorted values' order statistics at the tail's ranks, NaN and

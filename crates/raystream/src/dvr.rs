@@ -23,9 +23,10 @@ use crate::common::{Backend, Picture, ms};
 /// the defaults the user did not override come from its values
 /// ([`raystream_volume::auto`]), since the HU presets' mean nothing there (CT-Bone made an
 /// 8-bit scan a uniform pink box, the CT windows a grey one): dvr and cinematic take a ramp
-/// from their Otsu threshold (the background transparent) to their largest value, and iso
-/// the surface at that threshold in the ramp's colours, unless `--tf`, `--preset` or `--iso`
-/// says; a slice a window spanning their range, unless `--window` says. Said unless `quiet`.
+/// from their Otsu threshold (the background transparent) to the top of their robust range
+/// (their largest value but for one in 10⁴), and iso the surface at that threshold in the
+/// ramp's colours, unless `--tf`, `--preset` or `--iso` says; a slice a window spanning
+/// them less 0.5 % at each end, unless `--window` says. Said unless `quiet`.
 /// The projections' (mip, minip, average) window is left to [`ProjectionWindow`]: they do not
 /// span the voxels' range (an average of a scan mostly air reached a third of it).
 pub fn unit_free_defaults(
@@ -59,19 +60,40 @@ pub fn unit_free_defaults(
                 ));
             }
         } else {
+            let top = tf.opacity.last().map_or(hi, |p| p.0);
+            let beyond = if top < hi {
+                ", their largest but for one in 10⁴ (so that a few outliers do not set it)"
+            } else {
+                ""
+            };
             say(format!(
-                "opacity ramped from 0 at {t}, their Otsu threshold (the background transparent), to {hi} (--tf FILE sets another)"
+                "opacity ramped from 0 at {t}, their Otsu threshold (the background transparent), to {top}{beyond} (--tf FILE sets another)"
             ));
         }
     } else if opt.mode.is_projection() && opt.window.is_none() {
         return Some(ProjectionWindow {
             range: (lo, hi),
+            robust: raystream_volume::auto::robust_range(&volume.data)?,
             path: path.to_owned(),
             quiet,
         });
     } else if opt.mode.is_windowed() && opt.window.is_none() && hi > lo {
-        opt.window = Some(spanning(lo, hi));
-        say("the window spans them (--window W --level L sets another)".into());
+        let tail = raystream_volume::auto::CLIPPED_TAIL;
+        match raystream_volume::auto::clipped_range(&volume.data, tail) {
+            Some((a, b)) if b > a => {
+                opt.window = Some(spanning(a, b));
+                say(format!(
+                    "the window spans them less {} % at each end, {} .. {} (--window W --level L sets another)",
+                    tail * 100.0,
+                    four_figures(a),
+                    four_figures(b)
+                ));
+            }
+            _ => {
+                opt.window = Some(spanning(lo, hi));
+                say("the window spans them (--window W --level L sets another)".into());
+            }
+        }
     }
     None
 }
@@ -81,13 +103,18 @@ fn spanning(lo: f32, hi: f32) -> (f32, f32) {
     (hi - lo, 0.5 * (lo + hi))
 }
 
-/// `v` to four significant figures (85.19, 0.04172, 1234).
+/// `v` to four significant figures, without trailing zeros (85.19, 0.04172, 1235, 207).
 fn four_figures(v: f32) -> String {
     if v == 0.0 || !v.is_finite() {
         return v.to_string();
     }
     let decimals = (3 - v.abs().log10().floor() as i32).max(0) as usize;
-    format!("{v:.decimals$}")
+    let s = format!("{v:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
 }
 
 /// Pixels along the longer side of the film [`ProjectionWindow::set_by_probe`] renders.
@@ -101,20 +128,24 @@ const PROBE_PIXELS: u32 = 128;
 pub struct ProjectionWindow {
     /// The voxels' finite range.
     range: (f32, f32),
+    /// Their robust range (`raystream_volume::auto::robust_range`), the window where the
+    /// projection does not give one.
+    robust: (f32, f32),
     path: std::path::PathBuf,
     quiet: bool,
 }
 
 impl ProjectionWindow {
-    /// The window spanning the voxels' range, for frames nobody looks at (a benchmark's).
+    /// The window spanning the voxels' robust range, for frames nobody looks at (a
+    /// benchmark's).
     pub fn spanning_the_voxels(self, opt: &mut DvrOptions) {
-        opt.window = Some(spanning(self.range.0, self.range.1));
+        opt.window = Some(spanning(self.robust.0, self.robust.1));
     }
 
     /// The window spanning the projected values of a probe frame seen by `sight` (at most
     /// [`PROBE_PIXELS`] along its longer side, the film's aspect kept), less
-    /// [`raystream_volume::auto::CLIPPED_TAIL`] at each end; the voxels' range where the
-    /// probe sees one value or none. Said unless quiet.
+    /// [`raystream_volume::auto::CLIPPED_TAIL`] at each end; the voxels' robust range where
+    /// the probe sees one value or none. Said unless quiet.
     pub fn set_by_probe<'s>(
         self,
         renderer: &Renderer,
@@ -145,10 +176,13 @@ impl ProjectionWindow {
                 )
             }
             _ => {
-                opt.window = Some(spanning(lo, hi));
+                let (a, b) = self.robust;
+                opt.window = Some(spanning(a, b));
                 format!(
-                    "the {} sees one value or none: the window spans them",
-                    opt.mode.name()
+                    "the {} sees one value or none: the window spans them but for one in 10⁴ at each end, {} .. {}",
+                    opt.mode.name(),
+                    four_figures(a),
+                    four_figures(b)
                 )
             }
         };
@@ -551,5 +585,21 @@ pub fn estimate_stats(
         shadow_samples: s.shadow_samples,
         step_mm: s.step_mm,
         denoise: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::four_figures;
+
+    #[test]
+    fn four_figures_round_and_drop_trailing_zeros() {
+        assert_eq!(four_figures(85.190025), "85.19");
+        assert_eq!(four_figures(207.0), "207");
+        assert_eq!(four_figures(1234.56), "1235");
+        assert_eq!(four_figures(-0.041_723), "-0.04172");
+        assert_eq!(four_figures(0.5), "0.5");
+        assert_eq!(four_figures(123_456.0), "123456");
+        assert_eq!(four_figures(0.0), "0");
     }
 }

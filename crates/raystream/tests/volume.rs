@@ -1416,6 +1416,101 @@ fn values_of_no_known_unit_take_their_defaults_from_the_values() {
     assert!(brightest(&narrow, "unit-free-mip-window.png") < 100);
 }
 
+/// A few outlying voxels of a volume of no known unit (a hot voxel of an MR, a metal clip in a
+/// CT stored without its rescale) do not set its defaults: 100 voxels of 10,000 in the 8-bit
+/// bonsai (one in 20,000 of its voxels) made its dvr ramp reach 10,000, so that the bonsai
+/// itself was all but transparent, and its slice window 0 .. 10,000, so that it was black.
+/// Now the pictures are the bonsai's own, and stderr gives the same ramp and window.
+#[test]
+fn a_few_outlying_voxels_do_not_set_the_defaults() {
+    let v = raystream_io::load_volume(
+        Path::new(&volume("nifti/scivis_bonsai.nii.gz")),
+        &Default::default(),
+    )
+    .unwrap();
+    let half = v.resample([128; 3]);
+    let mut spiked = half.data.clone();
+    // A block of 5 × 5 × 4 voxels in a corner of the box.
+    for k in 0..4 {
+        for j in 0..5 {
+            for i in 0..5 {
+                spiked[i + 128 * (j + 128 * k)] = 1e4;
+            }
+        }
+    }
+    let nrrd = |name: &str, data: &[f32]| {
+        let path = tmp(name);
+        let mut bytes = b"NRRD0004\ntype: float\ndimension: 3\nsizes: 128 128 128\nencoding: raw\nendian: little\n\n".to_vec();
+        bytes.extend(data.iter().flat_map(|x| x.to_le_bytes()));
+        std::fs::write(&path, bytes).unwrap();
+        path.to_str().unwrap().to_string()
+    };
+    let (clean, spiked) = (
+        nrrd("outliers-clean.nrrd", &half.data),
+        nrrd("outliers-spiked.nrrd", &spiked),
+    );
+    for mode in ["dvr", "slice"] {
+        let mut seen = Vec::new();
+        for (input, name) in [(&clean, "clean"), (&spiked, "spiked")] {
+            let out = tmp(&format!("outliers-{mode}-{name}.png"));
+            let o = run(&[
+                "render",
+                input,
+                "--mode",
+                mode,
+                "--size",
+                "64x64",
+                "--device",
+                "cpu",
+                "-o",
+                out.to_str().unwrap(),
+            ]);
+            let e = stderr(&o);
+            assert!(o.status.success(), "{e}");
+            // What was chosen, less the values' range (which the outliers do reach).
+            let said = e
+                .lines()
+                .find(|l| l.contains("values of no known unit"))
+                .and_then(|l| l.split_once("): "))
+                .map(|(_, what)| what.to_string())
+                .unwrap_or_else(|| panic!("{e}"));
+            seen.push((said, image::open(out).unwrap().to_rgb8()));
+        }
+        let [(clean_said, a), (spiked_said, b)] = &seen[..] else {
+            unreachable!()
+        };
+        // The same words, and numbers (the threshold, the ramp's top, the window's ends)
+        // within 2 %: the outliers shift the ranks a little, no more.
+        let numbers = |s: &str| -> (String, Vec<f32>) {
+            let mut words = String::new();
+            let mut found = Vec::new();
+            for w in s.split([' ', ',', '(', ')']) {
+                match w.parse::<f32>() {
+                    Ok(x) => found.push(x),
+                    _ => words += w,
+                }
+            }
+            (words, found)
+        };
+        let ((wa, na), (wb, nb)) = (numbers(clean_said), numbers(spiked_said));
+        assert_eq!(wa, wb, "{clean_said} / {spiked_said}");
+        assert!(
+            na.len() >= 2
+                && na.len() == nb.len()
+                && na
+                    .iter()
+                    .zip(&nb)
+                    .all(|(x, y)| (x - y).abs() <= 0.02 * x.abs().max(1.0)),
+            "{clean_said} / {spiked_said}"
+        );
+        let (mean, _) = raystream_cpu::srgb8_diff(a.as_raw(), b.as_raw());
+        assert!(
+            mean < 0.5,
+            "{mode}: the outliers moved the picture {mean}/255"
+        );
+    }
+}
+
 /// A projection of values of no known unit is windowed on the values it projects, less 0.5 %
 /// at each end (an image viewer's auto-contrast), not on the voxels' range: the bonsai's
 /// average and minimum reach less than half its 0 .. 255, and a window over 0 .. 255 drew
