@@ -54,8 +54,11 @@ const RANK_GATHER: usize = 1 << 16;
 /// few enough (`RANK_GATHER`) to select among. Each pass narrows the range at least
 /// `RANK_BINS`-fold, for its smallest and largest values fall in the first and last bins.
 pub fn order_statistic(values: &[f32], rank: usize) -> Option<f32> {
-    let (mut lo, mut hi) = finite_range(values)?;
-    let mut rank = rank;
+    rank_within(values, finite_range(values)?, rank)
+}
+
+/// [`order_statistic`], the finite values' range `(lo, hi)` known.
+fn rank_within(values: &[f32], (mut lo, mut hi): (f32, f32), mut rank: usize) -> Option<f32> {
     loop {
         if lo == hi {
             // All in play are one value; the first pass checks that the rank lies among them.
@@ -106,14 +109,14 @@ pub fn order_statistic(values: &[f32], rank: usize) -> Option<f32> {
 /// ⌊tail·(n − 1)⌋ to that of rank ⌈(1 − tail)·(n − 1)⌉ in ascending order (exact order
 /// statistics, [`order_statistic`]; `tail` in 0 .. ½). `None` where no value is finite.
 pub fn clipped_range(values: &[f32], tail: f64) -> Option<(f32, f32)> {
-    let n = values.par_iter().filter(|v| v.is_finite()).count();
-    let last = n.checked_sub(1)?;
+    let range = finite_range(values)?;
+    let last = values.par_iter().filter(|v| v.is_finite()).count() - 1;
     let tail = tail.clamp(0.0, 0.5);
     let lo_rank = (tail * last as f64).floor() as usize;
     let hi_rank = (((1.0 - tail) * last as f64).ceil() as usize).clamp(lo_rank, last);
     Some((
-        order_statistic(values, lo_rank)?,
-        order_statistic(values, hi_rank)?,
+        rank_within(values, range, lo_rank)?,
+        rank_within(values, range, hi_rank)?,
     ))
 }
 
@@ -130,7 +133,12 @@ pub fn robust_range(values: &[f32]) -> Option<(f32, f32)> {
 /// weigh as far as they lie; a class boundary is a bin's edge). The background and the object
 /// of a scan are such classes. `None` where that range is one value.
 pub fn otsu_threshold(values: &[f32]) -> Option<f32> {
-    let (lo, hi) = robust_range(values)?;
+    otsu_threshold_within(values, robust_range(values)?)
+}
+
+/// [`otsu_threshold`] over a histogram spanning `(lo, hi)`, values beyond it counted in the end
+/// bins.
+fn otsu_threshold_within(values: &[f32], (lo, hi): (f32, f32)) -> Option<f32> {
     if hi <= lo {
         return None;
     }
@@ -221,8 +229,9 @@ impl TransferFunction {
 /// [`robust_range`], which lets half the light through a voxel's depth (its smallest
 /// spacing); and the threshold. `None` where that range is one value.
 pub fn unit_free_transfer(volume: &Volume) -> Option<(TransferFunction, f32)> {
-    let t = otsu_threshold(&volume.data)?;
-    let (_, hi) = robust_range(&volume.data)?;
+    let range = robust_range(&volume.data)?;
+    let t = otsu_threshold_within(&volume.data, range)?;
+    let hi = range.1;
     let spacing = volume.spacing.iter().copied().fold(f64::INFINITY, f64::min);
     let opacity = 1.0 - 0.5f64.powf(1.0 / spacing.max(1e-6));
     Some((TransferFunction::ramp(t, hi, opacity as f32), t))
@@ -231,6 +240,16 @@ pub fn unit_free_transfer(volume: &Volume) -> Option<(TransferFunction, f32)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Marsaglia's xorshift64 from `seed`: the tests' reproducible random numbers.
+    fn xorshift(mut seed: u64) -> impl FnMut() -> u64 {
+        move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        }
+    }
 
     /// The exact Otsu split of integer values by brute force in f64: over every split between
     /// two distinct values, the largest between-class variance.
@@ -269,13 +288,7 @@ mod tests {
     /// zeros and values a few ulps apart; a rank past the count is `None`.
     #[test]
     fn order_statistics_are_the_sorted_values() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
         for case in 0..6 {
             let n = [10, 1000, 70_000, 200_000, 300_000, 150_000][case];
             let values: Vec<f32> = (0..n)
@@ -319,12 +332,10 @@ mod tests {
     /// where the whole range would have spread 8-bit values over 40 times the bins' width.
     #[test]
     fn outliers_do_not_set_the_defaults() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = xorshift(0x2545_f491_4f6c_dd1d);
         let mut values: Vec<f32> = (0..100_000)
             .map(|i| {
-                seed ^= seed << 13;
-                seed ^= seed >> 7;
-                seed ^= seed << 17;
+                let seed = next();
                 let base = if i % 5 == 0 { 180.0 } else { 40.0 };
                 (base + (seed % 61) as f32 - 30.0).clamp(0.0, 255.0)
             })
@@ -367,13 +378,7 @@ mod tests {
     /// its between-class variance is brute force's best, on bimodal, skewed and uniform data.
     #[test]
     fn otsu_on_8_bit_values_is_the_exact_split() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut next = xorshift(0x2545_f491_4f6c_dd1d);
         for case in 0..40 {
             let n = 500 + (next() % 3000) as usize;
             let (m0, m1) = ((next() % 100) as f64, 120.0 + (next() % 120) as f64);
