@@ -155,8 +155,15 @@ def seeds(d):
         img.SetSpacing((0.7, 0.8, 2.5))
         img.SetOrigin((-10, 20, 30))
         img.SetDirection((0, 1, 0, 1, 0, 0, 0, 0, -1))
-        for n in ["v.nii", "v.nii.gz", "v.nrrd", "v.mha", "v.mhd", "v.nhdr"]:
+        for n in ["v.nii", "v.nii.gz", "v.nrrd", "v.mha", "v.mhd", "v.nhdr", "v.vtk"]:
             sitk.WriteImage(img, os.path.join(d, n))
+        # The same voxels as raw bytes named by their size and type, and as ASCII legacy VTK.
+        vox = sitk.GetArrayFromImage(img).astype("<i2")
+        w("vr_6x5x4_int16.raw", vox.tobytes())
+        w("va.vtk", b"# vtk DataFile Version 3.0\nascii ramp\nASCII\nDATASET STRUCTURED_POINTS\n"
+          b"DIMENSIONS 6 5 4\nSPACING 0.7 0.8 2.5\nORIGIN -10 20 30\nPOINT_DATA 120\n"
+          b"SCALARS v short 1\nLOOKUP_TABLE default\n"
+          + " ".join(str(v) for v in vox.ravel()).encode() + b"\n")
         # 4-D: two phases, as SimpleITK writes them, and 3D Slicer's interleaved NRRD.
         for n in ["v4.nii.gz", "v4.nrrd", "v4.mha"]:
             sitk.WriteImage(sitk.JoinSeries([img, img + 100]), os.path.join(d, n))
@@ -484,7 +491,8 @@ def fuzz_files(work, n, device):
         d = os.path.join(work, f"case{i}")
         os.makedirs(d)
         p = os.path.join(d, s)
-        text = s.endswith((".obj", ".stl", ".ply", ".mha", ".mhd", ".nhdr", ".nrrd", ".txt", ".json", ".gltf"))
+        text = s.endswith((".obj", ".stl", ".ply", ".mha", ".mhd", ".nhdr", ".nrrd", ".txt", ".json", ".gltf")) \
+            or s == "va.vtk"
         data = open(os.path.join(sd, s), "rb").read()
         if s == "tm.obj":
             # The OBJ, its material library or its texture, mutated; the others as they are.

@@ -282,7 +282,7 @@ impl VolumePick {
 #[command(group(clap::ArgGroup::new("stations").args(["slices", "fly"]).multiple(false)))]
 pub struct RenderArgs {
     /// Mesh (.obj, .ply, .stl, optionally .gz; .gltf, .glb), scene (.toml) or CT volume (DICOM folder,
-    /// .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd); none: the built-in abdomen CT.
+    /// .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, NAME_WxHxD_TYPE.raw); none: the built-in abdomen CT.
     pub input: Option<PathBuf>,
     #[command(flatten)]
     pub threshold: Threshold,
@@ -852,7 +852,7 @@ impl From<ModeArg> for raystream_cpu::dvr::DvrMode {
 
 #[derive(Args)]
 pub struct IsoArgs {
-    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd), or a label map
+    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, NAME_WxHxD_TYPE.raw), or a label map
     /// or DICOM Segmentation (with `--segment`).
     pub input: PathBuf,
     /// Output mesh in LPS millimetres: .ply (with normals), .obj (with normals), .stl, or
@@ -918,7 +918,7 @@ pub struct LumenPick {
 
 #[derive(Args)]
 pub struct MeasureArgs {
-    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd).
+    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, NAME_WxHxD_TYPE.raw).
     pub input: PathBuf,
     /// The vessel's path: 3D Slicer markups (.mrk.json) or text (x y z per line, LPS mm), as
     /// `render --path` reads it.
@@ -1082,7 +1082,7 @@ impl MeasureArgs {
 
 #[derive(Args)]
 pub struct CentrelineArgs {
-    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd).
+    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, NAME_WxHxD_TYPE.raw).
     pub input: PathBuf,
     /// The points placed in the vessel, in order (its two ends, and any between that it must
     /// pass): 3D Slicer markups (.mrk.json) or text (x y z per line, LPS mm), as `render
@@ -1174,7 +1174,7 @@ pub struct TraceArgs {
 
 #[derive(Args)]
 pub struct InfoArgs {
-    /// Mesh file, CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd) or
+    /// Mesh file, CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, NAME_WxHxD_TYPE.raw) or
     /// scene file (.toml).
     #[arg(required_unless_present = "gpu")]
     pub input: Option<PathBuf>,

@@ -781,7 +781,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         None => (Path::new(DEFAULT_CT_NAME), Some(DEFAULT_CT)),
         Some(p) if raystream_io::is_volume_path(p) => (p, None),
         Some(p) => bail!(
-            "{}: --mode {} renders CT volumes (DICOM, NIfTI, NRRD, MetaImage), not meshes or scenes",
+            "{}: --mode {} renders CT volumes (DICOM, NIfTI, NRRD, MetaImage, VTK, raw), not meshes or scenes",
             p.display(),
             mode.name()
         ),

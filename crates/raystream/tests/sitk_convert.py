@@ -1,5 +1,5 @@
 """Writes the abdomen CT, resampled onto an oblique grid, in every format raystream reads
-(.nrrd, .nhdr + gzip data, .mha, .mhd + raw, .nii) with SimpleITK, and prints SimpleITK's
+(.nrrd, .nhdr + gzip data, .mha, .mhd + raw, .nii, .nii.gz, legacy VTK .vtk) with SimpleITK, and prints SimpleITK's
 reading of each written file as JSON lines: the reference for tests/volume.rs.
 Usage: python sitk_convert.py INPUT.nii.gz OUTDIR"""
 import json, os, sys
@@ -16,7 +16,9 @@ small = sitk.Resample(im, [40, 36, 30], sitk.Transform(), sitk.sitkLinear,
                       [2.5, 3.0, 3.5], d, -1024, sitk.sitkInt16)
 for name, kw in [("oblique.nrrd", {}), ("oblique.nhdr", {"useCompression": True}),
                  ("oblique.mha", {"useCompression": True}), ("oblique.mhd", {}),
-                 ("oblique.nii", {}), ("oblique.nii.gz", {})]:
+                 ("oblique.nii", {}), ("oblique.nii.gz", {}),
+                 # ITK's legacy VTK writer keeps no direction: read back, the grid is axial.
+                 ("oblique.vtk", {})]:
     path = os.path.join(out, name)
     sitk.WriteImage(small, path, **kw)
     back = sitk.ReadImage(path)

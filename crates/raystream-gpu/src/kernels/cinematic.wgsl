@@ -239,7 +239,10 @@ fn trace_path(o_in: vec3<f32>, d_in: vec3<f32>, key: vec3<f32>) -> PathSample {
         let albedo = painted(color_at(hit.hu), p_idx);
         let g = gradient_at(p_idx);
         let gm = length(g);
-        let surface = rng_next() < min(gm / FULL_SHADING_GRADIENT, 1.0);
+        // As on the CPU: a gradient that is not finite (a NaN voxel among those it reads)
+        // gives no normal. (NaN and infinity fail `gm <= 3.0e38`.)
+        let u = rng_next();
+        let surface = gm <= 3.0e38 && u < min(gm / FULL_SHADING_GRADIENT, 1.0);
         var n = vec3<f32>(0.0);
         var gloss = 0.0;
         var f = albedo * phase(d, key);

@@ -1,5 +1,6 @@
 //! CT volumes: the [`Volume`] model (voxel values, spacing in mm, origin and orientation in the
-//! DICOM patient system LPS) and its readers — DICOM series, NIfTI-1/2, NRRD and MetaImage.
+//! DICOM patient system LPS) and its readers — DICOM series, NIfTI-1/2, NRRD, MetaImage, legacy
+//! VTK image data, and raw files named by their size and type.
 //!
 //! World coordinates are **LPS millimetres**, as ITK/SimpleITK report them: `x` grows to the
 //! patient's left, `y` to posterior, `z` to superior (head). A voxel index `(i, j, k)` (x fastest
@@ -12,11 +13,13 @@
 
 pub(crate) mod dicom;
 mod mha;
+mod named_raw;
 mod nifti;
 mod nrrd;
 mod raw;
 mod segmentation;
 mod structure_set;
+mod vtk;
 
 use std::path::{Path, PathBuf};
 
@@ -47,11 +50,15 @@ pub enum VolumeFormat {
     Nifti,
     Nrrd,
     MetaImage,
+    /// Legacy VTK image data (`DATASET STRUCTURED_POINTS`).
+    Vtk,
+    /// Raw voxels named by their size and type: `NAME_WxHxD_TYPE.raw`.
+    Raw,
 }
 
 impl VolumeFormat {
     /// The format named by a path: a directory is a DICOM series; files go by extension
-    /// (`.nii`, `.nii.gz`, `.nrrd`, `.nhdr`, `.mha`, `.mhd`, `.dcm`).
+    /// (`.nii`, `.nii.gz`, `.nrrd`, `.nhdr`, `.mha`, `.mhd`, `.vtk`, `.raw`, `.raw.gz`, `.dcm`).
     pub fn from_path(path: &Path) -> Option<Self> {
         if path.is_dir() {
             return Some(Self::Dicom);
@@ -63,6 +70,10 @@ impl VolumeFormat {
             Some(Self::Nrrd)
         } else if name.ends_with(".mha") || name.ends_with(".mhd") {
             Some(Self::MetaImage)
+        } else if name.ends_with(".vtk") {
+            Some(Self::Vtk)
+        } else if name.ends_with(".raw") || name.ends_with(".raw.gz") {
+            Some(Self::Raw)
         } else if name.ends_with(".dcm") || name.ends_with(".zip") {
             // A ZIP: a DICOM study as a PACS or a web viewer hands it out.
             Some(Self::Dicom)
@@ -80,6 +91,8 @@ impl VolumeFormat {
             Self::Nifti => "nifti",
             Self::Nrrd => "nrrd",
             Self::MetaImage => "metaimage",
+            Self::Vtk => "vtk",
+            Self::Raw => "raw",
         }
     }
 }
@@ -108,7 +121,7 @@ pub struct VolumeSelect {
     /// file's own numbering: a NIfTI's volumes along its fourth axis (and any further ones), a
     /// DICOM series' TemporalPositionIdentifier (0020,0100), an enhanced CT's
     /// TemporalPositionIndex (0020,9128). Default: the first, with a warning when there are
-    /// more. NRRD and MetaImage files are read as 3-D only: phase 1.
+    /// more. Legacy VTK and raw files are 3-D: phase 1.
     pub phase: Option<usize>,
 }
 
@@ -440,6 +453,30 @@ impl Volume {
             .into_finite()
     }
 
+    /// Reads infinite voxel values (a float file's, or a double's beyond f32's range) as
+    /// missing values, NaN, as a float file marks the voxels it has no value for; a warning
+    /// says how many. An infinite value is no measurement, and it sent the CPU's cinematic
+    /// paths off along a direction of NaN, tracked without end.
+    pub(crate) fn infinities_missing(&mut self) {
+        use rayon::prelude::*;
+        let count: usize = self
+            .data
+            .par_chunks_mut(1 << 16)
+            .map(|c| {
+                c.iter_mut()
+                    .filter(|v| v.is_infinite())
+                    .map(|v| *v = f32::NAN)
+                    .count()
+            })
+            .sum();
+        if count > 0 {
+            self.warnings.push(format!(
+                "{count} voxel value{} infinite: read as missing (NaN)",
+                if count == 1 { " is" } else { "s are" }
+            ));
+        }
+    }
+
     /// Checks the invariants every reader guarantees; readers call it last.
     pub(crate) fn check(&self, path: &Path) -> Result<(), VolumeError> {
         check_geometry(path, self.dims, self.spacing, self.origin, &self.direction)?;
@@ -552,7 +589,7 @@ pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeE
     let format = VolumeFormat::from_path(path).ok_or_else(|| {
         VolumeError::invalid(
             path,
-            "unsupported volume format (expected a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha or .mhd)",
+            "unsupported volume format (expected a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd, .vtk, or NAME_WxHxD_TYPE.raw)",
         )
     })?;
     if !path.exists() {
@@ -561,8 +598,10 @@ pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeE
             std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder"),
         ));
     }
-    let volume = match format {
+    let mut volume = match format {
         VolumeFormat::Dicom => dicom::load(path, select)?,
+        VolumeFormat::Raw => named_raw::load(path, select.phase)?,
+        VolumeFormat::Vtk => vtk::parse(&raw::read_file(path)?, path, select.phase)?,
         file_format => {
             let parse = match file_format {
                 VolumeFormat::Nifti => nifti::parse,
@@ -572,6 +611,7 @@ pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeE
             parse(&raw::read_file(path)?, path, select.phase)?
         }
     };
+    volume.infinities_missing();
     volume.check(path)?;
     Ok(volume)
 }
@@ -579,7 +619,8 @@ pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeE
 /// Parses NIfTI bytes held in memory (an embedded volume), its volume `phase` (from 1; `None`:
 /// the first) if 4-D; `path` names it in errors.
 pub fn parse_nifti(bytes: &[u8], path: &Path, phase: Option<usize>) -> Result<Volume, VolumeError> {
-    let v = nifti::parse(bytes, path, phase)?;
+    let mut v = nifti::parse(bytes, path, phase)?;
+    v.infinities_missing();
     v.check(path)?;
     Ok(v)
 }
