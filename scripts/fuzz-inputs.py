@@ -71,6 +71,10 @@ def seeds(d):
     w = lambda name, data: open(os.path.join(d, name), "wb").write(data)
     w("t.obj", "".join(f"v {x} {y} {z}\n" for x, y, z in v).encode()
       + "".join(f"f {a+1} {b+1} {c+1}\n" for a, b, c in f).encode())
+    # A model tagged with its patient space, as 3D Slicer saves one.
+    w("ts.stl", b"solid 3D Slicer output. SPACE=RAS\n" + "".join(
+        "facet normal 0 0 0\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in (v[a], v[b], v[c]))
+        + "endloop\nendfacet\n" for a, b, c in f).encode() + b"endsolid\n")
     hdr = lambda fmt: (f"ply\nformat {fmt} 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
                        "property float z\nelement face 4\nproperty list uchar int vertex_indices\n"
                        "end_header\n").encode()

@@ -153,6 +153,7 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
         }
     };
     mesh.check(path)?;
+    shading.space = declared_space(&bytes, format);
     shading.normals = file_normals(&mesh, normals, &mut shading.warnings);
     if format == MeshFormat::Obj {
         // An OBJ's textures are named by its libraries; a glTF file's come with it.
@@ -335,6 +336,74 @@ pub struct MeshShading {
     pub uvs: Vec<[Vec2; 3]>,
     /// What a user should know: a library missing or unreadable, a texture not applied.
     pub warnings: Vec<String>,
+    /// The patient coordinate system the file says its coordinates are in, if it says one
+    /// ([`declared_space`]).
+    pub space: Option<PatientSpace>,
+}
+
+/// A patient coordinate system a mesh's coordinates are in, millimetres: LPS (x to the
+/// patient's left, y posterior, z superior: DICOM's, and raystream's volumes') or RAS (x right,
+/// y anterior: NIfTI's, and 3D Slicer's models before Slicer 5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PatientSpace {
+    Lps,
+    Ras,
+}
+
+impl PatientSpace {
+    /// A point or direction of this space in LPS.
+    pub fn to_lps(self, p: Vec3) -> Vec3 {
+        match self {
+            PatientSpace::Lps => p,
+            PatientSpace::Ras => Vec3::new(-p.x, -p.y, p.z),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            PatientSpace::Lps => "LPS",
+            PatientSpace::Ras => "RAS",
+        }
+    }
+}
+
+/// The coordinate system a mesh file declares with 3D Slicer's tag `SPACE=LPS` or `SPACE=RAS`
+/// (as NRRD names it): in an STL's header (`solid 3D Slicer output. SPACE=RAS`, or a binary
+/// STL's 80 bytes), a PLY's `comment` lines, an OBJ's `#` comments before its first vertex.
+/// Slicer writes it since 4.8 (RAS, then LPS from Slicer 5), and `iso` writes `SPACE=LPS`.
+/// `None` where the file names none (glTF has its own axes).
+pub fn declared_space(bytes: &[u8], format: MeshFormat) -> Option<PatientSpace> {
+    let head = &bytes[..bytes.len().min(1 << 16)];
+    let text = String::from_utf8_lossy(head);
+    let tagged = |line: &str| -> Option<PatientSpace> {
+        let upper = line.to_ascii_uppercase();
+        let (before, after) = upper.split_once("SPACE=")?;
+        if before.ends_with(|c: char| c.is_ascii_alphanumeric() || c == '_') {
+            return None;
+        }
+        match after.get(..3)? {
+            "LPS" => Some(PatientSpace::Lps),
+            "RAS" => Some(PatientSpace::Ras),
+            _ => None,
+        }
+    };
+    match format {
+        // A binary STL's 80-byte header, or an ASCII STL's `solid` line (of any length).
+        MeshFormat::Stl if head.starts_with(b"solid") => text.lines().next().and_then(tagged),
+        MeshFormat::Stl => tagged(&String::from_utf8_lossy(&head[..head.len().min(80)])),
+        MeshFormat::Ply => text
+            .lines()
+            .take_while(|l| l.trim() != "end_header")
+            .filter(|l| l.starts_with("comment") || l.starts_with("obj_info"))
+            .find_map(tagged),
+        MeshFormat::Obj => text
+            .lines()
+            .map(str::trim_start)
+            .take_while(|l| !l.starts_with("v ") && !l.starts_with("f "))
+            .filter(|l| l.starts_with('#'))
+            .find_map(tagged),
+        MeshFormat::Gltf => None,
+    }
 }
 
 /// Parses mesh bytes of a known format; `path` is only used in error messages and to notice
@@ -533,6 +602,7 @@ fn parse_obj(
             material_of,
             uvs,
             warnings,
+            space: None,
         },
         normals,
     ))

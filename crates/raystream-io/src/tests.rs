@@ -264,11 +264,57 @@ fn written_meshes_read_back_identically() {
         for i in 0..mesh.len() {
             assert_eq!(back.corners(i), mesh.corners(i), "{name} triangle {i}");
         }
+        // Each says its coordinates are LPS, as 3D Slicer reads the tag.
+        let (_, shading) = load_mesh_with_shading(&path).unwrap();
+        assert_eq!(shading.space, Some(PatientSpace::Lps), "{name}");
     }
     let e = write_mesh(&dir.join("m.vtk"), &mesh, None)
         .unwrap_err()
         .to_string();
     assert!(e.contains("m.vtk"), "{e}");
+}
+
+/// 3D Slicer's `SPACE=` tag, where each format carries it (Slicer's own headers and comments),
+/// and where it is not one.
+#[test]
+fn the_patient_space_a_mesh_file_declares() {
+    let some = |bytes: &[u8], format| declared_space(bytes, format);
+    let (lps, ras) = (Some(PatientSpace::Lps), Some(PatientSpace::Ras));
+    let mut binary = [b' '; 84].to_vec();
+    binary[..27].copy_from_slice(b"3D Slicer output. SPACE=RAS");
+    assert_eq!(some(&binary, MeshFormat::Stl), ras);
+    let ascii = b"solid 3D Slicer output. SPACE=LPS\n facet normal 0 0 1\n";
+    assert_eq!(some(ascii, MeshFormat::Stl), lps);
+    assert_eq!(some(b"solid SPACE=lps", MeshFormat::Stl), lps);
+    let ply = b"ply\nformat ascii 1.0\ncomment VTK generated PLY File\ncomment SPACE=RAS\nelement vertex 0\nend_header\n";
+    assert_eq!(some(ply, MeshFormat::Ply), ras);
+    let obj = b"# wavefront obj file written by the visualization toolkit\n\n# 3D Slicer output. SPACE=RAS\n\nmtllib m.mtl\nv 0 0 0\n";
+    assert_eq!(some(obj, MeshFormat::Obj), ras);
+    for (bytes, format) in [
+        (&b"solid NOSPACE=RAS"[..], MeshFormat::Stl),
+        (b"solid SPACE=XYZ", MeshFormat::Stl),
+        (b"solid part\nfacet normal 0 0 1 SPACE=RAS", MeshFormat::Stl),
+        (
+            b"ply\nformat ascii 1.0\nend_header\ncomment SPACE=RAS\n",
+            MeshFormat::Ply,
+        ),
+        (b"v 0 0 0\n# SPACE=RAS\n", MeshFormat::Obj),
+        (
+            b"{\"asset\": {\"extras\": \"SPACE=RAS\"}}",
+            MeshFormat::Gltf,
+        ),
+    ] {
+        assert_eq!(
+            some(bytes, format),
+            None,
+            "{}",
+            String::from_utf8_lossy(bytes)
+        );
+    }
+    assert_eq!(
+        PatientSpace::Ras.to_lps(Vec3::new(1.0, 2.0, 3.0)),
+        Vec3::new(-1.0, -2.0, 3.0)
+    );
 }
 
 /// The volume a closed mesh encloses: an icosphere's, a little under the unit ball's (its

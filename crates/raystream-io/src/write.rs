@@ -1,5 +1,5 @@
 //! Mesh output: binary little-endian PLY (positions + normals), OBJ (`v`, `vn`, `f v//vn`),
-//! binary STL (stl_io) and binary glTF (`.glb`: the JSON through serde_json, the container
+//! binary STL (by hand: its header names the space) and binary glTF (`.glb`: the JSON through serde_json, the container
 //! through the gltf crate). PLY and OBJ are written here: ply-rs-bw's writer builds a map of
 //! properties per element, several times slower on the millions of vertices an isosurface has,
 //! and no maintained crate writes OBJ. What is written reads back through [`crate::load_mesh`].
@@ -128,7 +128,7 @@ fn write_ply(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
     let normals = parts.iter().all(|p| p.normals.is_some());
     writeln!(
         w,
-        "ply\nformat binary_little_endian 1.0\ncomment raystream isosurface, LPS millimetres"
+        "ply\nformat binary_little_endian 1.0\ncomment raystream isosurface, LPS millimetres\ncomment SPACE=LPS"
     )?;
     if coloured {
         for p in parts {
@@ -191,7 +191,7 @@ fn write_mtl(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
 
 /// OBJ, with the material library `library` (and an object and material a part) when given.
 fn write_obj(w: &mut impl Write, parts: &[MeshPart], library: Option<&str>) -> std::io::Result<()> {
-    writeln!(w, "# raystream isosurface, LPS millimetres")?;
+    writeln!(w, "# raystream isosurface, LPS millimetres\n# SPACE=LPS")?;
     if let Some(l) = library {
         writeln!(w, "mtllib {l}")?;
     }
@@ -331,14 +331,24 @@ fn write_glb(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
     glb.to_writer(w).map_err(std::io::Error::other)
 }
 
+/// Binary STL, written by hand rather than by stl_io, whose writer leaves the 80-byte header
+/// blank: the header says the coordinates' space, as 3D Slicer reads it (`SPACE=LPS`).
 fn write_stl(w: &mut impl Write, mesh: &TriMesh) -> std::io::Result<()> {
-    let tris = (0..mesh.len()).map(|i| {
+    let mut header = [b' '; 80];
+    let text = b"raystream isosurface, LPS millimetres. SPACE=LPS";
+    header[..text.len()].copy_from_slice(text);
+    w.write_all(&header)?;
+    let count = u32::try_from(mesh.len()).map_err(std::io::Error::other)?;
+    w.write_all(&count.to_le_bytes())?;
+    for i in 0..mesh.len() {
         let [a, b, c] = mesh.corners(i);
         let n = (b - a).cross(c - a).normalize_or_zero();
-        stl_io::Triangle {
-            normal: stl_io::Vector::new(n.to_array()),
-            vertices: [a, b, c].map(|p| stl_io::Vector::new(p.to_array())),
+        for v in [n, a, b, c] {
+            for x in v.to_array() {
+                w.write_all(&x.to_le_bytes())?;
+            }
         }
-    });
-    stl_io::write_stl(w, tris)
+        w.write_all(&[0, 0])?;
+    }
+    Ok(())
 }

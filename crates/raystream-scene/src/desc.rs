@@ -2,6 +2,7 @@
 
 use std::collections::HashMap;
 
+use raystream_io::PatientSpace;
 use raystream_math::{Mat3, Vec3};
 use serde::Deserialize;
 
@@ -150,9 +151,10 @@ pub struct ObjectDesc {
     /// Rotation in degrees about x, then y, then z.
     pub rotate: Option<[f32; 3]>,
     pub scale: Option<Scale>,
-    /// The frame the mesh (after its transform) is given in: "scene" (default), or "lps" /
-    /// "ras", patient millimetres as DICOM / NIfTI and 3D Slicer use them, converted to the
-    /// scene frame so that the mesh sits where it belongs in the scene's CT volume.
+    /// The frame the mesh (after its transform) is given in: "scene", or "lps" / "ras",
+    /// patient millimetres as DICOM / NIfTI and 3D Slicer use them, converted to the scene
+    /// frame so that the mesh sits where it belongs in the scene's CT volume. Default: the
+    /// patient space the mesh file declares (3D Slicer's `SPACE=` tag), else "scene".
     pub frame: Option<String>,
 }
 
@@ -230,6 +232,38 @@ impl ObjectDesc {
             Some("ras") => Ok(Frame::Ras),
             Some(f) => Err(format!("unknown frame '{f}' (scene, lps, ras)")),
         }
+    }
+
+    /// The frame the object's mesh is read in, given the patient space its file declares
+    /// (`declared`: 3D Slicer's `SPACE=` tag), and a word where the file overrules the scene.
+    /// As 3D Slicer reads a model, the file's tag comes first: where the object names a
+    /// patient frame or none, the declared space is taken; `frame = "scene"` keeps the file's
+    /// numbers as they are.
+    pub fn frame_of_file(
+        &self,
+        declared: Option<PatientSpace>,
+    ) -> Result<(Frame, Option<String>), String> {
+        let named = self.frame()?;
+        let Some(space) = declared else {
+            return Ok((named, None));
+        };
+        let file = match space {
+            PatientSpace::Lps => Frame::Lps,
+            PatientSpace::Ras => Frame::Ras,
+        };
+        Ok(match (self.frame.as_deref(), named) {
+            (Some("scene"), _) => (Frame::Scene, None),
+            (Some(_), named) if named != file => (
+                file,
+                Some(format!(
+                    "its file says SPACE={} (3D Slicer's tag), so its coordinates are read as {}, not as the frame = \"{}\" the scene gives",
+                    space.name(),
+                    space.name(),
+                    self.frame.as_deref().unwrap_or_default()
+                )),
+            ),
+            _ => (file, None),
+        })
     }
 
     /// The linear part of the object's transform (rotation then scale applied to the mesh).

@@ -479,7 +479,10 @@ impl Scene {
                 .matrix()
                 .map_err(|e| invalid(format!("object {i}: {e}")))?;
             let t = o.translate.map(Vec3::from).unwrap_or(Vec3::ZERO);
-            let frame = o.frame().map_err(|e| invalid(format!("object {i}: {e}")))?;
+            let (frame, overruled) = o
+                .frame_of_file(shading.space)
+                .map_err(|e| invalid(format!("object {i}: {e}")))?;
+            shading.warnings.extend(overruled);
             let normal_m = m.inverse().transpose();
             // The file's normals where it gives them, else averaged over the faces.
             let own = if shading.normals.len() == source.positions.len() {
@@ -675,7 +678,20 @@ impl Scene {
         Self::staged(mesh, MeshShading::default(), name)
     }
 
-    fn staged(mesh: TriMesh, shading: MeshShading, name: &Path) -> Result<Scene, SceneError> {
+    fn staged(
+        mut mesh: TriMesh,
+        mut shading: MeshShading,
+        name: &Path,
+    ) -> Result<Scene, SceneError> {
+        // A mesh in a patient space (3D Slicer's `SPACE=` tag, `iso`'s output) stands as
+        // anatomy does: the patient upright, seen from the front, as `render CT` shows bones.
+        let patient = shading.space.take();
+        if let Some(space) = patient {
+            let to_scene = |p: Vec3| Frame::Lps.to_scene(space.to_lps(p));
+            for p in mesh.positions.iter_mut().chain(&mut shading.normals) {
+                *p = to_scene(*p);
+            }
+        }
         let b = mesh.bounds();
         let (c, r) = (b.center(), b.radius());
         let mut desc = SceneDesc::default();
@@ -704,10 +720,14 @@ impl Scene {
         ];
         desc.objects.push(ObjectDesc::default());
         let mut object = Some((mesh, shading));
-        Self::compile(&desc, name, None, |_, _| {
+        let mut scene = Self::compile(&desc, name, None, |_, _| {
             Ok(object.take().expect("one object"))
         })
-        .map_err(around_the_mesh)
+        .map_err(around_the_mesh)?;
+        if patient.is_some() {
+            scene.frame_view = VOLUME_VIEW;
+        }
+        Ok(scene)
     }
 
     /// A bone isosurface from CT: `mesh` and its `normals` in LPS millimetres are turned so that
@@ -1074,6 +1094,121 @@ mod tests {
             "{:?}",
             missing.warnings
         );
+    }
+
+    /// A model that says which patient space it is in (3D Slicer's `SPACE=` tag) is read in
+    /// it: the same tetrahedron written in RAS and tagged so, and in LPS and tagged so (an STL,
+    /// a PLY, an OBJ), lands on the same points of the scene, where `frame = "lps"` puts the
+    /// LPS numbers; the tag overrules a scene's other patient frame, with a word saying so;
+    /// `frame = "scene"` keeps the numbers as they are. Alone, a tagged model is staged as
+    /// anatomy: in the scene frame (x = L, y = S, z = A), seen from the front.
+    #[test]
+    fn a_model_is_read_in_the_patient_space_its_file_declares() {
+        let scratch = tempfile::Builder::new()
+            .prefix("raystream-scene-space-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
+        let lps = [
+            Vec3::new(10.0, -20.0, 30.0),
+            Vec3::new(14.0, -20.0, 30.0),
+            Vec3::new(10.0, -15.0, 30.0),
+            Vec3::new(10.0, -20.0, 37.0),
+        ];
+        let faces = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+        let ras = lps.map(|p| Vec3::new(-p.x, -p.y, p.z));
+        let stl = |points: &[Vec3; 4], header: &str| {
+            let mut text = format!("solid {header}\n");
+            for f in faces {
+                text += "facet normal 0 0 0\nouter loop\n";
+                for v in f {
+                    let p = points[v];
+                    text += &format!("vertex {} {} {}\n", p.x, p.y, p.z);
+                }
+                text += "endloop\nendfacet\n";
+            }
+            text + &format!("endsolid {header}\n")
+        };
+        let obj = |points: &[Vec3; 4], comment: &str| {
+            let mut text = format!("# {comment}\n");
+            for p in points {
+                text += &format!("v {} {} {}\n", p.x, p.y, p.z);
+            }
+            for [a, b, c] in faces {
+                text += &format!("f {} {} {}\n", a + 1, b + 1, c + 1);
+            }
+            text
+        };
+        let ply = |points: &[Vec3; 4], comment: &str| {
+            let mut text = format!(
+                "ply\nformat ascii 1.0\ncomment {comment}\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 4\nproperty list uchar int vertex_indices\nend_header\n"
+            );
+            for p in points {
+                text += &format!("{} {} {}\n", p.x, p.y, p.z);
+            }
+            for [a, b, c] in faces {
+                text += &format!("3 {a} {b} {c}\n");
+            }
+            text
+        };
+        let files = [
+            ("lps.stl", stl(&lps, "3D Slicer output. SPACE=LPS")),
+            ("ras.stl", stl(&ras, "3D Slicer output. SPACE=RAS")),
+            ("ras.obj", obj(&ras, "3D Slicer output. SPACE=RAS")),
+            ("ras.ply", ply(&ras, "SPACE=RAS")),
+            ("plain.stl", stl(&ras, "no space named")),
+        ];
+        for (name, text) in &files {
+            std::fs::write(dir.join(name), text).unwrap();
+        }
+        let scene = |object: &str| {
+            let desc: SceneDesc = toml::from_str(&format!("[[objects]]\n{object}")).unwrap();
+            Scene::from_desc(&desc, dir, Path::new("s.toml")).unwrap()
+        };
+        let sorted = |mut v: Vec<Vec3>| {
+            v.sort_by(|a, b| a.to_array().partial_cmp(&b.to_array()).unwrap());
+            v
+        };
+        let sorted_want = sorted(lps.iter().map(|&p| Frame::Lps.to_scene(p)).collect());
+        let placed = |s: &Scene| sorted(s.mesh.positions.clone());
+        for object in [
+            "mesh = \"lps.stl\"",
+            "mesh = \"ras.stl\"",
+            "mesh = \"ras.obj\"",
+            "mesh = \"ras.ply\"",
+            "mesh = \"ras.stl\"\nframe = \"ras\"",
+            "mesh = \"plain.stl\"\nframe = \"ras\"",
+        ] {
+            let s = scene(object);
+            assert_eq!(placed(&s), sorted_want, "{object}");
+            assert!(s.warnings.is_empty(), "{object}: {:?}", s.warnings);
+        }
+        // The file's tag before the scene's frame, with a word; "scene" keeps the numbers.
+        let overruled = scene("mesh = \"ras.stl\"\nframe = \"lps\"");
+        assert_eq!(placed(&overruled), sorted_want);
+        assert!(
+            overruled.warnings[0].contains("SPACE=RAS")
+                && overruled.warnings[0].contains("frame = \"lps\""),
+            "{:?}",
+            overruled.warnings
+        );
+        let raw = sorted(ras.to_vec());
+        assert_eq!(placed(&scene("mesh = \"ras.stl\"\nframe = \"scene\"")), raw);
+        assert_eq!(placed(&scene("mesh = \"plain.stl\"")), raw);
+        // Alone: the RAS and the LPS model are staged alike, upright and seen from the front;
+        // an untagged one keeps its numbers and the framing of any mesh.
+        let lps_alone = Scene::for_mesh_file(&dir.join("lps.stl")).unwrap();
+        let ras_alone = Scene::for_mesh_file(&dir.join("ras.obj")).unwrap();
+        assert_eq!(lps_alone.frame_view, VOLUME_VIEW);
+        assert_eq!(ras_alone.frame_view, VOLUME_VIEW);
+        let objects = |s: &Scene| {
+            sorted(s.mesh.positions[..s.mesh.positions.len() - s.ground_vertices].to_vec())
+        };
+        assert_eq!(objects(&lps_alone), sorted_want);
+        assert_eq!(objects(&ras_alone), sorted_want);
+        let plain = Scene::for_mesh_file(&dir.join("plain.stl")).unwrap();
+        assert_eq!(objects(&plain), raw);
+        assert_ne!(plain.frame_view, VOLUME_VIEW);
     }
 
     fn compile(text: &str) -> Result<Scene, SceneError> {

@@ -98,6 +98,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             "kdtree": tree_json(&tree),
             "materials": used.iter().map(|(name, n, t)| json!({"name": name, "triangles": n, "texture": t})).collect::<Vec<_>>(),
             "texture_coordinates": !materials.uvs.is_empty(),
+            "space": materials.space.map(|s| s.name()),
             "warnings": materials.warnings,
         });
         print_line(v);
@@ -114,6 +115,12 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             b.min.to_array(),
             b.max.to_array()
         );
+        if let Some(space) = materials.space {
+            println!(
+                "  space      {}: patient millimetres, as the file says (SPACE={0}, 3D Slicer's tag); render shows it from the front, head up",
+                space.name()
+            );
+        }
         println!(
             "  kd-tree    {}: {} nodes, {} leaves ({} empty), depth {}, SAH cost {:.2}, {:.2} triangles/leaf, {} references, built in {:.1} ms",
             s.builder,
