@@ -71,6 +71,15 @@ def seeds(d):
     w = lambda name, data: open(os.path.join(d, name), "wb").write(data)
     w("t.obj", "".join(f"v {x} {y} {z}\n" for x, y, z in v).encode()
       + "".join(f"f {a+1} {b+1} {c+1}\n" for a, b, c in f).encode())
+    # Legacy VTK polygonal data: ASCII (version 4.2, a quad and a strip) and binary (5.1).
+    pts = " ".join(f"{x} {y} {z}" for x, y, z in v)
+    w("tp.vtk", (f"# vtk DataFile Version 4.2\n3D Slicer output. SPACE=RAS\nASCII\nDATASET POLYDATA\n"
+                 f"POINTS 4 float\n{pts}\nPOLYGONS 2 8\n3 0 2 1\n3 0 1 3\nTRIANGLE_STRIPS 1 5\n4 0 3 2 1\n"
+                 f"POINT_DATA 4\nNORMALS Normals float\n" + " ".join(["0 0 1"] * 4) + "\n").encode())
+    w("tb.vtk", b"# vtk DataFile Version 5.1\nvtk output\nBINARY\nDATASET POLYDATA\nPOINTS 4 double\n"
+      + struct.pack(">12d", *[c for p in v for c in p]) + b"\nPOLYGONS 5 12\nOFFSETS vtktypeint64\n"
+      + struct.pack(">5q", 0, 3, 6, 9, 12) + b"\nCONNECTIVITY vtktypeint64\n"
+      + struct.pack(">12q", *[i for t in f for i in t]) + b"\n")
     # A model tagged with its patient space, as 3D Slicer saves one.
     w("ts.stl", b"solid 3D Slicer output. SPACE=RAS\n" + "".join(
         "facet normal 0 0 0\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in (v[a], v[b], v[c]))
@@ -496,7 +505,7 @@ def fuzz_files(work, n, device):
         os.makedirs(d)
         p = os.path.join(d, s)
         text = s.endswith((".obj", ".stl", ".ply", ".mha", ".mhd", ".nhdr", ".nrrd", ".txt", ".json", ".gltf")) \
-            or s == "va.vtk"
+            or s in ("va.vtk", "tp.vtk")
         data = open(os.path.join(sd, s), "rb").read()
         if s == "tm.obj":
             # The OBJ, its material library or its texture, mutated; the others as they are.

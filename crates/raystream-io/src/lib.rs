@@ -19,6 +19,8 @@ mod stl;
 mod structure_set_write;
 mod texture;
 pub mod volume;
+mod vtk_legacy;
+mod vtk_mesh;
 mod write;
 pub use colour_table::read_colour_table;
 pub use structure_set_write::{
@@ -91,6 +93,8 @@ pub enum MeshFormat {
     Stl,
     /// glTF 2.0, `.gltf` or `.glb`.
     Gltf,
+    /// Legacy VTK polygonal data (`.vtk`, `DATASET POLYDATA`): 3D Slicer's models.
+    Vtk,
 }
 
 impl MeshFormat {
@@ -103,6 +107,7 @@ impl MeshFormat {
             "ply" => Some(Self::Ply),
             "stl" => Some(Self::Stl),
             "gltf" | "glb" => Some(Self::Gltf),
+            "vtk" => Some(Self::Vtk),
             _ => None,
         }
     }
@@ -150,6 +155,18 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
                 ..Default::default()
             };
             (g.mesh, shading, g.normals)
+        }
+        MeshFormat::Vtk => {
+            let poly = vtk_mesh::parse(&bytes, path)?;
+            let shading = MeshShading {
+                warnings: poly.warnings,
+                ..Default::default()
+            };
+            (
+                poly.mesh,
+                shading,
+                poly.normals.into_iter().map(Some).collect(),
+            )
         }
     };
     mesh.check(path)?;
@@ -286,7 +303,7 @@ fn read_mesh_file(path: &Path) -> Result<(MeshFormat, Vec<u8>), MeshError> {
     let format = MeshFormat::from_path(path).ok_or_else(|| {
         MeshError::invalid(
             path,
-            "unsupported format: not a mesh (.obj, .ply, .stl, optionally .gz, or .gltf, .glb) nor a volume (a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd)",
+            "unsupported format: not a mesh (.obj, .ply, .stl, optionally .gz, .gltf, .glb, or a .vtk of polygons) nor a volume (a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd, a .vtk of image data, or NAME_WxHxD_TYPE.raw)",
         )
     })?;
     let bytes = std::fs::read(path).map_err(|error| MeshError::Io {
@@ -369,7 +386,8 @@ impl PatientSpace {
 
 /// The coordinate system a mesh file declares with 3D Slicer's tag `SPACE=LPS` or `SPACE=RAS`
 /// (as NRRD names it): in an STL's header (`solid 3D Slicer output. SPACE=RAS`, or a binary
-/// STL's 80 bytes), a PLY's `comment` lines, an OBJ's `#` comments before its first vertex.
+/// STL's 80 bytes), a PLY's `comment` lines, an OBJ's `#` comments before its first vertex, a
+/// legacy VTK file's title line.
 /// Slicer writes it since 4.8 (RAS, then LPS from Slicer 5), and `iso` writes `SPACE=LPS`.
 /// `None` where the file names none (glTF has its own axes).
 pub fn declared_space(bytes: &[u8], format: MeshFormat) -> Option<PatientSpace> {
@@ -402,6 +420,8 @@ pub fn declared_space(bytes: &[u8], format: MeshFormat) -> Option<PatientSpace> 
             .take_while(|l| !l.starts_with("v ") && !l.starts_with("f "))
             .filter(|l| l.starts_with('#'))
             .find_map(tagged),
+        // The title line, where 3D Slicer writes `3D Slicer output. SPACE=LPS`.
+        MeshFormat::Vtk => text.lines().nth(1).and_then(tagged),
         MeshFormat::Gltf => None,
     }
 }
@@ -425,6 +445,7 @@ fn parse_mesh_in(
         MeshFormat::Ply => ply::parse(&bytes, path)?.0,
         MeshFormat::Stl => stl::parse(&bytes, path)?,
         MeshFormat::Gltf => gltf::parse(&bytes, path, dir, false)?.mesh,
+        MeshFormat::Vtk => vtk_mesh::parse(&bytes, path)?.mesh,
     };
     mesh.check(path)?;
     Ok(mesh)

@@ -143,7 +143,7 @@ fn gzip_is_looked_through() {
         MeshFormat::from_path(Path::new("a/B.PLY.gz")),
         Some(MeshFormat::Ply)
     );
-    assert_eq!(MeshFormat::from_path(Path::new("a/b.vtk")), None);
+    assert_eq!(MeshFormat::from_path(Path::new("a/b.off")), None);
 }
 
 #[test]
@@ -224,8 +224,8 @@ fn lying_headers_do_not_allocate() {
 
 #[test]
 fn unsupported_extension_and_missing_file() {
-    let e = load_mesh(Path::new("scene.vtk")).unwrap_err().to_string();
-    assert!(e.contains("scene.vtk") && e.contains("unsupported"), "{e}");
+    let e = load_mesh(Path::new("scene.off")).unwrap_err().to_string();
+    assert!(e.contains("scene.off") && e.contains("unsupported"), "{e}");
     let e = load_mesh(Path::new("does/not/exist.obj"))
         .unwrap_err()
         .to_string();
@@ -256,7 +256,7 @@ fn written_meshes_read_back_identically() {
     let normals = mesh.vertex_normals();
     let scratch = scratch_dir("write");
     let dir = scratch.path();
-    for name in ["m.ply", "m.obj", "m.stl"] {
+    for name in ["m.ply", "m.obj", "m.stl", "m.vtk"] {
         let path = dir.join(name);
         write_mesh(&path, &mesh, Some(&normals)).unwrap();
         let back = load_mesh(&path).unwrap();
@@ -268,10 +268,10 @@ fn written_meshes_read_back_identically() {
         let (_, shading) = load_mesh_with_shading(&path).unwrap();
         assert_eq!(shading.space, Some(PatientSpace::Lps), "{name}");
     }
-    let e = write_mesh(&dir.join("m.vtk"), &mesh, None)
+    let e = write_mesh(&dir.join("m.off"), &mesh, None)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("m.vtk"), "{e}");
+    assert!(e.contains("m.off"), "{e}");
 }
 
 /// 3D Slicer's `SPACE=` tag, where each format carries it (Slicer's own headers and comments),
@@ -427,7 +427,7 @@ fn mesh_parts_keep_their_names_and_colours() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("m.stl: an STL file holds one surface, not 2"),
+        e.contains("m.stl: an STL or VTK file holds one surface here, not 2"),
         "{e}"
     );
 }

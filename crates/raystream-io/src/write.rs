@@ -47,15 +47,17 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
         .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
     let format = MeshFormat::from_path(path)
         .filter(|f| (*f != MeshFormat::Gltf || glb) && !path.to_string_lossy().ends_with(".gz"))
-        .ok_or_else(|| MeshError::invalid(path, "output must end in .ply, .obj, .stl or .glb"))?;
+        .ok_or_else(|| {
+            MeshError::invalid(path, "output must end in .ply, .obj, .stl, .vtk or .glb")
+        })?;
     if parts.is_empty() {
         return Err(MeshError::invalid(path, "no surface to write"));
     }
-    if format == MeshFormat::Stl && parts.len() > 1 {
+    if matches!(format, MeshFormat::Stl | MeshFormat::Vtk) && parts.len() > 1 {
         return Err(MeshError::invalid(
             path,
             format!(
-                "an STL file holds one surface, not {}: write .glb, .obj or .ply, or one at a time",
+                "an STL or VTK file holds one surface here, not {}: write .glb, .obj or .ply, or one at a time",
                 parts.len()
             ),
         ));
@@ -103,6 +105,7 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
         MeshFormat::Obj => write_obj(&mut w, &parts, None),
         MeshFormat::Stl => write_stl(&mut w, parts[0].mesh),
         MeshFormat::Gltf => write_glb(&mut w, &parts),
+        MeshFormat::Vtk => write_vtk(&mut w, &parts[0]),
     };
     r.and_then(|()| w.flush()).map_err(io)
 }
@@ -329,6 +332,38 @@ fn write_glb(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
         bin: Some(bin.into()),
     };
     glb.to_writer(w).map_err(std::io::Error::other)
+}
+
+/// Legacy VTK polygonal data, binary, in the file version 3D Slicer writes (4.2), its title
+/// naming the space as Slicer's do: 3D Slicer's own model format.
+fn write_vtk(w: &mut impl Write, part: &MeshPart) -> std::io::Result<()> {
+    let mesh = part.mesh;
+    write!(
+        w,
+        "# vtk DataFile Version 4.2\nraystream isosurface, LPS millimetres. SPACE=LPS\nBINARY\nDATASET POLYDATA\nPOINTS {} float\n",
+        mesh.positions.len()
+    )?;
+    for p in &mesh.positions {
+        for x in p.to_array() {
+            w.write_all(&x.to_be_bytes())?;
+        }
+    }
+    write!(w, "\nPOLYGONS {} {}\n", mesh.len(), 4 * mesh.len())?;
+    for t in &mesh.triangles {
+        w.write_all(&3i32.to_be_bytes())?;
+        for &v in t {
+            w.write_all(&(v as i32).to_be_bytes())?;
+        }
+    }
+    if let Some(normals) = part.normals {
+        write!(w, "\nPOINT_DATA {}\nNORMALS Normals float\n", normals.len())?;
+        for n in normals {
+            for x in n.to_array() {
+                w.write_all(&x.to_be_bytes())?;
+            }
+        }
+    }
+    writeln!(w)
 }
 
 /// Binary STL, written by hand rather than by stl_io, whose writer leaves the 80-byte header

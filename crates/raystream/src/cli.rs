@@ -281,8 +281,9 @@ impl VolumePick {
 #[command(group(clap::ArgGroup::new("frames").args(["turntable", "slices", "cine", "fly"])))]
 #[command(group(clap::ArgGroup::new("stations").args(["slices", "fly"]).multiple(false)))]
 pub struct RenderArgs {
-    /// Mesh (.obj, .ply, .stl, optionally .gz; .gltf, .glb), scene (.toml) or CT volume (DICOM folder,
-    /// .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, NAME_WxHxD_TYPE.raw); none: the built-in abdomen CT.
+    /// Mesh (.obj, .ply, .stl, optionally .gz; .gltf, .glb; a .vtk of polygons), scene (.toml) or
+    /// CT volume (DICOM folder, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, a .vtk of image data,
+    /// NAME_WxHxD_TYPE.raw); none: the built-in abdomen CT.
     pub input: Option<PathBuf>,
     #[command(flatten)]
     pub threshold: Threshold,
@@ -855,9 +856,10 @@ pub struct IsoArgs {
     /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, NAME_WxHxD_TYPE.raw), or a label map
     /// or DICOM Segmentation (with `--segment`).
     pub input: PathBuf,
-    /// Output mesh in LPS millimetres: .ply (with normals), .obj (with normals), .stl, or
-    /// .glb (binary glTF with normals, under a node that turns it to glTF's metres, +Y
-    /// superior, +Z anterior).
+    /// Output mesh in LPS millimetres: .ply (with normals), .obj (with normals), .stl, .vtk
+    /// (3D Slicer's model format, legacy VTK polygonal data, with normals), or .glb (binary
+    /// glTF with normals, under a node that turns it to glTF's metres, +Y superior, +Z
+    /// anterior). All but the GLB say SPACE=LPS, as 3D Slicer reads a model's space.
     #[arg(short, long)]
     pub output: PathBuf,
     #[command(flatten)]

@@ -1650,3 +1650,106 @@ fn a_raw_file_named_by_its_size_and_type_reads_as_its_nifti() {
     // A name claiming 10⁶ slices is refused by the file's length, before anything is read.
     refused_as("huge_1000x1000x1000000_uint8.raw", n, "voxel limit");
 }
+
+/// Legacy VTK against VTK itself (the vtk wheel): `iso -o bones.vtk` writes 3D Slicer's
+/// model format (polygonal data, tagged `SPACE=LPS` as Slicer tags its own), in which VTK's
+/// reader finds the PLY's surface (its points, triangles and normals); the PLY written by VTK
+/// in file versions 4.2 and 5.1, ASCII and binary, titled as Slicer titles a RAS model, reads
+/// as the PLY (`info` says RAS), and VTK's image data, ASCII and binary, as its voxels; `info`
+/// and `render` take a `.vtk` of polygons as a mesh, of image data as a volume.
+#[test]
+fn legacy_vtk_files_agree_with_vtk() {
+    let Some(py) = python_with("vtkmodules") else {
+        return;
+    };
+    let ct = volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz");
+    let (ply, vtk) = (tmp("bones-model.ply"), tmp("bones-model.vtk"));
+    for out in [&ply, &vtk] {
+        let o = run(&["iso", &ct, "--quiet", "-o", out.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let (a, b) = (
+        raystream_io::load_mesh(&ply).unwrap(),
+        raystream_io::load_mesh(&vtk).unwrap(),
+    );
+    assert!(a.positions == b.positions && a.triangles == b.triangles);
+    let dir = tmp("vtk-legacy");
+    let o = std::process::Command::new(&py)
+        .arg(repo().join("crates/raystream/tests/vtk_legacy.py"))
+        .args([&vtk, &ply, &dir])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+
+    // VTK reads raystream's model.
+    let read = &v["read"];
+    assert_eq!(read["points"], a.positions.len());
+    assert_eq!(read["polygons"], a.len());
+    assert_eq!(read["normals"], a.positions.len());
+    let index_sum: u64 = a.triangles.iter().flatten().map(|&i| i as u64).sum();
+    assert_eq!(read["index_sum"], index_sum);
+    let coordinates = || a.positions.iter().flat_map(|p| p.to_array());
+    let point_sum: f64 = coordinates().map(f64::from).sum();
+    let theirs = read["point_sum"].as_f64().unwrap();
+    assert!(
+        (theirs - point_sum).abs() <= 1e-9 * point_sum.abs(),
+        "{theirs} vs {point_sum}"
+    );
+    assert!(read["title"].as_str().unwrap().ends_with("SPACE=LPS"));
+    let i = info(vtk.to_str().unwrap());
+    assert_eq!(
+        (i["kind"].as_str(), i["space"].as_str()),
+        (Some("mesh"), Some("LPS"))
+    );
+    render_to(
+        "bones-model.png",
+        "cpu",
+        &[vtk.to_str().unwrap(), "--size", "32x24"],
+    );
+
+    // raystream reads VTK's polygonal data of every version and encoding.
+    let written = v["written"].as_array().unwrap();
+    assert_eq!(written.len(), 4);
+    for name in written {
+        let file = dir.join(name.as_str().unwrap());
+        let (m, shading) = raystream_io::load_mesh_with_shading(&file).unwrap();
+        assert_eq!(m.triangles, a.triangles, "{file:?}");
+        // Text is written to VTK's precision (6 significant digits: 5·10⁻⁶ relative, and f32's
+        // rounding), binary exactly.
+        let worst = m
+            .positions
+            .iter()
+            .zip(&a.positions)
+            .map(|(p, q)| ((*p - *q).abs() / q.abs().max(raystream_io::Vec3::ONE)).max_element())
+            .fold(0.0f32, f32::max);
+        let exact = file.to_string_lossy().contains("binary");
+        assert!(
+            if exact { worst == 0.0 } else { worst < 5.2e-6 },
+            "{file:?}: {worst}"
+        );
+        assert_eq!(
+            shading.space,
+            Some(raystream_io::PatientSpace::Ras),
+            "{file:?}"
+        );
+        assert_eq!(info(file.to_str().unwrap())["space"], "RAS");
+    }
+
+    // …and VTK's image data.
+    let values: Vec<f32> = v["image_values"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap() as f32)
+        .collect();
+    for name in v["images"].as_array().unwrap() {
+        let file = dir.join(name.as_str().unwrap());
+        let vol = raystream_io::load_volume(&file, &Default::default()).unwrap();
+        assert_eq!(vol.dims, [5, 4, 3], "{file:?}");
+        assert_eq!(vol.spacing, [0.5, 0.25, 2.0], "{file:?}");
+        assert_eq!(vol.origin, [-10.0, 20.0, 30.5], "{file:?}");
+        assert!(vol.data == values, "{file:?}: the voxels differ");
+        assert_eq!(info(file.to_str().unwrap())["kind"], "volume");
+    }
+}

@@ -16,7 +16,7 @@ mod mha;
 mod named_raw;
 mod nifti;
 mod nrrd;
-mod raw;
+pub(crate) mod raw;
 mod segmentation;
 mod structure_set;
 mod vtk;
@@ -71,7 +71,10 @@ impl VolumeFormat {
         } else if name.ends_with(".mha") || name.ends_with(".mhd") {
             Some(Self::MetaImage)
         } else if name.ends_with(".vtk") {
-            Some(Self::Vtk)
+            // Legacy VTK holds volumes (image data) and meshes (polygons): the mesh reader
+            // takes the polygons.
+            let mesh = crate::vtk_legacy::dataset_of(path).is_some_and(|d| d == "POLYDATA");
+            (!mesh).then_some(Self::Vtk)
         } else if name.ends_with(".raw") || name.ends_with(".raw.gz") {
             Some(Self::Raw)
         } else if name.ends_with(".dcm") || name.ends_with(".zip") {

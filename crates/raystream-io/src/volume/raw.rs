@@ -145,6 +145,34 @@ pub(crate) fn skip_n(r: &mut dyn Read, n: u64, path: &Path) -> Result<(), Volume
     Ok(())
 }
 
+/// One value of `scalar` from its bytes `c`, exactly (every stored type fits f64 but 8-byte
+/// integers beyond 2⁵³).
+#[inline(always)]
+pub(crate) fn value(c: &[u8], scalar: Scalar, big_endian: bool) -> f64 {
+    macro_rules! get {
+        ($t:ty) => {{
+            let a = c.try_into().unwrap();
+            if big_endian {
+                <$t>::from_be_bytes(a) as f64
+            } else {
+                <$t>::from_le_bytes(a) as f64
+            }
+        }};
+    }
+    match scalar {
+        Scalar::U8 => c[0] as f64,
+        Scalar::I8 => c[0] as i8 as f64,
+        Scalar::U16 => get!(u16),
+        Scalar::I16 => get!(i16),
+        Scalar::U32 => get!(u32),
+        Scalar::I32 => get!(i32),
+        Scalar::U64 => get!(u64),
+        Scalar::I64 => get!(i64),
+        Scalar::F32 => get!(f32),
+        Scalar::F64 => get!(f64),
+    }
+}
+
 /// Decodes `bytes` (exactly `count` values of `scalar`) to `value·slope + intercept` as f32.
 pub(crate) fn decode(
     bytes: &[u8],
@@ -155,30 +183,7 @@ pub(crate) fn decode(
 ) -> Vec<f32> {
     use rayon::prelude::*;
     let size = scalar.size();
-    let convert = |c: &[u8]| -> f64 {
-        macro_rules! get {
-            ($t:ty) => {{
-                let a = c.try_into().unwrap();
-                if big_endian {
-                    <$t>::from_be_bytes(a) as f64
-                } else {
-                    <$t>::from_le_bytes(a) as f64
-                }
-            }};
-        }
-        match scalar {
-            Scalar::U8 => c[0] as f64,
-            Scalar::I8 => c[0] as i8 as f64,
-            Scalar::U16 => get!(u16),
-            Scalar::I16 => get!(i16),
-            Scalar::U32 => get!(u32),
-            Scalar::I32 => get!(i32),
-            Scalar::U64 => get!(u64),
-            Scalar::I64 => get!(i64),
-            Scalar::F32 => get!(f32),
-            Scalar::F64 => get!(f64),
-        }
-    };
+    let convert = |c: &[u8]| value(c, scalar, big_endian);
     if slope == 1.0 && intercept == 0.0 {
         bytes
             .par_chunks_exact(size)
