@@ -384,6 +384,17 @@ mod tests {
             crate::declared_space(ascii_42().as_bytes(), crate::MeshFormat::Vtk),
             Some(crate::PatientSpace::Ras)
         );
+        // Named where a volume is wanted, it is called a mesh.
+        let scratch = crate::tests::scratch_dir("vtk-mesh");
+        let file = scratch.path().join("model.vtk");
+        std::fs::write(&file, ascii_42()).unwrap();
+        let e = crate::load_volume(&file, &Default::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("model.vtk") && e.contains("is a mesh, not a volume"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -590,9 +590,14 @@ pub(crate) fn voxel_count(path: &Path, dims: [usize; 3]) -> Result<usize, Volume
 /// by extension; of a 4-D acquisition, the phase `select` names.
 pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeError> {
     let format = VolumeFormat::from_path(path).ok_or_else(|| {
+        let polygons = crate::vtk_legacy::dataset_of(path).is_some_and(|d| d == "POLYDATA");
         VolumeError::invalid(
             path,
-            "unsupported volume format (expected a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd, .vtk, or NAME_WxHxD_TYPE.raw)",
+            if polygons {
+                "a .vtk of polygons (DATASET POLYDATA) is a mesh, not a volume: a volume's .vtk holds image data (STRUCTURED_POINTS)"
+            } else {
+                "unsupported volume format (expected a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd, a .vtk of image data, or NAME_WxHxD_TYPE.raw)"
+            },
         )
     })?;
     if !path.exists() {
