@@ -343,11 +343,12 @@ fn write_vtk(w: &mut impl Write, part: &MeshPart) -> std::io::Result<()> {
         "# vtk DataFile Version 4.2\nraystream isosurface, LPS millimetres. SPACE=LPS\nBINARY\nDATASET POLYDATA\nPOINTS {} float\n",
         mesh.positions.len()
     )?;
-    for p in &mesh.positions {
-        for x in p.to_array() {
-            w.write_all(&x.to_be_bytes())?;
-        }
-    }
+    let big_endian = |w: &mut dyn Write, v: &[Vec3]| -> std::io::Result<()> {
+        v.iter()
+            .flat_map(|p| p.to_array())
+            .try_for_each(|x| w.write_all(&x.to_be_bytes()))
+    };
+    big_endian(w, &mesh.positions)?;
     write!(w, "\nPOLYGONS {} {}\n", mesh.len(), 4 * mesh.len())?;
     for t in &mesh.triangles {
         w.write_all(&3i32.to_be_bytes())?;
@@ -357,11 +358,7 @@ fn write_vtk(w: &mut impl Write, part: &MeshPart) -> std::io::Result<()> {
     }
     if let Some(normals) = part.normals {
         write!(w, "\nPOINT_DATA {}\nNORMALS Normals float\n", normals.len())?;
-        for n in normals {
-            for x in n.to_array() {
-                w.write_all(&x.to_be_bytes())?;
-            }
-        }
+        big_endian(w, normals)?;
     }
     writeln!(w)
 }

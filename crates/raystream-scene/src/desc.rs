@@ -213,6 +213,15 @@ pub enum Frame {
     Ras,
 }
 
+impl From<PatientSpace> for Frame {
+    fn from(space: PatientSpace) -> Frame {
+        match space {
+            PatientSpace::Lps => Frame::Lps,
+            PatientSpace::Ras => Frame::Ras,
+        }
+    }
+}
+
 impl Frame {
     /// The frame's point in the scene frame (x = L, y = S, z = A): a rotation.
     pub fn to_scene(self, p: Vec3) -> Vec3 {
@@ -247,10 +256,7 @@ impl ObjectDesc {
         let Some(space) = declared else {
             return Ok((named, None));
         };
-        let file = match space {
-            PatientSpace::Lps => Frame::Lps,
-            PatientSpace::Ras => Frame::Ras,
-        };
+        let file = Frame::from(space);
         Ok(match (self.frame.as_deref(), named) {
             (Some("scene"), _) => (Frame::Scene, None),
             (Some(_), named) if named != file => (

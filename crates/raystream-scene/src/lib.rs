@@ -687,9 +687,9 @@ impl Scene {
         // anatomy does: the patient upright, seen from the front, as `render CT` shows bones.
         let patient = shading.space.take();
         if let Some(space) = patient {
-            let to_scene = |p: Vec3| Frame::Lps.to_scene(space.to_lps(p));
+            let frame = Frame::from(space);
             for p in mesh.positions.iter_mut().chain(&mut shading.normals) {
-                *p = to_scene(*p);
+                *p = frame.to_scene(*p);
             }
         }
         let b = mesh.bounds();

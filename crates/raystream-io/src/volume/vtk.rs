@@ -12,10 +12,7 @@ use std::path::Path;
 
 use super::nifti::guess_unit;
 use super::raw::decode;
-use super::{
-    Phase, Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal, unit_columns,
-    voxel_count,
-};
+use super::{Phase, Volume, VolumeError, VolumeFormat, check_geometry, unit_columns, voxel_count};
 use crate::vtk_legacy::{Cursor, header, scalar_of};
 
 /// Parses a legacy VTK file's bytes (a 3-D volume: `phase`, if given, must be 1).
@@ -34,8 +31,6 @@ pub(crate) fn parse(
     }
     let (binary, mut c) = (h.binary, h.cursor);
     let (mut dims, mut spacing_v, mut origin) = (None, [1.0; 3], [0.0; 3]);
-    // Legacy VTK image data has no orientation: its axes are x, y and z.
-    let direction = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     let numbers = |words: &[&str], n: usize| -> Result<Vec<f64>, VolumeError> {
         let v: Option<Vec<f64>> = words[1..].iter().map(|w| w.parse().ok()).collect();
         v.filter(|v| v.len() == n && v.iter().all(|x: &f64| x.is_finite()))
@@ -84,17 +79,16 @@ pub(crate) fn parse(
             "VTK POINT_DATA {points} does not match DIMENSIONS {dims:?} ({n} points)"
         )));
     }
-    // Each axis scaled by its spacing, then split into unit direction and spacing, as the
-    // other readers do (a negative spacing turns its axis round).
-    let axes =
-        std::array::from_fn(|r| std::array::from_fn(|col| direction[r][col] * spacing_v[col]));
+    // Legacy VTK image data has no orientation: its axes are x, y and z, each scaled by its
+    // spacing, then split into unit direction and spacing as the other readers do (a negative
+    // spacing turns its axis round).
+    let axes = std::array::from_fn(|r| {
+        std::array::from_fn(|col| if r == col { spacing_v[col] } else { 0.0 })
+    });
     let (direction, spacing) = unit_columns(axes);
     check_geometry(path, dims, spacing, origin, &direction)?;
     let mut warnings = Vec::new();
     let phase = Phase::pick(path, phase, 1, &mut warnings)?;
-    if !is_orthonormal(&direction, 1e-4) {
-        warnings.push("the voxel axes are not orthogonal".into());
-    }
 
     let scalar = values_header(&mut c, n).map_err(bad)?;
     let what = "the VTK voxel data";
