@@ -185,6 +185,17 @@ def seeds(d):
           b"sizes: 2 6 5 4\nspace directions: none (0,0.7,0) (0.8,0,0) (0,0,-2.5)\n"
           b"kinds: list domain domain domain\nendian: little\nencoding: raw\n"
           b"space origin: (-10,20,30)\n\n" + np.stack([a, a + 100], axis=-1).tobytes())
+        # A 3D Slicer segmentation of v.nii: two overlapping segments on two layers.
+        lab = np.zeros((4, 5, 6), "u1")
+        lab[1:3, 1:4, 1:5] = 1
+        top = np.zeros_like(lab)
+        top[2:4, 2:5, 2:6] = 1
+        w("vs.seg.nrrd", b"NRRD0004\ntype: unsigned char\ndimension: 4\nspace: left-posterior-superior\n"
+          b"sizes: 2 6 5 4\nspace directions: none (0,0.7,0) (0.8,0,0) (0,0,-2.5)\n"
+          b"kinds: list domain domain domain\nencoding: raw\nspace origin: (-10,20,30)\n"
+          b"Segment0_ID:=a\nSegment0_Name:=liver\nSegment0_Color:=0.8 0.3 0.2\nSegment0_LabelValue:=1\n"
+          b"Segment0_Layer:=0\nSegment1_ID:=b\nSegment1_Name:=tumour\nSegment1_Color:=1 1 0\n"
+          b"Segment1_LabelValue:=1\nSegment1_Layer:=1\n\n" + np.stack([lab, top], axis=-1).tobytes())
     except ImportError:
         print("no SimpleITK: volumes other than DICOM left out", file=sys.stderr)
     # Paths for curved planar reformation through v.nii (LPS mm), as text and Slicer markups.
@@ -658,7 +669,7 @@ def fuzz_files(work, n, device):
             # Sometimes its segments as surfaces, written (some simplified) or rendered (a CT is
             # refused as no label map).
             if not why and random.random() < 0.3:
-                segments = ["--segment", random.choice(["all", "1", "2,1", "Lumen", "body"]),
+                segments = ["--segment", random.choice(["all", "1", "2,1", "Lumen", "body", "tumour"]),
                             "--smooth", random.choice(["0", "3"])] + phase
                 if random.random() < 0.3:
                     # Names and colours from a mutated colour table (3D Slicer's or ITK-SNAP's).

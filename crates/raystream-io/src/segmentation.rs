@@ -756,7 +756,7 @@ pub(crate) mod tests {
         let want: Vec<f32> = labels.iter().map(|&l| l as f32).collect();
         assert_eq!(back.data, want);
         assert_eq!(
-            back.series.as_ref().unwrap().segments,
+            back.segments,
             segments().map(|s| crate::SegmentLabel {
                 number: s.value as u16,
                 label: s.label.to_string(),

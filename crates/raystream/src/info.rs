@@ -374,7 +374,6 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             "transfer_syntax": s.transfer_syntax,
             "transfer_syntax_name": s.transfer_syntax_name,
             "all": s.all.iter().map(|(u, n, d)| json!({"uid": u, "count": n, "description": d})).collect::<Vec<_>>(),
-            "segments": s.segments.iter().map(|k| json!({"number": k.number, "label": k.label, "colour": k.colour})).collect::<Vec<_>>(),
         })
     });
     if a.json {
@@ -388,6 +387,7 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             "direction": v.direction.concat().iter().map(|d| d + 0.0).collect::<Vec<f64>>(),
             "unit": unit,
             "phase": {"index": v.phase.index, "count": v.phase.count},
+            "segments": v.segments.iter().map(|k| json!({"number": k.number, "label": k.label, "colour": k.colour})).collect::<Vec<_>>(),
             "warnings": v.warnings,
         });
         if let Some(labels) = &labels {
@@ -490,7 +490,7 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 }
             };
             // A Segmentation's count is its frames (a segment and slice each).
-            let what = if s.segments.is_empty() {
+            let what = if v.segments.is_empty() {
                 "slices"
             } else if structures.is_some() {
                 "file"
@@ -505,35 +505,35 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 s.transfer_syntax,
                 s.transfer_syntax_name
             );
-            for k in &s.segments {
-                let colour = k
-                    .colour
-                    .map(|[r, g, b]| format!(", shown in #{r:02x}{g:02x}{b:02x}"))
-                    .unwrap_or_default();
-                let roi = structures
-                    .as_ref()
-                    .and_then(|set| set.rois.iter().find(|r| r.number == k.number));
-                match roi {
-                    Some(r) => println!(
-                        "  structure  {n}: {} ({}{} closed contours{colour})",
-                        k.label,
-                        if r.kind.is_empty() {
-                            String::new()
-                        } else {
-                            format!("{}, ", r.kind)
-                        },
-                        r.contours.len(),
-                        n = k.number
-                    ),
-                    None => println!(
-                        "  segment    {n}: {} (the voxels of value {n}{colour})",
-                        k.label,
-                        n = k.number
-                    ),
-                }
-            }
             for (u, n, d) in s.all.iter().filter(|(u, _, _)| *u != s.uid) {
                 println!("  also       {} ({n} slices) {d}", uid(u));
+            }
+        }
+        for k in &v.segments {
+            let colour = k
+                .colour
+                .map(|[r, g, b]| format!(", shown in #{r:02x}{g:02x}{b:02x}"))
+                .unwrap_or_default();
+            let roi = structures
+                .as_ref()
+                .and_then(|set| set.rois.iter().find(|r| r.number == k.number));
+            match roi {
+                Some(r) => println!(
+                    "  structure  {n}: {} ({}{} closed contours{colour})",
+                    k.label,
+                    if r.kind.is_empty() {
+                        String::new()
+                    } else {
+                        format!("{}, ", r.kind)
+                    },
+                    r.contours.len(),
+                    n = k.number
+                ),
+                None => println!(
+                    "  segment    {n}: {} (the voxels of value {n}{colour})",
+                    k.label,
+                    n = k.number
+                ),
             }
         }
         if let Some((stats, how)) = &stats {

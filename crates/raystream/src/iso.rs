@@ -164,10 +164,7 @@ pub fn wants_segments(
     segment: Option<&str>,
     colour_table: Option<&Path>,
 ) -> bool {
-    let segmentation = volume
-        .series
-        .as_ref()
-        .is_some_and(|s| !s.segments.is_empty());
+    let segmentation = !volume.segments.is_empty();
     let thresholded = threshold.iso.is_some() || threshold.preset.is_some();
     segment.is_some() || colour_table.is_some() || (segmentation && !thresholded)
 }
@@ -369,18 +366,14 @@ pub fn enclosed_ml(mesh: &raystream_io::TriMesh) -> f64 {
     mesh.enclosed_volume() / 1000.0
 }
 
-/// The segments' names and colours: a DICOM Segmentation's own, each label that
+/// The segments' names and colours: a label file's own (a DICOM Segmentation's, a 3D Slicer
+/// segmentation's), each label that
 /// `--colour-table FILE` names taking the table's.
 pub fn segment_names(
     labels: &Volume,
     table: Option<&Path>,
 ) -> Result<Vec<raystream_io::SegmentLabel>> {
-    let known = labels
-        .series
-        .as_ref()
-        .map(|s| s.segments.clone())
-        .unwrap_or_default();
-    with_colour_table(known, table)
+    with_colour_table(labels.segments.clone(), table)
 }
 
 /// Segment names and colours `known`, each label that `--colour-table FILE` names taking the

@@ -1463,7 +1463,7 @@ fn the_mask_as_a_dicom_segmentation_of_the_series() {
         let v = raystream_io::load_volume(file, &select).unwrap();
         let s = v.series.as_ref().unwrap();
         assert_eq!(s.modality, "SEG", "{written_by}");
-        let named = s.segments.iter().filter(|k| k.number > 0).count();
+        let named = v.segments.iter().filter(|k| k.number > 0).count();
         assert_eq!(named, 2, "{written_by}");
         assert_eq!(v.direction, labels.direction, "{written_by}");
         assert_eq!(v.spacing, labels.spacing, "{written_by}");
@@ -3264,7 +3264,7 @@ fn segments_become_closed_surfaces() {
     let o = run(&["info", seg_file, "--json"]);
     let info: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     assert_eq!(
-        info["series"]["segments"],
+        info["segments"],
         serde_json::json!([
             {"number": 1, "label": "Lumen", "colour": [0, 255, 255]},
             {"number": 2, "label": "Wall and thrombus", "colour": [255, 0, 255]}

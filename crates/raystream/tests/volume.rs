@@ -1753,3 +1753,254 @@ fn legacy_vtk_files_agree_with_vtk() {
         assert_eq!(info(file.to_str().unwrap())["kind"], "volume");
     }
 }
+
+/// A segment's voxels (i, j, k) in `labels` (`number`'s), or whole where the file overlaps.
+fn segment_voxels(
+    labels: &raystream_io::Volume,
+    whole: Option<&raystream_io::WholeSegments>,
+    number: u16,
+) -> Vec<[usize; 3]> {
+    let [nx, ny, _] = labels.dims;
+    match whole {
+        Some(w) => {
+            let (_, s) = w.iter().find(|(l, _)| *l == number).unwrap();
+            let [dx, dy, _] = s.dims;
+            (0..s.inside.len())
+                .filter(|&n| s.inside[n])
+                .map(|n| [n % dx, (n / dx) % dy, n / (dx * dy)])
+                .map(|ijk| std::array::from_fn(|a| ijk[a] + s.lo[a]))
+                .collect()
+        }
+        None => (0..labels.data.len())
+            .filter(|&n| labels.data[n] == number as f32)
+            .map(|n| [n % nx, (n / nx) % ny, n / (nx * ny)])
+            .collect(),
+    }
+}
+
+/// 3D Slicer segmentations (`.seg.nrrd`) read as slicerio, Slicer's own Python reader and
+/// writer, reads them: two files Slicer wrote (a chest CT's segments on one layer; the same
+/// with a sphere overlapping them on a second), an oblique one slicerio wrote (overlapping
+/// segments on two layers, each layer's label values from 1), and one of Slicer before 4.11
+/// (a layer for each segment, no label values).
+/// - The grid lies where slicerio's voxel-to-LPS matrix puts it; each segment has its name
+///   and colour, the voxels slicerio's mask holds (whole where segments overlap), and their
+///   centroid. Segments numbered by their label values where those are distinct, else from 1
+///   in the file's order, with a warning.
+/// - The tissue's surface is the same from both of Slicer's files, though the sphere covers
+///   part of it in the second's label volume; `iso` names and colours each surface as Slicer
+///   does (in a GLB, the colour's linear value).
+/// - The chest CT's values within each segment are numpy's.
+/// - `render --segment NAME` draws that segment in its colour.
+/// - A layer the file lacks, a label value 0 or not a number, or two segments with one label
+///   value on one layer are refused, the file and field named.
+#[test]
+fn slicer_segmentations_read_as_slicerio_reads_them() {
+    let Some(py) = python_with("slicerio") else {
+        return;
+    };
+    let dir = tmp("slicer-seg");
+    let o = std::process::Command::new(&py)
+        .arg(repo().join("crates/raystream/tests/slicer_seg.py"))
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let files = v["files"].as_array().unwrap();
+    assert_eq!(files.len(), 4);
+    for f in files {
+        let path = Path::new(f["path"].as_str().unwrap());
+        let labels = raystream_io::load_volume(path, &Default::default()).unwrap();
+        let whole = raystream_io::whole_segments(&labels, path).unwrap();
+        let m: Vec<Vec<f64>> = serde_json::from_value(f["ijk_to_lps"].clone()).unwrap();
+        let lps = |ijk: [usize; 3]| -> [f64; 3] {
+            std::array::from_fn(|r| {
+                labels.origin[r]
+                    + (0..3)
+                        .map(|c| labels.direction[r][c] * labels.spacing[c] * ijk[c] as f64)
+                        .sum::<f64>()
+            })
+        };
+        let [nx, ny, nz] = labels.dims;
+        for ijk in [[0, 0, 0], [nx - 1, 0, 0], [0, ny - 1, 0], [0, 0, nz - 1]] {
+            let got = lps(ijk);
+            for r in 0..3 {
+                let want = m[r][3] + (0..3).map(|c| m[r][c] * ijk[c] as f64).sum::<f64>();
+                assert!((got[r] - want).abs() < 1e-6, "{path:?} {ijk:?}: {got:?}");
+            }
+        }
+        let segments = f["segments"].as_array().unwrap();
+        let names: Vec<&str> = segments
+            .iter()
+            .map(|s| s["name"].as_str().unwrap())
+            .collect();
+        let ours: Vec<&str> = labels.segments.iter().map(|k| k.label.as_str()).collect();
+        assert_eq!(ours, names, "{path:?}");
+        let shared_values = labels
+            .warnings
+            .iter()
+            .any(|w| w.contains("share label values"));
+        for (n, (k, s)) in labels.segments.iter().zip(segments).enumerate() {
+            let colour: Option<[u8; 3]> = serde_json::from_value(s["colour"].clone()).unwrap();
+            assert_eq!(k.colour, colour, "{path:?} {}", k.label);
+            if shared_values {
+                assert_eq!(k.number as usize, n + 1, "{path:?} {}", k.label);
+            }
+            let voxels = segment_voxels(&labels, whole.as_ref(), k.number);
+            assert_eq!(
+                voxels.len() as u64,
+                s["voxels"].as_u64().unwrap(),
+                "{path:?} {}",
+                k.label
+            );
+            let mut sum = [0.0; 3];
+            for ijk in &voxels {
+                let p = lps(*ijk);
+                (0..3).for_each(|r| sum[r] += p[r] / voxels.len() as f64);
+            }
+            let want: [f64; 3] = serde_json::from_value(s["centroid"].clone()).unwrap();
+            for r in 0..3 {
+                assert!(
+                    (sum[r] - want[r]).abs() < 1e-6,
+                    "{path:?} {}: {sum:?}",
+                    k.label
+                );
+            }
+        }
+        // Slicer's chest segments keep their label values; the files with a second layer
+        // share them.
+        let layered = f != &files[0];
+        assert_eq!(shared_values, layered, "{path:?}: {:?}", labels.warnings);
+        assert_eq!(whole.is_some(), layered, "{path:?}");
+    }
+
+    // The tissue whole from both of Slicer's files: one surface.
+    let (one, two) = (
+        files[0]["path"].as_str().unwrap(),
+        files[1]["path"].as_str().unwrap(),
+    );
+    let tissue = |input: &str, name: &str| {
+        let out = tmp(name);
+        let o = run(&[
+            "iso",
+            "--quiet",
+            input,
+            "--segment",
+            "tissue",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        raystream_io::load_mesh(&out).unwrap()
+    };
+    let (a, b) = (
+        tissue(one, "slicer-tissue-1.ply"),
+        tissue(two, "slicer-tissue-2.ply"),
+    );
+    assert!(a.len() > 1000 && a.positions == b.positions && a.triangles == b.triangles);
+    let all = tmp("slicer-segments.glb");
+    let o = run(&["iso", "--quiet", two, "-o", all.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (_, shading) = raystream_io::load_mesh_with_shading(&all).unwrap();
+    for (m, s) in shading
+        .materials
+        .iter()
+        .zip(files[1]["segments"].as_array().unwrap())
+    {
+        assert_eq!(m.name, s["name"].as_str().unwrap());
+        let colour: [f64; 3] = serde_json::from_value(s["colour"].clone()).unwrap();
+        let diffuse = m.diffuse.unwrap();
+        // glTF's colour factors are linear.
+        let linear = |c: f64| {
+            let c = c / 255.0;
+            if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            }
+        };
+        for c in 0..3 {
+            assert!(
+                (diffuse[c] as f64 - linear(colour[c])).abs() < 1e-5,
+                "{}",
+                m.name
+            );
+        }
+    }
+    assert_eq!(shading.materials.len(), 8);
+
+    // The chest CT's values within each segment.
+    let o = run(&[
+        "info",
+        "--json",
+        v["ct"].as_str().unwrap(),
+        "--segmentation",
+        one,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let stats = info["segmentation"]["segments"].as_array().unwrap();
+    let means = v["ct_means"].as_array().unwrap();
+    assert_eq!(stats.len(), means.len());
+    for (s, want) in stats.iter().zip(means) {
+        let (got, want) = (s["mean"].as_f64().unwrap(), want.as_f64().unwrap());
+        assert!(
+            (got - want).abs() < 0.05,
+            "{}: mean {got} vs {want}",
+            s["name"]
+        );
+    }
+
+    // The right lung alone, in its green (#16c547): no pixel of the left lung's magenta.
+    let png = render_to(
+        "slicer-right-lung.png",
+        "cpu",
+        &[one, "--segment", "right lung", "--size", "48x40"],
+    );
+    let img = image::open(&png).unwrap().to_rgb8();
+    let green = img
+        .pixels()
+        .filter(|p| p[1] > p[0] + 30 && p[1] > p[2] + 30)
+        .count();
+    let magenta = img
+        .pixels()
+        .filter(|p| p[0] > p[1] + 30 && p[2] > p[1] + 30)
+        .count();
+    assert!(
+        green > 100 && magenta == 0,
+        "{green} green, {magenta} magenta"
+    );
+
+    // Bad files.
+    let bad = |name: &str, fields: &str, want: &str| {
+        let file = dir.join(name);
+        let mut bytes = format!(
+            "NRRD0004\ntype: uint8\ndimension: 3\nspace: left-posterior-superior\nsizes: 2 2 2\nspace directions: (1,0,0) (0,1,0) (0,0,1)\nencoding: raw\nspace origin: (0,0,0)\n{fields}\n\n"
+        )
+        .into_bytes();
+        bytes.extend([0, 1, 1, 2, 0, 0, 2, 1]);
+        std::fs::write(&file, bytes).unwrap();
+        refused(&["info", file.to_str().unwrap()], want);
+    };
+    bad(
+        "layer.seg.nrrd",
+        "Segment0_Name:=a\nSegment0_LabelValue:=1\nSegment0_Layer:=3",
+        "layer.seg.nrrd: Segment0_Layer 3: the file holds 1 layer",
+    );
+    bad(
+        "zero.seg.nrrd",
+        "Segment0_LabelValue:=0",
+        "zero.seg.nrrd: Segment0_LabelValue 0: label values run from 1",
+    );
+    bad(
+        "word.seg.nrrd",
+        "Segment0_LabelValue:=one",
+        "word.seg.nrrd: Segment0_LabelValue \"one\" is not a whole number",
+    );
+    bad(
+        "twice.seg.nrrd",
+        "Segment0_Name:=a\nSegment0_LabelValue:=1\nSegment1_Name:=b\nSegment1_LabelValue:=1",
+        "twice.seg.nrrd: segments \"a\" and \"b\" both have label value 1 on layer 0",
+    );
+}

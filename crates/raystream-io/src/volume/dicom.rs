@@ -53,14 +53,12 @@ pub struct DicomSeriesInfo {
     /// object derived slice by slice (a segmentation) references. Empty where the grid's
     /// slices were interpolated between the acquired ones (uneven spacing).
     pub sources: Vec<SourceImage>,
-    /// A DICOM Segmentation's segments (read as a label volume, each segment's voxels its
-    /// number). Empty for an image series.
-    pub segments: Vec<SegmentLabel>,
 }
 
-/// A segment of a DICOM Segmentation as read: its number (its voxels' value in the label
-/// volume), its Segment Label, and the colour it recommends showing it in (sRGB, from the
-/// Recommended Display CIELab Value; `None` where it gives none).
+/// A segment of a label file as read (a DICOM Segmentation's, an RT Structure Set's
+/// structure, a 3D Slicer segmentation's): its number (its voxels' value in the label
+/// volume), its name, and the colour it recommends showing it in (sRGB; `None` where it gives
+/// none).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct SegmentLabel {
     pub number: u16,
@@ -1234,8 +1232,8 @@ fn assemble(
             all,
             study,
             sources,
-            segments: Vec::new(),
         }),
+        segments: Vec::new(),
         phase: Phase::default(),
         warnings,
     })

@@ -196,6 +196,7 @@ pub(crate) fn parse(
         unit,
         format: VolumeFormat::MetaImage,
         series: None,
+        segments: Vec::new(),
         phase,
         warnings,
     })

@@ -18,6 +18,7 @@ mod nifti;
 mod nrrd;
 pub(crate) mod raw;
 mod segmentation;
+mod slicer_seg;
 mod structure_set;
 mod vtk;
 
@@ -234,6 +235,10 @@ pub struct Volume {
     pub format: VolumeFormat,
     /// For DICOM: the series read, and the others found in the folder.
     pub series: Option<DicomSeriesInfo>,
+    /// The segments a label file names, each with its number (its voxels' value here), name
+    /// and colour: a DICOM Segmentation's, an RT Structure Set's structures, a 3D Slicer
+    /// segmentation's (`.seg.nrrd`). Empty for an image.
+    pub segments: Vec<SegmentLabel>,
     /// The temporal position (phase) of a 4-D acquisition this volume is, and how many the
     /// file or series holds (1 of 1 for a 3-D one).
     pub phase: Phase,
@@ -254,6 +259,7 @@ impl Volume {
             unit: ValueUnit::Hounsfield,
             format: VolumeFormat::Nifti,
             series: None,
+            segments: Vec::new(),
             warnings: Vec::new(),
             phase: Default::default(),
         }
@@ -346,6 +352,7 @@ impl Volume {
             data,
             warnings: self.warnings.clone(),
             series: self.series.clone(),
+            segments: self.segments.clone(),
             ..*self
         }
     }
@@ -433,6 +440,7 @@ impl Volume {
             data,
             warnings: Vec::new(),
             series: None,
+            segments: Vec::new(),
             ..*self
         }
     }

@@ -140,6 +140,7 @@ pub(crate) fn load(path: &Path, phase: Option<usize>) -> Result<Volume, VolumeEr
         unit,
         format: VolumeFormat::Raw,
         series: None,
+        segments: Vec::new(),
         phase,
         warnings,
     })

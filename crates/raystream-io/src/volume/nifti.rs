@@ -276,6 +276,7 @@ fn build(
         unit,
         format: VolumeFormat::Nifti,
         series: None,
+        segments: Vec::new(),
         phase,
         warnings,
     })

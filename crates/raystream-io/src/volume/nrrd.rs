@@ -12,19 +12,38 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use super::nifti::guess_unit;
-use super::raw::{PhaseLayout, Scalar, decode, open_payload, read_phase, skip_n};
+use super::raw::{PhaseLayout, Scalar, decode, open_payload, read_phase, skip_n, value};
 use super::{
-    Phase, Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal, unit_columns,
-    voxel_count,
+    Phase, ValueUnit, Volume, VolumeError, VolumeFormat, WholeSegments, check_geometry,
+    is_orthonormal, slicer_seg, unit_columns, voxel_count,
 };
 
 /// Parses a `.nrrd` / `.nhdr` file's bytes; a detached data file is looked up beside `path`.
 /// Of a 4-D image, the 3-D volume `phase` (from 1, default 1) along its non-spatial axis.
+/// A 3D Slicer segmentation (`.seg.nrrd`) is read as its label volume, every layer at once.
 pub(crate) fn parse(
     bytes: &[u8],
     path: &Path,
     phase: Option<usize>,
 ) -> Result<Volume, VolumeError> {
+    read(bytes, path, phase, false).map(|(v, _)| v)
+}
+
+/// A 3D Slicer segmentation's label volume and, where its segments lie on several layers (they
+/// overlap), each segment's voxels whole; `None` for a single layer or a plain NRRD.
+pub(crate) fn whole_segments(
+    bytes: &[u8],
+    path: &Path,
+) -> Result<Option<WholeSegments>, VolumeError> {
+    read(bytes, path, None, true).map(|(_, whole)| whole)
+}
+
+fn read(
+    bytes: &[u8],
+    path: &Path,
+    phase: Option<usize>,
+    whole: bool,
+) -> Result<(Volume, Option<WholeSegments>), VolumeError> {
     if !bytes.starts_with(b"NRRD000") {
         return Err(VolumeError::invalid(
             path,
@@ -37,12 +56,14 @@ pub(crate) fn parse(
     let text = std::str::from_utf8(&bytes[..header_end])
         .map_err(|_| VolumeError::invalid(path, "NRRD header is not text"))?;
     let mut fields = HashMap::new();
+    let mut key_values = Vec::new();
     for line in text.lines().skip(1) {
         if line.starts_with('#') || line.trim().is_empty() {
             continue;
         }
-        // `key:=value` lines are key/value comments, not fields.
-        if line.contains(":=") {
+        // `key:=value` lines are key/value pairs, not fields (a Slicer segmentation's segments).
+        if let Some((k, v)) = line.split_once(":=") {
+            key_values.push((k.to_string(), v.to_string()));
             continue;
         }
         let (k, v) = line
@@ -126,7 +147,18 @@ pub(crate) fn parse(
             format!("NRRD sizes {sizes:?}: {} phases", layout.count),
         ));
     }
-    let phase = Phase::pick(path, phase, layout.count, &mut warnings)?;
+    // A Slicer segmentation's fourth axis holds layers of segments, all read.
+    let layers = if phase_axis.is_some() {
+        layout.count
+    } else {
+        1
+    };
+    let segments = slicer_seg::segments(&key_values, layers, path, &mut warnings)?;
+    let phase = if segments.is_some() {
+        Phase::pick(path, phase, 1, &mut warnings)?
+    } else {
+        Phase::pick(path, phase, layout.count, &mut warnings)?
+    };
     let axes = std::array::from_fn(|r| std::array::from_fn(|c| steps[spatial[c]].unwrap()[r]));
     let (direction, spacing) = unit_columns(axes);
     check_geometry(path, dims, spacing, origin, &direction)?;
@@ -182,10 +214,37 @@ pub(crate) fn parse(
         skip_n(&mut r, byte_skip as u64, path)?;
     }
     let what = "the NRRD voxel data";
-    let data_bytes = read_phase(&mut r, layout, phase.index - 1, scalar.size(), path, what)?;
-    let data = decode(&data_bytes, scalar, big_endian, 1.0, 0.0);
-    let unit = guess_unit(&data, scalar);
-    Ok(Volume {
+    let (data, labels, whole, unit) = match segments {
+        Some(segments) => {
+            let all = PhaseLayout::time_last(n * layers, 1);
+            let data_bytes = read_phase(&mut r, all, 0, scalar.size(), path, what)?;
+            let size = scalar.size();
+            let value = |i: usize| value(&data_bytes[i * size..(i + 1) * size], scalar, big_endian);
+            let labels = slicer_seg::label_volume(
+                value,
+                dims,
+                (layers, layout.inner),
+                &segments,
+                whole && layers > 1,
+                path,
+                &mut warnings,
+            )?;
+            (
+                labels.data,
+                labels.segments,
+                labels.whole,
+                ValueUnit::Unknown,
+            )
+        }
+        None => {
+            let data_bytes =
+                read_phase(&mut r, layout, phase.index - 1, scalar.size(), path, what)?;
+            let data = decode(&data_bytes, scalar, big_endian, 1.0, 0.0);
+            let unit = guess_unit(&data, scalar);
+            (data, Vec::new(), None, unit)
+        }
+    };
+    let volume = Volume {
         dims,
         spacing,
         origin,
@@ -194,9 +253,11 @@ pub(crate) fn parse(
         unit,
         format: VolumeFormat::Nrrd,
         series: None,
+        segments: labels,
         phase,
         warnings,
-    })
+    };
+    Ok((volume, whole))
 }
 
 /// Byte offsets of the end of the header text and of the first data byte.

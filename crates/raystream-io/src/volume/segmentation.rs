@@ -18,10 +18,8 @@ use super::dicom::{
     DicomStudy, FileMeta, FrameGeometry, cross, dot, functional_groups, sub, text_of,
     transfer_syntax_name,
 };
-use super::{
-    DicomSeriesInfo, Phase, SegmentLabel, SegmentVoxels, ValueUnit, Volume, VolumeError,
-    VolumeFormat,
-};
+use super::structure_set::gather_whole;
+use super::{DicomSeriesInfo, Phase, SegmentLabel, ValueUnit, Volume, VolumeError, VolumeFormat};
 use super::{check_geometry, voxel_count};
 
 const SEGMENTATION: &str = "1.2.840.10008.5.1.4.1.1.66.4";
@@ -62,7 +60,7 @@ pub(crate) fn read_segments(
     meta: &FileMeta,
     obj: &InMemDicomObject,
     whole: bool,
-) -> Result<(Volume, Vec<(u16, SegmentVoxels)>), VolumeError> {
+) -> Result<(Volume, super::WholeSegments), VolumeError> {
     let bad =
         |problem: String| VolumeError::invalid(file, format!("DICOM Segmentation: {problem}"));
     let text = text_of;
@@ -302,18 +300,10 @@ pub(crate) fn read_segments(
     };
     let mut data = vec![0f32; cols * rows * nz];
     let mut overlap = 0usize;
-    // Each segment's box (lowest and highest i, j, k), for `whole`.
-    let mut boxes: std::collections::BTreeMap<u16, ([usize; 3], [usize; 3])> = Default::default();
     for (f, &k) in slice_of.iter().enumerate() {
         let out = &mut data[k * per..(k + 1) * per];
         for (p, v) in out.iter_mut().enumerate() {
             let Some(label) = held(f, p) else { continue };
-            if whole {
-                let ijk = [p % cols, p / cols, k];
-                let e = boxes.entry(label).or_insert((ijk, ijk));
-                e.0 = std::array::from_fn(|a| e.0[a].min(ijk[a]));
-                e.1 = std::array::from_fn(|a| e.1[a].max(ijk[a]));
-            }
             let label = label as f32;
             if *v != 0.0 && *v != label {
                 overlap += 1;
@@ -321,34 +311,19 @@ pub(crate) fn read_segments(
             *v = label;
         }
     }
-    let mut whole_segments: Vec<(u16, SegmentVoxels)> = boxes
-        .iter()
-        .map(|(&l, &(lo, hi))| {
-            let dims = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
-            let v = SegmentVoxels {
-                lo,
-                dims,
-                inside: vec![false; dims[0] * dims[1] * dims[2]],
-                voxels: 0,
-            };
-            (l, v)
-        })
-        .collect();
-    if whole {
-        for (f, &k) in slice_of.iter().enumerate() {
-            for p in 0..per {
-                let Some(label) = held(f, p) else { continue };
-                let Ok(s) = whole_segments.binary_search_by_key(&label, |(l, _)| *l) else {
-                    continue;
-                };
-                let v = &mut whole_segments[s].1;
-                let (i, j) = (p % cols - v.lo[0], p / cols - v.lo[1]);
-                let at = i + v.dims[0] * (j + v.dims[1] * (k - v.lo[2]));
-                v.voxels += usize::from(!v.inside[at]);
-                v.inside[at] = true;
+    let whole_segments = if whole {
+        gather_whole(|add| {
+            for (f, &k) in slice_of.iter().enumerate() {
+                for p in 0..per {
+                    if let Some(label) = held(f, p) {
+                        add(label, [p % cols, p / cols, k]);
+                    }
+                }
             }
-        }
-    }
+        })
+    } else {
+        Vec::new()
+    };
     let spacing3 = [pixel[1], pixel[0], step];
     let direction = std::array::from_fn(|r| [row[r], col[r], axis[r]]);
     check_geometry(file, dims, spacing3, origin, &direction)?;
@@ -376,8 +351,8 @@ pub(crate) fn read_segments(
             all: Vec::new(),
             study: DicomStudy::of(obj),
             sources: Vec::new(),
-            segments,
         }),
+        segments,
         phase: Phase::default(),
         warnings,
     };

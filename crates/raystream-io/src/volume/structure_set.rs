@@ -507,8 +507,8 @@ impl StructureSet {
                 all: Vec::new(),
                 study: self.study.clone(),
                 sources: Vec::new(),
-                segments: self.segments(),
             }),
+            segments: self.segments(),
             phase: Phase::default(),
             warnings,
         }
@@ -517,6 +517,44 @@ impl StructureSet {
 
 /// Segments each whole: each one's label and voxels, in increasing order of label.
 pub type WholeSegments = Vec<(u16, SegmentVoxels)>;
+
+/// Each label's voxels whole, overlaps and all, in increasing order of label: `visit` hands
+/// its argument each voxel a label holds (the label, and the voxel's i, j, k). It is run
+/// twice, once to find each label's box and once to fill it.
+pub(crate) fn gather_whole(
+    mut visit: impl FnMut(&mut dyn FnMut(u16, [usize; 3])),
+) -> WholeSegments {
+    let mut boxes: std::collections::BTreeMap<u16, ([usize; 3], [usize; 3])> = Default::default();
+    visit(&mut |label, ijk| {
+        let e = boxes.entry(label).or_insert((ijk, ijk));
+        e.0 = std::array::from_fn(|a| e.0[a].min(ijk[a]));
+        e.1 = std::array::from_fn(|a| e.1[a].max(ijk[a]));
+    });
+    let mut whole: WholeSegments = boxes
+        .iter()
+        .map(|(&l, &(lo, hi))| {
+            let dims = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
+            let v = SegmentVoxels {
+                lo,
+                dims,
+                inside: vec![false; dims[0] * dims[1] * dims[2]],
+                voxels: 0,
+            };
+            (l, v)
+        })
+        .collect();
+    visit(&mut |label, ijk| {
+        let Ok(s) = whole.binary_search_by_key(&label, |(l, _)| *l) else {
+            return;
+        };
+        let v = &mut whole[s].1;
+        let [i, j, k] = std::array::from_fn(|a| ijk[a] - v.lo[a]);
+        let at = i + v.dims[0] * (j + v.dims[1] * k);
+        v.voxels += usize::from(!v.inside[at]);
+        v.inside[at] = true;
+    });
+    whole
+}
 
 /// How near an edge, in voxels, a voxel's centre counts as on it.
 pub const ON_EDGE: f64 = 1e-3;
@@ -555,12 +593,16 @@ pub fn is_structure_set_file(path: &Path) -> bool {
 
 /// Each segment of the label volume `labels` (read from `path`) whole, where its segments may
 /// overlap, which a label volume cannot hold: an RT Structure Set's structures laid on
-/// `labels`' grid, a DICOM Segmentation's segments (read again); `None` for other label
-/// volumes, whose voxels each hold one label. Each with its label, in increasing order.
+/// `labels`' grid, a DICOM Segmentation's segments, a 3D Slicer segmentation's on several
+/// layers (each read again); `None` for other label volumes, whose voxels each hold one label. Each with its label, in increasing order.
 pub fn whole_segments(labels: &Volume, path: &Path) -> Result<Option<WholeSegments>, VolumeError> {
     if is_structure_set_volume(labels) {
         let set = StructureSet::read(path)?;
         return Ok(Some(set.whole(set.regions(labels).0)));
+    }
+    if labels.format == VolumeFormat::Nrrd && !labels.segments.is_empty() && path.is_file() {
+        let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
+        return super::nrrd::whole_segments(&bytes, path);
     }
     let modality = labels.series.as_ref().map(|s| s.modality.as_str());
     if modality != Some("SEG") || !path.is_file() {
@@ -1026,7 +1068,7 @@ mod tests {
         let series = labels.series.as_ref().unwrap();
         assert_eq!(series.modality, "RTSTRUCT");
         assert!(is_structure_set_volume(&labels));
-        assert_eq!(series.segments[1].label, "Squares");
+        assert_eq!(labels.segments[1].label, "Squares");
         assert!(
             labels
                 .warnings

@@ -114,6 +114,7 @@ pub(crate) fn parse(
         unit,
         format: VolumeFormat::Vtk,
         series: None,
+        segments: Vec::new(),
         phase,
         warnings,
     })

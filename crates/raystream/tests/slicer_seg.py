@@ -1,0 +1,89 @@
+"""slicerio (3D Slicer's own Python reader and writer of .seg.nrrd files) as the reference for
+raystream's reading of 3D Slicer segmentations, for tests/volume.rs.
+Usage: python slicer_seg.py OUTDIR
+Takes the segmentations 3D Slicer wrote that slicerio ships (a chest CT's, one layer; the same
+with an overlapping sphere on a second layer) and its CT; writes with slicerio an oblique
+segmentation whose segments overlap, and, by hand, one in the format of Slicer before 4.11 (no
+label values: a layer for each segment). Prints one JSON object: for each file, its path, its
+voxel-to-LPS matrix and each segment's name, colour (0-255), voxels and centroid (LPS mm); the
+CT's mean value within each segment of the first file."""
+import json, os, sys
+
+import nrrd
+import numpy as np
+import slicerio
+
+out = sys.argv[1]
+os.makedirs(out, exist_ok=True)
+data = os.path.join(os.path.dirname(slicerio.__file__), "data")
+
+
+def describe(path, masks=None):
+    """`masks`: each segment's voxels, where slicerio does not find them (it takes every
+    segment of a file without label values from the first layer)."""
+    s = slicerio.read_segmentation(path)
+    m = s["ijkToLPS"]
+    segments = []
+    for n, seg in enumerate(s["segments"]):
+        mask = slicerio.segment_mask(s, seg["id"]) if masks is None else masks[n]
+        ijk = np.argwhere(mask).astype("float64")
+        centroid = (m[:3, :3] @ ijk.mean(axis=0) + m[:3, 3]).tolist() if len(ijk) else None
+        segments.append({
+            "name": seg["name"],
+            "colour": [int(np.floor(c * 255 + 0.5)) for c in seg["color"]] if "color" in seg else None,
+            "voxels": int(mask.sum()),
+            "centroid": centroid,
+        })
+    return {"path": path, "ijk_to_lps": m.tolist(), "segments": segments}, s
+
+
+files = []
+one_layer = os.path.join(data, "Segmentation.seg.nrrd")
+d, flat = describe(one_layer)
+files.append(d)
+files.append(describe(os.path.join(data, "SegmentationOverlapping.seg.nrrd"))[0])
+
+# The CT the segmentation was drawn on: its mean within each segment.
+ct_path = os.path.join(data, "CTChest4.nrrd")
+ct, _ = nrrd.read(ct_path)
+assert ct.shape == flat["voxels"].shape, (ct.shape, flat["voxels"].shape)
+means = [float(ct[slicerio.segment_mask(flat, seg["id"])].astype("float64").mean())
+         for seg in flat["segments"]]
+
+# An oblique grid (rotated 30° about z, then 20° about x; uneven spacing), three segments: a
+# ball and a slab that overlaps it (slicerio puts it on a second layer), and a cube apart.
+shape = (40, 36, 24)
+a, b = np.radians(30.0), np.radians(20.0)
+rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+rx = np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+m = np.eye(4)
+m[:3, :3] = rx @ rz @ np.diag([0.8, 1.1, 2.5])
+m[:3, 3] = [-12.5, 40.0, -210.0]
+s = slicerio.create_segmentation(shape, m)
+i, j, k = np.indices(shape)
+ball = (i - 15) ** 2 + (j - 16) ** 2 + ((k - 11) * 2) ** 2 <= 10 ** 2
+slab = (i >= 12) & (i < 30) & (j >= 5) & (j < 30) & (k >= 10) & (k < 14)
+cube = (i >= 32) & (i < 38) & (j >= 28) & (j < 34) & (k >= 2) & (k < 8)
+for name, mask, colour in (("ball", ball, [1.0, 0.2, 0.2]), ("slab", slab, [0.2, 0.4, 1.0]),
+                           ("cube", cube, [0.1, 0.9, 0.3])):
+    slicerio.add_segment(s, mask, {"id": name, "name": name, "color": colour})
+oblique = os.path.join(out, "oblique.seg.nrrd")
+slicerio.write_segmentation(oblique, s)
+files.append(describe(oblique)[0])
+
+# Slicer before 4.11: a layer for each segment, its voxels 1, no LabelValue or Layer fields.
+legacy = os.path.join(out, "legacy.seg.nrrd")
+layers = np.stack([ball, slab]).astype("uint8")
+header = {
+    "type": "unsigned char", "dimension": 4, "space": "right-anterior-superior",
+    "kinds": ["list", "domain", "domain", "domain"],
+    "space directions": np.vstack([[np.nan] * 3, (np.diag([-1.0, -1.0, 1.0]) @ m[:3, :3]).T]),
+    "space origin": np.diag([-1.0, -1.0, 1.0]) @ m[:3, 3],
+    "encoding": "gzip",
+    "Segment0_ID": "Ball", "Segment0_Name": "ball", "Segment0_Color": "1 0.2 0.2",
+    "Segment1_ID": "Slab", "Segment1_Name": "slab", "Segment1_Color": "0.2 0.4 1",
+}
+nrrd.write(legacy, layers, header, custom_field_map={})
+files.append(describe(legacy, [ball, slab])[0])
+
+print(json.dumps({"files": files, "ct": ct_path, "ct_means": means}))
