@@ -598,7 +598,7 @@ def fuzz_files(work, n, device):
                    if random.random() < 0.3 else [])
                 + (["--plot", os.path.join(d, "p." + random.choice(["svg", "png", "dcm"]))]
                    if random.random() < 0.5 else [])
-                + (["--mask", os.path.join(d, "m." + random.choice(["nii", "nii.gz"]))]
+                + (["--mask", os.path.join(d, "m." + random.choice(["nii", "nii.gz", "seg.nrrd"]))]
                    if random.random() < 0.3 else [])
                 + pi10 + dark, (s, "pi.svg") if pi10 else s))
             # And a centreline tracked through its points.

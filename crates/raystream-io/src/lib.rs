@@ -15,6 +15,7 @@ mod ply;
 mod secondary_capture;
 mod segmentation;
 mod shapes;
+mod slicer_segmentation;
 mod stl;
 mod structure_set_write;
 mod texture;
@@ -47,6 +48,7 @@ pub use segmentation::{
     Code, SEGMENTATION, Segment, SegmentationInfo, SegmentationWritten, cielab,
     is_segmentation_path, segmentation_source, srgb_from_cielab, write_segmentation,
 };
+pub use slicer_segmentation::{is_slicer_segmentation_path, write_slicer_segmentation};
 pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping, linear_to_srgb8};
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, RT_STRUCTURE_SET, RasterNotes, Roi,

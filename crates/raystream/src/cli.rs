@@ -482,8 +482,9 @@ pub struct RenderArgs {
     #[arg(long, value_enum, value_name = "EDGE", requires = "draw_wall")]
     pub draw_wall_edge: Option<AirwayEdge>,
     /// With --mode slice (a slice, or a CPR with --path, and their frames): tints each pixel by the
-    /// label of a label map, DICOM Segmentation or RT Structure Set (FILE: NIfTI, NRRD,
-    /// MetaImage, DICOM SEG or RTSTRUCT; `measure --mask` writes the first and the SEG) at the
+    /// label of a label map, DICOM Segmentation or RT Structure Set (FILE: NIfTI, NRRD (a 3D
+    /// Slicer .seg.nrrd too), MetaImage, DICOM SEG or RTSTRUCT; `measure --mask` writes NIfTI,
+    /// .seg.nrrd and SEG) at the
     /// pixel's point in the patient, as a viewer lays a segmentation over the CT, each segment
     /// in its own colour (a Segmentation's, a structure set's, `--colour-table`'s), else label
     /// 1 cyan, 2 magenta, then yellow, green, orange, blue; PNG, or DICOM as the picture. With
@@ -1027,10 +1028,11 @@ pub struct MeasureArgs {
     pub angle: Vec<f64>,
     /// Write the lumen (label 1) and, with --wall, what the outer wall holds beyond it (label
     /// 2) as a label map on the CT's own grid, for a viewer to lay over the CT: NIfTI (.nii
-    /// or .nii.gz; 3D Slicer, ITK-SNAP), or, from a DICOM series, a DICOM Segmentation of it
-    /// (.dcm; PACS viewers) that files with its study. From sections as far apart as the CT's
-    /// finest voxel spacing, each voxel labelled by the nearest section's plane.
-    #[arg(long, value_name = "FILE.nii.gz|FILE.dcm")]
+    /// or .nii.gz; 3D Slicer, ITK-SNAP), a 3D Slicer segmentation (.seg.nrrd: named, coloured
+    /// segments in Slicer's Segment Editor), or, from a DICOM series, a DICOM Segmentation of
+    /// it (.dcm; PACS viewers) that files with its study. From sections as far apart as the
+    /// CT's finest voxel spacing, each voxel labelled by the nearest section's plane.
+    #[arg(long, value_name = "FILE.nii.gz|FILE.seg.nrrd|FILE.dcm")]
     pub mask: Option<PathBuf>,
     /// From a DICOM series: the lumen and, with --wall, the wall beyond it (the labels --mask
     /// writes, with it or without) as a DICOM RT Structure Set of it (.dcm), for a

@@ -41,10 +41,11 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     }
     if let Some(m) = &a.mask
         && !raystream_io::is_label_map_path(m)
+        && !raystream_io::is_slicer_segmentation_path(m)
         && !raystream_io::is_segmentation_path(m)
     {
         bail!(
-            "{}: --mask writes a NIfTI label map (.nii or .nii.gz) or a DICOM Segmentation (.dcm): name it so",
+            "{}: --mask writes a NIfTI label map (.nii or .nii.gz), a 3D Slicer segmentation (.seg.nrrd) or a DICOM Segmentation (.dcm): name it so",
             m.display()
         );
     }
@@ -726,8 +727,8 @@ pub(crate) fn mask_segments(wall: bool, dark: bool) -> Vec<raystream_io::Segment
 }
 
 /// `--mask FILE` (`out`) and `--structures FILE`: the lumen and the outer wall labelled on
-/// the CT's grid ([`raystream_cpu::mask`]), written as NIfTI or as a DICOM Segmentation of the
-/// CT's series, and as an RT Structure Set of it.
+/// the CT's grid ([`raystream_cpu::mask`]), written as NIfTI, as a 3D Slicer segmentation or
+/// as a DICOM Segmentation of the CT's series, and as an RT Structure Set of it.
 fn write_mask(
     a: &MeasureArgs,
     out: Option<&std::path::Path>,
@@ -771,6 +772,11 @@ fn write_mask(
                 series_uid: written.series_uid,
             }),
         )
+    } else if let Some(out) = out
+        && raystream_io::is_slicer_segmentation_path(out)
+    {
+        raystream_io::write_slicer_segmentation(out, volume, &labels.data, &segments)?;
+        (None, None)
     } else if let Some(out) = out {
         let what = if wall.is_some() {
             "raystream measure: 1 lumen, 2 outer wall beyond the lumen"
@@ -816,6 +822,12 @@ fn mask_text(m: &MaskWritten) -> String {
     };
     let kind = match m.frames {
         Some(n) => format!("a DICOM Segmentation of the CT's series, {n} frames"),
+        None if m.file.as_deref().is_some_and(|f| {
+            raystream_io::is_slicer_segmentation_path(std::path::Path::new(f))
+        }) =>
+        {
+            "a 3D Slicer segmentation".to_string()
+        }
         None => "a NIfTI label map".to_string(),
     };
     let (file, kind) = match &m.file {

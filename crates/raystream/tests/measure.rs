@@ -1156,7 +1156,8 @@ fn the_profile_as_png_and_dicom() {
 /// `measure --mask`: the lumen (1) and the wall beyond it (2) labelled on the chest CT's own
 /// grid, as NIfTI that both raystream and SimpleITK read on that grid; the labels' volumes
 /// agree with the sections' (area × spacing), the lumen's voxels are contrast and the wall's
-/// are soft tissue.
+/// are soft tissue. As a 3D Slicer segmentation, the same labels, named and coloured, as
+/// raystream and slicerio read it.
 #[test]
 fn the_mask_on_the_ct_grid() {
     let (vol, path) = (chest(), aorta());
@@ -1253,6 +1254,74 @@ fn the_mask_on_the_ct_grid() {
             serde_json::json!([true, true, true, true, lumen.len(), wall.len()])
         );
     }
+    // As a 3D Slicer segmentation: the same voxels on the same grid, the segments named and
+    // coloured; slicerio (Slicer's own reader) finds the same, with their label values, their
+    // DICOM codes and the CT's voxel-to-LPS matrix.
+    let seg = tmp("measure-mask.seg.nrrd");
+    let seg_file = seg.to_str().unwrap();
+    let t = measure_text(
+        &vol,
+        &path,
+        &["--wall", "--mask", seg_file],
+        &tmp("measure-mask-seg.csv"),
+    );
+    assert!(
+        t.contains(&format!(
+            "mask: {seg_file} (a 3D Slicer segmentation): label 1 the lumen on {} voxels",
+            lumen.len()
+        )),
+        "{t}"
+    );
+    let back = raystream_io::load_volume(&seg, &select).unwrap();
+    assert_eq!(
+        (back.dims, back.spacing, back.origin),
+        (labels.dims, labels.spacing, labels.origin)
+    );
+    assert!(back.data == labels.data);
+    let named: Vec<(u16, &str, Option<[u8; 3]>)> = back
+        .segments
+        .iter()
+        .map(|k| (k.number, k.label.as_str(), k.colour))
+        .collect();
+    assert_eq!(
+        named,
+        [
+            (1, "Lumen", Some([0, 255, 255])),
+            (2, "Wall and thrombus", Some([255, 0, 255]))
+        ]
+    );
+    if let Some(py) = python_with("slicerio") {
+        let script = "import sys, json, numpy as n, slicerio\n\
+            s = slicerio.read_segmentation(sys.argv[1])\n\
+            print(json.dumps({'ijk_to_lps': s['ijkToLPS'].tolist(), 'segments': [\
+            {'name': g['name'], 'label': g['labelValue'], 'colour': [round(c * 255) for c in g['color']],\
+            'type': g['terminology']['type'], 'voxels': int(slicerio.segment_mask(s, g['id']).sum())}\
+            for g in s['segments']]}))";
+        let o = std::process::Command::new(py)
+            .args(["-c", script, seg_file])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        let got: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        assert_eq!(
+            got["segments"],
+            serde_json::json!([
+                {"name": "Lumen", "label": 1, "colour": [0, 255, 255],
+                 "type": ["SCT", "91747007", "Lumen"], "voxels": lumen.len()},
+                {"name": "Wall and thrombus", "label": 2, "colour": [255, 0, 255],
+                 "type": ["SCT", "59820001", "Blood vessel"], "voxels": wall.len()},
+            ])
+        );
+        let m: Vec<Vec<f64>> = serde_json::from_value(got["ijk_to_lps"].clone()).unwrap();
+        for r in 0..3 {
+            assert!((m[r][3] - ct.origin[r]).abs() < 1e-9);
+            for c in 0..3 {
+                let want = ct.direction[r][c] * ct.spacing[c];
+                assert!((m[r][c] - want).abs() < 1e-9, "{m:?}");
+            }
+        }
+    }
+
     // The text says what was written; without --wall, the lumen alone, the same voxels.
     let t = measure_text(&vol, &path, &["--mask", file], &tmp("measure-mask.csv"));
     assert!(
