@@ -177,6 +177,41 @@ def seeds(d):
           b"DIMENSIONS 6 5 4\nSPACING 0.7 0.8 2.5\nORIGIN -10 20 30\nPOINT_DATA 120\n"
           b"SCALARS v short 1\nLOOKUP_TABLE default\n"
           + " ".join(str(v) for v in vox.ravel()).encode() + b"\n")
+        # VTK XML image data: appended raw zlib blocks (VTK's default), inline base64, and a
+        # sphere as polygonal data, as the vtk wheel writes them (where it is installed).
+        try:
+            from vtkmodules.vtkCommonDataModel import vtkImageData
+            from vtkmodules.vtkFiltersSources import vtkSphereSource
+            from vtkmodules.vtkIOXML import vtkXMLImageDataWriter, vtkXMLPolyDataWriter
+            from vtkmodules.util.numpy_support import numpy_to_vtk
+            vi = vtkImageData()
+            vi.SetDimensions(6, 5, 4)
+            vi.SetSpacing(0.7, 0.8, 2.5)
+            vi.SetOrigin(-10, 20, 30)
+            vi.SetDirectionMatrix(0, 1, 0, 1, 0, 0, 0, 0, -1)
+            arr = numpy_to_vtk(vox.ravel().astype(np.int16), deep=1)
+            arr.SetName("v")
+            vi.GetPointData().SetScalars(arr)
+            for n, binary in (("vx.vti", False), ("vb.vti", True)):
+                wr = vtkXMLImageDataWriter()
+                wr.SetInputData(vi)
+                if binary:
+                    wr.SetDataModeToBinary()
+                    wr.SetCompressorTypeToNone()
+                else:
+                    wr.SetBlockSize(64)
+                wr.SetFileName(os.path.join(d, n))
+                wr.Write()
+            sph = vtkSphereSource()
+            sph.SetThetaResolution(6)
+            sph.SetPhiResolution(4)
+            wr = vtkXMLPolyDataWriter()
+            wr.SetInputConnection(sph.GetOutputPort())
+            wr.SetCompressorTypeToLZ4()
+            wr.SetFileName(os.path.join(d, "tx.vtp"))
+            wr.Write()
+        except ImportError:
+            print("no vtk: VTK XML files left out", file=sys.stderr)
         # 4-D: two phases, as SimpleITK writes them, and 3D Slicer's interleaved NRRD.
         for n in ["v4.nii.gz", "v4.nrrd", "v4.mha"]:
             sitk.WriteImage(sitk.JoinSeries([img, img + 100]), os.path.join(d, n))

@@ -41,13 +41,8 @@ pub fn write_label_map(
             "a label map is written as NIfTI: name it .nii or .nii.gz",
         ));
     }
+    one_a_voxel(path, like, labels)?;
     let [nx, ny, nz] = like.dims;
-    if labels.len() != nx * ny * nz {
-        return Err(VolumeError::invalid(
-            path,
-            format!("{} labels for a {nx}×{ny}×{nz} grid", labels.len()),
-        ));
-    }
     let m = like.index_to_world_affine();
     let (a, t) = (m.matrix3, m.translation);
     // LPS → RAS: x and y negated.
@@ -108,6 +103,18 @@ pub fn write_label_map(
         std::fs::remove_file(&own).ok();
     }
     written
+}
+
+/// That `labels` hold one label a voxel of `like`'s grid (an error naming `path` if not).
+pub(crate) fn one_a_voxel(path: &Path, like: &Volume, labels: &[u8]) -> Result<(), VolumeError> {
+    let [nx, ny, nz] = like.dims;
+    if labels.len() != nx * ny * nz {
+        return Err(VolumeError::invalid(
+            path,
+            format!("{} labels for a {nx}×{ny}×{nz} grid", labels.len()),
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -22,6 +22,7 @@ mod texture;
 pub mod volume;
 mod vtk_legacy;
 mod vtk_mesh;
+mod vtk_xml;
 mod write;
 pub use colour_table::read_colour_table;
 pub use structure_set_write::{
@@ -97,6 +98,8 @@ pub enum MeshFormat {
     Gltf,
     /// Legacy VTK polygonal data (`.vtk`, `DATASET POLYDATA`): 3D Slicer's models.
     Vtk,
+    /// VTK XML polygonal data (`.vtp`): ParaView's surfaces.
+    VtkXml,
 }
 
 impl MeshFormat {
@@ -110,6 +113,7 @@ impl MeshFormat {
             "stl" => Some(Self::Stl),
             "gltf" | "glb" => Some(Self::Gltf),
             "vtk" => Some(Self::Vtk),
+            "vtp" => Some(Self::VtkXml),
             _ => None,
         }
     }
@@ -158,8 +162,12 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
             };
             (g.mesh, shading, g.normals)
         }
-        MeshFormat::Vtk => {
-            let poly = vtk_mesh::parse(&bytes, path)?;
+        MeshFormat::Vtk | MeshFormat::VtkXml => {
+            let poly = if format == MeshFormat::Vtk {
+                vtk_mesh::parse(&bytes, path)?
+            } else {
+                vtk_xml::parse_poly(&bytes, path)?
+            };
             let shading = MeshShading {
                 warnings: poly.warnings,
                 ..Default::default()
@@ -305,7 +313,7 @@ fn read_mesh_file(path: &Path) -> Result<(MeshFormat, Vec<u8>), MeshError> {
     let format = MeshFormat::from_path(path).ok_or_else(|| {
         MeshError::invalid(
             path,
-            "unsupported format: not a mesh (.obj, .ply, .stl, optionally .gz, .gltf, .glb, or a .vtk of polygons) nor a volume (a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd, a .vtk of image data, or NAME_WxHxD_TYPE.raw)",
+            "unsupported format: not a mesh (.obj, .ply, .stl, optionally .gz, .gltf, .glb, .vtp, or a .vtk of polygons) nor a volume (a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd, .vti, a .vtk of image data, or NAME_WxHxD_TYPE.raw)",
         )
     })?;
     let bytes = std::fs::read(path).map_err(|error| MeshError::Io {
@@ -424,7 +432,7 @@ pub fn declared_space(bytes: &[u8], format: MeshFormat) -> Option<PatientSpace> 
             .find_map(tagged),
         // The title line, where 3D Slicer writes `3D Slicer output. SPACE=LPS`.
         MeshFormat::Vtk => text.lines().nth(1).and_then(tagged),
-        MeshFormat::Gltf => None,
+        MeshFormat::Gltf | MeshFormat::VtkXml => None,
     }
 }
 
@@ -448,6 +456,7 @@ fn parse_mesh_in(
         MeshFormat::Stl => stl::parse(&bytes, path)?,
         MeshFormat::Gltf => gltf::parse(&bytes, path, dir, false)?.mesh,
         MeshFormat::Vtk => vtk_mesh::parse(&bytes, path)?.mesh,
+        MeshFormat::VtkXml => vtk_xml::parse_poly(&bytes, path)?.mesh,
     };
     mesh.check(path)?;
     Ok(mesh)

@@ -36,13 +36,8 @@ pub fn write_slicer_segmentation(
             "a 3D Slicer segmentation is named .seg.nrrd",
         ));
     }
+    crate::label_map::one_a_voxel(path, like, labels)?;
     let [nx, ny, nz] = like.dims;
-    if labels.len() != nx * ny * nz {
-        return Err(VolumeError::invalid(
-            path,
-            format!("{} labels for a {nx}×{ny}×{nz} grid", labels.len()),
-        ));
-    }
     let vector = |v: [f64; 3]| format!("({:?},{:?},{:?})", v[0], v[1], v[2]);
     let axis = |c: usize| {
         vector(std::array::from_fn(|r| {

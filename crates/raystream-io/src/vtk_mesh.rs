@@ -98,19 +98,10 @@ fn parse_poly(bytes: &[u8]) -> Result<PolyData, String> {
                             "a VTK {keyword} cell names point {i}, of {n_points} points"
                         ));
                     }
-                    let at = |k: usize| cell[k] as u32;
-                    match keyword.as_str() {
-                        "POLYGONS" => {
-                            triangles.extend((2..cell.len()).map(|k| [at(0), at(k - 1), at(k)]))
-                        }
-                        "TRIANGLE_STRIPS" => triangles.extend((2..cell.len()).map(|k| {
-                            if k % 2 == 0 {
-                                [at(k - 2), at(k - 1), at(k)]
-                            } else {
-                                [at(k - 1), at(k - 2), at(k)]
-                            }
-                        })),
-                        _ => {}
+                    if matches!(keyword.as_str(), "POLYGONS" | "TRIANGLE_STRIPS") {
+                        let cell: Vec<u32> = cell.iter().map(|&i| i as u32).collect();
+                        let strip = keyword == "TRIANGLE_STRIPS";
+                        triangulate(strip, &cell, 0, &mut triangles);
                     }
                 }
                 if matches!(keyword.as_str(), "VERTICES" | "LINES") && !cells.is_empty() {
@@ -148,6 +139,23 @@ fn parse_poly(bytes: &[u8]) -> Result<PolyData, String> {
         normals,
         warnings,
     })
+}
+
+/// A polygon's triangles (a fan about its first point), or a triangle strip's (every other
+/// one turned, as VTK turns them), its points `base` on, onto `out`.
+pub(crate) fn triangulate(strip: bool, cell: &[u32], base: usize, out: &mut Vec<[u32; 3]>) {
+    let at = |k: usize| cell[k] + base as u32;
+    if strip {
+        out.extend((2..cell.len()).map(|k| {
+            if k % 2 == 0 {
+                [at(k - 2), at(k - 1), at(k)]
+            } else {
+                [at(k - 1), at(k - 2), at(k)]
+            }
+        }));
+    } else {
+        out.extend((2..cell.len()).map(|k| [at(0), at(k - 1), at(k)]));
+    }
 }
 
 /// The cells after a `POLYGONS` (or strips, vertices, lines) line: as versions up to 4.2 write

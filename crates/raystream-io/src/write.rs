@@ -46,7 +46,11 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
     let format = MeshFormat::from_path(path)
-        .filter(|f| (*f != MeshFormat::Gltf || glb) && !path.to_string_lossy().ends_with(".gz"))
+        .filter(|f| {
+            (*f != MeshFormat::Gltf || glb)
+                && *f != MeshFormat::VtkXml
+                && !path.to_string_lossy().ends_with(".gz")
+        })
         .ok_or_else(|| {
             MeshError::invalid(path, "output must end in .ply, .obj, .stl, .vtk or .glb")
         })?;
@@ -106,6 +110,7 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
         MeshFormat::Stl => write_stl(&mut w, parts[0].mesh),
         MeshFormat::Gltf => write_glb(&mut w, &parts),
         MeshFormat::Vtk => write_vtk(&mut w, &parts[0]),
+        MeshFormat::VtkXml => Err(std::io::Error::other("a .vtp is read, not written")),
     };
     r.and_then(|()| w.flush()).map_err(io)
 }

@@ -2004,3 +2004,205 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
         "twice.seg.nrrd: segments \"a\" and \"b\" both have label value 1 on layer 0",
     );
 }
+
+/// VTK's XML formats against VTK itself (the `vtk` wheel): a block of the abdomen CT on an
+/// oblique grid written as image data (`.vti`), and a sphere as polygonal data (`.vtp`, and as
+/// triangle strips), in every way VTK writes them: ASCII, inline binary, appended raw and
+/// base64, uncompressed and under zlib, LZ4 and LZMA (many blocks, the last one short), with
+/// 32- and 64-bit headers, little- and big-endian.
+/// - Every image reads as the NIfTI SimpleITK wrote of the same block: its grid (`Direction`
+///   kept) and its voxels, exactly.
+/// - Every surface has the triangles of the PLY VTK wrote of it, the same points (exactly,
+///   but for ASCII's digits) and its normals; the strips make the same surface.
+/// - Damaged files (cut short, a lying header, a bad compressed block, a piece naming a point
+///   it lacks, cell data only, vectors) are errors naming the file; a `.vtp` given as a volume
+///   and a `.vti` as a mesh are named for what they are.
+#[test]
+fn vtk_xml_files_agree_with_vtk() {
+    let Some(py) = python_with("vtkmodules") else {
+        return;
+    };
+    let dir = tmp("vtk-xml");
+    let o = std::process::Command::new(&py)
+        .arg(repo().join("crates/raystream/tests/vtk_xml.py"))
+        .arg(volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz"))
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let select = raystream_io::VolumeSelect::default();
+    let nifti = raystream_io::load_volume(&dir.join("ref.nii"), &select).unwrap();
+    let images = v["images"].as_array().unwrap();
+    assert_eq!(images.len(), 31);
+    for name in images {
+        let file = dir.join(name.as_str().unwrap());
+        let read = raystream_io::load_volume(&file, &select).unwrap();
+        assert_eq!(read.dims, nifti.dims, "{file:?}");
+        for a in 0..3 {
+            // NIfTI keeps f32 geometry.
+            assert!(
+                (read.spacing[a] - nifti.spacing[a]).abs() < 1e-5,
+                "{file:?}"
+            );
+            assert!((read.origin[a] - nifti.origin[a]).abs() < 1e-4, "{file:?}");
+            for b in 0..3 {
+                assert!(
+                    (read.direction[a][b] - nifti.direction[a][b]).abs() < 1e-6,
+                    "{file:?}"
+                );
+            }
+        }
+        assert!(
+            read.data == nifti.data,
+            "{file:?}: its voxels differ from the NIfTI's"
+        );
+        assert_eq!(read.unit, nifti.unit, "{file:?}");
+    }
+    let i = info(dir.join("ct_raw_zlib_32_le.vti").to_str().unwrap());
+    assert_eq!(i["format"], "vti");
+
+    let (ply, _) = raystream_io::load_mesh_with_shading(&dir.join("sphere.ply")).unwrap();
+    let surfaces = v["surfaces"].as_array().unwrap();
+    assert_eq!(surfaces.len(), 62);
+    for name in surfaces {
+        let name = name.as_str().unwrap();
+        let file = dir.join(name);
+        let (m, shading) = raystream_io::load_mesh_with_shading(&file).unwrap();
+        // ASCII holds VTK's digits: within f32's rounding of 6 significant digits.
+        let tol = if name.contains("ascii") { 1e-4 } else { 0.0 };
+        let worst = m
+            .positions
+            .iter()
+            .zip(&ply.positions)
+            .map(|(a, b)| (*a - *b).abs().max_element())
+            .fold(0.0f32, f32::max);
+        assert!(
+            m.positions.len() == ply.positions.len() && worst <= tol,
+            "{name}: {worst}"
+        );
+        // The sphere's normals: one a point, pointing away from its centre.
+        assert_eq!(shading.normals.len(), m.positions.len(), "{name}");
+        let centre = raystream_math::Vec3::new(10.0, -20.5, 300.25);
+        for (n, p) in shading.normals.iter().zip(&m.positions) {
+            let out = (*p - centre).normalize();
+            assert!(n.dot(out) > 0.99, "{name}: normal {n} at {p}");
+        }
+        if name.starts_with("surface") {
+            assert_eq!(m.triangles, ply.triangles, "{name}");
+        } else {
+            // Strips: as many triangles, the same area.
+            assert_eq!(m.len(), ply.len(), "{name}");
+            let area = |m: &raystream_io::TriMesh| -> f64 {
+                (0..m.len())
+                    .map(|t| {
+                        let [a, b, c] = m.corners(t);
+                        (b - a).cross(c - a).length() as f64 / 2.0
+                    })
+                    .sum()
+            };
+            assert!((area(&m) - area(&ply)).abs() < 1e-3 * area(&ply), "{name}");
+        }
+    }
+
+    // Damaged files.
+    let damaged = |name: &str, bytes: &[u8], want: &str| {
+        let file = dir.join(name);
+        std::fs::write(&file, bytes).unwrap();
+        refused(
+            &["info", file.to_str().unwrap()],
+            &format!("{name}: {want}"),
+        );
+    };
+    let read = |name: &str| std::fs::read(dir.join(name)).unwrap();
+    // The first byte of the appended data (after its '_').
+    let appended = |b: &[u8]| {
+        let tag = b.windows(13).position(|w| w == b"<AppendedData").unwrap();
+        tag + b[tag..].iter().position(|&c| c == b'_').unwrap() + 1
+    };
+    let zlib = read("ct_raw_zlib_32_le.vti");
+    damaged(
+        "cut.vti",
+        &zlib[..zlib.len() - 3000],
+        "the VTK array \"HU\": the data is cut short in its compressed blocks",
+    );
+    let mut bad_block = zlib.clone();
+    // Past the header: its block count, the block sizes, and each block's compressed size.
+    let a = appended(&zlib);
+    let blocks = u32::from_le_bytes(zlib[a..a + 4].try_into().unwrap()) as usize;
+    let at = a + 4 * (3 + blocks) + 10;
+    bad_block[at..at + 40].fill(0x55);
+    damaged(
+        "block.vti",
+        &bad_block,
+        "the VTK array \"HU\": block 0: zlib",
+    );
+    let mut lying = read("ct_raw_none_32_le.vti");
+    let at = appended(&lying);
+    lying[at..at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    damaged(
+        "lying.vti",
+        &lying,
+        "the VTK array \"HU\": its header gives 4294967295 bytes, 172800 expected",
+    );
+    let ascii = String::from_utf8(read("ct_ascii.vti")).unwrap();
+    damaged(
+        "cells.vti",
+        ascii.replace("PointData", "CellData").as_bytes(),
+        "the VTK image data holds cell data only",
+    );
+    damaged(
+        "vectors.vti",
+        ascii
+            .replace("Name=\"HU\"", "Name=\"HU\" NumberOfComponents=\"3\"")
+            .as_bytes(),
+        "the VTK array \"HU\" has 3 components",
+    );
+    damaged(
+        "huge.vti",
+        ascii
+            .replace(
+                "WholeExtent=\"0 39 0 35 0 29\"",
+                "WholeExtent=\"0 99999 0 99999 0 99999\"",
+            )
+            .replace(
+                "Extent=\"0 39 0 35 0 29\"",
+                "Extent=\"0 99999 0 99999 0 99999\"",
+            )
+            .as_bytes(),
+        "dimensions [100000, 100000, 100000] are empty or exceed the 1073741824-voxel limit",
+    );
+    // The first number of the array `name` (a surface's polygons') in an ASCII file's text:
+    // its byte range.
+    let first_number = |text: &str, name: &str| {
+        // Past the empty vertices' arrays of a surface.
+        let from = text.find("<Polys>").unwrap_or(0);
+        let tag = from + text[from..].find(&format!("Name=\"{name}\"")).unwrap();
+        let start = tag + text[tag..].find('>').unwrap() + 1;
+        let start = start
+            + text[start..]
+                .find(|c: char| c.is_ascii_digit() || c == '-')
+                .unwrap();
+        let end = start + text[start..].find(char::is_whitespace).unwrap();
+        (start, end)
+    };
+    let (a, b) = first_number(&ascii, "HU");
+    damaged(
+        "short.vti",
+        format!("{}{}", &ascii[..a], &ascii[b..]).as_bytes(),
+        "the VTK array \"HU\" holds 43199 of its 43200 values",
+    );
+    let poly = String::from_utf8(read("surface_ascii.vtp")).unwrap();
+    let (a, b) = first_number(&poly, "connectivity");
+    damaged(
+        "far.vtp",
+        format!("{}999999{}", &poly[..a], &poly[b..]).as_bytes(),
+        "a VTK Polys cell names point 999999, of 338 points",
+    );
+    let vtp = dir.join("surface_raw_zlib_32_le.vtp");
+    let vtp = vtp.to_str().unwrap();
+    refused(
+        &["iso", vtp, "-o", tmp("x.ply").to_str().unwrap()],
+        "a .vtp is VTK's polygonal data, a mesh, not a volume",
+    );
+}

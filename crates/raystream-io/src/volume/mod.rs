@@ -20,6 +20,7 @@ pub(crate) mod raw;
 mod segmentation;
 mod slicer_seg;
 mod structure_set;
+mod vti;
 mod vtk;
 
 use std::path::{Path, PathBuf};
@@ -53,13 +54,16 @@ pub enum VolumeFormat {
     MetaImage,
     /// Legacy VTK image data (`DATASET STRUCTURED_POINTS`).
     Vtk,
+    /// VTK XML image data (`.vti`).
+    VtkXml,
     /// Raw voxels named by their size and type: `NAME_WxHxD_TYPE.raw`.
     Raw,
 }
 
 impl VolumeFormat {
     /// The format named by a path: a directory is a DICOM series; files go by extension
-    /// (`.nii`, `.nii.gz`, `.nrrd`, `.nhdr`, `.mha`, `.mhd`, `.vtk`, `.raw`, `.raw.gz`, `.dcm`).
+    /// (`.nii`, `.nii.gz`, `.nrrd`, `.nhdr`, `.mha`, `.mhd`, `.vtk`, `.vti`, `.raw`, `.raw.gz`,
+    /// `.dcm`).
     pub fn from_path(path: &Path) -> Option<Self> {
         if path.is_dir() {
             return Some(Self::Dicom);
@@ -76,6 +80,8 @@ impl VolumeFormat {
             // takes the polygons.
             let mesh = crate::vtk_legacy::dataset_of(path).is_some_and(|d| d == "POLYDATA");
             (!mesh).then_some(Self::Vtk)
+        } else if name.ends_with(".vti") {
+            Some(Self::VtkXml)
         } else if name.ends_with(".raw") || name.ends_with(".raw.gz") {
             Some(Self::Raw)
         } else if name.ends_with(".dcm") || name.ends_with(".zip") {
@@ -96,6 +102,7 @@ impl VolumeFormat {
             Self::Nrrd => "nrrd",
             Self::MetaImage => "metaimage",
             Self::Vtk => "vtk",
+            Self::VtkXml => "vti",
             Self::Raw => "raw",
         }
     }
@@ -603,8 +610,10 @@ pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeE
             path,
             if polygons {
                 "a .vtk of polygons (DATASET POLYDATA) is a mesh, not a volume: a volume's .vtk holds image data (STRUCTURED_POINTS)"
+            } else if crate::MeshFormat::from_path(path) == Some(crate::MeshFormat::VtkXml) {
+                "a .vtp is VTK's polygonal data, a mesh, not a volume: a volume is VTK image data (.vti)"
             } else {
-                "unsupported volume format (expected a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd, a .vtk of image data, or NAME_WxHxD_TYPE.raw)"
+                "unsupported volume format (expected a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd, .vti, a .vtk of image data, or NAME_WxHxD_TYPE.raw)"
             },
         )
     })?;
@@ -618,6 +627,7 @@ pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeE
         VolumeFormat::Dicom => dicom::load(path, select)?,
         VolumeFormat::Raw => named_raw::load(path, select.phase)?,
         VolumeFormat::Vtk => vtk::parse(&raw::read_file(path)?, path, select.phase)?,
+        VolumeFormat::VtkXml => vti::parse(&raw::read_file(path)?, path, select.phase)?,
         file_format => {
             let parse = match file_format {
                 VolumeFormat::Nifti => nifti::parse,
