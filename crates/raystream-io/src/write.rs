@@ -46,13 +46,12 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
     let format = MeshFormat::from_path(path)
-        .filter(|f| {
-            (*f != MeshFormat::Gltf || glb)
-                && *f != MeshFormat::VtkXml
-                && !path.to_string_lossy().ends_with(".gz")
-        })
+        .filter(|f| (*f != MeshFormat::Gltf || glb) && !path.to_string_lossy().ends_with(".gz"))
         .ok_or_else(|| {
-            MeshError::invalid(path, "output must end in .ply, .obj, .stl, .vtk or .glb")
+            MeshError::invalid(
+                path,
+                "output must end in .ply, .obj, .stl, .vtk, .vtp or .glb",
+            )
         })?;
     if parts.is_empty() {
         return Err(MeshError::invalid(path, "no surface to write"));
@@ -61,7 +60,7 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
         return Err(MeshError::invalid(
             path,
             format!(
-                "an STL or VTK file holds one surface here, not {}: write .glb, .obj or .ply, or one at a time",
+                "an STL or legacy VTK file holds one surface here, not {}: write .glb, .obj, .ply or .vtp, or one at a time",
                 parts.len()
             ),
         ));
@@ -110,7 +109,7 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
         MeshFormat::Stl => write_stl(&mut w, parts[0].mesh),
         MeshFormat::Gltf => write_glb(&mut w, &parts),
         MeshFormat::Vtk => write_vtk(&mut w, &parts[0]),
-        MeshFormat::VtkXml => Err(std::io::Error::other("a .vtp is read, not written")),
+        MeshFormat::VtkXml => write_vtp(&mut w, &parts),
     };
     r.and_then(|()| w.flush()).map_err(io)
 }
@@ -366,6 +365,71 @@ fn write_vtk(w: &mut impl Write, part: &MeshPart) -> std::io::Result<()> {
         big_endian(w, normals)?;
     }
     writeln!(w)
+}
+
+/// VTK XML polygonal data (`.vtp`, ParaView's format): a piece a part (its points, its
+/// triangles as polygons, its normals where given, and its colour on every point as 8-bit
+/// sRGB `Colors`), the arrays appended raw and uncompressed after 64-bit byte counts, little
+/// endian. Written by hand, as the reader is ([`crate::vtk_xml`]).
+fn write_vtp(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
+    use std::fmt::Write as _;
+    let mut xml = String::from(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"1.0\" \
+         byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <PolyData>\n",
+    );
+    let mut data: Vec<u8> = Vec::new();
+    let mut array = |xml: &mut String, ty: &str, name: &str, components: usize, bytes: &[u8]| {
+        let _ = writeln!(
+            xml,
+            "        <DataArray type=\"{ty}\" Name=\"{name}\" NumberOfComponents=\"{components}\" format=\"appended\" offset=\"{}\"/>",
+            data.len()
+        );
+        data.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
+        data.extend_from_slice(bytes);
+    };
+    let floats = |v: &[Vec3]| -> Vec<u8> {
+        v.iter()
+            .flat_map(|p| p.to_array())
+            .flat_map(f32::to_le_bytes)
+            .collect()
+    };
+    for part in parts {
+        let mesh = part.mesh;
+        let (n, t) = (mesh.positions.len(), mesh.len());
+        let _ = writeln!(
+            xml,
+            "    <Piece NumberOfPoints=\"{n}\" NumberOfVerts=\"0\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"{t}\">"
+        );
+        let normals = if part.normals.is_some() {
+            " Normals=\"Normals\""
+        } else {
+            ""
+        };
+        let _ = writeln!(xml, "      <PointData Scalars=\"Colors\"{normals}>");
+        let colour = part.colour.map(|c| crate::linear_to_srgb8(c as f64));
+        let colours: Vec<u8> = (0..n).flat_map(|_| colour).collect();
+        array(&mut xml, "UInt8", "Colors", 3, &colours);
+        if let Some(normals) = part.normals {
+            array(&mut xml, "Float32", "Normals", 3, &floats(normals));
+        }
+        xml.push_str("      </PointData>\n      <Points>\n");
+        array(&mut xml, "Float32", "Points", 3, &floats(&mesh.positions));
+        xml.push_str("      </Points>\n      <Polys>\n");
+        let connectivity: Vec<u8> = mesh
+            .triangles
+            .iter()
+            .flatten()
+            .flat_map(|&v| (v as i64).to_le_bytes())
+            .collect();
+        array(&mut xml, "Int64", "connectivity", 1, &connectivity);
+        let offsets: Vec<u8> = (1..=t as i64).flat_map(|k| (3 * k).to_le_bytes()).collect();
+        array(&mut xml, "Int64", "offsets", 1, &offsets);
+        xml.push_str("      </Polys>\n    </Piece>\n");
+    }
+    xml.push_str("  </PolyData>\n  <AppendedData encoding=\"raw\">\n   _");
+    w.write_all(xml.as_bytes())?;
+    w.write_all(&data)?;
+    w.write_all(b"\n  </AppendedData>\n</VTKFile>\n")
 }
 
 /// Binary STL, written by hand rather than by stl_io, whose writer leaves the 80-byte header

@@ -281,9 +281,9 @@ impl VolumePick {
 #[command(group(clap::ArgGroup::new("frames").args(["turntable", "slices", "cine", "fly"])))]
 #[command(group(clap::ArgGroup::new("stations").args(["slices", "fly"]).multiple(false)))]
 pub struct RenderArgs {
-    /// Mesh (.obj, .ply, .stl, optionally .gz; .gltf, .glb; a .vtk of polygons), scene (.toml) or
-    /// CT volume (DICOM folder, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, a .vtk of image data,
-    /// NAME_WxHxD_TYPE.raw); none: the built-in abdomen CT.
+    /// Mesh (.obj, .ply, .stl, optionally .gz; .gltf, .glb; .vtp, a .vtk of polygons), scene
+    /// (.toml) or CT volume (DICOM folder, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vti, a .vtk of
+    /// image data, NAME_WxHxD_TYPE.raw); none: the built-in abdomen CT.
     pub input: Option<PathBuf>,
     #[command(flatten)]
     pub threshold: Threshold,
@@ -854,13 +854,15 @@ impl From<ModeArg> for raystream_cpu::dvr::DvrMode {
 
 #[derive(Args)]
 pub struct IsoArgs {
-    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, NAME_WxHxD_TYPE.raw), or a label map
-    /// or DICOM Segmentation (with `--segment`).
+    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, .vti,
+    /// NAME_WxHxD_TYPE.raw), or a label map, DICOM Segmentation or 3D Slicer segmentation
+    /// (with `--segment`).
     pub input: PathBuf,
     /// Output mesh in LPS millimetres: .ply (with normals), .obj (with normals), .stl, .vtk
-    /// (3D Slicer's model format, legacy VTK polygonal data, with normals), or .glb (binary
+    /// (3D Slicer's model format, legacy VTK polygonal data, with normals), .vtp (ParaView's:
+    /// VTK XML polygonal data, a piece a segment, with normals and colours), or .glb (binary
     /// glTF with normals, under a node that turns it to glTF's metres, +Y superior, +Z
-    /// anterior). All but the GLB say SPACE=LPS, as 3D Slicer reads a model's space.
+    /// anterior). The PLY, OBJ, STL and VTK say SPACE=LPS, as 3D Slicer reads a model's space.
     #[arg(short, long)]
     pub output: PathBuf,
     #[command(flatten)]
@@ -921,7 +923,8 @@ pub struct LumenPick {
 
 #[derive(Args)]
 pub struct MeasureArgs {
-    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, NAME_WxHxD_TYPE.raw).
+    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, .vti,
+    /// NAME_WxHxD_TYPE.raw).
     pub input: PathBuf,
     /// The vessel's path: 3D Slicer markups (.mrk.json) or text (x y z per line, LPS mm), as
     /// `render --path` reads it.
@@ -1086,7 +1089,8 @@ impl MeasureArgs {
 
 #[derive(Args)]
 pub struct CentrelineArgs {
-    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, NAME_WxHxD_TYPE.raw).
+    /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, .vti,
+    /// NAME_WxHxD_TYPE.raw).
     pub input: PathBuf,
     /// The points placed in the vessel, in order (its two ends, and any between that it must
     /// pass): 3D Slicer markups (.mrk.json) or text (x y z per line, LPS mm), as `render
@@ -1178,7 +1182,8 @@ pub struct TraceArgs {
 
 #[derive(Args)]
 pub struct InfoArgs {
-    /// Mesh file, CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, NAME_WxHxD_TYPE.raw) or
+    /// Mesh file, CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, .vti,
+    /// NAME_WxHxD_TYPE.raw) or
     /// scene file (.toml).
     #[arg(required_unless_present = "gpu")]
     pub input: Option<PathBuf>,

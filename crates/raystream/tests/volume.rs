@@ -2014,6 +2014,8 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
 ///   kept) and its voxels, exactly.
 /// - Every surface has the triangles of the PLY VTK wrote of it, the same points (exactly,
 ///   but for ASCII's digits) and its normals; the strips make the same surface.
+/// - `iso -o X.vtp` writes the PLY's surface; two segments are two pieces, which VTK reads
+///   with their points, triangles, normals and colours.
 /// - Damaged files (cut short, a lying header, a bad compressed block, a piece naming a point
 ///   it lacks, cell data only, vectors) are errors naming the file; a `.vtp` given as a volume
 ///   and a `.vti` as a mesh are named for what they are.
@@ -2104,6 +2106,81 @@ fn vtk_xml_files_agree_with_vtk() {
             assert!((area(&m) - area(&ply)).abs() < 1e-3 * area(&ply), "{name}");
         }
     }
+
+    // `iso -o X.vtp`: the PLY's surface; two segments, a piece each, as VTK reads them.
+    let ct = dir.join("ref.nii");
+    let surface = |input: &std::path::Path, args: &[&str], out: &str| {
+        let out = dir.join(out);
+        let mut all = vec![
+            "iso",
+            "--quiet",
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        all.extend_from_slice(args);
+        let o = run(&all);
+        assert!(o.status.success(), "{}", stderr(&o));
+        out
+    };
+    let (a, _) =
+        raystream_io::load_mesh_with_shading(&surface(&ct, &["--iso", "300"], "bones.ply"))
+            .unwrap();
+    let (b, shading) =
+        raystream_io::load_mesh_with_shading(&surface(&ct, &["--iso", "300"], "bones.vtp"))
+            .unwrap();
+    assert!(a.len() > 500 && a.positions == b.positions && a.triangles == b.triangles);
+    assert_eq!(shading.normals.len(), b.positions.len());
+    let labels: Vec<u8> = nifti
+        .data
+        .iter()
+        .map(|&hu| {
+            if hu > 300.0 {
+                1
+            } else {
+                u8::from(hu > 100.0) * 2
+            }
+        })
+        .collect();
+    let label_map = dir.join("labels.nii.gz");
+    raystream_io::write_label_map(&label_map, &nifti, &labels, "bone 1, soft 2").unwrap();
+    let parts = surface(&label_map, &["--segment", "all"], "parts.vtp");
+    let whole = raystream_io::load_mesh(&parts).unwrap();
+    let one =
+        raystream_io::load_mesh(&surface(&label_map, &["--segment", "1"], "part1.vtp")).unwrap();
+    let two =
+        raystream_io::load_mesh(&surface(&label_map, &["--segment", "2"], "part2.vtp")).unwrap();
+    assert_eq!(
+        (whole.positions.len(), whole.len()),
+        (
+            one.positions.len() + two.positions.len(),
+            one.len() + two.len()
+        )
+    );
+    let script = "import sys, json\n\
+        from vtkmodules.vtkIOXML import vtkXMLPolyDataReader\n\
+        r = vtkXMLPolyDataReader(); r.SetFileName(sys.argv[1]); r.Update(); m = r.GetOutput()\n\
+        c = m.GetPointData().GetArray('Colors')\n\
+        print(json.dumps([r.GetNumberOfPieces(), m.GetNumberOfPoints(), m.GetNumberOfPolys(),\
+        m.GetPointData().GetNormals().GetNumberOfTuples(), c.GetTuple3(0), c.GetTuple3(m.GetNumberOfPoints() - 1)]))";
+    let o = std::process::Command::new(&py)
+        .args(["-c", script, parts.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let got: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    // Label 1 cyan, 2 magenta, the tints of --segmentation and its legend's swatches.
+    assert_eq!(
+        got,
+        serde_json::json!([
+            2,
+            whole.positions.len(),
+            whole.len(),
+            whole.positions.len(),
+            [0.0, 230.0, 255.0],
+            [255.0, 64.0, 220.0]
+        ])
+    );
 
     // Damaged files.
     let damaged = |name: &str, bytes: &[u8], want: &str| {
