@@ -177,7 +177,7 @@ def seeds(d):
           b"DIMENSIONS 6 5 4\nSPACING 0.7 0.8 2.5\nORIGIN -10 20 30\nPOINT_DATA 120\n"
           b"SCALARS v short 1\nLOOKUP_TABLE default\n"
           + " ".join(str(v) for v in vox.ravel()).encode() + b"\n")
-        # VTK XML image data: appended raw zlib blocks (VTK's default), inline base64, and a
+        # VTK XML image data: appended base64 zlib blocks (VTK's default), inline base64, and a
         # sphere as polygonal data, as the vtk wheel writes them (where it is installed).
         try:
             from vtkmodules.vtkCommonDataModel import vtkImageData

@@ -427,7 +427,7 @@ fn mesh_parts_keep_their_names_and_colours() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("m.stl: an STL or VTK file holds one surface here, not 2"),
+        e.contains("m.stl: an STL or legacy VTK file holds one surface here, not 2"),
         "{e}"
     );
 }

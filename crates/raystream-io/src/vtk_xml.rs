@@ -9,9 +9,9 @@
 //! (zlib, LZ4 or LZMA), its blocks' count and sizes followed by the compressed blocks.
 //!
 //! Written by hand over `roxmltree` (the XML), `base64`, `flate2`, `lz4_flex` and `lzma-rs`:
-//! vtkio 0.6.3, the VTK crate on crates.io, reads no appended raw data (VTK's default: an XML
-//! error), returns an empty array for zlib-compressed binary data, and drops the `Direction`
-//! of image data (tried on files the `vtk` wheel wrote).
+//! vtkio 0.6.3, the VTK crate on crates.io, reads no appended raw data (an XML error),
+//! returns an empty array for zlib-compressed binary data, and drops the `Direction` of image
+//! data (tried on files the `vtk` wheel wrote).
 
 use std::io::{Read, Write};
 use std::path::Path;
