@@ -2011,7 +2011,8 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
 /// base64, uncompressed and under zlib, LZ4 and LZMA (many blocks, the last one short), with
 /// 32- and 64-bit headers, little- and big-endian.
 /// - Every image reads as the NIfTI SimpleITK wrote of the same block: its grid (`Direction`
-///   kept) and its voxels, exactly.
+///   kept) and its voxels, exactly. An image whose extent starts away from 0 has its first
+///   and last voxels where VTK puts them.
 /// - Every surface has the triangles of the PLY VTK wrote of it, the same points (exactly,
 ///   but for ASCII's digits) and its normals; the strips make the same surface.
 /// - `iso -o X.vtp` writes the PLY's surface; two segments are two pieces, which VTK reads
@@ -2063,6 +2064,17 @@ fn vtk_xml_files_agree_with_vtk() {
     }
     let i = info(dir.join("ct_raw_zlib_32_le.vti").to_str().unwrap());
     assert_eq!(i["format"], "vti");
+    // A cropped extent: its first and last voxels where VTK puts them, the ramp in order.
+    let crop = raystream_io::load_volume(&dir.join("cropped.vti"), &select).unwrap();
+    assert_eq!(crop.dims, [6, 5, 4]);
+    assert!(crop.data.iter().enumerate().all(|(i, &v)| v == i as f32));
+    for (ijk, key) in [([0.0; 3], "first"), ([5.0, 4.0, 3.0], "last")] {
+        let want: [f64; 3] = serde_json::from_value(v["cropped"][key].clone()).unwrap();
+        let got = crop.index_to_world(raystream_math::DVec3::from(ijk));
+        for a in 0..3 {
+            assert!((got[a] - want[a]).abs() < 1e-9, "{key}: {got} vs {want:?}");
+        }
+    }
 
     let (ply, _) = raystream_io::load_mesh_with_shading(&dir.join("sphere.ply")).unwrap();
     let surfaces = v["surfaces"].as_array().unwrap();

@@ -98,5 +98,21 @@ for name, setup in variants():
         assert w.Write() == 1
         surfaces.append(f"{what}_{name}.vtp")
 
+# An extent that starts away from 0 (a cropped image, as vtkExtractVOI leaves it): its first
+# voxel lies where VTK puts it, Origin + Direction · (Spacing ⊙ the extent's low corner).
+crop = vtkImageData()
+crop.SetExtent(3, 8, 2, 6, 1, 4)
+crop.SetSpacing(0.5, 0.75, 2.0)
+crop.SetOrigin(-7.0, 11.0, 130.0)
+crop.SetDirectionMatrix(*d.ravel().tolist())
+ramp = numpy_to_vtk(np.arange(6 * 5 * 4, dtype=np.int16), deep=1)
+ramp.SetName("ramp")
+crop.GetPointData().SetScalars(ramp)
+w = vtkXMLImageDataWriter()
+w.SetInputData(crop)
+w.SetFileName(os.path.join(out, "cropped.vti"))
+assert w.Write() == 1
+
 print(json.dumps({"images": images, "surfaces": surfaces,
-                  "strips": stripper.GetOutput().GetNumberOfStrips()}))
+                  "strips": stripper.GetOutput().GetNumberOfStrips(),
+                  "cropped": {"first": crop.GetPoint(0), "last": crop.GetPoint(6 * 5 * 4 - 1)}}))
