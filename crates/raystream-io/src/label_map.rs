@@ -118,15 +118,12 @@ pub(crate) fn one_a_voxel(path: &Path, like: &Volume, labels: &[u8]) -> Result<(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::volume::{VolumeSelect, load_volume};
 
-    /// Written on an oblique, anisotropic grid and read back: the same grid, the same labels.
-    #[test]
-    fn a_label_map_reads_back_on_its_grid() {
-        let scratch = crate::tests::scratch_dir("label-test");
-        let dir = scratch.path();
+    /// An oblique, anisotropic 5×4×3 grid and labels 0, 1, 2 on it, for the writers' tests.
+    pub(crate) fn oblique_labels() -> (Volume, Vec<u8>) {
         let (c, s) = (0.6f64.cos(), 0.6f64.sin());
         let like = Volume {
             origin: [-120.5, 33.25, 710.0],
@@ -134,7 +131,15 @@ mod tests {
             direction: [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
             ..Volume::hounsfield([5, 4, 3], [1.0; 3], vec![0.0; 60])
         };
-        let labels: Vec<u8> = (0..60).map(|k| (k * 7 % 3) as u8).collect();
+        (like, (0..60).map(|k| (k * 7 % 3) as u8).collect())
+    }
+
+    /// Written on an oblique, anisotropic grid and read back: the same grid, the same labels.
+    #[test]
+    fn a_label_map_reads_back_on_its_grid() {
+        let scratch = crate::tests::scratch_dir("label-test");
+        let dir = scratch.path();
+        let (like, labels) = oblique_labels();
         // Written to the name asked for, compressed as it says, whatever its case and dots.
         for name in ["m.nii", "m.nii.gz", "M.NII.GZ", "a.b.nii", "a.b.nii.gz"] {
             let path = dir.join(name);

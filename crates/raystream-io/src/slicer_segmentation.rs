@@ -114,14 +114,7 @@ mod tests {
     #[test]
     fn a_segmentation_reads_back_on_its_grid() {
         let scratch = crate::tests::scratch_dir("slicer-seg-test");
-        let (c, s) = (0.6f64.cos(), 0.6f64.sin());
-        let like = Volume {
-            origin: [-120.5, 33.25, 710.0],
-            spacing: [0.7, 0.8, 1.5],
-            direction: [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
-            ..Volume::hounsfield([5, 4, 3], [1.0; 3], vec![0.0; 60])
-        };
-        let labels: Vec<u8> = (0..60).map(|k| (k * 7 % 3) as u8).collect();
+        let (like, labels) = crate::label_map::tests::oblique_labels();
         let code = Code {
             value: "1",
             scheme: "SCT",

@@ -99,9 +99,8 @@ fn parse_poly(bytes: &[u8]) -> Result<PolyData, String> {
                         ));
                     }
                     if matches!(keyword.as_str(), "POLYGONS" | "TRIANGLE_STRIPS") {
-                        let cell: Vec<u32> = cell.iter().map(|&i| i as u32).collect();
                         let strip = keyword == "TRIANGLE_STRIPS";
-                        triangulate(strip, &cell, 0, &mut triangles);
+                        triangulate(strip, cell.len(), |k| cell[k] as u32, &mut triangles);
                     }
                 }
                 if matches!(keyword.as_str(), "VERTICES" | "LINES") && !cells.is_empty() {
@@ -121,13 +120,7 @@ fn parse_poly(bytes: &[u8]) -> Result<PolyData, String> {
         }
     }
     let positions = points.ok_or("the VTK file has no POINTS")?;
-    let mut warnings = Vec::new();
-    if !left_out.is_empty() {
-        warnings.push(format!(
-            "{} left out: only polygons and triangle strips are surfaces",
-            left_out.join(" and ")
-        ));
-    }
+    let warnings = left_out_warning(&left_out).into_iter().collect();
     if normals.len() != positions.len() {
         normals.clear();
     }
@@ -141,12 +134,16 @@ fn parse_poly(bytes: &[u8]) -> Result<PolyData, String> {
     })
 }
 
-/// A polygon's triangles (a fan about its first point), or a triangle strip's (every other
-/// one turned, as VTK turns them), its points `base` on, onto `out`.
-pub(crate) fn triangulate(strip: bool, cell: &[u32], base: usize, out: &mut Vec<[u32; 3]>) {
-    let at = |k: usize| cell[k] + base as u32;
+/// The triangles of a polygon of `n` points (a fan about its first), or of a triangle strip's
+/// (every other one turned, as VTK turns them), its `k`-th point `at(k)`, onto `out`.
+pub(crate) fn triangulate(
+    strip: bool,
+    n: usize,
+    at: impl Fn(usize) -> u32,
+    out: &mut Vec<[u32; 3]>,
+) {
     if strip {
-        out.extend((2..cell.len()).map(|k| {
+        out.extend((2..n).map(|k| {
             if k % 2 == 0 {
                 [at(k - 2), at(k - 1), at(k)]
             } else {
@@ -154,8 +151,18 @@ pub(crate) fn triangulate(strip: bool, cell: &[u32], base: usize, out: &mut Vec<
             }
         }));
     } else {
-        out.extend((2..cell.len()).map(|k| [at(0), at(k - 1), at(k)]));
+        out.extend((2..n).map(|k| [at(0), at(k - 1), at(k)]));
     }
+}
+
+/// The warning for the cells a surface leaves out (`["2 vertices", "1 lines"]`), if any.
+pub(crate) fn left_out_warning(left_out: &[String]) -> Option<String> {
+    (!left_out.is_empty()).then(|| {
+        format!(
+            "{} left out: only polygons and triangle strips are surfaces",
+            left_out.join(" and ")
+        )
+    })
 }
 
 /// The cells after a `POLYGONS` (or strips, vertices, lines) line: as versions up to 4.2 write

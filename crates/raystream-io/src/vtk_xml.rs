@@ -158,56 +158,47 @@ pub(crate) fn numbers_attribute<const N: usize>(
         return default
             .ok_or_else(|| format!("the VTK <{}> has no {name}", node.tag_name().name()));
     };
-    let v: Vec<f64> = text
-        .split_whitespace()
-        .map(|w| w.parse::<f64>().map_err(|_| ()))
-        .collect::<Result<_, _>>()
-        .map_err(|()| format!("VTK {name} {text:?} is not {N} numbers"))?;
-    v.try_into()
-        .map_err(|_| format!("VTK {name} {text:?} is not {N} numbers"))
+    let v: Option<Vec<f64>> = text.split_whitespace().map(|w| w.parse().ok()).collect();
+    v.and_then(|v| v.try_into().ok())
+        .ok_or_else(|| format!("VTK {name} {text:?} is not {N} numbers"))
 }
 
-/// A `DataArray`'s values: read from text, or bytes of its type.
-pub(crate) enum Values {
+/// A `DataArray`'s values, of its type `scalar`: read from text, or its bytes.
+pub(crate) struct Values {
+    pub scalar: Scalar,
+    stored: Stored,
+}
+
+enum Stored {
     Text(Vec<f64>),
-    Bytes {
-        bytes: Vec<u8>,
-        scalar: Scalar,
-        big_endian: bool,
-    },
+    Bytes { bytes: Vec<u8>, big_endian: bool },
 }
 
 impl Values {
     /// Value `i`, exactly.
     pub fn get(&self, i: usize) -> f64 {
-        match self {
-            Values::Text(v) => v[i],
-            Values::Bytes {
-                bytes,
-                scalar,
-                big_endian,
-            } => {
-                let s = scalar.size();
-                value(&bytes[i * s..(i + 1) * s], *scalar, *big_endian)
+        match &self.stored {
+            Stored::Text(v) => v[i],
+            Stored::Bytes { bytes, big_endian } => {
+                let s = self.scalar.size();
+                value(&bytes[i * s..(i + 1) * s], self.scalar, *big_endian)
             }
         }
     }
 
     /// Every value as f32.
     pub fn to_f32(&self) -> Vec<f32> {
-        match self {
-            Values::Text(v) => v.iter().map(|&x| x as f32).collect(),
-            Values::Bytes {
-                bytes,
-                scalar,
-                big_endian,
-            } => crate::volume::raw::decode(bytes, *scalar, *big_endian, 1.0, 0.0),
+        match &self.stored {
+            Stored::Text(v) => v.iter().map(|&x| x as f32).collect(),
+            Stored::Bytes { bytes, big_endian } => {
+                crate::volume::raw::decode(bytes, self.scalar, *big_endian, 1.0, 0.0)
+            }
         }
     }
 }
 
 /// The scalar type a `DataArray`'s `type` names.
-pub(crate) fn scalar_type(t: &str) -> Option<Scalar> {
+fn scalar_type(t: &str) -> Option<Scalar> {
     Some(match t {
         "Int8" | "Char" => Scalar::I8,
         "UInt8" | "UnsignedChar" => Scalar::U8,
@@ -251,7 +242,10 @@ pub(crate) fn read_array(
         if v.len() < count {
             return Err(format!("{what} holds {} of its {count} values", v.len()));
         }
-        return Ok(Values::Text(v));
+        return Ok(Values {
+            scalar,
+            stored: Stored::Text(v),
+        });
     }
     let need = count
         .checked_mul(scalar.size())
@@ -259,7 +253,7 @@ pub(crate) fn read_array(
     let owned;
     let bytes: &[u8] = match format {
         "binary" => {
-            owned = base64_streams(node.text().unwrap_or(""), usize::MAX)
+            owned = base64_streams(node.text().unwrap_or("").as_bytes(), usize::MAX)
                 .map_err(|e| format!("{what}: {e}"))?;
             &owned
         }
@@ -275,10 +269,7 @@ pub(crate) fn read_array(
                 .get(offset..)
                 .ok_or_else(|| format!("{what}: offset {offset} lies past the file's end"))?;
             if base64 {
-                let end = rest.iter().position(|&b| b == b'<').unwrap_or(rest.len());
-                let text = std::str::from_utf8(&rest[..end])
-                    .map_err(|_| format!("{what}: the appended base64 data is not text"))?;
-                owned = appended_base64(text, layout, need).map_err(|e| format!("{what}: {e}"))?;
+                owned = appended_base64(rest, layout, need).map_err(|e| format!("{what}: {e}"))?;
                 &owned
             } else {
                 rest
@@ -287,30 +278,34 @@ pub(crate) fn read_array(
         f => return Err(format!("{what}: format {f:?}")),
     };
     let data = unpack(bytes, layout, need).map_err(|e| format!("{what}: {e}"))?;
-    Ok(Values::Bytes {
-        bytes: data,
+    Ok(Values {
         scalar,
-        big_endian: layout.big_endian,
+        stored: Stored::Bytes {
+            bytes: data,
+            big_endian: layout.big_endian,
+        },
     })
 }
 
 /// Base64 text of one or more streams one after another (VTK may encode a header and the data
-/// after it separately, each padded), whitespace ignored, decoded group by group of four
-/// characters until at least `most` bytes are out (or the text ends).
-fn base64_streams(text: &str, most: usize) -> Result<Vec<u8>, String> {
+/// after it separately, each padded), whitespace ignored, up to the end of `text` or a `<` (the
+/// appended section's closing tag), decoded group by group of four characters until at least
+/// `most` bytes are out.
+fn base64_streams(text: &[u8], most: usize) -> Result<Vec<u8>, String> {
     let engine = base64::engine::general_purpose::STANDARD;
     let mut out = Vec::new();
-    let mut stream = String::new();
-    let flush = |stream: &mut String, out: &mut Vec<u8>| -> Result<(), String> {
+    let mut stream = Vec::with_capacity(4096);
+    let flush = |stream: &mut Vec<u8>, out: &mut Vec<u8>| -> Result<(), String> {
         engine
-            .decode_vec(stream.as_bytes(), out)
+            .decode_vec(&stream[..], out)
             .map_err(|e| format!("bad base64 data ({e})"))?;
         stream.clear();
         Ok(())
     };
-    for c in text.chars().filter(|c| !c.is_ascii_whitespace()) {
+    let chars = text.iter().take_while(|&&c| c != b'<');
+    for &c in chars.filter(|c| !c.is_ascii_whitespace()) {
         stream.push(c);
-        if stream.len().is_multiple_of(4) && (c == '=' || stream.len() >= 4096) {
+        if stream.len().is_multiple_of(4) && (c == b'=' || stream.len() >= 4096) {
             flush(&mut stream, &mut out)?;
             if out.len() >= most {
                 return Ok(out);
@@ -325,7 +320,7 @@ fn base64_streams(text: &str, most: usize) -> Result<Vec<u8>, String> {
 
 /// An appended array's bytes from base64 `text` (the rest of the section from its offset):
 /// as far as its header says it runs, for an array of `need` bytes.
-fn appended_base64(text: &str, layout: &Layout, need: usize) -> Result<Vec<u8>, String> {
+fn appended_base64(text: &[u8], layout: &Layout, need: usize) -> Result<Vec<u8>, String> {
     let w = layout.word;
     let head = base64_streams(text, w)?;
     if layout.compressor == Compressor::None {
@@ -510,7 +505,6 @@ fn poly(bytes: &[u8]) -> Result<crate::vtk_mesh::PolyData, String> {
     let mut positions: Vec<Vec3> = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::new();
     let mut normals: Vec<Vec3> = Vec::new();
-    let mut every_normal = true;
     let mut left_out = [0usize; 2];
     let size = bytes.len();
     for piece in children(data, "Piece") {
@@ -550,23 +544,22 @@ fn poly(bytes: &[u8]) -> Result<crate::vtk_mesh::PolyData, String> {
             ("Lines", "NumberOfLines"),
         ] {
             let n = number(count)?;
-            if n == 0 {
-                continue;
-            }
-            let cells = cells(piece, element, n, n_points, &layout)?;
             match element {
-                "Polys" | "Strips" => {
-                    for cell in &cells {
+                _ if n == 0 => {}
+                // Left out unread: they are no surface.
+                "Verts" => left_out[0] += n,
+                "Lines" => left_out[1] += n,
+                _ => {
+                    for cell in cells(piece, element, n, n_points, &layout)? {
+                        let at = |k: usize| cell[k] + base as u32;
                         crate::vtk_mesh::triangulate(
                             element == "Strips",
-                            cell,
-                            base,
+                            cell.len(),
+                            at,
                             &mut triangles,
                         );
                     }
                 }
-                "Verts" => left_out[0] += n,
-                _ => left_out[1] += n,
             }
         }
         let point_data = children(piece, "PointData").next();
@@ -574,33 +567,29 @@ fn poly(bytes: &[u8]) -> Result<crate::vtk_mesh::PolyData, String> {
             let name = d.attribute("Normals")?;
             children(d, "DataArray").find(|a| a.attribute("Name") == Some(name))
         });
-        match normal_array {
-            Some(a) if every_normal => {
-                let v = read_array(a, &layout, 3 * n_points)?;
-                normals.extend((0..n_points).map(|p| {
-                    Vec3::new(
-                        v.get(3 * p) as f32,
-                        v.get(3 * p + 1) as f32,
-                        v.get(3 * p + 2) as f32,
-                    )
-                }));
-            }
-            _ => every_normal = n_points == 0 && every_normal,
+        // Only while every piece before gave its points normals: else none are kept.
+        if let Some(a) = normal_array
+            && normals.len() == base
+        {
+            let v = read_array(a, &layout, 3 * n_points)?;
+            normals.extend((0..n_points).map(|p| {
+                Vec3::new(
+                    v.get(3 * p) as f32,
+                    v.get(3 * p + 1) as f32,
+                    v.get(3 * p + 2) as f32,
+                )
+            }));
         }
     }
-    let mut warnings = Vec::new();
     let words: Vec<String> = [("vertices", left_out[0]), ("lines", left_out[1])]
         .iter()
         .filter(|(_, n)| *n > 0)
         .map(|(w, n)| format!("{n} {w}"))
         .collect();
-    if !words.is_empty() {
-        warnings.push(format!(
-            "{} left out: only polygons and triangle strips are surfaces",
-            words.join(" and ")
-        ));
-    }
-    if !every_normal || normals.len() != positions.len() {
+    let warnings = crate::vtk_mesh::left_out_warning(&words)
+        .into_iter()
+        .collect();
+    if normals.len() != positions.len() {
         normals.clear();
     }
     Ok(crate::vtk_mesh::PolyData {

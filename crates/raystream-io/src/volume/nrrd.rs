@@ -154,11 +154,8 @@ fn read(
         1
     };
     let segments = slicer_seg::segments(&key_values, layers, path, &mut warnings)?;
-    let phase = if segments.is_some() {
-        Phase::pick(path, phase, 1, &mut warnings)?
-    } else {
-        Phase::pick(path, phase, layout.count, &mut warnings)?
-    };
+    let phases = if segments.is_some() { 1 } else { layout.count };
+    let phase = Phase::pick(path, phase, phases, &mut warnings)?;
     let axes = std::array::from_fn(|r| std::array::from_fn(|c| steps[spatial[c]].unwrap()[r]));
     let (direction, spacing) = unit_columns(axes);
     check_geometry(path, dims, spacing, origin, &direction)?;

@@ -108,11 +108,7 @@ pub(crate) fn parse(
     }
     let values = read_array(array, &layout, n).map_err(bad)?;
     let data = values.to_f32();
-    let scalar = array
-        .attribute("type")
-        .and_then(crate::vtk_xml::scalar_type)
-        .expect("read_array checked the type");
-    let unit = guess_unit(&data, scalar);
+    let unit = guess_unit(&data, values.scalar);
     Ok(Volume {
         dims,
         spacing,
