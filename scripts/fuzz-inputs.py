@@ -80,6 +80,28 @@ def seeds(d):
       + struct.pack(">12d", *[c for p in v for c in p]) + b"\nPOLYGONS 5 12\nOFFSETS vtktypeint64\n"
       + struct.pack(">5q", 0, 3, 6, 9, 12) + b"\nCONNECTIVITY vtktypeint64\n"
       + struct.pack(">12q", *[i for t in f for i in t]) + b"\n")
+    # Coloured: a PLY with vertex colours (bytes) and face colours (floats), an OBJ with
+    # `v x y z r g b`, legacy VTK with cell colours after a string field (binary, as VTK writes
+    # them: a length byte before the string) and point colours in ASCII.
+    w("tc.ply", (b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\n"
+                 b"property float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
+                 b"property uchar blue\nelement face 4\nproperty list uchar int vertex_indices\n"
+                 b"property float red\nproperty float green\nproperty float blue\nend_header\n")
+      + b"".join(struct.pack("<3f3B", *p, 40 * i, 200, 255 - 40 * i) for i, p in enumerate(v))
+      + b"".join(struct.pack("<B3i3f", 3, *t, 0.25 * i, 0.5, 1.0) for i, t in enumerate(f)))
+    w("tc.obj", "".join(f"v {x} {y} {z} {x} 0.5 {z}\n" for x, y, z in v).encode()
+      + "".join(f"f {a+1} {b+1} {c+1}\n" for a, b, c in f).encode())
+    w("tcb.vtk", b"# vtk DataFile Version 4.2\nvtk output\nBINARY\nDATASET POLYDATA\n"
+      b"FIELD FieldData 1\nSPACE 1 1 string\n\xc3LPS\nPOINTS 4 float\n"
+      + struct.pack(">12f", *[c for p in v for c in p]) + b"\nVERTICES 1 2\n"
+      + struct.pack(">2i", 1, 0) + b"\nPOLYGONS 4 16\n"
+      + b"".join(struct.pack(">4i", 3, *t) for t in f)
+      + b"\nCELL_DATA 5\nCOLOR_SCALARS c 3\n" + bytes(range(15)) + b"\n")
+    w("tca.vtk", (f"# vtk DataFile Version 4.2\nvtk output\nASCII\nDATASET POLYDATA\n"
+                  f"POINTS 4 float\n{pts}\nPOLYGONS 4 16\n"
+                  + "".join(f"3 {a} {b} {c}\n" for a, b, c in f)
+                  + "POINT_DATA 4\nCOLOR_SCALARS c 4\n" + "0.5 0.25 1 1\n" * 4
+                  + "VECTORS v float\n" + "0 0 1\n" * 4).encode())
     # A model tagged with its patient space, as 3D Slicer saves one.
     w("ts.stl", b"solid 3D Slicer output. SPACE=RAS\n" + "".join(
         "facet normal 0 0 0\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in (v[a], v[b], v[c]))
@@ -209,6 +231,23 @@ def seeds(d):
             wr.SetInputConnection(sph.GetOutputPort())
             wr.SetCompressorTypeToLZ4()
             wr.SetFileName(os.path.join(d, "tx.vtp"))
+            wr.Write()
+            # Coloured per cell, with 3D Slicer's SPACE field, appended and compressed.
+            from vtkmodules.vtkCommonCore import vtkStringArray
+            sph.Update()
+            pd = sph.GetOutput()
+            cols = numpy_to_vtk((np.arange(3 * pd.GetNumberOfCells()) * 7 % 256).astype(np.uint8)
+                                .reshape(-1, 3), deep=1)
+            cols.SetName("c")
+            pd.GetCellData().SetScalars(cols)
+            space = vtkStringArray()
+            space.SetName("SPACE")
+            space.InsertNextValue("LPS")
+            pd.GetFieldData().AddArray(space)
+            wr = vtkXMLPolyDataWriter()
+            wr.SetInputData(pd)
+            wr.SetDataModeToAppended()
+            wr.SetFileName(os.path.join(d, "tc.vtp"))
             wr.Write()
         except ImportError:
             print("no vtk: VTK XML files left out", file=sys.stderr)

@@ -701,6 +701,12 @@ impl Shaded {
     }
 }
 
+/// An 8-bit sRGB colour in linear light, by the table the GPU's shading reads too.
+fn linear_colour(c: raystream_io::Rgb8) -> Vec3 {
+    let lut = &*raystream_io::SRGB_TO_LINEAR;
+    Vec3::new(lut[c[0] as usize], lut[c[1] as usize], lut[c[2] as usize])
+}
+
 /// One hit: its ambient term, a shadow ray toward each light that can reach it, and (with
 /// `spawn`) its reflection and refraction rays.
 fn shade_hit(scene: &Scene, h: &HitWorkItem, spawn: bool, out: &mut Shaded) {
@@ -708,15 +714,20 @@ fn shade_hit(scene: &Scene, h: &HitWorkItem, spawn: bool, out: &mut Shaded) {
     let m = &scene.materials[scene.material_of[h.hit.prim as usize] as usize];
     let (k, r, t, refr) = coefficients(m, &s);
     let pixel = h.item.pixel;
-    // A texture tints the ambient and diffuse colours (MTL: `map_Kd` multiplies `Kd`).
-    let tint = match m.texture {
+    // A texture tints the ambient and diffuse colours (MTL: `map_Kd` multiplies `Kd`), as do
+    // the file's vertex colours.
+    let (u, v) = (h.hit.u, h.hit.v);
+    let mut tint = match m.texture {
         Some(i) => {
             let [a, b, c] = scene.uvs[h.hit.prim as usize];
-            let (u, v) = (h.hit.u, h.hit.v);
             scene.textures[i as usize].sample(a * (1.0 - u - v) + b * u + c * v)
         }
         None => Vec3::ONE,
     };
+    if let Some(corners) = scene.colours.get(h.hit.prim as usize) {
+        let [a, b, c] = corners.map(linear_colour);
+        tint *= a * (1.0 - u - v) + b * u + c * v;
+    }
     let (ambient, diffuse) = (m.ambient * tint, m.diffuse * tint);
     out.local
         .push((pixel, h.item.weight * k * ambient * scene.ambient_light));

@@ -156,15 +156,21 @@ pub struct GpuMaterial {
 /// `GpuMaterial::texture` of a material without one.
 pub const NO_TEXTURE: u32 = u32::MAX;
 
-/// `TriUv` in render.wgsl, 24 bytes: a triangle's corners' texture coordinates, by prim id.
+/// `TriCorners` in render.wgsl, 40 bytes: a triangle's corners' texture coordinates and
+/// colours (8-bit sRGB packed R in the low byte, as the texels), by prim id.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct TriUv {
+pub struct TriCorners {
     pub a: [f32; 2],
     /// Byte 8.
     pub b: [f32; 2],
     /// Byte 16.
     pub c: [f32; 2],
+    /// Bytes 24, 28, 32.
+    pub colour_a: u32,
+    pub colour_b: u32,
+    pub colour_c: u32,
+    pub pad: u32,
 }
 
 /// Where the texture table (`textures` in render.wgsl, one array of u32) keeps its parts: the
@@ -229,7 +235,9 @@ pub struct RenderParams {
     /// Rows per band of the camera rays' pixel order: 1, row by row; more, bands of that
     /// many rows, each band column by column (byte 116; [`band_rows`]).
     pub band: u32,
-    pub pad: [u32; 2],
+    /// 1: triangles take their corners' colours ([`TriCorners`], `Scene::colours`), byte 120.
+    pub coloured: u32,
+    pub pad: u32,
 }
 
 /// The rows of a band of pixels whose column-by-column order puts the pixels of one subgroup
@@ -416,7 +424,7 @@ const _: () = assert!(std::mem::size_of::<ShadowWork>() == 48);
 const _: () = assert!(std::mem::size_of::<Vertex>() == 32);
 const _: () = assert!(std::mem::size_of::<ShadeTri>() == 16);
 const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 64);
-const _: () = assert!(std::mem::size_of::<TriUv>() == 24);
+const _: () = assert!(std::mem::size_of::<TriCorners>() == 40);
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 const _: () = assert!(std::mem::size_of::<RenderParams>() == 128);
 const _: () = assert!(std::mem::size_of::<DvrParams>() == 368);

@@ -29,7 +29,7 @@ use raystream_scene::{Camera, Light, Scene};
 
 use crate::layout::{
     GpuLight, GpuMaterial, MediumParams, NO_TEXTURE, RayWork, RenderParams, ShadeTri, ShadowWork,
-    TEXTURE_INFO, TEXTURE_INFO_WORDS, TriUv, Vertex, band_rows, counter,
+    TEXTURE_INFO, TEXTURE_INFO_WORDS, TriCorners, Vertex, band_rows, counter,
 };
 use crate::volume::{GpuVolume, volume_core_wgsl};
 use crate::{
@@ -151,7 +151,9 @@ pub struct GpuRenderer<'a> {
     materials: wgpu::Buffer,
     lights: wgpu::Buffer,
     /// Per triangle its texture coordinates, and the texture table (layout::TEXTURE_INFO).
-    tri_uvs: wgpu::Buffer,
+    tri_corners: wgpu::Buffer,
+    /// Whether `tri_corners` holds the scene's colours.
+    coloured: bool,
     textures: wgpu::Buffer,
     params: wgpu::Buffer,
     layouts: [wgpu::BindGroupLayout; 4],
@@ -419,6 +421,12 @@ fn scene_links(scene: &Scene, prims: u64) -> Result<(), String> {
             scene.uvs.len()
         ));
     }
+    if !scene.colours.is_empty() && scene.colours.len() != tris {
+        return Err(format!(
+            "{tris} triangles, {} with corner colours",
+            scene.colours.len()
+        ));
+    }
     for (k, t) in scene.textures.iter().enumerate() {
         if t.width == 0
             || t.height == 0
@@ -500,18 +508,27 @@ impl<'a> GpuRenderer<'a> {
                 bytemuck::cast_slice(&lights),
                 wgpu::BufferUsages::COPY_DST,
             )?;
-            let tri_uvs: Vec<TriUv> = scene
-                .uvs
-                .iter()
-                .map(|[a, b, c]| TriUv {
-                    a: a.to_array(),
-                    b: b.to_array(),
-                    c: c.to_array(),
+            // A triangle's texture coordinates (0 where the scene has none) and its corners'
+            // colours (white where it has none).
+            let packed = |c: raystream_io::Rgb8| u32::from_le_bytes([c[0], c[1], c[2], 255]);
+            let corners: Vec<TriCorners> = (0..scene.uvs.len().max(scene.colours.len()))
+                .map(|t| {
+                    let [a, b, c] = scene.uvs.get(t).copied().unwrap_or_default();
+                    let [ca, cb, cc] = scene.colours.get(t).copied().unwrap_or([[255; 3]; 3]);
+                    TriCorners {
+                        a: a.to_array(),
+                        b: b.to_array(),
+                        c: c.to_array(),
+                        colour_a: packed(ca),
+                        colour_b: packed(cb),
+                        colour_c: packed(cc),
+                        pad: 0,
+                    }
                 })
                 .collect();
-            // A scene without textures binds a zeroed element it never reads.
-            let tri_uvs =
-                ctx.storage("texture coordinates", bytemuck::cast_slice(&tri_uvs), none)?;
+            // A scene without textures or colours binds a zeroed element it never reads.
+            let tri_corners =
+                ctx.storage("triangle corners", bytemuck::cast_slice(&corners), none)?;
             let textures = ctx.storage(
                 "textures",
                 bytemuck::cast_slice(&texture_table(scene)),
@@ -603,7 +620,8 @@ impl<'a> GpuRenderer<'a> {
                 shade_tris,
                 materials,
                 lights,
-                tri_uvs,
+                tri_corners,
+                coloured: !scene.colours.is_empty(),
                 textures,
                 params,
                 layouts,
@@ -881,6 +899,7 @@ impl<'a> GpuRenderer<'a> {
                 } else {
                     1
                 },
+                coloured: self.coloured as u32,
                 ..Default::default()
             };
             let mut stats = GpuRenderStats {
@@ -901,7 +920,7 @@ impl<'a> GpuRenderer<'a> {
                     &self.shade_tris,
                     &self.materials,
                     &self.lights,
-                    &self.tri_uvs,
+                    &self.tri_corners,
                     &self.textures,
                 ],
             );

@@ -297,12 +297,16 @@ fn render_wgsl_structs_match_rust() {
         ],
     );
     check(
-        "TriUv",
-        size_of::<TriUv>(),
+        "TriCorners",
+        size_of::<TriCorners>(),
         &[
-            ("a", offset_of!(TriUv, a)),
-            ("b", offset_of!(TriUv, b)),
-            ("c", offset_of!(TriUv, c)),
+            ("a", offset_of!(TriCorners, a)),
+            ("b", offset_of!(TriCorners, b)),
+            ("c", offset_of!(TriCorners, c)),
+            ("colour_a", offset_of!(TriCorners, colour_a)),
+            ("colour_b", offset_of!(TriCorners, colour_b)),
+            ("colour_c", offset_of!(TriCorners, colour_c)),
+            ("pad", offset_of!(TriCorners, pad)),
         ],
     );
     check(
@@ -361,8 +365,8 @@ fn render_wgsl_structs_match_rust() {
             ("light_count", offset_of!(RenderParams, light_count)),
             ("max_groups", offset_of!(RenderParams, max_groups)),
             ("band", offset_of!(RenderParams, band)),
-            ("pad1", pad),
-            ("pad2", pad + 4),
+            ("coloured", offset_of!(RenderParams, coloured)),
+            ("pad", pad),
         ],
     );
 }

@@ -18,7 +18,7 @@ use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 use raystream_math::{DMat3, DMat4, Vec2, Vec3};
 
-use crate::{MeshError, MtlMaterial, Texture, TextureMapping, TriMesh};
+use crate::{MeshError, MtlMaterial, Rgb8, Texture, TextureMapping, TriMesh};
 
 /// The most triangles a glTF file may place, counting every instance of its meshes: a small
 /// file whose nodes instance a mesh many times over could otherwise ask for any amount of
@@ -43,6 +43,9 @@ pub(crate) struct Parsed {
     /// Per triangle, its corners' texture coordinates (v up, as OBJ's), where its material
     /// has a base colour texture and its primitive those coordinates; empty when none has.
     pub uvs: Vec<[Vec2; 3]>,
+    /// Per triangle, its corners' colours (`COLOR_0`; white where a primitive has none);
+    /// empty when no primitive has them.
+    pub colours: Vec<[Rgb8; 3]>,
     pub warnings: Vec<String>,
 }
 
@@ -99,8 +102,10 @@ pub(crate) fn parse(
         materials: document.materials().map(material).collect(),
         material_of: Vec::new(),
         uvs: Vec::new(),
+        colours: Vec::new(),
         warnings: Vec::new(),
     };
+    let mut coloured = false;
     // The materials whose texture some triangle has coordinates for.
     let mut textured = std::collections::BTreeSet::new();
     // The mesh instances, each with its world transform, in the scene's order (depth first).
@@ -206,6 +211,13 @@ pub(crate) fn parse(
                     .iter()
                     .map(|t| t.map(|i| local.uvs.get(i as usize).copied().unwrap_or(Vec2::ZERO))),
             );
+            coloured |= !local.colours.is_empty();
+            out.colours.extend(
+                local
+                    .triangles
+                    .iter()
+                    .map(|t| t.map(|i| local.colours.get(i as usize).copied().unwrap_or([255; 3]))),
+            );
             out.mesh
                 .triangles
                 .extend(local.triangles.iter().map(|t| t.map(|i| i + base as u32)));
@@ -223,6 +235,9 @@ pub(crate) fn parse(
     }
     if textured.is_empty() {
         out.uvs.clear();
+    }
+    if !coloured {
+        out.colours.clear();
     }
     // Extensions the file uses (and does not require: the crate's validation refuses those it
     // does not know) are not read; what is drawn is the file without them.
@@ -381,6 +396,8 @@ struct Primitive {
     /// Per vertex, the base colour texture's coordinates (v up); empty where the material
     /// has no texture or the primitive no coordinates for it.
     uvs: Vec<Vec2>,
+    /// Per vertex, `COLOR_0` as 8-bit sRGB; empty where the primitive has none.
+    colours: Vec<Rgb8>,
     material: Option<u32>,
 }
 
@@ -461,11 +478,25 @@ fn read_primitive(
         }
         None => Vec::new(),
     };
+    // Vertex colours, linear light in glTF (RGB or RGBA; the alpha is not read).
+    let colours = match prim.get(&gltf::Semantic::Colors(0)) {
+        Some(a) => {
+            let types = [DataType::F32, DataType::U8, DataType::U16];
+            per_vertex(&a, &types, Dimensions::Vec3, "COLOR_0", "colours")
+                .or_else(|_| per_vertex(&a, &types, Dimensions::Vec4, "COLOR_0", "colours"))?;
+            let read = reader.read_colors(0).ok_or_else(|| unreadable("COLOR_0"))?;
+            read.into_rgb_f32()
+                .map(|c| c.map(|x| crate::texture::linear_to_srgb8(x as f64)))
+                .collect()
+        }
+        None => Vec::new(),
+    };
     Ok(Primitive {
         positions,
         normals,
         triangles: assemble(prim.mode(), &corners),
         uvs,
+        colours,
         material: prim.material().index().map(|m| m as u32),
     })
 }

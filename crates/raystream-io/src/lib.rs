@@ -142,9 +142,16 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
     let (mesh, mut shading, normals) = match format {
         MeshFormat::Obj => parse_obj(&bytes, path, path.parent())?,
         MeshFormat::Ply => {
-            let (mesh, normals) = ply::parse(&bytes, path)?;
-            let normals = normals.into_iter().map(Some).collect();
-            (mesh, MeshShading::default(), normals)
+            let ply = ply::parse(&bytes, path)?;
+            let shading = MeshShading {
+                colours: ply.colours,
+                ..Default::default()
+            };
+            (
+                ply.mesh,
+                shading,
+                ply.normals.into_iter().map(Some).collect(),
+            )
         }
         MeshFormat::Stl => (
             stl::parse(&bytes, path)?,
@@ -157,6 +164,7 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
                 materials: g.materials,
                 material_of: g.material_of,
                 uvs: g.uvs,
+                colours: g.colours,
                 warnings: g.warnings,
                 ..Default::default()
             };
@@ -169,7 +177,9 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
                 vtk_xml::parse_poly(&bytes, path)?
             };
             let shading = MeshShading {
+                colours: poly.colours,
                 warnings: poly.warnings,
+                space: poly.space,
                 ..Default::default()
             };
             (
@@ -180,7 +190,7 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
         }
     };
     mesh.check(path)?;
-    shading.space = declared_space(&bytes, format);
+    shading.space = shading.space.or(declared_space(&bytes, format));
     shading.normals = file_normals(&mesh, normals, &mut shading.warnings);
     if format == MeshFormat::Obj {
         // An OBJ's textures are named by its libraries; a glTF file's come with it.
@@ -346,6 +356,27 @@ pub struct MtlMaterial {
     pub image: Option<Texture>,
 }
 
+/// An 8-bit sRGB colour, as mesh files give their vertices' colours.
+pub type Rgb8 = [u8; 3];
+
+/// A display colour channel written as a number from 0 to 1 (a PLY's float `red`, an OBJ's
+/// vertex colour) as 8 bits: rounded, clamped, NaN as 0.
+pub(crate) fn unit_to_8bit(c: f64) -> u8 {
+    if c.is_nan() {
+        0
+    } else {
+        (c.clamp(0.0, 1.0) * 255.0).round() as u8
+    }
+}
+
+/// Per triangle, its corners' colours from its vertices'.
+pub(crate) fn corner_colours(triangles: &[[u32; 3]], of_vertex: &[Rgb8]) -> Vec<[Rgb8; 3]> {
+    triangles
+        .iter()
+        .map(|t| t.map(|v| of_vertex[v as usize]))
+        .collect()
+}
+
 /// What a mesh file gives its surface besides the triangles: vertex normals, and the materials
 /// of an OBJ's `mtllib` and `usemtl`.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -361,6 +392,11 @@ pub struct MeshShading {
     /// Per triangle, its corners' texture coordinates (OBJ `vt`); empty when the file gives
     /// none, or not at every corner.
     pub uvs: Vec<[Vec2; 3]>,
+    /// Per triangle, its corners' colours, 8-bit sRGB: a PLY's `red green blue` (per vertex or
+    /// per face), an OBJ's `v x y z r g b`, a glTF primitive's `COLOR_0`, a VTK file's colour
+    /// scalars (per point or per cell); empty when the file gives none. They multiply the
+    /// material's ambient and diffuse colours, as a texture does.
+    pub colours: Vec<[Rgb8; 3]>,
     /// What a user should know: a library missing or unreadable, a texture not applied.
     pub warnings: Vec<String>,
     /// The patient coordinate system the file says its coordinates are in, if it says one
@@ -452,7 +488,7 @@ fn parse_mesh_in(
     let bytes = gunzip(bytes, path)?;
     let mesh = match format {
         MeshFormat::Obj => parse_obj(&bytes, path, None)?.0,
-        MeshFormat::Ply => ply::parse(&bytes, path)?.0,
+        MeshFormat::Ply => ply::parse(&bytes, path)?.mesh,
         MeshFormat::Stl => stl::parse(&bytes, path)?,
         MeshFormat::Gltf => gltf::parse(&bytes, path, dir, false)?.mesh,
         MeshFormat::Vtk => vtk_mesh::parse(&bytes, path)?.mesh,
@@ -525,6 +561,7 @@ fn parse_obj(
     let mut material_of = Vec::new();
     let mut normals: Vec<Option<Vec3>> = Vec::new();
     let mut uvs: Vec<[Vec2; 3]> = Vec::new();
+    let mut colours: Vec<[Rgb8; 3]> = Vec::new();
     for model in models {
         material_of.extend(std::iter::repeat_n(
             model
@@ -557,6 +594,20 @@ fn parse_obj(
             for c in m.texcoord_indices.chunks_exact(3) {
                 uvs.push([uv(c[0])?, uv(c[1])?, uv(c[2])?]);
             }
+        }
+        // tobj gives a colour a position where the file's `v` lines give one.
+        if m.vertex_color.len() == m.positions.len() {
+            let colour = |i: u32| -> Rgb8 {
+                let i = i as usize * 3;
+                std::array::from_fn(|c| {
+                    unit_to_8bit(m.vertex_color.get(i + c).copied().unwrap_or(0.0) as f64)
+                })
+            };
+            colours.extend(
+                m.indices
+                    .chunks_exact(3)
+                    .map(|t| [colour(t[0]), colour(t[1]), colour(t[2])]),
+            );
         }
         let base = mesh.positions.len() as u32;
         let position = |i: u32| {
@@ -626,6 +677,9 @@ fn parse_obj(
     if uvs.len() != mesh.len() {
         uvs.clear();
     }
+    if colours.len() != mesh.len() {
+        colours.clear();
+    }
     Ok((
         mesh,
         MeshShading {
@@ -633,6 +687,7 @@ fn parse_obj(
             materials,
             material_of,
             uvs,
+            colours,
             warnings,
             space: None,
         },

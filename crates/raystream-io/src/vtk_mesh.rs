@@ -3,21 +3,71 @@
 //! file versions up to 4.2 write them (`POLYGONS n size`, each cell its count then its points)
 //! or as 5.1 does (`OFFSETS` and `CONNECTIVITY` arrays). Polygons become triangle fans and
 //! strips triangles (every other one turned, as VTK turns them); vertices and lines are left
-//! out with a warning. Point normals (`POINT_DATA` … `NORMALS`) are kept. Written by hand (see
+//! out with a warning. Point normals (`POINT_DATA` … `NORMALS`) are kept, and colours (the
+//! point or cell data's first scalars, where RGB bytes). Written by hand (see
 //! [`crate::vtk_legacy`]).
 
 use std::path::Path;
 
 use crate::volume::raw::{Scalar, value};
 use crate::vtk_legacy::{Cursor, header, scalar_of};
-use crate::{MeshError, TriMesh, Vec3};
+use crate::{MeshError, Rgb8, TriMesh, Vec3};
 
 /// A polygonal data file's surface: its triangles, its point normals where it gives them (one
-/// a point), and warnings.
+/// a point), its triangles' corners' colours where it gives colours, and warnings.
 pub(crate) struct PolyData {
     pub mesh: TriMesh,
     pub normals: Vec<Vec3>,
+    pub colours: Vec<[Rgb8; 3]>,
+    /// The patient space the file names outside its title (a `.vtp`'s `SPACE` field, as 3D
+    /// Slicer writes it).
+    pub space: Option<crate::PatientSpace>,
     pub warnings: Vec<String>,
+}
+
+/// The colours of `n` items from an attribute array of `components` values an item, `value(i)`
+/// the i-th: RGB or RGBA (the alpha not read), 8-bit where the array holds bytes, else 0 to 1
+/// (a legacy file's ASCII `COLOR_SCALARS`). `None` for other component counts: those are no
+/// colours (VTK maps them through a lookup table).
+pub(crate) fn colours_of(
+    n: usize,
+    components: usize,
+    bytes: bool,
+    value: impl Fn(usize) -> f64,
+) -> Option<Vec<Rgb8>> {
+    if !matches!(components, 3 | 4) {
+        return None;
+    }
+    let channel = |v: f64| {
+        if bytes {
+            v.clamp(0.0, 255.0) as u8
+        } else {
+            crate::unit_to_8bit(v)
+        }
+    };
+    Some(
+        (0..n)
+            .map(|i| std::array::from_fn(|c| channel(value(i * components + c))))
+            .collect(),
+    )
+}
+
+/// Per triangle, its corners' colours: its points' where the points have colours, else its
+/// cell's (`cell_of`: each triangle's cell, by its id in VTK's order), as VTK's mappers colour
+/// by point scalars first; else none.
+pub(crate) fn triangle_colours(
+    triangles: &[[u32; 3]],
+    cell_of: &[usize],
+    point: &[Rgb8],
+    cell: &[Rgb8],
+) -> Vec<[Rgb8; 3]> {
+    if !point.is_empty() {
+        crate::corner_colours(triangles, point)
+    } else if !cell.is_empty() {
+        cell_of.iter().map(|&c| [cell[c]; 3]).collect()
+    } else {
+        Vec::new()
+    }
 }
 
 /// The numbers of `n` values of `scalar`: binary (big-endian) or text.
@@ -68,7 +118,13 @@ fn parse_poly(bytes: &[u8]) -> Result<PolyData, String> {
     let (binary, mut c) = (h.binary, h.cursor);
     let mut points: Option<Vec<Vec3>> = None;
     let mut triangles: Vec<[u32; 3]> = Vec::new();
+    // Each triangle's cell: its section (0 vertices, 1 lines, 2 polygons, 3 strips) and its
+    // place there, numbered as VTK numbers cells (those sections in that order) at the end.
+    let mut cell_at: Vec<(usize, usize)> = Vec::new();
+    let mut section_cells = [0usize; 4];
     let mut normals = Vec::new();
+    let (mut point_colours, mut cell_colours) = (Vec::new(), Vec::new());
+    let mut space = None;
     let mut left_out = Vec::new();
     let size = bytes.len();
     while let Some(words) = c.next_words() {
@@ -92,30 +148,41 @@ fn parse_poly(bytes: &[u8]) -> Result<PolyData, String> {
             "POLYGONS" | "TRIANGLE_STRIPS" | "VERTICES" | "LINES" => {
                 let cells = cells(&mut c, &words, binary, size)?;
                 let n_points = points.as_ref().map_or(0, Vec::len);
-                for cell in &cells {
+                let section = ["VERTICES", "LINES", "POLYGONS", "TRIANGLE_STRIPS"]
+                    .iter()
+                    .position(|k| *k == keyword)
+                    .unwrap_or(0);
+                section_cells[section] = cells.len();
+                for (k, cell) in cells.iter().enumerate() {
                     if let Some(&i) = cell.iter().find(|&&i| i >= n_points as u64) {
                         return Err(format!(
                             "a VTK {keyword} cell names point {i}, of {n_points} points"
                         ));
                     }
-                    if matches!(keyword.as_str(), "POLYGONS" | "TRIANGLE_STRIPS") {
-                        let strip = keyword == "TRIANGLE_STRIPS";
-                        triangulate(strip, cell.len(), |k| cell[k] as u32, &mut triangles);
+                    if section >= 2 {
+                        triangulate(section == 3, cell.len(), |k| cell[k] as u32, &mut triangles);
+                        cell_at.resize(triangles.len(), (section, k));
                     }
                 }
-                if matches!(keyword.as_str(), "VERTICES" | "LINES") && !cells.is_empty() {
+                if section < 2 && !cells.is_empty() {
                     left_out.push(format!("{} {}", cells.len(), keyword.to_lowercase()));
                 }
             }
             "METADATA" => skip_metadata(&mut c),
-            "FIELD" => skip_field(&mut c, &words, binary, size)?,
-            "POINT_DATA" => {
-                let n = count(words.get(1), size, "POINT_DATA")?;
-                normals = point_normals(&mut c, n, binary)?;
-                break;
+            "FIELD" => space = skip_field(&mut c, &words, binary, size)?.or(space),
+            "POINT_DATA" | "CELL_DATA" => {
+                let n = count(words.get(1), size, &keyword)?;
+                let a = attributes(&mut c, n, binary, size)?;
+                if keyword == "POINT_DATA" {
+                    normals = a.normals;
+                    point_colours = a.colours;
+                } else {
+                    cell_colours = a.colours;
+                }
+                if a.stopped {
+                    break;
+                }
             }
-            // Cell data (per polygon) holds nothing a surface is drawn with here.
-            "CELL_DATA" => break,
             other => return Err(format!("unexpected VTK keyword {other:?}")),
         }
     }
@@ -124,12 +191,26 @@ fn parse_poly(bytes: &[u8]) -> Result<PolyData, String> {
     if normals.len() != positions.len() {
         normals.clear();
     }
+    if point_colours.len() != positions.len() {
+        point_colours.clear();
+    }
+    let mut first_of = [0usize; 4];
+    for s in 1..4 {
+        first_of[s] = first_of[s - 1] + section_cells[s - 1];
+    }
+    let cell_of: Vec<usize> = cell_at.iter().map(|&(s, k)| first_of[s] + k).collect();
+    if cell_colours.len() != first_of[3] + section_cells[3] {
+        cell_colours.clear();
+    }
+    let colours = triangle_colours(&triangles, &cell_of, &point_colours, &cell_colours);
     Ok(PolyData {
         mesh: TriMesh {
             positions,
             triangles,
         },
         normals,
+        colours,
+        space,
         warnings,
     })
 }
@@ -254,48 +335,172 @@ fn skip_metadata_if_any(c: &mut Cursor) {
     }
 }
 
-/// Skips a `FIELD name k` block: its arrays (`NAME COMPONENTS TUPLES TYPE`, then the values).
-fn skip_field(c: &mut Cursor, words: &[&str], binary: bool, size: usize) -> Result<(), String> {
+/// Skips a `FIELD name k` block: its arrays (`NAME COMPONENTS TUPLES TYPE`, then the values),
+/// returning the patient space a `SPACE` string array names (`LPS` or `RAS`), if one does.
+fn skip_field(
+    c: &mut Cursor,
+    words: &[&str],
+    binary: bool,
+    size: usize,
+) -> Result<Option<crate::PatientSpace>, String> {
+    let mut space = None;
     for _ in 0..count(words.get(2), size, "FIELD")? {
         let array = c.words("FIELD array")?;
-        let [_, components, tuples, type_name] = array[..] else {
+        let [name, components, tuples, type_name] = array[..] else {
             return Err(format!("VTK FIELD array line {:?}", array.join(" ")));
         };
         let n = count(Some(&components), size, "FIELD")?
             .checked_mul(count(Some(&tuples), size, "FIELD")?)
             .ok_or("VTK FIELD array too large")?;
-        numbers(c, n, scalar_of(type_name)?, binary, "a VTK FIELD array")?;
+        if type_name.eq_ignore_ascii_case("string") || type_name.eq_ignore_ascii_case("utf8_string")
+        {
+            let strings = strings(c, n, binary)?;
+            if name == "SPACE" {
+                space = match strings.first().map(String::as_str) {
+                    Some("LPS") => Some(crate::PatientSpace::Lps),
+                    Some("RAS") => Some(crate::PatientSpace::Ras),
+                    _ => space,
+                };
+            }
+        } else {
+            numbers(c, n, scalar_of(type_name)?, binary, "a VTK FIELD array")?;
+        }
         skip_metadata_if_any(c);
     }
-    Ok(())
+    Ok(space)
 }
 
-/// The point normals among the point attributes, if any (`n` points): `SCALARS` are passed
-/// over, and reading stops at any other attribute, since nothing else is drawn with.
-fn point_normals(c: &mut Cursor, n: usize, binary: bool) -> Result<Vec<Vec3>, String> {
-    while let Some(words) = c.next_words() {
-        match words[0].to_ascii_uppercase().as_str() {
+/// The `n` strings of a string array: a line each in an ASCII file; in a binary one, each its
+/// length (big-endian, in 1, 2, 4 or 8 bytes, the first byte's top two bits saying which: 11,
+/// 10, 01, 00) then its bytes, as VTK's writer puts them.
+fn strings(c: &mut Cursor, n: usize, binary: bool) -> Result<Vec<String>, String> {
+    let mut out = Vec::new();
+    for _ in 0..n {
+        if !binary {
+            let line = c.line().ok_or("the VTK file ends in a string array")?;
+            out.push(line.to_string());
+            continue;
+        }
+        let first = c.binary(1, 1, "a VTK string's length")?[0];
+        let extra = match first >> 6 {
+            3 => 0,
+            2 => 1,
+            1 => 3,
+            _ => 7,
+        };
+        let mut len = u64::from(first & 0x3f);
+        for &b in c.binary(extra, 1, "a VTK string's length")? {
+            len = len << 8 | u64::from(b);
+        }
+        let len = usize::try_from(len).map_err(|_| "a VTK string's length is too large")?;
+        let bytes = c.binary(len, 1, "a VTK string")?;
+        out.push(String::from_utf8_lossy(bytes).into_owned());
+    }
+    Ok(out)
+}
+
+/// What a `POINT_DATA` or `CELL_DATA` section gives a surface.
+struct Attributes {
+    /// `NORMALS` (one an item), or empty.
+    normals: Vec<Vec3>,
+    /// The section's first scalars (VTK's active ones) where they are colours: `COLOR_SCALARS`,
+    /// or `SCALARS` of unsigned char in three or four components; else empty.
+    colours: Vec<Rgb8>,
+    /// Whether reading stopped at an attribute it does not pass over (nothing after it is
+    /// read).
+    stopped: bool,
+}
+
+/// The attributes of `n` items, up to the next `POINT_DATA` or `CELL_DATA` line or the end of
+/// the file. Vectors, texture coordinates, tensors, lookup tables and fields are passed over;
+/// reading stops at anything else.
+fn attributes(c: &mut Cursor, n: usize, binary: bool, size: usize) -> Result<Attributes, String> {
+    let mut out = Attributes {
+        normals: Vec::new(),
+        colours: Vec::new(),
+        stopped: false,
+    };
+    let mut scalars_seen = false;
+    loop {
+        let at = c.pos;
+        let Some(words) = c.next_words() else {
+            return Ok(out);
+        };
+        let keyword = words[0].to_ascii_uppercase();
+        let scalar = |k: usize| scalar_of(words.get(k).copied().unwrap_or("float"));
+        let components = |k: usize, default: usize| -> Result<usize, String> {
+            match words.get(k) {
+                None => Ok(default),
+                Some(w) => w
+                    .parse::<usize>()
+                    .ok()
+                    .filter(|&m| (1..=16).contains(&m))
+                    .ok_or_else(|| format!("VTK {keyword}: {w:?} components")),
+            }
+        };
+        match keyword.as_str() {
+            "POINT_DATA" | "CELL_DATA" => {
+                c.pos = at;
+                return Ok(out);
+            }
             "NORMALS" => {
-                let scalar = scalar_of(words.get(2).copied().unwrap_or("float"))?;
-                let v = numbers(c, 3 * n, scalar, binary, "the VTK normals")?;
-                return Ok(v
+                let v = numbers(c, 3 * n, scalar(2)?, binary, "the VTK normals")?;
+                out.normals = v
                     .chunks_exact(3)
                     .map(|p| Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32))
-                    .collect());
-            }
-            "SCALARS" => {
-                let scalar = scalar_of(words.get(2).copied().unwrap_or("float"))?;
-                let k: usize = words.get(3).and_then(|k| k.parse().ok()).unwrap_or(1);
-                if c.next_line_starts_with("LOOKUP_TABLE") {
-                    c.line();
-                }
-                numbers(c, n.saturating_mul(k), scalar, binary, "VTK scalars")?;
+                    .collect();
                 skip_metadata_if_any(c);
             }
-            _ => break,
+            "SCALARS" | "COLOR_SCALARS" => {
+                // COLOR_SCALARS: bytes in a binary file, 0 to 1 in an ASCII one.
+                let (kind, k) = if keyword == "SCALARS" {
+                    (scalar(2)?, components(3, 1)?)
+                } else if binary {
+                    (Scalar::U8, components(2, 4)?)
+                } else {
+                    (Scalar::F32, components(2, 4)?)
+                };
+                if keyword == "SCALARS" && c.next_line_starts_with("LOOKUP_TABLE") {
+                    c.line();
+                }
+                let v = numbers(c, n.saturating_mul(k), kind, binary, "VTK scalars")?;
+                skip_metadata_if_any(c);
+                let colour = keyword == "COLOR_SCALARS" || kind == Scalar::U8;
+                if !scalars_seen && colour {
+                    let bytes = kind == Scalar::U8;
+                    out.colours = colours_of(n, k, bytes, |i| v[i]).unwrap_or_default();
+                }
+                scalars_seen = true;
+            }
+            "VECTORS" | "TENSORS" | "TEXTURE_COORDINATES" => {
+                let (k, kind) = match keyword.as_str() {
+                    "VECTORS" => (3, scalar(2)?),
+                    "TENSORS" => (9, scalar(2)?),
+                    _ => (components(2, 2)?, scalar(3)?),
+                };
+                numbers(
+                    c,
+                    n.saturating_mul(k),
+                    kind,
+                    binary,
+                    &format!("VTK {keyword}"),
+                )?;
+                skip_metadata_if_any(c);
+            }
+            "LOOKUP_TABLE" => {
+                let entries = count(words.get(2), size, "LOOKUP_TABLE")?;
+                let kind = if binary { Scalar::U8 } else { Scalar::F32 };
+                numbers(c, 4 * entries, kind, binary, "a VTK lookup table")?;
+            }
+            "FIELD" => {
+                skip_field(c, &words, binary, size)?;
+            }
+            _ => {
+                out.stopped = true;
+                return Ok(out);
+            }
         }
     }
-    Ok(Vec::new())
 }
 
 #[cfg(test)]
@@ -410,6 +615,69 @@ mod tests {
             e.contains("model.vtk") && e.contains("is a mesh, not a volume"),
             "{e}"
         );
+    }
+
+    /// Field data of strings (binary: lengths in one, two and four bytes) is passed over, its
+    /// `SPACE` read; vectors, texture coordinates and a lookup table before the colours are
+    /// passed over; cell colours reach the triangles by VTK's cell numbering (the line first).
+    #[test]
+    fn strings_attributes_and_cell_colours() {
+        let mut b = binary_42();
+        let cut = b.windows(10).position(|w| w == b"POINT_DATA").unwrap();
+        b.truncate(cut);
+        let long = "x".repeat(300);
+        let huge = "y".repeat(20_000);
+        b.extend(b"CELL_DATA 3\nVECTORS v float\n");
+        b.extend([0.5f32; 9].iter().flat_map(|x| x.to_be_bytes()));
+        b.extend(b"\nTEXTURE_COORDINATES t 2 float\n");
+        b.extend([0.25f32; 6].iter().flat_map(|x| x.to_be_bytes()));
+        b.extend(b"\nSCALARS c unsigned_char 3\nLOOKUP_TABLE default\n");
+        b.extend([1u8, 2, 3, 10, 20, 30, 40, 50, 60]);
+        b.extend(b"\nLOOKUP_TABLE default 2\n");
+        b.extend([0u8; 8]);
+        // The dataset's field data, before its points, as VTK writes it; and the cells'.
+        let mut field = b"FIELD FieldData 2\nnotes 1 2 string\n".to_vec();
+        field.push(0x80 | (long.len() >> 8) as u8);
+        field.push(long.len() as u8);
+        field.extend(long.as_bytes());
+        field.extend([0x40, 0, (huge.len() >> 8) as u8, huge.len() as u8]);
+        field.extend(huge.as_bytes());
+        field.extend(b"\nSPACE 1 1 string\n\xc3LPS\n");
+        // The cells' field data names RAS, which is not the dataset's space.
+        let mut cells = field.clone();
+        let n = cells.len();
+        cells[n - 4..n - 1].copy_from_slice(b"RAS");
+        b.extend(b"\n");
+        b.extend(cells);
+        let at = b.windows(7).position(|w| w == b"POINTS ").unwrap();
+        b.splice(at..at, field);
+        let poly = parse(&b, Path::new("m.vtk")).unwrap();
+        assert_eq!(poly.mesh.triangles, WANT);
+        assert_eq!(poly.space, Some(crate::PatientSpace::Lps));
+        // Cells: the line (0), the quad's fan (1), the strip (2).
+        assert_eq!(
+            poly.colours,
+            [
+                [[10, 20, 30]; 3],
+                [[10, 20, 30]; 3],
+                [[40, 50, 60]; 3],
+                [[40, 50, 60]; 3]
+            ]
+        );
+        // In ASCII, a string a line; COLOR_SCALARS are 0 to 1, point colours before cell ones.
+        let ascii = ascii_42().replace("POINTS", "FIELD f 1\nSPACE 1 1 string\nRAS\nPOINTS")
+            + "CELL_DATA 3\nCOLOR_SCALARS c 3\n0 0 0\n1 1 1\n0.5 0.5 0.5\n\
+               POINT_DATA 8\nCOLOR_SCALARS p 4\n"
+            + &"1 0.5 0 0.25\n".repeat(8);
+        let poly = parse(ascii.as_bytes(), Path::new("m.vtk")).unwrap();
+        assert_eq!(poly.space, Some(crate::PatientSpace::Ras));
+        assert_eq!(poly.colours, vec![[[255, 128, 0]; 3]; 4]);
+        // A string longer than the file is an error naming it.
+        let mut cut = b.clone();
+        let at = cut.windows(4).position(|w| w == b"\xc3LPS").unwrap();
+        cut[at] = 0x3f;
+        let e = parse(&cut, Path::new("bad.vtk")).err().unwrap().to_string();
+        assert!(e.starts_with("bad.vtk") && e.contains("truncated"), "{e}");
     }
 
     #[test]

@@ -19,7 +19,7 @@ use std::path::Path;
 use base64::Engine;
 
 use crate::volume::raw::{Scalar, value};
-use crate::{MeshError, TriMesh, Vec3};
+use crate::{MeshError, Rgb8, TriMesh, Vec3};
 
 /// A VTK XML file's text (up to its appended data) and where its appended data lies.
 pub(crate) struct XmlFile<'a> {
@@ -222,10 +222,24 @@ pub(crate) fn read_array(
     layout: &Layout,
     count: usize,
 ) -> Result<Values, String> {
+    let t = node.attribute("type").unwrap_or("");
+    let scalar = scalar_type(t).ok_or_else(|| {
+        let name = node.attribute("Name").unwrap_or("");
+        format!("the VTK array {name:?}: type {t:?} is not supported")
+    })?;
+    read_array_as(node, layout, count, scalar)
+}
+
+/// As [`read_array`], its values taken as `scalar` whatever its type says (a `String` array's
+/// bytes as `UInt8`).
+fn read_array_as(
+    node: roxmltree::Node,
+    layout: &Layout,
+    count: usize,
+    scalar: Scalar,
+) -> Result<Values, String> {
     let name = node.attribute("Name").unwrap_or("");
     let what = format!("the VTK array {name:?}");
-    let t = node.attribute("type").unwrap_or("");
-    let scalar = scalar_type(t).ok_or_else(|| format!("{what}: type {t:?} is not supported"))?;
     let format = node.attribute("format").unwrap_or("ascii");
     if format == "ascii" {
         let text = node.text().unwrap_or("");
@@ -502,9 +516,11 @@ fn poly(bytes: &[u8]) -> Result<crate::vtk_mesh::PolyData, String> {
     let data = children(root, "PolyData")
         .next()
         .ok_or("the VTK file has no <PolyData>")?;
+    let space = field_space(data, &layout);
     let mut positions: Vec<Vec3> = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::new();
     let mut normals: Vec<Vec3> = Vec::new();
+    let mut colours: Vec<[Rgb8; 3]> = Vec::new();
     let mut left_out = [0usize; 2];
     let size = bytes.len();
     for piece in children(data, "Piece") {
@@ -537,11 +553,16 @@ fn poly(bytes: &[u8]) -> Result<crate::vtk_mesh::PolyData, String> {
                 positions.push(Vec3::new(xyz[0] as f32, xyz[1] as f32, xyz[2] as f32));
             }
         }
+        let first_triangle = triangles.len();
+        // Each triangle's cell, by its id in the piece: VTK numbers vertices, lines, polygons,
+        // then strips.
+        let mut cell_of = Vec::new();
+        let mut cell_id = 0;
         for (element, count) in [
-            ("Polys", "NumberOfPolys"),
-            ("Strips", "NumberOfStrips"),
             ("Verts", "NumberOfVerts"),
             ("Lines", "NumberOfLines"),
+            ("Polys", "NumberOfPolys"),
+            ("Strips", "NumberOfStrips"),
         ] {
             let n = number(count)?;
             match element {
@@ -550,7 +571,10 @@ fn poly(bytes: &[u8]) -> Result<crate::vtk_mesh::PolyData, String> {
                 "Verts" => left_out[0] += n,
                 "Lines" => left_out[1] += n,
                 _ => {
-                    for cell in cells(piece, element, n, n_points, &layout)? {
+                    for (k, cell) in cells(piece, element, n, n_points, &layout)?
+                        .iter()
+                        .enumerate()
+                    {
                         let at = |k: usize| cell[k] + base as u32;
                         crate::vtk_mesh::triangulate(
                             element == "Strips",
@@ -558,9 +582,11 @@ fn poly(bytes: &[u8]) -> Result<crate::vtk_mesh::PolyData, String> {
                             at,
                             &mut triangles,
                         );
+                        cell_of.resize(triangles.len() - first_triangle, cell_id + k);
                     }
                 }
             }
+            cell_id += n;
         }
         let point_data = children(piece, "PointData").next();
         let normal_array = point_data.and_then(|d| {
@@ -580,6 +606,21 @@ fn poly(bytes: &[u8]) -> Result<crate::vtk_mesh::PolyData, String> {
                 )
             }));
         }
+        let point = active_colours(point_data, &layout, n_points)?;
+        let cell = active_colours(children(piece, "CellData").next(), &layout, cell_id)?;
+        let local: Vec<[u32; 3]> = triangles[first_triangle..]
+            .iter()
+            .map(|t| t.map(|v| v - base as u32))
+            .collect();
+        let own = crate::vtk_mesh::triangle_colours(&local, &cell_of, &point, &cell);
+        if !own.is_empty() || !colours.is_empty() {
+            // Pieces before without colours are white, as are those after.
+            colours.resize(first_triangle, [[255; 3]; 3]);
+            colours.extend(own);
+        }
+    }
+    if !colours.is_empty() {
+        colours.resize(triangles.len(), [[255; 3]; 3]);
     }
     let words: Vec<String> = [("vertices", left_out[0]), ("lines", left_out[1])]
         .iter()
@@ -598,8 +639,51 @@ fn poly(bytes: &[u8]) -> Result<crate::vtk_mesh::PolyData, String> {
             triangles,
         },
         normals,
+        colours,
+        space,
         warnings,
     })
+}
+
+/// The patient space 3D Slicer names in a dataset's field data: a `String` array `SPACE`
+/// holding `LPS` or `RAS` (what Slicer writes into a `.vtp` model, ASCII or appended and
+/// compressed). A string of three letters is four bytes with its terminating zero: an array
+/// of any other length names no space.
+fn field_space(data: roxmltree::Node, layout: &Layout) -> Option<crate::PatientSpace> {
+    let array = children(data, "FieldData")
+        .flat_map(|f| children(f, "Array").chain(children(f, "DataArray")))
+        .find(|a| a.attribute("Name") == Some("SPACE") && a.attribute("type") == Some("String"))?;
+    let v = read_array_as(array, layout, 4, Scalar::U8).ok()?;
+    match [0, 1, 2, 3].map(|i| v.get(i) as u8) {
+        [b'L', b'P', b'S', 0] => Some(crate::PatientSpace::Lps),
+        [b'R', b'A', b'S', 0] => Some(crate::PatientSpace::Ras),
+        _ => None,
+    }
+}
+
+/// The colours of `n` items in a `<PointData>` or `<CellData>`: its active scalars
+/// (`Scalars="…"`) where those are RGB or RGBA (VTK draws unsigned char ones as they are);
+/// empty otherwise.
+fn active_colours(
+    data: Option<roxmltree::Node>,
+    layout: &Layout,
+    n: usize,
+) -> Result<Vec<Rgb8>, String> {
+    let Some(array) = data.and_then(|d| {
+        let name = d.attribute("Scalars")?;
+        children(d, "DataArray").find(|a| a.attribute("Name") == Some(name))
+    }) else {
+        return Ok(Vec::new());
+    };
+    let components = array
+        .attribute("NumberOfComponents")
+        .and_then(|c| c.trim().parse::<usize>().ok())
+        .unwrap_or(1);
+    if n == 0 || !matches!(components, 3 | 4) || array.attribute("type") != Some("UInt8") {
+        return Ok(Vec::new());
+    }
+    let v = read_array(array, layout, n * components)?;
+    Ok(crate::vtk_mesh::colours_of(n, components, true, |i| v.get(i)).unwrap_or_default())
 }
 
 /// The `n` cells of a piece's `element` (`Polys`, `Strips`, …): its `connectivity` array cut

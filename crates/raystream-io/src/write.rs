@@ -370,12 +370,15 @@ fn write_vtk(w: &mut impl Write, part: &MeshPart) -> std::io::Result<()> {
 /// VTK XML polygonal data (`.vtp`, ParaView's format): a piece a part (its points, its
 /// triangles as polygons, its normals where given, and its colour on every point as 8-bit
 /// sRGB `Colors`), the arrays appended raw and uncompressed after 64-bit byte counts, little
-/// endian. Written by hand, as the reader is ([`crate::vtk_xml`]).
+/// endian; its field data names its space as 3D Slicer does (a `SPACE` string, `LPS`). Written
+/// by hand, as the reader is ([`crate::vtk_xml`]).
 fn write_vtp(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
     use std::fmt::Write as _;
     let mut xml = String::from(
         "<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"1.0\" \
-         byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <PolyData>\n",
+         byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <PolyData>\n\
+         \x20   <FieldData>\n      <Array type=\"String\" Name=\"SPACE\" NumberOfTuples=\"1\" \
+         format=\"ascii\">76 80 83 0</Array>\n    </FieldData>\n",
     );
     let mut data: Vec<u8> = Vec::new();
     let mut array = |xml: &mut String, ty: &str, name: &str, components: usize, bytes: &[u8]| {

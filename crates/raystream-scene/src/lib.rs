@@ -48,7 +48,9 @@ pub use desc::{
     CameraDesc, Frame, GroundDesc, LightDesc, MaterialDesc, ObjectDesc, Scale, SceneDesc,
     SegmentItem, SegmentList, VolumeDesc,
 };
-use raystream_io::{MeshError, MeshShading, MtlMaterial, Texture, TriMesh, Volume, VolumeError};
+use raystream_io::{
+    MeshError, MeshShading, MtlMaterial, Rgb8, Texture, TriMesh, Volume, VolumeError,
+};
 use raystream_math::{Aabb, DVec3, MAX_COORDINATE, Vec2, Vec3, in_coordinate_range};
 use raystream_volume::segments::SegmentColours;
 use raystream_volume::{Interpolation, TfPreset, TransferFunction};
@@ -137,6 +139,11 @@ pub struct Scene {
     /// Per triangle, its corners' texture coordinates: the file's where it gives them, else 0;
     /// empty when no material has a texture.
     pub uvs: Vec<[Vec2; 3]>,
+    /// Per triangle, its corners' colours (8-bit sRGB) where its file gives them (white
+    /// elsewhere); empty when no object's file gives colours. Undone to linear light and
+    /// interpolated across the triangle, they multiply its material's ambient and diffuse
+    /// colours (and its texture's), as MeshLab, ParaView and glTF's `COLOR_0` have them.
+    pub colours: Vec<[Rgb8; 3]>,
     pub lights: Vec<Light>,
     /// The camera, or `None` to frame the scene's objects.
     pub camera: Option<Camera>,
@@ -470,6 +477,11 @@ impl Scene {
         let mut warnings = Vec::new();
         let mut textures = Vec::new();
         let mut uvs = Vec::new();
+        let mut colours = Vec::new();
+        let mut coloured = false;
+        // The material of a coloured mesh the scene and its file give none: white, so that the
+        // colours are its own, with the default material's ambient share and highlights.
+        let mut colour_material = None;
         for (i, o) in desc.objects.iter().enumerate() {
             let (source, mut shading) = load(i, o).map_err(|e| match e {
                 SceneError::Invalid { problem, .. } => invalid(problem),
@@ -504,7 +516,20 @@ impl Scene {
                     "object {i}: a vertex lands at {p} after scale, rotate and translate, beyond ±{MAX_COORDINATE:e} (f32 triangle tests overflow that far out)"
                 )));
             }
-            let chosen = lookup(&o.material)?;
+            let own_colours = shading.colours.len() == source.len() && !source.is_empty();
+            let chosen = if o.material.is_none() && own_colours {
+                *colour_material.get_or_insert_with(|| {
+                    let d = Material::default();
+                    materials.push(Material {
+                        ambient: d.ambient / d.diffuse,
+                        diffuse: Vec3::ONE,
+                        ..d
+                    });
+                    materials.len() as u32 - 1
+                })
+            } else {
+                lookup(&o.material)?
+            };
             if o.material.is_none() && !shading.material_of.is_empty() {
                 // The file's own materials (an OBJ's MTL), where the scene names none.
                 let first = materials.len() as u32;
@@ -530,6 +555,12 @@ impl Scene {
                 uvs.append(&mut shading.uvs);
             } else {
                 uvs.resize(material_of.len(), [Vec2::ZERO; 3]);
+            }
+            if own_colours {
+                coloured = true;
+                colours.append(&mut shading.colours);
+            } else {
+                colours.resize(material_of.len(), [[255; 3]; 3]);
             }
             // A scene file's objects are named by their mesh; a mesh rendered alone is the
             // message's subject already.
@@ -627,6 +658,11 @@ impl Scene {
         } else {
             uvs.resize(mesh.len(), [Vec2::ZERO; 3]);
         }
+        if coloured {
+            colours.resize(mesh.len(), [[255; 3]; 3]);
+        } else {
+            colours.clear();
+        }
         Ok(Scene {
             warnings,
             mesh,
@@ -636,6 +672,7 @@ impl Scene {
             materials,
             textures,
             uvs,
+            colours,
             lights,
             camera,
             background,
@@ -846,6 +883,9 @@ impl Scene {
         self.material_of.truncate(t - self.ground_triangles);
         if !self.uvs.is_empty() {
             self.uvs.truncate(t - self.ground_triangles);
+        }
+        if !self.colours.is_empty() {
+            self.colours.truncate(t - self.ground_triangles);
         }
         for n in [&mut self.mesh.positions, &mut self.normals] {
             n.truncate(v - self.ground_vertices);

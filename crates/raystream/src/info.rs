@@ -84,6 +84,12 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             (m.name.as_str(), n, texture)
         })
         .collect();
+    // The file's colours (per vertex or per face), counted distinct.
+    let colours = (!materials.colours.is_empty()).then(|| {
+        let distinct: std::collections::HashSet<_> =
+            materials.colours.iter().flatten().copied().collect();
+        distinct.len()
+    });
     let tree = a.tree.build(&mesh);
     let b = mesh.bounds();
     let s = &tree.stats;
@@ -98,6 +104,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             "kdtree": tree_json(&tree),
             "materials": used.iter().map(|(name, n, t)| json!({"name": name, "triangles": n, "texture": t})).collect::<Vec<_>>(),
             "texture_coordinates": !materials.uvs.is_empty(),
+            "colours": colours.map(|n| json!({"distinct": n})),
             "space": materials.space.map(|s| s.name()),
             "warnings": materials.warnings,
         });
@@ -134,6 +141,11 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             s.build_ms
         );
         println!("  entry grid {}", entry_grid_line(&tree.entry));
+        if let Some(n) = colours {
+            println!(
+                "  colours    {n} distinct: the file's, per vertex or per face, which render draws"
+            );
+        }
         for (name, n, texture) in &used {
             match texture {
                 Some([w, h]) => println!("  material   {name}: {n} triangles, a {w}x{h} texture"),

@@ -2675,3 +2675,234 @@ fn the_interpolating_spline_keeps_the_peaks_a_mip_shows() {
         assert!(sharp.1 > brightest, "{msg}");
     }
 }
+
+/// Every file of `mesh_colours.py` (VTK's PLY, VTK XML and legacy VTK writers, per point and
+/// per cell; an OBJ, float and 16-bit PLYs, trimesh's GLB) reads with the colours its writer
+/// gave it: each triangle corner's colour is its point's (the nearest of the points the script
+/// lists), or each triangle's is its cell's (the nearest cell centroid), exactly; within one
+/// step for the GLB, whose linear COLOR_0 bytes turn to sRGB by way of f64. The VTK files'
+/// `SPACE` field (3D Slicer's) is read, ASCII, binary or compressed.
+#[test]
+fn mesh_colours_read_as_their_writers_wrote_them() {
+    let Some(py) = python_with("vtkmodules") else {
+        return;
+    };
+    let dir = tmp("mesh-colours");
+    let o = std::process::Command::new(&py)
+        .arg(repo().join("crates/raystream/tests/mesh_colours.py"))
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let files = v["files"].as_object().unwrap();
+    assert_eq!(files.len(), 28);
+    let rows = |v: &serde_json::Value| -> Vec<([f32; 3], [u8; 3])> {
+        let rows: Vec<Vec<f64>> = serde_json::from_value(v.clone()).unwrap();
+        rows.iter()
+            .map(|r| {
+                (
+                    [r[0] as f32, r[1] as f32, r[2] as f32],
+                    [r[3] as u8, r[4] as u8, r[5] as u8],
+                )
+            })
+            .collect()
+    };
+    let nearest = |rows: &[([f32; 3], [u8; 3])], p: raystream_math::Vec3| {
+        let d = |q: [f32; 3]| (raystream_math::Vec3::from(q) - p).length();
+        let best = rows
+            .iter()
+            .min_by(|a, b| d(a.0).total_cmp(&d(b.0)))
+            .unwrap();
+        assert!(d(best.0) < 1e-3, "no listed point within 1 µm of {p}");
+        best.1
+    };
+    for (name, want) in files {
+        let (mesh, shading) = raystream_io::load_mesh_with_shading(&dir.join(name)).unwrap();
+        assert_eq!(mesh.len(), 320, "{name}");
+        assert_eq!(shading.colours.len(), mesh.len(), "{name}: no colours read");
+        // The VTK files' field data names 3D Slicer's RAS (a string array, which the legacy
+        // files hold as text or length-prefixed bytes).
+        if name.ends_with(".vtp") || name.ends_with(".vtk") {
+            let want = (!name.starts_with("verts")).then_some(raystream_io::PatientSpace::Ras);
+            assert_eq!(shading.space, want, "{name}");
+        }
+        let step = if name.ends_with(".glb") { 1 } else { 0 };
+        let close = |a: [u8; 3], b: [u8; 3]| (0..3).all(|c| a[c].abs_diff(b[c]) <= step);
+        if let Some(points) = want.get("points") {
+            let points = rows(points);
+            for (t, corners) in mesh.triangles.iter().zip(&shading.colours) {
+                for (k, &v) in t.iter().enumerate() {
+                    let w = nearest(&points, mesh.positions[v as usize]);
+                    assert!(close(corners[k], w), "{name}: {:?} for {w:?}", corners[k]);
+                }
+            }
+        } else {
+            let cells = rows(&want["cells"]);
+            for (t, corners) in mesh.triangles.iter().zip(&shading.colours) {
+                let centroid = t
+                    .iter()
+                    .map(|&v| mesh.positions[v as usize])
+                    .sum::<raystream_math::Vec3>()
+                    / 3.0;
+                let w = nearest(&cells, centroid);
+                assert!(
+                    corners.iter().all(|&c| c == w),
+                    "{name}: {corners:?} for {w:?}"
+                );
+            }
+        }
+    }
+}
+
+/// A sphere as an ASCII PLY whose vertices run from red (x = −1) to blue (x = +1), green
+/// rising with y.
+fn colour_ramp_sphere(name: &str) -> std::path::PathBuf {
+    let m = raystream_io::TriMesh::icosphere(3);
+    let mut ply = format!(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\n\
+         property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n\
+         element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        m.positions.len(),
+        m.len()
+    );
+    for p in &m.positions {
+        let byte = |t: f32| (t.clamp(0.0, 1.0) * 255.0).round() as u8;
+        let x = (p.x + 1.0) / 2.0;
+        let (r, g, b) = (byte(1.0 - x), byte((p.y + 1.0) / 4.0), byte(x));
+        ply += &format!("{} {} {} {r} {g} {b}\n", p.x, p.y, p.z);
+    }
+    for t in &m.triangles {
+        ply += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+    }
+    let path = tmp(name);
+    std::fs::write(&path, ply).unwrap();
+    path
+}
+
+/// A PLY's vertex colours are drawn, blended across each triangle: the sphere is red on its
+/// −x side and blue on its +x side, purple between (with the colours left out, it is grey).
+#[test]
+fn vertex_colours_are_rendered() {
+    let ply = colour_ramp_sphere("colour-ramp.ply");
+    let out = tmp("colour-ramp.png");
+    let o = run(&[
+        "render",
+        ply.to_str().unwrap(),
+        "--size",
+        "96x72",
+        "--spp",
+        "1",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = image::open(&out).unwrap().to_rgb8();
+    let columns = |f: &dyn Fn(&image::Rgb<u8>) -> bool| {
+        let xs: Vec<u32> = img
+            .enumerate_pixels()
+            .filter(|(_, _, p)| f(p))
+            .map(|(x, _, _)| x)
+            .collect();
+        (
+            xs.len(),
+            xs.iter().sum::<u32>() as f64 / xs.len().max(1) as f64,
+        )
+    };
+    let red = columns(&|p| p[0] > 60 && p[0] as u32 > 2 * p[2] as u32);
+    let blue = columns(&|p| p[2] > 60 && p[2] as u32 > 2 * p[0] as u32);
+    let purple =
+        columns(&|p| p[0] > 40 && p[2] > 40 && p[0].abs_diff(p[2]) < 25 && p[1] < p[0].min(p[2]));
+    for (what, (n, _)) in [("red", red), ("blue", blue), ("purple", purple)] {
+        assert!(n > 100, "{n} {what} pixels");
+    }
+    // Red on the left (the scene's −x), purple in between, blue on the right.
+    assert!(
+        red.1 + 10.0 < purple.1 && purple.1 + 10.0 < blue.1,
+        "mean columns: red {:.1}, purple {:.1}, blue {:.1}",
+        red.1,
+        purple.1,
+        blue.1
+    );
+}
+
+#[test]
+fn gpu_matches_cpu_on_vertex_colours() {
+    let ply = colour_ramp_sphere("colour-ramp-gpu.ply");
+    gpu_matches_cpu(
+        "vertex-colours",
+        &[ply.to_str().unwrap(), "--size", "96x72", "--spp", "1"],
+        false,
+    );
+}
+
+/// 3D Slicer's segmentation of a chest CT (slicerio's), its segments' surfaces written by
+/// `iso` as a PLY and as a VTK XML file (each vertex in its segment's colour) and as an OBJ
+/// (each segment's colour a material of its MTL), render alike: the colours reach the image
+/// (left out, the segments are grey and the images differ by far more), and the `.vtp`'s
+/// `SPACE` field stands it up as the others' `SPACE=LPS` comments do.
+#[test]
+fn iso_segments_render_in_their_colours_from_a_ply_as_from_an_obj() {
+    let Some(py) = python_with("slicerio") else {
+        return;
+    };
+    let o = std::process::Command::new(&py)
+        .args([
+            "-c",
+            "import os, slicerio; print(os.path.join(os.path.dirname(slicerio.__file__), 'data', 'Segmentation.seg.nrrd'))",
+        ])
+        .output()
+        .unwrap();
+    let seg = stdout(&o).trim().to_string();
+    let image = |ext: &str| {
+        let mesh = tmp(&format!("slicer-segments.{ext}"));
+        let o = run(&[
+            "iso",
+            "--quiet",
+            &seg,
+            "--simplify",
+            "0.5",
+            "-o",
+            mesh.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let png = tmp(&format!("slicer-segments-{ext}.png"));
+        let o = run(&[
+            "render",
+            mesh.to_str().unwrap(),
+            "--size",
+            "96x72",
+            "--spp",
+            "1",
+            "--quiet",
+            "--device",
+            "cpu",
+            "-o",
+            png.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        (mesh, png)
+    };
+    let (ply, from_ply) = image("ply");
+    let (_, from_obj) = image("obj");
+    let (_, from_vtp) = image("vtp");
+    // Slicer's seven segments, seven colours.
+    let o = run(&["info", ply.to_str().unwrap(), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(v["colours"], serde_json::json!({"distinct": 7}));
+    gpu_frames_match(&from_obj, &from_ply, "the PLY against the OBJ", false);
+    // The .vtp's colours, and its space in the field data.
+    gpu_frames_match(&from_obj, &from_vtp, "the VTP against the OBJ", false);
+    let img = image::open(&from_ply).unwrap().to_rgb8();
+    let tinted = img
+        .pixels()
+        .filter(|p| p[0].max(p[1]).max(p[2]) - p[0].min(p[1]).min(p[2]) > 40)
+        .count();
+    assert!(tinted > 500, "{tinted} coloured pixels");
+    gpu_matches_cpu(
+        "slicer-segments",
+        &[ply.to_str().unwrap(), "--size", "96x72", "--spp", "1"],
+        false,
+    );
+}

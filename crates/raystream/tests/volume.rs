@@ -2174,7 +2174,8 @@ fn vtk_xml_files_agree_with_vtk() {
         r = vtkXMLPolyDataReader(); r.SetFileName(sys.argv[1]); r.Update(); m = r.GetOutput()\n\
         c = m.GetPointData().GetArray('Colors')\n\
         print(json.dumps([r.GetNumberOfPieces(), m.GetNumberOfPoints(), m.GetNumberOfPolys(),\
-        m.GetPointData().GetNormals().GetNumberOfTuples(), c.GetTuple3(0), c.GetTuple3(m.GetNumberOfPoints() - 1)]))";
+        m.GetPointData().GetNormals().GetNumberOfTuples(), c.GetTuple3(0), c.GetTuple3(m.GetNumberOfPoints() - 1),\
+        m.GetFieldData().GetAbstractArray('SPACE').GetValue(0)]))";
     let o = std::process::Command::new(&py)
         .args(["-c", script, parts.to_str().unwrap()])
         .output()
@@ -2190,8 +2191,18 @@ fn vtk_xml_files_agree_with_vtk() {
             whole.len(),
             whole.positions.len(),
             [0.0, 230.0, 255.0],
-            [255.0, 64.0, 220.0]
+            [255.0, 64.0, 220.0],
+            "LPS"
         ])
+    );
+    // raystream reads them back so: the space 3D Slicer's field names, the two colours.
+    let (_, shading) = raystream_io::load_mesh_with_shading(&parts).unwrap();
+    assert_eq!(shading.space, Some(raystream_io::PatientSpace::Lps));
+    let colours: std::collections::BTreeSet<[u8; 3]> =
+        shading.colours.iter().flatten().copied().collect();
+    assert_eq!(
+        colours,
+        std::collections::BTreeSet::from([[0, 230, 255], [255, 64, 220]])
     );
 
     // Damaged files.

@@ -55,10 +55,15 @@ struct Material {
     pad: u32,
 }
 
-struct TriUv {
+struct TriCorners {
     a: vec2<f32>,
     b: vec2<f32>,
     c: vec2<f32>,
+    // 8-bit sRGB, R in the low byte.
+    colour_a: u32,
+    colour_b: u32,
+    colour_c: u32,
+    pad: u32,
 }
 
 struct Light {
@@ -87,8 +92,9 @@ struct RenderParams {
     max_groups: u32,
     // Rows per band of the camera rays' pixel order (1: row by row).
     band: u32,
-    pad1: u32,
-    pad2: u32,
+    // 1: triangles take their corners' colours (tri_corners).
+    coloured: u32,
+    pad: u32,
 }
 
 @group(1) @binding(0) var<uniform> rp: RenderParams;
@@ -96,7 +102,7 @@ struct RenderParams {
 @group(1) @binding(2) var<storage, read> shade_tris: array<ShadeTri>;
 @group(1) @binding(3) var<storage, read> materials: array<Material>;
 @group(1) @binding(4) var<storage, read> lights: array<Light>;
-@group(1) @binding(5) var<storage, read> tri_uvs: array<TriUv>;
+@group(1) @binding(5) var<storage, read> tri_corners: array<TriCorners>;
 // The sRGB table, each texture's (first texel, width, height, clamp, scale, offset) from
 // TEXTURE_INFO, the texels (layout.rs says how).
 @group(1) @binding(6) var<storage, read> textures: array<u32>;
@@ -231,7 +237,11 @@ fn texel_index(i: i32, n: i32, cl: bool) -> i32 {
 fn texel(base: u32, w: i32, h: i32, cl: bool, i: i32, j: i32) -> vec3<f32> {
     let ii = texel_index(i, w, cl);
     let jj = texel_index(j, h, cl);
-    let t = textures[base + u32(jj * w + ii)];
+    return linear_rgb8(textures[base + u32(jj * w + ii)]);
+}
+
+// A packed 8-bit sRGB colour (R in the low byte) in linear light, by the table's start.
+fn linear_rgb8(t: u32) -> vec3<f32> {
     return vec3<f32>(
         bitcast<f32>(textures[t & 0xffu]),
         bitcast<f32>(textures[(t >> 8u) & 0xffu]),
@@ -369,11 +379,16 @@ fn shade_hits(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     let m = materials[shade_tris[h.prim].material];
     let split = coefficients(m, s);
     let k = split.local;
-    // A texture tints the ambient and diffuse colours (MTL: `map_Kd` multiplies `Kd`).
+    // A texture tints the ambient and diffuse colours (MTL: `map_Kd` multiplies `Kd`), as do
+    // the file's vertex colours.
     var tint = vec3<f32>(1.0);
     if m.texture != NO_TEXTURE {
-        let uv = tri_uvs[h.prim];
+        let uv = tri_corners[h.prim];
         tint = texture_colour(m.texture, uv.a * (1.0 - h.u - h.v) + uv.b * h.u + uv.c * h.v);
+    }
+    if rp.coloured != 0u {
+        let k = tri_corners[h.prim];
+        tint *= linear_rgb8(k.colour_a) * (1.0 - h.u - h.v) + linear_rgb8(k.colour_b) * h.u + linear_rgb8(k.colour_c) * h.v;
     }
     let ambient = m.ambient * tint;
     let diffuse = m.diffuse * tint;
