@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """Fuzzes raystream's inputs: mutated files and scenes through the release binary.
 
-  .venv/bin/python scripts/fuzz-inputs.py files [--runs N] [--seed S] [--device cpu|gpu]
+  .venv/bin/python scripts/fuzz-inputs.py files [--runs N] [--seed S] [--device cpu|gpu] [--only SEEDS]
   .venv/bin/python scripts/fuzz-inputs.py scenes [--runs N] [--seed S]
 
-files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, glTF as .glb (a textured one too; their JSON also mutated as a document) and as .gltf; an OBJ with normals and an MTL
+files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, coloured PLY, OBJ and VTK, glTF as .glb (a textured one too; their JSON also mutated as a document) and as .gltf; an OBJ with normals and an MTL
         library and a PNG texture, any of them mutated; a PLY with normals), tiny volumes
         (NIfTI, NRRD and MetaImage, attached and detached, via SimpleITK; 4-D ones, and
         3D Slicer's interleaved 4-D NRRD, read at a --phase or as a --cine) and real DICOM slices from
@@ -578,11 +578,15 @@ def run(args, name):
     return None
 
 
-def fuzz_files(work, n, device):
+def fuzz_files(work, n, device, only=None):
     sd = os.path.join(work, "seeds")
     os.makedirs(sd)
     seeds(sd)
     names = [s for s in sorted(os.listdir(sd)) if s not in ("v.raw", "tm.mtl", "tm.png", "rsct")]
+    if only:
+        names = [s for s in names if s in only]
+        if not names:
+            sys.exit(f"--only names no seed: {', '.join(only)}")
     bad = 0
     for i in range(n):
         s = random.choice(names)
@@ -891,10 +895,12 @@ def main():
     ap.add_argument("--runs", type=int, default=500)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--device", default="cpu", choices=["cpu", "gpu"])
+    ap.add_argument("--only", help="files: these seeds alone, comma-separated (tc.ply,tc.vtp)")
     a = ap.parse_args()
     random.seed(a.seed)
     work = tempfile.mkdtemp(prefix="raystream-fuzz-")
-    bad = fuzz_files(work, a.runs, a.device) if a.what == "files" else fuzz_scenes(work, a.runs)
+    only = a.only.split(",") if a.only else None
+    bad = fuzz_files(work, a.runs, a.device, only) if a.what == "files" else fuzz_scenes(work, a.runs)
     if bad:
         print(f"{a.what}: {a.runs} runs, {bad} failed (inputs of failures kept in {work})")
     else:
