@@ -419,6 +419,21 @@ fn mesh_parts_keep_their_names_and_colours() {
     let back = load_mesh(&path).unwrap();
     assert_eq!(back.len(), a.len() + b.len());
     assert_eq!(back.corners(a.len()), b.corners(0));
+    // PLY, VTK and VTK XML read back with each part's triangles in its colour.
+    for name in ["m.ply", "m.vtk", "m.vtp"] {
+        let path = dir.join(name);
+        crate::write_mesh_parts(&path, &parts).unwrap();
+        let (mesh, shading) = load_mesh_with_shading(&path).unwrap();
+        assert_eq!(mesh.corners(a.len()), b.corners(0), "{name}");
+        assert_eq!(shading.space, Some(crate::PatientSpace::Lps), "{name}");
+        assert_eq!(shading.normals.len(), mesh.positions.len(), "{name}");
+        let (orange, violet) = ([255, 188, 0], [124, 0, 255]);
+        for (t, corners) in shading.colours.iter().enumerate() {
+            let want = if t < a.len() { orange } else { violet };
+            assert_eq!(corners, &[want; 3], "{name} triangle {t}");
+        }
+        assert_eq!(shading.colours.len(), mesh.len(), "{name}");
+    }
     // One part: the plain formats, as `write_mesh` writes them.
     crate::write_mesh_parts(&path, &parts[..1]).unwrap();
     let text = String::from_utf8_lossy(&std::fs::read(&path).unwrap()).into_owned();
@@ -427,7 +442,7 @@ fn mesh_parts_keep_their_names_and_colours() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("m.stl: an STL or legacy VTK file holds one surface here, not 2"),
+        e.contains("m.stl: an STL file holds one surface here, not 2"),
         "{e}"
     );
 }

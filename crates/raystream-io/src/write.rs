@@ -56,11 +56,11 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
     if parts.is_empty() {
         return Err(MeshError::invalid(path, "no surface to write"));
     }
-    if matches!(format, MeshFormat::Stl | MeshFormat::Vtk) && parts.len() > 1 {
+    if format == MeshFormat::Stl && parts.len() > 1 {
         return Err(MeshError::invalid(
             path,
             format!(
-                "an STL or legacy VTK file holds one surface here, not {}: write .glb, .obj, .ply or .vtp, or one at a time",
+                "an STL file holds one surface here, not {}: write .glb, .obj, .ply, .vtk or .vtp, or one at a time",
                 parts.len()
             ),
         ));
@@ -108,7 +108,7 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
         MeshFormat::Obj => write_obj(&mut w, &parts, None),
         MeshFormat::Stl => write_stl(&mut w, parts[0].mesh),
         MeshFormat::Gltf => write_glb(&mut w, &parts),
-        MeshFormat::Vtk => write_vtk(&mut w, &parts[0]),
+        MeshFormat::Vtk => write_vtk(&mut w, &parts),
         MeshFormat::VtkXml => write_vtp(&mut w, &parts),
     };
     r.and_then(|()| w.flush()).map_err(io)
@@ -339,30 +339,53 @@ fn write_glb(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
 }
 
 /// Legacy VTK polygonal data, binary, in the file version 3D Slicer writes (4.2), its title
-/// naming the space as Slicer's do: 3D Slicer's own model format.
-fn write_vtk(w: &mut impl Write, part: &MeshPart) -> std::io::Result<()> {
-    let mesh = part.mesh;
+/// naming the space as Slicer's do: 3D Slicer's own model format. Several parts are one
+/// surface whose points carry their part's colour (`COLOR_SCALARS`, 8-bit sRGB, the point
+/// data's active scalars, as VTK draws them).
+fn write_vtk(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
+    let points: usize = parts.iter().map(|p| p.mesh.positions.len()).sum();
+    let triangles: usize = parts.iter().map(|p| p.mesh.len()).sum();
     write!(
         w,
-        "# vtk DataFile Version 4.2\nraystream isosurface, LPS millimetres. SPACE=LPS\nBINARY\nDATASET POLYDATA\nPOINTS {} float\n",
-        mesh.positions.len()
+        "# vtk DataFile Version 4.2\nraystream isosurface, LPS millimetres. SPACE=LPS\nBINARY\nDATASET POLYDATA\nPOINTS {points} float\n"
     )?;
     let big_endian = |w: &mut dyn Write, v: &[Vec3]| -> std::io::Result<()> {
         v.iter()
             .flat_map(|p| p.to_array())
             .try_for_each(|x| w.write_all(&x.to_be_bytes()))
     };
-    big_endian(w, &mesh.positions)?;
-    write!(w, "\nPOLYGONS {} {}\n", mesh.len(), 4 * mesh.len())?;
-    for t in &mesh.triangles {
-        w.write_all(&3i32.to_be_bytes())?;
-        for &v in t {
-            w.write_all(&(v as i32).to_be_bytes())?;
+    for p in parts {
+        big_endian(w, &p.mesh.positions)?;
+    }
+    write!(w, "\nPOLYGONS {triangles} {}\n", 4 * triangles)?;
+    let mut base = 0;
+    for p in parts {
+        for t in &p.mesh.triangles {
+            w.write_all(&3i32.to_be_bytes())?;
+            for &v in t {
+                w.write_all(&((base + v) as i32).to_be_bytes())?;
+            }
+        }
+        base += p.mesh.positions.len() as u32;
+    }
+    let normals = parts.iter().all(|p| p.normals.is_some());
+    if parts.len() > 1 || normals {
+        write!(w, "\nPOINT_DATA {points}")?;
+    }
+    if parts.len() > 1 {
+        w.write_all(b"\nCOLOR_SCALARS Colors 3\n")?;
+        for p in parts {
+            let colour = srgb8(p.colour);
+            for _ in 0..p.mesh.positions.len() {
+                w.write_all(&colour)?;
+            }
         }
     }
-    if let Some(normals) = part.normals {
-        write!(w, "\nPOINT_DATA {}\nNORMALS Normals float\n", normals.len())?;
-        big_endian(w, normals)?;
+    if normals {
+        w.write_all(b"\nNORMALS Normals float\n")?;
+        for p in parts {
+            big_endian(w, p.normals.unwrap_or_default())?;
+        }
     }
     writeln!(w)
 }

@@ -859,10 +859,11 @@ pub struct IsoArgs {
     /// (with `--segment`).
     pub input: PathBuf,
     /// Output mesh in LPS millimetres: .ply (with normals), .obj (with normals), .stl, .vtk
-    /// (3D Slicer's model format, legacy VTK polygonal data, with normals), .vtp (ParaView's:
-    /// VTK XML polygonal data, a piece a segment, with normals and colours), or .glb (binary
-    /// glTF with normals, under a node that turns it to glTF's metres, +Y superior, +Z
-    /// anterior). The PLY, OBJ, STL and VTK say SPACE=LPS, as 3D Slicer reads a model's space.
+    /// (3D Slicer's model format, legacy VTK polygonal data, with normals, and colours for
+    /// several segments), .vtp (ParaView's: VTK XML polygonal data, a piece a segment, with
+    /// normals and colours), or .glb (binary glTF with normals, under a node that turns it to
+    /// glTF's metres, +Y superior, +Z anterior). The PLY, OBJ, STL, VTK and VTP say SPACE=LPS,
+    /// as 3D Slicer reads a model's space.
     #[arg(short, long)]
     pub output: PathBuf,
     #[command(flatten)]
@@ -872,7 +873,8 @@ pub struct IsoArgs {
     /// Instead of a threshold, the surfaces of a label map's or DICOM Segmentation's segments:
     /// their numbers or names (a Segmentation's labels, or `--colour-table`'s),
     /// comma-separated, or `all` (the default for a DICOM Segmentation). Several go to one file: a glTF node each (named, in its colour),
-    /// an OBJ object each (colours in a .mtl beside it), or a PLY's vertex colours.
+    /// an OBJ object each (colours in a .mtl beside it), a VTP piece each (in its colour), or
+    /// a PLY's or VTK file's vertex colours (an STL holds one).
     #[arg(long, value_name = "LIST", conflicts_with_all = ["iso", "preset"])]
     pub segment: Option<String>,
     /// The label map's segments' names and colours, for `--segment` (which it implies): a 3D

@@ -3471,7 +3471,7 @@ fn segments_become_closed_surfaces() {
     );
     refused(
         &["iso", seg_file, "-o", tmp("segsurf.stl").to_str().unwrap()],
-        "an STL or legacy VTK file holds one surface here, not 2",
+        "an STL file holds one surface here, not 2",
     );
     refused(
         &["iso", nii_file, "-o", out],

@@ -2838,12 +2838,12 @@ fn gpu_matches_cpu_on_vertex_colours() {
 }
 
 /// 3D Slicer's segmentation of a chest CT (slicerio's), its segments' surfaces written by
-/// `iso` as a PLY and as a VTK XML file (each vertex in its segment's colour) and as an OBJ
+/// `iso` as a PLY, a legacy VTK and a VTK XML file (each vertex in its segment's colour) and as an OBJ
 /// (each segment's colour a material of its MTL), render alike: the colours reach the image
 /// (left out, the segments are grey and the images differ by far more), and the `.vtp`'s
 /// `SPACE` field stands it up as the others' `SPACE=LPS` comments do.
 #[test]
-fn iso_segments_render_in_their_colours_from_a_ply_as_from_an_obj() {
+fn iso_segments_render_in_their_colours_from_ply_vtk_and_vtp_as_from_obj() {
     let Some(py) = python_with("slicerio") else {
         return;
     };
@@ -2887,6 +2887,7 @@ fn iso_segments_render_in_their_colours_from_a_ply_as_from_an_obj() {
     let (ply, from_ply) = image("ply");
     let (_, from_obj) = image("obj");
     let (_, from_vtp) = image("vtp");
+    let (_, from_vtk) = image("vtk");
     // Slicer's seven segments, seven colours.
     let o = run(&["info", ply.to_str().unwrap(), "--json"]);
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
@@ -2894,6 +2895,7 @@ fn iso_segments_render_in_their_colours_from_a_ply_as_from_an_obj() {
     gpu_frames_match(&from_obj, &from_ply, "the PLY against the OBJ", false);
     // The .vtp's colours, and its space in the field data.
     gpu_frames_match(&from_obj, &from_vtp, "the VTP against the OBJ", false);
+    gpu_frames_match(&from_obj, &from_vtk, "the VTK against the OBJ", false);
     let img = image::open(&from_ply).unwrap().to_rgb8();
     let tinted = img
         .pixels()
