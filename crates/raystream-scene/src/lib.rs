@@ -478,7 +478,6 @@ impl Scene {
         let mut textures = Vec::new();
         let mut uvs = Vec::new();
         let mut colours = Vec::new();
-        let mut coloured = false;
         // The material of a coloured mesh the scene and its file give none: white, so that the
         // colours are its own, with the default material's ambient share and highlights.
         let mut colour_material = None;
@@ -556,10 +555,11 @@ impl Scene {
             } else {
                 uvs.resize(material_of.len(), [Vec2::ZERO; 3]);
             }
+            // White under the objects without colours, from the first with them on.
             if own_colours {
-                coloured = true;
+                colours.resize(material_of.len() - source.len(), [[255; 3]; 3]);
                 colours.append(&mut shading.colours);
-            } else {
+            } else if !colours.is_empty() {
                 colours.resize(material_of.len(), [[255; 3]; 3]);
             }
             // A scene file's objects are named by their mesh; a mesh rendered alone is the
@@ -658,10 +658,8 @@ impl Scene {
         } else {
             uvs.resize(mesh.len(), [Vec2::ZERO; 3]);
         }
-        if coloured {
+        if !colours.is_empty() {
             colours.resize(mesh.len(), [[255; 3]; 3]);
-        } else {
-            colours.clear();
         }
         Ok(Scene {
             warnings,
@@ -1134,6 +1132,57 @@ mod tests {
             "{:?}",
             missing.warnings
         );
+    }
+
+    /// A file's vertex colours: its triangles carry them, the objects before and after it (and
+    /// the ground) white; without a scene material it is white under them (with the default
+    /// material's highlight and ambient share), with one that material; a scene with no
+    /// coloured object keeps no colours.
+    #[test]
+    fn vertex_colours_reach_their_triangles() {
+        let scratch = tempfile::Builder::new()
+            .prefix("raystream-scene-colours-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
+        std::fs::write(
+            dir.join("c.obj"),
+            "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 1 1 0 0 0 1\nv 2 0 0 1 1 1\nf 1 2 3\nf 2 4 3\n",
+        )
+        .unwrap();
+        let scene = |text: &str| {
+            let desc: SceneDesc = toml::from_str(text).unwrap();
+            Scene::from_desc(&desc, dir, Path::new("s.toml")).unwrap()
+        };
+        let s = scene(
+            "[[objects]]\nshape = \"quad\"\n[[objects]]\nmesh = \"c.obj\"\n\
+             [[objects]]\nshape = \"quad\"\n[ground]\n",
+        );
+        let white = [[255u8; 3]; 3];
+        assert_eq!(s.colours.len(), s.mesh.len());
+        assert_eq!(&s.colours[..2], &[white; 2], "the quad before");
+        assert_eq!(
+            &s.colours[2..4],
+            &[
+                [[255, 0, 0], [0, 255, 0], [0, 0, 255]],
+                [[0, 255, 0], [255, 255, 255], [0, 0, 255]]
+            ]
+        );
+        assert!(s.colours[4..].iter().all(|c| *c == white), "quad, ground");
+        let m = s.materials[s.material_of[2] as usize];
+        let d = Material::default();
+        assert_eq!((m.diffuse, m.specular), (Vec3::ONE, d.specular));
+        assert!((m.ambient - d.ambient / d.diffuse).length() < 1e-6);
+        assert_eq!(s.materials[s.material_of[0] as usize], d, "the quad's");
+        let named = scene(
+            "[materials.grey]\ndiffuse = [0.5, 0.5, 0.5]\n[[objects]]\nmesh = \"c.obj\"\nmaterial = \"grey\"\n",
+        );
+        assert_eq!(
+            named.materials[named.material_of[0] as usize].diffuse,
+            Vec3::splat(0.5)
+        );
+        assert_eq!(named.colours.len(), 2);
+        assert!(scene("[[objects]]\nshape = \"quad\"\n").colours.is_empty());
     }
 
     /// A model that says which patient space it is in (3D Slicer's `SPACE=` tag) is read in
