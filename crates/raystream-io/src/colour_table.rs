@@ -97,6 +97,7 @@ pub fn read_colour_table(path: &Path) -> Result<Vec<SegmentLabel>, VolumeError> 
             number: index as u16,
             label: name,
             colour: Some(colour),
+            ..Default::default()
         });
     }
     if out.is_empty() {
@@ -122,6 +123,7 @@ mod tests {
             number,
             label: name.into(),
             colour: Some(colour),
+            ..Default::default()
         }
     }
 

@@ -53,9 +53,9 @@ pub use slicer_segmentation::{is_slicer_segmentation_path, write_slicer_segmenta
 pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping, linear_to_srgb8};
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, RT_STRUCTURE_SET, RasterNotes, Roi,
-    SegmentLabel, SegmentVoxels, SourceImage, StructureSet, ValueUnit, Volume, VolumeError,
-    VolumeFormat, VolumeSelect, WholeSegments, is_structure_set_file, is_structure_set_volume,
-    is_volume_path, list_dicom_series, load_volume, whole_segments,
+    SegmentLabel, SegmentTerms, SegmentVoxels, SourceImage, StructureSet, ValueUnit, Volume,
+    VolumeError, VolumeFormat, VolumeSelect, WholeSegments, is_structure_set_file,
+    is_structure_set_volume, is_volume_path, list_dicom_series, load_volume, whole_segments,
 };
 
 /// A triangle mesh: shared vertex positions and triangles as vertex-index triples.

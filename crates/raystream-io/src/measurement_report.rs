@@ -586,7 +586,7 @@ pub fn is_structured_report(path: &Path) -> bool {
 }
 
 /// A coded concept as read.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ReadCode {
     pub value: String,
     pub scheme: String,
@@ -681,7 +681,7 @@ fn items_of(o: &InMemDicomObject, tag: dicom_core::Tag) -> &[InMemDicomObject] {
 }
 
 /// The first item of a code sequence.
-fn code_of(o: &InMemDicomObject, tag: dicom_core::Tag) -> Option<ReadCode> {
+pub(crate) fn code_of(o: &InMemDicomObject, tag: dicom_core::Tag) -> Option<ReadCode> {
     let c = items_of(o, tag).first()?;
     Some(ReadCode {
         value: text_of(c, tags::CODE_VALUE)

@@ -757,10 +757,23 @@ pub(crate) mod tests {
         assert_eq!(back.data, want);
         assert_eq!(
             back.segments,
-            segments().map(|s| crate::SegmentLabel {
-                number: s.value as u16,
-                label: s.label.to_string(),
-                colour: Some(s.colour),
+            segments().map(|s| {
+                // The codes written come back as the segment's terms.
+                let code = |c: Code| crate::ReadCode {
+                    value: c.value.into(),
+                    scheme: c.scheme.into(),
+                    meaning: c.meaning.into(),
+                };
+                crate::SegmentLabel {
+                    number: s.value as u16,
+                    label: s.label.to_string(),
+                    colour: Some(s.colour),
+                    terms: crate::SegmentTerms {
+                        category: Some(code(s.category)),
+                        kind: Some(code(s.kind)),
+                        modifier: None,
+                    },
+                }
             })
         );
         // Damaged: a header claiming a million frames, pixel data short of its frames, a frame

@@ -399,7 +399,14 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             "direction": v.direction.concat().iter().map(|d| d + 0.0).collect::<Vec<f64>>(),
             "unit": unit,
             "phase": {"index": v.phase.index, "count": v.phase.count},
-            "segments": v.segments.iter().map(|k| json!({"number": k.number, "label": k.label, "colour": k.colour})).collect::<Vec<_>>(),
+            "segments": v.segments.iter().map(|k| json!({
+                "number": k.number,
+                "label": k.label,
+                "colour": k.colour,
+                "category": code_json(&k.terms.category),
+                "type": code_json(&k.terms.kind),
+                "modifier": code_json(&k.terms.modifier),
+            })).collect::<Vec<_>>(),
             "warnings": v.warnings,
         });
         if let Some(labels) = &labels {
@@ -525,7 +532,8 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             let colour = k
                 .colour
                 .map(|[r, g, b]| format!(", shown in #{r:02x}{g:02x}{b:02x}"))
-                .unwrap_or_default();
+                .unwrap_or_default()
+                + &terms_text(&k.terms);
             let roi = structures
                 .as_ref()
                 .and_then(|set| set.rois.iter().find(|r| r.number == k.number));
@@ -633,15 +641,42 @@ fn gpu_info(json: bool) {
     println!("(* the adapter --device gpu opens; --adapter SUBSTRING picks another)");
 }
 
+/// A coded concept as JSON (`null` where there is none).
+fn code_json(c: &Option<raystream_io::ReadCode>) -> serde_json::Value {
+    c.as_ref().map_or(
+        serde_json::Value::Null,
+        |c| json!({"value": c.value, "scheme": c.scheme, "meaning": c.meaning}),
+    )
+}
+
+/// What a segment is coded as, for `info`'s line: `; coded Lung, Right (SCT 39607008), an
+/// Anatomical Structure`; empty where the file codes nothing.
+fn terms_text(t: &raystream_io::SegmentTerms) -> String {
+    let Some(kind) = &t.kind else {
+        return String::new();
+    };
+    let modifier = t
+        .modifier
+        .as_ref()
+        .map(|m| format!(", {}", m.meaning))
+        .unwrap_or_default();
+    let category = t
+        .category
+        .as_ref()
+        .map(|c| format!(", in {}", c.meaning))
+        .unwrap_or_default();
+    format!(
+        "; coded {}{modifier} ({} {}){category}",
+        kind.meaning, kind.scheme, kind.value
+    )
+}
+
 /// A DICOM Structured Report's measurement groups (`measure --report`'s, or another tool's
 /// TID 1500 report), each with its finding and measurements.
 fn report_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     use raystream_io::ReadCode;
     let r = raystream_io::read_measurement_report(input)?;
-    let code = |c: &Option<ReadCode>| {
-        c.as_ref()
-            .map(|c| json!({"value": c.value, "scheme": c.scheme, "meaning": c.meaning}))
-    };
+    let code = code_json;
     let value = |c: &Option<ReadCode>| c.as_ref().map(|c| c.value.clone());
     if a.json {
         let groups: Vec<serde_json::Value> = r

@@ -141,6 +141,7 @@ mod tests {
             number: 2,
             label: "Wall".into(),
             colour: Some([1, 2, 3]),
+            ..Default::default()
         }];
         let e = entries(&[2, 5], &known);
         assert_eq!(

@@ -1278,16 +1278,25 @@ fn the_mask_on_the_ct_grid() {
         (labels.dims, labels.spacing, labels.origin)
     );
     assert!(back.data == labels.data);
-    let named: Vec<(u16, &str, Option<[u8; 3]>)> = back
+    let named: Vec<_> = back
         .segments
         .iter()
-        .map(|k| (k.number, k.label.as_str(), k.colour))
+        .map(|k| {
+            let kind = k.terms.kind.as_ref().map(|c| c.value.as_str());
+            (k.number, k.label.as_str(), k.colour, kind)
+        })
         .collect();
+    // Each coded as written (its TerminologyEntry read back).
     assert_eq!(
         named,
         [
-            (1, "Lumen", Some([0, 255, 255])),
-            (2, "Wall and thrombus", Some([255, 0, 255]))
+            (1, "Lumen", Some([0, 255, 255]), Some("91747007")),
+            (
+                2,
+                "Wall and thrombus",
+                Some([255, 0, 255]),
+                Some("59820001")
+            )
         ]
     );
     if let Some(py) = python_with("slicerio") {
@@ -1534,6 +1543,26 @@ fn the_mask_as_a_dicom_segmentation_of_the_series() {
         assert_eq!(s.modality, "SEG", "{written_by}");
         let named = v.segments.iter().filter(|k| k.number > 0).count();
         assert_eq!(named, 2, "{written_by}");
+        // What each segment is: SNOMED CT's Lumen and Blood vessel, Anatomical Structures (a
+        // label map's segment 0 is its background).
+        for (k, want) in v
+            .segments
+            .iter()
+            .filter(|k| k.number > 0)
+            .zip([("91747007", "Lumen"), ("59820001", "Blood vessel")])
+        {
+            let code = |c: &Option<raystream_io::ReadCode>| {
+                c.as_ref()
+                    .map(|c| (c.scheme.clone(), c.value.clone(), c.meaning.clone()))
+            };
+            let sct = |v: &str, m: &str| Some(("SCT".to_string(), v.to_string(), m.to_string()));
+            assert_eq!(code(&k.terms.kind), sct(want.0, want.1), "{written_by}");
+            assert_eq!(
+                code(&k.terms.category),
+                sct("123037004", "Anatomical Structure"),
+                "{written_by}"
+            );
+        }
         assert_eq!(v.direction, labels.direction, "{written_by}");
         assert_eq!(v.spacing, labels.spacing, "{written_by}");
         let dz = (v.origin[2] - labels.origin[2]) / labels.spacing[2];
@@ -3329,19 +3358,25 @@ fn segments_become_closed_surfaces() {
         }
     }
 
-    // `info` gives each segment's colour too.
+    // `info` gives each segment's colour too, and what it is coded as.
     let o = run(&["info", seg_file, "--json"]);
     let info: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let sct = |value: &str, meaning: &str| serde_json::json!({"value": value, "scheme": "SCT", "meaning": meaning});
+    let anatomy = sct("123037004", "Anatomical Structure");
     assert_eq!(
         info["segments"],
         serde_json::json!([
-            {"number": 1, "label": "Lumen", "colour": [0, 255, 255]},
-            {"number": 2, "label": "Wall and thrombus", "colour": [255, 0, 255]}
+            {"number": 1, "label": "Lumen", "colour": [0, 255, 255], "category": anatomy,
+             "type": sct("91747007", "Lumen"), "modifier": null},
+            {"number": 2, "label": "Wall and thrombus", "colour": [255, 0, 255],
+             "category": anatomy, "type": sct("59820001", "Blood vessel"), "modifier": null}
         ])
     );
     let text = stdout(&run(&["info", seg_file]));
     assert!(
-        text.contains("segment    1: Lumen (the voxels of value 1, shown in #00ffff)"),
+        text.contains(
+            "segment    1: Lumen (the voxels of value 1, shown in #00ffff; coded Lumen (SCT 91747007), in Anatomical Structure)"
+        ),
         "{text}"
     );
 

@@ -28,8 +28,13 @@ def describe(path, masks=None):
         mask = slicerio.segment_mask(s, seg["id"]) if masks is None else masks[n]
         ijk = np.argwhere(mask).astype("float64")
         centroid = (m[:3, :3] @ ijk.mean(axis=0) + m[:3, 3]).tolist() if len(ijk) else None
+        terms = seg.get("terminology", {})
+        code = lambda part: terms[part] if part in terms and terms[part][1] else None
         segments.append({
             "name": seg["name"],
+            "category": code("category"),
+            "type": code("type"),
+            "modifier": code("typeModifier"),
             "colour": [int(np.floor(c * 255 + 0.5)) for c in seg["color"]] if "color" in seg else None,
             "voxels": int(mask.sum()),
             "centroid": centroid,

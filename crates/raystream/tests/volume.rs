@@ -1844,6 +1844,19 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
         for (n, (k, s)) in labels.segments.iter().zip(segments).enumerate() {
             let colour: Option<[u8; 3]> = serde_json::from_value(s["colour"].clone()).unwrap();
             assert_eq!(k.colour, colour, "{path:?} {}", k.label);
+            // Its terminology's category, type and modifier, as slicerio splits them.
+            let t = &k.terms;
+            for (ours, theirs) in [
+                (&t.category, "category"),
+                (&t.kind, "type"),
+                (&t.modifier, "modifier"),
+            ] {
+                let want: Option<[String; 3]> = serde_json::from_value(s[theirs].clone()).unwrap();
+                let got = ours
+                    .as_ref()
+                    .map(|c| [c.scheme.clone(), c.value.clone(), c.meaning.clone()]);
+                assert_eq!(got, want, "{path:?} {} {theirs}", k.label);
+            }
             if shared_values {
                 assert_eq!(k.number as usize, n + 1, "{path:?} {}", k.label);
             }
@@ -1869,11 +1882,37 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
             }
         }
         // Slicer's chest segments keep their label values; the files with a second layer
-        // share them.
+        // share them. Slicer coded each of its own (ribs: SNOMED CT's Rib).
+        if f == &files[0] {
+            assert!(labels.segments.iter().all(|k| k.terms.kind.is_some()));
+            assert_eq!(
+                labels.segments[0].terms.kind.as_ref().unwrap().meaning,
+                "Rib"
+            );
+        }
         let layered = f != &files[0];
         assert_eq!(shared_values, layered, "{path:?}: {:?}", labels.warnings);
         assert_eq!(whole.is_some(), layered, "{path:?}");
     }
+
+    // `info` says what each segment is coded as, in its text and its JSON.
+    let first = files[0]["path"].as_str().unwrap();
+    let j = info(first);
+    assert_eq!(
+        j["segments"][0]["type"],
+        serde_json::json!({"value": "113197003", "scheme": "SCT", "meaning": "Rib"})
+    );
+    assert_eq!(
+        j["segments"][0]["category"]["meaning"],
+        "Anatomical Structure"
+    );
+    assert_eq!(j["segments"][0]["modifier"], Value::Null);
+    let o = run(&["info", first]);
+    assert!(
+        stdout(&o).contains("1: ribs (the voxels of value 1, shown in #fde89e; coded Rib (SCT 113197003), in Anatomical Structure)"),
+        "{}",
+        stdout(&o)
+    );
 
     // The tissue whole from both of Slicer's files: one surface.
     let (one, two) = (

@@ -57,13 +57,28 @@ pub struct DicomSeriesInfo {
 
 /// A segment of a label file as read (a DICOM Segmentation's, an RT Structure Set's
 /// structure, a 3D Slicer segmentation's): its number (its voxels' value in the label
-/// volume), its name, and the colour it recommends showing it in (sRGB; `None` where it gives
-/// none).
+/// volume), its name, the colour it recommends showing it in (sRGB; `None` where it gives
+/// none), and what it is, coded (`None` where the file does not say).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct SegmentLabel {
     pub number: u16,
     pub label: String,
     pub colour: Option<[u8; 3]>,
+    pub terms: SegmentTerms,
+}
+
+/// What a segment is, as coded concepts (SNOMED CT's, mostly): a DICOM Segmentation's
+/// Segmented Property Category, Type and Type Modifier, or the same three of a 3D Slicer
+/// segment's `TerminologyEntry` tag.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SegmentTerms {
+    /// What kind of thing: "Anatomical Structure", "Tissue", "Morphologically Altered
+    /// Structure"…
+    pub category: Option<crate::ReadCode>,
+    /// Which: "Rib", "Aorta", "Mass"…
+    pub kind: Option<crate::ReadCode>,
+    /// Its side or part: "Right", "Left"…
+    pub modifier: Option<crate::ReadCode>,
 }
 
 /// One acquired image of a series: a file's SOP instance, and its frame in a multi-frame one.

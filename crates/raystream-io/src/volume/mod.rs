@@ -27,7 +27,9 @@ use std::path::{Path, PathBuf};
 
 use raystream_math::DVec3;
 
-pub use dicom::{DicomSeriesInfo, DicomStudy, SegmentLabel, SourceImage, list_dicom_series};
+pub use dicom::{
+    DicomSeriesInfo, DicomStudy, SegmentLabel, SegmentTerms, SourceImage, list_dicom_series,
+};
 pub use structure_set::{
     RT_STRUCTURE_SET, RasterNotes, Roi, SegmentVoxels, StructureSet, WholeSegments,
     is_structure_set_file, is_structure_set_volume, whole_segments,

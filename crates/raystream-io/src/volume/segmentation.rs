@@ -167,10 +167,22 @@ pub(crate) fn read_segments(
                         .and_then(|e| e.to_multi_int::<u16>().ok())
                         .and_then(|v| <[u16; 3]>::try_from(v).ok())
                         .map(crate::srgb_from_cielab);
+                    let code = crate::measurement_report::code_of;
+                    let kind_item = s
+                        .get(tags::SEGMENTED_PROPERTY_TYPE_CODE_SEQUENCE)
+                        .and_then(|e| e.items())
+                        .and_then(|i| i.first());
                     Some(SegmentLabel {
                         number,
                         label: text(s, tags::SEGMENT_LABEL),
                         colour,
+                        terms: crate::SegmentTerms {
+                            category: code(s, tags::SEGMENTED_PROPERTY_CATEGORY_CODE_SEQUENCE),
+                            kind: code(s, tags::SEGMENTED_PROPERTY_TYPE_CODE_SEQUENCE),
+                            modifier: kind_item.and_then(|k| {
+                                code(k, tags::SEGMENTED_PROPERTY_TYPE_MODIFIER_CODE_SEQUENCE)
+                            }),
+                        },
                     })
                 })
                 .collect()

@@ -23,6 +23,36 @@ pub(crate) struct SlicerSegment {
     /// The value that marks its voxels on its layer (≥ 1).
     pub label_value: u32,
     pub layer: usize,
+    /// Its category, type and type modifier from its `TerminologyEntry` tag.
+    pub terms: crate::SegmentTerms,
+}
+
+/// The category, type and type modifier of a `Tags` field's `TerminologyEntry` (tags are
+/// `key:value` pairs between `|`; the entry's parts lie between `~`: the context's name, the
+/// category, the type, the type modifier, then the anatomic context, region and modifier; a
+/// code is `scheme^value^meaning`, `^^` where none is given).
+fn terms(tags: &str) -> crate::SegmentTerms {
+    let Some(entry) = tags
+        .split('|')
+        .find_map(|t| t.trim().strip_prefix("TerminologyEntry:"))
+    else {
+        return crate::SegmentTerms::default();
+    };
+    let parts: Vec<&str> = entry.split('~').collect();
+    let code = |k: usize| {
+        let mut c = parts.get(k)?.splitn(3, '^');
+        let (scheme, value, meaning) = (c.next()?, c.next()?, c.next()?);
+        (!value.is_empty()).then(|| crate::ReadCode {
+            value: value.to_string(),
+            scheme: scheme.to_string(),
+            meaning: meaning.to_string(),
+        })
+    };
+    crate::SegmentTerms {
+        category: code(1),
+        kind: code(2),
+        modifier: code(3),
+    }
 }
 
 /// The segments the `SegmentN_*` fields of `fields` (a header's `key:=value` pairs) describe,
@@ -104,6 +134,7 @@ pub(crate) fn segments(
             colour,
             label_value: label_value as u32,
             layer,
+            terms: f.get("Tags").map(|t| terms(t)).unwrap_or_default(),
         });
     }
     Ok(Some(out))
@@ -217,6 +248,7 @@ pub(crate) fn label_volume(
             number,
             label: s.name.clone(),
             colour: s.colour,
+            terms: s.terms.clone(),
         })
         .collect();
     let [nx, ny, _] = dims;

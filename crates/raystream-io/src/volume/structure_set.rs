@@ -181,6 +181,7 @@ impl StructureSet {
                 number: r.number,
                 label: r.name.clone(),
                 colour: r.colour,
+                ..Default::default()
             })
             .collect()
     }
