@@ -179,6 +179,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Ply, MeshError> {
                 let rows = Parser::<Face>::new()
                     .read_payload_for_element(&mut reader, def, &header)
                     .map_err(|e| bad(&e))?;
+                let face_coloured = coloured(def);
                 for (f, face) in rows.iter().enumerate() {
                     if let Some(&i) = face.0.iter().find(|&&i| i < 0 || i > u32::MAX as i64) {
                         return Err(MeshError::invalid(
@@ -189,7 +190,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Ply, MeshError> {
                     for k in 2..face.0.len() {
                         mesh.triangles
                             .push([face.0[0], face.0[k - 1], face.0[k]].map(|i| i as u32));
-                        if coloured(def) {
+                        if face_coloured {
                             face_colours.push(face.1);
                         }
                     }
