@@ -772,6 +772,8 @@ pub(crate) mod tests {
                         category: Some(code(s.category)),
                         kind: Some(code(s.kind)),
                         modifier: None,
+                        region: None,
+                        region_modifier: None,
                     },
                 }
             })

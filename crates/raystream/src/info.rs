@@ -406,6 +406,8 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 "category": code_json(&k.terms.category),
                 "type": code_json(&k.terms.kind),
                 "modifier": code_json(&k.terms.modifier),
+                "region": code_json(&k.terms.region),
+                "region_modifier": code_json(&k.terms.region_modifier),
             })).collect::<Vec<_>>(),
             "warnings": v.warnings,
         });
@@ -649,25 +651,34 @@ fn code_json(c: &Option<raystream_io::ReadCode>) -> serde_json::Value {
     )
 }
 
-/// What a segment is coded as, for `info`'s line: `; coded Lung, Right (SCT 39607008), an
-/// Anatomical Structure`; empty where the file codes nothing.
+/// What a segment is coded as, for `info`'s line: `; coded Lung, Right (SCT 39607008), in
+/// Anatomical Structure` (its type, then its category), with `, site Kidney, Right (SCT
+/// 64033007)` after the type where it names the region it lies in; empty where the file codes
+/// nothing.
 fn terms_text(t: &raystream_io::SegmentTerms) -> String {
     let Some(kind) = &t.kind else {
         return String::new();
     };
-    let modifier = t
-        .modifier
-        .as_ref()
-        .map(|m| format!(", {}", m.meaning))
-        .unwrap_or_default();
+    let with_modifier = |c: &raystream_io::ReadCode, m: &Option<raystream_io::ReadCode>| {
+        let m = m
+            .as_ref()
+            .map(|m| format!(", {}", m.meaning))
+            .unwrap_or_default();
+        format!("{}{m} ({} {})", c.meaning, c.scheme, c.value)
+    };
     let category = t
         .category
         .as_ref()
         .map(|c| format!(", in {}", c.meaning))
         .unwrap_or_default();
+    let region = t
+        .region
+        .as_ref()
+        .map(|r| format!(", site {}", with_modifier(r, &t.region_modifier)))
+        .unwrap_or_default();
     format!(
-        "; coded {}{modifier} ({} {}){category}",
-        kind.meaning, kind.scheme, kind.value
+        "; coded {}{region}{category}",
+        with_modifier(kind, &t.modifier)
     )
 }
 

@@ -24,15 +24,19 @@ labels = sitk.GetArrayFromImage(sitk.ReadImage(labels_path)).astype(np.uint8)  #
 assert labels.shape[0] == len(src)
 
 
-def segment(n, label, code, meaning):
+def segment(n, label, code, meaning, region=None):
     return hd.seg.SegmentDescription(
         segment_number=n, segment_label=label,
         segmented_property_category=hd.sr.CodedConcept("123037004", "SCT", "Anatomical Structure"),
         segmented_property_type=hd.sr.CodedConcept(code, "SCT", meaning),
-        algorithm_type=hd.seg.SegmentAlgorithmTypeValues.MANUAL)
+        algorithm_type=hd.seg.SegmentAlgorithmTypeValues.MANUAL,
+        anatomic_regions=[region] if region else None)
 
 
-segments = [segment(1, "lumen", "91747007", "Lumen"),
+# The lumen's segment names the vessel it lies in (its Anatomic Region), and that region's side
+# (an Anatomic Region Modifier, set below: highdicom takes no modifier).
+segments = [segment(1, "lumen", "91747007", "Lumen",
+                    hd.sr.CodedConcept("73634005", "SCT", "Common iliac artery")),
             segment(2, "wall", "59820001", "Blood vessel")]
 if kind == "FRACTIONAL":
     # One fraction a segment, along a last axis.
@@ -49,6 +53,10 @@ seg = hd.seg.Segmentation(
     series_instance_uid=hd.UID(), series_number=7, sop_instance_uid=hd.UID(), instance_number=1,
     manufacturer="test", manufacturer_model_name="test", software_versions="0",
     device_serial_number="0")
+right = pydicom.Dataset()
+right.CodeValue, right.CodingSchemeDesignator, right.CodeMeaning = "24028007", "SCT", "Right"
+lumen = next(s for s in seg.SegmentSequence if s.SegmentNumber == 1)
+lumen.AnatomicRegionSequence[0].AnatomicRegionModifierSequence = [right]
 if ts_name == "deflated":
     seg.file_meta.TransferSyntaxUID = pydicom.uid.DeflatedExplicitVRLittleEndian
 seg.save_as(out, enforce_file_format=True)

@@ -1562,6 +1562,17 @@ fn the_mask_as_a_dicom_segmentation_of_the_series() {
                 sct("123037004", "Anatomical Structure"),
                 "{written_by}"
             );
+            // highdicom's lumen lies in the right common iliac artery; raystream names no
+            // region.
+            let (region, side) = match (written_by.starts_with("highdicom"), k.number) {
+                (true, 1) => (
+                    sct("73634005", "Common iliac artery"),
+                    sct("24028007", "Right"),
+                ),
+                _ => (None, None),
+            };
+            assert_eq!(code(&k.terms.region), region, "{written_by}");
+            assert_eq!(code(&k.terms.region_modifier), side, "{written_by}");
         }
         assert_eq!(v.direction, labels.direction, "{written_by}");
         assert_eq!(v.spacing, labels.spacing, "{written_by}");
@@ -3367,9 +3378,11 @@ fn segments_become_closed_surfaces() {
         info["segments"],
         serde_json::json!([
             {"number": 1, "label": "Lumen", "colour": [0, 255, 255], "category": anatomy,
-             "type": sct("91747007", "Lumen"), "modifier": null},
+             "type": sct("91747007", "Lumen"), "modifier": null, "region": null,
+             "region_modifier": null},
             {"number": 2, "label": "Wall and thrombus", "colour": [255, 0, 255],
-             "category": anatomy, "type": sct("59820001", "Blood vessel"), "modifier": null}
+             "category": anatomy, "type": sct("59820001", "Blood vessel"), "modifier": null,
+             "region": null, "region_modifier": null}
         ])
     );
     let text = stdout(&run(&["info", seg_file]));
@@ -4011,6 +4024,24 @@ fn structure_sets_are_laid_on_their_ct() {
                 .contains("held by more than one segment"),
             "{}",
             info["warnings"]
+        );
+        // The lumen's Anatomic Region and its modifier, in the JSON and the text.
+        let sct = |value: &str, meaning: &str| serde_json::json!({"value": value, "scheme": "SCT", "meaning": meaning});
+        assert_eq!(
+            info["segments"][0]["region"],
+            sct("73634005", "Common iliac artery")
+        );
+        assert_eq!(
+            info["segments"][0]["region_modifier"],
+            sct("24028007", "Right")
+        );
+        assert_eq!(info["segments"][1]["region"], serde_json::Value::Null);
+        let text = stdout(&run(&["info", seg_file]));
+        assert!(
+            text.contains(
+                "coded Lumen (SCT 91747007), site Common iliac artery, Right (SCT 73634005), in Anatomical Structure)"
+            ),
+            "{text}"
         );
         let (from_seg, _) = stats(ct.to_str().unwrap(), seg_file);
         for l in 0..3 {

@@ -35,6 +35,8 @@ def describe(path, masks=None):
             "category": code("category"),
             "type": code("type"),
             "modifier": code("typeModifier"),
+            "region": code("anatomicRegion"),
+            "region_modifier": code("anatomicRegionModifier"),
             "colour": [int(np.floor(c * 255 + 0.5)) for c in seg["color"]] if "color" in seg else None,
             "voxels": int(mask.sum()),
             "centroid": centroid,
@@ -69,9 +71,20 @@ i, j, k = np.indices(shape)
 ball = (i - 15) ** 2 + (j - 16) ** 2 + ((k - 11) * 2) ** 2 <= 10 ** 2
 slab = (i >= 12) & (i < 30) & (j >= 5) & (j < 30) & (k >= 10) & (k < 14)
 cube = (i >= 32) & (i < 38) & (j >= 28) & (j < 34) & (k >= 2) & (k < 8)
+# The ball is coded as Slicer codes a mass in the right adrenal gland: its type, and the
+# anatomic region it lies in with that region's modifier.
+mass = {"contextName": "Segmentation category and type - 3D Slicer General Anatomy list",
+        "category": ["SCT", "49755003", "Morphologically Altered Structure"],
+        "type": ["SCT", "4147007", "Mass"],
+        "anatomicContextName": "Anatomic codes - DICOM master list",
+        "anatomicRegion": ["SCT", "23451007", "Adrenal gland"],
+        "anatomicRegionModifier": ["SCT", "24028007", "Right"]}
 for name, mask, colour in (("ball", ball, [1.0, 0.2, 0.2]), ("slab", slab, [0.2, 0.4, 1.0]),
                            ("cube", cube, [0.1, 0.9, 0.3])):
-    slicerio.add_segment(s, mask, {"id": name, "name": name, "color": colour})
+    segment = {"id": name, "name": name, "color": colour}
+    if name == "ball":
+        segment["terminology"] = mass
+    slicerio.add_segment(s, mask, segment)
 oblique = os.path.join(out, "oblique.seg.nrrd")
 slicerio.write_segmentation(oblique, s)
 files.append(describe(oblique)[0])

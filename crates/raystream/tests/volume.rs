@@ -1844,12 +1844,15 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
         for (n, (k, s)) in labels.segments.iter().zip(segments).enumerate() {
             let colour: Option<[u8; 3]> = serde_json::from_value(s["colour"].clone()).unwrap();
             assert_eq!(k.colour, colour, "{path:?} {}", k.label);
-            // Its terminology's category, type and modifier, as slicerio splits them.
+            // Its terminology's category, type and modifier, and the anatomic region and its
+            // modifier, as slicerio splits them.
             let t = &k.terms;
             for (ours, theirs) in [
                 (&t.category, "category"),
                 (&t.kind, "type"),
                 (&t.modifier, "modifier"),
+                (&t.region, "region"),
+                (&t.region_modifier, "region_modifier"),
             ] {
                 let want: Option<[String; 3]> = serde_json::from_value(s[theirs].clone()).unwrap();
                 let got = ours
@@ -1889,6 +1892,13 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
                 labels.segments[0].terms.kind.as_ref().unwrap().meaning,
                 "Rib"
             );
+        }
+        // The oblique file's ball: a mass in the right adrenal gland.
+        if f == &files[2] {
+            let t = &labels.segments[0].terms;
+            assert_eq!(t.kind.as_ref().unwrap().meaning, "Mass");
+            assert_eq!(t.region.as_ref().unwrap().value, "23451007");
+            assert_eq!(t.region_modifier.as_ref().unwrap().meaning, "Right");
         }
         let layered = f != &files[0];
         assert_eq!(shared_values, layered, "{path:?}: {:?}", labels.warnings);

@@ -68,8 +68,8 @@ pub struct SegmentLabel {
 }
 
 /// What a segment is, as coded concepts (SNOMED CT's, mostly): a DICOM Segmentation's
-/// Segmented Property Category, Type and Type Modifier, or the same three of a 3D Slicer
-/// segment's `TerminologyEntry` tag.
+/// Segmented Property Category, Type and Type Modifier, and the Anatomic Region it lies in with
+/// that region's modifier; or the same five of a 3D Slicer segment's `TerminologyEntry` tag.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct SegmentTerms {
     /// What kind of thing: "Anatomical Structure", "Tissue", "Morphologically Altered
@@ -79,6 +79,11 @@ pub struct SegmentTerms {
     pub kind: Option<crate::ReadCode>,
     /// Its side or part: "Right", "Left"…
     pub modifier: Option<crate::ReadCode>,
+    /// Where it lies, where its type does not say: a "Mass" in the "Liver", a "Calcification"
+    /// in the "Aortic valve".
+    pub region: Option<crate::ReadCode>,
+    /// The region's side or part: the "Right" kidney.
+    pub region_modifier: Option<crate::ReadCode>,
 }
 
 /// One acquired image of a series: a file's SOP instance, and its frame in a multi-frame one.

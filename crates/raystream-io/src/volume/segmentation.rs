@@ -172,6 +172,11 @@ pub(crate) fn read_segments(
                         .get(tags::SEGMENTED_PROPERTY_TYPE_CODE_SEQUENCE)
                         .and_then(|e| e.items())
                         .and_then(|i| i.first());
+                    // Modifiers sit in the item of the code they modify.
+                    let region_item = s
+                        .get(tags::ANATOMIC_REGION_SEQUENCE)
+                        .and_then(|e| e.items())
+                        .and_then(|i| i.first());
                     Some(SegmentLabel {
                         number,
                         label: text(s, tags::SEGMENT_LABEL),
@@ -182,6 +187,9 @@ pub(crate) fn read_segments(
                             modifier: kind_item.and_then(|k| {
                                 code(k, tags::SEGMENTED_PROPERTY_TYPE_MODIFIER_CODE_SEQUENCE)
                             }),
+                            region: code(s, tags::ANATOMIC_REGION_SEQUENCE),
+                            region_modifier: region_item
+                                .and_then(|r| code(r, tags::ANATOMIC_REGION_MODIFIER_SEQUENCE)),
                         },
                     })
                 })

@@ -23,11 +23,13 @@ pub(crate) struct SlicerSegment {
     /// The value that marks its voxels on its layer (≥ 1).
     pub label_value: u32,
     pub layer: usize,
-    /// Its category, type and type modifier from its `TerminologyEntry` tag.
+    /// Its category, type, type modifier, anatomic region and region modifier from its
+    /// `TerminologyEntry` tag.
     pub terms: crate::SegmentTerms,
 }
 
-/// The category, type and type modifier of a `Tags` field's `TerminologyEntry` (tags are
+/// The category, type and type modifier, and the anatomic region and its modifier, of a `Tags`
+/// field's `TerminologyEntry` (tags are
 /// `key:value` pairs between `|`; the entry's parts lie between `~`: the context's name, the
 /// category, the type, the type modifier, then the anatomic context, region and modifier; a
 /// code is `scheme^value^meaning`, `^^` where none is given).
@@ -52,6 +54,9 @@ fn terms(tags: &str) -> crate::SegmentTerms {
         category: code(1),
         kind: code(2),
         modifier: code(3),
+        region: code(5),
+        // A modifier of no region modifies nothing (slicerio drops it too).
+        region_modifier: code(5).and(code(6)),
     }
 }
 
