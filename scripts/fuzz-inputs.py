@@ -139,6 +139,15 @@ def seeds(d):
     for t in f:
         b += struct.pack("<12fH", 0, 0, 0, *v[t[0]], *v[t[1]], *v[t[2]], 0)
     w("t_bin.stl", b)
+    # Colour STLs: Materialise's (COLOR= and MATERIAL= in the header, a triangle its own colour
+    # or the part's) and VisCAM's (bit 15 set: its own colour).
+    for name, header, attrs in (
+            ("tcm.stl", b"COLOR=\x28\x5a\xc8\xff,MATERIAL=" + bytes(range(12)), (0x001f, 0x8000, 0x7c00, 0)),
+            ("tcv.stl", b"VisCAM", (0xfc00, 0, 0x83e0, 0xffff))):
+        b = header.ljust(80, b" ") + struct.pack("<I", len(f))
+        for t, a in zip(f, attrs * len(f)):
+            b += struct.pack("<12fH", 0, 0, 0, *v[t[0]], *v[t[1]], *v[t[2]], a)
+        w(name, b)
     # glTF: the tetrahedron as a GLB (positions, normals, u16 indices, a material, a node that
     # moves and scales it under a parent) and as a .gltf with its buffer as a data URI.
     pos = b"".join(struct.pack("<3f", *p) for p in v)

@@ -50,6 +50,7 @@ pub use segmentation::{
     is_segmentation_path, segmentation_source, srgb_from_cielab, write_segmentation,
 };
 pub use slicer_segmentation::{is_slicer_segmentation_path, write_slicer_segmentation};
+pub use stl::STL_UNCOLOURED;
 pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping, linear_to_srgb8};
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, RT_STRUCTURE_SET, RasterNotes, Roi,
@@ -153,11 +154,14 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
                 ply.normals.into_iter().map(Some).collect(),
             )
         }
-        MeshFormat::Stl => (
-            stl::parse(&bytes, path)?,
-            MeshShading::default(),
-            Vec::new(),
-        ),
+        MeshFormat::Stl => {
+            let stl = stl::parse(&bytes, path)?;
+            let shading = MeshShading {
+                colours: stl.colours,
+                ..Default::default()
+            };
+            (stl.mesh, shading, Vec::new())
+        }
         MeshFormat::Gltf => {
             let g = gltf::parse(&bytes, path, path.parent(), true)?;
             let shading = MeshShading {
@@ -394,7 +398,8 @@ pub struct MeshShading {
     pub uvs: Vec<[Vec2; 3]>,
     /// Per triangle, its corners' colours, 8-bit sRGB: a PLY's `red green blue` (per vertex or
     /// per face), an OBJ's `v x y z r g b`, a glTF primitive's `COLOR_0`, a VTK file's colour
-    /// scalars (per point or per cell); empty when the file gives none. They multiply the
+    /// scalars (per point or per cell), a binary STL's triangle colours (Materialise's or
+    /// VisCAM's); empty when the file gives none. They multiply the
     /// material's ambient and diffuse colours, as a texture does.
     pub colours: Vec<[Rgb8; 3]>,
     /// What a user should know: a library missing or unreadable, a texture not applied.
@@ -489,7 +494,7 @@ fn parse_mesh_in(
     let mesh = match format {
         MeshFormat::Obj => parse_obj(&bytes, path, None)?.0,
         MeshFormat::Ply => ply::parse(&bytes, path)?.mesh,
-        MeshFormat::Stl => stl::parse(&bytes, path)?,
+        MeshFormat::Stl => stl::parse(&bytes, path)?.mesh,
         MeshFormat::Gltf => gltf::parse(&bytes, path, dir, false)?.mesh,
         MeshFormat::Vtk => vtk_mesh::parse(&bytes, path)?.mesh,
         MeshFormat::VtkXml => vtk_xml::parse_poly(&bytes, path)?.mesh,

@@ -274,6 +274,129 @@ fn written_meshes_read_back_identically() {
     assert!(e.contains("m.off"), "{e}");
 }
 
+/// A binary STL of one triangle a value of `attributes`, `header` at the start of its 80 bytes.
+fn binary_stl(header: &[u8], attributes: &[u16]) -> Vec<u8> {
+    let mut b = vec![0u8; 80];
+    b[..header.len()].copy_from_slice(header);
+    b.extend_from_slice(&(attributes.len() as u32).to_le_bytes());
+    for (i, a) in attributes.iter().enumerate() {
+        let x = i as f32;
+        for v in [
+            0.0,
+            0.0,
+            1.0,
+            x,
+            0.0,
+            0.0,
+            x + 1.0,
+            0.0,
+            0.0,
+            x,
+            1.0,
+            0.0f32,
+        ] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.extend_from_slice(&a.to_le_bytes());
+    }
+    b
+}
+
+/// A binary STL's triangle colours (by Wikipedia's "STL (file format)"), read from `bytes`.
+fn stl_colours(bytes: &[u8]) -> Vec<Rgb8> {
+    let path = scratch_file("c.stl");
+    std::fs::write(&path, bytes).unwrap();
+    let (mesh, shading) = load_mesh_with_shading(&path).unwrap();
+    assert!(shading.colours.is_empty() || shading.colours.len() == mesh.len());
+    shading
+        .colours
+        .iter()
+        .map(|c| {
+            assert!(c[1] == c[0] && c[2] == c[0], "a colour a triangle");
+            c[0]
+        })
+        .collect()
+}
+
+/// Colour in binary STL, by its two conventions: Materialise's (`COLOR=` in the header, a
+/// triangle's own colour red-first where bit 15 is clear) and VisCAM's (no `COLOR=`, blue-first
+/// where bit 15 is set); and `iso`'s STL, which carries its part's colour both ways.
+#[test]
+fn binary_stl_colours_by_both_conventions() {
+    // The 5-bit channels: each of the 32 values comes back; 8 bits within half a step.
+    for v in 0..32u16 {
+        let c = ((u32::from(v) * 255 + 15) / 31) as u8;
+        assert_eq!(stl::five_bits(c), v);
+    }
+    let (r5, g5, b5) = (31u16, 16u16, 1u16);
+    let (r8, g8, b8) = (255u8, 132u8, 8u8);
+    // VisCAM/SolidView: red in bits 10-14; bit 15 clear is no colour (the default grey).
+    let viscam = binary_stl(
+        b"solid? no: binary",
+        &[0x8000 | r5 << 10 | g5 << 5 | b5, 0, 0x8000],
+    );
+    assert_eq!(
+        stl_colours(&viscam),
+        [[r8, g8, b8], STL_UNCOLOURED, [0, 0, 0]]
+    );
+    // No triangle with bit 15 set and no COLOR=: no colours (netfabb's vase too, tested above).
+    assert!(stl_colours(&binary_stl(b"plain", &[0, 0x7fff])).is_empty());
+    // Materialise: red in bits 0-4 where bit 15 is clear; the part's colour where it is set.
+    let mut header = b"Magics COLOR=".to_vec();
+    header.extend_from_slice(&[40, 90, 200, 255]);
+    let near_part = stl::five_bits(40) | stl::five_bits(90) << 5 | stl::five_bits(200) << 10;
+    let cut_part = (40 >> 3) | (90 >> 3) << 5 | (200 >> 3) << 10;
+    let magics = binary_stl(
+        &header,
+        &[r5 | g5 << 5 | b5 << 10, 0x8000, 0, near_part, cut_part],
+    );
+    assert_eq!(
+        stl_colours(&magics),
+        [
+            [r8, g8, b8],
+            [40, 90, 200],
+            [0, 0, 0],
+            // A triangle's own colour that is the part's at 5 bits, rounded or cut: the part's.
+            [40, 90, 200],
+            [40, 90, 200],
+        ]
+    );
+    // A MATERIAL= after it: its diffuse colour is the part's.
+    header.extend_from_slice(b",MATERIAL=");
+    header.extend_from_slice(&[7, 8, 9, 255, 100, 100, 100, 255, 1, 1, 1, 255]);
+    assert_eq!(stl_colours(&binary_stl(&header, &[0x8000])), [[7, 8, 9]]);
+    // A header cut off after COLOR= (fewer than 4 bytes left): no part colour, VisCAM's way.
+    let mut at_end = vec![b' '; 80];
+    at_end[74..].copy_from_slice(b"COLOR=");
+    assert!(stl_colours(&binary_stl(&at_end, &[0])).is_empty());
+
+    // `write_mesh_parts`' STL: the part's colour in its header and in every triangle; read back
+    // exactly (8 bits), its space still LPS.
+    let mesh = TriMesh::icosphere(1);
+    let path = scratch_file("part.stl");
+    let colour = [0.8f32, 0.3, 0.05];
+    let part = MeshPart {
+        name: "part",
+        mesh: &mesh,
+        normals: None,
+        colour,
+    };
+    write_mesh_parts(&path, &[part]).unwrap();
+    let srgb = colour.map(|c| linear_to_srgb8(c as f64));
+    let (_, shading) = load_mesh_with_shading(&path).unwrap();
+    assert_eq!(shading.colours, vec![[srgb; 3]; mesh.len()]);
+    assert_eq!(shading.space, Some(PatientSpace::Lps));
+    let bytes = std::fs::read(&path).unwrap();
+    let at = bytes[..80].windows(6).position(|w| w == b"COLOR=").unwrap() + 6;
+    assert_eq!(bytes[at..at + 4], [srgb[0], srgb[1], srgb[2], 255]);
+    let own = u16::from_le_bytes([bytes[84 + 48], bytes[84 + 49]]);
+    assert_eq!(own & 0x8000, 0, "a triangle's own colour");
+    assert_eq!(
+        [own & 31, own >> 5 & 31, own >> 10 & 31],
+        srgb.map(stl::five_bits)
+    );
+}
+
 /// 3D Slicer's `SPACE=` tag, where each format carries it (Slicer's own headers and comments),
 /// and where it is not one.
 #[test]

@@ -52,17 +52,22 @@ pub(crate) fn colours_of(
     )
 }
 
-/// Per triangle, its corners' colours: its points' where the points have colours, else its
+/// Per triangle, its corners' colours: its points' where the points have colours (`point[v -
+/// base]` for vertex `v`: a `.vtp` piece's points follow those of the pieces before), else its
 /// cell's (`cell_of`: each triangle's cell, by its id in VTK's order), as VTK's mappers colour
 /// by point scalars first; else none.
 pub(crate) fn triangle_colours(
     triangles: &[[u32; 3]],
+    base: u32,
     cell_of: &[usize],
     point: &[Rgb8],
     cell: &[Rgb8],
 ) -> Vec<[Rgb8; 3]> {
     if !point.is_empty() {
-        crate::corner_colours(triangles, point)
+        triangles
+            .iter()
+            .map(|t| t.map(|v| point[(v - base) as usize]))
+            .collect()
     } else if !cell.is_empty() {
         cell_of.iter().map(|&c| [cell[c]; 3]).collect()
     } else {
@@ -202,7 +207,7 @@ fn parse_poly(bytes: &[u8]) -> Result<PolyData, String> {
     if cell_colours.len() != first_of[3] + section_cells[3] {
         cell_colours.clear();
     }
-    let colours = triangle_colours(&triangles, &cell_of, &point_colours, &cell_colours);
+    let colours = triangle_colours(&triangles, 0, &cell_of, &point_colours, &cell_colours);
     Ok(PolyData {
         mesh: TriMesh {
             positions,

@@ -608,11 +608,13 @@ fn poly(bytes: &[u8]) -> Result<crate::vtk_mesh::PolyData, String> {
         }
         let point = active_colours(point_data, &layout, n_points)?;
         let cell = active_colours(children(piece, "CellData").next(), &layout, cell_id)?;
-        let local: Vec<[u32; 3]> = triangles[first_triangle..]
-            .iter()
-            .map(|t| t.map(|v| v - base as u32))
-            .collect();
-        let own = crate::vtk_mesh::triangle_colours(&local, &cell_of, &point, &cell);
+        let own = crate::vtk_mesh::triangle_colours(
+            &triangles[first_triangle..],
+            base as u32,
+            &cell_of,
+            &point,
+            &cell,
+        );
         if !own.is_empty() || !colours.is_empty() {
             // Pieces before without colours are white, as are those after.
             colours.resize(first_triangle, [[255; 3]; 3]);

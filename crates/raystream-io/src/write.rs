@@ -106,7 +106,7 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
             write_obj(&mut w, &parts, Some(&name))
         }
         MeshFormat::Obj => write_obj(&mut w, &parts, None),
-        MeshFormat::Stl => write_stl(&mut w, parts[0].mesh),
+        MeshFormat::Stl => write_stl(&mut w, &parts[0]),
         MeshFormat::Gltf => write_glb(&mut w, &parts),
         MeshFormat::Vtk => write_vtk(&mut w, &parts),
         MeshFormat::VtkXml => write_vtp(&mut w, &parts),
@@ -459,14 +459,24 @@ fn write_vtp(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
 }
 
 /// Binary STL, written by hand rather than by stl_io, whose writer leaves the 80-byte header
-/// blank: the header says the coordinates' space, as 3D Slicer reads it (`SPACE=LPS`).
-fn write_stl(w: &mut impl Write, mesh: &TriMesh) -> std::io::Result<()> {
+/// blank: the header says the coordinates' space, as 3D Slicer reads it (`SPACE=LPS`), and the
+/// part's colour as Materialise's software reads it (`COLOR=` and its sRGB bytes, opaque); each
+/// triangle carries that colour as its own too, 5 bits a channel with bit 15 clear, so that a
+/// reader taking a triangle's colour over the header's (Materialise's convention) and one
+/// taking the header's where bit 15 is clear (Assimp's) show the same. A reader of VisCAM's
+/// convention, which needs bit 15 set, sees no colours.
+fn write_stl(w: &mut impl Write, part: &MeshPart) -> std::io::Result<()> {
+    let mesh = part.mesh;
+    let srgb = part.colour.map(|c| crate::linear_to_srgb8(c as f64));
     let mut header = [b' '; 80];
-    let text = b"raystream isosurface, LPS millimetres. SPACE=LPS";
+    let text = b"raystream isosurface, LPS millimetres. SPACE=LPS COLOR=";
     header[..text.len()].copy_from_slice(text);
+    header[text.len()..text.len() + 4].copy_from_slice(&[srgb[0], srgb[1], srgb[2], 255]);
     w.write_all(&header)?;
     let count = u32::try_from(mesh.len()).map_err(std::io::Error::other)?;
     w.write_all(&count.to_le_bytes())?;
+    let [r, g, b] = srgb.map(crate::stl::five_bits);
+    let attribute = (r | g << 5 | b << 10).to_le_bytes();
     for i in 0..mesh.len() {
         let [a, b, c] = mesh.corners(i);
         let n = (b - a).cross(c - a).normalize_or_zero();
@@ -475,7 +485,7 @@ fn write_stl(w: &mut impl Write, mesh: &TriMesh) -> std::io::Result<()> {
                 w.write_all(&x.to_le_bytes())?;
             }
         }
-        w.write_all(&[0, 0])?;
+        w.write_all(&attribute)?;
     }
     Ok(())
 }

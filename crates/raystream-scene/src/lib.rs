@@ -1134,6 +1134,18 @@ mod tests {
         );
     }
 
+    /// A colour STL's uncoloured triangles are given the default material's diffuse colour, so
+    /// that they look as a mesh without colours does (under the white a coloured mesh gets).
+    #[test]
+    fn uncoloured_stl_triangles_are_the_default_grey() {
+        let d = Material::default().diffuse;
+        assert_eq!(d, Vec3::splat(d.x));
+        assert_eq!(
+            raystream_io::STL_UNCOLOURED,
+            [raystream_io::linear_to_srgb8(d.x as f64); 3]
+        );
+    }
+
     /// A file's vertex colours: its triangles carry them, the objects before and after it (and
     /// the ground) white; without a scene material it is white under them (with the default
     /// material's highlight and ambient share), with one that material; a scene with no

@@ -2837,16 +2837,10 @@ fn gpu_matches_cpu_on_vertex_colours() {
     );
 }
 
-/// 3D Slicer's segmentation of a chest CT (slicerio's), its segments' surfaces written by
-/// `iso` as a PLY, a legacy VTK and a VTK XML file (each vertex in its segment's colour) and as an OBJ
-/// (each segment's colour a material of its MTL), render alike: the colours reach the image
-/// (left out, the segments are grey and the images differ by far more), and the `.vtp`'s
-/// `SPACE` field stands it up as the others' `SPACE=LPS` comments do.
-#[test]
-fn iso_segments_render_in_their_colours_from_ply_vtk_and_vtp_as_from_obj() {
-    let Some(py) = python_with("slicerio") else {
-        return;
-    };
+/// 3D Slicer's segmentation of a chest CT, as slicerio ships it (`None`: slicerio is not
+/// installed here).
+fn slicer_chest_segmentation() -> Option<String> {
+    let py = python_with("slicerio")?;
     let o = std::process::Command::new(&py)
         .args([
             "-c",
@@ -2854,7 +2848,37 @@ fn iso_segments_render_in_their_colours_from_ply_vtk_and_vtp_as_from_obj() {
         ])
         .output()
         .unwrap();
-    let seg = stdout(&o).trim().to_string();
+    Some(stdout(&o).trim().to_string())
+}
+
+/// `render MESH` on the CPU, 96×72, a sample a pixel, to `png`.
+fn render_small_on_cpu(mesh: &Path, png: &Path) {
+    let o = run(&[
+        "render",
+        mesh.to_str().unwrap(),
+        "--size",
+        "96x72",
+        "--spp",
+        "1",
+        "--quiet",
+        "--device",
+        "cpu",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// 3D Slicer's segmentation of a chest CT (slicerio's), its segments' surfaces written by
+/// `iso` as a PLY, a legacy VTK and a VTK XML file (each vertex in its segment's colour) and as an OBJ
+/// (each segment's colour a material of its MTL), render alike: the colours reach the image
+/// (left out, the segments are grey and the images differ by far more), and the `.vtp`'s
+/// `SPACE` field stands it up as the others' `SPACE=LPS` comments do.
+#[test]
+fn iso_segments_render_in_their_colours_from_ply_vtk_and_vtp_as_from_obj() {
+    let Some(seg) = slicer_chest_segmentation() else {
+        return;
+    };
     let image = |ext: &str| {
         let mesh = tmp(&format!("slicer-segments.{ext}"));
         let o = run(&[
@@ -2868,20 +2892,7 @@ fn iso_segments_render_in_their_colours_from_ply_vtk_and_vtp_as_from_obj() {
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
         let png = tmp(&format!("slicer-segments-{ext}.png"));
-        let o = run(&[
-            "render",
-            mesh.to_str().unwrap(),
-            "--size",
-            "96x72",
-            "--spp",
-            "1",
-            "--quiet",
-            "--device",
-            "cpu",
-            "-o",
-            png.to_str().unwrap(),
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
+        render_small_on_cpu(&mesh, &png);
         (mesh, png)
     };
     let (ply, from_ply) = image("ply");
@@ -2905,6 +2916,49 @@ fn iso_segments_render_in_their_colours_from_ply_vtk_and_vtp_as_from_obj() {
     gpu_matches_cpu(
         "slicer-segments",
         &[ply.to_str().unwrap(), "--size", "96x72", "--spp", "1"],
+        false,
+    );
+}
+
+/// `iso --segment NAME -o X.stl` writes the segment's colour as Materialise's software and
+/// Assimp read it; raystream reads it back and draws it, on both devices.
+#[test]
+fn an_iso_stl_carries_its_segments_colour() {
+    let Some(seg) = slicer_chest_segmentation() else {
+        return;
+    };
+    let stl = tmp("slicer-ribs.stl");
+    let o = run(&[
+        "iso",
+        "--quiet",
+        &seg,
+        "--segment",
+        "ribs",
+        "--simplify",
+        "0.5",
+        "-o",
+        stl.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Slicer's ribs are #fde89e: every corner, exactly.
+    let (mesh, shading) = raystream_io::load_mesh_with_shading(&stl).unwrap();
+    assert!(mesh.len() > 1000);
+    assert_eq!(shading.colours, vec![[[0xfd, 0xe8, 0x9e]; 3]; mesh.len()]);
+    let o = run(&["info", stl.to_str().unwrap(), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(v["colours"], serde_json::json!({"distinct": 1}));
+    let png = tmp("slicer-ribs-stl.png");
+    render_small_on_cpu(&stl, &png);
+    // Lit bone-yellow: red over blue by more than the grey of an uncoloured mesh allows.
+    let img = image::open(&png).unwrap().to_rgb8();
+    let yellow = img
+        .pixels()
+        .filter(|p| p[0] as i32 - p[2] as i32 > 30 && p[1] > p[2])
+        .count();
+    assert!(yellow > 300, "{yellow} yellow pixels");
+    gpu_matches_cpu(
+        "slicer-ribs-stl",
+        &[stl.to_str().unwrap(), "--size", "96x72", "--spp", "1"],
         false,
     );
 }
