@@ -139,6 +139,30 @@ def seeds(d):
     for t in f:
         b += struct.pack("<12fH", 0, 0, 0, *v[t[0]], *v[t[1]], *v[t[2]], 0)
     w("t_bin.stl", b)
+    # 3MF: the tetrahedron as a coloured object placed twice through components (one in another
+    # model part), and a colour group by triangle.
+    core = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
+    mat = "http://schemas.microsoft.com/3dmanufacturing/material/2015/02"
+    prod = "http://schemas.microsoft.com/3dmanufacturing/production/2015/06"
+    verts = "".join(f'<vertex x="{x}" y="{y}" z="{z}"/>' for x, y, z in v)
+    tris = "".join(f'<triangle v1="{a}" v2="{b}" v3="{c}" pid="4" p1="{k % 2}"/>' for k, (a, b, c) in enumerate(f))
+    root = (f'<model unit="centimeter" xmlns="{core}" xmlns:m="{mat}" xmlns:p="{prod}"><resources>'
+            '<basematerials id="1"><base name="a" displaycolor="#E3D9C9FF"/></basematerials>'
+            '<m:colorgroup id="4"><m:color color="#FF0000"/><m:color color="#00FF00FF"/></m:colorgroup>'
+            f'<object id="2" pid="1" pindex="0"><mesh><vertices>{verts}</vertices><triangles>{tris}</triangles></mesh></object>'
+            '<object id="3"><components><component objectid="2" transform="1 0 0 0 1 0 0 0 1 0 0 3"/>'
+            '<component p:path="/3D/o.model" objectid="1" transform="-1 0 0 0 1 0 0 0 1 0 0 0"/></components></object>'
+            '</resources><build><item objectid="3" transform="0 1 0 -1 0 0 0 0 1 5 5 5"/><item objectid="2"/></build></model>')
+    plain = "".join(f'<triangle v1="{a}" v2="{b}" v3="{c}"/>' for a, b, c in f)
+    other = (f'<model unit="millimeter" xmlns="{core}"><resources><object id="1"><mesh><vertices>{verts}</vertices>'
+             f'<triangles>{plain}</triangles></mesh></object></resources><build/></model>')
+    rels = ('<Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships">'
+            '<Relationship Target="/3D/3dmodel.model" Id="r0" '
+            'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/></Relationships>')
+    with zipfile.ZipFile(os.path.join(d, "t.3mf"), "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("_rels/.rels", rels)
+        z.writestr("3D/3dmodel.model", root)
+        z.writestr("3D/o.model", other)
     # Colour STLs: Materialise's (COLOR= and MATERIAL= in the header, a triangle its own colour
     # or the part's) and VisCAM's (bit 15 set: its own colour).
     for name, header, attrs in (
@@ -539,6 +563,21 @@ def mutate(b, text):
     return bytes(b)
 
 
+def mutate_3mf(b):
+    """A 3MF package with one of its parts (a model's XML, the relationships) mutated as text,
+    then zipped again (a byte changed in the archive mostly breaks its checksums)."""
+    import io
+    with zipfile.ZipFile(io.BytesIO(b)) as z:
+        parts = {n: z.read(n) for n in z.namelist()}
+    name = random.choice(sorted(parts))
+    parts[name] = mutate(parts[name], True)
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+        for n, data in parts.items():
+            z.writestr(n, data)
+    return out.getvalue()
+
+
 def mutate_glb(b):
     """A GLB's JSON changed as a document, not as bytes: one to three keys deleted, array
     entries repeated, or values replaced by absurd ones (a missing MIME type, an index out of
@@ -619,6 +658,8 @@ def fuzz_files(work, n, device, only=None):
             open(os.path.join(d, "tm.mtl"), "wb").write(lib)
             open(os.path.join(d, "tm.png"), "wb").write(tex)
             open(p, "wb").write(data)
+        elif s.endswith(".3mf") and random.random() < 0.8:
+            open(p, "wb").write(mutate_3mf(data))
         else:
             glb = s.endswith(".glb") and random.random() < 0.5
             open(p, "wb").write(mutate_glb(data) if glb else mutate(data, text))

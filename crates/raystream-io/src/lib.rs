@@ -19,6 +19,7 @@ mod slicer_segmentation;
 mod stl;
 mod structure_set_write;
 mod texture;
+mod three_mf;
 pub mod volume;
 mod vtk_legacy;
 mod vtk_mesh;
@@ -50,7 +51,6 @@ pub use segmentation::{
     is_segmentation_path, segmentation_source, srgb_from_cielab, write_segmentation,
 };
 pub use slicer_segmentation::{is_slicer_segmentation_path, write_slicer_segmentation};
-pub use stl::STL_UNCOLOURED;
 pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping, linear_to_srgb8};
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, RT_STRUCTURE_SET, RasterNotes, Roi,
@@ -101,6 +101,8 @@ pub enum MeshFormat {
     Vtk,
     /// VTK XML polygonal data (`.vtp`): ParaView's surfaces.
     VtkXml,
+    /// 3MF (`.3mf`): 3D printing's packages of parts.
+    ThreeMf,
 }
 
 impl MeshFormat {
@@ -115,6 +117,7 @@ impl MeshFormat {
             "gltf" | "glb" => Some(Self::Gltf),
             "vtk" => Some(Self::Vtk),
             "vtp" => Some(Self::VtkXml),
+            "3mf" => Some(Self::ThreeMf),
             _ => None,
         }
     }
@@ -173,6 +176,15 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
                 ..Default::default()
             };
             (g.mesh, shading, g.normals)
+        }
+        MeshFormat::ThreeMf => {
+            let m = three_mf::parse(&bytes, path)?;
+            let shading = MeshShading {
+                colours: m.colours,
+                warnings: m.warnings,
+                ..Default::default()
+            };
+            (m.mesh, shading, Vec::new())
         }
         MeshFormat::Vtk | MeshFormat::VtkXml => {
             let poly = if format == MeshFormat::Vtk {
@@ -327,7 +339,7 @@ fn read_mesh_file(path: &Path) -> Result<(MeshFormat, Vec<u8>), MeshError> {
     let format = MeshFormat::from_path(path).ok_or_else(|| {
         MeshError::invalid(
             path,
-            "unsupported format: not a mesh (.obj, .ply, .stl, optionally .gz, .gltf, .glb, .vtp, or a .vtk of polygons) nor a volume (a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd, .vti, a .vtk of image data, or NAME_WxHxD_TYPE.raw)",
+            "unsupported format: not a mesh (.obj, .ply, .stl, optionally .gz, .gltf, .glb, .vtp, .3mf, or a .vtk of polygons) nor a volume (a DICOM folder, file or .zip, .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd, .vti, a .vtk of image data, or NAME_WxHxD_TYPE.raw)",
         )
     })?;
     let bytes = std::fs::read(path).map_err(|error| MeshError::Io {
@@ -362,6 +374,12 @@ pub struct MtlMaterial {
 
 /// An 8-bit sRGB colour, as mesh files give their vertices' colours.
 pub type Rgb8 = [u8; 3];
+
+/// The colour a triangle is given where its file colours others but not it (a colour STL's,
+/// a 3MF's): the default material's diffuse reflectance (0.7, linear light) in 8-bit sRGB, so
+/// that it is drawn as it would be in a file without colours (raystream-scene's tests hold
+/// the two together).
+pub const UNCOLOURED_GREY: Rgb8 = [218; 3];
 
 /// A display colour channel written as a number from 0 to 1 (a PLY's float `red`, an OBJ's
 /// vertex colour) as 8 bits: rounded, clamped, NaN as 0.
@@ -473,7 +491,7 @@ pub fn declared_space(bytes: &[u8], format: MeshFormat) -> Option<PatientSpace> 
             .find_map(tagged),
         // The title line, where 3D Slicer writes `3D Slicer output. SPACE=LPS`.
         MeshFormat::Vtk => text.lines().nth(1).and_then(tagged),
-        MeshFormat::Gltf | MeshFormat::VtkXml => None,
+        MeshFormat::Gltf | MeshFormat::VtkXml | MeshFormat::ThreeMf => None,
     }
 }
 
@@ -498,6 +516,7 @@ fn parse_mesh_in(
         MeshFormat::Gltf => gltf::parse(&bytes, path, dir, false)?.mesh,
         MeshFormat::Vtk => vtk_mesh::parse(&bytes, path)?.mesh,
         MeshFormat::VtkXml => vtk_xml::parse_poly(&bytes, path)?.mesh,
+        MeshFormat::ThreeMf => three_mf::parse(&bytes, path)?.mesh,
     };
     mesh.check(path)?;
     Ok(mesh)

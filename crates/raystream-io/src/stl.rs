@@ -12,7 +12,7 @@
 //!   one whose bit 15 is set is the part's colour.
 //! - **VisCAM and SolidView** (no `COLOR=` in the header): a triangle whose bit 15 is set has
 //!   its own colour, blue in bits 0–4, green 5–9, red 10–14; the others have none, and are drawn
-//!   as an uncoloured mesh is ([`STL_UNCOLOURED`]).
+//!   as an uncoloured mesh is ([`crate::UNCOLOURED_GREY`]).
 
 use std::path::Path;
 
@@ -20,11 +20,6 @@ use crate::{MeshError, Rgb8, TriMesh, Vec3};
 
 const HEADER: usize = 80;
 const TRIANGLE: usize = 50;
-
-/// The colour a triangle a colour STL leaves uncoloured is given: the default material's
-/// diffuse reflectance (0.7, linear light) in 8-bit sRGB, so that it is drawn as it would be in
-/// a file without colours (raystream-scene's tests hold the two together).
-pub const STL_UNCOLOURED: Rgb8 = [218; 3];
 
 /// A mesh read from an STL file, with its triangles' colours (empty: the file has none).
 pub(crate) struct Stl {
@@ -135,7 +130,7 @@ fn colours(bytes: &[u8], count: usize) -> Vec<[Rgb8; 3]> {
         return Vec::new();
     }
     (0..count)
-        .map(|i| [colour(attribute(i)).unwrap_or(STL_UNCOLOURED); 3])
+        .map(|i| [colour(attribute(i)).unwrap_or(crate::UNCOLOURED_GREY); 3])
         .collect()
 }
 

@@ -337,7 +337,7 @@ fn binary_stl_colours_by_both_conventions() {
     );
     assert_eq!(
         stl_colours(&viscam),
-        [[r8, g8, b8], STL_UNCOLOURED, [0, 0, 0]]
+        [[r8, g8, b8], UNCOLOURED_GREY, [0, 0, 0]]
     );
     // No triangle with bit 15 set and no COLOR=: no colours (netfabb's vase too, tested above).
     assert!(stl_colours(&binary_stl(b"plain", &[0, 0x7fff])).is_empty());
@@ -459,7 +459,8 @@ fn enclosed_volume_of_a_closed_mesh() {
 
 /// Several surfaces in one file: each a glTF node and material (named, in its colour), an OBJ
 /// object with its material in the library beside it, a PLY's vertices in its sRGB colour;
-/// read back, each part's triangles are its own, in order. An STL refuses two.
+/// read back, each part's triangles are its own, in order; a 3MF object each. An STL refuses
+/// two.
 #[test]
 fn mesh_parts_keep_their_names_and_colours() {
     let scratch = scratch_dir("parts");
@@ -556,6 +557,28 @@ fn mesh_parts_keep_their_names_and_colours() {
             assert_eq!(corners, &[want; 3], "{name} triangle {t}");
         }
         assert_eq!(shading.colours.len(), mesh.len(), "{name}");
+    }
+    // 3MF: an object each (named as it is, XML's special characters escaped), read back
+    // with each part's triangles, exactly, in its colour.
+    let path3 = dir.join("m.3mf");
+    let mut odd = parts;
+    odd[1].name = "heart & <great \"vessels\">";
+    crate::write_mesh_parts(&path3, &odd).unwrap();
+    let (mesh, shading) = load_mesh_with_shading(&path3).unwrap();
+    assert_eq!(mesh.len(), a.len() + b.len());
+    for t in 0..mesh.len() {
+        let want = if t < a.len() {
+            a.corners(t)
+        } else {
+            b.corners(t - a.len())
+        };
+        assert_eq!(mesh.corners(t), want, "3MF triangle {t}");
+        let colour = if t < a.len() {
+            [255, 188, 0]
+        } else {
+            [124, 0, 255]
+        };
+        assert_eq!(shading.colours[t], [colour; 3], "3MF triangle {t}");
     }
     // One part: the plain formats, as `write_mesh` writes them.
     crate::write_mesh_parts(&path, &parts[..1]).unwrap();

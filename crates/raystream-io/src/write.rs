@@ -39,8 +39,9 @@ pub fn write_mesh(path: &Path, mesh: &TriMesh, normals: Option<&[Vec3]>) -> Resu
 /// Writes the surfaces `parts` into one file, in the format named by `path`'s extension: one
 /// part as [`write_mesh`] writes a mesh; several as a glTF node each (named, with its colour
 /// as its material), an OBJ object each (its colour in a material library beside it, `path`
-/// with the extension `.mtl`), or a PLY whose vertices carry their part's colour. An STL holds
-/// one surface, so several are refused.
+/// with the extension `.mtl`), a PLY whose vertices carry their part's colour, or a 3MF object
+/// each (named, its colour as its base material). An STL holds one surface, so several are
+/// refused.
 pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError> {
     let glb = path
         .extension()
@@ -50,7 +51,7 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
         .ok_or_else(|| {
             MeshError::invalid(
                 path,
-                "output must end in .ply, .obj, .stl, .vtk, .vtp or .glb",
+                "output must end in .ply, .obj, .stl, .vtk, .vtp, .3mf or .glb",
             )
         })?;
     if parts.is_empty() {
@@ -60,7 +61,7 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
         return Err(MeshError::invalid(
             path,
             format!(
-                "an STL file holds one surface here, not {}: write .glb, .obj, .ply, .vtk or .vtp, or one at a time",
+                "an STL file holds one surface here, not {}: write .3mf, .glb, .obj, .ply, .vtk or .vtp, or one at a time",
                 parts.len()
             ),
         ));
@@ -110,6 +111,7 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
         MeshFormat::Gltf => write_glb(&mut w, &parts),
         MeshFormat::Vtk => write_vtk(&mut w, &parts),
         MeshFormat::VtkXml => write_vtp(&mut w, &parts),
+        MeshFormat::ThreeMf => crate::three_mf::write(&mut w, &parts),
     };
     r.and_then(|()| w.flush()).map_err(io)
 }

@@ -1141,7 +1141,7 @@ mod tests {
         let d = Material::default().diffuse;
         assert_eq!(d, Vec3::splat(d.x));
         assert_eq!(
-            raystream_io::STL_UNCOLOURED,
+            raystream_io::UNCOLOURED_GREY,
             [raystream_io::linear_to_srgb8(d.x as f64); 3]
         );
     }

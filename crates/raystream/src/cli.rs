@@ -281,7 +281,7 @@ impl VolumePick {
 #[command(group(clap::ArgGroup::new("frames").args(["turntable", "slices", "cine", "fly"])))]
 #[command(group(clap::ArgGroup::new("stations").args(["slices", "fly"]).multiple(false)))]
 pub struct RenderArgs {
-    /// Mesh (.obj, .ply, .stl, optionally .gz; .gltf, .glb; .vtp, a .vtk of polygons), scene
+    /// Mesh (.obj, .ply, .stl, optionally .gz; .gltf, .glb; .vtp, a .vtk of polygons; .3mf), scene
     /// (.toml) or CT volume (DICOM folder, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vti, a .vtk of
     /// image data, NAME_WxHxD_TYPE.raw); none: the built-in abdomen CT.
     pub input: Option<PathBuf>,
@@ -861,7 +861,8 @@ pub struct IsoArgs {
     /// Output mesh in LPS millimetres: .ply (with normals), .obj (with normals), .stl, .vtk
     /// (3D Slicer's model format, legacy VTK polygonal data, with normals, and colours for
     /// several segments), .vtp (ParaView's: VTK XML polygonal data, a piece a segment, with
-    /// normals and colours), or .glb (binary glTF with normals, under a node that turns it to
+    /// normals and colours), .3mf (3D printing's package: an object a segment, named, in its
+    /// colour, millimetres), or .glb (binary glTF with normals, under a node that turns it to
     /// glTF's metres, +Y superior, +Z anterior). The PLY, OBJ, STL, VTK and VTP say SPACE=LPS,
     /// as 3D Slicer reads a model's space.
     #[arg(short, long)]

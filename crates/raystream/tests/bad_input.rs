@@ -46,6 +46,15 @@ fn truncated_files() {
     let vase = std::fs::read(mesh("goblet_vase.stl")).unwrap();
     let f = write("cut.stl", &vase[..vase.len() - 100]);
     assert_input_error(&["info", &f], "cut.stl", "truncated");
+    // A 3MF package cut short: its ZIP directory is gone.
+    let whole = tmp("whole.3mf");
+    let sphere = raystream_io::TriMesh::icosphere(2);
+    raystream_io::write_mesh(&whole, &sphere, None).unwrap();
+    let bytes = std::fs::read(&whole).unwrap();
+    let f = write("cut.3mf", &bytes[..bytes.len() * 2 / 3]);
+    for cmd in ["info", "render"] {
+        assert_input_error(&[cmd, &f], "cut.3mf", "not a 3MF package");
+    }
 }
 
 #[test]

@@ -2851,6 +2851,20 @@ fn slicer_chest_segmentation() -> Option<String> {
     Some(stdout(&o).trim().to_string())
 }
 
+/// `iso SEG --simplify 0.5 -o OUT` (every segment of the segmentation `seg`).
+fn iso_segments(seg: &str, out: &Path) {
+    let o = run(&[
+        "iso",
+        "--quiet",
+        seg,
+        "--simplify",
+        "0.5",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
 /// `render MESH` on the CPU, 96×72, a sample a pixel, to `png`.
 fn render_small_on_cpu(mesh: &Path, png: &Path) {
     let o = run(&[
@@ -2881,16 +2895,7 @@ fn iso_segments_render_in_their_colours_from_ply_vtk_and_vtp_as_from_obj() {
     };
     let image = |ext: &str| {
         let mesh = tmp(&format!("slicer-segments.{ext}"));
-        let o = run(&[
-            "iso",
-            "--quiet",
-            &seg,
-            "--simplify",
-            "0.5",
-            "-o",
-            mesh.to_str().unwrap(),
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
+        iso_segments(&seg, &mesh);
         let png = tmp(&format!("slicer-segments-{ext}.png"));
         render_small_on_cpu(&mesh, &png);
         (mesh, png)
@@ -2959,6 +2964,113 @@ fn an_iso_stl_carries_its_segments_colour() {
     gpu_matches_cpu(
         "slicer-ribs-stl",
         &[stl.to_str().unwrap(), "--size", "96x72", "--spp", "1"],
+        false,
+    );
+}
+
+/// 3MF, against lib3mf (the 3MF Consortium's library): its files (a build of a plain cube,
+/// a components object placing a base-material tetrahedron twice, once mirrored, and a
+/// colour-group one, in centimetres; a cube in inches) read as lib3mf places their triangles,
+/// in millimetres (within 1 µm), each with the colours lib3mf resolves for its corners (the
+/// cube grey); and `iso --segment all -o X.3mf` of 3D Slicer's chest segmentation reads in
+/// lib3mf as an object a segment, named and in its colour, in millimetres, with the OBJ's
+/// triangles. The coloured build renders alike on both devices.
+#[test]
+fn three_mf_reads_and_writes_as_lib3mf_does() {
+    let Some(py) = python_with("lib3mf") else {
+        return;
+    };
+    let Some(seg) = slicer_chest_segmentation() else {
+        return;
+    };
+    let dir = tmp("three-mf");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (written, obj) = (dir.join("segments.3mf"), dir.join("segments.obj"));
+    iso_segments(&seg, &written);
+    iso_segments(&seg, &obj);
+    let o = std::process::Command::new(&py)
+        .arg(repo().join("crates/raystream/tests/three_mf.py"))
+        .arg(&dir)
+        .arg(&written)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    for name in ["parts", "plain"] {
+        let path = v[name]["path"].as_str().unwrap();
+        let want = v[name]["triangles"].as_array().unwrap();
+        let (mesh, shading) = raystream_io::load_mesh_with_shading(Path::new(path)).unwrap();
+        assert_eq!(mesh.len(), want.len(), "{name}");
+        let coloured = want.iter().any(|t| !t["colours"].is_null());
+        assert_eq!(!shading.colours.is_empty(), coloured, "{name}");
+        for (i, t) in want.iter().enumerate() {
+            let corners: Vec<[f64; 3]> = serde_json::from_value(t["corners"].clone()).unwrap();
+            for (got, want) in mesh.corners(i).iter().zip(&corners) {
+                let d = (got.as_dvec3() - raystream_math::DVec3::from(*want)).length();
+                assert!(d < 1e-3, "{name} triangle {i}: {got} for {want:?}");
+            }
+            if coloured {
+                let want: [[u8; 3]; 3] = match t["colours"].is_null() {
+                    true => [raystream_io::UNCOLOURED_GREY; 3],
+                    false => serde_json::from_value(t["colours"].clone()).unwrap(),
+                };
+                assert_eq!(shading.colours[i], want, "{name} triangle {i}");
+            }
+        }
+    }
+    // Every kind of colour there: the cube's grey, the base material, the group's, a corner's.
+    let parts = v["parts"]["triangles"].as_array().unwrap();
+    assert_eq!(parts.len(), 12 + 3 * 4 + 4);
+    assert!(parts[12]["colours"][0] == serde_json::json!([200, 30, 20]));
+
+    // raystream's package, as lib3mf reads it: the OBJ's segments, names, colours, triangles.
+    let w = &v["written"];
+    assert_eq!(w["unit_mm"], 1.0);
+    let (obj_mesh, obj_shading) = raystream_io::load_mesh_with_shading(&obj).unwrap();
+    let o = run(&["info", &seg, "--json"]);
+    let info: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let objects = w["objects"].as_array().unwrap();
+    assert_eq!(objects.len(), obj_shading.materials.len());
+    assert_eq!(objects.len(), 7);
+    let mut triangles = 0;
+    for (k, (o, m)) in objects.iter().zip(&obj_shading.materials).enumerate() {
+        // The segment's own name (the OBJ's has its spaces as underscores).
+        assert_eq!(o["name"], info["segments"][k]["label"]);
+        assert_eq!(o["name"].as_str().unwrap().replace(' ', "_"), m.name);
+        assert_eq!(o["colour"], info["segments"][k]["colour"], "{}", m.name);
+        let count = obj_shading
+            .material_of
+            .iter()
+            .filter(|&&x| x == Some(k as u32))
+            .count();
+        assert_eq!(
+            o["triangles"].as_u64().unwrap() as usize,
+            count,
+            "{}",
+            m.name
+        );
+        triangles += count;
+    }
+    assert_eq!(triangles, obj_mesh.len());
+    // Read back by raystream: the OBJ's triangles, in order, each in its segment's colour.
+    let (mesh, shading) = raystream_io::load_mesh_with_shading(&written).unwrap();
+    assert_eq!(mesh.len(), obj_mesh.len());
+    for i in 0..mesh.len() {
+        assert_eq!(mesh.corners(i), obj_mesh.corners(i), "triangle {i}");
+        let k = obj_shading.material_of[i].unwrap() as usize;
+        let want: [u8; 3] = serde_json::from_value(info["segments"][k]["colour"].clone()).unwrap();
+        assert_eq!(shading.colours[i], [want; 3], "triangle {i}");
+    }
+
+    gpu_matches_cpu(
+        "three-mf-parts",
+        &[
+            v["parts"]["path"].as_str().unwrap(),
+            "--size",
+            "96x72",
+            "--spp",
+            "1",
+        ],
         false,
     );
 }
