@@ -374,6 +374,35 @@ fn simplifying_keeps_the_surface_within_its_bound() {
     assert_eq!(departure(&far.positions, &tri, 6.0), 5.0);
 }
 
+/// [`not_manifold`] on surfaces built by hand: a tetrahedron has no such edge; with a face
+/// turned, its three edges are each crossed twice the same way; a second tetrahedron on one
+/// edge makes it join four triangles; a lone triangle's edges are a border, not listed.
+#[test]
+fn edges_that_are_not_manifold() {
+    let tetra = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+    let none: [[u32; 2]; 0] = [];
+    assert_eq!(not_manifold(&tetra), none);
+    let mut turned = tetra;
+    turned[3] = [1, 3, 2];
+    assert_eq!(not_manifold(&turned), [[1, 2], [1, 3], [2, 3]]);
+    let mut two = tetra.to_vec();
+    two.extend([[0, 4, 1], [0, 1, 5], [0, 5, 4], [1, 4, 5]]);
+    assert_eq!(not_manifold(&two), [[0, 1]]);
+    assert_eq!(not_manifold(&[[0, 1, 2]]), none);
+    // The sphere's marching cubes surface: none, as the brute check finds it closed.
+    let centre = raystream_math::DVec3::splat(8.0);
+    let vol = analytic([16, 16, 16], [1.0; 3], [0.0; 3], rotation(), |p| {
+        if (p - centre).length() < 5.0 {
+            1000.0
+        } else {
+            -1000.0
+        }
+    });
+    let s = extract_isosurface(&vol, 0.0);
+    assert_closed_and_oriented(&s.mesh);
+    assert_eq!(not_manifold(&s.mesh.triangles), none);
+}
+
 /// A lone voxel's surface, smoothed to a speck (which quadric collapses alone take away
 /// whole, it being next to flat), stays; a ball of radius 3 beside it is simplified within the
 /// bound; every vertex of the full surface is within the bound of the simplified one.

@@ -2974,7 +2974,7 @@ fn an_iso_stl_carries_its_segments_colour() {
 /// in millimetres (within 1 µm), each with the colours lib3mf resolves for its corners (the
 /// cube grey); and `iso --segment all -o X.3mf` of 3D Slicer's chest segmentation reads in
 /// lib3mf as an object a segment, named and in its colour, in millimetres, with the OBJ's
-/// triangles. The coloured build renders alike on both devices.
+/// triangles, each manifold and oriented. The coloured build renders alike on both devices.
 #[test]
 fn three_mf_reads_and_writes_as_lib3mf_does() {
     let Some(py) = python_with("lib3mf") else {
@@ -3049,6 +3049,9 @@ fn three_mf_reads_and_writes_as_lib3mf_does() {
             "{}",
             m.name
         );
+        // Printable: closed and oriented, simplified as it is (the body's thin wall once had
+        // two edges pinched by the collapses).
+        assert_eq!(o["manifold"], true, "{}", m.name);
         triangles += count;
     }
     assert_eq!(triangles, obj_mesh.len());

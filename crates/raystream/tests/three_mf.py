@@ -12,7 +12,8 @@ Then reads each back with lib3mf and prints one JSON object: for each file, its 
 triangles as the build places them, in millimetres (corners, f64 from lib3mf's f32 values), each
 with its corners' colours (null where it has none), depth first through the build and the
 components, in order. With WRITTEN.3mf (raystream's), also its unit and each object's name,
-display colour and triangle count, as lib3mf reads them."""
+display colour and triangle count, and whether it is manifold and oriented (as a printer's
+slicer needs it), as lib3mf reads them."""
 import json, os, sys
 
 import lib3mf
@@ -172,7 +173,8 @@ def written(path):
         o = it.GetCurrent()
         resource, prop, has = o.GetObjectLevelProperty()
         objects.append({"name": o.GetName(), "triangles": o.GetTriangleCount(),
-                        "colour": colour_of(m, resource, prop) if has else None})
+                        "colour": colour_of(m, resource, prop) if has else None,
+                        "manifold": o.IsManifoldAndOriented()})
     return {"unit_mm": MM[m.GetUnit()], "objects": objects}
 
 
