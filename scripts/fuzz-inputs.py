@@ -811,7 +811,7 @@ def fuzz_files(work, n, device, only=None):
                 if random.random() < 0.5:
                     simplify = ["--simplify", random.choice(["0.1", "1"])] if random.random() < 0.5 else []
                     why = run(["iso", p, "-q"] + segments + simplify + ["-o", os.path.join(
-                        d, "s." + random.choice(["glb", "obj", "ply", "stl", "vtp"]))], (s, "t.ctbl", "s.stl"))
+                        d, "s." + random.choice(["glb", "obj", "ply", "stl", "vtk", "vtp", "3mf"]))], (s, "t.ctbl", "s.stl"))
                 else:
                     why = run(["render", p, "-q", "--size", "8x8", "--spp", "1", "--device", device]
                               + segments + ["-o", os.path.join(d, "s.png")], (s, "t.ctbl"))

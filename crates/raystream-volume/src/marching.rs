@@ -284,6 +284,9 @@ pub struct Simplified {
     pub held: usize,
 }
 
+/// The rounds of [`simplify`] that hold the ends of pinched edges.
+const PINCH_ROUNDS: usize = 8;
+
 /// Simplifies `surface` by edge collapses so that every vertex of the full surface stays
 /// within `max_error` (in the mesh's units, mm) of the simplified one, measured (but for
 /// vertices of none but triangles of no area, which may go).
@@ -299,9 +302,11 @@ pub struct Simplified {
 /// corners of its triangles too), until none is beyond it. The collapses may also pinch a
 /// thin wall against its other side (an edge then joins four triangles: on 3D Slicer's chest
 /// segmentation, 2 edges of the body's 70,000 triangles at 0.5 mm), which 3D printing's
-/// slicers and lib3mf refuse as not manifold: the ends of such an edge are held the same way,
-/// so that a closed, oriented surface stays one. From the thirteenth round the allowance is
-/// also halved each round, and after sixteen the surface is left as it was.
+/// slicers and lib3mf refuse as not manifold: for the first [`PINCH_ROUNDS`] rounds the ends
+/// of such an edge are held the same way (not always enough where several vertices lie on one
+/// point, which meshoptimizer takes for a seam: a raw CT surface's, a voxel exactly at the
+/// threshold). From the thirteenth round the allowance is also halved each round, and after
+/// sixteen the surface is left as it was.
 /// (Lowering the allowance for the whole surface instead, while many vertices were beyond,
 /// kept within the bound as well, but on the chest CT's bones left 2.5 times the
 /// triangles.) The vertices kept are original ones; unused ones are
@@ -365,12 +370,18 @@ pub fn simplify(surface: &mut IsoSurface, max_error: f64) -> Simplified {
         // Collapses that made an edge join more than two triangles, or two facing the same
         // way (meshoptimizer refuses those that would flip a triangle, but not all that
         // would pinch a thin wall against its other side: a surface a 3D printer's slicer,
-        // or lib3mf, calls not manifold): its ends are held as a vertex beyond the bound is.
-        for e in not_manifold(&simple.triangles) {
-            let e = e.map(|v| origin[v as usize]);
-            if !bad_in_full.contains(&e) {
-                beyond.extend(e.map(|v| v as usize));
-            }
+        // or lib3mf, calls not manifold): its ends are held as a vertex beyond the bound is,
+        // for the first PINCH_ROUNDS rounds. (Where the marching cubes put several vertices
+        // on one point, a CT voxel exactly at the threshold, meshoptimizer takes them for a
+        // seam, and holding may not undo a pinch there: after those rounds only the bound
+        // is kept to.)
+        let pinched: Vec<[u32; 2]> = not_manifold(&simple.triangles)
+            .into_iter()
+            .map(|e| e.map(|v| origin[v as usize]))
+            .filter(|e| !bad_in_full.contains(e))
+            .collect();
+        if round < PINCH_ROUNDS {
+            beyond.extend(pinched.iter().flatten().map(|&v| v as usize));
         }
         if beyond.is_empty() {
             let out = Simplified {
