@@ -302,7 +302,7 @@ const PINCH_ROUNDS: usize = 8;
 /// corners of its triangles too), until none is beyond it. The collapses may also pinch a
 /// thin wall against its other side (an edge then joins four triangles: on 3D Slicer's chest
 /// segmentation, 2 edges of the body's 70,000 triangles at 0.5 mm), which 3D printing's
-/// slicers and lib3mf refuse as not manifold: for the first [`PINCH_ROUNDS`] rounds the ends
+/// slicers and lib3mf refuse as not manifold: for the first 8 rounds (`PINCH_ROUNDS`) the ends
 /// of such an edge are held the same way (not always enough where several vertices lie on one
 /// point, which meshoptimizer takes for a seam: a raw CT surface's, a voxel exactly at the
 /// threshold). From the thirteenth round the allowance is also halved each round, and after
