@@ -50,10 +50,13 @@ enum Shape {
         triangles: Vec<[u32; 3]>,
         properties: Vec<Properties>,
     },
-    /// Each component: the part holding its object (`None`: this one), the object, its
-    /// transform.
-    Components(Vec<(Option<String>, u32, DAffine3)>),
+    /// Its components, each placing an object.
+    Components(Vec<Placement>),
 }
+
+/// Where a build item or a component places an object: the model part holding it (`None`:
+/// the one naming it), its id, and its transform.
+type Placement = (Option<String>, u32, DAffine3);
 
 /// What a model part holds: its objects, its colour groups (base materials' display colours
 /// too) and the ids of its other property groups (textures, composites), its unit (only the
@@ -64,7 +67,7 @@ struct Part {
     other_groups: HashMap<u32, String>,
     /// Millimetres a unit.
     scale: f64,
-    build: Vec<(Option<String>, u32, DAffine3)>,
+    build: Vec<Placement>,
 }
 
 pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<ThreeMf, MeshError> {
@@ -277,13 +280,10 @@ fn read_part(zip: &mut zip::ZipArchive<Cursor<&[u8]>>, name: &str) -> Result<Par
         scale,
         build: Vec::new(),
     };
-    let id_of = |n: roxmltree::Node, attr: &str| -> Result<u32, String> {
-        let v = n
-            .attribute(attr)
-            .ok_or_else(|| format!("part {name}: a <{}> has no {attr}", n.tag_name().name()))?;
-        v.trim()
-            .parse()
-            .map_err(|_| format!("part {name}: {attr}={v:?} is not a number"))
+    let id_of = |n: roxmltree::Node| -> Result<u32, String> {
+        number(n, "id")
+            .and_then(|id| id.ok_or_else(|| format!("a <{}> has no id", n.tag_name().name())))
+            .map_err(|e| format!("part {name}: {e}"))
     };
     for res in children(model, (CORE, "resources")) {
         for r in res.children().filter(|c| c.is_element()) {
@@ -306,15 +306,15 @@ fn read_part(zip: &mut zip::ZipArchive<Cursor<&[u8]>>, name: &str) -> Result<Par
                                 r.attribute("id").unwrap_or("?")
                             )
                         })?;
-                    part.colours.insert(id_of(r, "id")?, colours);
+                    part.colours.insert(id_of(r)?, colours);
                 }
                 (CORE, "object") => {
-                    let id = id_of(r, "id")?;
+                    let id = id_of(r)?;
                     let shape = object(r, name, id)?;
                     part.objects.insert(id, shape);
                 }
                 (_, kind) if r.attribute("id").is_some() => {
-                    part.other_groups.insert(id_of(r, "id")?, kind.to_string());
+                    part.other_groups.insert(id_of(r)?, kind.to_string());
                 }
                 _ => {}
             }
@@ -322,13 +322,8 @@ fn read_part(zip: &mut zip::ZipArchive<Cursor<&[u8]>>, name: &str) -> Result<Par
     }
     for build in children(model, (CORE, "build")) {
         for item in children(build, (CORE, "item")) {
-            part.build.push((
-                item.attribute((PRODUCTION, "path"))
-                    .map(|p| p.trim_start_matches('/').to_string()),
-                id_of(item, "objectid")?,
-                transform(item.attribute("transform"))
-                    .map_err(|e| format!("part {name}: a build item's transform: {e}"))?,
-            ));
+            part.build
+                .push(placement(item).map_err(|e| format!("part {name}: a build item: {e}"))?);
         }
     }
     Ok(part)
@@ -346,29 +341,12 @@ fn children<'a, 'i>(
 /// property where a triangle has none) or its components.
 fn object(o: roxmltree::Node, part: &str, id: u32) -> Result<Shape, String> {
     let at = |m: String| format!("part {part}, object {id}: {m}");
-    let number = |n: roxmltree::Node, attr: &str| -> Result<Option<u32>, String> {
-        n.attribute(attr)
-            .map(|v| {
-                v.trim()
-                    .parse()
-                    .map_err(|_| at(format!("{attr}={v:?} is not a number")))
-            })
-            .transpose()
-    };
+    let number = |n: roxmltree::Node, attr: &str| number(n, attr).map_err(at);
     if let Some(components) = children(o, (CORE, "components")).next() {
-        let mut list = Vec::new();
-        for c in children(components, (CORE, "component")) {
-            let child =
-                number(c, "objectid")?.ok_or_else(|| at("a component names no object".into()))?;
-            list.push((
-                c.attribute((PRODUCTION, "path"))
-                    .map(|p| p.trim_start_matches('/').to_string()),
-                child,
-                transform(c.attribute("transform"))
-                    .map_err(|e| at(format!("a component's transform: {e}")))?,
-            ));
-        }
-        return Ok(Shape::Components(list));
+        return children(components, (CORE, "component"))
+            .map(|c| placement(c).map_err(|e| at(format!("a component: {e}"))))
+            .collect::<Result<_, _>>()
+            .map(Shape::Components);
     }
     let mesh = children(o, (CORE, "mesh"))
         .next()
@@ -434,6 +412,29 @@ fn object(o: roxmltree::Node, part: &str, id: u32) -> Result<Shape, String> {
     })
 }
 
+/// The number `n`'s attribute `attr` holds (`None`: it has none).
+fn number(n: roxmltree::Node, attr: &str) -> Result<Option<u32>, String> {
+    n.attribute(attr)
+        .map(|v| {
+            v.trim()
+                .parse()
+                .map_err(|_| format!("{attr}={v:?} is not a number"))
+        })
+        .transpose()
+}
+
+/// The placement a build `<item>` or a `<component>` gives: its object (`objectid`, in the
+/// part `p:path` names), and its transform.
+fn placement(n: roxmltree::Node) -> Result<Placement, String> {
+    let id = number(n, "objectid")?.ok_or("it names no object")?;
+    let path = n
+        .attribute((PRODUCTION, "path"))
+        .map(|p| p.trim_start_matches('/').to_string());
+    let transform =
+        transform(n.attribute("transform")).map_err(|e| format!("its transform: {e}"))?;
+    Ok((path, id, transform))
+}
+
 /// A `transform` attribute (twelve numbers, the 4×3 matrix of row vectors: `p' = p M`, its
 /// last row the translation) as a column-vector matrix; the identity where there is none.
 fn transform(attribute: Option<&str>) -> Result<DAffine3, String> {
@@ -472,45 +473,49 @@ fn colour(text: &str) -> Result<Rgb8, String> {
 /// each coloured by its own base material (its name, its colour in sRGB), all placed by the
 /// build as they are.
 pub(crate) fn write(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
+    use std::fmt::Write as _;
+    // Writing into a String cannot fail: the results are dropped.
     let mut model = String::with_capacity(1 << 16);
-    model.push_str(&format!(
+    let _ = write!(
+        model,
         "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<model unit=\"millimeter\" xml:lang=\"en-US\" xmlns=\"{CORE}\">\n \
          <metadata name=\"Title\">raystream isosurface</metadata>\n \
          <metadata name=\"Application\">raystream {}</metadata>\n <resources>\n  <basematerials id=\"1\">\n",
         env!("CARGO_PKG_VERSION")
-    ));
+    );
     for p in parts {
-        let [r, g, b] = p.colour.map(|c| crate::linear_to_srgb8(c as f64));
-        model.push_str(&format!(
-            "   <base name=\"{}\" displaycolor=\"#{r:02X}{g:02X}{b:02X}FF\"/>\n",
+        let [r, g, b] = crate::write::srgb8(p.colour);
+        let _ = writeln!(
+            model,
+            "   <base name=\"{}\" displaycolor=\"#{r:02X}{g:02X}{b:02X}FF\"/>",
             xml_escape(p.name)
-        ));
+        );
     }
     model.push_str("  </basematerials>\n");
     for (k, p) in parts.iter().enumerate() {
-        model.push_str(&format!(
-            "  <object id=\"{}\" type=\"model\" name=\"{}\" pid=\"1\" pindex=\"{k}\">\n   <mesh>\n    <vertices>\n",
+        let _ = writeln!(
+            model,
+            "  <object id=\"{}\" type=\"model\" name=\"{}\" pid=\"1\" pindex=\"{k}\">\n   <mesh>\n    <vertices>",
             k + 2,
             xml_escape(p.name)
-        ));
+        );
         for v in &p.mesh.positions {
             // Shortest round-trip decimal forms: read back, the same f32.
-            model.push_str(&format!(
-                "     <vertex x=\"{}\" y=\"{}\" z=\"{}\"/>\n",
+            let _ = writeln!(
+                model,
+                "     <vertex x=\"{}\" y=\"{}\" z=\"{}\"/>",
                 v.x, v.y, v.z
-            ));
+            );
         }
         model.push_str("    </vertices>\n    <triangles>\n");
         for [a, b, c] in &p.mesh.triangles {
-            model.push_str(&format!(
-                "     <triangle v1=\"{a}\" v2=\"{b}\" v3=\"{c}\"/>\n"
-            ));
+            let _ = writeln!(model, "     <triangle v1=\"{a}\" v2=\"{b}\" v3=\"{c}\"/>");
         }
         model.push_str("    </triangles>\n   </mesh>\n  </object>\n");
     }
     model.push_str(" </resources>\n <build>\n");
     for k in 0..parts.len() {
-        model.push_str(&format!("  <item objectid=\"{}\"/>\n", k + 2));
+        let _ = writeln!(model, "  <item objectid=\"{}\"/>", k + 2);
     }
     model.push_str(" </build>\n</model>\n");
     let mut zip = zip::ZipWriter::new(Cursor::new(Vec::new()));

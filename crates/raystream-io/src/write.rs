@@ -128,7 +128,7 @@ fn token(name: &str) -> String {
 }
 
 /// Linear RGB (0–1) as 8-bit sRGB.
-fn srgb8(linear: [f32; 3]) -> [u8; 3] {
+pub(crate) fn srgb8(linear: [f32; 3]) -> [u8; 3] {
     linear.map(|c| crate::texture::linear_to_srgb8(c as f64))
 }
 
@@ -434,7 +434,7 @@ fn write_vtp(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
             ""
         };
         let _ = writeln!(xml, "      <PointData Scalars=\"Colors\"{normals}>");
-        let colour = part.colour.map(|c| crate::linear_to_srgb8(c as f64));
+        let colour = srgb8(part.colour);
         let colours: Vec<u8> = (0..n).flat_map(|_| colour).collect();
         array(&mut xml, "UInt8", "Colors", 3, &colours);
         if let Some(normals) = part.normals {
@@ -469,7 +469,7 @@ fn write_vtp(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
 /// convention, which needs bit 15 set, sees no colours.
 fn write_stl(w: &mut impl Write, part: &MeshPart) -> std::io::Result<()> {
     let mesh = part.mesh;
-    let srgb = part.colour.map(|c| crate::linear_to_srgb8(c as f64));
+    let srgb = srgb8(part.colour);
     let mut header = [b' '; 80];
     let text = b"raystream isosurface, LPS millimetres. SPACE=LPS COLOR=";
     header[..text.len()].copy_from_slice(text);

@@ -375,13 +375,13 @@ pub fn simplify(surface: &mut IsoSurface, max_error: f64) -> Simplified {
         // on one point, a CT voxel exactly at the threshold, meshoptimizer takes them for a
         // seam, and holding may not undo a pinch there: after those rounds only the bound
         // is kept to.)
-        let pinched: Vec<[u32; 2]> = not_manifold(&simple.triangles)
-            .into_iter()
-            .map(|e| e.map(|v| origin[v as usize]))
-            .filter(|e| !bad_in_full.contains(e))
-            .collect();
         if round < PINCH_ROUNDS {
-            beyond.extend(pinched.iter().flatten().map(|&v| v as usize));
+            for e in not_manifold(&simple.triangles) {
+                let e = e.map(|v| origin[v as usize]);
+                if !bad_in_full.contains(&e) {
+                    beyond.extend(e.map(|v| v as usize));
+                }
+            }
         }
         if beyond.is_empty() {
             let out = Simplified {

@@ -2851,17 +2851,13 @@ fn slicer_chest_segmentation() -> Option<String> {
     Some(stdout(&o).trim().to_string())
 }
 
-/// `iso SEG --simplify 0.5 -o OUT` (every segment of the segmentation `seg`).
-fn iso_segments(seg: &str, out: &Path) {
-    let o = run(&[
-        "iso",
-        "--quiet",
-        seg,
-        "--simplify",
-        "0.5",
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+/// `iso SEG [ARGS] --simplify 0.5 -o OUT` (every segment of the segmentation `seg` unless
+/// `args` picks some).
+fn iso_segments(seg: &str, args: &[&str], out: &Path) {
+    let mut all = vec!["iso", "--quiet", seg];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--simplify", "0.5", "-o", out.to_str().unwrap()]);
+    let o = run(&all);
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
@@ -2895,7 +2891,7 @@ fn iso_segments_render_in_their_colours_from_ply_vtk_and_vtp_as_from_obj() {
     };
     let image = |ext: &str| {
         let mesh = tmp(&format!("slicer-segments.{ext}"));
-        iso_segments(&seg, &mesh);
+        iso_segments(&seg, &[], &mesh);
         let png = tmp(&format!("slicer-segments-{ext}.png"));
         render_small_on_cpu(&mesh, &png);
         (mesh, png)
@@ -2933,18 +2929,7 @@ fn an_iso_stl_carries_its_segments_colour() {
         return;
     };
     let stl = tmp("slicer-ribs.stl");
-    let o = run(&[
-        "iso",
-        "--quiet",
-        &seg,
-        "--segment",
-        "ribs",
-        "--simplify",
-        "0.5",
-        "-o",
-        stl.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    iso_segments(&seg, &["--segment", "ribs"], &stl);
     // Slicer's ribs are #fde89e: every corner, exactly.
     let (mesh, shading) = raystream_io::load_mesh_with_shading(&stl).unwrap();
     assert!(mesh.len() > 1000);
@@ -2986,8 +2971,8 @@ fn three_mf_reads_and_writes_as_lib3mf_does() {
     let dir = tmp("three-mf");
     std::fs::create_dir_all(&dir).unwrap();
     let (written, obj) = (dir.join("segments.3mf"), dir.join("segments.obj"));
-    iso_segments(&seg, &written);
-    iso_segments(&seg, &obj);
+    iso_segments(&seg, &[], &written);
+    iso_segments(&seg, &[], &obj);
     let o = std::process::Command::new(&py)
         .arg(repo().join("crates/raystream/tests/three_mf.py"))
         .arg(&dir)
