@@ -209,7 +209,12 @@ fn simplify(surface: &mut IsoSurface, mm: Option<f64>, what: &str, quiet: bool) 
     let Some(mm) = mm else { return };
     let pb = spinner(quiet, &format!("simplifying {what} within {mm} mm"));
     let t = Instant::now();
-    let s = raystream_volume::simplify(surface, mm);
+    let s = raystream_volume::simplify_reporting(surface, mm, &mut |r| {
+        pb.set_message(format!(
+            "simplifying {what} within {mm} mm: try {}, round {} left {} vertices beyond the bound or at pinched edges",
+            r.attempt, r.round, r.beyond
+        ))
+    });
     pb.finish_and_clear();
     if !quiet {
         eprintln!(

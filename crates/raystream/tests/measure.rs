@@ -3159,22 +3159,6 @@ fn the_findings_as_a_dicom_structured_report() {
     refuses_a_ct_it_cannot_reference("--report", sr_file);
 }
 
-/// Whether every edge of `mesh` joins two triangles that cross it opposite ways: the surface
-/// is closed, a 2-manifold (no edge where two sheets pinch together, which a 3D printer's
-/// slicer refuses), and its triangles turn one way.
-fn closed_and_oriented(mesh: &raystream_io::TriMesh) -> bool {
-    // Each edge's uses from its lesser end and from its greater: one each, exactly (an edge
-    // two sheets pinch together has two each, which a signed sum alone would let through).
-    let mut edges: std::collections::HashMap<(u32, u32), [u32; 2]> = Default::default();
-    for t in &mesh.triangles {
-        for i in 0..3 {
-            let (a, b) = (t[i], t[(i + 1) % 3]);
-            edges.entry((a.min(b), a.max(b))).or_default()[usize::from(a > b)] += 1;
-        }
-    }
-    edges.values().all(|&n| n == [1, 1])
-}
-
 /// The volume a closed, outward-facing mesh in millimetres encloses, ml.
 fn enclosed_ml(mesh: &raystream_io::TriMesh) -> f64 {
     mesh.enclosed_volume() / 1000.0

@@ -133,6 +133,72 @@ fn iso_writes_a_closed_bone_surface() {
     assert!(b.min.z >= 94.30 - 1e-3 && b.max.z <= 94.31 + 333.0, "{b:?}");
 }
 
+/// The CT's integers at the integer threshold: where voxels are exactly 300 HU (110 are)
+/// the raw surface still puts no two vertices on one point, and simplified within 0.3 and 1 mm
+/// it stays closed and a 2-manifold by its indices (a 3D printer's slicer and lib3mf take it),
+/// each vertex one of the full surface's, which lies within the bound of it.
+#[test]
+fn raw_ct_bones_simplify_to_a_closed_manifold() {
+    let ct = volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz");
+    let at = raystream_io::load_volume(Path::new(&ct), &Default::default())
+        .unwrap()
+        .data
+        .iter()
+        .filter(|&&v| v == 300.0)
+        .count();
+    assert!(at >= 100, "{at} voxels at 300 HU");
+    let iso = |name: &str, more: &[&str]| {
+        let out = tmp(name);
+        let mut args = vec![
+            "iso",
+            &ct,
+            "--smooth",
+            "0",
+            "-o",
+            out.to_str().unwrap(),
+            "--quiet",
+        ];
+        args.extend_from_slice(more);
+        let o = run(&args);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        raystream_io::load_mesh(&out).unwrap()
+    };
+    let bits = |m: &raystream_io::TriMesh| -> std::collections::HashSet<[u32; 3]> {
+        m.positions
+            .iter()
+            .map(|p| p.to_array().map(f32::to_bits))
+            .collect()
+    };
+    let full = iso("abdomen-raw.ply", &[]);
+    let points = bits(&full);
+    assert_eq!(
+        points.len(),
+        full.positions.len(),
+        "vertices sharing a point"
+    );
+    assert!(closed_and_oriented(&full));
+    for mm in ["0.3", "1"] {
+        let simple = iso(&format!("abdomen-raw-{mm}.ply"), &["--simplify", mm]);
+        assert!(
+            simple.len() * 4 < full.len() * 3,
+            "{mm} mm: {} of {}",
+            simple.len(),
+            full.len()
+        );
+        assert!(
+            closed_and_oriented(&simple),
+            "{mm} mm: not a closed 2-manifold"
+        );
+        assert!(
+            bits(&simple).is_subset(&points),
+            "{mm} mm: a vertex not the full surface's"
+        );
+        let bound: f64 = mm.parse().unwrap();
+        let d = raystream_volume::departure(&full.positions, &simple, bound);
+        assert!(d <= bound, "{mm} mm: departs {d} mm");
+    }
+}
+
 #[test]
 fn render_dicom_folders_a_tilted_one_too() {
     let out = tmp("j2k-bones.png");

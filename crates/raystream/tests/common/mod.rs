@@ -541,3 +541,19 @@ pub fn write_like(name: &str, like: &raystream_io::Volume, data: &[f32]) -> std:
     std::fs::write(&path, bytes).unwrap();
     path
 }
+
+/// Whether every edge of `mesh` joins two triangles that cross it opposite ways: the surface
+/// is closed, a 2-manifold (no edge where two sheets pinch together, which a 3D printer's
+/// slicer refuses), and its triangles turn one way.
+pub fn closed_and_oriented(mesh: &raystream_io::TriMesh) -> bool {
+    // Each edge's uses from its lesser end and from its greater: one each, exactly (an edge
+    // two sheets pinch together has two each, which a signed sum alone would let through).
+    let mut edges: std::collections::HashMap<(u32, u32), [u32; 2]> = Default::default();
+    for t in &mesh.triangles {
+        for i in 0..3 {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            edges.entry((a.min(b), a.max(b))).or_default()[usize::from(a > b)] += 1;
+        }
+    }
+    edges.values().all(|&n| n == [1, 1])
+}
