@@ -14,7 +14,7 @@ mod tf;
 pub use grid::{clamp_to_grid, trilinear, trilinear_in};
 pub use marching::{
     IsoSurface, Simplified, SimplifyRound, departure, distances, extract_isosurface, not_manifold,
-    point_triangle_distance, simplify, simplify_reporting, smooth,
+    pinched_vertices, point_triangle_distance, simplify, simplify_reporting, smooth,
 };
 pub use stats::{RegionStats, region_stats};
 pub use tf::{Shading, TfPreset, TransferFunction};

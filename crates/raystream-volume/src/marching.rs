@@ -328,15 +328,15 @@ const QUICK_ROUNDS: usize = 8;
 /// thin wall against its other side (an edge then joins four triangles: on 3D Slicer's chest
 /// segmentation, 2 edges of the body's 70,000 triangles at 0.5 mm), which 3D printing's
 /// slicers and lib3mf refuse as not manifold: the ends of such an edge are held the same way.
+/// So is a vertex where they pinch the surface to a point, two fans of triangles meeting
+/// there only ([`pinched_vertices`]; which mesh repair tools flag, and a slicer may part).
 ///
 /// Holding is a try of up to 16 rounds. Where it took more than 8, it had held many vertices
 /// (the allowance let the collapses go far beyond the bound), and the next try, nothing held,
 /// at half the allowance, may keep fewer triangles: the tries go on, up to five, while they
-/// take more than 8 rounds and keep fewer triangles, and the fewest are kept. (On the chest
-/// CT's smoothed bones at 2 mm, the first try kept 211,938 triangles in 12 rounds, the second
-/// 138,546 in 12, the third 143,078 in 9; at 4 mm, 263,496 in 16, 138,056 in 14, 97,280 in
-/// 15 and 120,282 in 8.) After five tries that did not converge the surface is left as it
-/// was. (Lowering the allowance for the whole surface within a try instead, while many
+/// take more than 8 rounds and keep fewer triangles, and the fewest are kept. (With one try,
+/// the chest CT's smoothed bones kept more triangles at 4 mm than at 1 mm; BENCHMARKS.md has
+/// the tries.) After five tries that did not converge the surface is left as it was. (Lowering the allowance for the whole surface within a try instead, while many
 /// vertices were beyond, kept within the bound as well, but on the chest CT's bones left 2.5
 /// times the triangles.) The vertices kept are original ones, with their normals; unused ones
 /// are dropped.
@@ -444,8 +444,10 @@ struct Holding<'a> {
     index: Vec<usize>,
     points: Vec<Vec3>,
     /// The edges already joining other than two triangles facing opposite ways in the full
-    /// surface (none in a closed one): only new ones are the collapses' doing.
+    /// surface, and its vertices already pinched (none in the marching cubes' surfaces): only
+    /// new ones are the collapses' doing.
     bad_in_full: std::collections::HashSet<[u32; 2]>,
+    pinched_in_full: std::collections::HashSet<u32>,
     /// Each vertex's triangles' corners, built when first needed.
     ring: Option<Vec<Vec<u32>>>,
 }
@@ -473,6 +475,7 @@ impl<'a> Holding<'a> {
             points: index.iter().map(|&v| full.positions[v]).collect(),
             index,
             bad_in_full: not_manifold(&full.triangles).into_iter().collect(),
+            pinched_in_full: pinched_vertices(&full.triangles).into_iter().collect(),
             ring: None,
         }
     }
@@ -513,6 +516,15 @@ impl<'a> Holding<'a> {
                     beyond.extend(e.map(|v| v as usize));
                 }
             }
+            // So are the vertices where the collapses pinched the surface to a point (two
+            // fans of triangles meeting there only: on the chest CT's raw bones at 0.3 mm, 428
+            // of them, where the full surface had none).
+            for v in pinched_vertices(&simple.triangles) {
+                let v = origin[v as usize];
+                if !self.pinched_in_full.contains(&v) {
+                    beyond.push(v as usize);
+                }
+            }
             on_round(round + 1, beyond.len());
             if beyond.is_empty() {
                 return Some(Kept {
@@ -546,6 +558,42 @@ impl<'a> Holding<'a> {
         }
         None
     }
+}
+
+/// The vertices of `triangles` at which two or more fans of them meet (the surface pinched to
+/// a point, as two cones tip to tip): where a closed surface, its edges each joining two
+/// triangles, is still not a 2-manifold. A vertex's triangles, each giving the edge opposite
+/// it (from its next corner to its previous), chain into a loop around it on a 2-manifold; a
+/// vertex whose loop from its first triangle's edge closes before its triangles are spent, or
+/// whose edge is another's start twice (an edge that is not manifold), is listed (on a surface
+/// with borders, a border's vertices may be too). Each once, in order.
+pub fn pinched_vertices(triangles: &[[u32; 3]]) -> Vec<u32> {
+    // Every corner's edge opposite it, sorted by corner then by the edge's start.
+    let mut around: Vec<[u32; 3]> = triangles
+        .iter()
+        .flat_map(|&[a, b, c]| [[a, b, c], [b, c, a], [c, a, b]])
+        .collect();
+    around.sort_unstable();
+    let mut pinched = Vec::new();
+    for fan in around.chunk_by(|x, y| x[0] == y[0]) {
+        let next = |from: u32| {
+            let i = fan.partition_point(|x| x[1] < from);
+            (i < fan.len() && fan[i][1] == from).then(|| fan[i][2])
+        };
+        let twice = fan.windows(2).any(|w| w[0][1] == w[1][1]);
+        let (start, mut at, mut steps) = (fan[0][1], fan[0][2], 1);
+        while at != start && steps < fan.len() {
+            match next(at) {
+                Some(n) => at = n,
+                None => break,
+            }
+            steps += 1;
+        }
+        if twice || steps < fan.len() {
+            pinched.push(fan[0][0]);
+        }
+    }
+    pinched
 }
 
 /// The edges (their ends, the lesser first) of `triangles` that join more than two of them,

@@ -398,6 +398,7 @@ fn simplify_sphere(radius: f64) {
             s.triangles_after
         );
         assert_closed_and_oriented(&simple.mesh);
+        assert_eq!(pinched_vertices(&simple.mesh.triangles), [0u32; 0]);
         assert_eq!(simple.normals.len(), simple.mesh.positions.len());
         for (p, n) in simple.mesh.positions.iter().zip(&simple.normals) {
             let v = full.mesh.positions.iter().position(|q| q == p);
@@ -436,7 +437,8 @@ fn departure_beyond_the_reach_is_infinite() {
 
 /// [`not_manifold`] on surfaces built by hand: a tetrahedron has no such edge; with a face
 /// turned, its three edges are each crossed twice the same way; a second tetrahedron on one
-/// edge makes it join four triangles; a lone triangle's edges are a border, not listed.
+/// edge makes it join four triangles; a lone triangle's edges are a border, not listed. A
+/// sphere's marching cubes surface has no such edge and no pinched vertex.
 #[test]
 fn edges_that_are_not_manifold() {
     let tetra = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
@@ -461,6 +463,38 @@ fn edges_that_are_not_manifold() {
     let s = extract_isosurface(&vol, 0.0);
     assert_closed_and_oriented(&s.mesh);
     assert_eq!(not_manifold(&s.mesh.triangles), none);
+    assert_eq!(pinched_vertices(&s.mesh.triangles), [0u32; 0]);
+}
+
+/// [`pinched_vertices`] on surfaces built by hand: a tetrahedron has none; two tetrahedra
+/// sharing one vertex only (tip to tip) are pinched there; sharing an edge, at its ends (an
+/// edge joining four triangles); random volumes' marching cubes surfaces (every case of the
+/// table) have none, as the sphere's has none ([`edges_that_are_not_manifold`]).
+#[test]
+fn vertices_where_a_surface_is_pinched() {
+    let tetra = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+    let none: [u32; 0] = [];
+    assert_eq!(pinched_vertices(&tetra), none);
+    let mut tip = tetra.to_vec();
+    tip.extend([[0, 5, 4], [0, 4, 6], [0, 6, 5], [4, 5, 6]]);
+    assert_eq!(pinched_vertices(&tip), [0]);
+    let mut edge = tetra.to_vec();
+    edge.extend([[0, 4, 1], [0, 1, 5], [0, 5, 4], [1, 4, 5]]);
+    assert_eq!(pinched_vertices(&edge), [0, 1]);
+    let seed = std::cell::Cell::new(7u64);
+    for _ in 0..4 {
+        let vol = analytic([12, 11, 10], [1.0; 3], [0.0; 3], rotation(), |_| {
+            let next = seed
+                .get()
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            seed.set(next);
+            if next >> 63 == 1 { 1000.0 } else { -1000.0 }
+        });
+        let s = extract_isosurface(&vol, 0.0);
+        assert_closed_and_oriented(&s.mesh);
+        assert_eq!(pinched_vertices(&s.mesh.triangles), none);
+    }
 }
 
 /// A lone voxel's surface, smoothed to a speck (which quadric collapses alone take away

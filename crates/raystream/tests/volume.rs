@@ -135,7 +135,8 @@ fn iso_writes_a_closed_bone_surface() {
 
 /// The CT's integers at the integer threshold: where voxels are exactly 300 HU (110 are)
 /// the raw surface still puts no two vertices on one point, and simplified within 0.3 and 1 mm
-/// it stays closed and a 2-manifold by its indices (a 3D printer's slicer and lib3mf take it),
+/// it stays closed and a 2-manifold by its indices, at its edges and its vertices (a 3D
+/// printer's slicer and lib3mf take it),
 /// each vertex one of the full surface's, which lies within the bound of it.
 #[test]
 fn raw_ct_bones_simplify_to_a_closed_manifold() {
@@ -188,6 +189,11 @@ fn raw_ct_bones_simplify_to_a_closed_manifold() {
         assert!(
             closed_and_oriented(&simple),
             "{mm} mm: not a closed 2-manifold"
+        );
+        let pinched = raystream_volume::pinched_vertices(&simple.triangles);
+        assert!(
+            pinched.is_empty(),
+            "{mm} mm: pinched at vertices {pinched:?}"
         );
         assert!(
             bits(&simple).is_subset(&points),
