@@ -181,6 +181,7 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
             let m = three_mf::parse(&bytes, path)?;
             let shading = MeshShading {
                 colours: m.colours,
+                objects: m.objects,
                 warnings: m.warnings,
                 ..Default::default()
             };
@@ -420,6 +421,9 @@ pub struct MeshShading {
     /// VisCAM's); empty when the file gives none. They multiply the
     /// material's ambient and diffuse colours, as a texture does.
     pub colours: Vec<[Rgb8; 3]>,
+    /// The file's objects, in its order, each with the triangles it holds: a 3MF's build items
+    /// (named by their objects, or "object ID"); empty for the other formats.
+    pub objects: Vec<(String, usize)>,
     /// What a user should know: a library missing or unreadable, a texture not applied.
     pub warnings: Vec<String>,
     /// The patient coordinate system the file says its coordinates are in, if it says one
@@ -712,6 +716,7 @@ fn parse_obj(
             material_of,
             uvs,
             colours,
+            objects: Vec::new(),
             warnings,
             space: None,
         },

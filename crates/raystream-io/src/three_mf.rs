@@ -34,10 +34,13 @@ const MAX_PART_BYTES: u64 = 2 << 30;
 /// The deepest nesting of components read (the specification forbids cycles).
 const MAX_DEPTH: usize = 32;
 
-/// A mesh read from a 3MF package, with its triangles' colours (empty: it gives none).
+/// A mesh read from a 3MF package, with its triangles' colours (empty: it gives none) and its
+/// build's objects: each build item's object's name (or "object ID") and the triangles it
+/// placed, in the build's order.
 pub(crate) struct ThreeMf {
     pub mesh: TriMesh,
     pub colours: Vec<[Rgb8; 3]>,
+    pub objects: Vec<(String, usize)>,
     pub warnings: Vec<String>,
 }
 
@@ -63,6 +66,8 @@ type Placement = (Option<String>, u32, DAffine3);
 /// root part's applies: the model has one) and its build.
 struct Part {
     objects: HashMap<u32, Shape>,
+    /// The objects' names, where they have one.
+    names: HashMap<u32, String>,
     colours: HashMap<u32, Vec<Rgb8>>,
     other_groups: HashMap<u32, String>,
     /// Millimetres a unit.
@@ -83,24 +88,33 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<ThreeMf, MeshError> {
     let mut out = ThreeMf {
         mesh: TriMesh::default(),
         colours: Vec::new(),
+        objects: Vec::new(),
         warnings: Vec::new(),
     };
     let mut coloured = false;
     let mut other_kinds = std::collections::BTreeSet::new();
-    // Depth first, each object with its world transform (the unit's scale included).
-    let mut stack: Vec<(String, u32, DAffine3, usize)> = build
+    // Depth first, each object with its world transform (the unit's scale included) and its
+    // build item.
+    let mut stack: Vec<(String, u32, DAffine3, usize, usize)> = build
         .iter()
+        .enumerate()
         .rev()
-        .map(|(p, id, m)| {
+        .map(|(item, (p, id, m))| {
             let p = p.clone().unwrap_or_else(|| root.clone());
-            (p, *id, DAffine3::from_scale(DVec3::splat(scale)) * *m, 0)
+            (
+                p,
+                *id,
+                DAffine3::from_scale(DVec3::splat(scale)) * *m,
+                0,
+                item,
+            )
         })
         .collect();
     if stack.is_empty() {
         return Err(bad("its build places no object".into()));
     }
     let mut visits = 0usize;
-    while let Some((part_name, id, world, depth)) = stack.pop() {
+    while let Some((part_name, id, world, depth, item)) = stack.pop() {
         visits += 1;
         if visits > crate::gltf::MAX_TRIANGLES {
             return Err(bad(format!(
@@ -124,6 +138,10 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<ThreeMf, MeshError> {
             .objects
             .get(&id)
             .ok_or_else(|| bad(format!("{} is not defined", where_(id))))?;
+        if depth == 0 {
+            let name = part.names.get(&id).cloned().unwrap_or_else(|| where_(id));
+            out.objects.push((name, 0));
+        }
         match shape {
             Shape::Components(components) => {
                 if depth >= MAX_DEPTH {
@@ -134,7 +152,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<ThreeMf, MeshError> {
                 }
                 for (p, child, m) in components.iter().rev() {
                     let p = p.clone().unwrap_or_else(|| part_name.clone());
-                    stack.push((p, *child, world * *m, depth + 1));
+                    stack.push((p, *child, world * *m, depth + 1, item));
                 }
             }
             Shape::Mesh {
@@ -162,6 +180,7 @@ pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<ThreeMf, MeshError> {
                         .iter()
                         .map(|p| world.transform_point3(*p).as_vec3()),
                 );
+                out.objects[item].1 += triangles.len();
                 // A mirroring transform turns the triangles inside out: turned back.
                 let mirrored = world.matrix3.determinant() < 0.0;
                 out.mesh.triangles.extend(triangles.iter().map(|t| {
@@ -275,6 +294,7 @@ fn read_part(zip: &mut zip::ZipArchive<Cursor<&[u8]>>, name: &str) -> Result<Par
     };
     let mut part = Part {
         objects: HashMap::new(),
+        names: HashMap::new(),
         colours: HashMap::new(),
         other_groups: HashMap::new(),
         scale,
@@ -312,6 +332,9 @@ fn read_part(zip: &mut zip::ZipArchive<Cursor<&[u8]>>, name: &str) -> Result<Par
                     let id = id_of(r)?;
                     let shape = object(r, name, id)?;
                     part.objects.insert(id, shape);
+                    if let Some(n) = r.attribute("name").map(str::trim).filter(|n| !n.is_empty()) {
+                        part.names.insert(id, n.to_string());
+                    }
                 }
                 (_, kind) if r.attribute("id").is_some() => {
                     part.other_groups.insert(id_of(r)?, kind.to_string());
@@ -602,6 +625,9 @@ mod tests {
         let bytes = package_with(&root, &[("3D/Objects/o.model", &other)]);
         let m = parse_mesh(&bytes, MeshFormat::ThreeMf, Path::new("t.3mf")).unwrap();
         assert_eq!(m.positions[1], crate::Vec3::new(1.0, 0.0, 7.0));
+        // The build item's object, unnamed, holds its component's triangle.
+        let read = super::parse(&bytes, Path::new("t.3mf")).unwrap();
+        assert_eq!(read.objects, [("object 3".to_string(), 1)]);
         let missing = root.replace("o.model", "gone.model");
         let e = error(&package_with(&missing, &[("3D/Objects/o.model", &other)]));
         assert!(e.contains("part 3D/Objects/gone.model"), "{e}");
@@ -639,6 +665,14 @@ mod tests {
              <triangle v1=\"1\" v2=\"2\" v3=\"0\" pid=\"6\" p1=\"0\"/></triangles></mesh></object>"
         );
         let build = "<item objectid=\"1\" transform=\"0 1 0 -1 0 0 0 0 1 10 0 0\"/>";
+        // Two build items, the same object twice: an object each, named by it (trimmed).
+        let named = resources.replace("<object id=\"1\"", "<object name=\" Femur \" id=\"1\"");
+        let twice = package(&model("millimeter", &named, &build.repeat(2)));
+        let read = super::parse(&twice, Path::new("t.3mf")).unwrap();
+        assert_eq!(
+            read.objects,
+            [("Femur".to_string(), 3), ("Femur".to_string(), 3)]
+        );
         let scratch = crate::tests::scratch_file("t.3mf");
         std::fs::write(&scratch, package(&model("centimeter", &resources, build))).unwrap();
         let (mesh, shading) = load_mesh_with_shading(&scratch).unwrap();

@@ -68,7 +68,8 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     {
         return scene_info(a, input);
     }
-    // The mesh with its materials (an OBJ's MTL), each with the triangles that use it.
+    // The mesh with its materials (an OBJ's MTL), each with the triangles that use it, and its
+    // objects (a 3MF's build items).
     let (mesh, materials) = raystream_io::load_mesh_with_shading(input)?;
     let mut counts = vec![0usize; materials.materials.len()];
     for m in materials.material_of.iter().flatten() {
@@ -103,6 +104,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             "bounds": [b.min.to_array(), b.max.to_array()],
             "kdtree": tree_json(&tree),
             "materials": used.iter().map(|(name, n, t)| json!({"name": name, "triangles": n, "texture": t})).collect::<Vec<_>>(),
+            "objects": materials.objects.iter().map(|(name, n)| json!({"name": name, "triangles": n})).collect::<Vec<_>>(),
             "texture_coordinates": !materials.uvs.is_empty(),
             "colours": colours.map(|n| json!({"distinct": n})),
             "space": materials.space.map(|s| s.name()),
@@ -145,6 +147,9 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             println!(
                 "  colours    {n} distinct: the file's, per vertex or per face, which render draws"
             );
+        }
+        for (name, n) in &materials.objects {
+            println!("  object     {name}: {n} triangles");
         }
         for (name, n, texture) in &used {
             match texture {

@@ -3040,7 +3040,15 @@ fn three_mf_reads_and_writes_as_lib3mf_does() {
         triangles += count;
     }
     assert_eq!(triangles, obj_mesh.len());
-    // Read back by raystream: the OBJ's triangles, in order, each in its segment's colour.
+    // Read back by raystream: `info` lists the objects lib3mf finds, by name, with their
+    // triangles; and the OBJ's triangles, in order, each in its segment's colour.
+    let o = run(&["info", written.to_str().unwrap(), "--json"]);
+    let read: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let read = read["objects"].as_array().unwrap();
+    assert_eq!(read.len(), objects.len());
+    for (r, o) in read.iter().zip(objects) {
+        assert_eq!((&r["name"], &r["triangles"]), (&o["name"], &o["triangles"]));
+    }
     let (mesh, shading) = raystream_io::load_mesh_with_shading(&written).unwrap();
     assert_eq!(mesh.len(), obj_mesh.len());
     for i in 0..mesh.len() {
