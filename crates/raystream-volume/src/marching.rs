@@ -348,7 +348,8 @@ pub fn simplify(surface: &mut IsoSurface, max_error: f64) -> Simplified {
 }
 
 /// Where [`simplify`] is: the try (from 1), its round (from 1), and how many vertices that
-/// round left beyond the bound or at a pinched edge (to be held in the next).
+/// round left beyond the bound, at a pinched edge or pinched themselves (to be held in the
+/// next).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SimplifyRound {
     pub attempt: u32,

@@ -211,7 +211,7 @@ fn simplify(surface: &mut IsoSurface, mm: Option<f64>, what: &str, quiet: bool) 
     let t = Instant::now();
     let s = raystream_volume::simplify_reporting(surface, mm, &mut |r| {
         pb.set_message(format!(
-            "simplifying {what} within {mm} mm: try {}, round {} left {} vertices beyond the bound or at pinched edges",
+            "simplifying {what} within {mm} mm: try {}, round {} left {} vertices beyond the bound or where the surface is pinched",
             r.attempt, r.round, r.beyond
         ))
     });
