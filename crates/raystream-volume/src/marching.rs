@@ -143,11 +143,9 @@ pub fn extract_isosurface(vol: &Volume, iso: f32) -> IsoSurface {
                                 (c1.0 as usize, c1.1 as usize, c1.2 as usize),
                             );
                             let (v0, v1) = (value(a0.0, a0.1, a0.2), value(a1.0, a1.1, a1.2));
-                            let t = if v1 != v0 {
-                                ((iso - v0) / (v1 - v0)) as f64
-                            } else {
-                                0.5
-                            };
+                            // A crossing edge's ends differ (one at or above the threshold,
+                            // the other below it or NaN); a NaN end puts the vertex midway.
+                            let t = ((iso - v0) / (v1 - v0)) as f64;
                             let t = if t.is_nan() {
                                 0.5
                             } else {
