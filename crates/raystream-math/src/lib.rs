@@ -2,7 +2,7 @@
 //! and an axis-aligned box [`Aabb`]. No I/O and no GPU here.
 
 pub use glam::{
-    DAffine3, DMat3, DMat4, DVec2, DVec3, Mat3, Mat4, Quat, UVec3, Vec2, Vec3, Vec3A, Vec4,
+    DAffine3, DMat3, DMat4, DVec2, DVec3, I64Vec3, Mat3, Mat4, Quat, UVec3, Vec2, Vec3, Vec3A, Vec4,
 };
 
 /// The largest coordinate a mesh, scene or volume may hold, in scene units (millimetres for

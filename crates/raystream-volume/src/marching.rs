@@ -15,7 +15,7 @@
 
 use rayon::prelude::*;
 use raystream_io::{TriMesh, Volume};
-use raystream_math::{DVec3, Vec3};
+use raystream_math::{DVec3, I64Vec3, Vec3};
 
 use crate::cases::{CASES, EDGE_START};
 
@@ -445,8 +445,8 @@ struct Holding<'a> {
     /// The edges already joining other than two triangles facing opposite ways in the full
     /// surface, and its vertices already pinched (none in the marching cubes' surfaces): only
     /// new ones are the collapses' doing.
-    bad_in_full: std::collections::HashSet<[u32; 2]>,
-    pinched_in_full: std::collections::HashSet<u32>,
+    bad_in_full: foldhash::HashSet<[u32; 2]>,
+    pinched_in_full: foldhash::HashSet<u32>,
     /// Each vertex's triangles' corners, built when first needed.
     ring: Option<Vec<Vec<u32>>>,
 }
@@ -600,7 +600,7 @@ pub fn pinched_vertices(triangles: &[[u32; 3]]) -> Vec<u32> {
 /// a surface is not a closed, oriented 2-manifold (edges of one triangle, a border, are not
 /// listed).
 pub fn not_manifold(triangles: &[[u32; 3]]) -> Vec<[u32; 2]> {
-    use std::collections::HashMap;
+    use foldhash::{HashMap, HashMapExt};
     // Each edge's uses: how many cross it from its lesser end, and from its greater.
     let mut uses: HashMap<[u32; 2], [u32; 2]> = HashMap::with_capacity(triangles.len() * 3 / 2);
     for t in triangles {
@@ -625,7 +625,7 @@ pub fn not_manifold(triangles: &[[u32; 3]]) -> Vec<[u32; 2]> {
 /// held vertices can leave: its two faces cancel, and without them the surface is a 2-manifold
 /// again).
 fn compact(full: &TriMesh, kept: &[u32]) -> (TriMesh, Vec<u32>) {
-    use std::collections::HashMap;
+    use foldhash::{HashMap, HashMapExt};
     let tris: Vec<[u32; 3]> = kept.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
     // Each triangle keyed by its corners, rotated to start at the least: a triangle and its
     // reverse have the same corners in the other cyclic order.
@@ -682,55 +682,163 @@ pub fn departure(points: &[Vec3], simple: &TriMesh, reach: f64) -> f64 {
 }
 
 /// How far each of the `points` lies from the surface `simple` (from its nearest triangle),
-/// +∞ where it has none within `reach`.
-///
-/// `simple`'s triangles are binned by their bounds into a grid of cells at least `reach` wide
-/// (and as wide as its mean edge), so that each vertex looks only at the triangles of the cells
-/// within `reach` of it; f64 throughout, in parallel over the vertices.
+/// +∞ where it has none within `reach`: a search of a grid of the triangles, nearest cells
+/// first, in parallel over the points.
 pub fn distances(points: &[Vec3], simple: &TriMesh, reach: f64) -> Vec<f64> {
-    use std::collections::HashMap;
-    if simple.is_empty() || reach.is_nan() || reach <= 0.0 {
-        return vec![f64::INFINITY; points.len()];
+    match Nearest::new(simple, reach) {
+        Some(near) => points
+            .par_iter()
+            .map(|p| near.distance(p.as_dvec3()))
+            .collect(),
+        None => vec![f64::INFINITY; points.len()],
     }
-    let tris: Vec<[DVec3; 3]> = (0..simple.len())
-        .map(|i| simple.corners(i).map(|p| p.as_dvec3()))
-        .collect();
-    let edge = tris
-        .iter()
-        .map(|t| (t[1] - t[0]).length() + (t[2] - t[1]).length() + (t[0] - t[2]).length())
-        .sum::<f64>()
-        / (3 * tris.len()) as f64;
-    let cell = reach.max(edge);
-    let key = |p: DVec3| (p / cell).floor().as_i64vec3().to_array();
-    let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
-    for (i, t) in tris.iter().enumerate() {
-        let (lo, hi) = (key(t[0].min(t[1]).min(t[2])), key(t[0].max(t[1]).max(t[2])));
-        for x in lo[0]..=hi[0] {
-            for y in lo[1]..=hi[1] {
-                for z in lo[2]..=hi[2] {
-                    grid.entry([x, y, z]).or_default().push(i as u32);
-                }
-            }
+}
+
+/// A surface's triangles binned for the distance of points from it, up to a reach.
+///
+/// The triangles are binned by their bounds into a grid of cells at least `reach` wide (and as
+/// wide as their mean edge). A point looks at the cells within `reach` of it, nearest first,
+/// and stops at the first cell farther than the nearest triangle found so far; within a cell,
+/// a triangle whose bounding box is farther than that is passed over unmeasured. f64
+/// throughout. (Written by hand: the search is a few lines, where a crate's nearest-point
+/// query, parry's, would bring its own geometry types for this one use; it is checked against
+/// brute force in the tests.)
+struct Nearest {
+    reach: f64,
+    tris: Vec<[DVec3; 3]>,
+    bounds: Vec<[DVec3; 2]>,
+    /// The grid's corner and its cells' width.
+    lo: DVec3,
+    cell: f64,
+    /// Each listed cell's triangles: `listed[grid[cell]]`.
+    listed: Vec<u32>,
+    grid: foldhash::HashMap<u64, std::ops::Range<usize>>,
+    /// The cells about a point's own, nearest first by the least distance any point of the
+    /// own cell can have to them (a whole cell less than their offset, on each axis).
+    offsets: Vec<(f64, I64Vec3)>,
+}
+
+impl Nearest {
+    /// `None` where `mesh` has no triangle or `reach` is not positive.
+    fn new(mesh: &TriMesh, reach: f64) -> Option<Nearest> {
+        if mesh.is_empty() || reach.is_nan() || reach <= 0.0 {
+            return None;
         }
-    }
-    points
-        .par_iter()
-        .map(|p| {
-            let p = p.as_dvec3();
-            let (lo, hi) = (key(p - reach), key(p + reach));
-            let mut best = f64::INFINITY;
-            for x in lo[0]..=hi[0] {
-                for y in lo[1]..=hi[1] {
-                    for z in lo[2]..=hi[2] {
-                        for &i in grid.get(&[x, y, z]).map_or(&[][..], |v| v.as_slice()) {
-                            best = best.min(point_triangle_distance(p, tris[i as usize]));
+        let tris: Vec<[DVec3; 3]> = (0..mesh.len())
+            .map(|i| mesh.corners(i).map(|p| p.as_dvec3()))
+            .collect();
+        let bounds: Vec<[DVec3; 2]> = tris
+            .iter()
+            .map(|t| [t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2])])
+            .collect();
+        let (lo, hi) = bounds
+            .iter()
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), b| {
+                (lo.min(b[0]), hi.max(b[1]))
+            });
+        let edge = tris
+            .iter()
+            .map(|t| (t[1] - t[0]).length() + (t[2] - t[1]).length() + (t[0] - t[2]).length())
+            .sum::<f64>()
+            / (3 * tris.len()) as f64;
+        // Cells at least `reach` wide, so that a point looks at no more than the 27 about it;
+        // widened until each axis has at most 2²¹ of them, so that a cell's three coordinates
+        // pack into one key. Only cells a triangle's bounds reach are listed (a surface fills
+        // few of a volume's cells), hashed by foldhash's fast hasher (as this file's other
+        // maps are: far fewer cycles a key than the standard SipHash, and seeded all the same).
+        let mut cell = reach.max(edge);
+        while ((hi - lo) / cell).max_element() >= (1 << 21) as f64 {
+            cell *= 2.0;
+        }
+        let mut near = Nearest {
+            reach,
+            tris,
+            bounds,
+            lo,
+            cell,
+            listed: Vec::new(),
+            grid: foldhash::HashMapExt::new(),
+            offsets: Vec::new(),
+        };
+        let mut pairs: Vec<(u64, u32)> = Vec::new();
+        for (t, b) in near.bounds.iter().enumerate() {
+            let (a, z) = (near.key(b[0]), near.key(b[1]));
+            for x in a.x..=z.x {
+                for y in a.y..=z.y {
+                    for w in a.z..=z.z {
+                        if let Some(k) = packed(I64Vec3::new(x, y, w)) {
+                            pairs.push((k, t as u32));
                         }
                     }
                 }
             }
-            if best <= reach { best } else { f64::INFINITY }
-        })
-        .collect()
+        }
+        pairs.sort_unstable();
+        near.listed = pairs.iter().map(|&(_, t)| t).collect();
+        let mut from = 0;
+        for run in pairs.chunk_by(|a, b| a.0 == b.0) {
+            near.grid.insert(run[0].0, from..from + run.len());
+            from += run.len();
+        }
+        let r = (reach / cell).ceil() as i64;
+        for x in -r..=r {
+            for y in -r..=r {
+                for z in -r..=r {
+                    let d = I64Vec3::new(x, y, z);
+                    let gap = (d.abs() - 1).max(I64Vec3::ZERO).as_dvec3() * cell;
+                    near.offsets.push((gap.length(), d));
+                }
+            }
+        }
+        near.offsets.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Some(near)
+    }
+
+    /// The cell that holds `p`.
+    fn key(&self, p: DVec3) -> I64Vec3 {
+        ((p - self.lo) / self.cell).floor().as_i64vec3()
+    }
+
+    /// How far `p` lies from its nearest triangle, +∞ where none is within the reach.
+    fn distance(&self, p: DVec3) -> f64 {
+        // The squared distance from `p` to the box `b`.
+        let box_distance2 =
+            |b: [DVec3; 2]| (b[0] - p).max(p - b[1]).max(DVec3::ZERO).length_squared();
+        let own = self.key(p);
+        let mut best = f64::INFINITY;
+        for &(gap, d) in &self.offsets {
+            let bound = best.min(self.reach);
+            if gap > bound {
+                break;
+            }
+            let c = own + d;
+            let lo = self.lo + c.as_dvec3() * self.cell;
+            if box_distance2([lo, lo + self.cell]) > bound * bound {
+                continue;
+            }
+            let Some(range) = packed(c).and_then(|k| self.grid.get(&k)) else {
+                continue;
+            };
+            for &t in &self.listed[range.clone()] {
+                let bound = best.min(self.reach);
+                if box_distance2(self.bounds[t as usize]) > bound * bound {
+                    continue;
+                }
+                best = best.min(point_triangle_distance(p, self.tris[t as usize]));
+            }
+        }
+        if best <= self.reach {
+            best
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+/// A cell's three coordinates in one key, 21 bits each; `None` for a cell off the grid.
+fn packed(c: I64Vec3) -> Option<u64> {
+    (c.cmpge(I64Vec3::ZERO).all() && c.cmplt(I64Vec3::splat(1 << 21)).all())
+        .then_some(((c.x as u64) << 42) | ((c.y as u64) << 21) | c.z as u64)
 }
 
 /// The distance from `p` to the triangle `t` (Ericson, Real-Time Collision Detection 5.1.5:

@@ -435,6 +435,90 @@ fn departure_beyond_the_reach_is_infinite() {
     assert_eq!(departure(&far.positions, &tri, 6.0), 5.0);
 }
 
+/// Each point's distance from its nearest triangle, brute force: +∞ beyond `reach`.
+fn distances_brute(points: &[Vec3], mesh: &raystream_io::TriMesh, reach: f64) -> Vec<f64> {
+    points
+        .iter()
+        .map(|p| {
+            let d = (0..mesh.len())
+                .map(|i| {
+                    point_triangle_distance(p.as_dvec3(), mesh.corners(i).map(|c| c.as_dvec3()))
+                })
+                .fold(f64::INFINITY, f64::min);
+            if d <= reach { d } else { f64::INFINITY }
+        })
+        .collect()
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(96))]
+    /// [`distances`]' grid search (nearest cells first, stopping at the first farther than the
+    /// nearest triangle found, passing over triangles whose bounds are) gives each point the
+    /// same distance as brute force, to the bit, or +∞ alike: random triangles from slivers to
+    /// ones spanning many cells, points on them, near them and far off, reaches from a
+    /// hundredth of the triangles' spread to more than all of it.
+    #[test]
+    fn distances_equal_brute_force(seed in 0u64..u64::MAX, n in 1usize..60, reach_exp in -2.0f64..1.0) {
+        let mut s = seed | 1;
+        let mut rnd = move || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s >> 11) as f32 / (1u64 << 53) as f32 };
+        let mut positions = Vec::new();
+        let mut triangles = Vec::new();
+        for t in 0..n {
+            let c = Vec3::new(rnd(), rnd(), rnd()) * 100.0;
+            let size = 10f32.powf(rnd() * 3.0 - 1.0);
+            for _ in 0..3 {
+                positions.push(c + (Vec3::new(rnd(), rnd(), rnd()) - 0.5) * size);
+            }
+            let t = 3 * t as u32;
+            triangles.push([t, t + 1, t + 2]);
+        }
+        let mesh = raystream_io::TriMesh { positions, triangles };
+        let mut points: Vec<Vec3> = (0..200).map(|_| (Vec3::new(rnd(), rnd(), rnd()) - 0.1) * 120.0).collect();
+        points.extend(mesh.positions.iter().map(|&p| p + (Vec3::new(rnd(), rnd(), rnd()) - 0.5)));
+        let reach = 100.0 * 10f64.powf(reach_exp);
+        let got = distances(&points, &mesh, reach);
+        let want = distances_brute(&points, &mesh, reach);
+        for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+            proptest::prop_assert_eq!(g.to_bits(), w.to_bits(), "point {} at {}", i, points[i]);
+        }
+    }
+}
+
+/// A surface whose extent is more than 2²¹ of its cells (two small triangles 10⁸ apart,
+/// measured within 10⁻³) widens the cells until the grid fits its keys, and still gives brute
+/// force's distances.
+#[test]
+fn distances_over_a_vast_extent_equal_brute_force() {
+    let far = Vec3::new(1e8, -1e8, 5e7);
+    let mesh = raystream_io::TriMesh {
+        positions: vec![
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y,
+            far,
+            far + Vec3::X,
+            far + Vec3::Z,
+        ],
+        triangles: vec![[0, 1, 2], [3, 4, 5]],
+    };
+    let points = [
+        Vec3::new(0.25, 0.25, 0.0005),
+        Vec3::new(0.25, 0.25, 0.5),
+        far + Vec3::new(0.5, 0.0, 0.5),
+        far + Vec3::new(0.5, 0.0004, 0.5),
+        far * 0.5,
+    ];
+    for reach in [1e-3, 1.0, 1e9] {
+        let got = distances(&points, &mesh, reach);
+        assert_eq!(
+            got,
+            distances_brute(&points, &mesh, reach),
+            "within {reach}"
+        );
+    }
+    assert!(distances(&points, &mesh, 1e-3)[1].is_infinite());
+}
+
 /// [`not_manifold`] on surfaces built by hand: a tetrahedron has no such edge; with a face
 /// turned, its three edges are each crossed twice the same way; a second tetrahedron on one
 /// edge makes it join four triangles; a lone triangle's edges are a border, not listed. A
