@@ -332,9 +332,12 @@ const QUICK_ROUNDS: usize = 8;
 /// Holding is a try of up to 16 rounds. Where it took more than 8, it had held many vertices
 /// (the allowance let the collapses go far beyond the bound), and the next try, nothing held,
 /// at half the allowance, may keep fewer triangles: the tries go on, up to five, while they
-/// take more than 8 rounds and keep fewer triangles, and the fewest are kept. (With one try,
-/// the chest CT's smoothed bones kept more triangles at 4 mm than at 1 mm; BENCHMARKS.md has
-/// the tries.) After five tries that did not converge the surface is left as it was. (Lowering the allowance for the whole surface within a try instead, while many
+/// take more than 8 rounds and keep fewer triangles, and the fewest are kept. A try is given
+/// up at the first round that keeps as many as the fewest so far while it still has vertices
+/// to hold (a round keeps more than the one before it). (With one try, the chest CT's
+/// smoothed bones kept more triangles at 4 mm than at 1 mm; BENCHMARKS.md has the tries.)
+/// After five tries that did not converge the surface is left as it was. (Lowering the
+/// allowance for the whole surface within a try instead, while many
 /// vertices were beyond, kept within the bound as well, but on the chest CT's bones left 2.5
 /// times the triangles.) The vertices kept are original ones, with their normals; unused ones
 /// are dropped.
@@ -345,13 +348,14 @@ pub fn simplify(surface: &mut IsoSurface, max_error: f64) -> Simplified {
     simplify_reporting(surface, max_error, &mut |_| {})
 }
 
-/// Where [`simplify`] is: the try (from 1), its round (from 1), and how many vertices that
-/// round left beyond the bound, at a pinched edge or pinched themselves (to be held in the
-/// next).
+/// Where [`simplify`] is: the try (from 1), its round (from 1), the triangles that round
+/// kept, and how many vertices it left beyond the bound, at a pinched edge or pinched
+/// themselves (to be held in the next).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SimplifyRound {
     pub attempt: u32,
     pub round: usize,
+    pub triangles: usize,
     pub beyond: usize,
 }
 
@@ -375,20 +379,23 @@ pub fn simplify_reporting(
     let mut job = Holding::new(full, max_error);
     let mut best: Option<Kept> = None;
     for t in 0..TRIES {
-        let Some(kept) = job.attempt(max_error * 0.5f64.powi(t as i32), &mut |round, beyond| {
+        let allowance = max_error * 0.5f64.powi(t as i32);
+        let fewest = best.as_ref().map(|b| b.mesh.triangles.len());
+        let kept = job.attempt(allowance, fewest, &mut |round, triangles, beyond| {
             on_round(SimplifyRound {
                 attempt: t + 1,
                 round,
+                triangles,
                 beyond,
             })
-        }) else {
-            continue;
+        });
+        let kept = match kept {
+            Ok(kept) => kept,
+            Err(Unkept::Unconverged) => continue,
+            Err(Unkept::NoFewer) => break,
         };
         let (rounds, triangles) = (kept.rounds, kept.mesh.triangles.len());
-        if best
-            .as_ref()
-            .is_some_and(|b| b.mesh.triangles.len() <= triangles)
-        {
+        if fewest.is_some_and(|f| f <= triangles) {
             break;
         }
         best = Some(kept);
@@ -430,6 +437,14 @@ struct Kept {
     held: usize,
     /// The rounds it took.
     rounds: usize,
+}
+
+/// Why a try of [`simplify`] was given up.
+enum Unkept {
+    /// Some vertex was still beyond the bound, or pinched, after [`ROUNDS`] rounds.
+    Unconverged,
+    /// A round kept as many triangles as a try before had, with more still to hold.
+    NoFewer,
 }
 
 /// What the tries of [`simplify`] share: the full surface as meshoptimizer takes it, the
@@ -480,10 +495,18 @@ impl<'a> Holding<'a> {
     }
 
     /// Collapses at meshoptimizer's `allowance`, holding what went beyond the bound or pinched
-    /// and collapsing again, for up to [`ROUNDS`] rounds; `None` where some vertex is still
-    /// beyond, or some edge pinched, after them.
-    /// `on_round` is told each round (from 1) and its vertices beyond.
-    fn attempt(&mut self, allowance: f64, on_round: &mut dyn FnMut(usize, usize)) -> Option<Kept> {
+    /// and collapsing again, for up to [`ROUNDS`] rounds. Given up where some vertex is still
+    /// beyond, or some edge pinched, after them, or where a round that left some to hold kept
+    /// already as many triangles as `fewest` (a try before kept): holding more only keeps more
+    /// (on the chest CT's bones at 4 mm, every round of every try kept more than the one
+    /// before).
+    /// `on_round` is told each round (from 1), its triangles and its vertices beyond.
+    fn attempt(
+        &mut self,
+        allowance: f64,
+        fewest: Option<usize>,
+        on_round: &mut dyn FnMut(usize, usize, usize),
+    ) -> Result<Kept, Unkept> {
         let full = self.full;
         let adapter = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&self.positions), 12, 0)
             .expect("12-byte positions");
@@ -524,15 +547,18 @@ impl<'a> Holding<'a> {
                     beyond.push(v as usize);
                 }
             }
-            on_round(round + 1, beyond.len());
+            on_round(round + 1, simple.triangles.len(), beyond.len());
             if beyond.is_empty() {
-                return Some(Kept {
+                return Ok(Kept {
                     mesh: simple,
                     origin,
                     departure: d.iter().copied().fold(0.0, f64::max),
                     held: held.iter().filter(|h| **h).count(),
                     rounds: round + 1,
                 });
+            }
+            if fewest.is_some_and(|f| simple.triangles.len() >= f) {
+                return Err(Unkept::NoFewer);
             }
             // A vertex held and still beyond went with its piece, collapsed onto it, or its
             // triangles went flat (or its edge is still pinched): the vertices of its
@@ -555,7 +581,7 @@ impl<'a> Holding<'a> {
                 held[v] = true;
             }
         }
-        None
+        Err(Unkept::Unconverged)
     }
 }
 

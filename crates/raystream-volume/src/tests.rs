@@ -378,7 +378,8 @@ fn simplify_sphere(radius: f64) {
         let mut simple = full.clone();
         let mut rounds = Vec::new();
         let s = simplify_reporting(&mut simple, bound, &mut |r| rounds.push(r));
-        // Told every round of every try, in order; the last left none beyond.
+        // Told every round of every try, in order; the last left none beyond, and a round
+        // that left none kept the triangles the surface has now.
         assert_eq!((rounds[0].attempt, rounds[0].round), (1, 1));
         for w in rounds.windows(2) {
             let (a, b) = (w[0], w[1]);
@@ -389,6 +390,12 @@ fn simplify_sphere(radius: f64) {
             );
         }
         assert_eq!(rounds.last().unwrap().beyond, 0, "{rounds:?}");
+        assert!(
+            rounds
+                .iter()
+                .any(|r| r.beyond == 0 && r.triangles == simple.mesh.len()),
+            "{rounds:?}"
+        );
         assert_eq!(s.triangles_before, full.mesh.len());
         assert_eq!(s.triangles_after, simple.mesh.len());
         assert!(

@@ -211,8 +211,8 @@ fn simplify(surface: &mut IsoSurface, mm: Option<f64>, what: &str, quiet: bool) 
     let t = Instant::now();
     let s = raystream_volume::simplify_reporting(surface, mm, &mut |r| {
         pb.set_message(format!(
-            "simplifying {what} within {mm} mm: try {}, round {} left {} vertices beyond the bound or where the surface is pinched",
-            r.attempt, r.round, r.beyond
+            "simplifying {what} within {mm} mm: try {}, round {} kept {} triangles and left {} vertices beyond the bound or where the surface is pinched",
+            r.attempt, r.round, r.triangles, r.beyond
         ))
     });
     pb.finish_and_clear();
