@@ -820,9 +820,16 @@ impl Nearest {
         Some(near)
     }
 
-    /// The cell that holds `p`.
+    /// The cell that holds `p`, its coordinates clamped to ±2⁴⁰: far off the grid's 2²¹ a
+    /// side either way, so that a point so far still finds no cell within reach, and its
+    /// neighbours' coordinates cannot overflow (cells of 10⁻³⁰⁰ put a point 10¹⁰ off at
+    /// 10³¹⁰).
     fn key(&self, p: DVec3) -> I64Vec3 {
-        ((p - self.lo) / self.cell).floor().as_i64vec3()
+        let far = I64Vec3::splat(1 << 40);
+        ((p - self.lo) / self.cell)
+            .floor()
+            .as_i64vec3()
+            .clamp(-far, far)
     }
 
     /// How far `p` lies from its nearest triangle, +∞ where none is within the reach.

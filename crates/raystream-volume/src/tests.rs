@@ -524,6 +524,17 @@ fn distances_over_a_vast_extent_equal_brute_force() {
         );
     }
     assert!(distances(&points, &mesh, 1e-3)[1].is_infinite());
+    // A surface of one point (a triangle of no area) measured within 10⁻³⁰⁰: cells that small
+    // put a point 10¹⁰ off beyond any cell coordinate, which is still no panic and +∞.
+    let dot = raystream_io::TriMesh {
+        positions: vec![Vec3::ONE; 3],
+        triangles: vec![[0, 1, 2]],
+    };
+    let points = [Vec3::ONE, Vec3::splat(1e10), Vec3::splat(-1e10)];
+    assert_eq!(
+        distances(&points, &dot, 1e-300),
+        [0.0, f64::INFINITY, f64::INFINITY]
+    );
 }
 
 /// [`not_manifold`] on surfaces built by hand: a tetrahedron has no such edge; with a face
