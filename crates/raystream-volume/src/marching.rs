@@ -723,9 +723,9 @@ pub fn distances(points: &[Vec3], simple: &TriMesh, reach: f64) -> Vec<f64> {
 /// A surface's triangles binned for the distance of points from it, up to a reach.
 ///
 /// The triangles are binned by their bounds into a grid of cells at least `reach` wide (and as
-/// wide as their mean edge). A point looks at the cells within `reach` of it, nearest first,
-/// and stops at the first cell farther than the nearest triangle found so far; within a cell,
-/// a triangle whose bounding box is farther than that is passed over unmeasured. f64
+/// wide as their mean edge), so that those within `reach` of a point are the 27 about its own.
+/// A point looks at its own cell first, then the others, passing over a cell farther than the
+/// nearest triangle found so far, and within a cell a triangle whose bounding box is. f64
 /// throughout. (Written by hand: the search is a few lines, where a crate's nearest-point
 /// query, parry's, would bring its own geometry types for this one use; it is checked against
 /// brute force in the tests.)
@@ -739,10 +739,28 @@ struct Nearest {
     /// Each listed cell's triangles: `listed[grid[cell]]`.
     listed: Vec<u32>,
     grid: foldhash::HashMap<u64, std::ops::Range<usize>>,
-    /// The cells about a point's own, nearest first by the least distance any point of the
-    /// own cell can have to them (a whole cell less than their offset, on each axis).
-    offsets: Vec<(f64, I64Vec3)>,
 }
+
+/// The offsets of the 27 cells about a point's own, its own first, then those across a face,
+/// an edge and a corner (the nearer first, where the point is in its cell's middle).
+const AROUND: [[i64; 3]; 27] = {
+    let mut around = [[0; 3]; 27];
+    let mut n = 0;
+    let mut ring = 0;
+    while ring <= 3 {
+        let mut i = 0;
+        while i < 27 {
+            let d = [i as i64 / 9 - 1, i as i64 / 3 % 3 - 1, i as i64 % 3 - 1];
+            if d[0].abs() + d[1].abs() + d[2].abs() == ring {
+                around[n] = d;
+                n += 1;
+            }
+            i += 1;
+        }
+        ring += 1;
+    }
+    around
+};
 
 impl Nearest {
     /// `None` where `mesh` has no triangle or `reach` is not positive.
@@ -784,7 +802,6 @@ impl Nearest {
             cell,
             listed: Vec::new(),
             grid: foldhash::HashMapExt::new(),
-            offsets: Vec::new(),
         };
         let mut pairs: Vec<(u64, u32)> = Vec::new();
         for (t, b) in near.bounds.iter().enumerate() {
@@ -806,17 +823,6 @@ impl Nearest {
             near.grid.insert(run[0].0, from..from + run.len());
             from += run.len();
         }
-        let r = (reach / cell).ceil() as i64;
-        for x in -r..=r {
-            for y in -r..=r {
-                for z in -r..=r {
-                    let d = I64Vec3::new(x, y, z);
-                    let gap = (d.abs() - 1).max(I64Vec3::ZERO).as_dvec3() * cell;
-                    near.offsets.push((gap.length(), d));
-                }
-            }
-        }
-        near.offsets.sort_by(|a, b| a.0.total_cmp(&b.0));
         Some(near)
     }
 
@@ -839,12 +845,9 @@ impl Nearest {
             |b: [DVec3; 2]| (b[0] - p).max(p - b[1]).max(DVec3::ZERO).length_squared();
         let own = self.key(p);
         let mut best = f64::INFINITY;
-        for &(gap, d) in &self.offsets {
+        for d in AROUND {
             let bound = best.min(self.reach);
-            if gap > bound {
-                break;
-            }
-            let c = own + d;
+            let c = own + I64Vec3::from_array(d);
             let lo = self.lo + c.as_dvec3() * self.cell;
             if box_distance2([lo, lo + self.cell]) > bound * bound {
                 continue;

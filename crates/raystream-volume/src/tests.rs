@@ -333,17 +333,9 @@ fn transfer_functions() {
 
 /// The farthest any vertex of `full` lies from the surface `simple`, brute force.
 fn departure_brute(full: &raystream_io::TriMesh, simple: &raystream_io::TriMesh) -> f64 {
-    use rayon::prelude::*;
-    full.positions
-        .par_iter()
-        .map(|p| {
-            (0..simple.len())
-                .map(|i| {
-                    point_triangle_distance(p.as_dvec3(), simple.corners(i).map(|c| c.as_dvec3()))
-                })
-                .fold(f64::INFINITY, f64::min)
-        })
-        .reduce(|| 0.0, f64::max)
+    distances_brute(&full.positions, simple, f64::INFINITY)
+        .into_iter()
+        .fold(0.0, f64::max)
 }
 
 /// The smoothed spheres of radius 20 and 20.5 (voxels of 1 mm, cut by the volume's border)
@@ -444,8 +436,9 @@ fn departure_beyond_the_reach_is_infinite() {
 
 /// Each point's distance from its nearest triangle, brute force: +∞ beyond `reach`.
 fn distances_brute(points: &[Vec3], mesh: &raystream_io::TriMesh, reach: f64) -> Vec<f64> {
+    use rayon::prelude::*;
     points
-        .iter()
+        .par_iter()
         .map(|p| {
             let d = (0..mesh.len())
                 .map(|i| {
@@ -459,8 +452,8 @@ fn distances_brute(points: &[Vec3], mesh: &raystream_io::TriMesh, reach: f64) ->
 
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(96))]
-    /// [`distances`]' grid search (nearest cells first, stopping at the first farther than the
-    /// nearest triangle found, passing over triangles whose bounds are) gives each point the
+    /// [`distances`]' grid search (passing over cells and triangles whose bounds are farther
+    /// than the nearest triangle found so far) gives each point the
     /// same distance as brute force, to the bit, or +∞ alike: random triangles from slivers to
     /// ones spanning many cells, points on them, near them and far off, reaches from a
     /// hundredth of the triangles' spread to more than all of it.
