@@ -301,21 +301,18 @@ pub struct Simplified {
     pub held: usize,
 }
 
-/// The rounds of one try of [`simplify`].
+/// The rounds a try of [`simplify`] may take.
 const ROUNDS: usize = 16;
-/// [`simplify`]'s tries, each at half the allowance of the one before, and the rounds within
-/// which a try ends them (a try that takes more has held many vertices, and one at a lower
-/// allowance may keep fewer triangles).
-const TRIES: u32 = 5;
-const QUICK_ROUNDS: usize = 8;
+/// [`simplify`]'s tries, each at half the allowance of the one before.
+const TRIES: usize = 5;
 
 /// Simplifies `surface` by edge collapses so that every vertex of the full surface stays
 /// within `max_error` (in the mesh's units, mm) of the simplified one, measured (but for
 /// vertices of none but triangles of no area, which may go).
 ///
 /// meshoptimizer's `simplify` collapses the edges (Garland–Heckbert error quadrics; collapses
-/// that would flip a triangle refused) as far as its error estimate stays within an allowance,
-/// at first `max_error`. The estimate is not a bound: on a smoothed sphere allowed 0.2 mm the
+/// that would flip a triangle refused) as far as its error estimate stays within an allowance.
+/// The estimate is not a bound: on a smoothed sphere allowed 0.2 mm the
 /// surface departed 0.46 mm, and a flat flake or a needle (a lone voxel barely over a CT
 /// threshold), whose faces' planes run along it so that quadrics see no error, may be
 /// collapsed away whole. So the departure of every vertex
@@ -329,14 +326,23 @@ const QUICK_ROUNDS: usize = 8;
 /// So is a vertex where they pinch the surface to a point, two fans of triangles meeting
 /// there only ([`pinched_vertices`]; which mesh repair tools flag, and a slicer may part).
 ///
-/// Holding is a try of up to 16 rounds. Where it took more than 8, it had held many vertices
-/// (the allowance let the collapses go far beyond the bound), and the next try, nothing held,
-/// at half the allowance, may keep fewer triangles: the tries go on, up to five, while they
-/// take more than 8 rounds and keep fewer triangles, and the fewest are kept. A try is given
-/// up at the first round that keeps as many as the fewest so far while it still has vertices
-/// to hold (a round keeps more than the one before it). (With one try, the chest CT's
-/// smoothed bones kept more triangles at 4 mm than at 1 mm; BENCHMARKS.md has the tries.)
-/// After five tries that did not converge the surface is left as it was. (Lowering the
+/// Holding is a try of up to 16 rounds, at an allowance. A high allowance lets the collapses
+/// go far beyond the bound, so many vertices are held, and a lower one may end with fewer
+/// triangles (with one try at the bound itself, the chest CT's smoothed bones kept more at
+/// 4 mm than at 1 mm). So there are five tries, at `max_error` and at each half of it down
+/// to a sixteenth, and the fewest triangles are kept. The tries take turns: a round keeps
+/// more triangles than the one before it in its try (holding more only keeps more), and a
+/// try's first round more than the first of the try at twice its allowance (on the chest CT's
+/// bones at 1, 2 and 4 mm, every round of every try did: BENCHMARKS.md), so what a try's last
+/// collapses kept is the least it can end with, and the next try's is what the last one
+/// begun kept first. The try that can end with the fewest goes next (its round's collapses,
+/// or their measure), until one keeps within the bound no more triangles than any other can
+/// end with: the fewest any try ends with, without running the others to their ends (where
+/// the rounds do not grow so, it is still within the bound, and may not be the fewest). On
+/// the chest CT's smoothed bones at 4 mm that took 21 collapses and 17 measures where the
+/// tries run one after another took 45 rounds, and made the same surface (BENCHMARKS.md). A
+/// try still holding after 16 rounds
+/// is given up; where every one is, the surface is left as it was. (Lowering the
 /// allowance for the whole surface within a try instead, while many
 /// vertices were beyond, kept within the bound as well, but on the chest CT's bones left 2.5
 /// times the triangles.) The vertices kept are original ones, with their normals; unused ones
@@ -348,9 +354,10 @@ pub fn simplify(surface: &mut IsoSurface, max_error: f64) -> Simplified {
     simplify_reporting(surface, max_error, &mut |_| {})
 }
 
-/// Where [`simplify`] is: the try (from 1), its round (from 1), the triangles that round
-/// kept, and how many vertices it left beyond the bound, at a pinched edge or pinched
-/// themselves (to be held in the next).
+/// Where [`simplify`] is: the try (from 1, at `max_error` halved one less times), its round
+/// (from 1), the triangles that round kept, and how many vertices it left beyond the bound,
+/// at a pinched edge or pinched themselves (to be held in its try's next). The tries' rounds
+/// come interleaved, each try's in order, the tries begun in order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SimplifyRound {
     pub attempt: u32,
@@ -377,30 +384,62 @@ pub fn simplify_reporting(
         return unchanged;
     }
     let mut job = Holding::new(full, max_error);
+    let mut tries: Vec<Try> = Vec::new();
     let mut best: Option<Kept> = None;
-    for t in 0..TRIES {
-        let allowance = max_error * 0.5f64.powi(t as i32);
-        let fewest = best.as_ref().map(|b| b.mesh.triangles.len());
-        let kept = job.attempt(allowance, fewest, &mut |round, triangles, beyond| {
-            on_round(SimplifyRound {
-                attempt: t + 1,
-                round,
-                triangles,
-                beyond,
-            })
-        });
-        let kept = match kept {
-            Ok(kept) => kept,
-            Err(Unkept::Unconverged) => continue,
-            Err(Unkept::NoFewer) => break,
-        };
-        let (rounds, triangles) = (kept.rounds, kept.mesh.triangles.len());
-        if fewest.is_some_and(|f| f <= triangles) {
-            break;
+    loop {
+        // The tries by the fewest triangles they can end with: those under way (the earliest
+        // of those level first), and the next to begin, which keeps at least what the last
+        // begun kept first.
+        let mut order: Vec<(usize, usize)> = (tries.iter().enumerate())
+            .filter(|(_, t)| t.live)
+            .map(|(i, t)| (t.triangles, i))
+            .collect();
+        if tries.len() < TRIES {
+            order.push((tries.last().map_or(0, |t| t.first), tries.len()));
         }
-        best = Some(kept);
-        if rounds <= QUICK_ROUNDS {
-            break;
+        order.sort_unstable();
+        let fewest = best.as_ref().map_or(usize::MAX, |b| b.mesh.triangles.len());
+        let order: Vec<usize> = (order.into_iter())
+            .take_while(|&(least, _)| least < fewest)
+            .map(|(_, i)| i)
+            .collect();
+        let Some(&i) = order.first() else { break };
+        let begin = |tries: &mut Vec<Try>, j: usize| {
+            if j == tries.len() {
+                let allowance = max_error * 0.5f64.powi(j as i32);
+                tries.push(Try::new(allowance, full.positions.len()));
+            }
+        };
+        begin(&mut tries, i);
+        // A round's collapses tell its triangles, the least its try can end with: it is
+        // measured when it is its try's turn again. meshoptimizer runs on one thread, so
+        // the next try in line collapses beside it where it is to collapse too (the same
+        // turns on any number of threads).
+        if tries[i].collapsed.is_none() {
+            match order.get(1) {
+                Some(&j) if j == tries.len() || tries[j].collapsed.is_none() => {
+                    begin(&mut tries, j);
+                    let [a, b] = tries.get_disjoint_mut([i, j]).expect("two tries");
+                    rayon::join(|| job.collapse(a), || job.collapse(b));
+                }
+                _ => job.collapse(&mut tries[i]),
+            }
+            continue;
+        }
+        let t = &mut tries[i];
+        let (beyond, kept) = job.measure(t);
+        on_round(SimplifyRound {
+            attempt: i as u32 + 1,
+            round: t.rounds,
+            triangles: t.triangles,
+            beyond,
+        });
+        if let Some(kept) = kept
+            && best
+                .as_ref()
+                .is_none_or(|b| kept.mesh.triangles.len() < b.mesh.triangles.len())
+        {
+            best = Some(kept);
         }
     }
     let Some(best) = best else {
@@ -435,16 +474,37 @@ struct Kept {
     origin: Vec<u32>,
     departure: f64,
     held: usize,
-    /// The rounds it took.
-    rounds: usize,
 }
 
-/// Why a try of [`simplify`] was given up.
-enum Unkept {
-    /// Some vertex was still beyond the bound, or pinched, after [`ROUNDS`] rounds.
-    Unconverged,
-    /// A round kept as many triangles as a try before had, with more still to hold.
-    NoFewer,
+/// A try of [`simplify`]: its allowance and where it is.
+struct Try {
+    allowance: f64,
+    /// The full surface's vertices it holds in place.
+    held: Vec<bool>,
+    /// The rounds it has measured, and the triangles its first and its last kept (its
+    /// last collapsed, measured or not).
+    rounds: usize,
+    first: usize,
+    triangles: usize,
+    /// Its next round's surface, collapsed and not yet measured, with each of its vertices'
+    /// index in the full surface.
+    collapsed: Option<(TriMesh, Vec<u32>)>,
+    /// Whether it goes on: its last round left vertices to hold, and it has rounds left.
+    live: bool,
+}
+
+impl Try {
+    fn new(allowance: f64, vertices: usize) -> Self {
+        Try {
+            allowance,
+            held: vec![false; vertices],
+            rounds: 0,
+            first: 0,
+            triangles: 0,
+            collapsed: None,
+            live: true,
+        }
+    }
 }
 
 /// What the tries of [`simplify`] share: the full surface as meshoptimizer takes it, the
@@ -494,95 +554,117 @@ impl<'a> Holding<'a> {
         }
     }
 
-    /// Collapses at meshoptimizer's `allowance`, holding what went beyond the bound or pinched
-    /// and collapsing again, for up to [`ROUNDS`] rounds. Given up where some vertex is still
-    /// beyond, or some edge pinched, after them, or where a round that left some to hold kept
-    /// already as many triangles as `fewest` (a try before kept): holding more only keeps more
-    /// (on the chest CT's bones at 4 mm, every round of every try kept more than the one
-    /// before).
-    /// `on_round` is told each round (from 1), its triangles and its vertices beyond.
-    fn attempt(
-        &mut self,
-        allowance: f64,
-        fewest: Option<usize>,
-        on_round: &mut dyn FnMut(usize, usize, usize),
-    ) -> Result<Kept, Unkept> {
-        let full = self.full;
+    /// The collapses of `t`'s next round: the full surface's, at its allowance, its vertices
+    /// held.
+    fn collapse(&self, t: &mut Try) {
         let adapter = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&self.positions), 12, 0)
             .expect("12-byte positions");
-        let mut held = vec![false; full.positions.len()];
-        for round in 0..ROUNDS {
-            let kept = meshopt::simplify_with_locks(
-                &self.indices,
-                &adapter,
-                &held,
-                0,
-                allowance as f32,
-                meshopt::SimplifyOptions::ErrorAbsolute,
-                None,
-            );
-            let (simple, origin) = compact(full, &kept);
-            let d = distances(&self.points, &simple, self.max_error);
-            let mut beyond: Vec<usize> = (0..d.len())
-                .filter(|&i| d[i] > self.max_error)
-                .map(|i| self.index[i])
-                .collect();
-            // Collapses that made an edge join more than two triangles, or two facing the
-            // same way (meshoptimizer refuses those that would flip a triangle, but not all
-            // that would pinch a thin wall against its other side: a surface a 3D printer's
-            // slicer, or lib3mf, calls not manifold): its ends are held as a vertex beyond the
-            // bound is.
-            for e in not_manifold(&simple.triangles) {
-                let e = e.map(|v| origin[v as usize]);
-                if !self.bad_in_full.contains(&e) {
-                    beyond.extend(e.map(|v| v as usize));
-                }
-            }
-            // So are the vertices where the collapses pinched the surface to a point (two
-            // fans of triangles meeting there only: on the chest CT's raw bones at 0.3 mm, 428
-            // of them, where the full surface had none).
-            for v in pinched_vertices(&simple.triangles) {
-                let v = origin[v as usize];
-                if !self.pinched_in_full.contains(&v) {
-                    beyond.push(v as usize);
-                }
-            }
-            on_round(round + 1, simple.triangles.len(), beyond.len());
-            if beyond.is_empty() {
-                return Ok(Kept {
-                    mesh: simple,
-                    origin,
-                    departure: d.iter().copied().fold(0.0, f64::max),
-                    held: held.iter().filter(|h| **h).count(),
-                    rounds: round + 1,
-                });
-            }
-            if fewest.is_some_and(|f| simple.triangles.len() >= f) {
-                return Err(Unkept::NoFewer);
-            }
-            // A vertex held and still beyond went with its piece, collapsed onto it, or its
-            // triangles went flat (or its edge is still pinched): the vertices of its
-            // triangles are held too, so that they stay.
-            for v in beyond {
-                if held[v] {
-                    let around = self.ring.get_or_insert_with(|| {
-                        let mut around = vec![Vec::new(); full.positions.len()];
-                        for t in &full.triangles {
-                            for &a in t {
-                                around[a as usize].extend_from_slice(t);
-                            }
-                        }
-                        around
-                    });
-                    for &w in &around[v] {
-                        held[w as usize] = true;
-                    }
-                }
-                held[v] = true;
+        let kept = meshopt::simplify_with_locks(
+            &self.indices,
+            &adapter,
+            &t.held,
+            0,
+            t.allowance as f32,
+            meshopt::SimplifyOptions::ErrorAbsolute,
+            None,
+        );
+        let (simple, origin) = compact(self.full, &kept);
+        t.triangles = simple.triangles.len();
+        if t.rounds == 0 {
+            t.first = t.triangles;
+        }
+        t.collapsed = Some((simple, origin));
+    }
+
+    /// Measures `t`'s round, collapsed ([`Holding::collapse`]). Returns how many vertices it
+    /// left beyond the bound or pinched, and the surface where none: then, or where it was the
+    /// last of [`ROUNDS`], `t` ends; else they are held for its next round.
+    fn measure(&mut self, t: &mut Try) -> (usize, Option<Kept>) {
+        let full = self.full;
+        let (simple, origin) = t.collapsed.take().expect("a round collapsed");
+        let d = distances(&self.points, &simple, self.max_error);
+        let mut beyond: Vec<usize> = (0..d.len())
+            .filter(|&i| d[i] > self.max_error)
+            .map(|i| self.index[i])
+            .collect();
+        // Collapses that made an edge join more than two triangles, or two facing the
+        // same way (meshoptimizer refuses those that would flip a triangle, but not all
+        // that would pinch a thin wall against its other side: a surface a 3D printer's
+        // slicer, or lib3mf, calls not manifold): its ends are held as a vertex beyond the
+        // bound is.
+        for e in not_manifold(&simple.triangles) {
+            let e = e.map(|v| origin[v as usize]);
+            if !self.bad_in_full.contains(&e) {
+                beyond.extend(e.map(|v| v as usize));
             }
         }
-        Err(Unkept::Unconverged)
+        // So are the vertices where the collapses pinched the surface to a point (two
+        // fans of triangles meeting there only: on the chest CT's raw bones at 0.3 mm, 428
+        // of them, where the full surface had none).
+        for v in pinched_vertices(&simple.triangles) {
+            let v = origin[v as usize];
+            if !self.pinched_in_full.contains(&v) {
+                beyond.push(v as usize);
+            }
+        }
+        t.rounds += 1;
+        let count = beyond.len();
+        if beyond.is_empty() {
+            t.live = false;
+            let kept = Kept {
+                mesh: simple,
+                origin,
+                departure: d.iter().copied().fold(0.0, f64::max),
+                held: t.held.iter().filter(|h| **h).count(),
+            };
+            return (0, Some(kept));
+        }
+        t.live = t.rounds < ROUNDS;
+        // A vertex held and still beyond went with its piece, collapsed onto it, or its
+        // triangles went flat (or its edge is still pinched): the vertices of its
+        // triangles are held too, so that they stay.
+        for v in beyond {
+            if t.held[v] {
+                let around = self.ring.get_or_insert_with(|| {
+                    let mut around = vec![Vec::new(); full.positions.len()];
+                    for tri in &full.triangles {
+                        for &a in tri {
+                            around[a as usize].extend_from_slice(tri);
+                        }
+                    }
+                    around
+                });
+                for &w in &around[v] {
+                    t.held[w as usize] = true;
+                }
+            }
+            t.held[v] = true;
+        }
+        (count, None)
     }
+}
+
+/// Each try of [`simplify`] run alone to its end: the triangles of each of its rounds, and
+/// whether it kept within the bound (what the turns [`simplify_reporting`] takes are checked
+/// against).
+#[cfg(test)]
+pub(crate) fn each_try(surface: &IsoSurface, max_error: f64) -> Vec<(Vec<usize>, bool)> {
+    let mut job = Holding::new(&surface.mesh, max_error);
+    (0..TRIES)
+        .map(|i| {
+            let allowance = max_error * 0.5f64.powi(i as i32);
+            let mut t = Try::new(allowance, surface.mesh.positions.len());
+            let mut rounds = Vec::new();
+            loop {
+                job.collapse(&mut t);
+                let (_, kept) = job.measure(&mut t);
+                rounds.push(t.triangles);
+                if kept.is_some() || !t.live {
+                    return (rounds, kept.is_some());
+                }
+            }
+        })
+        .collect()
 }
 
 /// The vertices of `triangles` at which two or more fans of them meet (the surface pinched to

@@ -343,8 +343,9 @@ fn departure_brute(full: &raystream_io::TriMesh, simple: &raystream_io::TriMesh)
 /// oriented, its vertices original ones with their own normals (re-derived from the simplified
 /// triangles, they were up to 72° off the radial on such spheres at 0.5 mm), every vertex
 /// of the full surface within the bound of the simplified one (the departure `simplify`
-/// measures through its grid equals brute force's), the volume within 3 × bound / radius. A
-/// bound of 0 changes nothing.
+/// measures through its grid equals brute force's), the volume within 3 × bound / radius, and
+/// as few triangles as the fewest any of its tries keeps run alone to its end (the tries take
+/// turns, each reported round that of its try alone). A bound of 0 changes nothing.
 #[test]
 fn simplifying_keeps_the_surface_within_its_bound() {
     for radius in [20.0, 20.5] {
@@ -370,23 +371,28 @@ fn simplify_sphere(radius: f64) {
         let mut simple = full.clone();
         let mut rounds = Vec::new();
         let s = simplify_reporting(&mut simple, bound, &mut |r| rounds.push(r));
-        // Told every round of every try, in order; the last left none beyond, and a round
-        // that left none kept the triangles the surface has now.
+        // Told every round measured: each try's in order, the tries begun in order, each
+        // round's triangles those of its try run alone; the tries that kept within the bound,
+        // run alone, kept no fewer than the surface has now, which one of them kept.
+        let alone = crate::marching::each_try(&full, bound);
         assert_eq!((rounds[0].attempt, rounds[0].round), (1, 1));
-        for w in rounds.windows(2) {
-            let (a, b) = (w[0], w[1]);
-            assert!(
-                (b.attempt, b.round) == (a.attempt, a.round + 1)
-                    || (b.attempt, b.round) == (a.attempt + 1, 1),
-                "{rounds:?}"
-            );
+        let mut of_try: Vec<Vec<SimplifyRound>> = vec![Vec::new(); alone.len()];
+        for r in &rounds {
+            let a = r.attempt as usize - 1;
+            assert!(a == 0 || !of_try[a - 1].is_empty(), "{rounds:?}");
+            assert_eq!(r.round, of_try[a].len() + 1, "{rounds:?}");
+            assert_eq!(r.triangles, alone[a].0[r.round - 1], "{rounds:?} {alone:?}");
+            of_try[a].push(*r);
         }
-        assert_eq!(rounds.last().unwrap().beyond, 0, "{rounds:?}");
+        let fewest = (alone.iter())
+            .filter(|(_, kept)| *kept)
+            .map(|(r, _)| *r.last().unwrap())
+            .min();
+        assert_eq!(fewest, Some(simple.mesh.len()), "{alone:?}");
         assert!(
             rounds
                 .iter()
-                .any(|r| r.beyond == 0 && r.triangles == simple.mesh.len()),
-            "{rounds:?}"
+                .any(|r| r.beyond == 0 && r.triangles == simple.mesh.len())
         );
         assert_eq!(s.triangles_before, full.mesh.len());
         assert_eq!(s.triangles_after, simple.mesh.len());
