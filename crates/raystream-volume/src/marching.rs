@@ -332,20 +332,19 @@ const TRIES: usize = 5;
 /// 4 mm than at 1 mm). So there are five tries, at `max_error` and at each half of it down
 /// to a sixteenth, and the fewest triangles are kept. The tries take turns: a round keeps
 /// more triangles than the one before it in its try (holding more only keeps more), and a
-/// try's first round more than the first of the try at twice its allowance (on the chest CT's
-/// bones at 1, 2 and 4 mm, every round of every try did: BENCHMARKS.md), so what a try's last
-/// collapses kept is the least it can end with, and the next try's is what the last one
-/// begun kept first. The try that can end with the fewest goes next (its round's collapses,
-/// or their measure), until one keeps within the bound no more triangles than any other can
-/// end with: the fewest any try ends with, without running the others to their ends (where
-/// the rounds do not grow so, it is still within the bound, and may not be the fewest). On
-/// the chest CT's smoothed bones at 4 mm that took 21 collapses and 17 measures where the
-/// tries run one after another took 45 rounds, and made the same surface (BENCHMARKS.md). A
-/// try still holding after 16 rounds
-/// is given up; where every one is, the surface is left as it was. (Lowering the
-/// allowance for the whole surface within a try instead, while many
-/// vertices were beyond, kept within the bound as well, but on the chest CT's bones left 2.5
-/// times the triangles.) The vertices kept are original ones, with their normals; unused ones
+/// try's first round more than the first of the try at twice its allowance (every round
+/// looked at did, on the chest CT's bones: BENCHMARKS.md), so what a try's last collapses
+/// kept is the least it can end with, and the next try's is what the last one begun kept
+/// first. The try that can end with the fewest goes next (its round's collapses, or their
+/// measure), until one keeps within the bound no more triangles than any other can end with:
+/// the fewest any try ends with, without running the others to their ends (where the rounds
+/// do not grow so, it is still within the bound, and may not be the fewest). On the chest
+/// CT's smoothed bones at 4 mm that took 21 collapses and 17 measures where the tries run one
+/// after another took 45 rounds, and made the same surface (BENCHMARKS.md). A try still
+/// holding after 16 rounds is given up; where every one is, the surface is left as it was.
+/// (Lowering the allowance for the whole surface within a try instead, while many vertices
+/// were beyond, kept within the bound as well, but on the chest CT's bones left 2.5 times the
+/// triangles.) The vertices kept are original ones, with their normals; unused ones
 /// are dropped.
 ///
 /// Written through a crate: meshoptimizer is the maintained, widely used implementation
