@@ -26,4 +26,6 @@ part 1-trace PARTS=trace TRACERS="gpu checked block costs ifif wg"
 part 2-render PARTS=render
 part 3-trace PARTS=trace TRACERS="split sorted cpu embree"
 part 4-volume PARTS="volume scene"
+# CPU only, last: iso --simplify on the host's cores (and BASE's, where packed).
+part 5-simplify PARTS=simplify
 echo done > "$out/done"

@@ -10,7 +10,8 @@
 # Then the volume benchmark: the abdomen CT resampled to 512³, 1024×1024 frames of an orbit,
 # ct-bone, without and with shadows, with and without empty-space skipping, GPU and CPU.
 # PARTS (default "trace render volume"; also "build": the kd-tree build at 1 to every thread, BASE against this binary;
-# "cpuframes": the CPU renderer's frames at 4, 8 and every thread, BASE against this binary, then in waves of CPU_WAVES samples; "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
+# "cpuframes": the CPU renderer's frames at 4, 8 and every thread, BASE against this binary, then in waves of CPU_WAVES samples;
+# "simplify": iso --simplify on the chest CT's bones at 2, 8 and every thread, this binary and BASE where given; "entry": the entry grid's sizes (GRIDS) A/B; "scene": meshes and the CT in one scene; "ab": this binary against
 # BASE=another on the primary, shadow and diffuse sets; "abframes": the same on whole frames (the default scene, a dvr orbit,
 # a denoised cinematic frame); "floor": where a query's wall time goes (the floor kernel beside the
 # query, with and without timestamps); "pixels": the default scene's camera rays by rows or blocks; "waves": its
@@ -216,6 +217,26 @@ has "$parts" build && [ -n "${BASE:-}" ] && {
     for m in "$tmp/chest_bones.ply" "$d/meshes/turbine_blade.ply"; do
       RAYON_NUM_THREADS=$th $b info "$m" --json \
         | tag "{\"part\": \"build\", \"binary\": \"$which\", \"threads\": $th, \"round\": $round, \"mesh\": \"$(basename "$m" .ply)\"}"
+    done
+  done; done; done
+}
+# "simplify": `iso CHEST --smooth S --simplify MM` on the host's cores (CPU only; no GPU): the
+# chest CT's bones smoothed 10× at 4 and 1 mm and raw at 0.3 mm, this binary (and BASE, where
+# given) at 2, 8 and every thread, two rounds: the whole command's ms and the triangles kept
+# (summarize-device-bench.py's simplify table). meshoptimizer's collapses run on one thread
+# (two tries' side by side), the measure on every thread: what more cores gain.
+has "$parts" simplify && {
+  for round in 1 2; do for th in 2 8 "$(nproc)"; do for which in base new; do
+    b=$bin
+    if [ $which = base ]; then [ -n "${BASE:-}" ] || continue; b=$BASE; fi
+    for spec in "10 4" "10 1" "0 0.3"; do
+      read -r sm mm <<< "$spec"
+      s0=$(date +%s%N)
+      kept=$(RAYON_NUM_THREADS=$th $b iso "$d/ct/chest_ct_stents_totalseg.nii.gz" --smooth "$sm" \
+        --simplify "$mm" -o "$tmp/simplified.ply" 2>&1 | grep -o '→ [0-9]* triangles' | grep -o '[0-9]*')
+      s1=$(date +%s%N)
+      echo "{\"ms\": $(( (s1 - s0) / 1000000 )), \"triangles\": ${kept:-null}}" \
+        | tag "{\"part\": \"simplify\", \"binary\": \"$which\", \"threads\": $th, \"round\": $round, \"smooth\": $sm, \"bound_mm\": $mm}"
     done
   done; done; done
 }

@@ -233,6 +233,31 @@ def build_table(lines, out):
     out.append("")
 
 
+def simplify_table(lines, out):
+    """iso --simplify by threads (device-bench.sh's simplify part): the median ms of the whole
+    command for each binary, new over base, and the triangles each kept."""
+    runs = defaultdict(lambda: defaultdict(list))
+    kept = defaultdict(dict)
+    for o in lines:
+        if o.get("part") == "simplify" and "ms" in o:
+            key = (o["smooth"], o["bound_mm"], o["threads"])
+            runs[key][o["binary"]].append(o["ms"])
+            kept[key][o["binary"]] = o["triangles"]
+    if not runs:
+        return
+    out.append("| smoothing | bound, mm | threads | base, ms (median) | new, ms (median) | new / base | "
+               "triangles base | triangles new |")
+    out.append("|" + "---|" * 8)
+    for key in sorted(runs, key=lambda k: (-k[0], -k[1], k[2])):
+        med = {w: statistics.median(v) if v else None for w, v in runs[key].items()}
+        b, n = med.get("base"), med.get("new")
+        ms = lambda x: "–" if x is None else f"{x:.0f}"  # noqa: E731
+        out.append(f"| {key[0]} | {key[1]} | {key[2]} | {ms(b)} | {ms(n)} | "
+                   + (f"{n / b:.2f}" if b and n else "–")
+                   + f" | {kept[key].get('base', '–')} | {kept[key].get('new', '–')} |")
+    out.append("")
+
+
 def floor_table(lines, out):
     """Where a query's wall time goes (trace lines with --stats carry "floor": the same rays
     through a kernel that reads each ray and writes a miss): ms of the query and of the floor by
@@ -455,6 +480,7 @@ def main():
     entry_table(lines, out)
     ab_table(lines, out)
     build_table(lines, out)
+    simplify_table(lines, out)
     floor_table(lines, out)
     stats_table(by, a.sms, a.threads_per_sm, out)
     checks(lines, out)

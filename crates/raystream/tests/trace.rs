@@ -672,7 +672,8 @@ fn unknown_adapter_is_a_clear_error() {
 
 /// scripts/summarize-device-bench.py on the lines device-bench.sh writes: Grays/s from the
 /// times, the first bar judged by wall, streamed and kernel time against the issue's peers, a
-/// failed rays.py check named, and the render modes' frame times side by side.
+/// failed rays.py check named, the render modes' frame times and `iso --simplify`'s by threads
+/// side by side.
 #[test]
 fn device_bench_summary() {
     let Some(py) = python() else { return };
@@ -732,6 +733,10 @@ fn device_bench_summary() {
             ms(4.4),
             ms(5.5)
         ),
+        // The simplify part: two rounds of the new binary, one of the base, at 16 threads.
+        r#"{"ms": 3000, "triangles": 115076, "part": "simplify", "binary": "new", "threads": 16, "round": 1, "smooth": 10, "bound_mm": 4}"#.to_string(),
+        r#"{"ms": 2000, "triangles": 115076, "part": "simplify", "binary": "new", "threads": 16, "round": 2, "smooth": 10, "bound_mm": 4}"#.to_string(),
+        r#"{"ms": 10000, "triangles": 115076, "part": "simplify", "binary": "base", "threads": 16, "round": 1, "smooth": 10, "bound_mm": 4}"#.to_string(),
         r#"{"volume": "cinematic ct-bones", "kind": "volume", "mode": "cinematic", "interpolation": "cubic", "shadows": false, "spp": 64, "bounces": 4, "device": "gpu", "dims": [512, 512, 512], "size": "1024x1024", "frame_ms": 2000.0, "frames_per_s": 0.5, "kernel_frames_per_s": 0.51, "samples_per_frame": 2500000000.0, "msamples_per_s_kernel": 1275.0}"#.to_string(),
     ];
     std::fs::write(&results, lines.join("\n") + "\n").unwrap();
@@ -814,6 +819,11 @@ fn device_bench_summary() {
     // A volume bench's orbit: 2.5 G samples a frame at 0.51 kernel frames/s.
     assert!(
         out.contains("| cinematic ct-bones | cinematic | cubic | no | 64 | gpu | 512×512×512 | 1024x1024 | 0.5 | 0.51 | 2,500 | 1.27 |"),
+        "{out}"
+    );
+    // iso --simplify by threads: the new binary's median 2500 ms against the base's 10000.
+    assert!(
+        out.contains("| 10 | 4 | 16 | 10000 | 2500 | 0.25 | 115076 | 115076 |"),
         "{out}"
     );
     // Occupancy: 135,168 resident invocations are half of 132 SMs x 2048.
