@@ -137,7 +137,9 @@ fn iso_writes_a_closed_bone_surface() {
 /// the raw surface still puts no two vertices on one point, and simplified within 0.3 and 1 mm
 /// it stays closed and a 2-manifold by its indices, at its edges and its vertices (a 3D
 /// printer's slicer and lib3mf take it),
-/// each vertex one of the full surface's, which lies within the bound of it.
+/// each vertex one of the full surface's, which lies within the bound of it. So within 128 mm,
+/// with fewer triangles than within 1 mm (with five tries, where none converged, the surface
+/// was left whole).
 #[test]
 fn raw_ct_bones_simplify_to_a_closed_manifold() {
     let ct = volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz");
@@ -178,8 +180,10 @@ fn raw_ct_bones_simplify_to_a_closed_manifold() {
         "vertices sharing a point"
     );
     assert!(closed_and_oriented(&full));
-    for mm in ["0.3", "1"] {
+    let mut kept = Vec::new();
+    for mm in ["0.3", "1", "128"] {
         let simple = iso(&format!("abdomen-raw-{mm}.ply"), &["--simplify", mm]);
+        kept.push(simple.len());
         assert!(
             simple.len() * 4 < full.len() * 3,
             "{mm} mm: {} of {}",
@@ -203,6 +207,7 @@ fn raw_ct_bones_simplify_to_a_closed_manifold() {
         let d = raystream_volume::departure(&full.positions, &simple, bound);
         assert!(d <= bound, "{mm} mm: departs {d} mm");
     }
+    assert!(kept.is_sorted_by(|a, b| a > b), "triangles kept: {kept:?}");
 }
 
 #[test]
