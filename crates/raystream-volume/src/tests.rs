@@ -490,6 +490,52 @@ proptest::proptest! {
     }
 }
 
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(128))]
+    /// `compact` (meshoptimizer's triangles made a surface, less any two that are one triangle
+    /// facing both ways) against a plain search: each triangle cancels the latest one still
+    /// standing that is it reversed (in any rotation), else stands; the ones standing are kept
+    /// in order, and only the vertices they use, in order, each with its index in the full
+    /// surface. Few vertices, so that triangles repeat and reverse often.
+    #[test]
+    fn compact_equals_a_plain_search(tris in proptest::collection::vec(
+        proptest::strategy::Strategy::prop_filter(
+            (0u32..5, 0u32..5, 0u32..5),
+            "three corners",
+            |(a, b, c)| a != b && b != c && a != c,
+        ),
+        0..40,
+    )) {
+        let full = raystream_io::TriMesh {
+            positions: (0..7).map(|v| Vec3::new(v as f32, (v * v) as f32, 1.0)).collect(),
+            triangles: Vec::new(),
+        };
+        let kept: Vec<u32> = tris.iter().flat_map(|&(a, b, c)| [a, b, c]).collect();
+        let (mesh, origin) = crate::marching::compact(&full, &kept);
+        let cyclic = |t: [u32; 3]| [t, [t[1], t[2], t[0]], [t[2], t[0], t[1]]];
+        let mut standing: Vec<bool> = Vec::new();
+        let tris: Vec<[u32; 3]> = tris.iter().map(|&(a, b, c)| [a, b, c]).collect();
+        for (i, &t) in tris.iter().enumerate() {
+            let reverse = [t[0], t[2], t[1]];
+            let j = (0..i).rev().find(|&j| standing[j] && cyclic(tris[j]).contains(&reverse));
+            standing.push(j.is_none());
+            if let Some(j) = j {
+                standing[j] = false;
+            }
+        }
+        let want: Vec<[u32; 3]> = (0..tris.len()).filter(|&i| standing[i]).map(|i| tris[i]).collect();
+        let mut used: Vec<u32> = want.iter().flatten().copied().collect();
+        used.sort_unstable();
+        used.dedup();
+        proptest::prop_assert_eq!(&origin, &used);
+        let got: Vec<[u32; 3]> = mesh.triangles.iter().map(|t| t.map(|v| origin[v as usize])).collect();
+        proptest::prop_assert_eq!(got, want);
+        for (v, &o) in origin.iter().enumerate() {
+            proptest::prop_assert_eq!(mesh.positions[v], full.positions[o as usize]);
+        }
+    }
+}
+
 /// A surface whose extent is more than 2²¹ of its cells (two small triangles 10⁸ apart,
 /// measured within 10⁻³) widens the cells until the grid fits its keys, and still gives brute
 /// force's distances.
