@@ -248,10 +248,10 @@ def simplify_table(lines, out):
     out.append("| smoothing | bound, mm | threads | base, ms (median) | new, ms (median) | new / base | "
                "triangles base | triangles new |")
     out.append("|" + "---|" * 8)
+    ms = lambda x: "–" if x is None else f"{x:.0f}"  # noqa: E731
     for key in sorted(runs, key=lambda k: (-k[0], -k[1], k[2])):
         med = {w: statistics.median(v) if v else None for w, v in runs[key].items()}
         b, n = med.get("base"), med.get("new")
-        ms = lambda x: "–" if x is None else f"{x:.0f}"  # noqa: E731
         out.append(f"| {key[0]} | {key[1]} | {key[2]} | {ms(b)} | {ms(n)} | "
                    + (f"{n / b:.2f}" if b and n else "–")
                    + f" | {kept[key].get('base', '–')} | {kept[key].get('new', '–')} |")
