@@ -16,6 +16,7 @@ mod secondary_capture;
 mod segmentation;
 mod shapes;
 mod slicer_segmentation;
+mod solid;
 mod stl;
 mod structure_set_write;
 mod texture;
@@ -51,6 +52,7 @@ pub use segmentation::{
     is_segmentation_path, segmentation_source, srgb_from_cielab, write_segmentation,
 };
 pub use slicer_segmentation::{is_slicer_segmentation_path, write_slicer_segmentation};
+pub use solid::SurfaceMeasures;
 pub use texture::{MAX_TEXELS, SRGB_TO_LINEAR, Texture, TextureMapping, linear_to_srgb8};
 pub use volume::{
     DicomSeriesInfo, DicomStudy, MAX_VOXELS, Phase, RT_STRUCTURE_SET, RasterNotes, Roi,

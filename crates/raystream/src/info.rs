@@ -4,6 +4,7 @@
 
 use anyhow::{Result, bail};
 use raystream_accel::KdTree;
+use raystream_io::SurfaceMeasures;
 use serde_json::json;
 
 use crate::cli::InfoArgs;
@@ -92,6 +93,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         distinct.len()
     });
     let tree = a.tree.build(&mesh);
+    let surface = mesh.measure_surface();
     let b = mesh.bounds();
     let s = &tree.stats;
     if a.json {
@@ -102,6 +104,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             "triangles": mesh.len(),
             "degenerate_triangles": mesh.len() - s.triangles,
             "bounds": [b.min.to_array(), b.max.to_array()],
+            "surface": surface_json(&surface),
             "kdtree": tree_json(&tree),
             "materials": used.iter().map(|(name, n, t)| json!({"name": name, "triangles": n, "texture": t})).collect::<Vec<_>>(),
             "objects": materials.objects.iter().map(|(name, n)| json!({"name": name, "triangles": n})).collect::<Vec<_>>(),
@@ -130,6 +133,10 @@ pub fn run(a: &InfoArgs) -> Result<()> {
                 space.name()
             );
         }
+        println!(
+            "  surface    {}",
+            surface_line(&surface, materials.space.is_some())
+        );
         println!(
             "  kd-tree    {}: {} nodes, {} leaves ({} empty), depth {}, SAH cost {:.2}, {:.2} triangles/leaf, {} references, built in {:.1} ms",
             s.builder,
@@ -162,6 +169,97 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// A mesh's [`SurfaceMeasures`] as `info --json` gives them.
+fn surface_json(s: &SurfaceMeasures) -> serde_json::Value {
+    json!({
+        "area": s.area,
+        "shells": s.shells,
+        "closed": s.closed(),
+        "volume": s.volume,
+        "genus": s.genus(),
+        "euler": s.euler(),
+        "vertices": s.vertices,
+        "edges": s.edges,
+        "boundary_edges": s.boundary_edges,
+        "holes": s.holes,
+        "non_manifold_edges": s.non_manifold_edges,
+        "misoriented_edges": s.misoriented_edges,
+    })
+}
+
+/// A mesh's [`SurfaceMeasures`] in words: its area, shells, and whether it closes (what it
+/// encloses) or what keeps it from closing; in mm² and ml where the file is in millimetres
+/// (`mm`).
+fn surface_line(s: &SurfaceMeasures, mm: bool) -> String {
+    let plural =
+        |n: usize, one: &str, many: &str| format!("{n} {}", if n == 1 { one } else { many });
+    let area = if mm {
+        format!("{:.1} mm²", s.area)
+    } else {
+        significant(s.area)
+    };
+    if s.faces == 0 {
+        return format!("area {area}: no triangle has three corners apart");
+    }
+    let mut line = format!("area {area}, {}", plural(s.shells, "shell", "shells"));
+    let volume = |v: f64| {
+        let turned = if v < 0.0 {
+            " (turned inside out: its triangles face in)"
+        } else {
+            ""
+        };
+        if mm {
+            format!("encloses {:.3} ml{turned}", v.abs() / 1000.0)
+        } else {
+            format!("encloses {}{turned}", significant(v.abs()))
+        }
+    };
+    if s.closed() {
+        line += ", closed";
+        if let Some(v) = s.volume {
+            line += &format!(": {}", volume(v));
+        }
+        if let Some(g) = s.genus() {
+            line += &format!(", genus {g}");
+        }
+        return line;
+    }
+    let mut why = Vec::new();
+    if s.boundary_edges > 0 {
+        why.push(format!(
+            "{} of one triangle ({})",
+            plural(s.boundary_edges, "edge", "edges"),
+            plural(s.holes, "hole", "holes")
+        ));
+    }
+    if s.non_manifold_edges > 0 {
+        why.push(format!(
+            "{} of more than two triangles",
+            plural(s.non_manifold_edges, "edge", "edges")
+        ));
+    }
+    if s.misoriented_edges > 0 {
+        why.push(format!(
+            "{} whose two triangles are wound against each other",
+            plural(s.misoriented_edges, "edge", "edges")
+        ));
+    }
+    line += &format!(", not closed: {}", why.join(", "));
+    if let Some(v) = s.volume {
+        line += &format!("; {}", volume(v));
+    }
+    line
+}
+
+/// `x` to seven significant digits, written out (no exponent).
+fn significant(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let decimals = (6 - x.abs().log10().floor() as i32).max(0) as usize;
+    format!("{x:.decimals$}")
 }
 
 /// The aspect ratio `info` frames a scene's camera for: `render`'s default 800x600.

@@ -190,11 +190,12 @@ pub fn run(a: &IsoArgs) -> Result<()> {
     raystream_io::write_mesh(&a.output, &b.surface.mesh, Some(&b.surface.normals))?;
     if !a.quiet {
         eprintln!(
-            "raystream: wrote {} ({} vertices, {} triangles at {}): load {:.0} ms, isosurface {:.0} ms ({:.0} M voxels/s), write {:.0} ms",
+            "raystream: wrote {} ({} vertices, {} triangles at {}, enclosing {:.1} ml): load {:.0} ms, isosurface {:.0} ms ({:.0} M voxels/s), write {:.0} ms",
             a.output.display(),
             b.surface.mesh.positions.len(),
             b.surface.mesh.len(),
             value_words(&volume, hu),
+            enclosed_ml(&b.surface.mesh),
             b.load_ms,
             b.iso_ms,
             b.voxels as f64 / b.iso_ms / 1e3,

@@ -160,6 +160,139 @@ fn golden_median_builder_and_stack_traversal_match_default() {
     );
 }
 
+/// `info MESH` measures the surface as trimesh does (an independent implementation, its
+/// corners merged by position as `info` merges them): area and, where it closes, volume (to
+/// 10⁻⁶: trimesh reads an OBJ's text in f64, raystream in f32), its pieces joined through edges, Euler characteristic, vertices, edges, the edges of
+/// one triangle and of more than two, and its holes, on every mesh in ../shared/data/meshes
+/// (the bunny and the teapot open, the teapot in four pieces), the built-in CT's bones as an
+/// STL (each triangle its own corners; thousands of pieces, closed: `iso` says the volume
+/// they enclose), a cube with a face wound
+/// the wrong way and two cubes meeting along an edge. `closed` is trimesh's watertight and
+/// wound one way.
+#[test]
+fn info_measures_a_surface_as_trimesh_does() {
+    let bones = tmp("surface-bones.stl");
+    let o = run(&["iso", &builtin_ct(), "-o", bones.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = stderr(&o);
+    let iso_ml: f64 = (said
+        .split_once("enclosing ")
+        .and_then(|(_, r)| r.split_once(" ml")))
+    .unwrap_or_else(|| panic!("no volume in {said}"))
+    .0
+    .parse()
+    .unwrap();
+    let cube = |at: [i32; 3], flip: bool| {
+        let mut obj = String::new();
+        for i in 0..8 {
+            let c = [i & 1, i >> 1 & 1, i >> 2 & 1];
+            obj += &format!("v {} {} {}\n", c[0] + at[0], c[1] + at[1], c[2] + at[2]);
+        }
+        obj + &format!(
+            "f 1 3 4 2\nf {}\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n",
+            if flip { "5 7 8 6" } else { "5 6 8 7" }
+        )
+    };
+    let flipped = tmp("surface-flipped.obj");
+    std::fs::write(&flipped, cube([0; 3], true)).unwrap();
+    let touching = tmp("surface-touching.obj");
+    let two = cube([0; 3], false);
+    let second = cube([1, 1, 0], false);
+    let renumbered: String = (second.lines())
+        .map(|l| match l.strip_prefix("f ") {
+            Some(f) => {
+                let f: Vec<String> = (f.split(' '))
+                    .map(|v| (v.parse::<u32>().unwrap() + 8).to_string())
+                    .collect();
+                format!("f {}\n", f.join(" "))
+            }
+            None => format!("{l}\n"),
+        })
+        .collect();
+    std::fs::write(&touching, two + &renumbered).unwrap();
+    let mut files: Vec<String> = std::fs::read_dir(shared().join("data/meshes"))
+        .unwrap()
+        .map(|e| e.unwrap().path().to_string_lossy().into_owned())
+        .filter(|p| raystream_io::is_mesh_path(Path::new(p)))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 6, "{files:?}");
+    for f in [&bones, &flipped, &touching] {
+        files.push(f.to_string_lossy().into_owned());
+    }
+    let mine: Vec<serde_json::Value> = (files.iter())
+        .map(|f| {
+            let o = run(&["info", f, "--json"]);
+            assert!(o.status.success(), "{f}: {}", stderr(&o));
+            let j: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+            j["surface"].clone()
+        })
+        .collect();
+    let by_name = |name: &str| &mine[files.iter().position(|f| f.ends_with(name)).unwrap()];
+    // What the fixtures are, whatever trimesh says.
+    assert_eq!(by_name("utah_teapot.obj")["shells"], 4);
+    assert_eq!(by_name("stanford_bunny.ply")["holes"], 5);
+    assert_eq!(by_name("surface-flipped.obj")["misoriented_edges"], 4);
+    assert_eq!(by_name("surface-touching.obj")["non_manifold_edges"], 1);
+    assert_eq!(by_name("surface-touching.obj")["volume"], 2.0);
+    assert_eq!(by_name("surface-bones.stl")["closed"], true);
+    assert!(by_name("surface-bones.stl")["shells"].as_u64().unwrap() > 100);
+    // `iso` says what the bones enclose, to its tenth of a millilitre.
+    let ml = by_name("surface-bones.stl")["volume"].as_f64().unwrap() / 1000.0;
+    assert!(
+        (iso_ml - ml).abs() <= 0.05 + 1e-9,
+        "{iso_ml} ml against {ml}"
+    );
+    assert!(ml > 100.0, "{ml}");
+    let text = run(&["info", &mesh("utah_teapot.obj")]);
+    assert!(
+        stdout(&text).contains(
+            "surface    area 52.66079, 4 shells, not closed: 160 edges of one triangle (6 holes)\n"
+        ),
+        "{}",
+        stdout(&text)
+    );
+
+    let (Some(py), Some(_)) = (python_with("trimesh"), python_with("scipy")) else {
+        return;
+    };
+    let o = std::process::Command::new(&py)
+        .arg(repo().join("crates/raystream/tests/trimesh_surface.py"))
+        .args(&files)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let theirs: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    for (f, s) in files.iter().zip(&mine) {
+        let name = Path::new(f).file_name().unwrap().to_str().unwrap();
+        let t = &theirs[name];
+        for k in [
+            "shells",
+            "euler",
+            "vertices",
+            "edges",
+            "boundary_edges",
+            "non_manifold_edges",
+            "holes",
+        ] {
+            assert_eq!(s[k], t[k], "{name}: {k}: {s} against trimesh's {t}");
+        }
+        let close = |a: &serde_json::Value, b: &serde_json::Value| {
+            let (a, b) = (a.as_f64().unwrap(), b.as_f64().unwrap());
+            (a - b).abs() <= 1e-6 * b.abs()
+        };
+        assert!(close(&s["area"], &t["area"]), "{name}: {s} {t}");
+        let closed = t["watertight"] == true && t["winding_consistent"] == true;
+        assert_eq!(s["closed"], closed, "{name}: {s} {t}");
+        if closed {
+            assert!(close(&s["volume"], &t["volume"]), "{name}: {s} {t}");
+        }
+        if t["watertight"] == false && s["non_manifold_edges"] == 0 {
+            assert!(s["volume"].is_null(), "{name}: {s}");
+        }
+    }
+}
+
 #[test]
 fn info_json() {
     let o = run(&["info", &mesh("utah_teapot.obj"), "--json"]);
