@@ -6,15 +6,18 @@ mod cases;
 pub mod centreline;
 pub mod distance;
 mod grid;
+mod islands;
 mod marching;
 pub mod segments;
 mod stats;
 mod tf;
 
 pub use grid::{clamp_to_grid, trilinear, trilinear_in};
+pub use islands::{Islands, KeepIslands};
 pub use marching::{
-    IsoSurface, Simplified, SimplifyRound, departure, distances, extract_isosurface, not_manifold,
-    pinched_vertices, point_triangle_distance, simplify, simplify_reporting, smooth,
+    IsoSurface, Simplified, SimplifyRound, departure, distances, extract_isosurface,
+    extract_isosurface_keeping, not_manifold, pinched_vertices, point_triangle_distance, simplify,
+    simplify_reporting, smooth,
 };
 pub use stats::{RegionStats, region_stats};
 pub use tf::{Shading, TfPreset, TransferFunction};

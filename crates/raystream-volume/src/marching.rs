@@ -18,6 +18,7 @@ use raystream_io::{TriMesh, Volume};
 use raystream_math::{DVec3, I64Vec3, Vec3};
 
 use crate::cases::{CASES, EDGE_START};
+use crate::islands::{Islands, KeepIslands, keep_islands};
 
 /// A triangle mesh in LPS millimetres with per-vertex unit normals (from the volume gradient,
 /// pointing out of the region at or above the threshold).
@@ -46,6 +47,18 @@ struct Layer {
 /// Extracts the surface `value = iso` of `vol`, oriented out of the region `value ≥ iso`
 /// (NaN voxels count as outside).
 pub fn extract_isosurface(vol: &Volume, iso: f32) -> IsoSurface {
+    extract_isosurface_keeping(vol, iso, KeepIslands::All).0
+}
+
+/// [`extract_isosurface`] of the islands of the region `value ≥ iso` that `keep` keeps (each
+/// voxel joined to the six that share a face with it: [`KeepIslands`]), with the islands
+/// found. The surface is
+/// the full one's triangles of those islands, vertex for vertex.
+pub fn extract_isosurface_keeping(
+    vol: &Volume,
+    iso: f32,
+    keep: KeepIslands,
+) -> (IsoSurface, Islands) {
     let [nx, ny, nz] = vol.dims;
     // Padded grid: corner (I, J, K) is voxel (I − 1, J − 1, K − 1); the border is outside.
     let (px, py, pz) = (nx + 2, ny + 2, nz + 2);
@@ -66,6 +79,10 @@ pub fn extract_isosurface(vol: &Volume, iso: f32) -> IsoSurface {
                 }
             }
         });
+    let islands = match keep {
+        KeepIslands::All => Islands::default(),
+        keep => keep_islands(&mut mask, [px, py, pz], keep),
+    };
     // Per padded row (J, K): whether any corner in it is inside. Most CT rows hold no bone, and
     // a cell or edge row can be skipped when the rows it touches are all empty.
     let row_any: Vec<bool> = mask
@@ -236,7 +253,7 @@ pub fn extract_isosurface(vol: &Volume, iso: f32) -> IsoSurface {
         normals.extend(l.normals);
     }
     mesh.triangles = tris.into_iter().flatten().collect();
-    IsoSurface { mesh, normals }
+    (IsoSurface { mesh, normals }, islands)
 }
 
 /// Taubin λ|μ smoothing (Taubin 1995): `iterations` pairs of a shrinking and an inflating

@@ -202,16 +202,33 @@ fn every_case_is_closed_on_its_own() {
     }
 }
 
+/// A volume of xorshift noise from `seed`, uniform over −1000 + `shift` .. 1000 + `shift`, on a
+/// grid of these dimensions, spacing and direction.
+fn noise(
+    seed: u64,
+    dims: [usize; 3],
+    spacing: [f64; 3],
+    direction: [[f64; 3]; 3],
+    shift: f32,
+) -> Volume {
+    let mut s = seed | 1;
+    let mut rnd = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s % 2000) as f32 - 1000.0 + shift
+    };
+    let mut vol = analytic(dims, spacing, [5.0, -3.0, 2.0], direction, |_| 0.0);
+    vol.data.iter_mut().for_each(|v| *v = rnd());
+    vol
+}
+
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
     /// Random noise volumes (every ambiguous configuration appears): always closed and oriented.
     #[test]
     fn random_volumes_give_closed_surfaces(seed in 0u64..u64::MAX, dims in (2usize..9, 2usize..9, 2usize..9)) {
-        let mut s = seed | 1;
-        let mut rnd = move || { s ^= s << 13; s ^= s >> 7; s ^= s << 17; (s % 2000) as f32 - 1000.0 };
-        let mut vol = analytic([dims.0, dims.1, dims.2], [1.0; 3], [0.0; 3],
-            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], |_| 0.0);
-        for v in vol.data.iter_mut() { *v = rnd(); }
+        let vol = noise(seed, [dims.0, dims.1, dims.2], [1.0; 3], [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], 0.0);
         let iso = extract_isosurface(&vol, 0.5);
         assert_closed_and_oriented(&iso.mesh);
         for n in &iso.normals { proptest::prop_assert!(n.is_finite()); }
@@ -791,4 +808,126 @@ fn clamps_to_the_grid_as_f32_clamp() {
             );
         }
     }
+}
+
+/// Each triangle of `s` by its corners' positions and normals, bit for bit.
+fn triangle_set(s: &IsoSurface) -> std::collections::HashSet<[[u32; 6]; 3]> {
+    (s.mesh.triangles.iter())
+        .map(|t| {
+            t.map(|v| {
+                let (p, n) = (s.mesh.positions[v as usize], s.normals[v as usize]);
+                [p.x, p.y, p.z, n.x, n.y, n.z].map(f32::to_bits)
+            })
+        })
+        .collect()
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+    /// Random noise volumes (many islands, touching along edges and at corners): keeping the k
+    /// largest islands keeps some of the full surface's triangles, vertex for vertex and
+    /// normal for normal, closed and oriented, more of them for each k, all of them for every
+    /// island and none for no island; keeping those of at least n voxels is keeping the largest
+    /// as many as are that large.
+    #[test]
+    fn kept_islands_are_the_full_surface_s_pieces(seed in 0u64..u64::MAX, dims in (2usize..9, 2usize..9, 2usize..9)) {
+        // Mostly outside, so that the inside falls apart into islands.
+        let vol = noise(seed, [dims.0, dims.1, dims.2], [0.7, 1.0, 1.3], rotation(), -500.0);
+        let full = extract_isosurface(&vol, 0.5);
+        let all = triangle_set(&full);
+        let (_, islands) = extract_isosurface_keeping(&vol, 0.5, KeepIslands::AtLeast(0));
+        let count = islands.sizes.len();
+        proptest::prop_assert!(islands.sizes.windows(2).all(|w| w[0] >= w[1]));
+        proptest::prop_assert_eq!(islands.sizes.iter().sum::<usize>(),
+            vol.data.iter().filter(|&&v| v >= 0.5).count());
+        let mut last = 0;
+        for k in 0..=count + 1 {
+            let (kept, found) = extract_isosurface_keeping(&vol, 0.5, KeepIslands::Largest(k));
+            proptest::prop_assert_eq!(&found.sizes, &islands.sizes);
+            proptest::prop_assert_eq!(found.kept, k.min(count));
+            proptest::prop_assert_eq!(found.kept_voxels, islands.sizes[..k.min(count)].iter().sum::<usize>());
+            let set = triangle_set(&kept);
+            proptest::prop_assert_eq!(set.len(), kept.mesh.len());
+            proptest::prop_assert!(set.is_subset(&all));
+            proptest::prop_assert!(k == 0 || k > count || set.len() > last, "island {} added no triangle", k);
+            if k >= count {
+                proptest::prop_assert_eq!(set.len(), all.len());
+            }
+            if k > 0 {
+                assert_closed_and_oriented(&kept.mesh);
+            }
+            last = set.len();
+            if k > 0 && k <= count {
+                let n = islands.sizes[k - 1];
+                let ties = islands.sizes.iter().filter(|&&s| s == n).count();
+                let at_least = extract_isosurface_keeping(&vol, 0.5, KeepIslands::AtLeast(n)).0;
+                let as_many = islands.sizes.iter().filter(|&&s| s >= n).count();
+                let largest = extract_isosurface_keeping(&vol, 0.5, KeepIslands::Largest(as_many)).0;
+                proptest::prop_assert_eq!(triangle_set(&at_least), triangle_set(&largest), "{} ties", ties);
+            }
+        }
+        proptest::prop_assert_eq!(last, all.len());
+    }
+}
+
+/// A hollow ball (radii 8 and 4 voxels), a smaller ball and a speck: the largest island keeps
+/// the hollow ball's two surfaces (outer and inner: one island, its hollow inside), enclosing
+/// its shell's volume; at least 30 voxels, the smaller ball too; the speck goes with both.
+#[test]
+fn the_largest_island_keeps_its_hollow() {
+    let d = raystream_math::DVec3::new;
+    let (hollow, ball, speck) = (
+        d(12.0, 12.0, 12.0),
+        d(30.0, 12.0, 12.0),
+        d(30.0, 30.0, 12.0),
+    );
+    let vol = analytic(
+        [40, 40, 24],
+        [1.0; 3],
+        [0.0; 3],
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        |p| {
+            let r = (p - hollow).length();
+            let shell = (8.0 - r).min(r - 4.0);
+            let small = 3.0 - (p - ball).length();
+            let tiny = 0.6 - (p - speck).length();
+            shell.max(small).max(tiny) as f32
+        },
+    );
+    let full = extract_isosurface(&vol, 0.0);
+    let whole = full.mesh.measure_surface();
+    assert_eq!(whole.shells, 4);
+    let (one, islands) = extract_isosurface_keeping(&vol, 0.0, KeepIslands::Largest(1));
+    assert_eq!(islands.sizes.len(), 3);
+    assert_eq!(islands.sizes[2], 1, "the speck: {:?}", islands.sizes);
+    let kept = one.mesh.measure_surface();
+    assert!(kept.closed());
+    assert_eq!((kept.shells, kept.genus()), (2, Some(0)));
+    let pi = std::f64::consts::PI;
+    let shell = 4.0 / 3.0 * pi * (8f64.powi(3) - 4f64.powi(3));
+    let v = kept.volume.unwrap();
+    assert!((v / shell - 1.0).abs() < 0.03, "{v} for {shell}");
+    // Every kept vertex is the hollow ball's.
+    for p in &one.mesh.positions {
+        assert!((p.as_dvec3() - hollow).length() < 8.5, "{p}");
+    }
+    // Two voxels touching along an edge only: two surfaces, as the marching cubes part them
+    // (an ambiguous face separates its inside corners), so two islands.
+    let mut pair = Volume::hounsfield([4, 4, 4], [1.0; 3], vec![-1.0; 64]);
+    pair.data[1 + 4 * (1 + 4)] = 1.0;
+    pair.data[2 + 4 * (2 + 4)] = 1.0;
+    let (both, found) = extract_isosurface_keeping(&pair, 0.0, KeepIslands::AtLeast(0));
+    assert_eq!(
+        (both.mesh.measure_surface().shells, found.sizes),
+        (2, vec![1, 1])
+    );
+    let (two, islands) = extract_isosurface_keeping(&vol, 0.0, KeepIslands::AtLeast(30));
+    assert_eq!((islands.kept, two.mesh.measure_surface().shells), (2, 3));
+    let small = 4.0 / 3.0 * pi * 27.0;
+    let v2 = two.mesh.measure_surface().volume.unwrap();
+    assert!(
+        ((v2 - v) / small - 1.0).abs() < 0.1,
+        "{} for {small}",
+        v2 - v
+    );
 }

@@ -255,6 +255,55 @@ fn parse_tolerance(s: &str) -> Result<f64, String> {
     }
 }
 
+/// `--min-island`: millilitres above 0.
+fn parse_island_ml(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(ml) if ml > 0.0 && ml.is_finite() => Ok(ml),
+        _ => Err(format!("'{s}': a volume in ml, above 0")),
+    }
+}
+
+/// Which islands of a surface's inside keep their surface: `iso` and `render` of a CT's
+/// threshold or of a label map's segments.
+#[derive(Args, Clone, Copy, Debug, Default)]
+pub struct IslandPick {
+    /// Keep the N largest islands (pieces of the voxels at or above the threshold, or of a
+    /// segment's, each joined to the six that share a face with it, as the marching cubes and
+    /// 3D Slicer's Islands effect join them) and drop the others' surfaces: the bones without
+    /// the specks of noise, calcified vessels and the table; each segment's own with
+    /// --segment.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub keep_largest: Option<u64>,
+    /// Drop the islands (as --keep-largest has them) whose voxels hold less than ML
+    /// millilitres, and their surfaces.
+    #[arg(long, value_name = "ML", value_parser = parse_island_ml, conflicts_with = "keep_largest")]
+    pub min_island: Option<f64>,
+}
+
+impl IslandPick {
+    /// The islands to keep on a grid of voxels of `voxel_ml` each.
+    pub fn keep(&self, voxel_ml: f64) -> raystream_volume::KeepIslands {
+        use raystream_volume::KeepIslands;
+        match (self.keep_largest, self.min_island) {
+            (Some(n), _) => KeepIslands::Largest(usize::try_from(n).unwrap_or(usize::MAX)),
+            // A hair under, so that an island of exactly ML is not lost to rounding.
+            (None, Some(ml)) => {
+                KeepIslands::AtLeast((ml / voxel_ml * (1.0 - 1e-9)).ceil() as usize)
+            }
+            (None, None) => KeepIslands::All,
+        }
+    }
+
+    /// The flag given, if any.
+    pub fn flag(&self) -> Option<&'static str> {
+        match (self.keep_largest, self.min_island) {
+            (Some(_), _) => Some("--keep-largest"),
+            (None, Some(_)) => Some("--min-island"),
+            (None, None) => None,
+        }
+    }
+}
+
 /// Which image of a CT folder or file to read.
 #[derive(Args, Clone, Debug, Default)]
 pub struct VolumePick {
@@ -293,6 +342,8 @@ pub struct RenderArgs {
     /// gradient normals; default 0, and 10 for `--segment`'s surfaces).
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=100))]
     pub smooth: Option<u32>,
+    #[command(flatten)]
+    pub islands: IslandPick,
     /// A label map or DICOM Segmentation: the surfaces of its segments, each in its colour,
     /// instead of bones (numbers or a Segmentation's labels, comma-separated, or `all`, the
     /// default for a Segmentation; as `iso --segment`). A CT with --mode dvr, iso, cinematic,
@@ -891,6 +942,8 @@ pub struct IsoArgs {
     /// (measured): far fewer triangles, for printing, the web and meshing for simulation.
     #[arg(long, value_name = "MM", value_parser = parse_tolerance)]
     pub simplify: Option<f64>,
+    #[command(flatten)]
+    pub islands: IslandPick,
     #[arg(short, long)]
     pub quiet: bool,
 }

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use raystream_io::{SegmentVoxels, ValueUnit, Volume, VolumeSelect};
-use raystream_volume::{IsoSurface, extract_isosurface};
+use raystream_volume::{Islands, IsoSurface, KeepIslands, extract_isosurface_keeping};
 
 use crate::cli::IsoArgs;
 use crate::common::{ms, spinner};
@@ -86,7 +86,7 @@ pub fn bones_of(
     volume: &Volume,
     path: &Path,
     hu: f32,
-    smoothing: u32,
+    (smoothing, keep): (u32, KeepIslands),
     quiet: bool,
     load_ms: f64,
 ) -> Result<Bones> {
@@ -101,9 +101,24 @@ pub fn bones_of(
             value_words(volume, hu)
         ),
     );
-    let mut surface = extract_isosurface(volume, hu);
-    raystream_volume::smooth(&mut surface, smoothing);
+    let (mut surface, islands) = extract_isosurface_keeping(volume, hu, keep);
     pb.finish_and_clear();
+    if islands.kept == 0 && !islands.sizes.is_empty() {
+        bail!(
+            "{}: {}",
+            path.display(),
+            no_island_kept(&islands, keep, volume.voxel_ml())
+        );
+    }
+    if keep != KeepIslands::All && !quiet {
+        eprintln!(
+            "raystream: {}: {} at {}",
+            path.display(),
+            islands_kept(&islands, volume.voxel_ml()),
+            value_words(volume, hu)
+        );
+    }
+    raystream_volume::smooth(&mut surface, smoothing);
     if surface.mesh.is_empty() {
         let range = volume
             .value_range()
@@ -181,7 +196,7 @@ pub fn run(a: &IsoArgs) -> Result<()> {
         &volume,
         &a.input,
         hu,
-        a.smooth.unwrap_or(0),
+        (a.smooth.unwrap_or(0), a.islands.keep(volume.voxel_ml())),
         a.quiet,
         load_ms,
     )?;
@@ -239,8 +254,11 @@ pub struct SegmentSurface {
     pub name: String,
     /// sRGB: a Segmentation's recommended colour, else `--segmentation`'s tint for the label.
     pub colour: [u8; 3],
+    /// Its voxels (those of the islands kept, where some were dropped).
     pub voxels: usize,
     pub surface: IsoSurface,
+    /// Its islands, where `--keep-largest` or `--min-island` chose among them.
+    pub islands: Option<Islands>,
 }
 
 impl SegmentSurface {
@@ -262,7 +280,10 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
         whole.as_ref(),
         &a.input,
         (a.segment.as_deref().unwrap_or("all"), &known),
-        a.smooth.unwrap_or(SEGMENT_SMOOTHING),
+        (
+            a.smooth.unwrap_or(SEGMENT_SMOOTHING),
+            a.islands.keep(labels.voxel_ml()),
+        ),
         a.quiet,
     )?;
     for s in &mut surfaces {
@@ -284,8 +305,11 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
     if !a.quiet {
         let voxel_ml = labels.voxel_ml();
         for s in &surfaces {
+            let kept = (s.islands.as_ref()).map_or(String::new(), |i| {
+                format!(" ({})", islands_kept(i, voxel_ml))
+            });
             eprintln!(
-                "raystream: segment {} ({}): {} voxels, {:.1} ml; its surface {} triangles, enclosing {:.1} ml",
+                "raystream: segment {} ({}): {} voxels, {:.1} ml{kept}; its surface {} triangles, enclosing {:.1} ml",
                 s.label,
                 s.name,
                 s.voxels,
@@ -367,6 +391,35 @@ pub fn pick_segments(
     Ok(wanted)
 }
 
+/// What `--keep-largest` or `--min-island` kept of `islands`: "kept 1 of 1222 islands (99.8 of
+/// 391.8 ml of voxels)", on a grid of voxels of `voxel_ml`.
+pub fn islands_kept(islands: &Islands, voxel_ml: f64) -> String {
+    let all: usize = islands.sizes.iter().sum();
+    format!(
+        "kept {} of {} island{} ({:.1} of {:.1} ml of voxels)",
+        islands.kept,
+        islands.sizes.len(),
+        if islands.sizes.len() == 1 { "" } else { "s" },
+        islands.kept_voxels as f64 * voxel_ml,
+        all as f64 * voxel_ml
+    )
+}
+
+/// Why `keep` kept none of `islands` (only `--min-island` can): the largest's size.
+fn no_island_kept(islands: &Islands, keep: KeepIslands, voxel_ml: f64) -> String {
+    let least = match keep {
+        KeepIslands::AtLeast(n) => n,
+        _ => 0,
+    };
+    format!(
+        "--min-island: no island holds {:.3} ml ({least} voxels); the largest of {} holds {:.3} ml ({} voxels)",
+        least as f64 * voxel_ml,
+        islands.sizes.len(),
+        islands.sizes[0] as f64 * voxel_ml,
+        islands.sizes[0]
+    )
+}
+
 /// The volume a closed, outward-facing mesh in millimetres encloses, ml.
 pub fn enclosed_ml(mesh: &raystream_io::TriMesh) -> f64 {
     mesh.enclosed_volume() / 1000.0
@@ -409,7 +462,7 @@ pub fn segment_surfaces(
     whole_segments: Option<&raystream_io::WholeSegments>,
     path: &Path,
     (list, known): (&str, &[raystream_io::SegmentLabel]),
-    smoothing: u32,
+    (smoothing, keep): (u32, KeepIslands),
     quiet: bool,
 ) -> Result<Vec<SegmentSurface>> {
     let name = path.display();
@@ -492,20 +545,28 @@ pub fn segment_surfaces(
                 lo.map(|x| x as f64 - 1.0),
             ))
             .to_array();
-        let mut surface = extract_isosurface(&cut, 0.5);
+        let (mut surface, islands) = extract_isosurface_keeping(&cut, 0.5, keep);
         raystream_volume::smooth(&mut surface, smoothing);
         let segment = known.iter().find(|k| k.number as u32 == l);
         let name = segment
             .map(|k| k.label.clone())
             .filter(|n| !n.is_empty())
             .unwrap_or_else(|| format!("label {l}"));
+        if islands.kept == 0 && !islands.sizes.is_empty() {
+            bail!(
+                "{name}: segment {l} ({name}): {}",
+                no_island_kept(&islands, keep, labels.voxel_ml())
+            );
+        }
+        let islands = (keep != KeepIslands::All).then_some(islands);
         let colour = crate::overlay::segment_colour(known, l);
         out.push(SegmentSurface {
             label: l,
             name,
             colour,
-            voxels,
+            voxels: islands.as_ref().map_or(voxels, |i| i.kept_voxels),
             surface,
+            islands,
         });
         pb.inc(1);
     }
@@ -550,7 +611,8 @@ mod tests {
     fn segments_are_closed_halfway_to_their_neighbours_the_grid_edge_too() {
         let v = labels();
         let path = Path::new("labels.nii");
-        let s = segment_surfaces(&v, None, path, ("2, 1,2", &[]), 0, true).unwrap();
+        let s =
+            segment_surfaces(&v, None, path, ("2, 1,2", &[]), (0, KeepIslands::All), true).unwrap();
         assert_eq!(s.iter().map(|s| s.label).collect::<Vec<_>>(), [2, 1]);
         assert_eq!(s[0].name, "label 2");
         assert_eq!(s[1].voxels, 1);
@@ -572,9 +634,10 @@ mod tests {
         let voxel_ml = v.voxel_ml();
         assert!((enclosed_ml(&s[1].surface.mesh) - voxel_ml / 6.0).abs() < 1e-6 * voxel_ml);
         assert!(enclosed_ml(&s[0].surface.mesh) > 0.0);
-        let all = segment_surfaces(&v, None, path, ("all", &[]), 3, true).unwrap();
+        let all =
+            segment_surfaces(&v, None, path, ("all", &[]), (3, KeepIslands::All), true).unwrap();
         assert_eq!(all.iter().map(|s| s.label).collect::<Vec<_>>(), [1, 2]);
-        let e = segment_surfaces(&v, None, path, ("3", &[]), 0, true)
+        let e = segment_surfaces(&v, None, path, ("3", &[]), (0, KeepIslands::All), true)
             .err()
             .unwrap();
         assert_eq!(
@@ -583,7 +646,7 @@ mod tests {
         );
         let mut ct = v.clone();
         ct.data[5] = -1000.0;
-        let e = segment_surfaces(&ct, None, path, ("all", &[]), 0, true)
+        let e = segment_surfaces(&ct, None, path, ("all", &[]), (0, KeepIslands::All), true)
             .err()
             .unwrap();
         assert!(e.to_string().contains("it holds -1000"), "{e}");

@@ -70,7 +70,8 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend
         }
         let smoothing = a.smooth.unwrap_or(0);
         let hu = crate::iso::surface_threshold(&volume, &a.threshold, path, a.quiet)?;
-        let mut b = crate::iso::bones_of(&volume, path, hu, smoothing, a.quiet, load_ms)?;
+        let keep = a.islands.keep(volume.voxel_ml());
+        let mut b = crate::iso::bones_of(&volume, path, hu, (smoothing, keep), a.quiet, load_ms)?;
         b.lone_view = lone_view;
         let mesh = std::mem::take(&mut b.surface.mesh);
         let scene = Scene::for_bones(mesh, &b.surface.normals, path);
@@ -129,7 +130,10 @@ fn segments_scene(
         whole.as_ref(),
         path,
         (a.segment.as_deref().unwrap_or("all"), &known),
-        a.smooth.unwrap_or(crate::iso::SEGMENT_SMOOTHING),
+        (
+            a.smooth.unwrap_or(crate::iso::SEGMENT_SMOOTHING),
+            a.islands.keep(labels.voxel_ml()),
+        ),
         a.quiet,
     )?;
     let what = surfaces
@@ -2107,6 +2111,21 @@ fn render_aov(a: &RenderArgs, aov: Aov) -> Result<()> {
 }
 
 pub fn run(a: &RenderArgs) -> Result<()> {
+    if let Some(flag) = a.islands.flag() {
+        if a.mode.is_some() {
+            bail!(
+                "{flag} keeps a surface's islands; --mode renders the volume itself (without --mode, its bones' or segments' surfaces)"
+            );
+        }
+        if a.input
+            .as_deref()
+            .is_some_and(|p| !raystream_io::is_volume_path(p))
+        {
+            bail!(
+                "{flag} keeps the islands of a CT volume's or label map's surface; a mesh or scene has none"
+            );
+        }
+    }
     if let Some(mode) = a.mode {
         return render_direct(a, mode.into());
     }

@@ -133,6 +133,173 @@ fn iso_writes_a_closed_bone_surface() {
     assert!(b.min.z >= 94.30 - 1e-3 && b.max.z <= 94.31 + 333.0, "{b:?}");
 }
 
+/// `iso --keep-largest N` and `--min-island ML` on the abdomen CT's bones: the kept surface is
+/// the full one's triangles (each a triangle of the full STL, corner for corner), closed, in
+/// as many pieces as islands kept or more (an island's hollows are surfaces of its own), the
+/// largest island's alone with N = 1, more of them for each larger N, and the islands of at
+/// least 1 ml with `--min-island 1` (where 13 of 1,222 hold one), fewer triangles than the full
+/// surface's and more than the largest island's; `render` keeps them too. A label map's
+/// segments keep their own islands: a segment of a ball and a speck keeps its ball, another
+/// of one ball keeps it, and says its voxels are the ball's. Refused: an island size no island
+/// reaches (naming the largest), 0, with `--mode` and for a mesh.
+#[test]
+fn iso_keeps_the_largest_islands() {
+    let ct = volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz");
+    let iso = |name: &str, more: &[&str]| {
+        let out = tmp(name);
+        let mut args = vec!["iso", &ct, "-o", out.to_str().unwrap()];
+        args.extend_from_slice(more);
+        let o = run(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        (raystream_io::load_mesh(&out).unwrap(), stderr(&o))
+    };
+    let (full, _) = iso("islands-full.stl", &[]);
+    let corners =
+        |m: &raystream_io::TriMesh, i: usize| m.corners(i).map(|p| p.to_array().map(f32::to_bits));
+    let all: std::collections::HashSet<_> = (0..full.len()).map(|i| corners(&full, i)).collect();
+    let mut last = 0;
+    for n in [1, 2, 5] {
+        let (kept, said) = iso(
+            &format!("islands-{n}.stl"),
+            &["--keep-largest", &n.to_string()],
+        );
+        assert!(
+            said.contains(&format!("kept {n} of 1222 islands (")),
+            "{said}"
+        );
+        let s = kept.measure_surface();
+        assert!(
+            s.closed() && s.shells >= n && s.shells < n + 10,
+            "{n}: {s:?}"
+        );
+        assert!(
+            (0..kept.len()).all(|i| all.contains(&corners(&kept, i))),
+            "{n}"
+        );
+        assert!(
+            kept.len() > last && kept.len() < full.len(),
+            "{n}: {}",
+            kept.len()
+        );
+        last = kept.len();
+    }
+    let (one, _) = iso("islands-1.stl", &["--keep-largest", "1"]);
+    let (big, said) = iso("islands-1ml.stl", &["--min-island", "1"]);
+    assert!(said.contains("kept 13 of 1222 islands ("), "{said}");
+    assert!(big.len() > one.len() && big.len() < full.len());
+    assert!((0..big.len()).all(|i| all.contains(&corners(&big, i))));
+    let png = render_to(
+        "islands.png",
+        "cpu",
+        &[&ct, "--keep-largest", "2", "--size", "64x48"],
+    );
+    assert!(png.exists());
+
+    // A label map: segment 1 a ball of radius 4 voxels and a speck of one voxel, segment 2 a
+    // ball of radius 3.
+    let like = raystream_io::Volume::hounsfield([30, 20, 20], [1.0, 1.5, 2.0], Vec::new());
+    let mut labels = vec![0.0f32; 30 * 20 * 20];
+    let mut ball = |c: [f64; 3], r: f64, l: f32| {
+        for k in 0..20 {
+            for j in 0..20 {
+                for i in 0..30 {
+                    let d = [i as f64 - c[0], j as f64 - c[1], k as f64 - c[2]];
+                    if d.iter().map(|x| x * x).sum::<f64>() <= r * r {
+                        labels[i + 30 * (j + 20 * k)] = l;
+                    }
+                }
+            }
+        }
+    };
+    ball([7.0, 8.0, 9.0], 4.0, 1.0);
+    ball([20.0, 8.0, 9.0], 3.0, 2.0);
+    ball([3.0, 17.0, 17.0], 0.0, 1.0);
+    let voxels = |l: f32| labels.iter().filter(|&&v| v == l).count();
+    let (one_ball, speck, other) = (voxels(1.0) - 1, 1, voxels(2.0));
+    let map = write_like("islands-labels.mha", &like, &labels);
+    let out = tmp("islands-segments.ply");
+    let o = run(&[
+        "iso",
+        map.to_str().unwrap(),
+        "--segment",
+        "1,2",
+        "--keep-largest",
+        "1",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = stderr(&o);
+    assert!(
+        said.contains(&format!("segment 1 (label 1): {one_ball} voxels, "))
+            && said.contains(&format!(
+                "(kept 1 of 2 islands ({:.1} of {:.1} ml of voxels))",
+                one_ball as f64 * 3e-3,
+                (one_ball + speck) as f64 * 3e-3
+            )),
+        "{said}"
+    );
+    assert!(
+        said.contains(&format!("segment 2 (label 2): {other} voxels, ")),
+        "{said}"
+    );
+    let surfaces = raystream_io::load_mesh(&out).unwrap();
+    assert_eq!(surfaces.measure_surface().shells, 2);
+
+    // Refused, naming what is wrong.
+    let e = refused(
+        &[
+            "iso",
+            &ct,
+            "-o",
+            tmp("x.stl").to_str().unwrap(),
+            "--min-island",
+            "500",
+        ],
+        "no island holds 500.0",
+    );
+    assert!(
+        e.contains("abdomen_pelvis_ct_totalseg.nii.gz")
+            && e.contains("the largest of 1222 holds 99.792 ml"),
+        "{e}"
+    );
+    refused(
+        &[
+            "iso",
+            &ct,
+            "-o",
+            tmp("x.stl").to_str().unwrap(),
+            "--keep-largest",
+            "0",
+        ],
+        "--keep-largest",
+    );
+    refused(
+        &[
+            "render",
+            &ct,
+            "--mode",
+            "mip",
+            "--keep-largest",
+            "1",
+            "-o",
+            tmp("x.png").to_str().unwrap(),
+        ],
+        "--mode renders the volume itself",
+    );
+    refused(
+        &[
+            "render",
+            &mesh("spot.obj"),
+            "--min-island",
+            "1",
+            "-o",
+            tmp("x.png").to_str().unwrap(),
+        ],
+        "a mesh or scene has none",
+    );
+}
+
 /// The CT's integers at the integer threshold: where voxels are exactly 300 HU (110 are)
 /// the raw surface still puts no two vertices on one point, and simplified within 0.3 and 1 mm
 /// it stays closed and a 2-manifold by its indices, at its edges and its vertices (a 3D
