@@ -14,7 +14,7 @@ files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, coloured PLY, OBJ a
         dvr or cinematic (half of those --denoise, some with --anisotropy and --exposure), some
         with --interpolation linear, cubic or cubic-interpolating, some with --slab, to an EXR, a turntable of EXRs or an animation (APNG, GIF); some tinted by themselves as a label map, some
         rendered (dvr, iso, mip, minip, average, cinematic) in the colours of their own segments or kept to some,
-        or their segments made surfaces with `raystream iso --segment` (some simplified, some named
+        or their segments made surfaces with `raystream iso --segment` (some simplified, some keeping their largest islands, some named
         by a mutated colour table) or rendered). Each run must exit 0 or 2, never panic, and an error
         must name the file. Paths (text and 3D Slicer markups) are mutated too, rendered as a
         curved planar reformation (--path, straightened or stretched) or flown through (--fly) in an intact volume, measured along
@@ -609,6 +609,16 @@ def mutate_glb(b):
             + b"JSON" + j + rest)
 
 
+def islands():
+    """Now and then `--keep-largest` or `--min-island`, with a sensible or an absurd number."""
+    pick = random.random()
+    if pick < 0.2:
+        return ["--keep-largest", random.choice(["1", "2", "1000000", "18446744073709551615"])]
+    if pick < 0.4:
+        return ["--min-island", random.choice(["0.000001", "0.5", "1e9", "1e300"])]
+    return []
+
+
 def run(args, name):
     """None if the run behaved, else what went wrong. An error must name `name` (or one of
     them, a tuple: an input and the colour table or output an error may be about)."""
@@ -750,6 +760,9 @@ def fuzz_files(work, n, device, only=None):
             # Shaded, so that normals and materials are used.
             why = run(["render", p, "--size", "8x8", "--spp", "1", "-q", "--device", device,
                        "-o", os.path.join(d, "s.png")], s)
+        if not why and not s.endswith((".obj", ".stl", ".ply", ".glb", ".gltf")) and random.random() < 0.3:
+            # Its bones as a surface, some of their islands kept.
+            why = run(["iso", p, "-q"] + islands() + phase + ["-o", os.path.join(d, "b.stl")], (s, "b.stl"))
         if not why and not s.endswith((".obj", ".stl", ".ply", ".glb", ".gltf")):
             # A volume also goes straight through a windowed mode, its HU into an EXR.
             mode = random.choice(["mip", "minip", "average", "slice", "dvr", "cinematic"])
@@ -808,6 +821,7 @@ def fuzz_files(work, n, device, only=None):
                     with open(ctbl, "wb") as f:
                         f.write(mutate(table, True))
                     segments += ["--colour-table", ctbl]
+                segments += islands()
                 if random.random() < 0.5:
                     simplify = ["--simplify", random.choice(["0.1", "1"])] if random.random() < 0.5 else []
                     why = run(["iso", p, "-q"] + segments + simplify + ["-o", os.path.join(

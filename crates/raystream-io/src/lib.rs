@@ -8,6 +8,7 @@
 
 mod colour_table;
 mod curve;
+mod encapsulated_stl;
 mod gltf;
 mod label_map;
 mod measurement_report;
@@ -27,6 +28,9 @@ mod vtk_mesh;
 mod vtk_xml;
 mod write;
 pub use colour_table::read_colour_table;
+pub use encapsulated_stl::{
+    ENCAPSULATED_STL, ModelInfo, is_encapsulated_stl, write_encapsulated_stl,
+};
 pub use structure_set_write::{
     StructureSetWritten, pixel_loops, structure_set_source, write_structure_set,
 };
@@ -105,11 +109,17 @@ pub enum MeshFormat {
     VtkXml,
     /// 3MF (`.3mf`): 3D printing's packages of parts.
     ThreeMf,
+    /// A DICOM Encapsulated STL (a `.dcm`, or a DICOM file without an extension, of that SOP
+    /// class): the STL a hospital files with its study, in its patient's LPS millimetres.
+    DicomStl,
 }
 
 impl MeshFormat {
     /// The format named by a file's extension (a trailing `.gz` is looked through).
     pub fn from_path(path: &Path) -> Option<Self> {
+        if encapsulated_stl::is_encapsulated_stl(path) {
+            return Some(Self::DicomStl);
+        }
         let name = path.file_name()?.to_str()?.to_ascii_lowercase();
         let name = name.strip_suffix(".gz").unwrap_or(&name);
         match name.rsplit_once('.')?.1 {
@@ -144,6 +154,8 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh, MeshError> {
 /// warning, not an error: the geometry is still the file's.
 pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), MeshError> {
     let (format, bytes) = read_mesh_file(path)?;
+    let dicom = format == MeshFormat::DicomStl;
+    let (format, bytes) = unwrapped(format, bytes, path)?;
     let bytes = gunzip(&bytes, path)?;
     let (mesh, mut shading, normals) = match format {
         MeshFormat::Obj => parse_obj(&bytes, path, path.parent())?,
@@ -159,7 +171,7 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
                 ply.normals.into_iter().map(Some).collect(),
             )
         }
-        MeshFormat::Stl => {
+        MeshFormat::Stl | MeshFormat::DicomStl => {
             let stl = stl::parse(&bytes, path)?;
             let shading = MeshShading {
                 colours: stl.colours,
@@ -210,6 +222,10 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
     };
     mesh.check(path)?;
     shading.space = shading.space.or(declared_space(&bytes, format));
+    if dicom {
+        // DICOM's patient coordinates are LPS millimetres, whatever the STL's header says.
+        shading.space = Some(PatientSpace::Lps);
+    }
     shading.normals = file_normals(&mesh, normals, &mut shading.warnings);
     if format == MeshFormat::Obj {
         // An OBJ's textures are named by its libraries; a glTF file's come with it.
@@ -497,6 +513,7 @@ pub fn declared_space(bytes: &[u8], format: MeshFormat) -> Option<PatientSpace> 
             .find_map(tagged),
         // The title line, where 3D Slicer writes `3D Slicer output. SPACE=LPS`.
         MeshFormat::Vtk => text.lines().nth(1).and_then(tagged),
+        MeshFormat::DicomStl => Some(PatientSpace::Lps),
         MeshFormat::Gltf | MeshFormat::VtkXml | MeshFormat::ThreeMf => None,
     }
 }
@@ -514,11 +531,12 @@ fn parse_mesh_in(
     path: &Path,
     dir: Option<&Path>,
 ) -> Result<TriMesh, MeshError> {
-    let bytes = gunzip(bytes, path)?;
+    let (format, bytes) = unwrapped(format, bytes.to_vec(), path)?;
+    let bytes = gunzip(&bytes, path)?;
     let mesh = match format {
         MeshFormat::Obj => parse_obj(&bytes, path, None)?.0,
         MeshFormat::Ply => ply::parse(&bytes, path)?.mesh,
-        MeshFormat::Stl => stl::parse(&bytes, path)?.mesh,
+        MeshFormat::Stl | MeshFormat::DicomStl => stl::parse(&bytes, path)?.mesh,
         MeshFormat::Gltf => gltf::parse(&bytes, path, dir, false)?.mesh,
         MeshFormat::Vtk => vtk_mesh::parse(&bytes, path)?.mesh,
         MeshFormat::VtkXml => vtk_xml::parse_poly(&bytes, path)?.mesh,
@@ -526,6 +544,19 @@ fn parse_mesh_in(
     };
     mesh.check(path)?;
     Ok(mesh)
+}
+
+/// The mesh a file's bytes hold, with its format: a DICOM Encapsulated STL's STL, else the
+/// file's own bytes.
+fn unwrapped(
+    format: MeshFormat,
+    bytes: Vec<u8>,
+    path: &Path,
+) -> Result<(MeshFormat, Vec<u8>), MeshError> {
+    match format {
+        MeshFormat::DicomStl => Ok((MeshFormat::Stl, encapsulated_stl::stl_of(&bytes, path)?)),
+        _ => Ok((format, bytes)),
+    }
 }
 
 /// `bytes`, unzipped if they start with the gzip magic number.

@@ -408,6 +408,22 @@ pub(crate) fn derived_object(
     }
 }
 
+/// The Frame of Reference module (`frame`), the Enhanced General Equipment's serial number,
+/// and the object as instance 1 of its series, made at `date` and `time`: what a derived
+/// object in its source's patient coordinates (a Segmentation, a 3D model) carries.
+pub(crate) fn put_frame_and_content(
+    o: &mut InMemDicomObject,
+    frame: &str,
+    (date, time): (&str, &str),
+) {
+    put(o, tags::FRAME_OF_REFERENCE_UID, VR::UI, frame);
+    put(o, tags::POSITION_REFERENCE_INDICATOR, VR::LO, "");
+    put(o, tags::DEVICE_SERIAL_NUMBER, VR::LO, "1");
+    put(o, tags::INSTANCE_NUMBER, VR::IS, "1");
+    put(o, tags::CONTENT_DATE, VR::DA, date);
+    put(o, tags::CONTENT_TIME, VR::TM, time);
+}
+
 pub(crate) fn put(obj: &mut InMemDicomObject, tag: dicom_core::Tag, vr: VR, value: &str) {
     obj.put(DataElement::new(tag, vr, PrimitiveValue::from(value)));
 }

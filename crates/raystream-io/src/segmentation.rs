@@ -16,8 +16,8 @@ use dicom_object::InMemDicomObject;
 
 use crate::new_uid;
 use crate::secondary_capture::{
-    DEFLATED_EXPLICIT_VR_LE, Derived, decimal, decimals, derived_object, put, truncate,
-    write_dicom_as,
+    DEFLATED_EXPLICIT_VR_LE, Derived, decimal, decimals, derived_object, put,
+    put_frame_and_content, truncate, write_dicom_as,
 };
 use crate::volume::{SourceImage, Volume, VolumeError};
 
@@ -204,19 +204,9 @@ pub fn write_segmentation(
         info.version,
     );
     let o = &mut obj;
-    // Frame of Reference, General and Enhanced General Equipment.
-    put(
-        o,
-        tags::FRAME_OF_REFERENCE_UID,
-        VR::UI,
-        &study.frame_of_reference_uid,
-    );
-    put(o, tags::POSITION_REFERENCE_INDICATOR, VR::LO, "");
-    put(o, tags::DEVICE_SERIAL_NUMBER, VR::LO, "1");
-    // General Image, Segmentation Image, Multi-frame Functional Groups.
-    put(o, tags::INSTANCE_NUMBER, VR::IS, "1");
-    put(o, tags::CONTENT_DATE, VR::DA, &date);
-    put(o, tags::CONTENT_TIME, VR::TM, &time);
+    // Frame of Reference, General and Enhanced General Equipment; General Image, Segmentation
+    // Image, Multi-frame Functional Groups.
+    put_frame_and_content(o, &study.frame_of_reference_uid, (&date, &time));
     put(o, tags::IMAGE_TYPE, VR::CS, "DERIVED\\PRIMARY");
     put(o, tags::CONTENT_LABEL, VR::CS, "SEGMENTATION");
     put(

@@ -43,6 +43,15 @@ pub fn write_mesh(path: &Path, mesh: &TriMesh, normals: Option<&[Vec3]>) -> Resu
 /// each (named, its colour as its base material). An STL holds one surface, so several are
 /// refused.
 pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError> {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("dcm"))
+    {
+        return Err(MeshError::invalid(
+            path,
+            "a DICOM Encapsulated STL is made from its CT or label map: `raystream iso VOLUME -o MODEL.dcm`",
+        ));
+    }
     let glb = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
@@ -107,7 +116,7 @@ pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError
             write_obj(&mut w, &parts, Some(&name))
         }
         MeshFormat::Obj => write_obj(&mut w, &parts, None),
-        MeshFormat::Stl => write_stl(&mut w, &parts[0]),
+        MeshFormat::Stl | MeshFormat::DicomStl => write_stl(&mut w, &parts[0]),
         MeshFormat::Gltf => write_glb(&mut w, &parts),
         MeshFormat::Vtk => write_vtk(&mut w, &parts),
         MeshFormat::VtkXml => write_vtp(&mut w, &parts),
@@ -467,7 +476,7 @@ fn write_vtp(w: &mut impl Write, parts: &[MeshPart]) -> std::io::Result<()> {
 /// reader taking a triangle's colour over the header's (Materialise's convention) and one
 /// taking the header's where bit 15 is clear (Assimp's) show the same. A reader of VisCAM's
 /// convention, which needs bit 15 set, sees no colours.
-fn write_stl(w: &mut impl Write, part: &MeshPart) -> std::io::Result<()> {
+pub(crate) fn write_stl(w: &mut impl Write, part: &MeshPart) -> std::io::Result<()> {
     let mesh = part.mesh;
     let srgb = srgb8(part.colour);
     let mut header = [b' '; 80];

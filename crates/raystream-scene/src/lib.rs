@@ -1015,6 +1015,15 @@ impl From<String> for SceneError {
 mod tests {
     use super::*;
 
+    /// A scratch folder of its own under the system's temporary one, removed when the test
+    /// ends, passed or failed.
+    fn scratch(name: &str) -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix(&format!("raystream-scene-{name}-"))
+            .tempdir()
+            .unwrap()
+    }
+
     /// MTL statements → Phong materials: the highlight only where the model has one, the
     /// mirror only for the mirror models, `d` and `Ni` as glass, and bad values refused as a
     /// scene file's are.
@@ -1077,10 +1086,7 @@ mod tests {
     /// value is an error naming the object and the material.
     #[test]
     fn scene_objects_keep_their_obj_materials() {
-        let scratch = tempfile::Builder::new()
-            .prefix("raystream-scene-mtl-")
-            .tempdir()
-            .unwrap();
+        let scratch = scratch("mtl");
         let dir = scratch.path();
         std::fs::write(
             dir.join("two.obj"),
@@ -1152,10 +1158,7 @@ mod tests {
     /// coloured object keeps no colours.
     #[test]
     fn vertex_colours_reach_their_triangles() {
-        let scratch = tempfile::Builder::new()
-            .prefix("raystream-scene-colours-")
-            .tempdir()
-            .unwrap();
+        let scratch = scratch("colours");
         let dir = scratch.path();
         std::fs::write(
             dir.join("c.obj"),
@@ -1205,10 +1208,7 @@ mod tests {
     /// anatomy: in the scene frame (x = L, y = S, z = A), seen from the front.
     #[test]
     fn a_model_is_read_in_the_patient_space_its_file_declares() {
-        let scratch = tempfile::Builder::new()
-            .prefix("raystream-scene-space-")
-            .tempdir()
-            .unwrap();
+        let scratch = scratch("space");
         let dir = scratch.path();
         let lps = [
             Vec3::new(10.0, -20.0, 30.0),

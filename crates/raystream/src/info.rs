@@ -127,7 +127,11 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             b.min.to_array(),
             b.max.to_array()
         );
-        if let Some(space) = materials.space {
+        if raystream_io::is_encapsulated_stl(input) {
+            println!(
+                "  space      LPS: patient millimetres, a DICOM Encapsulated STL's (its study's frame of reference); render shows it from the front, head up"
+            );
+        } else if let Some(space) = materials.space {
             println!(
                 "  space      {}: patient millimetres, as the file says (SPACE={0}, 3D Slicer's tag); render shows it from the front, head up",
                 space.name()

@@ -202,7 +202,13 @@ pub fn run(a: &IsoArgs) -> Result<()> {
     )?;
     simplify(&mut b.surface, a.simplify, "the surface", a.quiet);
     let t = Instant::now();
-    raystream_io::write_mesh(&a.output, &b.surface.mesh, Some(&b.surface.normals))?;
+    let bone = raystream_io::MeshPart {
+        name: "bone",
+        mesh: &b.surface.mesh,
+        normals: Some(&b.surface.normals),
+        colour: raystream_io::BONE,
+    };
+    write_surfaces(&a.output, &[bone], &volume, &format!("bones {}", b.what))?;
     if !a.quiet {
         eprintln!(
             "raystream: wrote {} ({} vertices, {} triangles at {}, enclosing {:.1} ml): load {:.0} ms, isosurface {:.0} ms ({:.0} M voxels/s), write {:.0} ms",
@@ -301,7 +307,8 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
             colour: s.linear_colour(),
         })
         .collect();
-    raystream_io::write_mesh_parts(&a.output, &parts)?;
+    let titles: Vec<&str> = surfaces.iter().map(|s| s.name.as_str()).collect();
+    write_surfaces(&a.output, &parts, labels, &titles.join(", "))?;
     if !a.quiet {
         let voxel_ml = labels.voxel_ml();
         for s in &surfaces {
@@ -389,6 +396,37 @@ pub fn pick_segments(
         }
     }
     Ok(wanted)
+}
+
+/// Writes `parts` to `out`: a mesh file by its extension, or (`.dcm`) one surface as a DICOM
+/// Encapsulated STL of `volume`'s study, titled `title`.
+fn write_surfaces(
+    out: &Path,
+    parts: &[raystream_io::MeshPart],
+    volume: &Volume,
+    title: &str,
+) -> Result<()> {
+    let dicom = out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("dcm"));
+    if !dicom {
+        raystream_io::write_mesh_parts(out, parts)?;
+        return Ok(());
+    }
+    let [part] = parts else {
+        bail!(
+            "{}: a DICOM Encapsulated STL holds one surface, not {}: give one --segment, or write .3mf, .glb, .obj, .ply, .vtk or .vtp",
+            out.display(),
+            parts.len()
+        );
+    };
+    let info = raystream_io::ModelInfo {
+        title,
+        description: &format!("raystream iso: {title}"),
+        version: env!("CARGO_PKG_VERSION"),
+    };
+    raystream_io::write_encapsulated_stl(out, part, Some(volume), &info)?;
+    Ok(())
 }
 
 /// What `--keep-largest` or `--min-island` kept of `islands`: "kept 1 of 1222 islands (99.8 of
@@ -554,7 +592,8 @@ pub fn segment_surfaces(
             .unwrap_or_else(|| format!("label {l}"));
         if islands.kept == 0 && !islands.sizes.is_empty() {
             bail!(
-                "{name}: segment {l} ({name}): {}",
+                "{}: segment {l} ({name}): {}",
+                path.display(),
                 no_island_kept(&islands, keep, labels.voxel_ml())
             );
         }

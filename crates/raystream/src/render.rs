@@ -2117,12 +2117,10 @@ pub fn run(a: &RenderArgs) -> Result<()> {
                 "{flag} keeps a surface's islands; --mode renders the volume itself (without --mode, its bones' or segments' surfaces)"
             );
         }
-        if a.input
-            .as_deref()
-            .is_some_and(|p| !raystream_io::is_volume_path(p))
-        {
+        if let Some(p) = (a.input.as_deref()).filter(|p| !raystream_io::is_volume_path(p)) {
             bail!(
-                "{flag} keeps the islands of a CT volume's or label map's surface; a mesh or scene has none"
+                "{}: {flag} keeps the islands of a CT volume's or label map's surface; a mesh or scene has none",
+                p.display()
             );
         }
     }

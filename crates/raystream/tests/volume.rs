@@ -300,6 +300,183 @@ fn iso_keeps_the_largest_islands() {
     );
 }
 
+/// `iso SERIES -o MODEL.dcm`: the bones as a DICOM Encapsulated STL, filed with the CT series'
+/// patient and study, in its frame of reference, referencing every one of its images once;
+/// dciodvfy finds no error in it. Read back (`info`, `render`, the mesh reader) it is the STL
+/// `iso` writes of the same surface, triangle for triangle, in LPS; in the series' folder it is
+/// skipped with a warning and the CT still reads. Made from a NIfTI it opens a study and a
+/// frame of reference of its own and references no image. Two segments in one are refused,
+/// and a `.dcm` asked of the plain mesh writer is told how to make one.
+#[test]
+fn iso_files_an_encapsulated_stl_with_its_study() {
+    use raystream_io::{DicomStudy, load_mesh};
+    let dir = tmp("estl-series");
+    let study: DicomStudy = chest_series(&dir);
+    let slices: Vec<dicom_object::DefaultDicomObject> = (1..)
+        .map(|k| dir.join(format!("{k:04}.dcm")))
+        .take_while(|f| f.exists())
+        .map(|f| dicom_object::open_file(f).unwrap())
+        .collect();
+    let series = dicom_text(&slices[0], dicom_dictionary_std::tags::SERIES_INSTANCE_UID);
+    let iso = |input: &str, out: &str, more: &[&str]| {
+        let path = tmp(out);
+        let mut args = vec![
+            "iso",
+            input,
+            "--keep-largest",
+            "1",
+            "-o",
+            path.to_str().unwrap(),
+        ];
+        args.extend_from_slice(more);
+        let o = run(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        path
+    };
+    let series_dir = dir.to_str().unwrap();
+    let model = iso(series_dir, "estl-bones.dcm", &[]);
+    let stl = iso(series_dir, "estl-bones.stl", &[]);
+    assert_eq!(iod_errors(&model), Vec::<String>::new());
+    let (a, b) = (load_mesh(&model).unwrap(), load_mesh(&stl).unwrap());
+    assert!(a.len() > 1000 && a.positions == b.positions && a.triangles == b.triangles);
+    let obj = dicom_object::open_file(&model).unwrap();
+    use dicom_dictionary_std::tags;
+    let t = |tag| dicom_text(&obj, tag);
+    assert_eq!(t(tags::SOP_CLASS_UID), raystream_io::ENCAPSULATED_STL);
+    assert_eq!(t(tags::MODALITY), "M3D");
+    assert_eq!(t(tags::MIME_TYPE_OF_ENCAPSULATED_DOCUMENT), "model/stl");
+    assert_eq!(t(tags::DOCUMENT_TITLE), "bones at 300 HU");
+    assert_eq!(t(tags::STUDY_INSTANCE_UID), study.study_uid);
+    assert_eq!(
+        t(tags::FRAME_OF_REFERENCE_UID),
+        study.frame_of_reference_uid
+    );
+    assert_eq!(t(tags::PATIENT_NAME), "MÜLLER^JÖRG");
+    assert_ne!(t(tags::SERIES_INSTANCE_UID), series);
+    let length = obj
+        .element(tags::ENCAPSULATED_DOCUMENT_LENGTH)
+        .unwrap()
+        .to_int::<u64>()
+        .unwrap();
+    assert_eq!(length, std::fs::metadata(&stl).unwrap().len());
+    let images: Vec<String> = (slices.iter())
+        .map(|s| dicom_text(s, tags::SOP_INSTANCE_UID))
+        .collect();
+    let referenced = |items: &[dicom_object::InMemDicomObject]| -> Vec<String> {
+        (items.iter())
+            .map(|i| {
+                assert_eq!(
+                    i.element(tags::REFERENCED_SOP_CLASS_UID)
+                        .unwrap()
+                        .to_str()
+                        .unwrap()
+                        .trim_end_matches('\0'),
+                    dicom_text(&slices[0], tags::SOP_CLASS_UID)
+                );
+                let uid = i
+                    .element(tags::REFERENCED_SOP_INSTANCE_UID)
+                    .unwrap()
+                    .to_str()
+                    .unwrap();
+                uid.trim_end_matches('\0').to_string()
+            })
+            .collect()
+    };
+    let sources = referenced(
+        obj.element(tags::SOURCE_INSTANCE_SEQUENCE)
+            .unwrap()
+            .items()
+            .unwrap(),
+    );
+    assert_eq!(sources, images);
+    let refs = obj
+        .element(tags::REFERENCED_SERIES_SEQUENCE)
+        .unwrap()
+        .items()
+        .unwrap();
+    assert_eq!(refs.len(), 1);
+    assert_eq!(
+        refs[0]
+            .element(tags::SERIES_INSTANCE_UID)
+            .unwrap()
+            .to_str()
+            .unwrap()
+            .trim_end_matches('\0'),
+        series
+    );
+    assert_eq!(
+        referenced(
+            refs[0]
+                .element(tags::REFERENCED_INSTANCE_SEQUENCE)
+                .unwrap()
+                .items()
+                .unwrap()
+        ),
+        images
+    );
+
+    // `info` and `render` take it as a mesh in LPS millimetres.
+    let o = run(&["info", model.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(
+        (j["kind"].as_str(), j["space"].as_str()),
+        (Some("mesh"), Some("LPS"))
+    );
+    assert_eq!(j["triangles"], a.len());
+    assert!(
+        render_to(
+            "estl.png",
+            "cpu",
+            &[model.to_str().unwrap(), "--size", "48x32"]
+        )
+        .exists()
+    );
+    // In the series' folder, skipped: the CT still reads.
+    std::fs::copy(&model, dir.join("model.dcm")).unwrap();
+    let ct = raystream_io::load_volume(&dir, &Default::default()).unwrap();
+    assert_eq!(ct.dims[2], slices.len());
+    assert!(
+        ct.warnings
+            .iter()
+            .any(|w| w.contains("model.dcm") && w.contains("Encapsulated STL")),
+        "{:?}",
+        ct.warnings
+    );
+
+    // From a NIfTI: a study and a frame of reference of its own, no image referenced.
+    let own = iso(&chest(), "estl-nifti.dcm", &[]);
+    assert_eq!(iod_errors(&own), Vec::<String>::new());
+    let o2 = dicom_object::open_file(&own).unwrap();
+    assert!(!dicom_text(&o2, tags::STUDY_INSTANCE_UID).is_empty());
+    assert_ne!(dicom_text(&o2, tags::STUDY_INSTANCE_UID), study.study_uid);
+    assert!(o2.element(tags::SOURCE_INSTANCE_SEQUENCE).is_err());
+    assert_eq!(load_mesh(&own).unwrap().triangles, a.triangles);
+
+    // One surface only; the mesh writer points to iso.
+    let like = raystream_io::Volume::hounsfield([8, 8, 8], [1.0; 3], Vec::new());
+    let mut labels = vec![0.0f32; 512];
+    labels[2 + 8 * (2 + 8 * 2)] = 1.0;
+    labels[5 + 8 * (5 + 8 * 5)] = 2.0;
+    let map = write_like("estl-labels.mha", &like, &labels);
+    refused(
+        &[
+            "iso",
+            map.to_str().unwrap(),
+            "--segment",
+            "all",
+            "-o",
+            tmp("estl-two.dcm").to_str().unwrap(),
+        ],
+        "holds one surface, not 2",
+    );
+    let e = raystream_io::write_mesh(&tmp("plain.dcm"), &a, None).unwrap_err();
+    assert!(
+        e.to_string().contains("raystream iso VOLUME -o MODEL.dcm"),
+        "{e}"
+    );
+}
+
 /// The CT's integers at the integer threshold: where voxels are exactly 300 HU (110 are)
 /// the raw surface still puts no two vertices on one point, and simplified within 0.3 and 1 mm
 /// it stays closed and a 2-manifold by its indices, at its edges and its vertices (a 3D

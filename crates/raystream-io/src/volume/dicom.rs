@@ -763,6 +763,12 @@ fn slices_of(
         ));
     }
     let sop_class = meta.sop_class_of(&obj);
+    if sop_class == crate::ENCAPSULATED_STL {
+        return Err(VolumeError::invalid(
+            file,
+            "a DICOM Encapsulated STL (a 3D model), not an image of a series (read it by its own name)",
+        ));
+    }
     if crate::measurement_report::is_report_class(&sop_class) {
         return Err(VolumeError::invalid(
             file,

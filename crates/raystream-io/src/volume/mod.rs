@@ -86,6 +86,9 @@ impl VolumeFormat {
             Some(Self::VtkXml)
         } else if name.ends_with(".raw") || name.ends_with(".raw.gz") {
             Some(Self::Raw)
+        } else if crate::encapsulated_stl::is_encapsulated_stl(path) {
+            // A 3D model filed as DICOM: a mesh.
+            None
         } else if name.ends_with(".dcm") || name.ends_with(".zip") {
             // A ZIP: a DICOM study as a PACS or a web viewer hands it out.
             Some(Self::Dicom)
