@@ -6,7 +6,7 @@
 
 files:  tiny meshes (OBJ, PLY ascii/LE/BE, STL ascii/binary, coloured PLY, OBJ and VTK, glTF as .glb (a textured one too; their JSON also mutated as a document) and as .gltf; an OBJ with normals and an MTL
         library and a PNG texture, any of them mutated; a PLY with normals), tiny volumes
-        (NIfTI, NRRD and MetaImage, attached and detached, via SimpleITK; 4-D ones, and
+        (NIfTI, NRRD and MetaImage, attached and detached, via SimpleITK; a DICOM Encapsulated STL raystream wrote; 4-D ones, and
         3D Slicer's interleaved 4-D NRRD, read at a --phase or as a --cine) and real DICOM slices from
         ../shared (JPEG-LS and 12-bit JPEG among them; three of a series in a ZIP, as a PACS
         hands a study out) and, with pydicom, an enhanced CT, each cut, bit-flipped, spliced or given absurd numbers, then `raystream info`
@@ -303,6 +303,14 @@ def seeds(d):
           b"Segment0_ID:=a\nSegment0_Name:=liver\nSegment0_Color:=0.8 0.3 0.2\nSegment0_LabelValue:=1\n"
           b"Segment0_Layer:=0\nSegment1_ID:=b\nSegment1_Name:=tumour\nSegment1_Color:=1 1 0\n"
           b"Segment1_LabelValue:=1\nSegment1_Layer:=1\n\n" + np.stack([lab, top], axis=-1).tobytes())
+        # A ball as a DICOM Encapsulated STL, written by raystream itself.
+        z, y, x = np.mgrid[0:8, 0:8, 0:8]
+        ball = (((x - 3.5) ** 2 + (y - 3.5) ** 2 + (z - 3.5) ** 2) < 9).astype("<i2") * 1000
+        w("ball.nrrd", b"NRRD0004\ntype: short\ndimension: 3\nspace: left-posterior-superior\n"
+          b"sizes: 8 8 8\nspace directions: (1,0,0) (0,1,0) (0,0,1)\nkinds: domain domain domain\n"
+          b"endian: little\nencoding: raw\nspace origin: (0,0,0)\n\n" + ball.tobytes())
+        subprocess.run([BIN, "iso", os.path.join(d, "ball.nrrd"), "-q", "-o", os.path.join(d, "m3d.dcm")],
+                       check=True)
     except ImportError:
         print("no SimpleITK: volumes other than DICOM left out", file=sys.stderr)
     # Paths for curved planar reformation through v.nii (LPS mm), as text and Slicer markups.
