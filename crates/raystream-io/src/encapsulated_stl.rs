@@ -139,10 +139,14 @@ pub fn write_encapsulated_stl(
 }
 
 /// Whether `path` is a DICOM file holding an Encapsulated STL (by its file meta's SOP class,
-/// from its first 64 KiB).
+/// from its first 64 KiB): a `.dcm`, or a file without an extension (as on a CD) or named by
+/// its UID (digits after the last dot); files of other extensions are not opened.
 pub fn is_encapsulated_stl(path: &Path) -> bool {
     use std::io::Read;
-    if !path.is_file() {
+    let dicom_name = path.extension().is_none_or(|e| {
+        e.eq_ignore_ascii_case("dcm") || e.to_string_lossy().bytes().all(|b| b.is_ascii_digit())
+    });
+    if !dicom_name || !path.is_file() {
         return false;
     }
     let Ok(f) = std::fs::File::open(path) else {
@@ -200,4 +204,50 @@ pub(crate) fn stl_of(bytes: &[u8], path: &Path) -> Result<Vec<u8>, MeshError> {
         None => document.len(),
     };
     Ok(document[..keep].to_vec())
+}
+
+/// What an Encapsulated STL says about its model, as read ([`read_model_record`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ModelRecord {
+    pub title: String,
+    pub patient_name: String,
+    pub patient_id: String,
+    pub study_uid: String,
+    pub study_date: String,
+    pub series_uid: String,
+    pub frame_of_reference_uid: String,
+    /// The series it was made from (Referenced Series Sequence), and its images referenced
+    /// (Source Instance Sequence).
+    pub source_series: Vec<String>,
+    pub source_images: usize,
+}
+
+/// The patient, study, frame of reference and sources an Encapsulated STL names.
+pub fn read_model_record(path: &Path) -> Result<ModelRecord, MeshError> {
+    let bytes = std::fs::read(path).map_err(|error| MeshError::Io {
+        path: path.to_path_buf(),
+        error,
+    })?;
+    let (_, obj) = crate::volume::dicom::parse_dataset(&bytes, path)
+        .map_err(|e| MeshError::invalid(path, e.to_string()))?;
+    let text = |o: &dicom_object::InMemDicomObject, tag| {
+        o.get(tag)
+            .and_then(|e| e.to_str().ok())
+            .map(|s| s.trim_end_matches(['\0', ' ']).trim().to_string())
+            .unwrap_or_default()
+    };
+    let items = |tag| obj.get(tag).and_then(|e| e.items()).unwrap_or(&[]);
+    Ok(ModelRecord {
+        title: text(&obj, tags::DOCUMENT_TITLE),
+        patient_name: text(&obj, tags::PATIENT_NAME),
+        patient_id: text(&obj, tags::PATIENT_ID),
+        study_uid: text(&obj, tags::STUDY_INSTANCE_UID),
+        study_date: text(&obj, tags::STUDY_DATE),
+        series_uid: text(&obj, tags::SERIES_INSTANCE_UID),
+        frame_of_reference_uid: text(&obj, tags::FRAME_OF_REFERENCE_UID),
+        source_series: (items(tags::REFERENCED_SERIES_SEQUENCE).iter())
+            .map(|i| text(i, tags::SERIES_INSTANCE_UID))
+            .collect(),
+        source_images: items(tags::SOURCE_INSTANCE_SEQUENCE).len(),
+    })
 }

@@ -29,7 +29,8 @@ mod vtk_xml;
 mod write;
 pub use colour_table::read_colour_table;
 pub use encapsulated_stl::{
-    ENCAPSULATED_STL, ModelInfo, is_encapsulated_stl, write_encapsulated_stl,
+    ENCAPSULATED_STL, ModelInfo, ModelRecord, is_encapsulated_stl, read_model_record,
+    write_encapsulated_stl,
 };
 pub use structure_set_write::{
     StructureSetWritten, pixel_loops, structure_set_source, write_structure_set,

@@ -94,6 +94,10 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     });
     let tree = a.tree.build(&mesh);
     let surface = mesh.measure_surface();
+    // A DICOM Encapsulated STL: the patient, study and images it was made from.
+    let record = raystream_io::is_encapsulated_stl(input)
+        .then(|| raystream_io::read_model_record(input))
+        .transpose()?;
     let b = mesh.bounds();
     let s = &tree.stats;
     if a.json {
@@ -105,6 +109,17 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             "degenerate_triangles": mesh.len() - s.triangles,
             "bounds": [b.min.to_array(), b.max.to_array()],
             "surface": surface_json(&surface),
+            "dicom": record.as_ref().map(|r| json!({
+                "title": r.title,
+                "patient_name": r.patient_name,
+                "patient_id": r.patient_id,
+                "study_uid": r.study_uid,
+                "study_date": r.study_date,
+                "series_uid": r.series_uid,
+                "frame_of_reference_uid": r.frame_of_reference_uid,
+                "source_series": r.source_series,
+                "source_images": r.source_images,
+            })),
             "kdtree": tree_json(&tree),
             "materials": used.iter().map(|(name, n, t)| json!({"name": name, "triangles": n, "texture": t})).collect::<Vec<_>>(),
             "objects": materials.objects.iter().map(|(name, n)| json!({"name": name, "triangles": n})).collect::<Vec<_>>(),
@@ -127,9 +142,29 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             b.min.to_array(),
             b.max.to_array()
         );
-        if raystream_io::is_encapsulated_stl(input) {
+        if let Some(r) = &record {
+            let said = |what: &str, parts: &[&str]| {
+                let parts: Vec<&str> = parts.iter().copied().filter(|p| !p.is_empty()).collect();
+                (!parts.is_empty()).then(|| format!("{what} {}", parts.join(", ")))
+            };
+            let sources = match r.source_series.as_slice() {
+                _ if r.source_images == 0 => String::new(),
+                [one] => format!("made from {} images of series {one}", r.source_images),
+                _ => format!("made from {} images", r.source_images),
+            };
+            let words: Vec<String> = [
+                Some(format!("Encapsulated STL \"{}\"", r.title)),
+                said("of patient", &[&r.patient_name, &r.patient_id]),
+                said("study", &[&r.study_uid, &r.study_date]),
+                (!sources.is_empty()).then_some(sources),
+            ]
+            .into_iter()
+            .flatten()
+            .collect();
+            println!("  dicom      {}", words.join("; "));
             println!(
-                "  space      LPS: patient millimetres, a DICOM Encapsulated STL's (its study's frame of reference); render shows it from the front, head up"
+                "  space      LPS: patient millimetres, a DICOM Encapsulated STL's (frame of reference {}); render shows it from the front, head up",
+                r.frame_of_reference_uid
             );
         } else if let Some(space) = materials.space {
             println!(

@@ -424,6 +424,21 @@ fn iso_files_an_encapsulated_stl_with_its_study() {
         (Some("mesh"), Some("LPS"))
     );
     assert_eq!(j["triangles"], a.len());
+    let d = &j["dicom"];
+    assert_eq!(d["title"], "bones at 300 HU");
+    assert_eq!(
+        (d["patient_name"].as_str(), d["patient_id"].as_str()),
+        (Some("MÜLLER^JÖRG"), Some("RS-0042"))
+    );
+    assert_eq!(d["study_uid"], study.study_uid.as_str());
+    assert_eq!(
+        d["frame_of_reference_uid"],
+        study.frame_of_reference_uid.as_str()
+    );
+    assert_eq!(d["source_series"], serde_json::json!([series]));
+    assert_eq!(d["source_images"], slices.len());
+    let text = stdout(&run(&["info", model.to_str().unwrap()]));
+    assert!(text.contains(&format!("  dicom      Encapsulated STL \"bones at 300 HU\"; of patient MÜLLER^JÖRG, RS-0042; study {}, 20261202; made from {} images of series {series}\n", study.study_uid, slices.len())), "{text}");
     assert!(
         render_to(
             "estl.png",
@@ -451,6 +466,15 @@ fn iso_files_an_encapsulated_stl_with_its_study() {
     assert!(!dicom_text(&o2, tags::STUDY_INSTANCE_UID).is_empty());
     assert_ne!(dicom_text(&o2, tags::STUDY_INSTANCE_UID), study.study_uid);
     assert!(o2.element(tags::SOURCE_INSTANCE_SEQUENCE).is_err());
+    let o = run(&["info", own.to_str().unwrap(), "--json"]);
+    let j: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(
+        (
+            j["dicom"]["source_images"].as_u64(),
+            j["dicom"]["source_series"].as_array().map(Vec::len)
+        ),
+        (Some(0), Some(0))
+    );
     assert_eq!(load_mesh(&own).unwrap().triangles, a.triangles);
 
     // One surface only; the mesh writer points to iso.
