@@ -628,6 +628,33 @@ mod tests {
     use super::*;
     use raystream_math::{DVec3, Vec3};
 
+    /// `--min-island ML` keeps an island of exactly ML: ML written as its voxels' volume (as a
+    /// user copies it from `info`'s ml) asks for those voxels, not one more, whatever the
+    /// rounding of the voxel's volume and of the decimal.
+    #[test]
+    fn min_island_counts_whole_voxels() {
+        for spacing in [
+            [1.0, 1.5, 2.0],
+            [0.7, 0.7, 1.25],
+            [3.0; 3],
+            [0.488281, 0.488281, 0.625],
+        ] {
+            let voxel_ml = spacing.iter().product::<f64>() / 1000.0;
+            for n in 1..3000usize {
+                let ml: f64 = format!("{}", n as f64 * voxel_ml).parse().unwrap();
+                let pick = crate::cli::IslandPick {
+                    keep_largest: None,
+                    min_island: Some(ml),
+                };
+                assert_eq!(
+                    pick.keep(voxel_ml),
+                    KeepIslands::AtLeast(n),
+                    "{n} voxels of {spacing:?}"
+                );
+            }
+        }
+    }
+
     /// A 3×3×4 label map on a turned, unevenly spaced grid: label 2 everywhere but voxel
     /// (0, 0, 0), which is label 1.
     fn labels() -> Volume {

@@ -245,6 +245,37 @@ fn iso_keeps_the_largest_islands() {
     );
     let surfaces = raystream_io::load_mesh(&out).unwrap();
     assert_eq!(surfaces.measure_surface().shells, 2);
+    // An island of exactly ML is kept (its ml, not a rounding of it, decides); one voxel more
+    // and it is refused, naming the file and the segment.
+    let exactly = format!("{}", other as f64 * 0.003);
+    let out = tmp("islands-exact.stl");
+    let (map_file, out_file) = (map.to_str().unwrap(), out.to_str().unwrap());
+    let o = run(&[
+        "iso",
+        map_file,
+        "--segment",
+        "2",
+        "--min-island",
+        &exactly,
+        "-o",
+        out_file,
+    ]);
+    assert!(o.status.success(), "{exactly}: {}", stderr(&o));
+    let more = format!("{}", (other + 1) as f64 * 0.003);
+    let e = refused(
+        &[
+            "iso",
+            map_file,
+            "--segment",
+            "2",
+            "--min-island",
+            &more,
+            "-o",
+            out_file,
+        ],
+        "segment 2 (label 2): --min-island: no island holds",
+    );
+    assert!(e.contains("islands-labels.mha"), "{e}");
 
     // Refused, naming what is wrong.
     let e = refused(
