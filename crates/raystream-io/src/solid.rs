@@ -270,6 +270,123 @@ mod tests {
         }
     }
 
+    /// [`TriMesh::measure_surface`]'s counts the plain way: positions compared as values in a
+    /// map, each edge's uses listed, pieces and rims walked breadth first.
+    fn brute(m: &TriMesh) -> (usize, usize, usize, usize, usize, usize, usize, usize, bool) {
+        use std::collections::{HashMap, HashSet, VecDeque};
+        let key = |p: Vec3| p.to_array().map(|x| if x == 0.0 { 0 } else { x.to_bits() });
+        let mut ids: HashMap<[u32; 3], usize> = HashMap::new();
+        let id: Vec<usize> = (m.positions.iter())
+            .map(|&p| {
+                let n = ids.len();
+                *ids.entry(key(p)).or_insert(n)
+            })
+            .collect();
+        let faces: Vec<[usize; 3]> = (m.triangles.iter())
+            .map(|t| t.map(|v| id[v as usize]))
+            .filter(|[a, b, c]| a != b && b != c && c != a)
+            .collect();
+        let mut uses: HashMap<(usize, usize), Vec<(usize, bool)>> = HashMap::new();
+        for (f, t) in faces.iter().enumerate() {
+            for k in 0..3 {
+                let (p, q) = (t[k], t[(k + 1) % 3]);
+                uses.entry((p.min(q), p.max(q)))
+                    .or_default()
+                    .push((f, p > q));
+            }
+        }
+        let vertices: HashSet<usize> = faces.iter().flatten().copied().collect();
+        let (mut boundary, mut non_manifold, mut misoriented) = (0, 0, 0);
+        let mut balanced = true;
+        let mut joined: Vec<Vec<usize>> = vec![Vec::new(); faces.len()];
+        let mut rim: HashMap<usize, Vec<usize>> = HashMap::new();
+        for (&(p, q), u) in &uses {
+            let back = u.iter().filter(|x| x.1).count();
+            balanced &= 2 * back == u.len();
+            match u.len() {
+                1 => {
+                    boundary += 1;
+                    rim.entry(p).or_default().push(q);
+                    rim.entry(q).or_default().push(p);
+                }
+                2 => {
+                    misoriented += usize::from(back != 1);
+                    joined[u[0].0].push(u[1].0);
+                    joined[u[1].0].push(u[0].0);
+                }
+                _ => non_manifold += 1,
+            }
+        }
+        let pieces = |starts: Vec<usize>, next: &dyn Fn(usize) -> Vec<usize>| {
+            let mut seen = HashSet::new();
+            let mut count = 0;
+            for s in starts {
+                if !seen.insert(s) {
+                    continue;
+                }
+                count += 1;
+                let mut queue = VecDeque::from([s]);
+                while let Some(x) = queue.pop_front() {
+                    for y in next(x) {
+                        if seen.insert(y) {
+                            queue.push_back(y);
+                        }
+                    }
+                }
+            }
+            count
+        };
+        let shells = pieces((0..faces.len()).collect(), &|f| joined[f].clone());
+        let holes = pieces(rim.keys().copied().collect(), &|v| rim[&v].clone());
+        let volume = balanced && !faces.is_empty();
+        (
+            vertices.len(),
+            uses.len(),
+            faces.len(),
+            shells,
+            boundary,
+            holes,
+            non_manifold,
+            misoriented,
+            volume,
+        )
+    }
+
+    proptest::proptest! {
+        /// Random triangles over a few points (some at one position under different indices,
+        /// some at −0 and +0): the counts of the plain way, and where the surface closes, its
+        /// volume's sum, whose value is the same about the origin.
+        #[test]
+        fn surface_counts_equal_the_plain_way(
+            tris in proptest::collection::vec((0u32..9, 0u32..9, 0u32..9), 0..40),
+            flip in proptest::collection::vec(proptest::bool::ANY, 40),
+        ) {
+            // Nine vertices at six positions: 6, 7 and 8 repeat 0, 1 and 2 (8 as −0).
+            let at = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0], [2.0, 0.5, -1.0]];
+            let mut positions: Vec<Vec3> = at.iter().map(|&p| Vec3::from_array(p)).collect();
+            positions.extend([positions[0], positions[1], Vec3::new(-0.0, 1.0, -0.0)]);
+            // Each triangle, and sometimes its reverse (closing what it opens).
+            let mut triangles = Vec::new();
+            for (i, &(a, b, c)) in tris.iter().enumerate() {
+                triangles.push([a, b, c]);
+                if flip[i % flip.len()] {
+                    triangles.push([a, c, b]);
+                }
+            }
+            let m = TriMesh { positions, triangles };
+            let s = m.measure_surface();
+            let (v, e, f, shells, boundary, holes, non_manifold, misoriented, volume) = brute(&m);
+            proptest::prop_assert_eq!(
+                (s.vertices, s.edges, s.faces, s.shells, s.boundary_edges, s.holes, s.non_manifold_edges, s.misoriented_edges, s.volume.is_some()),
+                (v, e, f, shells, boundary, holes, non_manifold, misoriented, volume)
+            );
+            if let Some(vol) = s.volume {
+                let about_origin = m.enclosed_volume();
+                proptest::prop_assert!((vol - about_origin).abs() < 1e-5, "{} {}", vol, about_origin);
+            }
+        }
+    }
+
     #[test]
     fn a_cube_is_closed_with_its_area_and_volume() {
         for m in [cube(), unshared(&cube())] {
