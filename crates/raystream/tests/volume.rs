@@ -478,6 +478,33 @@ fn iso_files_an_encapsulated_stl_with_its_study() {
         )
         .exists()
     );
+    // A scene lays it over its CT, in the patient's millimetres: its triangles, its LPS box in
+    // the scene's frame (x the patient's left, y superior, z anterior), within the CT's.
+    let b = a.bounds();
+    let want = [[b.min.x, b.min.z, -b.max.y], [b.max.x, b.max.z, -b.min.y]];
+    for volume in [false, true] {
+        let scene = tmp("estl-scene.toml");
+        let ct = format!(
+            "[volume]\npath = {:?}\npreset = \"ct-aaa\"\n\n",
+            dir.to_str().unwrap()
+        );
+        let object = format!("[[objects]]\nmesh = {:?}\n", model.to_str().unwrap());
+        std::fs::write(&scene, if volume { ct + &object } else { object }).unwrap();
+        let o = run(&["info", scene.to_str().unwrap(), "--json"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let j: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        assert_eq!(j["triangles"], a.len());
+        // The box: the model's alone, or the CT's around it.
+        let got: [[f32; 3]; 2] = serde_json::from_value(j["bounds"].clone()).unwrap();
+        if volume {
+            assert!(
+                (0..3).all(|k| got[0][k] <= want[0][k] && got[1][k] >= want[1][k]),
+                "{j}"
+            );
+        } else {
+            assert_eq!(got, want, "{j}");
+        }
+    }
     // In the series' folder, skipped: the CT still reads.
     std::fs::copy(&model, dir.join("model.dcm")).unwrap();
     let ct = raystream_io::load_volume(&dir, &Default::default()).unwrap();
