@@ -32,6 +32,9 @@ pub struct ModelInfo<'a> {
     pub description: &'a str,
     /// raystream's version, as the equipment's software.
     pub version: &'a str,
+    /// The series it joins and its number there (several models made together, a segment
+    /// each); a new series and number 1 where `None`.
+    pub series: Option<(&'a str, u32)>,
 }
 
 /// Writes `part` to `path` as a DICOM Encapsulated STL. Made from `source`'s DICOM series, it
@@ -85,6 +88,10 @@ pub fn write_encapsulated_stl(
     let o = &mut obj;
     // Frame of Reference, Enhanced General Equipment, Encapsulated Document.
     put_frame_and_content(o, &frame, (&date, &time));
+    if let Some((uid, number)) = info.series {
+        put(o, tags::SERIES_INSTANCE_UID, VR::UI, uid);
+        put(o, tags::INSTANCE_NUMBER, VR::IS, &number.to_string());
+    }
     put(o, tags::ACQUISITION_DATE_TIME, VR::DT, "");
     put(o, tags::BURNED_IN_ANNOTATION, VR::CS, "NO");
     put(o, tags::DOCUMENT_TITLE, VR::ST, &truncate(info.title, 1024));

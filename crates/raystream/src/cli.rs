@@ -914,8 +914,9 @@ pub struct IsoArgs {
     /// several segments), .vtp (ParaView's: VTK XML polygonal data, a piece a segment, with
     /// normals and colours), .3mf (3D printing's package: an object a segment, named, in its
     /// colour, millimetres), or .glb (binary glTF with normals, under a node that turns it to
-    /// glTF's metres, +Y superior, +Z anterior), or .dcm (one surface as a DICOM Encapsulated
-    /// STL, filed with a DICOM series' study and frame of reference, referencing its images).
+    /// glTF's metres, +Y superior, +Z anterior), or .dcm (a DICOM Encapsulated STL, filed with a
+    /// DICOM series' study and frame of reference, referencing its images; several segments
+    /// as MODEL-1.dcm, MODEL-2.dcm … in one series).
     /// The PLY, OBJ, STL, VTK and VTP say SPACE=LPS, as 3D Slicer reads a model's space.
     #[arg(short, long)]
     pub output: PathBuf,

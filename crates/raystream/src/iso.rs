@@ -308,7 +308,7 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
         })
         .collect();
     let titles: Vec<&str> = surfaces.iter().map(|s| s.name.as_str()).collect();
-    write_surfaces(&a.output, &parts, labels, &titles.join(", "))?;
+    let written = write_surfaces(&a.output, &parts, labels, &titles.join(", "))?;
     if !a.quiet {
         let voxel_ml = labels.voxel_ml();
         for s in &surfaces {
@@ -327,7 +327,10 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
         }
         eprintln!(
             "raystream: wrote {} ({} surfaces): load {load_ms:.0} ms, surfaces {iso_ms:.0} ms, write {:.0} ms",
-            a.output.display(),
+            (written.iter())
+                .map(|f| f.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
             surfaces.len(),
             ms(t.elapsed())
         );
@@ -398,35 +401,45 @@ pub fn pick_segments(
     Ok(wanted)
 }
 
-/// Writes `parts` to `out`: a mesh file by its extension, or (`.dcm`) one surface as a DICOM
-/// Encapsulated STL of `volume`'s study, titled `title`.
+/// Writes `parts` to `out`: a mesh file by its extension, or (`.dcm`) a DICOM Encapsulated STL
+/// of `volume`'s study, titled `title`; several surfaces as as many models in one series,
+/// `out` numbered (`MODEL-1.dcm`, `MODEL-2.dcm` …), each titled by its name. The files
+/// written.
 fn write_surfaces(
     out: &Path,
     parts: &[raystream_io::MeshPart],
     volume: &Volume,
     title: &str,
-) -> Result<()> {
+) -> Result<Vec<std::path::PathBuf>> {
     let dicom = out
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("dcm"));
     if !dicom {
         raystream_io::write_mesh_parts(out, parts)?;
-        return Ok(());
+        return Ok(vec![out.to_path_buf()]);
     }
-    let [part] = parts else {
-        bail!(
-            "{}: a DICOM Encapsulated STL holds one surface, not {}: give one --segment, or write .3mf, .glb, .obj, .ply, .vtk or .vtp",
-            out.display(),
-            parts.len()
-        );
-    };
-    let info = raystream_io::ModelInfo {
-        title,
-        description: &format!("raystream iso: {title}"),
-        version: env!("CARGO_PKG_VERSION"),
-    };
-    raystream_io::write_encapsulated_stl(out, part, Some(volume), &info)?;
-    Ok(())
+    let description = format!("raystream iso: {title}");
+    let series = raystream_io::new_uid();
+    let mut written = Vec::new();
+    for (k, part) in parts.iter().enumerate() {
+        let (file, title, joined) = match parts.len() {
+            1 => (out.to_path_buf(), title, None),
+            _ => {
+                let stem = out.file_stem().unwrap_or_default().to_string_lossy();
+                let file = out.with_file_name(format!("{stem}-{}.dcm", k + 1));
+                (file, part.name, Some((series.as_str(), k as u32 + 1)))
+            }
+        };
+        let info = raystream_io::ModelInfo {
+            title,
+            description: &description,
+            version: env!("CARGO_PKG_VERSION"),
+            series: joined,
+        };
+        raystream_io::write_encapsulated_stl(&file, part, Some(volume), &info)?;
+        written.push(file);
+    }
+    Ok(written)
 }
 
 /// What `--keep-largest` or `--min-island` kept of `islands`: "kept 1 of 1222 islands (99.8 of

@@ -336,8 +336,9 @@ fn iso_keeps_the_largest_islands() {
 /// dciodvfy finds no error in it. Read back (`info`, `render`, the mesh reader) it is the STL
 /// `iso` writes of the same surface, triangle for triangle, in LPS; in the series' folder it is
 /// skipped with a warning and the CT still reads. Made from a NIfTI it opens a study and a
-/// frame of reference of its own and references no image. Two segments in one are refused,
-/// and a `.dcm` asked of the plain mesh writer is told how to make one.
+/// frame of reference of its own and references no image. Two segments are two models in one
+/// series (`-1.dcm`, `-2.dcm`), and a `.dcm` asked of the plain mesh writer is told how to
+/// make one.
 #[test]
 fn iso_files_an_encapsulated_stl_with_its_study() {
     use raystream_io::{DicomStudy, load_mesh};
@@ -535,23 +536,49 @@ fn iso_files_an_encapsulated_stl_with_its_study() {
     );
     assert_eq!(load_mesh(&own).unwrap().triangles, a.triangles);
 
-    // One surface only; the mesh writer points to iso.
+    // Several segments; the mesh writer points to iso.
     let like = raystream_io::Volume::hounsfield([8, 8, 8], [1.0; 3], Vec::new());
     let mut labels = vec![0.0f32; 512];
     labels[2 + 8 * (2 + 8 * 2)] = 1.0;
     labels[5 + 8 * (5 + 8 * 5)] = 2.0;
     let map = write_like("estl-labels.mha", &like, &labels);
-    refused(
-        &[
-            "iso",
-            map.to_str().unwrap(),
-            "--segment",
-            "all",
-            "-o",
-            tmp("estl-two.dcm").to_str().unwrap(),
-        ],
-        "holds one surface, not 2",
-    );
+    // Two segments: two models in one series, numbered, each titled by its segment.
+    let two = tmp("estl-two.dcm");
+    std::fs::remove_file(&two).ok();
+    let o = run(&[
+        "iso",
+        map.to_str().unwrap(),
+        "--segment",
+        "all",
+        "-o",
+        two.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!two.exists());
+    let models: Vec<dicom_object::DefaultDicomObject> = [1, 2]
+        .map(|k| {
+            let file = tmp(&format!("estl-two-{k}.dcm"));
+            assert!(
+                stderr(&o).contains(file.to_str().unwrap()),
+                "{}",
+                stderr(&o)
+            );
+            assert_eq!(iod_errors(&file), Vec::<String>::new());
+            assert_eq!(load_mesh(&file).unwrap().measure_surface().shells, 1);
+            dicom_object::open_file(&file).unwrap()
+        })
+        .into();
+    let series: Vec<String> = (models.iter())
+        .map(|m| dicom_text(m, tags::SERIES_INSTANCE_UID))
+        .collect();
+    assert_eq!(series[0], series[1]);
+    for (k, m) in models.iter().enumerate() {
+        assert_eq!(dicom_text(m, tags::INSTANCE_NUMBER), (k + 1).to_string());
+        assert_eq!(
+            dicom_text(m, tags::DOCUMENT_TITLE),
+            format!("label {}", k + 1)
+        );
+    }
     let e = raystream_io::write_mesh(&tmp("plain.dcm"), &a, None).unwrap_err();
     assert!(
         e.to_string().contains("raystream iso VOLUME -o MODEL.dcm"),
