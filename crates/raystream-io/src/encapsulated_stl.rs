@@ -12,6 +12,7 @@ use std::path::Path;
 use dicom_core::{DataElement, PrimitiveValue, VR};
 use dicom_dictionary_std::tags;
 
+use crate::measurement_report::{items_of, text_of};
 use crate::secondary_capture::{
     Derived, derived_object, put, put_frame_and_content, truncate, write_dicom,
 };
@@ -166,8 +167,9 @@ pub fn is_encapsulated_stl(path: &Path) -> bool {
     crate::volume::dicom::read_meta(&head, path).is_ok_and(|(m, _)| m.sop_class == ENCAPSULATED_STL)
 }
 
-/// The STL an Encapsulated STL's bytes hold (its Encapsulated Document, cut to its length).
-pub(crate) fn stl_of(bytes: &[u8], path: &Path) -> Result<Vec<u8>, MeshError> {
+/// The STL an Encapsulated STL's bytes hold (its Encapsulated Document, cut to its length),
+/// and what it says of its model.
+pub(crate) fn stl_of(bytes: &[u8], path: &Path) -> Result<(Vec<u8>, ModelRecord), MeshError> {
     let invalid = |e: String| MeshError::invalid(path, e);
     let (meta, obj) = crate::volume::dicom::parse_dataset(bytes, path).map_err(|e| match e {
         crate::VolumeError::Invalid { problem, .. } => invalid(problem),
@@ -182,11 +184,8 @@ pub(crate) fn stl_of(bytes: &[u8], path: &Path) -> Result<Vec<u8>, MeshError> {
             "not a DICOM Encapsulated STL (SOP class {class})"
         )));
     }
-    let mime = obj
-        .get(tags::MIME_TYPE_OF_ENCAPSULATED_DOCUMENT)
-        .and_then(|e| e.to_str().ok())
-        .map(|s| s.trim_end_matches(['\0', ' ']).trim().to_string())
-        .unwrap_or_default();
+    let text = |o, tag| text_of(o, tag).unwrap_or_default();
+    let mime = text(&obj, tags::MIME_TYPE_OF_ENCAPSULATED_DOCUMENT);
     if !mime.eq_ignore_ascii_case("model/stl") {
         return Err(invalid(format!(
             "an Encapsulated STL whose document is {mime:?}, not model/stl"
@@ -210,10 +209,24 @@ pub(crate) fn stl_of(bytes: &[u8], path: &Path) -> Result<Vec<u8>, MeshError> {
         }
         None => document.len(),
     };
-    Ok(document[..keep].to_vec())
+    let record = ModelRecord {
+        title: text(&obj, tags::DOCUMENT_TITLE),
+        patient_name: text(&obj, tags::PATIENT_NAME),
+        patient_id: text(&obj, tags::PATIENT_ID),
+        study_uid: text(&obj, tags::STUDY_INSTANCE_UID),
+        study_date: text(&obj, tags::STUDY_DATE),
+        series_uid: text(&obj, tags::SERIES_INSTANCE_UID),
+        frame_of_reference_uid: text(&obj, tags::FRAME_OF_REFERENCE_UID),
+        source_series: (items_of(&obj, tags::REFERENCED_SERIES_SEQUENCE).iter())
+            .map(|i| text(i, tags::SERIES_INSTANCE_UID))
+            .collect(),
+        source_images: items_of(&obj, tags::SOURCE_INSTANCE_SEQUENCE).len(),
+    };
+    Ok((document[..keep].to_vec(), record))
 }
 
-/// What an Encapsulated STL says about its model, as read ([`read_model_record`]).
+/// What an Encapsulated STL says about its model, as read (the mesh reader's
+/// [`crate::MeshShading::dicom`]).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ModelRecord {
     pub title: String,
@@ -227,34 +240,4 @@ pub struct ModelRecord {
     /// (Source Instance Sequence).
     pub source_series: Vec<String>,
     pub source_images: usize,
-}
-
-/// The patient, study, frame of reference and sources an Encapsulated STL names.
-pub fn read_model_record(path: &Path) -> Result<ModelRecord, MeshError> {
-    let bytes = std::fs::read(path).map_err(|error| MeshError::Io {
-        path: path.to_path_buf(),
-        error,
-    })?;
-    let (_, obj) = crate::volume::dicom::parse_dataset(&bytes, path)
-        .map_err(|e| MeshError::invalid(path, e.to_string()))?;
-    let text = |o: &dicom_object::InMemDicomObject, tag| {
-        o.get(tag)
-            .and_then(|e| e.to_str().ok())
-            .map(|s| s.trim_end_matches(['\0', ' ']).trim().to_string())
-            .unwrap_or_default()
-    };
-    let items = |tag| obj.get(tag).and_then(|e| e.items()).unwrap_or(&[]);
-    Ok(ModelRecord {
-        title: text(&obj, tags::DOCUMENT_TITLE),
-        patient_name: text(&obj, tags::PATIENT_NAME),
-        patient_id: text(&obj, tags::PATIENT_ID),
-        study_uid: text(&obj, tags::STUDY_INSTANCE_UID),
-        study_date: text(&obj, tags::STUDY_DATE),
-        series_uid: text(&obj, tags::SERIES_INSTANCE_UID),
-        frame_of_reference_uid: text(&obj, tags::FRAME_OF_REFERENCE_UID),
-        source_series: (items(tags::REFERENCED_SERIES_SEQUENCE).iter())
-            .map(|i| text(i, tags::SERIES_INSTANCE_UID))
-            .collect(),
-        source_images: items(tags::SOURCE_INSTANCE_SEQUENCE).len(),
-    })
 }

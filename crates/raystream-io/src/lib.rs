@@ -29,8 +29,7 @@ mod vtk_xml;
 mod write;
 pub use colour_table::read_colour_table;
 pub use encapsulated_stl::{
-    ENCAPSULATED_STL, ModelInfo, ModelRecord, is_encapsulated_stl, read_model_record,
-    write_encapsulated_stl,
+    ENCAPSULATED_STL, ModelInfo, ModelRecord, is_encapsulated_stl, write_encapsulated_stl,
 };
 pub use structure_set_write::{
     StructureSetWritten, pixel_loops, structure_set_source, write_structure_set,
@@ -155,8 +154,7 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh, MeshError> {
 /// warning, not an error: the geometry is still the file's.
 pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), MeshError> {
     let (format, bytes) = read_mesh_file(path)?;
-    let dicom = format == MeshFormat::DicomStl;
-    let (format, bytes) = unwrapped(format, bytes, path)?;
+    let (format, bytes, dicom) = unwrapped(format, &bytes, path)?;
     let bytes = gunzip(&bytes, path)?;
     let (mesh, mut shading, normals) = match format {
         MeshFormat::Obj => parse_obj(&bytes, path, path.parent())?,
@@ -223,10 +221,11 @@ pub fn load_mesh_with_shading(path: &Path) -> Result<(TriMesh, MeshShading), Mes
     };
     mesh.check(path)?;
     shading.space = shading.space.or(declared_space(&bytes, format));
-    if dicom {
+    if dicom.is_some() {
         // DICOM's patient coordinates are LPS millimetres, whatever the STL's header says.
         shading.space = Some(PatientSpace::Lps);
     }
+    shading.dicom = dicom;
     shading.normals = file_normals(&mesh, normals, &mut shading.warnings);
     if format == MeshFormat::Obj {
         // An OBJ's textures are named by its libraries; a glTF file's come with it.
@@ -448,6 +447,8 @@ pub struct MeshShading {
     /// The patient coordinate system the file says its coordinates are in, if it says one
     /// ([`declared_space`]).
     pub space: Option<PatientSpace>,
+    /// A DICOM Encapsulated STL's title, patient, study and sources.
+    pub dicom: Option<ModelRecord>,
 }
 
 /// A patient coordinate system a mesh's coordinates are in, millimetres: LPS (x to the
@@ -532,7 +533,7 @@ fn parse_mesh_in(
     path: &Path,
     dir: Option<&Path>,
 ) -> Result<TriMesh, MeshError> {
-    let (format, bytes) = unwrapped(format, bytes.to_vec(), path)?;
+    let (format, bytes, _) = unwrapped(format, bytes, path)?;
     let bytes = gunzip(&bytes, path)?;
     let mesh = match format {
         MeshFormat::Obj => parse_obj(&bytes, path, None)?.0,
@@ -547,17 +548,23 @@ fn parse_mesh_in(
     Ok(mesh)
 }
 
-/// The mesh a file's bytes hold, with its format: a DICOM Encapsulated STL's STL, else the
-/// file's own bytes.
-fn unwrapped(
+/// A mesh's bytes in their format, and what a DICOM wrapping said of it ([`unwrapped`]).
+type MeshBytes<'a> = (MeshFormat, std::borrow::Cow<'a, [u8]>, Option<ModelRecord>);
+
+/// The mesh a file's bytes hold, with its format: a DICOM Encapsulated STL's STL (and what
+/// the DICOM says of it), else the file's own bytes.
+fn unwrapped<'a>(
     format: MeshFormat,
-    bytes: Vec<u8>,
+    bytes: &'a [u8],
     path: &Path,
-) -> Result<(MeshFormat, Vec<u8>), MeshError> {
-    match format {
-        MeshFormat::DicomStl => Ok((MeshFormat::Stl, encapsulated_stl::stl_of(&bytes, path)?)),
-        _ => Ok((format, bytes)),
-    }
+) -> Result<MeshBytes<'a>, MeshError> {
+    Ok(match format {
+        MeshFormat::DicomStl => {
+            let (stl, record) = encapsulated_stl::stl_of(bytes, path)?;
+            (MeshFormat::Stl, stl.into(), Some(record))
+        }
+        _ => (format, bytes.into(), None),
+    })
 }
 
 /// `bytes`, unzipped if they start with the gzip magic number.
@@ -750,9 +757,8 @@ fn parse_obj(
             material_of,
             uvs,
             colours,
-            objects: Vec::new(),
             warnings,
-            space: None,
+            ..Default::default()
         },
         normals,
     ))

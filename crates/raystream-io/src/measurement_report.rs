@@ -668,7 +668,7 @@ pub fn read_measurement_report(path: &Path) -> Result<ReadReport, VolumeError> {
 }
 
 /// A text element, trimmed; none where absent or empty.
-fn text_of(o: &InMemDicomObject, tag: dicom_core::Tag) -> Option<String> {
+pub(crate) fn text_of(o: &InMemDicomObject, tag: dicom_core::Tag) -> Option<String> {
     o.get(tag)
         .and_then(|e| e.to_str().ok())
         .map(|s| s.trim_end_matches(['\0', ' ']).trim().to_string())
@@ -676,7 +676,7 @@ fn text_of(o: &InMemDicomObject, tag: dicom_core::Tag) -> Option<String> {
 }
 
 /// A sequence's items (none where absent or not a sequence).
-fn items_of(o: &InMemDicomObject, tag: dicom_core::Tag) -> &[InMemDicomObject] {
+pub(crate) fn items_of(o: &InMemDicomObject, tag: dicom_core::Tag) -> &[InMemDicomObject] {
     o.get(tag).and_then(|e| e.items()).unwrap_or(&[])
 }
 

@@ -80,7 +80,7 @@ impl TriMesh {
         // Each triangle's sides by their vertices (lower first), with the triangle and
         // whether it runs the side from the higher to the lower, sorted so that a side's
         // triangles come together.
-        let mut faces = 0;
+        let mut faces: Vec<usize> = Vec::with_capacity(self.triangles.len());
         let mut used = vec![false; self.positions.len()];
         let mut sides: Vec<(u64, u64)> = Vec::with_capacity(3 * self.triangles.len());
         for (f, t) in self.triangles.iter().enumerate() {
@@ -88,7 +88,7 @@ impl TriMesh {
             if a == b || b == c || c == a {
                 continue;
             }
-            faces += 1;
+            faces.push(f);
             for (p, q) in [(a, b), (b, c), (c, a)] {
                 used[p as usize] = true;
                 let key = (u64::from(p.min(q)) << 32) | u64::from(p.max(q));
@@ -104,7 +104,7 @@ impl TriMesh {
             area: 0.0,
             vertices: used.iter().filter(|&&u| u).count(),
             edges: 0,
-            faces,
+            faces: faces.len(),
             shells: 0,
             boundary_edges: 0,
             holes: 0,
@@ -133,9 +133,7 @@ impl TriMesh {
                 pieces.union((a.1 >> 1) as usize, (b.1 >> 1) as usize);
             }
         }
-        let mut roots: Vec<usize> = (sides.iter())
-            .map(|s| pieces.find((s.1 >> 1) as usize))
-            .collect();
+        let mut roots: Vec<usize> = faces.iter().map(|&f| pieces.find(f)).collect();
         roots.sort_unstable();
         roots.dedup();
         m.shells = roots.len();
@@ -162,7 +160,7 @@ impl TriMesh {
             m.area += n.length() / 2.0;
             six_volume += a.dot(b.cross(c));
         }
-        m.volume = (balanced && faces > 0).then_some(six_volume / 6.0);
+        m.volume = (balanced && m.faces > 0).then_some(six_volume / 6.0);
         m
     }
 

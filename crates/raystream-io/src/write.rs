@@ -43,19 +43,21 @@ pub fn write_mesh(path: &Path, mesh: &TriMesh, normals: Option<&[Vec3]>) -> Resu
 /// each (named, its colour as its base material). An STL holds one surface, so several are
 /// refused.
 pub fn write_mesh_parts(path: &Path, parts: &[MeshPart]) -> Result<(), MeshError> {
-    if path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("dcm"))
-    {
+    let named = |ext: &str| {
+        path.extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case(ext))
+    };
+    let format = MeshFormat::from_path(path);
+    // A `.dcm`, or an existing Encapsulated STL without the extension: not overwritten with a
+    // bare STL.
+    if named("dcm") || format == Some(MeshFormat::DicomStl) {
         return Err(MeshError::invalid(
             path,
             "a DICOM Encapsulated STL is made from its CT or label map: `raystream iso VOLUME -o MODEL.dcm`",
         ));
     }
-    let glb = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
-    let format = MeshFormat::from_path(path)
+    let glb = named("glb");
+    let format = format
         .filter(|f| (*f != MeshFormat::Gltf || glb) && !path.to_string_lossy().ends_with(".gz"))
         .ok_or_else(|| {
             MeshError::invalid(

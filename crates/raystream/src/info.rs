@@ -95,9 +95,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     let tree = a.tree.build(&mesh);
     let surface = mesh.measure_surface();
     // A DICOM Encapsulated STL: the patient, study and images it was made from.
-    let record = raystream_io::is_encapsulated_stl(input)
-        .then(|| raystream_io::read_model_record(input))
-        .transpose()?;
+    let record = &materials.dicom;
     let b = mesh.bounds();
     let s = &tree.stats;
     if a.json {
@@ -142,7 +140,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             b.min.to_array(),
             b.max.to_array()
         );
-        if let Some(r) = &record {
+        if let Some(r) = record {
             let said = |what: &str, parts: &[&str]| {
                 let parts: Vec<&str> = parts.iter().copied().filter(|p| !p.is_empty()).collect();
                 (!parts.is_empty()).then(|| format!("{what} {}", parts.join(", ")))
