@@ -13,12 +13,12 @@
 
 use petgraph::unionfind::UnionFind;
 use rayon::prelude::*;
-use raystream_math::{DVec3, Vec3};
+use raystream_math::{Aabb, DVec3, Vec3};
 
 use crate::TriMesh;
 
-/// [`TriMesh::measure_surface`]: the mesh as a surface.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// [`TriMesh::measure_surface`]: the mesh as a surface, and each of its shells.
+#[derive(Clone, Debug, PartialEq)]
 pub struct SurfaceMeasures {
     /// The triangles' area, in the mesh's units squared.
     pub area: f64,
@@ -48,6 +48,13 @@ pub struct SurfaceMeasures {
     /// face out, negative where the surface is turned inside out; `None` where it does not
     /// close.
     pub volume: Option<f64>,
+    /// The box of the triangles counted in `faces`.
+    pub bounds: Aabb,
+    /// Each shell measured as if it were alone (its triangles' edges counted among its own
+    /// triangles only: two closed shells touching along an edge are each closed, though the
+    /// edge is of four triangles), the largest in area first (then the most triangles; then
+    /// the first in the file), their own `pieces` empty. Empty where there is no face.
+    pub pieces: Vec<SurfaceMeasures>,
 }
 
 impl SurfaceMeasures {
@@ -70,18 +77,80 @@ impl SurfaceMeasures {
     pub fn genus(&self) -> Option<i64> {
         self.closed().then(|| self.shells as i64 - self.euler() / 2)
     }
+
+    /// Nothing measured yet: the sums and counts at zero.
+    fn empty(shells: usize) -> Self {
+        SurfaceMeasures {
+            area: 0.0,
+            vertices: 0,
+            edges: 0,
+            faces: 0,
+            shells,
+            boundary_edges: 0,
+            holes: 0,
+            non_manifold_edges: 0,
+            misoriented_edges: 0,
+            volume: None,
+            bounds: Aabb::EMPTY,
+            pieces: Vec::new(),
+        }
+    }
+
+    /// The counts of one edge of `sides` triangles, `backward` of which run it from its higher
+    /// vertex to its lower; whether it is run as often one way as the other.
+    fn count_edge(&mut self, sides: usize, backward: usize) -> bool {
+        self.edges += 1;
+        match sides {
+            1 => self.boundary_edges += 1,
+            2 if backward != 1 => self.misoriented_edges += 1,
+            2 => {}
+            _ => self.non_manifold_edges += 1,
+        }
+        2 * backward == sides
+    }
+}
+
+/// Distinct values of `keys`, counted by their first part (`n` of them): vertices by shell,
+/// say, each counted once in each shell it is in.
+fn distinct_by_first(mut keys: Vec<(u32, u32)>, n: usize) -> Vec<usize> {
+    keys.par_sort_unstable();
+    keys.dedup();
+    let mut counts = vec![0; n];
+    for (first, _) in keys {
+        counts[first as usize] += 1;
+    }
+    counts
+}
+
+/// The loops that rim edges `(group, p, q)` make within each of `n` groups (pieces of them
+/// joined at their ends, in that group): the holes, by group.
+fn loops_by_group(rims: &[(u32, u32, u32)], n: usize) -> Vec<usize> {
+    let mut ends: Vec<(u32, u32)> = rims
+        .iter()
+        .flat_map(|&(g, p, q)| [(g, p), (g, q)])
+        .collect();
+    ends.sort_unstable();
+    ends.dedup();
+    let at = |g: u32, v: u32| ends.binary_search(&(g, v)).expect("an end of a rim edge");
+    let mut joined = UnionFind::<usize>::new(ends.len());
+    for &(g, p, q) in rims {
+        joined.union(at(g, p), at(g, q));
+    }
+    let roots: Vec<(u32, u32)> = (ends.iter().enumerate())
+        .map(|(i, &(g, _))| (g, joined.find(i) as u32))
+        .collect();
+    distinct_by_first(roots, n)
 }
 
 impl TriMesh {
     /// The mesh as a surface: area, shells, holes, the edges that keep it from closing, and
-    /// where it closes its volume ([`SurfaceMeasures`]).
+    /// where it closes its volume; and each shell so ([`SurfaceMeasures`]).
     pub fn measure_surface(&self) -> SurfaceMeasures {
         let id = self.welded();
         // Each triangle's sides by their vertices (lower first), with the triangle and
         // whether it runs the side from the higher to the lower, sorted so that a side's
         // triangles come together.
         let mut faces: Vec<usize> = Vec::with_capacity(self.triangles.len());
-        let mut used = vec![false; self.positions.len()];
         let mut sides: Vec<(u64, u64)> = Vec::with_capacity(3 * self.triangles.len());
         for (f, t) in self.triangles.iter().enumerate() {
             let [a, b, c] = t.map(|v| id[v as usize]);
@@ -90,77 +159,120 @@ impl TriMesh {
             }
             faces.push(f);
             for (p, q) in [(a, b), (b, c), (c, a)] {
-                used[p as usize] = true;
                 let key = (u64::from(p.min(q)) << 32) | u64::from(p.max(q));
                 sides.push((key, ((f as u64) << 1) | u64::from(p > q)));
             }
         }
         sides.par_sort_unstable();
+        let ends = |key: u64| ((key >> 32) as u32, key as u32);
+        let face_of = |side: u64| (side >> 1) as usize;
 
+        // The shells: triangles joined through the edges of two.
         let mut pieces = UnionFind::<usize>::new(self.triangles.len());
-        let mut rims = UnionFind::<u32>::new(self.positions.len());
-        let mut on_rim = vec![false; self.positions.len()];
-        let mut m = SurfaceMeasures {
-            area: 0.0,
-            vertices: used.iter().filter(|&&u| u).count(),
-            edges: 0,
-            faces: faces.len(),
-            shells: 0,
-            boundary_edges: 0,
-            holes: 0,
-            non_manifold_edges: 0,
-            misoriented_edges: 0,
-            volume: None,
-        };
-        let mut balanced = true;
         for run in sides.chunk_by(|x, y| x.0 == y.0) {
-            m.edges += 1;
-            let backward = run.iter().filter(|s| s.1 & 1 == 1).count();
-            balanced &= 2 * backward == run.len();
-            match run.len() {
-                1 => {
-                    m.boundary_edges += 1;
-                    let (p, q) = ((run[0].0 >> 32) as u32, run[0].0 as u32);
-                    rims.union(p, q);
-                    on_rim[p as usize] = true;
-                    on_rim[q as usize] = true;
-                }
-                2 if backward != 1 => m.misoriented_edges += 1,
-                2 => {}
-                _ => m.non_manifold_edges += 1,
-            }
             if let [a, b] = run {
-                pieces.union((a.1 >> 1) as usize, (b.1 >> 1) as usize);
+                pieces.union(face_of(a.1), face_of(b.1));
             }
         }
         let mut roots: Vec<usize> = faces.iter().map(|&f| pieces.find(f)).collect();
         roots.sort_unstable();
         roots.dedup();
-        m.shells = roots.len();
-        let mut loops: Vec<u32> = (0..on_rim.len() as u32)
-            .filter(|&v| on_rim[v as usize])
-            .map(|v| rims.find(v))
-            .collect();
-        loops.sort_unstable();
-        loops.dedup();
-        m.holes = loops.len();
+        let shell_of = |f: usize| {
+            roots
+                .binary_search(&pieces.find(f))
+                .expect("a face's shell") as u32
+        };
+        let shell: Vec<u32> = {
+            let mut s = vec![u32::MAX; self.triangles.len()];
+            for &f in &faces {
+                s[f] = shell_of(f);
+            }
+            s
+        };
 
-        // In f64, about the middle of the mesh's box: the volume's sum cancels less there
-        // (and is the same about any point where the surface closes).
-        let centre = if self.triangles.is_empty() {
+        let mut m = SurfaceMeasures::empty(roots.len());
+        let mut each: Vec<SurfaceMeasures> = vec![SurfaceMeasures::empty(1); roots.len()];
+        m.faces = faces.len();
+        let (mut balanced, mut each_balanced) = (true, vec![true; roots.len()]);
+        let (mut rims, mut each_rims) = (Vec::new(), Vec::new());
+        let mut by_shell: Vec<(u32, bool)> = Vec::new();
+        for run in sides.chunk_by(|x, y| x.0 == y.0) {
+            let (p, q) = ends(run[0].0);
+            let backward = run.iter().filter(|s| s.1 & 1 == 1).count();
+            balanced &= m.count_edge(run.len(), backward);
+            if run.len() == 1 {
+                rims.push((0, p, q));
+            }
+            // The edge as each shell with triangles on it sees it alone.
+            by_shell.clear();
+            by_shell.extend(run.iter().map(|s| (shell[face_of(s.1)], s.1 & 1 == 1)));
+            by_shell.sort_unstable();
+            for group in by_shell.chunk_by(|x, y| x.0 == y.0) {
+                let k = group[0].0 as usize;
+                let backward = group.iter().filter(|s| s.1).count();
+                each_balanced[k] &= each[k].count_edge(group.len(), backward);
+                if group.len() == 1 {
+                    each_rims.push((k as u32, p, q));
+                }
+            }
+        }
+        m.holes = loops_by_group(&rims, 1)[0];
+        for (s, holes) in each.iter_mut().zip(loops_by_group(&each_rims, roots.len())) {
+            s.holes = holes;
+        }
+        let corners = |f: usize| self.triangles[f].map(|v| id[v as usize]);
+        m.vertices = distinct_by_first(
+            faces
+                .iter()
+                .flat_map(|&f| corners(f).map(|v| (0, v)))
+                .collect(),
+            1,
+        )[0];
+        let vertices = distinct_by_first(
+            (faces.iter())
+                .flat_map(|&f| corners(f).map(|v| (shell[f], v)))
+                .collect(),
+            roots.len(),
+        );
+        for (s, v) in each.iter_mut().zip(vertices) {
+            s.vertices = v;
+        }
+
+        // In f64, about the middle of the faces' box: the volume's sum cancels less there
+        // (and is the same about any point where the surface closes). Every triangle's area
+        // counts in the whole's (one with two corners at one position may still have some).
+        m.bounds = (faces.iter())
+            .flat_map(|&f| self.corners(f))
+            .fold(Aabb::EMPTY, Aabb::grow);
+        let centre = if faces.is_empty() {
             DVec3::ZERO
         } else {
-            let b = self.bounds();
-            (b.min.as_dvec3() + b.max.as_dvec3()) / 2.0
+            (m.bounds.min.as_dvec3() + m.bounds.max.as_dvec3()) / 2.0
         };
+        let mut six_volumes = vec![0.0; roots.len()];
         let mut six_volume = 0.0;
-        for i in 0..self.triangles.len() {
-            let [a, b, c] = self.corners(i).map(|p: Vec3| p.as_dvec3() - centre);
-            let n = (b - a).cross(c - a);
-            m.area += n.length() / 2.0;
-            six_volume += a.dot(b.cross(c));
+        for f in 0..self.triangles.len() {
+            let corners = self.corners(f);
+            let [a, b, c] = corners.map(|p: Vec3| p.as_dvec3() - centre);
+            let area = (b - a).cross(c - a).length() / 2.0;
+            let six = a.dot(b.cross(c));
+            m.area += area;
+            six_volume += six;
+            if let Some(s) = each.get_mut(shell[f] as usize) {
+                s.area += area;
+                s.faces += 1;
+                s.bounds = corners.into_iter().fold(s.bounds, Aabb::grow);
+                six_volumes[shell[f] as usize] += six;
+            }
         }
         m.volume = (balanced && m.faces > 0).then_some(six_volume / 6.0);
+        for ((s, six), ok) in each.iter_mut().zip(six_volumes).zip(each_balanced) {
+            s.volume = ok.then_some(six / 6.0);
+        }
+        // The largest first; ties by triangles, then by the file's order (the sort is
+        // stable, and the shells are in the order of their first face's root).
+        each.sort_by(|a, b| b.area.total_cmp(&a.area).then(b.faces.cmp(&a.faces)));
+        m.pieces = each;
         m
     }
 
@@ -269,8 +381,15 @@ mod tests {
     }
 
     /// [`TriMesh::measure_surface`]'s counts the plain way: positions compared as values in a
-    /// map, each edge's uses listed, pieces and rims walked breadth first.
-    fn brute(m: &TriMesh) -> (usize, usize, usize, usize, usize, usize, usize, usize, bool) {
+    /// map, each edge's uses listed, pieces and rims walked breadth first; and the triangles
+    /// (their indices in `m`) of each piece.
+    #[allow(clippy::type_complexity)]
+    fn brute(
+        m: &TriMesh,
+    ) -> (
+        (usize, usize, usize, usize, usize, usize, usize, usize, bool),
+        Vec<Vec<usize>>,
+    ) {
         use std::collections::{HashMap, HashSet, VecDeque};
         let key = |p: Vec3| p.to_array().map(|x| if x == 0.0 { 0 } else { x.to_bits() });
         let mut ids: HashMap<[u32; 3], usize> = HashMap::new();
@@ -280,10 +399,10 @@ mod tests {
                 *ids.entry(key(p)).or_insert(n)
             })
             .collect();
-        let faces: Vec<[usize; 3]> = (m.triangles.iter())
-            .map(|t| t.map(|v| id[v as usize]))
-            .filter(|[a, b, c]| a != b && b != c && c != a)
-            .collect();
+        let (index, faces): (Vec<usize>, Vec<[usize; 3]>) = (m.triangles.iter().enumerate())
+            .map(|(i, t)| (i, t.map(|v| id[v as usize])))
+            .filter(|(_, [a, b, c])| a != b && b != c && c != a)
+            .unzip();
         let mut uses: HashMap<(usize, usize), Vec<(usize, bool)>> = HashMap::new();
         for (f, t) in faces.iter().enumerate() {
             for k in 0..3 {
@@ -317,36 +436,67 @@ mod tests {
         }
         let pieces = |starts: Vec<usize>, next: &dyn Fn(usize) -> Vec<usize>| {
             let mut seen = HashSet::new();
-            let mut count = 0;
+            let mut found = Vec::new();
             for s in starts {
                 if !seen.insert(s) {
                     continue;
                 }
-                count += 1;
+                let mut piece = vec![s];
                 let mut queue = VecDeque::from([s]);
                 while let Some(x) = queue.pop_front() {
                     for y in next(x) {
                         if seen.insert(y) {
                             queue.push_back(y);
+                            piece.push(y);
                         }
                     }
                 }
+                found.push(piece);
             }
-            count
+            found
         };
         let shells = pieces((0..faces.len()).collect(), &|f| joined[f].clone());
-        let holes = pieces(rim.keys().copied().collect(), &|v| rim[&v].clone());
+        let holes = pieces(rim.keys().copied().collect(), &|v| rim[&v].clone()).len();
         let volume = balanced && !faces.is_empty();
-        (
+        let counts = (
             vertices.len(),
             uses.len(),
             faces.len(),
-            shells,
+            shells.len(),
             boundary,
             holes,
             non_manifold,
             misoriented,
             volume,
+        );
+        let shells = (shells.into_iter())
+            .map(|piece| piece.into_iter().map(|f| index[f]).collect())
+            .collect();
+        (counts, shells)
+    }
+
+    /// `m`'s triangles `which` alone, over all its positions.
+    fn only(m: &TriMesh, which: &[usize]) -> TriMesh {
+        TriMesh {
+            positions: m.positions.clone(),
+            triangles: which.iter().map(|&f| m.triangles[f]).collect(),
+        }
+    }
+
+    /// The counts [`brute`] gives, as [`SurfaceMeasures`] holds them.
+    fn counts(
+        s: &SurfaceMeasures,
+    ) -> (usize, usize, usize, usize, usize, usize, usize, usize, bool) {
+        (
+            s.vertices,
+            s.edges,
+            s.faces,
+            s.shells,
+            s.boundary_edges,
+            s.holes,
+            s.non_manifold_edges,
+            s.misoriented_edges,
+            s.volume.is_some(),
         )
     }
 
@@ -373,14 +523,28 @@ mod tests {
             }
             let m = TriMesh { positions, triangles };
             let s = m.measure_surface();
-            let (v, e, f, shells, boundary, holes, non_manifold, misoriented, volume) = brute(&m);
-            proptest::prop_assert_eq!(
-                (s.vertices, s.edges, s.faces, s.shells, s.boundary_edges, s.holes, s.non_manifold_edges, s.misoriented_edges, s.volume.is_some()),
-                (v, e, f, shells, boundary, holes, non_manifold, misoriented, volume)
-            );
+            let (whole, shells) = brute(&m);
+            proptest::prop_assert_eq!(counts(&s), whole);
             if let Some(vol) = s.volume {
                 let about_origin = m.enclosed_volume();
                 proptest::prop_assert!((vol - about_origin).abs() < 1e-5, "{} {}", vol, about_origin);
+            }
+            // Each shell: the counts of its triangles alone, the plain way (the shells
+            // compared as sets, their order aside); their areas the whole's.
+            let mut alone: Vec<_> = shells.iter().map(|f| brute(&only(&m, f)).0).collect();
+            let mut pieces: Vec<_> = s.pieces.iter().map(counts).collect();
+            alone.sort_unstable();
+            pieces.sort_unstable();
+            proptest::prop_assert_eq!(pieces, alone);
+            let area: f64 = s.pieces.iter().map(|p| p.area).sum();
+            proptest::prop_assert!((area - s.area).abs() <= 1e-9 * s.area, "{} {}", area, s.area);
+            proptest::prop_assert!(s.pieces.windows(2).all(|w| w[0].area >= w[1].area));
+            proptest::prop_assert!(s.pieces.iter().all(|p| p.pieces.is_empty()));
+            // Where every shell closes so, the whole does, and encloses what they do.
+            let each = s.pieces.iter().map(|p| p.volume).sum::<Option<f64>>();
+            if let Some(each) = each.filter(|_| !s.pieces.is_empty()) {
+                let whole = s.volume.unwrap_or(f64::NAN);
+                proptest::prop_assert!((each - whole).abs() < 1e-5, "{} {}", each, whole);
             }
         }
     }
@@ -449,6 +613,72 @@ mod tests {
         let s = TriMesh::default().measure_surface();
         assert_eq!((s.faces, s.shells, s.area, s.volume), (0, 0, 0.0, None));
         assert!(!s.closed());
+    }
+
+    /// Each shell measured alone: a torus and a cube apart, the torus (larger) first with its
+    /// handle; two cubes touching along an edge each closed though the whole is not; a cube
+    /// with a face gone beside a whole one; a cavity's inner wall, facing in, enclosing less.
+    #[test]
+    fn each_shell_is_measured_alone() {
+        let both = joined(&cube(), &moved(&torus(16), Vec3::new(10.0, 0.0, 0.0)));
+        let s = both.measure_surface();
+        assert_eq!((s.shells, s.genus()), (2, Some(1)));
+        let [ring, block] = &s.pieces[..] else {
+            panic!("{s:?}")
+        };
+        assert_eq!(
+            (ring.faces, ring.shells, ring.genus(), ring.euler()),
+            (512, 1, Some(1), 0)
+        );
+        assert_eq!(
+            (block.faces, block.genus(), block.area, block.volume),
+            (12, Some(0), 6.0, Some(1.0))
+        );
+        assert_eq!((block.vertices, block.edges), (8, 18));
+        assert_eq!(
+            (block.bounds.min, block.bounds.max),
+            (Vec3::ZERO, Vec3::ONE)
+        );
+        assert_eq!(ring.bounds.min.x, 7.0);
+        assert!((ring.area + block.area - s.area).abs() < 1e-9);
+        assert!((ring.volume.unwrap() + 1.0 - s.volume.unwrap()).abs() < 1e-9);
+
+        let touching = joined(&cube(), &moved(&cube(), Vec3::new(1.0, 1.0, 0.0)));
+        let s = touching.measure_surface();
+        assert!(!s.closed());
+        for p in &s.pieces {
+            assert!(p.closed(), "{p:?}");
+            assert_eq!(
+                (p.non_manifold_edges, p.volume, p.genus()),
+                (0, Some(1.0), Some(0))
+            );
+        }
+
+        let mut open = cube();
+        open.triangles.drain(0..2);
+        let s = joined(&open, &moved(&cube(), Vec3::new(0.0, 0.0, 5.0))).measure_surface();
+        let [whole, broken] = &s.pieces[..] else {
+            panic!("{s:?}")
+        };
+        assert!(whole.closed() && !broken.closed());
+        assert_eq!(
+            (broken.boundary_edges, broken.holes, broken.volume),
+            (4, 1, None)
+        );
+        assert_eq!((whole.boundary_edges, whole.holes, s.holes), (0, 0, 1));
+
+        // A 4-unit cube with a unit cavity: its wall faces in, so the cavity's volume is
+        // negative and the two add to the solid's 63.
+        let outer = TriMesh {
+            positions: cube().positions.iter().map(|&p| 4.0 * p).collect(),
+            triangles: cube().triangles,
+        };
+        let mut cavity = moved(&cube(), Vec3::splat(1.5));
+        cavity.triangles.iter_mut().for_each(|t| t.swap(1, 2));
+        let s = joined(&outer, &cavity).measure_surface();
+        let volumes: Vec<Option<f64>> = s.pieces.iter().map(|p| p.volume).collect();
+        assert_eq!(volumes, [Some(64.0), Some(-1.0)]);
+        assert_eq!(s.volume, Some(63.0));
     }
 
     /// A torus is one closed shell with a handle; its area and volume those of the

@@ -170,10 +170,11 @@ pub fn run(a: &InfoArgs) -> Result<()> {
                 space.name()
             );
         }
-        println!(
-            "  surface    {}",
-            surface_line(&surface, materials.space.is_some())
-        );
+        let mm = materials.space.is_some() || record.is_some();
+        println!("  surface    {}", surface_line(&surface, mm, false));
+        if surface.shells > 1 {
+            shell_lines(&surface, mm);
+        }
         println!(
             "  kd-tree    {}: {} nodes, {} leaves ({} empty), depth {}, SAH cost {:.2}, {:.2} triangles/leaf, {} references, built in {:.1} ms",
             s.builder,
@@ -208,9 +209,20 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     Ok(())
 }
 
-/// A mesh's [`SurfaceMeasures`] as `info --json` gives them.
+/// A mesh's [`SurfaceMeasures`] as `info --json` gives them, with each shell's the same way
+/// in `pieces`, the largest first.
 fn surface_json(s: &SurfaceMeasures) -> serde_json::Value {
+    let mut v = piece_json(s);
+    v["pieces"] = s.pieces.iter().map(piece_json).collect();
+    v
+}
+
+/// [`surface_json`] of the whole or of one shell.
+fn piece_json(s: &SurfaceMeasures) -> serde_json::Value {
+    let b = s.bounds;
     json!({
+        "triangles": s.faces,
+        "bounds": (s.faces > 0).then(|| [b.min.to_array(), b.max.to_array()]),
         "area": s.area,
         "shells": s.shells,
         "closed": s.closed(),
@@ -226,32 +238,94 @@ fn surface_json(s: &SurfaceMeasures) -> serde_json::Value {
     })
 }
 
+/// The largest of a mesh's shells, a line each, and the rest summed.
+fn shell_lines(s: &SurfaceMeasures, mm: bool) {
+    const LISTED: usize = 8;
+    for (i, p) in s.pieces.iter().take(LISTED).enumerate() {
+        let label = format!("shell {}", i + 1);
+        println!("  {label:<10} {}", surface_line(p, mm, true));
+    }
+    let rest = s.pieces.get(LISTED..).unwrap_or_default();
+    if !rest.is_empty() {
+        let triangles: usize = rest.iter().map(|p| p.faces).sum();
+        let area: f64 = rest.iter().map(|p| p.area).sum();
+        let closed = rest.iter().filter(|p| p.closed()).count();
+        // Closed shells facing in: the walls of cavities (a voxel below the threshold inside
+        // a bone is an octahedron of 8), or shells turned inside out.
+        let inward: Vec<f64> = (rest.iter())
+            .filter(|p| p.closed())
+            .filter_map(|p| p.volume.filter(|&v| v < 0.0))
+            .collect();
+        let inward = match inward.len() {
+            0 => String::new(),
+            n => {
+                let v = volume_words(-inward.iter().sum::<f64>(), mm);
+                format!(", {n} facing in (cavities or turned inside out, enclosing {v})")
+            }
+        };
+        println!(
+            "  shells     {} more: {triangles} triangles, area {} ({:.2} % of the whole), {closed} of them closed{inward}",
+            rest.len(),
+            area_words(area, mm),
+            100.0 * area / s.area
+        );
+    }
+}
+
+/// A volume, in ml where the file is in millimetres (`mm`), or mm³ where under half a
+/// thousandth of a ml (a voxel's cavity).
+fn volume_words(volume: f64, mm: bool) -> String {
+    match mm {
+        true if volume.abs() < 0.5 => format!("{volume:.3} mm³"),
+        true => format!("{:.3} ml", volume / 1000.0),
+        false => significant(volume),
+    }
+}
+
+/// An area, in mm² where the file is in millimetres (`mm`).
+fn area_words(area: f64, mm: bool) -> String {
+    if mm {
+        format!("{area:.1} mm²")
+    } else {
+        significant(area)
+    }
+}
+
 /// A mesh's [`SurfaceMeasures`] in words: its area, shells, and whether it closes (what it
 /// encloses) or what keeps it from closing; in mm² and ml where the file is in millimetres
-/// (`mm`).
-fn surface_line(s: &SurfaceMeasures, mm: bool) -> String {
+/// (`mm`). One shell's (`piece`) begins with its triangles and ends with where its box's
+/// middle is.
+fn surface_line(s: &SurfaceMeasures, mm: bool, piece: bool) -> String {
     let plural =
         |n: usize, one: &str, many: &str| format!("{n} {}", if n == 1 { one } else { many });
-    let area = if mm {
-        format!("{:.1} mm²", s.area)
-    } else {
-        significant(s.area)
-    };
+    let area = area_words(s.area, mm);
     if s.faces == 0 {
         return format!("area {area}: no triangle has three corners apart");
     }
-    let mut line = format!("area {area}, {}", plural(s.shells, "shell", "shells"));
+    let mut line = if piece {
+        format!("{}, area {area}", plural(s.faces, "triangle", "triangles"))
+    } else {
+        format!("area {area}, {}", plural(s.shells, "shell", "shells"))
+    };
+    let centre = (s.bounds.min + s.bounds.max) / 2.0;
+    let place = if !piece {
+        String::new()
+    } else if mm {
+        format!(
+            "; around ({:.1}, {:.1}, {:.1}) mm",
+            centre.x, centre.y, centre.z
+        )
+    } else {
+        let [x, y, z] = centre.to_array().map(|c| significant(f64::from(c)));
+        format!("; around ({x}, {y}, {z})")
+    };
     let volume = |v: f64| {
-        let turned = if v < 0.0 {
-            " (turned inside out: its triangles face in)"
-        } else {
-            ""
+        let turned = match (v < 0.0, piece) {
+            (false, _) => "",
+            (true, false) => " (turned inside out: its triangles face in)",
+            (true, true) => " (its triangles face in: a cavity's wall, or turned inside out)",
         };
-        if mm {
-            format!("encloses {:.3} ml{turned}", v.abs() / 1000.0)
-        } else {
-            format!("encloses {}{turned}", significant(v.abs()))
-        }
+        format!("encloses {}{turned}", volume_words(v.abs(), mm))
     };
     if s.closed() {
         line += ", closed";
@@ -261,7 +335,7 @@ fn surface_line(s: &SurfaceMeasures, mm: bool) -> String {
         if let Some(g) = s.genus() {
             line += &format!(", genus {g}");
         }
-        return line;
+        return line + &place;
     }
     let mut why = Vec::new();
     if s.boundary_edges > 0 {
@@ -287,7 +361,7 @@ fn surface_line(s: &SurfaceMeasures, mm: bool) -> String {
     if let Some(v) = s.volume {
         line += &format!("; {}", volume(v));
     }
-    line
+    line + &place
 }
 
 /// `x` to seven significant digits, written out (no exponent).

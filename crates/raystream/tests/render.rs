@@ -252,6 +252,36 @@ fn info_measures_a_surface_as_trimesh_does() {
         "{}",
         stdout(&text)
     );
+    // Each shell a line, the largest first: the teapot's body, lid, spout and handle.
+    assert!(
+        stdout(&text).contains(
+            "  shell 1    3160 triangles, area 38.39945, not closed: 40 edges of one triangle (1 hole); around (0, 1.249219, 0)\n"
+        ),
+        "{}",
+        stdout(&text)
+    );
+    // The bones: the hip bones first, then a line for the rest, among them the walls of
+    // cavities (a voxel under the threshold inside a bone, its 8 triangles facing in).
+    let text = stdout(&run(&["info", bones.to_str().unwrap()]));
+    let shells: Vec<&str> = text.lines().filter(|l| l.starts_with("  shell")).collect();
+    assert_eq!(shells.len(), 9, "{text}");
+    assert!(shells[0].contains(", closed: encloses "), "{text}");
+    assert!(
+        shells[8].starts_with("  shells     ") && shells[8].contains(" facing in (cavities"),
+        "{text}"
+    );
+    let volumes = by_name("surface-bones.stl")["pieces"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["volume"].as_f64().unwrap());
+    let (out, cavities): (Vec<f64>, Vec<f64>) = volumes.partition(|&v| v > 0.0);
+    assert!(
+        !cavities.is_empty() && out.len() > 100,
+        "{} {}",
+        out.len(),
+        cavities.len()
+    );
 
     let (Some(py), Some(_)) = (python_with("trimesh"), python_with("scipy")) else {
         return;
@@ -263,18 +293,20 @@ fn info_measures_a_surface_as_trimesh_does() {
         .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     let theirs: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let keys = [
+        "triangles",
+        "shells",
+        "euler",
+        "vertices",
+        "edges",
+        "boundary_edges",
+        "non_manifold_edges",
+        "holes",
+    ];
     for (f, s) in files.iter().zip(&mine) {
         let name = Path::new(f).file_name().unwrap().to_str().unwrap();
         let t = &theirs[name];
-        for k in [
-            "shells",
-            "euler",
-            "vertices",
-            "edges",
-            "boundary_edges",
-            "non_manifold_edges",
-            "holes",
-        ] {
+        for k in keys {
             assert_eq!(s[k], t[k], "{name}: {k}: {s} against trimesh's {t}");
         }
         let close = |a: &serde_json::Value, b: &serde_json::Value| {
@@ -289,6 +321,63 @@ fn info_measures_a_surface_as_trimesh_does() {
         }
         if t["watertight"] == false && s["non_manifold_edges"] == 0 {
             assert!(s["volume"].is_null(), "{name}: {s}");
+        }
+        // Each shell alone, as trimesh measures its faces taken out: the same counts (the
+        // shells compared as sets), the same areas, and where closed the same volumes (each
+        // list in order, so that shells of one area pair up whichever they are).
+        let (mine, theirs) = (
+            s["pieces"].as_array().unwrap(),
+            t["pieces"].as_array().unwrap(),
+        );
+        let counts = |p: &serde_json::Value, closed: bool| {
+            let mut c: Vec<i64> = keys.iter().map(|&k| p[k].as_i64().unwrap()).collect();
+            c.push(closed.into());
+            c
+        };
+        let trimesh_closed =
+            |p: &serde_json::Value| p["watertight"] == true && p["winding_consistent"] == true;
+        let mut a: Vec<_> = mine
+            .iter()
+            .map(|p| counts(p, p["closed"] == true))
+            .collect();
+        let mut b: Vec<_> = theirs
+            .iter()
+            .map(|p| counts(p, trimesh_closed(p)))
+            .collect();
+        a.sort_unstable();
+        b.sort_unstable();
+        assert_eq!(a, b, "{name}: shells");
+        let sorted = |v: Vec<f64>| {
+            let mut v = v;
+            v.sort_by(f64::total_cmp);
+            v
+        };
+        let areas = |ps: &[serde_json::Value]| {
+            sorted(ps.iter().map(|p| p["area"].as_f64().unwrap()).collect())
+        };
+        for (x, y) in areas(mine).iter().zip(areas(theirs)) {
+            assert!(
+                (x - y).abs() <= 1e-6 * y.abs() + 1e-12,
+                "{name}: a shell's area {x} against {y}"
+            );
+        }
+        let mine_volumes = sorted(
+            (mine.iter())
+                .filter(|p| p["closed"] == true)
+                .map(|p| p["volume"].as_f64().unwrap())
+                .collect(),
+        );
+        let their_volumes = sorted(
+            (theirs.iter())
+                .filter(|p| trimesh_closed(p))
+                .map(|p| p["volume"].as_f64().unwrap())
+                .collect(),
+        );
+        for (x, y) in mine_volumes.iter().zip(&their_volumes) {
+            assert!(
+                (x - y).abs() <= 1e-6 * y.abs() + 1e-9,
+                "{name}: a shell's volume {x} against {y}"
+            );
         }
     }
 }

@@ -7,8 +7,8 @@ Each mesh is read by trimesh for its geometry alone (its corners merged by posit
 `info` merges them), and measured by trimesh: area, volume, whether it is watertight and
 wound one way, its pieces joined through edges (its face adjacency's connected components,
 with scipy), its Euler characteristic, its vertices and edges, the edges of one triangle and
-of more than two, and its holes (the loops of its outline). Prints one JSON object, by file
-name.
+of more than two, and its holes (the loops of its outline); and each piece so, alone (its
+faces taken out as a mesh of their own), in `pieces`. Prints one JSON object, by file name.
 """
 
 import json
@@ -19,13 +19,12 @@ import numpy as np
 import trimesh
 from trimesh import graph
 
-out = {}
-for path in sys.argv[1:]:
-    read = trimesh.load(path, force="mesh", process=False)
-    m = trimesh.Trimesh(read.vertices, read.faces)
+
+def measures(m):
     uses = np.unique(m.edges_sorted, axis=0, return_counts=True)[1]
     pieces = graph.connected_components(m.face_adjacency, nodes=np.arange(len(m.faces)))
-    out[os.path.basename(path)] = {
+    return {
+        "triangles": len(m.faces),
         "area": float(m.area),
         "volume": float(m.volume),
         "watertight": bool(m.is_watertight),
@@ -37,5 +36,18 @@ for path in sys.argv[1:]:
         "boundary_edges": int((uses == 1).sum()),
         "non_manifold_edges": int((uses > 2).sum()),
         "holes": 0 if m.is_watertight else len(m.outline().entities),
-    }
+    }, pieces
+
+
+out = {}
+for path in sys.argv[1:]:
+    read = trimesh.load(path, force="mesh", process=False)
+    m = trimesh.Trimesh(read.vertices, read.faces)
+    whole, pieces = measures(m)
+    whole["pieces"] = []
+    for p in pieces:
+        piece = trimesh.Trimesh(m.vertices, m.faces[np.sort(p)])
+        piece.remove_unreferenced_vertices()
+        whole["pieces"].append(measures(piece)[0])
+    out[os.path.basename(path)] = whole
 print(json.dumps(out))
