@@ -618,13 +618,15 @@ def mutate_glb(b):
 
 
 def islands():
-    """Now and then `--keep-largest` or `--min-island`, with a sensible or an absurd number."""
+    """Now and then `--keep-largest` or `--min-island`, with a sensible or an absurd number,
+    and `--fill-cavities`."""
     pick = random.random()
+    fill = ["--fill-cavities"] if random.random() < 0.3 else []
     if pick < 0.2:
-        return ["--keep-largest", random.choice(["1", "2", "1000000", "18446744073709551615"])]
+        return fill + ["--keep-largest", random.choice(["1", "2", "1000000", "18446744073709551615"])]
     if pick < 0.4:
-        return ["--min-island", random.choice(["0.000001", "0.5", "1e9", "1e300"])]
-    return []
+        return fill + ["--min-island", random.choice(["0.000001", "0.5", "1e9", "1e300"])]
+    return fill
 
 
 def run(args, name):

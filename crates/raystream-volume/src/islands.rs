@@ -30,14 +30,129 @@ pub enum KeepIslands {
     AtLeast(usize),
 }
 
+/// What [`crate::extract_isosurface_keeping`] keeps of the inside region: its islands, and
+/// whether its cavities are filled first.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct KeepSurface {
+    pub islands: KeepIslands,
+    /// Fill the cavities first: the pieces of the voxels below the threshold that the inside
+    /// region encloses wholly (those that no path through them reaches the volume's border
+    /// from, a voxel joined to the 18 that share a face or an edge with it), as
+    /// Materialise Mimics's cavity fill makes a bone solid for printing: the marrow inside a
+    /// cortex closed all round, a voxel of noise. A cavity's surface is then gone, triangle for
+    /// triangle, and the island around it holds its voxels.
+    pub fill_cavities: bool,
+}
+
+impl From<KeepIslands> for KeepSurface {
+    fn from(islands: KeepIslands) -> Self {
+        KeepSurface {
+            islands,
+            fill_cavities: false,
+        }
+    }
+}
+
+impl KeepSurface {
+    /// The whole surface: every island, no cavity filled.
+    pub fn is_all(&self) -> bool {
+        self.islands == KeepIslands::All && !self.fill_cavities
+    }
+}
+
 /// What [`crate::extract_isosurface_keeping`] found and kept.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Islands {
-    /// Every island's voxels, the largest first.
+    /// Every island's voxels, the largest first (after any cavity was filled).
     pub sizes: Vec<usize>,
     /// How many of them were kept, and their voxels.
     pub kept: usize,
     pub kept_voxels: usize,
+    /// Where the cavities were filled: how many, and their voxels.
+    pub cavities: usize,
+    pub cavity_voxels: usize,
+}
+
+/// Fills the cavities of `mask` (0 outside, 1 inside, on a grid `dims` with a layer of 0 all
+/// around): the pieces of its 0s, each joined to the 18 that share a face or an edge with it,
+/// that the border's do not reach ([`KeepSurface::fill_cavities`]). Returns how many there
+/// were, and their voxels.
+///
+/// Why 18: the marching cubes join inside voxels through faces alone, so where two outside
+/// voxels share an edge (on a face whose corners alternate) the outside runs between them, and
+/// where two share a corner only, each has a cap of its own. So a cavity filled is closed all
+/// round by the surface, and once filled, every cell with a voxel of it has its other corners
+/// inside, or one outside across a corner, whose cap is the triangle it had: the cavity's
+/// triangles go and every other stays. (Joined through corners too, a cavity touching the
+/// outside at a corner would be left, its surface facing in; joined through faces alone, one
+/// touching it along an edge would be filled, changing the outside's surface there: the
+/// proptest in the crate's tests tells both apart.)
+pub(crate) fn fill_cavities(mask: &mut [u8], dims: [usize; 3]) -> (usize, usize) {
+    let [px, py, pz] = dims;
+    assert_eq!(mask.len(), px * py * pz, "a mask of the grid");
+    let (sx, layer) = (px as isize, (px * py) as isize);
+    let around: Vec<isize> = (-1isize..=1)
+        .flat_map(|k| (-1isize..=1).flat_map(move |j| (-1isize..=1).map(move |i| (i, j, k))))
+        .filter(|&(i, j, k)| matches!(i.abs() + j.abs() + k.abs(), 1 | 2))
+        .map(|(i, j, k)| i + sx * j + layer * k)
+        .collect();
+    let on_border = |v: usize| {
+        let (i, j, k) = (v % px, v / px % py, v / (px * py));
+        i == 0 || j == 0 || k == 0 || i == px - 1 || j == py - 1 || k == pz - 1
+    };
+    // Marks the 0s joined to `seed` (a 0) as `to`, by their 26 neighbours; how many.
+    let mut stack: Vec<usize> = Vec::new();
+    let mut flood = |mask: &mut [u8], seed: usize, to: u8| {
+        let mut count = 0;
+        mask[seed] = to;
+        stack.push(seed);
+        while let Some(v) = stack.pop() {
+            count += 1;
+            let edge = on_border(v);
+            for &o in &around {
+                let n = v as isize + o;
+                // A border voxel's neighbours may wrap around to the far side or leave the
+                // grid: only those one step away along each axis count.
+                if edge && !neighbours(v, n, dims) {
+                    continue;
+                }
+                let n = n as usize;
+                if mask[n] == 0 {
+                    mask[n] = to;
+                    stack.push(n);
+                }
+            }
+        }
+        count
+    };
+    // The outside: every 0 the padding reaches (the padding is all 0, so one fill from a corner).
+    flood(mask, 0, 2);
+    let (mut cavities, mut voxels) = (0, 0);
+    for v in 0..mask.len() {
+        if mask[v] == 0 {
+            cavities += 1;
+            voxels += flood(mask, v, 3);
+        }
+    }
+    for m in mask.iter_mut() {
+        *m = match *m {
+            2 => 0,
+            3 => 1,
+            m => m,
+        };
+    }
+    (cavities, voxels)
+}
+
+/// Whether `n` (an index, perhaps out of the grid) is within one step of `v` along each axis of
+/// a grid `dims`.
+fn neighbours(v: usize, n: isize, [px, py, pz]: [usize; 3]) -> bool {
+    if n < 0 || n as usize >= px * py * pz {
+        return false;
+    }
+    let n = n as usize;
+    let at = |x: usize| [x % px, x / px % py, x / (px * py)];
+    at(v).iter().zip(at(n)).all(|(&a, b)| a.abs_diff(b) <= 1)
 }
 
 /// Finds the islands of `mask` (0 outside, 1 inside, on a grid `dims` with a layer of 0 all
@@ -97,6 +212,7 @@ pub(crate) fn keep_islands(mask: &mut [u8], dims: [usize; 3], keep: KeepIslands)
         sizes: order.iter().map(|&i| size(i)).collect(),
         kept: kept.iter().filter(|&&k| k).count(),
         kept_voxels: (0..count).filter(|&i| kept[i]).map(size).sum(),
+        ..Islands::default()
     }
 }
 

@@ -13,7 +13,7 @@ mod stats;
 mod tf;
 
 pub use grid::{clamp_to_grid, trilinear, trilinear_in};
-pub use islands::{Islands, KeepIslands};
+pub use islands::{Islands, KeepIslands, KeepSurface};
 pub use marching::{
     IsoSurface, Simplified, SimplifyRound, departure, distances, extract_isosurface,
     extract_isosurface_keeping, not_manifold, pinched_vertices, point_triangle_distance, simplify,

@@ -18,7 +18,7 @@ use raystream_io::{TriMesh, Volume};
 use raystream_math::{DVec3, I64Vec3, Vec3};
 
 use crate::cases::{CASES, EDGE_START};
-use crate::islands::{Islands, KeepIslands, keep_islands};
+use crate::islands::{Islands, KeepIslands, KeepSurface, fill_cavities, keep_islands};
 
 /// A triangle mesh in LPS millimetres with per-vertex unit normals (from the volume gradient,
 /// pointing out of the region at or above the threshold).
@@ -51,14 +51,16 @@ pub fn extract_isosurface(vol: &Volume, iso: f32) -> IsoSurface {
 }
 
 /// [`extract_isosurface`] of the islands of the region `value ≥ iso` that `keep` keeps (each
-/// voxel joined to the six that share a face with it: [`KeepIslands`]), with the islands
-/// found. The surface is
-/// the full one's triangles of those islands, vertex for vertex.
+/// voxel joined to the six that share a face with it: [`KeepIslands`]), its cavities filled
+/// first where it says so ([`KeepSurface`]), with the islands and cavities found. The surface
+/// is the full one's triangles of those islands, vertex for vertex, less those of the
+/// cavities filled.
 pub fn extract_isosurface_keeping(
     vol: &Volume,
     iso: f32,
-    keep: KeepIslands,
+    keep: impl Into<KeepSurface>,
 ) -> (IsoSurface, Islands) {
+    let keep: KeepSurface = keep.into();
     let [nx, ny, nz] = vol.dims;
     // Padded grid: corner (I, J, K) is voxel (I − 1, J − 1, K − 1); the border is outside.
     let (px, py, pz) = (nx + 2, ny + 2, nz + 2);
@@ -79,9 +81,18 @@ pub fn extract_isosurface_keeping(
                 }
             }
         });
-    let islands = match keep {
+    let (cavities, cavity_voxels) = match keep.fill_cavities {
+        true => fill_cavities(&mut mask, [px, py, pz]),
+        false => (0, 0),
+    };
+    let islands = match keep.islands {
         KeepIslands::All => Islands::default(),
-        keep => keep_islands(&mut mask, [px, py, pz], keep),
+        islands => keep_islands(&mut mask, [px, py, pz], islands),
+    };
+    let islands = Islands {
+        cavities,
+        cavity_voxels,
+        ..islands
     };
     // Per padded row (J, K): whether any corner in it is inside. Most CT rows hold no bone, and
     // a cell or edge row can be skipped when the rows it touches are all empty.

@@ -870,6 +870,49 @@ proptest::proptest! {
     }
 }
 
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+    /// Random noise volumes, mostly inside (so that the outside falls apart into pockets, some
+    /// touching along edges and at corners): filling the cavities takes away the full
+    /// surface's triangles of the pockets closed all round and no others: what it takes away
+    /// is as many closed shells as it filled cavities, each facing in; what is left is closed,
+    /// oriented, with no shell facing in, and encloses the full surface's volume and the
+    /// cavities'. The islands then hold the cavities' voxels.
+    #[test]
+    fn filled_cavities_are_the_full_surface_s_inward_shells(seed in 0u64..u64::MAX, dims in (2usize..9, 2usize..9, 2usize..9)) {
+        let vol = noise(seed, [dims.0, dims.1, dims.2], [0.7, 1.0, 1.3], rotation(), 500.0);
+        let full = extract_isosurface(&vol, 0.5);
+        let fill = KeepSurface { islands: KeepIslands::AtLeast(0), fill_cavities: true };
+        let (filled, found) = extract_isosurface_keeping(&vol, 0.5, fill);
+        let (all, kept) = (triangle_set(&full), triangle_set(&filled));
+        proptest::prop_assert!(kept.is_subset(&all));
+        let inside = vol.data.iter().filter(|&&v| v >= 0.5).count();
+        proptest::prop_assert_eq!(found.sizes.iter().sum::<usize>(), inside + found.cavity_voxels);
+        proptest::prop_assert_eq!(found.cavities == 0, found.cavity_voxels == 0);
+        // The triangles taken away, as a mesh of their own.
+        let mut gone = raystream_io::TriMesh::default();
+        for t in all.difference(&kept) {
+            let base = gone.positions.len() as u32;
+            gone.positions.extend(t.iter().map(|c| Vec3::new(f32::from_bits(c[0]), f32::from_bits(c[1]), f32::from_bits(c[2]))));
+            gone.triangles.push([base, base + 1, base + 2]);
+        }
+        let g = gone.measure_surface();
+        proptest::prop_assert_eq!(g.shells, found.cavities);
+        for p in &g.pieces {
+            proptest::prop_assert!(p.closed() && p.volume.unwrap() < 0.0, "{:?}", p);
+        }
+        if !filled.mesh.is_empty() {
+            assert_closed_and_oriented(&filled.mesh);
+        }
+        let left = filled.mesh.measure_surface();
+        proptest::prop_assert!(left.pieces.iter().all(|p| p.volume.unwrap() > 0.0), "{:?}", left.pieces);
+        let before = full.mesh.measure_surface().volume.unwrap_or(0.0);
+        let after = left.volume.unwrap_or(0.0);
+        let holes = -g.volume.unwrap_or(0.0);
+        proptest::prop_assert!((after - before - holes).abs() <= 1e-9 * before.abs().max(1.0), "{} {} {}", before, after, holes);
+    }
+}
+
 /// A hollow ball (radii 8 and 4 voxels), a smaller ball and a speck: the largest island keeps
 /// the hollow ball's two surfaces (outer and inner: one island, its hollow inside), enclosing
 /// its shell's volume; at least 30 voxels, the smaller ball too; the speck goes with both.

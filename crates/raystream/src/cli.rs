@@ -278,11 +278,27 @@ pub struct IslandPick {
     /// millilitres, and their surfaces.
     #[arg(long, value_name = "ML", value_parser = parse_island_ml, conflicts_with = "keep_largest")]
     pub min_island: Option<f64>,
+    /// Fill the cavities first: the pieces of voxels below the threshold (or outside a
+    /// segment) that it encloses all round, so that the surface is the outer walls alone and
+    /// the model solid, as Materialise Mimics's cavity fill makes a bone for printing (a
+    /// marrow cavity closed all round, a voxel of noise inside a bone); before --keep-largest
+    /// or --min-island, whose islands then hold the voxels they enclose.
+    #[arg(long)]
+    pub fill_cavities: bool,
 }
 
 impl IslandPick {
+    /// The islands to keep on a grid of voxels of `voxel_ml` each, and whether the cavities
+    /// are filled first.
+    pub fn keep(&self, voxel_ml: f64) -> raystream_volume::KeepSurface {
+        raystream_volume::KeepSurface {
+            islands: self.islands(voxel_ml),
+            fill_cavities: self.fill_cavities,
+        }
+    }
+
     /// The islands to keep on a grid of voxels of `voxel_ml` each.
-    pub fn keep(&self, voxel_ml: f64) -> raystream_volume::KeepIslands {
+    fn islands(&self, voxel_ml: f64) -> raystream_volume::KeepIslands {
         use raystream_volume::KeepIslands;
         match (self.keep_largest, self.min_island) {
             (Some(n), _) => KeepIslands::Largest(usize::try_from(n).unwrap_or(usize::MAX)),
@@ -299,7 +315,7 @@ impl IslandPick {
         match (self.keep_largest, self.min_island) {
             (Some(_), _) => Some("--keep-largest"),
             (None, Some(_)) => Some("--min-island"),
-            (None, None) => None,
+            (None, None) => self.fill_cavities.then_some("--fill-cavities"),
         }
     }
 }

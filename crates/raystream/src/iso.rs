@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use raystream_io::{SegmentVoxels, ValueUnit, Volume, VolumeSelect};
-use raystream_volume::{Islands, IsoSurface, KeepIslands, extract_isosurface_keeping};
+use raystream_volume::{Islands, IsoSurface, KeepIslands, KeepSurface, extract_isosurface_keeping};
 
 use crate::cli::IsoArgs;
 use crate::common::{ms, spinner};
@@ -86,7 +86,7 @@ pub fn bones_of(
     volume: &Volume,
     path: &Path,
     hu: f32,
-    (smoothing, keep): (u32, KeepIslands),
+    (smoothing, keep): (u32, KeepSurface),
     quiet: bool,
     load_ms: f64,
 ) -> Result<Bones> {
@@ -107,14 +107,14 @@ pub fn bones_of(
         bail!(
             "{}: {}",
             path.display(),
-            no_island_kept(&islands, keep, volume.voxel_ml())
+            no_island_kept(&islands, keep.islands, volume.voxel_ml())
         );
     }
-    if keep != KeepIslands::All && !quiet {
+    if !keep.is_all() && !quiet {
         eprintln!(
             "raystream: {}: {} at {}",
             path.display(),
-            islands_kept(&islands, volume.voxel_ml()),
+            islands_kept(&islands, keep, volume.voxel_ml()),
             value_words(volume, hu)
         );
     }
@@ -281,15 +281,13 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
     let t0 = Instant::now();
     let known = segment_names(labels, a.colour_table.as_deref())?;
     let whole = raystream_io::whole_segments(labels, &a.input)?;
+    let keep = a.islands.keep(labels.voxel_ml());
     let mut surfaces = segment_surfaces(
         labels,
         whole.as_ref(),
         &a.input,
         (a.segment.as_deref().unwrap_or("all"), &known),
-        (
-            a.smooth.unwrap_or(SEGMENT_SMOOTHING),
-            a.islands.keep(labels.voxel_ml()),
-        ),
+        (a.smooth.unwrap_or(SEGMENT_SMOOTHING), keep),
         a.quiet,
     )?;
     for s in &mut surfaces {
@@ -313,7 +311,7 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
         let voxel_ml = labels.voxel_ml();
         for s in &surfaces {
             let kept = (s.islands.as_ref()).map_or(String::new(), |i| {
-                format!(" ({})", islands_kept(i, voxel_ml))
+                format!(" ({})", islands_kept(i, keep, voxel_ml))
             });
             eprintln!(
                 "raystream: segment {} ({}): {} voxels, {:.1} ml{kept}; its surface {} triangles, enclosing {:.1} ml",
@@ -442,18 +440,31 @@ fn write_surfaces(
     Ok(written)
 }
 
-/// What `--keep-largest` or `--min-island` kept of `islands`: "kept 1 of 1222 islands (99.8 of
+/// What `--fill-cavities` filled and `--keep-largest` or `--min-island` kept (as `keep` says)
+/// of `islands`: "filled 217 cavities (0.9 ml of voxels), kept 1 of 1222 islands (99.8 of
 /// 391.8 ml of voxels)", on a grid of voxels of `voxel_ml`.
-pub fn islands_kept(islands: &Islands, voxel_ml: f64) -> String {
-    let all: usize = islands.sizes.iter().sum();
-    format!(
-        "kept {} of {} island{} ({:.1} of {:.1} ml of voxels)",
-        islands.kept,
-        islands.sizes.len(),
-        if islands.sizes.len() == 1 { "" } else { "s" },
-        islands.kept_voxels as f64 * voxel_ml,
-        all as f64 * voxel_ml
-    )
+pub fn islands_kept(islands: &Islands, keep: KeepSurface, voxel_ml: f64) -> String {
+    let plural =
+        |n: usize, one: &str, many: &str| format!("{n} {}", if n == 1 { one } else { many });
+    let mut said = Vec::new();
+    if keep.fill_cavities {
+        said.push(format!(
+            "filled {} ({:.1} ml of voxels)",
+            plural(islands.cavities, "cavity", "cavities"),
+            islands.cavity_voxels as f64 * voxel_ml
+        ));
+    }
+    if keep.islands != KeepIslands::All {
+        let all: usize = islands.sizes.iter().sum();
+        said.push(format!(
+            "kept {} of {} ({:.1} of {:.1} ml of voxels)",
+            islands.kept,
+            plural(islands.sizes.len(), "island", "islands"),
+            islands.kept_voxels as f64 * voxel_ml,
+            all as f64 * voxel_ml
+        ));
+    }
+    said.join(", ")
 }
 
 /// Why `keep` kept none of `islands` (only `--min-island` can): the largest's size.
@@ -513,7 +524,7 @@ pub fn segment_surfaces(
     whole_segments: Option<&raystream_io::WholeSegments>,
     path: &Path,
     (list, known): (&str, &[raystream_io::SegmentLabel]),
-    (smoothing, keep): (u32, KeepIslands),
+    (smoothing, keep): (u32, KeepSurface),
     quiet: bool,
 ) -> Result<Vec<SegmentSurface>> {
     let name = path.display();
@@ -607,16 +618,20 @@ pub fn segment_surfaces(
             bail!(
                 "{}: segment {l} ({name}): {}",
                 path.display(),
-                no_island_kept(&islands, keep, labels.voxel_ml())
+                no_island_kept(&islands, keep.islands, labels.voxel_ml())
             );
         }
-        let islands = (keep != KeepIslands::All).then_some(islands);
+        let islands = (!keep.is_all()).then_some(islands);
         let colour = crate::overlay::segment_colour(known, l);
         out.push(SegmentSurface {
             label: l,
             name,
             colour,
-            voxels: islands.as_ref().map_or(voxels, |i| i.kept_voxels),
+            voxels: match &islands {
+                Some(i) if keep.islands != KeepIslands::All => i.kept_voxels,
+                Some(i) => voxels + i.cavity_voxels,
+                None => voxels,
+            },
             surface,
             islands,
         });
@@ -658,10 +673,11 @@ mod tests {
                 let pick = crate::cli::IslandPick {
                     keep_largest: None,
                     min_island: Some(ml),
+                    fill_cavities: false,
                 };
                 assert_eq!(
                     pick.keep(voxel_ml),
-                    KeepIslands::AtLeast(n),
+                    KeepIslands::AtLeast(n).into(),
                     "{n} voxels of {spacing:?}"
                 );
             }
@@ -690,8 +706,15 @@ mod tests {
     fn segments_are_closed_halfway_to_their_neighbours_the_grid_edge_too() {
         let v = labels();
         let path = Path::new("labels.nii");
-        let s =
-            segment_surfaces(&v, None, path, ("2, 1,2", &[]), (0, KeepIslands::All), true).unwrap();
+        let s = segment_surfaces(
+            &v,
+            None,
+            path,
+            ("2, 1,2", &[]),
+            (0, KeepSurface::default()),
+            true,
+        )
+        .unwrap();
         assert_eq!(s.iter().map(|s| s.label).collect::<Vec<_>>(), [2, 1]);
         assert_eq!(s[0].name, "label 2");
         assert_eq!(s[1].voxels, 1);
@@ -713,21 +736,42 @@ mod tests {
         let voxel_ml = v.voxel_ml();
         assert!((enclosed_ml(&s[1].surface.mesh) - voxel_ml / 6.0).abs() < 1e-6 * voxel_ml);
         assert!(enclosed_ml(&s[0].surface.mesh) > 0.0);
-        let all =
-            segment_surfaces(&v, None, path, ("all", &[]), (3, KeepIslands::All), true).unwrap();
+        let all = segment_surfaces(
+            &v,
+            None,
+            path,
+            ("all", &[]),
+            (3, KeepSurface::default()),
+            true,
+        )
+        .unwrap();
         assert_eq!(all.iter().map(|s| s.label).collect::<Vec<_>>(), [1, 2]);
-        let e = segment_surfaces(&v, None, path, ("3", &[]), (0, KeepIslands::All), true)
-            .err()
-            .unwrap();
+        let e = segment_surfaces(
+            &v,
+            None,
+            path,
+            ("3", &[]),
+            (0, KeepSurface::default()),
+            true,
+        )
+        .err()
+        .unwrap();
         assert_eq!(
             e.to_string(),
             "labels.nii: --segment 3: no voxel holds label 3; the labels present are 1, 2"
         );
         let mut ct = v.clone();
         ct.data[5] = -1000.0;
-        let e = segment_surfaces(&ct, None, path, ("all", &[]), (0, KeepIslands::All), true)
-            .err()
-            .unwrap();
+        let e = segment_surfaces(
+            &ct,
+            None,
+            path,
+            ("all", &[]),
+            (0, KeepSurface::default()),
+            true,
+        )
+        .err()
+        .unwrap();
         assert!(e.to_string().contains("it holds -1000"), "{e}");
     }
 }

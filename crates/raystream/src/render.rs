@@ -2114,12 +2114,12 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     if let Some(flag) = a.islands.flag() {
         if a.mode.is_some() {
             bail!(
-                "{flag} keeps a surface's islands; --mode renders the volume itself (without --mode, its bones' or segments' surfaces)"
+                "{flag} works on the islands of a surface's voxels; --mode renders the volume itself (without --mode, its bones' or segments' surfaces)"
             );
         }
         if let Some(p) = (a.input.as_deref()).filter(|p| !raystream_io::is_volume_path(p)) {
             bail!(
-                "{}: {flag} keeps the islands of a CT volume's or label map's surface; a mesh or scene has none",
+                "{}: {flag} works on the islands of a CT volume's or label map's surface; a mesh or scene has none",
                 p.display()
             );
         }
