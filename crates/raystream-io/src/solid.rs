@@ -146,6 +146,13 @@ impl TriMesh {
     /// The mesh as a surface: area, shells, holes, the edges that keep it from closing, and
     /// where it closes its volume; and each shell so ([`SurfaceMeasures`]).
     pub fn measure_surface(&self) -> SurfaceMeasures {
+        self.measure_shells().0
+    }
+
+    /// [`Self::measure_surface`], and each triangle's shell: its place in the measures'
+    /// `pieces` (the largest first), or `u32::MAX` for a triangle without three corners apart
+    /// (in no shell).
+    pub fn measure_shells(&self) -> (SurfaceMeasures, Vec<u32>) {
         let id = self.welded();
         // Each triangle's sides by their vertices (lower first), with the triangle and
         // whether it runs the side from the higher to the lower, sorted so that a side's
@@ -269,11 +276,22 @@ impl TriMesh {
         for ((s, six), ok) in each.iter_mut().zip(six_volumes).zip(each_balanced) {
             s.volume = ok.then_some(six / 6.0);
         }
-        // The largest first; ties by triangles, then by the file's order (the sort is
-        // stable, and the shells are in the order of their first face's root).
-        each.sort_by(|a, b| b.area.total_cmp(&a.area).then(b.faces.cmp(&a.faces)));
-        m.pieces = each;
-        m
+        // The largest first; ties by triangles, then in an order the file fixes (the sort is
+        // stable, and the shells are in the order of their union–find roots).
+        let mut order: Vec<usize> = (0..each.len()).collect();
+        order.sort_by(|&a, &b| {
+            let (a, b) = (&each[a], &each[b]);
+            b.area.total_cmp(&a.area).then(b.faces.cmp(&a.faces))
+        });
+        let mut rank = vec![0u32; each.len()];
+        for (r, &k) in order.iter().enumerate() {
+            rank[k] = r as u32;
+        }
+        let of_face = (shell.iter())
+            .map(|&k| rank.get(k as usize).copied().unwrap_or(u32::MAX))
+            .collect();
+        m.pieces = order.into_iter().map(|k| each[k].clone()).collect();
+        (m, of_face)
     }
 
     /// Each vertex's position's number: vertices at one position (the same bits, −0 and +0
@@ -540,6 +558,16 @@ mod tests {
             proptest::prop_assert!((area - s.area).abs() <= 1e-9 * s.area, "{} {}", area, s.area);
             proptest::prop_assert!(s.pieces.windows(2).all(|w| w[0].area >= w[1].area));
             proptest::prop_assert!(s.pieces.iter().all(|p| p.pieces.is_empty()));
+            // Each triangle's shell: as many as its measures count, the same area.
+            let of_face = m.measure_shells().1;
+            for (k, p) in s.pieces.iter().enumerate() {
+                let mine: Vec<usize> = (0..m.len()).filter(|&f| of_face[f] == k as u32).collect();
+                proptest::prop_assert_eq!(mine.len(), p.faces);
+                let area = only(&m, &mine).measure_surface().area;
+                proptest::prop_assert!((area - p.area).abs() <= 1e-9 * p.area, "{} {}", area, p.area);
+            }
+            let none = of_face.iter().filter(|&&k| k == u32::MAX).count();
+            proptest::prop_assert_eq!(none, m.len() - s.faces);
             // Where every shell closes so, the whole does, and encloses what they do.
             let each = s.pieces.iter().map(|p| p.volume).sum::<Option<f64>>();
             if let Some(each) = each.filter(|_| !s.pieces.is_empty()) {
@@ -626,6 +654,10 @@ mod tests {
         let [ring, block] = &s.pieces[..] else {
             panic!("{s:?}")
         };
+        // Each triangle's shell: the cube's 12 (first in the file) are the second's.
+        let of_face = both.measure_shells().1;
+        assert_eq!(of_face[..12], [1; 12]);
+        assert!(of_face[12..].iter().all(|&k| k == 0));
         assert_eq!(
             (ring.faces, ring.shells, ring.genus(), ring.euler()),
             (512, 1, Some(1), 0)

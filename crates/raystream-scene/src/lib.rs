@@ -707,6 +707,16 @@ impl Scene {
         Self::staged(mesh, shading, path)
     }
 
+    /// [`Self::for_mesh_file`] of a mesh loaded already, with its `shading` (its colours,
+    /// normals, materials and space) as the caller has it.
+    pub fn for_mesh_shaded(
+        mesh: TriMesh,
+        shading: MeshShading,
+        name: &Path,
+    ) -> Result<Scene, SceneError> {
+        Self::staged(mesh, shading, name)
+    }
+
     /// A mesh alone: a key and a fill light, a slightly reflective ground plane under it, the
     /// camera framing it.
     pub fn for_mesh(mesh: TriMesh, name: &Path) -> Result<Scene, SceneError> {

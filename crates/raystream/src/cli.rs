@@ -569,6 +569,12 @@ pub struct RenderArgs {
     /// colour in the top left corner; PNG, or DICOM as the picture.
     #[arg(long)]
     pub legend: bool,
+    /// A mesh's or a CT's bone surface with its ten largest shells (pieces of triangles joined
+    /// through their edges: a CT's islands of bone, a fracture's fragments, a model's parts)
+    /// each in a colour of its own, the rest in the usual one; --legend names them, with the
+    /// volume each encloses (ml, for a CT or a model in patient millimetres).
+    #[arg(long, alias = "color-shells", conflicts_with_all = ["mode", "segment", "colour_table"])]
+    pub colour_shells: bool,
     /// With --path FILE (not --slices): marks these points of the path, mm along it from its
     /// first point (as `measure` gives a lesion's and its references' arc lengths), each a
     /// line across the CPR, yellow ringed in black; PNG, or DICOM as the picture.

@@ -15,6 +15,7 @@ mod profile;
 mod render;
 mod scale_bar;
 mod segments;
+mod shells;
 mod structured_report;
 mod trace;
 

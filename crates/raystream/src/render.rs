@@ -53,6 +53,24 @@ fn is_scene_file(a: &RenderArgs) -> bool {
     })
 }
 
+/// `--colour-shells`: how many shells `path`'s surface has, and how many are coloured.
+fn say_shells(a: &RenderArgs, path: &Path, c: &crate::shells::ShellColours) {
+    if a.quiet {
+        return;
+    }
+    let n = c.measures.shells;
+    let rest = match n.saturating_sub(c.legend.len()) {
+        0 => String::new(),
+        k => format!(", the other {k} in the usual colour"),
+    };
+    eprintln!(
+        "raystream: {}: {n} shell{}, the {} largest each in a colour of its own{rest} (--legend names them)",
+        path.display(),
+        if n == 1 { "" } else { "s" },
+        c.legend.len()
+    );
+}
+
 /// The scene named by INPUT: none → the built-in CT's bones, `.toml` → scene file, a volume →
 /// its bones, else a mesh. Also says how the volume steps went, for volumes.
 fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend::Entry>)> {
@@ -62,6 +80,12 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend
         let (segment, table) = (a.segment.as_deref(), a.colour_table.as_deref());
         let lone_view = crate::common::lone_slice_view(&volume);
         if crate::iso::wants_segments(&volume, &a.threshold, segment, table) {
+            if a.colour_shells {
+                bail!(
+                    "{}: --colour-shells colours a surface's shells; a segmentation's segments are drawn in their own colours",
+                    path.display()
+                );
+            }
             let (scene, mut b) = segments_scene(a, path, &volume, load_ms)?;
             if let Some(b) = b.as_mut() {
                 b.lone_view = lone_view;
@@ -74,12 +98,37 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend
         let mut b = crate::iso::bones_of(&volume, path, hu, (smoothing, keep), a.quiet, load_ms)?;
         b.lone_view = lone_view;
         let mesh = std::mem::take(&mut b.surface.mesh);
-        let scene = Scene::for_bones(mesh, &b.surface.normals, path);
-        Ok((scene, Some(b)))
+        if !a.colour_shells {
+            let scene = Scene::for_bones(mesh, &b.surface.normals, path);
+            return Ok((scene, Some(b)));
+        }
+        let c = crate::shells::shell_colours(&mesh, true);
+        say_shells(a, path, &c);
+        let parts = crate::shells::parted(&mesh, &b.surface.normals, &c.of_face);
+        let count = parts.len() - 1;
+        let surfaces = (parts.into_iter().enumerate())
+            .filter(|(_, (m, _))| !m.is_empty())
+            .map(|(k, (mesh, normals))| raystream_scene::Surface {
+                mesh,
+                normals,
+                colour: match k < count {
+                    true => {
+                        crate::shells::PALETTE[k].map(|c| raystream_io::SRGB_TO_LINEAR[c as usize])
+                    }
+                    false => raystream_scene::BONE,
+                },
+            })
+            .collect();
+        b.legend = c.legend;
+        Ok((Scene::for_surfaces(surfaces, path), Some(b)))
     };
     let mut scene_legend = Vec::new();
     let loaded = match a.input.as_deref() {
         None => volume_scene(Path::new(DEFAULT_CT_NAME), Some(DEFAULT_CT)),
+        Some(p) if is_scene_file(a) && a.colour_shells => bail!(
+            "{}: --colour-shells colours a mesh's or a CT's bone surface; a scene file's objects have their materials",
+            p.display()
+        ),
         Some(p) if is_scene_file(a) => {
             let mut scene = Scene::load(p)?;
             if let Some((words, entries)) = crate::segments::paint_scene(&mut scene, p)? {
@@ -94,6 +143,18 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend
             Ok((scene, None))
         }
         Some(p) if raystream_io::is_volume_path(p) => volume_scene(p, None),
+        Some(p) if a.colour_shells => {
+            let (mesh, mut shading) = raystream_io::load_mesh_with_shading(p)?;
+            let mm = shading.space.is_some() || shading.dicom.is_some();
+            let c = crate::shells::shell_colours(&mesh, mm);
+            say_shells(a, p, &c);
+            let white = [255; 3];
+            shading.colours = (c.of_face.iter())
+                .map(|g| [g.map_or(white, |k| crate::shells::PALETTE[k]); 3])
+                .collect();
+            scene_legend = c.legend;
+            Ok((Scene::for_mesh_shaded(mesh, shading, p)?, None))
+        }
         Some(p) => Ok((Scene::for_mesh_file(p)?, None)),
     }?;
     // A label map's surfaces name their segments; a scene file's volume, its own.

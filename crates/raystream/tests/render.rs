@@ -382,6 +382,87 @@ fn info_measures_a_surface_as_trimesh_does() {
     }
 }
 
+/// `--colour-shells`: the built-in CT's bones with their ten largest shells in the palette's
+/// colours (the hip bones blue and orange, the largest two), the rest ivory, on every
+/// device; the teapot's four parts, each its colour; refused where there is no surface of
+/// its own to part.
+#[test]
+fn render_colours_each_shell() {
+    // Pixels well into blue, and into orange, out of `rgb`.
+    let hues = |rgb: &[u8]| {
+        let px: Vec<[i32; 3]> = rgb
+            .chunks(3)
+            .map(|c| [c[0], c[1], c[2]].map(i32::from))
+            .collect();
+        let blue = px
+            .iter()
+            .filter(|[r, g, b]| b - r > 40 && b - g > 10)
+            .count();
+        let orange = px
+            .iter()
+            .filter(|[r, g, b]| r - g > 40 && g - b > 30)
+            .count();
+        (
+            blue as f64 / px.len() as f64,
+            orange as f64 / px.len() as f64,
+        )
+    };
+    // `render ARGS… -o NAME`: it said `said`; the picture's share of blue and orange.
+    let coloured = |name: &str, args: &[&str], said: &str| {
+        let png = tmp(name);
+        let mut all = vec!["render", "--size", "96x72", "-o", png.to_str().unwrap()];
+        all.extend_from_slice(args);
+        let o = run(&all);
+        assert!(
+            o.status.success() && stderr(&o).contains(said),
+            "{}",
+            stderr(&o)
+        );
+        hues(&image::open(&png).unwrap().to_rgb8().into_raw())
+    };
+    let ivory = coloured("shells-none.png", &["--device", "cpu"], "");
+    assert!(ivory.0 < 0.001 && ivory.1 < 0.001, "{ivory:?}");
+    for dev in devices() {
+        let (blue, orange) = coloured(
+            &format!("shells-{dev}.png"),
+            &["--device", dev, "--colour-shells"],
+            ": 1223 shells, the 10 largest each in a colour of its own, the other 1213 in the usual colour",
+        );
+        assert!(blue > 0.01 && orange > 0.01, "{dev}: {blue} {orange}");
+    }
+    let teapot = mesh("utah_teapot.obj");
+    let (blue, orange) = coloured(
+        "shells-teapot.png",
+        &[&teapot, "--colour-shells", "--legend"],
+        ": 4 shells, the 4 largest each in a colour of its own (--legend",
+    );
+    assert!(blue > 0.05 && orange > 0.002, "{blue} {orange}");
+    let png = tmp("shells-teapot.png");
+    let scene = tmp("shells-scene.toml");
+    std::fs::write(&scene, format!("[[objects]]\nmesh = {teapot:?}\n")).unwrap();
+    refused(
+        &[
+            "render",
+            scene.to_str().unwrap(),
+            "--colour-shells",
+            "-o",
+            png.to_str().unwrap(),
+        ],
+        "--colour-shells colours a mesh's or a CT's bone surface; a scene file's objects have their materials",
+    );
+    refused(
+        &[
+            "render",
+            "--colour-shells",
+            "--mode",
+            "dvr",
+            "-o",
+            png.to_str().unwrap(),
+        ],
+        "cannot be used with",
+    );
+}
+
 #[test]
 fn info_json() {
     let o = run(&["info", &mesh("utah_teapot.obj"), "--json"]);
