@@ -619,9 +619,10 @@ def mutate_glb(b):
 
 def islands():
     """Now and then `--keep-largest` or `--min-island`, with a sensible or an absurd number,
-    and `--fill-cavities`."""
+    and `--fill-cavities` or `--colour-shells`."""
     pick = random.random()
     fill = ["--fill-cavities"] if random.random() < 0.3 else []
+    fill += ["--colour-shells"] if random.random() < 0.2 else []
     if pick < 0.2:
         return fill + ["--keep-largest", random.choice(["1", "2", "1000000", "18446744073709551615"])]
     if pick < 0.4:

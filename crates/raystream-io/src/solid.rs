@@ -1,7 +1,9 @@
 //! What a triangle mesh makes as a surface, as a 3D printer's slicer or a mesh repair tool
 //! asks it (`info MESH`): its area, its pieces (shells), whether it closes (every edge joining
 //! two triangles that run it opposite ways), where it does not its holes and the edges that
-//! break it, and where it does the volume it encloses.
+//! break it, and where it does the volume it encloses; and each shell so, as if it were alone
+//! (a bone of a CT's skeleton, a cavity's wall facing in, a part of a model), with the shell
+//! each triangle is in (`render --colour-shells`).
 //!
 //! Corners at one position are one vertex here, whatever the file's indices: an STL repeats
 //! every corner in each of its triangles, and an OBJ's reader splits a position by its
@@ -9,7 +11,8 @@
 //!
 //! Area and volume are three sums; the pieces are a union–find (petgraph's) over the pairs of
 //! triangles that share an edge, and the edges are found by sorting the triangles' sides, which needs
-//! no hash of every edge and gives the same counts in any order of the threads.
+//! no hash of every edge and gives the same counts in any order of the threads; each shell's
+//! counts come from the same runs of sides, grouped by shell.
 
 use petgraph::unionfind::UnionFind;
 use rayon::prelude::*;

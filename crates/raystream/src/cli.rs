@@ -968,6 +968,12 @@ pub struct IsoArgs {
     pub simplify: Option<f64>,
     #[command(flatten)]
     pub islands: IslandPick,
+    /// The bone surface's ten largest shells (pieces of triangles joined through their edges:
+    /// its islands, a fracture's fragments) each a part of its own, "shell 1" the largest, in
+    /// render --colour-shells's colours, and the rest one part, "bone": an OBJ's objects, a
+    /// 3MF's or a GLB's, a VTP's pieces, a DICOM model each.
+    #[arg(long, alias = "color-shells", conflicts_with_all = ["segment", "colour_table"])]
+    pub colour_shells: bool,
     #[arg(short, long)]
     pub quiet: bool,
 }

@@ -189,6 +189,12 @@ pub fn run(a: &IsoArgs) -> Result<()> {
     let (volume, load_ms) = read_volume(&a.input, &a.pick.select(), a.quiet, None)?;
     let segment = a.segment.as_deref();
     if wants_segments(&volume, &a.threshold, segment, a.colour_table.as_deref()) {
+        if a.colour_shells {
+            bail!(
+                "{}: --colour-shells parts a threshold's surface by its shells; a segmentation's segments are parts of their own",
+                a.input.display()
+            );
+        }
         return run_segments(a, &volume, load_ms);
     }
     let hu = surface_threshold(&volume, &a.threshold, &a.input, a.quiet)?;
@@ -202,13 +208,46 @@ pub fn run(a: &IsoArgs) -> Result<()> {
     )?;
     simplify(&mut b.surface, a.simplify, "the surface", a.quiet);
     let t = Instant::now();
-    let bone = raystream_io::MeshPart {
-        name: "bone",
-        mesh: &b.surface.mesh,
-        normals: Some(&b.surface.normals),
-        colour: raystream_io::BONE,
+    // --colour-shells: the largest shells a part each, named and coloured, then the rest.
+    let shells = a.colour_shells.then(|| {
+        let c = crate::shells::shell_colours(&b.surface.mesh, true);
+        if !a.quiet {
+            eprintln!(
+                "raystream: {}: {} shells, the {} largest a part each (shell 1 …), the rest one (bone)",
+                a.input.display(),
+                c.measures.shells,
+                c.legend.len()
+            );
+        }
+        let parts = crate::shells::parted(&b.surface.mesh, &b.surface.normals, &c.of_face);
+        let named = (parts.into_iter().enumerate())
+            .filter(|(_, (mesh, _))| !mesh.is_empty())
+            .map(|(k, part)| match c.legend.get(k) {
+                Some(e) => (format!("shell {}", k + 1), e.colour, part),
+                None => ("bone".to_string(), [0; 3], part),
+            });
+        named.collect::<Vec<_>>()
+    });
+    let parts: Vec<raystream_io::MeshPart> = match &shells {
+        None => vec![raystream_io::MeshPart {
+            name: "bone",
+            mesh: &b.surface.mesh,
+            normals: Some(&b.surface.normals),
+            colour: raystream_io::BONE,
+        }],
+        Some(shells) => (shells.iter())
+            .map(|(name, colour, (mesh, normals))| raystream_io::MeshPart {
+                name,
+                mesh,
+                normals: Some(normals),
+                colour: match name.as_str() {
+                    "bone" => raystream_io::BONE,
+                    _ => colour.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize]),
+                },
+            })
+            .collect(),
     };
-    write_surfaces(&a.output, &[bone], &volume, &format!("bones {}", b.what))?;
+    write_surfaces(&a.output, &parts, &volume, &format!("bones {}", b.what))?;
     if !a.quiet {
         eprintln!(
             "raystream: wrote {} ({} vertices, {} triangles at {}, enclosing {:.1} ml): load {:.0} ms, isosurface {:.0} ms ({:.0} M voxels/s), write {:.0} ms",

@@ -239,6 +239,60 @@ fn iso_fills_cavities() {
     );
 }
 
+/// `iso --colour-shells`: the built-in CT's bones as its ten largest shells, a 3MF object each,
+/// named and coloured, each the triangles `info` counts for that shell of the whole surface,
+/// then the rest; refused for a label map's segments.
+#[test]
+fn iso_parts_the_bones_by_shell() {
+    let ct = builtin_ct();
+    let info = |file: &Path| {
+        let o = run(&["info", file.to_str().unwrap(), "--json"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_str::<serde_json::Value>(stdout(&o).trim()).unwrap()
+    };
+    let (whole, said) = iso_to(&ct, "shells-whole.stl", &[]);
+    assert!(!said.contains(" shells, "), "{said}");
+    let pieces = info(&tmp("shells-whole.stl"))["surface"]["pieces"].clone();
+    let (parted, said) = iso_to(&ct, "shells.3mf", &["--colour-shells"]);
+    assert!(
+        said.contains(": 1223 shells, the 10 largest a part each"),
+        "{said}"
+    );
+    assert_eq!(parted.len(), whole.len());
+    let j = info(&tmp("shells.3mf"));
+    let objects = j["objects"].as_array().unwrap();
+    let names: Vec<&str> = objects
+        .iter()
+        .map(|o| o["name"].as_str().unwrap())
+        .collect();
+    let want: Vec<String> = (1..=10)
+        .map(|k| format!("shell {k}"))
+        .chain(["bone".into()])
+        .collect();
+    assert_eq!(names, want);
+    for (k, o) in objects.iter().take(10).enumerate() {
+        assert_eq!(o["triangles"], pieces[k]["triangles"], "shell {}", k + 1);
+    }
+    assert_eq!(j["colours"]["distinct"], 11);
+    let map = write_like(
+        "shells-labels.mha",
+        &raystream_io::Volume::hounsfield([4, 4, 4], [1.0; 3], Vec::new()),
+        &[1.0; 64],
+    );
+    refused(
+        &[
+            "iso",
+            map.to_str().unwrap(),
+            "--segment",
+            "1",
+            "--colour-shells",
+            "-o",
+            tmp("shells-labels.stl").to_str().unwrap(),
+        ],
+        "cannot be used with",
+    );
+}
+
 #[test]
 fn iso_keeps_the_largest_islands() {
     let ct = volume("nifti/abdomen_pelvis_ct_totalseg.nii.gz");
