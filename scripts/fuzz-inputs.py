@@ -617,12 +617,13 @@ def mutate_glb(b):
             + b"JSON" + j + rest)
 
 
-def islands():
+def islands(shells=True):
     """Now and then `--keep-largest` or `--min-island`, with a sensible or an absurd number,
     and `--fill-cavities` or `--colour-shells`."""
     pick = random.random()
     fill = ["--fill-cavities"] if random.random() < 0.3 else []
-    fill += ["--colour-shells"] if random.random() < 0.2 else []
+    # (--colour-shells parts a threshold's surface; with --segment it is a usage error.)
+    fill += ["--colour-shells"] if shells and random.random() < 0.2 else []
     if pick < 0.2:
         return fill + ["--keep-largest", random.choice(["1", "2", "1000000", "18446744073709551615"])]
     if pick < 0.4:
@@ -769,8 +770,9 @@ def fuzz_files(work, n, device, only=None):
              "-o", os.path.join(d, "o.png")], s)
         if not why and s.endswith((".obj", ".ply", ".glb", ".gltf")):
             # Shaded, so that normals and materials are used.
-            why = run(["render", p, "--size", "8x8", "--spp", "1", "-q", "--device", device,
-                       "-o", os.path.join(d, "s.png")], s)
+            shells = ["--colour-shells", "--legend"] if random.random() < 0.3 else []
+            why = run(["render", p, "--size", "8x8", "--spp", "1", "-q", "--device", device]
+                      + shells + ["-o", os.path.join(d, "s.png")], s)
         if not why and not s.endswith((".obj", ".stl", ".ply", ".glb", ".gltf")) and random.random() < 0.3:
             # Its bones as a surface, some of their islands kept.
             why = run(["iso", p, "-q"] + islands() + phase + ["-o", os.path.join(d, "b.stl")], (s, "b.stl"))
@@ -832,7 +834,7 @@ def fuzz_files(work, n, device, only=None):
                     with open(ctbl, "wb") as f:
                         f.write(mutate(table, True))
                     segments += ["--colour-table", ctbl]
-                segments += islands()
+                segments += islands(shells=False)
                 if random.random() < 0.5:
                     simplify = ["--simplify", random.choice(["0.1", "1"])] if random.random() < 0.5 else []
                     why = run(["iso", p, "-q"] + segments + simplify + ["-o", os.path.join(

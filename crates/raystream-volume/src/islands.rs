@@ -96,27 +96,22 @@ pub(crate) fn fill_cavities(mask: &mut [u8], dims: [usize; 3]) -> (usize, usize)
         .filter(|&(i, j, k)| matches!(i.abs() + j.abs() + k.abs(), 1 | 2))
         .map(|(i, j, k)| i + sx * j + layer * k)
         .collect();
-    let on_border = |v: usize| {
-        let (i, j, k) = (v % px, v / px % py, v / (px * py));
-        i == 0 || j == 0 || k == 0 || i == px - 1 || j == py - 1 || k == pz - 1
-    };
-    // Marks the 0s joined to `seed` (a 0) as `to`, by their 26 neighbours; how many.
+    // Marks the 0s joined to `seeds` (0s, none in the padding) as `to`, by their 18
+    // neighbours; how many. The padding is marked outside first, so a fill never enters it,
+    // and every neighbour of a voxel within it is in the grid.
     let mut stack: Vec<usize> = Vec::new();
-    let mut flood = |mask: &mut [u8], seed: usize, to: u8| {
+    let mut flood = |mask: &mut [u8], seeds: &mut dyn Iterator<Item = usize>, to: u8| {
         let mut count = 0;
-        mask[seed] = to;
-        stack.push(seed);
+        for seed in seeds {
+            if mask[seed] == 0 {
+                mask[seed] = to;
+                stack.push(seed);
+            }
+        }
         while let Some(v) = stack.pop() {
             count += 1;
-            let edge = on_border(v);
             for &o in &around {
-                let n = v as isize + o;
-                // A border voxel's neighbours may wrap around to the far side or leave the
-                // grid: only those one step away along each axis count.
-                if edge && !neighbours(v, n, dims) {
-                    continue;
-                }
-                let n = n as usize;
+                let n = (v as isize + o) as usize;
                 if mask[n] == 0 {
                     mask[n] = to;
                     stack.push(n);
@@ -125,13 +120,34 @@ pub(crate) fn fill_cavities(mask: &mut [u8], dims: [usize; 3]) -> (usize, usize)
         }
         count
     };
-    // The outside: every 0 the padding reaches (the padding is all 0, so one fill from a corner).
-    flood(mask, 0, 2);
+    // The padding, and the voxels next to it (one step in along some axis), by index.
+    let (mut padding, mut next_to_padding) = (Vec::new(), Vec::new());
+    for k in 0..pz {
+        for j in 0..py {
+            let row = px * (j + py * k);
+            let edge = |x: usize, n: usize| (x == 0 || x == n - 1, x == 1 || x == n - 2);
+            let ((pj, nj), (pk, nk)) = (edge(j, py), edge(k, pz));
+            if pj || pk {
+                padding.extend(row..row + px);
+            } else if nj || nk {
+                padding.extend([row, row + px - 1]);
+                next_to_padding.extend(row + 1..row + px - 1);
+            } else {
+                padding.extend([row, row + px - 1]);
+                next_to_padding.extend([row + 1, row + px - 2]);
+            }
+        }
+    }
+    for &v in &padding {
+        mask[v] = 2;
+    }
+    // The outside: every 0 the padding reaches.
+    flood(mask, &mut next_to_padding.into_iter(), 2);
     let (mut cavities, mut voxels) = (0, 0);
     for v in 0..mask.len() {
         if mask[v] == 0 {
             cavities += 1;
-            voxels += flood(mask, v, 3);
+            voxels += flood(mask, &mut std::iter::once(v), 3);
         }
     }
     for m in mask.iter_mut() {
@@ -142,17 +158,6 @@ pub(crate) fn fill_cavities(mask: &mut [u8], dims: [usize; 3]) -> (usize, usize)
         };
     }
     (cavities, voxels)
-}
-
-/// Whether `n` (an index, perhaps out of the grid) is within one step of `v` along each axis of
-/// a grid `dims`.
-fn neighbours(v: usize, n: isize, [px, py, pz]: [usize; 3]) -> bool {
-    if n < 0 || n as usize >= px * py * pz {
-        return false;
-    }
-    let n = n as usize;
-    let at = |x: usize| [x % px, x / px % py, x / (px * py)];
-    at(v).iter().zip(at(n)).all(|(&a, b)| a.abs_diff(b) <= 1)
 }
 
 /// Finds the islands of `mask` (0 outside, 1 inside, on a grid `dims` with a layer of 0 all
