@@ -247,11 +247,19 @@ pub fn run(a: &IsoArgs) -> Result<()> {
             })
             .collect(),
     };
-    write_surfaces(&a.output, &parts, &volume, &format!("bones {}", b.what))?;
+    let written = write_surfaces(&a.output, &parts, &volume, &format!("bones {}", b.what))?;
     if !a.quiet {
         eprintln!(
             "raystream: wrote {} ({} vertices, {} triangles at {}, enclosing {:.1} ml): load {:.0} ms, isosurface {:.0} ms ({:.0} M voxels/s), write {:.0} ms",
-            a.output.display(),
+            match written.as_slice() {
+                [first, .., last] => format!(
+                    "{} … {} ({} files)",
+                    first.display(),
+                    last.display(),
+                    written.len()
+                ),
+                _ => a.output.display().to_string(),
+            },
             b.surface.mesh.positions.len(),
             b.surface.mesh.len(),
             value_words(&volume, hu),

@@ -274,6 +274,28 @@ fn iso_parts_the_bones_by_shell() {
         assert_eq!(o["triangles"], pieces[k]["triangles"], "shell {}", k + 1);
     }
     assert_eq!(j["colours"]["distinct"], 11);
+    // As DICOM models: one a part, titled by it, each passing dciodvfy.
+    let dcm = tmp("shells.dcm");
+    let o = run(&["iso", &ct, "--colour-shells", "-o", dcm.to_str().unwrap()]);
+    let said = stderr(&o);
+    let (first, last) = (tmp("shells-1.dcm"), tmp("shells-11.dcm"));
+    assert!(
+        said.contains(&format!(
+            "wrote {} … {} (11 files)",
+            first.display(),
+            last.display()
+        )),
+        "{said}"
+    );
+    for (file, title) in [(&first, "shell 1"), (&last, "bone")] {
+        assert_eq!(iod_errors(file), Vec::<String>::new());
+        let o = run(&["info", file.to_str().unwrap()]);
+        assert!(
+            stdout(&o).contains(&format!("Encapsulated STL \"{title}\"")),
+            "{}",
+            stdout(&o)
+        );
+    }
     let map = write_like(
         "shells-labels.mha",
         &raystream_io::Volume::hounsfield([4, 4, 4], [1.0; 3], Vec::new()),
