@@ -101,20 +101,37 @@ pub fn bones_of(
             value_words(volume, hu)
         ),
     );
-    let (mut surface, islands) = extract_isosurface_keeping(volume, hu, keep);
+    // A lone slice: its bones as the slab of tissue it images, a spacing thick (as the volume
+    // modes and a label map's segments take it), where its grid's own surface would be a
+    // sheet whose caps, each kept a hair inside its side, cross: inside out. The slab holds
+    // each voxel `per` times, so an island's voxels count `per` each.
+    let slab = volume.slab_of_lone_slices();
+    let per = 1usize << volume.dims.iter().filter(|&&n| n == 1).count();
+    let (grid, keep) = match &slab {
+        None => (volume, keep),
+        Some(slab) => {
+            let islands = match keep.islands {
+                KeepIslands::AtLeast(n) => KeepIslands::AtLeast(n.saturating_mul(per)),
+                islands => islands,
+            };
+            (slab, KeepSurface { islands, ..keep })
+        }
+    };
+    let voxel_ml = volume.voxel_ml() / per as f64;
+    let (mut surface, islands) = extract_isosurface_keeping(grid, hu, keep);
     pb.finish_and_clear();
     if islands.kept == 0 && !islands.sizes.is_empty() {
         bail!(
             "{}: {}",
             path.display(),
-            no_island_kept(&islands, keep.islands, volume.voxel_ml())
+            no_island_kept(&islands, keep.islands, voxel_ml)
         );
     }
     if !keep.is_all() && !quiet {
         eprintln!(
             "raystream: {}: {} at {}",
             path.display(),
-            islands_kept(&islands, keep, volume.voxel_ml()),
+            islands_kept(&islands, keep, voxel_ml),
             value_words(volume, hu)
         );
     }

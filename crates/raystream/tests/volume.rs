@@ -153,6 +153,36 @@ fn iso_to(ct: &str, name: &str, more: &[&str]) -> (raystream_io::TriMesh, String
     (raystream_io::load_mesh(&out).unwrap(), stderr(&o))
 }
 
+/// A lone slice's bones: the slab of tissue it images, a spacing thick about the slice,
+/// closed and facing out, enclosing about its bone voxels' volume (its grid's own surface was
+/// a sheet 1/256 of a spacing thick, turned inside out); its islands counted in its voxels.
+#[test]
+fn iso_of_a_lone_slice_is_its_slab() {
+    let dir = shared().join("data/volumes/dicom/ct_slice_transfer_syntaxes");
+    let slice = dir.join("ct_1.2.840.10008.1.2.1_LittleEndianExplicit.dcm");
+    let slice = slice.to_str().unwrap();
+    let v = raystream_io::load_volume(Path::new(slice), &Default::default()).unwrap();
+    assert_eq!(v.dims[2], 1);
+    let bone = v.data.iter().filter(|&&x| x >= 300.0).count();
+    let bone_ml = bone as f64 * v.voxel_ml();
+    let (mesh, said) = iso_to(slice, "lone-slice.stl", &["--min-island", "0.000001"]);
+    assert!(
+        said.contains(&format!("of {bone_ml:.1} ml of voxels)")),
+        "{said} ({bone} voxels, {bone_ml} ml)"
+    );
+    let s = mesh.measure_surface();
+    assert!(s.closed(), "{s:?}");
+    let ml = s.volume.unwrap() / 1000.0;
+    assert!((ml / bone_ml - 1.0).abs() < 0.1, "{ml} ml for {bone_ml}");
+    let b = mesh.bounds();
+    let z = v.origin[2] as f32;
+    let half = v.spacing[2] as f32 / 2.0;
+    assert!(
+        (b.min.z - (z - half)).abs() < 1e-3 && (b.max.z - (z + half)).abs() < 1e-3,
+        "{b:?}"
+    );
+}
+
 /// `--fill-cavities` on the chest CT's bones: it fills as many cavities as the full surface has
 /// closed shells facing in, and takes away their triangles and no others; what is left
 /// encloses their volume more, and has none facing in. Then a label map's hollow ball: one
