@@ -231,13 +231,13 @@ impl TriMesh {
             s.holes = holes;
         }
         let corners = |f: usize| self.triangles[f].map(|v| id[v as usize]);
-        m.vertices = distinct_by_first(
-            faces
-                .iter()
-                .flat_map(|&f| corners(f).map(|v| (0, v)))
-                .collect(),
-            1,
-        )[0];
+        // The whole's vertices by a mark each (no sort needed); each shell's by a sort of
+        // (shell, vertex), a vertex in two shells counting in both.
+        let mut used = vec![false; self.positions.len()];
+        for v in faces.iter().flat_map(|&f| corners(f)) {
+            used[v as usize] = true;
+        }
+        m.vertices = used.iter().filter(|&&u| u).count();
         let vertices = distinct_by_first(
             (faces.iter())
                 .flat_map(|&f| corners(f).map(|v| (shell[f], v)))

@@ -61,6 +61,28 @@ pub fn extract_isosurface_keeping(
     keep: impl Into<KeepSurface>,
 ) -> (IsoSurface, Islands) {
     let keep: KeepSurface = keep.into();
+    // A lone slice (one voxel along an axis): the surface of the slab of tissue it images, a
+    // spacing thick (`Volume::slab_of_lone_slices`, as the volume renderers take it), where
+    // its own grid's would be a sheet whose caps, each kept a hair inside its side, cross:
+    // inside out. The slab holds each voxel `per` times (two equal layers along each such
+    // axis), so the islands are counted in the slice's voxels.
+    if let Some(slab) = vol.slab_of_lone_slices() {
+        let per = 1usize << vol.dims.iter().filter(|&&n| n == 1).count();
+        let islands = match keep.islands {
+            KeepIslands::AtLeast(n) => KeepIslands::AtLeast(n.saturating_mul(per)),
+            islands => islands,
+        };
+        let (surface, found) =
+            extract_isosurface_keeping(&slab, iso, KeepSurface { islands, ..keep });
+        let found = Islands {
+            sizes: found.sizes.iter().map(|n| n / per).collect(),
+            kept: found.kept,
+            kept_voxels: found.kept_voxels / per,
+            cavities: found.cavities,
+            cavity_voxels: found.cavity_voxels / per,
+        };
+        return (surface, found);
+    }
     let [nx, ny, nz] = vol.dims;
     // Padded grid: corner (I, J, K) is voxel (I − 1, J − 1, K − 1); the border is outside.
     let (px, py, pz) = (nx + 2, ny + 2, nz + 2);

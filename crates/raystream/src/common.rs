@@ -537,6 +537,11 @@ pub fn slab_if_lone(
     slab
 }
 
+/// `n` and the word for it: "1 shell", "3 shells".
+pub fn plural(n: usize, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

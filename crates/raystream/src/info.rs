@@ -296,8 +296,7 @@ fn area_words(area: f64, mm: bool) -> String {
 /// (`mm`). One shell's (`piece`) begins with its triangles and ends with where its box's
 /// middle is.
 fn surface_line(s: &SurfaceMeasures, mm: bool, piece: bool) -> String {
-    let plural =
-        |n: usize, one: &str, many: &str| format!("{n} {}", if n == 1 { one } else { many });
+    use crate::common::plural;
     let area = area_words(s.area, mm);
     if s.faces == 0 {
         return format!("area {area}: no triangle has three corners apart");

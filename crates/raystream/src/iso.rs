@@ -101,24 +101,8 @@ pub fn bones_of(
             value_words(volume, hu)
         ),
     );
-    // A lone slice: its bones as the slab of tissue it images, a spacing thick (as the volume
-    // modes and a label map's segments take it), where its grid's own surface would be a
-    // sheet whose caps, each kept a hair inside its side, cross: inside out. The slab holds
-    // each voxel `per` times, so an island's voxels count `per` each.
-    let slab = volume.slab_of_lone_slices();
-    let per = 1usize << volume.dims.iter().filter(|&&n| n == 1).count();
-    let (grid, keep) = match &slab {
-        None => (volume, keep),
-        Some(slab) => {
-            let islands = match keep.islands {
-                KeepIslands::AtLeast(n) => KeepIslands::AtLeast(n.saturating_mul(per)),
-                islands => islands,
-            };
-            (slab, KeepSurface { islands, ..keep })
-        }
-    };
-    let voxel_ml = volume.voxel_ml() / per as f64;
-    let (mut surface, islands) = extract_isosurface_keeping(grid, hu, keep);
+    let voxel_ml = volume.voxel_ml();
+    let (mut surface, islands) = extract_isosurface_keeping(volume, hu, keep);
     pb.finish_and_clear();
     if islands.kept == 0 && !islands.sizes.is_empty() {
         bail!(
@@ -236,14 +220,7 @@ pub fn run(a: &IsoArgs) -> Result<()> {
                 c.legend.len()
             );
         }
-        let parts = crate::shells::parted(&b.surface.mesh, &b.surface.normals, &c.of_face);
-        let named = (parts.into_iter().enumerate())
-            .filter(|(_, (mesh, _))| !mesh.is_empty())
-            .map(|(k, part)| match c.legend.get(k) {
-                Some(e) => (format!("shell {}", k + 1), e.colour, part),
-                None => ("bone".to_string(), [0; 3], part),
-            });
-        named.collect::<Vec<_>>()
+        crate::shells::shell_parts(&b.surface.mesh, &b.surface.normals, &c)
     });
     let parts: Vec<raystream_io::MeshPart> = match &shells {
         None => vec![raystream_io::MeshPart {
@@ -253,14 +230,11 @@ pub fn run(a: &IsoArgs) -> Result<()> {
             colour: raystream_io::BONE,
         }],
         Some(shells) => (shells.iter())
-            .map(|(name, colour, (mesh, normals))| raystream_io::MeshPart {
-                name,
-                mesh,
-                normals: Some(normals),
-                colour: match name.as_str() {
-                    "bone" => raystream_io::BONE,
-                    _ => colour.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize]),
-                },
+            .map(|p| raystream_io::MeshPart {
+                name: &p.name,
+                mesh: &p.mesh,
+                normals: Some(&p.normals),
+                colour: p.colour.unwrap_or(raystream_io::BONE),
             })
             .collect(),
     };
@@ -508,8 +482,7 @@ fn write_surfaces(
 /// of `islands`: "filled 217 cavities (0.9 ml of voxels), kept 1 of 1222 islands (99.8 of
 /// 391.8 ml of voxels)", on a grid of voxels of `voxel_ml`.
 pub fn islands_kept(islands: &Islands, keep: KeepSurface, voxel_ml: f64) -> String {
-    let plural =
-        |n: usize, one: &str, many: &str| format!("{n} {}", if n == 1 { one } else { many });
+    use crate::common::plural;
     let mut said = Vec::new();
     if keep.fill_cavities {
         said.push(format!(

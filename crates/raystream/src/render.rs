@@ -104,19 +104,11 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend
         }
         let c = crate::shells::shell_colours(&mesh, true);
         say_shells(a, path, &c);
-        let parts = crate::shells::parted(&mesh, &b.surface.normals, &c.of_face);
-        let count = parts.len() - 1;
-        let surfaces = (parts.into_iter().enumerate())
-            .filter(|(_, (m, _))| !m.is_empty())
-            .map(|(k, (mesh, normals))| raystream_scene::Surface {
-                mesh,
-                normals,
-                colour: match k < count {
-                    true => {
-                        crate::shells::PALETTE[k].map(|c| raystream_io::SRGB_TO_LINEAR[c as usize])
-                    }
-                    false => raystream_scene::BONE,
-                },
+        let surfaces = (crate::shells::shell_parts(&mesh, &b.surface.normals, &c).into_iter())
+            .map(|p| raystream_scene::Surface {
+                colour: p.colour.unwrap_or(raystream_scene::BONE),
+                mesh: p.mesh,
+                normals: p.normals,
             })
             .collect();
         b.legend = c.legend;

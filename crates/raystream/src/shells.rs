@@ -60,14 +60,43 @@ pub fn shell_colours(mesh: &TriMesh, mm: bool) -> ShellColours {
     }
 }
 
+/// A part of a surface parted by [`shell_parts`]: a shell in its colour, or the rest.
+pub struct ShellPart {
+    /// "shell 1" …, or "bone" for the rest.
+    pub name: String,
+    /// Linear RGB; `None` for the rest, drawn in the surface's usual colour.
+    pub colour: Option<[f32; 3]>,
+    pub mesh: TriMesh,
+    pub normals: Vec<Vec3>,
+}
+
+/// `mesh` and its vertex `normals` as [`shell_colours`]' `c` colours them: the largest shells
+/// a part each, then the rest (where there is any).
+pub fn shell_parts(mesh: &TriMesh, normals: &[Vec3], c: &ShellColours) -> Vec<ShellPart> {
+    (parted(mesh, normals, &c.of_face).into_iter().enumerate())
+        .filter(|(_, (mesh, _))| !mesh.is_empty())
+        .map(|(k, (mesh, normals))| {
+            let (name, colour) = match c.legend.get(k) {
+                Some(e) => (
+                    format!("shell {}", k + 1),
+                    Some(e.colour.map(|c| raystream_io::SRGB_TO_LINEAR[c as usize])),
+                ),
+                None => ("bone".to_string(), None),
+            };
+            ShellPart {
+                name,
+                colour,
+                mesh,
+                normals,
+            }
+        })
+        .collect()
+}
+
 /// `mesh` and its vertex `normals` parted by `group` (a triangle's group, `None` for the rest):
 /// a mesh for each group from 0 up to the largest used, then one for the rest, each with the
 /// vertices its triangles use.
-pub fn parted(
-    mesh: &TriMesh,
-    normals: &[Vec3],
-    group: &[Option<usize>],
-) -> Vec<(TriMesh, Vec<Vec3>)> {
+fn parted(mesh: &TriMesh, normals: &[Vec3], group: &[Option<usize>]) -> Vec<(TriMesh, Vec<Vec3>)> {
     let groups = group.iter().flatten().max().map_or(0, |&g| g + 1);
     let mut parts: Vec<(TriMesh, Vec<Vec3>)> = vec![Default::default(); groups + 1];
     // Per part, each vertex's new index (`u32::MAX` until used).
