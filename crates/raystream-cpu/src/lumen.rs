@@ -762,7 +762,7 @@ fn fill_holes(dims: [usize; 2], region: &[bool]) -> Vec<bool> {
 
 /// Per pixel of a grid of `dims` (row by row), the squared distance (pixels²) to the nearest
 /// pixel that is `target` (+∞ where there is none).
-fn distance_to(dims: [usize; 2], target: impl Fn(usize) -> bool) -> Vec<f64> {
+fn distance_to(dims: [usize; 2], target: impl Fn(usize) -> bool + Sync) -> Vec<f64> {
     raystream_volume::distance::squared_distance(dims, [1.0, 1.0], target)
 }
 

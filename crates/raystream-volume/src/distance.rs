@@ -4,37 +4,117 @@
 //! Written here: they are a few dozen lines, and the image-processing crates that have one
 //! would add a large dependency for them (and take no anisotropic voxels).
 
+use rayon::prelude::*;
+
 /// Per cell of a grid of `dims` (x fastest) with `spacing` per axis, the squared distance to
 /// the nearest cell that is `target`, in the spacing's units squared (+∞ where there is none;
-/// beyond the grid's border none is assumed).
+/// beyond the grid's border none is assumed). The lines along each axis are transformed in
+/// parallel (a CT of 512 × 512 × 300 voxels has 78 million cells).
 pub fn squared_distance<const N: usize>(
     dims: [usize; N],
     spacing: [f64; N],
-    target: impl Fn(usize) -> bool,
+    target: impl Fn(usize) -> bool + Sync,
 ) -> Vec<f64> {
     let total: usize = dims.iter().product();
     let mut d: Vec<f64> = (0..total)
+        .into_par_iter()
+        .with_min_len(1 << 14)
         .map(|k| if target(k) { 0.0 } else { f64::INFINITY })
         .collect();
-    let longest = dims.iter().copied().max().unwrap_or(0);
-    let mut f = vec![0.0; longest];
-    let mut out = vec![0.0; longest];
-    let (mut v, mut z) = (vec![0usize; longest], vec![0.0f64; longest + 1]);
+    if total == 0 {
+        return d;
+    }
     for axis in 0..N {
-        let n = dims[axis];
+        let (n, h) = (dims[axis], spacing[axis]);
         let stride: usize = dims[..axis].iter().product();
-        // Every line along `axis`: its first cell, for each cell of the other axes.
-        for start in (0..total).filter(|k| (k / stride).is_multiple_of(n)) {
-            for (q, x) in f[..n].iter_mut().enumerate() {
-                *x = d[start + q * stride];
-            }
-            envelope(&f[..n], spacing[axis], &mut out[..n], &mut v, &mut z);
-            for (q, &x) in out[..n].iter().enumerate() {
-                d[start + q * stride] = x;
+        // A block of `stride` whole lines along `axis`, each starting at one of its first
+        // `stride` cells: the blocks are apart in memory, and transformed each on a thread.
+        let block = stride * n;
+        if block < total {
+            // Small grids (a vessel's cross-section) on one thread.
+            d.par_chunks_mut(block)
+                .with_min_len((1 << 14) / block + 1)
+                .for_each_init(
+                    || Lines::new(n),
+                    |lines, chunk| {
+                        for start in 0..stride {
+                            lines.transform(chunk, start, stride, h);
+                        }
+                    },
+                );
+        } else {
+            // One block (the last axis): groups of its lines read, transformed and gathered
+            // in parallel, then written back, a batch of groups at a time (so that the
+            // copy is a batch's, not the grid's: 64 × 1024 lines of 135 cells on the head CT,
+            // 71 MB, for a grid of 283 MB).
+            const GROUP: usize = 1024;
+            const BATCH: usize = 64;
+            let groups = stride.div_ceil(GROUP);
+            for batch in (0..groups).step_by(BATCH) {
+                let done: Vec<Vec<f64>> = (batch..(batch + BATCH).min(groups))
+                    .into_par_iter()
+                    .map_init(
+                        || Lines::new(n),
+                        |lines, g| {
+                            let starts = g * GROUP..((g + 1) * GROUP).min(stride);
+                            let mut out = Vec::with_capacity(starts.len() * n);
+                            for start in starts {
+                                for q in 0..n {
+                                    lines.f[q] = d[start + q * stride];
+                                }
+                                lines.envelope(h);
+                                out.extend_from_slice(&lines.out);
+                            }
+                            out
+                        },
+                    )
+                    .collect();
+                for (g, out) in (batch..).zip(&done) {
+                    for (l, line) in out.chunks_exact(n).enumerate() {
+                        let start = g * GROUP + l;
+                        for (q, &x) in line.iter().enumerate() {
+                            d[start + q * stride] = x;
+                        }
+                    }
+                }
             }
         }
     }
     d
+}
+
+/// One line's values and the lower envelope's scratch.
+struct Lines {
+    f: Vec<f64>,
+    out: Vec<f64>,
+    v: Vec<usize>,
+    z: Vec<f64>,
+}
+
+impl Lines {
+    fn new(n: usize) -> Lines {
+        Lines {
+            f: vec![0.0; n],
+            out: vec![0.0; n],
+            v: vec![0; n],
+            z: vec![0.0; n + 1],
+        }
+    }
+
+    /// The line of `d` from `start`, `stride` apart, transformed in place.
+    fn transform(&mut self, d: &mut [f64], start: usize, stride: usize, h: f64) {
+        for (q, x) in self.f.iter_mut().enumerate() {
+            *x = d[start + q * stride];
+        }
+        self.envelope(h);
+        for (q, &x) in self.out.iter().enumerate() {
+            d[start + q * stride] = x;
+        }
+    }
+
+    fn envelope(&mut self, h: f64) {
+        envelope(&self.f, h, &mut self.out, &mut self.v, &mut self.z);
+    }
 }
 
 /// The 1-D squared distance transform of `f` (0 at targets, +∞ elsewhere, or the squared
@@ -137,6 +217,24 @@ mod tests {
         }
     }
 
+    /// More lines along the last axis than a batch of groups holds (260 × 260 of them, in
+    /// two batches): every 211th cell against brute force.
+    #[test]
+    fn a_wide_grid_s_last_axis_is_the_brute_force_one() {
+        let mut seed = 4242u64;
+        let (dims, spacing) = ([260usize, 260, 2], [0.5, 0.7, 3.0]);
+        let target = random(dims.iter().product(), 0.0005, &mut seed);
+        let d = squared_distance(dims, spacing, |k| target[k]);
+        for k in (0..d.len()).step_by(211) {
+            let want = brute(dims, spacing, &target, k);
+            assert!(
+                (d[k] - want).abs() <= 1e-9 * want.max(1.0),
+                "cell {k}: {} for {want}",
+                d[k]
+            );
+        }
+    }
+
     #[test]
     fn anisotropic_three_dimensional_transforms_are_the_brute_force_ones() {
         let mut seed = 777u64;
@@ -144,6 +242,8 @@ mod tests {
             ([9usize, 7, 5], [0.7, 1.3, 3.0], 0.03),
             ([4, 11, 6], [2.0, 0.5, 1.0], 0.1),
             ([1, 1, 8], [1.0, 1.0, 0.25], 0.2),
+            // More lines along the last axis than one group of them holds.
+            ([40, 30, 3], [1.0, 0.8, 2.5], 0.01),
         ] {
             let total = dims.iter().product();
             let target = random(total, density, &mut seed);

@@ -2,6 +2,7 @@
 //! ([`Preset`]) that `raystream iso` and `raystream render VOLUME` use.
 
 pub mod auto;
+pub mod body;
 mod cases;
 pub mod centreline;
 pub mod distance;

@@ -575,6 +575,12 @@ pub struct RenderArgs {
     /// volume each encloses (ml, for a CT or a model in patient millimetres).
     #[arg(long, alias = "color-shells", conflicts_with_all = ["mode", "segment", "colour_table"])]
     pub colour_shells: bool,
+    /// A CT with only the patient's body (and what it encloses: the lungs, the airway):
+    /// the table, a head holder, cables and pads are left out, in every mode and in the bone
+    /// surface. The body: above -500 HU, opened by a ball of 4 mm radius, its thin
+    /// parts (the nose, the ears) joined back (`raystream_volume::body`).
+    #[arg(long, conflicts_with = "cine")]
+    pub body_only: bool,
     /// With --path FILE (not --slices): marks these points of the path, mm along it from its
     /// first point (as `measure` gives a lesion's and its references' arc lengths), each a
     /// line across the CPR, yellow ringed in black; PNG, or DICOM as the picture.
@@ -974,6 +980,10 @@ pub struct IsoArgs {
     /// 3MF's or a GLB's, a VTP's pieces, a DICOM model each.
     #[arg(long, alias = "color-shells", conflicts_with_all = ["segment", "colour_table"])]
     pub colour_shells: bool,
+    /// The bones of the patient's body alone: the table and a head holder left out, as
+    /// `render --body-only` leaves them out.
+    #[arg(long, conflicts_with_all = ["segment", "colour_table"])]
+    pub body_only: bool,
     #[arg(short, long)]
     pub quiet: bool,
 }

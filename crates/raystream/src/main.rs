@@ -1,6 +1,7 @@
 //! `raystream`: render, trace, bench and info over the library crates.
 
 mod bench;
+mod body;
 mod centreline;
 mod cli;
 mod common;

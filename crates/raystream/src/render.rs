@@ -75,8 +75,22 @@ fn say_shells(a: &RenderArgs, path: &Path, c: &crate::shells::ShellColours) {
 /// its bones, else a mesh. Also says how the volume steps went, for volumes.
 fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend::Entry>)> {
     a.threshold.hu()?;
+    if let Some(p) = a
+        .input
+        .as_deref()
+        .filter(|p| a.body_only && !raystream_io::is_volume_path(p))
+    {
+        bail!(
+            "{}: --body-only keeps a CT to the patient's body; a mesh or a scene file has none to find",
+            p.display()
+        );
+    }
     let volume_scene = |path: &Path, embedded: Option<&[u8]>| -> Result<(Scene, Option<Bones>)> {
-        let (volume, load_ms) = read_volume(path, &a.pick.select(), a.quiet, embedded)?;
+        let (mut volume, load_ms) = read_volume(path, &a.pick.select(), a.quiet, embedded)?;
+        if a.body_only {
+            let b = crate::body::find(&volume, path, a.quiet)?;
+            crate::body::hide_outside(&mut volume, &b);
+        }
         let (segment, table) = (a.segment.as_deref(), a.colour_table.as_deref());
         let lone_view = crate::common::lone_slice_view(&volume);
         if crate::iso::wants_segments(&volume, &a.threshold, segment, table) {
@@ -876,7 +890,14 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     }
     let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
     let lone = crate::common::lone_slice_view(&volume);
-    let volume = crate::common::slab_if_lone(volume, path, a.quiet);
+    let mut volume = crate::common::slab_if_lone(volume, path, a.quiet);
+    let body = match a.body_only {
+        true => Some(crate::body::find(&volume, path, a.quiet)?),
+        false => None,
+    };
+    if let Some(b) = body.as_ref().filter(|_| !mode.is_projection()) {
+        crate::body::hide_outside(&mut volume, b);
+    }
     let labels = segmentation(a, format, &volume)?;
     // Every other mode colours (dvr, iso, cinematic) or keeps to segments (--segment).
     let painted = if mode == DvrMode::Slice {
@@ -898,10 +919,13 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         }
         crate::segments::paint(crate::segments::Asked::of_render(a), mode, &volume, path)?
     };
-    let (volume, painted) = match painted {
+    let (mut volume, mut painted) = match painted {
         Some(mut p) => (p.kept.take().unwrap_or(volume), Some(p)),
         None => (volume, None),
     };
+    if let Some(b) = body.as_ref().filter(|_| mode.is_projection()) {
+        painted = Some(crate::body::projected(mode, &mut volume, painted, b));
+    }
     let mut segment_words = painted
         .as_ref()
         .map_or(String::new(), |p| format!("; {}", p.words));

@@ -423,3 +423,74 @@ fn a_frame_that_cannot_be_written_stops_the_series() {
     );
     assert!(e.contains("cannot create"), "{e}");
 }
+
+/// `--body-only` finds a CT's body by its HU: refused, naming the file, for a mesh, a volume
+/// not in HU, a CT with no tissue, and one whose tissue is all thinner than the ball.
+#[test]
+fn body_only_refuses_what_has_no_body() {
+    let out = tmp("body.png");
+    let out = out.to_string_lossy();
+    let teapot = mesh("utah_teapot.obj");
+    assert_input_error(
+        &["render", &teapot, "--body-only", "-o", &out],
+        "utah_teapot.obj",
+        "a mesh or a scene file has none to find",
+    );
+    let bonsai = shared().join("data/volumes/nifti/scivis_bonsai.nii.gz");
+    let bonsai = bonsai.to_str().unwrap();
+    for args in [
+        &["render", bonsai, "--mode", "mip"][..],
+        &["render", bonsai],
+        &["iso", bonsai],
+    ] {
+        let args = [args, &["--body-only", "-o", &out]].concat();
+        assert_input_error(
+            &args,
+            "scivis_bonsai.nii.gz",
+            "this volume's values are not HU",
+        );
+    }
+    let like = raystream_io::Volume::hounsfield([24, 24, 24], [1.0; 3], Vec::new());
+    let air = write_like("body-air.mha", &like, &vec![-1000.0; 24 * 24 * 24]);
+    let air = air.to_str().unwrap();
+    assert_input_error(
+        &["render", air, "--mode", "dvr", "--body-only", "-o", &out],
+        "body-air.mha",
+        "--body-only: no voxel above -500 HU",
+    );
+    // A sheet 3 mm thick.
+    let sheet: Vec<f32> = (0..24 * 24 * 24)
+        .map(|n| {
+            if (10..13).contains(&(n / 576)) {
+                40.0
+            } else {
+                -1000.0
+            }
+        })
+        .collect();
+    let sheet = write_like("body-sheet.mha", &like, &sheet);
+    let stl = tmp("body.stl");
+    assert_input_error(
+        &[
+            "iso",
+            sheet.to_str().unwrap(),
+            "--body-only",
+            "-o",
+            stl.to_str().unwrap(),
+        ],
+        "body-sheet.mha",
+        "nothing above -500 HU is thicker than 8 mm",
+    );
+    // A cine reads its phases one by one.
+    let o = run(&[
+        "render",
+        "--mode",
+        "mip",
+        "--cine",
+        "--body-only",
+        "-o",
+        &out,
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--cine"), "{}", stderr(&o));
+}

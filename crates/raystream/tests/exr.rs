@@ -714,3 +714,59 @@ fn dicom_projections_hold_the_exrs_hounsfield_units() {
         assert_eq!(p.to_str().unwrap().trim(), "RGB");
     }
 }
+
+/// `--body-only` projections of the built-in CT, seen from the left (the table's top runs
+/// along the back, on the picture's right): the MIP loses the table's line and keeps the
+/// body's pixels (never lower: a sample at the skin blends the body's voxels alone, not the
+/// air); the MinIP shows the bowel's gas within the body instead of the air around it. On
+/// both devices.
+#[test]
+fn body_only_projections_leave_out_the_table() {
+    for dev in devices() {
+        let project = |mode: &str, more: &[&str]| {
+            let name = format!("body-{mode}{}-{dev}.exr", more.len());
+            let args = [&["--mode", mode, "--size", "96x96", "--view", "left"], more].concat();
+            let e = read_exr(&render_to(&name, dev, &args));
+            (e.width as usize, floats(&e, "Y").to_vec())
+        };
+        let (w, plain) = project("mip", &[]);
+        let (_, body) = project("mip", &["--body-only"]);
+        let seen: Vec<usize> = (0..body.len()).filter(|&n| !body[n].is_nan()).collect();
+        let same = seen
+            .iter()
+            .filter(|&&n| (body[n] - plain[n]).abs() <= 2.0)
+            .count();
+        let lower = seen.iter().filter(|&&n| body[n] < plain[n] - 2.0).count();
+        assert!(
+            lower == 0 && same as f64 > 0.85 * seen.len() as f64,
+            "{dev}: of {} pixels, {same} the same and {lower} lower",
+            seen.len()
+        );
+        // Left out: the dense pixels of the whole CT's MIP that the body's misses, a line
+        // down the picture, all behind the body.
+        let lost: Vec<usize> = (0..body.len())
+            .filter(|&n| body[n].is_nan() && plain[n] > -300.0)
+            .collect();
+        let back = seen.iter().map(|&n| n % w).max().unwrap();
+        let first = lost.iter().map(|&n| n % w).min().unwrap();
+        assert!(
+            lost.len() > w / 2 && first > back,
+            "{dev}: {} pixels lost, from column {first}; the body ends at {back}",
+            lost.len()
+        );
+        // The MinIP: air (below -950 HU) in most of the whole CT's pixels, in few of the
+        // body's.
+        let air = |v: &[f32]| {
+            let hit: Vec<f32> = v.iter().copied().filter(|x| !x.is_nan()).collect();
+            hit.iter().filter(|&&x| x < -950.0).count() as f64 / hit.len() as f64
+        };
+        let (plain, body) = (
+            air(&project("minip", &[]).1),
+            air(&project("minip", &["--body-only"]).1),
+        );
+        assert!(
+            plain > 0.8 && body < 0.1,
+            "{dev}: air in {plain} and {body} of the pixels"
+        );
+    }
+}

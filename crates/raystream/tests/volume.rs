@@ -3,9 +3,11 @@
 
 mod common;
 
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 use common::*;
+use raystream_math::{I64Vec3, Vec3};
 use serde_json::Value;
 
 fn info(path: &str) -> Value {
@@ -151,6 +153,84 @@ fn iso_to(ct: &str, name: &str, more: &[&str]) -> (raystream_io::TriMesh, String
     let o = run(&args);
     assert!(o.status.success(), "{}", stderr(&o));
     (raystream_io::load_mesh(&out).unwrap(), stderr(&o))
+}
+
+/// `iso --body-only` of the J2K series (the upper abdomen, the arms at its sides, on a
+/// curved table whose parts pass 300 HU): the bones are the whole CT's, triangle for
+/// triangle, less the table's pieces, which `iso` says it left out: none of them within 5 mm
+/// of a bone kept, the arms' bones kept at either side, the back 80 mm nearer.
+#[test]
+fn iso_body_only_leaves_out_the_table() {
+    let ct = volume("dicom/abdomen_ct_j2k_totalseg");
+    let (full, _) = iso_to(&ct, "body-full.stl", &[]);
+    let (body, said) = iso_to(&ct, "body-only.stl", &["--body-only"]);
+    assert!(
+        said.contains(
+            "the body, 3.33 l with what it encloses; left out above -500 HU: 2 pieces (135 ml, 63 ml)"
+        ),
+        "{said}"
+    );
+    let corners =
+        |m: &raystream_io::TriMesh, i: usize| m.corners(i).map(|p| p.to_array().map(f32::to_bits));
+    let all: HashSet<_> = (0..full.len()).map(|i| corners(&full, i)).collect();
+    let kept: HashSet<_> = (0..body.len()).map(|i| corners(&body, i)).collect();
+    assert!(kept.iter().all(|t| all.contains(t)));
+    let gone: Vec<usize> = (0..full.len())
+        .filter(|&i| !kept.contains(&corners(&full, i)))
+        .collect();
+    assert!(gone.len() > 1000, "{} triangles left out", gone.len());
+    // The vertices kept, by 5 mm cell.
+    let cell = |p: Vec3| (p / 5.0).floor().as_i64vec3();
+    let mut cells: HashMap<I64Vec3, Vec<Vec3>> = HashMap::new();
+    for &p in &body.positions {
+        cells.entry(cell(p)).or_default().push(p);
+    }
+    for &i in &gone {
+        for p in full.corners(i) {
+            let c = cell(p);
+            let near = (-1..=1).flat_map(|z| {
+                (-1..=1).flat_map(move |y| (-1..=1).map(move |x| I64Vec3::new(x, y, z)))
+            });
+            for d in near {
+                for q in cells.get(&(c + d)).into_iter().flatten() {
+                    assert!(p.distance(*q) > 5.0, "{p} left out, {q} kept");
+                }
+            }
+        }
+    }
+    let (lo, hi) = (
+        |m: &raystream_io::TriMesh| m.bounds().min,
+        |m: &raystream_io::TriMesh| m.bounds().max,
+    );
+    assert_eq!(
+        (lo(&body).x, hi(&body).x),
+        (lo(&full).x, hi(&full).x),
+        "the arms' bones"
+    );
+    assert!(
+        hi(&body).y < hi(&full).y - 80.0,
+        "{} {}",
+        hi(&body).y,
+        hi(&full).y
+    );
+    // `render` of the bones finds the same body.
+    let png = tmp("body-bones.png");
+    let o = run(&[
+        "render",
+        &ct,
+        "--body-only",
+        "--size",
+        "48x48",
+        "--device",
+        "cpu",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(
+        o.status.success() && stderr(&o).contains("the body, 3.33 l"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 /// A lone slice's bones: the slab of tissue it images, a spacing thick about the slice,

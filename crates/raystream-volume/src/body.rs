@@ -1,0 +1,545 @@
+//! The patient's body in a CT, apart from what lies outside it: the table, a head holder, a
+//! pad's cover, tubes and blankets, which a MIP shows as bright as bone and a skin rendering
+//! as a second body. `render --body-only` and `iso --body-only` leave them out.
+//!
+//! Found in five steps, each a plain morphological one (a workstation's "table removal" is a
+//! threshold, an opening and the largest piece; the fourth step keeps what an opening alone
+//! would trim: the nose, the ears, the fingers):
+//! 1. **Dense**: the voxels above [`BodyOptions::threshold_hu`] (−500 HU, between air and
+//!    fat). A table's carbon fibre and a holder's plastic are dense too, and often touch the
+//!    body (a head resting in its holder, the back on the table's top).
+//! 2. **Core**: the dense voxels further than [`BodyOptions::opening_mm`] from any other
+//!    (the dense region eroded by a ball), in pieces joined through faces. A piece is body
+//!    where it holds a ball of radius [`BodyOptions::core_depth_mm`] (the trunk, the head, an
+//!    arm at the side), or is the largest; a table's shell or a holder, a few mm thick, leaves
+//!    no core, or specks.
+//! 3. **Opening**: the dense voxels within the opening's radius and a voxel of the body's
+//!    core (its dilation by the ball): the body less what is thinner than the ball, and less
+//!    what touches it but a sliver as thick as a voxel.
+//! 4. **Thin parts**: the other dense voxels, in pieces joined through faces. A piece that
+//!    touches the opening, reaches no further than [`BodyOptions::thin_part_mm`] from the
+//!    body's core and holds at most [`BodyOptions::thin_part_ml`] is joined back (on the CTs
+//!    in ../shared: the nose and lips, 23 ml reaching 19 mm; skin folds, up to 23 mm);
+//!    the others are left out (a table's top along the back, 117 ml reaching 32 mm; a head
+//!    holder's sides, 42 and 52 ml reaching 48 and 52 mm; a table not touching the body).
+//!    The reach tells a table's wing, which the sliver where the body rests may cut from the
+//!    rest of the table, from a part of the body.
+//! 5. **Enclosed**: in each slice of the grid (a plane of constant k), whatever the slice's
+//!    border does not reach without crossing the body (the lungs, the airway, the bowel's gas,
+//!    which are below the threshold but inside).
+//!
+//! Distances are in mm (anisotropic voxels are common: 0.49 × 0.49 × 1.13 mm on the head
+//! CT), by the exact transform of [`crate::distance`]; the grid's border is not taken for air,
+//! so a body cut off by the scan's ends keeps its full depth there.
+
+use rayon::prelude::*;
+use raystream_io::Volume;
+
+use crate::distance::squared_distance;
+
+/// What [`body`] takes for the body.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BodyOptions {
+    /// HU above which a voxel is dense (tissue, or a device).
+    pub threshold_hu: f32,
+    /// The radius of the ball the dense region is opened by, mm: a device thinner than twice
+    /// this separates from the body.
+    pub opening_mm: f64,
+    /// How deep a piece of the core must reach to be body (unless it is the largest), mm.
+    pub core_depth_mm: f64,
+    /// The largest thin part (thinner than the ball) joined back to the body, ml, and how far
+    /// from the body's core it may reach, mm.
+    pub thin_part_ml: f64,
+    pub thin_part_mm: f64,
+}
+
+impl Default for BodyOptions {
+    fn default() -> Self {
+        BodyOptions {
+            threshold_hu: -500.0,
+            opening_mm: 4.0,
+            core_depth_mm: 15.0,
+            thin_part_ml: 60.0,
+            thin_part_mm: 30.0,
+        }
+    }
+}
+
+/// The body [`body`] found.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Body {
+    /// Per voxel (as [`Volume::data`]), whether it is the body or lies within it.
+    pub inside: Vec<bool>,
+    /// How many voxels are inside.
+    pub voxels: usize,
+    /// The pieces of dense voxels left out, in ml, the largest first.
+    pub left_out_ml: Vec<f64>,
+    /// The thin parts joined back: how many, and their ml.
+    pub thin_parts: usize,
+    pub thin_part_ml: f64,
+}
+
+impl Body {
+    /// The body and every voxel next to it (sharing a face, an edge or a corner): every cell
+    /// of the grid with a corner inside reads all eight of its voxels as they are, so that a
+    /// volume kept to this is sampled as the whole one up to the skin and just beyond it.
+    pub fn with_margin(&self, dims: [usize; 3]) -> Vec<bool> {
+        let [nx, ny, nz] = dims;
+        let inside = &self.inside;
+        per_voxel(dims, |(i, j, k)| {
+            (k.saturating_sub(1)..(k + 2).min(nz)).any(|kk| {
+                (j.saturating_sub(1)..(j + 2).min(ny)).any(|jj| {
+                    (i.saturating_sub(1)..(i + 2).min(nx))
+                        .any(|ii| inside[ii + nx * (jj + ny * kk)])
+                })
+            })
+        })
+    }
+
+    /// The body less its rim: the voxels inside whose six neighbours across a face are all
+    /// inside too (or beyond the grid). The skin's outer voxels hold partly air (−500 to
+    /// −100 HU where the skin crosses them), which would be the lowest values of a MinIP
+    /// through the body, as rings following the grid's steps, rather than what is within.
+    pub fn without_rim(&self, dims: [usize; 3]) -> Vec<bool> {
+        let [nx, ny, _] = dims;
+        let inside = &self.inside;
+        per_voxel(dims, |(i, j, k)| {
+            inside[i + nx * (j + ny * k)] && neighbours(dims, (i, j, k)).all(|q| inside[q])
+        })
+    }
+}
+
+/// `f` of each voxel (i, j, k) of a grid of `dims`, slice by slice in parallel.
+fn per_voxel(dims: [usize; 3], f: impl Fn((usize, usize, usize)) -> bool + Sync) -> Vec<bool> {
+    let [nx, ny, nz] = dims;
+    let mut out = vec![false; nx * ny * nz];
+    out.par_chunks_mut((nx * ny).max(1))
+        .enumerate()
+        .for_each(|(k, slice)| {
+            for (m, o) in slice.iter_mut().enumerate() {
+                *o = f((m % nx, m / nx, k));
+            }
+        });
+    out
+}
+
+/// The body in `vol` (a CT, in HU), as the module describes; an error saying why when there is
+/// none (no voxel dense, or none deeper than the ball's radius).
+pub fn body(vol: &Volume, opt: &BodyOptions) -> Result<Body, String> {
+    let dims = vol.dims;
+    let spacing = vol.spacing;
+    let voxel_ml = vol.voxel_ml();
+    let t = opt.threshold_hu;
+    let dense: Vec<bool> = vol.data.par_iter().map(|&v| v > t).collect();
+    if !dense.iter().any(|&d| d) {
+        return Err(format!("no voxel above {t} HU: no body to find"));
+    }
+    // 2. The core, its pieces, and how deep each reaches (squared mm).
+    let r2 = opt.opening_mm * opt.opening_mm;
+    let (core_pieces, depths) = {
+        let depth2 = squared_distance(dims, spacing, |n| !dense[n]);
+        let core: Vec<bool> = depth2.par_iter().map(|&d| d > r2).collect();
+        let (labels, sizes) = pieces(dims, &core);
+        let mut deepest = vec![0.0f64; sizes.len()];
+        for (&l, &d) in labels.iter().zip(&depth2) {
+            if l > 0 {
+                let x = &mut deepest[l as usize - 1];
+                *x = x.max(d);
+            }
+        }
+        ((labels, sizes), deepest)
+    };
+    let (labels, sizes) = core_pieces;
+    let Some(largest) = (0..sizes.len()).max_by_key(|&p| (sizes[p], std::cmp::Reverse(p))) else {
+        return Err(format!(
+            "nothing above {t} HU is thicker than {} mm: no body to find",
+            2.0 * opt.opening_mm
+        ));
+    };
+    let deep2 = opt.core_depth_mm * opt.core_depth_mm;
+    let body_piece: Vec<bool> = (0..sizes.len())
+        .map(|p| p == largest || depths[p] >= deep2)
+        .collect();
+    // 3. The opening: dense voxels within the radius and a voxel of the body's core.
+    let reach = opt.opening_mm + spacing.iter().copied().fold(0.0, f64::max);
+    let near2 = squared_distance(dims, spacing, |n| {
+        labels[n] > 0 && body_piece[labels[n] as usize - 1]
+    });
+    drop(labels);
+    let mut kept: Vec<bool> = (near2.par_iter().zip(&dense))
+        .map(|(&d, &s)| s && d <= reach * reach)
+        .collect();
+    // 4. The thin parts: pieces of the rest, joined back where small and touching.
+    let rest: Vec<bool> = (dense.par_iter().zip(&kept))
+        .map(|(&d, &k)| d && !k)
+        .collect();
+    let (labels, sizes) = pieces(dims, &rest);
+    let (mut touching, mut farthest2) = (vec![false; sizes.len()], vec![0.0f64; sizes.len()]);
+    let [nx, ny, nz] = dims;
+    for (n, &l) in labels.iter().enumerate() {
+        if l == 0 {
+            continue;
+        }
+        let p = l as usize - 1;
+        farthest2[p] = farthest2[p].max(near2[n]);
+        if !touching[p] {
+            let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
+            touching[p] = neighbours(dims, (i, j, k)).any(|m| kept[m]);
+        }
+    }
+    drop(near2);
+    let span2 = opt.thin_part_mm * opt.thin_part_mm;
+    let join: Vec<bool> = (0..sizes.len())
+        .map(|p| {
+            touching[p] && sizes[p] as f64 * voxel_ml <= opt.thin_part_ml && farthest2[p] <= span2
+        })
+        .collect();
+    for (n, &l) in labels.iter().enumerate() {
+        if l > 0 && join[l as usize - 1] {
+            kept[n] = true;
+        }
+    }
+    let thin: Vec<usize> = (0..sizes.len()).filter(|&p| join[p]).collect();
+    let thin_part_ml = thin.iter().map(|&p| sizes[p] as f64 * voxel_ml).sum();
+    // 5. What each slice's border cannot reach without crossing the body.
+    let mut inside = vec![false; kept.len()];
+    (inside.par_chunks_mut((nx * ny).max(1)))
+        .zip(kept.par_chunks((nx * ny).max(1)))
+        .for_each(|(out, wall)| enclosed_in_slice([nx, ny], wall, out));
+    debug_assert_eq!(inside.len(), nx * ny * nz);
+    let voxels = inside.iter().filter(|&&b| b).count();
+    // What is left of the pieces not joined once the body's enclosures are in (a speck
+    // within a slice's ring of skin is).
+    let mut out = vec![0usize; sizes.len()];
+    for (&l, &i) in labels.iter().zip(&inside) {
+        if l > 0 && !i {
+            out[l as usize - 1] += 1;
+        }
+    }
+    let mut left_out_ml: Vec<f64> = (out.iter().filter(|&&c| c > 0))
+        .map(|&c| c as f64 * voxel_ml)
+        .collect();
+    left_out_ml.sort_by(|a, b| b.total_cmp(a));
+    Ok(Body {
+        inside,
+        voxels,
+        left_out_ml,
+        thin_parts: thin.len(),
+        thin_part_ml,
+    })
+}
+
+/// The voxels of a grid of `dims` that share a face with voxel (i, j, k).
+fn neighbours(
+    [nx, ny, nz]: [usize; 3],
+    (i, j, k): (usize, usize, usize),
+) -> impl Iterator<Item = usize> {
+    let at = move |i: usize, j: usize, k: usize| i + nx * (j + ny * k);
+    [
+        (i > 0).then(|| at(i - 1, j, k)),
+        (i + 1 < nx).then(|| at(i + 1, j, k)),
+        (j > 0).then(|| at(i, j - 1, k)),
+        (j + 1 < ny).then(|| at(i, j + 1, k)),
+        (k > 0).then(|| at(i, j, k - 1)),
+        (k + 1 < nz).then(|| at(i, j, k + 1)),
+    ]
+    .into_iter()
+    .flatten()
+}
+
+/// The pieces of `member` (voxels joined through faces): per voxel its piece from 1 (0 for
+/// none), and each piece's voxels. A flood fill by hand, as the islands' (`crate::islands`
+/// says why), here on the grid itself, which has no padding.
+fn pieces(dims: [usize; 3], member: &[bool]) -> (Vec<u32>, Vec<usize>) {
+    let [nx, ny, _] = dims;
+    let mut labels = vec![0u32; member.len()];
+    let mut sizes = Vec::new();
+    let mut stack = Vec::new();
+    for seed in 0..member.len() {
+        if !member[seed] || labels[seed] != 0 {
+            continue;
+        }
+        sizes.push(0usize);
+        let l = sizes.len() as u32;
+        labels[seed] = l;
+        stack.push(seed);
+        while let Some(n) = stack.pop() {
+            sizes[l as usize - 1] += 1;
+            let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
+            for m in neighbours(dims, (i, j, k)) {
+                if member[m] && labels[m] == 0 {
+                    labels[m] = l;
+                    stack.push(m);
+                }
+            }
+        }
+    }
+    (labels, sizes)
+}
+
+/// Into `out`, per pixel of a slice of `dims`: whether it is `wall`, or no path of pixels that
+/// are not (each joined to the four sharing an edge) reaches it from the slice's border.
+fn enclosed_in_slice([nx, ny]: [usize; 2], wall: &[bool], out: &mut [bool]) {
+    // `out` first marks what the border reaches; flipped at the end.
+    let mut stack: Vec<usize> = (0..nx * ny)
+        .filter(|&n| {
+            let (i, j) = (n % nx, n / nx);
+            (i == 0 || j == 0 || i + 1 == nx || j + 1 == ny) && !wall[n]
+        })
+        .collect();
+    for &n in &stack {
+        out[n] = true;
+    }
+    while let Some(n) = stack.pop() {
+        let (i, j) = (n % nx, n / nx);
+        let around = [
+            (i > 0).then(|| n - 1),
+            (i + 1 < nx).then(|| n + 1),
+            (j > 0).then(|| n - nx),
+            (j + 1 < ny).then(|| n + nx),
+        ];
+        for m in around.into_iter().flatten() {
+            if !wall[m] && !out[m] {
+                out[m] = true;
+                stack.push(m);
+            }
+        }
+    }
+    for o in out.iter_mut() {
+        *o = !*o;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::{Path, PathBuf};
+
+    use super::*;
+
+    /// A phantom on a 2 mm grid of 80 × 50 × 30 voxels (x across, y up from the table, z
+    /// along it): its parts' voxels.
+    struct Phantom {
+        vol: Volume,
+        trunk: Vec<usize>,
+        lung: Vec<usize>,
+        ear: Vec<usize>,
+        arm: Vec<usize>,
+        table: Vec<usize>,
+        cable: Vec<usize>,
+    }
+
+    /// A trunk (an elliptic cylinder 70 × 50 mm, 40 HU) with a lung inside (−850 HU) and an
+    /// ear (a flap 2 mm thick, 8 × 8 mm, 40 HU) on its side; an arm beside it (a cylinder
+    /// 36 mm across, 12 mm away); under them a table's top (a plate 4 mm thick, 300 HU, as
+    /// wide and long as the grid) that the trunk rests on along its whole length; a cable
+    /// across the air above (2 mm, 1000 HU).
+    fn phantom() -> Phantom {
+        let dims = [80usize, 50, 30];
+        let at = |i: usize, j: usize, k: usize| i + dims[0] * (j + dims[1] * k);
+        let mut data = vec![-1000.0f32; dims.iter().product()];
+        let mut p = Phantom {
+            vol: Volume::hounsfield(dims, [2.0; 3], Vec::new()),
+            trunk: Vec::new(),
+            lung: Vec::new(),
+            ear: Vec::new(),
+            arm: Vec::new(),
+            table: Vec::new(),
+            cable: Vec::new(),
+        };
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let n = at(i, j, k);
+                    // mm from the trunk's axis (x 60, y 40): its lowest voxels are in row 8,
+                    // on the table's top row 7.
+                    let (x, y) = (i as f64 * 2.0 - 60.0, j as f64 * 2.0 - 40.0);
+                    if (x / 35.0).powi(2) + (y / 25.0).powi(2) <= 1.0 {
+                        let lung =
+                            (x / 20.0).powi(2) + (y / 12.0).powi(2) <= 1.0 && k > 3 && k < 26;
+                        data[n] = if lung { -850.0 } else { 40.0 };
+                        if lung { &mut p.lung } else { &mut p.trunk }.push(n);
+                    } else if j == 20 && (48..52).contains(&i) && (10..14).contains(&k) {
+                        data[n] = 40.0;
+                        p.ear.push(n);
+                    } else if (x - 65.0).powi(2) + (y - 5.0).powi(2) <= 18.0f64.powi(2) {
+                        data[n] = 40.0;
+                        p.arm.push(n);
+                    } else if j == 6 || j == 7 {
+                        data[n] = 300.0;
+                        p.table.push(n);
+                    } else if j == 45 && i == 30 {
+                        data[n] = 1000.0;
+                        p.cable.push(n);
+                    }
+                }
+            }
+        }
+        p.vol.data = data;
+        p
+    }
+
+    #[test]
+    fn a_phantom_s_body_is_kept_and_its_table_left_out() {
+        let p = phantom();
+        let b = body(&p.vol, &BodyOptions::default()).unwrap();
+        for (part, voxels) in [
+            ("trunk", &p.trunk),
+            ("lung", &p.lung),
+            ("ear", &p.ear),
+            ("arm", &p.arm),
+        ] {
+            let out = voxels.iter().filter(|&&n| !b.inside[n]).count();
+            assert_eq!(
+                out,
+                0,
+                "{out} of the {part}'s {} voxels left out",
+                voxels.len()
+            );
+        }
+        assert!(p.cable.iter().all(|&n| !b.inside[n]), "the cable kept");
+        // The table is left out but for a sliver where the trunk rests on it: the voxels
+        // within the opening's radius and a voxel (4 + 2 mm) of the trunk's core, which
+        // reaches the trunk's lowest row there (the table closes it from below).
+        let dims = p.vol.dims;
+        let trunk_distance2 = squared_distance(dims, [2.0; 3], |n| {
+            p.trunk.contains(&n) || p.lung.contains(&n)
+        });
+        for &n in &p.table {
+            let mm = trunk_distance2[n].sqrt();
+            assert!(
+                mm <= 6.0 || !b.inside[n],
+                "table voxel {n}, {mm} mm from the trunk, kept"
+            );
+        }
+        let kept = p.table.iter().filter(|&&n| b.inside[n]).count();
+        // The air around is out: the body is its parts and the sliver.
+        let parts = p.trunk.len() + p.lung.len() + p.ear.len() + p.arm.len();
+        assert_eq!(b.voxels, parts + kept);
+        // Left out: the table's two wings, which the sliver cuts apart, and the cable; the
+        // ear joined back.
+        let ml = 0.008;
+        let table_ml = (p.table.len() - kept) as f64 * ml;
+        let cable_ml = p.cable.len() as f64 * ml;
+        assert_eq!(b.left_out_ml.len(), 3, "{:?}", b.left_out_ml);
+        assert!((b.left_out_ml[0] + b.left_out_ml[1] - table_ml).abs() < 1e-9);
+        assert!(
+            (b.left_out_ml[2] - cable_ml).abs() < 1e-9,
+            "{:?}",
+            b.left_out_ml
+        );
+        assert_eq!(b.thin_parts, 1);
+        // The ear's far part (its near one lies within the opening's reach).
+        assert!(b.thin_part_ml > 0.0 && b.thin_part_ml < p.ear.len() as f64 * ml);
+    }
+
+    #[test]
+    fn no_body_is_an_error() {
+        let air = Volume::hounsfield([8, 8, 8], [1.0; 3], vec![-1000.0; 512]);
+        let e = body(&air, &BodyOptions::default()).unwrap_err();
+        assert!(e.contains("no voxel above -500 HU"), "{e}");
+        // A plate 3 mm thick: nothing deeper than the ball.
+        let mut data = vec![-1000.0; 20 * 20 * 20];
+        data[20 * 20 * 10..20 * 20 * 13].fill(0.0);
+        let plate = Volume::hounsfield([20, 20, 20], [1.0; 3], data);
+        let e = body(&plate, &BodyOptions::default()).unwrap_err();
+        assert!(e.contains("thicker than 8 mm"), "{e}");
+    }
+
+    /// The margin and the body less its rim, against their definitions voxel by voxel.
+    #[test]
+    fn the_margin_and_the_rim_are_the_voxels_beside_the_body() {
+        let dims = [7usize, 5, 4];
+        let mut seed = 99u64;
+        let inside: Vec<bool> = (0..140)
+            .map(|_| {
+                seed = (seed.wrapping_mul(6364136223846793005)).wrapping_add(1442695040888963407);
+                (seed >> 62) != 0
+            })
+            .collect();
+        let b = Body {
+            voxels: 0,
+            inside: inside.clone(),
+            left_out_ml: Vec::new(),
+            thin_parts: 0,
+            thin_part_ml: 0.0,
+        };
+        let (margin, core) = (b.with_margin(dims), b.without_rim(dims));
+        let at = |[i, j, k]: [i64; 3]| {
+            let inside_grid = (0..7).contains(&i) && (0..5).contains(&j) && (0..4).contains(&k);
+            inside_grid.then(|| (i + 7 * (j + 5 * k)) as usize)
+        };
+        let mut counts = [0; 2];
+        for n in 0..140i64 {
+            let p = [n % 7, n / 7 % 5, n / 35];
+            let around = |keep: &dyn Fn(i64) -> bool| {
+                (0..27)
+                    .map(|d| [d % 3 - 1, d / 3 % 3 - 1, d / 9 - 1])
+                    .filter(|d| keep(d.iter().map(|x: &i64| x.abs()).sum()))
+                    .filter_map(|d| at([p[0] + d[0], p[1] + d[1], p[2] + d[2]]))
+                    .collect::<Vec<usize>>()
+            };
+            let near = around(&|_| true).iter().any(|&q| inside[q]);
+            let whole = around(&|s| s <= 1).iter().all(|&q| inside[q]);
+            assert_eq!(margin[n as usize], near, "margin at {p:?}");
+            assert_eq!(core[n as usize], whole, "rim at {p:?}");
+            counts[0] += usize::from(near && !inside[n as usize]);
+            counts[1] += usize::from(inside[n as usize] && !whole);
+        }
+        assert!(counts[0] > 0 && counts[1] > 0, "{counts:?}");
+    }
+
+    fn ct(path: &str) -> Volume {
+        let p: PathBuf = Path::new(env!("CARGO_MANIFEST_DIR")).join(path);
+        raystream_io::load_volume(&p, &Default::default()).unwrap()
+    }
+
+    /// The CTs in ../shared and the built-in one: what is left out lies behind the body or
+    /// beside the head (the table, the holder), the skeleton is kept whole, and so is
+    /// nearly all the dense tissue.
+    #[test]
+    fn real_ct_bodies_leave_out_the_table_and_the_holder() {
+        for (path, at_least_ml) in [
+            (
+                "../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz",
+                250.0,
+            ),
+            (
+                "../../../shared/data/volumes/dicom/abdomen_ct_j2k_totalseg",
+                150.0,
+            ),
+            (
+                "../../../shared/data/volumes/dicom/head_ct_gantry_tilt_ge",
+                80.0,
+            ),
+        ] {
+            let vol = ct(path);
+            let b = body(&vol, &BodyOptions::default()).unwrap();
+            let ml: f64 = b.left_out_ml.iter().sum();
+            assert!(ml >= at_least_ml, "{path}: {ml} ml left out");
+            // The big pieces left out are the devices: the thin parts kept are small.
+            assert!(
+                b.left_out_ml.iter().filter(|&&x| x > 1.0).count() >= 2,
+                "{path}"
+            );
+            assert!(
+                b.thin_part_ml < 30.0,
+                "{path}: {} ml of thin parts",
+                b.thin_part_ml
+            );
+            // The skeleton whole, and all but the devices' share of the dense voxels.
+            let (mut dense, mut dense_in) = (0usize, 0usize);
+            for (&v, &inside) in vol.data.iter().zip(&b.inside) {
+                assert!(v <= 700.0 || inside, "{path}: bone left out");
+                if v > -500.0 {
+                    dense += 1;
+                    dense_in += usize::from(inside);
+                }
+            }
+            let out_ml = (dense - dense_in) as f64 * vol.voxel_ml();
+            assert!(
+                (out_ml - ml).abs() < 1e-6 * ml,
+                "{path}: {out_ml} ml out for {ml}"
+            );
+        }
+    }
+}

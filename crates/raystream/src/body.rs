@@ -1,0 +1,156 @@
+//! `--body-only`: a CT kept to the patient's body ([`raystream_volume::body`]), the table, a
+//! head holder, cables and pads left out: for the bones and the volume modes, every voxel
+//! beyond the body's margin set to the CT's lowest value (air); for the projections (mip,
+//! minip, average), the body's voxels alone projected, as a segment kept (`--segment`) is.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Result, bail};
+use raystream_cpu::dvr::DvrMode;
+use raystream_io::{ValueUnit, Volume};
+use raystream_volume::body::{Body, BodyOptions, body};
+
+use crate::segments::Painted;
+
+/// The body in `volume` (read from `path`), said on stderr unless `quiet`; refused for a
+/// volume not in HU.
+pub fn find(volume: &Volume, path: &Path, quiet: bool) -> Result<Body> {
+    if volume.unit != ValueUnit::Hounsfield {
+        bail!(
+            "{}: --body-only finds the body by its HU (above -500 HU); this volume's values are not HU",
+            path.display()
+        );
+    }
+    let t = Instant::now();
+    let pb = crate::common::spinner(quiet, &format!("finding the body in {}", path.display()));
+    let b = body(volume, &BodyOptions::default())
+        .map_err(|e| anyhow::anyhow!("{}: --body-only: {e}", path.display()))?;
+    pb.finish_and_clear();
+    if !quiet {
+        eprintln!(
+            "raystream: {}: {} ({:.0} ms)",
+            path.display(),
+            words(&b, volume.voxel_ml()),
+            t.elapsed().as_secs_f64() * 1e3
+        );
+    }
+    Ok(b)
+}
+
+/// What the summary says of `b`: the body's size, what was left out, the thin parts joined.
+pub fn words(b: &Body, voxel_ml: f64) -> String {
+    let big: Vec<String> = (b.left_out_ml.iter().filter(|&&ml| ml >= 1.0))
+        .map(|ml| format!("{ml:.0} ml"))
+        .collect();
+    let small = &b.left_out_ml[big.len()..];
+    let mut out = Vec::new();
+    if !big.is_empty() {
+        out.push(format!(
+            "{} ({})",
+            crate::common::plural(big.len(), "piece", "pieces"),
+            big.join(", ")
+        ));
+    }
+    if !small.is_empty() {
+        out.push(format!(
+            "{} ({:.1} ml)",
+            crate::common::plural(small.len(), "speck", "specks"),
+            small.iter().sum::<f64>()
+        ));
+    }
+    format!(
+        "the body, {:.2} l with what it encloses; left out above -500 HU: {}{}",
+        b.voxels as f64 * voxel_ml / 1000.0,
+        if out.is_empty() {
+            "nothing".to_string()
+        } else {
+            out.join(" and ")
+        },
+        match b.thin_parts {
+            0 => String::new(),
+            n => format!(
+                "; {} thinner than the 8 mm ball joined back ({:.1} ml)",
+                crate::common::plural(n, "part", "parts"),
+                b.thin_part_ml
+            ),
+        }
+    )
+}
+
+/// `volume` with every voxel beyond the body's margin ([`Body::with_margin`]) set to its
+/// lowest value: air, which the bones, dvr, iso, cinematic and slices read as nothing.
+pub fn hide_outside(volume: &mut Volume, b: &Body) {
+    let lowest = volume.value_range().map_or(-1024.0, |(lo, _)| lo);
+    for (v, keep) in volume.data.iter_mut().zip(b.with_margin(volume.dims)) {
+        if !keep {
+            *v = lowest;
+        }
+    }
+}
+
+/// A projection (mip, minip, average) of `volume` kept to the body, and to the segments
+/// `painted` keeps it to (if any): its weights ([`keep_projected`]), and an average's window
+/// spanning the body's values where none was set.
+pub fn projected(
+    mode: DvrMode,
+    volume: &mut Volume,
+    painted: Option<Painted>,
+    b: &Body,
+) -> Painted {
+    let mut p = painted.unwrap_or_else(|| Painted {
+        colours: None,
+        kept: None,
+        weights: None,
+        window: None,
+        words: "the body alone".to_string(),
+        legend: Vec::new(),
+    });
+    let weights = keep_projected(mode, volume, p.weights.take(), b);
+    if mode == DvrMode::Average && p.window.is_none() {
+        let mut values: Vec<f32> = (volume.data.iter().zip(&weights.data))
+            .filter(|&(_, &w)| w > 0.0)
+            .map(|(&v, _)| v)
+            .collect();
+        p.window = crate::segments::spanning_window(&mut values);
+    }
+    p.weights = Some(weights);
+    p
+}
+
+/// A projection (mip, minip, average) kept to the body: `weights` (1 at each voxel kept, 0
+/// at each hidden one: a segment's, or none) and `b`'s voxels together, and `volume`'s
+/// voxels hidden set to 0, as `raystream_cpu::dvr::CpuVolume::kept` takes them. So a MinIP
+/// shows the bowel's gas, the lungs and the airway rather than the air around the body; it
+/// takes the body less its rim ([`Body::without_rim`]: the skin's outer voxels, partly air,
+/// would be its lowest values), a MIP and an average the whole body (a MIP's silhouette is
+/// the skin's).
+pub fn keep_projected(
+    mode: DvrMode,
+    volume: &mut Volume,
+    weights: Option<Volume>,
+    b: &Body,
+) -> Volume {
+    let mut w = weights.unwrap_or_else(|| Volume {
+        origin: volume.origin,
+        direction: volume.direction,
+        ..Volume::hounsfield(volume.dims, volume.spacing, vec![1.0; volume.data.len()])
+    });
+    let rimless;
+    let inside = match mode {
+        DvrMode::MinIp => {
+            rimless = b.without_rim(volume.dims);
+            &rimless
+        }
+        _ => &b.inside,
+    };
+    for ((x, v), &inside) in w.data.iter_mut().zip(volume.data.iter_mut()).zip(inside) {
+        if !inside {
+            *x = 0.0;
+        }
+        if *x == 0.0 {
+            *v = 0.0;
+        }
+    }
+    w
+}
