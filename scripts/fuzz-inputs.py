@@ -775,7 +775,9 @@ def fuzz_files(work, n, device, only=None):
                       + shells + ["-o", os.path.join(d, "s.png")], s)
         if not why and not s.endswith((".obj", ".stl", ".ply", ".glb", ".gltf")) and random.random() < 0.3:
             # Its bones as a surface, some of their islands kept.
-            why = run(["iso", p, "-q"] + islands() + phase + ["-o", os.path.join(d, "b.stl")], (s, "b.stl"))
+            # (--body-only: a CT kept to its body; refused, naming it, for a volume not in HU.)
+            body = ["--body-only"] if random.random() < 0.3 else []
+            why = run(["iso", p, "-q"] + islands() + body + phase + ["-o", os.path.join(d, "b.stl")], (s, "b.stl"))
         if not why and not s.endswith((".obj", ".stl", ".ply", ".glb", ".gltf")):
             # A volume also goes straight through a windowed mode, its HU into an EXR.
             mode = random.choice(["mip", "minip", "average", "slice", "dvr", "cinematic"])
@@ -802,6 +804,9 @@ def fuzz_files(work, n, device, only=None):
                                 "-o", os.path.join(d, "a." + ("png" if kind == "apng" else "gif"))]
             else:
                 out = ["-o", os.path.join(d, "o.exr")] + phase
+            # Sometimes kept to the body (with --cine a usage error).
+            if "--cine" not in out and random.random() < 0.3:
+                extra.append("--body-only")
             why = run(["render", p, "--mode", mode, "--size", "8x8", "-q", "--device", device,
                        "--view", random.choice(["inferior", "left", "anterior"])] + extra + out, s)
             # Sometimes a slice of it tinted by itself as a label map (a Segmentation is one;

@@ -15,7 +15,8 @@
 //!    no core, or specks.
 //! 3. **Opening**: the dense voxels within the opening's radius and a voxel of the body's
 //!    core (its dilation by the ball): the body less what is thinner than the ball, and less
-//!    what touches it but a sliver as thick as a voxel.
+//!    what touches it but for a sliver within that reach of the core (where the back rests on
+//!    the table, the table's top closes the body from below, and the core reaches the skin).
 //! 4. **Thin parts**: the other dense voxels, in pieces joined through faces. A piece that
 //!    touches the opening, reaches no further than [`BodyOptions::thin_part_mm`] from the
 //!    body's core and holds at most [`BodyOptions::thin_part_ml`] is joined back (on the CTs
@@ -30,7 +31,9 @@
 //!
 //! Distances are in mm (anisotropic voxels are common: 0.49 × 0.49 × 1.13 mm on the head
 //! CT), by the exact transform of [`crate::distance`]; the grid's border is not taken for air,
-//! so a body cut off by the scan's ends keeps its full depth there.
+//! so a body cut off by the scan's ends keeps its full depth there. On a sheared grid (a
+//! gantry tilt) the axes are taken as square, which errs by the shear's cosine at most (0.95
+//! for the head CT's 18.5°).
 
 use rayon::prelude::*;
 use raystream_io::Volume;
@@ -53,15 +56,20 @@ pub struct BodyOptions {
     pub thin_part_mm: f64,
 }
 
+impl BodyOptions {
+    /// −500 HU, a ball of 4 mm radius, a core 15 mm deep, thin parts of 60 ml reaching 30 mm.
+    pub const DEFAULT: BodyOptions = BodyOptions {
+        threshold_hu: -500.0,
+        opening_mm: 4.0,
+        core_depth_mm: 15.0,
+        thin_part_ml: 60.0,
+        thin_part_mm: 30.0,
+    };
+}
+
 impl Default for BodyOptions {
     fn default() -> Self {
-        BodyOptions {
-            threshold_hu: -500.0,
-            opening_mm: 4.0,
-            core_depth_mm: 15.0,
-            thin_part_ml: 60.0,
-            thin_part_mm: 30.0,
-        }
+        BodyOptions::DEFAULT
     }
 }
 

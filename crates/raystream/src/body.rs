@@ -13,18 +13,22 @@ use raystream_volume::body::{Body, BodyOptions, body};
 
 use crate::segments::Painted;
 
+/// How the body is found.
+const OPTIONS: BodyOptions = BodyOptions::DEFAULT;
+
 /// The body in `volume` (read from `path`), said on stderr unless `quiet`; refused for a
 /// volume not in HU.
 pub fn find(volume: &Volume, path: &Path, quiet: bool) -> Result<Body> {
     if volume.unit != ValueUnit::Hounsfield {
         bail!(
-            "{}: --body-only finds the body by its HU (above -500 HU); this volume's values are not HU",
-            path.display()
+            "{}: --body-only finds the body by its HU (above {} HU); this volume's values are not HU",
+            path.display(),
+            OPTIONS.threshold_hu
         );
     }
     let t = Instant::now();
     let pb = crate::common::spinner(quiet, &format!("finding the body in {}", path.display()));
-    let b = body(volume, &BodyOptions::default())
+    let b = body(volume, &OPTIONS)
         .map_err(|e| anyhow::anyhow!("{}: --body-only: {e}", path.display()))?;
     pb.finish_and_clear();
     if !quiet {
@@ -60,8 +64,9 @@ pub fn words(b: &Body, voxel_ml: f64) -> String {
         ));
     }
     format!(
-        "the body, {:.2} l with what it encloses; left out above -500 HU: {}{}",
+        "the body, {:.2} l with what it encloses; left out above {} HU: {}{}",
         b.voxels as f64 * voxel_ml / 1000.0,
+        OPTIONS.threshold_hu,
         if out.is_empty() {
             "nothing".to_string()
         } else {
@@ -70,12 +75,31 @@ pub fn words(b: &Body, voxel_ml: f64) -> String {
         match b.thin_parts {
             0 => String::new(),
             n => format!(
-                "; {} thinner than the 8 mm ball joined back ({:.1} ml)",
+                "; {} thinner than the {} mm ball joined back ({:.1} ml)",
                 crate::common::plural(n, "part", "parts"),
+                2.0 * OPTIONS.opening_mm,
                 b.thin_part_ml
             ),
         }
     )
+}
+
+/// `b`, found on `volume`, on the grid a lone slice is drawn on (`Volume::slab_of_lone_slices`:
+/// two layers of it), else as it is.
+pub fn on_slab(mut b: Body, volume: &Volume) -> Body {
+    let mask = Volume {
+        origin: volume.origin,
+        direction: volume.direction,
+        ..Volume::hounsfield(
+            volume.dims,
+            volume.spacing,
+            b.inside.iter().map(|&i| f32::from(u8::from(i))).collect(),
+        )
+    };
+    if let Some(slab) = mask.slab_of_lone_slices() {
+        b.inside = slab.data.iter().map(|&x| x > 0.5).collect();
+    }
+    b
 }
 
 /// `volume` with every voxel beyond the body's margin ([`Body::with_margin`]) set to its

@@ -890,7 +890,9 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     }
     let (volume, load_ms) = read_volume(path, &select, a.quiet, embedded)?;
     let lone = crate::common::lone_slice_view(&volume);
-    let mut volume = crate::common::slab_if_lone(volume, path, a.quiet);
+    // The body of the CT as read (a lone slice's, not its slab's twice), then on the grid
+    // drawn.
+    let mut volume = volume;
     let body = match a.body_only {
         true => Some(crate::body::find(&volume, path, a.quiet)?),
         false => None,
@@ -898,6 +900,8 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
     if let Some(b) = body.as_ref().filter(|_| !mode.is_projection()) {
         crate::body::hide_outside(&mut volume, b);
     }
+    let body = body.map(|b| crate::body::on_slab(b, &volume));
+    let volume = crate::common::slab_if_lone(volume, path, a.quiet);
     let labels = segmentation(a, format, &volume)?;
     // Every other mode colours (dvr, iso, cinematic) or keeps to segments (--segment).
     let painted = if mode == DvrMode::Slice {

@@ -261,6 +261,35 @@ fn iso_of_a_lone_slice_is_its_slab() {
         (b.min.z - (z - half)).abs() < 1e-3 && (b.max.z - (z + half)).abs() < 1e-3,
         "{b:?}"
     );
+    // Its body is the slice's, once, whether its bones are made or its slab is projected.
+    // (its line less the time it took)
+    let body = |said: &str| {
+        (said.lines().find(|l| l.contains("the body, ")))
+            .and_then(|l| l.rsplit_once(" ("))
+            .map(|(words, _)| words.to_string())
+    };
+
+    let (_, bones) = iso_to(slice, "lone-slice-body.stl", &["--body-only"]);
+    let png = tmp("lone-slice-body.png");
+    let o = run(&[
+        "render",
+        slice,
+        "--mode",
+        "minip",
+        "--body-only",
+        "--size",
+        "32x32",
+        "--device",
+        "cpu",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        body(&bones).is_some() && body(&bones) == body(&stderr(&o)),
+        "{bones}\n{}",
+        stderr(&o)
+    );
 }
 
 /// `--fill-cavities` on the chest CT's bones: it fills as many cavities as the full surface has
