@@ -918,6 +918,8 @@ def fuzz_scenes(work, n):
             if random.random() < 0.5:
                 s += f'segmentation = "{halves_of(ct, work)}"\n'
                 s += random.choice(["", 'segment = "all"\n', "segment = [2]\n", 'segment = "1, 2"\n'])
+            if random.random() < 0.3:
+                s += "body_only = true\n"
         for _ in range(random.randint(1, 3)):
             m = random.choice(list(re.finditer(r"-?\d+(\.\d+)?", s)))
             s = s[:m.start()] + random.choice(

@@ -61,6 +61,9 @@ pub struct VolumeDesc {
     /// The segmentation's names and colours: a 3D Slicer colour table or an ITK-SNAP label
     /// description, relative to the scene file (as `--colour-table`).
     pub colour_table: Option<String>,
+    /// The CT kept to the patient's body, the table and a head holder left out (as
+    /// `--body-only`; default false).
+    pub body_only: Option<bool>,
 }
 
 /// `segment = "1,2"` or `segment = [1, 2]` (numbers or names).

@@ -241,6 +241,20 @@ impl SceneVolume {
                 phase: d.phase,
             },
         )?;
+        let mut volume = volume;
+        if d.body_only == Some(true) {
+            let path = base_dir.join(&d.path);
+            if volume.unit != raystream_io::ValueUnit::Hounsfield {
+                return Err(format!(
+                    "volume: body_only finds the body by its HU; {}'s values are not HU",
+                    path.display()
+                )
+                .into());
+            }
+            let body = raystream_volume::body::body(&volume, &Default::default())
+                .map_err(|e| format!("volume: body_only: {}: {e}", path.display()))?;
+            body.hide_outside(&mut volume);
+        }
         // A lone slice as the slab it images: a plane of no depth would take no sample.
         let volume = volume.slab_of_lone_slices().unwrap_or(volume);
         // Values of no known unit, given no transfer function: CT-Bone's HU mean nothing

@@ -117,6 +117,20 @@ impl Body {
     }
 }
 
+impl Body {
+    /// `vol` (the volume the body was found in) with every voxel beyond the body's margin
+    /// ([`Body::with_margin`]) set to its lowest value: air, which renderings and isosurfaces
+    /// read as nothing, while the skin is sampled as before.
+    pub fn hide_outside(&self, vol: &mut Volume) {
+        let lowest = vol.value_range().map_or(-1024.0, |(lo, _)| lo);
+        for (v, keep) in vol.data.iter_mut().zip(self.with_margin(vol.dims)) {
+            if !keep {
+                *v = lowest;
+            }
+        }
+    }
+}
+
 /// `f` of each voxel (i, j, k) of a grid of `dims`, slice by slice in parallel.
 fn per_voxel(dims: [usize; 3], f: impl Fn((usize, usize, usize)) -> bool + Sync) -> Vec<bool> {
     let [nx, ny, nz] = dims;

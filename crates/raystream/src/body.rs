@@ -102,17 +102,6 @@ pub fn on_slab(mut b: Body, volume: &Volume) -> Body {
     b
 }
 
-/// `volume` with every voxel beyond the body's margin ([`Body::with_margin`]) set to its
-/// lowest value: air, which the bones, dvr, iso, cinematic and slices read as nothing.
-pub fn hide_outside(volume: &mut Volume, b: &Body) {
-    let lowest = volume.value_range().map_or(-1024.0, |(lo, _)| lo);
-    for (v, keep) in volume.data.iter_mut().zip(b.with_margin(volume.dims)) {
-        if !keep {
-            *v = lowest;
-        }
-    }
-}
-
 /// A projection (mip, minip, average) of `volume` kept to the body, and to the segments
 /// `painted` keeps it to (if any): its weights ([`keep_projected`]), and an average's window
 /// spanning the body's values where none was set.

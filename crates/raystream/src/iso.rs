@@ -190,7 +190,7 @@ pub fn run(a: &IsoArgs) -> Result<()> {
     let (mut volume, load_ms) = read_volume(&a.input, &a.pick.select(), a.quiet, None)?;
     if a.body_only {
         let b = crate::body::find(&volume, &a.input, a.quiet)?;
-        crate::body::hide_outside(&mut volume, &b);
+        b.hide_outside(&mut volume);
     }
     let segment = a.segment.as_deref();
     if wants_segments(&volume, &a.threshold, segment, a.colour_table.as_deref()) {

@@ -89,7 +89,7 @@ fn load_scene(a: &RenderArgs) -> Result<(Scene, Option<Bones>, Vec<crate::legend
         let (mut volume, load_ms) = read_volume(path, &a.pick.select(), a.quiet, embedded)?;
         if a.body_only {
             let b = crate::body::find(&volume, path, a.quiet)?;
-            crate::body::hide_outside(&mut volume, &b);
+            b.hide_outside(&mut volume);
         }
         let (segment, table) = (a.segment.as_deref(), a.colour_table.as_deref());
         let lone_view = crate::common::lone_slice_view(&volume);
@@ -898,7 +898,7 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         false => None,
     };
     if let Some(b) = body.as_ref().filter(|_| !mode.is_projection()) {
-        crate::body::hide_outside(&mut volume, b);
+        b.hide_outside(&mut volume);
     }
     let body = body.map(|b| crate::body::on_slab(b, &volume));
     let volume = crate::common::slab_if_lone(volume, path, a.quiet);

@@ -450,6 +450,17 @@ fn body_only_refuses_what_has_no_body() {
             "this volume's values are not HU",
         );
     }
+    // A scene file's [volume] too.
+    let scene = write(
+        "body-bonsai.toml",
+        format!("[volume]\npath = {bonsai:?}\nbody_only = true\n[[objects]]\nshape = \"sphere\"\n")
+            .as_bytes(),
+    );
+    assert_input_error(
+        &["render", &scene, "-o", &out],
+        "scivis_bonsai.nii.gz",
+        "body_only finds the body by its HU",
+    );
     let like = raystream_io::Volume::hounsfield([24, 24, 24], [1.0; 3], Vec::new());
     let air = write_like("body-air.mha", &like, &vec![-1000.0; 24 * 24 * 24]);
     let air = air.to_str().unwrap();

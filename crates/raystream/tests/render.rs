@@ -3374,69 +3374,73 @@ fn three_mf_reads_and_writes_as_lib3mf_does() {
     );
 }
 
-/// `render --mode dvr --body-only` of the J2K series seen from below (the feet): the table's
-/// curved top, under the body in the plain picture, is gone, and the body is drawn as it was.
-/// On both devices.
+/// `render --mode dvr --body-only` of the J2K series seen from below (the feet), and a scene
+/// file's `[volume]` with `body_only = true`: the table's curved top, under the body in the
+/// plain picture, is gone, and the body is drawn as it was. On both devices.
 #[test]
 fn dvr_body_only_leaves_out_the_table() {
     let ct = shared().join("data/volumes/dicom/abdomen_ct_j2k_totalseg");
     let ct = ct.to_str().unwrap();
+    // A scene of the CT and a sphere in it, with the body alone or not.
+    let scene = |body: bool| {
+        let file = tmp(&format!("body-scene-{body}.toml"));
+        let text = format!(
+            "[volume]\npath = {ct:?}\npreset = \"ct-muscle\"\nbody_only = {body}\n[[objects]]\nshape = \"sphere\"\nframe = \"lps\"\nscale = 10\ntranslate = [0, -150, -785]\n"
+        );
+        std::fs::write(&file, text).unwrap();
+        file.to_string_lossy().into_owned()
+    };
+    let (plain_scene, body_scene) = (scene(false), scene(true));
     for dev in devices() {
-        let picture = |name: &str, more: &[&str]| {
-            let args = [
-                &[
-                    ct,
-                    "--mode",
-                    "dvr",
-                    "--preset",
-                    "ct-muscle",
-                    "--view",
-                    "inferior",
-                    "--size",
-                    "96x96",
-                ],
-                more,
-            ]
-            .concat();
+        let picture = |name: &str, args: &[&str]| {
+            let args = [args, &["--view", "inferior", "--size", "96x96"]].concat();
             let png = render_to(&format!("{name}-{dev}.png"), dev, &args);
             let rgb = image::open(&png).unwrap().to_rgb8();
             let background = *rgb.get_pixel(0, 0);
             let w = rgb.width() as usize;
-            let drawn: Vec<bool> = rgb
-                .pixels()
+            let drawn: Vec<bool> = (rgb.pixels())
                 .map(|p| p.0.iter().zip(background.0).any(|(a, b)| a.abs_diff(b) > 8))
                 .collect();
             (w, rgb.into_raw(), drawn)
         };
-        let (w, plain, all) = picture("body-dvr-plain", &[]);
-        let (_, body, kept) = picture("body-dvr-only", &["--body-only"]);
-        // The body's pixels, drawn alike (within 2/255 but for a rim).
-        let both: Vec<usize> = (0..kept.len()).filter(|&n| kept[n]).collect();
-        assert!(
-            both.iter().all(|&n| all[n]),
-            "{dev}: the body drawn where the whole CT is not"
-        );
-        let alike = both
-            .iter()
-            .filter(|&&n| (0..3).all(|c| plain[3 * n + c].abs_diff(body[3 * n + c]) <= 2))
-            .count();
-        assert!(
-            alike as f64 > 0.95 * both.len() as f64,
-            "{dev}: {alike} of {} alike",
-            both.len()
-        );
-        // The table: drawn in the whole CT's picture only, each pixel under the body's
-        // pixels in its column (the top's curved sides rise beside the arms).
-        let gone: Vec<usize> = (0..all.len()).filter(|&n| all[n] && !kept[n]).collect();
-        let mut lowest = vec![0; w];
-        for &n in &both {
-            lowest[n % w] = lowest[n % w].max(n / w);
+        let dvr = [ct, "--mode", "dvr", "--preset", "ct-muscle"];
+        for (what, plain_args, body_args) in [
+            ("dvr", dvr.to_vec(), [&dvr[..], &["--body-only"]].concat()),
+            (
+                "scene",
+                vec![plain_scene.as_str()],
+                vec![body_scene.as_str()],
+            ),
+        ] {
+            let (w, plain, all) = picture(&format!("body-{what}-plain"), &plain_args);
+            let (_, body, kept) = picture(&format!("body-{what}-only"), &body_args);
+            // The body's pixels, drawn alike (within 2/255 but for a rim).
+            let both: Vec<usize> = (0..kept.len()).filter(|&n| kept[n]).collect();
+            assert!(
+                both.iter().all(|&n| all[n]),
+                "{dev} {what}: drawn where the whole CT is not"
+            );
+            let alike = (both.iter())
+                .filter(|&&n| (0..3).all(|c| plain[3 * n + c].abs_diff(body[3 * n + c]) <= 2))
+                .count();
+            assert!(
+                alike as f64 > 0.95 * both.len() as f64,
+                "{dev} {what}: {alike} of {} alike",
+                both.len()
+            );
+            // The table: drawn in the whole CT's picture only, each pixel under the body's
+            // pixels in its column (the top's curved sides rise beside the arms).
+            let gone: Vec<usize> = (0..all.len()).filter(|&n| all[n] && !kept[n]).collect();
+            let mut lowest = vec![0; w];
+            for &n in &both {
+                lowest[n % w] = lowest[n % w].max(n / w);
+            }
+            let over = gone.iter().filter(|&&n| n / w <= lowest[n % w]).count();
+            assert!(
+                gone.len() > 300 && over == 0,
+                "{dev} {what}: {} pixels gone, {over} not under the body",
+                gone.len()
+            );
         }
-        let over = gone.iter().filter(|&&n| n / w <= lowest[n % w]).count();
-        assert!(
-            gone.len() > 300 && over == 0,
-            "{dev}: {} pixels gone, {over} not under the body",
-            gone.len()
-        );
     }
 }
