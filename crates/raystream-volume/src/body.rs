@@ -29,6 +29,11 @@
 //!    border does not reach without crossing the body (the lungs, the airway, the bowel's gas,
 //!    which are below the threshold but inside).
 //!
+//! The slice's border is taken for air around the body. Where the field of view cuts the
+//! body (a cropped CT, a cardiac CT's small field) and a lung reaches the border, the lung is
+//! not enclosed, and its vessels, thin and reaching far, are left out: [`Body::cut_slices`]
+//! counts the slices where the body reaches the border, and the command line says so.
+//!
 //! Distances are in mm (anisotropic voxels are common: 0.49 × 0.49 × 1.13 mm on the head
 //! CT), by the exact transform of [`crate::distance`]; the grid's border is not taken for air,
 //! so a body cut off by the scan's ends keeps its full depth there. On a sheared grid (a
@@ -85,6 +90,8 @@ pub struct Body {
     /// The thin parts joined back: how many, and their ml.
     pub thin_parts: usize,
     pub thin_part_ml: f64,
+    /// The slices whose border the body reaches: the field of view cuts it there.
+    pub cut_slices: usize,
 }
 
 impl Body {
@@ -225,9 +232,11 @@ pub fn body(vol: &Volume, opt: &BodyOptions) -> Result<Body, String> {
     let thin_part_ml = thin.iter().map(|&p| sizes[p] as f64 * voxel_ml).sum();
     // 5. What each slice's border cannot reach without crossing the body.
     let mut inside = vec![false; kept.len()];
-    (inside.par_chunks_mut((nx * ny).max(1)))
+    let cut_slices = (inside.par_chunks_mut((nx * ny).max(1)))
         .zip(kept.par_chunks((nx * ny).max(1)))
-        .for_each(|(out, wall)| enclosed_in_slice([nx, ny], wall, out));
+        .map(|(out, wall)| enclosed_in_slice([nx, ny], wall, out))
+        .filter(|&cut| cut)
+        .count();
     debug_assert_eq!(inside.len(), nx * ny * nz);
     let voxels = inside.iter().filter(|&&b| b).count();
     // What is left of the pieces not joined once the body's enclosures are in (a speck
@@ -248,6 +257,7 @@ pub fn body(vol: &Volume, opt: &BodyOptions) -> Result<Body, String> {
         left_out_ml,
         thin_parts: thin.len(),
         thin_part_ml,
+        cut_slices,
     })
 }
 
@@ -301,14 +311,17 @@ fn pieces(dims: [usize; 3], member: &[bool]) -> (Vec<u32>, Vec<usize>) {
 
 /// Into `out`, per pixel of a slice of `dims`: whether it is `wall`, or no path of pixels that
 /// are not (each joined to the four sharing an edge) reaches it from the slice's border.
-fn enclosed_in_slice([nx, ny]: [usize; 2], wall: &[bool], out: &mut [bool]) {
+/// Whether `wall` touches the border: the field of view cuts the body there (a cropped CT, a
+/// cardiac CT's small field, a large patient's flanks), and the border is not all air around
+/// it ([`Body::cut_slices`]).
+fn enclosed_in_slice([nx, ny]: [usize; 2], wall: &[bool], out: &mut [bool]) -> bool {
+    let border = |n: usize| {
+        let (i, j) = (n % nx, n / nx);
+        i == 0 || j == 0 || i + 1 == nx || j + 1 == ny
+    };
+    let cut = (0..nx * ny).any(|n| border(n) && wall[n]);
     // `out` first marks what the border reaches; flipped at the end.
-    let mut stack: Vec<usize> = (0..nx * ny)
-        .filter(|&n| {
-            let (i, j) = (n % nx, n / nx);
-            (i == 0 || j == 0 || i + 1 == nx || j + 1 == ny) && !wall[n]
-        })
-        .collect();
+    let mut stack: Vec<usize> = (0..nx * ny).filter(|&n| border(n) && !wall[n]).collect();
     for &n in &stack {
         out[n] = true;
     }
@@ -330,6 +343,7 @@ fn enclosed_in_slice([nx, ny]: [usize; 2], wall: &[bool], out: &mut [bool]) {
     for o in out.iter_mut() {
         *o = !*o;
     }
+    cut
 }
 
 #[cfg(test)]
@@ -484,6 +498,7 @@ mod tests {
             left_out_ml: Vec::new(),
             thin_parts: 0,
             thin_part_ml: 0.0,
+            cut_slices: 0,
         };
         let (margin, core) = (b.with_margin(dims), b.without_rim(dims));
         let at = |[i, j, k]: [i64; 3]| {
@@ -520,22 +535,33 @@ mod tests {
     /// nearly all the dense tissue.
     #[test]
     fn real_ct_bodies_leave_out_the_table_and_the_holder() {
-        for (path, at_least_ml) in [
+        // The chest CT is a crop within the body: every slice is cut, and the lungs reach
+        // the border (the limit the module states).
+        let chest = ct("../../../shared/data/volumes/nifti/chest_ct_stents_totalseg.nii.gz");
+        let b = body(&chest, &BodyOptions::default()).unwrap();
+        assert_eq!(b.cut_slices, chest.dims[2]);
+        // Each with the slices whose border the body reaches: the built-in CT is cropped
+        // close about the body, which its flanks touch.
+        for (path, at_least_ml, cut) in [
             (
                 "../raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz",
                 250.0,
+                76,
             ),
             (
                 "../../../shared/data/volumes/dicom/abdomen_ct_j2k_totalseg",
                 150.0,
+                0,
             ),
             (
                 "../../../shared/data/volumes/dicom/head_ct_gantry_tilt_ge",
                 80.0,
+                0,
             ),
         ] {
             let vol = ct(path);
             let b = body(&vol, &BodyOptions::default()).unwrap();
+            assert_eq!(b.cut_slices, cut, "{path}");
             let ml: f64 = b.left_out_ml.iter().sum();
             assert!(ml >= at_least_ml, "{path}: {ml} ml left out");
             // The big pieces left out are the devices: the thin parts kept are small.

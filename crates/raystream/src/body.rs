@@ -64,7 +64,7 @@ pub fn words(b: &Body, voxel_ml: f64) -> String {
         ));
     }
     format!(
-        "the body, {:.2} l with what it encloses; left out above {} HU: {}{}",
+        "the body, {:.2} l with what it encloses; left out above {} HU: {}{}{}",
         b.voxels as f64 * voxel_ml / 1000.0,
         OPTIONS.threshold_hu,
         if out.is_empty() {
@@ -79,6 +79,13 @@ pub fn words(b: &Body, voxel_ml: f64) -> String {
                 crate::common::plural(n, "part", "parts"),
                 2.0 * OPTIONS.opening_mm,
                 b.thin_part_ml
+            ),
+        },
+        match b.cut_slices {
+            0 => String::new(),
+            n => format!(
+                "; the field of view cuts the body in {} (a lung cut by it would lose its vessels)",
+                crate::common::plural(n, "slice", "slices")
             ),
         }
     )
