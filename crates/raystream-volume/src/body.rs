@@ -326,14 +326,8 @@ fn enclosed_in_slice([nx, ny]: [usize; 2], wall: &[bool], out: &mut [bool]) -> b
         out[n] = true;
     }
     while let Some(n) = stack.pop() {
-        let (i, j) = (n % nx, n / nx);
-        let around = [
-            (i > 0).then(|| n - 1),
-            (i + 1 < nx).then(|| n + 1),
-            (j > 0).then(|| n - nx),
-            (j + 1 < ny).then(|| n + nx),
-        ];
-        for m in around.into_iter().flatten() {
+        // A slice is a grid one voxel deep: its face neighbours are the four in its plane.
+        for m in neighbours([nx, ny, 1], (n % nx, n / nx, 0)) {
             if !wall[m] && !out[m] {
                 out[m] = true;
                 stack.push(m);
