@@ -29,10 +29,17 @@
 //!    border does not reach without crossing the body (the lungs, the airway, the bowel's gas,
 //!    which are below the threshold but inside).
 //!
-//! The slice's border is taken for air around the body. Where the field of view cuts the
-//! body (a cropped CT, a cardiac CT's small field) and a lung reaches the border, the lung is
-//! not enclosed, and its vessels, thin and reaching far, are left out: [`Body::cut_slices`]
-//! counts the slices where the body reaches the border, and the command line says so.
+//! Where the field of view cuts the body (a cropped CT, a cardiac CT's small field, a large
+//! patient's flanks), the border is not all air around the body: a lung reaches it too, and
+//! would be left out with its vessels. In such a slice, each region the border reaches is
+//! judged by its HU: air around a body reads −1000 to −900 HU (noise and beam hardening
+//! raise it), lung parenchyma −900 to −700. A region at least half of whose voxels are at or
+//! below [`BodyOptions::air_hu`] is air (each region of air around the built-in CT's flanks:
+//! 65 to 97 %); the others are tissue within the body (the chest crop's lungs: at most 9 %),
+//! counted in [`Body::border_tissue_ml`], and so is a small pocket of partial volume between
+//! the skin and the border. What the border cuts and is mostly below −900 HU reads as air: an
+//! emphysematous lung, or the bowel's gas (the chest crop's splenic flexure, in its lowest
+//! slices).
 //!
 //! Distances are in mm (anisotropic voxels are common: 0.49 × 0.49 × 1.13 mm on the head
 //! CT), by the exact transform of [`crate::distance`]; the grid's border is not taken for air,
@@ -59,16 +66,22 @@ pub struct BodyOptions {
     /// from the body's core it may reach, mm.
     pub thin_part_ml: f64,
     pub thin_part_mm: f64,
+    /// HU at or below which a voxel is air: where the field of view cuts the body, a region
+    /// reaching the slice's border is the air around the body when at least half of it is
+    /// air, and a lung the border cuts otherwise.
+    pub air_hu: f32,
 }
 
 impl BodyOptions {
-    /// −500 HU, a ball of 4 mm radius, a core 15 mm deep, thin parts of 60 ml reaching 30 mm.
+    /// −500 HU, a ball of 4 mm radius, a core 15 mm deep, thin parts of 60 ml reaching 30 mm,
+    /// air at −900 HU.
     pub const DEFAULT: BodyOptions = BodyOptions {
         threshold_hu: -500.0,
         opening_mm: 4.0,
         core_depth_mm: 15.0,
         thin_part_ml: 60.0,
         thin_part_mm: 30.0,
+        air_hu: -900.0,
     };
 }
 
@@ -92,6 +105,9 @@ pub struct Body {
     pub thin_part_ml: f64,
     /// The slices whose border the body reaches: the field of view cuts it there.
     pub cut_slices: usize,
+    /// In those slices, the ml of the regions reaching the border that were judged tissue
+    /// rather than air (a lung the field of view cuts), and kept.
+    pub border_tissue_ml: f64,
 }
 
 impl Body {
@@ -232,13 +248,15 @@ pub fn body(vol: &Volume, opt: &BodyOptions) -> Result<Body, String> {
     let thin_part_ml = thin.iter().map(|&p| sizes[p] as f64 * voxel_ml).sum();
     // 5. What each slice's border cannot reach without crossing the body.
     let mut inside = vec![false; kept.len()];
-    let cut_slices = (inside.par_chunks_mut((nx * ny).max(1)))
-        .zip(kept.par_chunks((nx * ny).max(1)))
-        .map(|(out, wall)| enclosed_in_slice([nx, ny], wall, out))
-        .filter(|&cut| cut)
-        .count();
+    let slice = (nx * ny).max(1);
+    let (cut_slices, border_tissue) = (inside.par_chunks_mut(slice))
+        .zip(kept.par_chunks(slice).zip(vol.data.par_chunks(slice)))
+        .map(|(out, (wall, hu))| enclosed_in_slice([nx, ny], wall, hu, opt.air_hu, out))
+        .map(|(cut, tissue)| (usize::from(cut), tissue))
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     debug_assert_eq!(inside.len(), nx * ny * nz);
     let voxels = inside.iter().filter(|&&b| b).count();
+
     // What is left of the pieces not joined once the body's enclosures are in (a speck
     // within a slice's ring of skin is).
     let mut out = vec![0usize; sizes.len()];
@@ -258,6 +276,7 @@ pub fn body(vol: &Volume, opt: &BodyOptions) -> Result<Body, String> {
         thin_parts: thin.len(),
         thin_part_ml,
         cut_slices,
+        border_tissue_ml: border_tissue as f64 * voxel_ml,
     })
 }
 
@@ -309,35 +328,63 @@ fn pieces(dims: [usize; 3], member: &[bool]) -> (Vec<u32>, Vec<usize>) {
     (labels, sizes)
 }
 
-/// Into `out`, per pixel of a slice of `dims`: whether it is `wall`, or no path of pixels that
-/// are not (each joined to the four sharing an edge) reaches it from the slice's border.
-/// Whether `wall` touches the border: the field of view cuts the body there (a cropped CT, a
-/// cardiac CT's small field, a large patient's flanks), and the border is not all air around
-/// it ([`Body::cut_slices`]).
-fn enclosed_in_slice([nx, ny]: [usize; 2], wall: &[bool], out: &mut [bool]) -> bool {
+/// Into `out`, per pixel of a slice of `dims`: whether it is `wall`, or lies within it.
+/// Whether `wall` touches the slice's border (the field of view cuts the body there), and how
+/// many pixels reaching the border were judged tissue.
+///
+/// What is not wall falls into regions (pixels joined to the four sharing an edge). A region
+/// the border does not reach is within the body (the airway, the bowel's gas, the lungs of an
+/// uncut slice). Where the body touches the border, a region that reaches the border may be
+/// a lung the field of view cuts, as well as the air around the body: the region is taken for
+/// air when at least half its pixels (`hu`) are at or below `air_hu`, and for tissue within
+/// the body otherwise (lung parenchyma with its vessels).
+fn enclosed_in_slice(
+    [nx, ny]: [usize; 2],
+    wall: &[bool],
+    hu: &[f32],
+    air_hu: f32,
+    out: &mut [bool],
+) -> (bool, usize) {
     let border = |n: usize| {
         let (i, j) = (n % nx, n / nx);
         i == 0 || j == 0 || i + 1 == nx || j + 1 == ny
     };
     let cut = (0..nx * ny).any(|n| border(n) && wall[n]);
-    // `out` first marks what the border reaches; flipped at the end.
-    let mut stack: Vec<usize> = (0..nx * ny).filter(|&n| border(n) && !wall[n]).collect();
-    for &n in &stack {
-        out[n] = true;
-    }
-    while let Some(n) = stack.pop() {
-        // A slice is a grid one voxel deep: its face neighbours are the four in its plane.
-        for m in neighbours([nx, ny, 1], (n % nx, n / nx, 0)) {
-            if !wall[m] && !out[m] {
-                out[m] = true;
-                stack.push(m);
+    // `out` first marks the regions taken for air around the body; flipped at the end. Each
+    // region reaching the border is flooded from its first border pixel, its pixels listed
+    // in `region` and counted; a region judged tissue is unmarked again.
+    let mut seen = vec![false; nx * ny];
+    let (mut stack, mut region, mut tissue) = (Vec::new(), Vec::new(), 0);
+    for seed in (0..nx * ny).filter(|&n| border(n)) {
+        if wall[seed] || seen[seed] {
+            continue;
+        }
+        seen[seed] = true;
+        stack.push(seed);
+        region.clear();
+        while let Some(n) = stack.pop() {
+            region.push(n);
+            // A slice is a grid one voxel deep: its face neighbours are the four in its plane.
+            for m in neighbours([nx, ny, 1], (n % nx, n / nx, 0)) {
+                if !wall[m] && !seen[m] {
+                    seen[m] = true;
+                    stack.push(m);
+                }
             }
+        }
+        let air = region.iter().filter(|&&n| hu[n] <= air_hu).count();
+        if !cut || 2 * air >= region.len() {
+            for &n in &region {
+                out[n] = true;
+            }
+        } else {
+            tissue += region.len();
         }
     }
     for o in out.iter_mut() {
         *o = !*o;
     }
-    cut
+    (cut, tissue)
 }
 
 #[cfg(test)]
@@ -462,6 +509,75 @@ mod tests {
         assert!(b.thin_part_ml > 0.0 && b.thin_part_ml < p.ear.len() as f64 * ml);
     }
 
+    /// The phantom cut by the field of view through its lung (the columns up to 66 mm from
+    /// the grid's side, 6 mm past the trunk's axis), with a vessel along the lung (a line of
+    /// 40 HU voxels, thinner than the ball, reaching no wall): the lung reaches the border in
+    /// every slice that has it, the air around the trunk too.
+    #[test]
+    fn a_lung_the_field_of_view_cuts_is_kept_and_the_air_left_out() {
+        let mut p = phantom();
+        let [nx, ny, nz] = p.vol.dims;
+        let (cx, at) = (34, |i: usize, j: usize, k: usize| i + nx * (j + ny * k));
+        let vessel: Vec<usize> = (6..24).map(|k| at(28, 20, k)).collect();
+        for &n in &vessel {
+            p.vol.data[n] = 40.0;
+        }
+        let lung: Vec<usize> = p
+            .lung
+            .iter()
+            .copied()
+            .filter(|n| !vessel.contains(n))
+            .collect();
+        // The crop, and each part's voxels in it.
+        let cropped = |n: usize| (n % nx < cx).then(|| n % nx + cx * (n / nx));
+        let mut data = vec![0.0f32; cx * ny * nz];
+        for (n, &v) in p.vol.data.iter().enumerate() {
+            if let Some(c) = cropped(n) {
+                data[c] = v;
+            }
+        }
+        let part = |v: &[usize]| -> Vec<usize> { v.iter().filter_map(|&n| cropped(n)).collect() };
+        let (trunk, lung, vessel) = (part(&p.trunk), part(&lung), part(&vessel));
+        let (table, cable) = (part(&p.table), part(&p.cable));
+        let mut vol = Volume::hounsfield([cx, ny, nz], [2.0; 3], data);
+        let b = body(&vol, &BodyOptions::default()).unwrap();
+        assert_eq!(b.cut_slices, nz);
+        for (name, v) in [("trunk", &trunk), ("lung", &lung), ("vessel", &vessel)] {
+            let out = v.iter().filter(|&&n| !b.inside[n]).count();
+            assert_eq!(out, 0, "{out} of the {name}'s {} voxels left out", v.len());
+        }
+        // The lung and its vessel are the tissue reaching the border; the air and the table
+        // and cable in it are left out, but for the table's sliver under the trunk.
+        let ml = 0.008;
+        let tissue = (lung.len() + vessel.len()) as f64 * ml;
+        assert!(
+            (b.border_tissue_ml - tissue).abs() < 1e-9,
+            "{}",
+            b.border_tissue_ml
+        );
+        assert!(cable.iter().all(|&n| !b.inside[n]), "the cable kept");
+        let mut of_trunk = vec![false; vol.data.len()];
+        for &n in trunk.iter().chain(&lung) {
+            of_trunk[n] = true;
+        }
+        let near2 = squared_distance(vol.dims, [2.0; 3], |n| of_trunk[n]);
+        let kept = table.iter().filter(|&&n| b.inside[n]).count();
+        assert!(
+            table.iter().all(|&n| !b.inside[n] || near2[n] <= 36.0) && kept < table.len() / 2,
+            "{kept} of {} table voxels kept",
+            table.len()
+        );
+        assert_eq!(b.voxels, trunk.len() + lung.len() + vessel.len() + kept);
+        // The limit the module states: a lung mostly below −900 HU reads as air, and is left
+        // out with its vessel.
+        for &n in &lung {
+            vol.data[n] = -950.0;
+        }
+        let b = body(&vol, &BodyOptions::default()).unwrap();
+        assert_eq!(b.border_tissue_ml, 0.0);
+        assert!(lung.iter().chain(&vessel).all(|&n| !b.inside[n]));
+    }
+
     #[test]
     fn no_body_is_an_error() {
         let air = Volume::hounsfield([8, 8, 8], [1.0; 3], vec![-1000.0; 512]);
@@ -493,6 +609,7 @@ mod tests {
             thin_parts: 0,
             thin_part_ml: 0.0,
             cut_slices: 0,
+            border_tissue_ml: 0.0,
         };
         let (margin, core) = (b.with_margin(dims), b.without_rim(dims));
         let at = |[i, j, k]: [i64; 3]| {
@@ -530,10 +647,37 @@ mod tests {
     #[test]
     fn real_ct_bodies_leave_out_the_table_and_the_holder() {
         // The chest CT is a crop within the body: every slice is cut, and the lungs reach
-        // the border (the limit the module states).
+        // the border on both sides. They read as tissue, and are kept with their vessels:
+        // nearly every voxel of lung parenchyma (−900 to −700 HU) and every one above
+        // −500 HU but for specks; the air before the neck is left out.
         let chest = ct("../../../shared/data/volumes/nifti/chest_ct_stents_totalseg.nii.gz");
         let b = body(&chest, &BodyOptions::default()).unwrap();
         assert_eq!(b.cut_slices, chest.dims[2]);
+        assert!(b.border_tissue_ml > 2000.0, "{} ml", b.border_tissue_ml);
+        let share = |lo: f32, hi: f32| {
+            let (mut all, mut kept) = (0usize, 0usize);
+            for (&v, &inside) in chest.data.iter().zip(&b.inside) {
+                if v > lo && v <= hi {
+                    all += 1;
+                    kept += usize::from(inside);
+                }
+            }
+            kept as f64 / all as f64
+        };
+        let lung = share(-900.0, -700.0);
+        assert!(lung > 0.98, "{lung} of the lung parenchyma kept");
+        let air = share(f32::MIN, -980.0);
+        assert!(air < 0.5, "{air} of the air kept");
+        assert!(
+            b.left_out_ml.iter().sum::<f64>() < 1.0,
+            "{:?}",
+            b.left_out_ml
+        );
+        assert!(
+            b.left_out_ml.iter().all(|&ml| ml < 1.0),
+            "{:?}",
+            b.left_out_ml
+        );
         // Each with the slices whose border the body reaches: the built-in CT is cropped
         // close about the body, which its flanks touch.
         for (path, at_least_ml, cut) in [

@@ -81,10 +81,19 @@ pub fn words(b: &Body, voxel_ml: f64) -> String {
                 b.thin_part_ml
             ),
         },
-        match b.cut_slices {
-            0 => String::new(),
-            n => format!(
-                "; the field of view cuts the body in {} (a lung cut by it would lose its vessels)",
+        match (b.cut_slices, b.border_tissue_ml) {
+            (0, _) => String::new(),
+            (n, ml) if ml > 0.0 => format!(
+                "; the field of view cuts the body in {}, where {:.0} ml reaching its border \
+                 reads as tissue, not air (less than half at or below {} HU: a lung it cuts, a \
+                 pocket by the skin), and is kept",
+                crate::common::plural(n, "slice", "slices"),
+                ml,
+                OPTIONS.air_hu
+            ),
+            (n, _) => format!(
+                "; the field of view cuts the body in {}, where all else reaching its border \
+                 reads as air",
                 crate::common::plural(n, "slice", "slices")
             ),
         }

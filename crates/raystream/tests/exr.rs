@@ -770,3 +770,44 @@ fn body_only_projections_leave_out_the_table() {
         );
     }
 }
+
+/// The chest CT is a crop within the body, whose lungs reach its border on both sides: with
+/// `--body-only`, a MinIP from the front keeps them (nearly every pixel the whole CT's MinIP
+/// reads as lung reads so still; the others lie by the air before the neck, which is left
+/// out, or by the bowel's gas the border cuts, which reads as air), and leaves out the air.
+#[test]
+fn body_only_keeps_a_lung_the_field_of_view_cuts() {
+    let chest = chest();
+    for dev in devices() {
+        let project = |more: &[&str]| {
+            let name = format!("body-cut-minip{}-{dev}.exr", more.len());
+            let args = [
+                &[chest.as_str(), "--mode", "minip", "--size", "64x64"],
+                more,
+            ]
+            .concat();
+            floats(&read_exr(&render_to(&name, dev, &args)), "Y").to_vec()
+        };
+        let (plain, body) = (project(&[]), project(&["--body-only"]));
+        let lung: Vec<usize> = (0..plain.len())
+            .filter(|&n| plain[n] > -950.0 && plain[n] <= -600.0)
+            .collect();
+        let kept = lung
+            .iter()
+            .filter(|&&n| (body[n] - plain[n]).abs() <= 20.0)
+            .count();
+        let hit = plain.iter().filter(|x| !x.is_nan()).count();
+        assert!(
+            lung.len() > hit / 3 && kept as f64 > 0.95 * lung.len() as f64,
+            "{dev}: {kept} of {} lung pixels kept",
+            lung.len()
+        );
+        let air = |v: &[f32]| v.iter().filter(|&&x| x < -980.0).count();
+        assert!(
+            air(&body) * 2 < air(&plain),
+            "{dev}: air in {} pixels, {} of the whole CT's",
+            air(&body),
+            air(&plain)
+        );
+    }
+}
