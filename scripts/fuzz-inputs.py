@@ -765,7 +765,11 @@ def fuzz_files(work, n, device, only=None):
         # A 4-D image's phases: one picked (maybe one it lacks), or all as a cine.
         four_d = s.startswith("v4")
         phase = ["--phase", random.choice("123")] if four_d and random.random() < 0.5 else []
-        why = run(["info", p, "--json"] + phase, s) or run(
+        # Sometimes the body too (--body; refused, naming the file, for a mesh or a volume not
+        # in HU), written as a label map.
+        body = (["--body", "--mask", os.path.join(d, "body.nii.gz")]
+                if random.random() < 0.2 else [])
+        why = run(["info", p, "--json"] + phase + body, s) or run(
             ["render", p, "--aov", "prim", "--size", "8x8", "-q", "--device", device,
              "-o", os.path.join(d, "o.png")], s)
         if not why and s.endswith((".obj", ".ply", ".glb", ".gltf")):

@@ -45,6 +45,10 @@ pub struct Segment<'a> {
     pub kind: Code,
     /// How a viewer should show it (sRGB; written as Recommended Display CIELab Value).
     pub colour: [u8; 3],
+    /// Its RT ROI Interpreted Type where it is written as a structure of an RT Structure Set
+    /// (PS3.3 C.8.8.8): `ORGAN`, or `EXTERNAL` for the patient's outline, the one structure a
+    /// planning system computes dose within.
+    pub rt_type: &'a str,
 }
 
 /// What a Segmentation holds besides its labels.
@@ -624,6 +628,7 @@ pub(crate) mod tests {
             category: c,
             kind: c,
             colour: [255, 0, 0],
+            rt_type: "ORGAN",
         };
         [s(1, "one"), s(2, "two")]
     }

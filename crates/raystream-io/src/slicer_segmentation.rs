@@ -127,6 +127,7 @@ mod tests {
             category: code,
             kind: code,
             colour,
+            rt_type: "ORGAN",
         };
         let segments = [
             segment(1, "Lumen", [0, 255, 255]),

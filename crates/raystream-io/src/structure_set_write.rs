@@ -284,13 +284,13 @@ pub fn write_structure_set(
     o.put(seq(tags::ROI_CONTOUR_SEQUENCE, roi_contours));
     o.put(seq(
         tags::RTROI_OBSERVATIONS_SEQUENCE,
-        (1..=segments.len())
-            .map(|number| {
-                let number = number.to_string();
+        (segments.iter().enumerate())
+            .map(|(s, seg)| {
+                let number = (s + 1).to_string();
                 item(vec![
                     text(tags::OBSERVATION_NUMBER, VR::IS, &number),
                     text(tags::REFERENCED_ROI_NUMBER, VR::IS, &number),
-                    text(tags::RTROI_INTERPRETED_TYPE, VR::CS, "ORGAN"),
+                    text(tags::RTROI_INTERPRETED_TYPE, VR::CS, seg.rt_type),
                     DataElement::new(tags::ROI_INTERPRETER, VR::PN, PrimitiveValue::Empty),
                 ])
             })

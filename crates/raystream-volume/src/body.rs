@@ -140,6 +140,45 @@ impl Body {
     }
 }
 
+/// The tissues within a body by their HU, in voxels (the ranges body-composition studies
+/// use: adipose tissue −190 to −30 HU, muscle −29 to 150).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Tissues {
+    /// Below −190 HU: air, gas, lung.
+    pub air: usize,
+    /// −190 to −30 HU: fat.
+    pub fat: usize,
+    /// Above −30 to 150 HU: muscle, organs, blood, water.
+    pub soft: usize,
+    /// Above 150 HU: bone, contrast, calcium, metal.
+    pub dense: usize,
+}
+
+impl Body {
+    /// The voxels inside the body, by their HU in `vol` (the volume the body was found in; a
+    /// NaN voxel counts in none).
+    pub fn tissues(&self, vol: &Volume) -> Tissues {
+        (vol.data.par_iter().zip(&self.inside))
+            .filter(|(_, inside)| **inside)
+            .fold(Tissues::default, |mut t, (&v, _)| {
+                match v {
+                    v if v.is_nan() => {}
+                    v if v < -190.0 => t.air += 1,
+                    v if v <= -30.0 => t.fat += 1,
+                    v if v <= 150.0 => t.soft += 1,
+                    _ => t.dense += 1,
+                }
+                t
+            })
+            .reduce(Tissues::default, |a, b| Tissues {
+                air: a.air + b.air,
+                fat: a.fat + b.fat,
+                soft: a.soft + b.soft,
+                dense: a.dense + b.dense,
+            })
+    }
+}
+
 impl Body {
     /// `vol` (the volume the body was found in) with every voxel beyond the body's margin
     /// ([`Body::with_margin`]) set to its lowest value: air, which renderings and isosurfaces
@@ -492,6 +531,17 @@ mod tests {
         // The air around is out: the body is its parts and the sliver.
         let parts = p.trunk.len() + p.lung.len() + p.ear.len() + p.arm.len();
         assert_eq!(b.voxels, parts + kept);
+        // Its tissues: the lung (−850 HU), the soft parts (40 HU), the table's sliver (300).
+        let soft = p.trunk.len() + p.ear.len() + p.arm.len();
+        assert_eq!(
+            b.tissues(&p.vol),
+            Tissues {
+                air: p.lung.len(),
+                fat: 0,
+                soft,
+                dense: kept
+            }
+        );
         // Left out: the table's two wings, which the sliver cuts apart, and the cable; the
         // ear joined back.
         let ml = 0.008;
@@ -576,6 +626,32 @@ mod tests {
         let b = body(&vol, &BodyOptions::default()).unwrap();
         assert_eq!(b.border_tissue_ml, 0.0);
         assert!(lung.iter().chain(&vessel).all(|&n| !b.inside[n]));
+    }
+
+    /// The tissues' ranges at their edges: −190 and −30 HU are fat, 150 soft tissue; a NaN
+    /// voxel counts in none, and a voxel outside the body in none.
+    #[test]
+    fn tissues_are_counted_by_their_ranges() {
+        let data = vec![-191.0, -190.0, -30.0, -29.5, 150.0, 150.5, f32::NAN, 40.0];
+        let vol = Volume::hounsfield([8, 1, 1], [1.0; 3], data);
+        let mut inside = vec![true; 8];
+        inside[7] = false;
+        let b = Body {
+            inside,
+            voxels: 7,
+            left_out_ml: Vec::new(),
+            thin_parts: 0,
+            thin_part_ml: 0.0,
+            cut_slices: 0,
+            border_tissue_ml: 0.0,
+        };
+        let want = Tissues {
+            air: 1,
+            fat: 2,
+            soft: 2,
+            dense: 1,
+        };
+        assert_eq!(b.tissues(&vol), want);
     }
 
     #[test]

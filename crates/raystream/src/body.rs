@@ -19,27 +19,33 @@ const OPTIONS: BodyOptions = BodyOptions::DEFAULT;
 /// The body in `volume` (read from `path`), said on stderr unless `quiet`; refused for a
 /// volume not in HU.
 pub fn find(volume: &Volume, path: &Path, quiet: bool) -> Result<Body> {
+    let (b, ms) = find_timed(volume, path, "--body-only", quiet)?;
+    if !quiet {
+        eprintln!(
+            "raystream: {}: {} ({ms:.0} ms)",
+            path.display(),
+            words(&b, volume.voxel_ml()),
+        );
+    }
+    Ok(b)
+}
+
+/// The body in `volume` and the ms it took, a spinner shown unless `quiet`; refused, naming
+/// `path` and `flag`, for a volume not in HU or without a body.
+pub fn find_timed(volume: &Volume, path: &Path, flag: &str, quiet: bool) -> Result<(Body, f64)> {
     if volume.unit != ValueUnit::Hounsfield {
         bail!(
-            "{}: --body-only finds the body by its HU (above {} HU); this volume's values are not HU",
+            "{}: {flag} finds the body by its HU (above {} HU); this volume's values are not HU",
             path.display(),
             OPTIONS.threshold_hu
         );
     }
     let t = Instant::now();
     let pb = crate::common::spinner(quiet, &format!("finding the body in {}", path.display()));
-    let b = body(volume, &OPTIONS)
-        .map_err(|e| anyhow::anyhow!("{}: --body-only: {e}", path.display()))?;
+    let b =
+        body(volume, &OPTIONS).map_err(|e| anyhow::anyhow!("{}: {flag}: {e}", path.display()))?;
     pb.finish_and_clear();
-    if !quiet {
-        eprintln!(
-            "raystream: {}: {} ({:.0} ms)",
-            path.display(),
-            words(&b, volume.voxel_ml()),
-            t.elapsed().as_secs_f64() * 1e3
-        );
-    }
-    Ok(b)
+    Ok((b, t.elapsed().as_secs_f64() * 1e3))
 }
 
 /// What the summary says of `b`: the body's size, what was left out, the thin parts joined.

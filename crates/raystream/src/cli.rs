@@ -1300,6 +1300,25 @@ pub struct InfoArgs {
     /// centre): voxels, volume, mean, standard deviation, minimum, median, maximum, centroid.
     #[arg(long, value_name = "LABELS")]
     pub segmentation: Option<PathBuf>,
+    /// A CT volume in HU: the patient's body as `render --body-only` finds it (the table, a
+    /// head holder, cables left out; what it encloses kept): its volume, what was left out,
+    /// and its tissues by HU (below -190 air, gas and lung; -190 to -30 fat; -29 to 150 soft
+    /// tissue; above 150 bone and contrast).
+    #[arg(long)]
+    pub body: bool,
+    /// With --body: the body (label 1) written on the CT's own grid as a NIfTI label map
+    /// (.nii or .nii.gz), a 3D Slicer segmentation (.seg.nrrd) or, from a DICOM series, a
+    /// DICOM Segmentation of it (.dcm).
+    #[arg(
+        long,
+        value_name = "FILE.nii.gz|FILE.seg.nrrd|FILE.dcm",
+        requires = "body"
+    )]
+    pub mask: Option<PathBuf>,
+    /// With --body, from a DICOM series: the body as a DICOM RT Structure Set of it (.dcm),
+    /// one structure of type EXTERNAL, the outline a planning system computes dose within.
+    #[arg(long, value_name = "FILE.dcm", requires = "body")]
+    pub structures: Option<PathBuf>,
     #[arg(long)]
     pub json: bool,
 }

@@ -54,12 +54,19 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         return report_info(a, input);
     }
     if raystream_io::is_volume_path(input) {
+        crate::mask_out::check_names(a.mask.as_deref(), a.structures.as_deref())?;
         return volume_info(a, input);
     }
     if let Some(labels) = &a.segmentation {
         bail!(
             "--segmentation {}: gives the values of a CT volume within its segments; {} is not a volume",
             labels.display(),
+            input.display()
+        );
+    }
+    if a.body {
+        bail!(
+            "--body finds the patient's body in a CT volume; {} is not a volume",
             input.display()
         );
     }
@@ -546,7 +553,13 @@ fn segment_stats(
 
 fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
     let v = raystream_io::load_volume(input, &a.pick.select())?;
+    crate::mask_out::check_sources(a.mask.as_deref(), a.structures.as_deref(), &v)?;
     let stats = segment_stats(a, &v, input)?;
+    let body = if a.body {
+        Some(body_info(a, &v, input)?)
+    } else {
+        None
+    };
     let range = v.value_range();
     // A label map's labels, their voxels and volumes, and their names: a Segmentation's, or
     // `--colour-table`'s.
@@ -661,6 +674,9 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                     "centroid": s.centroid,
                 })).collect::<Vec<_>>(),
             });
+        }
+        if let Some(b) = &body {
+            out["body"] = body_json(b);
         }
         if let Some(set) = &structures {
             out["structure_set"] = json!({
@@ -789,11 +805,160 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 );
             }
         }
+        if let Some(b) = &body {
+            body_lines(b);
+        }
         for w in &v.warnings {
             println!("  warning    {w}");
         }
     }
     Ok(())
+}
+
+/// `--body`: what was found, and what `--mask` and `--structures` wrote.
+struct BodyInfo {
+    body: raystream_volume::body::Body,
+    ms: f64,
+    voxel_ml: f64,
+    tissues: raystream_volume::body::Tissues,
+    stats: raystream_volume::RegionStats,
+    /// `--mask`: the file, and its frames if a DICOM Segmentation.
+    mask: Option<(String, String)>,
+    /// `--structures`: the file, and the body's contours.
+    structures: Option<(String, usize)>,
+}
+
+/// `--body`: the body in `v` (read from `input`), its tissues and HU, and the files
+/// `--mask` and `--structures` name, written.
+fn body_info(a: &InfoArgs, v: &raystream_io::Volume, input: &std::path::Path) -> Result<BodyInfo> {
+    let (body, ms) = crate::body::find_timed(v, input, "--body", a.json)?;
+    let tissues = body.tissues(v);
+    let members: Vec<usize> = (0..body.inside.len()).filter(|&n| body.inside[n]).collect();
+    let stats = raystream_volume::region_stats(v, &members)
+        .ok_or_else(|| anyhow::anyhow!("{}: --body: no finite value inside", input.display()))?;
+    drop(members);
+    let labels: Vec<u8> = body.inside.iter().map(|&b| u8::from(b)).collect();
+    let segments = [raystream_io::Segment {
+        value: 1,
+        label: "Body",
+        description: "The patient's body and what it encloses, the table and devices left out",
+        category: raystream_io::Code {
+            value: "123037004",
+            scheme: "SCT",
+            meaning: "Anatomical Structure",
+        },
+        kind: raystream_io::Code {
+            value: "38266002",
+            scheme: "SCT",
+            meaning: "Entire body as a whole",
+        },
+        colour: [177, 122, 101],
+        rt_type: "EXTERNAL",
+    }];
+    let info = raystream_io::SegmentationInfo {
+        description: "raystream info --body: the patient's body",
+        algorithm: "raystream body",
+        version: env!("CARGO_PKG_VERSION"),
+    };
+    let mask = match &a.mask {
+        Some(out) => {
+            let what = "raystream info --body: 1 the body";
+            let written = crate::mask_out::write_mask(out, v, &labels, &segments, (&info, what))?;
+            let kind = crate::mask_out::mask_kind(out, written.map(|w| w.frames));
+            Some((out.display().to_string(), kind))
+        }
+        None => None,
+    };
+    let structures = match &a.structures {
+        Some(out) => {
+            let written = raystream_io::write_structure_set(out, v, &labels, &segments, &info)?;
+            Some((out.display().to_string(), written.contours[0]))
+        }
+        None => None,
+    };
+    Ok(BodyInfo {
+        body,
+        ms,
+        voxel_ml: v.voxel_ml(),
+        tissues,
+        stats,
+        mask,
+        structures,
+    })
+}
+
+/// The tissues of [`BodyInfo`]: each range's name, HU and voxels.
+fn tissue_rows(t: &raystream_volume::body::Tissues) -> [(&'static str, &'static str, usize); 4] {
+    [
+        ("air", "below -190 HU: air, gas, lung", t.air),
+        ("fat", "-190 to -30 HU: fat", t.fat),
+        ("soft", "-29 to 150 HU: soft tissue", t.soft),
+        ("dense", "above 150 HU: bone, contrast", t.dense),
+    ]
+}
+
+/// `info --body`'s lines.
+fn body_lines(b: &BodyInfo) {
+    println!(
+        "  body       {} (found in {:.0} ms)",
+        crate::body::words(&b.body, b.voxel_ml).trim_start_matches("the body, "),
+        b.ms
+    );
+    let s = &b.stats;
+    let [x, y, z] = s.centroid;
+    println!(
+        "  body HU    mean {:.1}, sd {:.1}, median {}; centroid ({x:.1}, {y:.1}, {z:.1}) mm LPS",
+        s.mean, s.sd, s.median
+    );
+    let rows: Vec<String> = tissue_rows(&b.tissues)
+        .iter()
+        .map(|(_, what, n)| {
+            format!(
+                "{what} {:.2} l ({:.1} %)",
+                *n as f64 * b.voxel_ml / 1000.0,
+                100.0 * *n as f64 / b.body.voxels.max(1) as f64
+            )
+        })
+        .collect();
+    println!("  tissues    {}", rows.join("; "));
+    if let Some((file, kind)) = &b.mask {
+        println!(
+            "  mask       {file} ({kind}): label 1 the body on {} voxels",
+            b.body.voxels
+        );
+    }
+    if let Some((file, contours)) = &b.structures {
+        println!(
+            "  structures {file} (a DICOM RT Structure Set of the CT's series): Body, EXTERNAL, {contours} closed contours"
+        );
+    }
+}
+
+/// `info --body --json`'s `body`.
+fn body_json(b: &BodyInfo) -> serde_json::Value {
+    let ml = |n: usize| (n as f64 * b.voxel_ml * 1e3).round() / 1e3;
+    let s = &b.stats;
+    let mut tissues = json!({});
+    for (name, _, n) in tissue_rows(&b.tissues) {
+        tissues[name] = json!(ml(n));
+    }
+    json!({
+        "voxels": b.body.voxels,
+        "ml": ml(b.body.voxels),
+        "left_out_ml": b.body.left_out_ml,
+        "thin_parts": b.body.thin_parts,
+        "thin_part_ml": b.body.thin_part_ml,
+        "cut_slices": b.body.cut_slices,
+        "border_tissue_ml": b.body.border_tissue_ml,
+        "tissues_ml": tissues,
+        "mean": s.mean,
+        "sd": s.sd,
+        "median": s.median,
+        "centroid": s.centroid,
+        "ms": b.ms,
+        "mask": b.mask.as_ref().map(|(file, kind)| json!({"file": file, "kind": kind})),
+        "structures": b.structures.as_ref().map(|(file, contours)| json!({"file": file, "contours": contours})),
+    })
 }
 
 /// `info --gpu`: the adapters, in the order `--device gpu` prefers them (it opens the first).

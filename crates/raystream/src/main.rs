@@ -10,6 +10,7 @@ mod info;
 mod iso;
 mod labels;
 mod legend;
+mod mask_out;
 mod measure;
 mod overlay;
 mod profile;

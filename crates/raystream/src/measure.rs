@@ -39,24 +39,7 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
             "--plot-pi10 draws an airway's walls: give it with --dark --wall (Pi10 is an airway's)"
         );
     }
-    if let Some(m) = &a.mask
-        && !raystream_io::is_label_map_path(m)
-        && !raystream_io::is_slicer_segmentation_path(m)
-        && !raystream_io::is_segmentation_path(m)
-    {
-        bail!(
-            "{}: --mask writes a NIfTI label map (.nii or .nii.gz), a 3D Slicer segmentation (.seg.nrrd) or a DICOM Segmentation (.dcm): name it so",
-            m.display()
-        );
-    }
-    if let Some(r) = &a.structures
-        && !raystream_io::is_segmentation_path(r)
-    {
-        bail!(
-            "{}: --structures writes a DICOM RT Structure Set (.dcm): name it so",
-            r.display()
-        );
-    }
+    crate::mask_out::check_names(a.mask.as_deref(), a.structures.as_deref())?;
     if let Some(r) = &a.report
         && !raystream_io::is_segmentation_path(r)
     {
@@ -74,16 +57,7 @@ pub fn run(a: &MeasureArgs) -> Result<()> {
     let points = raystream_io::read_curve(&a.path)?;
     let (volume, _) = read_volume(&a.input, &a.pick.select(), a.quiet, None)?;
     // A Segmentation references the CT's series: one that cannot be is refused before any work.
-    if let Some(m) = &a.mask
-        && raystream_io::is_segmentation_path(m)
-    {
-        raystream_io::segmentation_source(&volume)
-            .map_err(|e| anyhow::anyhow!("{}: --mask: {e}", m.display()))?;
-    }
-    if let Some(r) = &a.structures {
-        raystream_io::structure_set_source(&volume)
-            .map_err(|e| anyhow::anyhow!("{}: --structures: {e}", r.display()))?;
-    }
+    crate::mask_out::check_sources(a.mask.as_deref(), a.structures.as_deref(), &volume)?;
     if let Some(r) = &a.report {
         raystream_io::measurement_report_source(&volume)
             .map_err(|e| anyhow::anyhow!("{}: --report: {e}", r.display()))?;
@@ -695,6 +669,7 @@ pub(crate) fn mask_segments(wall: bool, dark: bool) -> Vec<raystream_io::Segment
         },
         // As scripts/label-overlay.py tints them.
         colour: [0, 255, 255],
+        rt_type: "ORGAN",
     }];
     if wall {
         segments.push(Segment {
@@ -721,6 +696,7 @@ pub(crate) fn mask_segments(wall: bool, dark: bool) -> Vec<raystream_io::Segment
                 }
             },
             colour: [255, 0, 255],
+            rt_type: "ORGAN",
         });
     }
     segments
@@ -760,33 +736,26 @@ fn write_mask(
         version: env!("CARGO_PKG_VERSION"),
     };
     let segments = mask_segments(wall.is_some(), opt.dark);
-    let (frames, segmentation) = if let Some(out) = out
-        && raystream_io::is_segmentation_path(out)
-    {
-        let written =
-            raystream_io::write_segmentation(out, volume, &labels.data, &segments, &info)?;
-        (
-            Some(written.frames),
-            Some(raystream_io::SegmentationReference {
-                sop_instance_uid: written.sop_instance_uid,
-                series_uid: written.series_uid,
-            }),
-        )
-    } else if let Some(out) = out
-        && raystream_io::is_slicer_segmentation_path(out)
-    {
-        raystream_io::write_slicer_segmentation(out, volume, &labels.data, &segments)?;
-        (None, None)
-    } else if let Some(out) = out {
-        let what = if wall.is_some() {
-            "raystream measure: 1 lumen, 2 outer wall beyond the lumen"
-        } else {
-            "raystream measure: 1 lumen"
-        };
-        raystream_io::write_label_map(out, volume, &labels.data, what)?;
-        (None, None)
+    let what = if wall.is_some() {
+        "raystream measure: 1 lumen, 2 outer wall beyond the lumen"
     } else {
-        (None, None)
+        "raystream measure: 1 lumen"
+    };
+    let written = match out {
+        Some(out) => {
+            crate::mask_out::write_mask(out, volume, &labels.data, &segments, (&info, what))?
+        }
+        None => None,
+    };
+    let (frames, segmentation) = match written {
+        Some(w) => (
+            Some(w.frames),
+            Some(raystream_io::SegmentationReference {
+                sop_instance_uid: w.sop_instance_uid,
+                series_uid: w.series_uid,
+            }),
+        ),
+        None => (None, None),
     };
     let structures = match &a.structures {
         Some(file) => {
@@ -820,15 +789,9 @@ fn mask_text(m: &MaskWritten) -> String {
         Some((n, ml)) => format!(", 2 the outer wall beyond it on {n} voxels ({ml:.1} ml)"),
         None => String::new(),
     };
-    let kind = match m.frames {
-        Some(n) => format!("a DICOM Segmentation of the CT's series, {n} frames"),
-        None if m.file.as_deref().is_some_and(|f| {
-            raystream_io::is_slicer_segmentation_path(std::path::Path::new(f))
-        }) =>
-        {
-            "a 3D Slicer segmentation".to_string()
-        }
-        None => "a NIfTI label map".to_string(),
+    let kind = match &m.file {
+        Some(f) => crate::mask_out::mask_kind(std::path::Path::new(f), m.frames),
+        None => String::new(),
     };
     let (file, kind) = match &m.file {
         Some(f) => (f.as_str(), kind),

@@ -461,6 +461,46 @@ fn body_only_refuses_what_has_no_body() {
         "scivis_bonsai.nii.gz",
         "body_only finds the body by its HU",
     );
+    // `info --body` likewise, and its files named for no form they write, or not from a
+    // series a DICOM Segmentation or RT Structure Set could reference.
+    assert_input_error(
+        &["info", &teapot, "--body"],
+        "utah_teapot.obj",
+        "--body finds the patient's body in a CT volume",
+    );
+    assert_input_error(
+        &["info", bonsai, "--body"],
+        "scivis_bonsai.nii.gz",
+        "--body finds the body by its HU",
+    );
+    let builtin = repo().join("crates/raystream/assets/abdomen_pelvis_ct_totalseg.nii.gz");
+    let builtin = builtin.to_str().unwrap();
+    let png = tmp("body-mask.png");
+    assert_input_error(
+        &["info", builtin, "--body", "--mask", png.to_str().unwrap()],
+        "body-mask.png",
+        "--mask writes a NIfTI label map (.nii or .nii.gz)",
+    );
+    let dcm = tmp("body-rt.dcm");
+    assert_input_error(
+        &[
+            "info",
+            builtin,
+            "--body",
+            "--structures",
+            dcm.to_str().unwrap(),
+        ],
+        "body-rt.dcm",
+        "--structures",
+    );
+    assert!(!dcm.exists());
+    let o = run(&["info", builtin, "--mask", png.to_str().unwrap()]);
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "--mask without --body: {}",
+        stderr(&o)
+    );
     let like = raystream_io::Volume::hounsfield([24, 24, 24], [1.0; 3], Vec::new());
     let air = write_like("body-air.mha", &like, &vec![-1000.0; 24 * 24 * 24]);
     let air = air.to_str().unwrap();

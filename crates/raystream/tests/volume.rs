@@ -3214,3 +3214,102 @@ fn vtk_xml_files_agree_with_vtk() {
         "a .vtp is VTK's polygonal data, a mesh, not a volume",
     );
 }
+
+/// `info --body` of the chest CT written as a DICOM series (a crop, every slice cut, the lungs
+/// reaching its border): its figures are `raystream_volume::body`'s on the series, its
+/// tissues and mean HU counted here voxel by voxel; the body written as a NIfTI label map, a
+/// DICOM Segmentation and an RT Structure Set (one structure, of type EXTERNAL) reads back
+/// as the body, voxel for voxel.
+#[test]
+fn info_body_measures_and_writes_the_body() {
+    let root = tmp("info-body");
+    let ct = root.join("ct");
+    chest_series(&ct);
+    let path = |name: &str| root.join(name).to_string_lossy().into_owned();
+    let (nii, seg, rt) = (
+        path("body.nii.gz"),
+        path("body-seg.dcm"),
+        path("body-rt.dcm"),
+    );
+    let ct = ct.to_str().unwrap();
+    let o = run(&[
+        "info",
+        "--json",
+        ct,
+        "--body",
+        "--mask",
+        &seg,
+        "--structures",
+        &rt,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let j = &v["body"];
+    let grid = raystream_io::load_volume(Path::new(ct), &Default::default()).unwrap();
+    let b = raystream_volume::body::body(&grid, &Default::default()).unwrap();
+    let voxel_ml = grid.voxel_ml();
+    assert_eq!(j["voxels"], b.voxels);
+    assert_eq!(j["cut_slices"].as_u64(), Some(grid.dims[2] as u64));
+    assert!(j["border_tissue_ml"].as_f64().unwrap() > 2000.0, "{j}");
+    // The tissues by HU and the mean, counted here.
+    let mut counts = [0usize; 4];
+    let mut sum = 0.0f64;
+    for (&x, _) in grid.data.iter().zip(&b.inside).filter(|(_, i)| **i) {
+        sum += x as f64;
+        counts[if x < -190.0 {
+            0
+        } else if x <= -30.0 {
+            1
+        } else if x <= 150.0 {
+            2
+        } else {
+            3
+        }] += 1;
+    }
+    for (name, n) in ["air", "fat", "soft", "dense"].iter().zip(counts) {
+        let ml = j["tissues_ml"][name].as_f64().unwrap();
+        assert!(
+            (ml - n as f64 * voxel_ml).abs() < 1e-3,
+            "{name}: {ml} ml, {n} voxels"
+        );
+    }
+    assert_eq!(counts.iter().sum::<usize>(), b.voxels);
+    let mean = j["mean"].as_f64().unwrap();
+    assert!((mean - sum / b.voxels as f64).abs() < 1e-6, "{mean}");
+    // The RT Structure Set: one structure, EXTERNAL, laid back on the series as the body.
+    let set = raystream_io::StructureSet::read(Path::new(&rt)).unwrap();
+    assert_eq!(set.rois.len(), 1);
+    assert_eq!(
+        (set.rois[0].name.as_str(), set.rois[0].kind.as_str()),
+        ("Body", "EXTERNAL")
+    );
+    let (regions, warnings) = set.regions(&grid);
+    assert!(warnings.is_empty(), "{warnings:?}");
+    assert_eq!(regions[0].voxels, b.voxels);
+    assert_eq!(j["structures"]["contours"], set.rois[0].contours.len());
+    // The DICOM Segmentation, laid on the series by `info --segmentation`.
+    let o = run(&["info", "--json", ct, "--segmentation", &seg]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let s: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let segments = s["segmentation"]["segments"].as_array().unwrap();
+    assert_eq!(segments.len(), 1);
+    assert_eq!(segments[0]["voxels"], b.voxels);
+    assert_eq!(segments[0]["name"], "Body");
+    // The NIfTI label map, on the series' grid: 1 exactly where the body is; and the words.
+    let o = run(&["info", ct, "--body", "--mask", &nii]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    for want in [
+        format!("label 1 the body on {} voxels", b.voxels),
+        "tissues    below -190 HU: air, gas, lung".to_string(),
+        "a lung it cuts".to_string(),
+    ] {
+        assert!(text.contains(&want), "{want}: {text}");
+    }
+    let map = raystream_io::load_volume(Path::new(&nii), &Default::default()).unwrap();
+    assert_eq!(map.dims, grid.dims);
+    let wrong = (map.data.iter().zip(&b.inside))
+        .filter(|(l, i)| (**l == 1.0) != **i)
+        .count();
+    assert_eq!(wrong, 0);
+}
