@@ -37,8 +37,8 @@ pub fn squared_distance<const N: usize>(
                 .for_each_init(
                     || Lines::new(n),
                     |lines, chunk| {
-                        for start in 0..stride {
-                            lines.transform(chunk, start, stride, h);
+                        for first in (0..stride).step_by(WIDE) {
+                            lines.transform(chunk, first..(first + WIDE).min(stride), stride, h);
                         }
                     },
                 );
@@ -58,12 +58,11 @@ pub fn squared_distance<const N: usize>(
                         |lines, g| {
                             let starts = g * GROUP..((g + 1) * GROUP).min(stride);
                             let mut out = Vec::with_capacity(starts.len() * n);
-                            for start in starts {
-                                for q in 0..n {
-                                    lines.f[q] = d[start + q * stride];
-                                }
-                                lines.envelope(h);
-                                out.extend_from_slice(&lines.out);
+                            for first in starts.clone().step_by(WIDE) {
+                                let wide = first..(first + WIDE).min(starts.end);
+                                lines.gather(&d, wide.clone(), stride);
+                                lines.envelopes(wide.len(), h);
+                                out.extend_from_slice(&lines.out[..wide.len() * n]);
                             }
                             out
                         },
@@ -83,8 +82,14 @@ pub fn squared_distance<const N: usize>(
     d
 }
 
-/// One line's values and the lower envelope's scratch.
+/// How many adjacent lines a pass along a strided axis reads at once: their cells at one
+/// position along the axis are side by side in memory, a cache line of f64s, where a line
+/// alone would read 8 bytes of each cache line it touches.
+const WIDE: usize = 8;
+
+/// Up to [`WIDE`] lines' values, each line's cells together, and the lower envelope's scratch.
 struct Lines {
+    n: usize,
     f: Vec<f64>,
     out: Vec<f64>,
     v: Vec<usize>,
@@ -94,26 +99,52 @@ struct Lines {
 impl Lines {
     fn new(n: usize) -> Lines {
         Lines {
-            f: vec![0.0; n],
-            out: vec![0.0; n],
+            n,
+            f: vec![0.0; n * WIDE],
+            out: vec![0.0; n * WIDE],
             v: vec![0; n],
             z: vec![0.0; n + 1],
         }
     }
 
-    /// The line of `d` from `start`, `stride` apart, transformed in place.
-    fn transform(&mut self, d: &mut [f64], start: usize, stride: usize, h: f64) {
-        for (q, x) in self.f.iter_mut().enumerate() {
-            *x = d[start + q * stride];
-        }
-        self.envelope(h);
-        for (q, &x) in self.out.iter().enumerate() {
-            d[start + q * stride] = x;
+    /// The lines of `d` starting at `starts` (adjacent cells), `stride` apart along them,
+    /// into `f`, a line after another.
+    fn gather(&mut self, d: &[f64], starts: std::ops::Range<usize>, stride: usize) {
+        let (n, w) = (self.n, starts.len());
+        for q in 0..n {
+            let at = starts.start + q * stride;
+            for (l, &x) in d[at..at + w].iter().enumerate() {
+                self.f[l * n + q] = x;
+            }
         }
     }
 
-    fn envelope(&mut self, h: f64) {
-        envelope(&self.f, h, &mut self.out, &mut self.v, &mut self.z);
+    /// The first `w` lines of `f` transformed into `out`.
+    fn envelopes(&mut self, w: usize, h: f64) {
+        let n = self.n;
+        for l in 0..w {
+            let line = l * n..(l + 1) * n;
+            envelope(
+                &self.f[line.clone()],
+                h,
+                &mut self.out[line],
+                &mut self.v,
+                &mut self.z,
+            );
+        }
+    }
+
+    /// The lines of `d` starting at `starts`, `stride` apart along them, transformed in place.
+    fn transform(&mut self, d: &mut [f64], starts: std::ops::Range<usize>, stride: usize, h: f64) {
+        self.gather(d, starts.clone(), stride);
+        let (n, w) = (self.n, starts.len());
+        self.envelopes(w, h);
+        for q in 0..n {
+            let at = starts.start + q * stride;
+            for (l, x) in d[at..at + w].iter_mut().enumerate() {
+                *x = self.out[l * n + q];
+            }
+        }
     }
 }
 
@@ -126,10 +157,16 @@ fn envelope(f: &[f64], h: f64, out: &mut [f64], v: &mut [usize], z: &mut [f64]) 
         return;
     };
     let h2 = h * h;
+    // Each parabola's f/h² + q², once a cell (`out` holds them until the envelope is found),
+    // rather than twice a meeting of two (the same values: BENCHMARKS.md).
+    for (q, (g, &fq)) in out.iter_mut().zip(f).enumerate() {
+        let qf = q as f64;
+        *g = fq / h2 + qf * qf;
+    }
     // Where the parabolas of q and p (q > p) meet, in cells.
-    let meet = |q: usize, p: usize| {
+    let meet = |out: &[f64], q: usize, p: usize| {
         let (qf, pf) = (q as f64, p as f64);
-        ((f[q] / h2 + qf * qf) - (f[p] / h2 + pf * pf)) / (2.0 * (qf - pf))
+        (out[q] - out[p]) / (2.0 * (qf - pf))
     };
     let mut k = 0;
     v[0] = first;
@@ -139,10 +176,10 @@ fn envelope(f: &[f64], h: f64, out: &mut [f64], v: &mut [usize], z: &mut [f64]) 
         if !fq.is_finite() {
             continue;
         }
-        let mut s = meet(q, v[k]);
+        let mut s = meet(out, q, v[k]);
         while s <= z[k] {
             k -= 1;
-            s = meet(q, v[k]);
+            s = meet(out, q, v[k]);
         }
         k += 1;
         v[k] = q;
