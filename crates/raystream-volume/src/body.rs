@@ -405,44 +405,31 @@ fn enclosed_in_slice(
     border.sort_unstable();
     border.dedup();
     let cut = border.iter().any(|&n| wall[n]);
-    // `out` first marks the regions taken for air around the body; flipped at the end. Each
-    // region reaching the border is flooded from its first border pixel, its pixels listed
-    // in `region` and counted; a region judged tissue is unmarked again. Pixels travel on the
-    // stack with their coordinates, as the pieces' voxels do.
-    let mut seen = vec![false; nx * ny];
-    let (mut stack, mut region, mut tissue) = (Vec::<[usize; 2]>::new(), Vec::new(), 0);
-    for seed in border {
-        if wall[seed] || seen[seed] {
-            continue;
-        }
-        seen[seed] = true;
-        stack.push([seed % nx, seed / nx]);
-        region.clear();
-        while let Some([i, j]) = stack.pop() {
-            let n = i + nx * j;
-            region.push(n);
-            let mut visit = |near: bool, m: usize, at: [usize; 2]| {
-                if near && !wall[m] && !seen[m] {
-                    seen[m] = true;
-                    stack.push(at);
-                }
-            };
-            visit(i > 0, n.wrapping_sub(1), [i.wrapping_sub(1), j]);
-            visit(i + 1 < nx, n + 1, [i + 1, j]);
-            visit(j > 0, n.wrapping_sub(nx), [i, j.wrapping_sub(1)]);
-            visit(j + 1 < ny, n + nx, [i, j + 1]);
-        }
-        let air = region.iter().filter(|&&n| hu[n] <= air_hu).count();
-        if !cut || 2 * air >= region.len() {
-            for &n in &region {
-                out[n] = true;
-            }
-        } else {
-            tissue += region.len();
+    // The regions: the pieces of what is not wall on a grid one voxel deep. Those the border
+    // reaches, and how many of their pixels are air.
+    let open: Vec<bool> = wall.iter().map(|&w| !w).collect();
+    let (labels, sizes) = pieces([nx, ny, 1], &open);
+    let mut reached = vec![false; sizes.len()];
+    for &n in &border {
+        if labels[n] > 0 {
+            reached[labels[n] as usize - 1] = true;
         }
     }
-    for o in out.iter_mut() {
-        *o = !*o;
+    let mut air = vec![0usize; sizes.len()];
+    for (&l, &v) in labels.iter().zip(hu) {
+        if l > 0 && v <= air_hu {
+            air[l as usize - 1] += 1;
+        }
+    }
+    let outside: Vec<bool> = (0..sizes.len())
+        .map(|r| reached[r] && (!cut || 2 * air[r] >= sizes[r]))
+        .collect();
+    let tissue = (0..sizes.len())
+        .filter(|&r| reached[r] && !outside[r])
+        .map(|r| sizes[r])
+        .sum();
+    for (o, &l) in out.iter_mut().zip(&labels) {
+        *o = l == 0 || !outside[l as usize - 1];
     }
     (cut, tissue)
 }

@@ -837,7 +837,11 @@ fn body_info(a: &InfoArgs, v: &raystream_io::Volume, input: &std::path::Path) ->
     let stats = raystream_volume::region_stats(v, &members)
         .ok_or_else(|| anyhow::anyhow!("{}: --body: no finite value inside", input.display()))?;
     drop(members);
-    let labels: Vec<u8> = body.inside.iter().map(|&b| u8::from(b)).collect();
+    // Label 1 on the CT's grid, for the files alone.
+    let labels: Vec<u8> = match a.mask.is_some() || a.structures.is_some() {
+        true => body.inside.iter().map(|&b| u8::from(b)).collect(),
+        false => Vec::new(),
+    };
     let segments = [raystream_io::Segment {
         value: 1,
         label: "Body",
