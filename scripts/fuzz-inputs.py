@@ -769,7 +769,13 @@ def fuzz_files(work, n, device, only=None):
         # in HU), written as a label map.
         body = (["--body", "--mask", os.path.join(d, "body.nii.gz")]
                 if random.random() < 0.2 else [])
-        why = run(["info", p, "--json"] + phase + body, s) or run(
+        # Sometimes its values within itself as a segmentation, with densitometry (a CT is
+        # refused as no label map, a mesh as no volume).
+        within = (["--segmentation", p]
+                  + random.choice([["--below", "-950"], ["--below", "-950,0"], ["--below=-856"]])
+                  + ["--percentile", random.choice(["15", "0,100", "2.5"])]
+                  if random.random() < 0.15 else [])
+        why = run(["info", p, "--json"] + phase + body + within, s) or run(
             ["render", p, "--aov", "prim", "--size", "8x8", "-q", "--device", device,
              "-o", os.path.join(d, "o.png")], s)
         if not why and s.endswith((".obj", ".ply", ".glb", ".gltf")):

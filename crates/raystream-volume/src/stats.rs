@@ -1,6 +1,8 @@
 //! Statistics of a volume's values over a set of its voxels (a segment's): what a radiologist
 //! reads off a region of interest — its volume, the mean Hounsfield units and their spread,
-//! the extremes and the median, and where its centre lies.
+//! the extremes and the median, and where its centre lies; and the densitometry a lung's CT is
+//! read by (the share of voxels below a HU, as the emphysema index LAA-950; a percentile, as
+//! Perc15).
 
 use raystream_io::Volume;
 use raystream_math::DVec3;
@@ -27,14 +29,7 @@ pub struct RegionStats {
 /// `None` for no voxel, or none with a finite value.
 pub fn region_stats(volume: &Volume, indices: &[usize]) -> Option<RegionStats> {
     let [nx, ny, _] = volume.dims;
-    let mut values: Vec<f64> = indices
-        .iter()
-        .map(|&n| volume.data[n] as f64)
-        .filter(|v| v.is_finite())
-        .collect();
-    if values.is_empty() {
-        return None;
-    }
+    let mut values = finite_values(volume, indices)?;
     let n = values.len() as f64;
     let mean = values.iter().sum::<f64>() / n;
     let sd = if values.len() > 1 {
@@ -75,9 +70,112 @@ pub fn region_stats(volume: &Volume, indices: &[usize]) -> Option<RegionStats> {
     })
 }
 
+/// The finite values of `volume` at `indices`; `None` for none.
+fn finite_values(volume: &Volume, indices: &[usize]) -> Option<Vec<f64>> {
+    let values: Vec<f64> = indices
+        .iter()
+        .map(|&n| volume.data[n] as f64)
+        .filter(|v| v.is_finite())
+        .collect();
+    (!values.is_empty()).then_some(values)
+}
+
+/// A region's densitometry: for each HU asked, the voxels below it; for each percentile asked,
+/// the value there.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Densitometry {
+    pub below: Vec<Below>,
+    /// (p, the value at p), p from 0 to 100.
+    pub percentiles: Vec<(f64, f64)>,
+}
+
+/// The voxels of a region below a value: in COPD the emphysema index LAA-950 (the low
+/// attenuation area, the share of a lung's voxels below −950 HU on an inspiratory CT), and
+/// below −856 HU on an expiratory one, air trapping.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Below {
+    /// The value they are below (strictly: `hu` itself is not below).
+    pub hu: f64,
+    pub voxels: usize,
+    pub ml: f64,
+    /// Their share of the region's voxels with a finite value, per cent.
+    pub percent: f64,
+}
+
+/// `volume`'s values over the voxels `indices`: for each of `below`, those below it; for each
+/// of `percentiles` (0 to 100), the value at it, interpolated linearly between the two
+/// nearest ranks (numpy's default, type 7 of Hyndman and Fan; Perc15, the lung densitometry
+/// QIBA profiles, is the 15th). `None` for no voxel with a finite value.
+pub fn densitometry(
+    volume: &Volume,
+    indices: &[usize],
+    below: &[f64],
+    percentiles: &[f64],
+) -> Option<Densitometry> {
+    let mut values = finite_values(volume, indices)?;
+    let n = values.len();
+    let below = below
+        .iter()
+        .map(|&hu| {
+            let voxels = values.iter().filter(|&&v| v < hu).count();
+            Below {
+                hu,
+                voxels,
+                ml: voxels as f64 * volume.voxel_ml(),
+                percent: 100.0 * voxels as f64 / n as f64,
+            }
+        })
+        .collect();
+    let percentiles = percentiles
+        .iter()
+        .map(|&p| {
+            let rank = (n - 1) as f64 * p.clamp(0.0, 100.0) / 100.0;
+            let lo = (rank.floor() as usize).min(n - 1);
+            let (_, &mut at, above) = values.select_nth_unstable_by(lo, f64::total_cmp);
+            let next = above.iter().copied().fold(f64::INFINITY, f64::min);
+            let frac = rank - lo as f64;
+            let value = if frac > 0.0 {
+                at + frac * (next - at)
+            } else {
+                at
+            };
+            (p, value)
+        })
+        .collect();
+    Some(Densitometry { below, percentiles })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn densitometry_counts_below_and_interpolates_percentiles_as_numpy() {
+        // 0..99 shuffled on a 10×10×1 grid of 2 × 2 × 2.5 mm voxels, one NaN (voxel 0, 0.0).
+        let mut data: Vec<f32> = (0..100).map(|x| ((x * 37) % 100) as f32).collect();
+        let nan = data.iter().position(|&x| x == 0.0).unwrap();
+        data[nan] = f32::NAN;
+        let v = Volume::hounsfield([10, 10, 1], [2.0, 2.0, 2.5], data);
+        let all: Vec<usize> = (0..100).collect();
+        let d = densitometry(&v, &all, &[15.0, 1.0, 1000.0], &[0.0, 15.0, 50.0, 100.0]).unwrap();
+        // 1..99: below 15 are 1..14, 14 of 99; below 1 none (strictly); below 1000 all.
+        let counts: Vec<usize> = d.below.iter().map(|b| b.voxels).collect();
+        assert_eq!(counts, [14, 0, 99]);
+        assert!((d.below[0].percent - 1400.0 / 99.0).abs() < 1e-12);
+        assert!((d.below[0].ml - 14.0 * 0.01).abs() < 1e-12);
+        // numpy.percentile(np.arange(1, 100), [0, 15, 50, 100]) = 1, 15.7, 50, 99.
+        let got: Vec<f64> = d.percentiles.iter().map(|&(_, x)| x).collect();
+        for (g, want) in got.iter().zip([1.0, 15.7, 50.0, 99.0]) {
+            assert!((g - want).abs() < 1e-9, "{got:?}");
+        }
+        assert_eq!(d.percentiles[1].0, 15.0);
+        // One value: every percentile is it.
+        let d = densitometry(&v, &[5], &[], &[0.0, 37.5, 100.0]).unwrap();
+        let x = v.data[5] as f64;
+        assert!(d.percentiles.iter().all(|&(_, p)| p == x));
+        assert!(densitometry(&v, &[nan], &[0.0], &[15.0]).is_none());
+        assert!(densitometry(&v, &[], &[0.0], &[15.0]).is_none());
+    }
 
     #[test]
     fn stats_of_a_known_region() {

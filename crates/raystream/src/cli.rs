@@ -263,6 +263,22 @@ fn parse_island_ml(s: &str) -> Result<f64, String> {
     }
 }
 
+/// `--below`: a finite value (HU for a CT).
+fn parse_below(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        _ => Err(format!("'{s}': a value (HU for a CT), such as -950")),
+    }
+}
+
+/// `--percentile`: from 0 to 100.
+fn parse_percentile(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(p) if (0.0..=100.0).contains(&p) => Ok(p),
+        _ => Err(format!("'{s}': a percentile, from 0 to 100")),
+    }
+}
+
 /// Which islands of a surface's inside keep their surface: `iso` and `render` of a CT's
 /// threshold or of a label map's segments.
 #[derive(Args, Clone, Copy, Debug, Default)]
@@ -1300,6 +1316,29 @@ pub struct InfoArgs {
     /// centre): voxels, volume, mean, standard deviation, minimum, median, maximum, centroid.
     #[arg(long, value_name = "LABELS")]
     pub segmentation: Option<PathBuf>,
+    /// With --segmentation: each segment's share of voxels below each of these values (HU;
+    /// a list, or the option again): a lung's emphysema index LAA-950 is `--below -950` on an
+    /// inspiratory CT, air trapping `--below -856` on an expiratory one.
+    #[arg(
+        long,
+        value_name = "HU",
+        requires = "segmentation",
+        value_delimiter = ',',
+        value_parser = parse_below,
+        allow_hyphen_values = true
+    )]
+    pub below: Vec<f64>,
+    /// With --segmentation: each segment's values at these percentiles (0 to 100; a list, or
+    /// the option again), interpolated between the nearest ranks as numpy does: a lung's
+    /// Perc15 is `--percentile 15`.
+    #[arg(
+        long,
+        value_name = "P",
+        requires = "segmentation",
+        value_delimiter = ',',
+        value_parser = parse_percentile
+    )]
+    pub percentile: Vec<f64>,
     /// A CT volume in HU: the patient's body as `render --body-only` finds it (the table, a
     /// head holder, cables left out; what it encloses kept): its volume, what was left out,
     /// and its tissues by HU (below -190 air, gas and lung; -190 to -30 fat; -29 to 150 soft

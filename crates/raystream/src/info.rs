@@ -519,8 +519,14 @@ fn label_counts(v: &raystream_io::Volume) -> Option<Vec<(u32, usize)>> {
     Some(counts.into_iter().collect())
 }
 
-/// One segment's statistics: its label, its name, and the CT's values in it.
-type SegmentStats = (u32, String, raystream_volume::RegionStats);
+/// One segment's statistics: its label, its name, the CT's values in it, and its densitometry
+/// (`--below`, `--percentile`: empty lists when neither is asked).
+type SegmentStats = (
+    u32,
+    String,
+    raystream_volume::RegionStats,
+    raystream_volume::Densitometry,
+);
 
 /// `--segmentation LABELS`: the CT `ct`'s values within each segment of LABELS, and how its
 /// voxels were matched to the CT's (the same grid, the nearest label voxel, or a structure
@@ -539,13 +545,20 @@ fn segment_stats(
         .into_iter()
         .filter_map(|(l, list)| {
             let s = raystream_volume::region_stats(ct, &list)?;
+            let d = match a.below.is_empty() && a.percentile.is_empty() {
+                true => raystream_volume::Densitometry {
+                    below: Vec::new(),
+                    percentiles: Vec::new(),
+                },
+                false => raystream_volume::densitometry(ct, &list, &a.below, &a.percentile)?,
+            };
             let name = on
                 .known
                 .iter()
                 .find(|k| k.number as u32 == l)
                 .map(|k| k.label.clone())
                 .unwrap_or_default();
-            Some((l, name, s))
+            Some((l, name, s, d))
         })
         .collect();
     Ok(Some((stats, on.how)))
@@ -661,7 +674,7 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             out["segmentation"] = json!({
                 "file": a.segmentation.as_deref().map(file_name),
                 "matched_on": how,
-                "segments": stats.iter().map(|(l, name, s)| json!({
+                "segments": stats.iter().map(|(l, name, s, d)| json!({
                     "value": l,
                     "name": name,
                     "voxels": s.voxels,
@@ -672,6 +685,16 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                     "median": s.median,
                     "max": s.max,
                     "centroid": s.centroid,
+                    "below": d.below.iter().map(|b| json!({
+                        "hu": b.hu,
+                        "voxels": b.voxels,
+                        "ml": b.ml,
+                        "percent": b.percent,
+                    })).collect::<Vec<_>>(),
+                    "percentiles": d.percentiles.iter().map(|&(p, value)| json!({
+                        "p": p,
+                        "value": value,
+                    })).collect::<Vec<_>>(),
                 })).collect::<Vec<_>>(),
             });
         }
@@ -792,7 +815,7 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 "  within     {} (matched on {how}):",
                 a.segmentation.as_deref().unwrap_or(input).display()
             );
-            for (l, name, s) in stats {
+            for (l, name, s, d) in stats {
                 let name = if name.is_empty() {
                     String::new()
                 } else {
@@ -803,6 +826,18 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                     "  segment    {l}{name}: {} voxels, {:.1} ml; {unit} mean {:.1}, sd {:.1}, min {}, median {}, max {}; centroid ({x:.1}, {y:.1}, {z:.1}) mm LPS",
                     s.voxels, s.ml, s.mean, s.sd, s.min, s.median, s.max
                 );
+                let below = d.below.iter().map(|b| {
+                    format!(
+                        "{:.2} % below {} {unit} ({} voxels, {:.1} ml)",
+                        b.percent, b.hu, b.voxels, b.ml
+                    )
+                });
+                let at = (d.percentiles.iter())
+                    .map(|&(p, x)| format!("{} percentile {} {unit}", ordinal(p), round3(x)));
+                let parts: Vec<String> = below.chain(at).collect();
+                if !parts.is_empty() {
+                    println!("  density    {l}{name}: {}", parts.join("; "));
+                }
             }
         }
         if let Some(b) = &body {
@@ -813,6 +848,22 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// A percentile in words: "15th", "1st", "22nd", "2.5th".
+fn ordinal(p: f64) -> String {
+    if p.fract() != 0.0 {
+        return format!("{p}th");
+    }
+    let n = p as u64;
+    let suffix = match (n % 10, n % 100) {
+        (_, 11..=13) => "th",
+        (1, _) => "st",
+        (2, _) => "nd",
+        (3, _) => "rd",
+        _ => "th",
+    };
+    format!("{n}{suffix}")
 }
 
 /// `--body`: what was found, and what `--mask` and `--structures` wrote.

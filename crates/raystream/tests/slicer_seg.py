@@ -6,7 +6,8 @@ with an overlapping sphere on a second layer) and its CT; writes with slicerio a
 segmentation whose segments overlap, and, by hand, one in the format of Slicer before 4.11 (no
 label values: a layer for each segment). Prints one JSON object: for each file, its path, its
 voxel-to-LPS matrix and each segment's name, colour (0-255), voxels and centroid (LPS mm); the
-CT's mean value within each segment of the first file."""
+CT's mean value within each segment of the first file, its share below -950 and -856 HU and its
+15th and 2.5th percentiles."""
 import json, os, sys
 
 import nrrd
@@ -54,8 +55,13 @@ files.append(describe(os.path.join(data, "SegmentationOverlapping.seg.nrrd"))[0]
 ct_path = os.path.join(data, "CTChest4.nrrd")
 ct, _ = nrrd.read(ct_path)
 assert ct.shape == flat["voxels"].shape, (ct.shape, flat["voxels"].shape)
-means = [float(ct[slicerio.segment_mask(flat, seg["id"])].astype("float64").mean())
-         for seg in flat["segments"]]
+values = [ct[slicerio.segment_mask(flat, seg["id"])].astype("float64")
+          for seg in flat["segments"]]
+means = [float(v.mean()) for v in values]
+# Lung densitometry: the share below -950 and -856 HU (per cent), the 15th and 2.5th
+# percentiles (numpy's linear interpolation).
+below = [[float((v < hu).mean() * 100) for hu in (-950, -856)] for v in values]
+percentiles = [np.percentile(v, [15, 2.5]).tolist() for v in values]
 
 # An oblique grid (rotated 30° about z, then 20° about x; uneven spacing), three segments: a
 # ball and a slab that overlaps it (slicerio puts it on a second layer), and a cube apart.
@@ -104,4 +110,5 @@ header = {
 nrrd.write(legacy, layers, header, custom_field_map={})
 files.append(describe(legacy, [ball, slab])[0])
 
-print(json.dumps({"files": files, "ct": ct_path, "ct_means": means}))
+print(json.dumps({"files": files, "ct": ct_path, "ct_means": means, "ct_below": below,
+                  "ct_percentiles": percentiles}))

@@ -2649,7 +2649,8 @@ fn segment_voxels(
 /// - The tissue's surface is the same from both of Slicer's files, though the sphere covers
 ///   part of it in the second's label volume; `iso` names and colours each surface as Slicer
 ///   does (in a GLB, the colour's linear value).
-/// - The chest CT's values within each segment are numpy's.
+/// - The chest CT's values within each segment are numpy's, and so are the lungs'
+///   densitometry (the share below -950 and -856 HU, the 15th and 2.5th percentiles).
 /// - `render --segment NAME` draws that segment in its colour.
 /// - A layer the file lacks, a label value 0 or not a number, or two segments with one label
 ///   value on one layer are refused, the file and field named.
@@ -2838,27 +2839,72 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
     }
     assert_eq!(shading.materials.len(), 8);
 
-    // The chest CT's values within each segment.
+    // The chest CT's values within each segment, and the lungs' densitometry: LAA-950
+    // (normal lungs: under 1 %), the share below -856 HU, Perc15 and the 2.5th percentile.
     let o = run(&[
         "info",
         "--json",
         v["ct"].as_str().unwrap(),
         "--segmentation",
         one,
+        "--below",
+        "-950,-856",
+        "--percentile",
+        "15",
+        "--percentile=2.5",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let info: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
     let stats = info["segmentation"]["segments"].as_array().unwrap();
     let means = v["ct_means"].as_array().unwrap();
     assert_eq!(stats.len(), means.len());
-    for (s, want) in stats.iter().zip(means) {
+    let lists = |v: &Value| -> Vec<Vec<f64>> { serde_json::from_value(v.clone()).unwrap() };
+    let (below, percentiles) = (lists(&v["ct_below"]), lists(&v["ct_percentiles"]));
+    for (n, (s, want)) in stats.iter().zip(means).enumerate() {
         let (got, want) = (s["mean"].as_f64().unwrap(), want.as_f64().unwrap());
         assert!(
             (got - want).abs() < 0.05,
             "{}: mean {got} vs {want}",
             s["name"]
         );
+        let field = |list: &str, key: &str| -> Vec<f64> {
+            let items = s[list].as_array().unwrap();
+            items.iter().map(|b| b[key].as_f64().unwrap()).collect()
+        };
+        assert_eq!(field("below", "hu"), [-950.0, -856.0]);
+        assert_eq!(field("percentiles", "p"), [15.0, 2.5]);
+        for (got, want) in field("below", "percent").iter().zip(&below[n]) {
+            assert!((got - want).abs() < 1e-9, "{}: {got} vs {want}", s["name"]);
+        }
+        for (got, want) in field("percentiles", "value").iter().zip(&percentiles[n]) {
+            assert!((got - want).abs() < 1e-9, "{}: {got} vs {want}", s["name"]);
+        }
     }
+    let lung = |name: &str| stats.iter().find(|s| s["name"] == name).unwrap();
+    for name in ["right lung", "left lung"] {
+        let laa = lung(name)["below"][0]["percent"].as_f64().unwrap();
+        let perc15 = lung(name)["percentiles"][0]["value"].as_f64().unwrap();
+        assert!(laa > 0.0 && laa < 1.0, "{name}: LAA-950 {laa} %");
+        assert!(
+            (-910.0..-880.0).contains(&perc15),
+            "{name}: Perc15 {perc15}"
+        );
+    }
+    refused(
+        &["info", v["ct"].as_str().unwrap(), "--below", "-950"],
+        "--segmentation",
+    );
+    refused(
+        &[
+            "info",
+            v["ct"].as_str().unwrap(),
+            "--segmentation",
+            one,
+            "--percentile",
+            "101",
+        ],
+        "'101': a percentile, from 0 to 100",
+    );
 
     // The right lung alone, in its green (#16c547): no pixel of the left lung's magenta.
     let png = render_to(
