@@ -284,6 +284,8 @@ def seeds(d):
             wr.Write()
         except ImportError:
             print("no vtk: VTK XML files left out", file=sys.stderr)
+        # A mask of v.nii, as TotalSegmentator writes one of its folder's.
+        sitk.WriteImage(sitk.Cast(img > 0, sitk.sitkUInt8), os.path.join(d, "mk.nii.gz"))
         # 4-D: two phases, as SimpleITK writes them, and 3D Slicer's interleaved NRRD.
         for n in ["v4.nii.gz", "v4.nrrd", "v4.mha"]:
             sitk.WriteImage(sitk.JoinSeries([img, img + 100]), os.path.join(d, n))
@@ -648,6 +650,16 @@ def run(args, name):
     return None
 
 
+def settle(why, p, d):
+    """A case's outcome: 1 and its failure printed (its folder kept to look at), or 0 and its
+    folder removed."""
+    if why:
+        print(f"FAIL {p}: {why}")
+        return 1
+    shutil.rmtree(d)
+    return 0
+
+
 def fuzz_files(work, n, device, only=None):
     sd = os.path.join(work, "seeds")
     os.makedirs(sd)
@@ -691,6 +703,18 @@ def fuzz_files(work, n, device, only=None):
             # The structure set's CT beside it, in its folder.
             for f in os.listdir(os.path.join(sd, "rsct")):
                 shutil.copy(os.path.join(sd, "rsct", f), d)
+        if s == "mk.nii.gz":
+            # A folder of masks (TotalSegmentator's): the mutated one after an intact one.
+            masks = os.path.join(d, "masks")
+            os.makedirs(masks)
+            shutil.move(p, os.path.join(masks, s))
+            shutil.copy(os.path.join(sd, s), os.path.join(masks, "a.nii.gz"))
+            vol = os.path.join(sd, "v.nii")
+            why = run(["info", masks, "--json"], (s, "masks")) or (os.path.exists(vol) and run(
+                ["info", vol, "--segmentation", masks, "--below", "-950", "--percentile", "15"],
+                (s, "masks")))
+            bad += settle(why, p, d)
+            continue
         if s.startswith("c."):
             # A curved reformation along the mutated path, through the intact volume.
             vol = os.path.join(sd, "v.nii")
@@ -756,11 +780,7 @@ def fuzz_files(work, n, device, only=None):
                 ["centreline", vol, "--path", p, "-q", "-o", os.path.join(d, "cl.mrk.json"),
                  "--lumen", random.choice(["-500", "0", "150"])]
                 + (["--dark"] if random.random() < 0.3 else []), s))
-            if why:
-                bad += 1
-                print(f"FAIL {p}: {why}")
-            else:
-                shutil.rmtree(d)
+            bad += settle(why, p, d)
             continue
         # A 4-D image's phases: one picked (maybe one it lacks), or all as a cine.
         four_d = s.startswith("v4")
@@ -857,11 +877,7 @@ def fuzz_files(work, n, device, only=None):
                 else:
                     why = run(["render", p, "-q", "--size", "8x8", "--spp", "1", "--device", device]
                               + segments + ["-o", os.path.join(d, "s.png")], (s, "t.ctbl"))
-        if why:
-            bad += 1
-            print(f"FAIL {p}: {why}")
-        else:
-            shutil.rmtree(d)
+        bad += settle(why, p, d)
     return bad
 
 

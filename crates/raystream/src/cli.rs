@@ -566,7 +566,8 @@ pub struct RenderArgs {
     pub draw_wall_edge: Option<AirwayEdge>,
     /// With --mode slice (a slice, or a CPR with --path, and their frames): tints each pixel by the
     /// label of a label map, DICOM Segmentation or RT Structure Set (FILE: NIfTI, NRRD (a 3D
-    /// Slicer .seg.nrrd too), MetaImage, DICOM SEG or RTSTRUCT; `measure --mask` writes NIfTI,
+    /// Slicer .seg.nrrd too), MetaImage, DICOM SEG or RTSTRUCT, or a folder of NIfTI masks, a
+    /// file a segment, as TotalSegmentator writes them; `measure --mask` writes NIfTI,
     /// .seg.nrrd and SEG) at the
     /// pixel's point in the patient, as a viewer lays a segmentation over the CT, each segment
     /// in its own colour (a Segmentation's, a structure set's, `--colour-table`'s), else label
@@ -950,8 +951,8 @@ impl From<ModeArg> for raystream_cpu::dvr::DvrMode {
 #[derive(Args)]
 pub struct IsoArgs {
     /// CT volume (DICOM folder or file, .nii/.nii.gz, .nrrd/.nhdr, .mha/.mhd, .vtk, .vti,
-    /// NAME_WxHxD_TYPE.raw), or a label map, DICOM Segmentation or 3D Slicer segmentation
-    /// (with `--segment`).
+    /// NAME_WxHxD_TYPE.raw), or a label map, DICOM Segmentation, 3D Slicer segmentation or
+    /// folder of NIfTI masks (TotalSegmentator's; with `--segment`).
     pub input: PathBuf,
     /// Output mesh in LPS millimetres: .ply (with normals), .obj (with normals), .stl, .vtk
     /// (3D Slicer's model format, legacy VTK polygonal data, with normals, and colours for
@@ -1312,8 +1313,9 @@ pub struct InfoArgs {
     #[arg(long, alias = "color-table", value_name = "FILE")]
     pub colour_table: Option<PathBuf>,
     /// A CT volume: its values within each segment of LABELS (a label map, a DICOM
-    /// Segmentation or an RT Structure Set, on any grid: each CT voxel takes the label at its
-    /// centre): voxels, volume, mean, standard deviation, minimum, median, maximum, centroid.
+    /// Segmentation, an RT Structure Set or a folder of NIfTI masks, TotalSegmentator's, on
+    /// any grid: each CT voxel takes the label at its centre): voxels, volume, mean, standard
+    /// deviation, minimum, median, maximum, centroid.
     #[arg(long, value_name = "LABELS")]
     pub segmentation: Option<PathBuf>,
     /// With --segmentation: each segment's share of voxels below each of these values (HU;

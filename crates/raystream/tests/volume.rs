@@ -3359,3 +3359,150 @@ fn info_body_measures_and_writes_the_body() {
         .count();
     assert_eq!(wrong, 0);
 }
+
+/// A folder of NIfTI masks, a file a structure (as TotalSegmentator writes its
+/// `segmentations/`), read as one segmentation of the CT they were drawn on:
+/// - each mask a segment named by its file, numbered in name order; an empty mask (most of
+///   TotalSegmentator's on any one CT) holds no voxel; a file that is no NIfTI is passed by;
+/// - `info CT --segmentation DIR` measures each mask whole where masks overlap (the voxels
+///   and mean HU computed here from the masks), with densitometry;
+/// - `render --segmentation DIR --segment NAME` and `iso DIR --segment NAME` take them by name;
+/// - a mask on another grid, or a file holding other values than 0 and 1 (the CT among its
+///   masks), is refused, the file named.
+#[test]
+fn a_folder_of_masks_is_a_segmentation() {
+    let ct_path = builtin_ct();
+    let ct = raystream_io::load_volume(Path::new(&ct_path), &Default::default()).unwrap();
+    let [nx, ny, nz] = ct.dims;
+    let dir = tmp("mask-folder");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let ijk = |n: usize| (n % nx, (n / nx) % ny, n / (nx * ny));
+    let mask = |f: &dyn Fn(usize, f32) -> bool| -> Vec<u8> {
+        (ct.data.iter().enumerate())
+            .map(|(n, &h)| u8::from(f(n, h)))
+            .collect()
+    };
+    let bone = mask(&|_, h| h > 300.0);
+    let gas = mask(&|n, h| h < -500.0 && ijk(n).2 < nz / 2);
+    let block = mask(&|n, _| {
+        let (i, j, k) = ijk(n);
+        (40..80).contains(&i) && (30..70).contains(&j) && (20..60).contains(&k)
+    });
+    let empty = vec![0u8; ct.data.len()];
+    for (name, m) in [
+        ("bone.nii.gz", &bone),
+        ("gas.nii", &gas),
+        ("zz_block.nii.gz", &block),
+        ("aorta.nii.gz", &empty),
+    ] {
+        raystream_io::write_label_map(&dir.join(name), &ct, m, "mask").unwrap();
+    }
+    std::fs::write(dir.join("statistics.json"), "{}").unwrap();
+    let overlap = (bone.iter().zip(&gas).zip(&block))
+        .filter(|&((b, g), k)| b + g + k > 1)
+        .count();
+    assert!(overlap > 100, "{overlap}");
+
+    // The folder alone: its masks as a label map's segments.
+    let d = dir.to_str().unwrap();
+    let labels = info(d);
+    let names: Vec<&str> = (labels["segments"].as_array().unwrap().iter())
+        .map(|s| s["label"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["aorta", "bone", "gas", "zz_block"], "{labels}");
+    let warnings = labels["warnings"].to_string();
+    assert!(
+        warnings.contains(&format!("{overlap} voxels lie in two masks")),
+        "{warnings}"
+    );
+
+    // The CT within each, whole.
+    let o = run(&[
+        "info",
+        "--json",
+        &ct_path,
+        "--segmentation",
+        d,
+        "--below",
+        "-500",
+        "--percentile",
+        "50",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let got: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let segments = got["segmentation"]["segments"].as_array().unwrap();
+    let ours: Vec<(u64, &str)> = segments
+        .iter()
+        .map(|s| (s["value"].as_u64().unwrap(), s["name"].as_str().unwrap()))
+        .collect();
+    assert_eq!(ours, [(2, "bone"), (3, "gas"), (4, "zz_block")]);
+    for (s, m) in segments.iter().zip([&bone, &gas, &block]) {
+        let held: Vec<f64> = (ct.data.iter().zip(m.iter()))
+            .filter(|&(_, &m)| m == 1)
+            .map(|(&h, _)| h as f64)
+            .collect();
+        assert_eq!(
+            s["voxels"].as_u64().unwrap() as usize,
+            held.len(),
+            "{}",
+            s["name"]
+        );
+        let mean = held.iter().sum::<f64>() / held.len() as f64;
+        assert!(
+            (s["mean"].as_f64().unwrap() - mean).abs() < 1e-6,
+            "{}",
+            s["name"]
+        );
+        let below = held.iter().filter(|&&h| h < -500.0).count();
+        assert_eq!(s["below"][0]["voxels"].as_u64().unwrap() as usize, below);
+    }
+    assert_eq!(segments[1]["below"][0]["percent"].as_f64().unwrap(), 100.0);
+
+    // By name, in a render and as a surface.
+    render_to(
+        "mask-folder-bone.png",
+        "cpu",
+        &[
+            &ct_path,
+            "--mode",
+            "mip",
+            "--segmentation",
+            d,
+            "--segment",
+            "bone",
+            "--size",
+            "32x32",
+        ],
+    );
+    let ply = tmp("mask-folder-gas.ply");
+    let o = run(&[
+        "iso",
+        "--quiet",
+        d,
+        "--segment",
+        "gas",
+        "-o",
+        ply.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(raystream_io::load_mesh(&ply).unwrap().len() > 100);
+
+    // Refused: a mask on another grid; the CT among the masks.
+    let other = tmp("mask-folder-other");
+    let _ = std::fs::remove_dir_all(&other);
+    std::fs::create_dir_all(&other).unwrap();
+    raystream_io::write_label_map(&other.join("a.nii.gz"), &ct, &bone, "mask").unwrap();
+    let small = raystream_io::Volume::hounsfield([8, 8, 8], [1.0; 3], vec![0.0; 512]);
+    raystream_io::write_label_map(&other.join("b.nii.gz"), &small, &[1; 512], "mask").unwrap();
+    refused(
+        &["info", &ct_path, "--segmentation", other.to_str().unwrap()],
+        "b.nii.gz: a mask of this folder on another grid (8 x 8 x 8 voxels",
+    );
+    std::fs::remove_file(other.join("b.nii.gz")).unwrap();
+    std::fs::copy(&ct_path, other.join("ct.nii.gz")).unwrap();
+    refused(
+        &["info", other.to_str().unwrap()],
+        "ct.nii.gz: holds the value",
+    );
+}

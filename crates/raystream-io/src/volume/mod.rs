@@ -12,6 +12,7 @@
 //! file in every error ([`VolumeError`]).
 
 pub(crate) mod dicom;
+mod mask_folder;
 mod mha;
 mod named_raw;
 mod nifti;
@@ -63,7 +64,8 @@ pub enum VolumeFormat {
 }
 
 impl VolumeFormat {
-    /// The format named by a path: a directory is a DICOM series; files go by extension
+    /// The format named by a path: a directory is a DICOM series (or a folder of NIfTI masks,
+    /// which [`load_volume`] reads as one label map); files go by extension
     /// (`.nii`, `.nii.gz`, `.nrrd`, `.nhdr`, `.mha`, `.mhd`, `.vtk`, `.vti`, `.raw`, `.raw.gz`,
     /// `.dcm`).
     pub fn from_path(path: &Path) -> Option<Self> {
@@ -606,7 +608,8 @@ pub(crate) fn voxel_count(path: &Path, dims: [usize; 3]) -> Result<usize, Volume
     }
 }
 
-/// Reads a volume: a folder is a DICOM series (the largest, or the one `select` names), files go
+/// Reads a volume: a folder is a DICOM series (the largest, or the one `select` names) or, holding
+/// NIfTI files and no DICOM, a folder of masks read as one label map; files go
 /// by extension; of a 4-D acquisition, the phase `select` names.
 pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeError> {
     let format = VolumeFormat::from_path(path).ok_or_else(|| {
@@ -629,6 +632,7 @@ pub fn load_volume(path: &Path, select: &VolumeSelect) -> Result<Volume, VolumeE
         ));
     }
     let mut volume = match format {
+        VolumeFormat::Dicom if mask_folder::is_mask_folder(path) => mask_folder::read(path)?,
         VolumeFormat::Dicom => dicom::load(path, select)?,
         VolumeFormat::Raw => named_raw::load(path, select.phase)?,
         VolumeFormat::Vtk => vtk::parse(&raw::read_file(path)?, path, select.phase)?,

@@ -595,11 +595,14 @@ pub fn is_structure_set_file(path: &Path) -> bool {
 /// Each segment of the label volume `labels` (read from `path`) whole, where its segments may
 /// overlap, which a label volume cannot hold: an RT Structure Set's structures laid on
 /// `labels`' grid, a DICOM Segmentation's segments, a 3D Slicer segmentation's on several
-/// layers (each read again); `None` for other label volumes, whose voxels each hold one label. Each with its label, in increasing order.
+/// layers, a folder's masks that overlap (each read again); `None` for other label volumes, whose voxels each hold one label. Each with its label, in increasing order.
 pub fn whole_segments(labels: &Volume, path: &Path) -> Result<Option<WholeSegments>, VolumeError> {
     if is_structure_set_volume(labels) {
         let set = StructureSet::read(path)?;
         return Ok(Some(set.whole(set.regions(labels).0)));
+    }
+    if labels.format == VolumeFormat::Nifti && path.is_dir() {
+        return super::mask_folder::whole(labels, path);
     }
     if labels.format == VolumeFormat::Nrrd && !labels.segments.is_empty() && path.is_file() {
         let bytes = std::fs::read(path).map_err(|e| VolumeError::io(path, e))?;
