@@ -3399,6 +3399,16 @@ fn a_folder_of_masks_is_a_segmentation() {
         raystream_io::write_label_map(&dir.join(name), &ct, m, "mask").unwrap();
     }
     std::fs::write(dir.join("statistics.json"), "{}").unwrap();
+    // The gas as float32 (SimpleITK writes masks so when asked): NIfTI-1's datatype 16 and
+    // bitpix 32 at bytes 70 and 72, its voxels after the header's vox_offset.
+    let file = dir.join("gas.nii");
+    let bytes = std::fs::read(&file).unwrap();
+    let offset = f32::from_le_bytes(bytes[108..112].try_into().unwrap()) as usize;
+    let mut float = bytes[..offset].to_vec();
+    float[70..72].copy_from_slice(&16i16.to_le_bytes());
+    float[72..74].copy_from_slice(&32i16.to_le_bytes());
+    float.extend(gas.iter().flat_map(|&m| (m as f32).to_le_bytes()));
+    std::fs::write(&file, float).unwrap();
     let overlap = (bone.iter().zip(&gas).zip(&block))
         .filter(|&((b, g), k)| b + g + k > 1)
         .count();

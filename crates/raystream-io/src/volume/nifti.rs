@@ -41,6 +41,28 @@ pub(crate) fn parse(
     path: &Path,
     phase: Option<usize>,
 ) -> Result<Volume, VolumeError> {
+    let (mut v, p) = parse_payload(bytes, path, phase)?;
+    v.data = decode(&p.bytes, p.scalar, p.big_endian, p.slope, p.intercept);
+    v.unit = guess_unit(&v.data, p.scalar);
+    Ok(v)
+}
+
+/// A NIfTI file's voxels as the file holds them, and how to read them as values.
+pub(crate) struct Payload {
+    pub bytes: Vec<u8>,
+    pub scalar: Scalar,
+    pub big_endian: bool,
+    pub slope: f64,
+    pub intercept: f64,
+}
+
+/// [`parse`]'s volume without its values (`data` empty), and the voxels as the file holds them:
+/// a mask of bytes read as such, not as four times as many bytes of f32.
+pub(crate) fn parse_payload(
+    bytes: &[u8],
+    path: &Path,
+    phase: Option<usize>,
+) -> Result<(Volume, Payload), VolumeError> {
     let gzip = bytes.starts_with(&[0x1f, 0x8b]);
     let mut r = open_payload(bytes, 0, gzip, path)?;
     let first = read_exact_n(&mut r, 4, path, "the NIfTI header")?;
@@ -148,7 +170,7 @@ fn build(
     r: &mut dyn Read,
     hdr_len: usize,
     phase: Option<usize>,
-) -> Result<Volume, VolumeError> {
+) -> Result<(Volume, Payload), VolumeError> {
     let mut warnings = Vec::new();
     let ndim = h.dim[0];
     if !(1..=7).contains(&ndim) {
@@ -265,21 +287,27 @@ fn build(
             },
         )
     };
-    let data = decode(&bytes, scalar, h.big_endian, slope, inter);
-    let unit = guess_unit(&data, scalar);
-    Ok(Volume {
+    let v = Volume {
         dims,
         spacing,
         origin,
         direction,
-        data,
-        unit,
+        data: Vec::new(),
+        unit: ValueUnit::Unknown,
         format: VolumeFormat::Nifti,
         series: None,
         segments: Vec::new(),
         phase,
         warnings,
-    })
+    };
+    let payload = Payload {
+        bytes,
+        scalar,
+        big_endian: h.big_endian,
+        slope,
+        intercept: inter,
+    };
+    Ok((v, payload))
 }
 
 /// NIfTI, NRRD and MetaImage do not state a unit. A signed volume that reaches air (≤ −900)
