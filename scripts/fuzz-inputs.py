@@ -284,6 +284,18 @@ def seeds(d):
             wr.Write()
         except ImportError:
             print("no vtk: VTK XML files left out", file=sys.stderr)
+        # A multi-label map with TotalSegmentator's label table in a header extension (--ml).
+        sitk.WriteImage(sitk.Cast((img > -300) + (img > 300), sitk.sitkUInt8), os.path.join(d, "ml0.nii"))
+        raw = open(os.path.join(d, "ml0.nii"), "rb").read()
+        os.remove(os.path.join(d, "ml0.nii"))
+        xml = (b'<?xml version="1.0" encoding="UTF-8"?> <CaretExtension> <VolumeInformation Index="0">'
+               b'<LabelTable>\n<Label Key="1" Red="1.0" Green="0.0" Blue="0.0" Alpha="1"><![CDATA[liver]]>'
+               b'</Label>\n<Label Key="2" Red="0.0" Green="1.0" Blue="0.0" Alpha="1"><![CDATA[aorta]]>'
+               b'</Label>\n</LabelTable></VolumeInformation></CaretExtension>')
+        xml += b" " * ((-(len(xml) + 8)) % 16)
+        at = int(np.frombuffer(raw[108:112], "<f4")[0])
+        w("ml.nii", raw[:108] + np.array([352 + 8 + len(xml)], "<f4").tobytes() + raw[112:348]
+          + b"\x01\0\0\0" + np.array([len(xml) + 8, 0], "<i4").tobytes() + xml + raw[at:])
         # A mask of v.nii, as TotalSegmentator writes one of its folder's.
         sitk.WriteImage(sitk.Cast(img > 0, sitk.sitkUInt8), os.path.join(d, "mk.nii.gz"))
         # 4-D: two phases, as SimpleITK writes them, and 3D Slicer's interleaved NRRD.

@@ -3516,3 +3516,78 @@ fn a_folder_of_masks_is_a_segmentation() {
         "ct.nii.gz: holds the value",
     );
 }
+
+/// TotalSegmentator's multi-label NIfTI (`--ml`): its labels' names and colours in a header
+/// extension, the XML label table of Connectome Workbench's label volumes. Its segments are
+/// named and coloured by it (in `info`, and in `info CT --segmentation`'s statistics); a table
+/// that cannot be read is a warning, the labels then unnamed.
+#[test]
+fn a_multi_label_nifti_names_its_labels_from_its_label_table() {
+    let ct_path = builtin_ct();
+    let ct = raystream_io::load_volume(Path::new(&ct_path), &Default::default()).unwrap();
+    let labels: Vec<u8> = (ct.data.iter())
+        .map(|&h| match h {
+            h if h > 300.0 => 2,
+            h if h < -500.0 => 5,
+            _ => 0,
+        })
+        .collect();
+    let plain = tmp("ml-plain.nii");
+    raystream_io::write_label_map(&plain, &ct, &labels, "labels").unwrap();
+    let bytes = std::fs::read(&plain).unwrap();
+    let offset = f32::from_le_bytes(bytes[108..112].try_into().unwrap()) as usize;
+    let with_table = |name: &str, xml: &str| -> String {
+        let mut content = xml.as_bytes().to_vec();
+        // esize (a multiple of 16, its 8 bytes included) and ecode 0, as nibabel writes it.
+        content.resize((content.len() + 8).div_ceil(16) * 16 - 8, b' ');
+        let mut out = bytes[..348].to_vec();
+        let voxels = 348 + 4 + 8 + content.len();
+        out[108..112].copy_from_slice(&(voxels as f32).to_le_bytes());
+        out.extend([1, 0, 0, 0]);
+        out.extend(((content.len() + 8) as i32).to_le_bytes());
+        out.extend(0i32.to_le_bytes());
+        out.extend(content);
+        out.extend(&bytes[offset..]);
+        let file = tmp(name);
+        std::fs::write(&file, out).unwrap();
+        file.to_str().unwrap().to_string()
+    };
+    let table = "<?xml version=\"1.0\" encoding=\"UTF-8\"?> <CaretExtension>  <VolumeInformation Index=\"0\">   <LabelTable>\n<Label Key=\"2\" Red=\"0.0\" Green=\"1.0\" Blue=\"0.0\" Alpha=\"1\"><![CDATA[vertebrae_L1]]></Label>\n<Label Key=\"5\" Red=\"0.0\" Green=\"1.0\" Blue=\"1.0\" Alpha=\"1\"><![CDATA[colon]]></Label>\n<Label Key=\"7\" Red=\"1.0\" Green=\"0.5019607843137255\" Blue=\"0.0\" Alpha=\"1\"><![CDATA[liver]]></Label>\n  </LabelTable>  <VolumeType><![CDATA[Label]]></VolumeType>   </VolumeInformation></CaretExtension>\n              ";
+    let named = with_table("ml-named.nii", table);
+    let got = info(&named);
+    let segments: Vec<(u64, &str, Value)> = (got["segments"].as_array().unwrap().iter())
+        .map(|s| {
+            let n = s["number"].as_u64().unwrap();
+            (n, s["label"].as_str().unwrap(), s["colour"].clone())
+        })
+        .collect();
+    assert_eq!(
+        segments,
+        [
+            (2, "vertebrae_L1", serde_json::json!([0, 255, 0])),
+            (5, "colon", serde_json::json!([0, 255, 255])),
+            (7, "liver", serde_json::json!([255, 128, 0])),
+        ],
+        "{got}"
+    );
+    let o = run(&["info", &ct_path, "--segmentation", &named]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert!(text.contains("segment    2 (vertebrae_L1): "), "{text}");
+    assert!(text.contains("segment    5 (colon): "), "{text}");
+    // The plain file: no names. A broken table: a warning, no names.
+    assert!(
+        info(plain.to_str().unwrap())["segments"]
+            .as_array()
+            .unwrap()
+            .is_empty()
+    );
+    let broken = with_table("ml-broken.nii", "<LabelTable><Label Key=\"1\">a</Lab>");
+    let got = info(&broken);
+    assert!(got["segments"].as_array().unwrap().is_empty());
+    let warnings = got["warnings"].to_string();
+    assert!(
+        warnings.contains("its label table (a header extension) is not read"),
+        "{warnings}"
+    );
+}

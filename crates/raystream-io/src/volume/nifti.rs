@@ -13,8 +13,8 @@ use super::raw::{
     Bytes, PhaseLayout, Scalar, decode, open_payload, read_exact_n, read_phase, skip_n,
 };
 use super::{
-    Phase, ValueUnit, Volume, VolumeError, VolumeFormat, check_geometry, is_orthonormal,
-    unit_columns, voxel_count,
+    Phase, SegmentLabel, ValueUnit, Volume, VolumeError, VolumeFormat, check_geometry,
+    is_orthonormal, unit_columns, voxel_count,
 };
 
 /// The header fields raystream uses, widened to the NIfTI-2 types.
@@ -269,7 +269,21 @@ fn build(
             format!("vox_offset {} is invalid", h.vox_offset),
         ));
     }
-    skip_n(r, offset as u64 - hdr_len as u64, path)?;
+    // The extensions between the header and the voxels: read (up to 16 MiB of them) for a
+    // label table, else skipped.
+    let gap = offset as u64 - hdr_len as u64;
+    let mut segments = Vec::new();
+    if gap <= MAX_EXTENSIONS {
+        let ext = read_exact_n(r, gap as usize, path, "the NIfTI header's extensions")?;
+        match label_table(&ext, h.big_endian) {
+            Ok(table) => segments = table,
+            Err(why) => warnings.push(format!(
+                "its label table (a header extension) is not read: {why}"
+            )),
+        }
+    } else {
+        skip_n(r, gap, path)?;
+    }
     // The volumes follow each other: those before the phase read are skipped, not kept.
     let layout = PhaseLayout::time_last(n, phase.count);
     let what = "the NIfTI voxel data";
@@ -296,7 +310,7 @@ fn build(
         unit: ValueUnit::Unknown,
         format: VolumeFormat::Nifti,
         series: None,
-        segments: Vec::new(),
+        segments,
         phase,
         warnings,
     };
@@ -308,6 +322,83 @@ fn build(
         intercept: inter,
     };
     Ok((v, payload))
+}
+
+/// The most bytes of header extensions read for a label table; beyond, they are skipped.
+const MAX_EXTENSIONS: u64 = 16 << 20;
+
+/// The label names and colours a NIfTI header extension gives: the XML label table of
+/// Connectome Workbench's (Caret's) label volumes, which TotalSegmentator writes into its
+/// multi-label files (`--ml`): `<LabelTable><Label Key="1" Red="1" Green="0" Blue="0"
+/// Alpha="1"><![CDATA[spleen]]></Label>…`. `ext`: the bytes from the header's end to the
+/// voxels (the 4-byte extender, then extensions of esize, ecode and esize − 8 bytes of
+/// content). None found: no labels; a table that cannot be read: why.
+fn label_table(ext: &[u8], big_endian: bool) -> Result<Vec<SegmentLabel>, String> {
+    if ext.len() < 4 || ext[0] == 0 {
+        return Ok(Vec::new());
+    }
+    let i32_at = |at: usize| -> i32 {
+        let b: [u8; 4] = ext[at..at + 4].try_into().unwrap_or_default();
+        if big_endian {
+            i32::from_be_bytes(b)
+        } else {
+            i32::from_le_bytes(b)
+        }
+    };
+    let mut at = 4;
+    while at + 8 <= ext.len() {
+        let size = i32_at(at);
+        if size < 8 || at + size as usize > ext.len() {
+            // A lying size: no more extensions to read.
+            break;
+        }
+        let content = &ext[at + 8..at + size as usize];
+        at += size as usize;
+        let text = String::from_utf8_lossy(content);
+        let text = text.trim_end_matches(['\0', ' ', '\n']);
+        if !text.contains("<LabelTable") {
+            continue;
+        }
+        let doc = roxmltree::Document::parse(text).map_err(|e| format!("its XML: {e}"))?;
+        let mut labels = Vec::new();
+        for label in doc.descendants().filter(|n| n.has_tag_name("Label")) {
+            let key = label.attribute("Key").unwrap_or("");
+            let number = match key.trim().parse::<u16>() {
+                Ok(0) => continue,
+                Ok(n) => n,
+                Err(_) => {
+                    return Err(format!(
+                        "a label's Key {key:?} is not a number from 0 to 65535"
+                    ));
+                }
+            };
+            let channel = |name: &str| -> Option<u8> {
+                let v: f64 = label.attribute(name)?.trim().parse().ok()?;
+                (0.0..=1.0).contains(&v).then(|| (v * 255.0).round() as u8)
+            };
+            let colour = match (channel("Red"), channel("Green"), channel("Blue")) {
+                (Some(r), Some(g), Some(b)) => Some([r, g, b]),
+                _ => None,
+            };
+            let name: String = label.text().unwrap_or("").trim().to_string();
+            labels.push(SegmentLabel {
+                number,
+                label: if name.is_empty() {
+                    format!("{number}")
+                } else {
+                    name
+                },
+                colour,
+                terms: Default::default(),
+            });
+        }
+        labels.sort_by_key(|l| l.number);
+        if let Some(w) = labels.windows(2).find(|w| w[0].number == w[1].number) {
+            return Err(format!("two labels have the Key {}", w[0].number));
+        }
+        return Ok(labels);
+    }
+    Ok(Vec::new())
 }
 
 /// NIfTI, NRRD and MetaImage do not state a unit. A signed volume that reaches air (≤ −900)
