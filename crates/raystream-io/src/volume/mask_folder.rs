@@ -223,9 +223,19 @@ pub(crate) fn whole(labels: &Volume, dir: &Path) -> Result<Option<WholeSegments>
         [v % nx, (v / nx) % ny, v / (nx * ny)]
     };
     let mut whole = WholeSegments::new();
+    // The label map's grid, without cloning its values.
     let first = Volume {
+        dims: labels.dims,
+        spacing: labels.spacing,
+        origin: labels.origin,
+        direction: labels.direction,
         data: Vec::new(),
-        ..labels.clone()
+        unit: ValueUnit::Unknown,
+        format: VolumeFormat::Nifti,
+        series: None,
+        segments: Vec::new(),
+        phase: Phase::default(),
+        warnings: Vec::new(),
     };
     each_mask(&mask_files(dir)?, Some(first), |n, _, held| {
         let Some(&one) = held.first() else {
