@@ -3519,7 +3519,8 @@ fn a_folder_of_masks_is_a_segmentation() {
 
 /// TotalSegmentator's multi-label NIfTI (`--ml`): its labels' names and colours in a header
 /// extension, the XML label table of Connectome Workbench's label volumes. Its segments are
-/// named and coloured by it (in `info`, and in `info CT --segmentation`'s statistics); a table
+/// named and coloured by it (in `info`, and in `info CT --segmentation`'s statistics), from a
+/// file laid out here and from one nibabel (TotalSegmentator's NIfTI library) writes; a table
 /// that cannot be read is a warning, the labels then unnamed.
 #[test]
 fn a_multi_label_nifti_names_its_labels_from_its_label_table() {
@@ -3575,6 +3576,19 @@ fn a_multi_label_nifti_names_its_labels_from_its_label_table() {
     let text = stdout(&o);
     assert!(text.contains("segment    2 (vertebrae_L1): "), "{text}");
     assert!(text.contains("segment    5 (colon): "), "{text}");
+    // The same table as nibabel (TotalSegmentator's NIfTI library) writes it, gzipped.
+    if let Some(py) = python_with("nibabel") {
+        let gz = tmp("ml-nibabel.nii.gz");
+        let o = std::process::Command::new(&py)
+            .arg(repo().join("crates/raystream/tests/nibabel_labels.py"))
+            .args([&plain, &gz])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        let theirs = info(gz.to_str().unwrap());
+        assert_eq!(theirs["segments"], got["segments"], "{theirs}");
+        assert_eq!(theirs["labels"], got["labels"]);
+    }
     // The plain file: no names. A broken table: a warning, no names.
     assert!(
         info(plain.to_str().unwrap())["segments"]
