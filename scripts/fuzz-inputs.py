@@ -723,7 +723,8 @@ def fuzz_files(work, n, device, only=None):
             shutil.copy(os.path.join(sd, s), os.path.join(masks, "a.nii.gz"))
             vol = os.path.join(sd, "v.nii")
             why = run(["info", masks, "--json"], (s, "masks")) or (os.path.exists(vol) and run(
-                ["info", vol, "--segmentation", masks, "--below", "-950", "--percentile", "15"],
+                ["info", vol, "--segmentation", masks, "--below", "-950", "--percentile", "15",
+                 "--combine", random.choice(["both=1,2", "all=all", "one=a"])],
                 (s, "masks")))
             bad += settle(why, p, d)
             continue

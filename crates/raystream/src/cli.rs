@@ -271,6 +271,18 @@ fn parse_below(s: &str) -> Result<f64, String> {
     }
 }
 
+/// `--combine`: NAME=LIST, both not empty.
+fn parse_combine(s: &str) -> Result<(String, String), String> {
+    match s.split_once('=') {
+        Some((name, list)) if !name.trim().is_empty() && !list.trim().is_empty() => {
+            Ok((name.trim().to_string(), list.trim().to_string()))
+        }
+        _ => Err(format!(
+            "'{s}': NAME=LIST, a name for the segments LIST names together (numbers or names, comma-separated)"
+        )),
+    }
+}
+
 /// `--percentile`: from 0 to 100.
 fn parse_percentile(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
@@ -1341,6 +1353,17 @@ pub struct InfoArgs {
         value_parser = parse_percentile
     )]
     pub percentile: Vec<f64>,
+    /// With --segmentation: segments measured together as one region, NAME=LIST (LIST as
+    /// --segment takes it: label numbers or segment names, comma-separated; the option again
+    /// for another), densitometry included: a whole lung from its lobes,
+    /// `--combine "left lung=lung_upper_lobe_left,lung_lower_lobe_left"`.
+    #[arg(
+        long,
+        value_name = "NAME=LIST",
+        requires = "segmentation",
+        value_parser = parse_combine
+    )]
+    pub combine: Vec<(String, String)>,
     /// A CT volume in HU: the patient's body as `render --body-only` finds it (the table, a
     /// head holder, cables left out; what it encloses kept): its volume, what was left out,
     /// and its tissues by HU (below -190 air, gas and lung; -190 to -30 fat; -29 to 150 soft

@@ -519,14 +519,97 @@ fn label_counts(v: &raystream_io::Volume) -> Option<Vec<(u32, usize)>> {
     Some(counts.into_iter().collect())
 }
 
-/// One segment's statistics: its label, its name, the CT's values in it, and its densitometry
-/// (`--below`, `--percentile`: empty lists when neither is asked).
-type SegmentStats = (
-    u32,
-    String,
-    raystream_volume::RegionStats,
-    raystream_volume::Densitometry,
-);
+/// A region's statistics: a segment's (one label), or `--combine`'s (its labels together);
+/// its name, the CT's values in it, and its densitometry (`--below`, `--percentile`: empty
+/// lists when neither is asked).
+struct SegmentStats {
+    labels: Vec<u32>,
+    name: String,
+    stats: raystream_volume::RegionStats,
+    density: raystream_volume::Densitometry,
+}
+
+/// `--segmentation`'s regions: each segment's, then each `--combine`'s, and how the CT's
+/// voxels were matched to the segmentation's.
+struct Within {
+    segments: Vec<SegmentStats>,
+    combined: Vec<SegmentStats>,
+    how: &'static str,
+}
+
+impl SegmentStats {
+    /// The CT `ct`'s values over `list` (CT voxels), as `a` asks; `None` for no finite value.
+    fn of(
+        a: &InfoArgs,
+        ct: &raystream_io::Volume,
+        labels: Vec<u32>,
+        name: String,
+        list: &[usize],
+    ) -> Option<SegmentStats> {
+        let stats = raystream_volume::region_stats(ct, list)?;
+        let density = match a.below.is_empty() && a.percentile.is_empty() {
+            true => raystream_volume::Densitometry {
+                below: Vec::new(),
+                percentiles: Vec::new(),
+            },
+            false => raystream_volume::densitometry(ct, list, &a.below, &a.percentile)?,
+        };
+        Some(SegmentStats {
+            labels,
+            name,
+            stats,
+            density,
+        })
+    }
+
+    /// Its statistics as JSON fields (its labels apart).
+    fn json(&self) -> serde_json::Value {
+        let (s, d) = (&self.stats, &self.density);
+        json!({
+            "name": self.name,
+            "voxels": s.voxels,
+            "ml": s.ml,
+            "mean": s.mean,
+            "sd": s.sd,
+            "min": s.min,
+            "median": s.median,
+            "max": s.max,
+            "centroid": s.centroid,
+            "below": d.below.iter().map(|b| json!({
+                "hu": b.hu,
+                "voxels": b.voxels,
+                "ml": b.ml,
+                "percent": b.percent,
+            })).collect::<Vec<_>>(),
+            "percentiles": d.percentiles.iter().map(|&(p, value)| json!({
+                "p": p,
+                "value": value,
+            })).collect::<Vec<_>>(),
+        })
+    }
+
+    /// Its lines: `head` (what it is) and its statistics, then its densitometry if asked.
+    fn print(&self, kind: &str, head: &str, unit: &str) {
+        let s = &self.stats;
+        let [x, y, z] = s.centroid;
+        println!(
+            "  {kind:<10} {head}: {} voxels, {:.1} ml; {unit} mean {:.1}, sd {:.1}, min {}, median {}, max {}; centroid ({x:.1}, {y:.1}, {z:.1}) mm LPS",
+            s.voxels, s.ml, s.mean, s.sd, s.min, s.median, s.max
+        );
+        let below = self.density.below.iter().map(|b| {
+            format!(
+                "{:.2} % below {} {unit} ({} voxels, {:.1} ml)",
+                b.percent, b.hu, b.voxels, b.ml
+            )
+        });
+        let at = (self.density.percentiles.iter())
+            .map(|&(p, x)| format!("{} percentile {} {unit}", ordinal(p), round3(x)));
+        let parts: Vec<String> = below.chain(at).collect();
+        if !parts.is_empty() {
+            println!("  density    {head}: {}", parts.join("; "));
+        }
+    }
+}
 
 /// `--segmentation LABELS`: the CT `ct`'s values within each segment of LABELS, and how its
 /// voxels were matched to the CT's (the same grid, the nearest label voxel, or a structure
@@ -535,33 +618,38 @@ fn segment_stats(
     a: &InfoArgs,
     ct: &raystream_io::Volume,
     input: &std::path::Path,
-) -> Result<Option<(Vec<SegmentStats>, &'static str)>> {
+) -> Result<Option<Within>> {
     let Some(file) = &a.segmentation else {
         return Ok(None);
     };
     let on = crate::segments::on_ct(file, a.colour_table.as_deref(), ct, input)?;
-    let stats = on
-        .members
-        .into_iter()
-        .filter_map(|(l, list)| {
-            let s = raystream_volume::region_stats(ct, &list)?;
-            let d = match a.below.is_empty() && a.percentile.is_empty() {
-                true => raystream_volume::Densitometry {
-                    below: Vec::new(),
-                    percentiles: Vec::new(),
-                },
-                false => raystream_volume::densitometry(ct, &list, &a.below, &a.percentile)?,
-            };
-            let name = on
-                .known
-                .iter()
-                .find(|k| k.number as u32 == l)
-                .map(|k| k.label.clone())
-                .unwrap_or_default();
-            Some((l, name, s, d))
-        })
+    let name_of = |l: u32| {
+        (on.known.iter())
+            .find(|k| k.number as u32 == l)
+            .map(|k| k.label.clone())
+            .unwrap_or_default()
+    };
+    let present: Vec<u32> = on.members.keys().copied().collect();
+    let mut combined = Vec::new();
+    for (name, list) in &a.combine {
+        let option = format!("--combine {name}=");
+        let labels =
+            crate::iso::pick_segments(&file.display(), &option, list, &present, &on.known)?;
+        let mut voxels: Vec<usize> = (labels.iter())
+            .flat_map(|l| on.members[l].iter().copied())
+            .collect();
+        voxels.sort_unstable();
+        voxels.dedup();
+        combined.extend(SegmentStats::of(a, ct, labels, name.clone(), &voxels));
+    }
+    let segments = (on.members.iter())
+        .filter_map(|(&l, list)| SegmentStats::of(a, ct, vec![l], name_of(l), list))
         .collect();
-    Ok(Some((stats, on.how)))
+    Ok(Some(Within {
+        segments,
+        combined,
+        how: on.how,
+    }))
 }
 
 fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
@@ -670,32 +758,21 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
         if let Some(s) = series {
             out["series"] = s;
         }
-        if let Some((stats, how)) = &stats {
+        if let Some(w) = &stats {
+            let with = |r: &SegmentStats, key: &str, value: serde_json::Value| {
+                let mut j = r.json();
+                j[key] = value;
+                j
+            };
             out["segmentation"] = json!({
                 "file": a.segmentation.as_deref().map(file_name),
-                "matched_on": how,
-                "segments": stats.iter().map(|(l, name, s, d)| json!({
-                    "value": l,
-                    "name": name,
-                    "voxels": s.voxels,
-                    "ml": s.ml,
-                    "mean": s.mean,
-                    "sd": s.sd,
-                    "min": s.min,
-                    "median": s.median,
-                    "max": s.max,
-                    "centroid": s.centroid,
-                    "below": d.below.iter().map(|b| json!({
-                        "hu": b.hu,
-                        "voxels": b.voxels,
-                        "ml": b.ml,
-                        "percent": b.percent,
-                    })).collect::<Vec<_>>(),
-                    "percentiles": d.percentiles.iter().map(|&(p, value)| json!({
-                        "p": p,
-                        "value": value,
-                    })).collect::<Vec<_>>(),
-                })).collect::<Vec<_>>(),
+                "matched_on": w.how,
+                "segments": (w.segments.iter())
+                    .map(|r| with(r, "value", json!(r.labels[0])))
+                    .collect::<Vec<_>>(),
+                "combined": (w.combined.iter())
+                    .map(|r| with(r, "segments", json!(r.labels)))
+                    .collect::<Vec<_>>(),
             });
         }
         if let Some(b) = &body {
@@ -810,34 +887,23 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 ),
             }
         }
-        if let Some((stats, how)) = &stats {
+        if let Some(w) = &stats {
             println!(
-                "  within     {} (matched on {how}):",
-                a.segmentation.as_deref().unwrap_or(input).display()
+                "  within     {} (matched on {}):",
+                a.segmentation.as_deref().unwrap_or(input).display(),
+                w.how
             );
-            for (l, name, s, d) in stats {
-                let name = if name.is_empty() {
-                    String::new()
-                } else {
-                    format!(" ({name})")
+            for r in &w.segments {
+                let head = match r.name.is_empty() {
+                    true => format!("{}", r.labels[0]),
+                    false => format!("{} ({})", r.labels[0], r.name),
                 };
-                let [x, y, z] = s.centroid;
-                println!(
-                    "  segment    {l}{name}: {} voxels, {:.1} ml; {unit} mean {:.1}, sd {:.1}, min {}, median {}, max {}; centroid ({x:.1}, {y:.1}, {z:.1}) mm LPS",
-                    s.voxels, s.ml, s.mean, s.sd, s.min, s.median, s.max
-                );
-                let below = d.below.iter().map(|b| {
-                    format!(
-                        "{:.2} % below {} {unit} ({} voxels, {:.1} ml)",
-                        b.percent, b.hu, b.voxels, b.ml
-                    )
-                });
-                let at = (d.percentiles.iter())
-                    .map(|&(p, x)| format!("{} percentile {} {unit}", ordinal(p), round3(x)));
-                let parts: Vec<String> = below.chain(at).collect();
-                if !parts.is_empty() {
-                    println!("  density    {l}{name}: {}", parts.join("; "));
-                }
+                r.print("segment", &head, unit);
+            }
+            for r in &w.combined {
+                let list: Vec<String> = r.labels.iter().map(|l| l.to_string()).collect();
+                let head = format!("{} (segments {})", r.name, list.join(", "));
+                r.print("combined", &head, unit);
             }
         }
         if let Some(b) = &body {

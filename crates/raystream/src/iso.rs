@@ -380,9 +380,11 @@ fn run_segments(a: &IsoArgs, labels: &Volume, load_ms: f64) -> Result<()> {
 
 /// The labels `--segment LIST` names (numbers, a segmentation's segment labels in any case, or
 /// `all`), in the order named, among those `present` (some voxel holds each); an unknown one is
-/// refused, naming the file (`name`) and listing the labels present by number and name.
+/// refused, naming the file (`name`) and the option (`option`, its text before the list) and
+/// listing the labels present by number and name.
 pub fn pick_segments(
     name: &dyn std::fmt::Display,
+    option: &str,
     list: &str,
     present: &[u32],
     known: &[raystream_io::SegmentLabel],
@@ -409,7 +411,7 @@ pub fn pick_segments(
         } else if let Ok(l) = item.parse::<u32>() {
             if !present.contains(&l) {
                 bail!(
-                    "{name}: --segment {item}: no voxel holds label {l}; the labels present are {}",
+                    "{name}: {option}{item}: no voxel holds label {l}; the labels present are {}",
                     listed()
                 );
             }
@@ -422,11 +424,11 @@ pub fn pick_segments(
                 .collect();
             match by_name.as_slice() {
                 [] => bail!(
-                    "{name}: --segment {item:?}: no segment is named so (nor is it a number); the labels present are {}",
+                    "{name}: {option}{item:?}: no segment is named so (nor is it a number); the labels present are {}",
                     listed()
                 ),
                 [l] if !present.contains(l) => bail!(
-                    "{name}: --segment {item:?}: segment {l} holds no voxel; the labels present are {}",
+                    "{name}: {option}{item:?}: segment {l} holds no voxel; the labels present are {}",
                     listed()
                 ),
                 _ => by_name,
@@ -597,6 +599,7 @@ pub fn segment_surfaces(
     }
     let wanted = pick_segments(
         &name,
+        "--segment ",
         list,
         &boxes.keys().copied().collect::<Vec<_>>(),
         known,

@@ -235,7 +235,7 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
     let on = on_ct(file, a.colour_table, ct, input)?;
     let present: Vec<u32> = on.members.keys().copied().collect();
     let chosen = match a.segment {
-        Some(list) => crate::iso::pick_segments(&name, list, &present, &on.known)?,
+        Some(list) => crate::iso::pick_segments(&name, "--segment ", list, &present, &on.known)?,
         None => present.clone(),
     };
     if let Some(&l) = chosen.iter().find(|&&l| l > MAX_LABEL) {

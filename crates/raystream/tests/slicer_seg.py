@@ -7,7 +7,7 @@ segmentation whose segments overlap, and, by hand, one in the format of Slicer b
 label values: a layer for each segment). Prints one JSON object: for each file, its path, its
 voxel-to-LPS matrix and each segment's name, colour (0-255), voxels and centroid (LPS mm); the
 CT's mean value within each segment of the first file, its share below -950 and -856 HU and its
-15th and 2.5th percentiles."""
+15th and 2.5th percentiles, and the two lungs' together."""
 import json, os, sys
 
 import nrrd
@@ -62,6 +62,12 @@ means = [float(v.mean()) for v in values]
 # percentiles (numpy's linear interpolation).
 below = [[float((v < hu).mean() * 100) for hu in (-950, -856)] for v in values]
 percentiles = [np.percentile(v, [15, 2.5]).tolist() for v in values]
+# Both lungs together (their masks' union): voxels, share below -950 HU, 15th percentile.
+names = [seg["name"] for seg in flat["segments"]]
+lungs = ct[slicerio.segment_mask(flat, flat["segments"][names.index("right lung")]["id"])
+           | slicerio.segment_mask(flat, flat["segments"][names.index("left lung")]["id"])
+           ].astype("float64")
+both = [int(lungs.size), float((lungs < -950).mean() * 100), float(np.percentile(lungs, 15))]
 
 # An oblique grid (rotated 30° about z, then 20° about x; uneven spacing), three segments: a
 # ball and a slab that overlaps it (slicerio puts it on a second layer), and a cube apart.
@@ -111,4 +117,4 @@ nrrd.write(legacy, layers, header, custom_field_map={})
 files.append(describe(legacy, [ball, slab])[0])
 
 print(json.dumps({"files": files, "ct": ct_path, "ct_means": means, "ct_below": below,
-                  "ct_percentiles": percentiles}))
+                  "ct_percentiles": percentiles, "ct_lungs": both}))

@@ -2650,7 +2650,8 @@ fn segment_voxels(
 ///   part of it in the second's label volume; `iso` names and colours each surface as Slicer
 ///   does (in a GLB, the colour's linear value).
 /// - The chest CT's values within each segment are numpy's, and so are the lungs'
-///   densitometry (the share below -950 and -856 HU, the 15th and 2.5th percentiles).
+///   densitometry (the share below -950 and -856 HU, the 15th and 2.5th percentiles), each
+///   lung's and both together (`--combine`).
 /// - `render --segment NAME` draws that segment in its colour.
 /// - A layer the file lacks, a label value 0 or not a number, or two segments with one label
 ///   value on one layer are refused, the file and field named.
@@ -2852,6 +2853,8 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
         "--percentile",
         "15",
         "--percentile=2.5",
+        "--combine",
+        "lungs=right lung,LEFT LUNG",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let info: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
@@ -2890,6 +2893,28 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
             "{name}: Perc15 {perc15}"
         );
     }
+    // Both lungs as one region: numpy's over the union of their masks.
+    let lungs = &info["segmentation"]["combined"][0];
+    let want: Vec<f64> = serde_json::from_value(v["ct_lungs"].clone()).unwrap();
+    assert_eq!(lungs["name"], "lungs");
+    assert_eq!(lungs["voxels"].as_f64().unwrap(), want[0]);
+    let laa = lungs["below"][0]["percent"].as_f64().unwrap();
+    assert!((laa - want[1]).abs() < 1e-9, "{laa} vs {}", want[1]);
+    let perc15 = lungs["percentiles"][0]["value"].as_f64().unwrap();
+    assert!((perc15 - want[2]).abs() < 1e-9, "{perc15} vs {}", want[2]);
+    let lobes: Vec<u64> = serde_json::from_value(lungs["segments"].clone()).unwrap();
+    assert_eq!(lobes.len(), 2);
+    refused(
+        &[
+            "info",
+            v["ct"].as_str().unwrap(),
+            "--segmentation",
+            one,
+            "--combine",
+            "x=liver",
+        ],
+        "--combine x=\"liver\": no segment is named so",
+    );
     refused(
         &["info", v["ct"].as_str().unwrap(), "--below", "-950"],
         "--segmentation",
