@@ -42,12 +42,11 @@ pub fn region_stats(volume: &Volume, indices: &[usize]) -> Option<RegionStats> {
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
             (a.min(v), b.max(v))
         });
-    let (half, odd) = (values.len() / 2, values.len() % 2 == 1);
-    let (below, &mut upper, _) = values.select_nth_unstable_by(half, f64::total_cmp);
-    let median = if odd {
-        upper
+    let half = values.len() / 2;
+    let median = if values.len() % 2 == 1 {
+        ranks(&mut values, half).0
     } else {
-        let lower = below.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let (lower, upper) = ranks(&mut values, half - 1);
         0.5 * (lower + upper)
     };
     let sum = indices.iter().fold(DVec3::ZERO, |s, &i| {
@@ -78,6 +77,15 @@ fn finite_values(volume: &Volume, indices: &[usize]) -> Option<Vec<f64>> {
         .filter(|v| v.is_finite())
         .collect();
     (!values.is_empty()).then_some(values)
+}
+
+/// The values at ranks `lo` and `lo + 1` of `values` in increasing order (at `lo` twice for
+/// the last rank), found by selection, which reorders `values`: the median's two middle
+/// values, a percentile's two nearest ranks.
+fn ranks(values: &mut [f64], lo: usize) -> (f64, f64) {
+    let (_, &mut at, above) = values.select_nth_unstable_by(lo, f64::total_cmp);
+    let next = above.iter().copied().fold(f64::INFINITY, f64::min);
+    (at, if above.is_empty() { at } else { next })
 }
 
 /// A region's densitometry: for each HU asked, the voxels below it; for each percentile asked,
@@ -131,8 +139,7 @@ pub fn densitometry(
         .map(|&p| {
             let rank = (n - 1) as f64 * p.clamp(0.0, 100.0) / 100.0;
             let lo = (rank.floor() as usize).min(n - 1);
-            let (_, &mut at, above) = values.select_nth_unstable_by(lo, f64::total_cmp);
-            let next = above.iter().copied().fold(f64::INFINITY, f64::min);
+            let (at, next) = ranks(&mut values, lo);
             let frac = rank - lo as f64;
             let value = if frac > 0.0 {
                 at + frac * (next - at)

@@ -82,12 +82,7 @@ pub fn on_ct(file: &Path, colour_table: Option<&Path>, ct: &Volume, input: &Path
 
 /// Whether `labels` lie on the CT's grid, voxel for voxel.
 fn same_grid(labels: &Volume, ct: &Volume) -> bool {
-    labels.dims == ct.dims
-        && (0..3).all(|a| {
-            (labels.origin[a] - ct.origin[a]).abs() < 1e-3
-                && (labels.spacing[a] - ct.spacing[a]).abs() < 1e-6 * ct.spacing[a]
-                && (0..3).all(|b| (labels.direction[a][b] - ct.direction[a][b]).abs() < 1e-6)
-        })
+    ct.same_grid(labels, 1e-6, 1e-6)
 }
 
 /// Each CT voxel's segments in `labels` (a label volume; with `whole`, its segments each

@@ -91,7 +91,7 @@ fn read_mask(file: &Path) -> Result<(Volume, Vec<u32>), VolumeError> {
         }
         held
     } else {
-        let values = raw::decode(&p.bytes, p.scalar, p.big_endian, p.slope, p.intercept);
+        let values = p.values();
         if let Some(&x) = values.iter().find(|&&x| x != 0.0 && x != 1.0) {
             return Err(refuse(x));
         }
@@ -105,15 +105,10 @@ fn read_mask(file: &Path) -> Result<(Volume, Vec<u32>), VolumeError> {
 
 /// Refused unless `mask` (read from `file`) lies on `first`'s grid.
 fn same_grid(file: &Path, mask: &Volume, first: &Volume) -> Result<(), VolumeError> {
-    let (v, g) = (mask, first);
-    let close = |a: f64, b: f64, tol: f64| (a - b).abs() <= tol;
-    let same = v.dims == g.dims
-        && (0..3).all(|a| close(v.spacing[a], g.spacing[a], 1e-4 * g.spacing[a]))
-        && (0..3).all(|a| close(v.origin[a], g.origin[a], 1e-3))
-        && (0..3).all(|r| (0..3).all(|c| close(v.direction[r][c], g.direction[r][c], 1e-4)));
-    if same {
+    if first.same_grid(mask, 1e-4, 1e-4) {
         return Ok(());
     }
+    let (v, g) = (mask, first);
     Err(VolumeError::invalid(
         file,
         format!(

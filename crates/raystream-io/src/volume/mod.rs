@@ -292,6 +292,19 @@ impl Volume {
             .sqrt()
     }
 
+    /// Whether `other` lies on this volume's grid, voxel for voxel: the same dimensions,
+    /// origins within 10⁻³ mm, spacings within `spacing_rel` of this one's, and direction
+    /// cosines within `direction`.
+    pub fn same_grid(&self, other: &Volume, spacing_rel: f64, direction: f64) -> bool {
+        self.dims == other.dims
+            && (0..3).all(|a| {
+                (other.origin[a] - self.origin[a]).abs() < 1e-3
+                    && (other.spacing[a] - self.spacing[a]).abs() < spacing_rel * self.spacing[a]
+                    && (0..3)
+                        .all(|b| (other.direction[a][b] - self.direction[a][b]).abs() < direction)
+            })
+    }
+
     /// A voxel's volume, millilitres (the grid's cell, sheared or not).
     pub fn voxel_ml(&self) -> f64 {
         self.index_to_world_affine().matrix3.determinant().abs() / 1000.0

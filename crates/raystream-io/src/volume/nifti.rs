@@ -42,7 +42,7 @@ pub(crate) fn parse(
     phase: Option<usize>,
 ) -> Result<Volume, VolumeError> {
     let (mut v, p) = parse_payload(bytes, path, phase)?;
-    v.data = decode(&p.bytes, p.scalar, p.big_endian, p.slope, p.intercept);
+    v.data = p.values();
     v.unit = guess_unit(&v.data, p.scalar);
     Ok(v)
 }
@@ -54,6 +54,19 @@ pub(crate) struct Payload {
     pub big_endian: bool,
     pub slope: f64,
     pub intercept: f64,
+}
+
+impl Payload {
+    /// The voxels' values, scaled.
+    pub fn values(&self) -> Vec<f32> {
+        decode(
+            &self.bytes,
+            self.scalar,
+            self.big_endian,
+            self.slope,
+            self.intercept,
+        )
+    }
 }
 
 /// [`parse`]'s volume without its values (`data` empty), and the voxels as the file holds them:
