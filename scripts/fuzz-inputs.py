@@ -724,7 +724,7 @@ def fuzz_files(work, n, device, only=None):
             vol = os.path.join(sd, "v.nii")
             why = run(["info", masks, "--json"], (s, "masks")) or (os.path.exists(vol) and run(
                 ["info", vol, "--segmentation", masks, "--below", "-950", "--percentile", "15",
-                 "--combine", random.choice(["both=1,2", "all=all", "one=a"])],
+                 "--clusters", random.choice(["3d", "2d"]), "--combine", random.choice(["both=1,2", "all=all", "one=a"])],
                 (s, "masks")))
             bad += settle(why, p, d)
             continue
@@ -806,6 +806,7 @@ def fuzz_files(work, n, device, only=None):
         # refused as no label map, a mesh as no volume).
         within = (["--segmentation", p]
                   + random.choice([["--below", "-950"], ["--below", "-950,0"], ["--below=-856"]])
+                  + random.choice([[], ["--clusters"], ["--clusters", "2d"]])
                   + ["--percentile", random.choice(["15", "0,100", "2.5"])]
                   if random.random() < 0.15 else [])
         why = run(["info", p, "--json"] + phase + body + within, s) or run(

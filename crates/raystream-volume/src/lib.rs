@@ -5,6 +5,7 @@ pub mod auto;
 pub mod body;
 mod cases;
 pub mod centreline;
+pub mod clusters;
 pub mod distance;
 mod grid;
 mod islands;

@@ -4,6 +4,7 @@
 //! read by (the share of voxels below a HU, as the emphysema index LAA-950; a percentile, as
 //! Perc15).
 
+use crate::clusters::{Clusters, Connectivity};
 use raystream_io::Volume;
 use raystream_math::DVec3;
 
@@ -108,17 +109,21 @@ pub struct Below {
     pub ml: f64,
     /// Their share of the region's voxels with a finite value, per cent.
     pub percent: f64,
+    /// The clusters they make, where asked.
+    pub clusters: Option<Clusters>,
 }
 
 /// `volume`'s values over the voxels `indices`: for each of `below`, those below it; for each
 /// of `percentiles` (0 to 100), the value at it, interpolated linearly between the two
 /// nearest ranks (numpy's default, type 7 of Hyndman and Fan; Perc15, the lung densitometry
-/// QIBA profiles, is the 15th). `None` for no voxel with a finite value.
+/// QIBA profiles, is the 15th); with `clusters`, the clusters the voxels below each value
+/// make, so joined. `None` for no voxel with a finite value.
 pub fn densitometry(
     volume: &Volume,
     indices: &[usize],
     below: &[f64],
     percentiles: &[f64],
+    clusters: Option<Connectivity>,
 ) -> Option<Densitometry> {
     let mut values = finite_values(volume, indices)?;
     let n = values.len();
@@ -131,6 +136,7 @@ pub fn densitometry(
                 voxels,
                 ml: voxels as f64 * volume.voxel_ml(),
                 percent: 100.0 * voxels as f64 / n as f64,
+                clusters: clusters.map(|c| crate::clusters::clusters(volume, indices, hu, c)),
             }
         })
         .collect();
@@ -164,7 +170,14 @@ mod tests {
         data[nan] = f32::NAN;
         let v = Volume::hounsfield([10, 10, 1], [2.0, 2.0, 2.5], data);
         let all: Vec<usize> = (0..100).collect();
-        let d = densitometry(&v, &all, &[15.0, 1.0, 1000.0], &[0.0, 15.0, 50.0, 100.0]).unwrap();
+        let d = densitometry(
+            &v,
+            &all,
+            &[15.0, 1.0, 1000.0],
+            &[0.0, 15.0, 50.0, 100.0],
+            None,
+        )
+        .unwrap();
         // 1..99: below 15 are 1..14, 14 of 99; below 1 none (strictly); below 1000 all.
         let counts: Vec<usize> = d.below.iter().map(|b| b.voxels).collect();
         assert_eq!(counts, [14, 0, 99]);
@@ -177,11 +190,11 @@ mod tests {
         }
         assert_eq!(d.percentiles[1].0, 15.0);
         // One value: every percentile is it.
-        let d = densitometry(&v, &[5], &[], &[0.0, 37.5, 100.0]).unwrap();
+        let d = densitometry(&v, &[5], &[], &[0.0, 37.5, 100.0], None).unwrap();
         let x = v.data[5] as f64;
         assert!(d.percentiles.iter().all(|&(_, p)| p == x));
-        assert!(densitometry(&v, &[nan], &[0.0], &[15.0]).is_none());
-        assert!(densitometry(&v, &[], &[0.0], &[15.0]).is_none());
+        assert!(densitometry(&v, &[nan], &[0.0], &[15.0], None).is_none());
+        assert!(densitometry(&v, &[], &[0.0], &[15.0], None).is_none());
     }
 
     #[test]

@@ -85,6 +85,27 @@ pub enum KernelsArg {
     Ifif,
 }
 
+/// `info --below --clusters`: how the voxels below a value are joined into clusters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ClustersArg {
+    /// In 3D: each voxel with its six face neighbours.
+    #[value(name = "3d")]
+    Faces,
+    /// Within each slice (the grid's third axis): each voxel with its four face neighbours
+    /// there, as Mishima et al. counted them.
+    #[value(name = "2d")]
+    InSlices,
+}
+
+impl From<ClustersArg> for raystream_volume::clusters::Connectivity {
+    fn from(c: ClustersArg) -> Self {
+        match c {
+            ClustersArg::Faces => Self::Faces,
+            ClustersArg::InSlices => Self::InSlices,
+        }
+    }
+}
+
 /// `measure --dark --wall --wall-edge`: how an airway's wall is placed on each ray.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum AirwayEdge {
@@ -1342,6 +1363,18 @@ pub struct InfoArgs {
         allow_hyphen_values = true
     )]
     pub below: Vec<f64>,
+    /// With --below: the clusters each segment's voxels below each value make (in 3D, or
+    /// `--clusters 2d` within each slice), and how their sizes are spread: the count of
+    /// clusters at least X in size falls as X^-D (Mishima et al.), D lower where emphysema's
+    /// small clusters have merged into larger ones, even with LAA-950 still normal.
+    #[arg(
+        long,
+        value_name = "3d|2d",
+        requires = "below",
+        num_args = 0..=1,
+        default_missing_value = "3d"
+    )]
+    pub clusters: Option<ClustersArg>,
     /// With --segmentation: each segment's values at these percentiles (0 to 100; a list, or
     /// the option again), interpolated between the nearest ranks as numpy does: a lung's
     /// Perc15 is `--percentile 15`.

@@ -552,7 +552,13 @@ impl SegmentStats {
                 below: Vec::new(),
                 percentiles: Vec::new(),
             },
-            false => raystream_volume::densitometry(ct, list, &a.below, &a.percentile)?,
+            false => raystream_volume::densitometry(
+                ct,
+                list,
+                &a.below,
+                &a.percentile,
+                a.clusters.map(Into::into),
+            )?,
         };
         Some(SegmentStats {
             labels,
@@ -580,6 +586,7 @@ impl SegmentStats {
                 "voxels": b.voxels,
                 "ml": b.ml,
                 "percent": b.percent,
+                "clusters": b.clusters.as_ref().map(|c| clusters_json(c, s.ml / s.voxels as f64)),
             })).collect::<Vec<_>>(),
             "percentiles": d.percentiles.iter().map(|&(p, value)| json!({
                 "p": p,
@@ -596,10 +603,29 @@ impl SegmentStats {
             "  {kind:<10} {head}: {} voxels, {:.1} ml; {unit} mean {:.1}, sd {:.1}, min {}, median {}, max {}; centroid ({x:.1}, {y:.1}, {z:.1}) mm LPS",
             s.voxels, s.ml, s.mean, s.sd, s.min, s.median, s.max
         );
+        let voxel_ml = s.ml / s.voxels as f64;
         let below = self.density.below.iter().map(|b| {
+            let clusters = b.clusters.as_ref().map(|c| {
+                let d = (c.power_law).map_or(String::new(), |p| format!(", D {:.2}", p.d));
+                let how = match c.connectivity {
+                    raystream_volume::clusters::Connectivity::Faces => "",
+                    raystream_volume::clusters::Connectivity::InSlices => " in slices",
+                };
+                match c.count {
+                    0 => format!("; no clusters{how}"),
+                    n => format!(
+                        "; {n} clusters{how}, largest {:.2} ml{d}",
+                        c.largest() as f64 * voxel_ml
+                    ),
+                }
+            });
             format!(
-                "{:.2} % below {} {unit} ({} voxels, {:.1} ml)",
-                b.percent, b.hu, b.voxels, b.ml
+                "{:.2} % below {} {unit} ({} voxels, {:.1} ml{})",
+                b.percent,
+                b.hu,
+                b.voxels,
+                b.ml,
+                clusters.unwrap_or_default()
             )
         });
         let at = (self.density.percentiles.iter())
@@ -609,6 +635,24 @@ impl SegmentStats {
             println!("  density    {head}: {}", parts.join("; "));
         }
     }
+}
+
+/// The clusters of voxels below a value as JSON: how joined, how many, the largest (voxels,
+/// ml at `voxel_ml` a voxel), the power law's D and r² (null for fewer than two sizes), and
+/// each size met with its count, for a fit of one's own.
+fn clusters_json(c: &raystream_volume::clusters::Clusters, voxel_ml: f64) -> serde_json::Value {
+    json!({
+        "connectivity": match c.connectivity {
+            raystream_volume::clusters::Connectivity::Faces => "3d",
+            raystream_volume::clusters::Connectivity::InSlices => "2d",
+        },
+        "count": c.count,
+        "largest_voxels": c.largest(),
+        "largest_ml": c.largest() as f64 * voxel_ml,
+        "d": c.power_law.map(|p| p.d),
+        "r2": c.power_law.map(|p| p.r2),
+        "sizes": c.sizes.iter().map(|&(voxels, count)| [voxels, count]).collect::<Vec<_>>(),
+    })
 }
 
 /// `--segmentation LABELS`: the CT `ct`'s values within each segment of LABELS, and how its

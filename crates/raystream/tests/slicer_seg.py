@@ -7,11 +7,14 @@ segmentation whose segments overlap, and, by hand, one in the format of Slicer b
 label values: a layer for each segment). Prints one JSON object: for each file, its path, its
 voxel-to-LPS matrix and each segment's name, colour (0-255), voxels and centroid (LPS mm); the
 CT's mean value within each segment of the first file, its share below -950 and -856 HU and its
-15th and 2.5th percentiles, and the two lungs' together."""
+15th and 2.5th percentiles, and the two lungs' together; each lung's clusters of voxels below
+-910 HU (scipy.ndimage.label's), in 3D and within each slice, with the power law of their
+sizes."""
 import json, os, sys
 
 import nrrd
 import numpy as np
+import scipy.ndimage
 import slicerio
 
 out = sys.argv[1]
@@ -69,6 +72,31 @@ lungs = ct[slicerio.segment_mask(flat, flat["segments"][names.index("right lung"
            ].astype("float64")
 both = [int(lungs.size), float((lungs < -950).mean() * 100), float(np.percentile(lungs, 15))]
 
+
+def clusters(mask, structure):
+    """scipy.ndimage.label's clusters of `mask`: their count, each size met with its count,
+    and numpy.polyfit's line through (ln X, ln Y), Y the clusters of at least X voxels: D (its
+    slope, negated) and r² (numpy.corrcoef's)."""
+    labels, count = scipy.ndimage.label(mask, structure=structure)
+    sizes, counts = np.unique(np.bincount(labels.ravel())[1:], return_counts=True)
+    at_least = counts[::-1].cumsum()[::-1]
+    x, y = np.log(sizes), np.log(at_least)
+    d = r2 = None
+    if len(sizes) > 1:
+        d, r2 = float(-np.polyfit(x, y, 1)[0]), float(np.corrcoef(x, y)[0, 1] ** 2)
+    return {"count": int(count), "sizes": [[int(a), int(b)] for a, b in zip(sizes, counts)],
+            "d": d, "r2": r2}
+
+
+# The clusters of each lung's voxels below -910 HU: in 3D (scipy's default structure, the six
+# face neighbours) and within each slice (the four in the plane of the first two axes).
+in_slices = np.zeros((3, 3, 3), bool)
+in_slices[:, :, 1] = scipy.ndimage.generate_binary_structure(2, 1)
+lung_clusters = {}
+for name in ("right lung", "left lung"):
+    mask = slicerio.segment_mask(flat, flat["segments"][names.index(name)]["id"]) & (ct < -910)
+    lung_clusters[name] = {"3d": clusters(mask, None), "2d": clusters(mask, in_slices)}
+
 # An oblique grid (rotated 30° about z, then 20° about x; uneven spacing), three segments: a
 # ball and a slab that overlaps it (slicerio puts it on a second layer), and a cube apart.
 shape = (40, 36, 24)
@@ -117,4 +145,5 @@ nrrd.write(legacy, layers, header, custom_field_map={})
 files.append(describe(legacy, [ball, slab])[0])
 
 print(json.dumps({"files": files, "ct": ct_path, "ct_means": means, "ct_below": below,
-                  "ct_percentiles": percentiles, "ct_lungs": both}))
+                  "ct_percentiles": percentiles, "ct_lungs": both,
+                  "lung_clusters": lung_clusters}))

@@ -2651,7 +2651,8 @@ fn segment_voxels(
 ///   does (in a GLB, the colour's linear value).
 /// - The chest CT's values within each segment are numpy's, and so are the lungs'
 ///   densitometry (the share below -950 and -856 HU, the 15th and 2.5th percentiles), each
-///   lung's and both together (`--combine`).
+///   lung's and both together (`--combine`); each lung's clusters of voxels below -910 HU,
+///   in 3D and within each slice, are scipy.ndimage.label's, their power law numpy.polyfit's.
 /// - `render --segment NAME` draws that segment in its colour.
 /// - A layer the file lacks, a label value 0 or not a number, or two segments with one label
 ///   value on one layer are refused, the file and field named.
@@ -2929,6 +2930,68 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
             "101",
         ],
         "'101': a percentile, from 0 to 100",
+    );
+
+    // Each lung's clusters of voxels below -910 HU, in 3D and within each slice: scipy's
+    // (count, each size met with its count) and numpy.polyfit's power law.
+    for how in ["3d", "2d"] {
+        let o = run(&[
+            "info",
+            "--json",
+            v["ct"].as_str().unwrap(),
+            "--segmentation",
+            one,
+            "--below=-910",
+            "--clusters",
+            how,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let info: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        let stats = info["segmentation"]["segments"].as_array().unwrap();
+        for name in ["right lung", "left lung"] {
+            let got = &stats.iter().find(|s| s["name"] == name).unwrap()["below"][0]["clusters"];
+            let want = &v["lung_clusters"][name][how];
+            assert_eq!(got["connectivity"], how);
+            assert!(
+                want["count"].as_u64().unwrap() > 500,
+                "{name} {how}: {want}"
+            );
+            for key in ["count", "sizes"] {
+                assert_eq!(got[key], want[key], "{name} {how}: {key}");
+            }
+            for key in ["d", "r2"] {
+                let (g, w) = (got[key].as_f64().unwrap(), want[key].as_f64().unwrap());
+                assert!((g - w).abs() < 1e-9, "{name} {how}: {key} {g} vs {w}");
+            }
+            let sizes: Vec<[u64; 2]> = serde_json::from_value(got["sizes"].clone()).unwrap();
+            assert_eq!(got["largest_voxels"], sizes.last().unwrap()[0]);
+        }
+    }
+    let o = run(&[
+        "info",
+        v["ct"].as_str().unwrap(),
+        "--segmentation",
+        one,
+        "--below=-910",
+        "--clusters",
+    ]);
+    let text = stdout(&o);
+    let line = (text.lines())
+        .find(|l| l.contains("density") && l.contains("right lung"))
+        .unwrap();
+    assert!(
+        line.contains("621 clusters, largest") && line.contains(", D 1.17"),
+        "{line}"
+    );
+    refused(
+        &[
+            "info",
+            v["ct"].as_str().unwrap(),
+            "--segmentation",
+            one,
+            "--clusters",
+        ],
+        "--below",
     );
 
     // The right lung alone, in its green (#16c547): no pixel of the left lung's magenta.
