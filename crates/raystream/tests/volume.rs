@@ -3603,6 +3603,29 @@ fn a_folder_of_masks_is_a_segmentation() {
         &["info", other.to_str().unwrap()],
         "ct.nii.gz: holds the value",
     );
+    // A mask of bytes is scanned as it streams: a 2 past its first chunks, and one cut short
+    // (gzipped or not), are refused naming the file.
+    std::fs::remove_file(other.join("ct.nii.gz")).unwrap();
+    let mut two = bone.clone();
+    let last = two.len() - 1;
+    two[last] = 2;
+    raystream_io::write_label_map(&other.join("b.nii.gz"), &ct, &two, "mask").unwrap();
+    refused(
+        &["info", other.to_str().unwrap()],
+        "b.nii.gz: holds the value 2",
+    );
+    for name in ["b.nii.gz", "b.nii"] {
+        let _ = std::fs::remove_file(other.join("b.nii.gz"));
+        let b = other.join(name);
+        raystream_io::write_label_map(&b, &ct, &bone, "mask").unwrap();
+        let bytes = std::fs::read(&b).unwrap();
+        std::fs::write(&b, &bytes[..bytes.len() * 2 / 3]).unwrap();
+        // Plain, "is truncated"; gzipped, zlib's "incomplete deflate stream".
+        let e = refused(&["info", other.to_str().unwrap()], &format!("{name}: "));
+        let cut = e.contains("is truncated") || e.contains("incomplete deflate stream");
+        assert!(e.contains("the NIfTI voxel data") && cut, "{e}");
+        std::fs::remove_file(&b).unwrap();
+    }
 }
 
 /// TotalSegmentator's multi-label NIfTI (`--ml`): its labels' names and colours in a header

@@ -62,10 +62,12 @@ fn mask_name(file: &Path) -> String {
 }
 
 /// One mask file read: its grid (a volume without values) and the voxels it holds (of 0s
-/// and 1s; other values are refused, naming the file). A mask of bytes (TotalSegmentator's) is
-/// read as bytes, not widened to f32.
+/// and 1s; other values are refused, naming the file). A mask of bytes (TotalSegmentator's)
+/// is scanned as it is gunzipped, a chunk at a time: never held whole (78 MB for a CT of
+/// 512 × 512 × 300), nor widened to f32.
 fn read_mask(file: &Path) -> Result<(Volume, Vec<u32>), VolumeError> {
-    let (grid, p) = nifti::parse_payload(&raw::read_file(file)?, file, None)?;
+    let contents = raw::read_file(file)?;
+    let (grid, x, mut r) = nifti::open(&contents, file, None)?;
     let refuse = |x: f32| {
         VolumeError::invalid(
             file,
@@ -74,34 +76,41 @@ fn read_mask(file: &Path) -> Result<(Volume, Vec<u32>), VolumeError> {
             ),
         )
     };
-    let bytes = p.scalar == Scalar::U8 && p.slope == 1.0 && p.intercept == 0.0;
-    let held: Vec<u32> = if bytes {
+    let n = x.layout.inner;
+    let of_bytes = x.scalar == Scalar::U8 && x.slope == 1.0 && x.intercept == 0.0;
+    if !(of_bytes && x.layout.count == 1) {
+        let values = x.values(&mut r, file)?;
+        if let Some(&x) = values.iter().find(|&&x| x != 0.0 && x != 1.0) {
+            return Err(refuse(x));
+        }
+        let held = (values.iter().enumerate())
+            .filter(|&(_, &x)| x == 1.0)
+            .map(|(n, _)| n as u32)
+            .collect();
+        return Ok((grid, held));
+    }
+    let mut held = Vec::new();
+    raw::read_in_chunks(&mut r, n, CHUNK, file, nifti::VOXELS, |at, chunk| {
         // A run of 64 bytes at a time, OR-ed together (which vectorises): most are all 0.
-        let mut held = Vec::new();
-        for (r, run) in p.bytes.chunks(64).enumerate() {
+        for (k, run) in chunk.chunks(64).enumerate() {
             match run.iter().fold(0u8, |m, &x| m | x) {
                 0 => {}
                 1 => held.extend(
                     (run.iter().enumerate())
                         .filter(|&(_, &x)| x == 1)
-                        .map(|(n, _)| (r * 64 + n) as u32),
+                        .map(|(m, _)| (at + k * 64 + m) as u32),
                 ),
                 _ => return Err(refuse(run.iter().copied().max().unwrap_or(2) as f32)),
             }
         }
-        held
-    } else {
-        let values = p.values();
-        if let Some(&x) = values.iter().find(|&&x| x != 0.0 && x != 1.0) {
-            return Err(refuse(x));
-        }
-        (values.iter().enumerate())
-            .filter(|&(_, &x)| x == 1.0)
-            .map(|(n, _)| n as u32)
-            .collect()
-    };
+        Ok(())
+    })?;
     Ok((grid, held))
 }
+
+/// How many bytes of a mask are gunzipped and scanned at a time: a multiple of the scan's runs
+/// of 64, small enough to stay in a core's cache.
+const CHUNK: usize = 256 << 10;
 
 /// Refused unless `mask` (read from `file`) lies on `first`'s grid.
 fn same_grid(file: &Path, mask: &Volume, first: &Volume) -> Result<(), VolumeError> {
@@ -127,8 +136,9 @@ fn same_grid(file: &Path, mask: &Volume, first: &Volume) -> Result<(), VolumeErr
     ))
 }
 
-/// How many masks are read at once: each holds its voxels' bytes while it is read (78 MB for
-/// a CT of 512 × 512 × 300), so not one a thread of a many-core machine.
+/// How many masks are read at once: each holds the list of its voxels until it is laid in
+/// the label map (a mask that is not of bytes, its values whole), so not one a thread of a
+/// many-core machine.
 const AT_ONCE: usize = 8;
 
 /// Each mask of `files` read, in parallel [`AT_ONCE`] at a time, checked against the first's

@@ -41,41 +41,48 @@ pub(crate) fn parse(
     path: &Path,
     phase: Option<usize>,
 ) -> Result<Volume, VolumeError> {
-    let (mut v, p) = parse_payload(bytes, path, phase)?;
-    v.data = p.values();
-    v.unit = guess_unit(&v.data, p.scalar);
+    let (mut v, x, mut r) = open(bytes, path, phase)?;
+    v.data = x.values(&mut r, path)?;
+    v.unit = guess_unit(&v.data, x.scalar);
     Ok(v)
 }
 
-/// A NIfTI file's voxels as the file holds them, and how to read them as values.
-pub(crate) struct Payload {
-    pub bytes: Vec<u8>,
+/// Where a NIfTI file's voxels lie after its header and how they read: the phase asked among
+/// the volumes that follow each other, and the payload's fields (its bytes not yet read).
+pub(crate) struct Voxels {
+    pub layout: PhaseLayout,
+    /// The phase read, from 0.
+    pub index: usize,
     pub scalar: Scalar,
     pub big_endian: bool,
     pub slope: f64,
     pub intercept: f64,
 }
 
-impl Payload {
-    /// The voxels' values, scaled.
-    pub fn values(&self) -> Vec<f32> {
-        decode(
-            &self.bytes,
+impl Voxels {
+    /// Their values, scaled, read from `r` at the first of them (`path` names the file).
+    pub fn values(&self, r: &mut dyn Read, path: &Path) -> Result<Vec<f32>, VolumeError> {
+        let bytes = read_phase(r, self.layout, self.index, self.scalar.size(), path, VOXELS)?;
+        Ok(decode(
+            &bytes,
             self.scalar,
             self.big_endian,
             self.slope,
             self.intercept,
-        )
+        ))
     }
 }
 
-/// [`parse`]'s volume without its values (`data` empty), and the voxels as the file holds them:
-/// a mask of bytes read as such, not as four times as many bytes of f32.
-pub(crate) fn parse_payload(
-    bytes: &[u8],
+/// What the voxels are named as in errors.
+pub(crate) const VOXELS: &str = "the NIfTI voxel data";
+
+/// [`parse`]'s volume without its values, how its voxels lie, and a reader at the first of
+/// them (the file's bytes gunzipped as they are read): for one that streams them.
+pub(crate) fn open<'a>(
+    bytes: &'a [u8],
     path: &Path,
     phase: Option<usize>,
-) -> Result<(Volume, Payload), VolumeError> {
+) -> Result<(Volume, Voxels, Box<dyn Read + 'a>), VolumeError> {
     let gzip = bytes.starts_with(&[0x1f, 0x8b]);
     let mut r = open_payload(bytes, 0, gzip, path)?;
     let first = read_exact_n(&mut r, 4, path, "the NIfTI header")?;
@@ -101,7 +108,8 @@ pub(crate) fn parse_payload(
     } else {
         parse_nifti2(&raw, big_endian, path)?
     };
-    build(path, h, &mut r, hdr_len, phase)
+    let (v, x) = build(path, h, &mut r, hdr_len, phase)?;
+    Ok((v, x, r))
 }
 
 fn parse_nifti1(raw: &[u8], path: &Path) -> Result<Header, VolumeError> {
@@ -177,13 +185,15 @@ fn scalar_of(datatype: i16) -> Option<Scalar> {
     })
 }
 
+/// The volume header `h` describes (its values not read) and how its voxels lie, its
+/// extensions read from `r` (a label table among them), leaving `r` at the first voxel.
 fn build(
     path: &Path,
     h: Header,
     r: &mut dyn Read,
     hdr_len: usize,
     phase: Option<usize>,
-) -> Result<(Volume, Payload), VolumeError> {
+) -> Result<(Volume, Voxels), VolumeError> {
     let mut warnings = Vec::new();
     let ndim = h.dim[0];
     if !(1..=7).contains(&ndim) {
@@ -299,8 +309,6 @@ fn build(
     }
     // The volumes follow each other: those before the phase read are skipped, not kept.
     let layout = PhaseLayout::time_last(n, phase.count);
-    let what = "the NIfTI voxel data";
-    let bytes = read_phase(r, layout, phase.index - 1, scalar.size(), path, what)?;
     // scl_slope 0 or NaN means "no scaling" (NIfTI-1 standard).
     let (slope, inter) = if h.scl_slope == 0.0 || !h.scl_slope.is_finite() {
         (1.0, 0.0)
@@ -327,14 +335,15 @@ fn build(
         phase,
         warnings,
     };
-    let payload = Payload {
-        bytes,
+    let voxels = Voxels {
+        layout,
+        index: phase.index - 1,
         scalar,
         big_endian: h.big_endian,
         slope,
         intercept: inter,
     };
-    Ok((v, payload))
+    Ok((v, voxels))
 }
 
 /// The most bytes of header extensions read for a label table; beyond, they are skipped.

@@ -57,6 +57,46 @@ pub(crate) fn read_exact_n(
     Ok(out)
 }
 
+/// Reads `n` bytes from `r` a chunk of `chunk` bytes at a time into one buffer, handing each to
+/// `take` with its offset: a payload scanned as it streams, never held whole. Errors as
+/// [`read_exact_n`] does if fewer are there.
+pub(crate) fn read_in_chunks(
+    r: &mut dyn Read,
+    n: usize,
+    chunk: usize,
+    path: &Path,
+    what: &str,
+    mut take: impl FnMut(usize, &[u8]) -> Result<(), VolumeError>,
+) -> Result<(), VolumeError> {
+    let mut buffer = vec![0u8; chunk.min(n)];
+    let mut at = 0;
+    while at < n {
+        let want = chunk.min(n - at);
+        let mut got = 0;
+        while got < want {
+            match r.read(&mut buffer[got..want]) {
+                Ok(0) => {
+                    return Err(VolumeError::invalid(
+                        path,
+                        format!(
+                            "{what} is truncated: the header implies {n} bytes, the file holds {}",
+                            at + got
+                        ),
+                    ));
+                }
+                Ok(k) => got += k,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => {
+                    return Err(VolumeError::invalid(path, format!("reading {what}: {e}")));
+                }
+            }
+        }
+        take(at, &buffer[..want])?;
+        at += want;
+    }
+    Ok(())
+}
+
 /// Where the values of one phase lie in a 4-D payload: the phase axis has `count` positions,
 /// the axes before it make runs of `inner` values, the axes after it `outer` such runs. Time
 /// last (NIfTI, MetaImage, ITK's NRRD): `outer` = 1; a list axis first (3D Slicer's
