@@ -857,6 +857,7 @@ def fuzz_files(work, n, device, only=None):
             # a CT is refused as none).
             if not why and random.random() < 0.2:
                 outline = ["--outline"] if random.random() < 0.5 else []
+                outline += random.choice([[], [], ["--below=0.5", "--legend"], ["--below=-950"]])
                 why = run(["render", p, "--mode", "slice", "--size", "8x8", "-q", "--device",
                            device, "--segmentation", p] + outline + phase + ["-o", os.path.join(d, "t.png")], s)
             # Sometimes rendered in the colours of its own segments, or kept to some of them

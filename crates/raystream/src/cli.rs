@@ -614,6 +614,17 @@ pub struct RenderArgs {
     /// structures, rather than its inside tinted (a structure set's structures each whole).
     #[arg(long, requires = "segmentation")]
     pub outline: bool,
+    /// With --segmentation on a slice or a CPR: only the pixels whose CT voxel (the one nearest
+    /// their point) is below HU are tinted, as `info --below` counts them: a lung's low
+    /// attenuation areas, `--below -950` with a lung segmentation, an emphysema map.
+    #[arg(
+        long,
+        value_name = "HU",
+        requires = "segmentation",
+        value_parser = parse_below,
+        allow_hyphen_values = true
+    )]
+    pub below: Option<f64>,
     /// With --segmentation (dvr, iso and cinematic in its colours, or a slice tinted by it),
     /// or a label map's surfaces (--segment): each segment drawn, named beside a swatch of its
     /// colour in the top left corner; PNG, or DICOM as the picture.

@@ -238,6 +238,8 @@ pub struct SegmentOverlay {
     pub outline: bool,
     /// The segments present, named (`--legend`).
     pub legend: Vec<crate::legend::Entry>,
+    /// Only the points whose CT voxel is below this value are in a segment (`--below`).
+    pub below: Option<f64>,
 }
 
 impl SegmentOverlay {
@@ -260,24 +262,27 @@ pub fn tint_labels(
     rgb: &mut [u8],
     width: u32,
     overlay: &SegmentOverlay,
+    ct: &raystream_io::Volume,
     point: impl Fn(u32, u32) -> DVec3 + Sync,
 ) {
     use rayon::prelude::*;
     let labels = &overlay.labels;
-    let to_index = labels.index_to_world_affine().inverse();
-    let [nx, ny, nz] = labels.dims;
     let (w, h) = (width as usize, rgb.len() / (3 * width as usize).max(1));
-    let voxel: Vec<Option<[usize; 3]>> = (0..w * h)
+    let points: Vec<DVec3> = (0..w * h)
         .into_par_iter()
-        .map(|n| {
-            let q = to_index
-                .transform_point3(point((n % w) as u32, (n / w) as u32))
-                .round();
-            let inside =
-                q.min_element() >= 0.0 && q.x < nx as f64 && q.y < ny as f64 && q.z < nz as f64;
-            inside.then_some([q.x as usize, q.y as usize, q.z as usize])
-        })
+        .map(|n| point((n % w) as u32, (n / w) as u32))
         .collect();
+    let mut voxel = nearest_voxels(labels, &points);
+    // --below: a pixel whose CT voxel is not below the value is in no segment.
+    if let Some(hu) = overlay.below {
+        let of_ct = nearest_voxels(ct, &points);
+        for (q, c) in voxel.iter_mut().zip(of_ct) {
+            let low = c.is_some_and(|[i, j, k]| (ct.at(i, j, k) as f64) < hu);
+            if !low {
+                *q = None;
+            }
+        }
+    }
     let label_at = |q: &Option<[usize; 3]>| {
         q.map(|[i, j, k]| labels.at(i, j, k))
             .filter(|&v| v >= 0.5)
@@ -338,9 +343,109 @@ pub fn tint_labels(
     }
 }
 
+/// Per voxel of `labels`: whether the voxel of `ct` nearest its centre is below `hu` (`--below`).
+pub fn below_in(labels: &raystream_io::Volume, ct: &raystream_io::Volume, hu: f64) -> Vec<bool> {
+    use rayon::prelude::*;
+    let to_world = labels.index_to_world_affine();
+    let to_ct = ct.index_to_world_affine().inverse();
+    let [nx, ny, _] = labels.dims;
+    (0..labels.data.len())
+        .into_par_iter()
+        .map(|n| {
+            let ijk = DVec3::new(
+                (n % nx) as f64,
+                (n / nx % ny) as f64,
+                (n / (nx * ny)) as f64,
+            );
+            let c = nearest(&to_ct, ct.dims, to_world.transform_point3(ijk));
+            c.is_some_and(|[i, j, k]| (ct.at(i, j, k) as f64) < hu)
+        })
+        .collect()
+}
+
+/// The voxel of `v` nearest each of `points` (LPS mm); `None` outside its grid.
+fn nearest_voxels(v: &raystream_io::Volume, points: &[DVec3]) -> Vec<Option<[usize; 3]>> {
+    use rayon::prelude::*;
+    let to_index = v.index_to_world_affine().inverse();
+    (points.par_iter())
+        .map(|&p| nearest(&to_index, v.dims, p))
+        .collect()
+}
+
+/// The voxel nearest the point `p` (LPS mm) of a grid of `dims` whose world-to-index map is
+/// `to_index`; `None` outside it.
+fn nearest(
+    to_index: &raystream_math::DAffine3,
+    [nx, ny, nz]: [usize; 3],
+    p: DVec3,
+) -> Option<[usize; 3]> {
+    let q = to_index.transform_point3(p).round();
+    let inside = q.min_element() >= 0.0 && q.x < nx as f64 && q.y < ny as f64 && q.z < nz as f64;
+    inside.then_some([q.x as usize, q.y as usize, q.z as usize])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn below_tints_only_the_pixels_whose_ct_voxel_is_below() {
+        // A 4 × 3 × 2 CT of 1 mm voxels, values -1000 + 100·n; labels 1 on the first slice's
+        // left half, 2 on its right half, none on the second slice; a pixel a voxel of the
+        // first slice (the point its centre).
+        let ct = raystream_io::Volume::hounsfield(
+            [4, 3, 2],
+            [1.0; 3],
+            (0..24).map(|n| -1000.0 + 100.0 * n as f32).collect(),
+        );
+        let labels = raystream_io::Volume::hounsfield(
+            [4, 3, 2],
+            [1.0; 3],
+            (0..24)
+                .map(|n| match (n % 4, n < 12) {
+                    (_, false) => 0.0,
+                    (0 | 1, true) => 1.0,
+                    _ => 2.0,
+                })
+                .collect(),
+        );
+        let overlay = |below| SegmentOverlay {
+            labels: labels.clone(),
+            colours: Default::default(),
+            structures: Vec::new(),
+            outline: false,
+            legend: Vec::new(),
+            below,
+        };
+        let grey = [100u8; 3];
+        let point = |x: u32, y: u32| DVec3::new(x as f64, y as f64, 0.0);
+        for (below, want) in [
+            (None, 12),
+            // Below -650: voxels 0..=3 (-1000 to -700), strictly.
+            (Some(-650.0), 4),
+            (Some(-700.0), 3),
+            (Some(-5000.0), 0),
+        ] {
+            let mut rgb = [grey; 12].concat();
+            tint_labels(&mut rgb, 4, &overlay(below), &ct, point);
+            let tinted: Vec<usize> = (0..12).filter(|&n| rgb[3 * n..3 * n + 3] != grey).collect();
+            assert_eq!(tinted.len(), want, "{below:?}");
+            assert!(tinted.iter().all(|&n| n < want), "{below:?}: {tinted:?}");
+            for &n in &tinted {
+                let l = if n % 4 < 2 { 1 } else { 2 };
+                assert_eq!(rgb[3 * n..3 * n + 3], tint(grey, label_colour(l)));
+            }
+        }
+        // The legend's segments: of voxels whose CT voxel is below. A label grid of 2 mm
+        // voxels from (0.4, 0.4, 0.4): its centres fall nearest CT voxels (0, 0, 0), (2, 0, 0),
+        // (0, 2, 0) and (2, 2, 0) (values -1000, -800, -200, 0), and past the CT's last slice.
+        let coarse = raystream_io::Volume {
+            origin: [0.4; 3],
+            ..raystream_io::Volume::hounsfield([2, 2, 2], [2.0; 3], vec![1.0; 8])
+        };
+        let low = below_in(&coarse, &ct, -500.0);
+        assert_eq!(low, [true, true, false, false, false, false, false, false]);
+    }
 
     #[test]
     fn points_project_where_the_camera_casts_their_pixels() {

@@ -403,6 +403,11 @@ fn segmentation(
     };
     let name = file.display();
     if a.mode != Some(crate::cli::ModeArg::Slice) {
+        if let Some(hu) = a.below {
+            bail!(
+                "--below {hu}: tints a slice or a CPR's pixels by the CT's voxel at each: give --mode slice"
+            );
+        }
         // The other modes colour or keep to segments: crate::segments::paint.
         return Ok(None);
     }
@@ -447,14 +452,20 @@ fn segmentation(
         .filter_map(|k| Some((k.number as u32, k.colour?)))
         .collect();
     let legend = if a.legend {
-        let present: std::collections::BTreeSet<u32> = labels
-            .data
-            .iter()
-            .filter(|&&v| v > 0.0)
-            .map(|&v| v as u32)
+        // With --below, the segments with a voxel whose CT voxel is below the value.
+        let low = a.below.map(|hu| crate::overlay::below_in(&labels, ct, hu));
+        let present: std::collections::BTreeSet<u32> = (labels.data.iter().enumerate())
+            .filter(|&(n, &v)| v > 0.0 && low.as_ref().is_none_or(|low| low[n]))
+            .map(|(_, &v)| v as u32)
             .collect();
         let present: Vec<u32> = present.into_iter().collect();
-        crate::legend::entries(&present, &known)
+        let mut entries = crate::legend::entries(&present, &known);
+        if let Some(hu) = a.below {
+            for e in &mut entries {
+                e.name = format!("{} below {hu} HU", e.name);
+            }
+        }
+        entries
     } else {
         Vec::new()
     };
@@ -475,6 +486,7 @@ fn segmentation(
         structures,
         outline: a.outline,
         legend,
+        below: a.below,
     }))
 }
 
@@ -500,13 +512,13 @@ fn tint_segmentation(
                 DVec3::from(p.row),
                 DVec3::from(p.column),
             );
-            crate::overlay::tint_labels(rgb, *width, labels, |x, y| {
+            crate::overlay::tint_labels(rgb, *width, labels, volume, |x, y| {
                 o + (r * x as f64 + c * y as f64) * p.spacing
             })
         }
-        Seen::Curved(plane) => {
-            crate::overlay::tint_labels(rgb, *width, labels, |x, y| plane.point(x, y).0.as_dvec3())
-        }
+        Seen::Curved(plane) => crate::overlay::tint_labels(rgb, *width, labels, volume, |x, y| {
+            plane.point(x, y).0.as_dvec3()
+        }),
     }
 }
 

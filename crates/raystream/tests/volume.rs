@@ -3014,6 +3014,62 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
         "{green} green, {magenta} magenta"
     );
 
+    // An emphysema map: a coronal slice through both lungs, the segments tinted only where
+    // the CT's voxel is below -910 HU. Its tinted pixels are some of those tinted without
+    // --below, in the same colours; the others are the plain slice's.
+    let coronal = |name: &str, extra: &[&str]| {
+        let mut args = vec![
+            v["ct"].as_str().unwrap(),
+            "--mode",
+            "slice",
+            "--view",
+            "anterior",
+            "--slice-at",
+            "8,22,-150",
+            "--window",
+            "lung",
+            "--size",
+            "96x80",
+        ];
+        args.extend_from_slice(extra);
+        image::open(render_to(name, "cpu", &args))
+            .unwrap()
+            .to_rgb8()
+    };
+    let plain = coronal("slicer-coronal.png", &[]);
+    let all = coronal("slicer-coronal-all.png", &["--segmentation", one]);
+    let low = coronal(
+        "slicer-coronal-low.png",
+        &["--segmentation", one, "--below=-910"],
+    );
+    let (mut tinted, mut tinted_low) = (0, 0);
+    for ((p, a), l) in plain.pixels().zip(all.pixels()).zip(low.pixels()) {
+        tinted += usize::from(a != p);
+        if l != p {
+            tinted_low += 1;
+            assert_eq!(
+                l, a,
+                "a pixel tinted below -910 HU as it is tinted without --below"
+            );
+        }
+    }
+    assert!(
+        tinted > 3000 && tinted_low > 20 && tinted_low * 10 < tinted,
+        "{tinted_low} of {tinted} pixels tinted below -910 HU"
+    );
+    refused(
+        &[
+            "render",
+            v["ct"].as_str().unwrap(),
+            "--mode",
+            "dvr",
+            "--segmentation",
+            one,
+            "--below=-910",
+        ],
+        "--below -910: tints a slice or a CPR's pixels",
+    );
+
     // Bad files.
     let bad = |name: &str, fields: &str, want: &str| {
         let file = dir.join(name);
