@@ -215,27 +215,33 @@ pub fn body(vol: &Volume, opt: &BodyOptions) -> Result<Body, String> {
     let spacing = vol.spacing;
     let voxel_ml = vol.voxel_ml();
     let t = opt.threshold_hu;
-    let dense: Vec<bool> = vol.data.par_iter().map(|&v| v > t).collect();
-    if !dense.iter().any(|&d| d) {
+    // Dense: above the threshold, read off the values where needed rather than kept (a byte
+    // a voxel).
+    let dense = |n: usize| vol.data[n] > t;
+    if !vol.data.par_iter().any(|&v| v > t) {
         return Err(format!("no voxel above {t} HU: no body to find"));
     }
-    // 2. The core, its pieces, and how deep each reaches (squared mm).
+    // 2. The core, its pieces, and how deep each reaches (squared mm). Each voxel's piece is
+    // not kept (four bytes a voxel): a piece is its first voxel, filled again to take it.
     let r2 = opt.opening_mm * opt.opening_mm;
-    let (core_pieces, depths) = {
-        let depth2: Vec<f32> = squared_distance_in(dims, spacing, |n| !dense[n]);
-        let core: Vec<bool> = depth2.par_iter().map(|&d| d as f64 > r2).collect();
-        let (labels, sizes) = pieces(dims, &core);
-        drop(core);
-        let mut deepest = vec![0.0f64; sizes.len()];
-        for (&l, &d) in labels.iter().zip(&depth2) {
-            if l > 0 {
-                let x = &mut deepest[l as usize - 1];
-                *x = x.max(d as f64);
-            }
+    let len = vol.data.len();
+    let mut flood = Flood::new(dims);
+    let depth2: Vec<f32> = squared_distance_in(dims, spacing, |n| !dense(n));
+    let core = |n: usize| depth2[n] as f64 > r2;
+    let mut marks = vec![0u8; len];
+    let (mut sizes, mut depths, mut firsts) = (Vec::new(), Vec::new(), Vec::new());
+    for first in 0..len {
+        if marks[first] == 0 && core(first) {
+            let (mut size, mut deepest) = (0usize, 0.0f64);
+            flood.fill(first, &mut marks, (0, 1), &core, |n| {
+                size += 1;
+                deepest = deepest.max(depth2[n] as f64);
+            });
+            sizes.push(size);
+            depths.push(deepest);
+            firsts.push(first);
         }
-        ((labels, sizes), deepest)
-    };
-    let (labels, sizes) = core_pieces;
+    }
     let Some(largest) = (0..sizes.len()).max_by_key(|&p| (sizes[p], std::cmp::Reverse(p))) else {
         return Err(format!(
             "nothing above {t} HU is thicker than {} mm: no body to find",
@@ -243,38 +249,40 @@ pub fn body(vol: &Volume, opt: &BodyOptions) -> Result<Body, String> {
         ));
     };
     let deep2 = opt.core_depth_mm * opt.core_depth_mm;
-    let body_piece: Vec<bool> = (0..sizes.len())
-        .map(|p| p == largest || depths[p] >= deep2)
-        .collect();
-    // 3. The opening: dense voxels within the radius and a voxel of the body's core.
+    // 3. The opening: dense voxels within the radius and a voxel of the body's core (its
+    // pieces marked 2).
+    for p in (0..sizes.len()).filter(|&p| p == largest || depths[p] >= deep2) {
+        flood.fill(firsts[p], &mut marks, (1, 2), &core, |_| {});
+    }
+    drop(depth2);
     let reach = opt.opening_mm + spacing.iter().copied().fold(0.0, f64::max);
-    let seed: Vec<bool> = (labels.par_iter())
-        .map(|&l| l > 0 && body_piece[l as usize - 1])
+    let near2: Vec<f32> = squared_distance_in(dims, spacing, |n| marks[n] == 2);
+    let mut kept: Vec<bool> = (near2.par_iter().zip(&vol.data))
+        .map(|(&d, &v)| v > t && d as f64 <= reach * reach)
         .collect();
-    drop(labels);
-    let near2: Vec<f32> = squared_distance_in(dims, spacing, |n| seed[n]);
-    drop(seed);
-    let mut kept: Vec<bool> = (near2.par_iter().zip(&dense))
-        .map(|(&d, &s)| s && d as f64 <= reach * reach)
-        .collect();
-    // 4. The thin parts: pieces of the rest, joined back where small and touching.
-    let rest: Vec<bool> = (dense.par_iter().zip(&kept))
-        .map(|(&d, &k)| d && !k)
-        .collect();
-    drop(dense);
-    let (labels, sizes) = pieces(dims, &rest);
-    drop(rest);
-    let (mut touching, mut farthest2) = (vec![false; sizes.len()], vec![0.0f64; sizes.len()]);
+    // 4. The thin parts: pieces of the rest (marked 1, then 2 once found), joined back where
+    // small and touching.
+    (marks.par_iter_mut().zip(vol.data.par_iter().zip(&kept)))
+        .for_each(|(m, (&v, &k))| *m = u8::from(v > t && !k));
+    let all = |_: usize| true;
     let [nx, ny, nz] = dims;
-    for (n, &l) in labels.iter().enumerate() {
-        if l == 0 {
-            continue;
-        }
-        let p = l as usize - 1;
-        farthest2[p] = farthest2[p].max(near2[n] as f64);
-        if !touching[p] {
-            let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
-            touching[p] = neighbours(dims, (i, j, k)).any(|m| kept[m]);
+    let (mut sizes, mut farthest2, mut touching, mut firsts) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for first in 0..len {
+        if marks[first] == 1 {
+            let (mut size, mut farthest, mut touches) = (0usize, 0.0f64, false);
+            flood.fill(first, &mut marks, (1, 2), &all, |n| {
+                size += 1;
+                farthest = farthest.max(near2[n] as f64);
+                if !touches {
+                    let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
+                    touches = neighbours(dims, (i, j, k)).any(|m| kept[m]);
+                }
+            });
+            sizes.push(size);
+            farthest2.push(farthest);
+            touching.push(touches);
+            firsts.push(first);
         }
     }
     drop(near2);
@@ -284,10 +292,8 @@ pub fn body(vol: &Volume, opt: &BodyOptions) -> Result<Body, String> {
             touching[p] && sizes[p] as f64 * voxel_ml <= opt.thin_part_ml && farthest2[p] <= span2
         })
         .collect();
-    for (n, &l) in labels.iter().enumerate() {
-        if l > 0 && join[l as usize - 1] {
-            kept[n] = true;
-        }
+    for p in (0..sizes.len()).filter(|&p| join[p]) {
+        flood.fill(firsts[p], &mut marks, (2, 3), &all, |n| kept[n] = true);
     }
     let thin: Vec<usize> = (0..sizes.len()).filter(|&p| join[p]).collect();
     let thin_part_ml = thin.iter().map(|&p| sizes[p] as f64 * voxel_ml).sum();
@@ -304,15 +310,16 @@ pub fn body(vol: &Volume, opt: &BodyOptions) -> Result<Body, String> {
 
     // What is left of the pieces not joined once the body's enclosures are in (a speck
     // within a slice's ring of skin is).
-    let mut out = vec![0usize; sizes.len()];
-    for (&l, &i) in labels.iter().zip(&inside) {
-        if l > 0 && !i {
-            out[l as usize - 1] += 1;
+    let mut left_out_ml = Vec::new();
+    for p in (0..sizes.len()).filter(|&p| !join[p]) {
+        let mut out = 0usize;
+        flood.fill(firsts[p], &mut marks, (2, 3), &all, |n| {
+            out += usize::from(!inside[n])
+        });
+        if out > 0 {
+            left_out_ml.push(out as f64 * voxel_ml);
         }
     }
-    let mut left_out_ml: Vec<f64> = (out.iter().filter(|&&c| c > 0))
-        .map(|&c| c as f64 * voxel_ml)
-        .collect();
     left_out_ml.sort_by(|a, b| b.total_cmp(a));
     Ok(Body {
         inside,
@@ -345,44 +352,79 @@ fn neighbours(
 
 /// The pieces of `member` (voxels joined through faces): per voxel its piece from 1 (0 for
 /// none, the pieces numbered in the order their first voxels come, i fastest), and each
-/// piece's voxels. A flood fill by hand, as the islands' (`crate::islands` says why), here on
-/// the grid itself, which has no padding. Each voxel's grid coordinates travel with it on the
-/// stack: dividing its index to find them cost about a quarter of the fill (the head CT's
-/// core: 0.62–0.67 s so, 0.48–0.56 s now; BENCHMARKS.md).
+/// piece's voxels.
 fn pieces(dims: [usize; 3], member: &[bool]) -> (Vec<u32>, Vec<usize>) {
-    let [nx, ny, nz] = dims;
-    let sxy = nx * ny;
     let mut labels = vec![0u32; member.len()];
+    let mut marks = vec![0u8; member.len()];
     let mut sizes = Vec::new();
-    let mut stack: Vec<[u32; 3]> = Vec::new();
-    for seed in 0..member.len() {
-        if !member[seed] || labels[seed] != 0 {
-            continue;
+    let mut flood = Flood::new(dims);
+    for first in 0..member.len() {
+        if member[first] && marks[first] == 0 {
+            let (l, mut size) = (sizes.len() as u32 + 1, 0usize);
+            flood.fill(first, &mut marks, (0, 1), &|m| member[m], |n| {
+                labels[n] = l;
+                size += 1;
+            });
+            sizes.push(size);
         }
-        let l = sizes.len() as u32 + 1;
-        labels[seed] = l;
-        stack.push([seed % nx, (seed / nx) % ny, seed / sxy].map(|c| c as u32));
-        let mut size = 0usize;
+    }
+    (labels, sizes)
+}
+
+/// Flood fills over a grid's voxels joined through faces, by hand as the islands' are
+/// (`crate::islands` says why), here on the grid itself, which has no padding. A piece is
+/// taken by its first voxel and filled again where it is needed again, so that no voxel
+/// keeps a number of its piece (four bytes a voxel). Each voxel's grid coordinates travel
+/// with it on the stack: dividing its index to find them cost about a quarter of the fill
+/// (the head CT's core: 0.62–0.67 s so, 0.48–0.56 s; BENCHMARKS.md).
+struct Flood {
+    dims: [usize; 3],
+    stack: Vec<[u32; 3]>,
+}
+
+impl Flood {
+    fn new(dims: [usize; 3]) -> Flood {
+        Flood {
+            dims,
+            stack: Vec::new(),
+        }
+    }
+
+    /// Fills the piece through `first` of the voxels marked `from` for which `member` holds,
+    /// marking them `to` (`marks`, a byte a voxel) and handing each to `visit` once. `first`
+    /// must be such a voxel; `from` and `to` differ.
+    fn fill(
+        &mut self,
+        first: usize,
+        marks: &mut [u8],
+        (from, to): (u8, u8),
+        member: &impl Fn(usize) -> bool,
+        mut visit: impl FnMut(usize),
+    ) {
+        let [nx, ny, nz] = self.dims;
+        let sxy = nx * ny;
+        let stack = &mut self.stack;
+        debug_assert!(marks[first] == from && member(first) && from != to);
+        marks[first] = to;
+        stack.push([first % nx, (first / nx) % ny, first / sxy].map(|c| c as u32));
         while let Some(c) = stack.pop() {
-            size += 1;
             let [i, j, k] = c.map(|x| x as usize);
             let n = i + nx * j + sxy * k;
-            let mut visit = |near: bool, m: usize, at: [usize; 3]| {
-                if near && member[m] && labels[m] == 0 {
-                    labels[m] = l;
+            visit(n);
+            let mut go = |near: bool, m: usize, at: [usize; 3]| {
+                if near && marks[m] == from && member(m) {
+                    marks[m] = to;
                     stack.push(at.map(|x| x as u32));
                 }
             };
-            visit(i > 0, n.wrapping_sub(1), [i.wrapping_sub(1), j, k]);
-            visit(i + 1 < nx, n + 1, [i + 1, j, k]);
-            visit(j > 0, n.wrapping_sub(nx), [i, j.wrapping_sub(1), k]);
-            visit(j + 1 < ny, n + nx, [i, j + 1, k]);
-            visit(k > 0, n.wrapping_sub(sxy), [i, j, k.wrapping_sub(1)]);
-            visit(k + 1 < nz, n + sxy, [i, j, k + 1]);
+            go(i > 0, n.wrapping_sub(1), [i.wrapping_sub(1), j, k]);
+            go(i + 1 < nx, n + 1, [i + 1, j, k]);
+            go(j > 0, n.wrapping_sub(nx), [i, j.wrapping_sub(1), k]);
+            go(j + 1 < ny, n + nx, [i, j + 1, k]);
+            go(k > 0, n.wrapping_sub(sxy), [i, j, k.wrapping_sub(1)]);
+            go(k + 1 < nz, n + sxy, [i, j, k + 1]);
         }
-        sizes.push(size);
     }
-    (labels, sizes)
 }
 
 /// Into `out`, per pixel of a slice of `dims`: whether it is `wall`, or lies within it.
