@@ -32,16 +32,21 @@ pub fn region_stats(volume: &Volume, indices: &[usize]) -> Option<RegionStats> {
     let [nx, ny, _] = volume.dims;
     let mut values = finite_values(volume, indices)?;
     let n = values.len() as f64;
-    let mean = values.iter().sum::<f64>() / n;
+    let mean = values.iter().map(|&v| v as f64).sum::<f64>() / n;
     let sd = if values.len() > 1 {
-        (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+        (values
+            .iter()
+            .map(|&v| (v as f64 - mean).powi(2))
+            .sum::<f64>()
+            / (n - 1.0))
+            .sqrt()
     } else {
         0.0
     };
     let (min, max) = values
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
+            (a.min(v as f64), b.max(v as f64))
         });
     let half = values.len() / 2;
     let median = if values.len() % 2 == 1 {
@@ -70,11 +75,12 @@ pub fn region_stats(volume: &Volume, indices: &[usize]) -> Option<RegionStats> {
     })
 }
 
-/// The finite values of `volume` at `indices`; `None` for none.
-fn finite_values(volume: &Volume, indices: &[usize]) -> Option<Vec<f64>> {
-    let values: Vec<f64> = indices
+/// The finite values of `volume` at `indices`; `None` for none. Kept as the volume holds them,
+/// in f32 (half the memory of f64, for a region of a whole body; every sum is taken in f64).
+fn finite_values(volume: &Volume, indices: &[usize]) -> Option<Vec<f32>> {
+    let values: Vec<f32> = indices
         .iter()
-        .map(|&n| volume.data[n] as f64)
+        .map(|&n| volume.data[n])
         .filter(|v| v.is_finite())
         .collect();
     (!values.is_empty()).then_some(values)
@@ -83,10 +89,11 @@ fn finite_values(volume: &Volume, indices: &[usize]) -> Option<Vec<f64>> {
 /// The values at ranks `lo` and `lo + 1` of `values` in increasing order (at `lo` twice for
 /// the last rank), found by selection, which reorders `values`: the median's two middle
 /// values, a percentile's two nearest ranks.
-fn ranks(values: &mut [f64], lo: usize) -> (f64, f64) {
-    let (_, &mut at, above) = values.select_nth_unstable_by(lo, f64::total_cmp);
-    let next = above.iter().copied().fold(f64::INFINITY, f64::min);
-    (at, if above.is_empty() { at } else { next })
+fn ranks(values: &mut [f32], lo: usize) -> (f64, f64) {
+    let (_, &mut at, above) = values.select_nth_unstable_by(lo, f32::total_cmp);
+    let next = above.iter().copied().fold(f32::INFINITY, f32::min);
+    let at = at as f64;
+    (at, if above.is_empty() { at } else { next as f64 })
 }
 
 /// A region's densitometry: for each HU asked, the voxels below it; for each percentile asked,
@@ -130,7 +137,7 @@ pub fn densitometry(
     let below = below
         .iter()
         .map(|&hu| {
-            let voxels = values.iter().filter(|&&v| v < hu).count();
+            let voxels = values.iter().filter(|&&v| (v as f64) < hu).count();
             Below {
                 hu,
                 voxels,
