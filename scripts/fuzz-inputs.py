@@ -806,7 +806,8 @@ def fuzz_files(work, n, device, only=None):
         # refused as no label map, a mesh as no volume).
         within = (["--segmentation", p]
                   + random.choice([["--below", "-950"], ["--below", "-950,0"], ["--below=-856"]])
-                  + random.choice([[], ["--clusters"], ["--clusters", "2d"]])
+                  + random.choice([[], ["--clusters"], ["--clusters", "2d"],
+                                   ["--below-mask", os.path.join(d, "laa.nii.gz")]])
                   + ["--percentile", random.choice(["15", "0,100", "2.5"])]
                   if random.random() < 0.15 else [])
         why = run(["info", p, "--json"] + phase + body + within, s) or run(

@@ -35,6 +35,21 @@ pub fn write_label_map(
     labels: &[u8],
     description: &str,
 ) -> Result<(), VolumeError> {
+    write_label_map_named(path, like, labels, description, &[])
+}
+
+/// [`write_label_map`], with each label of `table` named and coloured (sRGB) in a header
+/// extension: the XML label table of Connectome Workbench's label volumes, as
+/// TotalSegmentator writes its multi-label files (`--ml`, through nibabel, extension code 0),
+/// which raystream, nibabel-based tools and Workbench read back. No extension for an empty
+/// table.
+pub fn write_label_map_named(
+    path: &Path,
+    like: &Volume,
+    labels: &[u8],
+    description: &str,
+    table: &[(u8, &str, [u8; 3])],
+) -> Result<(), VolumeError> {
     if !is_label_map_path(path) {
         return Err(VolumeError::invalid(
             path,
@@ -91,8 +106,15 @@ pub fn write_label_map(
         std::process::id(),
         if gz { "nii.gz" } else { "nii" }
     ));
-    let written = WriterOptions::new(&own)
-        .reference_header(&header)
+    let mut options = WriterOptions::new(&own).reference_header(&header);
+    if !table.is_empty() {
+        let extension = nifti::Extension::from_str(0, &label_table_xml(table));
+        options = options.with_extensions(nifti::ExtensionSequence::new(
+            nifti::Extender::from([1, 0, 0, 0]),
+            vec![extension],
+        ));
+    }
+    let written = options
         .write_nifti_with_type(&data, NiftiType::Uint8)
         .map_err(|e| match e {
             nifti::NiftiError::Io(e) => VolumeError::io(path, e),
@@ -103,6 +125,26 @@ pub fn write_label_map(
         std::fs::remove_file(&own).ok();
     }
     written
+}
+
+/// The XML of a label table (Workbench's `CaretExtension`, as TotalSegmentator writes it):
+/// each label's key, colour (0 to 1) and name (CDATA, a `]]>` within it split across two).
+fn label_table_xml(table: &[(u8, &str, [u8; 3])]) -> String {
+    let rows: String = (table.iter())
+        .map(|&(key, name, [r, g, b])| {
+            let c = |x: u8| x as f64 / 255.0;
+            let name = name.replace("]]>", "]]]]><![CDATA[>");
+            format!(
+                "<Label Key=\"{key}\" Red=\"{}\" Green=\"{}\" Blue=\"{}\" Alpha=\"1\"><![CDATA[{name}]]></Label>\n",
+                c(r),
+                c(g),
+                c(b)
+            )
+        })
+        .collect();
+    format!(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<CaretExtension><VolumeInformation Index=\"0\"><LabelTable>\n{rows}</LabelTable><VolumeType><![CDATA[Label]]></VolumeType></VolumeInformation></CaretExtension>\n"
+    )
 }
 
 /// That `labels` hold one label a voxel of `like`'s grid (an error naming `path` if not).

@@ -40,7 +40,7 @@ use std::io::{BufReader, Cursor, Read};
 use std::path::{Path, PathBuf};
 
 pub use curve::{MAX_CURVE_POINTS, read_curve, write_curve};
-pub use label_map::{is_label_map_path, write_label_map};
+pub use label_map::{is_label_map_path, write_label_map, write_label_map_named};
 pub use measurement_report::{
     COMPREHENSIVE_3D_SR, Measurement, MeasurementGroup, RAYSTREAM_SCHEME, ReadCode, ReadGroup,
     ReadMeasurement, ReadReport, Region, ReportInfo, ReportWritten, SegmentationReference,

@@ -1386,6 +1386,13 @@ pub struct InfoArgs {
         default_missing_value = "3d"
     )]
     pub clusters: Option<ClustersArg>,
+    /// With --below: each segment's voxels below the first --below value written on the CT's
+    /// grid as a NIfTI label map (.nii or .nii.gz), each labelled with its segment's number
+    /// and named and coloured as it in a label table (a header extension, as
+    /// TotalSegmentator's files carry one): the low attenuation areas, for `iso` and `render`
+    /// (emphysema's clusters in 3D) or a viewer.
+    #[arg(long, value_name = "FILE.nii.gz", requires = "below")]
+    pub below_mask: Option<PathBuf>,
     /// With --segmentation: each segment's values at these percentiles (0 to 100; a list, or
     /// the option again), interpolated between the nearest ranks as numpy does: a lung's
     /// Perc15 is `--percentile 15`.

@@ -535,6 +535,8 @@ struct Within {
     segments: Vec<SegmentStats>,
     combined: Vec<SegmentStats>,
     how: &'static str,
+    /// `--below-mask`: the file written, and how many segments it holds.
+    below_mask: Option<(String, usize)>,
 }
 
 impl SegmentStats {
@@ -666,6 +668,14 @@ fn segment_stats(
     let Some(file) = &a.segmentation else {
         return Ok(None);
     };
+    if let Some(out) = &a.below_mask
+        && !raystream_io::is_label_map_path(out)
+    {
+        anyhow::bail!(
+            "{}: --below-mask writes a NIfTI label map: name it .nii or .nii.gz",
+            out.display()
+        );
+    }
     let on = crate::segments::on_ct(file, a.colour_table.as_deref(), ct, input)?;
     let name_of = |l: u32| {
         (on.known.iter())
@@ -689,11 +699,65 @@ fn segment_stats(
     let segments = (on.members.iter())
         .filter_map(|(&l, list)| SegmentStats::of(a, ct, vec![l], name_of(l), list))
         .collect();
+    let below_mask = match &a.below_mask {
+        Some(out) => Some(write_below_mask(out, a.below[0], ct, &on)?),
+        None => None,
+    };
     Ok(Some(Within {
         segments,
         combined,
         how: on.how,
+        below_mask,
     }))
+}
+
+/// `--below-mask FILE`: each segment's voxels below `hu` labelled with its number on the CT
+/// `ct`'s grid, the larger segments laid first (so that one within another keeps its own
+/// voxels), named and coloured in the file's label table. The file, and how many segments it
+/// holds.
+fn write_below_mask(
+    out: &std::path::Path,
+    hu: f64,
+    ct: &raystream_io::Volume,
+    on: &crate::segments::OnCt,
+) -> Result<(String, usize)> {
+    if let Some(l) = on.members.keys().find(|&&l| l > 255) {
+        anyhow::bail!(
+            "{}: --below-mask: segment {l}: a label map of bytes holds labels 1 to 255",
+            out.display()
+        );
+    }
+    let mut order: Vec<u32> = on.members.keys().copied().collect();
+    order.sort_by_key(|l| std::cmp::Reverse(on.members[l].len()));
+    let mut labels = vec![0u8; ct.data.len()];
+    for l in &order {
+        for &n in &on.members[l] {
+            if (ct.data[n] as f64) < hu {
+                labels[n] = *l as u8;
+            }
+        }
+    }
+    let mut present = [false; 256];
+    for &l in &labels {
+        present[l as usize] = true;
+    }
+    let entries: Vec<(u8, String, [u8; 3])> = (1..=255u8)
+        .filter(|&l| present[l as usize])
+        .map(|l| {
+            let known = on.known.iter().find(|k| k.number == l as u16);
+            let name = known.map_or_else(|| format!("label {l}"), |k| k.label.clone());
+            let colour = known
+                .and_then(|k| k.colour)
+                .unwrap_or_else(|| crate::overlay::label_colour(l as u32));
+            (l, name, colour)
+        })
+        .collect();
+    let table: Vec<(u8, &str, [u8; 3])> = (entries.iter())
+        .map(|(l, n, c)| (*l, n.as_str(), *c))
+        .collect();
+    let what = format!("raystream info --below-mask: each segment's voxels below {hu} HU");
+    raystream_io::write_label_map_named(out, ct, &labels, &what, &table)?;
+    Ok((out.display().to_string(), table.len()))
 }
 
 fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
@@ -817,6 +881,11 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 "combined": (w.combined.iter())
                     .map(|r| with(r, "segments", json!(r.labels)))
                     .collect::<Vec<_>>(),
+                "below_mask": w.below_mask.as_ref().map(|(file, segments)| json!({
+                    "file": file,
+                    "hu": a.below[0],
+                    "segments": segments,
+                })),
             });
         }
         if let Some(b) = &body {
@@ -948,6 +1017,12 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 let list: Vec<String> = r.labels.iter().map(|l| l.to_string()).collect();
                 let head = format!("{} (segments {})", r.name, list.join(", "));
                 r.print("combined", &head, unit);
+            }
+            if let Some((file, segments)) = &w.below_mask {
+                println!(
+                    "  wrote      {file}: the voxels below {} {unit} of {segments} segments, a NIfTI label map",
+                    a.below[0]
+                );
             }
         }
         if let Some(b) = &body {

@@ -2932,19 +2932,18 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
         "'101': a percentile, from 0 to 100",
     );
 
+    // `info CT --segmentation ONE --below=-910` with more options.
+    fn below_with<'a>(ct: &'a str, one: &'a str, more: &[&'a str]) -> Vec<&'a str> {
+        let mut args = vec!["info", ct, "--segmentation", one, "--below=-910"];
+        args.extend_from_slice(more);
+        args
+    }
+    let ct = v["ct"].as_str().unwrap();
+    let below = |more: &[&'static str]| below_with(ct, one, more);
     // Each lung's clusters of voxels below -910 HU, in 3D and within each slice: scipy's
     // (count, each size met with its count) and numpy.polyfit's power law.
     for how in ["3d", "2d"] {
-        let o = run(&[
-            "info",
-            "--json",
-            v["ct"].as_str().unwrap(),
-            "--segmentation",
-            one,
-            "--below=-910",
-            "--clusters",
-            how,
-        ]);
+        let o = run(&below(&["--json", "--clusters", how]));
         assert!(o.status.success(), "{}", stderr(&o));
         let info: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
         let stats = info["segmentation"]["segments"].as_array().unwrap();
@@ -2967,14 +2966,43 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
             assert_eq!(got["largest_voxels"], sizes.last().unwrap()[0]);
         }
     }
-    let o = run(&[
-        "info",
-        v["ct"].as_str().unwrap(),
-        "--segmentation",
+    // The voxels below -910 HU written as a label map: each segment's count of them under its
+    // own label, named and coloured as the segment is (its label table read back).
+    let laa = dir.join("laa.nii.gz");
+    let o = run(&below_with(
+        ct,
         one,
-        "--below=-910",
-        "--clusters",
-    ]);
+        &["--json", "--below-mask", laa.to_str().unwrap()],
+    ));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let map = raystream_io::load_volume(&laa, &Default::default()).unwrap();
+    let ct_labels = raystream_io::load_volume(Path::new(one), &Default::default()).unwrap();
+    let mut written = 0;
+    for s in info["segmentation"]["segments"].as_array().unwrap() {
+        let l = s["value"].as_u64().unwrap();
+        let want = s["below"][0]["voxels"].as_u64().unwrap() as usize;
+        let got = map.data.iter().filter(|&&x| x == l as f32).count();
+        assert_eq!(got, want, "{}", s["name"]);
+        if want > 0 {
+            written += 1;
+            let named = map.segments.iter().find(|k| k.number as u64 == l).unwrap();
+            let own = ct_labels
+                .segments
+                .iter()
+                .find(|k| k.number as u64 == l)
+                .unwrap();
+            assert_eq!((&named.label, named.colour), (&own.label, own.colour));
+        }
+    }
+    assert_eq!(map.segments.len(), written);
+    assert_eq!(info["segmentation"]["below_mask"]["segments"], written);
+    assert!(written >= 2, "{written}");
+    refused(
+        &below(&["--below-mask", "laa.stl"]),
+        "laa.stl: --below-mask writes a NIfTI label map",
+    );
+    let o = run(&below(&["--clusters"]));
     let text = stdout(&o);
     let line = (text.lines())
         .find(|l| l.contains("density") && l.contains("right lung"))
