@@ -223,4 +223,31 @@ pub(crate) mod tests {
         let e = write_label_map(&dir.join("n.nii"), &like, &labels[1..], "").unwrap_err();
         assert!(e.to_string().contains("59 labels"), "{e}");
     }
+
+    /// Named labels read back with their names and colours (plain and gzipped), a name
+    /// holding XML's own characters and CDATA's end among them; the labels unchanged.
+    #[test]
+    fn a_label_table_reads_back() {
+        let scratch = crate::tests::scratch_dir("label-table-test");
+        let (like, labels) = oblique_labels();
+        let table = [
+            (1, "lung_upper_lobe_left", [200, 100, 0]),
+            (2, "a <b> & \"c\" ]]> d", [0, 255, 7]),
+        ];
+        for name in ["t.nii", "t.nii.gz"] {
+            let path = scratch.path().join(name);
+            write_label_map_named(&path, &like, &labels, "raystream test", &table).unwrap();
+            let v = load_volume(&path, &VolumeSelect::default()).unwrap();
+            let back: Vec<u8> = v.data.iter().map(|&x| x as u8).collect();
+            assert_eq!(back, labels, "{name}");
+            let got: Vec<(u16, &str, Option<[u8; 3]>)> = (v.segments.iter())
+                .map(|k| (k.number, k.label.as_str(), k.colour))
+                .collect();
+            let want: Vec<(u16, &str, Option<[u8; 3]>)> = (table.iter())
+                .map(|&(l, n, c)| (l as u16, n, Some(c)))
+                .collect();
+            assert_eq!(got, want, "{name}");
+            assert!(v.warnings.is_empty(), "{name}: {:?}", v.warnings);
+        }
+    }
 }
