@@ -727,16 +727,11 @@ fn write_below_mask(
             out.display()
         );
     }
-    let mut order: Vec<u32> = on.members.keys().copied().collect();
-    order.sort_by_key(|l| std::cmp::Reverse(on.members[l].len()));
-    let mut labels = vec![0u8; ct.data.len()];
-    for l in &order {
-        for &n in &on.members[l] {
-            if (ct.data[n] as f64) < hu {
-                labels[n] = *l as u8;
-            }
-        }
-    }
+    let all: Vec<u32> = on.members.keys().copied().collect();
+    let labels: Vec<u8> = (on.laid(&all, ct.data.len(), |n| (ct.data[n] as f64) < hu))
+        .into_iter()
+        .map(|l| l as u8)
+        .collect();
     let mut present = [false; 256];
     for &l in &labels {
         present[l as usize] = true;
@@ -746,10 +741,7 @@ fn write_below_mask(
         .map(|l| {
             let known = on.known.iter().find(|k| k.number == l as u16);
             let name = known.map_or_else(|| format!("label {l}"), |k| k.label.clone());
-            let colour = known
-                .and_then(|k| k.colour)
-                .unwrap_or_else(|| crate::overlay::label_colour(l as u32));
-            (l, name, colour)
+            (l, name, crate::overlay::segment_colour(&on.known, l as u32))
         })
         .collect();
     let table: Vec<(u8, &str, [u8; 3])> = (entries.iter())

@@ -345,9 +345,9 @@ pub fn tint_labels(
 
 /// Per voxel of `labels`: whether the voxel of `ct` nearest its centre is below `hu` (`--below`).
 pub fn below_in(labels: &raystream_io::Volume, ct: &raystream_io::Volume, hu: f64) -> Vec<bool> {
+    use crate::segments::nearest_voxel;
     use rayon::prelude::*;
-    let to_world = labels.index_to_world_affine();
-    let to_ct = ct.index_to_world_affine().inverse();
+    let to_ct = ct.index_to_world_affine().inverse() * labels.index_to_world_affine();
     let [nx, ny, _] = labels.dims;
     (0..labels.data.len())
         .into_par_iter()
@@ -357,7 +357,7 @@ pub fn below_in(labels: &raystream_io::Volume, ct: &raystream_io::Volume, hu: f6
                 (n / nx % ny) as f64,
                 (n / (nx * ny)) as f64,
             );
-            let c = nearest(&to_ct, ct.dims, to_world.transform_point3(ijk));
+            let c = nearest_voxel(&to_ct, ct.dims, ijk);
             c.is_some_and(|[i, j, k]| (ct.at(i, j, k) as f64) < hu)
         })
         .collect()
@@ -368,20 +368,8 @@ fn nearest_voxels(v: &raystream_io::Volume, points: &[DVec3]) -> Vec<Option<[usi
     use rayon::prelude::*;
     let to_index = v.index_to_world_affine().inverse();
     (points.par_iter())
-        .map(|&p| nearest(&to_index, v.dims, p))
+        .map(|&p| crate::segments::nearest_voxel(&to_index, v.dims, p))
         .collect()
-}
-
-/// The voxel nearest the point `p` (LPS mm) of a grid of `dims` whose world-to-index map is
-/// `to_index`; `None` outside it.
-fn nearest(
-    to_index: &raystream_math::DAffine3,
-    [nx, ny, nz]: [usize; 3],
-    p: DVec3,
-) -> Option<[usize; 3]> {
-    let q = to_index.transform_point3(p).round();
-    let inside = q.min_element() >= 0.0 && q.x < nx as f64 && q.y < ny as f64 && q.z < nz as f64;
-    inside.then_some([q.x as usize, q.y as usize, q.z as usize])
 }
 
 #[cfg(test)]

@@ -80,9 +80,38 @@ pub fn on_ct(file: &Path, colour_table: Option<&Path>, ct: &Volume, input: &Path
     })
 }
 
+impl OnCt {
+    /// The segments `chosen` laid on the CT's grid (`len` voxels) as one label volume, at the
+    /// voxels where `keep` holds; the largest laid first, so that a segment inside another (a
+    /// tumour in its organ) keeps its own voxels.
+    pub fn laid(&self, chosen: &[u32], len: usize, keep: impl Fn(usize) -> bool) -> Vec<u16> {
+        let mut order = chosen.to_vec();
+        order.sort_by_key(|l| std::cmp::Reverse(self.members[l].len()));
+        let mut labels = vec![0u16; len];
+        for &l in &order {
+            for &n in self.members[&l].iter().filter(|&&n| keep(n)) {
+                labels[n] = l as u16;
+            }
+        }
+        labels
+    }
+}
+
 /// Whether `labels` lie on the CT's grid, voxel for voxel.
 fn same_grid(labels: &Volume, ct: &Volume) -> bool {
     ct.same_grid(labels, 1e-6, 1e-6)
+}
+
+/// The voxel of a grid of `dims` nearest the point `p` that `to_index` maps into the grid's
+/// index space (from LPS mm, or from another grid's indices); `None` outside the grid.
+pub fn nearest_voxel(
+    to_index: &raystream_math::DAffine3,
+    [nx, ny, nz]: [usize; 3],
+    p: raystream_math::DVec3,
+) -> Option<[usize; 3]> {
+    let q = to_index.transform_point3(p).round();
+    let inside = q.min_element() >= 0.0 && q.x < nx as f64 && q.y < ny as f64 && q.z < nz as f64;
+    inside.then_some([q.x as usize, q.y as usize, q.z as usize])
 }
 
 /// Each CT voxel's segments in `labels` (a label volume; with `whole`, its segments each
@@ -97,7 +126,6 @@ fn labels_on_ct(
     let [nx, ny, nz] = ct.dims;
     let same = same_grid(labels, ct);
     let to_labels = labels.index_to_world_affine().inverse() * ct.index_to_world_affine();
-    let [lx, ly, lz] = labels.dims;
     // Slice by slice in parallel (a 512³ CT on another grid took 2.9 s on one thread), each
     // slice's (label, voxel within the slice) pairs in voxel order, gathered in slice order:
     // the same lists. A batch of slices at a time, so that the pairs (8 bytes a voxel) are a
@@ -116,19 +144,11 @@ fn labels_on_ct(
                         let q = if same {
                             [i, j, k]
                         } else {
-                            let q = to_labels
-                                .transform_point3(raystream_math::DVec3::new(
-                                    i as f64, j as f64, k as f64,
-                                ))
-                                .round();
-                            if q.min_element() < 0.0
-                                || q.x >= lx as f64
-                                || q.y >= ly as f64
-                                || q.z >= lz as f64
-                            {
-                                continue;
+                            let ijk = raystream_math::DVec3::new(i as f64, j as f64, k as f64);
+                            match nearest_voxel(&to_labels, labels.dims, ijk) {
+                                Some(q) => q,
+                                None => continue,
                             }
-                            [q.x as usize, q.y as usize, q.z as usize]
                         };
                         let m = (i + nx * j) as u32;
                         match whole {
@@ -245,16 +265,7 @@ pub fn paint(a: Asked, mode: DvrMode, ct: &Volume, input: &Path) -> Result<Optio
     if let Some(&l) = chosen.iter().find(|&&l| l > MAX_LABEL) {
         bail!("{name}: label {l}: labels above {MAX_LABEL} are not rendered in colour");
     }
-    // The largest painted first, so that a segment inside another (a tumour in its organ)
-    // keeps its colour.
-    let mut order = chosen.clone();
-    order.sort_by_key(|l| std::cmp::Reverse(on.members[l].len()));
-    let mut labels = vec![0u16; ct.data.len()];
-    for &l in &order {
-        for &n in &on.members[&l] {
-            labels[n] = l as u16;
-        }
-    }
+    let labels = on.laid(&chosen, ct.data.len(), |_| true);
     // Each segment's name and colour, once: the legend's, and linear, the samples'.
     let entries = crate::legend::entries(&chosen, &on.known);
     let colours: Vec<(u32, Vec3)> = chosen
