@@ -21,7 +21,10 @@ pub use marching::{
     extract_isosurface_keeping, not_manifold, pinched_vertices, point_triangle_distance, simplify,
     simplify_reporting, smooth,
 };
-pub use stats::{Below, Densitometry, RegionStats, densitometry, region_stats};
+pub use stats::{
+    Below, Densitometry, Inflation, RegionStats, Sex, densitometry, mass_g, predicted_tlc_ml,
+    region_stats,
+};
 pub use tf::{Shading, TfPreset, TransferFunction};
 
 /// How a volume is sampled between voxel centres (raystream-cpu's `sampling` module evaluates

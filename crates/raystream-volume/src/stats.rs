@@ -165,6 +165,57 @@ pub fn densitometry(
     Some(Densitometry { below, percentiles })
 }
 
+/// A region's tissue mass in grams from its volume and mean HU, as lung weight is found from CT:
+/// each voxel's density taken as (HU + 1000) / 1000 g/ml, water's 1 and air's 0 (Gattinoni's
+/// lung weight; a fair measure for lung and soft tissue, not for bone, whose HU outgrow its
+/// density).
+pub fn mass_g(ml: f64, mean_hu: f64) -> f64 {
+    ml * (mean_hu + 1000.0) / 1000.0
+}
+
+/// A lung's density adjusted for the depth of the breath by the sponge model (Shaker et al.,
+/// Acta Radiologica 2004; the adjustment of the trials of alpha-1 antitrypsin augmentation):
+/// the lung's tissue mass stays as it breathes, so that its density, HU + 1000 g/l, scales as
+/// the inverse of its volume. A value measured at `measured_ml` is the one the lung would show
+/// at `reference_ml` (its predicted total lung capacity, or its volume on an earlier CT).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Inflation {
+    pub measured_ml: f64,
+    pub reference_ml: f64,
+}
+
+impl Inflation {
+    /// measured / reference: below 1 for a breath short of the reference.
+    pub fn factor(&self) -> f64 {
+        self.measured_ml / self.reference_ml
+    }
+
+    /// `hu` measured, at the reference volume.
+    pub fn adjust(&self, hu: f64) -> f64 {
+        (hu + 1000.0) * self.factor() - 1000.0
+    }
+}
+
+/// Sex, for a predicted lung volume.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sex {
+    Male,
+    Female,
+}
+
+/// The total lung capacity predicted for an adult of `height_cm` in ml, by the equations of
+/// the ECSC and the ERS (Quanjer et al., Eur Respir J 1993; 6 Suppl 16: 5–40): 7.99 H − 7.08
+/// litres for men, 6.60 H − 5.79 for women, H in metres (fit over heights of 1.55 to 1.95 m
+/// for men and 1.45 to 1.80 m for women, ages 18 to 70).
+pub fn predicted_tlc_ml(sex: Sex, height_cm: f64) -> f64 {
+    let h = height_cm / 100.0;
+    let litres = match sex {
+        Sex::Male => 7.99 * h - 7.08,
+        Sex::Female => 6.60 * h - 5.79,
+    };
+    litres * 1000.0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -202,6 +253,36 @@ mod tests {
         assert!(d.percentiles.iter().all(|&(_, p)| p == x));
         assert!(densitometry(&v, &[nan], &[0.0], &[15.0], None).is_none());
         assert!(densitometry(&v, &[], &[0.0], &[15.0], None).is_none());
+    }
+
+    #[test]
+    fn the_sponge_model_keeps_the_mass() {
+        // A lung of 4 l at -850 HU: 600 g. Inflated to 6 l (factor 2/3) it keeps its 600 g,
+        // at -900 HU; at its own volume nothing moves; air stays air.
+        let at = Inflation {
+            measured_ml: 4000.0,
+            reference_ml: 6000.0,
+        };
+        assert!((mass_g(4000.0, -850.0) - 600.0).abs() < 1e-9);
+        assert!((at.factor() - 2.0 / 3.0).abs() < 1e-15);
+        assert!((at.adjust(-850.0) + 900.0).abs() < 1e-9);
+        assert!((mass_g(6000.0, at.adjust(-850.0)) - 600.0).abs() < 1e-9);
+        assert_eq!(at.adjust(-1000.0), -1000.0);
+        let same = Inflation {
+            measured_ml: 5123.4,
+            reference_ml: 5123.4,
+        };
+        assert!((same.adjust(-912.25) + 912.25).abs() < 1e-12);
+        // A breath deeper than the reference (factor above 1): at the reference the lung is
+        // denser, 100 g/l × 1.25.
+        let deep = Inflation {
+            measured_ml: 5000.0,
+            reference_ml: 4000.0,
+        };
+        assert!((deep.adjust(-900.0) + 875.0).abs() < 1e-9);
+        // Quanjer 1993: a man of 1.80 m 7.302 l, a woman of 1.65 m 5.10 l.
+        assert!((predicted_tlc_ml(Sex::Male, 180.0) - 7302.0).abs() < 1e-6);
+        assert!((predicted_tlc_ml(Sex::Female, 165.0) - 5100.0).abs() < 1e-6);
     }
 
     #[test]

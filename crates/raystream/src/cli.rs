@@ -304,6 +304,62 @@ fn parse_combine(s: &str) -> Result<(String, String), String> {
     }
 }
 
+/// `--adjust-to`'s volume: given, or the total lung capacity predicted for a sex and height.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AdjustTo {
+    Ml(f64),
+    Tlc {
+        sex: raystream_volume::Sex,
+        height_cm: f64,
+    },
+}
+
+impl AdjustTo {
+    /// The volume in ml.
+    pub fn ml(&self) -> f64 {
+        match *self {
+            AdjustTo::Ml(ml) => ml,
+            AdjustTo::Tlc { sex, height_cm } => raystream_volume::predicted_tlc_ml(sex, height_cm),
+        }
+    }
+}
+
+/// `--adjust-to`: REGION=ML (a volume from 100 ml to 20 l) or REGION=tlc:SEX:CM (male or
+/// female, a height from 100 to 250 cm).
+fn parse_adjust_to(s: &str) -> Result<(String, AdjustTo), String> {
+    let fail = || {
+        format!(
+            "'{s}': REGION=ML (a volume, 100 to 20000 ml) or REGION=tlc:SEX:CM (SEX male or female, a height of 100 to 250 cm)"
+        )
+    };
+    let (name, to) = s.split_once('=').ok_or_else(fail)?;
+    let (name, to) = (name.trim(), to.trim());
+    if name.is_empty() {
+        return Err(fail());
+    }
+    let to = match to.strip_prefix("tlc:") {
+        None => match to.parse::<f64>() {
+            Ok(ml) if (100.0..=20000.0).contains(&ml) => AdjustTo::Ml(ml),
+            _ => return Err(fail()),
+        },
+        Some(rest) => {
+            let (sex, cm) = rest.split_once(':').ok_or_else(fail)?;
+            let sex = match sex.to_ascii_lowercase().as_str() {
+                "male" | "m" => raystream_volume::Sex::Male,
+                "female" | "f" => raystream_volume::Sex::Female,
+                _ => return Err(fail()),
+            };
+            match cm.parse::<f64>() {
+                Ok(height_cm) if (100.0..=250.0).contains(&height_cm) => {
+                    AdjustTo::Tlc { sex, height_cm }
+                }
+                _ => return Err(fail()),
+            }
+        }
+    };
+    Ok((name.to_string(), to))
+}
+
 /// `--percentile`: from 0 to 100.
 fn parse_percentile(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
@@ -1415,6 +1471,20 @@ pub struct InfoArgs {
         value_parser = parse_combine
     )]
     pub combine: Vec<(String, String)>,
+    /// With --segmentation: the lungs' density adjusted for the depth of the breath,
+    /// REGION=ML: the region (segment names or numbers, comma-separated, or a --combine's
+    /// name: both lungs) taken to the volume ML (their volume on an earlier CT), or
+    /// REGION=tlc:SEX:CM (male or female), to the total lung capacity predicted for that sex
+    /// and height (ECSC/ERS 1993). By the sponge model, mass held (HU + 1000 scaled by the
+    /// region's volume over ML): the mean and percentiles of the region and of each segment
+    /// within it, as the trials of alpha-1 antitrypsin augmentation adjust Perc15.
+    #[arg(
+        long,
+        value_name = "REGION=ML|REGION=tlc:SEX:CM",
+        requires = "segmentation",
+        value_parser = parse_adjust_to
+    )]
+    pub adjust_to: Option<(String, AdjustTo)>,
     /// A CT volume in HU: the patient's body as `render --body-only` finds it (the table, a
     /// head holder, cables left out; what it encloses kept): its volume, what was left out,
     /// and its tissues by HU (below -190 air, gas and lung; -190 to -30 fat; -29 to 150 soft

@@ -537,6 +537,27 @@ struct Within {
     how: &'static str,
     /// `--below-mask`: the file written, and how many segments it holds.
     below_mask: Option<(String, usize)>,
+    /// `--adjust-to`: the region named, and its inflation against the volume asked.
+    adjusted: Option<Adjusted>,
+}
+
+/// `--adjust-to REGION=…`: the region and its segments, its inflation, the volume asked.
+struct Adjusted {
+    region: String,
+    labels: Vec<u32>,
+    inflation: raystream_volume::Inflation,
+    to: crate::cli::AdjustTo,
+}
+
+impl Adjusted {
+    /// The inflation for a region of the segments `labels`: the region's, for those within
+    /// it (a lung of both, a lobe), none for the others (the sponge model is a lung's).
+    fn of(&self, labels: &[u32]) -> Option<&raystream_volume::Inflation> {
+        labels
+            .iter()
+            .all(|l| self.labels.contains(l))
+            .then_some(&self.inflation)
+    }
 }
 
 impl SegmentStats {
@@ -570,10 +591,11 @@ impl SegmentStats {
         })
     }
 
-    /// Its statistics as JSON fields (its labels apart).
-    fn json(&self) -> serde_json::Value {
+    /// Its statistics as JSON fields (its labels apart): its mass where the CT is in HU
+    /// (`hu`), its mean and percentiles adjusted by `inflation` where asked.
+    fn json(&self, hu: bool, inflation: Option<&raystream_volume::Inflation>) -> serde_json::Value {
         let (s, d) = (&self.stats, &self.density);
-        json!({
+        let mut out = json!({
             "name": self.name,
             "voxels": s.voxels,
             "ml": s.ml,
@@ -594,15 +616,39 @@ impl SegmentStats {
                 "p": p,
                 "value": value,
             })).collect::<Vec<_>>(),
-        })
+        });
+        if hu {
+            out["mass_g"] = json!(raystream_volume::mass_g(s.ml, s.mean));
+        }
+        if let Some(at) = inflation {
+            out["adjusted"] = json!({
+                "mean": at.adjust(s.mean),
+                "percentiles": d.percentiles.iter().map(|&(p, value)| json!({
+                    "p": p,
+                    "value": at.adjust(value),
+                })).collect::<Vec<_>>(),
+            });
+        }
+        out
     }
 
-    /// Its lines: `head` (what it is) and its statistics, then its densitometry if asked.
-    fn print(&self, kind: &str, head: &str, unit: &str) {
+    /// Its lines: `head` (what it is) and its statistics (its mass where the CT is in HU),
+    /// then its densitometry if asked, and that adjusted by `inflation` where asked.
+    fn print(
+        &self,
+        kind: &str,
+        head: &str,
+        unit: &str,
+        inflation: Option<&raystream_volume::Inflation>,
+    ) {
         let s = &self.stats;
         let [x, y, z] = s.centroid;
+        let mass = match unit {
+            "HU" => format!(", {:.0} g", raystream_volume::mass_g(s.ml, s.mean)),
+            _ => String::new(),
+        };
         println!(
-            "  {kind:<10} {head}: {} voxels, {:.1} ml; {unit} mean {:.1}, sd {:.1}, min {}, median {}, max {}; centroid ({x:.1}, {y:.1}, {z:.1}) mm LPS",
+            "  {kind:<10} {head}: {} voxels, {:.1} ml{mass}; {unit} mean {:.1}, sd {:.1}, min {}, median {}, max {}; centroid ({x:.1}, {y:.1}, {z:.1}) mm LPS",
             s.voxels, s.ml, s.mean, s.sd, s.min, s.median, s.max
         );
         let voxel_ml = s.ml / s.voxels as f64;
@@ -635,6 +681,13 @@ impl SegmentStats {
         let parts: Vec<String> = below.chain(at).collect();
         if !parts.is_empty() {
             println!("  density    {head}: {}", parts.join("; "));
+        }
+        if let Some(at) = inflation {
+            let mean = format!("mean {:.1} {unit}", at.adjust(s.mean));
+            let at = (self.density.percentiles.iter())
+                .map(|&(p, x)| format!("{} percentile {:.1} {unit}", ordinal(p), at.adjust(x)));
+            let parts: Vec<String> = [mean].into_iter().chain(at).collect();
+            println!("  adjusted   {head}: {}", parts.join("; "));
         }
     }
 }
@@ -676,6 +729,12 @@ fn segment_stats(
             out.display()
         );
     }
+    if a.adjust_to.is_some() && ct.unit != raystream_io::ValueUnit::Hounsfield {
+        anyhow::bail!(
+            "{}: --adjust-to adjusts a CT's HU (HU + 1000 being a density in g/l); this volume's values are not in HU",
+            input.display()
+        );
+    }
     let on = crate::segments::on_ct(file, a.colour_table.as_deref(), ct, input)?;
     let name_of = |l: u32| {
         (on.known.iter())
@@ -689,11 +748,7 @@ fn segment_stats(
         let option = format!("--combine {name}=");
         let labels =
             crate::iso::pick_segments(&file.display(), &option, list, &present, &on.known)?;
-        let mut voxels: Vec<usize> = (labels.iter())
-            .flat_map(|l| on.members[l].iter().copied())
-            .collect();
-        voxels.sort_unstable();
-        voxels.dedup();
+        let voxels = union(&on, &labels);
         combined.extend(SegmentStats::of(a, ct, labels, name.clone(), &voxels));
     }
     let segments = (on.members.iter())
@@ -703,12 +758,55 @@ fn segment_stats(
         Some(out) => Some(write_below_mask(out, a.below[0], ct, &on)?),
         None => None,
     };
+    let adjusted = match &a.adjust_to {
+        Some((region, to)) => {
+            let named =
+                (combined.iter()).find(|r: &&SegmentStats| r.name.eq_ignore_ascii_case(region));
+            let (labels, ml) = match named {
+                Some(r) => (r.labels.clone(), r.stats.ml),
+                None => {
+                    let option = "--adjust-to ";
+                    let labels = crate::iso::pick_segments(
+                        &file.display(),
+                        option,
+                        region,
+                        &present,
+                        &on.known,
+                    )?;
+                    let ml = union(&on, &labels).len() as f64 * ct.voxel_ml();
+                    (labels, ml)
+                }
+            };
+            let inflation = raystream_volume::Inflation {
+                measured_ml: ml,
+                reference_ml: to.ml(),
+            };
+            Some(Adjusted {
+                region: region.clone(),
+                labels,
+                inflation,
+                to: *to,
+            })
+        }
+        None => None,
+    };
     Ok(Some(Within {
         segments,
         combined,
         how: on.how,
         below_mask,
+        adjusted,
     }))
+}
+
+/// The CT voxels of the segments `labels`, in order, each once.
+fn union(on: &crate::segments::OnCt, labels: &[u32]) -> Vec<usize> {
+    let mut voxels: Vec<usize> = (labels.iter())
+        .flat_map(|l| on.members[l].iter().copied())
+        .collect();
+    voxels.sort_unstable();
+    voxels.dedup();
+    voxels
 }
 
 /// `--below-mask FILE`: each segment's voxels below `hu` labelled with its number on the CT
@@ -859,8 +957,10 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
             out["series"] = s;
         }
         if let Some(w) = &stats {
+            let hu = v.unit == raystream_io::ValueUnit::Hounsfield;
             let with = |r: &SegmentStats, key: &str, value: serde_json::Value| {
-                let mut j = r.json();
+                let inflation = w.adjusted.as_ref().and_then(|a| a.of(&r.labels));
+                let mut j = r.json(hu, inflation);
                 j[key] = value;
                 j
             };
@@ -877,6 +977,27 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                     "file": file,
                     "hu": a.below[0],
                     "segments": segments,
+                })),
+                "adjusted_to": w.adjusted.as_ref().map(|adj| json!({
+                    "region": adj.region,
+                    "segments": adj.labels,
+                    "measured_ml": adj.inflation.measured_ml,
+                    "reference_ml": adj.inflation.reference_ml,
+                    "reference": match adj.to {
+                        crate::cli::AdjustTo::Ml(_) => json!("given"),
+                        crate::cli::AdjustTo::Tlc { sex, height_cm } => json!({
+                            "predicted_tlc": {
+                                "sex": match sex {
+                                    raystream_volume::Sex::Male => "male",
+                                    raystream_volume::Sex::Female => "female",
+                                },
+                                "height_cm": height_cm,
+                                "equations": "ECSC/ERS 1993 (Quanjer)",
+                            },
+                        }),
+                    },
+                    "factor": adj.inflation.factor(),
+                    "model": "sponge: mass held, HU + 1000 scaled by measured / reference",
                 })),
             });
         }
@@ -998,17 +1119,37 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 a.segmentation.as_deref().unwrap_or(input).display(),
                 w.how
             );
+            let inflation = |labels: &[u32]| w.adjusted.as_ref().and_then(|a| a.of(labels));
+            if let Some(adj) = &w.adjusted {
+                let (region, at) = (&adj.region, &adj.inflation);
+                let reference = match adj.to {
+                    crate::cli::AdjustTo::Ml(_) => "given".to_string(),
+                    crate::cli::AdjustTo::Tlc { sex, height_cm } => format!(
+                        "the total lung capacity predicted for a {} of {height_cm} cm, ECSC/ERS 1993",
+                        match sex {
+                            raystream_volume::Sex::Male => "man",
+                            raystream_volume::Sex::Female => "woman",
+                        }
+                    ),
+                };
+                println!(
+                    "  adjusting  to {:.1} ml ({reference}): {region}: {:.1} ml, factor {:.4}; the sponge model, mass held",
+                    at.reference_ml,
+                    at.measured_ml,
+                    at.factor()
+                );
+            }
             for r in &w.segments {
                 let head = match r.name.is_empty() {
                     true => format!("{}", r.labels[0]),
                     false => format!("{} ({})", r.labels[0], r.name),
                 };
-                r.print("segment", &head, unit);
+                r.print("segment", &head, unit, inflation(&r.labels));
             }
             for r in &w.combined {
                 let list: Vec<String> = r.labels.iter().map(|l| l.to_string()).collect();
                 let head = format!("{} (segments {})", r.name, list.join(", "));
-                r.print("combined", &head, unit);
+                r.print("combined", &head, unit, inflation(&r.labels));
             }
             if let Some((file, segments)) = &w.below_mask {
                 println!(

@@ -7,7 +7,8 @@ segmentation whose segments overlap, and, by hand, one in the format of Slicer b
 label values: a layer for each segment). Prints one JSON object: for each file, its path, its
 voxel-to-LPS matrix and each segment's name, colour (0-255), voxels and centroid (LPS mm); the
 CT's mean value within each segment of the first file, its share below -950 and -856 HU and its
-15th and 2.5th percentiles, and the two lungs' together; each lung's clusters of voxels below
+15th and 2.5th percentiles and its mass (g, at (HU + 1000) / 1000 g/ml), the two lungs' together
+and a voxel's volume (ml); each lung's clusters of voxels below
 -910 HU (scipy.ndimage.label's), in 3D and within each slice, with the power law of their
 sizes."""
 import json, os, sys
@@ -71,6 +72,10 @@ lungs = ct[slicerio.segment_mask(flat, flat["segments"][names.index("right lung"
            | slicerio.segment_mask(flat, flat["segments"][names.index("left lung")]["id"])
            ].astype("float64")
 both = [int(lungs.size), float((lungs < -950).mean() * 100), float(np.percentile(lungs, 15))]
+# A voxel's volume (ml), and each segment's mass (g) with each voxel's density (HU + 1000) / 1000
+# g/ml, as lung weight is found.
+voxel_ml = float(abs(np.linalg.det(flat["ijkToLPS"][:3, :3]))) / 1000.0
+masses = [float(((v + 1000.0) / 1000.0).sum() * voxel_ml) for v in values]
 
 
 def clusters(mask, structure):
@@ -146,4 +151,5 @@ files.append(describe(legacy, [ball, slab])[0])
 
 print(json.dumps({"files": files, "ct": ct_path, "ct_means": means, "ct_below": below,
                   "ct_percentiles": percentiles, "ct_lungs": both,
+                  "ct_voxel_ml": voxel_ml, "ct_masses": masses,
                   "lung_clusters": lung_clusters}))

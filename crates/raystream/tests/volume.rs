@@ -2653,6 +2653,10 @@ fn segment_voxels(
 ///   densitometry (the share below -950 and -856 HU, the 15th and 2.5th percentiles), each
 ///   lung's and both together (`--combine`); each lung's clusters of voxels below -910 HU,
 ///   in 3D and within each slice, are scipy.ndimage.label's, their power law numpy.polyfit's.
+/// - Each segment's mass is numpy's sum of (HU + 1000) / 1000 g/ml; `--adjust-to` takes the
+///   lungs' Perc15 and mean to a predicted TLC by both lungs' volume (numpy's), keeping their
+///   mass, leaves them as they are at their own volume, adjusts the lungs alone, and refuses
+///   a region not there and a volume or height out of range.
 /// - `render --segment NAME` draws that segment in its colour.
 /// - A layer the file lacks, a label value 0 or not a number, or two segments with one label
 ///   value on one layer are refused, the file and field named.
@@ -2905,6 +2909,107 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
     assert!((perc15 - want[2]).abs() < 1e-9, "{perc15} vs {}", want[2]);
     let lobes: Vec<u64> = serde_json::from_value(lungs["segments"].clone()).unwrap();
     assert_eq!(lobes.len(), 2);
+    // Each segment's mass: numpy's sum of (HU + 1000) / 1000 g/ml over its voxels.
+    let voxel_ml = v["ct_voxel_ml"].as_f64().unwrap();
+    for (s, want) in stats.iter().zip(v["ct_masses"].as_array().unwrap()) {
+        let (got, want) = (s["mass_g"].as_f64().unwrap(), want.as_f64().unwrap());
+        assert!(
+            (got - want).abs() < 1e-6 * want.abs().max(1.0),
+            "{}: {got} g vs {want}",
+            s["name"]
+        );
+    }
+
+    // The density adjusted for the breath (the sponge model) to the TLC predicted for a man
+    // of 1.80 m, 7.99 × 1.80 − 7.08 = 7.302 l: by both lungs' volume (numpy's voxel count),
+    // each segment's Perc15 and mean; the lungs' mass at 7.302 l is their mass as scanned.
+    let ct = v["ct"].as_str().unwrap();
+    let adjust = |to: &str| {
+        let o = run(&[
+            "info",
+            "--json",
+            ct,
+            "--segmentation",
+            one,
+            "--percentile",
+            "15",
+            "--combine",
+            "lungs=right lung,left lung",
+            "--adjust-to",
+            to,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_str::<Value>(stdout(&o).trim()).unwrap()["segmentation"].clone()
+    };
+    let lungs_ml = want[0] * voxel_ml;
+    // By the lungs' two segments named, then by the --combine's name: the same.
+    for to in ["right lung,LEFT LUNG=tlc:male:180", "Lungs=tlc:m:180"] {
+        let got = adjust(to);
+        let at = &got["adjusted_to"];
+        assert_eq!(
+            at["reference"]["predicted_tlc"]["sex"], "male",
+            "{to}: {at}"
+        );
+        assert!((at["reference_ml"].as_f64().unwrap() - 7302.0).abs() < 1e-6);
+        assert!((at["measured_ml"].as_f64().unwrap() - lungs_ml).abs() < 1e-6 * lungs_ml);
+        let factor = lungs_ml / 7302.0;
+        assert!((at["factor"].as_f64().unwrap() - factor).abs() < 1e-12);
+        assert_eq!(at["segments"].as_array().unwrap().len(), 2);
+        let segments = got["segments"].as_array().unwrap();
+        for (n, s) in segments.iter().enumerate() {
+            // Only the lungs: the sponge model is a lung's.
+            if !s["name"].as_str().unwrap().ends_with(" lung") {
+                assert!(s["adjusted"].is_null(), "{}", s["name"]);
+                continue;
+            }
+            let p15 = s["adjusted"]["percentiles"][0]["value"].as_f64().unwrap();
+            let want = (percentiles[n][0] + 1000.0) * factor - 1000.0;
+            assert!(
+                (p15 - want).abs() < 1e-6,
+                "{to} {}: {p15} vs {want}",
+                s["name"]
+            );
+            let mean = s["adjusted"]["mean"].as_f64().unwrap();
+            let want = (means[n].as_f64().unwrap() + 1000.0) * factor - 1000.0;
+            assert!(
+                (mean - want).abs() < 0.05,
+                "{to} {}: {mean} vs {want}",
+                s["name"]
+            );
+        }
+        let lungs = &got["combined"][0];
+        let mean = lungs["adjusted"]["mean"].as_f64().unwrap();
+        let mass = lungs["mass_g"].as_f64().unwrap();
+        assert!((7302.0 * (mean + 1000.0) / 1000.0 - mass).abs() < 1e-6 * mass);
+    }
+    // To their own volume: nothing moves.
+    let own = adjust(&format!("lungs={lungs_ml:.9}"));
+    assert_eq!(own["adjusted_to"]["reference"], "given");
+    let lung_segments = (own["segments"].as_array().unwrap().iter())
+        .filter(|s| !s["adjusted"].is_null())
+        .count();
+    assert_eq!(lung_segments, 2);
+    for s in (own["segments"].as_array().unwrap().iter()).filter(|s| !s["adjusted"].is_null()) {
+        let (got, was) = (
+            s["adjusted"]["percentiles"][0]["value"].as_f64().unwrap(),
+            s["percentiles"][0]["value"].as_f64().unwrap(),
+        );
+        assert!((got - was).abs() < 1e-6, "{}: {got} vs {was}", s["name"]);
+    }
+    let adjust_refused = |to: &str, want: &str| {
+        let args = ["info", ct, "--segmentation", one, "--adjust-to", to];
+        refused(&args, want);
+    };
+    adjust_refused(
+        "liver=6000",
+        "--adjust-to \"liver\": no segment is named so",
+    );
+    adjust_refused(
+        "lungs=50",
+        "'lungs=50': REGION=ML (a volume, 100 to 20000 ml)",
+    );
+    adjust_refused("lungs=tlc:x:170", "REGION=tlc:SEX:CM");
+    adjust_refused("lungs=tlc:female:20", "a height of 100 to 250 cm");
     refused(
         &[
             "info",
