@@ -3,6 +3,7 @@
 
 pub mod auto;
 pub mod body;
+pub mod calcium;
 mod cases;
 pub mod centreline;
 pub mod clusters;

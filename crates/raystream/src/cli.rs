@@ -1471,6 +1471,14 @@ pub struct InfoArgs {
         value_parser = parse_combine
     )]
     pub combine: Vec<(String, String)>,
+    /// With --segmentation: each segment's calcium score as Agatston defined it, on a
+    /// non-contrast CT at 120 kVp (the coronary arteries', each artery a segment, or the
+    /// aortic valve's): lesions of 130 HU or more and 1 mm² or more within each slice, each
+    /// its area times 1 to 4 by its peak (130, 200, 300, 400 HU), slices of other than 3 mm
+    /// weighted by spacing / 3 mm; the volume score, and the CAC-DRS category (A0 to A3) of
+    /// a total (--combine the arteries).
+    #[arg(long, requires = "segmentation")]
+    pub agatston: bool,
     /// With --segmentation: the lungs' density adjusted for the depth of the breath,
     /// REGION=ML: the region (segment names or numbers, comma-separated, or a --combine's
     /// name: both lungs) taken to the volume ML (their volume on an earlier CT), or

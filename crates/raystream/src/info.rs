@@ -527,6 +527,8 @@ struct SegmentStats {
     name: String,
     stats: raystream_volume::RegionStats,
     density: raystream_volume::Densitometry,
+    /// `--agatston`: its calcium score.
+    calcium: Option<raystream_volume::calcium::Agatston>,
 }
 
 /// `--segmentation`'s regions: each segment's, then each `--combine`'s, and how the CT's
@@ -583,11 +585,15 @@ impl SegmentStats {
                 a.clusters.map(Into::into),
             )?,
         };
+        let calcium = a
+            .agatston
+            .then(|| raystream_volume::calcium::agatston(ct, list));
         Some(SegmentStats {
             labels,
             name,
             stats,
             density,
+            calcium,
         })
     }
 
@@ -619,6 +625,17 @@ impl SegmentStats {
         });
         if hu {
             out["mass_g"] = json!(raystream_volume::mass_g(s.ml, s.mean));
+        }
+        if let Some(c) = &self.calcium {
+            out["agatston"] = json!({
+                "score": c.score,
+                "volume_mm3": c.volume_mm3,
+                "lesions": c.lesions,
+                "slices": c.slices,
+                "peak_hu": c.peak_hu,
+                "cac_drs": c.cac_drs(),
+                "slice_factor": c.slice_factor,
+            });
         }
         if let Some(at) = inflation {
             out["adjusted"] = json!({
@@ -682,6 +699,19 @@ impl SegmentStats {
         if !parts.is_empty() {
             println!("  density    {head}: {}", parts.join("; "));
         }
+        if let Some(c) = &self.calcium {
+            let peak = c
+                .peak_hu
+                .map_or(String::new(), |p| format!(", peak {p} {unit}"));
+            println!(
+                "  calcium    {head}: Agatston {:.1} (CAC-DRS {}), volume {:.1} mm³, {} lesions in {} slices{peak}",
+                c.score,
+                c.cac_drs(),
+                c.volume_mm3,
+                c.lesions,
+                c.slices
+            );
+        }
         if let Some(at) = inflation {
             let mean = format!("mean {:.1} {unit}", at.adjust(s.mean));
             let at = (self.density.percentiles.iter())
@@ -732,6 +762,12 @@ fn segment_stats(
     if a.adjust_to.is_some() && ct.unit != raystream_io::ValueUnit::Hounsfield {
         anyhow::bail!(
             "{}: --adjust-to adjusts a CT's HU (HU + 1000 being a density in g/l); this volume's values are not in HU",
+            input.display()
+        );
+    }
+    if a.agatston && ct.unit != raystream_io::ValueUnit::Hounsfield {
+        anyhow::bail!(
+            "{}: --agatston scores a CT's HU (calcium from 130 HU); this volume's values are not in HU",
             input.display()
         );
     }
@@ -978,6 +1014,17 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                     "hu": a.below[0],
                     "segments": segments,
                 })),
+                "agatston": a.agatston.then(|| {
+                    let (pixel_mm2, slice_mm) = raystream_volume::calcium::slice_geometry(&v);
+                    json!({
+                        "threshold_hu": raystream_volume::calcium::THRESHOLD_HU,
+                        "min_area_mm2": raystream_volume::calcium::MIN_AREA_MM2,
+                        "connectivity": "8 within each slice",
+                        "pixel_mm2": pixel_mm2,
+                        "slice_mm": slice_mm,
+                        "slice_factor": slice_mm / raystream_volume::calcium::SLICE_MM,
+                    })
+                }),
                 "adjusted_to": w.adjusted.as_ref().map(|adj| json!({
                     "region": adj.region,
                     "segments": adj.labels,
@@ -1120,6 +1167,15 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 w.how
             );
             let inflation = |labels: &[u32]| w.adjusted.as_ref().and_then(|a| a.of(labels));
+            if a.agatston {
+                let (pixel_mm2, slice_mm) = raystream_volume::calcium::slice_geometry(&v);
+                println!(
+                    "  agatston   lesions from {} HU and {} mm² within each slice (pixels {pixel_mm2:.3} mm², joined at edges and corners); slices {slice_mm:.2} mm apart, weighted {:.3} (Agatston's 3 mm)",
+                    raystream_volume::calcium::THRESHOLD_HU,
+                    raystream_volume::calcium::MIN_AREA_MM2,
+                    slice_mm / raystream_volume::calcium::SLICE_MM
+                );
+            }
             if let Some(adj) = &w.adjusted {
                 let (region, at) = (&adj.region, &adj.inflation);
                 let reference = match adj.to {

@@ -957,9 +957,19 @@ fn render_direct(a: &RenderArgs, mode: DvrMode) -> Result<()> {
         (None, true) => painted.as_ref().map_or(&[], |p| &p.legend),
     };
     if a.legend && legend.is_empty() {
-        bail!(
-            "--legend names the segments drawn in colour: give --segmentation LABELS (a label map, DICOM Segmentation or RT Structure Set)"
-        );
+        match &a.segmentation {
+            Some(file) => bail!(
+                "{}: --legend names the segments drawn in colour, and none of its segments is drawn in this image (none holds a voxel shown{})",
+                file.display(),
+                match a.below {
+                    Some(hu) => format!(" below {hu}"),
+                    None => String::new(),
+                }
+            ),
+            None => bail!(
+                "--legend names the segments drawn in colour: give --segmentation LABELS (a label map, DICOM Segmentation or RT Structure Set)"
+            ),
+        }
     }
     let labels = Labels {
         overlay: labels.as_ref(),

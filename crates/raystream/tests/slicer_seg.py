@@ -7,7 +7,8 @@ segmentation whose segments overlap, and, by hand, one in the format of Slicer b
 label values: a layer for each segment). Prints one JSON object: for each file, its path, its
 voxel-to-LPS matrix and each segment's name, colour (0-255), voxels and centroid (LPS mm); the
 CT's mean value within each segment of the first file, its share below -950 and -856 HU and its
-15th and 2.5th percentiles and its mass (g, at (HU + 1000) / 1000 g/ml), the two lungs' together
+15th and 2.5th percentiles, its mass (g, at (HU + 1000) / 1000 g/ml) and its Agatston score (its
+bones' calcium; scipy.ndimage.label's lesions in each slice), the two lungs' together
 and a voxel's volume (ml); each lung's clusters of voxels below
 -910 HU (scipy.ndimage.label's), in 3D and within each slice, with the power law of their
 sizes."""
@@ -76,6 +77,39 @@ both = [int(lungs.size), float((lungs < -950).mean() * 100), float(np.percentile
 # g/ml, as lung weight is found.
 voxel_ml = float(abs(np.linalg.det(flat["ijkToLPS"][:3, :3]))) / 1000.0
 masses = [float(((v + 1000.0) / 1000.0).sum() * voxel_ml) for v in values]
+
+
+def agatston(mask):
+    """The Agatston score of the CT's voxels in `mask`: in each slice (the third axis), the
+    pieces of those at 130 HU or more (scipy.ndimage.label, the eight about each voxel), each of
+    1 mm² or more counted as its area times 1 to 4 by its peak (130, 200, 300, 400 HU), times
+    the slice spacing over 3 mm; with the volume (mm³), the lesions, the slices and the peak."""
+    m = flat["ijkToLPS"][:3, :3]
+    pixel = float(np.linalg.norm(np.cross(m[:, 0], m[:, 1])))
+    slice_mm = float(abs(np.linalg.det(m))) / pixel
+    score = volume = 0.0
+    lesions, slices, peak = 0, set(), None
+    for k in range(ct.shape[2]):
+        hot = mask[:, :, k] & (ct[:, :, k] >= 130)
+        labels, n = scipy.ndimage.label(hot, structure=np.ones((3, 3)))
+        if n == 0:
+            continue
+        sizes = np.bincount(labels.ravel())[1:]
+        peaks = scipy.ndimage.maximum(ct[:, :, k], labels, np.arange(1, n + 1))
+        for size, top in zip(sizes, peaks):
+            if size * pixel < 1.0:
+                continue
+            weight = 4 if top >= 400 else 3 if top >= 300 else 2 if top >= 200 else 1
+            score += size * pixel * weight * slice_mm / 3.0
+            volume += size * pixel * slice_mm
+            lesions += 1
+            slices.add(k)
+            peak = float(top) if peak is None else max(peak, float(top))
+    return {"score": score, "volume_mm3": volume, "lesions": lesions, "slices": len(slices),
+            "peak_hu": peak}
+
+
+calcium = [agatston(slicerio.segment_mask(flat, seg["id"])) for seg in flat["segments"]]
 
 
 def clusters(mask, structure):
@@ -151,5 +185,5 @@ files.append(describe(legacy, [ball, slab])[0])
 
 print(json.dumps({"files": files, "ct": ct_path, "ct_means": means, "ct_below": below,
                   "ct_percentiles": percentiles, "ct_lungs": both,
-                  "ct_voxel_ml": voxel_ml, "ct_masses": masses,
+                  "ct_voxel_ml": voxel_ml, "ct_masses": masses, "ct_agatston": calcium,
                   "lung_clusters": lung_clusters}))

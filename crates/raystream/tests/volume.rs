@@ -2657,6 +2657,8 @@ fn segment_voxels(
 ///   lungs' Perc15 and mean to a predicted TLC by both lungs' volume (numpy's), keeping their
 ///   mass, leaves them as they are at their own volume, adjusts the lungs alone, and refuses
 ///   a region not there and a volume or height out of range.
+/// - Each segment's Agatston score (lesions, slices, peak, score, volume) is that of a
+///   scipy.ndimage.label reference over each slice.
 /// - `render --segment NAME` draws that segment in its colour.
 /// - A layer the file lacks, a label value 0 or not a number, or two segments with one label
 ///   value on one layer are refused, the file and field named.
@@ -2845,14 +2847,18 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
     }
     assert_eq!(shading.materials.len(), 8);
 
+    // `info --json CT --segmentation ONE` with more options: its JSON.
+    let ct = v["ct"].as_str().unwrap();
+    let info_with = |more: &[&str]| -> Value {
+        let mut args = vec!["info", "--json", ct, "--segmentation", one];
+        args.extend_from_slice(more);
+        let o = run(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_str(stdout(&o).trim()).unwrap()
+    };
     // The chest CT's values within each segment, and the lungs' densitometry: LAA-950
     // (normal lungs: under 1 %), the share below -856 HU, Perc15 and the 2.5th percentile.
-    let o = run(&[
-        "info",
-        "--json",
-        v["ct"].as_str().unwrap(),
-        "--segmentation",
-        one,
+    let info = info_with(&[
         "--below",
         "-950,-856",
         "--percentile",
@@ -2861,8 +2867,6 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
         "--combine",
         "lungs=right lung,LEFT LUNG",
     ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let info: Value = serde_json::from_str(stdout(&o).trim()).unwrap();
     let stats = info["segmentation"]["segments"].as_array().unwrap();
     let means = v["ct_means"].as_array().unwrap();
     assert_eq!(stats.len(), means.len());
@@ -2920,26 +2924,55 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
         );
     }
 
+    // Each segment's Agatston score (its bones' calcium, on this CT): scipy's lesions in
+    // each slice, joined at edges and corners, of 1 mm² or more, weighted by their peaks and
+    // by the slices' 10 mm over 3 mm.
+    let calcium = info_with(&["--agatston"]);
+    let method = &calcium["segmentation"]["agatston"];
+    assert!(
+        (method["slice_factor"].as_f64().unwrap() - 10.0 / 3.0).abs() < 1e-6,
+        "{method}"
+    );
+    let scored = calcium["segmentation"]["segments"].as_array().unwrap();
+    let wants = v["ct_agatston"].as_array().unwrap();
+    assert_eq!(scored.len(), wants.len());
+    for (s, want) in scored.iter().zip(wants) {
+        let got = &s["agatston"];
+        for key in ["lesions", "slices", "peak_hu"] {
+            assert_eq!(got[key], want[key], "{}: {key}", s["name"]);
+        }
+        for key in ["score", "volume_mm3"] {
+            let (g, w) = (got[key].as_f64().unwrap(), want[key].as_f64().unwrap());
+            assert!(
+                (g - w).abs() <= 1e-9 * w.max(1.0),
+                "{}: {key} {g} vs {w}",
+                s["name"]
+            );
+        }
+    }
+    let ribs = scored.iter().find(|s| s["name"] == "ribs").unwrap();
+    assert!(
+        ribs["agatston"]["lesions"].as_u64().unwrap() > 100,
+        "{ribs}"
+    );
+    assert_eq!(ribs["agatston"]["cac_drs"], "A3");
+    let lung = scored.iter().find(|s| s["name"] == "left lung").unwrap();
+    assert_eq!(lung["agatston"]["score"], 0.0);
+    assert_eq!(lung["agatston"]["cac_drs"], "A0");
+
     // The density adjusted for the breath (the sponge model) to the TLC predicted for a man
     // of 1.80 m, 7.99 × 1.80 − 7.08 = 7.302 l: by both lungs' volume (numpy's voxel count),
     // each segment's Perc15 and mean; the lungs' mass at 7.302 l is their mass as scanned.
-    let ct = v["ct"].as_str().unwrap();
     let adjust = |to: &str| {
-        let o = run(&[
-            "info",
-            "--json",
-            ct,
-            "--segmentation",
-            one,
+        let more = [
             "--percentile",
             "15",
             "--combine",
             "lungs=right lung,left lung",
             "--adjust-to",
             to,
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        serde_json::from_str::<Value>(stdout(&o).trim()).unwrap()["segmentation"].clone()
+        ];
+        info_with(&more)["segmentation"].clone()
     };
     let lungs_ml = want[0] * voxel_ml;
     // By the lungs' two segments named, then by the --combine's name: the same.
@@ -3010,30 +3043,24 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
     );
     adjust_refused("lungs=tlc:x:170", "REGION=tlc:SEX:CM");
     adjust_refused("lungs=tlc:female:20", "a height of 100 to 250 cm");
+    // Both take HU: a volume of other values is refused, named.
+    let engine = volume("nifti/scivis_engine.nii.gz");
+    for (option, want) in [
+        (["--adjust-to", "a=5000"], "--adjust-to adjusts a CT's HU"),
+        (["--agatston", "--json"], "--agatston scores a CT's HU"),
+    ] {
+        let mut args = vec!["info", &engine, "--segmentation", one];
+        args.extend(option);
+        let e = refused(&args, want);
+        assert!(e.contains("scivis_engine.nii.gz: "), "{e}");
+    }
     refused(
-        &[
-            "info",
-            v["ct"].as_str().unwrap(),
-            "--segmentation",
-            one,
-            "--combine",
-            "x=liver",
-        ],
+        &["info", ct, "--segmentation", one, "--combine", "x=liver"],
         "--combine x=\"liver\": no segment is named so",
     );
+    refused(&["info", ct, "--below", "-950"], "--segmentation");
     refused(
-        &["info", v["ct"].as_str().unwrap(), "--below", "-950"],
-        "--segmentation",
-    );
-    refused(
-        &[
-            "info",
-            v["ct"].as_str().unwrap(),
-            "--segmentation",
-            one,
-            "--percentile",
-            "101",
-        ],
+        &["info", ct, "--segmentation", one, "--percentile", "101"],
         "'101': a percentile, from 0 to 100",
     );
 
@@ -3043,7 +3070,6 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
         args.extend_from_slice(more);
         args
     }
-    let ct = v["ct"].as_str().unwrap();
     let below = |more: &[&'static str]| below_with(ct, one, more);
     // Each lung's clusters of voxels below -910 HU, in 3D and within each slice: scipy's
     // (count, each size met with its count) and numpy.polyfit's power law.
@@ -3117,13 +3143,7 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
         "{line}"
     );
     refused(
-        &[
-            "info",
-            v["ct"].as_str().unwrap(),
-            "--segmentation",
-            one,
-            "--clusters",
-        ],
+        &["info", ct, "--segmentation", one, "--clusters"],
         "--below",
     );
 
@@ -3152,7 +3172,7 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
     // --below, in the same colours; the others are the plain slice's.
     let coronal = |name: &str, extra: &[&str]| {
         let mut args = vec![
-            v["ct"].as_str().unwrap(),
+            ct,
             "--mode",
             "slice",
             "--view",
@@ -3193,7 +3213,7 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
     refused(
         &[
             "render",
-            v["ct"].as_str().unwrap(),
+            ct,
             "--mode",
             "dvr",
             "--segmentation",
@@ -3201,6 +3221,23 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
             "--below=-910",
         ],
         "--below -910: tints a slice or a CPR's pixels",
+    );
+    // Nothing below -5000 HU: no segment in colour for --legend to name.
+    let none = tmp("slicer-none.png");
+    refused(
+        &[
+            "render",
+            ct,
+            "--mode",
+            "slice",
+            "--segmentation",
+            one,
+            "--below=-5000",
+            "--legend",
+            "-o",
+            none.to_str().unwrap(),
+        ],
+        "Segmentation.seg.nrrd: --legend names the segments drawn in colour, and none of its segments is drawn in this image (none holds a voxel shown below -5000)",
     );
 
     // Bad files.
