@@ -41,6 +41,24 @@ pub struct Agatston {
     pub slice_factor: f64,
     /// A pixel's area within its slice, mm².
     pub pixel_mm2: f64,
+    /// Each lesion counted, by slice, then by its first voxel.
+    pub each: Vec<Lesion>,
+}
+
+/// A lesion counted: one piece within one slice.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lesion {
+    /// Its slice (the grid's third index).
+    pub slice: usize,
+    pub voxels: usize,
+    pub area_mm2: f64,
+    pub peak_hu: f64,
+    /// 1 to 4, by its peak.
+    pub weight: f64,
+    /// area × weight × the slice factor.
+    pub score: f64,
+    /// The mean of its voxels' centres, LPS mm.
+    pub centroid: [f64; 3],
 }
 
 impl Agatston {
@@ -102,13 +120,19 @@ pub fn agatston(volume: &Volume, indices: &[usize]) -> Agatston {
             }
         }
     }
-    // Each piece's voxels and peak, by its root.
+    // Each piece's voxels, peak and sum of voxel indices (for its centroid), by its root.
     let mut size = vec![0usize; hot.len()];
     let mut peak = vec![f64::NEG_INFINITY; hot.len()];
+    let mut sum = vec![DVec3::ZERO; hot.len()];
     for (at, root) in pieces.into_labeling().into_iter().enumerate() {
-        let r = root as usize;
+        let (r, n) = (root as usize, hot[at]);
         size[r] += 1;
-        peak[r] = peak[r].max(volume.data[hot[at]] as f64);
+        peak[r] = peak[r].max(volume.data[n] as f64);
+        sum[r] += DVec3::new(
+            (n % nx) as f64,
+            (n / nx % ny) as f64,
+            (n / (nx * ny)) as f64,
+        );
     }
     let mut score = Agatston {
         score: 0.0,
@@ -118,19 +142,32 @@ pub fn agatston(volume: &Volume, indices: &[usize]) -> Agatston {
         peak_hu: None,
         slice_factor,
         pixel_mm2,
+        each: Vec::new(),
     };
+    // A root is its piece's first voxel in sorted order: the lesions come by slice.
     let mut slices = std::collections::BTreeSet::new();
     for (r, &s) in size.iter().enumerate() {
         let area = s as f64 * pixel_mm2;
         if s == 0 || area < MIN_AREA_MM2 {
             continue;
         }
-        score.score += area * weight(peak[r]) * slice_factor;
+        let lesion = Lesion {
+            slice: hot[r] / (nx * ny),
+            voxels: s,
+            area_mm2: area,
+            peak_hu: peak[r],
+            weight: weight(peak[r]),
+            score: area * weight(peak[r]) * slice_factor,
+            centroid: volume.index_to_world(sum[r] / s as f64).to_array(),
+        };
+        score.score += lesion.score;
         score.volume_mm3 += s as f64 * voxel_mm3;
-        score.lesions += 1;
         score.peak_hu = Some(score.peak_hu.map_or(peak[r], |p: f64| p.max(peak[r])));
-        slices.insert(hot[r] / (nx * ny));
+        slices.insert(lesion.slice);
+        score.each.push(lesion);
     }
+    score.each.sort_by_key(|l| l.slice);
+    score.lesions = score.each.len();
     score.slices = slices.len();
     score
 }
@@ -178,6 +215,22 @@ mod tests {
         assert!((a.volume_mm3 - 12.0 * 0.375).abs() < 1e-12);
         assert_eq!(a.peak_hu, Some(420.0));
         assert_eq!(a.cac_drs(), "A1");
+        // Each lesion: its slice, area, peak, weight, score and centroid (index + 0 origin,
+        // × 0.5 mm in-plane, × 1.5 mm across).
+        let each: Vec<(usize, usize, f64, f64, f64)> = (a.each.iter())
+            .map(|l| (l.slice, l.voxels, l.peak_hu, l.weight, l.score))
+            .collect();
+        assert_eq!(
+            each,
+            [
+                (0, 4, 250.0, 2.0, 1.0),
+                (1, 4, 420.0, 4.0, 2.0),
+                (2, 4, 300.0, 3.0, 1.5)
+            ]
+        );
+        assert_eq!(a.each[0].centroid, [0.75, 0.75, 0.0]);
+        assert_eq!(a.each[1].centroid, [2.25, 1.25, 1.5]);
+        assert!(a.each.iter().all(|l| l.area_mm2 == 1.0));
         // Only slice 0's block region: weight 2, 1 mm², factor 0.5.
         let block: Vec<usize> = [(1, 1), (2, 1), (1, 2), (2, 2)]
             .iter()

@@ -635,6 +635,15 @@ impl SegmentStats {
                 "peak_hu": c.peak_hu,
                 "cac_drs": c.cac_drs(),
                 "slice_factor": c.slice_factor,
+                "each": c.each.iter().map(|l| json!({
+                    "slice": l.slice,
+                    "voxels": l.voxels,
+                    "area_mm2": l.area_mm2,
+                    "peak_hu": l.peak_hu,
+                    "weight": l.weight,
+                    "score": l.score,
+                    "centroid": l.centroid,
+                })).collect::<Vec<_>>(),
             });
         }
         if let Some(at) = inflation {
@@ -702,7 +711,7 @@ impl SegmentStats {
         if let Some(c) = &self.calcium {
             let peak = c
                 .peak_hu
-                .map_or(String::new(), |p| format!(", peak {p} {unit}"));
+                .map_or(String::new(), |p| format!(", peak {p:.0} {unit}"));
             println!(
                 "  calcium    {head}: Agatston {:.1} (CAC-DRS {}), volume {:.1} mm³, {} lesions in {} slices{peak}",
                 c.score,

@@ -88,7 +88,7 @@ def agatston(mask):
     pixel = float(np.linalg.norm(np.cross(m[:, 0], m[:, 1])))
     slice_mm = float(abs(np.linalg.det(m))) / pixel
     score = volume = 0.0
-    lesions, slices, peak = 0, set(), None
+    lesions, slices, peak, each = 0, set(), None, []
     for k in range(ct.shape[2]):
         hot = mask[:, :, k] & (ct[:, :, k] >= 130)
         labels, n = scipy.ndimage.label(hot, structure=np.ones((3, 3)))
@@ -105,8 +105,9 @@ def agatston(mask):
             lesions += 1
             slices.add(k)
             peak = float(top) if peak is None else max(peak, float(top))
+            each.append([k, int(size), float(top)])
     return {"score": score, "volume_mm3": volume, "lesions": lesions, "slices": len(slices),
-            "peak_hu": peak}
+            "peak_hu": peak, "each": sorted(each)}
 
 
 calcium = [agatston(slicerio.segment_mask(flat, seg["id"])) for seg in flat["segments"]]

@@ -2949,6 +2949,21 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
                 s["name"]
             );
         }
+        // Each lesion: its slice, voxels and peak, as scipy's (in order of those).
+        let mut each: Vec<(u64, u64, f64)> = (got["each"].as_array().unwrap().iter())
+            .map(|l| {
+                let n = |k: &str| l[k].as_u64().unwrap();
+                (n("slice"), n("voxels"), l["peak_hu"].as_f64().unwrap())
+            })
+            .collect();
+        each.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        let want: Vec<(u64, u64, f64)> = serde_json::from_value(want["each"].clone()).unwrap();
+        assert_eq!(each, want, "{}", s["name"]);
+        let sum: f64 = (got["each"].as_array().unwrap().iter())
+            .map(|l| l["score"].as_f64().unwrap())
+            .sum();
+        let score = got["score"].as_f64().unwrap();
+        assert!((sum - score).abs() <= 1e-9 * score.max(1.0));
     }
     let ribs = scored.iter().find(|s| s["name"] == "ribs").unwrap();
     assert!(
