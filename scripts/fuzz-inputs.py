@@ -810,7 +810,8 @@ def fuzz_files(work, n, device, only=None):
                                    ["--below-mask", os.path.join(d, "laa.nii.gz")]])
                   + ["--percentile", random.choice(["15", "0,100", "2.5"])]
                   + random.choice([[], ["--adjust-to", "1=tlc:male:180"], ["--adjust-to", "all=5000"]])
-                  + random.choice([[], ["--agatston"]])
+                  + random.choice([[], ["--agatston"],
+                                   ["--agatston", "--agatston-mask", os.path.join(d, "cac.nii.gz")]])
                   if random.random() < 0.15 else [])
         why = run(["info", p, "--json"] + phase + body + within, s) or run(
             ["render", p, "--aov", "prim", "--size", "8x8", "-q", "--device", device,

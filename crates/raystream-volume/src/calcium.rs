@@ -94,6 +94,15 @@ pub fn slice_geometry(volume: &Volume) -> (f64, f64) {
 
 /// The Agatston score of `volume`'s voxels among `indices` (distinct, any order).
 pub fn agatston(volume: &Volume, indices: &[usize]) -> Agatston {
+    scored(volume, indices, false).0
+}
+
+/// [`agatston`], and the voxels of the lesions counted (in increasing order).
+pub fn agatston_with_voxels(volume: &Volume, indices: &[usize]) -> (Agatston, Vec<usize>) {
+    scored(volume, indices, true)
+}
+
+fn scored(volume: &Volume, indices: &[usize], with_voxels: bool) -> (Agatston, Vec<usize>) {
     let (pixel_mm2, slice_mm) = slice_geometry(volume);
     let voxel_mm3 = pixel_mm2 * slice_mm;
     let slice_factor = slice_mm / SLICE_MM;
@@ -124,7 +133,8 @@ pub fn agatston(volume: &Volume, indices: &[usize]) -> Agatston {
     let mut size = vec![0usize; hot.len()];
     let mut peak = vec![f64::NEG_INFINITY; hot.len()];
     let mut sum = vec![DVec3::ZERO; hot.len()];
-    for (at, root) in pieces.into_labeling().into_iter().enumerate() {
+    let roots = pieces.into_labeling();
+    for (at, &root) in roots.iter().enumerate() {
         let (r, n) = (root as usize, hot[at]);
         size[r] += 1;
         peak[r] = peak[r].max(volume.data[n] as f64);
@@ -169,7 +179,14 @@ pub fn agatston(volume: &Volume, indices: &[usize]) -> Agatston {
     score.each.sort_by_key(|l| l.slice);
     score.lesions = score.each.len();
     score.slices = slices.len();
-    score
+    let voxels = match with_voxels {
+        true => (hot.iter().zip(&roots))
+            .filter(|&(_, &r)| size[r as usize] as f64 * pixel_mm2 >= MIN_AREA_MM2)
+            .map(|(&n, _)| n)
+            .collect(),
+        false => Vec::new(),
+    };
+    (score, voxels)
 }
 
 #[cfg(test)]
@@ -231,6 +248,12 @@ mod tests {
         assert_eq!(a.each[0].centroid, [0.75, 0.75, 0.0]);
         assert_eq!(a.each[1].centroid, [2.25, 1.25, 1.5]);
         assert!(a.each.iter().all(|l| l.area_mm2 == 1.0));
+        // The lesions' voxels: the twelve, in order; the 900, 500 and 1000 HU pixels dropped.
+        let (b, voxels) = agatston_with_voxels(&v, &all);
+        assert_eq!(b, a);
+        assert_eq!(voxels.len(), 12);
+        assert!(voxels.windows(2).all(|w| w[0] < w[1]));
+        assert!(voxels.iter().all(|&n| (130.0..=420.0).contains(&v.data[n])));
         // Only slice 0's block region: weight 2, 1 mm², factor 0.5.
         let block: Vec<usize> = [(1, 1), (2, 1), (1, 2), (2, 2)]
             .iter()

@@ -1479,6 +1479,12 @@ pub struct InfoArgs {
     /// a total (--combine the arteries).
     #[arg(long, requires = "segmentation")]
     pub agatston: bool,
+    /// With --agatston: each segment's lesions counted written on the CT's grid as a NIfTI
+    /// label map (.nii or .nii.gz), each labelled with its segment's number, named and
+    /// coloured as it in a label table: to check them over the CT (`render CT --mode slice
+    /// --segmentation FILE --outline`).
+    #[arg(long, value_name = "FILE.nii.gz", requires = "agatston")]
+    pub agatston_mask: Option<PathBuf>,
     /// With --segmentation: the lungs' density adjusted for the depth of the breath,
     /// REGION=ML: the region (segment names or numbers, comma-separated, or a --combine's
     /// name: both lungs) taken to the volume ML (their volume on an earlier CT), or

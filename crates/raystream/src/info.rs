@@ -539,6 +539,8 @@ struct Within {
     how: &'static str,
     /// `--below-mask`: the file written, and how many segments it holds.
     below_mask: Option<(String, usize)>,
+    /// `--agatston-mask`: the file written, and how many segments it holds.
+    agatston_mask: Option<(String, usize)>,
     /// `--adjust-to`: the region named, and its inflation against the volume asked.
     adjusted: Option<Adjusted>,
 }
@@ -760,13 +762,18 @@ fn segment_stats(
     let Some(file) = &a.segmentation else {
         return Ok(None);
     };
-    if let Some(out) = &a.below_mask
-        && !raystream_io::is_label_map_path(out)
-    {
-        anyhow::bail!(
-            "{}: --below-mask writes a NIfTI label map: name it .nii or .nii.gz",
-            out.display()
-        );
+    for (option, out) in [
+        ("--below-mask", &a.below_mask),
+        ("--agatston-mask", &a.agatston_mask),
+    ] {
+        if let Some(out) = out
+            && !raystream_io::is_label_map_path(out)
+        {
+            anyhow::bail!(
+                "{}: {option} writes a NIfTI label map: name it .nii or .nii.gz",
+                out.display()
+            );
+        }
     }
     if a.adjust_to.is_some() && ct.unit != raystream_io::ValueUnit::Hounsfield {
         anyhow::bail!(
@@ -800,7 +807,40 @@ fn segment_stats(
         .filter_map(|(&l, list)| SegmentStats::of(a, ct, vec![l], name_of(l), list))
         .collect();
     let below_mask = match &a.below_mask {
-        Some(out) => Some(write_below_mask(out, a.below[0], ct, &on)?),
+        Some(out) => {
+            let hu = a.below[0];
+            let what = format!("raystream info --below-mask: each segment's voxels below {hu} HU");
+            let below = |_: u32, list: &[usize]| -> Vec<usize> {
+                (list.iter().copied())
+                    .filter(|&n| (ct.data[n] as f64) < hu)
+                    .collect()
+            };
+            Some(write_segment_mask(
+                out,
+                "--below-mask",
+                ct,
+                &on,
+                below,
+                &what,
+            )?)
+        }
+        None => None,
+    };
+    let agatston_mask = match &a.agatston_mask {
+        Some(out) => {
+            let what = "raystream info --agatston-mask: each segment's calcium lesions counted (130 HU, 1 mm² within a slice)";
+            let lesions = |_: u32, list: &[usize]| -> Vec<usize> {
+                raystream_volume::calcium::agatston_with_voxels(ct, list).1
+            };
+            Some(write_segment_mask(
+                out,
+                "--agatston-mask",
+                ct,
+                &on,
+                lesions,
+                what,
+            )?)
+        }
         None => None,
     };
     let adjusted = match &a.adjust_to {
@@ -840,6 +880,7 @@ fn segment_stats(
         combined,
         how: on.how,
         below_mask,
+        agatston_mask,
         adjusted,
     }))
 }
@@ -854,27 +895,32 @@ fn union(on: &crate::segments::OnCt, labels: &[u32]) -> Vec<usize> {
     voxels
 }
 
-/// `--below-mask FILE`: each segment's voxels below `hu` labelled with its number on the CT
-/// `ct`'s grid, the larger segments laid first (so that one within another keeps its own
-/// voxels), named and coloured in the file's label table. The file, and how many segments it
-/// holds.
-fn write_below_mask(
+/// `--below-mask FILE` and `--agatston-mask FILE` (`option`): each segment's voxels that
+/// `voxels_of` gives (CT voxels) labelled with its number on the CT `ct`'s grid, the larger
+/// segments laid first (so that one within another keeps its own voxels), named and coloured
+/// in the file's label table, `what` in its header. The file, and how many segments it holds.
+fn write_segment_mask(
     out: &std::path::Path,
-    hu: f64,
+    option: &str,
     ct: &raystream_io::Volume,
     on: &crate::segments::OnCt,
+    voxels_of: impl Fn(u32, &[usize]) -> Vec<usize>,
+    what: &str,
 ) -> Result<(String, usize)> {
     if let Some(l) = on.members.keys().find(|&&l| l > 255) {
         anyhow::bail!(
-            "{}: --below-mask: segment {l}: a label map of bytes holds labels 1 to 255",
+            "{}: {option}: segment {l}: a label map of bytes holds labels 1 to 255",
             out.display()
         );
     }
-    let all: Vec<u32> = on.members.keys().copied().collect();
-    let labels: Vec<u8> = (on.laid(&all, ct.data.len(), |n| (ct.data[n] as f64) < hu))
-        .into_iter()
-        .map(|l| l as u8)
-        .collect();
+    let mut order: Vec<u32> = on.members.keys().copied().collect();
+    order.sort_by_key(|l| std::cmp::Reverse(on.members[l].len()));
+    let mut labels = vec![0u8; ct.data.len()];
+    for &l in &order {
+        for n in voxels_of(l, &on.members[&l]) {
+            labels[n] = l as u8;
+        }
+    }
     let mut present = [false; 256];
     for &l in &labels {
         present[l as usize] = true;
@@ -890,8 +936,7 @@ fn write_below_mask(
     let table: Vec<(u8, &str, [u8; 3])> = (entries.iter())
         .map(|(l, n, c)| (*l, n.as_str(), *c))
         .collect();
-    let what = format!("raystream info --below-mask: each segment's voxels below {hu} HU");
-    raystream_io::write_label_map_named(out, ct, &labels, &what, &table)?;
+    raystream_io::write_label_map_named(out, ct, &labels, what, &table)?;
     Ok((out.display().to_string(), table.len()))
 }
 
@@ -1021,6 +1066,10 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 "below_mask": w.below_mask.as_ref().map(|(file, segments)| json!({
                     "file": file,
                     "hu": a.below[0],
+                    "segments": segments,
+                })),
+                "agatston_mask": w.agatston_mask.as_ref().map(|(file, segments)| json!({
+                    "file": file,
                     "segments": segments,
                 })),
                 "agatston": a.agatston.then(|| {
@@ -1220,6 +1269,11 @@ fn volume_info(a: &InfoArgs, input: &std::path::Path) -> Result<()> {
                 println!(
                     "  wrote      {file}: the voxels below {} {unit} of {segments} segments, a NIfTI label map",
                     a.below[0]
+                );
+            }
+            if let Some((file, segments)) = &w.agatston_mask {
+                println!(
+                    "  wrote      {file}: the calcium lesions counted of {segments} segments, a NIfTI label map"
                 );
             }
         }

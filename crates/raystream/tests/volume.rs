@@ -2927,7 +2927,8 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
     // Each segment's Agatston score (its bones' calcium, on this CT): scipy's lesions in
     // each slice, joined at edges and corners, of 1 mm² or more, weighted by their peaks and
     // by the slices' 10 mm over 3 mm.
-    let calcium = info_with(&["--agatston"]);
+    let lesions = dir.join("lesions.nii.gz");
+    let calcium = info_with(&["--agatston", "--agatston-mask", lesions.to_str().unwrap()]);
     let method = &calcium["segmentation"]["agatston"];
     assert!(
         (method["slice_factor"].as_f64().unwrap() - 10.0 / 3.0).abs() < 1e-6,
@@ -2964,6 +2965,21 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
             .sum();
         let score = got["score"].as_f64().unwrap();
         assert!((sum - score).abs() <= 1e-9 * score.max(1.0));
+    }
+    // The lesions written: each segment's voxels in them under its own label, named as it.
+    let map = raystream_io::load_volume(&lesions, &Default::default()).unwrap();
+    assert_eq!(calcium["segmentation"]["agatston_mask"]["segments"], 5);
+    for s in scored {
+        let l = s["value"].as_u64().unwrap() as f32;
+        let want: u64 = (s["agatston"]["each"].as_array().unwrap().iter())
+            .map(|l| l["voxels"].as_u64().unwrap())
+            .sum();
+        let got = map.data.iter().filter(|&&x| x == l).count() as u64;
+        assert_eq!(got, want, "{}", s["name"]);
+        if want > 0 {
+            let named = map.segments.iter().find(|k| k.number as f32 == l).unwrap();
+            assert_eq!(named.label, s["name"].as_str().unwrap());
+        }
     }
     let ribs = scored.iter().find(|s| s["name"] == "ribs").unwrap();
     assert!(
@@ -3058,6 +3074,19 @@ fn slicer_segmentations_read_as_slicerio_reads_them() {
     );
     adjust_refused("lungs=tlc:x:170", "REGION=tlc:SEX:CM");
     adjust_refused("lungs=tlc:female:20", "a height of 100 to 250 cm");
+    let png = tmp("lesions.png");
+    refused(
+        &[
+            "info",
+            ct,
+            "--segmentation",
+            one,
+            "--agatston",
+            "--agatston-mask",
+            png.to_str().unwrap(),
+        ],
+        "lesions.png: --agatston-mask writes a NIfTI label map: name it .nii or .nii.gz",
+    );
     // Both take HU: a volume of other values is refused, named.
     let engine = volume("nifti/scivis_engine.nii.gz");
     for (option, want) in [
