@@ -32,11 +32,6 @@ pub struct Agatston {
     pub score: f64,
     /// The lesions' volume, mm³ (the volume score).
     pub volume_mm3: f64,
-    /// The lesions counted (each slice's apart), and the slices holding one.
-    pub lesions: usize,
-    pub slices: usize,
-    /// The highest value of a lesion counted, HU; `None` for none.
-    pub peak_hu: Option<f64>,
     /// The slice spacing over Agatston's 3 mm.
     pub slice_factor: f64,
     /// A pixel's area within its slice, mm².
@@ -62,6 +57,23 @@ pub struct Lesion {
 }
 
 impl Agatston {
+    /// The lesions counted (each slice's apart).
+    pub fn lesions(&self) -> usize {
+        self.each.len()
+    }
+
+    /// The slices holding a lesion.
+    pub fn slices(&self) -> usize {
+        let mut slices: Vec<usize> = self.each.iter().map(|l| l.slice).collect();
+        slices.dedup();
+        slices.len()
+    }
+
+    /// The highest value of a lesion counted, HU; `None` for none.
+    pub fn peak_hu(&self) -> Option<f64> {
+        self.each.iter().map(|l| l.peak_hu).reduce(f64::max)
+    }
+
     /// The CAC-DRS category of a total coronary score (Hecht et al., 2018): A0 for none,
     /// A1 below 100, A2 below 300, A3 from 300.
     pub fn cac_drs(&self) -> &'static str {
@@ -147,15 +159,11 @@ fn scored(volume: &Volume, indices: &[usize], with_voxels: bool) -> (Agatston, V
     let mut score = Agatston {
         score: 0.0,
         volume_mm3: 0.0,
-        lesions: 0,
-        slices: 0,
-        peak_hu: None,
         slice_factor,
         pixel_mm2,
         each: Vec::new(),
     };
     // A root is its piece's first voxel in sorted order: the lesions come by slice.
-    let mut slices = std::collections::BTreeSet::new();
     for (r, &s) in size.iter().enumerate() {
         let area = s as f64 * pixel_mm2;
         if s == 0 || area < MIN_AREA_MM2 {
@@ -172,13 +180,9 @@ fn scored(volume: &Volume, indices: &[usize], with_voxels: bool) -> (Agatston, V
         };
         score.score += lesion.score;
         score.volume_mm3 += s as f64 * voxel_mm3;
-        score.peak_hu = Some(score.peak_hu.map_or(peak[r], |p: f64| p.max(peak[r])));
-        slices.insert(lesion.slice);
         score.each.push(lesion);
     }
     score.each.sort_by_key(|l| l.slice);
-    score.lesions = score.each.len();
-    score.slices = slices.len();
     let voxels = match with_voxels {
         true => (hot.iter().zip(&roots))
             .filter(|&(_, &r)| size[r as usize] as f64 * pixel_mm2 >= MIN_AREA_MM2)
@@ -225,12 +229,12 @@ mod tests {
         let v = Volume::hounsfield([nx, ny, 3], [0.5, 0.5, 1.5], data);
         let all: Vec<usize> = (0..v.data.len()).rev().collect();
         let a = agatston(&v, &all);
-        assert_eq!((a.lesions, a.slices), (3, 3));
+        assert_eq!((a.lesions(), a.slices()), (3, 3));
         assert!((a.pixel_mm2 - 0.25).abs() < 1e-12 && (a.slice_factor - 0.5).abs() < 1e-12);
         // (1 mm² × 2 + 1 mm² × 4 + 1 mm² × 3) × 0.5.
         assert!((a.score - 4.5).abs() < 1e-12, "{a:?}");
         assert!((a.volume_mm3 - 12.0 * 0.375).abs() < 1e-12);
-        assert_eq!(a.peak_hu, Some(420.0));
+        assert_eq!(a.peak_hu(), Some(420.0));
         assert_eq!(a.cac_drs(), "A1");
         // Each lesion: its slice, area, peak, weight, score and centroid (index + 0 origin,
         // × 0.5 mm in-plane, × 1.5 mm across).
@@ -262,7 +266,7 @@ mod tests {
         assert!((agatston(&v, &block).score - 1.0).abs() < 1e-12);
         // Three of the block: 0.75 mm², dropped.
         let none = agatston(&v, &block[..3]);
-        assert_eq!((none.score, none.lesions, none.peak_hu), (0.0, 0, None));
+        assert_eq!((none.score, none.lesions(), none.peak_hu()), (0.0, 0, None));
         assert_eq!(none.cac_drs(), "A0");
         assert_eq!(weight(199.9), 1.0);
         assert_eq!(weight(300.0), 3.0);

@@ -632,9 +632,9 @@ impl SegmentStats {
             out["agatston"] = json!({
                 "score": c.score,
                 "volume_mm3": c.volume_mm3,
-                "lesions": c.lesions,
-                "slices": c.slices,
-                "peak_hu": c.peak_hu,
+                "lesions": c.lesions(),
+                "slices": c.slices(),
+                "peak_hu": c.peak_hu(),
                 "cac_drs": c.cac_drs(),
                 "slice_factor": c.slice_factor,
                 "each": c.each.iter().map(|l| json!({
@@ -712,15 +712,15 @@ impl SegmentStats {
         }
         if let Some(c) = &self.calcium {
             let peak = c
-                .peak_hu
+                .peak_hu()
                 .map_or(String::new(), |p| format!(", peak {p:.0} {unit}"));
             println!(
                 "  calcium    {head}: Agatston {:.1} (CAC-DRS {}), volume {:.1} mm³, {} lesions in {} slices{peak}",
                 c.score,
                 c.cac_drs(),
                 c.volume_mm3,
-                c.lesions,
-                c.slices
+                c.lesions(),
+                c.slices()
             );
         }
         if let Some(at) = inflation {
@@ -775,15 +775,21 @@ fn segment_stats(
             );
         }
     }
-    if a.adjust_to.is_some() && ct.unit != raystream_io::ValueUnit::Hounsfield {
+    let need_hu = [
+        (
+            a.adjust_to.is_some(),
+            "--adjust-to adjusts a CT's HU (HU + 1000 being a density in g/l)",
+        ),
+        (
+            a.agatston,
+            "--agatston scores a CT's HU (calcium from 130 HU)",
+        ),
+    ];
+    if let Some((_, why)) = need_hu.iter().find(|(asked, _)| *asked)
+        && ct.unit != raystream_io::ValueUnit::Hounsfield
+    {
         anyhow::bail!(
-            "{}: --adjust-to adjusts a CT's HU (HU + 1000 being a density in g/l); this volume's values are not in HU",
-            input.display()
-        );
-    }
-    if a.agatston && ct.unit != raystream_io::ValueUnit::Hounsfield {
-        anyhow::bail!(
-            "{}: --agatston scores a CT's HU (calcium from 130 HU); this volume's values are not in HU",
+            "{}: {why}; this volume's values are not in HU",
             input.display()
         );
     }
@@ -810,7 +816,7 @@ fn segment_stats(
         Some(out) => {
             let hu = a.below[0];
             let what = format!("raystream info --below-mask: each segment's voxels below {hu} HU");
-            let below = |_: u32, list: &[usize]| -> Vec<usize> {
+            let below = |list: &[usize]| -> Vec<usize> {
                 (list.iter().copied())
                     .filter(|&n| (ct.data[n] as f64) < hu)
                     .collect()
@@ -829,7 +835,7 @@ fn segment_stats(
     let agatston_mask = match &a.agatston_mask {
         Some(out) => {
             let what = "raystream info --agatston-mask: each segment's calcium lesions counted (130 HU, 1 mm² within a slice)";
-            let lesions = |_: u32, list: &[usize]| -> Vec<usize> {
+            let lesions = |list: &[usize]| -> Vec<usize> {
                 raystream_volume::calcium::agatston_with_voxels(ct, list).1
             };
             Some(write_segment_mask(
@@ -904,7 +910,7 @@ fn write_segment_mask(
     option: &str,
     ct: &raystream_io::Volume,
     on: &crate::segments::OnCt,
-    voxels_of: impl Fn(u32, &[usize]) -> Vec<usize>,
+    voxels_of: impl Fn(&[usize]) -> Vec<usize>,
     what: &str,
 ) -> Result<(String, usize)> {
     if let Some(l) = on.members.keys().find(|&&l| l > 255) {
@@ -917,7 +923,7 @@ fn write_segment_mask(
     order.sort_by_key(|l| std::cmp::Reverse(on.members[l].len()));
     let mut labels = vec![0u8; ct.data.len()];
     for &l in &order {
-        for n in voxels_of(l, &on.members[&l]) {
+        for n in voxels_of(&on.members[&l]) {
             labels[n] = l as u8;
         }
     }
